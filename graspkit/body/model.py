@@ -1,0 +1,324 @@
+"""BodyModel: SMPL-X-format linear blend skinning (Pavlakos et al., CVPR 2019, Sec. 3; SMPL Eq. 1-10).
+
+    T(beta, psi, theta) = T_bar + B_S(beta; S) + B_E(psi; E) + B_P(theta; P)     (shape, expression, pose blend shapes)
+    J(beta, psi)        = J_reg @ (T_bar + B_S + B_E)                          (joints regressed from the shaped mesh)
+    v_i                 = sum_k w_ik G_k(theta, J) G_k(0, J)^-1 T_i           (linear blend skinning)
+
+The engine reads any file in the SMPL-X `.npz` layout: graspkit's procedural humanoid or a real
+SMPLX_{NEUTRAL,MALE,FEMALE}.npz. Everything that does not depend on the pose is precomputed once:
+the joint regressor is folded into the template and the shape basis (J = J_0 + coeffs @ J_dirs), so
+the forward pass never touches the dense (55, V) regressor, and the kinematic chain is walked one tree
+level at a time (11 batched matmuls instead of 54 sequential ones).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from graspkit.body.skeleton import NUM_BODY_JOINTS, NUM_JOINTS
+from graspkit.rotations import axis_angle_to_matrix
+
+NUM_HAND_JOINTS = 15
+NUM_POSE_BASIS = (NUM_JOINTS - 1) * 9  # 486
+
+
+@dataclass
+class BodyOutput:
+    """What a forward pass returns: vertices (B,V,3), joints (B,55,3), faces (F,3) and the full pose (B,55,3,3)."""
+
+    vertices: Tensor
+    joints: Tensor
+    faces: Tensor
+    rot_mats: Tensor
+
+
+class ModelFileError(ValueError):
+    """A body-model file that is missing, pickled, or has a wrong key, shape or dtype."""
+
+
+def _expected_shapes(V: int) -> dict[str, tuple[int | None, ...]]:
+    """Expected shape per required key for a model with V vertices (None = any size)."""
+    return {
+        "v_template": (V, 3), "f": (None, 3), "shapedirs": (V, 3, None), "posedirs": (V, 3, NUM_POSE_BASIS),
+        "J_regressor": (NUM_JOINTS, V), "weights": (V, NUM_JOINTS), "kintree_table": (2, NUM_JOINTS),
+        "hands_componentsl": (45, 45), "hands_componentsr": (45, 45), "hands_meanl": (45,), "hands_meanr": (45,),
+    }
+
+
+def load_model_arrays(path: str | os.PathLike, allow_pickle: bool = False) -> dict[str, np.ndarray]:
+    """Read and validate the arrays of an SMPL-X-format .npz; errors name the file, key and expectation."""
+    path = Path(path)
+    if not path.is_file():
+        raise ModelFileError(f"{path}: no such body-model file (expected an SMPL-X-format .npz)")
+    try:
+        npz = np.load(path, allow_pickle=allow_pickle)
+    except ValueError as e:  # numpy refuses a pickled file when allow_pickle=False
+        raise ModelFileError(f"{path}: {e}; graspkit reads plain .npz files only "
+                             "(pass allow_pickle=True explicitly for a trusted third-party file)") from None
+    except Exception as e:
+        raise ModelFileError(f"{path}: not a readable .npz file ({e})") from None
+    if not isinstance(npz, np.lib.npyio.NpzFile):
+        raise ModelFileError(f"{path}: expected an .npz archive of arrays, got a single array")
+    with npz:
+        if "v_template" not in npz.files:
+            raise ModelFileError(f"{path}: missing key 'v_template' (an SMPL-X .npz has {sorted(_expected_shapes(0))})")
+        arrays: dict[str, np.ndarray] = {}
+        for key in list(_expected_shapes(0)):
+            if key not in npz.files:
+                raise ModelFileError(f"{path}: missing key {key!r}")
+            try:
+                arrays[key] = np.asarray(npz[key])
+            except ValueError as e:
+                raise ModelFileError(f"{path}: key {key!r} cannot be read without pickle ({e})") from None
+        for opt in ("procedural",):
+            if opt in npz.files:
+                arrays[opt] = np.asarray(npz[opt])
+    validate_model_arrays(arrays, source=str(path))
+    return arrays
+
+
+def validate_model_arrays(arrays: Mapping[str, np.ndarray], source: str = "<arrays>") -> None:
+    """Check keys, shapes, dtypes and finiteness of SMPL-X arrays; raise ModelFileError naming the key."""
+    if "v_template" not in arrays:
+        raise ModelFileError(f"{source}: missing key 'v_template'")
+    V = int(np.shape(arrays["v_template"])[0])
+    for key, shape in _expected_shapes(V).items():
+        if key not in arrays:
+            raise ModelFileError(f"{source}: missing key {key!r}")
+        a = arrays[key]
+        ok = a.ndim == len(shape) and all(s is None or s == d for s, d in zip(shape, a.shape))
+        if not ok:
+            want = "(" + ", ".join("any" if s is None else str(s) for s in shape) + ")"
+            raise ModelFileError(f"{source}: key {key!r} has shape {a.shape}, expected {want} (V={V})")
+        if a.dtype == object:
+            raise ModelFileError(f"{source}: key {key!r} is an object array; expected numbers")
+        if key in ("f", "kintree_table"):
+            if not np.issubdtype(a.dtype, np.integer):
+                raise ModelFileError(f"{source}: key {key!r} has dtype {a.dtype}, expected integers")
+        elif not np.issubdtype(a.dtype, np.floating) or not np.isfinite(a).all():
+            raise ModelFileError(f"{source}: key {key!r} must hold finite floats (dtype {a.dtype})")
+    if arrays["shapedirs"].shape[2] < 20:
+        raise ModelFileError(f"{source}: key 'shapedirs' has {arrays['shapedirs'].shape[2]} components, "
+                             "expected at least 20 (10 shape + 10 expression)")
+    f = arrays["f"]
+    if f.size and (f.min() < 0 or f.max() >= V):
+        raise ModelFileError(f"{source}: key 'f' indexes vertices outside [0, {V})")
+    parents = _parents(arrays["kintree_table"])
+    if parents[0] != -1 or any(not (0 <= p < i) for i, p in enumerate(parents[1:], 1)):
+        raise ModelFileError(f"{source}: key 'kintree_table' is not a tree with parents before children")
+
+
+def _parents(kintree: np.ndarray) -> list[int]:
+    """Parent index per joint from a (2, J) kintree table; the root's parent becomes -1."""
+    p = [int(x) for x in np.asarray(kintree[0]).astype(np.int64)]
+    p[0] = -1
+    return p
+
+
+def _split_shapedirs(shapedirs: np.ndarray, num_betas: int, num_expression: int) -> tuple[np.ndarray, np.ndarray]:
+    """Shape and expression bases (V,3,S), (V,3,E) from the stacked shapedirs, as smplx reads them."""
+    total = shapedirs.shape[2]
+    shape_space, expr_start = (300, 300) if total >= 400 else (10, 10)  # SMPL-X 2020 (300+100) or v1.1 (10+10)
+    if not 0 <= num_betas <= shape_space:
+        raise ValueError(f"num_betas: expected 0..{shape_space} for this file, got {num_betas}")
+    if not 0 <= num_expression <= total - expr_start:
+        raise ValueError(f"num_expression: expected 0..{total - expr_start} for this file, got {num_expression}")
+    return shapedirs[:, :, :num_betas], shapedirs[:, :, expr_start:expr_start + num_expression]
+
+
+class BodyModel(nn.Module):
+    """An SMPL-X body: any omitted argument of forward() is zeros; batch size from the given arguments."""
+
+    def __init__(self, arrays: Mapping[str, np.ndarray], *, num_betas: int = 10, num_expression: int = 10,
+                 use_pca: bool = False, num_pca_comps: int = 6, flat_hand_mean: bool = False,
+                 dtype: torch.dtype = torch.float32, source: str = "<arrays>") -> None:
+        super().__init__()
+        validate_model_arrays(arrays, source)
+        if use_pca and not 1 <= num_pca_comps <= 45:
+            raise ValueError(f"num_pca_comps: expected 1..45, got {num_pca_comps}")
+        self.source, self.use_pca, self.flat_hand_mean = source, use_pca, flat_hand_mean
+        self.num_betas, self.num_expression = num_betas, num_expression
+        self.num_pca_comps = num_pca_comps if use_pca else 45
+        self.is_procedural = "procedural" in arrays
+        t = lambda a: torch.as_tensor(np.asarray(a, dtype=np.float64), dtype=dtype)  # noqa: E731
+
+        v_template = np.asarray(arrays["v_template"], np.float64)
+        V = v_template.shape[0]
+        sdirs, edirs = _split_shapedirs(np.asarray(arrays["shapedirs"], np.float64), num_betas, num_expression)
+        basis = np.concatenate([sdirs, edirs], axis=2)                      # (V, 3, S+E)
+        J_reg = np.asarray(arrays["J_regressor"], np.float64)
+        # vertex quantities are kept coordinate-major, (3, V), so that skinning works on contiguous slabs
+        self.register_buffer("v_template", t(v_template))
+        self.register_buffer("_v_template_cm", t(v_template.T.reshape(1, 3 * V)))
+        self.register_buffer("shape_basis", t(basis.transpose(2, 1, 0).reshape(-1, 3 * V)))   # (S+E, 3V)
+        self.register_buffer("J_template", t(J_reg @ v_template))                          # (55, 3)
+        self.register_buffer("J_basis", t(np.einsum("jv,vkc->cjk", J_reg, basis).reshape(basis.shape[2], -1)))
+        self.register_buffer("J_regressor", t(J_reg))
+        posedirs = np.asarray(arrays["posedirs"], np.float64)
+        # all-zero pose correctives (allowed in the procedural humanoid) cost nothing
+        self.has_posedirs = bool(np.any(posedirs))
+        self.register_buffer("posedirs", t(posedirs.transpose(2, 1, 0).reshape(NUM_POSE_BASIS, 3 * V))
+                             if self.has_posedirs else torch.zeros(0, dtype=dtype))        # (486, 3V)
+        self.register_buffer("lbs_weights", t(arrays["weights"]))                          # (V, 55)
+        self.register_buffer("_weights_t", t(np.asarray(arrays["weights"]).T))              # (55, V)
+        self.register_buffer("faces", torch.as_tensor(np.asarray(arrays["f"], np.int64)))
+        parents = _parents(arrays["kintree_table"])
+        self.register_buffer("parents", torch.tensor(parents, dtype=torch.long))
+        comps = [np.asarray(arrays[f"hands_components{s}"], np.float64)[:self.num_pca_comps] for s in "lr"]
+        self.register_buffer("left_hand_components", t(comps[0]))
+        self.register_buffer("right_hand_components", t(comps[1]))
+        means = [np.zeros(45) if flat_hand_mean else np.asarray(arrays[f"hands_mean{s}"], np.float64) for s in "lr"]
+        self.register_buffer("pose_mean", t(np.concatenate([np.zeros(3 * 25), means[0], means[1]])))
+        self._build_levels(parents)
+
+    def _build_levels(self, parents: list[int]) -> None:
+        """Group joints by tree depth, so that each level's parents all sit in the level before."""
+        depth = [0] * len(parents)
+        for j in range(1, len(parents)):
+            depth[j] = depth[parents[j]] + 1
+        levels = [[j for j in range(len(parents)) if depth[j] == d] for d in range(max(depth) + 1)]
+        self._levels = [torch.tensor(lv) for lv in levels]
+        self._parent_slot = [torch.tensor([levels[d - 1].index(parents[j]) for j in lv]) if d else torch.zeros(0)
+                             for d, lv in enumerate(levels)]
+        order = [j for lv in levels for j in lv]
+        self._unorder = torch.tensor(np.argsort(order))  # level order -> joint order
+
+    @classmethod
+    def from_file(cls, path: str | os.PathLike, *, allow_pickle: bool = False, **kwargs) -> "BodyModel":
+        """Load an SMPL-X-format .npz (procedural or real) and build the model; kwargs go to __init__."""
+        return cls(load_model_arrays(path, allow_pickle=allow_pickle), source=str(path), **kwargs)
+
+    @property
+    def dtype(self) -> torch.dtype:
+        return self.v_template.dtype
+
+    @property
+    def num_vertices(self) -> int:
+        return self.v_template.shape[0]
+
+    # ------------------------------------------------------------------ inputs
+    def _arg(self, x: Tensor | None, name: str, sizes: tuple[int, ...], B: int) -> Tensor:
+        """Check one argument: (B, *sizes) or (B, prod(sizes)); None -> zeros; returns (B, prod(sizes))."""
+        n = int(np.prod(sizes))
+        if x is None:
+            return self.v_template.new_zeros(B, n)
+        if not isinstance(x, Tensor):
+            raise TypeError(f"{name}: expected a torch.Tensor, got {type(x).__name__}")
+        if x.dim() == len(sizes) + 1 and tuple(x.shape[1:]) == sizes:
+            x = x.reshape(x.shape[0], n)
+        if x.dim() != 2 or x.shape[1] != n:
+            want = f"(B, {n})" + (f" or (B, {', '.join(map(str, sizes))})" if len(sizes) > 1 else "")
+            raise ValueError(f"{name}: expected shape {want}, got {tuple(x.shape)}")
+        if x.device != self.v_template.device:
+            raise ValueError(f"{name}: on {x.device}, but the model is on {self.v_template.device}")
+        if x.shape[0] != B:
+            x = x.expand(B, n)  # only size 1 reaches here (checked in _batch_size)
+        return x.to(self.dtype)
+
+    def _coeffs(self, x: Tensor | None, name: str, n: int, B: int) -> Tensor:
+        """Betas / expression (B, k<=n), zero-padded to (B, n)."""
+        if x is None:
+            return self.v_template.new_zeros(B, n)
+        if not isinstance(x, Tensor):
+            raise TypeError(f"{name}: expected a torch.Tensor, got {type(x).__name__}")
+        if x.dim() != 2 or x.shape[1] > n:
+            raise ValueError(f"{name}: expected shape (B, k) with k <= {n}, got {tuple(x.shape)}")
+        x = self._arg(x, name, (x.shape[1],), B)
+        return torch.nn.functional.pad(x, (0, n - x.shape[1])) if x.shape[1] < n else x
+
+    @staticmethod
+    def _batch_size(named: dict[str, Tensor | None]) -> int:
+        """Common batch size of the given arguments (size 1 broadcasts); error names the odd one."""
+        sizes = {k: v.shape[0] for k, v in named.items() if isinstance(v, Tensor) and v.dim() > 0}
+        big = {s for s in sizes.values() if s != 1}
+        if len(big) > 1:
+            raise ValueError(f"batch sizes differ: {sizes}")
+        return big.pop() if big else 1
+
+    # ------------------------------------------------------------------ forward
+    def forward(self, betas: Tensor | None = None, expression: Tensor | None = None,
+                global_orient: Tensor | None = None, body_pose: Tensor | None = None,
+                left_hand_pose: Tensor | None = None, right_hand_pose: Tensor | None = None,
+                jaw_pose: Tensor | None = None, leye_pose: Tensor | None = None,
+                reye_pose: Tensor | None = None, transl: Tensor | None = None) -> BodyOutput:
+        """SMPL-X forward from axis-angle parameters; see the module docstring for the equations."""
+        named = dict(betas=betas, expression=expression, global_orient=global_orient, body_pose=body_pose,
+                     left_hand_pose=left_hand_pose, right_hand_pose=right_hand_pose, jaw_pose=jaw_pose,
+                     leye_pose=leye_pose, reye_pose=reye_pose, transl=transl)
+        B = self._batch_size(named)
+        hand = (self.num_pca_comps,) if self.use_pca else (NUM_HAND_JOINTS, 3)
+        lh = self._arg(left_hand_pose, "left_hand_pose", hand, B)
+        rh = self._arg(right_hand_pose, "right_hand_pose", hand, B)
+        if self.use_pca:
+            lh, rh = lh @ self.left_hand_components, rh @ self.right_hand_components
+        pose = torch.cat([self._arg(global_orient, "global_orient", (3,), B),
+                          self._arg(body_pose, "body_pose", (NUM_BODY_JOINTS, 3), B),
+                          self._arg(jaw_pose, "jaw_pose", (3,), B), self._arg(leye_pose, "leye_pose", (3,), B),
+                          self._arg(reye_pose, "reye_pose", (3,), B), lh, rh], dim=1) + self.pose_mean
+        coeffs = torch.cat([self._coeffs(betas, "betas", self.num_betas, B),
+                            self._coeffs(expression, "expression", self.num_expression, B)], dim=1)
+        t = self._arg(transl, "transl", (3,), B)
+        if not (torch.isfinite(pose).all() and torch.isfinite(coeffs).all() and torch.isfinite(t).all()):
+            bad = [k for k, v in named.items() if isinstance(v, Tensor) and not torch.isfinite(v).all()]
+            raise ValueError(f"{', '.join(bad)}: contains NaN or Inf")
+        rot = axis_angle_to_matrix(pose.view(B, NUM_JOINTS, 3))
+        return self.lbs(coeffs, rot, t)
+
+    def forward_rotmats(self, rot_mats: Tensor, betas: Tensor | None = None,
+                        expression: Tensor | None = None, transl: Tensor | None = None) -> BodyOutput:
+        """Forward from rotation matrices (B,55,3,3) of all joints (hand mean NOT added): for networks."""
+        if rot_mats.dim() != 4 or tuple(rot_mats.shape[1:]) != (NUM_JOINTS, 3, 3):
+            raise ValueError(f"rot_mats: expected shape (B, 55, 3, 3), got {tuple(rot_mats.shape)}")
+        B = rot_mats.shape[0]
+        coeffs = torch.cat([self._coeffs(betas, "betas", self.num_betas, B),
+                            self._coeffs(expression, "expression", self.num_expression, B)], dim=1)
+        return self.lbs(coeffs, rot_mats.to(self.dtype), self._arg(transl, "transl", (3,), B))
+
+    def shaped(self, coeffs: Tensor) -> tuple[Tensor, Tensor]:
+        """Rest-pose vertices (B,V,3) and joints (B,55,3) for stacked [betas, expression] coeffs (B,S+E)."""
+        v, J = self._shaped_cm(coeffs)
+        return v.transpose(1, 2), J
+
+    def _shaped_cm(self, coeffs: Tensor) -> tuple[Tensor, Tensor]:
+        """Coordinate-major rest vertices (B,3,V) and joints (B,55,3)."""
+        B = coeffs.shape[0]
+        v = torch.addmm(self._v_template_cm, coeffs, self.shape_basis).view(B, 3, -1)
+        J = torch.addmm(self.J_template.view(1, -1), coeffs, self.J_basis).view(B, NUM_JOINTS, 3)
+        return v, J
+
+    def lbs(self, coeffs: Tensor, rot: Tensor, transl: Tensor) -> BodyOutput:
+        """Blend shapes + skinning: coeffs (B,S+E), rot (B,55,3,3), transl (B,3) -> BodyOutput."""
+        B = coeffs.shape[0]
+        v, J = self._shaped_cm(coeffs)                                  # (B,3,V), (B,55,3)
+        if self.has_posedirs:
+            eye = torch.eye(3, dtype=rot.dtype, device=rot.device)
+            v = torch.addmm(v.view(B, -1), (rot[:, 1:] - eye).reshape(B, NUM_POSE_BASIS), self.posedirs).view(B, 3, -1)
+        Rg, tg = self._global_transforms(rot, J)                       # (B,55,3,3), (B,55,3)
+        # skinning transform of joint k: x -> Rg_k (x - J_k) + tg_k; rows of A: columns of Rg, then the offset
+        offset = (tg + transl.unsqueeze(1)) - (Rg @ J.unsqueeze(-1)).squeeze(-1)
+        A = torch.cat([Rg.transpose(2, 3), offset.unsqueeze(2)], dim=2)                # (B,55,4,3)
+        A = A.reshape(B, NUM_JOINTS, 12).transpose(1, 2).reshape(B * 12, NUM_JOINTS)
+        T = torch.mm(A, self._weights_t).view(B, 4, 3, -1)            # one GEMM for the batch: (B,4,3,V)
+        verts = T[:, 3] + T[:, 0] * v[:, 0:1] + T[:, 1] * v[:, 1:2] + T[:, 2] * v[:, 2:3]      # (B,3,V)
+        return BodyOutput(verts.transpose(1, 2).contiguous(), tg + transl.unsqueeze(1), self.faces, rot)
+
+    def _global_transforms(self, rot: Tensor, J: Tensor) -> tuple[Tensor, Tensor]:
+        """Walk the kinematic tree level by level: local rot (B,55,3,3), rest joints (B,55,3) -> global R, t."""
+        rel = J - torch.cat([J.new_zeros(J.shape[0], 1, 3), J[:, self.parents[1:]]], dim=1)
+        Rs, ts = [rot[:, self._levels[0]]], [J[:, self._levels[0]]]
+        for lv, slot in zip(self._levels[1:], self._parent_slot[1:]):
+            Rp, tp = Rs[-1][:, slot], ts[-1][:, slot]
+            Rs.append(Rp @ rot[:, lv])
+            ts.append((Rp @ rel[:, lv].unsqueeze(-1)).squeeze(-1) + tp)
+        return torch.cat(Rs, 1)[:, self._unorder], torch.cat(ts, 1)[:, self._unorder]
+
+    def extra_repr(self) -> str:
+        kind = "procedural humanoid" if self.is_procedural else "SMPL-X file"
+        return (f"{kind} {self.source}: V={self.num_vertices}, betas={self.num_betas}, "
+                f"expression={self.num_expression}, use_pca={self.use_pca}, pose_correctives={self.has_posedirs}")

@@ -1,0 +1,129 @@
+"""BodyModel against the smplx package (parity), analytic cases, gradients and input/file validation."""
+import pickle
+
+import numpy as np
+import pytest
+import smplx
+import torch
+
+from graspkit.body import BodyModel, ModelFileError
+from graspkit.body.random_model import random_smplx_arrays
+from graspkit.rotations import axis_angle_to_matrix
+
+
+def _params(B: int, n_hand: int, dtype, seed: int = 0) -> dict:
+    """Random SMPL-X parameters of a batch, every argument given (smplx needs them all at batch B)."""
+    g = torch.Generator().manual_seed(seed)
+    r = lambda *s, k=1.0: (torch.randn(*s, generator=g, dtype=torch.float64) * k).to(dtype)  # noqa: E731
+    return dict(betas=r(B, 10), expression=r(B, 10), global_orient=r(B, 3), body_pose=r(B, 63, k=0.5),
+                left_hand_pose=r(B, n_hand, k=0.5), right_hand_pose=r(B, n_hand, k=0.5), jaw_pose=r(B, 3, k=0.3),
+                leye_pose=r(B, 3, k=0.3), reye_pose=r(B, 3, k=0.3), transl=r(B, 3))
+
+
+def _parity(model_dir, use_pca: bool, flat: bool, dtype) -> tuple[float, float]:
+    """Max vertex and joint deviation (m) between graspkit and smplx on one file and random parameters."""
+    kw = dict(use_pca=use_pca, num_pca_comps=12, flat_hand_mean=flat, dtype=dtype)
+    ref = smplx.create(str(model_dir), model_type="smplx", gender="neutral", ext="npz", **kw)
+    ours = BodyModel.from_file(model_dir / "smplx" / "SMPLX_NEUTRAL.npz", **kw)
+    p = _params(4, 12 if use_pca else 45, dtype)
+    with torch.no_grad():
+        a, b = ref(**p), ours(**p)
+    return (a.vertices - b.vertices).abs().max().item(), (a.joints[:, :55] - b.joints).abs().max().item()
+
+
+@pytest.mark.parametrize("use_pca", [False, True])
+@pytest.mark.parametrize("flat", [False, True])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_parity_with_smplx_on_dense_random_model(random_model_dir, use_pca, flat, dtype):
+    dv, dj = _parity(random_model_dir, use_pca, flat, dtype)
+    assert dv <= 1e-5 and dj <= 1e-5, (dv, dj)
+
+
+def test_zero_parameters_give_the_template_and_regressed_joints():
+    arr = random_smplx_arrays(num_vertices=300, num_faces=100, seed=1)
+    out = BodyModel(arr, flat_hand_mean=True, dtype=torch.float64)()
+    assert out.vertices.shape == (1, 300, 3) and out.joints.shape == (1, 55, 3)
+    np.testing.assert_allclose(out.vertices[0].numpy(), arr["v_template"], atol=1e-12)
+    np.testing.assert_allclose(out.joints[0].numpy(), arr["J_regressor"] @ arr["v_template"], atol=1e-12)
+
+
+def test_global_orient_rotates_the_body_about_the_root_joint():
+    arr = random_smplx_arrays(num_vertices=300, num_faces=100, seed=2)
+    bm = BodyModel(arr, dtype=torch.float64)
+    betas = torch.randn(1, 10, dtype=torch.float64, generator=torch.Generator().manual_seed(3))
+    aa = torch.tensor([[0.3, -1.2, 2.0]], dtype=torch.float64)
+    rest, turned = bm(betas=betas), bm(betas=betas, global_orient=aa)
+    R, root = axis_angle_to_matrix(aa)[0], rest.joints[0, 0]
+    expect = (rest.vertices[0] - root) @ R.T + root
+    np.testing.assert_allclose(turned.vertices[0].numpy(), expect.numpy(), atol=1e-12)
+
+
+def test_transl_and_batch_broadcast():
+    bm = BodyModel(random_smplx_arrays(num_vertices=200, num_faces=50, seed=3), dtype=torch.float64)
+    pose = torch.randn(3, 63, dtype=torch.float64, generator=torch.Generator().manual_seed(0))
+    t = torch.tensor([[1.0, 2.0, 3.0]], dtype=torch.float64)
+    a, b = bm(body_pose=pose), bm(body_pose=pose, transl=t)  # transl of batch 1 broadcasts to 3
+    np.testing.assert_allclose((b.vertices - a.vertices).numpy(), np.broadcast_to([1.0, 2.0, 3.0], (3, 200, 3)))
+    np.testing.assert_allclose((b.joints - a.joints).numpy(), np.broadcast_to([1.0, 2.0, 3.0], (3, 55, 3)))
+
+
+def test_gradcheck_through_pose_and_shape():
+    bm = BodyModel(random_smplx_arrays(num_vertices=40, num_faces=20, seed=4), dtype=torch.float64)
+    g = torch.Generator().manual_seed(1)
+    pose = (torch.randn(2, 63, dtype=torch.float64, generator=g) * 0.5).requires_grad_(True)
+    betas = torch.randn(2, 10, dtype=torch.float64, generator=g).requires_grad_(True)
+    f = lambda p, b: bm(body_pose=p, betas=b).vertices  # noqa: E731
+    assert torch.autograd.gradcheck(f, (pose, betas))
+
+
+def test_forward_rotmats_matches_axis_angle_forward():
+    bm = BodyModel(random_smplx_arrays(num_vertices=200, num_faces=50, seed=5), dtype=torch.float64, flat_hand_mean=True)
+    p = _params(2, 45, torch.float64, seed=2)
+    full = torch.cat([p["global_orient"], p["body_pose"], p["jaw_pose"], p["leye_pose"], p["reye_pose"],
+                      p["left_hand_pose"], p["right_hand_pose"]], 1).view(2, 55, 3)
+    a = bm(**p)
+    b = bm.forward_rotmats(axis_angle_to_matrix(full), betas=p["betas"], expression=p["expression"], transl=p["transl"])
+    np.testing.assert_allclose(a.vertices.numpy(), b.vertices.numpy(), atol=1e-12)
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    (dict(body_pose=torch.zeros(1, 60)), "body_pose"),
+    (dict(betas=torch.zeros(1, 11)), "betas"),
+    (dict(left_hand_pose=torch.zeros(1, 6)), "left_hand_pose"),
+    (dict(transl=torch.zeros(3)), "transl"),
+    (dict(jaw_pose=torch.tensor([[0.0, float("nan"), 0.0]])), "jaw_pose"),
+    (dict(body_pose=torch.zeros(2, 63), transl=torch.zeros(3, 3)), "batch sizes"),
+])
+def test_bad_arguments_name_the_argument(kwargs, name):
+    bm = BodyModel(random_smplx_arrays(num_vertices=50, num_faces=20, seed=6))
+    with pytest.raises(ValueError, match=name):
+        bm(**kwargs)
+
+
+def test_pca_hand_pose_expects_num_pca_comps():
+    bm = BodyModel(random_smplx_arrays(num_vertices=50, num_faces=20, seed=6), use_pca=True, num_pca_comps=6)
+    assert bm(left_hand_pose=torch.zeros(2, 6)).vertices.shape == (2, 50, 3)
+    with pytest.raises(ValueError, match=r"left_hand_pose: expected shape \(B, 6\)"):
+        bm(left_hand_pose=torch.zeros(2, 45))
+
+
+def test_file_errors_name_file_and_key(tmp_path):
+    arr = random_smplx_arrays(num_vertices=50, num_faces=20, seed=8)
+    missing = {k: v for k, v in arr.items() if k != "weights"}
+    np.savez(tmp_path / "missing.npz", **missing)
+    with pytest.raises(ModelFileError, match=r"missing.npz: missing key 'weights'"):
+        BodyModel.from_file(tmp_path / "missing.npz")
+    wrong = dict(arr, J_regressor=arr["J_regressor"][:54])
+    np.savez(tmp_path / "wrong.npz", **wrong)
+    with pytest.raises(ModelFileError, match=r"wrong.npz: key 'J_regressor' has shape \(54, 50\), expected \(55, 50\)"):
+        BodyModel.from_file(tmp_path / "wrong.npz")
+    with open(tmp_path / "model.pkl", "wb") as fh:
+        pickle.dump(arr, fh)
+    with pytest.raises(ModelFileError, match="model.pkl.*pickle"):
+        BodyModel.from_file(tmp_path / "model.pkl")
+    obj = dict(arr, weights=np.array([None], dtype=object))
+    np.savez(tmp_path / "obj.npz", **obj)
+    with pytest.raises(ModelFileError, match=r"obj.npz: key 'weights'"):
+        BodyModel.from_file(tmp_path / "obj.npz")
+    with pytest.raises(ModelFileError, match="no such body-model file"):
+        BodyModel.from_file(tmp_path / "nope.npz")
