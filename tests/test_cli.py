@@ -1,0 +1,30 @@
+"""The `graspkit` console command: help, version and the body-model subcommands."""
+import subprocess
+import sys
+
+import numpy as np
+
+from graspkit import __version__
+from graspkit.body.random_model import random_smplx_arrays
+
+
+def _run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "graspkit", *args], capture_output=True, text=True, timeout=120)
+
+
+def test_help_and_version():
+    r = _run("--help")
+    assert r.returncode == 0 and "demo" in r.stdout and "body" in r.stdout
+    r = _run("--version")
+    assert r.returncode == 0 and r.stdout.strip() == f"graspkit {__version__}"
+
+
+def test_body_info_reads_a_file_and_reports_a_bad_one(tmp_path):
+    arr = random_smplx_arrays(num_vertices=100, num_faces=40, seed=0)
+    np.savez(tmp_path / "m.npz", **arr)
+    r = _run("body", "info", "--model", str(tmp_path / "m.npz"))
+    assert r.returncode == 0 and "V=100" in r.stdout
+    del arr["weights"]
+    np.savez(tmp_path / "bad.npz", **arr)
+    r = _run("body", "info", "--model", str(tmp_path / "bad.npz"))
+    assert r.returncode == 2 and "bad.npz: missing key 'weights'" in r.stderr
