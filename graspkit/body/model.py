@@ -299,7 +299,7 @@ class BodyModel(nn.Module):
         if self.has_posedirs:
             eye = torch.eye(3, dtype=rot.dtype, device=rot.device)
             v = torch.addmm(v.view(B, -1), (rot[:, 1:] - eye).reshape(B, NUM_POSE_BASIS), self.posedirs).view(B, 3, -1)
-        Rg, tg = self._global_transforms(rot, J)                       # (B,55,3,3), (B,55,3)
+        Rg, tg = self.global_transforms(rot, J)                       # (B,55,3,3), (B,55,3)
         # skinning transform of joint k: x -> Rg_k (x - J_k) + tg_k; rows of A: columns of Rg, then the offset
         offset = (tg + transl.unsqueeze(1)) - (Rg @ J.unsqueeze(-1)).squeeze(-1)
         A = torch.cat([Rg.transpose(2, 3), offset.unsqueeze(2)], dim=2)                # (B,55,4,3)
@@ -308,7 +308,7 @@ class BodyModel(nn.Module):
         verts = T[:, 3] + T[:, 0] * v[:, 0:1] + T[:, 1] * v[:, 1:2] + T[:, 2] * v[:, 2:3]      # (B,3,V)
         return BodyOutput(verts.transpose(1, 2).contiguous(), tg + transl.unsqueeze(1), self.faces, rot)
 
-    def _global_transforms(self, rot: Tensor, J: Tensor) -> tuple[Tensor, Tensor]:
+    def global_transforms(self, rot: Tensor, J: Tensor) -> tuple[Tensor, Tensor]:
         """Walk the kinematic tree level by level: local rot (B,55,3,3), rest joints (B,55,3) -> global R, t."""
         rel = J - torch.cat([J.new_zeros(J.shape[0], 1, 3), J[:, self.parents[1:]]], dim=1)
         Rs, ts = [rot[:, self._levels[0]]], [J[:, self._levels[0]]]
