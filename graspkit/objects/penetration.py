@@ -1,0 +1,161 @@
+"""Body-object interpenetration volume (cm^3) and depth (cm), as reported in SAGA Tab. 1-2 and GOAL Tab. 1.
+
+Volume: the intersection of two closed meshes is integrated along vertical rays. A regular grid of
+columns (spacing h, default 1 mm) covers the xy-overlap of the two bounding boxes; each column is
+intersected exactly with every triangle above it, the crossings of each mesh sorted along z give its
+inside intervals by parity (valid for watertight meshes), and the length of the intersection of the
+two interval sets times h^2 is that column's volume. This is exact along z and a midpoint rule in x, y
+(error O(h^2) for smooth shapes): two overlapping spheres match the analytic lens volume to ~0.1 %
+(tests/test_geometry.py, docs/objects.md).
+
+Depth: the largest distance from a body vertex inside the object to the object surface (exact signed
+distance), 0 when no vertex is inside.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from graspkit.objects.distance import MeshLike, mesh_arrays, require_closed
+from graspkit.objects.sdf import signed_distance
+
+# column offsets in cells: irrational fractions keep rays off mesh vertices and edges; a ray that still
+# hits one (odd number of crossings) is cast again at the next offset
+_OFFSETS = [(0.1234567, 0.3141593), (0.2718282, 0.1414214), (0.4142136, 0.2236068), (0.3819660, 0.4472136)]
+MAX_COLUMNS = 4_000_000
+
+
+@dataclass(frozen=True)
+class Penetration:
+    """Interpenetration of a body and an object: volume in cm^3 and maximum depth in cm."""
+
+    volume_cm3: float
+    depth_cm: float
+
+
+def _closed_numpy(mesh: MeshLike, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """A single closed mesh as float64 (V,3) and int64 (F,3) arrays; ValueError naming `name` otherwise."""
+    verts, faces = mesh_arrays(mesh, name)
+    if verts.dim() != 2:
+        raise ValueError(f"{name}: expected one mesh with vertices (V, 3), got {tuple(verts.shape)}")
+    require_closed(verts, faces, name)
+    return verts.detach().cpu().to(torch.float64).numpy(), faces.cpu().numpy()
+
+
+def _column_crossings(tri: np.ndarray, x0: float, y0: float, h: float, nx: int, ny: int,
+                      budget: int = 4_000_000) -> tuple[np.ndarray, np.ndarray]:
+    """Crossings of vertical rays at (x0 + i h, y0 + j h) with triangles (F,3,3): column ids i*ny + j and z."""
+    xy = tri[..., :2]
+    i0 = np.clip(np.ceil((xy[..., 0].min(1) - x0) / h), 0, nx).astype(np.int64)
+    i1 = np.clip(np.floor((xy[..., 0].max(1) - x0) / h), -1, nx - 1).astype(np.int64)
+    j0 = np.clip(np.ceil((xy[..., 1].min(1) - y0) / h), 0, ny).astype(np.int64)
+    j1 = np.clip(np.floor((xy[..., 1].max(1) - y0) / h), -1, ny - 1).astype(np.int64)
+    ni, nj = np.maximum(i1 - i0 + 1, 0), np.maximum(j1 - j0 + 1, 0)
+    count = ni * nj
+    cols, zs = [], []
+    csum = np.cumsum(count)
+    start = 0
+    while start < len(tri):  # groups of triangles whose (triangle, column) candidate pairs fit the budget
+        stop = max(start + 1, int(np.searchsorted(csum, csum[start] - count[start] + budget, side="right")))
+        sel = np.arange(start, min(stop, len(tri)))
+        sel, start = sel[count[sel] > 0], stop
+        if len(sel) == 0:
+            continue
+        face = np.repeat(sel, count[sel])
+        k = np.arange(len(face)) - np.repeat(np.cumsum(count[sel]) - count[sel], count[sel])
+        px = x0 + (i0[face] + k // nj[face]) * h
+        py = y0 + (j0[face] + k % nj[face]) * h
+        a, b, c = tri[face, 0], tri[face, 1], tri[face, 2]
+        # 2D edge functions: the ray at (px, py) crosses the triangle iff all three have the sign of its area
+        e_bc = (c[:, 0] - b[:, 0]) * (py - b[:, 1]) - (c[:, 1] - b[:, 1]) * (px - b[:, 0])
+        e_ca = (a[:, 0] - c[:, 0]) * (py - c[:, 1]) - (a[:, 1] - c[:, 1]) * (px - c[:, 0])
+        e_ab = (b[:, 0] - a[:, 0]) * (py - a[:, 1]) - (b[:, 1] - a[:, 1]) * (px - a[:, 0])
+        area = e_bc + e_ca + e_ab
+        hit = (((e_bc > 0) & (e_ca > 0) & (e_ab > 0)) | ((e_bc < 0) & (e_ca < 0) & (e_ab < 0))) & (area != 0)
+        z = (e_bc * a[:, 2] + e_ca * b[:, 2] + e_ab * c[:, 2])[hit] / area[hit]
+        cols.append(((i0[face] + k // nj[face]) * ny + j0[face] + k % nj[face])[hit])
+        zs.append(z)
+    if not cols:
+        return np.zeros(0, dtype=np.int64), np.zeros(0)
+    return np.concatenate(cols), np.concatenate(zs)
+
+
+def _overlap_lengths(col_a: np.ndarray, z_a: np.ndarray, col_b: np.ndarray, z_b: np.ndarray,
+                     ncols: int) -> np.ndarray:
+    """Per column, the length along z inside both meshes, given each mesh's (even) crossings."""
+    col = np.concatenate([col_a, col_b])
+    z = np.concatenate([z_a, z_b])
+    is_a = np.concatenate([np.ones(len(z_a), bool), np.zeros(len(z_b), bool)])
+    order = np.lexsort((z, col))
+    col, z, is_a = col[order], z[order], is_a[order]
+    # every column holds an even number of crossings of each mesh, so the global parity restarts per column
+    in_a = np.cumsum(is_a) % 2 == 1
+    in_b = np.cumsum(~is_a) % 2 == 1
+    seg = (col[:-1] == col[1:]) & in_a[:-1] & in_b[:-1]
+    return np.bincount(col[:-1][seg], weights=(z[1:] - z[:-1])[seg], minlength=ncols)
+
+
+def intersection_volume(mesh_a: MeshLike, mesh_b: MeshLike, spacing: float = 1e-3) -> float:
+    """Volume (m^3) of the intersection of two closed meshes, by exact vertical ray casting on an xy grid."""
+    return _volume(*_closed_numpy(mesh_a, "mesh_a"), *_closed_numpy(mesh_b, "mesh_b"), spacing)
+
+
+def _volume(va: np.ndarray, fa: np.ndarray, vb: np.ndarray, fb: np.ndarray, spacing: float) -> float:
+    """Intersection volume of two validated closed meshes (see the module docstring)."""
+    if not spacing > 0:
+        raise ValueError(f"spacing: expected a positive grid spacing in metres, got {spacing}")
+    lo = np.maximum(va.min(0), vb.min(0))
+    hi = np.minimum(va.max(0), vb.max(0))
+    if (hi <= lo).any():
+        return 0.0
+    h = max(spacing, float(np.sqrt((hi[0] - lo[0]) * (hi[1] - lo[1]) / MAX_COLUMNS)))
+    nx, ny = int(np.ceil((hi[0] - lo[0]) / h)), int(np.ceil((hi[1] - lo[1]) / h))
+
+    def near(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """Triangles whose xy-box meets the overlap rectangle (all of a column's crossings are among them)."""
+        t = v[f]
+        keep = (t[..., 0].max(1) >= lo[0]) & (t[..., 0].min(1) <= hi[0])
+        keep &= (t[..., 1].max(1) >= lo[1]) & (t[..., 1].min(1) <= hi[1])
+        return t[keep]
+
+    tri_a, tri_b = near(va, fa), near(vb, fb)
+    length = np.zeros(nx * ny)
+    todo = np.ones(nx * ny, dtype=bool)
+    for ox, oy in _OFFSETS:
+        x0, y0 = lo[0] + (0.5 + ox * 1e-3) * h, lo[1] + (0.5 + oy * 1e-3) * h
+        ca, za = _column_crossings(tri_a, x0, y0, h, nx, ny)
+        cb, zb = _column_crossings(tri_b, x0, y0, h, nx, ny)
+        odd = (np.bincount(ca, minlength=nx * ny) % 2 == 1) | (np.bincount(cb, minlength=nx * ny) % 2 == 1)
+        ok_a, ok_b = ~odd[ca], ~odd[cb]
+        part = _overlap_lengths(ca[ok_a], za[ok_a], cb[ok_b], zb[ok_b], nx * ny)
+        done = todo & ~odd
+        length[done] = part[done]
+        todo &= odd
+        if not todo.any():
+            break
+    # columns still ambiguous after every offset (a ray through a vertex each time) count as empty
+    return float(length.sum() * h * h)
+
+
+def penetration_depth(body: MeshLike, obj: MeshLike) -> float:
+    """Maximum distance (m) from a body vertex inside the object to the object surface; 0 if none is inside."""
+    vb, _ = _closed_numpy(body, "body")
+    return _depth(vb, *_closed_numpy(obj, "obj"))
+
+
+def _depth(vb: np.ndarray, vo: np.ndarray, fo: np.ndarray) -> float:
+    """Depth of body vertices vb in the validated closed mesh (vo, fo)."""
+    near = np.all((vb >= vo.min(0)) & (vb <= vo.max(0)), axis=1)
+    if not near.any():
+        return 0.0
+    sd = signed_distance(vb[near], (vo, fo), check=False)
+    return float(max(0.0, -sd.min().item()))
+
+
+def interpenetration(body: MeshLike, obj: MeshLike, spacing: float = 1e-3) -> Penetration:
+    """SAGA / GOAL interpenetration of a body mesh and an object mesh: volume (cm^3) and depth (cm)."""
+    vb, fb = _closed_numpy(body, "body")
+    vo, fo = _closed_numpy(obj, "obj")
+    return Penetration(volume_cm3=_volume(vb, fb, vo, fo, spacing) * 1e6, depth_cm=_depth(vb, vo, fo) * 100.0)

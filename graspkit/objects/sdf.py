@@ -1,0 +1,170 @@
+"""Signed distance to a closed mesh, NEGATIVE INSIDE and positive outside (SAGA Eq. 7 uses S(x, Y) this way).
+
+Two paths:
+- exact: `signed_distance` = exact closest-point distance (graspkit.objects.distance) with the sign of
+  (p - closest) . pseudo-normal of the closest feature (face normal; edge: sum of the two face normals;
+  vertex: angle-weighted normal; Baerentzen & Aanaes, IEEE TVCG 2005), which is exact for a watertight,
+  consistently oriented mesh. `winding_number` (generalized winding number, Jacobson et al. 2013,
+  solid angles by Van Oosterom & Strackee 1983) is an independent containment test.
+- fast grid: `SDFGrid` samples the exact SDF once per object on a regular grid over the padded
+  bounding box and interpolates trilinearly (torch grid_sample), with gradients w.r.t. the queries.
+
+Measured against trimesh on 5,000 random points in the padded box of every catalogue object (see
+docs/objects.md and tests/test_geometry.py): exact path sign agrees with `trimesh.Trimesh.contains` on
+100.00 % of points, magnitude matches brute-force point-triangle distances to ~1e-16 m. The 64^3 grid
+agrees in sign on 100 % of points farther than one cell from the surface, median |error| ~0.1 mm.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from graspkit.objects.distance import (EDGE_AB, EDGE_CA, VERT_A, VERT_C, MeshLike, as_points, edge_ids, mesh_arrays,
+                                       point_mesh_distance, require_closed)
+
+
+def pseudo_normals(verts: Tensor, faces: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    """Unit face normals (...,F,3), edge pseudo-normals (...,E,3) and angle-weighted vertex normals (...,V,3)."""
+    tri = verts[..., faces, :]  # (..., F, 3, 3)
+    cross = torch.linalg.cross(tri[..., 1, :] - tri[..., 0, :], tri[..., 2, :] - tri[..., 0, :])
+    fn = cross / torch.linalg.vector_norm(cross, dim=-1, keepdim=True).clamp_min(1e-30)
+    eid = torch.as_tensor(edge_ids(faces), device=verts.device)
+    en = torch.zeros(verts.shape[:-2] + (int(eid.max()) + 1, 3), dtype=verts.dtype, device=verts.device)
+    en.index_add_(-2, eid.reshape(-1), fn.repeat_interleave(3, dim=-2))
+    # interior angle at each corner k, between the edges to the two other corners
+    e1 = tri[..., [1, 2, 0], :] - tri
+    e2 = tri[..., [2, 0, 1], :] - tri
+    cos = (e1 * e2).sum(-1) / (torch.linalg.vector_norm(e1, dim=-1) * torch.linalg.vector_norm(e2, dim=-1)).clamp_min(
+        1e-30)
+    angle = torch.arccos(cos.clamp(-1.0, 1.0))  # (..., F, 3)
+    vn = torch.zeros_like(verts)
+    vn.index_add_(-2, faces.reshape(-1), (angle[..., None] * fn[..., None, :]).reshape(verts.shape[:-2] + (-1, 3)))
+    return fn, en, vn
+
+
+def signed_distance(points, mesh: MeshLike, check: bool = True) -> Tensor:
+    """Exact signed distance (N,)|(B,N) from points (N,3)|(B,N,3) to a closed mesh; negative inside.
+
+    Differentiable w.r.t. the points and the mesh vertices (the sign is locally constant). `check`
+    verifies that the mesh is watertight, consistently wound and outward-facing (ValueError otherwise).
+    """
+    verts, faces = mesh_arrays(mesh, "mesh")
+    if check:
+        require_closed(verts, faces, "mesh")
+    res = point_mesh_distance(points, (verts, faces))
+    with torch.no_grad():
+        fn, en, vn = pseudo_normals(verts.detach().to(res.closest.dtype), faces)
+        batched = verts.dim() == 3
+        if batched:  # index per batch element
+            b = torch.arange(len(verts), device=verts.device)[:, None].expand_as(res.face)
+            pick = lambda table, idx: table[b, idx]  # noqa: E731
+        else:
+            pick = lambda table, idx: table[idx]  # noqa: E731
+        eid = torch.as_tensor(edge_ids(faces), device=verts.device)
+        corner = torch.clamp(res.region - VERT_A, 0, 2)  # vertex regions 1..3 -> corner 0..2
+        edge = torch.clamp(res.region - EDGE_AB, 0, 2)  # edge regions 4..6 -> edge 0..2 (ab, bc, ca)
+        normal = pick(fn, res.face)
+        is_vert = (res.region >= VERT_A) & (res.region <= VERT_C)
+        is_edge = (res.region >= EDGE_AB) & (res.region <= EDGE_CA)
+        normal = torch.where(is_vert[..., None], pick(vn, faces[res.face, corner]), normal)
+        normal = torch.where(is_edge[..., None], pick(en, eid[res.face, edge]), normal)
+        p = as_points(points, "points").to(res.closest.dtype)
+        if batched and p.dim() == 2:
+            p = p.expand(len(verts), -1, -1)
+        sign = torch.where(((p - res.closest) * normal).sum(-1) < 0, -1.0, 1.0).to(res.distance.dtype)
+    return res.distance * sign
+
+
+def winding_number(points, mesh: MeshLike, chunk: int = 2_000_000) -> Tensor:
+    """Generalized winding number (N,) of a single mesh at points (N,3): ~1 inside, ~0 outside (no gradient)."""
+    p = as_points(points, "points").detach().to(torch.float64)
+    verts, faces = mesh_arrays(mesh, "mesh")
+    if verts.dim() != 2 or p.dim() != 2:
+        raise ValueError("points, mesh: winding_number takes one mesh (V,3) and points (N,3)")
+    tri = verts.detach().to(torch.float64)[faces]  # (F,3,3)
+    out = torch.empty(len(p), dtype=torch.float64)
+    rows = max(1, chunk // len(faces))
+    for s in range(0, len(p), rows):
+        r = tri[None] - p[s:s + rows, None, None, :]  # (n,F,3,3) corners relative to the query
+        a, b, c = r.unbind(-2)
+        la, lb, lc = (torch.linalg.vector_norm(x, dim=-1) for x in (a, b, c))
+        num = (a * torch.linalg.cross(b, c)).sum(-1)
+        den = la * lb * lc + (a * b).sum(-1) * lc + (b * c).sum(-1) * la + (c * a).sum(-1) * lb
+        out[s:s + rows] = torch.atan2(num, den).sum(-1) / (2 * torch.pi)  # sum of solid angles / (4 pi)
+    return out
+
+
+def contains(points, mesh: MeshLike) -> Tensor:
+    """Boolean (N,)|(B,N): points strictly inside the closed mesh (by the exact signed distance)."""
+    return signed_distance(points, mesh) < 0
+
+
+@dataclass
+class SDFGrid:
+    """A signed-distance grid values[z, y, x] over the box [lower, upper] (metres) with trilinear lookup.
+
+    Outside the box the lookup continues as sdf(clamped point) + |point - clamped point|, an upper
+    bound of the true distance that keeps gradients pointing towards the object.
+    """
+
+    values: Tensor  # (D, H, W) = (nz, ny, nx)
+    lower: Tensor  # (3,)
+    upper: Tensor  # (3,)
+
+    @property
+    def cell(self) -> Tensor:
+        """Grid spacing along x, y, z (3,)."""
+        n = torch.tensor(self.values.shape[::-1], dtype=self.lower.dtype) - 1
+        return (self.upper - self.lower) / n
+
+    @staticmethod
+    def from_mesh(mesh: MeshLike, resolution: int = 64, padding: float = 0.03,
+                  dtype: torch.dtype = torch.float32) -> SDFGrid:
+        """Sample the exact SDF of a closed mesh; `resolution` nodes along the longest side, cubic cells."""
+        verts, faces = mesh_arrays(mesh, "mesh")
+        if verts.dim() != 2:
+            raise ValueError("mesh: SDFGrid.from_mesh takes one mesh with vertices (V, 3)")
+        if resolution < 2 or padding < 0:
+            raise ValueError(f"resolution, padding: need resolution >= 2 and padding >= 0, got {resolution}, {padding}")
+        require_closed(verts, faces, "mesh")
+        v = verts.detach().to(torch.float64)
+        lo, hi = v.min(0).values - padding, v.max(0).values + padding
+        h = (hi - lo).max() / (resolution - 1)
+        n = torch.clamp(torch.ceil((hi - lo) / h - 1e-6).long() + 1, min=2)
+        hi = lo + (n - 1) * h  # cubic cells: stretch the box to whole cells
+        axes = [lo[i] + h * torch.arange(int(n[i]), dtype=torch.float64) for i in range(3)]
+        zz, yy, xx = torch.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
+        nodes = torch.stack([xx, yy, zz], -1).reshape(-1, 3)
+        values = signed_distance(nodes, (v, faces), check=False).reshape(zz.shape)
+        return SDFGrid(values.to(dtype), lo.to(dtype), hi.to(dtype))
+
+    def __call__(self, points) -> Tensor:
+        """Interpolated signed distance (...,) at points (..., 3); differentiable w.r.t. the points."""
+        p = _check_tensor(points if isinstance(points, Tensor) else as_points(points, "points"))
+        dtype = p.dtype
+        lo, hi = self.lower.to(dtype=dtype, device=p.device), self.upper.to(dtype=dtype, device=p.device)
+        inside = torch.maximum(torch.minimum(p, hi), lo)
+        outside = torch.linalg.vector_norm(p - inside, dim=-1)
+        coords = 2.0 * (inside - lo) / (hi - lo) - 1.0  # grid_sample wants (x, y, z) in [-1, 1]
+        grid = self.values.to(dtype=dtype, device=p.device)[None, None]
+        val = F.grid_sample(grid, coords.reshape(1, 1, 1, -1, 3), mode="bilinear", align_corners=True)
+        return val.reshape(p.shape[:-1]) + outside
+
+
+def _check_tensor(p: Tensor) -> Tensor:
+    """Shape/finiteness check of a query tensor without copying it (keeps the autograd graph)."""
+    if p.shape[-1] != 3 or p.numel() == 0 or not torch.isfinite(p).all():
+        raise ValueError(f"points: expected finite, non-empty points of shape (..., 3), got {tuple(p.shape)}")
+    return p if p.is_floating_point() else p.to(torch.float64)
+
+
+@lru_cache(maxsize=32)
+def object_sdf_grid(name: str, resolution: int = 64, padding: float = 0.03) -> SDFGrid:
+    """The cached SDF grid of canonical catalogue object `name` (built on first use, ~0.5-2 s)."""
+    from graspkit.objects.catalogue import make_object
+    return SDFGrid.from_mesh(make_object(name), resolution, padding)
