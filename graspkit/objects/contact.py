@@ -35,7 +35,8 @@ def distance_to(points, target: MeshLike | Tensor) -> Tensor:
 
 def marker_contact(markers, obj: MeshLike | Tensor, threshold: float = MARKER_CONTACT_THRESHOLD) -> Tensor:
     """SAGA's C_M: 1.0 where a marker (N,3)|(B,N,3) is within `threshold` m of the object, else 0.0."""
-    return (distance_to(markers, obj) <= threshold).to(as_points(markers, "markers").dtype)
+    markers = as_points(markers, "markers")
+    return (distance_to(markers, obj) <= threshold).to(markers.dtype)
 
 
 def object_contact(object_points, body: MeshLike | Tensor, threshold: float = OBJECT_CONTACT_THRESHOLD) -> Tensor:
@@ -43,7 +44,8 @@ def object_contact(object_points, body: MeshLike | Tensor, threshold: float = OB
 
     `body` is a body mesh (Trimesh or (vertices (V,3)|(B,V,3), faces)) or just its vertices.
     """
-    return (distance_to(object_points, body) <= threshold).to(as_points(object_points, "object_points").dtype)
+    object_points = as_points(object_points, "object_points")
+    return (distance_to(object_points, body) <= threshold).to(object_points.dtype)
 
 
 def interaction_attention(distance: Tensor, w: float = IAA_WEIGHT) -> Tensor:
@@ -57,4 +59,4 @@ def interaction_attention(distance: Tensor, w: float = IAA_WEIGHT) -> Tensor:
 
 def body_object_attention(body_vertices, obj: MeshLike | Tensor, w: float = IAA_WEIGHT) -> Tensor:
     """exp(-w d(v, O)) (N,)|(B,N) for body vertices v and an object mesh (exact) or object points O."""
-    return interaction_attention(distance_to(body_vertices, obj), w)
+    return interaction_attention(distance_to(as_points(body_vertices, "body_vertices"), obj), w)

@@ -39,7 +39,7 @@ FACE, VERT_A, VERT_B, VERT_C, EDGE_AB, EDGE_BC, EDGE_CA = range(7)
 def as_points(x, name: str, dtype: torch.dtype | None = None) -> Tensor:
     """Validate a point set (..., N, 3): a float tensor with at least one point, all finite; numpy -> float64."""
     if not isinstance(x, Tensor):
-        x = torch.as_tensor(np.asarray(x, dtype=np.float64))
+        x = torch.as_tensor(np.ascontiguousarray(x, dtype=np.float64))
     if not x.is_floating_point():
         x = x.to(torch.float64)
     if dtype is not None:
@@ -62,7 +62,7 @@ def mesh_arrays(mesh: MeshLike, name: str) -> tuple[Tensor, Tensor]:
     else:
         raise ValueError(f"{name}: expected a trimesh.Trimesh or a (vertices, faces) pair, got {type(mesh).__name__}")
     verts = as_points(verts, f"{name} vertices")
-    faces = torch.as_tensor(np.asarray(faces.cpu() if isinstance(faces, Tensor) else faces), dtype=torch.int64)
+    faces = torch.as_tensor(np.ascontiguousarray(faces.cpu() if isinstance(faces, Tensor) else faces), dtype=torch.int64)
     if faces.dim() != 2 or faces.shape[1] != 3 or len(faces) == 0:
         raise ValueError(f"{name}: expected faces of shape (F, 3) with F > 0, got {tuple(faces.shape)}")
     if verts.dim() > 3:

@@ -1,0 +1,354 @@
+"""The geometry layer against independent truths: trimesh, scipy, brute force and analytic formulas."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+from scipy.spatial import cKDTree
+
+from graspkit.objects import (IAA_WEIGHT, SDFGrid, TEST_OBJECTS, apply_pose, body_object_attention, bps_basis,
+                              bps_encode, interaction_attention, interpenetration, intersection_volume,
+                              list_objects, make_object, marker_contact, nearest_neighbours, object_contact,
+                              penetration_depth, point_mesh_distance, sample_object_pose, sample_surface,
+                              signed_distance, winding_number)
+
+ALL = list_objects()
+
+
+def _box_points(mesh: trimesh.Trimesh, n: int, seed: int, pad: float = 0.02) -> np.ndarray:
+    """n uniform random points in the mesh's bounding box padded by `pad` metres."""
+    lo, hi = mesh.bounds
+    return np.random.default_rng(seed).uniform(lo - pad, hi + pad, size=(n, 3))
+
+
+def _brute_force_distance(mesh: trimesh.Trimesh, pts: np.ndarray) -> np.ndarray:
+    """Exact point-mesh distance by trimesh's point-triangle routine over ALL (point, face) pairs."""
+    tri = mesh.triangles
+    cp = trimesh.triangles.closest_point(np.tile(tri, (len(pts), 1, 1)), np.repeat(pts, len(tri), 0))
+    return np.linalg.norm(np.repeat(pts, len(tri), 0) - cp, axis=1).reshape(len(pts), len(tri)).min(1)
+
+
+def _sphere(radius: float, centre=(0.0, 0.0, 0.0), subdivisions: int = 4) -> trimesh.Trimesh:
+    s = trimesh.creation.icosphere(subdivisions, radius)
+    s.apply_translation(centre)
+    return s
+
+
+def _open_mesh() -> trimesh.Trimesh:
+    s = _sphere(0.05, subdivisions=2)
+    return trimesh.Trimesh(s.vertices, s.faces[1:], process=False)
+
+
+# ---------------------------------------------------------------------------------------------- sampling
+
+@pytest.mark.parametrize("name", ["mug", "wine_glass", "banana", "cracker_box"])
+def test_sampled_points_on_surface_with_outward_unit_normals(name):
+    mesh = make_object(name)
+    pts, nrm = sample_surface(mesh, 2048, seed=0)
+    assert pts.shape == (2048, 3) and nrm.shape == (2048, 3)
+    np.testing.assert_allclose(np.linalg.norm(nrm, axis=1), 1.0, atol=1e-9)
+    assert _brute_force_distance(mesh, pts[:200]).max() <= 1e-5
+    # the normal agrees with trimesh's normal of the face the point lies on, and points outward
+    _, _, face = trimesh.proximity.closest_point(mesh, pts)
+    assert (np.einsum("nd,nd->n", nrm, mesh.face_normals[face]) > 0.999).mean() > 0.99
+    out, inn = mesh.contains(pts + 5e-4 * nrm), mesh.contains(pts - 5e-4 * nrm)
+    assert (~out).mean() > 0.99 and inn.mean() > 0.99
+
+
+def test_sampling_is_deterministic_and_area_weighted():
+    mesh = make_object("cracker_box")
+    a, b, c = sample_surface(mesh, 4000, seed=1), sample_surface(mesh, 4000, seed=1), sample_surface(mesh, 4000, 2)
+    np.testing.assert_array_equal(a[0], b[0])
+    assert not np.allclose(a[0], c[0])
+    # fraction of points on the two large (x-z) faces equals their share of the area (binomial 5 sigma)
+    on_large = np.abs(np.abs(a[1][:, 1]) - 1.0) < 1e-9
+    share = 2 * 0.16 * 0.21 / mesh.area
+    assert abs(on_large.mean() - share) < 5 * np.sqrt(share * (1 - share) / 4000)
+    with pytest.raises(ValueError, match="n"):
+        sample_surface(mesh, 0)
+
+
+# ---------------------------------------------------------------------------------------------- BPS
+
+def test_bps_basis_uniform_in_ball_and_deterministic():
+    basis = bps_basis(1024, 0.15, seed=0)
+    assert basis.shape == (1024, 3) and basis.dtype == torch.float32
+    torch.testing.assert_close(basis, bps_basis(1024, 0.15, seed=0), rtol=0, atol=0)
+    assert not torch.allclose(basis, bps_basis(1024, 0.15, seed=1))
+    r = basis.double().norm(dim=1)
+    assert r.max() <= 0.15 + 1e-7
+    # uniform in volume: half of the points within R / 2^(1/3); octants equally filled
+    inner = (r < 0.15 / 2 ** (1 / 3)).double().mean().item()
+    assert abs(inner - 0.5) < 5 * np.sqrt(0.25 / 1024)
+    assert abs((basis[:, 2] > 0).double().mean().item() - 0.5) < 5 * np.sqrt(0.25 / 1024)
+
+
+def test_bps_encode_matches_kdtree_and_deltas_reach_cloud():
+    basis = bps_basis(1024, 0.15, seed=0).double()
+    clouds = np.stack([sample_surface(make_object(n), 2048, seed=0)[0] for n in ("mug", "camera")])
+    dist, delta = bps_encode(torch.tensor(clouds), basis, return_deltas=True)
+    assert dist.shape == (2, 1024) and delta.shape == (2, 1024, 3)
+    for b in range(2):
+        ref, idx = cKDTree(clouds[b]).query(basis.numpy())
+        np.testing.assert_allclose(dist[b].numpy(), ref, atol=1e-12)
+        np.testing.assert_allclose((basis + delta[b]).numpy(), clouds[b][idx], atol=1e-12)
+    torch.testing.assert_close(delta.norm(dim=-1), dist)
+    single = bps_encode(torch.tensor(clouds[0]), basis)
+    assert single.shape == (1024,)
+    torch.testing.assert_close(single, dist[0])
+
+
+# ---------------------------------------------------------------------------------------------- distances
+
+def test_nearest_neighbours_matches_kdtree_batched():
+    rng = np.random.default_rng(0)
+    q, t = rng.normal(size=(3, 500, 3)), rng.normal(size=(3, 800, 3))
+    d, i = nearest_neighbours(torch.tensor(q), torch.tensor(t))
+    d2, _ = nearest_neighbours(torch.tensor(q), torch.tensor(t), squared=True)
+    for b in range(3):
+        ref, ridx = cKDTree(t[b]).query(q[b])
+        np.testing.assert_allclose(d[b].numpy(), ref, atol=1e-12)
+        np.testing.assert_array_equal(i[b].numpy(), ridx)
+        np.testing.assert_allclose(d2[b].numpy(), ref ** 2, atol=1e-12)
+    d_single, _ = nearest_neighbours(torch.tensor(q[1]), torch.tensor(t[1]))
+    torch.testing.assert_close(d_single, d[1])
+
+
+@pytest.mark.parametrize("name", TEST_OBJECTS)
+def test_point_mesh_distance_is_exact(name):
+    mesh = make_object(name)
+    pts = _box_points(mesh, 150, seed=1, pad=0.05)
+    res = point_mesh_distance(pts, mesh)
+    np.testing.assert_allclose(res.distance.numpy(), _brute_force_distance(mesh, pts), atol=1e-12)
+    # the closest point lies on the reported face (trimesh's projection is only ~1e-6 m precise on slivers)
+    tri = mesh.triangles[res.face.numpy()]
+    on = trimesh.triangles.closest_point(tri, res.closest.numpy())
+    np.testing.assert_allclose(on, res.closest.numpy(), atol=1e-5)
+    torch.testing.assert_close(res.distance, torch.linalg.vector_norm(torch.tensor(pts) - res.closest, dim=-1))
+
+
+def test_point_mesh_distance_batched_vertices_and_points():
+    mesh = make_object("can")
+    poses = [sample_object_pose(s) for s in range(3)]
+    verts = torch.tensor(np.stack([apply_pose(p, mesh.vertices) for p in poses]))
+    pts = torch.tensor(np.stack([apply_pose(p, _box_points(mesh, 200, seed=s)) for s, p in enumerate(poses)]))
+    batched = point_mesh_distance(pts, (verts, mesh.faces))
+    for b in range(3):
+        single = point_mesh_distance(pts[b], (verts[b], mesh.faces))
+        torch.testing.assert_close(batched.distance[b], single.distance)
+        # rigid motion of both leaves distances unchanged
+        local = point_mesh_distance(apply_pose(poses[b].inverse(), pts[b]), mesh).distance
+        torch.testing.assert_close(single.distance, local, atol=1e-12, rtol=0)
+
+
+# ---------------------------------------------------------------------------------------------- signed distance
+
+@pytest.mark.parametrize("name", ALL)
+def test_signed_distance_agrees_with_trimesh(name):
+    mesh = make_object(name)
+    pts = _box_points(mesh, 5000, seed=0)
+    sd = signed_distance(pts, mesh).numpy()
+    inside = mesh.contains(pts)
+    assert ((sd < 0) == inside).mean() >= 0.995
+    # trimesh's closest-point search is approximate from above: ours is never larger and within 1 mm
+    unsigned = trimesh.proximity.closest_point(mesh, pts)[1]
+    assert np.all(np.abs(sd) <= unsigned + 1e-9)
+    assert np.abs(np.abs(sd) - unsigned).max() <= 1e-3
+
+
+@pytest.mark.parametrize("name", ["mug", "pitcher", "binoculars"])
+def test_winding_number_agrees_with_signed_distance(name):
+    mesh = make_object(name)
+    pts = _box_points(mesh, 1500, seed=3)
+    w = winding_number(pts, mesh).numpy()
+    sd = signed_distance(pts, mesh).numpy()
+    assert np.all(np.abs(w - np.round(w)) < 1e-6) or np.abs(sd).min() < 1e-6  # integer away from the surface
+    np.testing.assert_array_equal(w > 0.5, sd < 0)
+
+
+def test_signed_distance_of_sphere_is_analytic():
+    r = 0.05
+    sphere = _sphere(r, subdivisions=5)
+    pts = np.random.default_rng(0).uniform(-0.08, 0.08, size=(3000, 3))
+    sd = signed_distance(pts, sphere).numpy()
+    # the icosphere lies inside the true sphere by at most the sagitta of its faces (< 0.1 mm here)
+    np.testing.assert_allclose(sd, np.linalg.norm(pts, axis=1) - r, atol=1e-4)
+
+
+@pytest.mark.parametrize("name", ["mug", "camera", "wine_glass"])
+def test_sdf_grid_matches_exact_away_from_surface(name):
+    mesh = make_object(name)
+    grid = SDFGrid.from_mesh(mesh, resolution=48)
+    cell = grid.cell.max().item()
+    pts = _box_points(mesh, 5000, seed=2)
+    exact = signed_distance(pts, mesh).numpy()
+    approx = grid(torch.tensor(pts)).numpy()
+    far = np.abs(exact) > cell
+    assert far.mean() > 0.5
+    assert ((approx < 0) == (exact < 0))[far].mean() >= 0.995
+    assert np.abs(approx - exact)[far].max() < cell
+    assert np.median(np.abs(approx - exact)) < 0.1 * cell
+    # outside the grid box the lookup is an upper bound of the true distance
+    outer = mesh.bounds[1] + np.array([[0.1, 0.0, 0.0], [0.2, 0.1, 0.3]])
+    assert np.all(grid(torch.tensor(outer)).numpy() >= signed_distance(outer, mesh).numpy() - 1e-6)
+
+
+def test_sdf_grid_gradient_is_unit_and_points_away_from_surface():
+    mesh = make_object("can")
+    grid = SDFGrid.from_mesh(mesh, resolution=48, dtype=torch.float64)
+    pts = _box_points(mesh, 2000, seed=4)
+    res = point_mesh_distance(pts, mesh)
+    keep = (res.distance > 3 * grid.cell.max()).numpy()
+    x = torch.tensor(pts[keep], requires_grad=True)
+    grid(x).sum().backward()
+    sd = signed_distance(pts[keep], mesh)
+    direction = (x.detach() - res.closest[keep]) / res.distance[keep, None] * torch.sign(sd)[:, None]
+    cos = (x.grad * direction).sum(-1) / x.grad.norm(dim=-1)
+    assert (cos > 0.95).float().mean() > 0.95
+    assert ((x.grad.norm(dim=-1) - 1).abs() < 0.1).float().mean() > 0.95
+
+
+# ---------------------------------------------------------------------------------------------- gradients
+
+def _generic_points(mesh: trimesh.Trimesh, n: int, seed: int) -> torch.Tensor:
+    return torch.tensor(_box_points(mesh, n, seed, pad=0.01), dtype=torch.float64)
+
+
+def test_gradcheck_point_mesh_and_signed_distance():
+    mesh = make_object("toothpaste")
+    pts = _generic_points(mesh, 12, 0).requires_grad_(True)
+    assert torch.autograd.gradcheck(lambda p: point_mesh_distance(p, mesh).distance, (pts,))
+    assert torch.autograd.gradcheck(lambda p: signed_distance(p, mesh), (pts,))
+    verts = torch.tensor(mesh.vertices, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda v: point_mesh_distance(pts.detach(), (v, mesh.faces)).distance, (verts,))
+
+
+def test_gradcheck_nearest_neighbours_and_bps():
+    rng = np.random.default_rng(0)
+    q = torch.tensor(rng.normal(size=(2, 10, 3)), requires_grad=True)
+    t = torch.tensor(rng.normal(size=(2, 15, 3)), requires_grad=True)
+    assert torch.autograd.gradcheck(lambda a, b: nearest_neighbours(a, b)[0], (q, t))
+    assert torch.autograd.gradcheck(lambda a, b: nearest_neighbours(a, b, squared=True)[0], (q, t))
+    basis = bps_basis(32, 1.0, seed=0).double()
+    assert torch.autograd.gradcheck(lambda p: bps_encode(p, basis, return_deltas=True), (t,))
+
+
+def test_gradcheck_sdf_grid():
+    grid = SDFGrid.from_mesh(make_object("apple"), resolution=24, dtype=torch.float64)
+    pts = _generic_points(make_object("apple"), 10, 5)
+    pts = torch.cat([pts, pts[:2] + 0.2]).requires_grad_(True)  # two queries outside the grid box
+    assert torch.autograd.gradcheck(grid, (pts,))
+
+
+def test_distance_gradient_is_unit_direction_to_closest_point():
+    mesh = make_object("mug")
+    x = _generic_points(mesh, 300, 6).requires_grad_(True)
+    res = point_mesh_distance(x, mesh)
+    res.distance.sum().backward()
+    expected = (x.detach() - res.closest.detach()) / res.distance.detach()[:, None]
+    torch.testing.assert_close(x.grad, expected, atol=1e-9, rtol=0)
+
+
+# ---------------------------------------------------------------------------------------------- contact, attention
+
+def test_marker_and_object_contact_thresholds():
+    box = make_object("cracker_box")  # faces at y = +-0.03
+    offsets = np.array([0.0, 0.005, 0.019, 0.021, 0.05])
+    markers = torch.tensor([[0.0, 0.03 + o, 0.0] for o in offsets])
+    np.testing.assert_array_equal(marker_contact(markers, box).numpy(), [1, 1, 1, 0, 0])
+    np.testing.assert_array_equal(marker_contact(markers, box, threshold=0.004).numpy(), [1, 0, 0, 0, 0])
+    # object points against a body surface (a sphere of radius 5 cm) and against its vertices only
+    body = _sphere(0.05, subdivisions=4)
+    pts = torch.tensor([[0.0, 0.0, 0.05 + o] for o in offsets])
+    np.testing.assert_array_equal(object_contact(pts, body).numpy(), [1, 1, 0, 0, 0])
+    np.testing.assert_array_equal(object_contact(pts, torch.tensor(body.vertices)).numpy(), [1, 1, 0, 0, 0])
+    batched = object_contact(pts[None].expand(2, -1, -1), torch.tensor(body.vertices)[None].expand(2, -1, -1))
+    assert batched.shape == (2, 5)
+
+
+def test_interaction_attention_is_goal_eq1():
+    d = torch.tensor([0.0, 0.1, 0.2, 1.0], dtype=torch.float64)
+    assert IAA_WEIGHT == 5.0
+    np.testing.assert_allclose(interaction_attention(d).numpy(), np.exp(-5.0 * d.numpy()))
+    box = make_object("cracker_box")
+    verts = torch.tensor([[0.0, 0.03, 0.0], [0.0, 0.23, 0.0], [0.0, 0.0, 0.0]], dtype=torch.float64)
+    att = body_object_attention(verts, box)
+    np.testing.assert_allclose(att.numpy(), [1.0, np.exp(-1.0), np.exp(-5 * 0.03)], atol=1e-9)
+    with pytest.raises(ValueError, match="w"):
+        interaction_attention(d, w=0.0)
+
+
+# ---------------------------------------------------------------------------------------------- interpenetration
+
+def _lens_volume(r1: float, r2: float, d: float) -> float:
+    """Volume of the intersection of two balls (radii r1, r2, centres d apart), |r1 - r2| < d < r1 + r2."""
+    return np.pi * (r1 + r2 - d) ** 2 * (d * d + 2 * d * (r1 + r2) - 3 * (r1 - r2) ** 2) / (12 * d)
+
+
+@pytest.mark.parametrize("r1, r2, d", [(0.05, 0.05, 0.07), (0.06, 0.03, 0.075), (0.04, 0.05, 0.06),
+                                       (0.05, 0.04, 0.03)])
+def test_sphere_lens_volume_and_depth(r1, r2, d):
+    body = _sphere(r1)
+    # put the object along a vertex direction of the body, so a body vertex sits at the deepest point
+    v = body.vertices[np.argmax(body.vertices @ np.array([0.3, 0.5, 0.8]))]
+    obj = _sphere(r2, centre=v / np.linalg.norm(v) * d)
+    pen = interpenetration(body, obj)
+    assert abs(pen.volume_cm3 - _lens_volume(r1, r2, d) * 1e6) <= 0.05 * _lens_volume(r1, r2, d) * 1e6
+    depth = r2 - abs(d - r1)  # deepest body point: on the axis, |d - r1| from the object's centre
+    assert abs(pen.depth_cm - depth * 100) <= 0.1  # 1 mm
+    # against the mesh-exact intersection (manifold3d boolean), the ray casting is within 0.2 %
+    exact = body.intersection(obj, engine="manifold").volume
+    assert abs(intersection_volume(body, obj) - exact) <= 2e-3 * exact
+
+
+def test_penetration_edge_cases_and_inputs():
+    body = _sphere(0.05)
+    far = _sphere(0.05, centre=(0.2, 0.0, 0.0))
+    assert interpenetration(body, far).volume_cm3 == 0.0 and interpenetration(body, far).depth_cm == 0.0
+    small = _sphere(0.02, centre=(0.01, 0.0, 0.0))  # wholly inside: the volume is the small one's
+    assert abs(intersection_volume(body, small) - small.volume) <= 2e-3 * small.volume
+    assert abs(intersection_volume(small, body) - small.volume) <= 2e-3 * small.volume
+    # (vertices, faces) arrays and torch tensors work like a Trimesh
+    mug = apply_pose(sample_object_pose(0, height_range=(0.0, 0.0), distance_range=(0.0, 0.0)), make_object("mug"))
+    hand = _sphere(0.03, centre=mug.vertices[np.argmax(mug.vertices[:, 0])])
+    a = interpenetration(hand, mug)
+    b = interpenetration((torch.tensor(hand.vertices), torch.tensor(hand.faces)), (mug.vertices, mug.faces))
+    assert a == b and a.volume_cm3 > 0 and a.depth_cm > 0
+    assert abs(penetration_depth(hand, mug) * 100 - a.depth_cm) < 1e-12
+
+
+# ---------------------------------------------------------------------------------------------- errors
+
+def test_non_watertight_or_inverted_mesh_is_rejected():
+    bad = _open_mesh()
+    with pytest.raises(ValueError, match="mesh: .*watertight"):
+        signed_distance(np.zeros((1, 3)), bad)
+    with pytest.raises(ValueError, match="body: .*watertight"):
+        interpenetration(bad, _sphere(0.05))
+    with pytest.raises(ValueError, match="obj: .*watertight"):
+        interpenetration(_sphere(0.05), bad)
+    with pytest.raises(ValueError, match="mesh: .*watertight"):
+        SDFGrid.from_mesh(bad)
+    s = _sphere(0.05)
+    inverted = trimesh.Trimesh(s.vertices, s.faces[:, ::-1], process=False)
+    with pytest.raises(ValueError, match="mesh: .*inwards"):
+        signed_distance(np.zeros((1, 3)), inverted)
+
+
+def test_bad_point_sets_are_rejected_with_the_argument_name():
+    mesh = make_object("can")
+    with pytest.raises(ValueError, match="points: empty"):
+        signed_distance(np.zeros((0, 3)), mesh)
+    with pytest.raises(ValueError, match="points: contains NaN"):
+        point_mesh_distance(np.array([[0.0, np.nan, 0.0]]), mesh)
+    with pytest.raises(ValueError, match="query: .*shape"):
+        nearest_neighbours(np.zeros((4, 2)), np.zeros((4, 3)))
+    with pytest.raises(ValueError, match="target: empty"):
+        nearest_neighbours(np.zeros((4, 3)), np.zeros((0, 3)))
+    with pytest.raises(ValueError, match="markers: contains NaN"):
+        marker_contact(torch.tensor([[np.inf, 0.0, 0.0]]), mesh)
+    with pytest.raises(ValueError, match="points: contains NaN"):
+        bps_encode(torch.full((5, 3), float("nan")), bps_basis(8))
+    with pytest.raises(ValueError, match="mesh: face indices"):
+        point_mesh_distance(np.zeros((1, 3)), (mesh.vertices, mesh.faces + 10_000))

@@ -1,0 +1,150 @@
+"""Catalogue and placement: closed, outward, realistic meshes; consistent rigid transforms."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+from graspkit.objects import (SPECS, TEST_OBJECTS, ObjectPose, apply_pose, list_objects, make_object,
+                              sample_object_pose, sample_surface)
+
+ALL = list_objects()
+
+
+def test_catalogue_size_and_grab_test_objects():
+    assert len(ALL) >= 12
+    assert set(TEST_OBJECTS) == {"mug", "camera", "toothpaste", "wine_glass", "frying_pan", "binoculars"}
+    assert set(TEST_OBJECTS) <= set(ALL)
+    assert {"bottle", "can", "cracker_box", "apple", "banana", "pitcher", "bowl", "power_drill"} <= set(ALL)
+
+
+@pytest.mark.parametrize("name", ALL)
+def test_object_is_closed_outward_and_realistic(name):
+    mesh = make_object(name)
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.is_volume
+    assert mesh.volume > 0  # outward orientation: trimesh's signed volume is negative for inverted meshes
+    assert mesh.body_count == 1
+    assert len(mesh.faces) <= 5000
+    # documented size (x, y, z) to the millimetre, origin at the bounding-box centre
+    np.testing.assert_allclose(mesh.extents, SPECS[name].size, atol=1e-3)
+    np.testing.assert_allclose(mesh.bounds.mean(0), 0.0, atol=1e-9)
+    # graspable, real-world scale: 3 cm to 50 cm across, nothing thinner than a centimetre overall
+    assert 0.03 <= mesh.extents.max() <= 0.5 and mesh.extents.min() >= 0.01
+    assert 1e-6 < mesh.volume <= mesh.extents.prod() * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("name", ["mug", "banana", "frying_pan"])
+def test_seeded_variation_is_deterministic_and_bounded(name):
+    a, b, c = make_object(name, seed=3), make_object(name, seed=3), make_object(name, seed=4)
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    assert not np.allclose(a.vertices, c.vertices)
+    assert a.is_watertight and a.is_winding_consistent and a.volume > 0
+    size = np.asarray(SPECS[name].size)
+    for seed in range(8):
+        ext = make_object(name, seed=seed).extents
+        assert np.all(ext >= 0.9 * size - 1e-3) and np.all(ext <= 1.1 * size + 1e-3)
+    canon = make_object(name).extents
+    np.testing.assert_allclose(a.extents[0] / a.extents[1], canon[0] / canon[1], rtol=1e-9)  # x, y share one scale
+
+
+def test_make_object_returns_independent_copies():
+    a = make_object("can")
+    a.apply_translation([1.0, 0.0, 0.0])
+    np.testing.assert_allclose(make_object("can").bounds.mean(0), 0.0, atol=1e-9)
+
+
+def test_unknown_object_error_names_argument_and_choices():
+    with pytest.raises(ValueError, match=r"name: unknown object 'spoon'.*'mug'"):
+        make_object("spoon")
+
+
+# ---------------------------------------------------------------------------------------------- placement
+
+def test_sample_object_pose_ranges_and_determinism():
+    start, facing = (0.3, -0.2), 30.0
+    poses = [sample_object_pose(np.random.default_rng(s), start=start, facing_deg=facing) for s in range(300)]
+    t = np.stack([p.translation for p in poses])
+    assert np.all((t[:, 2] >= 0.5) & (t[:, 2] <= 1.7))
+    horiz = t[:, :2] - start
+    dist = np.linalg.norm(horiz, axis=1)
+    assert np.all((dist >= 0.05) & (dist <= 1.1))
+    bearing = np.rad2deg(np.arctan2(horiz[:, 1], horiz[:, 0])) - facing
+    assert np.all(np.abs(bearing) <= 30.0 + 1e-9)
+    for p in poses:  # yaw only: the gravity axis is kept
+        np.testing.assert_allclose(p.rotation[:, 2], [0, 0, 1], atol=1e-12)
+        np.testing.assert_allclose(p.rotation @ p.rotation.T, np.eye(3), atol=1e-12)
+    yaw = np.rad2deg(np.array([np.arctan2(p.rotation[1, 0], p.rotation[0, 0]) for p in poses])) % 360
+    assert yaw.min() < 30 and yaw.max() > 330  # the full 0-360 range is used
+    a, b = sample_object_pose(7), sample_object_pose(7)
+    np.testing.assert_array_equal(a.matrix(), b.matrix())
+    narrow = sample_object_pose(1, height_range=(1.0, 1.0), distance_range=(0.5, 0.5))
+    assert narrow.translation[2] == 1.0 and np.isclose(np.linalg.norm(narrow.translation[:2]), 0.5)
+
+
+def test_sample_object_pose_rejects_bad_ranges():
+    with pytest.raises(ValueError, match="height_range"):
+        sample_object_pose(0, height_range=(1.7, 0.5))
+    with pytest.raises(ValueError, match="distance_range"):
+        sample_object_pose(0, distance_range=(-0.1, 0.5))
+
+
+def test_object_pose_validates_rotation():
+    with pytest.raises(ValueError, match="rotation"):
+        ObjectPose(np.zeros(3), np.diag([1.0, 1.0, -1.0]))
+    with pytest.raises(ValueError, match="translation"):
+        ObjectPose(np.zeros(2), np.eye(3))
+
+
+def _random_pose(seed: int) -> ObjectPose:
+    rng = np.random.default_rng(seed)
+    q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    q *= np.sign(np.linalg.det(q))
+    return ObjectPose(rng.uniform(-1, 1, 3), q)
+
+
+def test_apply_pose_mesh_points_normals_consistent_and_round_trip():
+    mesh = make_object("mug")
+    pose = _random_pose(0)
+    moved = apply_pose(pose, mesh)
+    # the mesh moves like its vertices, and its (trimesh-computed) face normals like rotated normals
+    np.testing.assert_allclose(moved.vertices, apply_pose(pose, mesh.vertices), atol=1e-12)
+    pts, nrm = apply_pose(pose, mesh.triangles_center, mesh.face_normals)
+    np.testing.assert_allclose(nrm, moved.face_normals, atol=1e-9)
+    np.testing.assert_allclose(pts, moved.triangles_center, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(nrm, axis=1), 1.0, atol=1e-12)
+    assert moved.is_watertight and np.isclose(moved.volume, mesh.volume)
+    # round trip with the inverse pose
+    back = apply_pose(pose.inverse(), moved)
+    np.testing.assert_allclose(back.vertices, mesh.vertices, atol=1e-12)
+    p2, n2 = apply_pose(pose.inverse(), pts, nrm)
+    np.testing.assert_allclose(p2, mesh.triangles_center, atol=1e-12)
+    np.testing.assert_allclose(n2, mesh.face_normals, atol=1e-12)
+    np.testing.assert_allclose(pose.compose(pose.inverse()).matrix(), np.eye(4), atol=1e-12)
+    np.testing.assert_allclose(pose.matrix() @ pose.inverse().matrix(), np.eye(4), atol=1e-12)
+    # the mesh is unchanged
+    np.testing.assert_allclose(mesh.vertices, make_object("mug").vertices)
+
+
+def test_apply_pose_commutes_with_sampling_and_torch_matches_numpy():
+    mesh, pose = make_object("camera"), _random_pose(1)
+    p, n = sample_surface(mesh, 512, seed=5)
+    pm, nm = sample_surface(apply_pose(pose, mesh), 512, seed=5)  # same faces and barycentrics
+    pp, pn = apply_pose(pose, p, n)
+    np.testing.assert_allclose(pm, pp, atol=1e-12)
+    np.testing.assert_allclose(nm, pn, atol=1e-9)
+    x = torch.tensor(p, requires_grad=True)
+    y = apply_pose(pose, x)
+    np.testing.assert_allclose(y.detach().numpy(), pp, atol=1e-12)
+    y.sum().backward()
+    np.testing.assert_allclose(x.grad.numpy(), np.broadcast_to(pose.rotation.sum(0), p.shape), atol=1e-12)
+
+
+def test_apply_pose_errors():
+    pose = ObjectPose.identity()
+    with pytest.raises(ValueError, match="x"):
+        apply_pose(pose, np.zeros((4, 2)))
+    with pytest.raises(ValueError, match="normals"):
+        apply_pose(pose, np.zeros((4, 3)), np.zeros((5, 3)))
+    with pytest.raises(ValueError, match="normals"):
+        apply_pose(pose, trimesh.creation.box(), np.zeros((5, 3)))
