@@ -11,7 +11,7 @@ from graspkit.objects import (IAA_WEIGHT, SDFGrid, TEST_OBJECTS, apply_pose, bod
                               bps_encode, interaction_attention, interpenetration, intersection_volume,
                               list_objects, make_object, marker_contact, nearest_neighbours, object_contact,
                               penetration_depth, point_mesh_distance, sample_object_pose, sample_surface,
-                              signed_distance, winding_number)
+                              signed_distance, signed_distance_to_points, winding_number)
 
 ALL = list_objects()
 
@@ -352,3 +352,20 @@ def test_bad_point_sets_are_rejected_with_the_argument_name():
         bps_encode(torch.full((5, 3), float("nan")), bps_basis(8))
     with pytest.raises(ValueError, match="mesh: face indices"):
         point_mesh_distance(np.zeros((1, 3)), (mesh.vertices, mesh.faces + 10_000))
+
+
+def test_signed_distance_to_point_cloud_saga_eq7():
+    r = 0.05
+    sphere = _sphere(r, subdivisions=5)
+    cloud = torch.tensor(sphere.vertices)
+    normals = cloud / cloud.norm(dim=1, keepdim=True)
+    pts = np.random.default_rng(1).uniform(-0.08, 0.08, size=(3000, 3))
+    truth = np.linalg.norm(pts, axis=1) - r
+    sd = signed_distance_to_points(torch.tensor(pts), cloud, normals).numpy()
+    clear = np.abs(truth) > 1e-3
+    np.testing.assert_array_equal(np.sign(sd[clear]), np.sign(truth[clear]))
+    # nearest-vertex distance overestimates the surface distance by at most the vertex spacing (~2 mm)
+    gap = np.abs(sd) - np.abs(truth)
+    assert gap.min() > -1e-4 and gap.max() < 2.5e-3
+    batched = signed_distance_to_points(torch.tensor(pts)[None].expand(2, -1, -1), cloud, normals)
+    torch.testing.assert_close(batched[1], torch.tensor(sd))

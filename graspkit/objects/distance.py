@@ -62,7 +62,8 @@ def mesh_arrays(mesh: MeshLike, name: str) -> tuple[Tensor, Tensor]:
     else:
         raise ValueError(f"{name}: expected a trimesh.Trimesh or a (vertices, faces) pair, got {type(mesh).__name__}")
     verts = as_points(verts, f"{name} vertices")
-    faces = torch.as_tensor(np.ascontiguousarray(faces.cpu() if isinstance(faces, Tensor) else faces), dtype=torch.int64)
+    faces = np.ascontiguousarray(faces.cpu() if isinstance(faces, Tensor) else faces)
+    faces = torch.as_tensor(faces, dtype=torch.int64)
     if faces.dim() != 2 or faces.shape[1] != 3 or len(faces) == 0:
         raise ValueError(f"{name}: expected faces of shape (F, 3) with F > 0, got {tuple(faces.shape)}")
     if verts.dim() > 3:

@@ -9,23 +9,25 @@ Two paths:
 - fast grid: `SDFGrid` samples the exact SDF once per object on a regular grid over the padded
   bounding box and interpolates trilinearly (torch grid_sample), with gradients w.r.t. the queries.
 
-Measured against trimesh on 5,000 random points in the padded box of every catalogue object (see
-docs/objects.md and tests/test_geometry.py): exact path sign agrees with `trimesh.Trimesh.contains` on
-100.00 % of points, magnitude matches brute-force point-triangle distances to ~1e-16 m. The 64^3 grid
-agrees in sign on 100 % of points farther than one cell from the surface, median |error| ~0.1 mm.
+Measured on 5,000 random points in the 2 cm-padded box of each of the 17 catalogue objects (tables in
+docs/objects.md; checks in tests/test_geometry.py): the exact path's sign agrees with trimesh's
+`contains` on 100.00 % of points and its distance equals a brute-force point-triangle minimum to
+~1e-16 m (trimesh's own closest-point search is up to 0.03 mm too large). The default grid (64 nodes
+along the longest side, 3 cm padding, cells of 2.3-7.5 mm) agrees in sign on 100 % of points farther
+than one cell from the surface (98.4-100 % overall), with median |error| <= 0.07 mm and at most 0.65
+cell beyond one cell from the surface. 10k queries: exact ~0.18 s, grid ~1 ms (2 CPU cores).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor
 
 from graspkit.objects.distance import (EDGE_AB, EDGE_CA, VERT_A, VERT_C, MeshLike, as_points, edge_ids, mesh_arrays,
-                                       point_mesh_distance, require_closed)
+                                       nearest_neighbours, point_mesh_distance, require_closed)
 
 
 def pseudo_normals(verts: Tensor, faces: Tensor) -> tuple[Tensor, Tensor, Tensor]:
@@ -78,6 +80,27 @@ def signed_distance(points, mesh: MeshLike, check: bool = True) -> Tensor:
             p = p.expand(len(verts), -1, -1)
         sign = torch.where(((p - res.closest) * normal).sum(-1) < 0, -1.0, 1.0).to(res.distance.dtype)
     return res.distance * sign
+
+
+def signed_distance_to_points(points, cloud, normals) -> Tensor:
+    """SAGA Eq. 7's S(x, Y) for a point cloud Y with outward normals: |x - y*| signed by (x - y*) . n(y*).
+
+    y* is the nearest cloud point; points (N,3)|(B,N,3), cloud and normals (M,3)|(B,M,3) -> (N,)|(B,N),
+    negative inside. Differentiable w.r.t. points and cloud. Exact only as the cloud gets dense; use
+    `signed_distance` when the mesh is at hand.
+    """
+    p, y = as_points(points, "points"), as_points(cloud, "cloud")
+    n = as_points(normals, "normals").to(y.dtype)
+    if n.shape != y.shape:
+        raise ValueError(f"normals: expected the shape of the cloud {tuple(y.shape)}, got {tuple(n.shape)}")
+    dist, idx = nearest_neighbours(p, y)
+    p3, y3, n3, i3 = (p if p.dim() == 3 else p[None]), (y if y.dim() == 3 else y[None]), \
+        (n if n.dim() == 3 else n[None]), (idx if idx.dim() == 2 else idx[None])
+    batch = max(len(p3), len(y3))
+    gather = lambda t: torch.gather(t.expand(batch, -1, -1), 1, i3[..., None].expand(-1, -1, 3))  # noqa: E731
+    with torch.no_grad():
+        sign = torch.where(((p3 - gather(y3)) * gather(n3)).sum(-1) < 0, -1.0, 1.0).to(dist.dtype)
+    return dist * sign.reshape(dist.shape)
 
 
 def winding_number(points, mesh: MeshLike, chunk: int = 2_000_000) -> Tensor:
