@@ -10,7 +10,7 @@ from scipy.spatial import cKDTree
 from graspkit.objects import (IAA_WEIGHT, SDFGrid, TEST_OBJECTS, apply_pose, body_object_attention, bps_basis,
                               bps_encode, interaction_attention, interpenetration, intersection_volume,
                               list_objects, make_object, marker_contact, nearest_neighbours, object_contact,
-                              penetration_depth, point_mesh_distance, sample_object_pose, sample_surface,
+                              object_sdf_grid, penetration_depth, point_mesh_distance, sample_object_pose, sample_surface,
                               signed_distance, signed_distance_to_points, winding_number)
 
 ALL = list_objects()
@@ -192,6 +192,16 @@ def test_sdf_grid_matches_exact_away_from_surface(name):
     # outside the grid box the lookup is an upper bound of the true distance
     outer = mesh.bounds[1] + np.array([[0.1, 0.0, 0.0], [0.2, 0.1, 0.3]])
     assert np.all(grid(torch.tensor(outer)).numpy() >= signed_distance(outer, mesh).numpy() - 1e-6)
+
+
+def test_object_sdf_grid_is_cached_and_movable():
+    grid = object_sdf_grid("can", 16)
+    assert object_sdf_grid("can", 16) is grid
+    torch.testing.assert_close(grid.values, SDFGrid.from_mesh(make_object("can"), 16).values)
+    g64 = grid.to(dtype=torch.float64)
+    assert g64.values.dtype == torch.float64 and grid.values.dtype == torch.float32
+    x = torch.tensor([[0.0, 0.0, 0.0], [0.0, 0.0, 0.2]], dtype=torch.float64)
+    torch.testing.assert_close(g64(x), grid(x.float()).double(), atol=1e-6, rtol=0)
 
 
 def test_sdf_grid_gradient_is_unit_and_points_away_from_surface():

@@ -17,7 +17,7 @@ from torch import Tensor
 Array = TypeVar("Array", np.ndarray, Tensor)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ObjectPose:
     """A rigid pose: translation (3,) and rotation (3,3), both float64; x_world = rotation @ x_obj + translation."""
 
@@ -61,7 +61,7 @@ class ObjectPose:
 
 
 def sample_object_pose(
-    rng: np.random.Generator | int | None = None,
+    rng: np.random.Generator | int,
     height_range: tuple[float, float] = (0.5, 1.7),
     yaw_range_deg: tuple[float, float] = (0.0, 360.0),
     distance_range: tuple[float, float] = (0.05, 1.1),
@@ -84,6 +84,8 @@ def sample_object_pose(
             raise ValueError(f"{name}: expected finite (low, high) with low <= high, got {(lo, hi)}")
     if distance_range[0] < 0:
         raise ValueError(f"distance_range: distances must be >= 0, got {distance_range}")
+    if not isinstance(rng, (np.random.Generator, int, np.integer)):
+        raise ValueError(f"rng: expected a numpy Generator or an integer seed, got {type(rng).__name__}")
     rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
     dist = rng.uniform(*distance_range)
     bearing = np.deg2rad(facing_deg + rng.uniform(*bearing_range_deg))

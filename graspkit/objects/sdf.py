@@ -166,6 +166,10 @@ class SDFGrid:
         values = signed_distance(nodes, (v, faces), check=False).reshape(zz.shape)
         return SDFGrid(values.to(dtype), lo.to(dtype), hi.to(dtype))
 
+    def to(self, device: torch.device | str | None = None, dtype: torch.dtype | None = None) -> SDFGrid:
+        """A copy on another device and/or in another dtype (do this once, not per query)."""
+        return SDFGrid(*(t.to(device=device, dtype=dtype) for t in (self.values, self.lower, self.upper)))
+
     def __call__(self, points) -> Tensor:
         """Interpolated signed distance (...,) at points (..., 3); differentiable w.r.t. the points."""
         p = _check_tensor(points if isinstance(points, Tensor) else as_points(points, "points"))
