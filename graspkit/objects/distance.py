@@ -126,7 +126,7 @@ def nearest_neighbours(query, target, squared: bool = False) -> tuple[Tensor, Te
     batch = max(len(q3), len(t3))
     q3, t3 = q3.expand(batch, -1, -1), t3.expand(batch, -1, -1)
     idx = torch.empty(q3.shape[:2], dtype=torch.int64, device=q3.device)
-    rows = max(1, PAIR_BUDGET // t3.shape[1])
+    rows = max(1, PAIR_BUDGET // (batch * t3.shape[1]))
     with torch.no_grad():
         qd, td = q3.detach().to(torch.float64), t3.detach().to(torch.float64)
         for s in range(0, q3.shape[1], rows):

@@ -41,9 +41,8 @@ def pseudo_normals(verts: Tensor, faces: Tensor) -> tuple[Tensor, Tensor, Tensor
     # interior angle at each corner k, between the edges to the two other corners
     e1 = tri[..., [1, 2, 0], :] - tri
     e2 = tri[..., [2, 0, 1], :] - tri
-    cos = (e1 * e2).sum(-1) / (torch.linalg.vector_norm(e1, dim=-1) * torch.linalg.vector_norm(e2, dim=-1)).clamp_min(
-        1e-30)
-    angle = torch.arccos(cos.clamp(-1.0, 1.0))  # (..., F, 3)
+    norms = torch.linalg.vector_norm(e1, dim=-1) * torch.linalg.vector_norm(e2, dim=-1)
+    angle = torch.arccos(((e1 * e2).sum(-1) / norms.clamp_min(1e-30)).clamp(-1.0, 1.0))  # (..., F, 3)
     vn = torch.zeros_like(verts)
     vn.index_add_(-2, faces.reshape(-1), (angle[..., None] * fn[..., None, :]).reshape(verts.shape[:-2] + (-1, 3)))
     return fn, en, vn
@@ -94,12 +93,13 @@ def signed_distance_to_points(points, cloud, normals) -> Tensor:
     if n.shape != y.shape:
         raise ValueError(f"normals: expected the shape of the cloud {tuple(y.shape)}, got {tuple(n.shape)}")
     dist, idx = nearest_neighbours(p, y)
-    p3, y3, n3, i3 = (p if p.dim() == 3 else p[None]), (y if y.dim() == 3 else y[None]), \
-        (n if n.dim() == 3 else n[None]), (idx if idx.dim() == 2 else idx[None])
-    batch = max(len(p3), len(y3))
-    gather = lambda t: torch.gather(t.expand(batch, -1, -1), 1, i3[..., None].expand(-1, -1, 3))  # noqa: E731
     with torch.no_grad():
-        sign = torch.where(((p3 - gather(y3)) * gather(n3)).sum(-1) < 0, -1.0, 1.0).to(dist.dtype)
+        p3, y3, n3 = (t if t.dim() == 3 else t[None] for t in (p, y, n))
+        batch = max(len(p3), len(y3))
+        i3 = idx.reshape(batch, -1, 1).expand(-1, -1, 3)
+        nearest = torch.gather(y3.expand(batch, -1, -1), 1, i3)
+        normal = torch.gather(n3.expand(batch, -1, -1), 1, i3)
+        sign = torch.where(((p3 - nearest) * normal).sum(-1) < 0, -1.0, 1.0).to(dist.dtype)
     return dist * sign.reshape(dist.shape)
 
 
