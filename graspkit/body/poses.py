@@ -38,5 +38,5 @@ def body_pose(name: str, dtype: torch.dtype = torch.float32) -> torch.Tensor:
 
 
 def y_up_to_z_up(dtype: torch.dtype = torch.float32) -> torch.Tensor:
-    """global_orient (1, 3) that turns the canonical y-up body into the z-up world, facing +y (AMASS convention)."""
+    """global_orient (1, 3): +90 deg about x, turning the canonical y-up body into the z-up world (it then faces -y)."""
     return torch.tensor([[torch.pi / 2, 0.0, 0.0]], dtype=dtype)
