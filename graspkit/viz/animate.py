@@ -1,0 +1,163 @@
+"""Mesh sequences as matplotlib animations: inline JSHTML for notebooks, GIF / MP4 files.
+
+Notebook outputs stay small by default: at most `max_frames` frames (the stride grows to fit, playback
+stays real-time), small panels, low dpi; `to_html` refuses to embed more than `max_mb` megabytes.
+"""
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import matplotlib as mpl
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter, writers
+from tqdm.auto import tqdm
+
+from graspkit.viz.scene import (GOAL, OBJECT, SKIN, View, _mesh_polys, as_array, as_points, bounds_of, camera_light,
+                                draw_ground, draw_meshes, draw_path, figure, set_equal, sphere, to_numpy)
+
+
+def _frames_array(frames: Any, num_frames: int | None) -> tuple[int, Callable[[int], np.ndarray]]:
+    """(T, frame getter) for an array (T,V,3), a list of (V,3) arrays, or a callable t -> (V,3) with num_frames."""
+    if callable(frames):
+        if num_frames is None:
+            raise ValueError("num_frames: required when frames is a function t -> vertices (V, 3)")
+        return num_frames, lambda t: as_array(frames(t), f"frames({t})", (None, 3))
+    if isinstance(frames, (list, tuple)):
+        return len(frames), lambda t: as_array(frames[t], f"frames[{t}]", (None, 3))
+    arr = as_array(frames, "frames", (None, None, 3))
+    return len(arr), lambda t: arr[t]
+
+
+def animate(frames: Any, faces: Any, objects: Sequence[tuple[Any, ...]] = (), goals: Any = None,
+            goal_radius: float = 0.05, paths: Sequence[Any] = (), fps: float = 30.0,
+            views: Sequence[View] = ("front", "side"), stride: int = 1, max_frames: int | None = 60,
+            size: float = 3.0, dpi: float = 72.0, color: Any = SKIN, title: str | None = None, ground: bool = True,
+            num_frames: int | None = None, close: bool = True) -> FuncAnimation:
+    """A body moving over time: frames (T,V,3) array / list of (V,3) / function t -> (V,3) (with num_frames),
+    faces (F,3); objects [(vertices (V,3) static or (T,V,3) moving, faces[, color])]; static goals (G,3),
+    paths [(N,3)]. Every `stride`-th frame, stride raised so at most max_frames are drawn; plays at real time.
+    close=True closes the figure so a notebook shows only the animation, not a still of its last frame.
+    """
+    total, get = _frames_array(frames, num_frames)
+    if total < 1:
+        raise ValueError("frames: expected at least one frame")
+    if stride < 1:
+        raise ValueError(f"stride: expected >= 1, got {stride}")
+    if max_frames is not None:
+        stride = max(stride, math.ceil(total / max_frames))
+    ticks = list(range(0, total, stride))
+    body = [get(t) for t in ticks]
+    f = as_array(faces, "faces", (None, 3), dtype=np.int64)
+    objs = []
+    for k, item in enumerate(objects):
+        ov = to_numpy(item[0])
+        if ov.ndim == 3 and len(ov) != total:
+            raise ValueError(f"objects[{k}]: {len(ov)} frames of vertices for {total} body frames")
+        objs.append((ov[ticks] if ov.ndim == 3 else ov[None], item[1], item[2] if len(item) > 2 else OBJECT))
+    goal_meshes = [(*sphere(c, goal_radius), GOAL) for c in as_points(goals, "goals")] if goals is not None else []
+
+    extent = [np.stack(body)] + [o[0] for o in objs] + [m[0] for m in goal_meshes] + [to_numpy(p) for p in paths]
+    lo, hi = bounds_of(*extent)
+    fig, axes = figure(views, size, title=title or " ", dpi=dpi)
+    if ground:
+        m = 0.25 * max(float((hi - lo)[:2].max()), 0.4)
+        box = (lo[0] - m, hi[0] + m, lo[1] - m, hi[1] + m)
+        lo = np.minimum(lo, [box[0], box[2], min(0.0, lo[2])])
+        hi = np.maximum(hi, [box[1], box[3], 0.0])
+    colls = []
+    for ax in axes:
+        if ground:
+            draw_ground(ax, box, z=min(0.0, float(lo[2])))
+        for p in paths:
+            draw_path(ax, p)
+        colls.append(draw_meshes(ax, []))
+        set_equal(ax, np.stack([lo, hi]), pad=0.0, zoom=1.15)
+    stamp = fig.texts[0] if fig.texts else fig.suptitle("")
+
+    def meshes_at(i: int) -> list[tuple[Any, ...]]:
+        moving = [(ov[min(i, len(ov) - 1)], of, oc) for ov, of, oc in objs]  # static objects hold one frame
+        return [(body[i], f, color), *moving, *goal_meshes]
+
+    def update(i: int) -> list[Any]:
+        items = meshes_at(i)
+        for ax, pc in zip(axes, colls):
+            polys = [_mesh_polys(mi, f"frame {ticks[i]}", ax, True) for mi in items]
+            pc.set_verts(np.concatenate([p for p, _ in polys]))
+            pc.set_facecolor(np.concatenate([np.concatenate([c, np.ones((len(c), 1))], 1) for _, c in polys]))
+        stamp.set_text(f"{title + '   ' if title else ''}t = {ticks[i] / fps:.2f} s")
+        return colls
+
+    anim = FuncAnimation(fig, update, frames=len(ticks), interval=1000.0 * stride / fps, blit=False)
+    anim.graspkit_fps = fps / stride  # frames per second of the drawn frames, for writers
+    if close:
+        plt.close(fig)
+    return anim
+
+
+def to_html(anim: FuncAnimation, max_mb: float = 3.0) -> str:
+    """The animation as self-contained JavaScript HTML (looping player); ValueError above max_mb megabytes."""
+    with mpl.rc_context({"animation.embed_limit": 1e4}):  # never truncate silently; the check below decides
+        html = anim.to_jshtml(default_mode="loop")
+    mb = len(html.encode()) / 2**20
+    if mb > max_mb:
+        raise ValueError(f"max_mb: the animation is {mb:.1f} MB (> {max_mb} MB); draw fewer frames (max_frames, stride), "
+                         "smaller panels (size, dpi) or fewer views, or raise max_mb")
+    return html
+
+
+def show_animation(anim: FuncAnimation, max_mb: float = 3.0) -> Any:
+    """An IPython HTML object that plays the animation inline in a notebook (see to_html)."""
+    from IPython.display import HTML
+
+    return HTML(to_html(anim, max_mb))
+
+
+def _ffmpeg_path() -> str | None:
+    """matplotlib's configured ffmpeg if it runs, else the binary bundled by imageio-ffmpeg, else None."""
+    if writers.is_available("ffmpeg"):
+        return mpl.rcParams["animation.ffmpeg_path"]
+    try:
+        import imageio_ffmpeg
+    except ImportError:
+        return None
+    return imageio_ffmpeg.get_ffmpeg_exe()
+
+
+def save_animation(anim: FuncAnimation, path: str | os.PathLike, fps: float | None = None, dpi: float | None = None,
+                   progress: bool | None = None) -> Path:
+    """Write anim to path (.gif with Pillow, .mp4 with ffmpeg) atomically; a progress bar over frames is shown
+    when progress=True, or by default for 100 frames or more. Returns the path."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    fps = fps or getattr(anim, "graspkit_fps", None) or 1000.0 / anim._interval
+    rc: dict[str, Any] = {}
+    if suffix == ".gif":
+        writer: Any = PillowWriter(fps=fps)
+    elif suffix == ".mp4":
+        exe = _ffmpeg_path()
+        if exe is None:
+            raise RuntimeError("path: writing .mp4 needs ffmpeg, which was not found; save as .gif instead, "
+                               "or install ffmpeg (e.g. `pip install imageio-ffmpeg`)")
+        rc["animation.ffmpeg_path"] = exe
+        writer = FFMpegWriter(fps=fps, codec="h264")
+    else:
+        raise ValueError(f"path: expected a .gif or .mp4 file, got {path.name!r}")
+    n = anim._save_count or 0
+    show = progress if progress is not None else n >= 100
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=suffix)  # writers pick format by suffix
+    os.close(fd)
+    try:
+        with tqdm(total=n, unit="frame", desc=path.name, disable=not show, leave=False) as bar, mpl.rc_context(rc):
+            anim.save(tmp, writer=writer, dpi=dpi, progress_callback=lambda i, total: bar.update(1))
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path

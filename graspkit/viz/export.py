@@ -1,0 +1,230 @@
+"""Meshes to files other tools open (Blender, MeshLab, three.js / glTF viewers): GLB, OBJ, PLY; and a body
+sequence as an animated GLB (morph targets).
+
+Axes: the world is z up; glTF is y up by specification, so GLB files are written rotated -90 deg about x,
+(x, y, z) -> (x, z, -y), which keeps the world's up pointing up in every glTF viewer. OBJ and PLY have no
+up-axis convention and are written in world coordinates unless y_up=True. All files are written atomically.
+
+Per format:
+- .glb: a trimesh.Scene, one named node (and mesh) per entry, colours as PBR base colours;
+- .obj: one `o <name>` group per entry, colours as per-vertex RGB after each `v` (MeshLab / Blender read them);
+- .ply: one mesh (entries concatenated, names lost), colours as vertex colours.
+"""
+from __future__ import annotations
+
+import json
+import os
+import struct
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+from matplotlib.colors import to_rgba
+from trimesh.visual import TextureVisuals
+from trimesh.visual.material import PBRMaterial
+
+from graspkit.viz.scene import as_array, as_mesh
+from graspkit.viz.style import OBJECT, SEQUENCE, SKIN
+
+FORMATS = (".glb", ".obj", ".ply")
+Z_UP_TO_Y_UP = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # rotation of -90 deg about x: (x, y, z) -> (x, z, -y)
+
+
+def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
+    """Write data to path through a temporary file in the same folder and os.replace; returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data.encode() if isinstance(data, str) else data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _default_color(name: str, k: int) -> Any:
+    """Skin for the first entry or names containing 'body', else the object colour, then the sequence palette."""
+    if "body" in name or "human" in name or (k == 0 and "obj" not in name):
+        return SKIN
+    return OBJECT if k <= 1 else SEQUENCE[k % len(SEQUENCE)]
+
+
+def _as_trimesh(item: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (V,3), faces (F,3)) from a (vertices, faces) pair or a trimesh.Trimesh."""
+    if isinstance(item, trimesh.Trimesh):
+        return np.asarray(item.vertices, float), np.asarray(item.faces, np.int64)
+    if not isinstance(item, (tuple, list)) or len(item) != 2:
+        raise ValueError(f"meshes[{name!r}]: expected (vertices, faces) or a trimesh.Trimesh, got {type(item).__name__}")
+    return as_mesh(item[0], item[1], f"meshes[{name!r}]")
+
+
+def export_scene(meshes: Mapping[str, Any], path: str | os.PathLike, colors: Mapping[str, Any] | None = None,
+                 y_up: bool | None = None) -> Path:
+    """Write named meshes {name: (vertices (V,3), faces (F,3)) or trimesh.Trimesh} (z-up world) to path
+    (.glb / .obj / .ply, from the suffix); colors {name: matplotlib colour}; y_up defaults to True for .glb
+    only (see module doc). Vertices keep their order and count (no merging). Returns the path."""
+    path = Path(path)
+    fmt = path.suffix.lower()
+    if fmt not in FORMATS:
+        raise ValueError(f"path: expected a file ending in one of {FORMATS}, got {path.name!r}")
+    if not meshes:
+        raise ValueError("meshes: nothing to export")
+    rot = Z_UP_TO_Y_UP if (fmt == ".glb" if y_up is None else y_up) else np.eye(3)
+    scene = trimesh.Scene()
+    for k, (name, item) in enumerate(meshes.items()):
+        v, f = _as_trimesh(item, name)
+        rgba = np.round(np.asarray(to_rgba((colors or {}).get(name, _default_color(name, k)))) * 255).astype(np.uint8)
+        mesh = trimesh.Trimesh(v @ rot.T, f, process=False)
+        if fmt == ".glb":
+            mesh.visual = TextureVisuals(material=PBRMaterial(name=name, baseColorFactor=rgba, metallicFactor=0.0,
+                                                              roughnessFactor=0.8, doubleSided=True))
+        else:
+            mesh.visual.vertex_colors = rgba
+        scene.add_geometry(mesh, node_name=name, geom_name=name)
+    if fmt == ".ply":
+        data = trimesh.util.concatenate(list(scene.geometry.values())).export(file_type="ply")
+    else:
+        data = scene.export(file_type=fmt[1:])
+    return write_atomic(path, data)
+
+
+# ---- animated GLB: one mesh whose morph targets are the frames, played by a weights animation ----
+
+_FLOAT, _UINT = 5126, 5125  # glTF componentType
+_ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
+
+
+class _GLBBuilder:
+    """Accumulates one binary buffer and the glTF JSON that describes its accessors."""
+
+    def __init__(self) -> None:
+        self.blob = bytearray()
+        self.gltf: dict[str, Any] = {"asset": {"version": "2.0", "generator": "graspkit.viz.export"},
+                                     "buffers": [], "bufferViews": [], "accessors": [], "meshes": [], "nodes": [],
+                                     "materials": [], "scenes": [{"nodes": []}], "scene": 0}
+
+    def accessor(self, a: np.ndarray, kind: str, target: int | None = None) -> int:
+        """Append a (float32 VEC3 / SCALAR, or uint32 SCALAR) array; returns its accessor index."""
+        while len(self.blob) % 4:
+            self.blob.append(0)
+        view: dict[str, Any] = {"buffer": 0, "byteOffset": len(self.blob), "byteLength": a.nbytes}
+        if target is not None:
+            view["target"] = target
+        self.blob += a.tobytes()
+        self.gltf["bufferViews"].append(view)
+        acc: dict[str, Any] = {"bufferView": len(self.gltf["bufferViews"]) - 1, "count": len(a), "type": kind,
+                               "componentType": _UINT if a.dtype == np.uint32 else _FLOAT}
+        if a.dtype == np.float32:  # POSITION (also in morph targets) and animation inputs need min / max
+            acc["min"] = np.atleast_1d(a.min(0)).astype(float).tolist()
+            acc["max"] = np.atleast_1d(a.max(0)).astype(float).tolist()
+        self.gltf["accessors"].append(acc)
+        return len(self.gltf["accessors"]) - 1
+
+    def mesh_node(self, name: str, v: np.ndarray, f: np.ndarray, color: Any, targets: np.ndarray | None = None) -> int:
+        """Add a mesh (V,3) / (F,3) with a coloured material and optional morph targets (K,V,3); returns its mesh index."""
+        g = self.gltf
+        g["materials"].append({"name": name, "doubleSided": True, "pbrMetallicRoughness": {
+            "baseColorFactor": list(map(float, to_rgba(color))), "metallicFactor": 0.0, "roughnessFactor": 0.8}})
+        prim: dict[str, Any] = {"attributes": {"POSITION": self.accessor(v.astype(np.float32), "VEC3", _ARRAY_BUFFER)},
+                                "indices": self.accessor(f.astype(np.uint32).reshape(-1), "SCALAR",
+                                                         _ELEMENT_ARRAY_BUFFER),
+                                "material": len(g["materials"]) - 1, "mode": 4}
+        mesh: dict[str, Any] = {"name": name, "primitives": [prim]}
+        if targets is not None and len(targets):
+            prim["targets"] = [{"POSITION": self.accessor(t.astype(np.float32), "VEC3", _ARRAY_BUFFER)} for t in targets]
+            mesh["weights"] = [0.0] * len(targets)
+            mesh["extras"] = {"targetNames": [f"frame_{k + 1:04d}" for k in range(len(targets))]}
+        g["meshes"].append(mesh)
+        g["nodes"].append({"name": name, "mesh": len(g["meshes"]) - 1})
+        g["scenes"][0]["nodes"].append(len(g["nodes"]) - 1)
+        return len(g["meshes"]) - 1
+
+    def to_bytes(self) -> bytes:
+        """The GLB container: 12-byte header, JSON chunk (space-padded), BIN chunk (zero-padded)."""
+        self.gltf["buffers"] = [{"byteLength": len(self.blob)}]
+        js = json.dumps(self.gltf, separators=(",", ":")).encode()
+        js += b" " * (-len(js) % 4)
+        bin_ = bytes(self.blob) + b"\0" * (-len(self.blob) % 4)
+        total = 12 + 8 + len(js) + 8 + len(bin_)
+        return (struct.pack("<III", 0x46546C67, 2, total) + struct.pack("<II", len(js), 0x4E4F534A) + js
+                + struct.pack("<II", len(bin_), 0x004E4942) + bin_)
+
+
+def export_sequence_glb(vertices: Any, faces: Any, path: str | os.PathLike, fps: float = 30.0,
+                        objects: Mapping[str, Any] | None = None, color: Any = SKIN,
+                        colors: Mapping[str, Any] | None = None, stride: int = 1, y_up: bool = True,
+                        name: str = "body") -> Path:
+    """An animated GLB of a body sequence vertices (T,V,3) with faces (F,3) at fps, plus static objects
+    {name: (vertices, faces)}. Frame 0 is the mesh, frames 1..T-1 are morph targets (offsets from frame 0),
+    and an animation drives their weights with LINEAR interpolation at t = k * stride / fps, so viewers
+    (Blender: shape keys; three.js, gltf viewers) play it. Size ~ 12 * T * V bytes (10k vertices, 300
+    frames: 36 MB): use stride. trimesh loads the file as the static frame 0. Returns the path."""
+    verts = as_array(vertices, "vertices", (None, None, 3))[::stride]
+    f = as_array(faces, "faces", (None, 3), dtype=np.int64)
+    if stride < 1 or len(verts) == 0:
+        raise ValueError(f"vertices: need at least one frame (and stride >= 1), got {len(verts)} frames")
+    if f.size and (f.min() < 0 or f.max() >= verts.shape[1]):
+        raise ValueError(f"faces: indices must lie in [0, {verts.shape[1]}), got [{f.min()}, {f.max()}]")
+    rot = Z_UP_TO_Y_UP if y_up else np.eye(3)
+    verts = verts @ rot.T
+    glb = _GLBBuilder()
+    mesh = glb.mesh_node(name, verts[0], f, color, verts[1:] - verts[0])
+    for k, (oname, item) in enumerate((objects or {}).items()):
+        ov, of = _as_trimesh(item, oname)
+        glb.mesh_node(oname, ov @ rot.T, of, (colors or {}).get(oname, _default_color(oname, k + 1)))
+    if len(verts) > 1:
+        n = len(verts)
+        times = (np.arange(n) * stride / fps).astype(np.float32)
+        weights = np.zeros((n, n - 1), np.float32)
+        weights[np.arange(1, n), np.arange(n - 1)] = 1.0  # frame k shows target k - 1 fully; frame 0 shows none
+        sampler = {"input": glb.accessor(times, "SCALAR"), "output": glb.accessor(weights.reshape(-1), "SCALAR"),
+                   "interpolation": "LINEAR"}
+        glb.gltf["animations"] = [{"name": f"{name}_motion", "samplers": [sampler],
+                                   "channels": [{"sampler": 0, "target": {"node": mesh, "path": "weights"}}]}]
+    return write_atomic(path, glb.to_bytes())
+
+
+def read_glb(path: str | os.PathLike) -> tuple[dict[str, Any], bytes]:
+    """The JSON document and binary chunk of a GLB file."""
+    data = Path(path).read_bytes()
+    magic, version, _ = struct.unpack_from("<III", data, 0)
+    if magic != 0x46546C67 or version != 2:
+        raise ValueError(f"path: {path} is not a glTF 2.0 binary file")
+    n_json, _ = struct.unpack_from("<II", data, 12)
+    gltf = json.loads(data[20:20 + n_json])
+    off = 20 + n_json
+    blob = b""
+    if off < len(data):
+        n_bin, _ = struct.unpack_from("<II", data, off)
+        blob = data[off + 8:off + 8 + n_bin]
+    return gltf, blob
+
+
+def load_sequence_glb(path: str | os.PathLike, name: str = "body", y_up: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Read back a file from export_sequence_glb: vertices (T,V,3) in the z-up world, faces (F,3), times (T,) s."""
+    gltf, blob = read_glb(path)
+
+    def arr(i: int) -> np.ndarray:
+        acc = gltf["accessors"][i]
+        view = gltf["bufferViews"][acc["bufferView"]]
+        dtype = np.uint32 if acc["componentType"] == _UINT else np.float32
+        a = np.frombuffer(blob, dtype, acc["count"] * (3 if acc["type"] == "VEC3" else 1), view["byteOffset"])
+        return a.reshape(-1, 3) if acc["type"] == "VEC3" else a
+
+    k = next((i for i, m in enumerate(gltf["meshes"]) if m["name"] == name), None)
+    if k is None:
+        raise ValueError(f"name: no mesh {name!r} in {path}")
+    prim = gltf["meshes"][k]["primitives"][0]
+    base = arr(prim["attributes"]["POSITION"]).astype(np.float64)
+    frames = [base] + [base + arr(t["POSITION"]) for t in prim.get("targets", [])]
+    times = np.zeros(1)
+    for anim in gltf.get("animations", []):
+        times = arr(anim["samplers"][0]["input"]).astype(np.float64)
+    rot = Z_UP_TO_Y_UP if y_up else np.eye(3)
+    return np.stack(frames) @ rot, arr(prim["indices"]).reshape(-1, 3).astype(np.int64), times

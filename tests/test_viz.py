@@ -1,0 +1,252 @@
+"""graspkit.viz: figures, colour mapping, shape errors, animations (GIF / HTML) and mesh export round trips."""
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+import torch  # noqa: E402
+import trimesh  # noqa: E402
+from matplotlib.animation import FuncAnimation  # noqa: E402
+from mpl_toolkits.mplot3d import Axes3D  # noqa: E402
+from PIL import Image  # noqa: E402
+
+from graspkit import viz  # noqa: E402
+from graspkit.viz import animate as animate_fn  # noqa: E402
+from graspkit.viz.animate import save_animation, to_html  # noqa: E402
+from graspkit.viz.export import Z_UP_TO_Y_UP, export_scene, export_sequence_glb, load_sequence_glb, read_glb  # noqa: E402
+
+
+@pytest.fixture
+def body() -> trimesh.Trimesh:
+    """A standing capsule 1.7 m tall on the ground (z up), as a stand-in body."""
+    return trimesh.creation.capsule(height=1.3, radius=0.2, count=[12, 12]).apply_translation([0, 0, 0.85])
+
+
+@pytest.fixture
+def ball() -> trimesh.Trimesh:
+    """A small icosphere object in front of the body."""
+    return trimesh.creation.icosphere(1, radius=0.1).apply_translation([0.4, -0.5, 1.0])
+
+
+@pytest.fixture(autouse=True)
+def _close_figures():
+    yield
+    plt.close("all")
+
+
+def moving(body: trimesh.Trimesh, T: int) -> np.ndarray:
+    """(T, V, 3) frames of body walking along x (every frame differs, so GIF encoders keep them all)."""
+    return np.stack([body.vertices + [0.05 * t, 0.0, 0.02 * np.sin(t)] for t in range(T)])
+
+
+# ---- figures ----
+
+def test_figure_views_and_equal_aspect(body):
+    fig, axes = viz.figure(views=("front", "side", "top", (30, 45)), size=2)
+    assert len(axes) == 4 and all(isinstance(a, Axes3D) for a in axes)
+    assert len([a for a in fig.axes if isinstance(a, Axes3D)]) == 4
+    assert (axes[0].elev, axes[0].azim) == viz.VIEWS["front"] and (axes[3].elev, axes[3].azim) == (30, 45)
+    pts = np.array([[0, 0, 0], [2.0, 0.5, 1.0]])
+    lim = viz.set_equal(axes[1], pts, pad=0.0)
+    ranges = lim[1] - lim[0]
+    np.testing.assert_allclose(ranges, [2.0, 0.5, 1.0])
+    np.testing.assert_allclose([axes[1].get_xlim()[1], axes[1].get_ylim()[1], axes[1].get_zlim()[1]], [2.0, 0.5, 1.0])
+    aspect = np.asarray(axes[1].get_box_aspect())
+    np.testing.assert_allclose(aspect / aspect[0], ranges / ranges[0], rtol=1e-6)  # one metre is as long on every axis
+
+
+def test_set_equal_accepts_batches_and_flat_sets():
+    ax = viz.figure(views=("iso",))[1][0]
+    lim = viz.set_equal(ax, torch.zeros(4, 5, 3), [[1.0, 2.0, 0.0]], pad=0.0)
+    assert np.all(lim[1] - lim[0] > 0)  # a flat set still gets a non-degenerate box
+    np.testing.assert_allclose(lim[1, :2] - lim[0, :2], [1.0, 2.0], rtol=0.1)
+
+
+def test_draw_mesh_lit_and_torch_input(body):
+    fig, (ax,) = viz.figure(views=("front",))
+    v = torch.tensor(body.vertices, requires_grad=True)
+    pc = viz.draw_mesh(ax, v * 1.0, torch.tensor(body.faces))
+    colors = pc.get_facecolor()
+    assert len(colors) == len(body.faces)
+    assert colors[:, :3].std() > 0.01  # shaded, not flat
+    fig.canvas.draw()
+
+
+def test_lambert_bounds():
+    base = np.ones((3, 3)) * 0.8
+    n = np.array([[0, 0, 1.0], [1.0, 0, 0], [0, 0, -1.0]])
+    c = viz.lambert(n, base, np.array([0, 0, 1.0]), ambient=0.3)
+    np.testing.assert_allclose(c[:, 0], [0.8, 0.24, 0.8])  # facing the light: full; edge-on: ambient; two-sided
+
+
+def test_point_colours_follow_colormap():
+    fig, (ax,) = viz.figure(views=("front",))
+    values = np.array([0.0, 0.5, 1.0])
+    sc = viz.draw_points(ax, np.eye(3), values, cmap="viridis")
+    top = np.array(plt.get_cmap("viridis")(1.0))
+    np.testing.assert_allclose(sc.to_rgba(1.0), top)
+    fig.canvas.draw()
+    drawn = {tuple(np.round(c, 6)) for c in sc.get_facecolor()}
+    assert tuple(np.round(top, 6)) in drawn
+    assert len(fig.axes) == 2  # 3D axes + colorbar
+    np.testing.assert_allclose(viz.value_colors([1.0, 2.0])[0], viz.CONTACT_CMAP(1.0))  # clipped to vmax
+    np.testing.assert_allclose(viz.value_colors([0.0])[0], viz.CONTACT_CMAP(0.0))
+
+
+def test_other_layers_draw(body):
+    fig, (ax,) = viz.figure(views=("iso",))
+    viz.draw_markers(ax, body.vertices[:3], labels=["a", "b", "c"])
+    viz.draw_arrows(ax, [0, 0, 1], np.eye(3) * 0.3)
+    viz.draw_goal(ax, [[0.5, 0, 1], [0, 0.5, 1]], radius=0.05)
+    viz.draw_ground(ax, (-1, 1, -1, 1), step=0.5)
+    viz.draw_path(ax, np.random.default_rng(0).normal(size=(10, 3)))
+    fig.canvas.draw()
+    v, f = viz.sphere([1, 2, 3], 0.5)
+    np.testing.assert_allclose(np.linalg.norm(v - [1, 2, 3], axis=1), 0.5)
+    assert trimesh.Trimesh(v, f).is_watertight
+
+
+def test_show_scene(body, ball, tmp_path):
+    pts = ball.vertices
+    fig = viz.show_scene(meshes=[(body.vertices, body.faces), (ball.vertices, ball.faces, viz.OBJECT)],
+                         points=pts, values=np.linspace(0, 1, len(pts)), markers=body.vertices[:2], labels=["p", "q"],
+                         arrows=([0, 0, 1], [0.3, 0, 0]), goals=[0.5, -0.5, 1.2], paths=[body.vertices[:5]],
+                         views=("front", "side", "top"), size=2, title="scene", colorbar_label="contact")
+    axes3d = [a for a in fig.axes if isinstance(a, Axes3D)]
+    assert len(axes3d) == 3 and len(fig.axes) == 4
+    for ax in axes3d:
+        r = np.array([np.ptp(ax.get_xlim()), np.ptp(ax.get_ylim()), np.ptp(ax.get_zlim())])
+        a = np.asarray(ax.get_box_aspect())
+        np.testing.assert_allclose(a / a[2], r / r[2], rtol=1e-6)
+        assert ax.get_zlim()[0] <= 0.0 and ax.get_zlim()[1] >= body.bounds[1, 2]
+    fig.savefig(tmp_path / "scene.png", dpi=50)
+    assert Image.open(tmp_path / "scene.png").size[0] > 0
+
+
+@pytest.mark.parametrize("call, name", [
+    (lambda ax, b: viz.draw_mesh(ax, b.vertices[:, :2], b.faces), "mesh vertices"),
+    (lambda ax, b: viz.draw_mesh(ax, b.vertices[None], b.faces), "mesh vertices"),
+    (lambda ax, b: viz.draw_mesh(ax, b.vertices, b.faces[:, :2]), "mesh faces"),
+    (lambda ax, b: viz.draw_mesh(ax, b.vertices[:10], b.faces), "mesh faces"),
+    (lambda ax, b: viz.draw_points(ax, b.vertices, values=np.zeros(3)), "values"),
+    (lambda ax, b: viz.draw_points(ax, np.zeros((4, 2))), "points"),
+    (lambda ax, b: viz.draw_markers(ax, b.vertices[:3], labels=["a"]), "labels"),
+    (lambda ax, b: viz.draw_arrows(ax, np.zeros((3, 3)), np.zeros((2, 3))), "vectors"),
+    (lambda ax, b: viz.draw_goal(ax, [0, 0]), "center"),
+    (lambda ax, b: viz.draw_ground(ax, (1, -1, 0, 1)), "extent"),
+    (lambda ax, b: viz.figure(views=("nowhere",)), "views"),
+    (lambda ax, b: animate_fn(b.vertices, b.faces), "frames"),
+    (lambda ax, b: animate_fn(lambda t: b.vertices, b.faces), "num_frames"),
+    (lambda ax, b: export_scene({"body": (b.vertices, b.faces[:, :2])}, "x.glb"), "body"),
+    (lambda ax, b: export_scene({"body": b}, "x.stl"), "path"),
+    (lambda ax, b: export_sequence_glb(b.vertices, b.faces, "x.glb"), "vertices"),
+])
+def test_wrong_shapes_name_the_argument(body, call, name):
+    ax = viz.figure(views=("front",))[1][0]
+    with pytest.raises(ValueError, match=name):
+        call(ax, body)
+
+
+# ---- animations ----
+
+def test_gif_frames_and_stride(body, ball, tmp_path):
+    frames = moving(body, 25)
+    anim = animate_fn(frames, body.faces, objects=[(ball.vertices, ball.faces)], goals=[1, -1, 1],
+                      views=("front", "top"), max_frames=10, size=1.5, dpi=40)
+    assert isinstance(anim, FuncAnimation)
+    path = save_animation(anim, tmp_path / "walk.gif")
+    with Image.open(path) as im:
+        assert im.format == "GIF" and im.n_frames == 9  # stride raised to ceil(25 / 10) = 3 -> frames 0, 3, ..., 24
+    assert [p.name for p in tmp_path.iterdir()] == ["walk.gif"]  # the temporary file was renamed
+
+
+def test_animate_function_frames_and_moving_object(body, ball, tmp_path):
+    obj = moving(ball, 6)
+    anim = animate_fn(lambda t: torch.tensor(body.vertices) + t * 0.1, torch.tensor(body.faces), num_frames=6,
+                      objects=[(obj, ball.faces, "green")], views=("side",), size=1.5, dpi=40)
+    with Image.open(save_animation(anim, tmp_path / "f.gif", progress=True)) as im:
+        assert im.n_frames == 6
+    with pytest.raises(ValueError, match="objects"):
+        animate_fn(moving(body, 4), body.faces, objects=[(obj, ball.faces)])
+
+
+def test_html_embed_and_limit(body):
+    anim = animate_fn(moving(body, 4), body.faces, views=("front",), size=1.5, dpi=40)
+    html = to_html(anim)
+    assert "<script" in html and len(html) < 3 * 2**20
+    with pytest.raises(ValueError, match="max_mb"):
+        to_html(anim, max_mb=0.001)
+
+
+@pytest.mark.filterwarnings("ignore:Animation was deleted")
+def test_save_errors_and_atomicity(body, tmp_path, monkeypatch):
+    import sys
+
+    anim_mod = sys.modules["graspkit.viz.animate"]  # the package attribute `animate` is the function
+    anim = animate_fn(moving(body, 3), body.faces, views=("front",), size=1.0, dpi=30)
+    with pytest.raises(ValueError, match="path"):
+        save_animation(anim, tmp_path / "a.avi")
+    monkeypatch.setattr(anim_mod, "_ffmpeg_path", lambda: None)
+    with pytest.raises(RuntimeError, match=r"\.gif"):
+        save_animation(anim, tmp_path / "a.mp4")
+
+    def broken(*args, **kwargs):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(anim, "save", broken)
+    with pytest.raises(OSError):
+        save_animation(anim, tmp_path / "b.gif")
+    assert list(tmp_path.iterdir()) == []  # no partial output, no temporary file left behind
+
+
+def test_mp4_when_ffmpeg_available(body, tmp_path):
+    import sys
+
+    if sys.modules["graspkit.viz.animate"]._ffmpeg_path() is None:
+        pytest.skip("no ffmpeg (install imageio-ffmpeg to test .mp4)")
+    anim = animate_fn(moving(body, 5), body.faces, views=("front",), size=1.5, dpi=40)
+    path = save_animation(anim, tmp_path / "a.mp4")
+    assert path.stat().st_size > 1000 and path.read_bytes()[4:8] == b"ftyp"
+
+
+# ---- export ----
+
+@pytest.mark.parametrize("suffix", [".glb", ".obj", ".ply"])
+def test_export_scene_round_trip(body, ball, tmp_path, suffix):
+    meshes = {"body": (torch.tensor(body.vertices), body.faces), "ball": ball}
+    path = export_scene(meshes, tmp_path / f"scene{suffix}", colors={"ball": "tab:green"})
+    assert [p.name for p in tmp_path.iterdir()] == [path.name]
+    loaded = trimesh.load_scene(path, process=False)
+    n = len(body.vertices) + len(ball.vertices)
+    assert sum(len(g.vertices) for g in loaded.geometry.values()) == n
+    world = np.concatenate([body.vertices, ball.vertices])
+    expect = world @ Z_UP_TO_Y_UP.T if suffix == ".glb" else world  # glTF is y up
+    np.testing.assert_allclose(loaded.bounds, [expect.min(0), expect.max(0)], atol=1e-5)
+    if suffix == ".glb":
+        assert set(loaded.graph.nodes_geometry) == {"body", "ball"}
+        assert len(loaded.geometry["body"].vertices) == len(body.vertices)
+        np.testing.assert_allclose(loaded.geometry["body"].bounds[1, 1], body.bounds[1, 2], atol=1e-5)  # up is +y
+    if suffix == ".obj":
+        text = path.read_text()
+        assert "o body" in text and "o ball" in text
+
+
+def test_export_sequence_glb_round_trip(body, ball, tmp_path):
+    frames = moving(body, 7)
+    path = export_sequence_glb(torch.tensor(frames), body.faces, tmp_path / "seq.glb", fps=30,
+                               objects={"ball": (ball.vertices, ball.faces)})
+    v, f, times = load_sequence_glb(path)
+    np.testing.assert_allclose(v, frames, atol=1e-5)
+    np.testing.assert_array_equal(f, body.faces)
+    np.testing.assert_allclose(times, np.arange(7) / 30, atol=1e-6)
+    gltf, _ = read_glb(path)
+    assert [n["name"] for n in gltf["nodes"]] == ["body", "ball"]
+    assert len(gltf["meshes"][0]["primitives"][0]["targets"]) == 6
+    assert gltf["animations"][0]["channels"][0]["target"] == {"node": 0, "path": "weights"}
+    loaded = trimesh.load_scene(path, process=False)  # other tools see frame 0 and the object
+    assert set(loaded.geometry) == {"body", "ball"}
+    assert len(loaded.geometry["body"].vertices) == len(body.vertices)
+    np.testing.assert_allclose(loaded.geometry["body"].vertices @ Z_UP_TO_Y_UP, frames[0], atol=1e-5)
+    half = export_sequence_glb(frames, body.faces, tmp_path / "half.glb", stride=2)
+    assert len(load_sequence_glb(half)[0]) == 4
