@@ -1,4 +1,6 @@
 """graspkit.viz: figures, colour mapping, shape errors, animations (GIF / HTML) and mesh export round trips."""
+import os
+
 import matplotlib
 
 matplotlib.use("Agg")
@@ -14,7 +16,8 @@ from PIL import Image  # noqa: E402
 from graspkit import viz  # noqa: E402
 from graspkit.viz import animate as animate_fn  # noqa: E402
 from graspkit.viz.animate import save_animation, to_html  # noqa: E402
-from graspkit.viz.export import Z_UP_TO_Y_UP, export_scene, export_sequence_glb, load_sequence_glb, read_glb  # noqa: E402
+from graspkit.viz.export import (Z_UP_TO_Y_UP, export_scene, export_sequence_glb, load_sequence_glb,  # noqa: E402
+                                  read_glb)
 
 
 @pytest.fixture
@@ -159,6 +162,9 @@ def test_gif_frames_and_stride(body, ball, tmp_path):
     with Image.open(path) as im:
         assert im.format == "GIF" and im.n_frames == 9  # stride raised to ceil(25 / 10) = 3 -> frames 0, 3, ..., 24
     assert [p.name for p in tmp_path.iterdir()] == ["walk.gif"]  # the temporary file was renamed
+    umask = os.umask(0)
+    os.umask(umask)
+    assert path.stat().st_mode & 0o777 == 0o666 & ~umask  # not mkstemp's owner-only mode
 
 
 def test_animate_function_frames_and_moving_object(body, ball, tmp_path):
@@ -179,7 +185,6 @@ def test_html_embed_and_limit(body):
         to_html(anim, max_mb=0.001)
 
 
-@pytest.mark.filterwarnings("ignore:Animation was deleted")
 def test_save_errors_and_atomicity(body, tmp_path, monkeypatch):
     import sys
 
@@ -198,6 +203,9 @@ def test_save_errors_and_atomicity(body, tmp_path, monkeypatch):
     with pytest.raises(OSError):
         save_animation(anim, tmp_path / "b.gif")
     assert list(tmp_path.iterdir()) == []  # no partial output, no temporary file left behind
+    monkeypatch.undo()
+    save_animation(anim, tmp_path / "b.gif")
+    assert [p.name for p in tmp_path.iterdir()] == ["b.gif"]
 
 
 def test_mp4_when_ffmpeg_available(body, tmp_path):

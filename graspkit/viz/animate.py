@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -18,8 +17,10 @@ import numpy as np
 from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter, writers
 from tqdm.auto import tqdm
 
-from graspkit.viz.scene import (GOAL, OBJECT, SKIN, View, _mesh_polys, as_array, as_points, bounds_of, camera_light,
-                                draw_ground, draw_meshes, draw_path, figure, set_equal, sphere, to_numpy)
+from graspkit.viz.export import publish, temp_beside
+from graspkit.viz.scene import (View, _mesh_polys, as_array, as_points, bounds_of, draw_ground, draw_meshes,
+                                draw_path, figure, set_equal, sphere, to_numpy)
+from graspkit.viz.style import GOAL, OBJECT, SKIN
 
 
 def _frames_array(frames: Any, num_frames: int | None) -> tuple[int, Callable[[int], np.ndarray]]:
@@ -106,8 +107,8 @@ def to_html(anim: FuncAnimation, max_mb: float = 3.0) -> str:
         html = anim.to_jshtml(default_mode="loop")
     mb = len(html.encode()) / 2**20
     if mb > max_mb:
-        raise ValueError(f"max_mb: the animation is {mb:.1f} MB (> {max_mb} MB); draw fewer frames (max_frames, stride), "
-                         "smaller panels (size, dpi) or fewer views, or raise max_mb")
+        raise ValueError(f"max_mb: the animation is {mb:.1f} MB (> {max_mb} MB); draw fewer frames (max_frames, "
+                         "stride), smaller panels (size, dpi) or fewer views, or raise max_mb")
     return html
 
 
@@ -150,14 +151,11 @@ def save_animation(anim: FuncAnimation, path: str | os.PathLike, fps: float | No
         raise ValueError(f"path: expected a .gif or .mp4 file, got {path.name!r}")
     n = anim._save_count or 0
     show = progress if progress is not None else n >= 100
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=suffix)  # writers pick format by suffix
-    os.close(fd)
+    tmp = temp_beside(path, suffix)  # writers pick the format from the suffix
     try:
         with tqdm(total=n, unit="frame", desc=path.name, disable=not show, leave=False) as bar, mpl.rc_context(rc):
             anim.save(tmp, writer=writer, dpi=dpi, progress_callback=lambda i, total: bar.update(1))
-        os.replace(tmp, path)
+        return publish(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
-    return path

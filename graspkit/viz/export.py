@@ -33,19 +33,33 @@ FORMATS = (".glb", ".obj", ".ply")
 Z_UP_TO_Y_UP = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # rotation of -90 deg about x: (x, y, z) -> (x, z, -y)
 
 
+def temp_beside(path: Path, suffix: str = ".tmp") -> Path:
+    """An empty temporary file in path's folder (created), for writing before `publish`."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
+    os.close(fd)
+    return Path(tmp)
+
+
+def publish(tmp: Path, path: Path) -> Path:
+    """Give tmp the usual permissions (mkstemp makes it owner-only) and rename it onto path atomically."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)
+    os.replace(tmp, path)
+    return path
+
+
 def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
     """Write data to path through a temporary file in the same folder and os.replace; returns the path."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    tmp = temp_beside(path)
     try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data.encode() if isinstance(data, str) else data)
-        os.replace(tmp, path)
+        tmp.write_bytes(data.encode() if isinstance(data, str) else data)
+        return publish(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
-    return path
 
 
 def _default_color(name: str, k: int) -> Any:
@@ -60,7 +74,8 @@ def _as_trimesh(item: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
     if isinstance(item, trimesh.Trimesh):
         return np.asarray(item.vertices, float), np.asarray(item.faces, np.int64)
     if not isinstance(item, (tuple, list)) or len(item) != 2:
-        raise ValueError(f"meshes[{name!r}]: expected (vertices, faces) or a trimesh.Trimesh, got {type(item).__name__}")
+        raise ValueError(f"meshes[{name!r}]: expected (vertices, faces) or a trimesh.Trimesh, "
+                         f"got {type(item).__name__}")
     return as_mesh(item[0], item[1], f"meshes[{name!r}]")
 
 
@@ -127,7 +142,7 @@ class _GLBBuilder:
         return len(self.gltf["accessors"]) - 1
 
     def mesh_node(self, name: str, v: np.ndarray, f: np.ndarray, color: Any, targets: np.ndarray | None = None) -> int:
-        """Add a mesh (V,3) / (F,3) with a coloured material and optional morph targets (K,V,3); returns its mesh index."""
+        """Add a mesh (V,3) / (F,3), its material and node, and optional morph targets (K,V,3); returns the mesh."""
         g = self.gltf
         g["materials"].append({"name": name, "doubleSided": True, "pbrMetallicRoughness": {
             "baseColorFactor": list(map(float, to_rgba(color))), "metallicFactor": 0.0, "roughnessFactor": 0.8}})
@@ -137,7 +152,8 @@ class _GLBBuilder:
                                 "material": len(g["materials"]) - 1, "mode": 4}
         mesh: dict[str, Any] = {"name": name, "primitives": [prim]}
         if targets is not None and len(targets):
-            prim["targets"] = [{"POSITION": self.accessor(t.astype(np.float32), "VEC3", _ARRAY_BUFFER)} for t in targets]
+            prim["targets"] = [{"POSITION": self.accessor(t.astype(np.float32), "VEC3", _ARRAY_BUFFER)}
+                               for t in targets]
             mesh["weights"] = [0.0] * len(targets)
             mesh["extras"] = {"targetNames": [f"frame_{k + 1:04d}" for k in range(len(targets))]}
         g["meshes"].append(mesh)
@@ -206,7 +222,8 @@ def read_glb(path: str | os.PathLike) -> tuple[dict[str, Any], bytes]:
     return gltf, blob
 
 
-def load_sequence_glb(path: str | os.PathLike, name: str = "body", y_up: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def load_sequence_glb(path: str | os.PathLike, name: str = "body",
+                      y_up: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Read back a file from export_sequence_glb: vertices (T,V,3) in the z-up world, faces (F,3), times (T,) s."""
     gltf, blob = read_glb(path)
 

@@ -17,7 +17,7 @@ from matplotlib.figure import Figure
 from mpl_toolkits.mplot3d import Axes3D
 from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
-from graspkit.viz.style import AMBIENT, ARROW, CONTACT_CMAP, GOAL, GROUND, MARKER, OBJECT, SKIN, TRAJECTORY, VIEWS
+from graspkit.viz.style import AMBIENT, ARROW, CONTACT_CMAP, GOAL, GROUND, MARKER, SKIN, TRAJECTORY, VIEWS
 
 View = str | tuple[float, float]
 Mesh = tuple[Any, Any] | tuple[Any, Any, Any]  # (vertices (V,3), faces (F,3)[, color])
@@ -133,7 +133,8 @@ def draw_meshes(ax: Axes3D, meshes: Sequence[Mesh], alpha: float = 1.0, light: b
         polys.append(p)
         colors.append(c)
     tri = np.concatenate(polys) if polys else np.zeros((0, 3, 3))
-    rgba = np.concatenate([np.concatenate(colors), np.full((len(tri), 1), alpha)], axis=1) if polys else np.zeros((0, 4))
+    rgb = np.concatenate(colors) if polys else np.zeros((0, 3))
+    rgba = np.concatenate([rgb, np.full((len(tri), 1), alpha)], axis=1)
     # no edges and no antialiasing: antialiased edges leave light seams between adjacent faces
     pc = Poly3DCollection(tri, facecolors=rgba, edgecolors="none", linewidths=0.0, antialiased=False)
     ax.add_collection3d(pc)
@@ -311,16 +312,17 @@ def show_scene(meshes: Sequence[Mesh] = (), points: Any = None, values: Any = No
     """One scene in several views: meshes [(V,3), (F,3)[, color]], points (N,3) coloured by values (N,),
     markers (M,3) with labels, arrows (origins, vectors), goal spheres (G,3), paths [(T,3)], ground grid.
     mesh_values: per-mesh per-vertex scalars (contact maps) or None; returns the Figure."""
-    fig, axes = figure(views, size, title, axis=axis)
-    extent: list[Any] = [m[0] for m in meshes] + list(paths)
-    for a in (points, markers, goals):
+    meshes = [(*as_mesh(m[0], m[1], f"meshes[{k}]"), *m[2:]) for k, m in enumerate(meshes)]
+    extent: list[Any] = [m[0] for m in meshes] + [as_points(p, f"paths[{k}]") for k, p in enumerate(paths)]
+    for a, name in ((points, "points"), (markers, "markers"), (goals, "goals")):
         if a is not None:
-            extent.append(as_points(a, "points"))
+            extent.append(as_points(a, name))
     if arrows is not None:
         o, d = np.broadcast_arrays(as_points(arrows[0], "origins"), as_points(arrows[1], "vectors"))
         extent += [o, o + d]
     if not extent:
         raise ValueError("show_scene: nothing to draw")
+    fig, axes = figure(views, size, title, axis=axis)
     lo, hi = bounds_of(*extent)
     if goals is not None:
         lo, hi = lo - goal_radius, hi + goal_radius
@@ -352,8 +354,9 @@ def show_scene(meshes: Sequence[Mesh] = (), points: Any = None, values: Any = No
     if (points is not None and values is not None) or mesh_values is not None:
         mappable = sc if sc is not None and values is not None else plt.cm.ScalarMappable(
             Normalize(0, 1), plt.get_cmap(cmap if cmap is not None else CONTACT_CMAP))
-        fig.subplots_adjust(right=0.92)
-        cb = fig.colorbar(mappable, cax=fig.add_axes((0.93, 0.2, 0.012, 0.55)))
+        w = fig.get_figwidth()  # keep ~0.9 inch on the right for the bar, its ticks and its label
+        fig.subplots_adjust(right=1.0 - 1.0 / w)
+        cb = fig.colorbar(mappable, cax=fig.add_axes((1.0 - 0.85 / w, 0.2, 0.12 / w, 0.55)))
         if colorbar_label:
             cb.set_label(colorbar_label)
     return fig
