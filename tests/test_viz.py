@@ -177,6 +177,20 @@ def test_animate_function_frames_and_moving_object(body, ball, tmp_path):
         animate_fn(moving(body, 4), body.faces, objects=[(obj, ball.faces)])
 
 
+def test_decimated_sequence_keeps_one_topology(tmp_path):
+    from graspkit.viz.animate import decimate_sequence
+
+    sphere = trimesh.creation.icosphere(4)  # 5120 faces
+    frames = [sphere.vertices, sphere.vertices + [1.0, 0.0, 0.5]]
+    low, faces = decimate_sequence(frames, sphere.faces, 1000)
+    assert abs(len(faces) - 1000) < 50 and len(low[0]) == len(low[1]) < len(sphere.vertices)
+    np.testing.assert_allclose(low[1] - low[0], np.broadcast_to([1.0, 0.0, 0.5], low[0].shape), atol=1e-6)
+    anim = animate_fn(np.stack([v + [0.1 * t, 0, 0] for t, v in enumerate([sphere.vertices] * 3)]), sphere.faces,
+                      max_faces=500, views=("front",), size=1.0, dpi=30)
+    with Image.open(save_animation(anim, tmp_path / "d.gif")) as im:
+        assert im.n_frames == 3
+
+
 def test_html_embed_and_limit(body):
     anim = animate_fn(moving(body, 4), body.faces, views=("front",), size=1.5, dpi=40)
     html = to_html(anim)

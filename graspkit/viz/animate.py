@@ -18,7 +18,7 @@ from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter, writ
 from tqdm.auto import tqdm
 
 from graspkit.viz.export import publish, temp_beside
-from graspkit.viz.scene import (View, _mesh_polys, as_array, as_points, bounds_of, draw_ground, draw_meshes,
+from graspkit.viz.scene import (View, _mesh_polys, as_array, as_mesh, as_points, bounds_of, draw_ground, draw_meshes,
                                 draw_path, figure, set_equal, sphere, to_numpy)
 from graspkit.viz.style import GOAL, OBJECT, SKIN
 
@@ -35,15 +35,29 @@ def _frames_array(frames: Any, num_frames: int | None) -> tuple[int, Callable[[i
     return len(arr), lambda t: arr[t]
 
 
+def decimate_sequence(frames: list[np.ndarray], faces: np.ndarray,
+                      max_faces: int) -> tuple[list[np.ndarray], np.ndarray]:
+    """Quadric-decimate frame 0 (V,3) to ~max_faces faces and replay the same edge collapses on every frame,
+    so all frames share one topology; returns the frames (V',3) and faces (F',3)."""
+    import fast_simplification
+
+    _, low, collapses = fast_simplification.simplify(frames[0], faces, target_reduction=1.0 - max_faces / len(faces),
+                                                     return_collapses=True)
+    return [fast_simplification.replay_simplification(points=v, triangles=faces, collapses=collapses)[0]
+            for v in frames], low
+
+
 def animate(frames: Any, faces: Any, objects: Sequence[tuple[Any, ...]] = (), goals: Any = None,
             goal_radius: float = 0.05, paths: Sequence[Any] = (), fps: float = 30.0,
             views: Sequence[View] = ("front", "side"), stride: int = 1, max_frames: int | None = 60,
             size: float = 3.0, dpi: float = 72.0, color: Any = SKIN, title: str | None = None, ground: bool = True,
-            num_frames: int | None = None, close: bool = True) -> FuncAnimation:
+            num_frames: int | None = None, max_faces: int | None = 8000, close: bool = True) -> FuncAnimation:
     """A body moving over time: frames (T,V,3) array / list of (V,3) / function t -> (V,3) (with num_frames),
     faces (F,3); objects [(vertices (V,3) static or (T,V,3) moving, faces[, color])]; static goals (G,3),
     paths [(N,3)]. Every `stride`-th frame, stride raised so at most max_frames are drawn; plays at real time.
-    close=True closes the figure so a notebook shows only the animation, not a still of its last frame.
+    max_faces: larger bodies are decimated (same topology every frame): matplotlib's time per frame grows with
+    the face count, and a few thousand faces already fill a small panel. close=True closes the figure so a
+    notebook shows only the animation, not a still of its last frame.
     """
     total, get = _frames_array(frames, num_frames)
     if total < 1:
@@ -54,7 +68,9 @@ def animate(frames: Any, faces: Any, objects: Sequence[tuple[Any, ...]] = (), go
         stride = max(stride, math.ceil(total / max_frames))
     ticks = list(range(0, total, stride))
     body = [get(t) for t in ticks]
-    f = as_array(faces, "faces", (None, 3), dtype=np.int64)
+    _, f = as_mesh(body[0], faces, "frames")
+    if max_faces is not None and len(f) > max_faces:
+        body, f = decimate_sequence(body, f, max_faces)
     objs = []
     for k, item in enumerate(objects):
         ov = to_numpy(item[0])

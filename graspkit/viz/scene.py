@@ -1,9 +1,12 @@
 """Static 3D figures with matplotlib: shaded meshes, point clouds, markers, arrows, goals and a ground grid.
 
 Everything is drawn in the z-up world (metres). Inputs may be numpy arrays, torch tensors or nested lists,
-one item at a time (a (V, 3) mesh, not a batch). Meshes drawn in one call share one polygon collection, so
-their faces are depth-sorted together (a hand inside an object is hidden correctly); matplotlib sorts
-separate calls as whole collections.
+one item at a time (a (V, 3) mesh, not a batch).
+
+Occlusion: meshes drawn in one `draw_meshes` call share one polygon collection, so their faces are
+depth-sorted together (a hand around a mug is hidden correctly). Across calls, layers are drawn in a fixed
+order (ground, meshes, paths, points, arrows, markers; see LAYERS) so that overlays stay visible even behind
+a body; meshes from separate calls are drawn in call order, so draw meshes that overlap in one call.
 """
 from __future__ import annotations
 
