@@ -95,7 +95,7 @@ def animate(frames: Any, faces: Any, objects: Sequence[tuple[Any, ...]] = (), go
             draw_path(ax, p)
         colls.append(draw_meshes(ax, []))
         set_equal(ax, np.stack([lo, hi]), pad=0.0, zoom=1.15)
-    stamp = fig.texts[0] if fig.texts else fig.suptitle("")
+    stamp = fig.texts[0]  # the suptitle that figure(title=" ") made: it shows the time
 
     def meshes_at(i: int) -> list[tuple[Any, ...]]:
         moving = [(ov[min(i, len(ov) - 1)], of, oc) for ov, of, oc in objs]  # static objects hold one frame
