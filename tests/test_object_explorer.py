@@ -1,0 +1,109 @@
+"""The hand-object explorer's callback against independent computations (trimesh proximity, closed forms)."""
+import matplotlib
+
+matplotlib.use("Agg")
+
+import numpy as np
+import pytest
+import trimesh
+
+from graspkit.objects import MARKER_CONTACT_THRESHOLD, OBJECT_CONTACT_THRESHOLD, ObjectPose, make_object
+from graspkit.viz.object_explorer import HandObjectExplorer, place_at_palm
+
+HAND = (0.06, 0.04, 0.02)  # a flat box "hand" centred at the origin
+GAP = 0.015  # the cracker box starts 1.5 cm above the hand's top face: within the marker threshold only
+
+
+@pytest.fixture()
+def explorer() -> HandObjectExplorer:
+    hand = trimesh.creation.box(HAND)
+    box_half_height = make_object("cracker_box").extents[2] / 2
+    base = ObjectPose(np.array([0.0, 0.0, HAND[2] / 2 + GAP + box_half_height]), np.eye(3))
+    top = np.flatnonzero(hand.vertices[:, 2] > 0)  # the four top corners act as markers
+    return HandObjectExplorer(hand.vertices, hand.faces, "cracker_box", base=base, marker_ids=top, num_points=1024)
+
+
+def truth(ex: HandObjectExplorer) -> dict[str, float]:
+    """The same numbers from trimesh's proximity queries (signed distance is positive inside in trimesh)."""
+    obj, body = ex.object_mesh(), trimesh.Trimesh(ex.vertices, ex.faces, process=False)
+    hand_sd = -trimesh.proximity.signed_distance(obj, ex.vertices[ex.hand_ids])
+    _, marker_d, _ = trimesh.proximity.closest_point(obj, ex.vertices[ex.marker_ids])
+    _, point_d, _ = trimesh.proximity.closest_point(body, ex.object_points())
+    return {"min_distance_cm": hand_sd.min() * 100, "marker_contacts": float((marker_d <= MARKER_CONTACT_THRESHOLD).sum()),
+            "object_contacts": float((point_d <= OBJECT_CONTACT_THRESHOLD).sum())}
+
+
+def test_starting_pose_matches_trimesh_and_the_set_up_gap(explorer):
+    got, want = explorer.measure(), truth(explorer)
+    assert got["min_distance_cm"] == pytest.approx(GAP * 100, abs=1e-6)
+    assert got["min_distance_cm"] == pytest.approx(want["min_distance_cm"], abs=1e-3)
+    assert got["marker_contacts"] == want["marker_contacts"] == 4  # 1.5 cm: within 2 cm (C_M), beyond 1 cm (C_O)
+    assert got["object_contacts"] == want["object_contacts"] == 0
+    assert got["penetration_depth_cm"] == 0 and got["penetration_volume_cm3"] == 0
+
+
+def test_moving_away_by_one_metre_adds_one_metre_and_removes_all_contacts(explorer):
+    before = explorer.measure()["min_distance_cm"]
+    after = explorer.update("z", 1.0)
+    assert after["min_distance_cm"] == pytest.approx(before + 100.0, abs=1e-6)
+    assert after["marker_contacts"] == after["object_contacts"] == 0
+    assert after["min_distance_cm"] == pytest.approx(truth(explorer)["min_distance_cm"], abs=1e-3)
+
+
+@pytest.mark.parametrize("move", [{"z": -0.015}, {"z": -0.009, "x": 0.02}, {"x": 0.1, "z": -0.03},
+                                  {"yaw": 45.0, "z": -0.01}, {"y": 0.05, "z": -0.06, "yaw": 30.0}])
+def test_contacts_and_distance_match_trimesh_after_moves(explorer, move):
+    for name, value in move.items():
+        got = explorer.update(name, value)
+    want = truth(explorer)
+    assert got["min_distance_cm"] == pytest.approx(want["min_distance_cm"], abs=1e-3)
+    assert got["marker_contacts"] == want["marker_contacts"]
+    assert got["object_contacts"] == want["object_contacts"]
+
+
+def test_pushing_in_gives_the_closed_form_depth_and_volume(explorer):
+    push = GAP + 0.005  # the box's bottom face 5 mm below the hand's top face
+    got = explorer.update("z", -push)
+    assert got["min_distance_cm"] == pytest.approx(-0.5, abs=1e-6)
+    assert got["penetration_depth_cm"] == pytest.approx(0.5, abs=1e-6)  # the top corners, 5 mm under the face
+    assert got["penetration_volume_cm3"] == pytest.approx(HAND[0] * HAND[1] * 0.005 * 1e6, rel=1e-6)
+    assert got["object_contacts"] > 0  # points on the bottom face inside the hand's footprint are within 1 cm
+    want = truth(explorer)
+    assert got["object_contacts"] == want["object_contacts"]
+
+
+def test_object_swap_keeps_the_pose_and_unknown_slider_is_named(explorer):
+    explorer.update("x", 0.03)
+    got = explorer.update("object", "apple")
+    assert explorer.name == "apple" and explorer.points.shape == (1024, 3)
+    np.testing.assert_allclose(explorer.pose().translation[0], 0.03)
+    assert got["min_distance_cm"] == pytest.approx(truth(explorer)["min_distance_cm"], abs=1e-3)
+    with pytest.raises(ValueError, match="wiggle"):
+        explorer.update("wiggle", 1.0)
+
+
+def test_open_body_reports_no_volume_but_still_depth():
+    hand = trimesh.creation.box(HAND)
+    ex = HandObjectExplorer(hand.vertices, hand.faces[1:], "apple")  # one face missing: not closed
+    got = ex.measure()  # the apple's centre sits at the box centre: every hand vertex is inside
+    assert np.isnan(got["penetration_volume_cm3"]) and got["penetration_depth_cm"] > 0
+
+
+def test_figure_and_readout(explorer):
+    explorer.update("z", -GAP)
+    fig = explorer.figure(views=("front",), size=2.0)
+    assert len(fig.axes) == 1
+    line = HandObjectExplorer.describe(explorer.measure())
+    assert "markers in contact" in line and "cm³" in line
+
+
+def test_place_at_palm_touches_at_the_requested_gap():
+    palm = trimesh.creation.icosphere(3, 0.04)  # a round "palm": the object is placed on its normal line
+    ids = np.flatnonzero(palm.vertices[:, 2] < -0.035)  # the bottom cap, normal about -z
+    mug = make_object("mug")
+    pose = place_at_palm(mug, palm.vertices, palm.faces, ids, gap=0.003)
+    moved = mug.copy()
+    moved.apply_transform(pose.matrix())
+    d = -trimesh.proximity.signed_distance(moved, palm.vertices)
+    assert d.min() == pytest.approx(0.003, abs=2e-5)
+    assert pose.translation[2] < -0.04  # below the palm
