@@ -160,7 +160,7 @@ def _trunk_and_head(P: Proportions) -> tuple[list[Prim], list[Prim], list[Prim]]
         Ellipsoid((0.077, 0.283, -0.008), (0.011, 0.030, 0.019), _rot((1, 0, 0.25)), joint=head, k=0.006),  # ear
     ]
     eye: list[Prim] = [
-        Ellipsoid((0.032, 0.291, 0.094), (0.017, 0.016, 0.017), sub=True, k=0.006),                # eye socket
+        Ellipsoid((0.032, 0.291, 0.094), (0.017, 0.016, 0.017), sub=True, k=0.006, joint=J["head"]),  # eye socket
         Ellipsoid((0.032, 0.289, 0.069), (0.0125, 0.0125, 0.0125), joint=head, k=0.003),           # eyeball
     ]
     return mid, left, eye

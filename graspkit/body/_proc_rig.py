@@ -47,30 +47,45 @@ def bone_ends(P: Proportions, joints: np.ndarray) -> np.ndarray:
     return end
 
 
-# joint -> (blend half-width h, lateral radius of the affected zone); fingers get radii from the hand layout
-_BLEND = {"spine1": (0.05, np.inf), "spine2": (0.05, np.inf), "spine3": (0.05, np.inf), "neck": (0.03, 0.075),
-          "head": (0.03, 0.12), "left_collar": (0.04, 0.09), "left_shoulder": (0.05, 0.10),
-          "left_elbow": (0.03, 0.07), "left_wrist": (0.02, 0.07), "left_hip": (0.06, 0.15),
-          "left_knee": (0.04, 0.09), "left_ankle": (0.03, 0.08), "left_foot": (0.02, 0.07)}
+# joint -> (kind, size, lateral radius of the affected zone). 'plane': smoothstep across the joint plane,
+# half-width `size` metres (trunk, ball joints). 'cone': the weight follows the vertex's cone angle
+# alpha = atan2(distance from the bone axis, distance along it) around the joint, over 90 +- size degrees,
+# so that a 90-120 degree bend keeps the vertices' angular order (no fold in the crease; see
+# _cone_weight). Fingers get their radii from the hand layout.
+_BLEND = {"spine1": ("plane", 0.05, np.inf), "spine2": ("plane", 0.05, np.inf), "spine3": ("plane", 0.05, np.inf),
+          "neck": ("plane", 0.03, 0.075), "head": ("plane", 0.03, 0.12), "left_collar": ("plane", 0.04, 0.09),
+          "left_shoulder": ("plane", 0.05, 0.10), "left_elbow": ("cone", 55.0, 0.08),
+          "left_wrist": ("cone", 45.0, 0.07), "left_hip": ("plane", 0.06, 0.15), "left_knee": ("cone", 55.0, 0.10),
+          "left_ankle": ("cone", 45.0, 0.08), "left_foot": ("cone", 45.0, 0.07)}
 
 
-def _blend_table(P: Proportions) -> dict[int, tuple[float, float]]:
-    """(h, lateral radius) per joint index, both sides."""
+def _blend_table(P: Proportions) -> dict[int, tuple[str, float, float]]:
+    """(kind, size, lateral radius) per joint index, both sides."""
     out = {J[n]: v for n, v in _BLEND.items()}
     hand = left_hand(P)
     for f in FINGERS:
         for k in range(3):
-            r = hand[f].radii[k]
-            out[J[f"left_{f}{k + 1}"]] = ((1.3 if k == 0 else 0.8) * r, 1.5 * r)
-    out[J["left_thumb1"]] = (0.012, 0.022)
+            out[J[f"left_{f}{k + 1}"]] = ("cone", 50.0, 1.6 * hand[f].radii[k])
+    out[J["left_thumb1"]] = ("plane", 0.012, 0.022)
     for j in list(out):
         out[mirror_joint(j)] = out[j]
     return out
 
 
+def _cone_weight(alpha: np.ndarray, beta: float) -> np.ndarray:
+    """Child weight t for cone angles alpha (degrees, 180 = far along the parent, 0 = far along the child).
+
+    Blending x with its rotated copy R x at weight t moves it by psi(t) = atan(t / (1 - t)) around the
+    axis for a 90 degree bend; t is chosen so that psi grows linearly as alpha goes from 90 + beta to
+    90 - beta, which keeps the blended surface's angular order (beta >= 45 for 90 degrees).
+    """
+    psi = np.deg2rad(90.0) * np.clip((90.0 + beta - alpha) / (2 * beta), 0.0, 1.0)
+    return np.sin(psi) / (np.sin(psi) + np.cos(psi))
+
+
 def skinning_weights(v: np.ndarray, f: np.ndarray, labels: np.ndarray, joints: np.ndarray, ends: np.ndarray,
                      P: Proportions, smooth_iters: int = 3) -> np.ndarray:
-    """Skinning weights (V, 55) from vertex labels (V,) (owning joint per vertex): plane blends, then smoothing."""
+    """Skinning weights (V, 55) from vertex labels (V,) (owning joint per vertex): joint blends, then smoothing."""
     V = len(v)
     w = np.zeros((V, NUM_JOINTS))
     w[np.arange(V), labels] = 1.0
@@ -80,7 +95,7 @@ def skinning_weights(v: np.ndarray, f: np.ndarray, labels: np.ndarray, joints: n
             if c not in table:
                 continue
             p = PARENTS[c]
-            h, R = table[c]
+            kind, size, R = table[c]
             u_in = _unit(joints[c] - joints[p]) if np.linalg.norm(joints[c] - joints[p]) > 1e-9 else _unit(ends[c] - joints[c])
             u_out = _unit(ends[c] - joints[c])
             n = _unit(u_in + u_out)
@@ -88,8 +103,13 @@ def skinning_weights(v: np.ndarray, f: np.ndarray, labels: np.ndarray, joints: n
             lateral = np.linalg.norm(rel - np.outer(rel @ u_out, u_out), axis=1)
             mass = w[:, p] + w[:, c]
             sel = (mass > 0) & (lateral < R)
-            t = np.clip((rel[sel] @ n + h) / (2 * h), 0.0, 1.0)
-            t = t * t * (3 - 2 * t)
+            s = rel[sel] @ n
+            if kind == "plane":
+                t = np.clip((s + size) / (2 * size), 0.0, 1.0)
+                t = t * t * (3 - 2 * t)
+            else:
+                rho = np.linalg.norm(rel[sel] - np.outer(s, n), axis=1)
+                t = _cone_weight(np.degrees(np.arctan2(rho, s)), size)
             w[sel, c], w[sel, p] = t * mass[sel], (1 - t) * mass[sel]
     A = vertex_neighbours(f, V)
     deg = np.asarray(A.sum(1)).ravel()
@@ -224,13 +244,13 @@ def shape_basis(v: np.ndarray, w: np.ndarray, joints: np.ndarray, ends: np.ndarr
     lin[J["spine3"]] = np.diag([0.06, 0, 0])
     out[:, :, 2] = _affine_blend(v, w, f, lin, np.zeros_like(joints))
 
-    # 3 hip width: legs move out 1.5 cm per unit; pelvis stretches sideways
+    # 3 hip width: the pelvis stretches sideways 10 % per unit, the legs follow by 0.5 cm (the crotch stays open)
     f[:], lin[:] = 0.0, 0.0
     for side, s in (("left", 1.0), ("right", -1.0)):
         for j in _leg_joints(side):
-            f[j] = (0.015 * s, 0, 0)
-    lin[J["pelvis"]] = np.diag([0.015 / abs(joints[J["left_hip"], 0]), 0, 0])
-    lin[J["spine1"]] = np.diag([0.05, 0, 0])
+            f[j] = (0.005 * s, 0, 0)
+    lin[J["pelvis"]] = np.diag([0.10, 0, 0])
+    lin[J["spine1"]] = np.diag([0.03, 0, 0])
     out[:, :, 3] = _affine_blend(v, w, f, lin, np.zeros_like(joints))
 
     # 4 arm length, 5 leg length: bones stretch 4 % (arms) / 4.5 % (legs) per unit along their axes

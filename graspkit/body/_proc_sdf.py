@@ -224,17 +224,25 @@ class Body:
     prims: list[Prim]
     floor: Floor
 
-    def evaluate(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Signed distance (N,) and owning primitive index (N,) (-1 where none) of points p (N, 3)."""
+    def evaluate(self, p: np.ndarray, pose: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Signed distance (N,) and owning primitive index (N,) (-1 where none) of points p (N, 3).
+
+        pose: optional rigid transforms (R (55,3,3), t (55,3)) moving each primitive with its joint
+        (x_posed = R x_rest + t), for a posed body; primitives without a joint stay put.
+        """
         d = np.full(len(p), 1.0)
         raw = np.full(len(p), np.inf)
         owner = np.full(len(p), -1, np.int64)
         for i, prim in enumerate(self.prims):
+            q = p
+            if pose is not None and prim.joint >= 0:
+                R, t = pose[0][prim.joint], pose[1][prim.joint]
+                q = (p - t) @ R                                    # R^T (p - t), row-wise
             lo, hi = prim.bounds()
-            m = np.all((p >= lo - prim.k - 0.01) & (p <= hi + prim.k + 0.01), axis=1)
+            m = np.all((q >= lo - prim.k - 0.01) & (q <= hi + prim.k + 0.01), axis=1)
             if not m.any():
                 continue
-            di = prim.sdf(p[m])
+            di = prim.sdf(q[m])
             self._combine(d, raw, owner, m, di, i, prim)
         return self._floor(d, p), owner
 

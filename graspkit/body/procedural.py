@@ -1,8 +1,8 @@
 """graspkit's procedural humanoid, written in the SMPL-X file format (the licensed model cannot be had).
 
     body plan (primitives, _proc_anatomy) -> signed distance on a lens-warped grid (_proc_sdf)
-    -> marching cubes -> largest component -> quadric decimation -> edge splits to exactly 10,475
-    vertices -> checks (closed, manifold, oriented, genus 0, no self-intersection) (_proc_mesh)
+    -> marching cubes -> largest component -> quadric decimation -> Delaunay flips, tangential
+    relaxation onto the fine surface, edge splits to exactly 10,475 vertices (_proc_remesh) -> checks (closed, manifold, oriented, genus 0, no self-intersection) (_proc_mesh)
     -> skinning weights, joint regressor, shape and expression bases (_proc_rig), hand-pose PCA
     (hand_poses) -> SMPL-X landmark vertex ids moved onto the matching anatomy -> arrays.
 
@@ -19,8 +19,10 @@ import numpy as np
 
 from graspkit.body import _proc_mesh as M
 from graspkit.body._proc_anatomy import J, Proportions, body_plan, landmark_targets
+from graspkit.body._proc_correctives import fit_correctives
 from graspkit.body._proc_rig import (bone_ends, expression_basis, joint_regressor, part_of_vertex, shape_basis,
                                      skinning_weights)
+from graspkit.body._proc_remesh import SurfaceProjector, delaunay_flips, relax
 from graspkit.body._proc_sdf import Body, Lens, sample_grid, warp
 from graspkit.body.hand_poses import hand_pca
 from graspkit.body.skeleton import NUM_JOINTS, NUM_VERTICES, PARENTS, SMPLX_LANDMARK_VERTEX_IDS
@@ -62,11 +64,19 @@ def _mesh(body: Body, lenses: list[Lens], h: float, n_vertices: int, progress: b
     import fast_simplification
 
     n0 = n_vertices - NUM_SPLITS * n_vertices // NUM_VERTICES
+    f_mc = f
     vs, fs = fast_simplification.simplify(x, f.astype(np.int64), target_count=2 * (n0 - 2), agg=7)
     v, f = M.compact(np.asarray(vs, np.float64), np.asarray(fs, np.int64))
     if len(v) > n_vertices:
         raise RuntimeError(f"decimation left {len(v)} vertices, more than {n_vertices}")
+    project = SurfaceProjector(x, f_mc)
+    f = delaunay_flips(v, f)
+    v = relax(v, f, project, iters=4)
+    f = delaunay_flips(v, f)
     v, f = M.split_longest_edges(v, f, n_vertices)   # flat midpoint splits: the surface does not move
+    f = delaunay_flips(v, f)
+    v = relax(v, f, project, iters=3)
+    f = delaunay_flips(v, f)
     _say(progress, t0, f"decimated and split: {len(v)} vertices, {len(f)} faces")
     return v, f
 
@@ -160,6 +170,8 @@ def build_procedural_smplx(seed: int = 0, progress: bool = True, grid_spacing: f
     weights = skinning_weights(v, f, labels, joints, ends, P)
     J_reg = joint_regressor(v, weights, joints)
     _say(progress, t0, "skinning weights and joint regressor")
+    posedirs = fit_correctives(v, f, weights, joints, body)
+    _say(progress, t0, "pose correctives (elbows, knees)")
     shapedirs = np.concatenate([shape_basis(v, weights, joints, ends), expression_basis(v, weights, joints)], 2)
     lmk_f, lmk_b = _surface_points(v, f, face_landmark_targets())
     ct = contour_targets()
@@ -169,7 +181,7 @@ def build_procedural_smplx(seed: int = 0, progress: bool = True, grid_spacing: f
     kintree = np.stack([np.array([ROOT_PARENT] + list(PARENTS[1:]), np.int64), np.arange(NUM_JOINTS, dtype=np.int64)])
     return {
         "v_template": v, "f": f.astype(np.int64),
-        "shapedirs": shapedirs, "posedirs": np.zeros((len(v), 3, 486)),
+        "shapedirs": shapedirs, "posedirs": posedirs,
         "J_regressor": J_reg, "weights": weights, "kintree_table": kintree,
         "hands_componentsl": hands["l"][0], "hands_componentsr": hands["r"][0],
         "hands_meanl": hands["l"][1], "hands_meanr": hands["r"][1],
