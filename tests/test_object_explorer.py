@@ -107,3 +107,44 @@ def test_place_at_palm_touches_at_the_requested_gap():
     d = -trimesh.proximity.signed_distance(moved, palm.vertices)
     assert d.min() == pytest.approx(0.003, abs=2e-5)
     assert pose.translation[2] < -0.04  # below the palm
+
+
+@pytest.fixture(scope="module")
+def body_scene():
+    """The lesson's scene: the procedural body reaching forward, a can 2 mm under its right palm."""
+    from graspkit.body import BodyModel
+    from graspkit.body.markers import palm_vertices, saga_markers
+    from graspkit.paths import default_model_path
+    from graspkit.viz.object_explorer import hand_vertices, reaching_body
+
+    bm = BodyModel.from_file(default_model_path())
+    v, f = reaching_body(bm)
+    pose = place_at_palm(make_object("can"), v, f, palm_vertices(bm)["right"], gap=0.002)
+    markers = saga_markers(bm)
+    ex = HandObjectExplorer(v, f, "can", base=pose, hand_ids=hand_vertices(bm, "right"), marker_ids=markers.vertex_ids)
+    return ex, markers
+
+
+def test_body_scene_touches_with_the_palm_and_matches_trimesh(body_scene):
+    ex, markers = body_scene
+    got = ex.update("z", 0.0)
+    assert got["min_distance_cm"] == pytest.approx(0.2, abs=1e-3)
+    assert ex.vertices[:, 2].min() == 0.0 and ex.body_closed
+    c_m, _ = ex.contacts()
+    touching = [n for n, c in zip(markers.names, c_m) if c]
+    assert touching and all(n.startswith("RPALM") for n in touching)  # the right palm, nothing else
+    for dz in (0.0, 0.01):  # touching, then pressed 1 cm into the hand
+        got, want = ex.update("z", dz), truth(ex)
+        assert got["min_distance_cm"] == pytest.approx(want["min_distance_cm"], abs=1e-3)
+        assert (got["marker_contacts"], got["object_contacts"]) == (want["marker_contacts"], want["object_contacts"])
+    assert got["penetration_depth_cm"] == pytest.approx(-got["min_distance_cm"], abs=1e-9) and got["penetration_volume_cm3"] > 0
+
+
+def test_body_scene_one_metre_down_has_no_contact(body_scene):
+    ex, _ = body_scene
+    got = ex.update("z", -1.0)
+    want = truth(ex)
+    ex.update("z", 0.0)
+    assert got["marker_contacts"] == got["object_contacts"] == 0 == want["object_contacts"]
+    assert got["min_distance_cm"] == pytest.approx(want["min_distance_cm"], abs=1e-3)
+    assert 90.0 < got["min_distance_cm"] <= 100.2  # the palm was 2 mm above; other vertices may come closer

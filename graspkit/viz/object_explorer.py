@@ -24,6 +24,7 @@ REACH_FORWARD: dict[str, tuple[float, float, float]] = {
 }
 OFFSET_SLIDERS = ("x", "y", "z")  # object translation in metres, world axes
 YAW_SLIDER = "yaw"  # rotation about the world z axis through the object centre, degrees
+MARKER_IN_CONTACT = "#2ca02c"  # SAGA Fig. 3 draws markers in contact in green
 
 
 def reaching_body(bm: Any, pose: dict[str, tuple[float, float, float]] | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -41,6 +42,16 @@ def reaching_body(bm: Any, pose: dict[str, tuple[float, float, float]] | None = 
     return v, bm.faces.cpu().numpy().astype(np.int64)
 
 
+def hand_vertices(bm: Any, side: str = "right") -> np.ndarray:
+    """Ids (N,) of the vertices a hand moves: those whose largest skinning weight is the wrist or a finger joint."""
+    from graspkit.body.skeleton import FINGERS, JOINT_INDEX
+
+    if side not in ("left", "right"):
+        raise ValueError(f"side: expected 'left' or 'right', got {side!r}")
+    joints = [JOINT_INDEX[f"{side}_wrist"]] + [JOINT_INDEX[f"{side}_{f}{k}"] for f in FINGERS for k in (1, 2, 3)]
+    return np.flatnonzero(np.isin(bm.lbs_weights.argmax(1).cpu().numpy(), joints))
+
+
 def palm_frame(vertices: np.ndarray, faces: np.ndarray, palm_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Centre (3,) of the palm vertices and the unit mean normal (3,) pointing out of the palm."""
     normals = trimesh.Trimesh(vertices, faces, process=False).vertex_normals[palm_ids]
@@ -49,15 +60,16 @@ def palm_frame(vertices: np.ndarray, faces: np.ndarray, palm_ids: np.ndarray) ->
 
 
 def place_at_palm(mesh: trimesh.Trimesh, vertices: np.ndarray, faces: np.ndarray, palm_ids: np.ndarray,
-                  gap: float = 0.0, iterations: int = 4) -> ObjectPose:
+                  gap: float = 0.0, tol: float = 1e-5, max_iter: int = 30) -> ObjectPose:
     """Pose (no rotation) putting `mesh` on the palm's normal line so that the nearest body vertex is `gap` m outside it."""
     centre, n = palm_frame(vertices, faces, palm_ids)
     t = centre + n * (gap + float((-mesh.vertices @ n).max()))  # the object's extreme point along -n meets the palm
     near = vertices[np.linalg.norm(vertices - t, axis=1) < np.linalg.norm(mesh.extents) + 0.1]
-    for _ in range(iterations):  # the palm is curved: slide along n until the closest vertex sits at `gap`
-        pose = ObjectPose(t, np.eye(3))
-        closest = float(signed_distance(near, apply_pose(pose, mesh)).min())
-        t = t + n * (gap - closest)
+    for _ in range(max_iter):  # the palm is curved: slide along n until the closest vertex sits at `gap`
+        error = gap - float(signed_distance(near, apply_pose(ObjectPose(t, np.eye(3)), mesh), check=False).min())
+        if abs(error) < tol:
+            break
+        t = t + n * error  # moving by s along n changes the distance by at most s: no overshoot
     return ObjectPose(t, np.eye(3))
 
 
@@ -78,6 +90,8 @@ class HandObjectExplorer:
         self.num_points, self.seed = num_points, seed
         self.offset, self.yaw = np.zeros(3), 0.0
         self.body_closed = trimesh.Trimesh(self.vertices, self.faces, process=False).is_watertight
+        tri = self.vertices[self.faces]
+        self.face_lo, self.face_hi = tri.min(1), tri.max(1)  # (F,3) boxes: which faces can touch the object
         self.set_object(object_name)
 
     def set_object(self, name: str) -> None:
@@ -114,8 +128,12 @@ class HandObjectExplorer:
         """SAGA's contact maps at the current pose: C_M (M,) over the markers, C_O (P,) over the object points."""
         obj = self.object_mesh()
         c_m = marker_contact(self.vertices[self.marker_ids], obj).numpy() if len(self.marker_ids) else np.zeros(0)
-        c_o = object_contact(self.object_points(), (self.vertices, self.faces)).numpy()
-        return c_m, c_o
+        # only faces whose box comes within the threshold of the object's box can hold a contact: same map, faster
+        lo, hi = obj.bounds[0] - OBJECT_CONTACT_THRESHOLD, obj.bounds[1] + OBJECT_CONTACT_THRESHOLD
+        near = np.all((self.face_hi >= lo) & (self.face_lo <= hi), axis=1)
+        if not near.any():
+            return c_m, np.zeros(len(self.points))
+        return c_m, object_contact(self.object_points(), (self.vertices, self.faces[near])).numpy()
 
     def measure(self) -> dict[str, float]:
         """Numbers at the current pose: signed min distance of the hand vertices (cm, < 0 = inside), marker and
@@ -135,7 +153,7 @@ class HandObjectExplorer:
 
     def figure(self, views: tuple[Any, ...] = ("front", "side"), size: float = 3.2, radius: float = 0.2) -> Figure:
         """The body near the object (faces within `radius` m of it), the object, its contact points (red) and the
-        markers in contact (dark), in the given views."""
+        markers in contact (green), in the given views."""
         import matplotlib.pyplot as plt
 
         from graspkit.viz.scene import draw_markers, draw_meshes, draw_points, figure, set_equal
@@ -153,7 +171,7 @@ class HandObjectExplorer:
             if c_o.any():
                 draw_points(ax, pts[c_o > 0], color="#d7301f", size=3)
             if c_m.any():
-                draw_markers(ax, self.vertices[self.marker_ids[c_m > 0]], size=10)
+                draw_markers(ax, self.vertices[self.marker_ids[c_m > 0]], color=MARKER_IN_CONTACT, size=14)
             set_equal(ax, np.stack([centre - radius / 2, centre + radius / 2]), pad=0.0)
         return fig
 
@@ -167,21 +185,23 @@ class HandObjectExplorer:
                 f"penetration {numbers['penetration_depth_cm']:.2f} cm deep"
                 + ("" if math.isnan(vol) else f", {vol:.1f} cm³"))
 
-    def widget(self, step: float = 0.005, span: float = 0.1) -> Any:  # pragma: no cover - needs a browser
-        """An ipywidgets box: object dropdown, x/y/z sliders (±span m), a yaw slider, the readout and the figure."""
+    def widget(self, step: float = 0.005, span: float = 0.1, dpi: float = 72.0) -> Any:  # pragma: no cover - UI only
+        """An ipywidgets box: object dropdown, x/y/z sliders (±span m), a yaw slider, the figure and the readout."""
+        import io
+
         import ipywidgets as w
-        from IPython.display import display
 
         from graspkit.objects import list_objects
 
-        out, readout = w.Output(), w.HTML()
+        # the figure goes into an Image widget (PNG bytes), not an Output widget: it then shows the same in every
+        # front end and executor, and no stray display leaks into the notebook cell
+        image, readout = w.Image(format="png"), w.HTML()
 
         def redraw(numbers: dict[str, float]) -> None:
             readout.value = f"<b>{self.name}</b>: {self.describe(numbers)}"
-            fig = self.figure()
-            with out:
-                out.clear_output(wait=True)
-                display(fig)
+            buf = io.BytesIO()
+            self.figure().savefig(buf, format="png", dpi=dpi)
+            image.value = buf.getvalue()
 
         controls: list[Any] = [w.Dropdown(options=list_objects(), value=self.name, description="object")]
         controls += [w.FloatSlider(value=float(self.offset[i]), min=-span, max=span, step=step, description=f"{a} (m)",
@@ -191,4 +211,4 @@ class HandObjectExplorer:
         for name, c in zip(["object", *OFFSET_SLIDERS, YAW_SLIDER], controls):
             c.observe(lambda ch, name=name: redraw(self.update(name, ch["new"])), names="value")
         redraw(self.measure())
-        return w.VBox([w.HBox([w.VBox(controls), out]), readout])
+        return w.VBox([w.HBox([w.VBox(controls), image]), readout])
