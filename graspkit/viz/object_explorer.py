@@ -27,8 +27,9 @@ YAW_SLIDER = "yaw"  # rotation about the world z axis through the object centre,
 MARKER_IN_CONTACT = "#2ca02c"  # SAGA Fig. 3 draws markers in contact in green
 
 
-def reaching_body(bm: Any, pose: dict[str, tuple[float, float, float]] | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """A body in the z-up world (faces -y, feet on z = 0) in `pose` (default REACH_FORWARD): vertices (V,3), faces (F,3)."""
+def reaching_body(bm: Any, pose: dict[str, tuple[float, float, float]] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The body in `pose` (default REACH_FORWARD), z-up world, facing -y, feet on z = 0: vertices (V,3), faces (F,3)."""
     from graspkit.body.poses import y_up_to_z_up
     from graspkit.body.skeleton import JOINT_INDEX, NUM_BODY_JOINTS
 
@@ -61,7 +62,10 @@ def palm_frame(vertices: np.ndarray, faces: np.ndarray, palm_ids: np.ndarray) ->
 
 def place_at_palm(mesh: trimesh.Trimesh, vertices: np.ndarray, faces: np.ndarray, palm_ids: np.ndarray,
                   gap: float = 0.0, tol: float = 1e-5, max_iter: int = 30) -> ObjectPose:
-    """Pose (no rotation) putting `mesh` on the palm's normal line so that the nearest body vertex is `gap` m outside it."""
+    """Pose (no rotation) putting `mesh` on the palm's normal line, the nearest body vertex `gap` m outside it.
+
+    The object slides along the palm normal until that holds within `tol` m (at most `max_iter` steps).
+    """
     centre, n = palm_frame(vertices, faces, palm_ids)
     t = centre + n * (gap + float((-mesh.vertices @ n).max()))  # the object's extreme point along -n meets the palm
     near = vertices[np.linalg.norm(vertices - t, axis=1) < np.linalg.norm(mesh.extents) + 0.1]
@@ -121,7 +125,8 @@ class HandObjectExplorer:
         elif name == "object":
             self.set_object(str(value))
         else:
-            raise ValueError(f"name: unknown slider {name!r}; expected one of {[*OFFSET_SLIDERS, YAW_SLIDER, 'object']}")
+            names = [*OFFSET_SLIDERS, YAW_SLIDER, "object"]
+            raise ValueError(f"name: unknown slider {name!r}; expected one of {names}")
         return self.measure()
 
     def contacts(self) -> tuple[np.ndarray, np.ndarray]:
@@ -178,11 +183,11 @@ class HandObjectExplorer:
     @staticmethod
     def describe(numbers: dict[str, float]) -> str:
         """One line of the numbers for the widget's readout."""
-        vol = numbers["penetration_volume_cm3"]
-        return (f"hand–object distance {numbers['min_distance_cm']:+.2f} cm · "
-                f"markers in contact (≤ {MARKER_CONTACT_THRESHOLD * 100:.0f} cm) {numbers['marker_contacts']:.0f} · "
-                f"object points in contact (≤ {OBJECT_CONTACT_THRESHOLD * 100:.0f} cm) {numbers['object_contacts']:.0f} · "
-                f"penetration {numbers['penetration_depth_cm']:.2f} cm deep"
+        n, vol = numbers, numbers["penetration_volume_cm3"]
+        return (f"hand–object distance {n['min_distance_cm']:+.2f} cm · "
+                f"markers in contact (≤ {MARKER_CONTACT_THRESHOLD * 100:.0f} cm) {n['marker_contacts']:.0f} · "
+                f"object points in contact (≤ {OBJECT_CONTACT_THRESHOLD * 100:.0f} cm) {n['object_contacts']:.0f} · "
+                f"penetration {n['penetration_depth_cm']:.2f} cm deep"
                 + ("" if math.isnan(vol) else f", {vol:.1f} cm³"))
 
     def widget(self, step: float = 0.005, span: float = 0.1, dpi: float = 72.0) -> Any:  # pragma: no cover - UI only

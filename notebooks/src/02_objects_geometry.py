@@ -30,7 +30,7 @@ from graspkit.objects import (IAA_WEIGHT, MARKER_CONTACT_THRESHOLD, OBJECT_CONTA
                               signed_distance_to_points, winding_number)
 
 torch.manual_seed(0)
-torch.set_num_threads(1)  # small geometric queries gain little from more, and one thread keeps run times steady on a busy machine
+torch.set_num_threads(1)  # these small queries gain little from more; one thread keeps run times steady on busy cores
 plt.rcParams["figure.dpi"] = 72  # small pictures keep the notebook small
 
 # %% [markdown]
@@ -83,11 +83,12 @@ print("\nmug, seed 3:", " × ".join(f"{s:.1f}" for s in variant.extents * 100), 
 # %%
 mug = make_object("mug")
 points, normals = sample_surface(mug, 2048, seed=0)
-print("points", points.shape, "normals", normals.shape, "| unit normals:", bool(np.allclose(np.linalg.norm(normals, axis=1), 1)))
+unit = np.allclose(np.linalg.norm(normals, axis=1), 1.0)
+print("points", points.shape, "normals", normals.shape, "| unit normals:", unit)
 # outward means: a step of 1 mm along the normal leaves the solid, a step against it enters it
-out = signed_distance(points + 1e-3 * normals, mug)
-inn = signed_distance(points - 1e-3 * normals, mug)
-print(f"1 mm along the normal is outside for {(out > 0).float().mean():.1%}, against it inside for {(inn < 0).float().mean():.1%}")
+out = (signed_distance(points + 1e-3 * normals, mug) > 0).float().mean()
+inn = (signed_distance(points - 1e-3 * normals, mug) < 0).float().mean()
+print(f"1 mm along the normal is outside for {out:.1%}, against it inside for {inn:.1%}")
 
 # %% [markdown]
 # Left: every point, and the normals of a random tenth as 1.2 cm arrows. Right: a 1 cm thick slice through
@@ -289,17 +290,20 @@ body_v, body_f = reaching_body(bm)  # (V, 3) world, feet on z = 0, facing -y; (F
 markers = saga_markers(bm)
 palm = palm_vertices(bm)["right"]
 centre, normal = palm_frame(body_v, body_f, palm)
-print(f"body: {len(body_v)} vertices, {len(body_f)} faces; {len(markers)} SAGA markers; {len(palm)} right-palm vertices")
+print(f"body: {len(body_v)} vertices, {len(body_f)} faces; {len(markers)} SAGA markers; "
+      f"{len(palm)} right-palm vertices")
 print("palm centre (m):", np.round(centre, 3), " palm normal:", np.round(normal, 2))
 
 obj_name = "can"
-obj_pose = place_at_palm(make_object(obj_name), body_v, body_f, palm, gap=0.002)
-obj = apply_pose(obj_pose, make_object(obj_name))
-obj_points, obj_normals = apply_pose(obj_pose, *sample_surface(make_object(obj_name), 2048, seed=0))
+can = make_object(obj_name)  # object frame
+obj_pose = place_at_palm(can, body_v, body_f, palm, gap=0.002)
+obj = apply_pose(obj_pose, can)  # world
+obj_points = apply_pose(obj_pose, sample_surface(can, 2048, seed=0)[0])
 marker_pos = body_v[markers.vertex_ids]
-c_m = marker_contact(marker_pos, obj).numpy()           # SAGA's C_M, (143,)
+c_m = marker_contact(marker_pos, obj).numpy()  # SAGA's C_M, (143,)
 c_o = object_contact(obj_points, (body_v, body_f)).numpy()  # SAGA's C_O, (2048,)
-print(f"thresholds: marker {MARKER_CONTACT_THRESHOLD * 100:.0f} cm, object point {OBJECT_CONTACT_THRESHOLD * 100:.0f} cm")
+print(f"thresholds: marker {MARKER_CONTACT_THRESHOLD * 100:.0f} cm, "
+      f"object point {OBJECT_CONTACT_THRESHOLD * 100:.0f} cm")
 print(f"C_M: {int(c_m.sum())} of {len(c_m)} markers touch the {obj_name}:",
       ", ".join(n for n, c in zip(markers.names, c_m) if c))
 print(f"C_O: {int(c_o.sum())} of {len(c_o)} object points touch the body")
@@ -341,15 +345,16 @@ fig.subplots_adjust(left=0, right=1, bottom=0, top=0.92, wspace=0)
 
 # %%
 def contact_distances(offset: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
-    """SAGA Eq. 6's distances with the maps above, object moved by offset (3,) m: d(o, V_B) where C_O = 1, d(m, O) where C_M = 1."""
-    moved = apply_pose(ObjectPose(obj_pose.translation + offset, np.eye(3)), make_object(obj_name))
+    """Eq. 6's distances, object moved by offset (3,) m: d(o, V_B) where C_O = 1 (P,), d(m, O) where C_M = 1 (M,)."""
+    moved = apply_pose(ObjectPose(obj_pose.translation + offset, np.eye(3)), can)
     return distance_to(obj_points[c_o > 0] + offset, (body_v, body_f)), distance_to(marker_pos[c_m > 0], moved)
 
 
 print(f"{'lowered by':>10} | {'sum d(o, V_B) (m)':>17} {'mean (cm)':>9} | {'sum d(m, O) (m)':>15} {'mean (cm)':>9}")
 for drop in (0.0, 0.01, 0.05):
     d_o, d_m = contact_distances(np.array([0.0, 0.0, -drop]))
-    print(f"{drop * 100:>7.0f} cm | {d_o.sum():>17.3f} {d_o.mean() * 100:>9.2f} | {d_m.sum():>15.3f} {d_m.mean() * 100:>9.2f}")
+    print(f"{drop * 100:>7.0f} cm | {d_o.sum():>17.3f} {d_o.mean() * 100:>9.2f} | "
+          f"{d_m.sum():>15.3f} {d_m.mean() * 100:>9.2f}")
 
 # %% [markdown]
 # ## 6 · Interpenetration volume and depth
@@ -439,8 +444,8 @@ explorer = HandObjectExplorer(body_v, body_f, obj_name, base=obj_pose, hand_ids=
 print(f"{'z (cm)':>6} | {'distance (cm)':>13} {'C_M':>4} {'C_O':>5} {'depth (cm)':>10} {'volume (cm³)':>12}")
 for dz in (0.03, 0.01, 0.0, -0.01, -0.02):
     r = explorer.update("z", dz)
-    print(f"{dz * 100:>+6.0f} | {r['min_distance_cm']:>+13.2f} {r['marker_contacts']:>4.0f} {r['object_contacts']:>5.0f} "
-          f"{r['penetration_depth_cm']:>10.2f} {r['penetration_volume_cm3']:>12.2f}")
+    print(f"{dz * 100:>+6.0f} | {r['min_distance_cm']:>+13.2f} {r['marker_contacts']:>4.0f} "
+          f"{r['object_contacts']:>5.0f} {r['penetration_depth_cm']:>10.2f} {r['penetration_volume_cm3']:>12.2f}")
 _ = explorer.update("z", 0.0)  # back to the touching pose
 
 # %% [markdown]
