@@ -1,0 +1,108 @@
+"""`graspkit data make`: generate locomotion (AMASS-style) or reaching (CIRCLE-style) clips into a folder.
+
+    graspkit data make --kind locomotion --n 2000 --seed 0 --out ~/.cache/graspkit/motion/locomotion
+
+Parallel over processes, resumable (finished files are kept; each file is written to a temporary name and
+renamed, so no partial file is ever left), deterministic: clip i's seed derives from (seed, kind, i), so the
+same command writes the same files whatever the number of workers or interruptions.
+"""
+from __future__ import annotations
+
+import argparse
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+import numpy as np
+
+KINDS = ("locomotion", "reach")
+DEFAULT_N = {"locomotion": 2000, "reach": 2000}
+_BM = None
+
+
+def clip_seed(seed: int, kind: str, index: int) -> int:
+    """The seed of clip `index` of a set: derived from (seed, kind, index) by numpy's SeedSequence."""
+    return int(np.random.SeedSequence([seed, KINDS.index(kind), index]).generate_state(1)[0])
+
+
+def clip_path(out: Path, kind: str, index: int) -> Path:
+    """File name of clip `index`."""
+    return out / f"{kind}_{index:06d}.npz"
+
+
+def _init_worker(model: str | None) -> None:
+    """Load the body model once per worker process (and keep torch to one thread per process)."""
+    import torch
+
+    from graspkit.body import BodyModel
+    from graspkit.paths import default_model_path
+
+    global _BM
+    torch.set_num_threads(1)
+    _BM = BodyModel.from_file(model or default_model_path())
+
+
+def make_clip(kind: str, seed: int, index: int, out: str) -> str:
+    """Generate and write one clip (in a worker); returns its path."""
+    from graspkit.data.formats import save_motion
+    from graspkit.data.locomotion import generate_locomotion
+    from graspkit.data.reaching import generate_reach
+
+    s = clip_seed(seed, kind, index)
+    m = generate_locomotion(s, _BM) if kind == "locomotion" else generate_reach(s, _BM)
+    return str(save_motion(clip_path(Path(out), kind, index), m))
+
+
+def make_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2, model: str | None = None,
+                 progress: bool = True) -> list[Path]:
+    """Write clips 0..n-1 of `kind` that are not there yet; returns all n paths."""
+    from tqdm import tqdm
+
+    if kind not in KINDS:
+        raise ValueError(f"kind: expected one of {KINDS}, got {kind!r}")
+    if n < 0 or workers < 1:
+        raise ValueError(f"n / workers: expected n >= 0 and workers >= 1, got {n} / {workers}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    todo = [i for i in range(n) if not clip_path(out, kind, i).exists()]
+    bar = tqdm(total=n, initial=n - len(todo), desc=f"{kind} clips", unit="clip", disable=not progress)
+    if workers == 1:
+        _init_worker(model)
+        for i in todo:
+            make_clip(kind, seed, i, str(out))
+            bar.update()
+    elif todo:
+        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(model,)) as ex:
+            futures = [ex.submit(make_clip, kind, seed, i, str(out)) for i in todo]
+            for f in as_completed(futures):
+                f.result()
+                bar.update()
+    bar.close()
+    return [clip_path(out, kind, i) for i in range(n)]
+
+
+def _cmd_make(args: argparse.Namespace) -> int:
+    """Run `graspkit data make`."""
+    n = args.n if args.n is not None else DEFAULT_N[args.kind]
+    out = args.out
+    if out is None:
+        from graspkit.paths import cache_dir
+
+        out = cache_dir() / "motion" / args.kind
+    make_dataset(args.kind, n, args.seed, out, args.workers, str(args.model) if args.model else None,
+                 progress=not args.quiet)
+    print(f"{n} {args.kind} clips in {out}")
+    return 0
+
+
+def add_data_commands(subparsers) -> None:
+    """Register `graspkit data ...` on the top-level subparsers."""
+    data = subparsers.add_parser("data", help="procedural motion data").add_subparsers(dest="data_command", required=True)
+    m = data.add_parser("make", help="generate locomotion (AMASS-style) or reaching (CIRCLE-style) clips")
+    m.add_argument("--kind", choices=KINDS, required=True)
+    m.add_argument("--n", type=int, default=None, help=f"number of clips (default {DEFAULT_N})")
+    m.add_argument("--seed", type=int, default=0)
+    m.add_argument("--out", type=Path, default=None, help="folder (default: <cache>/motion/<kind>)")
+    m.add_argument("--workers", type=int, default=2, help="processes (default 2)")
+    m.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
+    m.add_argument("--quiet", action="store_true", help="no progress bar")
+    m.set_defaults(func=_cmd_make)

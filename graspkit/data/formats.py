@@ -1,0 +1,183 @@
+"""Sequence files: AMASS-style `.npz` (SMPL-X, z-up world) and CIRCLE-style reaching clips (the same plus a goal).
+
+Written keys (AMASS SMPL-X layout): `poses` (T,165) axis-angle in SMPL-X joint order (root, 21 body joints,
+jaw, eyes, 15 + 15 hand joints; absolute rotations, the hand mean not added), `trans` (T,3), `betas` (10,),
+`gender`, `mocap_frame_rate`, `surface_model_type` ('smplx'); graspkit adds `contacts` (T,4)
+[left heel, left toe, right heel, right toe] and, for reaching clips, `goal` (3,), `goal_frame`, `hand`.
+Arrays are float32; strings are plain numpy unicode scalars, so every file loads with allow_pickle=False.
+
+The reader also takes real AMASS files: SMPL-X (`poses` (T,165)) and SMPL-H (`poses` (T,156): 22 body joints
+including the root, then 30 hand joints; jaw and eyes are set to zero), any number of `betas` (the first 10
+are kept), `mocap_frame_rate` or `mocap_framerate`, and resamples to 30 fps (slerp for rotations, linear
+for translation, nearest frame for contacts).
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from graspkit.data.motion import HANDS, Motion
+from graspkit.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
+
+FPS = 30.0
+NUM_BETAS = 10
+SMPLH_BODY, SMPLH_HAND = 22, 30
+
+
+class SequenceFileError(ValueError):
+    """A sequence file that is missing, pickled, or has a missing or malformed key."""
+
+
+def save_motion(path: str | os.PathLike, motion: Motion) -> Path:
+    """Write a Motion as an AMASS-style .npz (plus goal keys for reaching clips), atomically; returns the path."""
+    path = Path(path)
+    arrays: dict[str, np.ndarray] = {
+        "poses": motion.poses.reshape(motion.num_frames, -1).astype(np.float32),
+        "trans": motion.trans.astype(np.float32),
+        "betas": motion.betas[:NUM_BETAS].astype(np.float32),
+        "gender": np.array(motion.gender),
+        "mocap_frame_rate": np.array(float(motion.fps)),
+        "surface_model_type": np.array("smplx"),
+    }
+    if motion.contacts is not None:
+        arrays["contacts"] = motion.contacts.astype(np.uint8)
+    if motion.goal is not None:
+        arrays.update(goal=motion.goal.astype(np.float32), goal_frame=np.array(int(motion.goal_frame)),
+                      hand=np.array(motion.hand))
+    write_npz_atomic(path, arrays)
+    return path
+
+
+def write_npz_atomic(path: Path, arrays: dict[str, np.ndarray]) -> None:
+    """A compressed .npz (as np.savez_compressed, but with fixed zip timestamps, so equal arrays give equal bytes)
+    written to a temporary file beside `path` and renamed: readers never see a partial file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f, zipfile.ZipFile(f, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+            for key, a in arrays.items():
+                info = zipfile.ZipInfo(f"{key}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+                info.compress_type = zipfile.ZIP_DEFLATED
+                with zf.open(info, "w", force_zip64=True) as member:
+                    np.lib.format.write_array(member, np.asanyarray(a), allow_pickle=False)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _get(npz, key: str, path: Path) -> np.ndarray:
+    """One array of an open npz; clear errors for a missing key or an object array."""
+    if key not in npz.files:
+        raise SequenceFileError(f"{path}: missing key {key!r} (has {sorted(npz.files)})")
+    try:
+        return np.asarray(npz[key])
+    except ValueError as e:
+        raise SequenceFileError(f"{path}: key {key!r} cannot be read without pickle ({e})") from None
+
+
+def _string(a: np.ndarray) -> str:
+    """A numpy scalar string or bytes as str."""
+    v = a.item() if a.shape == () else a.reshape(-1)[0]
+    return v.decode() if isinstance(v, bytes) else str(v)
+
+
+def to_smplx_poses(poses: np.ndarray, path: Path | str = "<array>") -> np.ndarray:
+    """Axis-angle poses (T,165) SMPL-X or (T,156) SMPL-H -> (T,55,3) in SMPL-X order (SMPL-H: zero jaw and eyes)."""
+    if poses.ndim != 2 or poses.shape[1] not in (165, 156):
+        raise SequenceFileError(f"{path}: key 'poses' has shape {poses.shape}, expected (T, 165) SMPL-X or (T, 156) SMPL-H")
+    T = len(poses)
+    if poses.shape[1] == 165:
+        return poses.reshape(T, 55, 3)
+    p = poses.reshape(T, 52, 3)
+    out = np.zeros((T, 55, 3), poses.dtype)
+    out[:, :SMPLH_BODY] = p[:, :SMPLH_BODY]
+    out[:, 25:] = p[:, SMPLH_BODY:]
+    return out
+
+
+def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
+    """Read an AMASS-style (graspkit, AMASS SMPL-X or SMPL-H) or CIRCLE-style .npz; resample to `fps` (None: keep)."""
+    path = Path(path)
+    if not path.is_file():
+        raise SequenceFileError(f"{path}: no such sequence file")
+    try:
+        npz = np.load(path, allow_pickle=False)
+    except Exception as e:
+        raise SequenceFileError(f"{path}: not a readable .npz file ({e})") from None
+    if not isinstance(npz, np.lib.npyio.NpzFile):
+        raise SequenceFileError(f"{path}: expected an .npz archive of arrays, got a single array")
+    with npz:
+        poses = to_smplx_poses(np.asarray(_get(npz, "poses", path), np.float64), path)
+        trans = np.asarray(_get(npz, "trans", path), np.float64)
+        if trans.shape != (len(poses), 3):
+            raise SequenceFileError(f"{path}: key 'trans' has shape {trans.shape}, expected ({len(poses)}, 3)")
+        rate_key = "mocap_frame_rate" if "mocap_frame_rate" in npz.files else "mocap_framerate"
+        src = float(_get(npz, rate_key, path))
+        if not np.isfinite(src) or src <= 0:
+            raise SequenceFileError(f"{path}: key {rate_key!r} is {src}, expected a positive frame rate")
+        betas = np.zeros(NUM_BETAS)
+        if "betas" in npz.files:
+            b = np.asarray(_get(npz, "betas", path), np.float64).reshape(-1)[:NUM_BETAS]
+            betas[:len(b)] = b
+        gender = _string(_get(npz, "gender", path)) if "gender" in npz.files else "neutral"
+        contacts = np.asarray(_get(npz, "contacts", path)).astype(bool) if "contacts" in npz.files else None
+        goal = gf = hand = None
+        if "goal" in npz.files:
+            goal = np.asarray(_get(npz, "goal", path), np.float64)
+            gf = int(_get(npz, "goal_frame", path))
+            hand = _string(_get(npz, "hand", path)) if "hand" in npz.files else "right"
+            if goal.shape != (3,):
+                raise SequenceFileError(f"{path}: key 'goal' has shape {goal.shape}, expected (3,)")
+            if hand not in HANDS:
+                raise SequenceFileError(f"{path}: key 'hand' is {hand!r}, expected one of {HANDS}")
+    for key, a in (("poses", poses), ("trans", trans), ("betas", betas)):
+        if not np.isfinite(a).all():
+            raise SequenceFileError(f"{path}: key {key!r} contains NaN or Inf")
+    if contacts is not None and contacts.shape != (len(poses), 4):
+        raise SequenceFileError(f"{path}: key 'contacts' has shape {contacts.shape}, expected ({len(poses)}, 4)")
+    if fps is not None and abs(src - fps) > 1e-6:
+        poses, trans, contacts, gf = resample(poses, trans, src, fps, contacts, gf)
+        src = fps
+    try:
+        return Motion(poses, trans, betas, src, contacts=contacts, goal=goal, goal_frame=gf, hand=hand, gender=gender)
+    except ValueError as e:
+        raise SequenceFileError(f"{path}: {e}") from None
+
+
+def resample(poses: np.ndarray, trans: np.ndarray, src_fps: float, fps: float, contacts: np.ndarray | None = None,
+             goal_frame: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, int | None]:
+    """Resample (T,55,3) axis-angle poses (slerp), (T,3) translations (linear), contacts (nearest) from src_fps to fps."""
+    T = len(poses)
+    n = int(np.floor((T - 1) * fps / src_fps + 1e-9)) + 1
+    f = np.arange(n) * src_fps / fps                       # fractional source frame of each new frame
+    i0 = np.minimum(np.floor(f).astype(int), T - 1)
+    i1 = np.minimum(i0 + 1, T - 1)
+    a = f - i0
+    q = axis_angle_to_quaternion(torch.as_tensor(poses, dtype=torch.float64)).numpy()
+    out = quaternion_to_axis_angle(torch.as_tensor(slerp(q[i0], q[i1], a[:, None]))).numpy()
+    tr = (1 - a)[:, None] * trans[i0] + a[:, None] * trans[i1]
+    c = contacts[np.minimum(np.round(f).astype(int), T - 1)] if contacts is not None else None
+    gf = None if goal_frame is None else int(min(round(goal_frame * fps / src_fps), n - 1))
+    return out, tr, c, gf
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Spherical linear interpolation of unit quaternions (..., 4) (w first) at t (broadcastable to (...))."""
+    dot = (q0 * q1).sum(-1)
+    q1 = np.where((dot < 0)[..., None], -q1, q1)             # the short way round
+    dot = np.abs(dot)
+    t = np.broadcast_to(np.asarray(t, np.float64), dot.shape)
+    theta = np.arccos(np.clip(dot, -1.0, 1.0))
+    small = theta < 1e-6
+    s = np.sin(np.where(small, 1.0, theta))
+    w0 = np.where(small, 1 - t, np.sin((1 - t) * theta) / s)
+    w1 = np.where(small, t, np.sin(t * theta) / s)
+    q = w0[..., None] * q0 + w1[..., None] * q1
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)

@@ -1,0 +1,125 @@
+"""Motion: one SMPL-X sequence in the z-up world (AMASS convention), plus what graspkit's generators know.
+
+`poses` are absolute local rotations (the hand mean is NOT added, as in AMASS files), so the body is
+`bm.forward_rotmats(axis_angle_to_matrix(poses), betas, transl=trans)` or equivalently a BodyModel /
+smplx model built with flat_hand_mean=True.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Iterator
+
+import numpy as np
+import torch
+
+from graspkit.body.skeleton import JOINT_INDEX, NUM_JOINTS
+from graspkit.rotations import axis_angle_to_matrix
+
+CONTACT_NAMES = ("left_heel", "left_toe", "right_heel", "right_toe")
+HANDS = ("right", "left")
+
+
+@dataclass
+class Motion:
+    """poses (T,55,3) axis-angle, trans (T,3), betas (10,), fps; contacts (T,4) bool [l heel, l toe, r heel, r toe];
+    for reaching clips the goal (3,) (world, m), the frame goal_frame at which `hand`'s wrist is on it."""
+
+    poses: np.ndarray
+    trans: np.ndarray
+    betas: np.ndarray
+    fps: float = 30.0
+    contacts: np.ndarray | None = None
+    goal: np.ndarray | None = None
+    goal_frame: int | None = None
+    hand: str | None = None
+    gender: str = "neutral"
+
+    def __post_init__(self) -> None:
+        self.poses = np.asarray(self.poses, np.float32).reshape(-1, NUM_JOINTS, 3)
+        self.trans = np.asarray(self.trans, np.float32).reshape(-1, 3)
+        self.betas = np.asarray(self.betas, np.float32).reshape(-1)
+        T = len(self.poses)
+        if len(self.trans) != T:
+            raise ValueError(f"trans: {len(self.trans)} frames, poses has {T}")
+        if self.contacts is not None:
+            self.contacts = np.asarray(self.contacts, bool)
+            if self.contacts.shape != (T, 4):
+                raise ValueError(f"contacts: expected shape ({T}, 4), got {self.contacts.shape}")
+        if self.goal is not None:
+            self.goal = np.asarray(self.goal, np.float32).reshape(3)
+            if self.goal_frame is None or not 0 <= int(self.goal_frame) < T:
+                raise ValueError(f"goal_frame: expected a frame in [0, {T}) with a goal, got {self.goal_frame}")
+            self.goal_frame = int(self.goal_frame)
+            if self.hand not in HANDS:
+                raise ValueError(f"hand: expected one of {HANDS}, got {self.hand!r}")
+
+    @property
+    def num_frames(self) -> int:
+        return len(self.poses)
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first to the last frame."""
+        return (self.num_frames - 1) / self.fps
+
+    def slice(self, start: int, stop: int | None = None) -> "Motion":
+        """Frames [start, stop) as a new Motion (goal_frame shifted; the goal dropped if it falls outside)."""
+        sl = slice(start, stop)
+        goal, gf, hand = self.goal, self.goal_frame, self.hand
+        n = len(range(*sl.indices(self.num_frames)))
+        if gf is not None:
+            gf = gf - start
+            if not 0 <= gf < n:
+                goal, gf, hand = None, None, None
+        return replace(self, poses=self.poses[sl], trans=self.trans[sl],
+                       contacts=None if self.contacts is None else self.contacts[sl], goal=goal, goal_frame=gf, hand=hand)
+
+    def rotmats(self, dtype: torch.dtype = torch.float32) -> torch.Tensor:
+        """Local rotation matrices (T,55,3,3)."""
+        return axis_angle_to_matrix(torch.as_tensor(self.poses, dtype=dtype))
+
+    def joint_positions(self, bm) -> np.ndarray:
+        """World joint positions (T,55,3) by joints-only forward kinematics on `bm`."""
+        coeffs = torch.zeros(1, bm.num_betas + bm.num_expression, dtype=bm.dtype)
+        coeffs[0, :min(bm.num_betas, len(self.betas))] = torch.as_tensor(self.betas[:bm.num_betas], dtype=bm.dtype)
+        with torch.no_grad():
+            _, J = bm.shaped(coeffs)
+            _, t = bm.global_transforms(self.rotmats(bm.dtype), J.expand(self.num_frames, -1, -1))
+        return (t + torch.as_tensor(self.trans, dtype=bm.dtype)[:, None]).numpy()
+
+    def vertices(self, bm, start: int = 0, stop: int | None = None) -> torch.Tensor:
+        """Mesh vertices (n,V,3) of frames [start, stop) on `bm` (hand mean not added)."""
+        sl = slice(start, stop)
+        rot = self.rotmats(bm.dtype)[sl]
+        betas = torch.as_tensor(self.betas[None, :bm.num_betas], dtype=bm.dtype)
+        with torch.no_grad():
+            return bm.forward_rotmats(rot, betas=betas, transl=torch.as_tensor(self.trans[sl], dtype=bm.dtype)).vertices
+
+    def iter_vertices(self, bm, chunk: int = 64, overlap: int = 0) -> Iterator[tuple[int, torch.Tensor]]:
+        """(first frame, vertices (n,V,3)) for consecutive chunks of frames; chunks share `overlap` frames."""
+        start = 0
+        while start < self.num_frames:
+            stop = min(start + chunk, self.num_frames)
+            yield start, self.vertices(bm, start, stop)
+            if stop == self.num_frames:
+                break
+            start = stop - overlap
+
+
+def heading_of(global_orient: np.ndarray) -> np.ndarray:
+    """Facing direction (radians from world +x) of root orientations (T,3): the canonical +z axis projected on the ground."""
+    R = axis_angle_to_matrix(torch.as_tensor(np.asarray(global_orient, np.float64))).numpy()
+    f = R[..., :, 2]
+    return np.arctan2(f[..., 1], f[..., 0])
+
+
+def canonicalize(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """SAGA A.3 clip frame for world joints (T,55,3): origin at the first-frame pelvis, x the horizontal
+    left->right shoulder direction, y forward, z up. Returns the rotation (3,3) and origin (3,) (x' = R (x - o))."""
+    o = joints[0, JOINT_INDEX["pelvis"]].copy()
+    x = joints[0, JOINT_INDEX["right_shoulder"]] - joints[0, JOINT_INDEX["left_shoulder"]]
+    x[2] = 0.0
+    x /= np.linalg.norm(x)
+    z = np.array([0.0, 0.0, 1.0])
+    y = np.cross(z, x)
+    return np.stack([x, y, z]), o

@@ -1,0 +1,264 @@
+"""Goal reaching: the procedural planner `plan_reach` and CIRCLE-style reaching clips (WANDR Sec. 3.1-3.2, 4.2).
+
+The planner walks to a stand-off point, turns to face the goal, slows down and reaches with the right
+hand so that the wrist is on the goal exactly at frame t_G (WANDR's time control, Sec. 3.2 and Sup. C.1):
+
+1. posture   a one-parameter family of whole-body postures, level b in [-1, 1]: b > 0 lowers the pelvis
+             (knee bend, then squat), pitches the pelvis and bends the spine for low goals; b < 0 raises the
+             right collar and extends the spine for high goals. For each level the right shoulder's position
+             is measured once (forward kinematics of a standing body) and the smallest |b| from which the
+             wrist target lies within REACH_RHO arm lengths of the shoulder is chosen.
+2. stand-off the root point from which that shoulder sees the goal at a comfortable reach, on the line from
+             the start to the goal, facing so that the goal is ahead and to the right.
+3. schedule  backwards from t_G: the reach takes 0.9-1.6 s (longer for lower goals) and starts while the
+             last step lands; walking (turn towards the stand-off, straight walk, final turn) is timed to
+             stop then; if there is time to spare the person waits first, if not they walk faster.
+4. motion    footsteps and whole-body posing as for locomotion, plus controls blending into the posture,
+             the gaze on the goal, the right wrist moved by IK along a minimum-jerk blend onto the target,
+             and the hand opened into a pre-shape.
+
+CIRCLE-style training clips (`generate_reach`) are short: a standing start near a goal (a step or two at
+most), right-hand targets, goal heights concentrated where people usually reach (not uniform over
+WANDR's evaluation volume).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from graspkit.data.footsteps import GaitStyle, foot_tracks, plan_footsteps
+from graspkit.data.ik import smoothstep, wrap_angle
+from graspkit.data.locomotion import sample_betas, sample_gait_style, sample_style
+from graspkit.data.motion import Motion
+from graspkit.data.posing import Controls, Style, pose_body
+from graspkit.data.rig import Rig, build_rig
+from graspkit.data.trajectory import RootPlan, heading_profile, ramp, straight_walk
+from graspkit.body.skeleton import JOINT_INDEX
+
+REACH_RHO = 0.86           # shoulder-to-wrist distance at the goal, as a fraction of the arm length
+FLOOR_WRIST = 0.07         # the wrist stays this high (m) above the floor: the hand lies flat below it
+LEVELS = np.linspace(-1.0, 1.0, 41)
+EVAL_ANGLES_DEG = (0.0, 72.0, 144.0, 216.0, 288.0)        # WANDR Sec. 4.2: 5 angles 72 deg apart
+EVAL_HEIGHTS = tuple(np.linspace(0.0, 1.8, 5))             # 0 .. 1.8 m
+EVAL_DISTANCES = tuple(np.linspace(0.5, 5.0, 5))           # 0.5 .. 5 m
+EVAL_FRAMES = 240                                          # 8 s at 30 fps
+
+
+@dataclass(frozen=True)
+class Start:
+    """Where a planned motion starts: ground position (x, y) and facing (rad from world +x)."""
+
+    x: float = 0.0
+    y: float = 0.0
+    heading: float = 0.0
+
+
+def posture_controls(b: np.ndarray | float, scale: float = 1.0) -> dict[str, np.ndarray]:
+    """Control values (each shaped like b) of posture level b: > 0 bend and squat for low goals, < 0 stretch for high."""
+    b = np.asarray(b, np.float64)
+    lo, hi = np.clip(b, 0, 1), np.clip(-b, 0, 1)
+    return {"pelvis_drop": scale * 0.38 * lo**1.5, "pelvis_back": scale * 0.16 * lo,
+            "hip_flex": 0.97 * np.minimum(lo / 0.7, 1.0), "spine_flex": 1.45 * lo**1.3 - 0.15 * hi,
+            "spine_side": 0.6 * lo, "spine_twist": -0.2 * lo - 0.1 * hi,
+            "collar_raise": 0.3 * hi - 0.35 * lo**2, "arm_flex": 1.4 * lo}
+
+
+def _static_plan(K: int) -> RootPlan:
+    """K frames of standing still at the origin facing +x."""
+    return RootPlan(np.zeros((K, 2)), np.zeros(K))
+
+
+def posture_shoulders(rig: Rig, style: Style | None = None) -> np.ndarray:
+    """Right-shoulder positions (len(LEVELS), 3) for each posture level, body at the origin facing +x (z up)."""
+    style = style or Style()
+    K = len(LEVELS)
+    plan, gait = _static_plan(K), GaitStyle()
+    tracks = foot_tracks([], plan, rig, gait)
+    c = Controls.zeros(K)
+    for k, v in posture_controls(LEVELS, rig.scale).items():
+        setattr(c, k, v)
+    _, _, extra = pose_body(rig, plan, tracks, style, c)
+    return extra["joints"][:, JOINT_INDEX["right_shoulder"]]
+
+
+def choose_posture(shoulders: np.ndarray, target_z: float, arm: float) -> tuple[float, np.ndarray, float]:
+    """The posture level with the smallest |b| whose shoulder reaches target_z; returns (b, shoulder (3,), horizontal reach).
+
+    Goals level with or above the shoulder are reached at REACH_RHO arm lengths; goals far below it with the arm
+    hanging almost straight (up to 0.97 arm lengths, as people reach for the floor).
+    """
+    r = REACH_RHO * arm
+    dz = target_z - shoulders[:, 2]
+    ok = (dz >= -0.95 * arm) & (dz <= 0.93 * r)
+    if ok.any():
+        k = int(np.flatnonzero(ok)[np.argmin(np.abs(LEVELS[ok]))])
+    else:
+        k = int(np.argmin(np.abs(np.clip(dz, -0.95 * arm, 0.93 * r) - dz)))
+    dzk = float(np.clip(dz[k], -0.95 * arm, 0.93 * r))
+    r_eff = float(np.clip(-dzk / 0.9, r, 0.97 * arm)) if dzk < 0 else r
+    return float(LEVELS[k]), shoulders[k], float(np.sqrt(r_eff**2 - dzk**2))
+
+
+@lru_cache(maxsize=16)
+def _default_model():
+    """The default body model, loaded once per process."""
+    import torch
+
+    from graspkit.body import BodyModel
+    from graspkit.paths import default_model_path
+
+    return BodyModel.from_file(default_model_path(), dtype=torch.float32)
+
+
+def plan_reach(start: Start | tuple[float, float, float], goal, t_goal_frames: int, betas=None, seed: int = 0,
+               bm=None, hold_frames: int = 15, style: Style | None = None, gait: GaitStyle | None = None,
+               v_pref: float | None = None) -> Motion:
+    """The procedural planner: walk, turn, slow down and reach so the right wrist is on `goal` (3,) (world, z up)
+    at frame t_goal_frames; the clip has t_goal_frames + 1 + hold_frames frames. start: Start or (x, y, heading).
+
+    seed draws the small person-to-person variations (style, gait, preferred speed) unless given.
+    """
+    if t_goal_frames < 1:
+        raise ValueError(f"t_goal_frames: expected >= 1, got {t_goal_frames}")
+    start = start if isinstance(start, Start) else Start(*map(float, start))
+    goal = np.asarray(goal, np.float64).reshape(3)
+    bm = bm if bm is not None else _default_model()
+    rng = np.random.default_rng(seed)
+    betas = np.zeros(10) if betas is None else np.asarray(betas, np.float64).reshape(-1)
+    rig = build_rig(bm, betas)
+    style = style or _mild(sample_style(rng), Style())
+    gait = gait or _mild(sample_gait_style(rng), GaitStyle())
+    v_pref = v_pref if v_pref is not None else float(rng.uniform(1.0, 1.35))
+    fps, T = 30.0, t_goal_frames + 1 + hold_frames
+    t_G = t_goal_frames / fps
+
+    # 1-2: posture and stand-off
+    target = goal.copy()
+    target[2] = max(target[2], FLOOR_WRIST * rig.scale)
+    b, shoulder, d_h = choose_posture(posture_shoulders(rig, style), float(target[2]), rig.arm_length)
+    beta = 0.3 + 0.2 * max(b, 0.0)                 # the goal a little to the right of straight ahead
+    q = shoulder[:2] + d_h * np.array([np.cos(beta), -np.sin(beta)])   # goal seen from the root (body frame)
+    xy0 = np.array([start.x, start.y])
+    to_goal = target[:2] - xy0
+    theta = float(np.arctan2(to_goal[1], to_goal[0])) if np.linalg.norm(to_goal) > 1e-6 else start.heading
+    gamma = float(np.arctan2(q[1], q[0]))
+    psi_f = theta - gamma
+    P = target[:2] - _rot2(psi_f) @ q
+
+    # 3: schedule, backwards from t_G
+    T_r = min(0.9 + 0.7 * abs(b) + 0.1 * rng.random(), 0.8 * t_G)
+    t_rs = t_G - T_r
+    t_stop = t_rs + 0.3 * T_r
+    plan = _approach_plan(T, xy0, start.heading, P, psi_f, t_rs, t_stop, v_pref, fps)
+
+    # 4: controls
+    t = np.arange(T) / fps
+    s = smoothstep((t - t_rs) / T_r)
+    s_arm = smoothstep((t - t_rs - 0.1 * T_r) / (0.9 * T_r))
+    c = Controls.zeros(T)
+    for k, v in posture_controls(b, rig.scale).items():
+        setattr(c, k, float(v) * s)
+    right = np.array([np.sin(psi_f), -np.cos(psi_f), 0.0])
+    fwd = np.array([np.cos(psi_f), np.sin(psi_f), 0.0])
+    up = np.array([0.0, 0.0, 1.0])
+    lo, hi = max(b, 0.0), max(-b, 0.0)
+    pole = 0.7 * right - (0.8 - 0.5 * hi) * up - 0.5 * lo * fwd
+    c.reach_target = np.broadcast_to(target, (T, 3)).copy()
+    c.reach_weight = s_arm
+    c.reach_pole = np.broadcast_to(pole / np.linalg.norm(pole), (T, 3)).copy()
+    c.hand_open = s_arm
+    c.support_weight = smoothstep((lo - 0.35) / 0.25) * (1 - smoothstep((lo - 0.7) / 0.2)) * s   # hand on knee in a crouch
+    # fingers continue the shoulder->goal line (levelled out for low goals), palm down for low goals, inwards else
+    sh = shoulder_world = _rot3(psi_f) @ shoulder + np.array([P[0], P[1], 0.0])
+    along = target - sh
+    along = along / np.linalg.norm(along)
+    fingers = (1 - lo) * along + lo * (0.8 * fwd + 0.2 * right - 0.1 * up)
+    palm = (1 - lo) * (-(0.7 * right) - 0.5 * up + 0.4 * hi * fwd) + lo * (-up)
+    c.finger_dir = np.broadcast_to(fingers / np.linalg.norm(fingers), (T, 3)).copy()
+    c.palm_dir = np.broadcast_to(palm / np.linalg.norm(palm), (T, 3)).copy()
+    del sh
+    c.gaze = np.broadcast_to(goal, (T, 3)).copy()
+    c.gaze_weight = smoothstep(t / max(min(1.0, t_rs), 0.3)) * 0.85 + 0.15 * s
+    rig_style = style
+    steps = plan_footsteps(plan, rig, gait)
+    tracks = foot_tracks(steps, plan, rig, gait)
+    aa, root, _ = pose_body(rig, plan, tracks, rig_style, c)
+    return Motion(aa, root - rig.joints[0], betas, fps, contacts=tracks.contacts, goal=goal,
+                  goal_frame=t_goal_frames, hand="right")
+
+
+def _mild(sampled, default):
+    """Halfway between a sampled style and the default one (the planner varies less than the training data)."""
+    from dataclasses import fields, replace
+
+    return replace(default, **{f.name: 0.5 * (getattr(sampled, f.name) + getattr(default, f.name)) for f in fields(default)})
+
+
+def _rot3(a: float) -> np.ndarray:
+    """Rotation (3,3) about the world z axis."""
+    return np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+
+
+def _rot2(a: float) -> np.ndarray:
+    """2D rotation matrix (2,2)."""
+    return np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+
+
+def _approach_plan(T: int, xy0: np.ndarray, h0: float, P: np.ndarray, psi_f: float, t_rs: float, t_stop: float,
+                   v_pref: float, fps: float) -> RootPlan:
+    """Root plan from (xy0, h0) to (P, psi_f), arriving at t_stop: turn, straight walk, final turn (or a shuffle if P is near)."""
+    d = P - xy0
+    D = float(np.linalg.norm(d))
+    if D < 0.4:   # a step or two: shift and turn together
+        t1 = max(t_stop, 0.3)
+        t0 = max(0.15, min(t1 - 1.0, t_rs - 0.8))
+        a = ramp(T, t0, t1, fps)[:, None]
+        return RootPlan(xy0 + a * d, heading_profile(T, h0, psi_f, t0 - 0.1, t1, fps), fps)
+    phi = float(np.arctan2(d[1], d[0]))
+    turn1 = abs(wrap_angle(phi - h0))
+    T_turn = 0.35 + turn1 / 2.2 if turn1 > 0.3 else 0.0
+    overlap = 0.55 if turn1 < 1.2 else 0.85
+    accel = 0.9
+    walk_pref = D / v_pref + accel
+    avail = t_stop - 0.2 - overlap * T_turn
+    walk = min(max(walk_pref, D / 1.6 + accel), avail) if avail > D / 1.6 + accel else max(avail, 0.6)
+    t_ws = t_stop - walk
+    t_turn0 = max(0.1, t_ws - overlap * T_turn)
+    xy, _ = straight_walk(T, xy0, phi, D, t_ws, t_stop, accel, fps)
+    h = heading_profile(T, h0, phi, t_turn0, t_turn0 + T_turn, fps) if T_turn > 0 else np.full(T, h0)
+    h = h + wrap_angle(psi_f - phi) * ramp(T, t_stop - 0.7, t_stop + 0.3, fps)
+    return RootPlan(xy, h, fps)
+
+
+def generate_reach(seed: int, bm, betas: np.ndarray | None = None) -> Motion:
+    """One CIRCLE-style clip: start standing, a right-hand goal 0.3-1.2 m away (a step or two at most), reached at
+    1.2-2.6 s, held 0.3-1.0 s. Goal heights: mostly 0.7-1.5 m, fewer low and high ones (not WANDR's uniform grid)."""
+    rng = np.random.default_rng(seed)
+    betas = sample_betas(rng) if betas is None else np.asarray(betas, np.float64)
+    h0 = rng.uniform(-np.pi, np.pi)
+    u = rng.random()
+    z = (rng.uniform(0.7, 1.5) if u < 0.6 else rng.uniform(0.25, 0.7) if u < 0.85
+         else rng.uniform(1.5, 1.8) if u < 0.95 else rng.uniform(0.0, 0.25))
+    r = rng.uniform(0.3, 1.2)
+    ang = h0 + np.clip(rng.normal(-0.2, 0.6), -1.8, 1.6)
+    xy0 = rng.uniform(-0.5, 0.5, 2)
+    goal = np.array([xy0[0] + r * np.cos(ang), xy0[1] + r * np.sin(ang), z])
+    t_goal = int(rng.integers(36, 79))
+    hold = int(rng.integers(9, 31))
+    style = sample_style(rng)
+    gait = sample_gait_style(rng)
+    return plan_reach(Start(xy0[0], xy0[1], h0), goal, t_goal, betas=betas, seed=int(rng.integers(2**31)), bm=bm,
+                      hold_frames=hold, style=style, gait=gait, v_pref=float(rng.uniform(0.7, 1.1)))
+
+
+def evaluation_goals(start: Start = Start()) -> np.ndarray:
+    """WANDR's evaluation grid (Sec. 4.2): (125, 5) rows (angle deg, height m, distance m, goal x, goal y) around `start`."""
+    rows = []
+    for a in EVAL_ANGLES_DEG:
+        for hgt in EVAL_HEIGHTS:
+            for d in EVAL_DISTANCES:
+                th = start.heading + np.deg2rad(a)
+                rows.append((a, hgt, d, start.x + d * np.cos(th), start.y + d * np.sin(th)))
+    return np.array(rows)

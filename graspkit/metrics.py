@@ -1,0 +1,170 @@
+"""Metrics of the three papers, with their thresholds as named constants (one module for all methods).
+
+Motion metrics (this section) take world vertices / joints in the z-up frame, metres, at `fps`:
+
+| metric | paper | definition |
+|---|---|---|
+| foot skating (FS) | WANDR Sec. 4.3 | a frame skates if the mesh's lowest vertex moves more than 0.66 cm horizontally to the next frame |
+| foot skating | SAGA Sec. 4.3 (after LEMO) | both heels are within 5 cm of the ground and both move faster than 75 mm/s (no foot planted) |
+| foot sliding | GOAL Sec. 4.2 | the vertex closest to the ground moves more than 1 cm per frame (GRAB's captured motion: 6.7 %) |
+| success rate (SR), distance to goal (DTG) | WANDR Sec. 4.3 | the right wrist comes within 10 cm of the goal; DTG its closest distance |
+| ground penetration | SAGA Sec. 4.3 (non-collision), GOAL Sec. 3.4 | depth of the lowest vertex below the ground plane z = 0 |
+| joint speed, jerk | smoothness | finite differences of joint positions (body joints 0..21) |
+| joint limits | human range of motion | rotation of each joint beyond the ranges in `JOINT_LIMITS_DEG` |
+
+"The lowest vertex moves" is measured on the same vertex from frame t to t+1 (the vertex that is lowest at t).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch
+
+from graspkit.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
+
+# ----------------------------------------------------------------------------- motion: thresholds
+WANDR_SKATE_THRESHOLD = 0.0066       # m per frame at 30 fps (WANDR Sec. 4.3, CIRCLE's 1 cm adjusted to 30 fps)
+SAGA_SKATE_HEEL_HEIGHT = 0.05        # m (SAGA Sec. 4.3, following LEMO)
+SAGA_SKATE_HEEL_SPEED = 0.075        # m/s, both heels (SAGA Sec. 4.3)
+GOAL_SLIDE_THRESHOLD = 0.01          # m per frame (GOAL Sec. 4.2)
+GOAL_GRAB_SLIDING = 0.067            # fraction of GRAB's captured frames that "slide" (GOAL Sec. 4.2)
+WANDR_SUCCESS_RADIUS = 0.10          # m, right wrist to goal (WANDR Sec. 4.3, as CIRCLE)
+BODY_JOINTS = slice(0, 22)           # pelvis .. right wrist: speed and jerk are reported on these
+
+# Human range of motion, degrees (adult norms, e.g. Soucie et al. 2011; AAOS). Hinge joints: signed flexion
+# about the hinge axis (canonical frame) and the largest rotation off that axis; other joints: the
+# largest total rotation from the rest pose (the T-pose for shoulders: arms down is ~75 deg there).
+HINGES = {  # joint: (axis, flexion min, flexion max, off-axis max)
+    "left_knee": ((1, 0, 0), -10, 155, 35), "right_knee": ((1, 0, 0), -10, 155, 35),
+    "left_elbow": ((0, -1, 0), -10, 155, 95), "right_elbow": ((0, 1, 0), -10, 155, 95),
+}
+JOINT_LIMITS_DEG: dict[str, float] = {
+    "pelvis": 360.0, "left_hip": 135.0, "right_hip": 135.0, "spine1": 45.0, "spine2": 45.0, "spine3": 45.0,
+    "left_ankle": 60.0, "right_ankle": 60.0, "left_foot": 80.0, "right_foot": 80.0, "neck": 60.0, "head": 60.0,
+    "left_collar": 45.0, "right_collar": 45.0, "left_shoulder": 180.0, "right_shoulder": 180.0,
+    "left_wrist": 90.0, "right_wrist": 90.0, "jaw": 30.0, "left_eye_smplhf": 30.0, "right_eye_smplhf": 30.0,
+}
+
+
+def _t(x: Any) -> torch.Tensor:
+    """A float tensor view of an array or tensor."""
+    return x if isinstance(x, torch.Tensor) else torch.as_tensor(np.asarray(x))
+
+
+def lowest_vertex_motion(vertices: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Horizontal and 3D displacement (T-1,) from frame t to t+1 of the vertex lowest at frame t; vertices (T,V,3)."""
+    v = _t(vertices)
+    idx = v[:-1, :, 2].argmin(1)
+    ar = torch.arange(len(idx))
+    d = v[1:][ar, idx] - v[:-1][ar, idx]
+    return d[:, :2].norm(dim=-1).double().numpy(), d.norm(dim=-1).double().numpy()
+
+
+def foot_skating_wandr(vertices: Any, threshold: float = WANDR_SKATE_THRESHOLD) -> np.ndarray:
+    """WANDR's FS per frame (T-1,) bool: the lowest vertex moves more than `threshold` m horizontally to the next frame."""
+    return lowest_vertex_motion(vertices)[0] > threshold
+
+
+def foot_sliding_goal(vertices: Any, threshold: float = GOAL_SLIDE_THRESHOLD) -> np.ndarray:
+    """GOAL's foot sliding per frame (T-1,) bool: the vertex closest to the ground moves more than `threshold` m."""
+    return lowest_vertex_motion(vertices)[1] > threshold
+
+
+def foot_skating_saga(heels: Any, fps: float = 30.0, height: float = SAGA_SKATE_HEEL_HEIGHT,
+                      speed: float = SAGA_SKATE_HEEL_SPEED) -> np.ndarray:
+    """SAGA's skating per frame (T-1,) bool from heel positions (T,2,3) [left, right]: both heels within `height`
+    of the ground and both faster than `speed` m/s (speed from frame t to t+1): no foot is planted."""
+    h = _t(heels).double()
+    v = (h[1:] - h[:-1]).norm(dim=-1) * fps                      # (T-1, 2)
+    return ((h[:-1, :, 2] < height) & (v > speed)).all(1).numpy()
+
+
+def ground_penetration(vertices: Any) -> np.ndarray:
+    """Depth (T,) of the lowest vertex below the ground z = 0 (0 when above)."""
+    return torch.clamp(-_t(vertices)[:, :, 2].min(1).values, min=0).double().numpy()
+
+
+def joint_speed(joints: Any, fps: float = 30.0) -> np.ndarray:
+    """Speeds (T-1,J) of joints (T,J,3) in m/s."""
+    j = _t(joints).double()
+    return ((j[1:] - j[:-1]).norm(dim=-1) * fps).numpy()
+
+
+def joint_jerk(joints: Any, fps: float = 30.0) -> np.ndarray:
+    """Jerk magnitudes (T-3,J) in m/s^3: third finite differences of joints (T,J,3)."""
+    j = _t(joints).double()
+    d3 = j[3:] - 3 * j[2:-1] + 3 * j[1:-2] - j[:-3]
+    return (d3.norm(dim=-1) * fps**3).numpy()
+
+
+def joint_limit_violation(poses: Any) -> np.ndarray:
+    """Degrees beyond the human range (T,55) of local rotations poses (T,55,3) axis-angle; 0 inside the range."""
+    p = _t(poses).double().reshape(-1, NUM_JOINTS, 3)
+    ang = torch.rad2deg(p.norm(dim=-1))
+    out = torch.zeros_like(ang)
+    for name, lim in JOINT_LIMITS_DEG.items():
+        j = JOINT_INDEX[name]
+        out[:, j] = torch.clamp(ang[:, j] - lim, min=0)
+    for name, (axis, lo, hi, off) in HINGES.items():
+        j = JOINT_INDEX[name]
+        a = torch.tensor(axis, dtype=p.dtype)
+        flex = torch.rad2deg(p[:, j] @ a)
+        rest = torch.rad2deg((p[:, j] - (p[:, j] @ a)[:, None] * a).norm(dim=-1))
+        out[:, j] = torch.clamp(lo - flex, min=0) + torch.clamp(flex - hi, min=0) + torch.clamp(rest - off, min=0)
+    finger = torch.clamp(ang[:, 25:] - 100.0, min=0)
+    out[:, 25:] = finger
+    return out.numpy()
+
+
+def distance_to_goal(wrist: Any, goal: Any) -> float:
+    """WANDR's DTG: closest distance (m) of the wrist track (T,3) to the goal (3,)."""
+    return float((_t(wrist).double() - _t(goal).double()).norm(dim=-1).min())
+
+
+def goal_reached(wrist: Any, goal: Any, radius: float = WANDR_SUCCESS_RADIUS) -> bool:
+    """WANDR's success: the wrist comes within `radius` m of the goal."""
+    return distance_to_goal(wrist, goal) <= radius
+
+
+def heel_vertex_ids() -> tuple[int, int]:
+    """SMPL-X heel landmark vertex ids (left, right), as used for SAGA's skating metric."""
+    from graspkit.body.skeleton import SMPLX_LANDMARK_VERTEX_IDS as L
+    return L["LHeel"], L["RHeel"]
+
+
+def motion_quality(bm, motions, chunk: int = 96) -> dict[str, Any]:
+    """All motion metrics over Motion clips, measured on their meshes (chunks of `chunk` frames, nothing stored).
+
+    Returns the fractions of frame pairs that skate (fs_wandr, skate_saga) or slide (slide_goal), ground
+    penetration (max and mean per-frame depth, m), the largest joint speed (m/s, body joints) and where,
+    the mean jerk (m/s^3, body joints), the largest joint-limit violation (deg) and where, and counts.
+    """
+    hl, hr = heel_vertex_ids()
+    clips = pairs = fs = sk = sl = frames = 0
+    pen_max = pen_sum = vmax = jerk_sum = lim_max = 0.0
+    jerk_n, vmax_at, lim_at = 0, "", ""
+    for k, m in enumerate(motions):
+        clips += 1
+        for start, v in m.iter_vertices(bm, chunk=chunk, overlap=1):   # chunks share one frame: every pair once
+            fs += int(foot_skating_wandr(v).sum())
+            sl += int(foot_sliding_goal(v).sum())
+            sk += int(foot_skating_saga(v[:, [hl, hr]], m.fps).sum())
+            pairs += len(v) - 1
+            pen = ground_penetration(v if start == 0 else v[1:])
+            pen_max, pen_sum, frames = max(pen_max, float(pen.max(initial=0))), pen_sum + float(pen.sum()), frames + len(pen)
+        j = m.joint_positions(bm)[:, BODY_JOINTS]
+        sp = joint_speed(j, m.fps)
+        if sp.size and sp.max() > vmax:
+            t, jj = np.unravel_index(np.argmax(sp), sp.shape)
+            vmax, vmax_at = float(sp.max()), f"clip {k} frame {t} {JOINT_NAMES[jj]}"
+        jk = joint_jerk(j, m.fps)
+        jerk_sum, jerk_n = jerk_sum + float(jk.sum()), jerk_n + jk.size
+        lim = joint_limit_violation(m.poses)
+        if lim.max() > lim_max:
+            t, jj = np.unravel_index(np.argmax(lim), lim.shape)
+            lim_max, lim_at = float(lim.max()), f"clip {k} frame {t} {JOINT_NAMES[jj]}"
+    return {"clips": clips, "frames": frames, "fs_wandr": fs / max(pairs, 1), "skate_saga": sk / max(pairs, 1),
+            "slide_goal": sl / max(pairs, 1), "penetration_max": pen_max, "penetration_mean": pen_sum / max(frames, 1),
+            "max_joint_speed": vmax, "max_joint_speed_at": vmax_at, "mean_jerk": jerk_sum / max(jerk_n, 1),
+            "joint_limit_max": lim_max, "joint_limit_at": lim_at}

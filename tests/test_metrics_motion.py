@@ -1,0 +1,83 @@
+"""Motion metrics on hand-made cases with known answers (a still body, a foot dragged at a known speed, ...)."""
+import numpy as np
+import pytest
+
+from graspkit import metrics as M
+
+
+def _cloud(T, motion=(0.0, 0.0, 0.0), lift=0.0):
+    """A 'body' of 50 points above the ground plus one lowest 'sole' point that moves by `motion` per frame."""
+    rng = np.random.default_rng(0)
+    body = rng.uniform([-0.2, -0.2, 0.3], [0.2, 0.2, 1.7], (50, 3))
+    v = np.repeat(np.concatenate([body, [[0.0, 0.0, 0.0]]])[None], T, 0).astype(np.float32)
+    v[:, -1] += np.arange(T)[:, None] * np.asarray(motion, np.float32)
+    v[:, :, 2] += lift
+    return v
+
+
+def test_thresholds_are_the_papers():
+    assert M.WANDR_SKATE_THRESHOLD == 0.0066 and M.GOAL_SLIDE_THRESHOLD == 0.01 and M.WANDR_SUCCESS_RADIUS == 0.10
+    assert M.SAGA_SKATE_HEEL_HEIGHT == 0.05 and M.SAGA_SKATE_HEEL_SPEED == 0.075
+
+
+def test_still_body_has_no_skating_sliding_penetration_speed_or_jerk():
+    v = _cloud(20)
+    assert not M.foot_skating_wandr(v).any() and not M.foot_sliding_goal(v).any()
+    assert not M.foot_skating_saga(v[:, [-1, 0]]).any()
+    assert M.ground_penetration(v).max() == 0
+    assert M.joint_speed(v).max() == 0 and M.joint_jerk(v).max() == 0
+
+
+@pytest.mark.parametrize("per_frame,wandr,goal", [(0.005, False, False), (0.008, True, False), (0.012, True, True)])
+def test_a_foot_dragged_at_known_speed(per_frame, wandr, goal):
+    v = _cloud(30, motion=(per_frame, 0.0, 0.0))
+    assert M.foot_skating_wandr(v).all() == wandr and M.foot_skating_wandr(v).any() == wandr
+    assert M.foot_sliding_goal(v).all() == goal and M.foot_sliding_goal(v).any() == goal
+    h, d3 = M.lowest_vertex_motion(v)
+    assert np.allclose(h, per_frame, atol=1e-6) and np.allclose(d3, per_frame, atol=1e-6)
+
+
+def test_wandr_counts_horizontal_motion_goal_counts_all_motion():
+    v = _cloud(10, motion=(0.0, 0.0, -0.012), lift=0.2)   # the lowest point sinks 1.2 cm per frame, straight down
+    assert not M.foot_skating_wandr(v).any() and M.foot_sliding_goal(v).all()
+
+
+def test_saga_needs_both_heels_low_and_fast():
+    T = 12
+    t = np.arange(T)[:, None] * 0.003                       # 3 mm per frame = 90 mm/s at 30 fps
+    moving = np.concatenate([t, 0 * t, 0 * t + 0.02], 1)   # heel 2 cm above the ground
+    still = np.tile([0.3, 0.1, 0.02], (T, 1))
+    both = np.stack([moving, moving + [0, 0.2, 0]], 1)
+    assert M.foot_skating_saga(both, fps=30).all()
+    assert not M.foot_skating_saga(np.stack([moving, still], 1), fps=30).any()        # one foot planted
+    assert not M.foot_skating_saga(both + [0, 0, 0.1], fps=30).any()                   # both feet in the air
+    assert not M.foot_skating_saga(both, fps=20).any()                                 # 60 mm/s is slow enough
+
+
+def test_penetration_speed_and_jerk_known_values():
+    v = _cloud(5, lift=-0.02)
+    assert np.allclose(M.ground_penetration(v), 0.02, atol=1e-6)
+    fps = 30.0
+    t = np.arange(40) / fps
+    acc = np.stack([0.5 * 2.0 * t**2, 0 * t, 0 * t], 1)[:, None]       # constant acceleration: no jerk
+    assert np.allclose(M.joint_jerk(acc, fps), 0, atol=1e-6)
+    cub = np.stack([t**3, 0 * t, 0 * t], 1)[:, None]                      # x = t^3: jerk 6 m/s^3
+    assert np.allclose(M.joint_jerk(cub, fps), 6.0, atol=1e-6)
+    lin = np.stack([1.5 * t, 0 * t, 0 * t], 1)[:, None]
+    assert np.allclose(M.joint_speed(lin, fps), 1.5)
+
+
+def test_joint_limits_flag_a_hyperextended_knee_and_a_broken_neck_only():
+    poses = np.zeros((3, 55, 3))
+    poses[1, 4] = [np.deg2rad(90), 0, 0]         # left knee flexed 90 deg: fine
+    poses[2, 4] = [np.deg2rad(-30), 0, 0]        # left knee hyperextended 30 deg: 20 beyond -10
+    poses[2, 12] = [0, np.deg2rad(100), 0]       # neck turned 100 deg: 40 beyond 60
+    lim = M.joint_limit_violation(poses)
+    assert lim[:2].max() == 0
+    assert np.isclose(lim[2, 4], 20, atol=1e-6) and np.isclose(lim[2, 12], 40, atol=1e-6)
+
+
+def test_distance_to_goal_and_success():
+    w = np.stack([np.linspace(0, 1, 11), np.zeros(11), np.ones(11)], 1)
+    assert np.isclose(M.distance_to_goal(w, [1.0, 0.05, 1.0]), 0.05)
+    assert M.goal_reached(w, [1.0, 0.09, 1.0]) and not M.goal_reached(w, [1.0, 0.11, 1.0])

@@ -1,0 +1,73 @@
+"""Rotation helpers and analytic two-bone IK against scipy and closed-form truths."""
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from graspkit.data.ik import axis_angle_matrix, matrix_axis_angle, smoothstep, two_bone_ik, wrap_angle
+
+
+def _is_rotation(R):
+    return np.allclose(R @ np.swapaxes(R, -1, -2), np.eye(3), atol=1e-9) and np.allclose(np.linalg.det(R), 1, atol=1e-9)
+
+
+def test_axis_angle_round_trip_matches_scipy_including_near_pi():
+    rng = np.random.default_rng(0)
+    aa = rng.normal(size=(200, 3))
+    aa[:20] *= (np.pi - 1e-7) / np.linalg.norm(aa[:20], axis=1, keepdims=True)   # angles at pi
+    aa[20:40] *= 1e-9                                                                 # and near zero
+    R = axis_angle_matrix(aa)
+    assert np.allclose(R, Rotation.from_rotvec(aa).as_matrix(), atol=1e-9)
+    back = matrix_axis_angle(R)
+    assert np.allclose(axis_angle_matrix(back), R, atol=1e-7)
+    assert np.allclose(back[40:], Rotation.from_matrix(R[40:]).as_rotvec(), atol=1e-7)
+
+
+def test_two_bone_ik_reaches_reachable_targets_with_exact_bone_lengths_and_pole_side():
+    rng = np.random.default_rng(1)
+    n = 500
+    b1, b2 = np.array([0.01, -0.375, 0.005]), np.array([-0.008, -0.41, -0.045])
+    root = rng.normal(size=(n, 3))
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    target = root + d * rng.uniform(0.1, 0.75, (n, 1))
+    pole = rng.normal(size=(n, 3))
+    R1, R2, mid = two_bone_ik(root, target, pole, b1, b2, np.array([0.0, 0.0, 1.0]))
+    assert _is_rotation(R1) and _is_rotation(R2)
+    assert np.allclose(root + R1 @ b1, mid, atol=1e-9)                       # rest bones land on the solved chain
+    assert np.allclose(mid + R2 @ b2, target, atol=1e-9)
+    # the middle joint bends towards the pole: it lies on the pole's side of the root-target line
+    a = (target - root) / np.linalg.norm(target - root, axis=1, keepdims=True)
+    off = (mid - root) - ((mid - root) * a).sum(1, keepdims=True) * a
+    p_perp = pole - (pole * a).sum(1, keepdims=True) * a
+    assert ((off * p_perp).sum(1) > 0).all()
+    assert np.allclose(np.linalg.norm(np.cross(off, p_perp), axis=1) / np.linalg.norm(off, axis=1)
+                       / np.linalg.norm(p_perp, axis=1), 0, atol=1e-9)      # in the pole plane
+
+
+def test_two_bone_ik_middle_joint_is_a_hinge_for_collinear_rest_bones():
+    b1, b2 = np.array([0, -0.4, 0.0]), np.array([0, -0.4, 0.0])
+    rng = np.random.default_rng(2)
+    d = rng.normal(size=(50, 3))
+    root, target = np.zeros((50, 3)), d / np.linalg.norm(d, axis=1, keepdims=True) * rng.uniform(0.05, 0.79, (50, 1))
+    R1, R2, _ = two_bone_ik(root, target, rng.normal(size=(50, 3)), b1, b2, np.array([0.0, 0.0, 1.0]))
+    local = np.swapaxes(R1, -1, -2) @ R2
+    aa = matrix_axis_angle(local)
+    assert np.allclose(aa[:, 1:], 0, atol=1e-9)            # a rotation about x only (the knee hinge)
+    assert (aa[:, 0] >= -1e-9).all()                        # flexion in one direction: the knee never bends backwards
+    dist = np.linalg.norm(target, axis=1)                   # and the law of cosines gives its angle
+    assert np.allclose(np.cos(np.pi - aa[:, 0]), (0.32 - dist**2) / 0.32, atol=1e-9)
+
+
+def test_two_bone_ik_out_of_reach_stretches_towards_the_target():
+    b = np.array([0, -0.4, 0.0])
+    R1, R2, mid = two_bone_ik(np.zeros(3), np.array([2.0, 0, 0]), np.array([0, 0, 1.0]), b, b, np.array([0, 0, 1.0]),
+                              max_stretch=0.999)
+    end = mid + R2 @ b
+    assert np.allclose(end, [0.8 * 0.999, 0, 0], atol=1e-9)
+
+
+def test_smoothstep_and_wrap_angle():
+    u = np.linspace(-0.5, 1.5, 201)
+    s = smoothstep(u)
+    assert s[0] == 0 and s[-1] == 1 and np.all(np.diff(s) >= 0)
+    assert np.isclose(smoothstep(np.array(0.5)), 0.5)
+    assert np.allclose(wrap_angle(np.array([3 * np.pi, -3 * np.pi / 2, 0.1])), [np.pi, np.pi / 2, 0.1])

@@ -1,0 +1,110 @@
+"""Footstep planner, foot motion and contact labels, locomotion clips measured on the procedural humanoid's mesh."""
+import numpy as np
+import pytest
+import torch
+
+from graspkit import metrics as M
+from graspkit.body import BodyModel
+from graspkit.body.markers import foot_vertices
+from graspkit.data import generate_locomotion
+from graspkit.data.footsteps import GaitStyle, foot_tracks, plan_footsteps
+from graspkit.data.rig import build_rig
+from graspkit.data.trajectory import RootPlan, heading_profile, integrate_controls, straight_walk
+
+from conftest import PROCEDURAL_MODEL
+
+
+@pytest.fixture(scope="module")
+def bm():
+    return BodyModel.from_file(PROCEDURAL_MODEL, dtype=torch.float32)
+
+
+@pytest.fixture(scope="module")
+def rig(bm):
+    return build_rig(bm)
+
+
+@pytest.mark.parametrize("v", [0.6, 1.0, 1.5])
+def test_straight_walk_alternates_feet_with_cadence_and_step_length_from_speed(rig, v):
+    T, style = 330, GaitStyle()
+    xy, speed = straight_walk(T, (0, 0), 0.0, v * (10.0 - 0.9), 0.5, 10.5)   # cruising at v between the ramps
+    assert np.isclose(speed[150], v, rtol=1e-3)
+    steps = plan_footsteps(RootPlan(xy, np.zeros(T)), rig, style)
+    assert all(a.side != b.side for a, b in zip(steps, steps[1:]))                       # alternating
+    cruise = [s for s in steps if 3.5 < s.t_land < 7.5]
+    f = style.cadence(v, rig.scale)
+    assert np.allclose([1 / s.period for s in cruise], f, rtol=0.02)                    # cadence from speed
+    lengths = np.diff([s.xy[0] for s in steps if 3.0 < s.t_land < 8.0])
+    assert np.allclose(lengths, v / f, rtol=0.1)                                         # step length = v / cadence
+    lat = np.array([s.xy[1] for s in cruise]) * np.where([s.side == 0 for s in cruise], 1, -1)
+    assert np.allclose(lat, style.half_width * rig.scale, atol=1e-3)                   # left at +y, right at -y
+    swing = np.array([s.t_land - s.t_lift for s in cruise])
+    assert np.allclose(swing, 2 * (1 - style.duty) / f, rtol=0.02) and (swing < 2 / f - swing).all()   # swing < stance
+
+
+def test_standing_still_takes_no_step_and_turning_in_place_follows_the_heading(rig):
+    T = 150
+    assert plan_footsteps(RootPlan(np.zeros((T, 2)), np.zeros(T)), rig, GaitStyle()) == []
+    h = heading_profile(T, 0.0, np.pi / 2, 0.5, 3.0)
+    steps = plan_footsteps(RootPlan(np.zeros((T, 2)), h), rig, GaitStyle())
+    assert 2 <= len(steps) <= 8
+    style = GaitStyle()
+    last = {s.side: s for s in steps}
+    for side, s in last.items():
+        want = np.pi / 2 + (style.toe_out if side == 0 else -style.toe_out)
+        assert abs(s.yaw - want) < style.yaw_threshold + 1e-9
+
+
+def test_contact_labels_are_honest_on_the_mesh(bm, rig):
+    """A labelled heel / toe touches the ground and has a vertex that does not move (the pivot it rolls about);
+    an unlabelled one is not below the ground."""
+    T = 120
+    v_ctrl = np.r_[np.zeros(20), np.full(T - 20, 1.2)]
+    plan = integrate_controls(np.convolve(v_ctrl, np.ones(15) / 15, "same"), np.zeros(T), np.full(T, 0.25), fps=30.0)
+    style = GaitStyle()
+    tracks = foot_tracks(plan_footsteps(plan, rig, style), plan, rig, style)
+    from graspkit.data.posing import Style, pose_body
+    from graspkit.data.motion import Motion
+    aa, root, _ = pose_body(rig, plan, tracks, Style())
+    m = Motion(aa, root - rig.joints[0], np.zeros(10), contacts=tracks.contacts)
+    v = m.vertices(bm).numpy()
+    parts = foot_vertices(bm)
+    for k, name in enumerate(("left_heel", "left_toe", "right_heel", "right_toe")):
+        on = tracks.contacts[:, k]
+        assert on.any() and (~on).any()
+        p = v[:, parts[name]]
+        assert p[on, :, 2].min(1).max() < 0.01                        # in contact: on the ground (1 cm)
+        stay = np.flatnonzero(on[:-1] & on[1:])
+        near = (p[stay, :, 2] < 0.01) & (p[stay + 1, :, 2] < 0.01)
+        move = np.linalg.norm(p[stay + 1, :, :2] - p[stay, :, :2], axis=-1)
+        still = np.where(near, move, np.inf).min(1)
+        assert still.max() < 5e-4                                     # a planted point: moves < 0.5 mm per frame
+        assert p[~on, :, 2].min() > -0.005                            # never below the ground
+    low = M.lowest_vertex_motion(v)[0]
+    assert low.max() < M.WANDR_SKATE_THRESHOLD                        # the whole body's lowest vertex never skates
+
+
+@pytest.mark.parametrize("kind", ["walk", "curve", "turn", "side", "start_stop"])
+def test_locomotion_clips_do_not_skate_penetrate_or_break_joints(bm, kind):
+    m = generate_locomotion(11, bm, num_frames=110, kind=kind)
+    q = M.motion_quality(bm, [m])
+    assert q["fs_wandr"] <= 0.05 and q["slide_goal"] <= 0.03
+    assert q["penetration_max"] <= 0.01
+    assert q["joint_limit_max"] == 0.0
+    assert q["max_joint_speed"] < 8.0
+    assert m.contacts.any(1).all()                       # something always touches the ground (walking, no flight)
+
+
+def test_chunked_quality_equals_whole_clip_quality(bm):
+    m = generate_locomotion(5, bm, num_frames=60, kind="walk")
+    a, b = M.motion_quality(bm, [m], chunk=7), M.motion_quality(bm, [m], chunk=1000)
+    for k in ("fs_wandr", "skate_saga", "slide_goal", "penetration_max", "frames"):
+        assert a[k] == pytest.approx(b[k])
+    v = m.vertices(bm)
+    assert a["fs_wandr"] == pytest.approx(M.foot_skating_wandr(v).mean())
+
+
+def test_same_seed_same_clip_different_seed_different_clip(bm):
+    a, b, c = (generate_locomotion(s, bm, num_frames=45) for s in (3, 3, 4))
+    assert np.array_equal(a.poses, b.poses) and np.array_equal(a.trans, b.trans) and np.array_equal(a.betas, b.betas)
+    assert not np.array_equal(a.betas, c.betas)

@@ -1,0 +1,71 @@
+"""The procedural reaching planner (WANDR's time-controlled goal reaching) and CIRCLE-style clips."""
+import numpy as np
+import pytest
+import torch
+
+from graspkit import metrics as M
+from graspkit.body import BodyModel
+from graspkit.data import Start, evaluation_goals, generate_reach, plan_reach
+from graspkit.data.reaching import FLOOR_WRIST
+
+from conftest import PROCEDURAL_MODEL
+
+WRIST = 21
+
+
+@pytest.fixture(scope="module")
+def bm():
+    return BodyModel.from_file(PROCEDURAL_MODEL, dtype=torch.float32)
+
+
+@pytest.mark.parametrize("goal", [(0.9, -0.4, 0.05), (1.6, 0.8, 0.9), (-0.3, 1.2, 1.75)])
+def test_wrist_is_on_low_middle_and_high_goals_at_the_goal_frame(bm, goal):
+    m = plan_reach(Start(0.0, 0.0, 0.3), goal, 100, seed=2, bm=bm, hold_frames=10)
+    assert m.num_frames == 111 and m.goal_frame == 100 and m.hand == "right"
+    w = m.joint_positions(bm)[:, WRIST]
+    want = np.array(goal, float)
+    want[2] = max(want[2], FLOOR_WRIST)                      # the hand lies on the floor, the wrist just above
+    assert np.linalg.norm(w[100] - want) < 0.01
+    assert np.linalg.norm(w[100:] - want, axis=1).max() < 0.01            # held
+    assert M.goal_reached(w, goal)
+    q = M.motion_quality(bm, [m])
+    assert q["fs_wandr"] <= 0.05 and q["penetration_max"] <= 0.01 and q["joint_limit_max"] == 0.0
+
+
+def test_time_control_the_wrist_arrives_when_asked(bm):
+    goal = (1.2, 0.3, 1.1)
+    for t_goal in (60, 150):
+        m = plan_reach(Start(), goal, t_goal, seed=0, bm=bm, hold_frames=0)
+        d = np.linalg.norm(m.joint_positions(bm)[:, WRIST] - goal, axis=1)
+        assert d[t_goal] < 0.01
+        assert d[: t_goal - 10].min() > 0.02                 # not there early
+        assert np.all(np.diff(d[t_goal - 12:]) <= 1e-4)     # slowing down onto the goal
+
+
+def test_reaching_turns_to_face_a_goal_behind(bm):
+    from graspkit.data.motion import heading_of
+    m = plan_reach(Start(0, 0, 0), (-2.0, 0.2, 1.0), 150, seed=1, bm=bm, hold_frames=0)
+    h = heading_of(m.poses[:, 0])
+    assert abs(h[0]) < 0.15
+    to_goal = np.arctan2(0.2 - m.trans[-1, 1], -2.0 - m.trans[-1, 0])
+    assert abs(np.angle(np.exp(1j * (h[-1] - to_goal)))) < 0.8            # facing the goal (it sits front-right)
+
+
+def test_circle_style_clips_are_short_mostly_reaching_and_store_their_goal(bm):
+    for seed in range(3):
+        m = generate_reach(seed, bm)
+        assert m.hand == "right" and m.goal is not None and 0 < m.goal_frame < m.num_frames <= 110
+        j = m.joint_positions(bm)
+        assert np.linalg.norm(j[m.goal_frame, WRIST] - np.maximum(m.goal, [-9, -9, FLOOR_WRIST])) < 0.02
+        walked = np.linalg.norm(j[-1, 0, :2] - j[0, 0, :2])
+        assert walked < 1.3                                  # a step or two at most
+        steps = (np.diff(m.contacts[:, [0, 2]].astype(int), axis=0) == 1).sum()
+        assert steps <= 4
+
+
+def test_evaluation_grid_is_wandrs():
+    g = evaluation_goals(Start(1.0, 2.0, 0.5))
+    assert g.shape == (125, 5)
+    assert sorted(set(np.round(g[:, 0]))) == [0, 72, 144, 216, 288]
+    assert np.allclose(sorted(set(g[:, 1])), np.linspace(0, 1.8, 5))
+    assert np.allclose(np.hypot(g[:, 3] - 1.0, g[:, 4] - 2.0), g[:, 2])
