@@ -60,6 +60,8 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--out", type=Path, default=Path("outputs/demo"))
     d.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
     d.set_defaults(func=_cmd_demo)
+    from graspkit.data.cli import add_data_commands
+    add_data_commands(sub)
     return p
 
 
