@@ -68,19 +68,6 @@ SPECS = (
 )
 
 
-def project_to_level_set(p: np.ndarray, body: Body, pose, iters: int = 6, eps: float = 2e-4,
-                         max_step: float = 0.003) -> np.ndarray:
-    """Points (N,3) moved onto the posed body's zero level set by clipped Newton steps along the gradient."""
-    p = p.copy()
-    off = np.eye(3) * eps
-    for _ in range(iters):
-        d = body.evaluate(p, pose)[0]
-        g = np.stack([(body.evaluate(p + o, pose)[0] - body.evaluate(p - o, pose)[0]) / (2 * eps) for o in off], 1)
-        step = d / np.maximum((g * g).sum(1), 1e-6)
-        p -= np.clip(step, -max_step, max_step)[:, None] * g
-    return p
-
-
 def fit_correctives(v: np.ndarray, f: np.ndarray, weights: np.ndarray, joints: np.ndarray, body: Body,
                     specs: tuple[CorrectiveSpec, ...] = SPECS, ridge: float = 1e-3) -> np.ndarray:
     """posedirs (V, 3, 486) with correctives for the given joints (and their mirrors), zeros elsewhere."""
@@ -120,7 +107,7 @@ def radial_target(x: np.ndarray, centre: np.ndarray, axis: np.ndarray, body: Bod
     k = np.where(sign_change, dist, np.inf).argmin(1)
     found = sign_change[np.arange(len(x)), k] & (rho0 > 0.005) & (dist[np.arange(len(x)), k] < max_move)
     lo, hi = grid[np.arange(len(x)), k], grid[np.arange(len(x)), k + 1]
-    for _ in range(30):
+    for _ in range(18):
         m = 0.5 * (lo + hi)
         inside = at(m[:, None]).reshape(-1) <= 0
         lo, hi = np.where(inside, m, lo), np.where(inside, hi, m)
@@ -163,6 +150,7 @@ def _fit_joint(v, f, weights, joints, body, c, flex_axis, twist_axis, spec: Corr
     fade = np.clip((spec.radius - np.linalg.norm(v[region] - joints[c], axis=1)) / (0.3 * spec.radius), 0, 1)
     fade = fade * fade * (3 - 2 * fade)
     A = vertex_neighbours(f, len(v))
+    local = body.subset(set(sub) | {PARENTS[c]})     # the field near joint c only needs these primitives
     feats, offsets = [], []
     for fl in spec.flex_deg:
         for tw in spec.twist_deg:
@@ -176,7 +164,7 @@ def _fit_joint(v, f, weights, joints, body, c, flex_axis, twist_axis, spec: Corr
             lbs = (1 - ws) * x + ws * (x @ R.T + ts[c])
             rv = _rotvec(R)
             axis = rv / np.linalg.norm(rv) if np.linalg.norm(rv) > 1e-9 else np.asarray(flex_axis, float)
-            target, known = radial_target(lbs, joints[c], axis, body, (Rs, ts), spec.max_move)
+            target, known = radial_target(lbs, joints[c], axis, local, (Rs, ts), spec.max_move)
             full = np.zeros_like(v)
             full[region] = target - lbs
             target = lbs + harmonic_fill(full, known, region, A)[region]

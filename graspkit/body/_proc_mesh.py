@@ -34,6 +34,13 @@ def largest_component(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndar
     return compact(v, keep)
 
 
+def drop_doubled_faces(f: np.ndarray) -> np.ndarray:
+    """Remove every face whose vertex set occurs more than once (the collapsed sheets decimation can leave)."""
+    key = np.sort(f, 1)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return f[cnt[inv.ravel()] == 1]
+
+
 def compact(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Drop vertices no face uses and renumber faces."""
     used = np.unique(f)
@@ -183,8 +190,15 @@ def candidate_pairs(v: np.ndarray, f: np.ndarray, cell: float | None = None) -> 
     return np.stack([i[~share], j[~share]], 1)
 
 
-def self_intersections(v: np.ndarray, f: np.ndarray, chunk: int = 200_000) -> np.ndarray:
-    """Pairs (K, 2) of non-adjacent faces that intersect (exact orientation tests in float64)."""
+def self_intersections(v: np.ndarray, f: np.ndarray, subset: np.ndarray | None = None,
+                       chunk: int = 200_000) -> np.ndarray:
+    """Pairs (K, 2) of non-adjacent faces that intersect (exact orientation tests in float64).
+
+    subset: optional face indices; then only pairs within the subset are tested (ids stay global).
+    """
+    if subset is not None:
+        subset = np.asarray(subset)
+        return subset[self_intersections(v, f[subset], None, chunk)] if len(subset) else np.zeros((0, 2), np.int64)
     pairs = candidate_pairs(v, f)
     hits = []
     for s in range(0, len(pairs), chunk):

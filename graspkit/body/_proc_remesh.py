@@ -10,74 +10,65 @@ from scipy.spatial import cKDTree
 from graspkit.body._proc_mesh import vertex_neighbours
 
 
-def _angle(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> float:
-    """Angle at p of triangle pqr (radians)."""
+def _angles_at(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Angles (N,) at p of triangles pqr (stacked (N,3) points), radians."""
     u, w = q - p, r - p
-    c = u @ w / (np.linalg.norm(u) * np.linalg.norm(w) + 1e-300)
-    return float(np.arccos(np.clip(c, -1.0, 1.0)))
+    c = (u * w).sum(1) / (np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1) + 1e-300)
+    return np.arccos(np.clip(c, -1.0, 1.0))
 
 
-def _normal(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Unit normal of triangle pqr."""
+def _normals(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Unit normals (N,3) of triangles pqr."""
     n = np.cross(q - p, r - p)
-    return n / (np.linalg.norm(n) + 1e-300)
+    return n / (np.linalg.norm(n, axis=1, keepdims=True) + 1e-300)
 
 
-def delaunay_flips(v: np.ndarray, f: np.ndarray, max_dihedral_deg: float = 12.0, passes: int = 6) -> np.ndarray:
+def delaunay_flips(v: np.ndarray, f: np.ndarray, max_dihedral_deg: float = 12.0, rounds: int = 60) -> np.ndarray:
     """Flip edges of near-flat face pairs that violate the Delaunay condition; returns new faces (F, 3).
 
     A flip is made only when the two faces are within max_dihedral_deg of coplanar (so the surface
     barely moves), the new edge does not exist yet, no vertex drops below valence 4, and the new faces
-    keep the old orientation.
+    keep the old orientation. Each round flips a set of edges that share no vertex, worst first.
     """
-    f = [list(t) for t in f.tolist()]
-    emap: dict[tuple[int, int], list[int]] = {}
-    for fi, (a, b, c) in enumerate(f):
-        for p, q in ((a, b), (b, c), (c, a)):
-            emap.setdefault((min(p, q), max(p, q)), []).append(fi)
-    valence = np.bincount(np.asarray(f).ravel(), minlength=len(v)) 
+    f = f.copy()
+    V = len(v)
     cos_max = np.cos(np.deg2rad(max_dihedral_deg))
-    for _ in range(passes):
-        flipped = 0
-        for key in sorted(emap):
-            faces = emap.get(key)
-            if faces is None or len(faces) != 2:
-                continue
-            f1, f2 = faces
-            t1, t2 = f[f1], f[f2]
-            # orient so that t1 = (a, b, c) contains a->b and t2 = (b, a, d)
-            i = next(k for k in range(3) if {t1[k], t1[(k + 1) % 3]} == set(key))
-            a, b, c = t1[i], t1[(i + 1) % 3], t1[(i + 2) % 3]
-            j = t2.index(b)
-            if t2[(j + 1) % 3] != a:
-                continue
-            d = t2[(j + 2) % 3]
-            if c == d or (min(c, d), max(c, d)) in emap or valence[a] <= 4 or valence[b] <= 4:
-                continue
-            pa, pb, pc, pd = v[a], v[b], v[c], v[d]
-            if _angle(pc, pa, pb) + _angle(pd, pb, pa) <= np.pi + 1e-6:
-                continue
-            n1, n2 = _normal(pa, pb, pc), _normal(pb, pa, pd)
-            if n1 @ n2 < cos_max:
-                continue
-            m1, m2 = _normal(pa, pd, pc), _normal(pd, pb, pc)
-            navg = n1 + n2
-            if m1 @ navg <= 0 or m2 @ navg <= 0 or m1 @ m2 < cos_max:
-                continue
-            f[f1], f[f2] = [a, d, c], [d, b, c]
-            del emap[key]
-            emap[(min(c, d), max(c, d))] = [f1, f2]
-            ad, bc = emap[(min(a, d), max(a, d))], emap[(min(b, c), max(b, c))]
-            ad[ad.index(f2)] = f1
-            bc[bc.index(f1)] = f2
-            valence[a] -= 1
-            valence[b] -= 1
-            valence[c] += 1
-            valence[d] += 1
-            flipped += 1
-        if flipped == 0:
+    for _ in range(rounds):
+        de = np.stack([f, np.roll(f, -1, axis=1)], 2).reshape(-1, 2)          # directed edge e in face e // 3
+        key = de[:, 0] * V + de[:, 1]
+        twin_key = de[:, 1] * V + de[:, 0]
+        order = np.argsort(key)
+        pos = np.searchsorted(key[order], twin_key)
+        twin = order[np.clip(pos, 0, len(order) - 1)]
+        e = np.nonzero((de[:, 0] < de[:, 1]) & (key[twin] == twin_key))[0]   # each interior edge once
+        e2 = twin[e]
+        f1, f2 = e // 3, e2 // 3
+        a, b = de[e, 0], de[e, 1]
+        c = f[f1, (e % 3 + 2) % 3]
+        d = f[f2, (e2 % 3 + 2) % 3]
+        pa, pb, pc, pd = v[a], v[b], v[c], v[d]
+        excess = _angles_at(pc, pa, pb) + _angles_at(pd, pb, pa) - np.pi
+        n1, n2 = _normals(pa, pb, pc), _normals(pb, pa, pd)
+        m1, m2 = _normals(pa, pd, pc), _normals(pd, pb, pc)
+        navg = n1 + n2
+        valence = np.bincount(f.ravel(), minlength=V)
+        exists = np.isin(np.minimum(c, d) * V + np.maximum(c, d), np.minimum(de[:, 0], de[:, 1]) * V
+                         + np.maximum(de[:, 0], de[:, 1]))
+        ok = ((excess > 1e-6) & (c != d) & ~exists & (valence[a] > 4) & (valence[b] > 4)
+              & ((n1 * n2).sum(1) >= cos_max) & ((m1 * navg).sum(1) > 0) & ((m2 * navg).sum(1) > 0)
+              & ((m1 * m2).sum(1) >= cos_max))
+        cand = np.nonzero(ok)[0]
+        if len(cand) == 0:
             break
-    return np.asarray(f, np.int64)
+        cand = cand[np.lexsort((e[cand], -excess[cand]))]                     # worst first, ties by edge id
+        # keep a set of flips that share no vertex: a flip survives if it is the first to use each of its 4
+        verts = np.stack([a[cand], b[cand], c[cand], d[cand]], 1)
+        first = np.full(V, len(cand))
+        np.minimum.at(first, verts.ravel(), np.repeat(np.arange(len(cand)), 4))
+        keep = cand[(first[verts] == np.arange(len(cand))[:, None]).all(1)]
+        f[f1[keep]] = np.stack([a[keep], d[keep], c[keep]], 1)
+        f[f2[keep]] = np.stack([d[keep], b[keep], c[keep]], 1)
+    return f
 
 
 def vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:

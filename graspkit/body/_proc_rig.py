@@ -119,11 +119,6 @@ def skinning_weights(v: np.ndarray, f: np.ndarray, labels: np.ndarray, joints: n
     return w / w.sum(1, keepdims=True)
 
 
-def part_of_vertex(weights: np.ndarray) -> np.ndarray:
-    """Dominant joint (V,) of each vertex: argmax of the skinning weights (V, 55)."""
-    return np.asarray(weights).argmax(1)
-
-
 # ----------------------------------------------------------------------------- joint regressor
 def _tilt(x: np.ndarray, g: np.ndarray, target: np.ndarray, iters: int = 100) -> tuple[np.ndarray, float]:
     """Weights (N,) proportional to g * exp(lam . (x - target)) whose mean is target; returns (weights, residual)."""
@@ -337,16 +332,16 @@ def _limb_stretch(v, w, joints, ends, bones: tuple[str, str], distal: str, a: fl
 
 
 def expression_basis(v: np.ndarray, w: np.ndarray, joints: np.ndarray) -> np.ndarray:
-    """Ten face-only expression components (V, 3, 10): smooth Gaussian bumps of a few millimetres."""
-    face = w[:, [J["head"], J["jaw"]]].sum(1) * (v[:, 2] > 0.0)
+    """Ten face-only expression components (V, 3, 10): smooth compact bumps of a few millimetres."""
+    face = _smoothstep((w[:, [J["head"], J["jaw"]]].sum(1) - 0.3) / 0.5) * _smoothstep((v[:, 2] + 0.01) / 0.04)
 
     def bump(c, sigma, d, mirror=False) -> np.ndarray:
-        c, d = np.asarray(c, float), np.asarray(d, float)
-        g = np.exp(-0.5 * np.sum((v - c) ** 2, 1) / sigma ** 2)
-        out = g[:, None] * d
-        if mirror:
-            cm, dm = c * (-1, 1, 1), d * (-1, 1, 1)
-            out += np.exp(-0.5 * np.sum((v - cm) ** 2, 1) / sigma ** 2)[:, None] * dm
+        """Displacement (V,3) d times a smooth compact bump of radius 3 sigma around c (and its mirror)."""
+        out = np.zeros_like(v)
+        for cc, dd in ((np.asarray(c, float), np.asarray(d, float)),) + (
+                ((np.asarray(c, float) * (-1, 1, 1), np.asarray(d, float) * (-1, 1, 1)),) if mirror else ()):
+            r2 = np.sum((v - cc) ** 2, 1) / (3 * sigma) ** 2
+            out += (np.clip(1 - r2, 0, None) ** 3)[:, None] * dd
         return out
 
     jaw = w[:, J["jaw"]][:, None] * np.array([0.0, -0.006, -0.002])

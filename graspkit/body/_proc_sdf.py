@@ -224,6 +224,10 @@ class Body:
     prims: list[Prim]
     floor: Floor
 
+    def subset(self, joints: set[int]) -> "Body":
+        """The body made of the primitives owned by the given joints only (same order and floor)."""
+        return Body([q for q in self.prims if q.joint in joints], self.floor)
+
     def evaluate(self, p: np.ndarray, pose: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Signed distance (N,) and owning primitive index (N,) (-1 where none) of points p (N, 3).
 

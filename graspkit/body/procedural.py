@@ -2,9 +2,11 @@
 
     body plan (primitives, _proc_anatomy) -> signed distance on a lens-warped grid (_proc_sdf)
     -> marching cubes -> largest component -> quadric decimation -> Delaunay flips, tangential
-    relaxation onto the fine surface, edge splits to exactly 10,475 vertices (_proc_remesh) -> checks (closed, manifold, oriented, genus 0, no self-intersection) (_proc_mesh)
-    -> skinning weights, joint regressor, shape and expression bases (_proc_rig), hand-pose PCA
-    (hand_poses) -> SMPL-X landmark vertex ids moved onto the matching anatomy -> arrays.
+    relaxation onto the fine surface, edge splits to exactly 10,475 vertices (_proc_remesh)
+    -> checks: closed, manifold, oriented, genus 0, no self-intersection (_proc_mesh)
+    -> SMPL-X landmark vertex ids moved onto the matching anatomy
+    -> skinning weights, joint regressor, shape and expression bases (_proc_rig), pose correctives
+    for elbows and knees (_proc_correctives), hand-pose PCA (hand_poses), face landmarks -> arrays.
 
 Deterministic: the same seed gives byte-identical arrays; the seed varies a few proportions only.
 `docs/body_model.md` describes the result and its measured figures.
@@ -14,14 +16,14 @@ from __future__ import annotations
 import os
 import time
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 
 from graspkit.body import _proc_mesh as M
 from graspkit.body._proc_anatomy import J, Proportions, body_plan, landmark_targets
 from graspkit.body._proc_correctives import fit_correctives
-from graspkit.body._proc_rig import (bone_ends, expression_basis, joint_regressor, part_of_vertex, shape_basis,
-                                     skinning_weights)
+from graspkit.body._proc_rig import bone_ends, expression_basis, joint_regressor, shape_basis, skinning_weights
 from graspkit.body._proc_remesh import SurfaceProjector, delaunay_flips, relax
 from graspkit.body._proc_sdf import Body, Lens, sample_grid, warp
 from graspkit.body.hand_poses import hand_pca
@@ -40,45 +42,59 @@ def _say(progress: bool, t0: float, msg: str) -> None:
         print(f"[{time.perf_counter() - t0:6.1f} s] {msg}", flush=True)
 
 
-def project_to_surface(v: np.ndarray, body: Body, iters: int = 3, eps: float = 1e-4) -> np.ndarray:
-    """Move points (N,3) onto the body's zero level set along the field gradient (Newton steps)."""
-    v = v.copy()
-    off = np.eye(3) * eps
-    for _ in range(iters):
-        d, _ = body.evaluate(v)
-        g = np.stack([(body.evaluate(v + o)[0] - body.evaluate(v - o)[0]) / (2 * eps) for o in off], 1)
-        step = d / np.maximum((g * g).sum(1), 1e-8)
-        v -= np.clip(step, -0.002, 0.002)[:, None] * g
-    return v
+def mesh_problems(v: np.ndarray, f: np.ndarray, intersections: bool = True) -> list[str]:
+    """What keeps (v, f) from being a closed, oriented, genus-0, self-intersection-free surface ([] if nothing)."""
+    r = M.topology_report(v, f)
+    out = [k for k in ("watertight", "winding_consistent") if not r[k]]
+    out += [f"genus {r['genus']}"] if r["genus"] != 0 else []
+    out += [f"{r['degenerate_faces']} degenerate faces"] if r["degenerate_faces"] else []
+    out += ["inward orientation"] if r["volume"] <= 0 else []
+    if not out:
+        out += [f"{M.pinched_vertices(f, len(v))} pinched vertices"] if M.pinched_vertices(f, len(v)) else []
+    if not out and intersections:
+        n = len(M.self_intersections(v, f))
+        out += [f"{n} self-intersecting face pairs"] if n else []
+    return out
 
 
 def _mesh(body: Body, lenses: list[Lens], h: float, n_vertices: int, progress: bool, t0: float):
-    """Closed genus-0 triangle mesh (V,3), (F,3) of the body with exactly n_vertices vertices."""
-    field, u0 = sample_grid(body, lenses, h, progress)
-    _say(progress, t0, "sampled the signed distance")
-    vu, f = M.marching_cubes(field, h, u0)
-    del field
-    vu, f = M.largest_component(vu, f)
-    x = warp(vu, lenses)
-    _say(progress, t0, f"marching cubes: {len(x)} vertices")
+    """Closed genus-0 triangle mesh (V,3), (F,3) of the body with exactly n_vertices vertices.
+
+    Quadric decimation occasionally leaves a non-manifold spot; then the next of a fixed sequence of
+    target counts is tried (deterministic), until the finished mesh passes every check.
+    """
     import fast_simplification
 
-    n0 = n_vertices - NUM_SPLITS * n_vertices // NUM_VERTICES
-    f_mc = f
-    vs, fs = fast_simplification.simplify(x, f.astype(np.int64), target_count=2 * (n0 - 2), agg=7)
-    v, f = M.compact(np.asarray(vs, np.float64), np.asarray(fs, np.int64))
-    if len(v) > n_vertices:
-        raise RuntimeError(f"decimation left {len(v)} vertices, more than {n_vertices}")
+    field, u0 = sample_grid(body, lenses, h, progress)
+    _say(progress, t0, "sampled the signed distance")
+    vu, f_mc = M.marching_cubes(field, h, u0)
+    del field
+    vu, f_mc = M.largest_component(vu, f_mc)
+    x = warp(vu, lenses)
     project = SurfaceProjector(x, f_mc)
-    f = delaunay_flips(v, f)
-    v = relax(v, f, project, iters=4)
-    f = delaunay_flips(v, f)
-    v, f = M.split_longest_edges(v, f, n_vertices)   # flat midpoint splits: the surface does not move
-    f = delaunay_flips(v, f)
-    v = relax(v, f, project, iters=3)
-    f = delaunay_flips(v, f)
-    _say(progress, t0, f"decimated and split: {len(v)} vertices, {len(f)} faces")
-    return v, f
+    _say(progress, t0, f"marching cubes: {len(x)} vertices")
+    n0 = n_vertices - NUM_SPLITS * n_vertices // NUM_VERTICES
+    problems: list[str] = []
+    for attempt, dn in enumerate((0, -7, 11, -19, 23, -31, 37, -43)):
+        vs, fs = fast_simplification.simplify(x, f_mc.astype(np.int64), target_count=2 * (n0 + dn - 2), agg=7)
+        v, f = M.largest_component(np.asarray(vs, np.float64), M.drop_doubled_faces(np.asarray(fs, np.int64)))
+        problems = ["too many vertices"] if len(v) > n_vertices else mesh_problems(v, f, intersections=False)
+        if problems:
+            problems = ["decimation: " + ", ".join(problems)]
+            continue
+        f = delaunay_flips(v, f)
+        v = relax(v, f, project, iters=4)
+        f = delaunay_flips(v, f)
+        v, f = M.split_longest_edges(v, f, n_vertices)   # flat midpoint splits: the surface does not move
+        f = delaunay_flips(v, f)
+        v = relax(v, f, project, iters=3)
+        f = delaunay_flips(v, f)
+        problems = mesh_problems(v, f)
+        if not problems:
+            _say(progress, t0, f"decimated, remeshed and split: {len(v)} vertices, {len(f)} faces (attempt {attempt + 1}); "
+                               "closed, oriented, genus 0, no self-intersection")
+            return v, f
+    raise RuntimeError(f"procedural mesh: no valid decimation found (last: {problems})")
 
 
 def _landmark_permutation(v: np.ndarray, targets: dict[str, np.ndarray]) -> np.ndarray:
@@ -110,22 +126,22 @@ def _surface_points(v: np.ndarray, f: np.ndarray, pts: np.ndarray) -> tuple[np.n
 
 
 def face_landmark_targets() -> np.ndarray:
-    """The 51 static face landmarks (iBUG 68 points 17..67: brows, nose, eyes, lips) as 3D targets (51, 3)."""
+    """The 51 static face landmarks (iBUG-68 points 17..67: brows, nose, eyes, lips) as 3D targets (51, 3).
+
+    As in the 68-point scheme, each group runs from the subject's right (-x) to the left (+x).
+    """
     pts = []
-    for xs in (np.linspace(-0.056, -0.012, 5), np.linspace(0.012, 0.056, 5)):        # brows (subject right, left)
+    for xs in (np.linspace(-0.056, -0.012, 5), np.linspace(0.012, 0.056, 5)):        # brows 17-21, 22-26
         pts += [(x, 0.306 + 0.006 * np.cos((abs(x) - 0.034) / 0.022 * 1.2), 0.09) for x in xs]
-    pts += [(0, y, 0.09 + (0.292 - y) * 0.45) for y in np.linspace(0.292, 0.258, 4)]   # nose bridge
-    pts += [(x, 0.245 - 0.004 * (abs(x) < 0.001), 0.10) for x in np.linspace(-0.014, 0.014, 5)]  # nostrils
-    for cx, inner_first in ((-0.032, False), (0.032, True)):                          # eyes
-        ang = np.deg2rad([180, 120, 60, 0, -60, -120])
-        if inner_first:
-            ang = np.deg2rad([180, 120, 60, 0, -60, -120])
-        ex = cx + 0.013 * np.cos(ang) * (1 if cx < 0 else -1) * -1
-        pts += [(x, 0.290 + 0.005 * np.sin(a), 0.09) for x, a in zip(ex, ang)]
-    a = np.deg2rad(np.linspace(180, -150, 12))                                          # outer lips
-    pts += [(0.025 * np.cos(t) * -1, 0.207 + 0.009 * np.sin(t), 0.09) for t in a]
-    a = np.deg2rad(np.array([180, 135, 90, 45, 0, -45, -90, -135]))                     # inner lips
-    pts += [(0.016 * np.cos(t) * -1, 0.207 + 0.002 * np.sin(t), 0.09) for t in a]
+    pts += [(0, y, 0.09 + (0.292 - y) * 0.45) for y in np.linspace(0.292, 0.258, 4)]   # nose bridge 27-30
+    pts += [(x, 0.245, 0.10) for x in np.linspace(-0.014, 0.014, 5)]                    # nostrils 31-35
+    lid = np.deg2rad([180, 120, 60, 0, -60, -120])       # corner, upper lid, corner, lower lid (36-41, 42-47)
+    for cx in (-0.032, 0.032):
+        pts += [(cx + 0.013 * np.cos(a), 0.290 + 0.005 * np.sin(a), 0.09) for a in lid]
+    pts += [(0.025 * np.cos(t), 0.207 + 0.009 * np.sin(t), 0.09)                       # outer lips 48-59
+            for t in np.deg2rad(180 - 30 * np.arange(12))]
+    pts += [(0.016 * np.cos(t), 0.207 + 0.002 * np.sin(t), 0.09)                       # inner lips 60-67
+            for t in np.deg2rad(180 - 45 * np.arange(8))]
     return np.asarray(pts, float)
 
 
@@ -149,14 +165,6 @@ def build_procedural_smplx(seed: int = 0, progress: bool = True, grid_spacing: f
     P = Proportions().jittered(seed)
     body, lenses, joints = body_plan(P)
     v, f = _mesh(body, lenses, grid_spacing, n_vertices, progress, t0)
-    report = M.topology_report(v, f)
-    if not (report["watertight"] and report["winding_consistent"] and report["genus"] == 0
-            and report["degenerate_faces"] == 0 and report["volume"] > 0):
-        raise RuntimeError(f"procedural mesh is not a closed oriented genus-0 surface: {report}")
-    hits = M.self_intersections(v, f)
-    if len(hits):
-        raise RuntimeError(f"procedural mesh intersects itself ({len(hits)} face pairs)")
-    _say(progress, t0, f"checked: closed, oriented, genus 0, no self-intersection")
 
     if n_vertices == NUM_VERTICES:
         order = _landmark_permutation(v, landmark_targets(P, joints))
@@ -190,6 +198,11 @@ def build_procedural_smplx(seed: int = 0, progress: bool = True, grid_spacing: f
         "procedural": np.array(f"graspkit procedural humanoid (not the licensed SMPL-X model): {len(v)} vertices, "
                                f"built by graspkit.body.procedural.build_procedural_smplx, seed={seed}"),
     }
+
+
+def part_of_vertex(arrays: Mapping[str, np.ndarray]) -> np.ndarray:
+    """The joint (V,) whose part each vertex belongs to: argmax of the skinning weights of a model's arrays."""
+    return np.asarray(arrays["weights"]).argmax(1)
 
 
 def save_model_npz(arrays: dict[str, np.ndarray], path: str | os.PathLike) -> Path:
