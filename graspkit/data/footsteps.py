@@ -44,6 +44,7 @@ class GaitStyle:
     yaw_threshold: float = 0.16    # ... or turned this much (rad) from where it stands
     max_step: float = 0.95         # longest footprint distance ahead/behind the stance foot
     min_separation: float = 0.09   # footprints never closer sideways than this (no crossing)
+    first_step: float = 0.4        # earliest lift-off (s) when starting from rest: time to shift the weight first
 
     def cadence(self, speed: np.ndarray | float, scale: float = 1.0) -> np.ndarray:
         """Steps per second at a root speed (m/s) for a body `scale` times 1.70 m (taller: slower cadence)."""
@@ -99,7 +100,8 @@ def plan_footsteps(plan: RootPlan, rig: Rig, style: GaitStyle, t_begin: float = 
     speed, turn = plan.speed(), np.abs(plan.turn_rate())
     thr, max_step = style.step_threshold * rig.scale, style.max_step * rig.scale
     steps: list[Step] = []
-    last, t = None, t_begin
+    at_rest = speed[0] < 0.05 and turn[0] < 0.05
+    last, t = None, t_begin + (style.first_step if at_rest else 0.0)
     while t <= t_end:
         k = min(int(round(t * fps)), plan.num_frames - 1)
         k2 = min(k + int(0.6 * fps), plan.num_frames - 1)

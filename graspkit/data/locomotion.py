@@ -63,7 +63,7 @@ def _segments(kind: str, rng: np.random.Generator, duration: float) -> list[tupl
             if rng.random() < 0.4:
                 out.append(("walk", rng.uniform(1.5, 3.0), {"v": rng.uniform(0.5, 1.3), "k": 0.0}))
         elif kind == "side":
-            out += [stand(0.4, 1.5), ("side", rng.uniform(0.8, 2.0), {"u": rng.choice([-1, 1]) * rng.uniform(0.2, 0.4)})]
+            out += [stand(0.4, 1.5), ("side", rng.uniform(0.8, 2.0), {"u": rng.choice([-1, 1]) * rng.uniform(0.15, 0.35)})]
         elif kind == "backward":
             out += [stand(0.5, 1.5), ("walk", rng.uniform(1.0, 2.5), {"v": -rng.uniform(0.3, 0.6), "k": 0.0})]
         else:  # idle
@@ -72,9 +72,9 @@ def _segments(kind: str, rng: np.random.Generator, duration: float) -> list[tupl
 
 
 def locomotion_plan(kind: str, rng: np.random.Generator, num_frames: int, fps: float = 30.0,
-                    preroll: float = 0.0) -> tuple[RootPlan, np.ndarray]:
-    """A RootPlan of num_frames + preroll frames for a program kind, and the planned speed (T,)."""
-    T = num_frames + int(round(preroll * fps))
+                    preroll: float = 0.0, postroll: float = 0.0) -> tuple[RootPlan, np.ndarray]:
+    """A RootPlan of num_frames + preroll + postroll frames for a program kind, and the planned speed (T,)."""
+    T = num_frames + int(round(preroll * fps)) + int(round(postroll * fps))
     segs = _segments(kind, rng, T / fps)
     v, u, w = np.zeros(T), np.zeros(T), np.zeros(T)
     k = 0
@@ -90,7 +90,10 @@ def locomotion_plan(kind: str, rng: np.random.Generator, num_frames: int, fps: f
         k += n
         if k >= T:
             break
-    # a clip that starts walking begins in motion (the pre-roll is cut later); ramps take ~1 s
+    # every plan starts from rest (the feet stand at their footprints); a clip that should begin in motion gets a
+    # pre-roll that is cut later. Smoothing makes ramps of about a second.
+    rest = int(0.25 * fps)
+    v[:rest], u[:rest], w[:rest] = 0.0, 0.0, 0.0
     v = smooth_controls(v, 0.3, fps)
     u = smooth_controls(u, 0.25, fps)
     w = smooth_controls(w, 0.15, fps)
@@ -109,8 +112,9 @@ def generate_locomotion(seed: int, bm, num_frames: int | None = None, kind: str 
     betas = sample_betas(rng) if betas is None else np.asarray(betas, np.float64)
     rig = rig or build_rig(bm, betas)
     gait, style = sample_gait_style(rng), sample_style(rng)
-    preroll = 1.5 if kind in ("walk", "curve") and rng.random() < 0.6 else 0.0
-    plan, _ = locomotion_plan(kind, rng, T, fps, preroll)
+    preroll = 2.5 if kind in ("walk", "curve") and rng.random() < 0.6 else 0.0
+    post = 1.0   # planned past the end, so the last steps are taken as if the motion went on, then cut
+    plan, _ = locomotion_plan(kind, rng, T, fps, preroll, post)
     P = plan.num_frames
     c = Controls.zeros(P)
     tt = np.arange(P) / fps
@@ -120,6 +124,7 @@ def generate_locomotion(seed: int, bm, num_frames: int | None = None, kind: str 
     tracks = foot_tracks(steps, plan, rig, gait)
     aa, root, _ = pose_body(rig, plan, tracks, style, c)
     m = Motion(aa, root - rig.joints[0], betas, fps, contacts=tracks.contacts)
-    m = m.slice(P - T)
+    end = P - int(round(post * fps))
+    m = m.slice(end - T, end)
     m.trans[:, :2] -= m.trans[0, :2] - rng.uniform(-0.5, 0.5, 2)  # each clip starts near the origin
     return m

@@ -146,6 +146,7 @@ def pose_body(rig: Rig, plan: RootPlan, tracks: FootTracks, style: Style, contro
 
     # ---- pelvis
     lat = ((tracks.xy[0] - tracks.xy[1]) * left[:, :2]).sum(-1)                  # stance width
+    lat = np.clip(lat, 0.0, 0.3 * sc)                                            # (wide side steps sway no further)
     sway = style.sway * (w - 0.5) * lat
     yaw = heading - style.pelvic_rotation * sep
     roll = style.obliquity * (2 * w - 1)
@@ -162,7 +163,8 @@ def pose_body(rig: Rig, plan: RootPlan, tracks: FootTracks, style: Style, contro
         off = R_pelvis @ (rig.joints[J[f"{side}_hip"]] - rig.joints[0])
         d_h = np.linalg.norm(xy + off[:, :2] - tracks.ankle[s, :, :2], axis=-1)
         h_max = np.minimum(h_max, tracks.ankle[s, :, 2] + np.sqrt(np.maximum(reach**2 - d_h**2, 0.0)) - off[:, 2])
-    height = _lower_envelope(h_nom, h_max, fps)
+    # (a foot out of reach even with the pelvis at half height is left to the IK to stretch towards)
+    height = np.maximum(_lower_envelope(h_nom, h_max, fps), np.minimum(h_nom, 0.5 * rig.pelvis_height))
     root = np.concatenate([xy, height[:, None]], 1)
 
     local = np.broadcast_to(np.eye(3), (T, NUM_JOINTS, 3, 3)).copy()

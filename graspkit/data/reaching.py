@@ -148,7 +148,10 @@ def plan_reach(start: Start | tuple[float, float, float], goal, t_goal_frames: i
     P = target[:2] - _rot2(psi_f) @ q
 
     # 3: schedule, backwards from t_G
-    T_r = min(0.9 + 0.7 * abs(b) + 0.1 * rng.random(), 0.8 * t_G)
+    D = float(np.linalg.norm(P - xy0))
+    walk_min = 0.9 if D < 0.4 else D / 1.5 + 0.9          # the quickest approach (a shuffle, or a brisk walk)
+    T_r = float(np.clip(0.9 + 0.7 * abs(b) + 0.1 * rng.random(), min(0.6, 0.8 * t_G), max(t_G - 0.3 - 0.7 * walk_min, 0.6)))
+    T_r = min(T_r, 0.8 * t_G)
     t_rs = t_G - T_r
     t_stop = t_rs + 0.3 * T_r
     plan = _approach_plan(T, xy0, start.heading, P, psi_f, t_rs, t_stop, v_pref, fps)
@@ -232,11 +235,22 @@ def _approach_plan(T: int, xy0: np.ndarray, h0: float, P: np.ndarray, psi_f: flo
     return RootPlan(xy, h, fps)
 
 
-def generate_reach(seed: int, bm, betas: np.ndarray | None = None) -> Motion:
-    """One CIRCLE-style clip: start standing, a right-hand goal 0.3-1.2 m away (a step or two at most), reached at
-    1.2-2.6 s, held 0.3-1.0 s. Goal heights: mostly 0.7-1.5 m, fewer low and high ones (not WANDR's uniform grid)."""
-    rng = np.random.default_rng(seed)
-    betas = sample_betas(rng) if betas is None else np.asarray(betas, np.float64)
+@dataclass(frozen=True)
+class ReachTask:
+    """A CIRCLE-style task: start, goal (3,), the goal frame, frames held after it, and the person's betas (10,)."""
+
+    start: Start
+    goal: np.ndarray
+    goal_frame: int
+    hold_frames: int
+    betas: np.ndarray
+
+
+def sample_reach_task(rng: np.random.Generator) -> ReachTask:
+    """Draw a CIRCLE-style task: a right-hand goal 0.3-1.2 m from a standing start, mostly ahead, heights mostly
+    0.7-1.5 m (25 % at 0.25-0.7, 10 % at 1.5-1.8, 5 % below 0.25), reached when a person would (a step closer if
+    needed, a slower reach for low goals, a short pause first: about 1.1-3.2 s) and held 0.3-1.0 s."""
+    betas = sample_betas(rng)
     h0 = rng.uniform(-np.pi, np.pi)
     u = rng.random()
     z = (rng.uniform(0.7, 1.5) if u < 0.6 else rng.uniform(0.25, 0.7) if u < 0.85
@@ -245,12 +259,21 @@ def generate_reach(seed: int, bm, betas: np.ndarray | None = None) -> Motion:
     ang = h0 + np.clip(rng.normal(-0.2, 0.6), -1.8, 1.6)
     xy0 = rng.uniform(-0.5, 0.5, 2)
     goal = np.array([xy0[0] + r * np.cos(ang), xy0[1] + r * np.sin(ang), z])
-    t_goal = int(rng.integers(36, 79))
-    hold = int(rng.integers(9, 31))
-    style = sample_style(rng)
-    gait = sample_gait_style(rng)
-    return plan_reach(Start(xy0[0], xy0[1], h0), goal, t_goal, betas=betas, seed=int(rng.integers(2**31)), bm=bm,
-                      hold_frames=hold, style=style, gait=gait, v_pref=float(rng.uniform(0.7, 1.1)))
+    # the goal frame: time to step closer (if the goal is beyond arm's reach) and to reach, plus a pause
+    walk = max(r - 0.55, 0.0) / 0.8 + (0.6 if r > 0.55 else 0.0)
+    reach = 0.9 + 0.5 * max(0.9 - z, 0.0)
+    t_goal = int(round((walk + reach + rng.uniform(0.2, 0.8)) * 30))
+    return ReachTask(Start(float(xy0[0]), float(xy0[1]), float(h0)), goal, t_goal, int(rng.integers(9, 31)), betas)
+
+
+def generate_reach(seed: int, bm, betas: np.ndarray | None = None) -> Motion:
+    """One CIRCLE-style clip (a step or two at most, then a right-hand reach) for the task `sample_reach_task` draws."""
+    rng = np.random.default_rng(seed)
+    task = sample_reach_task(rng)
+    style, gait = sample_style(rng), sample_gait_style(rng)
+    return plan_reach(task.start, task.goal, task.goal_frame, betas=task.betas if betas is None else betas,
+                      seed=int(rng.integers(2**31)), bm=bm, hold_frames=task.hold_frames, style=style, gait=gait,
+                      v_pref=float(rng.uniform(0.7, 1.1)))
 
 
 def evaluation_goals(start: Start = Start()) -> np.ndarray:
@@ -262,3 +285,23 @@ def evaluation_goals(start: Start = Start()) -> np.ndarray:
                 th = start.heading + np.deg2rad(a)
                 rows.append((a, hgt, d, start.x + d * np.cos(th), start.y + d * np.sin(th)))
     return np.array(rows)
+
+
+def evaluate_planner(bm, start: Start = Start(), t_goal_frames: int = EVAL_FRAMES - 1, betas=None, seed: int = 0,
+                     goals: np.ndarray | None = None, hold_frames: int = 0) -> list[dict]:
+    """Run plan_reach on WANDR's grid (or `goals` rows as evaluation_goals gives) and score each motion on its mesh:
+    success (wrist within 10 cm, WANDR Sec. 4.3), DTG (m), wrist error at the goal frame, FS (WANDR), GOAL sliding."""
+    from graspkit import metrics as M
+
+    rows = []
+    for k, (a, h, d, x, y) in enumerate(evaluation_goals(start) if goals is None else goals):
+        goal = np.array([x, y, h])
+        m = plan_reach(start, goal, t_goal_frames, betas=betas, seed=seed + k, bm=bm, hold_frames=hold_frames)
+        w = m.joint_positions(bm)[:, JOINT_INDEX["right_wrist"]]
+        q = M.motion_quality(bm, [m])
+        rows.append({"angle": float(a), "height": float(h), "distance": float(d), "goal": goal,
+                     "dtg": M.distance_to_goal(w, goal), "success": M.goal_reached(w, goal),
+                     "error_at_goal_frame": float(np.linalg.norm(w[t_goal_frames] - goal)),
+                     "fs_wandr": q["fs_wandr"], "slide_goal": q["slide_goal"], "penetration": q["penetration_max"],
+                     "joint_limit": q["joint_limit_max"]})
+    return rows
