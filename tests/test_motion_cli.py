@@ -27,3 +27,23 @@ def test_cli_with_two_workers_writes_the_same_bytes(tmp_path):
     one = make_dataset("locomotion", 2, 4, tmp_path / "s", workers=1, progress=False)
     for p in one:
         assert p.read_bytes() == (tmp_path / "p" / p.name).read_bytes()
+
+
+def test_shipped_samples_are_what_the_cli_makes_with_seed_0():
+    from pathlib import Path
+
+    import numpy as np
+    import torch
+
+    from graspkit.body import BodyModel
+    from graspkit.data import generate_locomotion, generate_reach
+    from conftest import PROCEDURAL_MODEL
+
+    stubs = Path(__file__).resolve().parents[1] / "data_stubs" / "motion"
+    bm = BodyModel.from_file(PROCEDURAL_MODEL, dtype=torch.float32)
+    for kind, gen in (("locomotion", generate_locomotion), ("reach", generate_reach)):
+        files = sorted((stubs / kind).glob(f"{kind}_*.npz"))
+        assert len(files) >= 5
+        m, ref = load_motion(files[1]), gen(clip_seed(0, kind, 1), bm)
+        assert np.allclose(m.poses, ref.poses, atol=1e-4) and np.allclose(m.trans, ref.trans, atol=1e-4)
+        assert (m.goal is not None) == (kind == "reach")
