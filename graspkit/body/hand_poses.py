@@ -29,10 +29,12 @@ _FINGER_TEMPLATES: dict[str, dict[str, tuple[float, float, float]]] = {
     "point": {"index": (5, 5, 0), "middle": (80, 100, 50), "pinky": (85, 100, 50), "ring": (85, 100, 50)},
     "fist": {"index": (85, 100, 55), "middle": (85, 100, 55), "pinky": (85, 100, 55), "ring": (85, 100, 55)},
 }
-# thumb: (CMC flexion, CMC palmar abduction, CMC twist, MCP flexion, IP flexion)
+# thumb: (CMC flexion, CMC palmar abduction, CMC twist, MCP flexion, IP flexion); pinch, tripod and
+# lateral were tuned on the procedural hand so that the thumb pad meets the index tip (pinch), the
+# index and middle tips (tripod) or the side of the index's middle phalanx (lateral/key grip)
 _THUMB_TEMPLATES: dict[str, tuple[float, float, float, float, float]] = {
     "flat": (0, 0, 0, 0, 0), "relaxed": (8, 12, 8, 10, 10), "power": (35, 40, 45, 25, 25),
-    "pinch": (30, 45, 50, 15, 15), "tripod": (30, 45, 45, 15, 15), "lateral": (10, 5, 20, 15, 20),
+    "pinch": (13, 36, 51, 16, 17), "tripod": (20, 37, 47, 12, 11), "lateral": (11, -10, 42, 30, 32),
     "hook": (0, 5, 0, 0, 0), "point": (35, 20, 30, 30, 30), "fist": (40, 25, 35, 40, 45),
 }
 # spread (degrees, towards the thumb side) of each finger's MCP in the flat hand; other kinds use a fraction
