@@ -105,9 +105,9 @@ def test_stature_and_height_component(shipped):
     assert abs((shipped["J_regressor"] @ v)[0, 1] + 0.35) < 0.01                     # pelvis joint height
 
 
-def test_shape_components_keep_the_mesh_free_of_self_intersection(shipped):
+def test_shape_and_expression_components_keep_the_mesh_free_of_self_intersection(shipped):
     v, f, S = shipped["v_template"], shipped["f"], shipped["shapedirs"]
-    for i in range(10):
+    for i in range(20):
         for b in (-2.0, 2.0):
             assert len(M.self_intersections(v + b * S[:, :, i], f)) == 0, (i, b)
     moved = np.abs(S[:, :, 10:]).max((1, 2)) > 0
@@ -238,6 +238,21 @@ def test_90_degree_elbow_and_knee_keep_volume_without_folding(shipped, joint, aa
     turned = (np.einsum("fab,fb,fa->f", R, n0, n1) < 0) & near
     print(f"{joint}: local volume change {100 * change:+.1f} %, faces turned over {turned.sum()} of {near.sum()}")
     assert turned.sum() <= 0.005 * near.sum()
+
+
+def test_everyday_poses_do_not_intersect_themselves(shipped):
+    """Arms lowered (A-pose), a walking stride and an arm raised: no face pair intersects."""
+    bm = _smplx()
+    poses = [
+        _pose(left_shoulder=(0, 0, -1.1), right_shoulder=(0, 0, 1.1)),
+        _pose(left_hip=(-0.45, 0, 0), right_hip=(0.3, 0, 0), left_knee=(0.25, 0, 0), right_knee=(0.5, 0, 0),
+              left_shoulder=(0.3, 0, -1.25), right_shoulder=(-0.3, 0, 1.25), left_elbow=(0, -0.3, 0),
+              right_elbow=(0, 0.3, 0)),
+        _pose(right_shoulder=(0, 0, -1.1), right_elbow=(0, 0.15, 0), left_shoulder=(0, 0, -1.2)),
+    ]
+    for p in poses:
+        v = bm(body_pose=p).vertices[0].detach().numpy()
+        assert len(M.self_intersections(v, shipped["f"])) == 0
 
 
 # ----------------------------------------------------------------------------- hands

@@ -54,8 +54,8 @@ def bone_ends(P: Proportions, joints: np.ndarray) -> np.ndarray:
 # _cone_weight). Fingers get their radii from the hand layout.
 _BLEND = {"spine1": ("plane", 0.05, np.inf), "spine2": ("plane", 0.05, np.inf), "spine3": ("plane", 0.05, np.inf),
           "neck": ("plane", 0.03, 0.075), "head": ("plane", 0.03, 0.12), "left_collar": ("plane", 0.04, 0.09),
-          "left_shoulder": ("plane", 0.05, 0.10), "left_elbow": ("cone", 55.0, 0.08),
-          "left_wrist": ("cone", 45.0, 0.07), "left_hip": ("plane", 0.06, 0.15), "left_knee": ("cone", 55.0, 0.10),
+          "left_shoulder": ("cone", 60.0, 0.12), "left_elbow": ("cone", 55.0, 0.08),
+          "left_wrist": ("cone", 45.0, 0.07), "left_hip": ("cone", 55.0, 0.15), "left_knee": ("cone", 55.0, 0.10),
           "left_ankle": ("cone", 45.0, 0.08), "left_foot": ("cone", 45.0, 0.07)}
 
 
@@ -344,9 +344,10 @@ def expression_basis(v: np.ndarray, w: np.ndarray, joints: np.ndarray) -> np.nda
             out += (np.clip(1 - r2, 0, None) ** 3)[:, None] * dd
         return out
 
-    jaw = w[:, J["jaw"]][:, None] * np.array([0.0, -0.006, -0.002])
+    # the jaw drops, fading out towards the lip line so that the closed lips never press into each other
+    jaw = (w[:, J["jaw"]] * _smoothstep((0.207 - v[:, 1]) / 0.03))[:, None] * np.array([0.0, -0.004, -0.001])
     comps = [
-        jaw + bump((0, 0.200, 0.085), 0.012, (0, -0.004, 0)),                               # mouth open
+        jaw,                                                                                 # mouth open
         bump((0.024, 0.207, 0.078), 0.012, (0.002, 0.004, -0.002), True),                   # smile
         bump((0.032, 0.312, 0.085), 0.018, (0, 0.005, 0.001), True),                        # brows up
         bump((0.013, 0.306, 0.088), 0.012, (-0.002, -0.004, 0.001), True),                  # frown
