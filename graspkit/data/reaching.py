@@ -271,9 +271,16 @@ def generate_reach(seed: int, bm, betas: np.ndarray | None = None) -> Motion:
     rng = np.random.default_rng(seed)
     task = sample_reach_task(rng)
     style, gait = sample_style(rng), sample_gait_style(rng)
-    return plan_reach(task.start, task.goal, task.goal_frame, betas=task.betas if betas is None else betas,
-                      seed=int(rng.integers(2**31)), bm=bm, hold_frames=task.hold_frames, style=style, gait=gait,
-                      v_pref=float(rng.uniform(0.7, 1.1)))
+    m = plan_reach(task.start, task.goal, task.goal_frame, betas=task.betas if betas is None else betas,
+                   seed=int(rng.integers(2**31)), bm=bm, hold_frames=task.hold_frames, style=style, gait=gait,
+                   v_pref=float(rng.uniform(0.7, 1.1)))
+    # a goal this body cannot reach (too high for a short person, too low for a stiff one) becomes the point the
+    # wrist did reach: the stored goal is always where the hand is at the goal frame
+    wrist = m.joint_positions(bm)[m.goal_frame, JOINT_INDEX["right_wrist"]]
+    target = np.array([m.goal[0], m.goal[1], max(m.goal[2], FLOOR_WRIST * build_rig(bm, m.betas).scale)])
+    if np.linalg.norm(wrist - target) > 0.01:
+        m.goal = wrist.astype(np.float32)
+    return m
 
 
 def evaluation_goals(start: Start = Start()) -> np.ndarray:
