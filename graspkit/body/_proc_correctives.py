@@ -108,7 +108,7 @@ def radial_target(x: np.ndarray, centre: np.ndarray, axis: np.ndarray, body: Bod
     k = np.where(sign_change, dist, np.inf).argmin(1)
     found = sign_change[np.arange(len(x)), k] & (rho0 > 0.005) & (dist[np.arange(len(x)), k] < max_move)
     lo, hi = grid[np.arange(len(x)), k], grid[np.arange(len(x)), k + 1]
-    for _ in range(18):
+    for _ in range(12):
         m = 0.5 * (lo + hi)
         inside = at(m[:, None]).reshape(-1) <= 0
         lo, hi = np.where(inside, m, lo), np.where(inside, hi, m)

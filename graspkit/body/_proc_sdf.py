@@ -237,13 +237,18 @@ class Body:
         d = np.full(len(p), 1.0)
         raw = np.full(len(p), np.inf)
         owner = np.full(len(p), -1, np.int64)
+        frames: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}   # joint -> (points, their box)
         for i, prim in enumerate(self.prims):
-            q = p
-            if pose is not None and prim.joint >= 0:
-                R, t = pose[0][prim.joint], pose[1][prim.joint]
-                q = (p - t) @ R                                    # R^T (p - t), row-wise
+            j = prim.joint if pose is not None and prim.joint >= 0 else -1
+            if j not in frames:
+                q = p if j < 0 else (p - pose[1][j]) @ pose[0][j]          # R^T (p - t), row-wise
+                frames[j] = (q, q.min(0), q.max(0))
+            q, qlo, qhi = frames[j]
             lo, hi = prim.bounds()
-            m = np.all((q >= lo - prim.k - 0.01) & (q <= hi + prim.k + 0.01), axis=1)
+            lo, hi = lo - prim.k - 0.01, hi + prim.k + 0.01
+            if np.any(qlo > hi) or np.any(qhi < lo):
+                continue
+            m = np.all((q >= lo) & (q <= hi), axis=1)
             if not m.any():
                 continue
             di = prim.sdf(q[m])
