@@ -125,7 +125,7 @@ def test_every_joint_is_inside_the_mesh_at_rest_and_at_betas_pm2(shipped):
 
 # ----------------------------------------------------------------------------- landmarks and parts
 def test_landmark_vertices_sit_on_their_anatomy(shipped):
-    v, w = shipped["v_template"], shipped["weights"]
+    v = shipped["v_template"]
     J = shipped["J_regressor"] @ v
     head = v[:, 1] > J[JOINT_INDEX["neck"], 1]
     nose, leye, reye = v[LMK["nose"]], v[LMK["leye"]], v[LMK["reye"]]

@@ -194,7 +194,8 @@ def _left_arm(P: Proportions, joints: np.ndarray) -> list[Prim]:
                                joint=J[f"left_{f}{b + 1}"], k=0.0015))
     th = hand["thumb"]
     prims += [
-        Sweep(W - (0.012, 0, 0), W + (0.030, -0.002, 0), (0.021, 0.030), (0.016, 0.036), joint=J["left_wrist"], k=0.012),
+        Sweep(W - (0.012, 0, 0), W + (0.030, -0.002, 0), (0.021, 0.030), (0.016, 0.036),
+              joint=J["left_wrist"], k=0.012),                                                      # wrist
         RoundBox(W + np.array([0.043, -0.003, -0.0015]) * s, (0.029 * s, 0.0015 * s, 0.027 * s), 0.0125 * s,
                  joint=J["left_wrist"], k=0.008),                                                   # palm
         *[Sweep(W + hand[a].joints[0] - (0.004 * s, 0, 0), W + hand[b].joints[0] - (0.004 * s, 0, 0),

@@ -128,7 +128,6 @@ def radial_target(x: np.ndarray, centre: np.ndarray, axis: np.ndarray, body: Bod
 
 def harmonic_fill(delta: np.ndarray, known: np.ndarray, region: np.ndarray, A) -> np.ndarray:
     """Displacements (V,3): known rows kept, other region rows harmonic (graph Laplacian), zero outside region."""
-    V = len(delta)
     out = np.zeros_like(delta)
     out[region[known]] = delta[region[known]]
     unknown = region[~known]

@@ -110,8 +110,6 @@ def split_longest_edges(v: np.ndarray, f: np.ndarray, n_target: int, batch: int 
             if key[e] in done:
                 continue
             a, b = de[e]
-            fa = e // 3
-            # the twin face holds the directed edge (b, a)
             fb_all = np.nonzero((f == b).any(1) & (f == a).any(1))[0]
             if used[fb_all].any():
                 continue

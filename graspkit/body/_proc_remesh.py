@@ -84,6 +84,7 @@ class SurfaceProjector:
     """Nearest points on a fine reference mesh (vertices (N,3), faces (M,3)), via a k-d tree of face centroids."""
 
     def __init__(self, v: np.ndarray, f: np.ndarray, k: int = 12) -> None:
+        """Index the reference triangles; k = candidate triangles examined per query point."""
         self.tri = v[f]
         self.tree = cKDTree(self.tri.mean(1))
         self.k = k

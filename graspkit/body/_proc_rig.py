@@ -96,8 +96,8 @@ def skinning_weights(v: np.ndarray, f: np.ndarray, labels: np.ndarray, joints: n
                 continue
             p = PARENTS[c]
             kind, size, R = table[c]
-            u_in = _unit(joints[c] - joints[p]) if np.linalg.norm(joints[c] - joints[p]) > 1e-9 else _unit(ends[c] - joints[c])
             u_out = _unit(ends[c] - joints[c])
+            u_in = _unit(joints[c] - joints[p]) if np.linalg.norm(joints[c] - joints[p]) > 1e-9 else u_out
             n = _unit(u_in + u_out)
             rel = v - joints[c]
             lateral = np.linalg.norm(rel - np.outer(rel @ u_out, u_out), axis=1)
@@ -215,7 +215,8 @@ def shape_basis(v: np.ndarray, w: np.ndarray, joints: np.ndarray, ends: np.ndarr
     # 1 girth / weight: cross-sections grow about each bone axis; belly forward; inner thighs grow less
     amount = np.zeros(NUM_JOINTS)
     for names, a in ((("pelvis", "spine1", "spine2"), 0.10), (("spine3",), 0.08), (("neck",), 0.06),
-                     (("left_collar",), 0.05), (("left_shoulder", "left_hip"), 0.08), (("left_elbow", "left_knee"), 0.06),
+                     (("left_collar",), 0.05), (("left_shoulder", "left_hip"), 0.08),
+                     (("left_elbow", "left_knee"), 0.06),
                      (("head", "jaw"), 0.02), (("left_wrist", "left_ankle", "left_foot"), 0.02)):
         for n in names:
             amount[J[n]] = a

@@ -39,12 +39,15 @@ class Prim:
     sub: bool = field(default=False, kw_only=True)
 
     def sdf(self, p: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        """Signed distance (N,) of points p (N, 3), negative inside."""
         raise NotImplementedError
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - abstract
+        """Axis-aligned box (lo (3,), hi (3,)) holding the shape."""
         raise NotImplementedError
 
     def mirrored(self) -> "Prim":  # pragma: no cover - abstract
+        """Copy mirrored across the plane x = 0 (same joint, blend radius and sign)."""
         raise NotImplementedError
 
 
@@ -63,6 +66,7 @@ class Sweep(Prim):
     caps: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
+        """Derived quantities (frame, radii, resampled profile)."""
         self.a, self.b = np.asarray(self.a, float), np.asarray(self.b, float)
         self.L = float(np.linalg.norm(self.b - self.a))
         self.u = (self.b - self.a) / self.L
@@ -90,10 +94,12 @@ class Sweep(Prim):
         return _ellipsoid_bound(k0, k1, np.minimum(np.minimum(r1, r2), c))
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned box (lo (3,), hi (3,)) holding the shape."""
         r = max(*self.sa, *self.sb, *self.caps)
         return np.minimum(self.a, self.b) - r, np.maximum(self.a, self.b) + r
 
     def mirrored(self) -> "Sweep":
+        """Copy mirrored across the plane x = 0."""
         m = np.array([-1.0, 1.0, 1.0])
         return Sweep(self.a * m, self.b * m, self.sa, self.sb, tuple(np.asarray(self.up) * m), self.caps,
                      joint=self.joint, k=self.k, sub=self.sub)
@@ -108,6 +114,7 @@ class Ellipsoid(Prim):
     R: np.ndarray | None = None
 
     def __post_init__(self) -> None:
+        """Derived quantities (frame, radii, resampled profile)."""
         self.c = np.asarray(self.c, float)
         self.R = np.eye(3) if self.R is None else np.asarray(self.R, float)
         self.rv = np.asarray(self.r, float)
@@ -120,10 +127,12 @@ class Ellipsoid(Prim):
         return _ellipsoid_bound(k0, k1, self.rv.min())
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned box (lo (3,), hi (3,)) holding the shape."""
         ext = np.abs(self.R) @ self.rv
         return self.c - ext, self.c + ext
 
     def mirrored(self) -> "Ellipsoid":
+        """Copy mirrored across the plane x = 0."""
         m = np.diag([-1.0, 1.0, 1.0])
         return Ellipsoid(self.c @ m, self.r, m @ self.R @ m, joint=self.joint, k=self.k, sub=self.sub)
 
@@ -138,6 +147,7 @@ class RoundBox(Prim):
     R: np.ndarray | None = None
 
     def __post_init__(self) -> None:
+        """Derived quantities (frame, radii, resampled profile)."""
         self.c = np.asarray(self.c, float)
         self.R = np.eye(3) if self.R is None else np.asarray(self.R, float)
         self.hv = np.asarray(self.h, float)
@@ -148,10 +158,12 @@ class RoundBox(Prim):
         return np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0) - self.round
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned box (lo (3,), hi (3,)) holding the shape."""
         ext = np.abs(self.R) @ (self.hv + self.round)
         return self.c - ext, self.c + ext
 
     def mirrored(self) -> "RoundBox":
+        """Copy mirrored across the plane x = 0."""
         m = np.diag([-1.0, 1.0, 1.0])
         return RoundBox(self.c @ m, self.h, self.round, m @ self.R @ m, joint=self.joint, k=self.k, sub=self.sub)
 
@@ -167,6 +179,7 @@ class Loft(Prim):
     caps: tuple[float, float] = (0.04, 0.03)
 
     def __post_init__(self) -> None:
+        """Derived quantities (frame, radii, resampled profile)."""
         from scipy.interpolate import PchipInterpolator
 
         self.profile = np.asarray(self.profile, float)
@@ -187,12 +200,14 @@ class Loft(Prim):
         return _ellipsoid_bound(k0, k1, np.minimum(np.minimum(A, Bd), cap))
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Axis-aligned box (lo (3,), hi (3,)) holding the shape."""
         y, a, b, c = self.profile.T
         lo = np.array([-a.max(), y[0] - self.caps[0], (c - b).min()])
         hi = np.array([a.max(), y[-1] + self.caps[1], (c + b).max()])
         return lo, hi
 
     def mirrored(self) -> "Loft":
+        """Copy mirrored across the plane x = 0."""
         return self
 
 
@@ -228,7 +243,8 @@ class Body:
         """The body made of the primitives owned by the given joints only (same order and floor)."""
         return Body([q for q in self.prims if q.joint in joints], self.floor)
 
-    def evaluate(self, p: np.ndarray, pose: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def evaluate(self, p: np.ndarray,
+                 pose: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Signed distance (N,) and owning primitive index (N,) (-1 where none) of points p (N, 3).
 
         pose: optional rigid transforms (R (55,3,3), t (55,3)) moving each primitive with its joint

@@ -47,7 +47,7 @@ def _unit(v: np.ndarray) -> np.ndarray:
 
 
 def hand_axes(joints: np.ndarray, side: str) -> dict[str, np.ndarray]:
-    """Rotation axes of one hand from rest joints (55, 3): 'flex' (15,3), 'spread' (15,3), 'abduct' (3,), 'twist' (3,)."""
+    """Axes of one hand from rest joints (55,3): 'flex' (15,3), 'spread' (15,3), thumb 'abduct' (3,), 'twist' (3,)."""
     p = "left_" if side == "left" else "right_"
     j = lambda n: joints[JOINT_INDEX[p + n]]  # noqa: E731
     wrist = joints[JOINT_INDEX[p + "wrist"]]
@@ -102,7 +102,8 @@ def sample_hand_poses(n: int, kind: str = "mixture", rng: np.random.Generator | 
                       joints: np.ndarray | None = None, noise_deg: float = 5.0) -> np.ndarray:
     """n hand poses (n, 45) of one kind (or 'mixture': kinds drawn uniformly), seeded, for side 'left'/'right'.
 
-    joints: rest joints (55, 3) of the model the poses are for (default: graspkit's procedural humanoid).
+    joints: rest joints (55, 3) of the model the poses are for (default: the shipped procedural humanoid,
+    seed 0, whose rest joints are exactly its designed ones).
     """
     if side not in ("left", "right"):
         raise ValueError(f"side: expected 'left' or 'right', got {side!r}")
@@ -111,7 +112,7 @@ def sample_hand_poses(n: int, kind: str = "mixture", rng: np.random.Generator | 
     rng = np.random.default_rng(rng) if not isinstance(rng, np.random.Generator) else rng
     if joints is None:
         from graspkit.body._proc_anatomy import Proportions, rest_joints
-        joints = rest_joints(Proportions())
+        joints = rest_joints(Proportions().jittered(0))
     axes = hand_axes(np.asarray(joints, float), side)
     kinds = rng.integers(0, len(HAND_KINDS), n) if kind == "mixture" else np.full(n, HAND_KINDS.index(kind))
     noise = rng.normal(scale=noise_deg, size=(n, 21))

@@ -91,8 +91,8 @@ def _mesh(body: Body, lenses: list[Lens], h: float, n_vertices: int, progress: b
         f = delaunay_flips(v, f)
         problems = mesh_problems(v, f)
         if not problems:
-            _say(progress, t0, f"decimated, remeshed and split: {len(v)} vertices, {len(f)} faces (attempt {attempt + 1}); "
-                               "closed, oriented, genus 0, no self-intersection")
+            _say(progress, t0, f"decimated, remeshed and split: {len(v)} vertices, {len(f)} faces "
+                               f"(attempt {attempt + 1}); closed, oriented, genus 0, no self-intersection")
             return v, f
     raise RuntimeError(f"procedural mesh: no valid decimation found (last: {problems})")
 
