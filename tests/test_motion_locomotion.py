@@ -37,7 +37,8 @@ def test_straight_walk_alternates_feet_with_cadence_and_step_length_from_speed(r
     lengths = np.diff([s.xy[0] for s in steps if 3.0 < s.t_land < 8.0])
     assert np.allclose(lengths, v / f, rtol=0.1)                                         # step length = v / cadence
     lat = np.array([s.xy[1] for s in cruise]) * np.where([s.side == 0 for s in cruise], 1, -1)
-    assert np.allclose(lat, style.half_width * rig.scale, atol=1e-3)                   # left at +y, right at -y
+    width = style.half_width * rig.scale * (1 + style.width_gain * (1 - v))          # narrower when faster
+    assert np.allclose(lat, width, atol=1e-3)                                           # left at +y, right at -y
     swing = np.array([s.t_land - s.t_lift for s in cruise])
     assert np.allclose(swing, 2 * (1 - style.duty) / f, rtol=0.02) and (swing < 2 / f - swing).all()   # swing < stance
 
@@ -102,6 +103,22 @@ def test_chunked_quality_equals_whole_clip_quality(bm):
         assert a[k] == pytest.approx(b[k])
     v = m.vertices(bm)
     assert a["fs_wandr"] == pytest.approx(M.foot_skating_wandr(v).mean())
+
+
+def test_saga_canonical_frame_of_a_clip(bm):
+    from graspkit.data.motion import canonicalize
+    from graspkit.data.ik import axis_angle_matrix
+    m = generate_locomotion(2, bm, num_frames=30, kind="walk")
+    j = m.joint_positions(bm)
+    R, o = canonicalize(j)
+    facing = R @ axis_angle_matrix(m.poses[0, 0].astype(np.float64))[:, 2]   # the body's forward axis
+    assert facing[1] > 0.9                                     # y forward
+    c = (j - o) @ R.T
+    assert np.allclose(R @ R.T, np.eye(3), atol=1e-9) and np.allclose(c[0, 0], 0, atol=1e-6)
+    s = c[0, 17] - c[0, 16]                                   # left -> right shoulder along +x, horizontal
+    assert s[0] > 0.3 and abs(s[1]) < 1e-6
+    nose_dir = c[0, 15] - c[0, 12]                            # head above neck: z up
+    assert nose_dir[2] > 0
 
 
 def test_same_seed_same_clip_different_seed_different_clip(bm):

@@ -28,7 +28,8 @@ from graspkit.data.trajectory import RootPlan
 class GaitStyle:
     """Gait parameters of one person (sampled per clip); lengths in m for a 1.70 m body, angles in rad."""
 
-    half_width: float = 0.085      # lateral offset of each footprint from the path
+    half_width: float = 0.085      # lateral offset of each footprint from the path at 1 m/s ...
+    width_gain: float = 0.12       # ... times 1 + width_gain (1 - v): a wider stance when slow, narrower when fast
     toe_out: float = 0.08          # each foot turned outwards
     lead: float = 0.45             # footprint = root position `lead` step periods after landing
     duty: float = 0.61             # stance fraction of the stride
@@ -81,23 +82,23 @@ class FootTracks:
     steps: list[Step] = field(default_factory=list)
 
 
-def footprint_target(plan: RootPlan, rig: Rig, style: GaitStyle, side: int, t: float | np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """Footprint xy (...,2) and yaw (...) of foot `side` for the root pose at time t (s)."""
+def footprint_target(plan: RootPlan, rig: Rig, style: GaitStyle, side: int, t: float | np.ndarray,
+                     speed: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Footprint xy (...,2) and yaw (...) of foot `side` for the root pose at time t (s), walking at `speed` m/s."""
     xy, h = plan.at(t)
     sgn = 1.0 if side == 0 else -1.0
     f_off = rig.feet[SIDES[side]].ref[2] - rig.joints[0, 2]       # ankle sits a little behind the pelvis
     fwd = np.stack([np.cos(h), np.sin(h)], -1)
     left = np.stack([-np.sin(h), np.cos(h)], -1)
-    hw = style.half_width * rig.scale
+    hw = style.half_width * rig.scale * (1 + style.width_gain * (1 - min(float(speed), 1.6)))
     return xy + f_off * fwd + sgn * hw * left, h + sgn * style.toe_out
 
 
 def plan_footsteps(plan: RootPlan, rig: Rig, style: GaitStyle, t_begin: float = 0.0) -> list[Step]:
     """Alternating footsteps (see the module docstring) that follow the plan; feet start at their footprints."""
     fps, t_end = plan.fps, (plan.num_frames - 1) / plan.fps
-    pos = [footprint_target(plan, rig, style, s, 0.0) for s in (0, 1)]
     speed, turn = plan.speed(), np.abs(plan.turn_rate())
+    pos = [footprint_target(plan, rig, style, s, 0.0, speed[0]) for s in (0, 1)]
     thr, max_step = style.step_threshold * rig.scale, style.max_step * rig.scale
     steps: list[Step] = []
     at_rest = speed[0] < 0.05 and turn[0] < 0.05
@@ -109,11 +110,12 @@ def plan_footsteps(plan: RootPlan, rig: Rig, style: GaitStyle, t_begin: float = 
         P = 1.0 / f
         t_land = t + 2 * (1 - style.duty) * P
         tau = t_land + style.lead * P
+        v_tau = speed[min(int(round(tau * fps)), plan.num_frames - 1)]
         order = [1 - last, last] if last is not None else sorted((0, 1), key=lambda s: -_distance(
-            footprint_target(plan, rig, style, s, tau), pos[s]))
+            footprint_target(plan, rig, style, s, tau, v_tau), pos[s]))
         chosen = None
         for s in order:
-            txy, tyaw = footprint_target(plan, rig, style, s, tau)
+            txy, tyaw = footprint_target(plan, rig, style, s, tau, v_tau)
             if (np.linalg.norm(txy - pos[s][0]) > thr or abs(wrap_angle(tyaw - pos[s][1])) > style.yaw_threshold):
                 chosen = s
                 break
@@ -190,7 +192,7 @@ def foot_tracks(steps: list[Step], plan: RootPlan, rig: Rig, style: GaitStyle) -
     contacts = np.zeros((T, 4), bool)
     for s in (0, 1):
         foot = rig.feet[SIDES[s]]
-        xy0, yaw0 = footprint_target(plan, rig, style, s, 0.0)
+        xy0, yaw0 = footprint_target(plan, rig, style, s, 0.0, plan.speed()[0])
         mine = [st for st in steps if st.side == s]
         # stance k: footprint k (k=0 the initial one), from landing k to lift k (of the next step of this foot)
         prints = [(xy0, float(yaw0), 0.0, -np.inf, None)] + [(st.xy, st.yaw, st.strike, st.t_land, st) for st in mine]
