@@ -174,20 +174,18 @@ def plan_reach(start: Start | tuple[float, float, float], goal, t_goal_frames: i
     c.hand_open = s_arm
     c.support_weight = smoothstep((lo - 0.35) / 0.25) * (1 - smoothstep((lo - 0.7) / 0.2)) * s   # hand on knee in a crouch
     # fingers continue the shoulder->goal line (levelled out for low goals), palm down for low goals, inwards else
-    sh = shoulder_world = _rot3(psi_f) @ shoulder + np.array([P[0], P[1], 0.0])
+    sh = _rot3(psi_f) @ shoulder + np.array([P[0], P[1], 0.0])      # the shoulder in the world at the goal
     along = target - sh
     along = along / np.linalg.norm(along)
     fingers = (1 - lo) * along + lo * (0.8 * fwd + 0.2 * right - 0.1 * up)
     palm = (1 - lo) * (-(0.7 * right) - 0.5 * up + 0.4 * hi * fwd) + lo * (-up)
     c.finger_dir = np.broadcast_to(fingers / np.linalg.norm(fingers), (T, 3)).copy()
     c.palm_dir = np.broadcast_to(palm / np.linalg.norm(palm), (T, 3)).copy()
-    del sh
     c.gaze = np.broadcast_to(goal, (T, 3)).copy()
     c.gaze_weight = smoothstep(t / max(min(1.0, t_rs), 0.3)) * 0.85 + 0.15 * s
-    rig_style = style
     steps = plan_footsteps(plan, rig, gait)
     tracks = foot_tracks(steps, plan, rig, gait)
-    aa, root, _ = pose_body(rig, plan, tracks, rig_style, c)
+    aa, root, _ = pose_body(rig, plan, tracks, style, c)
     return Motion(aa, root - rig.joints[0], betas, fps, contacts=tracks.contacts, goal=goal,
                   goal_frame=t_goal_frames, hand="right")
 
