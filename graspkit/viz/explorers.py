@@ -1,0 +1,117 @@
+"""Interactive explorers for the lessons: the state and callback logic are plain Python (unit-tested);
+the ipywidgets layer only wires sliders to them and redraws a matplotlib figure.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from graspkit.body.model import BodyModel
+from graspkit.body.skeleton import JOINT_INDEX, NUM_BODY_JOINTS
+
+# joints the body explorer exposes, with the axis (canonical frame) that bends them naturally
+EXPLORER_JOINTS: dict[str, tuple[float, float, float]] = {
+    "left_shoulder": (0, 0, -1), "right_shoulder": (0, 0, 1),
+    "left_elbow": (0, -1, 0), "right_elbow": (0, 1, 0),
+    "left_hip": (-1, 0, 0), "right_hip": (-1, 0, 0),
+    "left_knee": (1, 0, 0), "right_knee": (1, 0, 0),
+    "spine1": (1, 0, 0), "neck": (1, 0, 0),
+}
+
+
+@dataclass
+class BodyExplorerState:
+    """Slider values of the body explorer: shape coefficients and one bend angle (radians) per exposed joint."""
+
+    betas: np.ndarray = field(default_factory=lambda: np.zeros(10))
+    angles: dict[str, float] = field(default_factory=lambda: {j: 0.0 for j in EXPLORER_JOINTS})
+
+    def set(self, name: str, value: float) -> None:
+        """Set one slider: 'beta0'..'beta9' or a joint name from EXPLORER_JOINTS; unknown name -> ValueError."""
+        if name.startswith("beta") and name[4:].isdigit() and int(name[4:]) < len(self.betas):
+            self.betas[int(name[4:])] = float(value)
+        elif name in self.angles:
+            self.angles[name] = float(value)
+        else:
+            raise ValueError(f"name: unknown slider {name!r}; expected beta0..beta{len(self.betas) - 1} "
+                             f"or one of {list(self.angles)}")
+
+    def body_pose(self) -> torch.Tensor:
+        """SMPL-X body_pose (1, 63) from the joint sliders."""
+        pose = torch.zeros(NUM_BODY_JOINTS + 1, 3)
+        for j, a in self.angles.items():
+            pose[JOINT_INDEX[j]] = a * torch.tensor(EXPLORER_JOINTS[j], dtype=torch.float32)
+        return pose[1:].reshape(1, -1)
+
+
+def canonical_to_world(points: np.ndarray) -> np.ndarray:
+    """Canonical SMPL-X points (..., 3), y up and facing +z, -> z-up world (rotation of +90 deg about x; faces -y)."""
+    return np.stack([points[..., 0], -points[..., 2], points[..., 1]], axis=-1)
+
+
+class BodyExplorer:
+    """Shape and a few joints of a body model: `update(name, value)` returns the new vertices and joints."""
+
+    def __init__(self, bm: BodyModel) -> None:
+        self.bm, self.state = bm, BodyExplorerState(np.zeros(bm.num_betas))
+
+    def mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """Vertices (V,3) and joints (55,3) for the current state (canonical frame)."""
+        with torch.no_grad():
+            out = self.bm(betas=torch.as_tensor(self.state.betas, dtype=self.bm.dtype)[None],
+                          body_pose=self.state.body_pose().to(self.bm.dtype))
+        return out.vertices[0].numpy(), out.joints[0].numpy()
+
+    def update(self, name: str, value: float) -> tuple[np.ndarray, np.ndarray]:
+        """Apply one slider change, then return (vertices, joints)."""
+        self.state.set(name, value)
+        return self.mesh()
+
+    def stature(self) -> float:
+        """Height of the current body in metres (vertical extent in the canonical y-up frame)."""
+        v, _ = self.mesh()
+        return float(v[:, 1].max() - v[:, 1].min())
+
+    def figure(self):
+        """A matplotlib figure of the current body: front and side views in the z-up world."""
+        import matplotlib.pyplot as plt
+
+        from graspkit.viz import draw_mesh, set_equal
+
+        v, _ = self.mesh()
+        vz = canonical_to_world(v)
+        fig = plt.figure(figsize=(6, 4))
+        for k, azim in enumerate((-90, 0)):  # front and side
+            ax = fig.add_subplot(1, 2, k + 1, projection="3d")
+            draw_mesh(ax, vz, self.bm.faces.numpy())
+            set_equal(ax, vz)
+            ax.view_init(elev=5, azim=azim)
+            ax.set_axis_off()
+        fig.suptitle(f"stature {float(v[:, 1].max() - v[:, 1].min()):.2f} m")
+        plt.close(fig)
+        return fig
+
+    def widget(self, betas_shown: int = 3, dpi: float = 72.0):  # pragma: no cover - needs a browser; logic is tested
+        """An ipywidgets box: sliders for the first betas and the exposed joints, and the redrawn front/side view."""
+        import io
+
+        import ipywidgets as w
+
+        # an Image widget (PNG bytes) rather than an Output widget: no stray display leaks into the notebook cell
+        image = w.Image(format="png")
+
+        def redraw() -> None:
+            buf = io.BytesIO()
+            self.figure().savefig(buf, format="png", dpi=dpi)
+            image.value = buf.getvalue()
+
+        sliders = [w.FloatSlider(value=0, min=-2, max=2, step=0.25, description=f"beta{i}", continuous_update=False)
+                   for i in range(betas_shown)]
+        sliders += [w.FloatSlider(value=0, min=-1.6, max=1.6, step=0.1, description=j, continuous_update=False)
+                    for j in EXPLORER_JOINTS]
+        for s in sliders:
+            s.observe(lambda ch, s=s: (self.state.set(s.description, ch["new"]), redraw()), names="value")
+        redraw()
+        return w.HBox([w.VBox(sliders), image])

@@ -1,0 +1,51 @@
+"""The body explorer's callback logic (the ipywidgets layer only wires sliders to it)."""
+import numpy as np
+import pytest
+import torch
+
+from graspkit.body import BodyModel
+from graspkit.body.skeleton import JOINT_INDEX
+from graspkit.paths import default_model_path
+from graspkit.viz.explorers import BodyExplorer, canonical_to_world
+
+
+@pytest.fixture(scope="module")
+def explorer():
+    return BodyExplorer(BodyModel.from_file(default_model_path()))
+
+
+def test_height_slider_changes_stature(explorer):
+    explorer.update("beta0", 0.0)
+    h0 = explorer.stature()
+    explorer.update("beta0", 2.0)
+    h2 = explorer.stature()
+    explorer.update("beta0", 0.0)
+    assert h2 > h0 + 0.05
+
+
+def test_elbow_slider_moves_the_wrist_by_the_forearm_rotation(explorer):
+    _, j0 = explorer.mesh()
+    _, j1 = explorer.update("left_elbow", np.pi / 2)
+    explorer.update("left_elbow", 0.0)
+    e, w = JOINT_INDEX["left_elbow"], JOINT_INDEX["left_wrist"]
+    a, b = j0[w] - j0[e], j1[w] - j1[e]
+    from scipy.spatial.transform import Rotation
+    expected = Rotation.from_rotvec(np.pi / 2 * np.array([0.0, -1, 0])).apply(a)  # the slider's axis
+    np.testing.assert_allclose(b, expected, atol=1e-5)
+    assert b[2] > 0.9 * np.linalg.norm(b)                                          # the forearm now points forward
+    np.testing.assert_allclose(j1[e], j0[e], atol=1e-6)
+
+
+def test_unknown_slider_is_named():
+    ex = BodyExplorer.__new__(BodyExplorer)
+    from graspkit.viz.explorers import BodyExplorerState
+    ex.state = BodyExplorerState()
+    with pytest.raises(ValueError, match="wiggle"):
+        ex.state.set("wiggle", 1.0)
+
+
+def test_canonical_to_world_is_a_rotation_taking_up_to_z():
+    p = np.random.default_rng(0).normal(size=(10, 3))
+    w = canonical_to_world(p)
+    np.testing.assert_allclose(np.linalg.norm(w, axis=1), np.linalg.norm(p, axis=1))
+    np.testing.assert_allclose(canonical_to_world(np.array([0.0, 1.0, 0.0])), [0, 0, 1])

@@ -1,0 +1,93 @@
+"""Marker and vertex sets on the procedural humanoid: counts, uniqueness and anatomy checked geometrically."""
+import numpy as np
+import pytest
+import torch
+
+from graspkit.body import BodyModel
+from graspkit.body.markers import (farthest_point_sampling, foot_vertices, goal_vertices, palm_vertices,
+                                   saga_markers, saga_sparse_markers, vertex_normals)
+from graspkit.body.skeleton import JOINT_INDEX
+from graspkit.paths import default_model_path
+
+
+@pytest.fixture(scope="module")
+def bm():
+    return BodyModel.from_file(default_model_path(), dtype=torch.float64)
+
+
+@pytest.fixture(scope="module")
+def rest(bm):
+    out = bm()
+    return out.vertices[0].numpy(), out.joints[0].numpy()
+
+
+def test_saga_marker_counts_and_groups(bm):
+    m = saga_markers(bm)
+    sizes = {g: b - a for g, (a, b) in m.groups.items()}
+    assert sizes == {"body": 49, "face": 14, "hand": 6, "finger": 30, "palm": 44} and len(m) == 143
+    assert len(set(m.vertex_ids.tolist())) == 143 and len(set(m.names)) == 143
+    s = saga_sparse_markers(bm)
+    assert len(s) == 79 and s.groups["fingertip"] == (69, 79)
+    np.testing.assert_array_equal(s.vertex_ids[:69], m.vertex_ids[:69])
+
+
+def test_markers_sit_on_their_side_and_height(bm, rest):
+    v, j = rest
+    m = saga_markers(bm)
+    p = v[m.vertex_ids]
+    for name, x in zip(m.names, p):
+        if name[0] in "LR" and name not in ("LIPU", "LIPD") and not name.startswith("LIP"):
+            assert (x[0] > 0) == (name[0] == "L"), name  # the body's left is +x in the canonical frame
+    a, b = m.groups["face"]
+    assert (p[a:b, 1] > j[JOINT_INDEX["neck"], 1]).all() and (p[a:b, 2] > j[JOINT_INDEX["head"], 2]).all()
+    knee_y = j[JOINT_INDEX["left_knee"], 1]
+    for n in ("LHEE", "RHEE", "LTOE", "RTOE", "LANK", "RANK"):
+        assert p[m.names.index(n), 1] < knee_y, n
+
+
+def test_palm_markers_face_the_palm_and_finger_markers_the_back(bm, rest):
+    v, _ = rest
+    n = vertex_normals(torch.as_tensor(v)[None], bm.faces)[0].numpy()
+    m = saga_markers(bm)
+    a, b = m.groups["palm"]
+    assert np.mean(n[m.vertex_ids[a:b], 1] < 0) >= 0.9   # palms face down (-y) in the rest pose
+    a, b = m.groups["finger"]
+    assert np.mean(n[m.vertex_ids[a:b], 1] > 0) >= 0.9   # finger markers on the back of the fingers
+
+
+def test_goal_vertices(bm, rest):
+    v, j = rest
+    g = goal_vertices(bm)
+    assert g.vertex_ids.shape == (400,) and len(set(g.vertex_ids.tolist())) == 400
+    hand = v[g.vertex_ids[g.right_hand]]
+    assert g.right_hand.shape == (99,) and (hand[:, 0] < j[JOINT_INDEX["right_wrist"], 0] + 0.03).all()
+    q = g.head_direction(torch.as_tensor(v)[None])[0].numpy()
+    assert q[2] > 0.9  # the head looks forward (+z) at rest
+
+
+def test_foot_and_palm_vertex_sets(bm, rest):
+    v, _ = rest
+    f = foot_vertices(bm)
+    for s in ("left", "right"):
+        assert v[f[f"{s}_heel"], 2].mean() < v[f[f"{s}_toe"], 2].mean()      # heels behind toes
+        assert v[np.concatenate([f[f"{s}_heel"], f[f"{s}_toe"]]), 1].max() < v[:, 1].min() + 0.021
+    p = palm_vertices(bm)
+    assert (v[p["left"], 0] > 0).all() and (v[p["right"], 0] < 0).all() and len(p["left"]) > 20
+
+
+def test_farthest_point_sampling_against_brute_force():
+    pts = np.random.default_rng(0).random((200, 3))
+    idx = farthest_point_sampling(pts, 10)
+    d = np.linalg.norm(pts[:, None] - pts[idx[:5]][None], axis=2).min(1)
+    assert idx[5] == np.argmax(d)
+
+
+def test_vertex_normals_point_outwards_on_a_sphere_and_up_on_a_plane():
+    import trimesh
+    sph = trimesh.creation.icosphere(subdivisions=3)
+    n = vertex_normals(torch.as_tensor(sph.vertices)[None], torch.as_tensor(sph.faces))[0].numpy()
+    radial = sph.vertices / np.linalg.norm(sph.vertices, axis=1, keepdims=True)
+    assert (np.sum(n * radial, axis=1) > 1 - 1e-4).all()
+    quad = torch.tensor([[[0.0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]]], dtype=torch.float64)
+    nq = vertex_normals(quad, torch.tensor([[0, 1, 2], [0, 2, 3]]))[0].numpy()
+    np.testing.assert_allclose(nq, np.tile([0.0, 0, 1], (4, 1)), atol=1e-15)
