@@ -86,15 +86,61 @@ def _loader(dataset: Dataset, cfg: TrainConfig, epoch: int, world: tuple[bool, i
     return DataLoader(dataset, batch_size=cfg.batch_size, shuffle=True, generator=g)
 
 
+def evaluate(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig, epoch: int = 0
+             ) -> dict[str, float]:
+    """Mean of step's logs over `dataset` in eval mode, without gradients (fixed order)."""
+    model.eval()
+    sums: dict[str, float] = {}
+    n = 0
+    with torch.no_grad():
+        for batch in DataLoader(dataset, batch_size=cfg.batch_size, shuffle=False):
+            for k, v in step(model, batch, epoch).items():
+                sums[k] = sums.get(k, 0.0) + float(v)
+            n += 1
+    return {k: v / max(n, 1) for k, v in sums.items()}
+
+
+def write_history_csv(path: str | Path, history: list[dict[str, float]]) -> Path:
+    """Per-epoch logs (train and val_ columns) to a CSV file, written atomically."""
+    path = Path(path)
+    keys = list(dict.fromkeys(k for h in history for k in h))
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(",".join(keys) + "\n" + "".join(",".join(f"{h.get(k, float('nan')):.6g}" for k in keys) + "\n"
+                                                    for h in history))
+    os.replace(tmp, path)
+    return path
+
+
+def plot_history(history: list[dict[str, float]], keys: list[str] | None = None, ax: Any = None) -> Any:
+    """Train / validation curves of the logged terms against the epoch (log scale where positive); returns the axes."""
+    import matplotlib.pyplot as plt
+
+    keys = keys or [k for k in history[0] if k != "epoch" and not k.startswith("val_")]
+    if ax is None:
+        _, ax = plt.subplots(figsize=(5, 3))
+    ep = [h["epoch"] for h in history]
+    for k in keys:
+        line, = ax.plot(ep, [h[k] for h in history], label=k)
+        if f"val_{k}" in history[0]:
+            ax.plot(ep, [h[f"val_{k}"] for h in history], "--", color=line.get_color(), label=f"val {k}")
+    if all(h[k] > 0 for h in history for k in keys):
+        ax.set_yscale("log")
+    ax.set_xlabel("epoch")
+    ax.legend(fontsize=7)
+    return ax
+
+
 def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig,
         checkpoint: str | Path | None = None, extra: dict[str, Any] | None = None,
+        val_dataset: Dataset | None = None,
         progress: bool = True, time_limit_s: float | None = None, stop_at: int | None = None
         ) -> list[dict[str, float]]:
     """Train `model` with `step(model, batch, epoch) -> {'loss': ..}`; returns per-epoch mean logs.
 
     With `checkpoint`, an existing file is resumed from and the file is rewritten after every epoch (with
     `extra`, e.g. normalisation statistics). `time_limit_s` stops after the epoch that crosses the limit,
-    `stop_at` after that epoch (both leave a checkpoint to resume from).
+    `stop_at` after that epoch (both leave a checkpoint to resume from). With `val_dataset`, each epoch also logs
+    `val_<term>`; the history goes to `<checkpoint>.csv` beside the checkpoint.
     """
     if len(dataset) == 0:
         raise ValueError("dataset: empty")
@@ -134,11 +180,14 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
             n += 1
         sched.step()
         history.append({"epoch": epoch + 1, **{k: v / n for k, v in sums.items()}})
+        if val_dataset is not None:
+            history[-1].update({f"val_{k}": v for k, v in evaluate(model, step, val_dataset, cfg, epoch).items()})
         bar.set_postfix(loss=f"{history[-1]['loss']:.4f}")
         if checkpoint is not None and world[1] == 0:
             save_checkpoint(checkpoint, {"model": model.state_dict(), "optimizer": opt.state_dict(),
                                          "scheduler": sched.state_dict(), "epoch": epoch + 1, "history": history,
                                          "rng": torch.get_rng_state(), "config": asdict(cfg), "extra": extra or {}})
+            write_history_csv(Path(checkpoint).with_suffix(".csv"), history)
         if (time_limit_s is not None and time.perf_counter() - t0 > time_limit_s) or epoch + 1 == stop_at:
             break
     model.eval()

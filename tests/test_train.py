@@ -24,8 +24,9 @@ def _step(model, batch, epoch):
 def test_fit_learns_a_linear_map():
     torch.manual_seed(0)
     model = torch.nn.Linear(4, 1)
-    hist = fit(model, _step, _problem(), TrainConfig(epochs=60, batch_size=16, lr=5e-2, grad_clip=None), progress=False)
-    assert hist[-1]["loss"] < 1e-3 < hist[0]["loss"]
+    hist = fit(model, _step, _problem(), TrainConfig(epochs=60, batch_size=16, lr=5e-2, grad_clip=None), progress=False,
+               val_dataset=_problem())
+    assert hist[-1]["loss"] < 1e-3 < hist[0]["loss"] and hist[-1]["val_loss"] < 1e-3
 
 
 def test_resume_gives_the_same_weights_as_an_uninterrupted_run(tmp_path):
@@ -38,6 +39,7 @@ def test_resume_gives_the_same_weights_as_an_uninterrupted_run(tmp_path):
     ck = tmp_path / "b.pt"
     fit(b, _step, _problem(), cfg, checkpoint=ck, progress=False, stop_at=3)   # interrupted
     state = load_checkpoint(ck)
+    assert (tmp_path / "b.csv").read_text().count("\n") == 4      # header + 3 epochs
     assert state["epoch"] == 3 and not list(tmp_path.glob("*.tmp"))
     b2 = torch.nn.Linear(4, 1)
     fit(b2, _step, _problem(), cfg, checkpoint=ck, progress=False)  # resumes at epoch 3
