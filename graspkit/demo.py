@@ -33,6 +33,8 @@ def load_or_build_body(model_path: Path | None = None) -> BodyModel:
 
 def body_gallery(bm: BodyModel, bodies: list[tuple[str, float]] = DEMO_BODIES) -> tuple[plt.Figure, torch.Tensor]:
     """A row of bodies (pose name, height beta) side by side in the z-up world; returns the figure and vertices (N,V,3)."""
+    import numpy as np
+
     from graspkit.viz import draw_ground, draw_mesh, set_equal
 
     with torch.no_grad():
@@ -42,19 +44,18 @@ def body_gallery(bm: BodyModel, bodies: list[tuple[str, float]] = DEMO_BODIES) -
                  global_orient=y_up_to_z_up().expand(len(bodies), 3))
     v = out.vertices.clone()
     v[..., 2] -= v[..., 2].amin(dim=1, keepdim=True)          # stand on the ground
-    v[..., 0] += torch.arange(len(bodies))[:, None] * 0.9      # side by side along x
-    fig = plt.figure(figsize=(2.0 * len(bodies), 3.6))
-    ax = fig.add_subplot(111, projection="3d")
-    for k in range(len(bodies)):
+    v[..., :2] -= v[..., :2].mean(dim=1, keepdim=True)         # centred above the origin
+    fig = plt.figure(figsize=(1.9 * len(bodies), 3.6))
+    box = np.array([[-0.9, -0.6, 0.0], [0.9, 0.6, 2.1]])      # the same scale for every body
+    for k, (pose, beta) in enumerate(bodies):
+        ax = fig.add_subplot(1, len(bodies), k + 1, projection="3d", proj_type="ortho")
         draw_mesh(ax, v[k].numpy(), bm.faces.numpy())
-    draw_ground(ax, (float(v[..., 0].min()) - 0.3, float(v[..., 0].max()) + 0.3, -0.6, 0.6))
-    set_equal(ax, v.reshape(-1, 3).numpy())
-    ax.view_init(elev=8, azim=-90)
-    ax.set_axis_off()
-    labels = [f"{p}" + (f"\nbeta0={b:+.0f}" if b else "") for p, b in bodies]
-    for k, lab in enumerate(labels):
-        ax.text(float(v[k, :, 0].mean()), 0, -0.15, lab, ha="center", fontsize=8)
-    fig.subplots_adjust(0, 0, 1, 1)
+        draw_ground(ax, (-0.7, 0.7, -0.5, 0.5))
+        set_equal(ax, box, pad=0.0, zoom=1.35)
+        ax.view_init(elev=8, azim=-80)
+        ax.set_axis_off()
+        ax.set_title(pose.replace("_", " ") + (f", beta0 {beta:+.0f}" if beta else ""), fontsize=10, y=0.97)
+    fig.subplots_adjust(0, 0, 1, 1, wspace=0)
     return fig, v
 
 

@@ -28,3 +28,18 @@ def test_body_info_reads_a_file_and_reports_a_bad_one(tmp_path):
     np.savez(tmp_path / "bad.npz", **arr)
     r = _run("body", "info", "--model", str(tmp_path / "bad.npz"))
     assert r.returncode == 2 and "bad.npz: missing key 'weights'" in r.stderr
+
+
+def test_demo_writes_a_figure_and_a_glb_that_trimesh_reads(tmp_path):
+    import trimesh
+    from PIL import Image
+
+    from graspkit.demo import DEMO_BODIES, run_demo
+
+    files = run_demo(tmp_path)
+    png, glb = sorted(files, key=lambda p: p.suffix)[::-1]
+    assert png.suffix == ".png" and Image.open(png).size[0] > 1000
+    scene = trimesh.load(glb)
+    assert len(scene.geometry) == len(DEMO_BODIES)
+    heights = sorted(float(np.ptp(g.vertices[:, 1])) for g in scene.geometry.values())
+    assert 1.45 < heights[-1] < 2.0          # a standing adult; glTF is y up
