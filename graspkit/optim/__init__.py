@@ -1,0 +1,1 @@
+"""Optimisers of the workbook: grasp and motion refinement (SAGA GraspPose-Opt / GraspMotion-Opt, GOAL), latent optimisation."""

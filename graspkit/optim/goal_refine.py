@@ -1,0 +1,166 @@
+"""GOAL's optimisation post-processing (Taheri et al., CVPR 2022): GNet's grasp (§3.3, Eq. 4–8) and MNet's
+approach (§3.4, Eq. 12–13), both by gradient descent with Adam (§3.5), over the whole body's θ (6D) and γ.
+
+GNet refinement, E_GNet = λ_d E_d + λ_θ E_θ + λ_γ E_γ + λ_q E_q + λ_f E_f  (Eq. 8):
+    E_d(θ, γ) = ‖d^{h→o} − d̂^{h→o}‖₁   (Eq. 4) the 99 hand-to-object offsets, *recomputed at every step* from the
+                current hand vertices to their closest object points, against GNet's predicted ones
+    E_θ = ‖θ − θ̂‖₂², E_γ = ‖γ − γ̂‖₁    (Eq. 5) coupling to GNet's pose and translation (squared here, so that the
+                gradient is defined where θ = θ̂, i.e. at the start)
+    E_q = ‖q(θ, γ) − q̂‖₁               (Eq. 6) head direction (back of the head -> nose) against GNet's q̂
+    E_f = |v_z(k) − g|, k = argmin_i v_z(i)  (Eq. 7) the lowest body vertex on the ground. GOAL's world has y up;
+                graspkit's has z up, so the vertical axis is z (g = 0 is the floor). The lowest vertex is searched
+                among the feet and the 400 sampled vertices, which hold the lowest point of any standing body.
+All terms are means over their elements (metres for E_d, E_γ, E_f), per sample; the batch sums them, so every
+sample is refined independently.
+
+MNet refinement (Eq. 12–13), once the hand is within 10 cm of the goal hand: each hand vertex is moved towards its
+goal position along the straight line at MNet's average predicted hand speed, v_{t+1} = v_t + ‖v̇_t‖ l (Eq. 12;
+graspkit stops at the goal instead of overshooting it), and the frame's θ, γ are fitted to those hand vertices with
+E_MNet = λ_Θ E_Θ + λ_v^h E_v^h (Eq. 13): E_Θ couples to MNet's Θ̂ (squared), E_v^h = ‖v^h − v^h_{t+1}‖₁.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from graspkit.body.skeleton import JOINT_INDEX
+from graspkit.models.gnet import SparseBody, pose_rotmats
+from graspkit.objects.distance import nearest_neighbours
+
+FEET_PARTS = ("left_ankle", "right_ankle", "left_foot", "right_foot")
+GOAL_HAND_RADIUS = 0.10   # m: MNet's refinement starts when the hand is this close to the goal hand (§3.4)
+
+
+def hand_object_offsets(points: Tensor, object_points: Tensor) -> Tensor:
+    """Offsets (B,N,3) from points (B,N,3) to their closest object points (B,P,3) (or (P,3)); differentiable in points."""
+    obj = object_points if object_points.dim() == 3 else object_points[None]
+    obj = obj.expand(points.shape[0], -1, -1).to(points.dtype)
+    _, idx = nearest_neighbours(points.detach(), obj.detach())
+    nearest = torch.gather(obj, 1, idx[..., None].expand(-1, -1, 3))
+    return nearest - points
+
+
+def feet_vertex_ids(bm) -> np.ndarray:
+    """Ids of the vertices whose dominant skinning joint is an ankle or a foot (the soles and toes among them)."""
+    part = bm.lbs_weights.argmax(1).numpy()
+    return np.flatnonzero(np.isin(part, [JOINT_INDEX[j] for j in FEET_PARTS]))
+
+
+@dataclass
+class GraspRefineWeights:
+    """λ of Eq. 8 and the Adam settings (graspkit's values, tuned on the procedural data)."""
+
+    d: float = 1.0
+    theta: float = 0.05
+    gamma: float = 0.02
+    q: float = 0.05
+    f: float = 1.0
+    steps: int = 200
+    lr: float = 3e-3
+
+
+@dataclass
+class RefinedGrasp:
+    """The refined Θ: rot6d (B,55,6), transl (B,3); energy terms per step (batch means), first and last."""
+
+    rot6d: Tensor
+    transl: Tensor
+    history: list[dict[str, float]] = field(default_factory=list)
+
+
+class GraspRefiner:
+    """Eq. 4–8 on one body model: the sampled vertices (hand first), the head pair and the feet, evaluated sparsely."""
+
+    def __init__(self, bm, gv, n_hand: int = 99) -> None:
+        self.n_hand, self.n_sampled = n_hand, len(gv.vertex_ids)
+        ids = np.concatenate([gv.vertex_ids, [gv.head_back, gv.head_front], feet_vertex_ids(bm)])
+        self.body = SparseBody(bm, torch.as_tensor(ids))
+
+    def vertices(self, rot6d: Tensor, transl: Tensor, betas: Tensor) -> Tensor:
+        """Sparse vertices (B, 400 + 2 + feet, 3): sampled (hand first), head back, nose, feet."""
+        return self.body(pose_rotmats(rot6d), betas, transl)[0]
+
+    def energy(self, rot6d: Tensor, transl: Tensor, betas: Tensor, hat: dict[str, Tensor], object_points: Tensor,
+               ground: float = 0.0) -> dict[str, Tensor]:
+        """Per-sample terms (B,) of Eq. 4–7 at (rot6d, transl) against GNet's `hat` (rot6d, transl, head_dir, hand_offsets)."""
+        v = self.vertices(rot6d, transl, betas)
+        hand = v[:, :self.n_hand]
+        d = hand_object_offsets(hand, object_points)
+        back, front = v[:, self.n_sampled], v[:, self.n_sampled + 1]
+        q = torch.nn.functional.normalize(front - back, dim=-1)
+        return {"d": (d - hat["hand_offsets"]).abs().mean((1, 2)),
+                "theta": (rot6d - hat["rot6d"]).pow(2).mean((1, 2)),
+                "gamma": (transl - hat["transl"]).abs().mean(1),
+                "q": (q - hat["head_dir"]).abs().mean(1),
+                "f": (v[..., 2].min(1).values - ground).abs()}
+
+    def __call__(self, hat: dict[str, Tensor], betas: Tensor, object_points: Tensor,
+                 weights: GraspRefineWeights | None = None, ground: float = 0.0) -> RefinedGrasp:
+        """Refine GNet's outputs `hat` {rot6d (B,55,6), transl (B,3), head_dir (B,3), hand_offsets (B,99,3)}
+        for bodies `betas` (B,10) and object points (B,P,3)|(P,3), world frame, z up."""
+        for k, shape in (("rot6d", (55, 6)), ("transl", (3,)), ("head_dir", (3,)), ("hand_offsets", (self.n_hand, 3))):
+            if k not in hat or tuple(hat[k].shape[1:]) != shape:
+                raise ValueError(f"hat[{k!r}]: expected shape (B, {', '.join(map(str, shape))}), "
+                                 f"got {None if k not in hat else tuple(hat[k].shape)}")
+        w = weights or GraspRefineWeights()
+        lam = {"d": w.d, "theta": w.theta, "gamma": w.gamma, "q": w.q, "f": w.f}
+        hat = {k: t.detach() for k, t in hat.items()}
+        rot6d = hat["rot6d"].clone().requires_grad_(True)
+        transl = hat["transl"].clone().requires_grad_(True)
+        opt = torch.optim.Adam([rot6d, transl], lr=w.lr)
+        history = []
+        for step in range(w.steps + 1):
+            terms = self.energy(rot6d, transl, betas, hat, object_points, ground)
+            total = sum(lam[k] * t for k, t in terms.items())
+            if step in (0, w.steps):
+                history.append({"step": step, "E": float(total.detach().mean()),
+                                **{k: float(t.detach().mean()) for k, t in terms.items()}})
+            if step == w.steps:
+                break
+            opt.zero_grad()
+            total.sum().backward()
+            opt.step()
+        return RefinedGrasp(rot6d.detach(), transl.detach(), history)
+
+
+# ------------------------------------------------------------------------------------------- MNet (Eq. 12-13)
+
+def hand_step_targets(hand_now: Tensor, hand_goal: Tensor, speed: Tensor) -> Tensor:
+    """Eq. 12: v_{t+1} = v_t + s l, l the unit vector to the goal, s (B,) the average hand speed (m/frame),
+    not past the goal: hand vertices (B,N,3) -> (B,N,3)."""
+    delta = hand_goal - hand_now
+    dist = delta.norm(dim=-1, keepdim=True)
+    step = torch.minimum(speed.reshape(-1, 1, 1).expand_as(dist), dist)
+    return hand_now + step * delta / dist.clamp_min(1e-9)
+
+
+@dataclass
+class MotionRefineWeights:
+    """λ of Eq. 13 and the Adam settings."""
+
+    theta: float = 1.0
+    hand: float = 1.0
+    steps: int = 40
+    lr: float = 2e-3
+
+
+def refine_frame(hand_body: SparseBody, rot6d_hat: Tensor, transl_hat: Tensor, betas: Tensor, hand_target: Tensor,
+                 weights: MotionRefineWeights | None = None) -> tuple[Tensor, Tensor]:
+    """Eq. 13 for one frame: Θ (B,55,6), (B,3) fitted so that `hand_body`'s vertices (B,N,3) meet `hand_target`,
+    coupled to MNet's Θ̂; returns the refined (rot6d, transl)."""
+    w = weights or MotionRefineWeights()
+    rot6d_hat, transl_hat, hand_target = rot6d_hat.detach(), transl_hat.detach(), hand_target.detach()
+    rot6d = rot6d_hat.clone().requires_grad_(True)
+    transl = transl_hat.clone().requires_grad_(True)
+    opt = torch.optim.Adam([rot6d, transl], lr=w.lr)
+    for _ in range(w.steps):
+        v = hand_body(pose_rotmats(rot6d), betas, transl)[0]
+        e_theta = torch.cat([(rot6d - rot6d_hat).flatten(1), transl - transl_hat], 1).pow(2).mean(1)
+        e_hand = (v - hand_target).abs().mean((1, 2))
+        opt.zero_grad()
+        (w.theta * e_theta + w.hand * e_hand).sum().backward()
+        opt.step()
+    return rot6d.detach(), transl.detach()

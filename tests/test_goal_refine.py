@@ -1,0 +1,124 @@
+"""GOAL's refinements (Eq. 4-8 for GNet, Eq. 12-13 for MNet) on cases with a known answer."""
+import math
+
+import numpy as np
+import pytest
+import torch
+from scipy.spatial import cKDTree
+
+from graspkit.body import BodyModel
+from graspkit.body.markers import goal_vertices
+from graspkit.body.skeleton import JOINT_INDEX as J
+from graspkit.models.gnet import SparseBody, pose_rotmats
+from graspkit.optim.goal_refine import (GraspRefiner, GraspRefineWeights, MotionRefineWeights, hand_object_offsets,
+                                        hand_step_targets, refine_frame)
+from graspkit.paths import default_model_path
+from graspkit.rotations import axis_angle_to_rot6d
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    """One torch thread (the machine's cores are shared), restored afterwards."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+@pytest.fixture(scope="module")
+def setup():
+    bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    gv = goal_vertices(bm)
+    return bm, gv, GraspRefiner(bm, gv)
+
+
+def _sphere(centre, radius, n=3000):
+    i = torch.arange(n) + 0.5
+    phi, th = torch.acos(1 - 2 * i / n), math.pi * (1 + 5 ** 0.5) * i
+    return torch.stack([torch.cos(th) * torch.sin(phi), torch.sin(th) * torch.sin(phi), torch.cos(phi)], 1) * radius + centre
+
+
+def _grasp_pose():
+    """A standing body (z up) with the right arm lowered and the fingers curled."""
+    aa = torch.zeros(1, 55, 3, dtype=torch.float64)
+    aa[0, 0] = torch.tensor([math.pi / 2, 0, 0])
+    aa[0, J["right_shoulder"]] = torch.tensor([0, 0, 0.9])
+    aa[0, 40:55, 2] = 0.3
+    return aa
+
+
+def test_offsets_match_a_kd_tree():
+    g = torch.Generator().manual_seed(0)
+    pts, obj = torch.randn(2, 50, 3, generator=g), torch.randn(2, 300, 3, generator=g)
+    d = hand_object_offsets(pts, obj)
+    for b in range(2):
+        _, idx = cKDTree(obj[b].numpy()).query(pts[b].numpy())
+        np.testing.assert_allclose(d[b].numpy(), obj[b].numpy()[idx] - pts[b].numpy(), atol=1e-6)
+
+
+def test_grasp_refinement_recovers_a_known_grasp(setup):
+    bm, gv, ref = setup
+    aa, betas = _grasp_pose(), torch.zeros(1, 10)
+    rot6d, transl = axis_angle_to_rot6d(aa).float(), torch.zeros(1, 3)
+    transl[0, 2] -= ref.vertices(rot6d, transl, betas)[0, :, 2].min()            # standing on z = 0
+    v = ref.vertices(rot6d, transl, betas)
+    hand = v[:, :99]
+    obj = _sphere(hand[0].mean(0) + torch.tensor([0, 0, -0.05]), 0.045)       # a ball under the palm
+    q = torch.nn.functional.normalize(v[:, 401] - v[:, 400], dim=-1)
+    wrong = aa.clone()                                                          # GNet's "prediction": wrist, elbow,
+    wrong[0, J["right_wrist"]] += torch.tensor([0.25, 0.1, -0.1], dtype=torch.float64)   # fingers and root off
+    wrong[0, J["right_elbow"]] += torch.tensor([0.0, 0.15, 0.0], dtype=torch.float64)
+    wrong[0, 40:55, 2] += 0.2
+    hat = {"rot6d": axis_angle_to_rot6d(wrong).float(), "transl": transl + torch.tensor([[0.02, -0.015, 0.01]]),
+           "head_dir": q, "hand_offsets": hand_object_offsets(hand, obj[None])}
+    before = (ref.vertices(hat["rot6d"], hat["transl"], betas)[:, :99] - hand).norm(dim=-1).mean()
+    out = ref(hat, betas, obj, GraspRefineWeights(steps=200))
+    after_v = ref.vertices(out.rot6d, out.transl, betas)
+    after = (after_v[:, :99] - hand).norm(dim=-1).mean()
+    assert before > 0.05 and after < 0.005                                     # 7 cm -> a few mm
+    assert abs(float(after_v[0, :, 2].min())) < 1e-3                            # Eq. 7: on the ground
+    assert out.history[-1]["d"] < 0.1 * out.history[0]["d"]
+
+
+def test_foot_term_alone_puts_the_lowest_vertex_on_the_ground(setup):
+    bm, gv, ref = setup
+    rot6d, betas = axis_angle_to_rot6d(_grasp_pose()).float(), torch.zeros(1, 10)
+    transl = torch.zeros(1, 3)
+    transl[0, 2] += 0.04 - ref.vertices(rot6d, transl, betas)[0, :, 2].min()     # floating 4 cm above the floor
+    v = ref.vertices(rot6d, transl, betas)
+    hat = {"rot6d": rot6d, "transl": transl, "head_dir": torch.nn.functional.normalize(v[:, 401] - v[:, 400], dim=-1),
+           "hand_offsets": torch.zeros(1, 99, 3)}
+    out = ref(hat, betas, torch.zeros(1, 3), GraspRefineWeights(d=0.0, q=0.0, gamma=0.0, steps=150, lr=2e-3))
+    full = bm.forward_rotmats(pose_rotmats(out.rot6d), betas=betas, transl=out.transl).vertices
+    assert abs(float(full[0, :, 2].min())) < 1.5e-3                              # the full mesh's lowest vertex too
+    assert -0.045 < float(out.transl[0, 2] - transl[0, 2]) < -0.03               # mostly by moving down
+
+
+def test_refiner_names_a_missing_prediction(setup):
+    _, _, ref = setup
+    with pytest.raises(ValueError, match="hand_offsets"):
+        ref({"rot6d": torch.zeros(1, 55, 6), "transl": torch.zeros(1, 3), "head_dir": torch.zeros(1, 3)},
+            torch.zeros(1, 10), torch.zeros(5, 3))
+
+
+def test_hand_step_targets_is_eq12_without_overshoot():
+    now = torch.zeros(2, 1, 3)
+    goal = torch.tensor([[[0.1, 0.0, 0.0]], [[0.0, 0.0, 0.02]]])
+    out = hand_step_targets(now, goal, torch.tensor([0.03, 0.03]))
+    torch.testing.assert_close(out, torch.tensor([[[0.03, 0.0, 0.0]], [[0.0, 0.0, 0.02]]]))
+
+
+def test_motion_frame_refinement_meets_the_hand_targets(setup):
+    bm, gv, _ = setup
+    hand_body = SparseBody(bm, torch.as_tensor(gv.vertex_ids[gv.right_hand]))
+    aa, betas = _grasp_pose(), torch.zeros(1, 10)
+    rot6d, transl = axis_angle_to_rot6d(aa).float(), torch.zeros(1, 3)
+    target = hand_body(pose_rotmats(rot6d), betas, transl)[0]
+    wrong = aa.clone()
+    wrong[0, J["right_wrist"]] += torch.tensor([0.0, 0.2, 0.1], dtype=torch.float64)
+    wrong[0, J["right_elbow"]] += torch.tensor([0.0, -0.1, 0.0], dtype=torch.float64)
+    r6, t = refine_frame(hand_body, axis_angle_to_rot6d(wrong).float(), transl, betas, target,
+                         MotionRefineWeights())
+    before = (hand_body(pose_rotmats(axis_angle_to_rot6d(wrong).float()), betas, transl)[0] - target).norm(dim=-1).mean()
+    after = (hand_body(pose_rotmats(r6), betas, t)[0] - target).norm(dim=-1).mean()
+    assert before > 0.015 and after < 0.003
