@@ -1,0 +1,121 @@
+"""WholeGrasp-VAE (SAGA §3.2): shapes, gradients, the losses of Eq. 1-3 on hand-made cases, deterministic sampling."""
+import math
+
+import pytest
+import torch
+
+from graspkit.models.wholegrasp import (WholeGraspConfig, WholeGraspVAE, consistency_loss, squared_min_distance,
+                                        weighted_bce)
+
+P = 512  # object points in these tests (the model takes any P >= 256; SAGA uses 2,048)
+
+
+def _batch(B: int = 3, seed: int = 0) -> dict[str, torch.Tensor]:
+    g = torch.Generator().manual_seed(seed)
+    pts = torch.randn(B, P, 3, generator=g) * 0.05
+    return dict(markers=torch.randn(B, 143, 3, generator=g) * 0.3,
+                marker_contact=(torch.rand(B, 143, generator=g) < 0.1).float(),
+                points=pts, normals=torch.nn.functional.normalize(pts, dim=-1),
+                object_contact=(torch.rand(B, P, generator=g) < 0.1).float(),
+                height=torch.rand(B, 1, generator=g) + 0.5)
+
+
+def test_forward_shapes_and_every_parameter_gets_a_gradient():
+    torch.manual_seed(0)
+    model = WholeGraspVAE()
+    batch = _batch()
+    out = model(batch)
+    assert out["markers"].shape == (3, 143, 3) and out["mu"].shape == (3, 16)
+    assert out["marker_contact"].shape == (3, 143) and out["object_contact"].shape == (3, P)
+    for k in ("marker_contact", "object_contact"):
+        assert ((out[k] > 0) & (out[k] < 1)).all()
+    logs = model.loss(batch, out, epoch=0, epochs=10)
+    logs["loss"].backward()
+    missing = [n for n, p in model.named_parameters() if p.grad is None or p.grad.abs().sum() == 0]
+    assert not missing
+
+
+def test_single_task_model_learns_markers_only():
+    model = WholeGraspVAE(WholeGraspConfig(multitask=False))
+    batch = {k: v for k, v in _batch().items() if "contact" not in k}
+    out = model(batch)
+    assert "marker_contact" not in out and "object_contact" not in out
+    logs = model.loss(batch, out, 0, 10)
+    assert "bce_object" not in logs and torch.isfinite(logs["loss"])
+
+
+def test_weighted_bce_matches_the_formula():
+    p = torch.tensor([0.5, 0.9, 0.2, 0.7])
+    t = torch.tensor([1.0, 1.0, 0.0, 0.0])
+    want = -(5 * math.log(0.5) + 5 * math.log(0.9) + math.log(0.8) + math.log(0.3)) / 4
+    assert weighted_bce(p, t, 5.0).item() == pytest.approx(want, rel=1e-6)
+    # the in-contact weight is torch's per-element weight on the positive class
+    w = torch.where(t > 0, 5.0, 1.0)
+    assert weighted_bce(p, t, 5.0).item() == pytest.approx(
+        torch.nn.functional.binary_cross_entropy(p, t, weight=w).item(), rel=1e-6)
+
+
+def test_consistency_loss_on_a_hand_made_case():
+    pts = torch.tensor([[[0.0, 0, 0], [1.0, 0, 0]]])                         # object: two points
+    m = torch.tensor([[[0.0, 0.01, 0], [1.0, 0.5, 0]]])                      # markers 1 cm and 50 cm away
+    m_pred = torch.tensor([[[0.0, 0.03, 0], [1.0, 0.5, 0]]])                 # the first now 3 cm away
+    torch.testing.assert_close(squared_min_distance(m, pts), torch.tensor([[1e-4, 0.25]]))
+    cm = torch.tensor([[1.0, 1.0]])
+    co = torch.tensor([[1.0, 0.0]])
+    # marker term: |0.03^2 - 0.01^2| = 8e-4; object term: point 0 is nearest to marker 0 in both: 8e-4 again
+    assert consistency_loss(m_pred, m, cm, pts, co).item() == pytest.approx(1.6e-3, rel=1e-4)
+    assert consistency_loss(m, m, cm, pts, co).item() == 0.0
+    assert consistency_loss(m_pred, m, torch.zeros_like(cm), pts, torch.zeros_like(co)).item() == 0.0
+
+
+def test_kl_weight_rises_linearly_to_the_papers_end_point():
+    torch.manual_seed(0)
+    model = WholeGraspVAE()
+    batch = _batch()
+    model.eval()
+    out = dict(model(batch), mu=torch.full((3, 16), 2.0), logvar=torch.zeros(3, 16))   # KL = 32 per sample
+    rest = lambda e: (model.loss(batch, out, e, 40)["loss"] - model.loss(batch, out, 0, 40)["loss"]).item()  # noqa: E731
+    from graspkit.models.blocks import robust_kl
+    psi = robust_kl(out["mu"], out["logvar"]).item()
+    assert psi == pytest.approx(math.sqrt(1 + 32 ** 2) - 1)
+    # SAGA A.4: lambda_KL = 0.005 e over 40 epochs
+    assert rest(39) == pytest.approx((0.2 - 0.005) * psi, rel=1e-4, abs=1e-6)
+    assert rest(19) == pytest.approx((0.1 - 0.005) * psi, rel=1e-4, abs=1e-6)
+
+
+def test_sample_is_deterministic_for_a_generator_and_returns_world_transform():
+    torch.manual_seed(0)
+    model = WholeGraspVAE().eval()
+    g = torch.Generator().manual_seed(5)
+    pts = torch.randn(P, 3, generator=g) * 0.05 + torch.tensor([0.3, -0.6, 0.9])
+    nrm = torch.nn.functional.normalize(torch.randn(P, 3, generator=g), dim=-1)
+    a = model.sample(pts, nrm, n=4, generator=torch.Generator().manual_seed(1))
+    b = model.sample(pts, nrm, n=4, generator=torch.Generator().manual_seed(1))
+    c = model.sample(pts, nrm, n=4, generator=torch.Generator().manual_seed(2))
+    assert torch.equal(a.markers, b.markers) and torch.equal(a.object_contact, b.object_contact)
+    assert not torch.allclose(a.markers, c.markers)
+    assert a.markers.shape == (4, 143, 3) and a.marker_contact.shape == (4, 143) and a.object_contact.shape == (4, P)
+    centre = 0.5 * (pts.min(0).values + pts.max(0).values)
+    torch.testing.assert_close(a.translation, centre)
+    torch.testing.assert_close(a.markers_world(), a.markers + centre)
+    # the decoder sees the centred cloud: the same object elsewhere in the world gives the same grasp (object frame)
+    d = model.sample(pts + torch.tensor([1.0, 2.0, 0.0]), nrm, object_height=centre[2], n=4,
+                     generator=torch.Generator().manual_seed(1))
+    torch.testing.assert_close(d.markers, a.markers, atol=1e-5, rtol=0)
+    with pytest.raises(ValueError, match="object_normals"):
+        model.sample(pts, nrm[:10])
+    with pytest.raises(ValueError, match="n:"):
+        model.sample(pts, nrm, n=0)
+
+
+def test_state_round_trip_and_bad_batches():
+    torch.manual_seed(0)
+    model = WholeGraspVAE().eval()
+    again = WholeGraspVAE.from_state(model.state())
+    batch = _batch()
+    torch.testing.assert_close(again(batch)["markers"], model(batch)["markers"])
+    bad = dict(batch, markers=batch["markers"][:, :100])
+    with pytest.raises(ValueError, match="markers"):
+        model(bad)
+    with pytest.raises(ValueError, match="object_contact"):
+        model({k: v for k, v in batch.items() if k != "object_contact"})
