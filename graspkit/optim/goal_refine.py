@@ -142,6 +142,7 @@ class MotionRefineWeights:
     """λ of Eq. 13 and the Adam settings."""
 
     theta: float = 1.0
+    transl: float = 1000.0    # within E_Θ: γ weighs more than a 6D entry, so the body does not slide to help the hand
     hand: float = 1.0
     steps: int = 40
     lr: float = 2e-3
@@ -158,7 +159,7 @@ def refine_frame(hand_body: SparseBody, rot6d_hat: Tensor, transl_hat: Tensor, b
     opt = torch.optim.Adam([rot6d, transl], lr=w.lr)
     for _ in range(w.steps):
         v = hand_body(pose_rotmats(rot6d), betas, transl)[0]
-        e_theta = torch.cat([(rot6d - rot6d_hat).flatten(1), transl - transl_hat], 1).pow(2).mean(1)
+        e_theta = (rot6d - rot6d_hat).pow(2).mean((1, 2)) + w.transl * (transl - transl_hat).pow(2).mean(1)
         e_hand = (v - hand_target).abs().mean((1, 2))
         opt.zero_grad()
         (w.theta * e_theta + w.hand * e_hand).sum().backward()

@@ -1,0 +1,344 @@
+"""GOAL's MNet (Taheri et al., CVPR 2022, §3.4, Eq. 9–13): deterministic, autoregressive approach-and-grasp motion.
+
+Input at frame t (Eq. 9), everything in the *canonical frame of frame t* (z up, origin on the floor under the
+pelvis, the body's heading along +y), re-computed at every autoregressive step:
+    Θ_{t−4:t}   the last 5 frames' 55 joint rotations (6D) and translations      (5 × 333)
+    β           shape                                                              (10)
+    v_t, v̇_t    the 400 sampled vertices and their velocities (v_t − v_{t−1})      (400 × 3 each)
+    d^h_{t→g}   hand-vertex offsets from frame t to the goal grasp: v^h_g − v^h_t  (99 × 3)
+    b^h_g       BPS of the goal hand's 99 vertices on the object's basis (1024 points in 0.15 m around the object
+                centre, not rotated): the goal hand relative to the object, as the object's own code (§3.4)
+    IAA         interaction-aware attention (§3.2, Eq. 1, w = 5): for each of the 400 vertices the offset d to its
+                closest object point weighted by exp(−w|d|), and exp(−w z) for its height z above the floor
+                (400 × 3 + 400) — vertices near the object (hands) and near the ground (feet) get the attention.
+                `attention=False` (GOAL Tab. 2 "MNet-w/o-IAA") feeds the raw offsets instead.
+Output (Eq. 10): the next 10 frames as changes from frame t, in the same canonical frame:
+    ΔΘ_{t:t+10} (10 × 333: 6D rotations added to frame t's, translations), Δv_{t:t+10} (10 × 400 × 3) and
+    Δd^h_{t:t+10} (10 × 99 × 3), read here as the change of the hand-to-object offsets (the closest object point to
+    each hand vertex minus the vertex), as Eq. 11's L_d^{h→o} names them.
+Loss (Eq. 11): λ_v L_v + λ_v^h L_v^h + λ_Θ L_Θ + λ_d L_d^{h→o} + λ_f L_v^f, with L_v^f on the sampled foot
+vertices that are within 5 cm of the floor in the ground truth. No latent: MNet is deterministic.
+
+Size: GOAL's MNet has ~117M parameters; graspkit's has ~0.9M (grouped input projections, a two-block residual trunk,
+and an output head factorised as a per-frame code times one shared linear decoder), so that it trains on two CPU
+cores in minutes and ships as a ~2 MB checkpoint.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import torch
+from torch import Tensor, nn
+
+from graspkit.models.blocks import ResBlock
+from graspkit.models.gnet import NUM_JOINTS, POSE_DIM, Standardiser
+from graspkit.objects.bps import bps_encode
+from graspkit.objects.contact import IAA_WEIGHT
+from graspkit.rotations import matrix_to_rot6d, rot6d_to_matrix, rotation_about_z
+
+FOOT_CONTACT_HEIGHT = 0.05   # m: L_v^f covers the sampled foot vertices this close to the floor (ground truth)
+
+
+# ------------------------------------------------------------------------------------------- canonical frames
+
+def rest_root(bm, betas: Tensor) -> Tensor:
+    """The rest-pose root (pelvis) joint J_0(β) (B,3): the point the root rotation turns the body about."""
+    coeffs = torch.zeros(betas.shape[0], bm.num_betas + bm.num_expression, dtype=bm.dtype)
+    coeffs[:, :betas.shape[1]] = betas.to(bm.dtype)
+    return (bm.J_template[0] + coeffs @ bm.J_basis[:, :3]).to(betas.dtype)
+
+
+def heading(root_rot: Tensor) -> Tensor:
+    """Yaw (...) in radians from world +x of the body's forward direction (canonical +z) for root rotations (...,3,3)."""
+    return torch.atan2(root_rot[..., 1, 2], root_rot[..., 0, 2])
+
+
+def canonical_frame(root_rot: Tensor, pelvis: Tensor) -> tuple[Tensor, Tensor]:
+    """Frame of a body (root rotation (B,3,3), pelvis (B,3)): x' = R (x − o), o on the floor under the pelvis,
+    the heading along +y. Returns R (B,3,3), o (B,3)."""
+    R = rotation_about_z(math.pi / 2 - heading(root_rot))
+    o = torch.cat([pelvis[:, :2], torch.zeros_like(pelvis[:, :1])], 1)
+    return R, o
+
+
+def transform_params(rot6d: Tensor, transl: Tensor, root: Tensor, R: Tensor, o: Tensor) -> tuple[Tensor, Tensor]:
+    """SMPL-X parameters of the body moved by x -> R (x − o): rot6d (B,...,55,6), transl (B,...,3), rest root (B,3).
+
+    The root rotation becomes R R_root and γ' = R (J_0 + γ − o) − J_0; the other joints are local and unchanged."""
+    shape = transl.shape[1:-1]
+    Rx = R.reshape(R.shape[0], *([1] * len(shape)), 3, 3)
+    J0 = root.reshape(root.shape[0], *([1] * len(shape)), 3)
+    ox = o.reshape(o.shape[0], *([1] * len(shape)), 3)
+    root_rot = Rx @ rot6d_to_matrix(rot6d[..., 0, :])
+    out = torch.cat([matrix_to_rot6d(root_rot).unsqueeze(-2), rot6d[..., 1:, :]], dim=-2)
+    t = (Rx @ (J0 + transl - ox).unsqueeze(-1)).squeeze(-1) - J0
+    return out, t
+
+
+def transform_points(x: Tensor, R: Tensor, o: Tensor | None = None) -> Tensor:
+    """Points (B,...,3) -> R (x − o); vectors when o is None."""
+    shape = x.shape[1:-1]
+    Rx = R.reshape(R.shape[0], *([1] * len(shape)), 3, 3)
+    if o is not None:
+        x = x - o.reshape(o.shape[0], *([1] * len(shape)), 3)
+    return (Rx @ x.unsqueeze(-1)).squeeze(-1)
+
+
+# ------------------------------------------------------------------------------------------- inputs and targets
+
+@dataclass
+class MNetState:
+    """World-frame quantities MNet needs at frame t (B samples): past Θ (frames t−4..t), shape, vertices at t and
+    t−1, the goal hand, the object centre, the 400 body-to-object offsets at t and the rest root J_0(β)."""
+
+    rot6d: Tensor          # (B,5,55,6)
+    transl: Tensor         # (B,5,3)
+    betas: Tensor          # (B,10)
+    verts: Tensor          # (B,400,3) frame t
+    verts_prev: Tensor     # (B,400,3) frame t−1
+    goal_hand: Tensor      # (B,99,3)
+    obj_centre: Tensor     # (B,3)
+    obj_offsets: Tensor    # (B,400,3) closest object point − vertex, frame t
+    root: Tensor           # (B,3)
+
+
+def mnet_inputs(s: MNetState, basis: Tensor, attention: bool = True, n_hand: int = 99
+                ) -> tuple[dict[str, Tensor], Tensor, Tensor]:
+    """Eq. 9 in the canonical frame of frame t: {'pose', 'verts', 'goal', 'iaa'} (B, ·) and the frame's R, o."""
+    B = s.betas.shape[0]
+    R, o = canonical_frame(rot6d_to_matrix(s.rot6d[:, -1, 0]), s.root + s.transl[:, -1])
+    rot6d, transl = transform_params(s.rot6d, s.transl, s.root, R, o)
+    v, vp = transform_points(s.verts, R, o), transform_points(s.verts_prev, R, o)
+    goal = transform_points(s.goal_hand, R, o)
+    d = transform_points(s.obj_offsets, R)
+    bps = bps_encode(transform_points(s.goal_hand - s.obj_centre[:, None], R), basis.to(v.dtype))
+    if attention:
+        iaa = torch.cat([(torch.exp(-IAA_WEIGHT * d.norm(dim=-1, keepdim=True)) * d).reshape(B, -1),
+                         torch.exp(-IAA_WEIGHT * v[..., 2].clamp_min(0))], 1)
+    else:
+        iaa = d.reshape(B, -1)
+    feats = {"pose": torch.cat([torch.cat([rot6d.flatten(2), transl], 2).reshape(B, -1), s.betas], 1),
+             "verts": torch.cat([v.reshape(B, -1), (v - vp).reshape(B, -1)], 1),
+             "goal": torch.cat([(goal - v[:, :n_hand]).reshape(B, -1), bps], 1),
+             "iaa": iaa}
+    return feats, R, o
+
+
+def mnet_targets(s: MNetState, R: Tensor, o: Tensor, rot6d: Tensor, transl: Tensor, verts: Tensor,
+                 obj_offsets: Tensor, n_hand: int = 99) -> dict[str, Tensor]:
+    """Eq. 10 targets: future frames (B,F,...) in the world -> changes from frame t in its canonical frame."""
+    r_now, t_now = transform_params(s.rot6d[:, -1], s.transl[:, -1], s.root, R, o)
+    r_f, t_f = transform_params(rot6d, transl, s.root, R, o)
+    return {"d_rot6d": r_f - r_now[:, None], "d_transl": t_f - t_now[:, None],
+            "d_verts": transform_points(verts - s.verts[:, None], R),
+            "d_hand_obj": transform_points(obj_offsets[:, :, :n_hand] - s.obj_offsets[:, None, :n_hand], R)}
+
+
+# ------------------------------------------------------------------------------------------- the network
+
+@dataclass
+class MNetConfig:
+    """MNet sizes and variants (GOAL Tab. 2): attention (IAA), outputs 'full' or 'pose' (MNet-Pose), n_future frames."""
+
+    n_past: int = 5
+    n_future: int = 10
+    n_verts: int = 400
+    n_hand: int = 99
+    n_betas: int = 10
+    n_bps: int = 1024
+    hidden: int = 192
+    code: int = 48            # per-frame code width of the factorised output head
+    attention: bool = True
+    outputs: str = "full"     # 'full': ΔΘ, Δv, Δd (Eq. 10); 'pose': ΔΘ only
+
+
+@dataclass
+class MNetLossWeights:
+    """λ of Eq. 11 (vertex and offset terms: mean absolute errors in metres; Θ: mean squared error)."""
+
+    v: float = 1.0
+    v_hand: float = 1.0
+    theta: float = 10.0
+    d: float = 1.0
+    feet: float = 1.0
+
+
+def _group_sizes(cfg: MNetConfig) -> dict[str, tuple[int, int]]:
+    """(input size, projection width) per input group."""
+    iaa = 4 * cfg.n_verts if cfg.attention else 3 * cfg.n_verts
+    return {"pose": (cfg.n_past * POSE_DIM + cfg.n_betas, 128), "verts": (6 * cfg.n_verts, 64),
+            "goal": (3 * cfg.n_hand + cfg.n_bps, 64), "iaa": (iaa, 32)}
+
+
+class MNet(nn.Module):
+    """GOAL §3.4: grouped input projections -> residual trunk -> per-frame codes -> shared frame decoder."""
+
+    def __init__(self, cfg: MNetConfig | None = None) -> None:
+        super().__init__()
+        if (cfg or MNetConfig()).outputs not in ("full", "pose"):
+            raise ValueError(f"cfg.outputs: expected 'full' or 'pose', got {cfg.outputs!r}")
+        self.cfg = cfg = cfg or MNetConfig()
+        groups = _group_sizes(cfg)
+        self.norms = nn.ModuleDict({k: Standardiser(n) for k, (n, _) in groups.items()})
+        self.proj = nn.ModuleDict({k: nn.Sequential(nn.Linear(n, w), nn.LayerNorm(w), nn.LeakyReLU(0.2))
+                                   for k, (n, w) in groups.items()})
+        width = sum(w for _, w in groups.values())
+        self.trunk = nn.Sequential(ResBlock(width, cfg.hidden, norm="layer"), ResBlock(cfg.hidden, cfg.hidden, norm="layer"))
+        self.codes = nn.Linear(cfg.hidden, cfg.n_future * cfg.code)
+        self.frame_dim = POSE_DIM + (3 * cfg.n_verts + 3 * cfg.n_hand if cfg.outputs == "full" else 0)
+        self.decoder = nn.Linear(cfg.code, self.frame_dim)
+        self.frame_bias = nn.Parameter(torch.zeros(cfg.n_future, self.frame_dim))
+        self.norm_out = Standardiser(cfg.n_future * self.frame_dim)
+        nn.init.zeros_(self.decoder.weight)                                 # start at the mean change
+        nn.init.zeros_(self.decoder.bias)
+
+    def pack_targets(self, tgt: dict[str, Tensor]) -> Tensor:
+        """Targets dict (B,F,...) -> (B, F * frame_dim) in the network's output layout."""
+        B, F = tgt["d_transl"].shape[:2]
+        parts = [tgt["d_rot6d"].reshape(B, F, -1), tgt["d_transl"]]
+        if self.cfg.outputs == "full":
+            parts += [tgt["d_verts"].reshape(B, F, -1), tgt["d_hand_obj"].reshape(B, F, -1)]
+        return torch.cat(parts, 2).reshape(B, -1)
+
+    def unpack(self, y: Tensor) -> dict[str, Tensor]:
+        """(B, F * frame_dim) -> {'d_rot6d' (B,F,55,6), 'd_transl' (B,F,3)[, 'd_verts' (B,F,400,3), 'd_hand_obj' (B,F,99,3)]}."""
+        c, B, F = self.cfg, y.shape[0], self.cfg.n_future
+        y = y.reshape(B, F, self.frame_dim)
+        out = {"d_rot6d": y[..., :NUM_JOINTS * 6].reshape(B, F, NUM_JOINTS, 6), "d_transl": y[..., NUM_JOINTS * 6:POSE_DIM]}
+        if c.outputs == "full":
+            out["d_verts"] = y[..., POSE_DIM:POSE_DIM + 3 * c.n_verts].reshape(B, F, c.n_verts, 3)
+            out["d_hand_obj"] = y[..., POSE_DIM + 3 * c.n_verts:].reshape(B, F, c.n_hand, 3)
+        return out
+
+    @torch.no_grad()
+    def fit_normalisation(self, feats: dict[str, Tensor], targets: dict[str, Tensor]) -> None:
+        """Standardisation statistics of each input group and of the outputs from training samples."""
+        for k, n in self.norms.items():
+            n.fit(feats[k])
+        self.norm_out.fit(self.pack_targets(targets))
+
+    def forward(self, feats: dict[str, Tensor]) -> dict[str, Tensor]:
+        """Eq. 9 features {'pose', 'verts', 'goal', 'iaa'} (B, ·) -> Eq. 10 changes (see `unpack`)."""
+        h = torch.cat([self.proj[k](self.norms[k](feats[k])) for k in self.proj], 1)
+        h = self.trunk(h)
+        B = h.shape[0]
+        codes = self.codes(h).reshape(B, self.cfg.n_future, self.cfg.code)
+        y = (self.decoder(codes) + self.frame_bias).reshape(B, -1)
+        return self.unpack(self.norm_out.inverse(y))
+
+    def config_dict(self) -> dict:
+        """The config as plain values (for checkpoints)."""
+        return asdict(self.cfg)
+
+
+def feet_mask(targets_abs_z: Tensor, feet: Tensor, height: float = FOOT_CONTACT_HEIGHT) -> Tensor:
+    """(B,F,400) float mask: sampled foot vertices (positions `feet`) whose true height is below `height`."""
+    m = torch.zeros_like(targets_abs_z)
+    m[..., feet] = (targets_abs_z[..., feet] < height).to(m.dtype)
+    return m
+
+
+def mnet_loss(out: dict[str, Tensor], tgt: dict[str, Tensor], foot: Tensor | None = None,
+              w: MNetLossWeights | None = None, n_hand: int = 99) -> dict[str, Tensor]:
+    """Eq. 11: {'loss', 'theta', ['v', 'v_hand', 'd', 'feet']}; `foot` (B,F,400) masks L_v^f (see `feet_mask`)."""
+    w = w or MNetLossWeights()
+    terms = {"theta": torch.cat([(out["d_rot6d"] - tgt["d_rot6d"]).flatten(2), out["d_transl"] - tgt["d_transl"]],
+                                2).pow(2).mean()}
+    lam = {"theta": w.theta, "v": w.v, "v_hand": w.v_hand, "d": w.d, "feet": w.feet}
+    if "d_verts" in out:
+        err = (out["d_verts"] - tgt["d_verts"]).abs()               # (B,F,400,3)
+        terms["v"] = err.mean()
+        terms["v_hand"] = err[:, :, :n_hand].mean()
+        terms["d"] = (out["d_hand_obj"] - tgt["d_hand_obj"]).abs().mean()
+        if foot is not None:
+            terms["feet"] = (err.mean(-1) * foot).sum() / foot.sum().clamp_min(1.0)
+    terms["loss"] = sum(lam[k] * t for k, t in terms.items())
+    return terms
+
+
+def apply_changes(rot6d_t: Tensor, transl_t: Tensor, out: dict[str, Tensor]) -> tuple[Tensor, Tensor]:
+    """Frame t's canonical Θ (B,55,6), (B,3) plus MNet's changes -> future Θ (B,F,55,6) (re-orthonormalised), (B,F,3)."""
+    r = matrix_to_rot6d(rot6d_to_matrix(rot6d_t[:, None] + out["d_rot6d"]))
+    return r, transl_t[:, None] + out["d_transl"]
+
+
+# ------------------------------------------------------------------------------------------- rollout
+
+@dataclass
+class Rollout:
+    """A generated motion in the world: rot6d (T,55,6), transl (T,3); the mean hand-to-goal distance per frame (T,),
+    whether the goal grasp was reached, and the first refined frame (None if the refinement never started)."""
+
+    rot6d: Tensor
+    transl: Tensor
+    hand_dist: Tensor
+    reached: bool
+    first_refined: int | None
+
+
+def _invert(R: Tensor, o: Tensor) -> tuple[Tensor, Tensor]:
+    """(R, o) of the inverse map x' -> R^T x' + o, written as R_inv (x' − o_inv)."""
+    return R.transpose(1, 2), -(R @ o.unsqueeze(-1)).squeeze(-1)
+
+
+@torch.no_grad()
+def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, Tensor], betas: Tensor,
+            object_points: Tensor, basis: Tensor, max_frames: int = 300, refine: bool = True,
+            reach_tol: float = 0.01, min_speed: float = 0.003, refine_weights=None) -> Rollout:
+    """GOAL's autoregressive inference (§3.4) for one body: from `start` (rot6d (55,6), transl (3,)) to the grasp
+    `goal` (same), re-canonicalised at every step; 10 frames per step while far, one frame per step once the hand is
+    within 10 cm of the goal hand, each then refined by Eq. 12–13 (`min_speed` m/frame floors Eq. 12's step so that a
+    hand MNet slows early still arrives). Stops when the mean hand-to-goal distance is below `reach_tol` m or at
+    `max_frames`. `body` is a SparseBody over the 400 sampled vertices (hand first); object points (P,3) world."""
+    from graspkit.optim.goal_refine import (GOAL_HAND_RADIUS, MotionRefineWeights, hand_object_offsets,
+                                            hand_step_targets, refine_frame)
+    from graspkit.models.gnet import SparseBody, pose_rotmats
+
+    mnet.eval()
+    c = mnet.cfg
+    betas = betas.reshape(1, -1).float()
+    root = rest_root(body.bm, betas)
+    hand_body = SparseBody(body.bm, body.ids[:c.n_hand])
+    obj = object_points.reshape(1, -1, 3).float()
+    centre = 0.5 * (obj[0].min(0).values + obj[0].max(0).values)[None]
+
+    def verts(r6, t):
+        return body(pose_rotmats(r6), betas.expand(len(r6), -1), t)[0].float()
+
+    goal_hand = verts(goal[0][None].float(), goal[1][None].float())[:, :c.n_hand]
+    rs, ts = [start[0].float()], [start[1].float()]
+    vs = [verts(rs[0][None], ts[0][None])[0]]
+    dist = [float((vs[0][:c.n_hand] - goal_hand[0]).norm(dim=-1).mean())]
+    first_refined = None
+    while len(rs) < max_frames and dist[-1] > reach_tol:
+        idx = [max(len(rs) - c.n_past + k, 0) for k in range(c.n_past)]
+        s = MNetState(torch.stack([rs[i] for i in idx])[None], torch.stack([ts[i] for i in idx])[None], betas,
+                      vs[-1][None], vs[max(len(vs) - 2, 0)][None], goal_hand, centre,
+                      hand_object_offsets(vs[-1][None], obj), root)
+        feats, R, o = mnet_inputs(s, basis, c.attention, c.n_hand)
+        out = mnet(feats)
+        r_now, t_now = transform_params(s.rot6d[:, -1], s.transl[:, -1], root, R, o)
+        r_c, t_c = apply_changes(r_now, t_now, out)
+        Ri, oi = _invert(R, o)
+        r_w, t_w = transform_params(r_c, t_c, root, Ri, oi)                       # (1,F,55,6), (1,F,3) world
+        near = refine and dist[-1] < GOAL_HAND_RADIUS
+        for k in range(1 if near else c.n_future):
+            r, t = r_w[:, k], t_w[:, k]
+            if near:
+                first_refined = len(rs) if first_refined is None else first_refined
+                if "d_verts" in out:
+                    prev = out["d_verts"][:, k - 1, :c.n_hand] if k else torch.zeros_like(out["d_verts"][:, 0, :c.n_hand])
+                    speed = (out["d_verts"][:, k, :c.n_hand] - prev).norm(dim=-1).mean(1)
+                else:
+                    speed = (verts(r, t)[:, :c.n_hand] - vs[-1][None, :c.n_hand]).norm(dim=-1).mean(1)
+                target = hand_step_targets(vs[-1][None, :c.n_hand], goal_hand, speed.clamp_min(min_speed))
+                with torch.enable_grad():
+                    r, t = refine_frame(hand_body, r, t, betas, target, refine_weights or MotionRefineWeights())
+            rs.append(r[0])
+            ts.append(t[0])
+            vs.append(verts(r, t)[0])
+            dist.append(float((vs[-1][:c.n_hand] - goal_hand[0]).norm(dim=-1).mean()))
+            if len(rs) >= max_frames or dist[-1] <= reach_tol:
+                break
+    return Rollout(torch.stack(rs), torch.stack(ts), torch.tensor(dist), dist[-1] <= reach_tol, first_refined)

@@ -1,0 +1,167 @@
+"""MNet (GOAL §3.4, Eq. 9-13): canonical frames against the body model, invariance, round trips, loss, rollout."""
+import math
+
+import pytest
+import torch
+
+from graspkit.body import BodyModel
+from graspkit.body.markers import goal_vertices
+from graspkit.body.skeleton import JOINT_INDEX as J
+from graspkit.models.gnet import SparseBody, pose_rotmats
+from graspkit.models.mnet import (MNet, MNetConfig, MNetState, apply_changes, canonical_frame, feet_mask, heading,
+                                  mnet_inputs, mnet_loss, mnet_targets, rest_root, rollout, transform_params,
+                                  transform_points)
+from graspkit.objects.bps import bps_basis
+from graspkit.optim.goal_refine import hand_object_offsets
+from graspkit.paths import default_model_path
+from graspkit.rotations import axis_angle_to_rot6d, rotation_about_z
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    """One torch thread (the machine's cores are shared), restored afterwards."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+@pytest.fixture(scope="module")
+def setup():
+    bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    gv = goal_vertices(bm)
+    return bm, gv, SparseBody(bm, torch.as_tensor(gv.vertex_ids))
+
+
+def _random_params(B, T, seed):
+    g = torch.Generator().manual_seed(seed)
+    aa = 0.2 * torch.randn(B, T, 55, 3, generator=g)
+    aa[..., 0, :] = torch.tensor([math.pi / 2, 0, 0]) + 0.3 * torch.randn(B, T, 3, generator=g)
+    return axis_angle_to_rot6d(aa), torch.randn(B, T, 3, generator=g) * torch.tensor([1.0, 1.0, 0.05]), \
+        0.5 * torch.randn(B, 10, generator=g)
+
+
+def _state(body, rot6d, transl, betas, obj, goal_hand):
+    """MNetState at the last of 6 frames (5 past + the previous one for velocities)."""
+    B = len(betas)
+    v = body(pose_rotmats(rot6d[:, -2:].reshape(-1, 55, 6)), betas.repeat_interleave(2, 0),
+             transl[:, -2:].reshape(-1, 3))[0].reshape(B, 2, -1, 3)
+    return MNetState(rot6d[:, -5:], transl[:, -5:], betas, v[:, 1], v[:, 0], goal_hand, obj.mean(1),
+                     hand_object_offsets(v[:, 1], obj), rest_root(body.bm, betas))
+
+
+def test_transform_params_moves_the_mesh_rigidly(setup):
+    bm, _, _ = setup
+    rot6d, transl, betas = _random_params(3, 1, 0)
+    rot6d, transl = rot6d[:, 0], transl[:, 0]
+    R = rotation_about_z(torch.tensor([0.3, -2.0, 1.1]))
+    o = torch.tensor([[0.5, -0.2, 0.0], [1.0, 2.0, 0.0], [-0.3, 0.1, 0.0]])
+    before = bm.forward_rotmats(pose_rotmats(rot6d), betas=betas, transl=transl).vertices
+    r2, t2 = transform_params(rot6d, transl, rest_root(bm, betas), R, o)
+    after = bm.forward_rotmats(pose_rotmats(r2), betas=betas, transl=t2).vertices
+    torch.testing.assert_close(after, transform_points(before, R, o), atol=2e-5, rtol=0)
+
+
+def test_canonical_frame_puts_the_body_at_the_origin_facing_y(setup):
+    bm, _, _ = setup
+    rot6d, transl, betas = _random_params(4, 1, 1)
+    root = rest_root(bm, betas)
+    R, o = canonical_frame(pose_rotmats(rot6d[:, 0, 0]), root + transl[:, 0])
+    r2, t2 = transform_params(rot6d[:, 0], transl[:, 0], root, R, o)
+    torch.testing.assert_close(heading(pose_rotmats(r2[:, 0])), torch.full((4,), math.pi / 2), atol=1e-5, rtol=0)
+    pelvis = root + t2
+    torch.testing.assert_close(pelvis[:, :2], torch.zeros(4, 2), atol=1e-5, rtol=0)
+    torch.testing.assert_close(pelvis[:, 2], (root + transl[:, 0])[:, 2], atol=1e-5, rtol=0)
+
+
+def test_inputs_do_not_change_when_the_whole_scene_turns_and_moves(setup):
+    bm, gv, body = setup
+    rot6d, transl, betas = _random_params(2, 6, 2)
+    g = torch.Generator().manual_seed(3)
+    obj = torch.randn(2, 200, 3, generator=g) * 0.05 + torch.tensor([0.5, 0.5, 0.9])
+    goal_hand = torch.randn(2, 99, 3, generator=g) * 0.05 + torch.tensor([0.5, 0.45, 0.9])
+    basis = bps_basis()
+    f1, _, _ = mnet_inputs(_state(body, rot6d, transl, betas, obj, goal_hand), basis)
+    R = rotation_about_z(torch.tensor([0.7, -1.9]))                       # the world turns and shifts (x -> R(x - o))
+    o = torch.tensor([[0.3, -1.0, 0.0], [2.0, 0.5, 0.0]])
+    r2, t2 = transform_params(rot6d, transl, rest_root(bm, betas), R, o)
+    f2, _, _ = mnet_inputs(_state(body, r2, t2, betas, transform_points(obj, R, o),
+                                  transform_points(goal_hand, R, o)), basis)
+    for k in f1:
+        torch.testing.assert_close(f1[k], f2[k], atol=2e-4, rtol=1e-4)
+
+
+def test_targets_round_trip_to_the_future_frames(setup):
+    bm, gv, body = setup
+    rot6d, transl, betas = _random_params(2, 16, 4)
+    g = torch.Generator().manual_seed(5)
+    obj = torch.randn(2, 200, 3, generator=g) * 0.05
+    s = _state(body, rot6d[:, :6], transl[:, :6], betas, obj, torch.zeros(2, 99, 3))
+    _, R, o = mnet_inputs(s, bps_basis())
+    fut_v = body(pose_rotmats(rot6d[:, 6:].reshape(-1, 55, 6)), betas.repeat_interleave(10, 0),
+                 transl[:, 6:].reshape(-1, 3))[0].reshape(2, 10, -1, 3)
+    tgt = mnet_targets(s, R, o, rot6d[:, 6:], transl[:, 6:], fut_v,
+                       hand_object_offsets(fut_v.reshape(20, -1, 3), obj.repeat_interleave(10, 0)).reshape(2, 10, -1, 3))
+    r_now, t_now = transform_params(s.rot6d[:, -1], s.transl[:, -1], s.root, R, o)
+    r_c, t_c = apply_changes(r_now, t_now, tgt)
+    v_c = body(pose_rotmats(r_c.reshape(-1, 55, 6)), betas.repeat_interleave(10, 0), t_c.reshape(-1, 3))[0]
+    torch.testing.assert_close(v_c.reshape(2, 10, -1, 3), transform_points(fut_v, R, o), atol=5e-5, rtol=0)
+    torch.testing.assert_close(transform_points(s.verts, R, o)[:, None] + tgt["d_verts"], transform_points(fut_v, R, o),
+                               atol=1e-5, rtol=0)
+
+
+def test_network_shapes_variants_and_loss(setup):
+    B = 3
+    for cfg, keys in ((MNetConfig(), {"d_rot6d", "d_transl", "d_verts", "d_hand_obj"}),
+                      (MNetConfig(attention=False, outputs="pose", n_future=1), {"d_rot6d", "d_transl"})):
+        net = MNet(cfg)
+        iaa = 1600 if cfg.attention else 1200
+        feats = {"pose": torch.randn(B, 5 * 333 + 10), "verts": torch.randn(B, 2400), "goal": torch.randn(B, 297 + 1024),
+                 "iaa": torch.randn(B, iaa)}
+        out = net(feats)
+        assert set(out) == keys and out["d_rot6d"].shape == (B, cfg.n_future, 55, 6)
+        tgt = {"d_rot6d": torch.randn(B, cfg.n_future, 55, 6), "d_transl": torch.randn(B, cfg.n_future, 3),
+               "d_verts": torch.randn(B, cfg.n_future, 400, 3), "d_hand_obj": torch.randn(B, cfg.n_future, 99, 3)}
+        net.fit_normalisation(feats, tgt)
+        mean = net(feats)                                          # untrained: the mean change of the data
+        torch.testing.assert_close(mean["d_transl"], tgt["d_transl"].mean(0).expand(B, -1, -1), atol=1e-5, rtol=1e-5)
+        truth = {k: tgt[k] for k in keys}
+        assert float(mnet_loss(truth, tgt, feet_mask(torch.zeros(B, cfg.n_future, 400), torch.arange(139, 179)))["loss"]) == 0
+    with pytest.raises(ValueError, match="outputs"):
+        MNet(MNetConfig(outputs="markers"))
+
+
+def test_feet_mask_selects_low_foot_vertices():
+    z = torch.tensor([[[0.01, 0.2, 0.03, 0.0]]])
+    m = feet_mask(z, torch.tensor([1, 2]))
+    assert m.tolist() == [[[0.0, 0.0, 1.0, 0.0]]]
+
+
+def test_rollout_reaches_a_nearby_goal_by_the_refinement_alone(setup):
+    """An untrained MNet predicts no change (the body stands still); Eq. 12-13 must carry the hand to the goal."""
+    bm, gv, body = setup
+    aa = torch.zeros(55, 3)
+    aa[0] = torch.tensor([math.pi / 2, 0, 0])
+    aa[J["right_shoulder"]] = torch.tensor([0, 0, 0.9])
+    goal = (axis_angle_to_rot6d(aa), torch.zeros(3))
+    aa2 = aa.clone()
+    aa2[J["right_elbow"]] += torch.tensor([0.0, 0.25, 0.0])           # the hand starts ~5 cm from the goal hand
+    net = MNet()
+    obj = body(pose_rotmats(goal[0][None]), torch.zeros(1, 10), goal[1][None])[0][0, :99] + 0.02
+    out = rollout(net, body, (axis_angle_to_rot6d(aa2), torch.zeros(3)), goal, torch.zeros(10), obj, bps_basis(),
+                  max_frames=60, reach_tol=0.01, min_speed=0.004)
+    assert out.first_refined == 1 and out.reached
+    assert 0.03 < float(out.hand_dist[0]) < 0.1 and float(out.hand_dist[-1]) <= 0.01
+    assert len(out.rot6d) < 25                                     # ~4 mm per frame: about 10-15 frames
+    torch.testing.assert_close(out.transl[:, :2], torch.zeros(len(out.transl), 2), atol=5e-3, rtol=0)  # body stays
+
+
+def test_rollout_far_from_the_goal_runs_to_the_maximum(setup):
+    bm, gv, body = setup
+    aa = torch.zeros(55, 3)
+    aa[0] = torch.tensor([math.pi / 2, 0, 0])
+    start = (axis_angle_to_rot6d(aa), torch.zeros(3))
+    goal = (axis_angle_to_rot6d(aa), torch.tensor([0.0, -1.0, 0.0]))
+    out = rollout(MNet(), body, start, goal, torch.zeros(10), torch.randn(50, 3) * 0.05, bps_basis(), max_frames=35)
+    assert len(out.rot6d) == 35 and not out.reached and out.first_refined is None
+    torch.testing.assert_close(out.hand_dist, torch.full((35,), 1.0), atol=1e-4, rtol=0)   # standing still, 1 m away
