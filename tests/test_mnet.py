@@ -148,7 +148,7 @@ def test_rollout_reaches_a_nearby_goal_by_the_refinement_alone(setup):
     aa2[J["right_elbow"]] += torch.tensor([0.0, 0.25, 0.0])           # the hand starts ~5 cm from the goal hand
     net = MNet()
     obj = body(pose_rotmats(goal[0][None]), torch.zeros(1, 10), goal[1][None])[0][0, :99] + 0.02
-    out = rollout(net, body, (axis_angle_to_rot6d(aa2), torch.zeros(3)), goal, torch.zeros(10), obj, bps_basis(),
+    out = rollout(net, body, (axis_angle_to_rot6d(aa2), torch.zeros(3)), goal, torch.zeros(10), obj, obj.mean(0), bps_basis(),
                   max_frames=60, reach_tol=0.01, min_speed=0.004)
     assert out.first_refined == 1 and out.reached
     assert 0.03 < float(out.hand_dist[0]) < 0.1 and float(out.hand_dist[-1]) <= 0.01
@@ -162,6 +162,49 @@ def test_rollout_far_from_the_goal_runs_to_the_maximum(setup):
     aa[0] = torch.tensor([math.pi / 2, 0, 0])
     start = (axis_angle_to_rot6d(aa), torch.zeros(3))
     goal = (axis_angle_to_rot6d(aa), torch.tensor([0.0, -1.0, 0.0]))
-    out = rollout(MNet(), body, start, goal, torch.zeros(10), torch.randn(50, 3) * 0.05, bps_basis(), max_frames=35)
+    out = rollout(MNet(), body, start, goal, torch.zeros(10), torch.randn(50, 3) * 0.05, torch.zeros(3),
+                  bps_basis(), max_frames=35)
     assert len(out.rot6d) == 35 and not out.reached and out.first_refined is None
     torch.testing.assert_close(out.hand_dist, torch.full((35,), 1.0), atol=1e-4, rtol=0)   # standing still, 1 m away
+
+
+def _reach_clips(n=2):
+    """Reaching clips from data_stubs as approach clips: a 4 cm ball of points at the reaching goal."""
+    from pathlib import Path
+
+    from graspkit.data import load_motion
+    from graspkit.models.mnet import ApproachClip
+    g = torch.Generator().manual_seed(0)
+    out = []
+    for p in sorted(Path(default_model_path()).parents[2].joinpath("motion", "reach").glob("*.npz"))[:n]:
+        m = load_motion(p)
+        ball = torch.nn.functional.normalize(torch.randn(300, 3, generator=g), dim=-1) * 0.04 + torch.as_tensor(m.goal)
+        out.append(ApproachClip(axis_angle_to_rot6d(torch.as_tensor(m.poses)), torch.as_tensor(m.trans),
+                                torch.as_tensor(m.betas), m.goal_frame, ball, torch.as_tensor(m.goal), p.stem))
+    return out
+
+
+def test_windows_hold_the_clip_and_pad_its_ends(setup):
+    from graspkit.models.mnet import MNetWindows
+    bm, gv, body = setup
+    clips = _reach_clips(2)
+    w = MNetWindows(clips, body, bps_basis())
+    T0 = len(clips[0].rot6d)
+    assert len(w) == T0 + len(clips[1].rot6d)
+    feats, tgt, foot = w.batch(torch.tensor([0, T0 - 1, T0 + 5]))
+    assert feats["pose"].shape == (3, 5 * 333 + 10) and feats["iaa"].shape == (3, 1600)
+    for k in ("d_rot6d", "d_transl", "d_verts", "d_hand_obj"):               # the last frame holds: no change
+        assert float(tgt[k][1].abs().max()) == 0.0
+    s = w.state(torch.tensor([0, T0 + 5]))
+    assert torch.equal(s.rot6d[0], clips[0].rot6d[:1].float().expand(5, -1, -1))   # a static start before frame 0
+    assert torch.equal(s.rot6d[1], clips[1].rot6d[1:6].float())
+    assert foot.shape == (3, 10, 400) and 0 < float(foot.sum())                  # standing: sampled soles on the floor
+
+
+def test_mnet_learns_the_reaching_windows(setup):
+    from graspkit.models.mnet import MNetWindows, train_mnet
+    from graspkit.train import TrainConfig
+    bm, gv, body = setup
+    w = MNetWindows(_reach_clips(2), body, bps_basis(), stride=2)
+    net, hist = train_mnet(w, None, train_cfg=TrainConfig(epochs=15, batch_size=32, lr=2e-3), progress=False)
+    assert hist[-1]["loss"] < 0.5 * hist[0]["loss"] and hist[-1]["v"] < 0.5 * hist[0]["v"]

@@ -28,6 +28,7 @@ outputs Θ only (no offsets to refine with, no head direction), trained with the
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import torch
 from torch import Tensor, nn
@@ -38,6 +39,7 @@ from graspkit.rotations import rot6d_to_matrix
 
 NUM_JOINTS = 55
 POSE_DIM = NUM_JOINTS * 6 + 3        # Θ = 55 6D rotations + translation γ
+GNET_KEYS = ("rot6d", "transl", "betas", "verts", "head_dir", "obj_transl", "bps", "offsets")
 
 
 # ------------------------------------------------------------------------------------------- the body at few vertices
@@ -273,3 +275,64 @@ def gnet_loss(out: dict[str, Tensor], mu: Tensor, logvar: Tensor, batch: dict[st
 def count_parameters(model: nn.Module) -> int:
     """Number of trainable parameters."""
     return sum(p.numel() for p in model.parameters() if p.requires_grad)
+
+
+# ------------------------------------------------------------------------------------------- checkpoints
+
+def save_weights(path: str | Path, model: nn.Module, kind: str, extra: dict | None = None, half: bool = True) -> Path:
+    """A shipped checkpoint (atomic, weights only): {'kind', 'config', 'model' (float16 if `half`), 'extra'}."""
+    from graspkit.train import save_checkpoint
+
+    state = {k: (v.half() if half and v.is_floating_point() else v).clone() for k, v in model.state_dict().items()}
+    return save_checkpoint(path, {"kind": kind, "config": model.config_dict(), "model": state, "extra": extra or {}})
+
+
+def load_weights(path: str | Path, kind: str) -> tuple[dict[str, Tensor], dict]:
+    """(float32 state dict, config) from a shipped checkpoint or a training checkpoint of graspkit.train.fit."""
+    from graspkit.train import load_checkpoint
+
+    ck = load_checkpoint(path)
+    if "kind" in ck and ck["kind"] != kind:
+        raise ValueError(f"{path}: a {ck['kind']!r} checkpoint, expected {kind!r}")
+    config = ck.get("config") if "kind" in ck else ck.get("extra", {}).get(f"{kind}_config")
+    if config is None:
+        raise ValueError(f"{path}: no {kind} config inside (expected a checkpoint written by graspkit)")
+    state = {k: v.float() if v.is_floating_point() else v for k, v in ck["model"].items()}
+    return state, config
+
+
+def load_gnet(path: str | Path) -> GNet:
+    """A GNet from a shipped (or training) checkpoint, in float32 and eval mode."""
+    state, config = load_weights(path, "gnet")
+    net = GNet(GNetConfig(**config))
+    net.load_state_dict(state)
+    return net.eval()
+
+
+def train_gnet(train: dict[str, Tensor], val: dict[str, Tensor] | None, body: SparseBody,
+               cfg: GNetConfig | None = None, weights: GNetLossWeights | None = None, train_cfg=None,
+               checkpoint=None, time_limit_s=None, progress: bool = True) -> tuple[GNet, list[dict[str, float]]]:
+    """Fit GNet (Eq. 3) with the shared loop on samples {key: (N, ...)} (see GNet.features for the keys)."""
+    from graspkit.train import TrainConfig, fit
+
+    train_cfg = train_cfg or TrainConfig(epochs=60, batch_size=64, lr=1e-3)
+    torch.manual_seed(train_cfg.seed)
+    net = GNet(cfg)
+    net.fit_normalisation(train)
+    keys = list(GNET_KEYS)
+
+    def step(model, batch, epoch):
+        b = dict(zip(keys, batch))     # training draws z from torch's RNG, which fit() saves and restores on resume
+        out, mu, logvar = model(b, generator=None if model.training else torch.Generator().manual_seed(0))
+        return gnet_loss(out, mu, logvar, b, body, weights, net.cfg.n_hand)
+
+    def tensors(d):
+        missing = [k for k in keys if k not in d]
+        if missing:
+            raise ValueError(f"samples: missing {missing} (expected {keys})")
+        return torch.utils.data.TensorDataset(*[d[k].float() for k in keys])
+
+    hist = fit(net, step, tensors(train), train_cfg, checkpoint=checkpoint,
+               val_dataset=None if val is None else tensors(val), progress=progress, time_limit_s=time_limit_s,
+               extra={"gnet_config": net.config_dict()})
+    return net, hist

@@ -103,16 +103,22 @@ class MNetState:
     root: Tensor           # (B,3)
 
 
-def mnet_inputs(s: MNetState, basis: Tensor, attention: bool = True, n_hand: int = 99
+def goal_hand_bps(s: MNetState, R: Tensor, basis: Tensor) -> Tensor:
+    """b^h_g (B,1024): BPS of the goal hand on the object's basis, in the canonical frame R of frame t."""
+    return bps_encode(transform_points(s.goal_hand - s.obj_centre[:, None], R), basis.to(s.goal_hand.dtype))
+
+
+def mnet_inputs(s: MNetState, basis: Tensor, attention: bool = True, n_hand: int = 99, bps: Tensor | None = None
                 ) -> tuple[dict[str, Tensor], Tensor, Tensor]:
-    """Eq. 9 in the canonical frame of frame t: {'pose', 'verts', 'goal', 'iaa'} (B, ·) and the frame's R, o."""
+    """Eq. 9 in the canonical frame of frame t: {'pose', 'verts', 'goal', 'iaa'} (B, ·) and the frame's R, o
+    (`bps`: b^h_g when already computed, see `goal_hand_bps`)."""
     B = s.betas.shape[0]
     R, o = canonical_frame(rot6d_to_matrix(s.rot6d[:, -1, 0]), s.root + s.transl[:, -1])
     rot6d, transl = transform_params(s.rot6d, s.transl, s.root, R, o)
     v, vp = transform_points(s.verts, R, o), transform_points(s.verts_prev, R, o)
     goal = transform_points(s.goal_hand, R, o)
     d = transform_points(s.obj_offsets, R)
-    bps = bps_encode(transform_points(s.goal_hand - s.obj_centre[:, None], R), basis.to(v.dtype))
+    bps = goal_hand_bps(s, R, basis) if bps is None else bps
     if attention:
         iaa = torch.cat([(torch.exp(-IAA_WEIGHT * d.norm(dim=-1, keepdim=True)) * d).reshape(B, -1),
                          torch.exp(-IAA_WEIGHT * v[..., 2].clamp_min(0))], 1)
@@ -284,13 +290,14 @@ def _invert(R: Tensor, o: Tensor) -> tuple[Tensor, Tensor]:
 
 @torch.no_grad()
 def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, Tensor], betas: Tensor,
-            object_points: Tensor, basis: Tensor, max_frames: int = 300, refine: bool = True,
+            object_points: Tensor, obj_centre: Tensor, basis: Tensor, max_frames: int = 300, refine: bool = True,
             reach_tol: float = 0.01, min_speed: float = 0.003, refine_weights=None) -> Rollout:
     """GOAL's autoregressive inference (§3.4) for one body: from `start` (rot6d (55,6), transl (3,)) to the grasp
     `goal` (same), re-canonicalised at every step; 10 frames per step while far, one frame per step once the hand is
     within 10 cm of the goal hand, each then refined by Eq. 12–13 (`min_speed` m/frame floors Eq. 12's step so that a
     hand MNet slows early still arrives). Stops when the mean hand-to-goal distance is below `reach_tol` m or at
-    `max_frames`. `body` is a SparseBody over the 400 sampled vertices (hand first); object points (P,3) world."""
+    `max_frames`. `body` is a SparseBody over the 400 sampled vertices (hand first); object points (P,3) and the
+    object centre (3,) (the BPS basis centre) in the world."""
     from graspkit.optim.goal_refine import (GOAL_HAND_RADIUS, MotionRefineWeights, hand_object_offsets,
                                             hand_step_targets, refine_frame)
     from graspkit.models.gnet import SparseBody, pose_rotmats
@@ -301,7 +308,7 @@ def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, 
     root = rest_root(body.bm, betas)
     hand_body = SparseBody(body.bm, body.ids[:c.n_hand])
     obj = object_points.reshape(1, -1, 3).float()
-    centre = 0.5 * (obj[0].min(0).values + obj[0].max(0).values)[None]
+    centre = obj_centre.reshape(1, 3).float()
 
     def verts(r6, t):
         return body(pose_rotmats(r6), betas.expand(len(r6), -1), t)[0].float()
@@ -342,3 +349,136 @@ def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, 
             if len(rs) >= max_frames or dist[-1] <= reach_tol:
                 break
     return Rollout(torch.stack(rs), torch.stack(ts), torch.tensor(dist), dist[-1] <= reach_tol, first_refined)
+
+
+# ------------------------------------------------------------------------------------------- training windows
+
+@dataclass
+class ApproachClip:
+    """One approach-and-grasp sequence in the world (z up): rot6d (T,55,6), transl (T,3), betas (10,), the goal frame
+    (first frame of the final grasp), object surface points (P,3) and the object centre (3,) (the BPS basis centre)."""
+
+    rot6d: Tensor
+    transl: Tensor
+    betas: Tensor
+    goal_frame: int
+    object_points: Tensor
+    obj_centre: Tensor
+    name: str = ""
+
+
+class MNetWindows:
+    """All (past 5, current, future 10) windows of a set of clips, features built per batch (Eq. 9-10).
+
+    Frames before a clip's start repeat its first frame (a static start, as in a rollout); frames after its end
+    repeat its last (the grasp holds). Per frame the 400 sampled vertices and their offsets to the object are
+    computed once; everything that depends on frame t's canonical frame is computed in `batch`."""
+
+    def __init__(self, clips: list[ApproachClip], body, basis: Tensor, cfg: MNetConfig | None = None,
+                 stride: int = 1, chunk: int = 256) -> None:
+        from graspkit.models.gnet import pose_rotmats
+        from graspkit.optim.goal_refine import hand_object_offsets
+
+        if not clips:
+            raise ValueError("clips: empty")
+        self.cfg, self.basis = cfg or MNetConfig(), basis
+        rot, tr, vs, offs, start, end, goal, clip_of, betas, centre = [], [], [], [], [], [], [], [], [], []
+        n = 0
+        for k, c in enumerate(clips):
+            T = len(c.rot6d)
+            if not 0 <= c.goal_frame < T:
+                raise ValueError(f"clips[{k}].goal_frame: expected a frame in [0, {T}), got {c.goal_frame}")
+            b = c.betas.reshape(1, -1).float()
+            v = torch.cat([body(pose_rotmats(c.rot6d[i:i + chunk].float()), b.expand(len(c.rot6d[i:i + chunk]), -1),
+                                c.transl[i:i + chunk].float())[0] for i in range(0, T, chunk)]).float()
+            with torch.no_grad():
+                offs.append(hand_object_offsets(v, c.object_points.float()[None].expand(T, -1, -1)))
+            rot.append(c.rot6d.float())
+            tr.append(c.transl.float())
+            vs.append(v.detach())
+            goal.append(v[c.goal_frame, :self.cfg.n_hand].detach())
+            betas.append(b[0])
+            centre.append(c.obj_centre.float().reshape(3))
+            start.append(torch.full((T,), n))
+            end.append(torch.full((T,), n + T - 1))
+            clip_of.append(torch.full((T,), k))
+            n += T
+        self.rot6d, self.transl, self.verts, self.offsets = torch.cat(rot), torch.cat(tr), torch.cat(vs), torch.cat(offs)
+        self.start, self.end, self.clip = torch.cat(start), torch.cat(end), torch.cat(clip_of)
+        self.goal_hand, self.betas, self.centre = torch.stack(goal), torch.stack(betas), torch.stack(centre)
+        self.root = rest_root(body.bm, self.betas)
+        self.feet = torch.as_tensor(feet_positions(body))
+        self.windows = torch.arange(0, n, stride)
+        self.bps = torch.cat([self._bps(self.windows[i:i + chunk]) for i in range(0, len(self.windows), chunk)])
+
+    def _bps(self, t: Tensor) -> Tensor:
+        """b^h_g of windows at global frames t (computed once: the nearest-point search is the costly feature)."""
+        s = self.state(t)
+        R, _ = canonical_frame(rot6d_to_matrix(s.rot6d[:, -1, 0]), s.root + s.transl[:, -1])
+        return goal_hand_bps(s, R, self.basis).float()
+
+    def __len__(self) -> int:
+        return len(self.windows)
+
+    def state(self, t: Tensor) -> MNetState:
+        """MNetState at global frames t (B,)."""
+        c, s = self.clip[t], self.start[t]
+        past = torch.maximum(t[:, None] + torch.arange(-self.cfg.n_past + 1, 1), s[:, None])
+        prev = torch.maximum(t - 1, s)
+        return MNetState(self.rot6d[past], self.transl[past], self.betas[c], self.verts[t], self.verts[prev],
+                         self.goal_hand[c], self.centre[c], self.offsets[t], self.root[c])
+
+    def batch(self, index: Tensor) -> tuple[dict[str, Tensor], dict[str, Tensor], Tensor]:
+        """Features, targets and the foot mask of windows `index` (B,) (positions in this set)."""
+        t = self.windows[index]
+        s = self.state(t)
+        feats, R, o = mnet_inputs(s, self.basis, self.cfg.attention, self.cfg.n_hand, self.bps[index])
+        fut = torch.minimum(t[:, None] + torch.arange(1, self.cfg.n_future + 1), self.end[t][:, None])
+        tgt = mnet_targets(s, R, o, self.rot6d[fut], self.transl[fut], self.verts[fut], self.offsets[fut], self.cfg.n_hand)
+        return feats, tgt, feet_mask(self.verts[fut][..., 2], self.feet)
+
+
+def feet_positions(body) -> list[int]:
+    """Positions, among a SparseBody's vertices, of those dominated by an ankle or foot joint."""
+    from graspkit.optim.goal_refine import feet_vertex_ids
+
+    feet = set(feet_vertex_ids(body.bm).tolist())
+    return [i for i, v in enumerate(body.ids.tolist()) if v in feet]
+
+
+def train_mnet(train: MNetWindows, val: MNetWindows | None, cfg: MNetConfig | None = None,
+               weights: MNetLossWeights | None = None, train_cfg=None, checkpoint=None, time_limit_s=None,
+               progress: bool = True) -> tuple[MNet, list[dict[str, float]]]:
+    """Fit MNet with the shared loop (graspkit.train.fit) on windows; normalisation from up to 4096 windows."""
+    from graspkit.train import TrainConfig, fit
+
+    train_cfg = train_cfg or TrainConfig(epochs=10, batch_size=128, lr=1e-3)
+    torch.manual_seed(train_cfg.seed)
+    net = MNet(cfg or train.cfg)
+    if net.cfg.attention != train.cfg.attention:
+        raise ValueError("cfg.attention: the windows were built with a different attention setting")
+    g = torch.Generator().manual_seed(train_cfg.seed)
+    sub = torch.randperm(len(train), generator=g)[:4096]
+    feats, tgt, _ = train.batch(sub)
+    net.fit_normalisation(feats, tgt)
+
+    def step(model, batch, epoch):
+        sets = train if model.training else val
+        f, y, foot = sets.batch(batch[0])
+        return mnet_loss(model(f), y, foot, weights, net.cfg.n_hand)
+
+    data = torch.utils.data.TensorDataset(torch.arange(len(train)))
+    val_data = None if val is None else torch.utils.data.TensorDataset(torch.arange(len(val)))
+    hist = fit(net, step, data, train_cfg, checkpoint=checkpoint, val_dataset=val_data, progress=progress,
+               time_limit_s=time_limit_s, extra={"mnet_config": net.config_dict()})
+    return net, hist
+
+
+def load_mnet(path) -> MNet:
+    """An MNet from a shipped (or training) checkpoint, in float32 and eval mode."""
+    from graspkit.models.gnet import load_weights
+
+    state, config = load_weights(path, "mnet")
+    net = MNet(MNetConfig(**config))
+    net.load_state_dict(state)
+    return net.eval()
