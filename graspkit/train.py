@@ -11,8 +11,10 @@ extra such as normalisation statistics), so it loads with `torch.load(path, weig
 stopped at any point resumes from the last finished epoch with the same numbers as an uninterrupted run: the
 data order of each epoch comes from `seed + epoch`, and the RNG state is saved.
 
-DDP: when `torch.distributed` is initialised (e.g. `torchrun --nproc_per_node=2`), `fit` wraps the model in
-DistributedDataParallel, shards every epoch with a DistributedSampler and lets rank 0 alone write checkpoints.
+DDP: when `torch.distributed` is initialised (`init_distributed()` under `torchrun --nproc_per_node=2 ...`), `fit`
+wraps the model in DistributedDataParallel, shards every epoch with a DistributedSampler and lets rank 0 alone
+write checkpoints. The step function then receives the DDP wrapper and must run the model through its `forward`
+(gradients are averaged across ranks in backward), so every rank keeps identical weights.
 """
 from __future__ import annotations
 
@@ -65,6 +67,16 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
         return torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # noqa: BLE001 - re-raised with the file named
         raise ValueError(f"checkpoint {path}: not a graspkit checkpoint readable with weights_only=True ({e})") from e
+
+
+def init_distributed() -> bool:
+    """Join the process group that `torchrun` describes (env WORLD_SIZE > 1): gloo on CPU, nccl on GPUs.
+    Returns whether training is distributed. Call once at the start of a script run with torchrun."""
+    if int(os.environ.get("WORLD_SIZE", "1")) <= 1 or not torch.distributed.is_available():
+        return False
+    if not torch.distributed.is_initialized():
+        torch.distributed.init_process_group("nccl" if torch.cuda.is_available() else "gloo")
+    return True
 
 
 def _distributed() -> tuple[bool, int, int]:
