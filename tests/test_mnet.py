@@ -208,3 +208,19 @@ def test_mnet_learns_the_reaching_windows(setup):
     w = MNetWindows(_reach_clips(2), body, bps_basis(), stride=2)
     net, hist = train_mnet(w, None, train_cfg=TrainConfig(epochs=15, batch_size=32, lr=2e-3), progress=False)
     assert hist[-1]["loss"] < 0.5 * hist[0]["loss"] and hist[-1]["v"] < 0.5 * hist[0]["v"]
+
+
+def test_horizon_prediction_of_a_standing_mnet_is_the_current_pose(setup):
+    """A 1-frame MNet that predicts no change, rolled ten steps, repeats frame t: V2V = the true motion since t."""
+    from graspkit.eval_goal import teacher_forced_v2v
+    from graspkit.models.mnet import MNetWindows
+    bm, gv, body = setup
+    w = MNetWindows(_reach_clips(1), body, bps_basis())
+    net = MNet(MNetConfig(n_future=1))
+    idx = torch.tensor([40])
+    got = teacher_forced_v2v(net, w, bm, idx, horizon=10)
+    t = int(w.windows[40])
+    now = bm.forward_rotmats(pose_rotmats(w.rot6d[t:t + 1]), betas=w.betas[:1], transl=w.transl[t:t + 1]).vertices
+    fut = bm.forward_rotmats(pose_rotmats(w.rot6d[t + 1:t + 11]), betas=w.betas[:1].expand(10, -1),
+                             transl=w.transl[t + 1:t + 11]).vertices
+    assert got.body == pytest.approx(1000 * float((fut - now).norm(dim=-1).mean()), rel=1e-3)

@@ -288,6 +288,45 @@ def _invert(R: Tensor, o: Tensor) -> tuple[Tensor, Tensor]:
     return R.transpose(1, 2), -(R @ o.unsqueeze(-1)).squeeze(-1)
 
 
+def mnet_step(mnet: MNet, s: MNetState, basis: Tensor) -> tuple[Tensor, Tensor, dict[str, Tensor]]:
+    """One autoregressive step: state at t (world) -> the next F frames' Θ in the world, rot6d (B,F,55,6), transl
+    (B,F,3), and MNet's raw outputs (canonical frame of t)."""
+    feats, R, o = mnet_inputs(s, basis, mnet.cfg.attention, mnet.cfg.n_hand)
+    out = mnet(feats)
+    r_now, t_now = transform_params(s.rot6d[:, -1], s.transl[:, -1], s.root, R, o)
+    r_c, t_c = apply_changes(r_now, t_now, out)
+    Ri, oi = _invert(R, o)
+    r_w, t_w = transform_params(r_c, t_c, s.root, Ri, oi)
+    return r_w, t_w, out
+
+
+@torch.no_grad()
+def predict_horizon(mnet: MNet, body, s: MNetState, object_points: Tensor, basis: Tensor, horizon: int = 10
+                    ) -> tuple[Tensor, Tensor]:
+    """Autoregress from state s (B samples) until `horizon` frames exist (one step for a 10-frame MNet, ten for a
+    1-frame one), no refinement: world rot6d (B,horizon,55,6), transl (B,horizon,3). Object points (B,P,3)."""
+    from graspkit.models.gnet import pose_rotmats
+    from graspkit.optim.goal_refine import hand_object_offsets
+
+    mnet.eval()
+    rs, ts, fr, ft = list(s.rot6d.unbind(1)), list(s.transl.unbind(1)), [], []
+    v_prev, v_now = s.verts_prev, s.verts
+    B = s.betas.shape[0]
+    while len(fr) < horizon:
+        r_w, t_w, _ = mnet_step(mnet, s, basis)
+        F = r_w.shape[1]
+        fr += list(r_w.unbind(1))
+        ft += list(t_w.unbind(1))
+        rs += list(r_w.unbind(1))
+        ts += list(t_w.unbind(1))
+        last = body(pose_rotmats(torch.stack(rs[-2:], 1).reshape(-1, 55, 6)), s.betas.repeat_interleave(2, 0),
+                    torch.stack(ts[-2:], 1).reshape(-1, 3))[0].reshape(B, 2, -1, 3)
+        v_prev, v_now = (last[:, 0], last[:, 1]) if F > 0 else (v_prev, v_now)
+        s = MNetState(torch.stack(rs[-mnet.cfg.n_past:], 1), torch.stack(ts[-mnet.cfg.n_past:], 1), s.betas, v_now,
+                      v_prev, s.goal_hand, s.obj_centre, hand_object_offsets(v_now, object_points), s.root)
+    return torch.stack(fr[:horizon], 1), torch.stack(ft[:horizon], 1)
+
+
 @torch.no_grad()
 def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, Tensor], betas: Tensor,
             object_points: Tensor, obj_centre: Tensor, basis: Tensor, max_frames: int = 300, refine: bool = True,
@@ -323,12 +362,7 @@ def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, 
         s = MNetState(torch.stack([rs[i] for i in idx])[None], torch.stack([ts[i] for i in idx])[None], betas,
                       vs[-1][None], vs[max(len(vs) - 2, 0)][None], goal_hand, centre,
                       hand_object_offsets(vs[-1][None], obj), root)
-        feats, R, o = mnet_inputs(s, basis, c.attention, c.n_hand)
-        out = mnet(feats)
-        r_now, t_now = transform_params(s.rot6d[:, -1], s.transl[:, -1], root, R, o)
-        r_c, t_c = apply_changes(r_now, t_now, out)
-        Ri, oi = _invert(R, o)
-        r_w, t_w = transform_params(r_c, t_c, root, Ri, oi)                       # (1,F,55,6), (1,F,3) world
+        r_w, t_w, out = mnet_step(mnet, s, basis)                                    # (1,F,55,6), (1,F,3) world
         near = refine and dist[-1] < GOAL_HAND_RADIUS
         for k in range(1 if near else c.n_future):
             r, t = r_w[:, k], t_w[:, k]
@@ -381,7 +415,9 @@ class MNetWindows:
 
         if not clips:
             raise ValueError("clips: empty")
-        self.cfg, self.basis = cfg or MNetConfig(), basis
+        self.cfg, self.basis, self.body = cfg or MNetConfig(), basis, body
+        P = min(len(c.object_points) for c in clips)
+        self.points = torch.stack([c.object_points[:P].float() for c in clips])       # (clips, P, 3)
         rot, tr, vs, offs, start, end, goal, clip_of, betas, centre = [], [], [], [], [], [], [], [], [], []
         n = 0
         for k, c in enumerate(clips):
