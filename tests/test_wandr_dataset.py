@@ -1,0 +1,180 @@
+"""WANDR's dataset (§3.2, §4.1, Sup. B.2) on the shipped sample clips: windows, real and hindsight goals, filter, splits."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from graspkit import intention as I
+from graspkit.body import BodyModel
+from graspkit.data import heading_of, load_motion
+from graspkit.data import wandr_dataset as W
+from graspkit.paths import DATA_STUBS, default_model_path
+
+STUBS = DATA_STUBS / "motion"
+
+
+@pytest.fixture(scope="module")
+def bm():
+    return BodyModel.from_file(default_model_path())
+
+
+@pytest.fixture(scope="module")
+def clips(bm):
+    return W.load_clips(W.list_clips(STUBS), bm)
+
+
+def test_sample_clips_load_with_goals_where_labelled(clips):
+    files = W.list_clips(STUBS)
+    assert len(clips) == 20 and clips.names[0] == "locomotion/locomotion_000000.npz"
+    for k, f in enumerate(files):
+        m = load_motion(f)
+        assert clips.lengths[k] == m.num_frames
+        assert torch.allclose(clips.clip(k)[:, :3], torch.as_tensor(m.trans))
+        if m.goal is None:
+            assert clips.goal_frame[k] == -1 and clips.kind[k] == 0
+        else:
+            assert clips.goal_frame[k] == m.goal_frame and clips.kind[k] == 1
+            assert torch.allclose(clips.goal[k], torch.as_tensor(m.goal))
+    assert len(clips.of_kind("reach")) == 10
+
+
+def test_feet_filter_drops_clips_with_feet_above_20_cm(bm):
+    m = load_motion(STUBS / "locomotion" / "locomotion_000001.npz")
+    lifted = replace(m, trans=m.trans + np.array([0, 0, 0.30], np.float32))
+    low = replace(m, trans=m.trans + np.array([0, 0, 0.05], np.float32))
+    jump = m.trans.copy()
+    jump[50:60, 2] += 0.35                                   # a short jump: 10 frames with the feet high
+    cs = W.clips_from_motions([m, lifted, low, replace(m, trans=jump)], ["a", "b", "c", "d"], bm)
+    assert cs.names == ["a", "c"]
+    feet = W.feet_height(cs.clip(0), cs.rest[0])
+    joints = m.joint_positions(bm)[:, W.FOOT_JOINTS, 2].min(1)
+    assert np.allclose(feet.numpy(), joints, atol=1e-5)      # the filter measures the ankle/foot joints
+    assert W.clips_from_motions([lifted], ["b"], bm, max_foot_height=None).names == ["b"]
+
+
+def test_splits_are_deterministic_disjoint_and_80_10_10():
+    names = [f"locomotion/locomotion_{k:06d}.npz" for k in range(3000)]
+    a = W.split_clips(names)
+    b = W.split_clips(list(reversed(names))[:1500] + ["reach/extra.npz"])   # order and other names do not matter
+    for split, members in b.items():
+        assert set(m for m in members if m != "reach/extra.npz") <= set(a[split])
+    assert sorted(sum(a.values(), [])) == sorted(names)
+    frac = {k: len(v) / len(names) for k, v in a.items()}
+    assert abs(frac["train"] - 0.8) < 0.03 and abs(frac["val"] - 0.1) < 0.02 and abs(frac["test"] - 0.1) < 0.02
+    assert W.split_clips(names, seed=1)["test"] != a["test"]
+    with pytest.raises(ValueError, match="fractions"):
+        W.split_clips(names, fractions=(0.5, 0.2, 0.2))
+
+
+def test_windows_fit_in_their_clips(clips):
+    ds = W.WindowDataset(clips, max_steps=10)
+    expected = sum(max(0, int(T) - 12) for T in clips.lengths)
+    assert len(ds) == expected
+    c, i = ds.items[:, 0], ds.items[:, 1]
+    assert (i >= 1).all() and (i + 11 <= clips.lengths[c] - 1).all()
+
+
+def test_batches_hold_the_clip_frames_and_real_goals(clips):
+    ds = W.WindowDataset(clips, max_steps=3)
+    reach = (clips.kind[ds.items[:, 0]] == 1).nonzero()[:, 0]
+    items = ds.items[reach[::7]]
+    b = W.make_batch(clips, items, steps=3, generator=torch.Generator().manual_seed(0))
+    for k, (c, i) in enumerate(items.tolist()):
+        assert torch.equal(b["p"][k], clips.clip(c)[i - 1:i + 5])
+        assert torch.equal(b["goal"][k], clips.goal[c])
+        assert b["t_goal"][k] == clips.goal_frame[c] - i
+        assert not b["hindsight"][k]
+
+
+def test_hindsight_goal_is_the_future_right_wrist(clips, bm):
+    ds = W.WindowDataset(clips, max_steps=4)
+    loco = (clips.kind[ds.items[:, 0]] == 0).nonzero()[:, 0]
+    items = ds.items[loco[::37]]
+    b = W.make_batch(clips, items, steps=4, generator=torch.Generator().manual_seed(1))
+    files = W.list_clips(STUBS)
+    motions = {c: load_motion(files[c]) for c in set(items[:, 0].tolist())}
+    wrists = {c: m.joint_positions(bm)[:, 21] for c, m in motions.items()}
+    for k, (c, i) in enumerate(items.tolist()):
+        tg = i + int(b["t_goal"][k])
+        T = int(clips.lengths[c])
+        assert 5 <= b["t_goal"][k] <= min(240, T - 1 - i)             # beyond the window, within the 8 s horizon
+        m, wrist = motions[c], wrists[c][tg]
+        assert np.allclose(b["goal"][k].numpy(), wrist, atol=1e-5)
+        assert b["goal_heading"][k].item() == pytest.approx(float(heading_of(m.poses[tg, 0])), abs=1e-5)
+        assert b["hindsight"][k]
+    again = W.make_batch(clips, items, steps=4, generator=torch.Generator().manual_seed(1))
+    other = W.make_batch(clips, items, steps=4, generator=torch.Generator().manual_seed(2))
+    assert torch.equal(again["t_goal"], b["t_goal"]) and not torch.equal(other["t_goal"], b["t_goal"])
+
+
+def test_hindsight_horizons_cover_the_test_horizon(clips):
+    ds = W.WindowDataset(clips.of_kind("locomotion"), max_steps=0)
+    loco = clips.of_kind("locomotion")
+    first = ds.items[ds.items[:, 1] == 1]
+    g = torch.Generator().manual_seed(0)
+    t = torch.cat([W.make_batch(loco, first, steps=0, generator=g)["t_goal"] for _ in range(50)])
+    assert t.min() <= 5 and t.max() >= 200                     # short and long horizons both drawn
+
+
+def test_intention_is_zero_after_the_real_goal_frame(clips):
+    c = int((clips.kind == 1).nonzero()[0])
+    i = int(clips.goal_frame[c]) + 2
+    b = W.make_batch(clips, torch.tensor([[c, i]]), steps=0)
+    p0, p1 = b["p"][:, 0], b["p"][:, 1]
+    _, inten = W.window_condition(p1, I.pose_to_delta(p0, p1), b["rest"], b["goal"], b["t_goal"], b["goal_heading"])
+    assert torch.equal(inten, torch.zeros(1, 7))
+    b = W.make_batch(clips, torch.tensor([[c, 3]]), steps=0)
+    _, inten = W.window_condition(b["p"][:, 1], I.pose_to_delta(b["p"][:, 0], b["p"][:, 1]), b["rest"], b["goal"],
+                                  b["t_goal"], b["goal_heading"])
+    assert inten.abs().sum() > 0
+
+
+def test_stats_match_the_walking_speed_measured_independently(clips):
+    loco = clips.of_kind("locomotion")
+    stats = W.compute_stats(loco, samples=2000)
+    fwd = []
+    for f in W.list_clips(STUBS, kinds=("locomotion",)):
+        m = load_motion(f)
+        h = heading_of(m.poses[:, 0])
+        v = np.diff(m.trans[:, :2], axis=0)
+        fwd.append((v[:, 0] * np.cos(h[:-1]) + v[:, 1] * np.sin(h[:-1]))[1:])   # forward step in the heading frame
+    fwd = np.concatenate(fwd)
+    assert stats["delta_mean"][0].item() == pytest.approx(fwd.mean(), abs=1e-5)
+    assert stats["delta_std"][0].item() == pytest.approx(fwd.std(ddof=1), rel=1e-3)
+    assert (stats["state_std"] >= W.STD_FLOOR).all() and stats["intention_std"].shape == (7,)
+    assert stats["state_mean"][7:133].abs().max() <= 1.0                  # 6D entries of rotations
+
+
+def test_held_out_starts_are_test_split_and_canonical(bm):
+    names = W.test_start_names(STUBS, n=2, seed=3)
+    assert all(W.split_of(n, 3) == "test" for n in names)
+    assert [n.split("/")[0] for n in names] == ["locomotion", "reach"]
+    ms = [load_motion(STUBS / n) for n in names]
+    starts = W.held_out_starts(ms, names, bm, n=2, frame=5)
+    for s, m in zip(starts, ms):
+        pelvis = I.body_joints(s.p, s.rest)[0]
+        assert pelvis[:2].abs().max() < 1e-5 and abs(I.heading_of_pose(s.p).item()) < 1e-5
+        orig = I.pose_from_axis_angle(torch.as_tensor(m.trans[4:6]), torch.as_tensor(m.poses[4:6]))
+        assert torch.allclose(I.pose_to_delta(s.p_prev, s.p), I.pose_to_delta(orig[0], orig[1]), atol=1e-5)
+        assert abs(pelvis[2].item() - m.joint_positions(bm)[5, 0, 2]) < 1e-5
+        assert s.source.endswith("#5")
+
+
+def test_clipset_cache_round_trip(clips, tmp_path):
+    path = W.save_clipset(tmp_path / "c.npz", clips)
+    back = W.load_clipset(path)
+    assert back.names == clips.names and torch.equal(back.p, clips.p) and torch.equal(back.offsets, clips.offsets)
+    with np.load(path, allow_pickle=False) as z:
+        assert z["names"].dtype.kind == "U"
+
+
+def test_errors_name_the_argument(clips):
+    with pytest.raises(ValueError, match="names"):
+        clips.subset(["nope.npz"])
+    with pytest.raises(ValueError, match="kind"):
+        clips.of_kind("dance")
+    with pytest.raises(ValueError, match="items"):
+        W.make_batch(clips, torch.tensor([[0, 0]]), steps=1)
+    with pytest.raises(FileNotFoundError, match="folder"):
+        W.list_clips(STUBS / "nothing")
