@@ -62,6 +62,12 @@ def build_parser() -> argparse.ArgumentParser:
     d.set_defaults(func=_cmd_demo)
     from graspkit.data.cli import add_data_commands
     add_data_commands(sub)
+
+    # `graspkit train <model>`: each model family adds its own subcommands to this parser
+    train = sub.add_parser("train", help="train a model of the workbook").add_subparsers(dest="train_command",
+                                                                                          required=True)
+    from graspkit.eval_goal import add_goal_train_commands
+    add_goal_train_commands(train)
     return p
 
 

@@ -82,3 +82,200 @@ def teacher_forced_v2v(mnet: MNet, windows: MNetWindows, bm, index: Tensor, hori
         sums += [float(d.mean(1).sum()), float(d[:, hand].mean(1).sum()), float(d[:, feet].mean(1).sum())]
         n += d.shape[0]
     return V2V(*(1000.0 * sums / max(n, 1)))
+
+
+# ------------------------------------------------------------------------------------------- data (graspkit.data.grab files)
+
+def _files(folder, kind: str, split: str | None) -> list:
+    """GRAB-style files `<folder>/<kind>_*.npz` whose object is in `split` ('train', 'val', 'test' or None: all)."""
+    from pathlib import Path
+
+    from graspkit.data.grab import load_grasp_sequence
+    from graspkit.data.grasp import split_of
+
+    paths = sorted(Path(folder).glob(f"{kind}_*.npz"))
+    if not paths:
+        raise FileNotFoundError(f"folder: no {kind}_*.npz files in {folder} (make them with "
+                                f"`graspkit data make --kind {kind}`)")
+    seqs = [load_grasp_sequence(p) for p in paths]
+    return [s for s in seqs if split is None or split_of(s.object_name) == split]
+
+
+def gnet_samples(seqs: list) -> dict[str, Tensor]:
+    """GNet's training tensors (see GNet.features) from GRAB-style grasp or approach sequences, at their grasp frame."""
+    from graspkit.rotations import axis_angle_to_rot6d
+
+    if not seqs:
+        raise ValueError("seqs: no sequences")
+    cols: dict[str, list] = {k: [] for k in ("rot6d", "transl", "betas", "verts", "head_dir", "obj_transl", "bps",
+                                             "offsets")}
+    for s in seqs:
+        e = s.extras
+        f = int(e.get("grasp.goal_frame", e.get("grasp.frame", np.array(0))))
+        cols["rot6d"].append(axis_angle_to_rot6d(torch.as_tensor(s.poses[f], dtype=torch.float64)).float())
+        cols["transl"].append(torch.as_tensor(s.trans[f]))
+        cols["betas"].append(torch.as_tensor(s.betas[:10]))
+        for k, key in (("verts", "goal.vertices"), ("head_dir", "goal.head_direction"), ("obj_transl", "goal.object_transl"),
+                       ("bps", "goal.bps_object"), ("offsets", "goal.offsets")):
+            if key not in e:
+                raise ValueError(f"seqs: a {s.object_name} sequence has no {key!r} label")
+            cols[k].append(torch.as_tensor(np.asarray(e[key], np.float32)))
+    return {k: torch.stack(v).float() for k, v in cols.items()}
+
+
+def approach_clips(seqs: list) -> list:
+    """MNet's ApproachClips from GRAB-style approach sequences (object points in the world, goal = grasp frame)."""
+    from graspkit.models.mnet import ApproachClip
+    from graspkit.rotations import axis_angle_to_rot6d
+
+    out = []
+    for s in seqs:
+        if "grasp.goal_frame" not in s.extras:
+            raise ValueError(f"seqs: a {s.object_name} sequence has no 'grasp.goal_frame' (not an approach clip)")
+        R, t = s.object_rotation()[0], s.object_transl[0].astype(np.float64)
+        pts = torch.as_tensor(np.asarray(s.object_points, np.float64) @ R.T + t).float()
+        out.append(ApproachClip(axis_angle_to_rot6d(torch.as_tensor(s.poses, dtype=torch.float64)).float(),
+                                torch.as_tensor(s.trans).float(), torch.as_tensor(s.betas[:10]).float(),
+                                int(s.extras["grasp.goal_frame"]), pts, torch.as_tensor(t).float(), s.object_name))
+    return out
+
+
+# ------------------------------------------------------------------------------------------- training drivers, CLI
+
+MNET_VARIANTS = {  # GOAL Tab. 2 rows -> MNetConfig changes
+    "mnet": {}, "no_iaa": {"attention": False}, "pose": {"outputs": "pose"}, "1frame": {"n_future": 1}}
+
+
+def _all_files(folders, kind: str, split: str) -> list:
+    """Sequences of `kind` in `split` from every folder that has such files."""
+    out = []
+    for f in folders:
+        try:
+            out += _files(f, kind, split)
+        except FileNotFoundError:
+            continue
+    return out
+
+
+def default_data_folders() -> list:
+    """Where `graspkit data make --kind {grasp,approach}` writes by default."""
+    from graspkit.paths import cache_dir
+
+    return [cache_dir() / "grasp", cache_dir() / "approach"]
+
+
+def _body():
+    """The default body model (hand mean not added: the files store absolute poses) and GOAL's vertex sampler."""
+    from graspkit.body import BodyModel
+    from graspkit.body.markers import goal_vertices
+    from graspkit.models.gnet import SparseBody
+    from graspkit.paths import default_model_path
+
+    bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    gv = goal_vertices(bm)
+    return bm, gv, SparseBody(bm, torch.as_tensor(gv.vertex_ids))
+
+
+def gnet_data(folders) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
+    """GNet's train and validation samples: static grasps and the grasp frames of approach clips."""
+    train = _all_files(folders, "grasp", "train") + _all_files(folders, "approach", "train")
+    val = _all_files(folders, "grasp", "val") + _all_files(folders, "approach", "val")
+    if not train:
+        raise FileNotFoundError(f"data: no training grasps in {[str(f) for f in folders]}")
+    return gnet_samples(train), (gnet_samples(val) if val else None)
+
+
+def run_train_gnet(folders, out, variant: str = "gnet", epochs: int = 60, time_limit_s: float | None = 600.0,
+                   seed: int = 0, threads: int = 2, run_dir=None, progress: bool = True) -> dict:
+    """Train GNet ('gnet') or the GrabNet-style SMPL-X CVAE ('smplx') and ship its float16 weights to `out`."""
+    import time
+    from pathlib import Path
+
+    from graspkit.models.gnet import GNetConfig, save_weights, train_gnet
+    from graspkit.paths import cache_dir
+    from graspkit.train import TrainConfig
+
+    if variant not in ("gnet", "smplx"):
+        raise ValueError(f"variant: expected 'gnet' or 'smplx', got {variant!r}")
+    torch.set_num_threads(threads)
+    bm, gv, body = _body()
+    train, val = gnet_data(folders)
+    run = Path(run_dir or cache_dir() / "runs") / f"gnet_{variant}_s{seed}.pt"
+    t0 = time.perf_counter()
+    net, hist = train_gnet(train, val, body, GNetConfig(offsets=variant == "gnet"),
+                           train_cfg=TrainConfig(epochs=epochs, batch_size=64, lr=1e-3, seed=seed, num_threads=threads),
+                           checkpoint=run, time_limit_s=time_limit_s, progress=progress)
+    info = {"variant": variant, "train_samples": len(train["rot6d"]), "epochs": len(hist),
+            "seconds": time.perf_counter() - t0, "history": hist}
+    save_weights(out, net, "gnet", extra=info)
+    return info
+
+
+def mnet_windows(folders, split: str, cfg=None, stride: int = 1) -> MNetWindows:
+    """MNet windows of the approach clips of `split`."""
+    from graspkit.objects.bps import bps_basis
+
+    _, _, body = _body()
+    seqs = _all_files(folders, "approach", split)
+    if not seqs:
+        raise FileNotFoundError(f"data: no {split} approach clips in {[str(f) for f in folders]}")
+    return MNetWindows(approach_clips(seqs), body, bps_basis(), cfg, stride=stride)
+
+
+def run_train_mnet(folders, out, variant: str = "mnet", epochs: int = 20, time_limit_s: float | None = 600.0,
+                   seed: int = 0, threads: int = 2, stride: int = 1, run_dir=None, progress: bool = True) -> dict:
+    """Train MNet or one of its Tab. 2 ablations (MNET_VARIANTS) and ship its float16 weights to `out`."""
+    import time
+    from pathlib import Path
+
+    from graspkit.models.gnet import save_weights
+    from graspkit.models.mnet import MNetConfig, train_mnet
+    from graspkit.paths import cache_dir
+    from graspkit.train import TrainConfig
+
+    if variant not in MNET_VARIANTS:
+        raise ValueError(f"variant: expected one of {list(MNET_VARIANTS)}, got {variant!r}")
+    torch.set_num_threads(threads)
+    cfg = MNetConfig(**MNET_VARIANTS[variant])
+    t0 = time.perf_counter()
+    train = mnet_windows(folders, "train", cfg, stride)
+    val = mnet_windows(folders, "val", cfg, max(stride, 4))
+    run = Path(run_dir or cache_dir() / "runs") / f"mnet_{variant}_s{seed}.pt"
+    net, hist = train_mnet(train, val, cfg, train_cfg=TrainConfig(epochs=epochs, batch_size=128, lr=1e-3, seed=seed,
+                                                                   num_threads=threads),
+                           checkpoint=run, time_limit_s=time_limit_s, progress=progress)
+    info = {"variant": variant, "train_windows": len(train), "epochs": len(hist),
+            "seconds": time.perf_counter() - t0, "history": hist}
+    save_weights(out, net, "mnet", extra=info)
+    return info
+
+
+def add_goal_train_commands(train_sub) -> None:
+    """`graspkit train gnet` and `graspkit train mnet` (subcommands of `graspkit train`)."""
+    from pathlib import Path
+
+    from graspkit.paths import DATA_STUBS
+
+    for name, variants, default_epochs in (("gnet", ("gnet", "smplx"), 60), ("mnet", tuple(MNET_VARIANTS), 20)):
+        p = train_sub.add_parser(name, help=f"train GOAL's {name[0].upper() + name[1:].replace('net', 'Net')} "
+                                 "(or an ablation) on the synthetic grasp data")
+        p.add_argument("--data", type=Path, action="append", default=None,
+                       help="folder with grasp_*.npz / approach_*.npz (repeatable; default: the data-make cache)")
+        p.add_argument("--variant", choices=variants, default=variants[0])
+        p.add_argument("--out", type=Path, default=None, help=f"shipped weights (default data_stubs/checkpoints/{name}.pt)")
+        p.add_argument("--epochs", type=int, default=default_epochs)
+        p.add_argument("--time-limit", type=float, default=600.0, help="seconds; stops after the epoch that crosses it")
+        p.add_argument("--seed", type=int, default=0)
+        p.add_argument("--threads", type=int, default=2)
+        p.set_defaults(func=lambda a, name=name: _cmd_train(a, name, DATA_STUBS / "checkpoints"))
+
+
+def _cmd_train(args, name: str, stubs) -> int:
+    """Run one training command and print where the weights went."""
+    folders = args.data or default_data_folders()
+    suffix = "" if args.variant == name else f"_{args.variant}"
+    out = args.out or stubs / f"{name}{suffix}.pt"
+    run = run_train_gnet if name == "gnet" else run_train_mnet
+    info = run(folders, out, args.variant, args.epochs, args.time_limit, args.seed, args.threads)
+    print(f"wrote {out}: {info['epochs']} epochs in {info['seconds']:.0f} s; last loss {info['history'][-1]['loss']:.4f}")
+    return 0
