@@ -1,0 +1,354 @@
+"""GraspPose-Opt (SAGA §3.2, Eq. 4-7, Alg. 1, A.4): fit an SMPL-X body to generated markers and contacts.
+
+    E_opt(Theta) = E_fit + E^o_colli + E^o_cont + E^g_cont                                        (Eq. 4)
+    E_fit        = sum |M^ - M(Theta)|_1 + alpha_theta |theta|^2                                 (Eq. 5)
+    E^o_cont     = alpha^o_cont sum_o C^_o d(o, V_B) + alpha^m_cont sum_m C^_m d(m, O)            (Eq. 6)
+    E_colli      = alpha^B_colli sum_{b in V^h_B} max(-S(b, O), sigma_b)
+                 + alpha^O_colli sum_{o in O} max(-S(o, V^h_B), sigma_o)                          (Eq. 7)
+    E^g_cont     = alpha_g sum_{v in V^f_B} |h(v)|                                                (§3.2)
+
+d(x, Y) = min_y |x - y|^2 (squared, as Eq. 3), S = signed distance (negative inside), V^h_B the hand vertices,
+V^f_B the sole vertices, h the height above the floor. Theta = (t, R (6D), beta, theta_b, theta_h, theta_e):
+theta_b is the 32-D latent of the pose prior (graspkit.models.pose_prior, in place of VPoser), theta_h 24 hand-PCA
+coefficients per hand (SAGA: theta_h in R^48), theta_e the two eye rotations.
+
+Alg. 1 (A.4): stage 1, 300 Adam steps on t, R with E_fit (lr 0.016); stage 2, 400 steps on t, R, beta, theta_b with
+E_fit (lr 0.012); stage 3, 500 steps on theta_b, theta_h, theta_e with the full energy (lr 0.008).
+Weights (A.4): alpha^o_cont = alpha^m_cont = 15, alpha^O_colli = 100, alpha^B_colli = 200, alpha_theta = 0.0005.
+
+graspkit's choices where the paper is silent (all in `GraspPoseWeights` / `GraspPoseConfig`):
+- sigma_b = sigma_o = 1 mm; each hinge is written max(-S - sigma, 0) (the paper's max(-S, sigma) minus the constant
+  sigma, so a grasp without penetration reads 0; the gradient is the same). alpha_g = 1 per sole vertex.
+- Initialisation: theta_b = 0 (the prior's mean pose), beta = 0, hands at the PCA mean, eyes 0; R and t from the
+  least-squares rigid fit (Kabsch) of that body's body and face markers to the target ones.
+- V_B in d(o, V_B) is the hand vertices (contacts are with the hands; the rest of the body is far), and only the
+  256 object points with the highest C^_o enter that sum per sample; S(o, V^h_B) is taken for the 512 object points
+  nearest the hand at the start of stage 3 (the hand moves little in stage 3), signed by the hand's vertex normals.
+  S(b, O) uses the object's signed-distance grid when one is given (exact to ~0.1 mm), else the point cloud with
+  its normals (SAGA's "signed distance from point x to point cloud Y").
+- Energies are summed over the samples of a batch (the samples are independent; Adam's steps are per parameter).
+Frames: everything in the object frame of WholeGrasp-VAE (object centre at 0, z up, floor at z = -t_O).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+from tqdm.auto import tqdm
+
+from graspkit.body.markers import foot_vertices, saga_markers
+from graspkit.body.skeleton import FINGERS, JOINT_INDEX
+from graspkit.models.gnet import SparseBody
+from graspkit.objects.sdf import SDFGrid
+from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
+
+TERMS = ("fit", "prior", "contact_object", "contact_marker", "colli_body", "colli_object", "ground", "heuristic")
+
+
+@dataclass
+class GraspPoseWeights:
+    """Weights and thresholds of Eq. 5-7 and S.3 (A.4 where the paper gives them; see the module docstring)."""
+
+    prior: float = 5e-4           # alpha_theta
+    contact_object: float = 15.0  # alpha^o_cont
+    contact_marker: float = 15.0  # alpha^m_cont
+    colli_object: float = 100.0   # alpha^O_colli (object points inside the hand)
+    colli_body: float = 200.0     # alpha^B_colli (hand vertices inside the object)
+    sigma_b: float = 1e-3         # m
+    sigma_o: float = 1e-3         # m
+    ground: float = 1.0           # alpha_g (not in the paper)
+    heuristic: float = 15.0       # alpha^h_cont of S.3 (not in the paper)
+    heuristic_prior: float = 0.7  # S.3: hand vertices with prior contact probability above this ...
+    heuristic_radius: float = 0.02  # ... and closer than this (m) are pulled to the object
+
+
+@dataclass
+class GraspPoseConfig:
+    """Alg. 1 schedule and which terms stage 3 uses (Tab. 2 ablations switch them)."""
+
+    steps: tuple[int, int, int] = (300, 400, 500)
+    lrs: tuple[float, float, float] = (0.016, 0.012, 0.008)
+    collision: bool = True        # E_colli in stage 3
+    contact: bool = True          # E^o_cont in stage 3 (needs contact maps)
+    ground: bool = True           # E^g_cont in stage 3
+    heuristic: bool = False       # S.3's heuristic contact instead of E^o_cont (WholeGrasp-single)
+    contact_points: int = 256     # object points (highest C^_o) in d(o, V_B)
+    collision_points: int = 512   # object points (nearest the hand) in S(o, V^h_B)
+    n_pca: int = 24               # hand PCA components per hand (SAGA)
+    log_every: int = 10
+    weights: GraspPoseWeights = field(default_factory=GraspPoseWeights)
+
+
+@dataclass
+class GraspObject:
+    """The object in WholeGrasp-VAE's frame: points and normals (P,3), its height t_O, an optional SDF grid."""
+
+    points: Tensor
+    normals: Tensor
+    height: float
+    sdf: SDFGrid | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("points", "normals"):
+            x = getattr(self, name)
+            if not isinstance(x, Tensor) or x.dim() != 2 or x.shape[1] != 3:
+                got = tuple(x.shape) if isinstance(x, Tensor) else type(x).__name__
+                raise ValueError(f"{name}: expected a tensor of shape (P, 3), got {got}")
+        if self.points.shape != self.normals.shape:
+            raise ValueError(f"normals: expected the shape of points {tuple(self.points.shape)}, "
+                             f"got {tuple(self.normals.shape)}")
+        self.points, self.normals = self.points.float(), self.normals.float()
+
+
+@dataclass
+class GraspPoseResult:
+    """Fitted bodies (object frame): SMPL-X parameters, vertices, markers, energies per stage and a step log."""
+
+    params: dict[str, Tensor]                     # betas, global_orient, body_pose, *_hand_pose (absolute), ...
+    vertices: Tensor                              # (B, V, 3)
+    markers: Tensor                               # (B, 143, 3)
+    energies: list[dict[str, dict[str, Tensor]]]  # per stage: {'before': {term: (B,)}, 'after': {...}}
+    log: list[dict[str, float]]                   # every log_every steps: step, stage, each term (batch sum)
+    state: dict[str, Tensor] = field(default_factory=dict)  # the optimised variables (init= of another fit)
+
+    def to_world(self, translation: Tensor) -> "GraspPoseResult":
+        """The same result moved by the object centre `translation` (3,) into the world."""
+        t = torch.as_tensor(translation, dtype=self.vertices.dtype)
+        params = dict(self.params, transl=self.params["transl"] + t)
+        return replace(self, params=params, vertices=self.vertices + t, markers=self.markers + t)
+
+
+def hand_vertex_ids(bm, sides: tuple[str, ...] = ("left", "right")) -> np.ndarray:
+    """Vertex ids (sorted) dominated by the wrists and fingers of the given hands."""
+    parts = [JOINT_INDEX[f"{s}_wrist"] for s in sides]
+    parts += [JOINT_INDEX[f"{s}_{f}{k}"] for s in sides for f in FINGERS for k in (1, 2, 3)]
+    return np.flatnonzero(np.isin(bm.lbs_weights.argmax(1).numpy(), parts))
+
+
+def kabsch(source: Tensor, target: Tensor) -> tuple[Tensor, Tensor]:
+    """Least-squares rotation R (B,3,3) and translation c (B,3) with target ~ R source + c; (B,N,3) each."""
+    ms, mt = source.mean(1, keepdim=True), target.mean(1, keepdim=True)
+    H = (source - ms).transpose(1, 2) @ (target - mt)
+    U, _, Vt = torch.linalg.svd(H)
+    d = torch.sign(torch.det(Vt.transpose(1, 2) @ U.transpose(1, 2)))
+    D = torch.diag_embed(torch.stack([torch.ones_like(d), torch.ones_like(d), d], -1))
+    R = Vt.transpose(1, 2) @ D @ U.transpose(1, 2)
+    return R, (mt - ms @ R.transpose(1, 2)).squeeze(1)
+
+
+def _nearest(q: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
+    """Nearest target row for every query: (B,N,3), (B,M,3) -> squared distance (B,N) (differentiable), index."""
+    with torch.no_grad():
+        idx = torch.cdist(q.detach(), t.detach()).argmin(-1)
+    near = torch.gather(t, 1, idx.unsqueeze(-1).expand(-1, -1, 3))
+    return (q - near).pow(2).sum(-1), idx
+
+
+def _signed_to_cloud(q: Tensor, cloud: Tensor, normals: Tensor) -> Tensor:
+    """Signed distance (B,N) from q to a cloud with outward normals (negative inside), as SAGA's S(x, Y)."""
+    d2, idx = _nearest(q, cloud)
+    i3 = idx.unsqueeze(-1).expand(-1, -1, 3)
+    near, n = torch.gather(cloud, 1, i3), torch.gather(normals, 1, i3)
+    sign = torch.where(((q - near) * n).sum(-1) < 0, -1.0, 1.0).to(q.dtype).detach()
+    return sign * torch.sqrt(d2 + 1e-12)
+
+
+class GraspPoseOpt:
+    """SAGA's GraspPose-Opt for a BodyModel and a pose prior; call `fit` with markers, contacts and the object."""
+
+    def __init__(self, bm, prior, config: GraspPoseConfig | None = None,
+                 hand_contact_prior: Tensor | None = None) -> None:
+        self.bm, self.prior = bm, prior.eval()
+        for p in self.prior.parameters():
+            p.requires_grad_(False)
+        self.cfg = config or GraspPoseConfig()
+        ms = saga_markers(bm)
+        self.marker_ids = torch.as_tensor(ms.vertex_ids)
+        self.body_face = torch.arange(ms.groups["face"][1])              # body + face markers for Kabsch
+        hands = torch.as_tensor(hand_vertex_ids(bm))
+        feet = torch.as_tensor(np.concatenate(list(foot_vertices(bm).values())))
+        ids = torch.cat([self.marker_ids, hands, feet])
+        self.sparse = SparseBody(bm, ids)
+        n_m, n_h = len(self.marker_ids), len(hands)
+        self.sl_markers, self.sl_hands, self.sl_feet = slice(0, n_m), slice(n_m, n_m + n_h), slice(n_m + n_h, None)
+        # hand faces re-indexed into the hand slice (for vertex normals of the hand surface)
+        pos = torch.full((bm.num_vertices,), -1, dtype=torch.long)
+        pos[hands] = torch.arange(n_h)
+        f = pos[bm.faces.long()]
+        self.hand_faces = f[(f >= 0).all(1)]
+        self.hand_ids = hands
+        k = self.cfg.n_pca
+        self.pca = {s: getattr(bm, f"{s}_hand_components")[:k].float() for s in ("left", "right")}
+        self.hand_mean = {"left": bm.pose_mean[75:120].float(), "right": bm.pose_mean[120:165].float()}
+        if bm.flat_hand_mean:
+            raise ValueError("bm: build the BodyModel with flat_hand_mean=False (hand PCA about the mean hand)")
+        if hand_contact_prior is not None and hand_contact_prior.shape != (n_h,):
+            raise ValueError(f"hand_contact_prior: expected shape ({n_h},) (one per hand vertex), "
+                             f"got {tuple(hand_contact_prior.shape)}")
+        self.hand_contact_prior = hand_contact_prior
+
+    # ------------------------------------------------------------------ the body
+    def rotmats(self, p: dict[str, Tensor]) -> Tensor:
+        """All 55 joint rotations (B,55,3,3) from the optimised parameters (hand mean added)."""
+        B = p["transl"].shape[0]
+        eye = torch.eye(3).expand(B, 1, 3, 3)
+        hands = [axis_angle_to_matrix((p[f"{s}_pca"] @ self.pca[s] + self.hand_mean[s]).view(B, 15, 3))
+                 for s in ("left", "right")]
+        return torch.cat([rot6d_to_matrix(p["orient6d"]).unsqueeze(1), self.prior.decode_rotmats(p["z"]), eye,
+                          axis_angle_to_matrix(p["eyes"].view(B, 2, 3)), hands[0], hands[1]], 1)
+
+    def body(self, p: dict[str, Tensor]) -> Tensor:
+        """Markers, hand and foot vertices (B, n, 3) of the current parameters."""
+        return self.sparse(self.rotmats(p), p["betas"], p["transl"])[0]
+
+    def init_params(self, markers: Tensor) -> dict[str, Tensor]:
+        """Alg. 1's starting point (see the module docstring): prior mean pose, rigidly aligned to the markers."""
+        B = markers.shape[0]
+        p = {"transl": torch.zeros(B, 3), "orient6d": matrix_to_rot6d(torch.eye(3).expand(B, 3, 3)).clone(),
+             "betas": torch.zeros(B, 10), "z": torch.zeros(B, self.prior.cfg.latent),
+             "left_pca": torch.zeros(B, self.cfg.n_pca), "right_pca": torch.zeros(B, self.cfg.n_pca),
+             "eyes": torch.zeros(B, 6)}
+        with torch.no_grad():
+            rot = self.rotmats(p)
+            v, J = self.sparse(rot, p["betas"], p["transl"])
+            src = v[:, self.sl_markers][:, self.body_face]
+            R, c = kabsch(src, markers[:, self.body_face])
+            J0 = J[:, 0]
+            p["orient6d"] = matrix_to_rot6d(R)
+            p["transl"] = (R @ J0.unsqueeze(-1)).squeeze(-1) + c - J0
+        return p
+
+    # ------------------------------------------------------------------ the energy
+    def energy(self, p: dict[str, Tensor], target: Tensor, obj: GraspObject, stage: int,
+               marker_contact: Tensor | None, object_contact: Tensor | None,
+               cache: dict[str, Tensor]) -> dict[str, Tensor]:
+        """Each term of Eq. 4-7 (and S.3) per sample (B,) for the current parameters."""
+        cfg, w = self.cfg, self.cfg.weights
+        v = self.body(p)
+        m, hands, feet = v[:, self.sl_markers], v[:, self.sl_hands], v[:, self.sl_feet]
+        B = v.shape[0]
+        e = {"fit": (m - target).abs().sum((1, 2)),
+             "prior": w.prior * (p["z"].pow(2).sum(-1) + p["left_pca"].pow(2).sum(-1)
+                                 + p["right_pca"].pow(2).sum(-1) + p["eyes"].pow(2).sum(-1))}
+        if stage < 3:
+            return e
+        pts, nrm = obj.points.expand(B, -1, -1), obj.normals.expand(B, -1, -1)
+        if cfg.ground:
+            e["ground"] = w.ground * (feet[..., 2] + obj.height).abs().sum(-1)
+        if cfg.contact and object_contact is not None and marker_contact is not None:
+            co_idx = cache["contact_idx"]
+            po = torch.gather(pts, 1, co_idx.unsqueeze(-1).expand(-1, -1, 3))
+            e["contact_object"] = w.contact_object * (torch.gather(object_contact, 1, co_idx)
+                                                      * _nearest(po, hands)[0]).sum(-1)
+            e["contact_marker"] = w.contact_marker * (marker_contact * _nearest(m, pts)[0]).sum(-1)
+        if cfg.heuristic and self.hand_contact_prior is not None:
+            d2 = _nearest(hands, pts)[0]
+            ch = self.hand_contact_prior.to(d2.dtype)
+            on = (ch > w.heuristic_prior) & (d2.detach() < w.heuristic_radius ** 2)
+            e["heuristic"] = w.heuristic * (on * ch * d2).sum(-1)
+        if cfg.collision:
+            sd = obj.sdf(hands) if obj.sdf is not None else _signed_to_cloud(hands, pts, nrm)
+            e["colli_body"] = w.colli_body * torch.relu(-sd - w.sigma_b).sum(-1)
+            from graspkit.body.markers import vertex_normals
+            hn = vertex_normals(hands, self.hand_faces)
+            cp = torch.gather(pts, 1, cache["collision_idx"].unsqueeze(-1).expand(-1, -1, 3))
+            e["colli_object"] = w.colli_object * torch.relu(-_signed_to_cloud(cp, hands, hn) - w.sigma_o).sum(-1)
+        return e
+
+    # ------------------------------------------------------------------ Alg. 1
+    def fit(self, markers: Tensor, obj: GraspObject, marker_contact: Tensor | None = None,
+            object_contact: Tensor | None = None, progress: bool = True, init: dict[str, Tensor] | None = None,
+            stages: tuple[int, ...] = (1, 2, 3)) -> GraspPoseResult:
+        """Alg. 1 on a batch: markers (B,143,3), contacts (B,143), (B,P) (probabilities) -> GraspPoseResult.
+
+        `init` (e.g. a previous result's `state`) and `stages` let the Tab. 2 ablations share stages 1-2.
+        """
+        if not isinstance(markers, Tensor) or markers.dim() != 3 or markers.shape[1:] != (len(self.marker_ids), 3):
+            got = tuple(markers.shape) if isinstance(markers, Tensor) else type(markers).__name__
+            raise ValueError(f"markers: expected shape (B, {len(self.marker_ids)}, 3), got {got}")
+        B = markers.shape[0]
+        if marker_contact is not None and marker_contact.shape != markers.shape[:2]:
+            raise ValueError(f"marker_contact: expected shape {tuple(markers.shape[:2])}, "
+                             f"got {tuple(marker_contact.shape)}")
+        if object_contact is not None and object_contact.shape != (B, obj.points.shape[0]):
+            raise ValueError(f"object_contact: expected shape ({B}, {obj.points.shape[0]}), "
+                             f"got {tuple(object_contact.shape)}")
+        if self.cfg.heuristic and self.hand_contact_prior is None:
+            raise ValueError("hand_contact_prior: the heuristic contact of S.3 needs it")
+        target = markers.detach().float()
+        p = {k: v.detach().clone() for k, v in (init or self.init_params(target)).items()}
+        free = {1: ("transl", "orient6d"), 2: ("transl", "orient6d", "betas", "z"),
+                3: ("z", "left_pca", "right_pca", "eyes")}
+        energies: list[dict[str, dict[str, Tensor]]] = []
+        log: list[dict[str, float]] = []
+        cache: dict[str, Tensor] = {}
+        total = sum(self.cfg.steps[s - 1] for s in stages)
+        bar = tqdm(total=total, desc="GraspPose-Opt", disable=not progress)
+        step = 0
+        for stage in stages:
+            if stage == 3:
+                cache = self._stage3_cache(p, obj, object_contact)
+            names = free[stage]
+            for k in p:
+                p[k].requires_grad_(k in names)
+            opt = torch.optim.Adam([p[k] for k in names], lr=self.cfg.lrs[stage - 1])
+            with torch.no_grad():
+                before = {k: v.detach() for k, v in self.energy(p, target, obj, stage, marker_contact,
+                                                                object_contact, cache).items()}
+            for i in range(self.cfg.steps[stage - 1]):
+                e = self.energy(p, target, obj, stage, marker_contact, object_contact, cache)
+                loss = sum(t.sum() for t in e.values())
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                opt.step()
+                if i % self.cfg.log_every == 0:
+                    log.append({"step": step, "stage": stage, **{k: float(t.detach().sum()) for k, t in e.items()}})
+                step += 1
+                bar.update(1)
+            with torch.no_grad():
+                after = {k: v.detach() for k, v in self.energy(p, target, obj, stage, marker_contact,
+                                                               object_contact, cache).items()}
+            energies.append({"stage": stage, "before": before, "after": after})
+        bar.close()
+        return self._result(p, energies, log)
+
+    def _stage3_cache(self, p: dict[str, Tensor], obj: GraspObject, object_contact: Tensor | None
+                      ) -> dict[str, Tensor]:
+        """Object points used in stage 3: the highest-contact ones (d(o, V_B)) and those nearest the hand (S(o, V^h))."""
+        B = p["transl"].shape[0]
+        P = obj.points.shape[0]
+        with torch.no_grad():
+            hands = self.body(p)[:, self.sl_hands]
+            d2, _ = _nearest(obj.points.expand(B, -1, -1).contiguous(), hands)
+            cache = {"collision_idx": d2.topk(min(self.cfg.collision_points, P), -1, largest=False).indices}
+            if object_contact is not None:
+                cache["contact_idx"] = object_contact.topk(min(self.cfg.contact_points, P), -1).indices
+        return cache
+
+    def _result(self, p: dict[str, Tensor], energies: list, log: list) -> GraspPoseResult:
+        """Full-mesh forward and SMPL-X parameters (axis-angle, absolute hand poses) of the final parameters."""
+        with torch.no_grad():
+            rot = self.rotmats(p)
+            out = self.bm.forward_rotmats(rot, betas=p["betas"], transl=p["transl"])
+            aa = matrix_to_axis_angle(rot)
+            B = rot.shape[0]
+            params = {"betas": p["betas"].clone(), "transl": p["transl"].clone(), "global_orient": aa[:, 0],
+                      "body_pose": aa[:, 1:22].reshape(B, 63), "jaw_pose": aa[:, 22], "leye_pose": aa[:, 23],
+                      "reye_pose": aa[:, 24], "left_hand_pose": aa[:, 25:40].reshape(B, 45),
+                      "right_hand_pose": aa[:, 40:55].reshape(B, 45), "pose_latent": p["z"].clone(),
+                      "left_hand_pca": p["left_pca"].clone(), "right_hand_pca": p["right_pca"].clone()}
+        state = {k: v.detach().clone() for k, v in p.items()}
+        return GraspPoseResult(params, out.vertices, out.vertices[:, self.marker_ids], energies, log, state)
+
+
+def energies_table(result: GraspPoseResult) -> list[dict[str, Any]]:
+    """Rows (stage, term, before, after) with each term summed over the batch, for printing or plotting."""
+    rows = []
+    for e in result.energies:
+        for k in e["after"]:
+            rows.append({"stage": e["stage"], "term": k, "before": float(e["before"][k].sum()),
+                         "after": float(e["after"][k].sum())})
+    return rows

@@ -1,0 +1,172 @@
+"""GraspPose-Opt (SAGA Eq. 4-7, Alg. 1): a known body refitted from its markers, each energy term against an
+independent computation (scipy KD-tree, trimesh-free exact signed distance, closed-form heights)."""
+import numpy as np
+import pytest
+import torch
+import trimesh
+from scipy.spatial import cKDTree
+
+from graspkit.body import BodyModel
+from graspkit.body.markers import foot_vertices, palm_vertices
+from graspkit.models.pose_prior import load_pose_prior
+from graspkit.objects.sdf import SDFGrid, signed_distance
+from graspkit.optim.grasppose import GraspObject, GraspPoseConfig, GraspPoseOpt, hand_vertex_ids, kabsch
+from graspkit.paths import default_model_path
+from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d
+
+
+@pytest.fixture(scope="module", autouse=True)
+def one_thread():
+    """Many small tensor ops: one thread is several times faster than two on shared cores."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+@pytest.fixture(scope="module")
+def bm():
+    return BodyModel.from_file(default_model_path())
+
+
+@pytest.fixture(scope="module")
+def prior():
+    torch.manual_seed(0)
+    return load_pose_prior()
+
+
+def _truth(bm, prior, B: int = 2, seed: int = 0):
+    """A known body: prior latent, shape, hand PCA, upright in the z-up world with a yaw; posed by BodyModel.forward."""
+    g = torch.Generator().manual_seed(seed)
+    z = 0.5 * torch.randn(B, 32, generator=g)
+    betas = 0.5 * torch.randn(B, 10, generator=g)
+    pca = {s: 0.5 * torch.randn(B, 24, generator=g) for s in ("left", "right")}
+    yaw = torch.rand(B, generator=g) * 6.28
+    up = axis_angle_to_matrix(torch.tensor([np.pi / 2, 0.0, 0.0])).expand(B, 3, 3)
+    R = axis_angle_to_matrix(torch.stack([torch.zeros(B), torch.zeros(B), yaw], -1)) @ up
+    transl = torch.randn(B, 3, generator=g) * 0.3
+    with torch.no_grad():
+        out = bm(betas=betas, global_orient=matrix_to_axis_angle(R), body_pose=prior.decode(z),
+                 left_hand_pose=pca["left"] @ bm.left_hand_components[:24],
+                 right_hand_pose=pca["right"] @ bm.right_hand_components[:24], transl=transl)
+    return out.vertices, dict(z=z, betas=betas, pca=pca, R=R, transl=transl)
+
+
+def _dummy_object() -> GraspObject:
+    pts = torch.tensor(trimesh.creation.icosphere(2, 0.05).vertices, dtype=torch.float32)
+    return GraspObject(pts, torch.nn.functional.normalize(pts, dim=-1), height=1.0)
+
+
+def test_kabsch_recovers_a_rigid_motion():
+    g = torch.Generator().manual_seed(0)
+    x = torch.randn(3, 40, 3, generator=g)
+    R = axis_angle_to_matrix(torch.randn(3, 3, generator=g))
+    c = torch.randn(3, 3, generator=g)
+    R2, c2 = kabsch(x, x @ R.transpose(1, 2) + c[:, None])
+    torch.testing.assert_close(R2, R, atol=1e-5, rtol=0)
+    torch.testing.assert_close(c2, c, atol=1e-5, rtol=0)
+
+
+def test_markers_of_a_known_body_are_refitted_to_within_a_centimetre(bm, prior):
+    verts, _ = _truth(bm, prior)
+    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(60, 200, 200), collision=False, contact=False,
+                                                  ground=False))
+    markers = verts[:, opt.marker_ids]
+    res = opt.fit(markers, _dummy_object(), progress=False)
+    err = (res.markers - markers).norm(dim=-1)
+    assert err.mean() < 0.01, f"mean marker error {err.mean():.4f} m"
+    assert (res.vertices - verts).norm(dim=-1).mean() < 0.015       # the whole mesh follows, not just the markers
+    # energies fall in every stage, and the result re-poses with BodyModel.forward from its axis-angle parameters
+    for e in res.energies:
+        assert e["after"]["fit"].sum() < e["before"]["fit"].sum()
+    p = res.params
+    again = bm(betas=p["betas"], global_orient=p["global_orient"], body_pose=p["body_pose"],
+               left_hand_pose=p["left_hand_pose"] - bm.pose_mean[75:120],
+               right_hand_pose=p["right_hand_pose"] - bm.pose_mean[120:165], leye_pose=p["leye_pose"],
+               reye_pose=p["reye_pose"], transl=p["transl"]).vertices
+    torch.testing.assert_close(again, res.vertices, atol=2e-4, rtol=0)
+
+
+def _params_of(opt, truth):
+    B = truth["z"].shape[0]
+    return {"transl": truth["transl"], "orient6d": matrix_to_rot6d(truth["R"]), "betas": truth["betas"],
+            "z": truth["z"], "left_pca": truth["pca"]["left"], "right_pca": truth["pca"]["right"],
+            "eyes": torch.zeros(B, 6)}
+
+
+def test_energy_terms_against_independent_computations(bm, prior):
+    verts, truth = _truth(bm, prior, B=1, seed=3)
+    w = GraspPoseConfig().weights
+    # the object: a box around the right palm, so that some hand vertices are inside it
+    hand = hand_vertex_ids(bm, ("right",))
+    centre = verts[0, hand].mean(0).double()
+    box = trimesh.creation.box((0.06, 0.06, 0.06))
+    box.apply_translation(centre.numpy())
+    pts_np, face = trimesh.sample.sample_surface_even(box, 800, seed=0)
+    pts = torch.tensor(pts_np, dtype=torch.float32)
+    nrm = torch.tensor(box.face_normals[face], dtype=torch.float32)
+    height = 0.7
+    obj = GraspObject(pts, nrm, height=height, sdf=SDFGrid.from_mesh(box, resolution=40, padding=0.02))
+    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(contact_points=800, collision_points=800))
+    p = _params_of(opt, truth)
+    cm = torch.zeros(1, 143)
+    cm[0, 100] = 1.0
+    co = torch.zeros(1, len(pts))
+    co[0, :5] = 1.0
+    cache = opt._stage3_cache(p, obj, co)
+    target = verts[:, opt.marker_ids]
+    e = opt.energy(p, target, obj, 3, cm, co, cache)
+    v = verts[0].double().numpy()
+    # E_fit at the truth is the prior term only
+    assert e["fit"].item() < 1e-3
+    # ground: alpha_g sum |z + t_O| over the sole vertices
+    feet = np.concatenate(list(foot_vertices(bm).values()))
+    assert e["ground"].item() == pytest.approx(w.ground * np.abs(v[feet, 2] + height).sum(), rel=1e-3)
+    # marker contact: 15 * squared distance of marker 100 to its nearest object point
+    d, _ = cKDTree(pts_np).query(v[opt.marker_ids[100]])
+    assert e["contact_marker"].item() == pytest.approx(w.contact_marker * d ** 2, rel=1e-3)
+    # object contact: 15 * sum over the 5 contact points of the squared distance to the nearest hand vertex
+    both = hand_vertex_ids(bm)
+    d, _ = cKDTree(v[both]).query(pts_np[:5])
+    assert e["contact_object"].item() == pytest.approx(w.contact_object * (d ** 2).sum(), rel=1e-3)
+    # hand in the box: alpha^B sum relu(-S - sigma) with the exact signed distance
+    sd = signed_distance(torch.tensor(v[both]), box).numpy()
+    want = w.colli_body * np.maximum(-sd - w.sigma_b, 0).sum()
+    assert want > 0.5
+    assert e["colli_body"].item() == pytest.approx(want, rel=0.05)
+    assert e["colli_object"].item() > 0                                     # box points inside the closed hand too
+
+
+def test_collision_stage_pushes_the_hand_out_of_the_object(bm, prior):
+    verts, truth = _truth(bm, prior, B=1, seed=3)
+    palm = torch.as_tensor(palm_vertices(bm)["right"])
+    hand = hand_vertex_ids(bm, ("right",))
+    # a ball pressed 1 cm into the palm, from the palm side
+    out = verts[0, palm].mean(0) - verts[0, hand].mean(0)
+    out = out / out.norm()
+    r = 0.04
+    ball = trimesh.creation.icosphere(3, r)
+    ball.apply_translation((verts[0, palm].mean(0) + out * (r - 0.01)).double().numpy())
+    pts_np, face = trimesh.sample.sample_surface_even(ball, 1000, seed=0)
+    obj = GraspObject(torch.tensor(pts_np, dtype=torch.float32), torch.tensor(ball.face_normals[face]).float(),
+                      height=1.0, sdf=SDFGrid.from_mesh(ball, resolution=32, padding=0.02))
+    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(0, 0, 60), contact=False, ground=False))
+    markers = verts[:, opt.marker_ids]
+    res = opt.fit(markers, obj, init=_params_of(opt, truth), stages=(3,), progress=False)
+    e = res.energies[0]
+    assert e["before"]["colli_body"].item() > 1.0
+    assert e["after"]["colli_body"].item() < 0.1 * e["before"]["colli_body"].item()
+    depth = lambda vv: max(0.0, -signed_distance(vv[0, hand].double(), ball).min().item())  # noqa: E731
+    assert depth(verts) > 0.008 and depth(res.vertices) < 0.004
+
+
+def test_bad_inputs_are_named(bm, prior):
+    opt = GraspPoseOpt(bm, prior)
+    with pytest.raises(ValueError, match="markers"):
+        opt.fit(torch.zeros(2, 100, 3), _dummy_object())
+    with pytest.raises(ValueError, match="object_contact"):
+        opt.fit(torch.zeros(2, 143, 3), _dummy_object(), torch.zeros(2, 143), torch.zeros(2, 7))
+    with pytest.raises(ValueError, match="normals"):
+        GraspObject(torch.zeros(10, 3), torch.zeros(9, 3), 1.0)
+    with pytest.raises(ValueError, match="hand_contact_prior"):
+        GraspPoseOpt(bm, prior, GraspPoseConfig(heuristic=True)).fit(torch.zeros(1, 143, 3), _dummy_object())
