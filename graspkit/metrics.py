@@ -168,3 +168,74 @@ def motion_quality(bm, motions, chunk: int = 96) -> dict[str, Any]:
             "slide_goal": sl / max(pairs, 1), "penetration_max": pen_max, "penetration_mean": pen_sum / max(frames, 1),
             "max_joint_speed": vmax, "max_joint_speed_at": vmax_at, "mean_jerk": jerk_sum / max(jerk_n, 1),
             "joint_limit_max": lim_max, "joint_limit_at": lim_at}
+
+
+# ----------------------------------------------------------------------------- grasps (SAGA Sec. 4.1 / Tab. 1-2, GOAL Tab. 1)
+# | metric | paper | definition here |
+# |---|---|---|
+# | contact ratio | SAGA Sec. 4.1 ("ratio of body meshes in minimal contact with the object"), GOAL Tab. 1 (after PSI [68]) |
+# |   | | fraction of grasps whose body mesh comes within GRASP_CONTACT_THRESHOLD of the object surface (signed distance of
+# |   | | the body vertices, so touching or penetrating counts) |
+# | interpenetration volume | SAGA Tab. 1-2, GOAL Tab. 1 | cm^3 inside both the body mesh and the object mesh (exact ray casting,
+# |   | | graspkit.objects.interpenetration) |
+# | interpenetration depth | SAGA Tab. 1-2 | cm, deepest body vertex inside the object |
+# | APD | SAGA Sec. 4.1 (after DLow) | average L2 distance between all pairs of K samples (flattened markers), for one object placement |
+GRASP_CONTACT_THRESHOLD = 0.002      # m: "minimal contact" (the papers give no number; 2 mm on the exact signed distance)
+
+
+def grasp_contact_distance(vertices: Any, obj: Any, margin: float = 0.05) -> float:
+    """Smallest signed distance (m, < 0 inside) from body vertices (V,3) to an object mesh (Trimesh or (verts, faces)).
+
+    Only vertices within `margin` of the object's bounding box are measured (the rest cannot be closer)."""
+    from graspkit.objects.distance import mesh_arrays
+    from graspkit.objects.sdf import signed_distance
+
+    v = _t(vertices).double().reshape(-1, 3)
+    ov, of = mesh_arrays(obj, "obj")
+    lo, hi = ov.min(0).values - margin, ov.max(0).values + margin
+    near = ((v >= lo) & (v <= hi)).all(1)
+    if not near.any():
+        box = torch.maximum(torch.maximum(lo - v, v - hi), torch.zeros_like(v))
+        return float(box.norm(dim=1).min()) + margin
+    return float(signed_distance(v[near], (ov, of), check=False).min())
+
+
+def grasp_metrics(vertices: Any, faces: Any, obj: Any, threshold: float = GRASP_CONTACT_THRESHOLD) -> dict[str, float]:
+    """Contact, interpenetration volume (cm^3) and depth (cm) of one body mesh (V,3)+(F,3) and one object mesh."""
+    from graspkit.objects.penetration import interpenetration
+
+    d = grasp_contact_distance(vertices, obj)
+    pen = interpenetration((_t(vertices).double(), _t(faces).long()), obj)
+    return {"min_distance": d, "contact": float(d <= threshold), "volume_cm3": pen.volume_cm3, "depth_cm": pen.depth_cm}
+
+
+def contact_ratio(min_distances: Any, threshold: float = GRASP_CONTACT_THRESHOLD) -> float:
+    """Fraction of grasps in contact: min body-object signed distances (N,) <= threshold."""
+    d = np.asarray(min_distances, np.float64).reshape(-1)
+    return float((d <= threshold).mean()) if d.size else float("nan")
+
+
+def apd(samples: Any) -> float:
+    """Average pairwise L2 distance between K samples (K, ...) flattened (SAGA Sec. 4.1 after DLow): mean over i != j."""
+    x = _t(samples).double().reshape(len(samples), -1)
+    K = x.shape[0]
+    if K < 2:
+        raise ValueError(f"samples: APD needs at least 2 samples, got {K}")
+    d = torch.cdist(x, x)
+    return float(d.sum() / (K * (K - 1)))
+
+
+def grasp_quality_table(rows: list[dict[str, float]]) -> dict[str, float]:
+    """Summary over grasps: rows of grasp_metrics (+ optional 'feet_cm': distance of the lower foot sole to the ground,
+    cm): contact ratio, penetration volume mean / median / max, depth mean / max, share with feet within 1 cm."""
+    if not rows:
+        raise ValueError("rows: no grasps to summarise")
+    vol = np.array([r["volume_cm3"] for r in rows])
+    dep = np.array([r["depth_cm"] for r in rows])
+    out = {"grasps": len(rows), "contact_ratio": float(np.mean([r["contact"] for r in rows])),
+           "volume_mean_cm3": float(vol.mean()), "volume_median_cm3": float(np.median(vol)), "volume_max_cm3": float(vol.max()),
+           "depth_mean_cm": float(dep.mean()), "depth_max_cm": float(dep.max())}
+    if all("feet_cm" in r for r in rows):
+        feet = np.array([r["feet_cm"] for r in rows])
+        out.update(feet_within_1cm=float((feet <= 1.0).mean()), feet_max_cm=float(feet.max()))
+    return out

@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 KINDS = ("locomotion", "reach")
-DEFAULT_N = {"locomotion": 2000, "reach": 2000}
+GRASP_KINDS = ("grasp", "approach")          # graspkit.data.grasp_make (chunked, batched grasp fitting)
+DEFAULT_N = {"locomotion": 2000, "reach": 2000, "grasp": 1700, "approach": 510}
 _BM = None
 
 
@@ -87,7 +88,14 @@ def _cmd_make(args: argparse.Namespace) -> int:
     if out is None:
         from graspkit.paths import cache_dir
 
-        out = cache_dir() / "motion" / args.kind
+        out = cache_dir() / ("grasps" if args.kind in GRASP_KINDS else "motion") / args.kind
+    if args.kind in GRASP_KINDS:
+        from graspkit.data.grasp_make import make_grasp_dataset
+
+        make_grasp_dataset(args.kind, n, args.seed, out, args.workers, str(args.model) if args.model else None,
+                           progress=not args.quiet)
+        print(f"{n} {args.kind} files in {out}")
+        return 0
     make_dataset(args.kind, n, args.seed, out, args.workers, str(args.model) if args.model else None,
                  progress=not args.quiet)
     print(f"{n} {args.kind} clips in {out}")
@@ -97,11 +105,12 @@ def _cmd_make(args: argparse.Namespace) -> int:
 def add_data_commands(subparsers) -> None:
     """Register `graspkit data ...` on the top-level subparsers."""
     data = subparsers.add_parser("data", help="procedural motion data").add_subparsers(dest="data_command", required=True)
-    m = data.add_parser("make", help="generate locomotion (AMASS-style) or reaching (CIRCLE-style) clips")
-    m.add_argument("--kind", choices=KINDS, required=True)
+    m = data.add_parser("make", help="generate locomotion (AMASS-style) or reaching (CIRCLE-style) clips, "
+                        "whole-body grasps or approach-and-grasp clips (GRAB-style)")
+    m.add_argument("--kind", choices=KINDS + GRASP_KINDS, required=True)
     m.add_argument("--n", type=int, default=None, help=f"number of clips (default {DEFAULT_N})")
     m.add_argument("--seed", type=int, default=0)
-    m.add_argument("--out", type=Path, default=None, help="folder (default: <cache>/motion/<kind>)")
+    m.add_argument("--out", type=Path, default=None, help="folder (default: <cache>/motion/<kind>, <cache>/grasps/<kind>)")
     m.add_argument("--workers", type=int, default=2, help="processes (default 2)")
     m.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
     m.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -1,0 +1,90 @@
+"""Approach-and-grasp sequences: walk to the object, reach, close the hand into the fitted grasp and hold it.
+
+The reach plan that a grasp was fitted on (graspkit.data.grasp: plan_reach from a start 0.05-1.5 m away, facing
+the object within +-10 deg, SAGA Sec. 4.3 / GOAL Sec. 3) already walks and reaches; the approach clip adds:
+
+- the grasp: from half a second before the grasp frame the spine, neck, head and right arm rotate smoothly from the
+  plan into the fitted grasp pose (each joint: the plan's rotation times a growing fraction of the fitted change);
+  the fingers go from the plan's opening hand to the grasp type's open pre-shape, then close into the grasp in the
+  last GRASP_CLOSE_S seconds; from the grasp frame on, the whole pose is held (GOAL's goal frame = this frame);
+- a GRAB-like start: half of the clips start in a T-pose (GRAB's start pose), whose arms lower into the plan's
+  over the first TPOSE_S seconds; the others start from the planner's idle stance.
+
+The lower body is the planner's, so feet, foot contacts and skating are those of the motion data (docs/data.md).
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from graspkit.body.skeleton import JOINT_INDEX
+from graspkit.data.ik import axis_angle_matrix, matrix_axis_angle, smoothstep
+from graspkit.data.motion import Motion
+
+J = JOINT_INDEX
+BLEND_S = 0.5          # s before the grasp frame in which the body turns into the fitted pose
+PRESHAPE_S = 0.6       # s before the grasp frame the fingers start taking the pre-shape
+GRASP_CLOSE_S = 0.25   # s before the grasp frame the fingers start closing
+TPOSE_S = 0.8          # s over which a T-pose start lowers its arms
+ARM_JOINTS = tuple(J[n] for n in ("left_collar", "right_collar", "left_shoulder", "right_shoulder", "left_elbow",
+                                  "right_elbow", "left_wrist", "right_wrist")) + tuple(range(25, 55))
+FIT_JOINTS = tuple(J[n] for n in ("spine1", "spine2", "spine3", "neck", "head", "right_collar", "right_shoulder",
+                                  "right_elbow", "right_wrist"))
+
+
+def _slerp_from(R0: np.ndarray, R1: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """R0 (…,3,3) rotated a fraction w (…) of the way to R1: R0 exp(w log(R0^T R1))."""
+    rel = matrix_axis_angle(np.swapaxes(R0, -1, -2) @ R1)
+    return R0 @ axis_angle_matrix(rel * np.asarray(w)[..., None])
+
+
+def approach_motion(plan: Motion, grasp_frame: int, grasp_pose: np.ndarray, open_hand: np.ndarray,
+                    start_pose: str = "idle") -> Motion:
+    """The approach-and-grasp clip: the plan (T frames) with the fitted grasp pose (55,3) reached at grasp_frame and
+    held to the end; open_hand (15,3): the right hand's pre-shape; start_pose 'idle' or 't_pose'."""
+    if start_pose not in ("idle", "t_pose"):
+        raise ValueError(f"start_pose: expected 'idle' or 't_pose', got {start_pose!r}")
+    T, fps, g = plan.num_frames, plan.fps, int(grasp_frame)
+    if not 0 <= g < T:
+        raise ValueError(f"grasp_frame: expected a frame in [0, {T}), got {grasp_frame}")
+    R = axis_angle_matrix(plan.poses.astype(np.float64))                     # (T,55,3,3)
+    Rg = axis_angle_matrix(np.asarray(grasp_pose, np.float64))               # (55,3,3)
+    t = np.arange(T) / fps
+    tg = g / fps
+    # body: the change at the grasp frame, phased in over BLEND_S
+    w = smoothstep((t - (tg - BLEND_S)) / BLEND_S)
+    for j in FIT_JOINTS:
+        delta = matrix_axis_angle(R[g, j].T @ Rg[j])
+        R[:, j] = R[:, j] @ axis_angle_matrix(w[:, None] * delta)
+    # fingers: plan -> open pre-shape -> grasp
+    Ro = axis_angle_matrix(np.asarray(open_hand, np.float64))                # (15,3,3)
+    w1 = smoothstep((t - (tg - PRESHAPE_S)) / (PRESHAPE_S - GRASP_CLOSE_S))
+    w2 = smoothstep((t - (tg - GRASP_CLOSE_S)) / GRASP_CLOSE_S)
+    hand = _slerp_from(R[:, 40:55], np.broadcast_to(Ro, (T, 15, 3, 3)), np.broadcast_to(w1[:, None], (T, 15)))
+    R[:, 40:55] = _slerp_from(hand, np.broadcast_to(Rg[40:55], (T, 15, 3, 3)), np.broadcast_to(w2[:, None], (T, 15)))
+    # hold the grasp from the grasp frame on
+    R[g:] = Rg
+    trans = plan.trans.astype(np.float64).copy()
+    trans[g:] = trans[g]
+    contacts = plan.contacts.copy() if plan.contacts is not None else None
+    if contacts is not None:
+        contacts[g:] = contacts[g]
+    if start_pose == "t_pose":
+        wt = smoothstep(t / TPOSE_S)
+        ids = list(ARM_JOINTS)
+        R[:, ids] = _slerp_from(np.broadcast_to(np.eye(3), (T, len(ids), 3, 3)), R[:, ids],
+                                np.broadcast_to(wt[:, None], (T, len(ids))))
+    poses = matrix_axis_angle(R)
+    return Motion(poses, trans, plan.betas, fps, contacts=contacts, goal=None, goal_frame=None, hand=None)
+
+
+def hand_vertices_track(bm, motion: Motion, ids: np.ndarray) -> np.ndarray:
+    """World positions (T,len(ids),3) of selected vertices over a clip (partial skinning, no gradients)."""
+    from graspkit.data.grasp_opt import PartialBody, coeffs_of
+
+    pb = PartialBody(bm, ids)
+    rot = motion.rotmats(bm.dtype)
+    with torch.no_grad():
+        v, _ = pb(rot, coeffs_of(bm, motion.betas[None]).expand(motion.num_frames, -1),
+                  torch.as_tensor(motion.trans, dtype=bm.dtype))
+    return v.double().numpy()

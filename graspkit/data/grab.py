@@ -1,0 +1,233 @@
+"""GRAB-style grasp files: a whole-body SMPL-X sequence with an object, its per-frame pose and contact labels.
+
+GRAB (Taheri et al., ECCV 2020; used by SAGA App. A.3 and GOAL Sec. 3.5) stores each sequence as an `.npz` of
+pickled nested dictionaries (`body.params.*`, `object.params.*`, `contact.*`, `framerate`, `obj_name`, ...).
+graspkit writes the same tree WITHOUT pickle: every leaf is a plain array under its dotted path, e.g.
+
+| key | shape | meaning |
+|---|---|---|
+| `body.params.global_orient`, `.body_pose`, `.jaw_pose`, `.leye_pose`, `.reye_pose` | (T,3), (T,63), (T,3) x 3 | axis-angle |
+| `body.params.left_hand_pose`, `.right_hand_pose` | (T,45) | axis-angle, ABSOLUTE (`body.flat_hand_mean` = True) |
+| `body.params.transl`, `.expression`, `.fullpose` | (T,3), (T,10), (T,165) | fullpose = all 55 joints |
+| `body.betas`, `body.flat_hand_mean`, `body.model` | (10,), (), () | shape; hand mean not added; the model file |
+| `object.params.transl`, `.global_orient` | (T,3), (T,3) | object pose per frame: x_world = R(orient) x_obj + transl |
+| `object.object_mesh`, `object.points`, `object.normals` | (), (P,3), (P,3) | PLY path relative to the file; SAGA's 2048 points |
+| `contact.object`, `contact.markers`, `contact.body`, `contact.feet` | (T,P), (T,143), (T,V), (T,4) uint8 | C_O, C_M, body vertices, feet |
+| `framerate`, `n_frames`, `obj_name`, `gender`, `sbj_id`, `motion_intent` | () | as GRAB |
+| `grasp.*`, `goal.*`, `saga.*` | | graspkit's extras: grasp type, grasp frame, GOAL / SAGA labels |
+
+`load_grasp_sequence` reads these files, and real GRAB files when `allow_pickle=True` is passed explicitly (their
+dictionaries are pickled; only open files you trust). GRAB's hand poses are stored relative to the SMPL-X hand mean
+(its models use flat_hand_mean=False): pass `hands_mean` (90,) (e.g. a model's hands_meanl/r) to make them absolute.
+Sequences are resampled to `fps` (GRAB: 120 Hz) with slerp (graspkit.data.formats.resample).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from graspkit.data.formats import SequenceFileError, resample, write_npz_atomic
+
+BODY_PARTS = (("global_orient", 0, 1), ("body_pose", 1, 22), ("jaw_pose", 22, 23), ("leye_pose", 23, 24),
+              ("reye_pose", 24, 25), ("left_hand_pose", 25, 40), ("right_hand_pose", 40, 55))
+
+
+@dataclass
+class GraspSequence:
+    """One GRAB-style sequence: poses (T,55,3) absolute axis-angle, trans (T,3), betas (10,), fps; the object's
+    name, per-frame translation (T,3) and axis-angle orientation (T,3), mesh path; contacts {name: (T,N) uint8};
+    extras {key: array} (graspkit's labels); object points / normals (P,3) in the object frame."""
+
+    poses: np.ndarray
+    trans: np.ndarray
+    betas: np.ndarray
+    fps: float
+    object_name: str
+    object_transl: np.ndarray
+    object_orient: np.ndarray
+    object_mesh: str = ""
+    contacts: dict[str, np.ndarray] = field(default_factory=dict)
+    extras: dict[str, np.ndarray] = field(default_factory=dict)
+    object_points: np.ndarray | None = None
+    object_normals: np.ndarray | None = None
+    gender: str = "neutral"
+    subject: str = "graspkit"
+    intent: str = "lift"
+
+    def __post_init__(self) -> None:
+        self.poses = np.asarray(self.poses, np.float32).reshape(-1, 55, 3)
+        T = len(self.poses)
+        self.trans = np.asarray(self.trans, np.float32).reshape(T, 3)
+        self.betas = np.asarray(self.betas, np.float32).reshape(-1)
+        self.object_transl = np.asarray(self.object_transl, np.float32).reshape(T, 3)
+        self.object_orient = np.asarray(self.object_orient, np.float32).reshape(T, 3)
+        for k, c in self.contacts.items():
+            if len(c) != T:
+                raise ValueError(f"contacts: {k!r} has {len(c)} frames, poses has {T}")
+
+    @property
+    def num_frames(self) -> int:
+        return len(self.poses)
+
+    def object_rotation(self) -> np.ndarray:
+        """Object rotation matrices (T,3,3)."""
+        from graspkit.data.ik import axis_angle_matrix
+        return axis_angle_matrix(self.object_orient.astype(np.float64))
+
+
+def to_arrays(seq: GraspSequence, model: str = "graspkit procedural SMPLX_NEUTRAL.npz") -> dict[str, np.ndarray]:
+    """The flat dotted-key dictionary of a sequence (what save_grasp_sequence writes)."""
+    T = seq.num_frames
+    a: dict[str, np.ndarray] = {}
+    for name, lo, hi in BODY_PARTS:
+        a[f"body.params.{name}"] = seq.poses[:, lo:hi].reshape(T, -1).astype(np.float32)
+    a["body.params.transl"] = seq.trans.astype(np.float32)
+    a["body.params.expression"] = np.zeros((T, 10), np.float32)
+    a["body.params.fullpose"] = seq.poses.reshape(T, 165).astype(np.float32)
+    a["body.betas"] = seq.betas[:10].astype(np.float32)
+    a["body.flat_hand_mean"] = np.array(True)
+    a["body.model"] = np.array(model)
+    a["object.params.transl"] = seq.object_transl.astype(np.float32)
+    a["object.params.global_orient"] = seq.object_orient.astype(np.float32)
+    a["object.object_mesh"] = np.array(seq.object_mesh)
+    if seq.object_points is not None:
+        a["object.points"] = np.asarray(seq.object_points, np.float32)
+        a["object.normals"] = np.asarray(seq.object_normals, np.float32)
+    for k, c in seq.contacts.items():
+        a[f"contact.{k}"] = np.asarray(c).astype(np.uint8)
+    a.update(framerate=np.array(float(seq.fps)), n_frames=np.array(T), obj_name=np.array(seq.object_name),
+             gender=np.array(seq.gender), sbj_id=np.array(seq.subject), motion_intent=np.array(seq.intent))
+    for k, v in seq.extras.items():
+        if k in a:
+            raise ValueError(f"extras: key {k!r} clashes with a GRAB key")
+        a[k] = np.asarray(v)
+    return a
+
+
+def save_grasp_sequence(path: str | os.PathLike, seq: GraspSequence) -> Path:
+    """Write a GraspSequence as a GRAB-style .npz without pickle, atomically (equal content gives equal bytes)."""
+    path = Path(path)
+    write_npz_atomic(path, to_arrays(seq))
+    return path
+
+
+def _flatten(prefix: str, value, out: dict[str, np.ndarray]) -> None:
+    """Flatten GRAB's nested dictionaries into dotted keys."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _flatten(f"{prefix}.{k}" if prefix else str(k), v, out)
+    else:
+        out[prefix] = np.asarray(value)
+
+
+def read_arrays(path: str | os.PathLike, allow_pickle: bool = False) -> dict[str, np.ndarray]:
+    """All leaves of a GRAB-style or real GRAB .npz as a flat dotted-key dictionary."""
+    path = Path(path)
+    if not path.is_file():
+        raise SequenceFileError(f"{path}: no such grasp file")
+    try:
+        npz = np.load(path, allow_pickle=allow_pickle)
+    except Exception as e:
+        raise SequenceFileError(f"{path}: not a readable .npz file ({e})") from None
+    out: dict[str, np.ndarray] = {}
+    with npz:
+        for key in npz.files:
+            try:
+                a = npz[key]
+            except ValueError:
+                raise SequenceFileError(
+                    f"{path}: key {key!r} holds pickled Python objects (a real GRAB file?); pass allow_pickle=True "
+                    "only if you trust the file") from None
+            if a.dtype == object:
+                _flatten(key, a.item() if a.shape == () else list(a), out)
+            else:
+                out[key] = a
+    return out
+
+
+def _str(a: np.ndarray | None, default: str = "") -> str:
+    """A scalar string array as str."""
+    if a is None:
+        return default
+    v = a.item() if a.shape == () else a.reshape(-1)[0]
+    return v.decode() if isinstance(v, bytes) else str(v)
+
+
+def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, hands_mean: np.ndarray | None = None,
+                        fps: float | None = 30.0) -> GraspSequence:
+    """Read a graspkit GRAB-style file (or a real GRAB file with allow_pickle=True) into a GraspSequence at `fps`.
+
+    hands_mean (90,): added to the hand poses of files that store them relative to the hand mean (real GRAB;
+    graspkit's own files say `body.flat_hand_mean` = True and are never changed)."""
+    path = Path(path)
+    a = read_arrays(path, allow_pickle)
+
+    def get(key: str) -> np.ndarray:
+        if key not in a:
+            raise SequenceFileError(f"{path}: missing key {key!r}")
+        return a[key]
+
+    if "body.params.fullpose" in a:
+        full = np.asarray(get("body.params.fullpose"), np.float64)
+        if full.ndim != 2 or full.shape[1] != 165:
+            raise SequenceFileError(f"{path}: key 'body.params.fullpose' has shape {full.shape}, expected (T, 165)")
+        poses = full.reshape(-1, 55, 3)
+    else:
+        parts = []
+        for name, lo, hi in BODY_PARTS:
+            p = np.asarray(get(f"body.params.{name}"), np.float64)
+            if p.shape[-1] != 3 * (hi - lo):
+                raise SequenceFileError(f"{path}: key 'body.params.{name}' has {p.shape[-1]} values per frame, "
+                                        f"expected {3 * (hi - lo)} (PCA hand poses need 'body.params.fullpose')")
+            parts.append(p.reshape(len(p), hi - lo, 3))
+        poses = np.concatenate(parts, 1)
+    T = len(poses)
+    flat = bool(a["body.flat_hand_mean"]) if "body.flat_hand_mean" in a else False
+    if hands_mean is not None and not flat:
+        hm = np.asarray(hands_mean, np.float64).reshape(90)
+        poses = poses.copy()
+        poses[:, 25:55] += hm.reshape(30, 3)
+    trans = np.asarray(get("body.params.transl"), np.float64).reshape(T, 3)
+    betas = np.zeros(10)
+    if "body.betas" in a:
+        b = np.asarray(a["body.betas"], np.float64).reshape(-1)[:10]
+        betas[:len(b)] = b
+    src = float(np.asarray(a.get("framerate", np.array(30.0))).reshape(-1)[0])
+    o_t = np.asarray(get("object.params.transl"), np.float64).reshape(T, 3)
+    o_r = np.asarray(get("object.params.global_orient"), np.float64).reshape(T, 3)
+    contacts = {k[len("contact."):]: np.asarray(v) for k, v in a.items() if k.startswith("contact.")}
+    for k, c in contacts.items():
+        if len(c) != T:
+            raise SequenceFileError(f"{path}: key 'contact.{k}' has {len(c)} frames, expected {T}")
+    for key, arr in (("poses", poses), ("body.params.transl", trans), ("object.params.transl", o_t)):
+        if not np.isfinite(arr).all():
+            raise SequenceFileError(f"{path}: key {key!r} contains NaN or Inf")
+    if fps is not None and abs(src - fps) > 1e-6 and T > 1:
+        n_old = T
+        poses, trans, _, _ = resample(poses, trans, src, fps)
+        o_r3, o_t, _, _ = resample(o_r[:, None], o_t, src, fps)
+        o_r = o_r3[:, 0]
+        idx = np.minimum(np.round(np.arange(len(poses)) * src / fps).astype(int), n_old - 1)
+        contacts = {k: c[idx] for k, c in contacts.items()}
+        src = fps
+    skip = {"framerate", "n_frames", "obj_name", "gender", "sbj_id", "motion_intent", "body.betas", "body.model",
+            "body.flat_hand_mean", "object.object_mesh", "object.points", "object.normals"}
+    extras = {k: v for k, v in a.items() if not (k in skip or k.startswith(("body.params.", "object.params.", "contact.")))}
+    return GraspSequence(poses, trans, betas, src, _str(a.get("obj_name")), o_t, o_r, _str(a.get("object.object_mesh")),
+                         contacts, extras, a.get("object.points"), a.get("object.normals"), _str(a.get("gender"), "neutral"),
+                         _str(a.get("sbj_id"), ""), _str(a.get("motion_intent"), ""))
+
+
+def export_object_ply(name: str, folder: str | os.PathLike) -> Path:
+    """Write catalogue object `name` (canonical, object frame) as `folder/name.ply` (binary PLY), atomically."""
+    import trimesh
+
+    from graspkit.objects.catalogue import make_object
+    from graspkit.viz.export import write_atomic
+
+    mesh = make_object(name)
+    data = trimesh.exchange.ply.export_ply(mesh, encoding="binary", include_attributes=False)
+    return write_atomic(Path(folder) / f"{name}.ply", data)
