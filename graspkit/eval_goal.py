@@ -15,6 +15,7 @@ The perceptual studies (Tab. 3-4) are not reproduced.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import torch
@@ -101,26 +102,53 @@ def _files(folder, kind: str, split: str | None) -> list:
     return [s for s in seqs if split is None or split_of(s.object_name) == split]
 
 
-def gnet_samples(seqs: list) -> dict[str, Tensor]:
-    """GNet's training tensors (see GNet.features) from GRAB-style grasp or approach sequences, at their grasp frame."""
+def object_points_world(seq, frame: int = 0) -> Tensor:
+    """The sequence's object surface points (P,3) moved to the world by its pose at `frame`."""
+    R, t = seq.object_rotation()[frame], seq.object_transl[frame].astype(np.float64)
+    if seq.object_points is None:
+        raise ValueError(f"seq: the {seq.object_name} sequence stores no object points")
+    return torch.as_tensor(np.asarray(seq.object_points, np.float64) @ R.T + t).float()
+
+
+@torch.no_grad()
+def goal_labels(rot6d: Tensor, transl: Tensor, betas: Tensor, points: Tensor, obj_transl: Tensor) -> dict[str, Tensor]:
+    """GOAL's labels of grasps (B,...) recomputed on graspkit's body (Eq. 2): the 400 sampled vertices, their offsets
+    to the closest object point (points (B,P,3)), the head direction q and the object's BPS code (points minus the
+    object translation, the fixed 1024-point basis of radius 0.15 m)."""
+    from graspkit.objects.bps import bps_basis, bps_encode
+    from graspkit.optim.goal_refine import hand_object_offsets
+
+    _, gv, body = _body()
+    head = _head_body()
+    v = body(pose_rotmats(rot6d), betas, transl)[0].float()
+    hv = head(pose_rotmats(rot6d), betas, transl)[0].float()
+    return {"verts": v, "offsets": hand_object_offsets(v, points), "head_dir": torch.nn.functional.normalize(
+            hv[:, 1] - hv[:, 0], dim=-1), "bps": bps_encode(points - obj_transl[:, None], bps_basis()).float()}
+
+
+def gnet_samples(seqs: list, accepted_only: bool = True) -> dict[str, Tensor]:
+    """GNet's tensors (see GNet.features) from GRAB-style grasp or approach sequences at their grasp frame; the labels
+    are recomputed from the stored parameters and object (`goal_labels`), so they always match graspkit's body."""
     from graspkit.rotations import axis_angle_to_rot6d
 
+    if accepted_only:
+        seqs = [s for s in seqs if bool(s.extras.get("grasp.accepted", True))]
     if not seqs:
-        raise ValueError("seqs: no sequences")
-    cols: dict[str, list] = {k: [] for k in ("rot6d", "transl", "betas", "verts", "head_dir", "obj_transl", "bps",
-                                             "offsets")}
-    for s in seqs:
-        e = s.extras
-        f = int(e.get("grasp.goal_frame", e.get("grasp.frame", np.array(0))))
-        cols["rot6d"].append(axis_angle_to_rot6d(torch.as_tensor(s.poses[f], dtype=torch.float64)).float())
-        cols["transl"].append(torch.as_tensor(s.trans[f]))
-        cols["betas"].append(torch.as_tensor(s.betas[:10]))
-        for k, key in (("verts", "goal.vertices"), ("head_dir", "goal.head_direction"), ("obj_transl", "goal.object_transl"),
-                       ("bps", "goal.bps_object"), ("offsets", "goal.offsets")):
-            if key not in e:
-                raise ValueError(f"seqs: a {s.object_name} sequence has no {key!r} label")
-            cols[k].append(torch.as_tensor(np.asarray(e[key], np.float32)))
-    return {k: torch.stack(v).float() for k, v in cols.items()}
+        raise ValueError("seqs: no (accepted) sequences")
+    frames = [int(s.extras.get("grasp.goal_frame", s.extras.get("grasp.frame", np.array(0)))) for s in seqs]
+    rot6d = torch.stack([axis_angle_to_rot6d(torch.as_tensor(s.poses[f], dtype=torch.float64)).float()
+                         for s, f in zip(seqs, frames)])
+    transl = torch.stack([torch.as_tensor(np.array(s.trans[f])) for s, f in zip(seqs, frames)]).float()
+    betas = torch.stack([torch.as_tensor(s.betas[:10]) for s in seqs]).float()
+    obj_t = torch.stack([torch.as_tensor(np.array(s.object_transl[f])) for s, f in zip(seqs, frames)]).float()
+    P = min(len(s.object_points) for s in seqs)
+    points = torch.stack([object_points_world(s, f)[:P] for s, f in zip(seqs, frames)])
+    out = {"rot6d": rot6d, "transl": transl, "betas": betas, "obj_transl": obj_t}
+    for i in range(0, len(seqs), 256):
+        lab = goal_labels(rot6d[i:i + 256], transl[i:i + 256], betas[i:i + 256], points[i:i + 256], obj_t[i:i + 256])
+        for k, v in lab.items():
+            out.setdefault(k, []).append(v)
+    return {k: torch.cat(v) if isinstance(v, list) else v for k, v in out.items()}
 
 
 def approach_clips(seqs: list) -> list:
@@ -132,8 +160,7 @@ def approach_clips(seqs: list) -> list:
     for s in seqs:
         if "grasp.goal_frame" not in s.extras:
             raise ValueError(f"seqs: a {s.object_name} sequence has no 'grasp.goal_frame' (not an approach clip)")
-        R, t = s.object_rotation()[0], s.object_transl[0].astype(np.float64)
-        pts = torch.as_tensor(np.asarray(s.object_points, np.float64) @ R.T + t).float()
+        pts, t = object_points_world(s, 0), s.object_transl[0].astype(np.float64)
         out.append(ApproachClip(axis_angle_to_rot6d(torch.as_tensor(s.poses, dtype=torch.float64)).float(),
                                 torch.as_tensor(s.trans).float(), torch.as_tensor(s.betas[:10]).float(),
                                 int(s.extras["grasp.goal_frame"]), pts, torch.as_tensor(t).float(), s.object_name))
@@ -164,8 +191,10 @@ def default_data_folders() -> list:
     return [cache_dir() / "grasp", cache_dir() / "approach"]
 
 
+@lru_cache(maxsize=1)
 def _body():
-    """The default body model (hand mean not added: the files store absolute poses) and GOAL's vertex sampler."""
+    """The default body model (hand mean not added: the files store absolute poses), GOAL's vertex sampler and a
+    SparseBody over its 400 vertices (built once)."""
     from graspkit.body import BodyModel
     from graspkit.body.markers import goal_vertices
     from graspkit.models.gnet import SparseBody
@@ -174,6 +203,15 @@ def _body():
     bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
     gv = goal_vertices(bm)
     return bm, gv, SparseBody(bm, torch.as_tensor(gv.vertex_ids))
+
+
+@lru_cache(maxsize=1)
+def _head_body():
+    """A SparseBody over the head-direction pair (back of the head, nose) of the default body."""
+    from graspkit.models.gnet import SparseBody
+
+    _, gv, body = _body()
+    return SparseBody(body.bm, torch.tensor([gv.head_back, gv.head_front]))
 
 
 def gnet_data(folders) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
@@ -279,3 +317,117 @@ def _cmd_train(args, name: str, stubs) -> int:
     info = run(folders, out, args.variant, args.epochs, args.time_limit, args.seed, args.threads)
     print(f"wrote {out}: {info['epochs']} epochs in {info['seconds']:.0f} s; last loss {info['history'][-1]['loss']:.4f}")
     return 0
+
+
+# ------------------------------------------------------------------------------------------- Tab. 1: GNet grasps
+
+def object_mesh_world(seq, frame: int = 0):
+    """The sequence's catalogue object as a trimesh at its pose at `frame`."""
+    from graspkit.objects.catalogue import make_object
+    from graspkit.objects.placement import ObjectPose, apply_pose
+
+    return apply_pose(ObjectPose(seq.object_transl[frame].astype(np.float64), seq.object_rotation()[frame]),
+                      make_object(seq.object_name))
+
+
+def _grasp_row(bm, rot6d: Tensor, transl: Tensor, betas: Tensor, meshes: list) -> list[dict[str, float]]:
+    """graspkit.metrics.grasp_metrics of each body (full mesh) against its object mesh."""
+    from graspkit.metrics import grasp_metrics
+
+    with torch.no_grad():
+        v = bm.forward_rotmats(pose_rotmats(rot6d), betas=betas, transl=transl).vertices
+    rows = []
+    for b in range(len(v)):
+        m = grasp_metrics(v[b].double(), bm.faces, meshes[b])
+        m["feet_cm"] = 100.0 * float(v[b, :, 2].min())
+        rows.append(m)
+    return rows
+
+
+def gnet_table(gnet, baseline, seqs: list, seed: int = 0, refine_weights=None) -> dict:
+    """GOAL Tab. 1 on grasps `seqs` (one GNet sample per ground-truth grasp, same object pose and body shape):
+    {row: {'volume_cm3', 'contact_ratio', 'depth_cm', 'n'}} and the per-grasp metrics / bodies under 'samples'."""
+    from graspkit.optim.goal_refine import GraspRefiner
+
+    bm, gv, _ = _body()
+    gt = gnet_samples(seqs, accepted_only=False)
+    frames = [int(s.extras.get("grasp.goal_frame", s.extras.get("grasp.frame", np.array(0)))) for s in seqs]
+    meshes = [object_mesh_world(s, f) for s, f in zip(seqs, frames)]
+    P = min(len(s.object_points) for s in seqs)
+    points = torch.stack([object_points_world(s, f)[:P] for s, f in zip(seqs, frames)])
+    g = torch.Generator().manual_seed(seed)
+    z = torch.randn(len(seqs), gnet.cfg.latent, generator=g)
+    hat = gnet.sample(gt["bps"], gt["obj_transl"], gt["betas"], z=z)
+    refined = GraspRefiner(bm, gv)(hat, gt["betas"], points, refine_weights)
+    bodies = {"GrabNet-SMPL-X": None, "GNet w/o opt": (hat["rot6d"], hat["transl"]),
+              "GNet": (refined.rot6d, refined.transl), "synthetic GT": (gt["rot6d"], gt["transl"])}
+    if baseline is not None:
+        b = baseline.sample(gt["bps"], gt["obj_transl"], gt["betas"], z=z)
+        bodies["GrabNet-SMPL-X"] = (b["rot6d"], b["transl"])
+    table, samples = {}, {}
+    for name, body in bodies.items():
+        if body is None:
+            continue
+        rows = _grasp_row(bm, body[0], body[1], gt["betas"], meshes)
+        samples[name] = {"rows": rows, "rot6d": body[0], "transl": body[1]}
+        table[name] = {"volume_cm3": float(np.mean([r["volume_cm3"] for r in rows])),
+                       "contact_ratio": float(np.mean([r["contact"] for r in rows])),
+                       "depth_cm": float(np.mean([r["depth_cm"] for r in rows])),
+                       "feet_cm": float(np.mean([abs(r["feet_cm"]) for r in rows])), "n": len(rows)}
+    return {"table": table, "samples": samples, "refine_history": refined.history}
+
+
+# ------------------------------------------------------------------------------------------- rollouts, foot sliding
+
+def full_vertices(bm, rot6d: Tensor, transl: Tensor, betas: Tensor, chunk: int = 64) -> Tensor:
+    """Full SMPL-X meshes (T,V,3) of a sequence (T,55,6), (T,3) with shape betas (10,)."""
+    out = []
+    with torch.no_grad():
+        for i in range(0, len(rot6d), chunk):
+            r = rot6d[i:i + chunk]
+            out.append(bm.forward_rotmats(pose_rotmats(r), betas=betas.reshape(1, -1).expand(len(r), -1),
+                                          transl=transl[i:i + chunk]).vertices)
+    return torch.cat(out)
+
+
+def sliding(vertices: Tensor) -> tuple[int, int]:
+    """(sliding frames, frame pairs) by GOAL's §4.2 definition (graspkit.metrics.foot_sliding_goal)."""
+    from graspkit.metrics import foot_sliding_goal
+
+    s = foot_sliding_goal(vertices)
+    return int(s.sum()), int(len(s))
+
+
+def rollout_eval(mnet, clips: list, goals: list | None = None, max_frames: int = 300, refine: bool = True) -> dict:
+    """MNet rollouts from each clip's first frame to its goal grasp (or to `goals[i]` = (rot6d, transl)): per clip the
+    frames, whether the goal was reached, the final mean hand-to-goal distance and GOAL's foot sliding."""
+    from graspkit.models.mnet import rollout
+    from graspkit.objects.bps import bps_basis
+
+    bm, _, body = _body()
+    basis = bps_basis()
+    per, slide, pairs = [], 0, 0
+    rolls = []
+    for i, c in enumerate(clips):
+        goal = goals[i] if goals is not None else (c.rot6d[c.goal_frame], c.transl[c.goal_frame])
+        r = rollout(mnet, body, (c.rot6d[0], c.transl[0]), goal, c.betas, c.object_points, c.obj_centre, basis,
+                    max_frames=max_frames, refine=refine)
+        s, n = sliding(full_vertices(bm, r.rot6d, r.transl, c.betas))
+        slide, pairs = slide + s, pairs + n
+        per.append({"frames": len(r.rot6d), "reached": r.reached, "final_hand_cm": 100 * float(r.hand_dist[-1]),
+                    "first_refined": r.first_refined, "gt_frames": c.goal_frame + 1, "sliding": s / max(n, 1)})
+        rolls.append(r)
+    return {"clips": per, "rollouts": rolls, "sliding": slide / max(pairs, 1),
+            "reached": float(np.mean([p["reached"] for p in per])),
+            "final_hand_cm": float(np.mean([p["final_hand_cm"] for p in per]))}
+
+
+def clip_sliding(clips: list, until_goal: bool = True) -> float:
+    """GOAL's foot sliding of the ground-truth clips (frames up to the goal frame, or all)."""
+    bm, _, _ = _body()
+    slide, pairs = 0, 0
+    for c in clips:
+        stop = c.goal_frame + 1 if until_goal else len(c.rot6d)
+        s, n = sliding(full_vertices(bm, c.rot6d[:stop], c.transl[:stop], c.betas))
+        slide, pairs = slide + s, pairs + n
+    return slide / max(pairs, 1)

@@ -1,0 +1,81 @@
+"""GOAL data adapters, labels and the `graspkit train gnet|mnet` commands on small GRAB-style files."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from graspkit.body.markers import goal_vertices
+from graspkit.data import load_motion
+from graspkit.data.grab import GraspSequence, save_grasp_sequence
+from graspkit.data.grasp import object_points
+from graspkit.eval_goal import _body, approach_clips, gnet_samples
+from graspkit.paths import DATA_STUBS
+
+REACH = sorted((DATA_STUBS / "motion" / "reach").glob("*.npz"))
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    """One torch thread (the machine's cores are shared), restored afterwards."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+def _sequence(k: int, name: str) -> GraspSequence:
+    """A reaching clip of data_stubs as an approach clip: the object sits at the goal, turned about z."""
+    m = load_motion(REACH[k])
+    T = m.num_frames
+    orient = np.array([0.0, 0.0, 0.4 + k], np.float32)
+    pts, nrm = object_points(name)
+    return GraspSequence(m.poses, m.trans, m.betas, 30.0, name, np.broadcast_to(m.goal, (T, 3)),
+                         np.broadcast_to(orient, (T, 3)), f"meshes/{name}.ply", {}, {"grasp.goal_frame": np.array(m.goal_frame)},
+                         pts, nrm)
+
+
+def test_labels_are_those_of_the_full_body_and_a_kd_tree():
+    seqs = [_sequence(0, "bottle"), _sequence(1, "mug")]
+    s = gnet_samples(seqs)
+    bm, gv, _ = _body()
+    for b, seq in enumerate(seqs):
+        f = int(seq.extras["grasp.goal_frame"])
+        p = torch.as_tensor(seq.poses[f]).reshape(1, -1)
+        full = bm(betas=torch.as_tensor(seq.betas[None]), global_orient=p[:, :3], body_pose=p[:, 3:66],
+                  jaw_pose=p[:, 66:69], leye_pose=p[:, 69:72], reye_pose=p[:, 72:75], left_hand_pose=p[:, 75:120],
+                  right_hand_pose=p[:, 120:], transl=torch.as_tensor(seq.trans[f:f + 1])).vertices[0]
+        np.testing.assert_allclose(s["verts"][b].numpy(), full[gv.vertex_ids].numpy(), atol=1e-5)
+        pts = Rotation.from_rotvec(seq.object_orient[f]).apply(seq.object_points) + seq.object_transl[f]
+        _, idx = cKDTree(pts).query(s["verts"][b].numpy())
+        np.testing.assert_allclose(s["offsets"][b].numpy(), pts[idx] - s["verts"][b].numpy(), atol=1e-5)
+        q = goal_vertices(bm).head_direction(full)
+        np.testing.assert_allclose(s["head_dir"][b].numpy(), q.numpy(), atol=1e-5)
+    assert s["bps"].shape == (2, 1024) and float(s["bps"].min()) >= 0
+
+
+def test_approach_clips_place_the_object_in_the_world():
+    seq = _sequence(2, "can")
+    c = approach_clips([seq])[0]
+    want = Rotation.from_rotvec(seq.object_orient[0]).apply(seq.object_points) + seq.object_transl[0]
+    np.testing.assert_allclose(c.object_points.numpy(), want, atol=1e-5)
+    assert c.goal_frame == int(seq.extras["grasp.goal_frame"]) and c.rot6d.shape == (seq.num_frames, 55, 6)
+
+
+def test_train_commands_write_loadable_half_precision_weights(tmp_path):
+    from graspkit.cli import main
+    from graspkit.models.gnet import load_gnet
+    from graspkit.models.mnet import load_mnet
+
+    for k, name in enumerate(("bottle", "can", "apple")):                # train, train, validation objects
+        save_grasp_sequence(tmp_path / f"approach_{k:06d}.npz", _sequence(k, name))
+    for net in ("gnet", "mnet"):
+        out = tmp_path / f"{net}.pt"
+        assert main(["train", net, "--data", str(tmp_path), "--epochs", "1", "--out", str(out), "--threads", "1"]) == 0
+        raw = torch.load(out, weights_only=True)
+        assert raw["kind"] == net and all(v.dtype == torch.float16 for v in raw["model"].values() if v.is_floating_point())
+        model = (load_gnet if net == "gnet" else load_mnet)(out)
+        assert not model.training and all(p.dtype == torch.float32 for p in model.parameters())
+    assert Path(tmp_path / "gnet.pt").stat().st_size < 2.5e6
