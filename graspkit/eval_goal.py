@@ -188,7 +188,7 @@ def default_data_folders() -> list:
     """Where `graspkit data make --kind {grasp,approach}` writes by default."""
     from graspkit.paths import cache_dir
 
-    return [cache_dir() / "grasp", cache_dir() / "approach"]
+    return [cache_dir() / "grasps" / "grasp", cache_dir() / "grasps" / "approach"]
 
 
 @lru_cache(maxsize=1)
