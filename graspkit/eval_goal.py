@@ -431,3 +431,101 @@ def clip_sliding(clips: list, until_goal: bool = True) -> float:
         s, n = sliding(full_vertices(bm, c.rot6d[:stop], c.transl[:stop], c.betas))
         slide, pairs = slide + s, pairs + n
     return slide / max(pairs, 1)
+
+
+# ------------------------------------------------------------------------------------------- the whole evaluation
+
+def start_distance(clip) -> float:
+    """Horizontal distance (m) from the clip's first pelvis position to the object centre."""
+    bm, _, _ = _body()
+    from graspkit.models.mnet import rest_root
+
+    pelvis = rest_root(bm, clip.betas.reshape(1, -1))[0] + clip.transl[0]
+    return float((pelvis[:2] - clip.obj_centre[:2]).norm())
+
+
+def evaluate(folders=None, stubs=None, n_grasps: int = 60, n_rollouts: int = 24, window_stride: int = 5,
+             seed: int = 0, out=None) -> dict:
+    """GOAL Tab. 1, Tab. 2 and foot sliding on the test objects with the shipped checkpoints; written as JSON."""
+    import json
+    import time
+    from pathlib import Path
+
+    from graspkit.models.gnet import load_gnet
+    from graspkit.models.mnet import MNetConfig, load_mnet
+    from graspkit.paths import DATA_STUBS
+
+    folders = folders or default_data_folders()
+    stubs = Path(stubs or DATA_STUBS / "checkpoints")
+    bm, gv, body = _body()
+    res: dict = {"paper": {"tab1": PAPER_TAB1, "tab2": PAPER_TAB2, "sliding": PAPER_SLIDING}}
+    t0 = time.perf_counter()
+    # Tab. 1: one sample per test grasp, evenly over the test objects
+    tests = [s for s in _all_files(folders, "grasp", "test") + _all_files(folders, "approach", "test")
+             if bool(s.extras.get("grasp.accepted", True))]
+    rng = np.random.default_rng(seed)
+    pick = sorted(rng.permutation(len(tests))[:n_grasps].tolist())
+    gnet = load_gnet(stubs / "gnet.pt")
+    base = load_gnet(stubs / "gnet_smplx.pt") if (stubs / "gnet_smplx.pt").is_file() else None
+    tab1 = gnet_table(gnet, base, [tests[i] for i in pick], seed=seed)
+    res["tab1"] = tab1["table"]
+    res["tab1_refine_energy"] = tab1["refine_history"]
+    res["tab1_seconds"] = time.perf_counter() - t0
+    # Tab. 2: teacher-forced 10-frame horizon on the test clips' windows
+    t1 = time.perf_counter()
+    windows = mnet_windows(folders, "test", MNetConfig(), stride=window_stride)
+    idx = torch.arange(len(windows))
+    res["tab2"] = {}
+    for variant, name in (("mnet", "MNet"), ("no_iaa", "MNet-w/o-IAA"), ("pose", "MNet-Pose"), ("1frame", "1 output frame")):
+        path = stubs / ("mnet.pt" if variant == "mnet" else f"mnet_{variant}.pt")
+        if not path.is_file():
+            continue
+        e = teacher_forced_v2v(load_mnet(path), windows, bm, idx)
+        res["tab2"][name] = {"body": e.body, "hand": e.hand, "feet": e.feet}
+    res["tab2_windows"] = len(idx)
+    res["tab2_seconds"] = time.perf_counter() - t1
+    # rollouts: from the test clips' starts (0.5-1.5 m from the object) to the true goal grasp and to GNet's grasp
+    t2 = time.perf_counter()
+    clips = [c for c in approach_clips([s for s in _all_files(folders, "approach", "test")
+                                        if bool(s.extras.get("grasp.accepted", True))])
+             if 0.5 <= start_distance(c) <= 1.5][:n_rollouts]
+    mnet = load_mnet(stubs / "mnet.pt")
+    to_gt = rollout_eval(mnet, clips)
+    goals = _gnet_goals(gnet, clips, seed)
+    full = rollout_eval(mnet, clips, goals)
+    res["rollouts"] = {"clips": len(clips), "to_true_goal": {k: to_gt[k] for k in ("sliding", "reached", "final_hand_cm")},
+                       "goal_pipeline": {k: full[k] for k in ("sliding", "reached", "final_hand_cm")},
+                       "per_clip_true_goal": to_gt["clips"], "per_clip_pipeline": full["clips"]}
+    res["sliding"] = {"GOAL (GNet + MNet, ours)": full["sliding"], "MNet to the true goal": to_gt["sliding"],
+                      "synthetic GT (approach frames)": clip_sliding(clips)}
+    res["rollout_seconds"] = time.perf_counter() - t2
+    out = Path(out or stubs / "goal_eval.json")
+    tmp = out.with_name(out.name + ".tmp")
+    tmp.write_text(json.dumps(res, indent=1, default=float))
+    tmp.replace(out)
+    return res
+
+
+def _gnet_goals(gnet, clips: list, seed: int) -> list:
+    """GNet + refinement grasps (rot6d, transl) for each clip's object and body (one sample each)."""
+    from graspkit.objects.bps import bps_basis, bps_encode
+    from graspkit.optim.goal_refine import GraspRefiner
+
+    bm, gv, _ = _body()
+    P = min(len(c.object_points) for c in clips)
+    pts = torch.stack([c.object_points[:P] for c in clips])
+    centre = torch.stack([c.obj_centre for c in clips])
+    betas = torch.stack([c.betas for c in clips])
+    bps = bps_encode(pts - centre[:, None], bps_basis()).float()
+    z = torch.randn(len(clips), gnet.cfg.latent, generator=torch.Generator().manual_seed(seed + 1))
+    hat = gnet.sample(bps, centre, betas, z=z)
+    r = GraspRefiner(bm, gv)(hat, betas, pts)
+    return [(r.rot6d[i], r.transl[i]) for i in range(len(clips))]
+
+
+if __name__ == "__main__":
+    import sys
+
+    torch.set_num_threads(int(sys.argv[1]) if len(sys.argv) > 1 else 2)
+    r = evaluate()
+    print({k: r[k] for k in ("tab1", "tab2", "sliding")})
