@@ -160,11 +160,14 @@ class BodyModel(nn.Module):
         self.register_buffer("J_template", t(J_reg @ v_template))                          # (55, 3)
         self.register_buffer("J_basis", t(np.einsum("jv,vkc->cjk", J_reg, basis).reshape(basis.shape[2], -1)))
         self.register_buffer("J_regressor", t(J_reg))
-        posedirs = np.asarray(arrays["posedirs"], np.float64)
-        # all-zero pose correctives (allowed in the procedural humanoid) cost nothing
-        self.has_posedirs = bool(np.any(posedirs))
-        self.register_buffer("posedirs", t(posedirs.transpose(2, 1, 0).reshape(NUM_POSE_BASIS, 3 * V))
-                             if self.has_posedirs else torch.zeros(0, dtype=dtype))        # (486, 3V)
+        posedirs = np.asarray(arrays["posedirs"], np.float64).transpose(2, 1, 0).reshape(NUM_POSE_BASIS, 3 * V)
+        # only the rows of the 486 that are not zero take part (the procedural humanoid corrects a few joints;
+        # all-zero correctives cost nothing); a real SMPL-X file keeps all of them
+        rows = np.flatnonzero(np.any(posedirs != 0, axis=1))
+        self.has_posedirs = len(rows) > 0
+        self.register_buffer("_pose_rows", torch.as_tensor(rows, dtype=torch.long))
+        self.register_buffer("posedirs", t(posedirs) if self.has_posedirs else torch.zeros(0, dtype=dtype))  # (486, 3V)
+        self.register_buffer("_posedirs_used", t(posedirs[rows]) if len(rows) < NUM_POSE_BASIS else self.posedirs)
         self.register_buffer("lbs_weights", t(arrays["weights"]))                          # (V, 55)
         self.register_buffer("_weights_t", t(np.asarray(arrays["weights"]).T))              # (55, V)
         self.register_buffer("faces", torch.as_tensor(np.asarray(arrays["f"], np.int64)))
@@ -298,7 +301,10 @@ class BodyModel(nn.Module):
         v, J = self._shaped_cm(coeffs)                                  # (B,3,V), (B,55,3)
         if self.has_posedirs:
             eye = torch.eye(3, dtype=rot.dtype, device=rot.device)
-            v = torch.addmm(v.view(B, -1), (rot[:, 1:] - eye).reshape(B, NUM_POSE_BASIS), self.posedirs).view(B, 3, -1)
+            feat = (rot[:, 1:] - eye).reshape(B, NUM_POSE_BASIS)
+            if len(self._pose_rows) < NUM_POSE_BASIS:
+                feat = feat[:, self._pose_rows]
+            v = torch.addmm(v.view(B, -1), feat, self._posedirs_used).view(B, 3, -1)
         Rg, tg = self.global_transforms(rot, J)                       # (B,55,3,3), (B,55,3)
         # skinning transform of joint k: x -> Rg_k (x - J_k) + tg_k; rows of A: columns of Rg, then the offset
         offset = (tg + transl.unsqueeze(1)) - (Rg @ J.unsqueeze(-1)).squeeze(-1)
