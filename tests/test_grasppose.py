@@ -157,7 +157,7 @@ def test_collision_stage_pushes_the_hand_out_of_the_object(bm, prior):
     assert e["before"]["colli_body"].item() > 1.0
     assert e["after"]["colli_body"].item() < 0.1 * e["before"]["colli_body"].item()
     depth = lambda vv: max(0.0, -signed_distance(vv[0, hand].double(), ball).min().item())  # noqa: E731
-    assert depth(verts) > 0.008 and depth(res.vertices) < 0.004
+    assert depth(verts) > 0.008 and depth(res.vertices) < 0.25 * depth(verts)
 
 
 def test_bad_inputs_are_named(bm, prior):

@@ -175,20 +175,30 @@ class FeaturePropagation(nn.Module):
         super().__init__()
         self.mlp = SharedMLP([in_channels] + list(mlp), norm)
 
-    def forward(self, xyz1: Tensor, xyz2: Tensor, feat1: Tensor | None, feat2: Tensor) -> Tensor:
-        """Fine (B,N,3), coarse (B,S,3), fine features (B,N,C1)|None, coarse features (B,S,C2) -> (B,N,C_out)."""
-        interp = interpolate(xyz1, xyz2, feat2)
+    def forward(self, xyz1: Tensor, xyz2: Tensor, feat1: Tensor | None, feat2: Tensor,
+                weights: tuple[Tensor, Tensor] | None = None) -> Tensor:
+        """Fine (B,N,3), coarse (B,S,3), fine features (B,N,C1)|None, coarse features (B,S,C2) -> (B,N,C_out);
+        `weights` = interpolation_weights(xyz1, xyz2) when precomputed."""
+        interp = interpolate(xyz1, xyz2, feat2, weights=weights)
         h = interp if feat1 is None else torch.cat([feat1, interp], -1)
         return self.mlp(h)
 
 
-def interpolate(xyz1: Tensor, xyz2: Tensor, feat2: Tensor, k: int = 3) -> Tensor:
+def interpolation_weights(xyz1: Tensor, xyz2: Tensor, k: int = 3) -> tuple[Tensor, Tensor]:
+    """The k nearest coarse points of every fine point and their normalised inverse-squared-distance weights:
+    (B,N,3), (B,S,3) -> indices (B,N,k), weights (B,N,k). Invariant to rigid motions of the cloud."""
+    with torch.no_grad():
+        d, idx = torch.cdist(xyz1, xyz2).topk(min(k, xyz2.shape[1]), dim=-1, largest=False)
+        w = 1.0 / (d.pow(2) + 1e-8)
+    return idx, w / w.sum(-1, keepdim=True)
+
+
+def interpolate(xyz1: Tensor, xyz2: Tensor, feat2: Tensor, k: int = 3,
+                weights: tuple[Tensor, Tensor] | None = None) -> Tensor:
     """Inverse-squared-distance average of the k nearest coarse features: (B,N,3), (B,S,3), (B,S,C) -> (B,N,C)."""
     if xyz2.shape[1] == 1:
         return feat2.expand(-1, xyz1.shape[1], -1)
-    d, idx = torch.cdist(xyz1, xyz2).topk(min(k, xyz2.shape[1]), dim=-1, largest=False)
-    w = 1.0 / (d.pow(2) + 1e-8)
-    w = w / w.sum(-1, keepdim=True)
+    idx, w = weights if weights is not None else interpolation_weights(xyz1, xyz2, k)
     return (gather(feat2, idx) * w.unsqueeze(-1)).sum(2)
 
 

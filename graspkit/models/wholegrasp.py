@@ -26,15 +26,19 @@ averaged over the batch (as written); the BCEs are means over markers / points (
 """
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
+from graspkit.paths import DATA_STUBS
 from graspkit.models.blocks import GaussianHead, ResBlock, kl_standard_normal, reparameterize, robust_kl
-from graspkit.models.pointnet2 import FeaturePropagation, Grouping, PointNet2Encoder, groupings_from_tensors
+from graspkit.models.pointnet2 import (FeaturePropagation, Grouping, PointNet2Encoder, gather, groupings_from_tensors,
+                                       groupings_to_tensors, interpolation_weights)
 
 
 @dataclass
@@ -82,12 +86,18 @@ def weighted_bce(prob: Tensor, target: Tensor, pos_weight: float) -> Tensor:
     return loss.mean()
 
 
-def consistency_loss(markers_pred: Tensor, markers: Tensor, contact_pred_m: Tensor, points: Tensor,
-                     contact_pred_o: Tensor) -> Tensor:
+def consistency_loss(markers_pred: Tensor, markers: Tensor | None, contact_pred_m: Tensor, points: Tensor,
+                     contact_pred_o: Tensor, truth: tuple[Tensor, Tensor] | None = None) -> Tensor:
     """SAGA Eq. 3: marker-object and object-marker squared distances of the generated vs. ground-truth markers,
-    weighted by the predicted contacts. markers (B,N,3), contacts (B,N), points (B,P,3), (B,P) -> scalar."""
-    dm = (squared_min_distance(markers_pred, points) - squared_min_distance(markers, points)).abs()
-    do = (squared_min_distance(points, markers_pred) - squared_min_distance(points, markers)).abs()
+    weighted by the predicted contacts. markers (B,N,3), contacts (B,N), points (B,P,3), (B,P) -> scalar.
+
+    `truth` = (d(m, O) (B,N), d(o, M) (B,P)) of the ground truth when precomputed (then `markers` may be None)."""
+    if truth is None:
+        D = torch.cdist(markers, points).pow(2)
+        truth = (D.min(2).values, D.min(1).values)
+    D = torch.cdist(markers_pred, points).pow(2)                               # (B, N, P): both directions at once
+    dm = (D.min(2).values - truth[0]).abs()
+    do = (D.min(1).values - truth[1]).abs()
     return ((contact_pred_m * dm).sum(-1) + (contact_pred_o * do).sum(-1)).mean()
 
 
@@ -133,6 +143,23 @@ class WholeGraspVAE(nn.Module):
         """PointNet++ neighbourhoods of object points (B, P, 3), shared by the encoder and decoder branches."""
         return self.obj_dec.group(points)
 
+    @torch.no_grad()
+    def precompute(self, points: Tensor, markers: Tensor | None = None) -> dict[str, Tensor]:
+        """Everything of a batch that depends on geometry only, as tensors for a dataset to store once: the
+        PointNet++ groupings and interpolation weights (invariant to rigid motions of the cloud) and, with the
+        ground-truth markers, Eq. 3's d(m, O) (B,N) and d(o, M) (B,P)."""
+        grp = self.group(points)
+        out = groupings_to_tensors(grp)
+        xyz = [points]
+        for g in grp[:-1]:
+            xyz.append(gather(xyz[-1], g.centres))
+        out["fp1_idx"], out["fp1_w"] = interpolation_weights(xyz[0], xyz[1])
+        out["fp2_idx"], out["fp2_w"] = interpolation_weights(xyz[1], xyz[2])
+        if markers is not None:
+            D = torch.cdist(markers, points).pow(2)
+            out["dist_markers"], out["dist_points"] = D.min(2).values, D.min(1).values
+        return out
+
     def encode(self, markers: Tensor, marker_contact: Tensor | None, points: Tensor, normals: Tensor,
                object_contact: Tensor | None, height: Tensor, groupings: list[Grouping | None] | None = None
                ) -> tuple[Tensor, Tensor]:
@@ -148,7 +175,8 @@ class WholeGraspVAE(nn.Module):
         return self.head(self.fuse(torch.cat([self.body_enc(body), f_o, height], -1)))
 
     def decode(self, z: Tensor, points: Tensor, normals: Tensor, height: Tensor,
-               groupings: list[Grouping | None] | None = None) -> dict[str, Tensor]:
+               groupings: list[Grouping | None] | None = None, pre: dict[str, Tensor] | None = None
+               ) -> dict[str, Tensor]:
         """p(M, C_M, C_O | z, t_O, O): z (B, latent) -> {'markers' (B,N,3), 'marker_contact' (B,N),
         'object_contact' (B,P)} (contacts as probabilities; absent for WholeGrasp-single)."""
         B = z.shape[0]
@@ -160,8 +188,10 @@ class WholeGraspVAE(nn.Module):
             out["marker_contact"] = torch.sigmoid(self.out_marker_contact(h))
             g = self.global_proj(torch.cat([f_o, h], -1)).unsqueeze(1)          # (B, 1, 128)
             f = self.fp3(lv.xyz[2], lv.xyz[3], lv.features[2], torch.relu(g))
-            f = self.fp2(lv.xyz[1], lv.xyz[2], lv.features[1], f)
-            f = self.fp1(lv.xyz[0], lv.xyz[1], lv.features[0], f)
+            w2 = (pre["fp2_idx"], pre["fp2_w"]) if pre and "fp2_idx" in pre else None
+            w1 = (pre["fp1_idx"], pre["fp1_w"]) if pre and "fp1_idx" in pre else None
+            f = self.fp2(lv.xyz[1], lv.xyz[2], lv.features[1], f, w2)
+            f = self.fp1(lv.xyz[0], lv.xyz[1], lv.features[0], f, w1)
             out["object_contact"] = torch.sigmoid(self.out_object_contact(f).squeeze(-1))
         return out
 
@@ -169,15 +199,15 @@ class WholeGraspVAE(nn.Module):
         """Reconstruction of a batch: decoder outputs plus 'mu', 'logvar'.
 
         Keys: markers (B,N,3), marker_contact (B,N), points, normals (B,P,3), object_contact (B,P), height (B,1),
-        optionally precomputed PointNet++ groupings (pointnet2.groupings_to_tensors; they are invariant to rigid
-        motions of the cloud, so a dataset computes them once).
+        optionally what `precompute` gives (PointNet++ groupings and interpolation weights, Eq. 3's ground-truth
+        distances), which a dataset computes once.
         """
         self.check_batch(batch)
         groupings = groupings_from_tensors(batch, len(self.obj_dec.sa)) or self.group(batch["points"])
         mu, logvar = self.encode(batch["markers"], batch.get("marker_contact"), batch["points"], batch["normals"],
                                  batch.get("object_contact"), batch["height"], groupings)
         z = reparameterize(mu, logvar, generator) if self.training else mu
-        out = self.decode(z, batch["points"], batch["normals"], batch["height"], groupings)
+        out = self.decode(z, batch["points"], batch["normals"], batch["height"], groupings, batch)
         out.update(mu=mu, logvar=logvar)
         return out
 
@@ -207,8 +237,9 @@ class WholeGraspVAE(nn.Module):
         if cfg.multitask:
             logs["bce_markers"] = weighted_bce(out["marker_contact"], batch["marker_contact"], cfg.marker_contact_weight)
             logs["bce_object"] = weighted_bce(out["object_contact"], batch["object_contact"], cfg.object_contact_weight)
+            truth = (batch["dist_markers"], batch["dist_points"]) if "dist_markers" in batch else None
             logs["consistency"] = consistency_loss(out["markers"], batch["markers"], out["marker_contact"],
-                                                   batch["points"], out["object_contact"])
+                                                   batch["points"], out["object_contact"], truth)
             rec = rec + cfg.lambda_m * logs["bce_markers"] + cfg.lambda_o * logs["bce_object"]
         logs["kl"] = kl_standard_normal(out["mu"], out["logvar"])
         kl_w = cfg.kl_final * (epoch + 1) / max(epochs, 1)
@@ -249,15 +280,352 @@ class WholeGraspVAE(nn.Module):
     # ------------------------------------------------------------------ files
     def state(self) -> dict[str, Any]:
         """Weights and config as plain values (a weights-only checkpoint)."""
-        return {"model": self.state_dict(), "config": asdict(self.cfg)}
+        return {"model": self.state_dict(), "model_config": asdict(self.cfg)}
 
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> "WholeGraspVAE":
         """Rebuild from `state()` or a training checkpoint written by graspkit.train.fit (config under extra)."""
         cfg = state.get("model_config") or state.get("extra", {}).get("model_config") or state.get("config")
+        if isinstance(cfg, dict) and "latent" not in cfg and "model_config" in state.get("extra", {}):
+            cfg = state["extra"]["model_config"]
         if cfg is None or "latent" not in cfg:
             raise ValueError("state: no WholeGrasp config in it (expected key 'config' or extra['model_config'])")
         model = cls(WholeGraspConfig(**cfg))
-        model.load_state_dict(state["model"])
+        model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state["model"].items()})
         model.eval()
         return model
+
+
+# ------------------------------------------------------------------------------------------------ data and training
+WHOLEGRASP_PATH = DATA_STUBS / "checkpoints" / "wholegrasp.pt"
+WHOLEGRASP_SINGLE_PATH = DATA_STUBS / "checkpoints" / "wholegrasp_single.pt"
+
+
+class WholeGraspTrainingSet(torch.utils.data.Dataset):
+    """graspkit's synthetic grasps (graspkit.data.grasp_datasets.WholeGraspDataset items) in the model's keys, with
+    `WholeGraspVAE.precompute` done once; `augment_yaw` turns each item by a random angle about the vertical axis
+    through the object centre (draws from torch's global RNG, which graspkit.train.fit seeds and checkpoints)."""
+
+    def __init__(self, items: dict[str, Tensor], model: WholeGraspVAE, augment_yaw: bool = False,
+                 chunk: int = 64) -> None:
+        self.data = {"markers": items["markers"].float(), "marker_contact": items["marker_contacts"].float(),
+                     "points": items["object_points"].float(), "normals": items["object_normals"].float(),
+                     "object_contact": items["object_contacts"].float(),
+                     "height": items["object_height"].float().reshape(-1, 1)}
+        pre = [model.precompute(self.data["points"][i:i + chunk], self.data["markers"][i:i + chunk])
+               for i in range(0, len(self), chunk)]
+        self.data.update({k: torch.cat([p[k] for p in pre]) for k in pre[0]})
+        self.augment_yaw = augment_yaw
+
+    @classmethod
+    def from_folder(cls, root: str | Path, split: str, model: WholeGraspVAE, augment_yaw: bool = False
+                    ) -> "WholeGraspTrainingSet":
+        """Read `<root>/grasp_*.npz` of one split through graspkit.data.grasp_datasets.WholeGraspDataset."""
+        from graspkit.data.grasp_datasets import WholeGraspDataset
+
+        ds = WholeGraspDataset(root, split=split)
+        return cls(ds.data, model, augment_yaw)
+
+    def __len__(self) -> int:
+        return len(self.data["markers"])
+
+    def __getitem__(self, i: int) -> dict[str, Tensor]:
+        item = {k: v[i] for k, v in self.data.items()}
+        if self.augment_yaw:
+            a = float(torch.rand(()) * 2 * math.pi)
+            c, s = math.cos(a), math.sin(a)
+            R = torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+            for k in ("markers", "points", "normals"):
+                item[k] = item[k] @ R.T
+        return item
+
+
+def contact_auc(scores: Tensor, labels: Tensor) -> float:
+    """Area under the ROC curve of contact probabilities against binary labels (Mann-Whitney, ties averaged)."""
+    s, y = scores.reshape(-1).double(), labels.reshape(-1) > 0.5
+    n1, n0 = int(y.sum()), int((~y).sum())
+    if n1 == 0 or n0 == 0:
+        return float("nan")
+    order = torch.argsort(s)
+    ranks = torch.empty_like(s)
+    ranks[order] = torch.arange(1, len(s) + 1, dtype=s.dtype)
+    uniq, inv, counts = torch.unique(s, return_inverse=True, return_counts=True)
+    mean_rank = torch.zeros(len(uniq), dtype=s.dtype).index_add_(0, inv, ranks) / counts
+    r = mean_rank[inv]
+    return float((r[y].sum() - n1 * (n1 + 1) / 2) / (n1 * n0))
+
+
+@torch.no_grad()
+def reconstruction_metrics(model: WholeGraspVAE, data: WholeGraspTrainingSet, batch_size: int = 32
+                           ) -> dict[str, float]:
+    """Validation figures of the posterior mean: marker error (cm, mean per marker), contact AUCs of C_M and C_O."""
+    model.eval()
+    err, cm, cm_t, co, co_t = [], [], [], [], []
+    for i in range(0, len(data), batch_size):
+        b = {k: v[i:i + batch_size] for k, v in data.data.items()}
+        out = model(b)
+        err.append((out["markers"] - b["markers"]).norm(dim=-1).mean(1))
+        if model.cfg.multitask:
+            cm.append(out["marker_contact"]), cm_t.append(b["marker_contact"])
+            co.append(out["object_contact"]), co_t.append(b["object_contact"])
+    res = {"marker_error_cm": float(torch.cat(err).mean()) * 100}
+    if cm:
+        res["auc_marker_contact"] = contact_auc(torch.cat(cm), torch.cat(cm_t))
+        res["auc_object_contact"] = contact_auc(torch.cat(co), torch.cat(co_t))
+    return res
+
+
+def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask: bool = True, epochs: int = 12,
+                     batch_size: int = 32, lr: float = 1e-3, seed: int = 0, time_limit_s: float | None = 600.0,
+                     threads: int | None = 1, progress: bool = True, half: bool = True) -> dict[str, Any]:
+    """Train WholeGrasp-VAE (or WholeGrasp-single) on `<root>/grasp_*.npz` (train split, yaw-augmented; the val
+    split logged) with graspkit.train.fit; write weights-only `out` (float16 when `half`) and `out`.run.pt/.csv.
+    Returns {'history', 'seconds', 'val': reconstruction_metrics on the val split, 'out'}."""
+    import time
+
+    from graspkit.train import TrainConfig, fit, save_checkpoint
+
+    if threads:
+        torch.set_num_threads(threads)
+    out = Path(out or (WHOLEGRASP_PATH if multitask else WHOLEGRASP_SINGLE_PATH))
+    torch.manual_seed(seed)
+    model = WholeGraspVAE(WholeGraspConfig(multitask=multitask))
+    t0 = time.perf_counter()
+    train = WholeGraspTrainingSet.from_folder(root, "train", model, augment_yaw=True)
+    val = WholeGraspTrainingSet.from_folder(root, "val", model)
+    prep = time.perf_counter() - t0
+
+    def step(m: nn.Module, batch: dict[str, Tensor], epoch: int) -> dict[str, Tensor]:
+        """One batch of Eq. 1-3."""
+        return m.loss(batch, m(batch), epoch, epochs)
+
+    cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
+    run = out.with_name(out.stem + ".run.pt")
+    hist = fit(model, step, train, cfg, checkpoint=run, extra={"model_config": asdict(model.cfg)},
+               val_dataset=val, progress=progress, time_limit_s=None if time_limit_s is None
+               else max(time_limit_s - prep, 0.0))
+    seconds = time.perf_counter() - t0
+    metrics = reconstruction_metrics(model, val)
+    state = model.state()
+    if half:
+        state["model"] = {k: v.half() if v.is_floating_point() else v for k, v in state["model"].items()}
+    state.update(history=hist, val=metrics, seconds=seconds, train_items=len(train))
+    save_checkpoint(out, state)
+    return {"history": hist, "seconds": seconds, "val": metrics, "out": out}
+
+
+def load_wholegrasp(path: str | Path | None = None, multitask: bool = True) -> WholeGraspVAE:
+    """A trained WholeGrasp-VAE (default: the shipped checkpoint; multitask=False: WholeGrasp-single), eval mode."""
+    from graspkit.train import load_checkpoint
+
+    state = load_checkpoint(path or (WHOLEGRASP_PATH if multitask else WHOLEGRASP_SINGLE_PATH))
+    return WholeGraspVAE.from_state(state)
+
+
+# ------------------------------------------------------------------------------------------------ GrabNet-SMPLX
+GRABNET_SMPLX_PATH = DATA_STUBS / "checkpoints" / "wholegrasp_grabnet_smplx.pt"
+N_PCA = 24
+
+
+class HandPCA:
+    """SAGA's hand pose space: 24 PCA coefficients per hand about the model's mean hand (absolute axis-angle)."""
+
+    def __init__(self, bm, n: int = N_PCA) -> None:
+        if bm.use_pca or bm.flat_hand_mean:
+            raise ValueError("bm: build the BodyModel with the defaults (use_pca=False, flat_hand_mean=False)")
+        self.comps = {s: getattr(bm, f"{s}_hand_components")[:n].float() for s in ("left", "right")}
+        self.mean = {"left": bm.pose_mean[75:120].float(), "right": bm.pose_mean[120:165].float()}
+
+    def encode(self, hand_pose: Tensor, side: str) -> Tensor:
+        """Absolute hand poses (B, 45) -> coefficients (B, n) (projection onto the components)."""
+        return (hand_pose.float() - self.mean[side]) @ self.comps[side].T
+
+    def decode(self, coeffs: Tensor, side: str) -> Tensor:
+        """Coefficients (B, n) -> absolute hand poses (B, 45)."""
+        return coeffs @ self.comps[side] + self.mean[side]
+
+
+def params_to_rotmats(x: Tensor, pca: HandPCA) -> tuple[Tensor, Tensor, Tensor]:
+    """GrabNet-SMPLX's parameter vector (B, 193) = [transl 3, root 6D, betas 10, body 21x6D, left 24, right 24]
+    -> rotation matrices (B, 55, 3, 3), betas (B, 10), transl (B, 3) (jaw and eyes at rest)."""
+    from graspkit.rotations import axis_angle_to_matrix, rot6d_to_matrix
+
+    B = x.shape[0]
+    transl, root, betas, body = x[:, :3], x[:, 3:9], x[:, 9:19], x[:, 19:145]
+    hands = [axis_angle_to_matrix(pca.decode(x[:, 145 + 24 * k:169 + 24 * k], s).view(B, 15, 3))
+             for k, s in enumerate(("left", "right"))]
+    rot = torch.cat([rot6d_to_matrix(root).unsqueeze(1), rot6d_to_matrix(body.view(B, 21, 6)),
+                     torch.eye(3).expand(B, 3, 3, 3), hands[0], hands[1]], 1)
+    return rot, betas, transl
+
+
+class GrabNetSMPLX(nn.Module):
+    """SAGA's GrabNet-SMPLX baseline (§4.1, App. B.1, Fig. S3a): a CVAE that generates SMPL-X parameters directly
+    (t, R, beta, body pose, 24+24 hand PCA; 193 numbers, object frame) for an object encoded by the same PointNet++.
+
+    Loss (GrabNet-style): L1 of the markers the parameters pose (143, summed, as WholeGrasp's) + L1 of the
+    parameters (mean) + lambda_KL KL, lambda_KL rising linearly to 0.2 as WholeGrasp's."""
+
+    n_params = 193
+
+    def __init__(self, hidden: int = 256, latent: int = 16, nsample: int = 8, object_feature: int = 128,
+                 kl_final: float = 0.2) -> None:
+        super().__init__()
+        self.hparams = dict(hidden=hidden, latent=latent, nsample=nsample, object_feature=object_feature,
+                            kl_final=kl_final)
+        act = nn.LeakyReLU(0.2)
+        self.obj_enc = PointNet2Encoder(3, nsample=nsample, norm=False)
+        self.obj_dec = PointNet2Encoder(3, nsample=nsample, norm=False)
+        c = self.obj_enc.out_channels
+        self.enc_proj, self.dec_proj = nn.Linear(c, object_feature), nn.Linear(c, object_feature)
+        self.enc = nn.Sequential(nn.Linear(self.n_params + object_feature + 1, hidden), act,
+                                 ResBlock(hidden, hidden, n_hidden=hidden // 2))
+        self.head = GaussianHead(hidden, latent)
+        self.dec = nn.Sequential(nn.Linear(latent + object_feature + 1, hidden), act,
+                                 ResBlock(hidden, hidden, n_hidden=hidden // 2), nn.Linear(hidden, self.n_params))
+
+    def decode(self, z: Tensor, points: Tensor, normals: Tensor, height: Tensor,
+               groupings: list[Grouping | None] | None = None) -> Tensor:
+        """z (B, latent) -> parameter vector (B, 193)."""
+        f = self.dec_proj(self.obj_dec(points, normals, groupings).global_feature)
+        return self.dec(torch.cat([z, f, height], -1))
+
+    def forward(self, batch: dict[str, Tensor], generator: torch.Generator | None = None) -> dict[str, Tensor]:
+        """Reconstruction: {'params' (B,193), 'mu', 'logvar'} for a batch with params, points, normals, height."""
+        g = groupings_from_tensors(batch, len(self.obj_dec.sa)) or self.obj_dec.group(batch["points"])
+        f = self.enc_proj(self.obj_enc(batch["points"], batch["normals"], g).global_feature)
+        mu, logvar = self.head(self.enc(torch.cat([batch["params"], f, batch["height"]], -1)))
+        z = reparameterize(mu, logvar, generator) if self.training else mu
+        return {"params": self.decode(z, batch["points"], batch["normals"], batch["height"], g), "mu": mu,
+                "logvar": logvar}
+
+    def loss(self, batch: dict[str, Tensor], out: dict[str, Tensor], body, pca: HandPCA, epoch: int,
+             epochs: int) -> dict[str, Tensor]:
+        """Marker L1 through `body` (SparseBody at the 143 markers) + parameter L1 + annealed KL."""
+        rot, betas, transl = params_to_rotmats(out["params"], pca)
+        markers = body(rot, betas, transl)[0]
+        logs = {"rec_markers": (markers - batch["markers"]).abs().sum((1, 2)).mean(),
+                "rec_params": (out["params"] - batch["params"]).abs().mean(),
+                "kl": kl_standard_normal(out["mu"], out["logvar"])}
+        kl_w = self.hparams["kl_final"] * (epoch + 1) / max(epochs, 1)
+        loss = logs["rec_markers"] + logs["rec_params"] + kl_w * robust_kl(out["mu"], out["logvar"])
+        logs["marker_error_cm"] = (markers - batch["markers"]).norm(dim=-1).mean().detach() * 100
+        return {"loss": loss, **logs}
+
+    @torch.no_grad()
+    def sample(self, points: Tensor, normals: Tensor, height: float, n: int,
+               generator: torch.Generator | None = None) -> Tensor:
+        """n parameter vectors (n, 193) for one object (points, normals (P,3) in the object frame)."""
+        was = self.training
+        self.eval()
+        z = torch.randn(n, self.hparams["latent"], generator=generator)
+        out = self.decode(z, points.float().expand(n, -1, -1), normals.float().expand(n, -1, -1),
+                          torch.full((n, 1), float(height)))
+        self.train(was)
+        return out
+
+    def state(self) -> dict[str, Any]:
+        """Weights and hyper-parameters (weights-only checkpoint)."""
+        return {"model": self.state_dict(), "model_config": dict(self.hparams)}
+
+    @classmethod
+    def from_state(cls, state: dict[str, Any]) -> "GrabNetSMPLX":
+        """Rebuild from `state()` (or a fit checkpoint whose extra holds model_config)."""
+        cfg = state.get("model_config") or state.get("extra", {}).get("model_config")
+        model = cls(**cfg)
+        model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state["model"].items()})
+        return model.eval()
+
+
+def grasp_params(fullpose: Tensor, transl: Tensor, betas: Tensor, object_transl: Tensor, pca: HandPCA) -> Tensor:
+    """GrabNet-SMPLX parameter vectors (B, 193) of grasps: fullpose (B,55,3) absolute, world transl (B,3),
+    betas (B,10), the object translation (B,3) (the object frame's origin)."""
+    from graspkit.rotations import axis_angle_to_rot6d
+
+    B = fullpose.shape[0]
+    return torch.cat([transl - object_transl, axis_angle_to_rot6d(fullpose[:, 0]), betas,
+                      axis_angle_to_rot6d(fullpose[:, 1:22]).reshape(B, 126),
+                      pca.encode(fullpose[:, 25:40].reshape(B, 45), "left"),
+                      pca.encode(fullpose[:, 40:55].reshape(B, 45), "right")], -1).float()
+
+
+class GrabNetTrainingSet(torch.utils.data.Dataset):
+    """Parameter vectors, markers and objects of graspkit's grasps (one split), PointNet++ groupings precomputed;
+    `augment_yaw` turns each item about the vertical axis through the object centre (root and translation)."""
+
+    def __init__(self, root: str | Path, split: str, bm, model: GrabNetSMPLX, augment_yaw: bool = False) -> None:
+        from graspkit.data.grasp_datasets import GNetDataset, WholeGraspDataset
+
+        wg, gn = WholeGraspDataset(root, split=split), GNetDataset(root, split=split)
+        pca = HandPCA(bm)
+        d = gn.data
+        self.data = {"params": grasp_params(d["fullpose"], d["transl"], d["betas"], d["object_transl"], pca),
+                     "markers": wg.data["markers"], "points": wg.data["object_points"],
+                     "normals": wg.data["object_normals"], "height": wg.data["object_height"].reshape(-1, 1)}
+        with torch.no_grad():
+            coeffs = torch.cat([d["betas"].to(bm.dtype), torch.zeros(len(d["betas"]), bm.num_expression)], -1)
+            self.data["root_joint"] = (bm.J_template[0] + (coeffs @ bm.J_basis).view(-1, 55, 3)[:, 0]).float()
+            pre = [model.obj_dec.group(self.data["points"][i:i + 64]) for i in range(0, len(self), 64)]
+        t = [groupings_to_tensors(g) for g in pre]
+        self.data.update({k: torch.cat([x[k] for x in t]) for k in t[0]})
+        self.augment_yaw = augment_yaw
+
+    def __len__(self) -> int:
+        return len(self.data["params"])
+
+    def __getitem__(self, i: int) -> dict[str, Tensor]:
+        from graspkit.rotations import matrix_to_rot6d, rot6d_to_matrix
+
+        item = {k: v[i] for k, v in self.data.items()}
+        if self.augment_yaw:
+            a = float(torch.rand(()) * 2 * math.pi)
+            c, s = math.cos(a), math.sin(a)
+            Q = torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+            for k in ("markers", "points", "normals"):
+                item[k] = item[k] @ Q.T
+            p = item["params"].clone()
+            J0 = item["root_joint"]
+            p[:3] = Q @ (J0 + p[:3]) - J0
+            p[3:9] = matrix_to_rot6d(Q @ rot6d_to_matrix(p[3:9]))
+            item["params"] = p
+        return item
+
+
+def train_grabnet_smplx(root: str | Path, out: str | Path | None = None, epochs: int = 12, batch_size: int = 32,
+                        lr: float = 1e-3, seed: int = 0, time_limit_s: float | None = 600.0, threads: int | None = 1,
+                        progress: bool = True, half: bool = True) -> dict[str, Any]:
+    """Train the GrabNet-SMPLX baseline like `train_wholegrasp`; returns {'history', 'seconds', 'out'}."""
+    import time
+
+    from graspkit.body import BodyModel
+    from graspkit.models.gnet import SparseBody
+    from graspkit.paths import default_model_path
+    from graspkit.train import TrainConfig, fit, save_checkpoint
+    from graspkit.body.markers import saga_markers
+
+    if threads:
+        torch.set_num_threads(threads)
+    out = Path(out or GRABNET_SMPLX_PATH)
+    torch.manual_seed(seed)
+    bm = BodyModel.from_file(default_model_path())
+    body, pca = SparseBody(bm, saga_markers(bm).vertex_ids), HandPCA(bm)
+    model = GrabNetSMPLX()
+    t0 = time.perf_counter()
+    train = GrabNetTrainingSet(root, "train", bm, model, augment_yaw=True)
+    val = GrabNetTrainingSet(root, "val", bm, model)
+
+    def step(m: nn.Module, batch: dict[str, Tensor], epoch: int) -> dict[str, Tensor]:
+        """One batch of the GrabNet-style loss."""
+        return m.loss(batch, m(batch), body, pca, epoch, epochs)
+
+    cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
+    hist = fit(model, step, train, cfg, checkpoint=out.with_name(out.stem + ".run.pt"),
+               extra={"model_config": dict(model.hparams)}, val_dataset=val, progress=progress,
+               time_limit_s=None if time_limit_s is None else max(time_limit_s - (time.perf_counter() - t0), 0.0))
+    state = model.state()
+    if half:
+        state["model"] = {k: v.half() if v.is_floating_point() else v for k, v in state["model"].items()}
+    seconds = time.perf_counter() - t0
+    state.update(history=hist, seconds=seconds)
+    save_checkpoint(out, state)
+    return {"history": hist, "seconds": seconds, "out": out}

@@ -26,6 +26,9 @@ graspkit's choices where the paper is silent (all in `GraspPoseWeights` / `Grasp
   nearest the hand at the start of stage 3 (the hand moves little in stage 3), signed by the hand's vertex normals.
   S(b, O) uses the object's signed-distance grid when one is given (exact to ~0.1 mm), else the point cloud with
   its normals (SAGA's "signed distance from point x to point cloud Y").
+- In stage 3 the nearest-neighbour pairs behind d and S are recomputed every 10 steps and held in between (the
+  distances stay differentiable through the held pairs; the body moves little in 10 steps); energies reported
+  before and after a stage use fresh pairs.
 - Energies are summed over the samples of a batch (the samples are independent; Adam's steps are per parameter).
 Frames: everything in the object frame of WholeGrasp-VAE (object centre at 0, z up, floor at z = -t_O).
 """
@@ -39,7 +42,7 @@ import torch
 from torch import Tensor
 from tqdm.auto import tqdm
 
-from graspkit.body.markers import foot_vertices, saga_markers
+from graspkit.body.markers import foot_vertices, saga_markers, vertex_normals
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX
 from graspkit.models.gnet import SparseBody
 from graspkit.objects.sdf import SDFGrid
@@ -79,28 +82,49 @@ class GraspPoseConfig:
     collision_points: int = 512   # object points (nearest the hand) in S(o, V^h_B)
     n_pca: int = 24               # hand PCA components per hand (SAGA)
     log_every: int = 10
+    nn_every: int = 10            # stage 3: nearest-neighbour pairs recomputed every this many steps (held between)
     weights: GraspPoseWeights = field(default_factory=GraspPoseWeights)
 
 
 @dataclass
 class GraspObject:
-    """The object in WholeGrasp-VAE's frame: points and normals (P,3), its height t_O, an optional SDF grid."""
+    """The object in WholeGrasp-VAE's frame: points and normals (P,3) (or (B,P,3), one object pose per sample), its
+    height t_O (float or (B,)), optionally its signed-distance grid in the mesh's own frame and the rotation (3,3) or
+    (B,3,3) from that frame into this one (x = R x_mesh)."""
 
     points: Tensor
     normals: Tensor
-    height: float
+    height: float | Tensor
     sdf: SDFGrid | None = None
+    rotation: Tensor | None = None
 
     def __post_init__(self) -> None:
         for name in ("points", "normals"):
             x = getattr(self, name)
-            if not isinstance(x, Tensor) or x.dim() != 2 or x.shape[1] != 3:
+            if not isinstance(x, Tensor) or x.dim() not in (2, 3) or x.shape[-1] != 3:
                 got = tuple(x.shape) if isinstance(x, Tensor) else type(x).__name__
-                raise ValueError(f"{name}: expected a tensor of shape (P, 3), got {got}")
+                raise ValueError(f"{name}: expected a tensor of shape (P, 3) or (B, P, 3), got {got}")
         if self.points.shape != self.normals.shape:
             raise ValueError(f"normals: expected the shape of points {tuple(self.points.shape)}, "
                              f"got {tuple(self.normals.shape)}")
+        if self.rotation is not None and tuple(self.rotation.shape[-2:]) != (3, 3):
+            raise ValueError(f"rotation: expected shape (3, 3) or (B, 3, 3), got {tuple(self.rotation.shape)}")
         self.points, self.normals = self.points.float(), self.normals.float()
+
+    @property
+    def num_points(self) -> int:
+        return self.points.shape[-2]
+
+    def batch(self, B: int) -> tuple[Tensor, Tensor, Tensor]:
+        """Points, normals (B,P,3) and heights (B,1) for a batch of B samples."""
+        h = torch.as_tensor(self.height, dtype=torch.float32).reshape(-1, 1).expand(B, 1)
+        return self.points.expand(B, -1, -1), self.normals.expand(B, -1, -1), h
+
+    def signed_distance(self, x: Tensor) -> Tensor:
+        """S(x, O) (B,N) from the grid for x (B,N,3) (negative inside); the grid must be set."""
+        if self.rotation is not None:
+            x = x @ self.rotation.to(x.dtype)            # row vectors: R^T x
+        return self.sdf(x)
 
 
 @dataclass
@@ -139,21 +163,25 @@ def kabsch(source: Tensor, target: Tensor) -> tuple[Tensor, Tensor]:
     return R, (mt - ms @ R.transpose(1, 2)).squeeze(1)
 
 
-def _nearest(q: Tensor, t: Tensor) -> tuple[Tensor, Tensor]:
-    """Nearest target row for every query: (B,N,3), (B,M,3) -> squared distance (B,N) (differentiable), index."""
-    with torch.no_grad():
-        idx = torch.cdist(q.detach(), t.detach()).argmin(-1)
+def _nearest(q: Tensor, t: Tensor, idx: Tensor | None = None) -> tuple[Tensor, Tensor]:
+    """Nearest target row for every query: (B,N,3), (B,M,3) -> squared distance (B,N) (differentiable), index (B,N).
+    With `idx` the pairs are taken as given (held correspondences)."""
+    if idx is None:
+        with torch.no_grad():
+            idx = torch.cdist(q.detach(), t.detach()).argmin(-1)
     near = torch.gather(t, 1, idx.unsqueeze(-1).expand(-1, -1, 3))
     return (q - near).pow(2).sum(-1), idx
 
 
-def _signed_to_cloud(q: Tensor, cloud: Tensor, normals: Tensor) -> Tensor:
-    """Signed distance (B,N) from q to a cloud with outward normals (negative inside), as SAGA's S(x, Y)."""
-    d2, idx = _nearest(q, cloud)
+def _signed_to_cloud(q: Tensor, cloud: Tensor, normals: Tensor, idx: Tensor | None = None
+                     ) -> tuple[Tensor, Tensor]:
+    """Signed distance (B,N) from q to a cloud with outward normals (negative inside), as SAGA's S(x, Y); and the
+    nearest-point indices."""
+    d2, idx = _nearest(q, cloud, idx)
     i3 = idx.unsqueeze(-1).expand(-1, -1, 3)
     near, n = torch.gather(cloud, 1, i3), torch.gather(normals, 1, i3)
     sign = torch.where(((q - near) * n).sum(-1) < 0, -1.0, 1.0).to(q.dtype).detach()
-    return sign * torch.sqrt(d2 + 1e-12)
+    return sign * torch.sqrt(d2 + 1e-12), idx
 
 
 class GraspPoseOpt:
@@ -224,8 +252,10 @@ class GraspPoseOpt:
     # ------------------------------------------------------------------ the energy
     def energy(self, p: dict[str, Tensor], target: Tensor, obj: GraspObject, stage: int,
                marker_contact: Tensor | None, object_contact: Tensor | None,
-               cache: dict[str, Tensor]) -> dict[str, Tensor]:
-        """Each term of Eq. 4-7 (and S.3) per sample (B,) for the current parameters."""
+               cache: dict[str, Tensor], refresh: bool = True) -> dict[str, Tensor]:
+        """Each term of Eq. 4-7 (and S.3) per sample (B,) for the current parameters.
+
+        `refresh=False` reuses the nearest-neighbour pairs kept in `cache` from the last refresh."""
         cfg, w = self.cfg, self.cfg.weights
         v = self.body(p)
         m, hands, feet = v[:, self.sl_markers], v[:, self.sl_hands], v[:, self.sl_feet]
@@ -235,27 +265,37 @@ class GraspPoseOpt:
                                  + p["right_pca"].pow(2).sum(-1) + p["eyes"].pow(2).sum(-1))}
         if stage < 3:
             return e
-        pts, nrm = obj.points.expand(B, -1, -1), obj.normals.expand(B, -1, -1)
+        pts, nrm, height = obj.batch(B)
+
+        def nn(name: str, q: Tensor, t: Tensor) -> Tensor:
+            d2, cache[name] = _nearest(q, t, None if refresh or name not in cache else cache[name])
+            return d2
+
         if cfg.ground:
-            e["ground"] = w.ground * (feet[..., 2] + obj.height).abs().sum(-1)
+            e["ground"] = w.ground * (feet[..., 2] + height).abs().sum(-1)
         if cfg.contact and object_contact is not None and marker_contact is not None:
             co_idx = cache["contact_idx"]
             po = torch.gather(pts, 1, co_idx.unsqueeze(-1).expand(-1, -1, 3))
             e["contact_object"] = w.contact_object * (torch.gather(object_contact, 1, co_idx)
-                                                      * _nearest(po, hands)[0]).sum(-1)
-            e["contact_marker"] = w.contact_marker * (marker_contact * _nearest(m, pts)[0]).sum(-1)
+                                                      * nn("nn_contact_object", po, hands)).sum(-1)
+            e["contact_marker"] = w.contact_marker * (marker_contact * nn("nn_contact_marker", m, pts)).sum(-1)
         if cfg.heuristic and self.hand_contact_prior is not None:
-            d2 = _nearest(hands, pts)[0]
+            d2 = nn("nn_heuristic", hands, pts)
             ch = self.hand_contact_prior.to(d2.dtype)
             on = (ch > w.heuristic_prior) & (d2.detach() < w.heuristic_radius ** 2)
             e["heuristic"] = w.heuristic * (on * ch * d2).sum(-1)
         if cfg.collision:
-            sd = obj.sdf(hands) if obj.sdf is not None else _signed_to_cloud(hands, pts, nrm)
+            if obj.sdf is not None:
+                sd = obj.signed_distance(hands)
+            else:
+                sd, cache["nn_colli_body"] = _signed_to_cloud(hands, pts, nrm, None if refresh else
+                                                              cache.get("nn_colli_body"))
             e["colli_body"] = w.colli_body * torch.relu(-sd - w.sigma_b).sum(-1)
-            from graspkit.body.markers import vertex_normals
             hn = vertex_normals(hands, self.hand_faces)
             cp = torch.gather(pts, 1, cache["collision_idx"].unsqueeze(-1).expand(-1, -1, 3))
-            e["colli_object"] = w.colli_object * torch.relu(-_signed_to_cloud(cp, hands, hn) - w.sigma_o).sum(-1)
+            so, cache["nn_colli_object"] = _signed_to_cloud(cp, hands, hn, None if refresh else
+                                                            cache.get("nn_colli_object"))
+            e["colli_object"] = w.colli_object * torch.relu(-so - w.sigma_o).sum(-1)
         return e
 
     # ------------------------------------------------------------------ Alg. 1
@@ -273,8 +313,8 @@ class GraspPoseOpt:
         if marker_contact is not None and marker_contact.shape != markers.shape[:2]:
             raise ValueError(f"marker_contact: expected shape {tuple(markers.shape[:2])}, "
                              f"got {tuple(marker_contact.shape)}")
-        if object_contact is not None and object_contact.shape != (B, obj.points.shape[0]):
-            raise ValueError(f"object_contact: expected shape ({B}, {obj.points.shape[0]}), "
+        if object_contact is not None and object_contact.shape != (B, obj.num_points):
+            raise ValueError(f"object_contact: expected shape ({B}, {obj.num_points}), "
                              f"got {tuple(object_contact.shape)}")
         if self.cfg.heuristic and self.hand_contact_prior is None:
             raise ValueError("hand_contact_prior: the heuristic contact of S.3 needs it")
@@ -299,7 +339,8 @@ class GraspPoseOpt:
                 before = {k: v.detach() for k, v in self.energy(p, target, obj, stage, marker_contact,
                                                                 object_contact, cache).items()}
             for i in range(self.cfg.steps[stage - 1]):
-                e = self.energy(p, target, obj, stage, marker_contact, object_contact, cache)
+                e = self.energy(p, target, obj, stage, marker_contact, object_contact, cache,
+                                refresh=i % self.cfg.nn_every == 0)
                 loss = sum(t.sum() for t in e.values())
                 opt.zero_grad(set_to_none=True)
                 loss.backward()
@@ -319,10 +360,10 @@ class GraspPoseOpt:
                       ) -> dict[str, Tensor]:
         """Object points used in stage 3: the highest-contact ones (d(o, V_B)) and those nearest the hand (S(o, V^h))."""
         B = p["transl"].shape[0]
-        P = obj.points.shape[0]
+        P = obj.num_points
         with torch.no_grad():
             hands = self.body(p)[:, self.sl_hands]
-            d2, _ = _nearest(obj.points.expand(B, -1, -1).contiguous(), hands)
+            d2, _ = _nearest(obj.batch(B)[0].contiguous(), hands)
             cache = {"collision_idx": d2.topk(min(self.cfg.collision_points, P), -1, largest=False).indices}
             if object_contact is not None:
                 cache["contact_idx"] = object_contact.topk(min(self.cfg.contact_points, P), -1).indices
