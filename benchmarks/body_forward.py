@@ -1,6 +1,6 @@
 """Body-model forward speed: graspkit's BodyModel against the smplx package on the same file.
 
-Workloads: the shipped procedural humanoid (no pose correctives) and a dense random SMPL-X-format model
+Workloads: the shipped procedural humanoid (pose correctives on a few joints) and a dense random SMPL-X-format model
 with non-zero pose correctives; batch sizes 1, 64, 512; forward (no grad) and forward + backward.
 Prints bodies per second for both and the ratio. Run: python benchmarks/body_forward.py [--threads 2]
 """

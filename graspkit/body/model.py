@@ -181,15 +181,17 @@ class BodyModel(nn.Module):
         self._build_levels(parents)
 
     def _build_levels(self, parents: list[int]) -> None:
-        """Group joints by tree depth, so that each level's parents all sit in the level before."""
+        """Order joints by tree depth: each level is a contiguous run whose parents all sit in the level before."""
         depth = [0] * len(parents)
         for j in range(1, len(parents)):
             depth[j] = depth[parents[j]] + 1
         levels = [[j for j in range(len(parents)) if depth[j] == d] for d in range(max(depth) + 1)]
-        self._levels = [torch.tensor(lv) for lv in levels]
+        order = [j for lv in levels for j in lv]
+        self._order = torch.tensor(order)
+        self._spans = [(sum(map(len, levels[:d])), sum(map(len, levels[:d + 1]))) for d in range(len(levels))]
+        # the parent of each joint of level d, as a position within level d-1
         self._parent_slot = [torch.tensor([levels[d - 1].index(parents[j]) for j in lv]) if d else torch.zeros(0)
                              for d, lv in enumerate(levels)]
-        order = [j for lv in levels for j in lv]
         self._unorder = torch.tensor(np.argsort(order))  # level order -> joint order
 
     @classmethod
@@ -315,14 +317,20 @@ class BodyModel(nn.Module):
         return BodyOutput(verts.transpose(1, 2).contiguous(), tg + transl.unsqueeze(1), self.faces, rot)
 
     def global_transforms(self, rot: Tensor, J: Tensor) -> tuple[Tensor, Tensor]:
-        """Walk the kinematic tree level by level: local rot (B,55,3,3), rest joints (B,55,3) -> global R, t."""
-        rel = J - torch.cat([J.new_zeros(J.shape[0], 1, 3), J[:, self.parents[1:]]], dim=1)
-        Rs, ts = [rot[:, self._levels[0]]], [J[:, self._levels[0]]]
-        for lv, slot in zip(self._levels[1:], self._parent_slot[1:]):
-            Rp, tp = Rs[-1][:, slot], ts[-1][:, slot]
-            Rs.append(Rp @ rot[:, lv])
-            ts.append((Rp @ rel[:, lv].unsqueeze(-1)).squeeze(-1) + tp)
-        return torch.cat(Rs, 1)[:, self._unorder], torch.cat(ts, 1)[:, self._unorder]
+        """Walk the kinematic tree level by level: local rot (B,55,3,3), rest joints (B,55,3) -> global R, t.
+
+        Each joint's local transform is a 4x4 [rot | J - J_parent]; a level is one gather of its parents' global
+        transforms and one batched matmul (about 30 small ops per call instead of one per joint)."""
+        B = rot.shape[0]
+        rel = J - torch.cat([J.new_zeros(B, 1, 3), J[:, self.parents[1:]]], dim=1)
+        local = torch.cat([torch.cat([rot, rel.unsqueeze(-1)], dim=3),
+                           torch.cat([rot.new_zeros(B, NUM_JOINTS, 1, 3), rot.new_ones(B, NUM_JOINTS, 1, 1)], dim=3)],
+                          dim=2)[:, self._order]                                             # (B,55,4,4), level order
+        G = [local[:, :self._spans[0][1]]]
+        for (a, b), slot in zip(self._spans[1:], self._parent_slot[1:]):
+            G.append(G[-1][:, slot] @ local[:, a:b])
+        G = torch.cat(G, 1)[:, self._unorder]
+        return G[..., :3, :3], G[..., :3, 3]
 
     def extra_repr(self) -> str:
         kind = "procedural humanoid" if self.is_procedural else "SMPL-X file"
