@@ -224,3 +224,18 @@ def test_horizon_prediction_of_a_standing_mnet_is_the_current_pose(setup):
     fut = bm.forward_rotmats(pose_rotmats(w.rot6d[t + 1:t + 11]), betas=w.betas[:1].expand(10, -1),
                              transl=w.transl[t + 1:t + 11]).vertices
     assert got.body == pytest.approx(1000 * float((fut - now).norm(dim=-1).mean()), rel=1e-3)
+
+
+def test_window_features_match_the_direct_computation(setup):
+    """Offsets (KD-tree) and goal-hand BPS (turned basis) of the windows equal mnet_inputs' own computation."""
+    from graspkit.models.mnet import MNetWindows
+    bm, gv, body = setup
+    w = MNetWindows(_reach_clips(1), body, bps_basis())
+    idx = torch.tensor([0, 17, 50])
+    s = w.state(w.windows[idx])
+    torch.testing.assert_close(s.obj_offsets, hand_object_offsets(s.verts, w.points[w.clip[w.windows[idx]]]),
+                               atol=1e-6, rtol=0)
+    direct, _, _ = mnet_inputs(s, bps_basis())
+    stored, _ = w.batch(idx)[:2]
+    for k in direct:
+        torch.testing.assert_close(stored[k], direct[k], atol=1e-5, rtol=1e-5)

@@ -28,7 +28,9 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
+import numpy as np
 import torch
+from scipy.spatial import cKDTree
 from torch import Tensor, nn
 
 from graspkit.models.blocks import ResBlock
@@ -78,11 +80,10 @@ def transform_params(rot6d: Tensor, transl: Tensor, root: Tensor, R: Tensor, o: 
 
 def transform_points(x: Tensor, R: Tensor, o: Tensor | None = None) -> Tensor:
     """Points (B,...,3) -> R (x − o); vectors when o is None."""
-    shape = x.shape[1:-1]
-    Rx = R.reshape(R.shape[0], *([1] * len(shape)), 3, 3)
+    shape = x.shape
     if o is not None:
-        x = x - o.reshape(o.shape[0], *([1] * len(shape)), 3)
-    return (Rx @ x.unsqueeze(-1)).squeeze(-1)
+        x = x - o.reshape(o.shape[0], *([1] * (x.dim() - 2)), 3)
+    return torch.bmm(x.reshape(shape[0], -1, 3), R.transpose(1, 2).to(x.dtype)).reshape(shape)
 
 
 # ------------------------------------------------------------------------------------------- inputs and targets
@@ -411,7 +412,6 @@ class MNetWindows:
     def __init__(self, clips: list[ApproachClip], body, basis: Tensor, cfg: MNetConfig | None = None,
                  stride: int = 1, chunk: int = 256) -> None:
         from graspkit.models.gnet import pose_rotmats
-        from graspkit.optim.goal_refine import hand_object_offsets
 
         if not clips:
             raise ValueError("clips: empty")
@@ -425,10 +425,12 @@ class MNetWindows:
             if not 0 <= c.goal_frame < T:
                 raise ValueError(f"clips[{k}].goal_frame: expected a frame in [0, {T}), got {c.goal_frame}")
             b = c.betas.reshape(1, -1).float()
-            v = torch.cat([body(pose_rotmats(c.rot6d[i:i + chunk].float()), b.expand(len(c.rot6d[i:i + chunk]), -1),
-                                c.transl[i:i + chunk].float())[0] for i in range(0, T, chunk)]).float()
             with torch.no_grad():
-                offs.append(hand_object_offsets(v, c.object_points.float()[None].expand(T, -1, -1)))
+                v = torch.cat([body(pose_rotmats(c.rot6d[i:i + chunk].float()), b.expand(len(c.rot6d[i:i + chunk]), -1),
+                                    c.transl[i:i + chunk].float())[0] for i in range(0, T, chunk)]).float()
+            pts = c.object_points.double().numpy()
+            _, near = cKDTree(pts).query(v.reshape(-1, 3).double().numpy())      # the object does not move
+            offs.append(torch.as_tensor(pts[near]).float().reshape(v.shape) - v)
             rot.append(c.rot6d.float())
             tr.append(c.transl.float())
             vs.append(v.detach())
@@ -448,10 +450,19 @@ class MNetWindows:
         self.bps = torch.cat([self._bps(self.windows[i:i + chunk]) for i in range(0, len(self.windows), chunk)])
 
     def _bps(self, t: Tensor) -> Tensor:
-        """b^h_g of windows at global frames t (computed once: the nearest-point search is the costly feature)."""
+        """b^h_g of windows at global frames t, computed once with a KD-tree of each clip's goal hand: the distance from
+        basis point b to the turned hand R x is the distance from R^T b to x, so only the basis turns."""
         s = self.state(t)
         R, _ = canonical_frame(rot6d_to_matrix(s.rot6d[:, -1, 0]), s.root + s.transl[:, -1])
-        return goal_hand_bps(s, R, self.basis).float()
+        basis = self.basis.double().numpy()
+        out = torch.empty(len(t), len(basis))
+        clips = self.clip[t]
+        for k in torch.unique(clips).tolist():
+            rows = torch.nonzero(clips == k)[:, 0]
+            tree = cKDTree((self.goal_hand[k] - self.centre[k]).double().numpy())
+            q = np.einsum("kj,bji->bki", basis, R[rows].double().numpy())               # b_row @ R = (R^T b)^T
+            out[rows] = torch.as_tensor(tree.query(q.reshape(-1, 3))[0]).float().reshape(len(rows), -1)
+        return out
 
     def __len__(self) -> int:
         return len(self.windows)
