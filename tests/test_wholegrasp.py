@@ -119,3 +119,58 @@ def test_state_round_trip_and_bad_batches():
         model(bad)
     with pytest.raises(ValueError, match="object_contact"):
         model({k: v for k, v in batch.items() if k != "object_contact"})
+
+
+def test_contact_auc_matches_scipy_mann_whitney():
+    from scipy.stats import mannwhitneyu
+
+    from graspkit.models.wholegrasp import contact_auc
+    g = torch.Generator().manual_seed(0)
+    labels = (torch.rand(500, generator=g) < 0.2).float()
+    scores = torch.round(torch.rand(500, generator=g) * 10 + labels * 3) / 10        # with ties
+    u = mannwhitneyu(scores[labels > 0].numpy(), scores[labels == 0].numpy()).statistic
+    assert contact_auc(scores, labels) == pytest.approx(u / (labels.sum() * (500 - labels.sum())).item(), rel=1e-9)
+    assert contact_auc(labels, labels) == 1.0 and contact_auc(1 - labels, labels) == 0.0
+
+
+def test_training_set_precomputes_and_yaw_augmentation_keeps_the_geometry():
+    from graspkit.models.wholegrasp import WholeGraspTrainingSet, squared_min_distance
+    b = _batch(B=4)
+    items = {"markers": b["markers"], "marker_contacts": b["marker_contact"], "object_points": b["points"],
+             "object_normals": b["normals"], "object_contacts": b["object_contact"], "object_height": b["height"][:, 0]}
+    model = WholeGraspVAE()
+    ds = WholeGraspTrainingSet(items, model, augment_yaw=True)
+    torch.manual_seed(3)
+    it = ds[2]
+    # turned about z: heights kept, every distance kept (so the precomputed Eq. 3 truths and groupings stay valid)
+    assert not torch.allclose(it["markers"], b["markers"][2])
+    torch.testing.assert_close(it["markers"][:, 2], b["markers"][2, :, 2])
+    torch.testing.assert_close(squared_min_distance(it["markers"][None], it["points"][None])[0], it["dist_markers"],
+                               atol=1e-6, rtol=1e-4)
+    torch.testing.assert_close(it["normals"].norm(dim=-1), torch.ones(P))
+    # precomputed batches give the same outputs as computing everything in forward
+    model.eval()
+    full = {k: torch.stack([ds.data[k][i] for i in range(4)]) for k in ds.data}
+    torch.testing.assert_close(model(full)["object_contact"], model(b)["object_contact"], atol=1e-5, rtol=1e-4)
+    torch.testing.assert_close(model.loss(full, model(full), 0, 10)["consistency"],
+                               model.loss(b, model(b), 0, 10)["consistency"], atol=1e-6, rtol=1e-4)
+
+
+def test_grabnet_parameters_turn_with_the_body():
+    from graspkit.body import BodyModel
+    from graspkit.body.markers import saga_markers
+    from graspkit.models.gnet import SparseBody
+    from graspkit.models.wholegrasp import HandPCA, grasp_params, params_to_rotmats, rest_root_joint, turn_params
+    from graspkit.paths import default_model_path
+    from graspkit.rotations import axis_angle_to_matrix
+    bm = BodyModel.from_file(default_model_path())
+    body, pca = SparseBody(bm, saga_markers(bm).vertex_ids), HandPCA(bm)
+    g = torch.Generator().manual_seed(0)
+    fp = torch.randn(3, 55, 3, generator=g) * 0.2
+    fp[:, 25:] = pca.decode(torch.randn(6, 24, generator=g) * 0.5, "left").view(3, 2, 15, 3).reshape(3, 30, 3)
+    betas = torch.randn(3, 10, generator=g)
+    x = grasp_params(fp, torch.randn(3, 3, generator=g), betas, torch.zeros(3, 3), pca)
+    Q = axis_angle_to_matrix(torch.tensor([0.0, 0.0, 1.1]))
+    m0 = body(*params_to_rotmats(x, pca))[0]
+    m1 = body(*params_to_rotmats(turn_params(x, rest_root_joint(bm, betas), Q), pca))[0]
+    torch.testing.assert_close(m1, m0 @ Q.T, atol=1e-5, rtol=0)

@@ -410,6 +410,9 @@ def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask:
     if half:
         state["model"] = {k: v.half() if v.is_floating_point() else v for k, v in state["model"].items()}
     state.update(history=hist, val=metrics, seconds=seconds, train_items=len(train))
+    if not multitask:   # S.3's hand contact prior C_H (per body vertex) for the heuristic optimisation
+        from graspkit.eval_saga import hand_contact_prior
+        state["hand_contact_prior"] = hand_contact_prior(root).half()
     save_checkpoint(out, state)
     return {"history": hist, "seconds": seconds, "val": metrics, "out": out}
 
@@ -537,6 +540,13 @@ class GrabNetSMPLX(nn.Module):
         return model.eval()
 
 
+def rest_root_joint(bm, betas: Tensor) -> Tensor:
+    """The rest-pose pelvis joint (B,3) of bodies with shapes betas (B,10)."""
+    with torch.no_grad():
+        coeffs = torch.cat([betas.to(bm.dtype), torch.zeros(len(betas), bm.num_expression, dtype=bm.dtype)], -1)
+        return (bm.J_template[0] + (coeffs @ bm.J_basis).view(-1, 55, 3)[:, 0]).float()
+
+
 def grasp_params(fullpose: Tensor, transl: Tensor, betas: Tensor, object_transl: Tensor, pca: HandPCA) -> Tensor:
     """GrabNet-SMPLX parameter vectors (B, 193) of grasps: fullpose (B,55,3) absolute, world transl (B,3),
     betas (B,10), the object translation (B,3) (the object frame's origin)."""
@@ -562,9 +572,8 @@ class GrabNetTrainingSet(torch.utils.data.Dataset):
         self.data = {"params": grasp_params(d["fullpose"], d["transl"], d["betas"], d["object_transl"], pca),
                      "markers": wg.data["markers"], "points": wg.data["object_points"],
                      "normals": wg.data["object_normals"], "height": wg.data["object_height"].reshape(-1, 1)}
+        self.data["root_joint"] = rest_root_joint(bm, d["betas"])
         with torch.no_grad():
-            coeffs = torch.cat([d["betas"].to(bm.dtype), torch.zeros(len(d["betas"]), bm.num_expression)], -1)
-            self.data["root_joint"] = (bm.J_template[0] + (coeffs @ bm.J_basis).view(-1, 55, 3)[:, 0]).float()
             pre = [model.obj_dec.group(self.data["points"][i:i + 64]) for i in range(0, len(self), 64)]
         t = [groupings_to_tensors(g) for g in pre]
         self.data.update({k: torch.cat([x[k] for x in t]) for k in t[0]})
@@ -574,8 +583,6 @@ class GrabNetTrainingSet(torch.utils.data.Dataset):
         return len(self.data["params"])
 
     def __getitem__(self, i: int) -> dict[str, Tensor]:
-        from graspkit.rotations import matrix_to_rot6d, rot6d_to_matrix
-
         item = {k: v[i] for k, v in self.data.items()}
         if self.augment_yaw:
             a = float(torch.rand(()) * 2 * math.pi)
@@ -583,12 +590,19 @@ class GrabNetTrainingSet(torch.utils.data.Dataset):
             Q = torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
             for k in ("markers", "points", "normals"):
                 item[k] = item[k] @ Q.T
-            p = item["params"].clone()
-            J0 = item["root_joint"]
-            p[:3] = Q @ (J0 + p[:3]) - J0
-            p[3:9] = matrix_to_rot6d(Q @ rot6d_to_matrix(p[3:9]))
-            item["params"] = p
+            item["params"] = turn_params(item["params"][None], item["root_joint"][None], Q)[0]
         return item
+
+
+def turn_params(params: Tensor, root_joint: Tensor, Q: Tensor) -> Tensor:
+    """GrabNet-SMPLX parameters (B,193) of bodies turned by Q (3,3) about the origin: R -> Q R and
+    t -> Q (J0 + t) - J0, J0 (B,3) the rest root joint (SMPL-X turns the body about it)."""
+    from graspkit.rotations import matrix_to_rot6d, rot6d_to_matrix
+
+    p = params.clone()
+    p[:, :3] = (root_joint + p[:, :3]) @ Q.T - root_joint
+    p[:, 3:9] = matrix_to_rot6d(Q @ rot6d_to_matrix(p[:, 3:9]))
+    return p
 
 
 def train_grabnet_smplx(root: str | Path, out: str | Path | None = None, epochs: int = 12, batch_size: int = 32,

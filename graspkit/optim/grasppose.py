@@ -34,6 +34,7 @@ Frames: everything in the object frame of WholeGrasp-VAE (object centre at 0, z 
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -217,6 +218,12 @@ class GraspPoseOpt:
             raise ValueError(f"hand_contact_prior: expected shape ({n_h},) (one per hand vertex), "
                              f"got {tuple(hand_contact_prior.shape)}")
         self.hand_contact_prior = hand_contact_prior
+
+    def with_config(self, **changes: Any) -> "GraspPoseOpt":
+        """A copy that shares the body, prior and vertex sets, with some GraspPoseConfig fields changed."""
+        other = copy.copy(self)
+        other.cfg = replace(self.cfg, **changes)
+        return other
 
     # ------------------------------------------------------------------ the body
     def rotmats(self, p: dict[str, Tensor]) -> Tensor:

@@ -1,0 +1,74 @@
+"""The learned pose prior (VPoser's role in SAGA's GraspPose-Opt): mirroring, round trips, plausible samples."""
+import numpy as np
+import pytest
+import torch
+
+from graspkit.body import BodyModel
+from graspkit.data import load_motion
+from graspkit.metrics import joint_limit_violation
+from graspkit.models.pose_prior import (POSE_PRIOR_PATH, PosePrior, body_poses_from_motions, load_pose_prior,
+                                        mirror_body_pose)
+from graspkit.paths import DATA_STUBS, default_model_path
+
+
+@pytest.fixture(scope="module")
+def bm():
+    return BodyModel.from_file(default_model_path())
+
+
+@pytest.fixture(scope="module")
+def held_out_poses():
+    """Body poses of the shipped reaching clips (seed 0, not among the prior's training clips, which come from
+    SeedSequence(0)-derived seeds)."""
+    clips = [load_motion(p) for p in sorted((DATA_STUBS / "motion" / "reach").glob("*.npz"))[:4]]
+    return torch.as_tensor(body_poses_from_motions(clips, stride=10))
+
+
+def test_mirroring_is_an_involution_and_mirrors_the_skeleton(bm):
+    g = np.random.default_rng(0)
+    p = (g.normal(size=(3, 21, 3)) * 0.4).astype(np.float32)
+    np.testing.assert_allclose(mirror_body_pose(mirror_body_pose(p)), p)
+    with torch.no_grad():
+        j = bm(body_pose=torch.as_tensor(p).reshape(3, 63)).joints[:, :22].numpy()
+        jm = bm(body_pose=torch.as_tensor(mirror_body_pose(p)).reshape(3, 63)).joints[:, :22].numpy()
+    from graspkit.models.pose_prior import _MIRROR
+    # the procedural body is left-right symmetric: the mirrored pose puts every joint at the mirror image of its twin
+    np.testing.assert_allclose(jm[:, _MIRROR] * np.array([-1, 1, 1]), j, atol=2e-3)
+
+
+def test_shipped_prior_round_trips_held_out_poses(held_out_poses):
+    prior = load_pose_prior()
+    assert POSE_PRIOR_PATH.stat().st_size < 2_000_000
+    with torch.no_grad():
+        z = prior.encode(held_out_poses)
+        back = prior.decode(z)
+    from graspkit.rotations import axis_angle_to_matrix
+    R1 = axis_angle_to_matrix(held_out_poses.reshape(-1, 21, 3))
+    R2 = axis_angle_to_matrix(back.reshape(-1, 21, 3))
+    angle = torch.rad2deg(torch.acos(((R1 * R2).sum((-1, -2)) - 1).div(2).clamp(-1, 1)))
+    assert angle.mean() < 5.0, f"mean joint angle error {angle.mean():.2f} deg"
+    # poses it knows sit near the prior's centre (|z|^2 about the latent size or less)
+    assert z.pow(2).sum(-1).median() < 2 * prior.cfg.latent
+
+
+def test_prior_samples_respect_joint_limits():
+    prior = load_pose_prior()
+    with torch.no_grad():
+        pose = prior.decode(torch.randn(200, 32, generator=torch.Generator().manual_seed(0)))
+    full = torch.zeros(200, 55, 3)
+    full[:, 1:22] = pose.view(200, 21, 3)
+    worst = joint_limit_violation(full.numpy()).max(1)                  # per sample, the worst joint (deg)
+    assert (worst <= 5.0).mean() > 0.9, f"{(worst > 5).mean():.2f} of samples break a joint limit by > 5 deg"
+
+
+def test_untrained_and_bad_inputs():
+    prior = PosePrior()
+    with pytest.raises(ValueError, match="body_pose"):
+        prior.encode(torch.zeros(2, 60))
+    with pytest.raises(ValueError, match="z"):
+        prior.decode(torch.zeros(2, 31))
+    out = prior.loss(torch.zeros(4, 63))
+    assert set(out) >= {"loss", "rec", "kl"} and torch.isfinite(out["loss"])
+    again = PosePrior.from_state(prior.state())
+    z = torch.randn(3, 32)
+    torch.testing.assert_close(again.decode(z), prior.eval().decode(z))
