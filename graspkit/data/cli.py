@@ -93,7 +93,8 @@ def _cmd_make(args: argparse.Namespace) -> int:
         from graspkit.data.grasp_make import make_grasp_dataset
 
         make_grasp_dataset(args.kind, n, args.seed, out, args.workers, str(args.model) if args.model else None,
-                           progress=not args.quiet)
+                           progress=not args.quiet, chunk=args.chunk,
+                           objects=tuple(args.objects.split(",")) if args.objects else None)
         print(f"{n} {args.kind} files in {out}")
         return 0
     make_dataset(args.kind, n, args.seed, out, args.workers, str(args.model) if args.model else None,
@@ -114,4 +115,6 @@ def add_data_commands(subparsers) -> None:
     m.add_argument("--workers", type=int, default=2, help="processes (default 2)")
     m.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
     m.add_argument("--quiet", action="store_true", help="no progress bar")
+    m.add_argument("--chunk", type=int, default=16, help="grasp/approach: grasps fitted together (files depend on it)")
+    m.add_argument("--objects", default=None, help="grasp/approach: comma-separated objects (default: all 17)")
     m.set_defaults(func=_cmd_make)

@@ -52,6 +52,7 @@ SPLITS: dict[str, tuple[str, ...]] = {
     "train": tuple(n for n in sorted(SPECS) if n not in TEST_OBJECTS and n not in ("apple", "toothbrush")),
 }
 SETTLE_FRAMES = 45        # extra frames planned after the goal frame, so the last step can land before the grasp frame
+RIM_DEPTH = 0.012         # m: a rim is pinched this far below its top
 PALM_GAP = 0.004          # m: the palm centre is placed this far out of the surface (the palm is slightly concave)
 START_DISTANCE = (0.05, 1.5)   # m, start to object centre (SAGA Sec. 4.3 from 5 cm, GOAL Sec. 3 up to 1.5 m)
 START_CLEARANCE = 0.15    # m: the start is at least the object's horizontal radius + this from the object centre
@@ -88,25 +89,22 @@ def _drill_grip_axis() -> tuple[float, float, float]:
 
 _PAN_AXIS = (float(np.sin(np.deg2rad(80))), 0.0, float(np.cos(np.deg2rad(80))))
 GRASP_PARTS: dict[str, tuple[Part, ...]] = {
-    "apple": (Part("body", "sphere", (0, 0, 0.039), (0.041,), ("power", "pinch")),),
+    "apple": (Part("body", "sphere", (0, 0, 0.039), (0.041,), ("power",)),),
     "banana": (Part("middle", "cylinder", (0, 0.004, 0), (0.017, 0.035), ("power", "pinch"), axis=(1, 0, 0)),),
     "binoculars": (Part("barrel", "cylinder", (-0.035, 0, 0), (0.024, 0.035), ("power",), axis=(0, 1, 0),
                         facing=((0, 0, 1), 100.0)),
-                   Part("body", "box", (0, 0, 0), (0.118, 0.14, 0.048), ("side", "pinch"))),
-    "bottle": (Part("body", "cylinder", (0, 0, 0.08), (0.033, 0.04), ("power", "side")),
+                   Part("body", "box", (0, 0, 0), (0.118, 0.14, 0.048), ("side",))),
+    "bottle": (Part("body", "cylinder", (0, 0, 0.08), (0.033, 0.04), ("power",)),
                Part("neck", "cylinder", (0, 0, 0.213), (0.0135, 0.008), ("pinch", "power"))),
-    "bowl": (Part("rim", "ring", (0, 0, 0.057), (0.078,), ("pinch",)),
-             Part("wall", "cylinder", (0, 0, 0.035), (0.079, 0.005), ("side",))),
+    "bowl": (Part("wall", "cylinder", (0, 0, 0.035), (0.079, 0.005), ("side",)),),
     "camera": (Part("body", "box", (0, 0, 0), (0.12, 0.065, 0.08), ("side", "power")),),
     "can": (Part("body", "cylinder", (0, 0, 0.061), (0.033, 0.028), ("power",)),),
     "cracker_box": (Part("body", "box", (0, 0, 0), (0.16, 0.06, 0.21), ("power", "side")),),
     "flashlight": (Part("body", "cylinder", (0.065, 0, 0), (0.015, 0.04), ("power", "pinch"), axis=(1, 0, 0)),),
     "frying_pan": (Part("handle", "cylinder", tuple(np.array([0.112, 0, 0.035]) + 0.115 * np.array(_PAN_AXIS)),
-                        (0.012, 0.035), ("handle",), axis=_PAN_AXIS, facing=((0, 0, 1), 100.0)),
-                   Part("rim", "ring", (0, 0, 0.045), (0.12,), ("pinch",))),
-    "mug": (Part("body", "cylinder", (0, 0, 0.0475), (0.041, 0.02), ("power",), facing=((0, 1, 0), 135.0)),
-            Part("handle", "cylinder", (0.0593, 0, 0.05), (0.0055, 0.006), ("handle",), facing=((1, 0, 0), 35.0)),
-            Part("rim", "ring", (0, 0, 0.0935), (0.039,), ("pinch",))),
+                        (0.012, 0.035), ("handle",), axis=_PAN_AXIS, facing=((0, 0, 1), 100.0)),),
+    "mug": (Part("body", "cylinder", (0, 0, 0.0475), (0.041, 0.02), ("power",), facing=((-1, 0, 0), 120.0)),
+            Part("handle", "cylinder", (0.0593, 0, 0.05), (0.0055, 0.006), ("handle",), facing=((1, 0, 0), 35.0))),
     "pitcher": (Part("handle", "cylinder", (0.112, 0, 0.13), (0.009, 0.02), ("handle",), facing=((1, 0, 0), 35.0)),
                 Part("body", "cylinder", (0, 0, 0.12), (0.072, 0.04), ("side",), facing=((-1, 0, 0), 120.0))),
     "power_drill": (Part("grip", "cylinder", (-0.045, 0, -0.01), (0.018, 0.03), ("handle",), axis=_drill_grip_axis(),
@@ -187,9 +185,9 @@ def grasp_candidates(name: str, grasp_type: str) -> Candidates:
                 ok = _allowed(part, s)
                 if grasp_type == "pinch":
                     P.append(c + u * a + 0 * s[ok]); Y.append(np.cross(a, s[ok])); K += ["pinch"] * ok.sum()
-                else:
+                else:   # power, handle and side: the fingers go round the axis (side: a part too wide to wrap)
                     P.append(c + u * a + r * s[ok]); Y.append(np.broadcast_to(a, s[ok].shape))
-                    K += ["finger" if grasp_type == "side" else "thumb"] * ok.sum()
+                    K += ["thumb"] * ok.sum()
                 S.append(s[ok]); I.append(np.full(ok.sum(), pi))
         elif part.shape == "sphere":
             (r,) = part.size
@@ -207,9 +205,10 @@ def grasp_candidates(name: str, grasp_type: str) -> Candidates:
             (R,) = part.size
             phi = np.linspace(0, 2 * np.pi, 24, endpoint=False)
             radial = np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2
-            for tilt in (0.0, 0.5):
+            for tilt in (0.0, 0.5):   # pinch the wall just below the rim, approaching from above or above-outside
                 s = normalize(a + tilt * radial)
-                P.append(c + R * radial); S.append(s); Y.append(radial); K += ["pinch"] * len(phi); I.append(np.full(len(phi), pi))
+                P.append(c + R * radial - RIM_DEPTH * a); S.append(s); Y.append(radial); K += ["pinch"] * len(phi)
+                I.append(np.full(len(phi), pi))
         elif part.shape == "box":
             size = np.asarray(part.size, float)
             for k in range(3):
@@ -224,12 +223,12 @@ def grasp_candidates(name: str, grasp_type: str) -> Candidates:
                         y = np.eye(3)[long_]
                         kind = "thumb"
                         grid = [(u, 0.0) for u in np.linspace(-0.3, 0.3, 5)]   # along the long side, centred on the thin
-                        pts = [c + sign * size[k] / 2 * s * sign + u * size[long_] * np.eye(3)[long_] + v * np.eye(3)[thin]
+                        pts = [c + size[k] / 2 * s + u * size[long_] * np.eye(3)[long_] + v * np.eye(3)[thin]
                                for u, v in grid]
-                    elif grasp_type == "side":
+                    elif grasp_type == "side":   # palm flat on a face, fingers horizontal (on the top face: lengthwise)
                         if d.min() < 0.04:
                             continue
-                        long_ = t[int(np.argmax(d))]
+                        long_ = t[int(np.argmax(d))] if k == 2 else [i for i in t if i != 2][0]
                         y = np.eye(3)[long_]
                         kind = "finger"
                         pts = [c + size[k] / 2 * s + u * size[t[0]] * np.eye(3)[t[0]] + v * size[t[1]] * np.eye(3)[t[1]]
@@ -250,8 +249,15 @@ def grasp_candidates(name: str, grasp_type: str) -> Candidates:
             raise ValueError(f"part: unknown shape {part.shape!r}")
     if not P or sum(len(p) for p in P) == 0:
         raise ValueError(f"grasp_type: no {grasp_type!r} frames on {name!r}")
-    return Candidates(np.concatenate(P), normalize(np.concatenate(S)), normalize(np.concatenate(Y)), tuple(K),
-                      np.concatenate(I))
+    P, S, Y, I = np.concatenate(P), normalize(np.concatenate(S)), normalize(np.concatenate(Y)), np.concatenate(I)
+    # the parts only approximate the shapes: keep palm frames within 1 cm of the surface, pinch points inside or
+    # within 5 mm of it (exact signed distance to the mesh)
+    from graspkit.objects.sdf import signed_distance
+    d = signed_distance(torch.as_tensor(P), make_object(name), check=False).numpy()
+    ok = d < 0.005 if grasp_type == "pinch" else np.abs(d) < 0.01
+    if not ok.any():
+        raise ValueError(f"grasp_type: no {grasp_type!r} frame of {name!r} is on its surface")
+    return Candidates(P[ok], S[ok], Y[ok], tuple(k for k, o in zip(K, ok) if o), I[ok])
 
 
 # ----------------------------------------------------------------------------- tasks
@@ -285,9 +291,13 @@ def natural_hand_rotation(u: np.ndarray, height: float) -> np.ndarray:
     return frame(f, left)
 
 
-def hand_rotation(hf: go.HandFrame, axis_h: np.ndarray, s: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Rotation (3,3) taking the rest hand (palm normal hf.normal, hand axis axis_h) to palm normal -s with
-    axis_h as close to y as a rotation about s allows."""
+def hand_rotation(hf: go.HandFrame, axis_h: np.ndarray, s: np.ndarray, y: np.ndarray, pinch_from: np.ndarray | None = None
+                  ) -> np.ndarray:
+    """Rotation (3,3) of the rest hand onto a grasp frame. Palm grasps: palm normal hf.normal onto -s exactly, the hand
+    axis axis_h as close to y as a rotation about s allows. Pinch (pinch_from = the rest direction from the palm
+    centre to the pinch point): the pinch axis axis_h onto y exactly, pinch_from as close to -s as allowed."""
+    if pinch_from is not None:
+        return frame(y, -s) @ frame(axis_h, pinch_from).T
     return frame(-s, y) @ frame(hf.normal, axis_h).T
 
 
@@ -303,20 +313,22 @@ def hand_anchor(hm: go.HandModel, betas: np.ndarray, grasp_type: str) -> tuple[n
 
 @lru_cache(maxsize=256)
 def _pinch_tips(hm: go.HandModel, betas: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Thumb and index tip (rest body with the pinch's closed and open shapes): closed thumb, closed index, the
-    pinch point (their midpoint when closed) and the pinch axis (thumb -> index when open)."""
+    """The pinch on the rest body `betas`: thumb and index tips where they meet (the curl with the smallest gap along
+    the pinch's closing path), their midpoint (the pinch point) and the pinch axis (thumb -> index when open)."""
     bm = hm.bm
     axes = hm.axes(np.asarray(betas))
-    shape = go.HAND_SHAPES["pinch"]
-    hands = go.hand_path(shape, axes, np.array([[1.0] * 5, [0.0] * 5]))
-    rot = torch.eye(3, dtype=bm.dtype).repeat(2, 55, 1, 1)
+    curls = np.linspace(0.0, 1.0, 21)
+    hands = go.hand_path(go.HAND_SHAPES["pinch"], axes, np.repeat(curls[:, None], 5, 1))
+    K = len(curls)
+    rot = torch.eye(3, dtype=bm.dtype).repeat(K, 55, 1, 1)
     rot[:, 40:55] = axis_angle_to_matrix(torch.as_tensor(hands, dtype=bm.dtype))
     ids = np.array([SMPLX_LANDMARK_VERTEX_IDS["rthumb"], SMPLX_LANDMARK_VERTEX_IDS["rindex"]])
     pb = go.PartialBody(bm, ids)
     with torch.no_grad():
-        v, _ = pb(rot, go.coeffs_of(bm, np.asarray(betas)[None]).expand(2, -1), torch.zeros(2, 3, dtype=bm.dtype))
+        v, _ = pb(rot, go.coeffs_of(bm, np.asarray(betas)[None]).expand(K, -1), torch.zeros(K, 3, dtype=bm.dtype))
     v = v.double().numpy()
-    return v[0, 0], v[0, 1], 0.5 * (v[0, 0] + v[0, 1]), normalize(v[1, 1] - v[1, 0])
+    k = int(np.argmin(np.linalg.norm(v[:, 0] - v[:, 1], axis=1)))
+    return v[k, 0], v[k, 1], 0.5 * (v[k, 0] + v[k, 1]), normalize(v[0, 1] - v[0, 0])
 
 
 def _hand_axis(hf: go.HandFrame, kind: str, pinch_axis: np.ndarray | None) -> np.ndarray:
@@ -386,7 +398,7 @@ class GraspFitter:
     """Holds the body model, its hand model and the per-object SDF grids; `fit(tasks)` runs the pipeline."""
 
     bm: object
-    steps: int = 60
+    steps: int = 50
     grid_resolution: int = 64
     _grids: dict = field(default_factory=dict)
 
@@ -416,8 +428,9 @@ class GraspFitter:
                 continue
             axis_h = _hand_axis(hf, cand.kind[i], pinch_axis)
             target = Ro @ cand.p[i] + to + (0.0 if task.grasp_type == "pinch" else PALM_GAP) * s_w
+            pinch_from = normalize(anchor - hf.palm) if task.grasp_type == "pinch" else None
             for flip in (0, 1):
-                R_hand = hand_rotation(hf, axis_h, s_w, (-1.0 if flip else 1.0) * (Ro @ cand.y[i]))
+                R_hand = hand_rotation(hf, axis_h, s_w, (-1.0 if flip else 1.0) * (Ro @ cand.y[i]), pinch_from)
                 rows.append((i, flip)); T.append(target); S.append(s_w); R.append(R_hand)
                 Wr.append(target - R_hand @ (anchor - hf.wrist))
         return np.asarray(T), np.asarray(S), np.asarray(R), np.asarray(Wr), np.asarray(rows)

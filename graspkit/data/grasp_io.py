@@ -1,4 +1,5 @@
-"""Caches for grasp synthesis: per-object SDF grids stored in graspkit's cache folder (built once per machine)."""
+"""Caches for grasp synthesis: per-object SDF grids stored in graspkit's cache folder (built once per machine;
+a few are shipped in data_stubs/sdf for the tests and lesson 04)."""
 from __future__ import annotations
 
 import hashlib
@@ -8,6 +9,7 @@ import numpy as np
 import torch
 
 from graspkit.objects.catalogue import make_object
+from graspkit.paths import DATA_STUBS
 from graspkit.objects.sdf import SDFGrid
 
 SDF_PADDING = 0.03
@@ -27,13 +29,16 @@ def cached_sdf_grid(name: str, resolution: int = 64, folder: Path | None = None)
     from graspkit.paths import cache_dir
 
     folder = Path(folder) if folder is not None else cache_dir() / "sdf"
-    path = folder / f"{name}_r{resolution}_{mesh_digest(name)}.npz"
-    if path.is_file():
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                return SDFGrid(torch.as_tensor(z["values"]), torch.as_tensor(z["lower"]), torch.as_tensor(z["upper"]))
-        except (OSError, ValueError, KeyError):
-            pass   # a damaged cache file is rebuilt below
+    fname = f"{name}_r{resolution}_{mesh_digest(name)}.npz"
+    path = folder / fname
+    for p in (path, DATA_STUBS / "sdf" / fname):     # the cache, then the few grids shipped in data_stubs/sdf
+        if p.is_file():
+            try:
+                with np.load(p, allow_pickle=False) as z:
+                    return SDFGrid(torch.as_tensor(z["values"]).float(), torch.as_tensor(z["lower"]).float(),
+                                   torch.as_tensor(z["upper"]).float())
+            except (OSError, ValueError, KeyError):
+                pass   # a damaged cache file is rebuilt below
     grid = SDFGrid.from_mesh(make_object(name), resolution, SDF_PADDING)
     write_npz_atomic(path, {"values": grid.values.numpy(), "lower": grid.lower.numpy(), "upper": grid.upper.numpy()})
     return grid

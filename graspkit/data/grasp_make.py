@@ -50,9 +50,9 @@ def task_seed(seed: int, kind: str, index: int, attempt: int = 0) -> int:
     return int(np.random.SeedSequence([seed, KIND_IDS[kind], index, attempt]).generate_state(1)[0])
 
 
-def chunk_object(chunk: int) -> str:
-    """The object of chunk `chunk`."""
-    return OBJECT_ORDER[chunk % len(OBJECT_ORDER)]
+def chunk_object(chunk: int, objects: tuple[str, ...] = OBJECT_ORDER) -> str:
+    """The object of chunk `chunk` (objects cycle in the given order)."""
+    return objects[chunk % len(objects)]
 
 
 def file_path(out: Path, kind: str, index: int) -> Path:
@@ -117,7 +117,8 @@ def frame_labels(bm, vertices: torch.Tensor, name: str, pose: ObjectPose, hand_i
     t = torch.as_tensor(pose.translation)
     basis = _basis()
     return {
-        "saga.markers": markers.float().numpy(), "contact.markers": c_m.numpy().astype(np.uint8),
+        "saga.markers": markers.float().numpy(), "saga.marker_ids": saga_markers(bm).vertex_ids.astype(np.int64),
+        "contact.markers": c_m.numpy().astype(np.uint8),
         "contact.object": c_o.numpy().astype(np.uint8), "contact.body": c_b,
         "goal.vertex_ids": gv.vertex_ids.astype(np.int64), "goal.right_hand": gv.right_hand.astype(np.int64),
         "goal.vertices": v400.float().numpy(), "goal.offsets": offsets.float().numpy(),
@@ -199,10 +200,11 @@ def approach_sequence(fitter: GraspFitter, r: GraspResult, vertices: torch.Tenso
                          np.broadcast_to(orient, (T, 3)), mesh_path, contacts, extras, pts, nrm)
 
 
-def fit_chunk(fitter: GraspFitter, kind: str, seed: int, chunk: int) -> list[tuple[GraspResult, int, bool]]:
-    """Fit the CHUNK grasps of chunk `chunk` (retrying failures): (result, attempt, accepted) per item."""
-    name = chunk_object(chunk)
-    idx = list(range(chunk * CHUNK, (chunk + 1) * CHUNK))
+def fit_chunk(fitter: GraspFitter, kind: str, seed: int, chunk: int, size: int = CHUNK,
+              objects: tuple[str, ...] = OBJECT_ORDER) -> list[tuple[GraspResult, int, bool]]:
+    """Fit the `size` grasps of chunk `chunk` (retrying failures): (result, attempt, accepted) per item."""
+    name = chunk_object(chunk, objects)
+    idx = list(range(chunk * size, (chunk + 1) * size))
     tasks = [sample_grasp_task(np.random.default_rng(task_seed(seed, kind, i, 0)), name) for i in idx]
     res = fitter.fit(tasks)
     fitter.evaluate(res)
@@ -221,18 +223,19 @@ def fit_chunk(fitter: GraspFitter, kind: str, seed: int, chunk: int) -> list[tup
     return best
 
 
-def write_chunk(fitter: GraspFitter, kind: str, seed: int, chunk: int, out: Path, n: int) -> list[str]:
-    """Fit chunk `chunk` and write its files with index < n that are missing; returns the paths written."""
+def write_chunk(fitter: GraspFitter, kind: str, seed: int, chunk: int, out: Path, n: int, size: int = CHUNK,
+                objects: tuple[str, ...] = OBJECT_ORDER) -> list[str]:
+    """Fit chunk `chunk` (of `size` grasps) and write its files with index < n that are missing; returns their paths."""
     out = Path(out)
-    idx = list(range(chunk * CHUNK, (chunk + 1) * CHUNK))
+    idx = list(range(chunk * size, (chunk + 1) * size))
     want = [i for i in idx if i < n and not file_path(out, kind, i).exists()]
     if not want:
         return []
-    name = chunk_object(chunk)
+    name = chunk_object(chunk, objects)
     mesh_dir = out / "meshes"
     if not (mesh_dir / f"{name}.ply").exists():
         export_object_ply(name, mesh_dir)
-    best = fit_chunk(fitter, kind, seed, chunk)
+    best = fit_chunk(fitter, kind, seed, chunk, size, objects)
     V = fitter.vertices([b[0] for b in best])
     make = grasp_sequence if kind == "grasp" else approach_sequence
     written = []
@@ -258,33 +261,40 @@ def _init_worker(model: str | None) -> None:
     _FITTER = GraspFitter(BodyModel.from_file(model or default_model_path()))
 
 
-def _run(kind: str, seed: int, chunk: int, out: str, n: int) -> int:
+def _run(kind: str, seed: int, chunk: int, out: str, n: int, size: int, objects: tuple[str, ...]) -> int:
     """Worker entry: write one chunk; returns how many files it wrote."""
-    return len(write_chunk(_FITTER, kind, seed, chunk, Path(out), n))
+    return len(write_chunk(_FITTER, kind, seed, chunk, Path(out), n, size, objects))
 
 
 def make_grasp_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2, model: str | None = None,
-                       progress: bool = True) -> list[Path]:
-    """Write items 0..n-1 of `kind` ('grasp' or 'approach') that are not there yet; returns all n paths."""
+                       progress: bool = True, chunk: int = CHUNK, objects: tuple[str, ...] | None = None) -> list[Path]:
+    """Write items 0..n-1 of `kind` ('grasp' or 'approach') that are not there yet; returns all n paths.
+
+    chunk: grasps fitted together (one object per chunk); the files depend on it (default CHUNK).
+    objects: the objects chunks cycle through (default: all 17, alphabetically)."""
+    objects = OBJECT_ORDER if not objects else tuple(objects)
+    bad = [o for o in objects if o not in GRASP_PARTS]
+    if bad:
+        raise ValueError(f"objects: unknown {bad}; valid names are {list(OBJECT_ORDER)}")
     from tqdm import tqdm
 
     if kind not in KINDS:
         raise ValueError(f"kind: expected one of {KINDS}, got {kind!r}")
-    if n < 0 or workers < 1:
-        raise ValueError(f"n / workers: expected n >= 0 and workers >= 1, got {n} / {workers}")
+    if n < 0 or workers < 1 or chunk < 1:
+        raise ValueError(f"n / workers / chunk: expected n >= 0, workers >= 1, chunk >= 1, got {n} / {workers} / {chunk}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    chunks = [c for c in range((n + CHUNK - 1) // CHUNK)
-              if any(not file_path(out, kind, i).exists() for i in range(c * CHUNK, min(n, (c + 1) * CHUNK)))]
-    done = n - sum(1 for c in chunks for i in range(c * CHUNK, min(n, (c + 1) * CHUNK)) if not file_path(out, kind, i).exists())
+    missing = [i for i in range(n) if not file_path(out, kind, i).exists()]
+    chunks = sorted({i // chunk for i in missing})
+    done = n - len(missing)
     bar = tqdm(total=n, initial=done, desc=f"{kind} files", unit=kind, disable=not progress)
     if workers == 1 or len(chunks) <= 1:
         _init_worker(model)
         for c in chunks:
-            bar.update(_run(kind, seed, c, str(out), n))
+            bar.update(_run(kind, seed, c, str(out), n, chunk, objects))
     elif chunks:
         with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(model,)) as ex:
-            futures = [ex.submit(_run, kind, seed, c, str(out), n) for c in chunks]
+            futures = [ex.submit(_run, kind, seed, c, str(out), n, chunk, objects) for c in chunks]
             for f in as_completed(futures):
                 bar.update(f.result())
     bar.close()

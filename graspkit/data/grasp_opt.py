@@ -355,9 +355,9 @@ class PolishWeights:
     """Weights of the polish energy terms (distances in mm inside the terms)."""
 
     colli: float = 1.0        # SAGA Eq. 7, sum of squared penetrations (mm^2) of hand / arm vertices
-    colli_obj: float = 0.3    # SAGA Eq. 7, object points inside the hand (S(o, V_h) by nearest hand vertex + normal)
-    contact: float = 0.5      # SAGA Eq. 6, squared gap (mm^2) of each contact region's closest vertex
-    anchor: float = 0.02      # GOAL Eq. 4, palm centre to its target (mm^2)
+    colli_obj: float = 0.02   # SAGA Eq. 7, object points inside the hand (S(o, V_h) by nearest hand vertex + normal)
+    contact: float = 1.5      # SAGA Eq. 6, squared gap (mm^2) of each contact region's closest vertex
+    anchor: float = 0.2       # GOAL Eq. 4, palm centre to its target (mm^2)
     facing: float = 30.0      # palm normal against the surface normal, 1 + n . s
     gaze: float = 20.0        # GOAL Eq. 6, 1 - cos(head direction, object)
     prior: float = 200.0      # GOAL Eq. 5, squared rotation change (rad^2) of body joints
@@ -386,7 +386,7 @@ def _softmin(x: Tensor, dim: int, tau: float = 0.5) -> Tensor:
 
 def polish(pb: PartialBody, hm: HandModel, head_pb: PartialBody, head_pair: tuple[int, int], rot0: Tensor,
            coeffs: Tensor, transl: Tensor, sdf: PosedSDF, targets: PolishTargets, object_points: Tensor,
-           steps: int = 60, lr: float = 0.01, weights: PolishWeights | None = None, wrist_limit_deg: float = 80.0,
+           steps: int = 50, lr: float = 0.005, weights: PolishWeights | None = None, wrist_limit_deg: float = 80.0,
            history: list | None = None) -> Tensor:
     """Adam on rotation offsets of the spine, neck, head, right arm and fingers; returns the polished rot (B,55,3,3).
 

@@ -1,0 +1,102 @@
+"""Grasp fitting internals: partial skinning, the analytic arm, hand shapes, closing fingers until contact."""
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+from graspkit.body import BodyModel
+from graspkit.body.hand_poses import _FINGER_TEMPLATES, _SPREAD, _THUMB_TEMPLATES, hand_axes, template_pose
+from graspkit.body.skeleton import FINGERS, JOINT_INDEX as J
+from graspkit.data import grasp_opt as go
+from graspkit.data.ik import axis_angle_matrix
+from graspkit.data.posing import forward_kinematics
+from graspkit.data.rig import build_rig
+from graspkit.objects.sdf import SDFGrid
+from graspkit.rotations import axis_angle_to_matrix
+
+from conftest import PROCEDURAL_MODEL
+
+
+@pytest.fixture(scope="module")
+def bm():
+    return BodyModel.from_file(PROCEDURAL_MODEL)
+
+
+@pytest.fixture(scope="module")
+def hm(bm):
+    return go.HandModel(bm)
+
+
+def test_partial_body_equals_the_full_model(bm):
+    g = torch.Generator().manual_seed(0)
+    rot = axis_angle_to_matrix(0.4 * torch.randn(3, 55, 3, generator=g))
+    betas = torch.randn(3, 10, generator=g)
+    transl = torch.randn(3, 3, generator=g)
+    ids = np.array([0, 17, 5000, 8079, 10474, 7669])
+    v, j = go.PartialBody(bm, ids)(rot, go.coeffs_of(bm, betas.numpy()), transl)
+    ref = bm.forward_rotmats(rot, betas=betas, transl=transl)
+    assert torch.allclose(v, ref.vertices[:, ids], atol=2e-6) and torch.allclose(j, ref.joints, atol=2e-6)
+
+
+def test_solve_arm_puts_the_wrist_on_target_with_the_hand_rotation(bm):
+    rig = build_rig(bm)
+    local = np.broadcast_to(np.eye(3), (1, 55, 3, 3)).copy()
+    Rg, pos = forward_kinematics(rig, local, rig.joints[:1])
+    rng = np.random.default_rng(1)
+    arm = rig.arm_length
+    targets = pos[0, J["right_shoulder"]] + np.array([[-0.7, -0.3, 0.3], [-0.5, -0.5, 0.2], [-0.6, 0.2, 0.4]]) * arm
+    hands = axis_angle_matrix(rng.normal(scale=0.5, size=(3, 3)))
+    sh, el, wr, resid = go.solve_arm(Rg[0, J["right_collar"]], pos[0, J["right_shoulder"]], rig.joints, targets, hands)
+    for k in range(3):
+        loc = local.copy()
+        loc[0, J["right_shoulder"]], loc[0, J["right_elbow"]], loc[0, J["right_wrist"]] = sh[k], el[k], wr[k]
+        Rk, pk = forward_kinematics(rig, loc, rig.joints[:1])
+        assert np.allclose(pk[0, J["right_wrist"]], targets[k], atol=1e-6)           # exact IK
+        assert np.allclose(Rk[0, J["right_wrist"]], hands[k], atol=1e-6)             # the hand turned as asked
+        angle = np.arccos(np.clip((np.trace(wr[k]) - 1) / 2, -1, 1))
+        assert abs(angle - resid[k]) < 1e-6 and resid[k] < np.pi
+
+
+def test_hand_shapes_use_the_hand_pose_conventions(bm):
+    """hand_pose_from_angles with a template's angles reproduces graspkit.body.hand_poses.template_pose."""
+    axes = hand_axes(build_rig(bm).joints, "right")
+    for kind in ("power", "pinch", "hook"):
+        fingers = np.array([_FINGER_TEMPLATES[kind][f] for f in FINGERS[:4]], float)
+        spread = np.array([_SPREAD[f] * 0.3 for f in FINGERS[:4]])
+        out = go.hand_pose_from_angles(axes, fingers, np.array(_THUMB_TEMPLATES[kind], float), spread)
+        assert np.allclose(out.reshape(45), template_pose(kind, axes), atol=1e-12)
+
+
+def test_fingers_close_until_they_touch_a_box(bm, hm):
+    """An open right hand above a box (rest pose, palm facing -y): every digit stops within a few mm of the analytic
+    box surface and no deeper than the stop depth plus the grid's error, or closes fully without touching."""
+    rest_v = bm().vertices[0].detach().numpy()
+    palm = rest_v[hm.palm_ids]
+    top = palm[:, 1].min() - 0.012
+    box = trimesh.creation.box(extents=(0.30, 0.10, 0.30))
+    box.apply_translation([palm[:, 0].mean(), top - 0.05, palm[:, 2].mean()])
+    grid = SDFGrid.from_mesh(box, resolution=16)   # trilinear interpolation is exact near a face
+    sdf = go.PosedSDF(grid, np.eye(3)[None], np.zeros((1, 3)))
+    axes = hm.axes(np.zeros(10))
+    path = lambda c: go.hand_path(go.HAND_SHAPES["power"], axes, c)  # noqa: E731
+    rot = torch.eye(3).repeat(1, 55, 1, 1)
+    pb = go.PartialBody(bm, hm.fit_ids)
+    curls, hands = go.close_fingers(pb, hm, rot, go.coeffs_of(bm, np.zeros((1, 10))), torch.zeros(1, 3), sdf, [path])
+    rot[0, 40:55] = axis_angle_to_matrix(torch.as_tensor(hands[0], dtype=torch.float32))
+    v = bm.forward_rotmats(rot).vertices[0].detach().numpy()
+    lo, hi = box.bounds
+    def box_sdf(p):
+        q = np.abs(p - box.centroid) - (hi - lo) / 2                                # analytic box SDF
+        return np.linalg.norm(np.maximum(q, 0), axis=1) + np.minimum(q.max(1), 0)
+
+    open_rot = torch.eye(3).repeat(1, 55, 1, 1)
+    open_rot[0, 40:55] = axis_angle_to_matrix(torch.as_tensor(path(np.zeros((1, 5)))[0], dtype=torch.float32))
+    v_open = bm.forward_rotmats(open_rot).vertices[0].detach().numpy()
+    for k, f in enumerate(FINGERS):
+        d = box_sdf(v[hm.finger_ids[f]])
+        if f != "thumb":
+            assert 0 < curls[0, k] < 1, f"{f} never touched or started inside"
+        if curls[0, k] == 0:       # a digit that is already inside when open stays open
+            assert box_sdf(v_open[hm.finger_ids[f]]).min() < -go.PENETRATION_STOP
+        else:
+            assert -0.0025 < d.min() < 0.004, f"{f}: closest {d.min() * 1000:.1f} mm from the surface"
