@@ -68,6 +68,8 @@ def build_parser() -> argparse.ArgumentParser:
                                                                                           required=True)
     from graspkit.eval_goal import add_goal_train_commands
     add_goal_train_commands(train)
+    from graspkit.eval_saga import add_saga_train_commands
+    add_saga_train_commands(train)
     return p
 
 

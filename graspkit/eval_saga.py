@@ -347,3 +347,60 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+# ------------------------------------------------------------------------------------------------ `graspkit train`
+def add_saga_train_commands(train_sub) -> None:
+    """`graspkit train {wholegrasp,wholegrasp_single,grabnet_smplx,pose_prior}` (subcommands of `graspkit train`)."""
+    from graspkit.paths import cache_dir
+
+    default = cache_dir() / "grasps" / "grasp"
+    helps = {"wholegrasp": "SAGA's WholeGrasp-VAE (§3.2)", "wholegrasp_single": "WholeGrasp-single (App. B.1)",
+             "grabnet_smplx": "the GrabNet-SMPLX baseline (App. B.1)",
+             "pose_prior": "the body-pose prior GraspPose-Opt uses in place of VPoser"}
+    for name, text in helps.items():
+        p = train_sub.add_parser(name, help=f"train {text}")
+        p.add_argument("--data", type=Path, default=default, help=f"folder of grasp_*.npz (default {default})")
+        p.add_argument("--out", type=Path, default=None, help="weights (default data_stubs/checkpoints/<name>.pt)")
+        p.add_argument("--epochs", type=int, default=30 if name == "pose_prior" else 12)
+        p.add_argument("--time-limit", type=float, default=600.0, help="seconds; stops after the epoch that crosses it")
+        p.add_argument("--seed", type=int, default=0)
+        p.add_argument("--threads", type=int, default=1)
+        p.set_defaults(func=lambda a, name=name: _cmd_train(a, name))
+
+
+def _cmd_train(args: argparse.Namespace, name: str) -> int:
+    """Run one SAGA training command and print where the weights went and the validation figures."""
+    from graspkit.models import wholegrasp as W
+
+    torch.set_num_threads(args.threads)
+    if name == "pose_prior":
+        from graspkit.models.pose_prior import POSE_PRIOR_PATH, train_pose_prior, pose_training_set
+
+        extra = None
+        if args.data and Path(args.data).is_dir():   # grasp poses, repeated 4x: ~900 grasps beside ~15k clip frames
+            extra = np.tile(grasp_body_poses(args.data, split="train"), (4, 1, 1))
+        t0 = time.perf_counter()
+        hist = train_pose_prior(args.out or POSE_PRIOR_PATH, pose_training_set(200, args.seed, extra=extra),
+                                epochs=args.epochs, seed=args.seed)
+        print(f"wrote {args.out or POSE_PRIOR_PATH}: {len(hist)} epochs in {time.perf_counter() - t0:.0f} s; "
+              f"val joint angle error {hist[-1]['val_angle_error_deg']:.2f} deg")
+        return 0
+    if name == "grabnet_smplx":
+        info = W.train_grabnet_smplx(args.data, args.out, epochs=args.epochs, seed=args.seed,
+                                     time_limit_s=args.time_limit, threads=args.threads)
+    else:
+        info = W.train_wholegrasp(args.data, args.out, multitask=name == "wholegrasp", epochs=args.epochs,
+                                  seed=args.seed, time_limit_s=args.time_limit, threads=args.threads)
+    print(f"wrote {info['out']}: {len(info['history'])} epochs in {info['seconds']:.0f} s; "
+          f"val {json.dumps(info.get('val', {}))}")
+    return 0
+
+
+def grasp_body_poses(root: str | Path, split: str = "train") -> np.ndarray:
+    """Body poses (n, 21, 3) of the grasps of one split (extra training poses for the pose prior)."""
+    from graspkit.data.grab import read_arrays
+    from graspkit.data.grasp_datasets import grasp_files
+
+    files = grasp_files(root, "grasp", split=split)
+    return np.stack([read_arrays(p)["body.params.body_pose"][0].reshape(21, 3) for p in files]).astype(np.float32)

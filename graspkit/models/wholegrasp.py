@@ -121,6 +121,10 @@ class WholeGraspVAE(nn.Module):
         self.obj_dec_proj = nn.Linear(c, o)
         self.dec = nn.Sequential(nn.Linear(cfg.latent + o + 1, h), act, ResBlock(h, h, n_hidden=h // 2))
         self.out_markers = nn.Linear(h, n * 3)
+        # marker normalisation (training-set mean per marker coordinate, one std per axis): the networks see and
+        # emit standardised markers, the losses are in metres
+        self.register_buffer("marker_mean", torch.zeros(n, 3))
+        self.register_buffer("marker_std", torch.ones(3))
         if mt:
             self.out_marker_contact = nn.Linear(h, n)
             lv = self.obj_dec.level_channels                      # [3, 128, 256, 512]
@@ -129,6 +133,11 @@ class WholeGraspVAE(nn.Module):
             self.fp2 = FeaturePropagation(128 + lv[1], [64], norm=cfg.point_norm)
             self.fp1 = FeaturePropagation(64 + lv[0], [64, 64], norm=cfg.point_norm)
             self.out_object_contact = nn.Linear(64, 1)
+
+    def fit_normalisation(self, markers: Tensor) -> None:
+        """Set the marker statistics from training markers (B, N, 3)."""
+        self.marker_mean.copy_(markers.mean(0))
+        self.marker_std.copy_((markers - markers.mean(0)).std(dim=(0, 1)).clamp_min(1e-3))
 
     # ------------------------------------------------------------------ pieces
     @staticmethod
@@ -166,7 +175,7 @@ class WholeGraspVAE(nn.Module):
         """q(z | M, C_M, C_O, t_O, O): markers (B,N,3), contacts (B,N), (B,P), points/normals (B,P,3), height (B,1)
         -> mean, log-variance (B, latent)."""
         B = markers.shape[0]
-        body = markers.reshape(B, -1)
+        body = ((markers - self.marker_mean) / self.marker_std).reshape(B, -1)
         feat = normals
         if self.cfg.multitask:
             body = torch.cat([body, marker_contact], -1)
@@ -183,7 +192,7 @@ class WholeGraspVAE(nn.Module):
         lv = self.obj_dec(points, normals, groupings)
         f_o = self.obj_dec_proj(lv.global_feature)
         h = self.dec(torch.cat([z, f_o, height], -1))
-        out = {"markers": self.out_markers(h).view(B, self.cfg.n_markers, 3)}
+        out = {"markers": self.out_markers(h).view(B, self.cfg.n_markers, 3) * self.marker_std + self.marker_mean}
         if self.cfg.multitask:
             out["marker_contact"] = torch.sigmoid(self.out_marker_contact(h))
             g = self.global_proj(torch.cat([f_o, h], -1)).unsqueeze(1)          # (B, 1, 128)
@@ -340,6 +349,16 @@ class WholeGraspTrainingSet(torch.utils.data.Dataset):
         return item
 
 
+def yaw_spread(markers: Tensor, turns: int = 8) -> Tensor:
+    """Markers (B,N,3) turned by `turns` even yaw angles about z (the statistics of a yaw-augmented set)."""
+    out = []
+    for k in range(turns):
+        a = 2 * math.pi * k / turns
+        R = torch.tensor([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+        out.append(markers @ R.T)
+    return torch.cat(out)
+
+
 def contact_auc(scores: Tensor, labels: Tensor) -> float:
     """Area under the ROC curve of contact probabilities against binary labels (Mann-Whitney, ties averaged)."""
     s, y = scores.reshape(-1).double(), labels.reshape(-1) > 0.5
@@ -393,6 +412,7 @@ def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask:
     t0 = time.perf_counter()
     train = WholeGraspTrainingSet.from_folder(root, "train", model, augment_yaw=True)
     val = WholeGraspTrainingSet.from_folder(root, "val", model)
+    model.fit_normalisation(yaw_spread(train.data["markers"]) if train.augment_yaw else train.data["markers"])
     prep = time.perf_counter() - t0
 
     def step(m: nn.Module, batch: dict[str, Tensor], epoch: int) -> dict[str, Tensor]:
@@ -486,18 +506,26 @@ class GrabNetSMPLX(nn.Module):
         self.head = GaussianHead(hidden, latent)
         self.dec = nn.Sequential(nn.Linear(latent + object_feature + 1, hidden), act,
                                  ResBlock(hidden, hidden, n_hidden=hidden // 2), nn.Linear(hidden, self.n_params))
+        self.register_buffer("param_mean", torch.zeros(self.n_params))     # standardised parameters in and out
+        self.register_buffer("param_std", torch.ones(self.n_params))
+
+    def fit_normalisation(self, params: Tensor) -> None:
+        """Set the parameter statistics from training parameter vectors (B, 193)."""
+        self.param_mean.copy_(params.mean(0))
+        self.param_std.copy_(params.std(0).clamp_min(1e-2))
 
     def decode(self, z: Tensor, points: Tensor, normals: Tensor, height: Tensor,
                groupings: list[Grouping | None] | None = None) -> Tensor:
         """z (B, latent) -> parameter vector (B, 193)."""
         f = self.dec_proj(self.obj_dec(points, normals, groupings).global_feature)
-        return self.dec(torch.cat([z, f, height], -1))
+        return self.dec(torch.cat([z, f, height], -1)) * self.param_std + self.param_mean
 
     def forward(self, batch: dict[str, Tensor], generator: torch.Generator | None = None) -> dict[str, Tensor]:
         """Reconstruction: {'params' (B,193), 'mu', 'logvar'} for a batch with params, points, normals, height."""
         g = groupings_from_tensors(batch, len(self.obj_dec.sa)) or self.obj_dec.group(batch["points"])
         f = self.enc_proj(self.obj_enc(batch["points"], batch["normals"], g).global_feature)
-        mu, logvar = self.head(self.enc(torch.cat([batch["params"], f, batch["height"]], -1)))
+        x = (batch["params"] - self.param_mean) / self.param_std
+        mu, logvar = self.head(self.enc(torch.cat([x, f, batch["height"]], -1)))
         z = reparameterize(mu, logvar, generator) if self.training else mu
         return {"params": self.decode(z, batch["points"], batch["normals"], batch["height"], g), "mu": mu,
                 "logvar": logvar}
@@ -508,7 +536,7 @@ class GrabNetSMPLX(nn.Module):
         rot, betas, transl = params_to_rotmats(out["params"], pca)
         markers = body(rot, betas, transl)[0]
         logs = {"rec_markers": (markers - batch["markers"]).abs().sum((1, 2)).mean(),
-                "rec_params": (out["params"] - batch["params"]).abs().mean(),
+                "rec_params": ((out["params"] - batch["params"]) / self.param_std).abs().mean(),
                 "kl": kl_standard_normal(out["mu"], out["logvar"])}
         kl_w = self.hparams["kl_final"] * (epoch + 1) / max(epochs, 1)
         loss = logs["rec_markers"] + logs["rec_params"] + kl_w * robust_kl(out["mu"], out["logvar"])
@@ -594,6 +622,11 @@ class GrabNetTrainingSet(torch.utils.data.Dataset):
         return item
 
 
+def _yaw(a: float) -> Tensor:
+    """Rotation (3,3) by a radians about z."""
+    return torch.tensor([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+
+
 def turn_params(params: Tensor, root_joint: Tensor, Q: Tensor) -> Tensor:
     """GrabNet-SMPLX parameters (B,193) of bodies turned by Q (3,3) about the origin: R -> Q R and
     t -> Q (J0 + t) - J0, J0 (B,3) the rest root joint (SMPL-X turns the body about it)."""
@@ -627,6 +660,10 @@ def train_grabnet_smplx(root: str | Path, out: str | Path | None = None, epochs:
     t0 = time.perf_counter()
     train = GrabNetTrainingSet(root, "train", bm, model, augment_yaw=True)
     val = GrabNetTrainingSet(root, "val", bm, model)
+    g = torch.Generator().manual_seed(seed)       # statistics of the yaw-augmented training parameters
+    turned = [turn_params(train.data["params"], train.data["root_joint"], _yaw(float(torch.rand((), generator=g)) * 6.2832))
+              for _ in range(8)]
+    model.fit_normalisation(torch.cat(turned))
 
     def step(m: nn.Module, batch: dict[str, Tensor], epoch: int) -> dict[str, Tensor]:
         """One batch of the GrabNet-style loss."""

@@ -1,0 +1,137 @@
+"""Walk WholeGrasp-VAE's latent space for one object (lesson 05's widget).
+
+`LatentWalk` holds the object and a latent z (16-D); `update(name, value)` changes one latent coordinate (or draws
+a new z from a seed) and decodes the grasp: markers, marker contacts, object contacts (SAGA §3.2, inference). It is
+plain Python, tested in tests/test_wholegrasp_explorer.py; `widget()` wires sliders to it and shows the figure as a
+PNG in an ipywidgets Image (as graspkit.viz.object_explorer).
+"""
+from __future__ import annotations
+
+import io
+from typing import Any
+
+import numpy as np
+import torch
+from matplotlib.figure import Figure
+from torch import Tensor
+
+SEED_SLIDER = "seed"
+MARKER_IN_CONTACT = "#2ca02c"     # SAGA Fig. 3: markers in contact in green
+CONTACT_LEVEL = 0.5               # probability above which a marker / point is drawn as in contact
+
+
+class LatentWalk:
+    """A WholeGrasp-VAE, one object (points, normals (P,3) in the object frame, height t_O) and a latent z."""
+
+    def __init__(self, model: Any, points: Tensor, normals: Tensor, height: float, dims: int = 4,
+                 seed: int = 0) -> None:
+        if not 1 <= dims <= model.cfg.latent:
+            raise ValueError(f"dims: expected 1..{model.cfg.latent} latent sliders, got {dims}")
+        self.model, self.points, self.normals, self.height = model.eval(), points.float(), normals.float(), height
+        self.dims = dims
+        self.seed = seed
+        self.z = self._draw(seed)
+        self.grasp: dict[str, Tensor] = {}
+        self.decode()
+
+    def _draw(self, seed: int) -> Tensor:
+        """z ~ N(0, I) (1, latent) from a seeded generator."""
+        return torch.randn(1, self.model.cfg.latent, generator=torch.Generator().manual_seed(int(seed)))
+
+    @property
+    def names(self) -> list[str]:
+        """Slider names: z0 .. z{dims-1}, then the seed."""
+        return [f"z{i}" for i in range(self.dims)] + [SEED_SLIDER]
+
+    @torch.no_grad()
+    def decode(self) -> dict[str, Tensor]:
+        """Markers (143,3), marker contacts (143,), object contacts (P,) for the current z."""
+        out = self.model.decode(self.z, self.points[None], self.normals[None], torch.tensor([[float(self.height)]]))
+        self.grasp = {k: v[0] for k, v in out.items()}
+        return self.grasp
+
+    def update(self, name: str, value: float | int) -> dict[str, float]:
+        """Set latent coordinate `name` ('z0'...) or draw a new z (`seed`); decode; return `measure()`."""
+        if name == SEED_SLIDER:
+            self.seed = int(value)
+            self.z = self._draw(self.seed)
+        elif name in self.names:
+            self.z[0, int(name[1:])] = float(value)
+        else:
+            raise ValueError(f"name: expected one of {self.names}, got {name!r}")
+        self.decode()
+        return self.measure()
+
+    def measure(self) -> dict[str, float]:
+        """Numbers for the caption: markers and object points in contact, the right palm's distance to the object."""
+        g = self.grasp
+        m = g["markers"]
+        d = torch.cdist(m[None], self.points[None])[0].min(1).values
+        palm = slice(121, 143)                                   # the right palm's 22 markers (saga_markers order)
+        return {"markers_in_contact": int((g["marker_contact"] > CONTACT_LEVEL).sum()),
+                "points_in_contact": int((g["object_contact"] > CONTACT_LEVEL).sum()),
+                "palm_to_object_cm": float(d[palm].min()) * 100, "z_norm": float(self.z.norm())}
+
+    def figure(self, size: float = 3.0) -> Figure:
+        """Two panels: the markers around the object (contact markers green), the object coloured by C_O."""
+        from graspkit.viz import scene
+
+        fig = Figure(figsize=(2 * size, size), dpi=72)
+        g = self.grasp
+        m, cm, co = g["markers"].numpy(), g["marker_contact"].numpy(), g["object_contact"].numpy()
+        p = self.points.numpy()
+        ax = fig.add_subplot(1, 2, 1, projection="3d", proj_type="ortho")
+        ax.view_init(15, -60)
+        ax.set_axis_off()
+        scene.draw_points(ax, p, size=1.0, color="0.6", colorbar=False)
+        ax.scatter(*m[cm <= CONTACT_LEVEL].T, s=4, c="#3b6ea8")
+        ax.scatter(*m[cm > CONTACT_LEVEL].T, s=10, c=MARKER_IN_CONTACT)
+        scene.set_equal(ax, m, p)
+        ax.set_title("markers (green: in contact)", fontsize=8)
+        ax = fig.add_subplot(1, 2, 2, projection="3d", proj_type="ortho")
+        ax.view_init(15, -60)
+        ax.set_axis_off()
+        scene.draw_points(ax, p, values=co, cmap="Reds", size=3.0, colorbar=False)
+        hand = m[63:143]                                          # hand, finger and palm markers of both hands
+        near = np.linalg.norm(hand[:, None] - p[None], axis=-1).min(1) < 0.1
+        ax.scatter(*hand[near].T, s=6, c=MARKER_IN_CONTACT)
+        scene.set_equal(ax, p)
+        ax.set_title("object contacts C_O (red)", fontsize=8)
+        fig.tight_layout()
+        return fig
+
+    @staticmethod
+    def describe(numbers: dict[str, float]) -> str:
+        """One caption line."""
+        return (f"{numbers['markers_in_contact']} markers and {numbers['points_in_contact']} object points in contact; "
+                f"right palm {numbers['palm_to_object_cm']:.1f} cm from the object; |z| = {numbers['z_norm']:.2f}")
+
+    def png(self) -> bytes:
+        """The current figure as PNG bytes."""
+        buf = io.BytesIO()
+        self.figure().savefig(buf, format="png")
+        return buf.getvalue()
+
+    def widget(self) -> Any:  # pragma: no cover - UI only
+        """Sliders for z0..z{dims-1} and the seed, an Image with the figure and a caption."""
+        import ipywidgets as w
+
+        img = w.Image(value=self.png(), format="png")
+        caption = w.Label(self.describe(self.measure()))
+        sliders = [w.FloatSlider(value=float(self.z[0, i]), min=-3, max=3, step=0.1, description=f"z{i}")
+                   for i in range(self.dims)]
+        seed = w.IntSlider(value=self.seed, min=0, max=50, description=SEED_SLIDER)
+
+        def changed(change: dict, name: str) -> None:
+            numbers = self.update(name, change["new"])
+            if name == SEED_SLIDER:
+                for i, s in enumerate(sliders):
+                    s.unobserve_all()
+                    s.value = float(self.z[0, i])
+                    s.observe(lambda c, n=f"z{i}": changed(c, n), names="value")
+            img.value, caption.value = self.png(), self.describe(numbers)
+
+        for i, s in enumerate(sliders):
+            s.observe(lambda c, n=f"z{i}": changed(c, n), names="value")
+        seed.observe(lambda c: changed(c, SEED_SLIDER), names="value")
+        return w.VBox([w.HBox([w.VBox(sliders + [seed]), img]), caption])

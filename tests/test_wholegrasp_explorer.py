@@ -1,0 +1,48 @@
+"""Lesson 05's latent-space walker: the callback decodes exactly what the model decodes, the numbers are right."""
+import numpy as np
+import pytest
+import torch
+
+from graspkit.models.wholegrasp import WholeGraspVAE
+from graspkit.viz.grasp_latent import CONTACT_LEVEL, LatentWalk
+
+
+@pytest.fixture(scope="module")
+def walk():
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(1)
+    pts = torch.randn(512, 3, generator=g) * 0.05
+    return LatentWalk(WholeGraspVAE(), pts, torch.nn.functional.normalize(pts, dim=-1), 0.9, dims=3, seed=4)
+
+
+def test_update_sets_one_latent_coordinate_and_decodes_it(walk):
+    numbers = walk.update("z1", 1.5)
+    assert walk.z[0, 1] == 1.5 and walk.names == ["z0", "z1", "z2", "seed"]
+    with torch.no_grad():
+        out = walk.model.decode(walk.z.clone(), walk.points[None], walk.normals[None], torch.tensor([[0.9]]))
+    torch.testing.assert_close(walk.grasp["markers"], out["markers"][0])
+    assert numbers["markers_in_contact"] == int((out["marker_contact"][0] > CONTACT_LEVEL).sum())
+    assert numbers["points_in_contact"] == int((out["object_contact"][0] > CONTACT_LEVEL).sum())
+    m, p = walk.grasp["markers"].numpy(), walk.points.numpy()
+    d = np.linalg.norm(m[121:143, None] - p[None], axis=-1).min()
+    assert numbers["palm_to_object_cm"] == pytest.approx(100 * d, rel=1e-4)
+
+
+def test_seed_draws_the_same_z_as_a_generator(walk):
+    walk.update("seed", 7)
+    torch.testing.assert_close(walk.z, torch.randn(1, 16, generator=torch.Generator().manual_seed(7)))
+    a = walk.grasp["markers"].clone()
+    walk.update("z0", 0.3)
+    walk.update("seed", 7)
+    torch.testing.assert_close(walk.grasp["markers"], a)
+
+
+def test_bad_names_and_the_figure(walk):
+    with pytest.raises(ValueError, match="name"):
+        walk.update("z9", 1.0)
+    with pytest.raises(ValueError, match="dims"):
+        LatentWalk(walk.model, walk.points, walk.normals, 0.9, dims=17)
+    fig = walk.figure(size=2.0)
+    assert len(fig.axes) == 2
+    assert walk.png()[:4] == b"\x89PNG"
+    assert "markers" in LatentWalk.describe(walk.measure())
