@@ -11,7 +11,8 @@ from graspkit.data.approach import approach_motion
 from graspkit.data.grasp import (GRASP_PARTS, SPLITS, GraspFitter, grasp_candidates, grasp_types, sample_grasp_task,
                                  split_of)
 from graspkit.data.grasp_make import accepted, fit_chunk
-from graspkit.objects import TEST_OBJECTS, apply_pose, list_objects, make_object
+from graspkit.data.rig import build_rig
+from graspkit.objects import TEST_OBJECTS, apply_pose, list_objects, make_object, signed_distance
 
 from conftest import PROCEDURAL_MODEL
 
@@ -98,7 +99,8 @@ def test_pelvis_over_the_feet_and_head_towards_the_object(fitted):
 def test_the_approach_clip_walks_in_and_holds_the_grasp(fitted):
     bm, fitter, res, _ = fitted
     r = res[0]
-    m = approach_motion(r.plan, r.grasp_frame, r.poses, r.init_poses[40:55], "t_pose")
+    m = approach_motion(r.plan, r.grasp_frame, r.poses, r.init_poses[40:55], "t_pose", r.approach_dir,
+                        build_rig(bm, r.task.betas))
     g = r.grasp_frame
     assert m.num_frames == r.plan.num_frames and np.allclose(m.poses[g:], r.poses, atol=1e-5)
     arms = [J[n] for n in ("left_shoulder", "right_shoulder", "left_elbow", "right_elbow")]
@@ -107,3 +109,7 @@ def test_the_approach_clip_walks_in_and_holds_the_grasp(fitted):
     assert np.linalg.norm(np.diff(w, axis=0), axis=1).max() < 0.08, "no jumps (< 2.4 m/s)"
     va, vp = m.vertices(bm), r.plan.vertices(bm)
     assert M.foot_skating_wandr(va).mean() == M.foot_skating_wandr(vp).mean()   # the planner's feet
+    obj = apply_pose(r.task.object_pose, make_object("apple"))
+    hand = va[g - 15:g, fitter.hm.hand_ids].double()                              # the open hand comes in from outside
+    depth = max(0.0, -float(min(signed_distance(h, obj).min() for h in hand)))
+    assert depth < 0.005, f"the approaching hand is {depth * 100:.1f} cm inside the apple"

@@ -39,9 +39,13 @@ def _slerp_from(R0: np.ndarray, R1: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 
 def approach_motion(plan: Motion, grasp_frame: int, grasp_pose: np.ndarray, open_hand: np.ndarray,
-                    start_pose: str = "idle") -> Motion:
+                    start_pose: str = "idle", approach_dir: np.ndarray | None = None, rig=None) -> Motion:
     """The approach-and-grasp clip: the plan (T frames) with the fitted grasp pose (55,3) reached at grasp_frame and
-    held to the end; open_hand (15,3): the right hand's pre-shape; start_pose 'idle' or 't_pose'."""
+    held to the end; open_hand (15,3): the right hand's pre-shape; start_pose 'idle' or 't_pose'.
+
+    approach_dir (3,) (with rig = graspkit.data.rig.build_rig(bm, betas)): the hand's last APPROACH_S seconds are a
+    straight line in along -approach_dir from APPROACH_DIST away (the right arm re-solved by IK each frame with the
+    grasp's elbow pole), so the open hand reaches the object from outside rather than sweeping through it."""
     if start_pose not in ("idle", "t_pose"):
         raise ValueError(f"start_pose: expected 'idle' or 't_pose', got {start_pose!r}")
     T, fps, g = plan.num_frames, plan.fps, int(grasp_frame)
@@ -51,11 +55,18 @@ def approach_motion(plan: Motion, grasp_frame: int, grasp_pose: np.ndarray, open
     Rg = axis_angle_matrix(np.asarray(grasp_pose, np.float64))               # (55,3,3)
     t = np.arange(T) / fps
     tg = g / fps
-    # body: the change at the grasp frame, phased in over BLEND_S
+    # spine, neck, head: the change at the grasp frame, phased in over BLEND_S
     w = smoothstep((t - (tg - BLEND_S)) / BLEND_S)
-    for j in FIT_JOINTS:
+    for j in FIT_JOINTS[:5]:
         delta = matrix_axis_angle(R[g, j].T @ Rg[j])
         R[:, j] = R[:, j] @ axis_angle_matrix(w[:, None] * delta)
+    arm = [J[n] for n in ("right_collar", "right_shoulder", "right_elbow", "right_wrist")]
+    if approach_dir is not None and rig is not None:
+        _approach_arm(R, Rg, plan.trans.astype(np.float64), g, fps, np.asarray(approach_dir, np.float64), rig)
+    else:
+        for j in arm:
+            delta = matrix_axis_angle(R[g, j].T @ Rg[j])
+            R[:, j] = R[:, j] @ axis_angle_matrix(w[:, None] * delta)
     # fingers: plan -> open pre-shape -> grasp
     Ro = axis_angle_matrix(np.asarray(open_hand, np.float64))                # (15,3,3)
     w1 = smoothstep((t - (tg - PRESHAPE_S)) / (PRESHAPE_S - GRASP_CLOSE_S))
@@ -76,6 +87,55 @@ def approach_motion(plan: Motion, grasp_frame: int, grasp_pose: np.ndarray, open
                                 np.broadcast_to(wt[:, None], (T, len(ids))))
     poses = matrix_axis_angle(R)
     return Motion(poses, trans, plan.betas, fps, contacts=contacts, goal=None, goal_frame=None, hand=None)
+
+
+APPROACH_S = 0.45      # s: the hand's straight final approach
+APPROACH_DIST = 0.10   # m: from this far out along the approach direction
+ARM_BLEND_S = 0.5      # s before the straight approach in which the arm leaves the plan
+
+
+def _approach_arm(R: np.ndarray, Rg: np.ndarray, trans: np.ndarray, g: int, fps: float, s: np.ndarray, rig) -> None:
+    """Right collar, shoulder, elbow, wrist (in place in R (T,55,3,3)) for the final approach (see approach_motion)."""
+    from graspkit.data.ik import normalize, two_bone_ik
+    from graspkit.data.posing import forward_kinematics
+
+    T = len(R)
+    t0 = max(0, g - int(round((APPROACH_S + ARM_BLEND_S) * fps)))
+    win = np.arange(t0, g + 1)
+    tt = (win - g) / fps                                                     # <= 0
+    cs, sh, el, wr = (J[n] for n in ("right_collar", "right_shoulder", "right_elbow", "right_wrist"))
+    # the grasp's arm (with the final body) and the plan's arm, in the world
+    root = trans + rig.joints[0]
+    Rg_full = R[g].copy()
+    Rg_full[[cs, sh, el, wr]] = Rg[[cs, sh, el, wr]]
+    G, P = forward_kinematics(rig, Rg_full[None], root[g][None])
+    W, H = P[0, wr], G[0, wr]
+    pole = P[0, el] - P[0, sh]
+    Rw, Pw = forward_kinematics(rig, R[win], root[win])                      # plan (with the spine already blended)
+    u = np.clip((tt + APPROACH_S) / APPROACH_S, 0, 1)
+    A = W + APPROACH_DIST * (1 - smoothstep(u))[:, None] * s                 # the straight approach path
+    b = smoothstep((tt + APPROACH_S + ARM_BLEND_S) / ARM_BLEND_S)[:, None]   # leave the plan's path
+    target = (1 - b) * Pw[:, wr] + b * A
+    hand = _slerp_from(Rw[:, wr], np.broadcast_to(H, Rw[:, wr].shape), b[:, 0])
+    # collar from the grasp, phased in with b; then two-bone IK with the grasp's elbow pole and the twist split
+    Rc = _slerp_from(R[win, cs], np.broadcast_to(Rg[cs], R[win, cs].shape), b[:, 0])
+    R[win, cs] = Rc
+    Rw, Pw = forward_kinematics(rig, R[win], root[win])
+    b1, b2 = rig.bone("right_shoulder", "right_elbow"), rig.bone("right_elbow", "right_wrist")
+    pole_w = normalize((1 - b) * (Pw[:, el] - Pw[:, sh]) + b * pole)
+    R_up, R_fore, _ = two_bone_ik(Pw[:, sh], target, pole_w, b1, b2, np.array([0.0, 0.0, -1.0]))
+    d = normalize(b2)
+    wrist = np.swapaxes(R_fore, -1, -2) @ hand
+    aa = matrix_axis_angle(wrist)
+    twist = (aa @ d)[:, None] * d                                            # the wrist's rotation about the forearm
+    R_fore = R_fore @ axis_angle_matrix(twist)
+    ik = np.stack([np.swapaxes(Rw[:, cs], -1, -2) @ R_up, np.swapaxes(R_up, -1, -2) @ R_fore,
+                   np.swapaxes(R_fore, -1, -2) @ hand], 1)                   # local shoulder, elbow, wrist
+    R[win[:, None], [sh, el, wr]] = _slerp_from(R[win][:, [sh, el, wr]], ik, np.broadcast_to(b, (len(win), 3)))
+    # land exactly on the fitted arm at the grasp frame (a small correction, phased in over the straight approach)
+    for j in (sh, el, wr):
+        delta = matrix_axis_angle(R[g, j].T @ Rg[j])
+        R[win, j] = R[win, j] @ axis_angle_matrix(smoothstep(u)[:, None] * delta)
 
 
 def hand_vertices_track(bm, motion: Motion, ids: np.ndarray) -> np.ndarray:

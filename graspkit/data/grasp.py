@@ -386,6 +386,7 @@ class GraspResult:
     curls: np.ndarray
     init_poses: np.ndarray
     grasp_frame: int
+    approach_dir: np.ndarray          # (3,) unit: the hand comes in along -approach_dir (the frame's s, world)
     quality: dict = field(default_factory=dict)
 
     @property
@@ -537,7 +538,7 @@ class GraspFitter:
         for b, t in enumerate(tasks):
             q = {"arm_residual_deg": float(np.rad2deg(inits[b][3])), "reach": inits[b][4]["reach"]}
             out.append(GraspResult(t, aa[b].astype(np.float32), inits[b][1].astype(np.float32), inits[b][2], curls[b],
-                                   aa0[b].astype(np.float32), inits[b][4]["grasp_frame"], q))
+                                   aa0[b].astype(np.float32), inits[b][4]["grasp_frame"], inits[b][4]["normal"], q))
         return out
 
 

@@ -173,7 +173,9 @@ def approach_sequence(fitter: GraspFitter, r: GraspResult, vertices: torch.Tenso
     """The GRAB-style approach-and-grasp clip of a fitted grasp, labelled per frame (contacts) and at the goal frame."""
     t = r.task
     bm = fitter.bm
-    m = approach_motion(r.plan, r.grasp_frame, r.poses, r.init_poses[40:55], t.start_pose)
+    from graspkit.data.rig import build_rig
+    m = approach_motion(r.plan, r.grasp_frame, r.poses, r.init_poses[40:55], t.start_pose, r.approach_dir,
+                        build_rig(bm, t.betas))
     g = r.grasp_frame
     lab = frame_labels(bm, vertices, t.object_name, t.object_pose, fitter.hm.hand_ids)
     T = m.num_frames
@@ -183,7 +185,7 @@ def approach_sequence(fitter: GraspFitter, r: GraspResult, vertices: torch.Tenso
     obj = apply_pose(t.object_pose, make_object(t.object_name))
     lo, hi = obj.bounds[0] - 0.05, obj.bounds[1] + 0.05
     rot = m.rotmats(bm.dtype)
-    for f in range(max(0, g - 30), g):       # frames before the grasp where the hand is near the object
+    for f in range(max(0, g - 20), g):       # frames before the grasp where the hand is near the object
         with torch.no_grad():
             v = bm.forward_rotmats(rot[f:f + 1], betas=torch.as_tensor(m.betas[None]),
                                    transl=torch.as_tensor(m.trans[f:f + 1], dtype=bm.dtype)).vertices[0].double()
