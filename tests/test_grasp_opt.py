@@ -100,3 +100,13 @@ def test_fingers_close_until_they_touch_a_box(bm, hm):
             assert box_sdf(v_open[hm.finger_ids[f]]).min() < -go.PENETRATION_STOP
         else:
             assert -0.0025 < d.min() < 0.004, f"{f}: closest {d.min() * 1000:.1f} mm from the surface"
+
+
+def test_profile_sdf_is_the_sdf_of_the_revolved_solid():
+    """The fit's cavity fill: profile_sdf of a (r, z) polygon equals trimesh's signed distance to the revolved mesh."""
+    prof = np.array([(0, 0), (0.06, 0), (0.07, 0.05), (0.072, 0.12), (0.062, 0.19), (0, 0.19)])
+    solid = trimesh.creation.revolve(prof, sections=256)
+    P = np.random.default_rng(0).uniform([-0.1, -0.1, -0.03], [0.1, 0.1, 0.22], (2000, 3))
+    rz = torch.as_tensor(np.stack([np.linalg.norm(P[:, :2], axis=1), P[:, 2]], 1))
+    d = go.profile_sdf(rz, torch.as_tensor(prof)).numpy()
+    assert np.abs(d + trimesh.proximity.signed_distance(solid, P)).max() < 1e-4       # trimesh: > 0 inside

@@ -119,6 +119,24 @@ GRASP_PARTS: dict[str, tuple[Part, ...]] = {
 }
 
 
+# hollow objects: (r, z) outer profiles (builder coordinates, about the z axis) that the fit treats as solid
+SOLIDS: dict[str, tuple[tuple[tuple[float, float], ...], ...]] = {
+    "mug": (((0, 0), (0.041, 0), (0.041, 0.095), (0, 0.095)),),
+    "wine_glass": (((0, 0.085), (0.025, 0.095), (0.037, 0.115), (0.040, 0.14), (0.038, 0.17), (0.036, 0.21),
+                    (0, 0.21)),),
+    "pitcher": (((0, 0), (0.06, 0), (0.07, 0.05), (0.072, 0.12), (0.062, 0.19), (0.058, 0.235), (0, 0.235)),),
+    "bowl": (tuple([(0.0, 0.0)] + [(0.05 + 0.03 * np.sin(x), 0.055 * (1 - np.cos(x))) for x in np.linspace(0, np.pi / 2, 8)]
+                   + [(0.0, 0.059)]),),
+    "frying_pan": (((0, 0), (0.1, 0), (0.122, 0.045), (0, 0.045)),),
+}
+
+
+def solid_profiles(name: str) -> list[np.ndarray]:
+    """The SOLIDS profiles of object `name` in its object frame ((r, z) (K,2), z shifted by the builder centre)."""
+    shift = builder_centre(name)
+    return [np.asarray(p, float) - [0.0, shift[2]] for p in SOLIDS.get(name, ())]
+
+
 def grasp_types(name: str) -> tuple[str, ...]:
     """The grasp types object `name` affords (union over its parts, in GRASP_TYPES order)."""
     if name not in GRASP_PARTS:
@@ -399,7 +417,7 @@ class GraspFitter:
     """Holds the body model, its hand model and the per-object SDF grids; `fit(tasks)` runs the pipeline."""
 
     bm: object
-    steps: int = 50
+    steps: int = 40
     grid_resolution: int = 64
     _grids: dict = field(default_factory=dict)
 
@@ -510,7 +528,8 @@ class GraspFitter:
         transl = torch.as_tensor(np.stack([i[1] for i in inits]), dtype=dtype)
         coeffs = go.coeffs_of(bm, np.stack([t.betas for t in tasks]))
         sdf = go.PosedSDF(self.grid(name), np.stack([t.object_pose.rotation for t in tasks]),
-                          np.stack([t.object_pose.translation for t in tasks]), dtype)
+                          np.stack([t.object_pose.translation for t in tasks]), dtype, solid_profiles(name),
+                          -builder_centre(name)[:2])
         paths = []
         for t in tasks:
             axes = hm.axes(t.betas)

@@ -40,7 +40,7 @@ KINDS = ("grasp", "approach")
 KIND_IDS = {"grasp": 11, "approach": 12}
 DEFAULT_N = {"grasp": 1700, "approach": 510}
 CHUNK = 16
-MAX_ATTEMPTS = 3
+MAX_ATTEMPTS = 4
 OBJECT_ORDER = tuple(sorted(GRASP_PARTS))
 LABEL_MARGIN = 0.03          # m: body vertices this close to the object's box are measured exactly
 

@@ -194,9 +194,10 @@ HAND_SHAPES: dict[str, HandShape] = {
     "handle": HandShape(((5, 5, 0),) * 4, ((100, 115, 70),) * 4, (-5, 5, 25, 0, 0), (45, 55, 55, 45, 50),
                         (1.0, 0.0, -2.0, -1.0)),
     "side": HandShape(((0, 0, 0),) * 4, ((80, 100, 60),) * 4, (-5, 0, 15, 0, 0), (35, 45, 40, 40, 45)),
-    "pinch": HandShape(((10, 15, 5), (10, 15, 5), (60, 75, 40), (55, 70, 35)),
-                       ((80, 95, 50), (80, 95, 50), (75, 90, 50), (75, 90, 50)),
-                       (0, 25, 45, 0, 0), (30, 40, 50, 35, 35)),
+    # pinch closes onto graspkit.body.hand_poses' 'pinch' template, where the thumb pad meets the index tip
+    "pinch": HandShape(((8, 12, 5), (8, 12, 5), (45, 60, 25), (40, 55, 25)),
+                       ((40, 50, 25), (35, 45, 20), (45, 60, 25), (40, 55, 25)),
+                       (0, 20, 40, 0, 0), (13, 36, 51, 16, 17)),
 }
 
 
@@ -280,19 +281,47 @@ def solve_arm(collar_rot: np.ndarray, shoulder: np.ndarray, rest_joints: np.ndar
 
 
 # ----------------------------------------------------------------------------- signed distance to posed objects
-class PosedSDF:
-    """One object's SDF grid seen in the world through per-grasp poses: x_obj = R^T (x - t)."""
+def profile_sdf(rz: Tensor, profile: Tensor) -> Tensor:
+    """Signed distance (...,) of points given as (r, z) (...,2) to the closed polygon `profile` (K,2) in the (r, z)
+    half-plane: the exact SDF of the solid of revolution about z (negative inside); differentiable."""
+    a, b = profile, torch.roll(profile, -1, 0)                              # edges a -> b
+    e = b - a
+    w = rz[..., None, :] - a                                                # (...,K,2)
+    h = ((w * e).sum(-1) / (e * e).sum(-1).clamp_min(1e-18)).clamp(0, 1)
+    on_axis = (a[:, 0] <= 1e-12) & (b[:, 0] <= 1e-12)                      # the axis is no surface in 3D
+    d = (w - h[..., None] * e).norm(dim=-1).masked_fill(on_axis, float("inf")).min(-1).values
+    # crossing number of a ray along +r
+    up = (a[:, 1] <= rz[..., None, 1]) != (b[:, 1] <= rz[..., None, 1])
+    x = a[:, 0] + (rz[..., None, 1] - a[:, 1]) / torch.where(e[:, 1] == 0, torch.ones_like(e[:, 1]), e[:, 1]) * e[:, 0]
+    inside = ((up & (rz[..., None, 0] < x)).sum(-1) % 2) == 1
+    return torch.where(inside, -d, d)
 
-    def __init__(self, grid: SDFGrid, rot: np.ndarray, transl: np.ndarray, dtype: torch.dtype = torch.float32) -> None:
+
+class PosedSDF:
+    """One object's SDF grid seen in the world through per-grasp poses: x_obj = R^T (x - t).
+
+    `solids` ((K,2) (r, z) profiles in the object frame, about its vertical axis through `axis_xy`): solids of
+    revolution that fill a hollow object's cavity up to its outer surface. The fit sees min(grid, solids), so a
+    finger can neither enter a cup nor pass through a wall thinner than the grid's cells; the metrics use the
+    real, hollow mesh."""
+
+    def __init__(self, grid: SDFGrid, rot: np.ndarray, transl: np.ndarray, dtype: torch.dtype = torch.float32,
+                 solids: list[np.ndarray] | None = None, axis_xy: np.ndarray | None = None) -> None:
         self.grid = grid.to(dtype=dtype)
         self.rot = torch.as_tensor(np.asarray(rot), dtype=dtype).reshape(-1, 3, 3)       # (B,3,3)
         self.transl = torch.as_tensor(np.asarray(transl), dtype=dtype).reshape(-1, 3)    # (B,3)
+        self.solids = [torch.as_tensor(np.asarray(p), dtype=dtype) for p in (solids or [])]
+        self.axis_xy = torch.zeros(2, dtype=dtype) if axis_xy is None else torch.as_tensor(axis_xy, dtype=dtype)
 
     def __call__(self, points: Tensor, index: Tensor | None = None) -> Tensor:
         """Signed distance (B,N) of world points (B,N,3) (or (M,N,3) with index (M,) choosing each row's grasp)."""
-        R, t = (self.rot, self.transl) if index is None else (self.rot[index], self.transl[index])
-        local = (points - t[:, None]) @ R
-        return self.grid(local)
+        local = self.to_object(points, index)
+        d = self.grid(local)
+        if self.solids:
+            rz = torch.stack([(local[..., :2] - self.axis_xy).norm(dim=-1), local[..., 2]], -1)
+            for prof in self.solids:
+                d = torch.minimum(d, profile_sdf(rz, prof))
+        return d
 
     def to_object(self, points: Tensor, index: Tensor | None = None) -> Tensor:
         """World points (B,N,3) in each grasp's object frame."""
