@@ -39,6 +39,14 @@ def test_parity_with_smplx_on_dense_random_model(random_model_dir, use_pca, flat
     assert dv <= 1e-5 and dj <= 1e-5, (dv, dj)
 
 
+@pytest.mark.parametrize("use_pca", [False, True])
+def test_parity_with_smplx_on_the_shipped_procedural_file(use_pca):
+    from graspkit.paths import default_model_path
+
+    dv, dj = _parity(default_model_path().parents[1], use_pca, False, torch.float32)
+    assert dv <= 1e-5 and dj <= 1e-5, (dv, dj)
+
+
 def test_zero_parameters_give_the_template_and_regressed_joints():
     arr = random_smplx_arrays(num_vertices=300, num_faces=100, seed=1)
     out = BodyModel(arr, flat_hand_mean=True, dtype=torch.float64)()
