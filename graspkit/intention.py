@@ -135,38 +135,25 @@ def state_features(p: Tensor, d_prev: Tensor) -> Tensor:
 
 
 # ----------------------------------------------------------------------------------------------------- joints
-def _levels() -> list[tuple[Tensor, Tensor]]:
-    """(joints, their parents) of the 22 body joints grouped by tree depth."""
-    depth = [0] * NUM_BODY
-    for j in range(1, NUM_BODY):
-        depth[j] = depth[PARENTS[j]] + 1
-    return [(torch.tensor([j for j in range(NUM_BODY) if depth[j] == d]),
-             torch.tensor([PARENTS[j] for j in range(NUM_BODY) if depth[j] == d])) for d in range(1, max(depth) + 1)]
-
-
-_LEVELS = _levels()
-
-
-def body_joints(p: Tensor, rest: Tensor) -> Tensor:
-    """World positions (..., 22, 3) of the body joints of poses p (..., 135) by forward kinematics; rest (..., 22, 3)
-    are the shaped rest joints (BodyModel.shaped) in the canonical frame. Same convention as BodyModel: the body
-    rotates about its root joint, world = R (x - J_0) + J_0 + t."""
+def body_transforms(p: Tensor, rest: Tensor) -> tuple[Tensor, Tensor]:
+    """Forward kinematics of poses p (..., 135) with shaped rest joints (..., 22, 3) (canonical frame, from
+    BodyModel.shaped): global rotations (..., 22, 3, 3) and world positions (..., 22, 3) of the body joints. Same
+    convention as BodyModel: the body rotates about its root joint, world = R (x - J_0) + J_0 + t."""
     t, R = pose_rotmats(p)
     if rest.shape[-2:] != (NUM_BODY, 3):
         raise ValueError(f"rest: expected shape (..., 22, 3), got {tuple(rest.shape)}")
     rest = rest.to(p.dtype).expand(R.shape[:-3] + (NUM_BODY, 3))
-    Rg, pos = R, rest                    # joint 0: its own rotation, at its rest position
-    for js, ps in _LEVELS:               # one batched step per tree level (7 levels), out of place for autograd
-        Rp = Rg[..., ps, :, :]
-        bone = (rest[..., js, :] - rest[..., ps, :]).unsqueeze(-1)
-        pos = _set(pos, js, pos[..., ps, :] + (Rp @ bone).squeeze(-1), -2)
-        Rg = _set(Rg, js, Rp @ R[..., js, :, :], -3)
-    return pos + t.unsqueeze(-2)
+    Rg, pos = [R[..., 0, :, :]], [rest[..., 0, :]]          # the root: its own rotation, at its rest position
+    for j in range(1, NUM_BODY):                              # parents come first in SMPL-X order
+        q = PARENTS[j]
+        Rg.append(Rg[q] @ R[..., j, :, :])
+        pos.append(pos[q] + (Rg[q] @ (rest[..., j, :] - rest[..., q, :]).unsqueeze(-1)).squeeze(-1))
+    return torch.stack(Rg, -3), torch.stack(pos, -2) + t.unsqueeze(-2)
 
 
-def _set(x: Tensor, idx: Tensor, values: Tensor, dim: int) -> Tensor:
-    """x with x[..., idx, ...] (along `dim`) replaced by values, out of place (keeps autograd simple)."""
-    return x.index_copy(x.dim() + dim, idx, values)
+def body_joints(p: Tensor, rest: Tensor) -> Tensor:
+    """World positions (..., 22, 3) of the body joints of poses p (..., 135) with rest joints (..., 22, 3)."""
+    return body_transforms(p, rest)[1]
 
 
 def heading_of_pose(p: Tensor) -> Tensor:

@@ -14,6 +14,15 @@ from graspkit.paths import DATA_STUBS, default_model_path
 STUBS = DATA_STUBS / "motion"
 
 
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    """One torch thread: the machine's cores are shared, and small ops thrash with more."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
 @pytest.fixture(scope="module")
 def bm():
     return BodyModel.from_file(default_model_path())

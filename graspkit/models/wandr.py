@@ -1,0 +1,327 @@
+"""WANDR (Diomataris et al., CVPR 2024): an autoregressive conditional VAE on pose deltas, steered by intention.
+
+    model = WandrCVAE(WandrConfig(), stats)                            # stats: compute_stats(train clips)
+    history = train_wandr(model, train_clips, TrainConfig(...))        # §3.4 losses, Sup. B.2 rollout schedule
+    out = generate(model, start, goals, t_goal=239, n=5, generator=g)  # §3.5: batched rollout, fresh z every frame
+
+Model (§3.3, Sup. B.1): encoder q(z | d_i, c_i) and decoder (z, c_i) -> d̂_i, both MLPs with LayerNorm, ReLU and
+dropout; the prior is fixed at N(0, I) (no prior network). The condition c_i = (p^dyn_i, I_i) is the state and the
+intention (graspkit.intention); deltas, states and intentions enter normalised with training statistics, which live
+in the model's buffers (so in every checkpoint). Ablations (Tab. 2) drop intention parts from the condition.
+
+Loss (§3.4): L = L_rec + α L_KL + λ_J L_J with α = 1e-2: L_rec the MSE of the (normalised) deltas, L_KL the KL of
+q(z | .) from N(0, I) (summed over the latent, mean over the batch), L_J the MSE of the 22 body joints after
+integrating d̂ and forward kinematics (metres; λ_J scales it to the size of L_rec: graspkit's choice, the paper
+writes no weight). No goal-reaching loss.
+
+Rollout schedule (Sup. B.2): after the reconstruction step, the model runs s more steps on its own output: each step
+integrates the predicted delta, recomputes state and intention from the generated pose, samples z from the prior and
+decodes; the losses are taken against the ground truth of those frames. s grows linearly from 0 to `max_steps` (10)
+over `ramp_epochs`, then stays.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import torch
+from torch import Tensor, nn
+
+from graspkit import intention as I
+from graspkit.data.wandr_dataset import ClipSet, WindowDataset, make_batch, window_condition
+from graspkit.models.blocks import GaussianHead, kl_standard_normal
+from graspkit.train import TrainConfig, fit, load_checkpoint, save_checkpoint
+
+FULL_INTENTION = ("wrist", "orientation", "pelvis")
+
+
+@dataclass
+class WandrConfig:
+    """Network and loss settings (paper values in brackets: latent 64, 15-layer MLPs, α = 1e-2, rollout 0 -> 10)."""
+
+    latent: int = 32
+    hidden: int = 256
+    enc_layers: int = 3
+    dec_layers: int = 4
+    dropout: float = 0.05
+    intention: tuple[str, ...] = FULL_INTENTION        # Tab. 2 ablations: ("wrist",), ("wrist", "pelvis"), ...
+    alpha_kl: float = 1e-2
+    w_joint: float = 100.0
+    max_steps: int = 10
+    ramp_epochs: int = 4
+    rollout_latent: str = "prior"                      # "prior" (Sup. B.2) or "posterior" (encoder on the truth)
+
+    def __post_init__(self) -> None:
+        self.intention = tuple(self.intention)
+        bad = [x for x in self.intention if x not in I.INTENTION_PARTS]
+        if bad:
+            raise ValueError(f"intention: unknown parts {bad}; expected a subset of {tuple(I.INTENTION_PARTS)}")
+        if self.rollout_latent not in ("prior", "posterior"):
+            raise ValueError(f"rollout_latent: expected 'prior' or 'posterior', got {self.rollout_latent!r}")
+
+    def rollout_steps(self, epoch: int) -> int:
+        """s at `epoch` (0-based): linear from 0 to max_steps over ramp_epochs, then max_steps."""
+        if self.ramp_epochs <= 0:
+            return self.max_steps
+        return min(self.max_steps, int(round(self.max_steps * epoch / self.ramp_epochs)))
+
+
+def _mlp(n_in: int, hidden: int, layers: int, n_out: int, dropout: float) -> nn.Sequential:
+    """`layers` blocks of Linear + LayerNorm + ReLU + Dropout (Sup. B.1), then a linear output: (B, n_in) -> (B, n_out)."""
+    mods: list[nn.Module] = []
+    for k in range(layers):
+        mods += [nn.Linear(n_in if k == 0 else hidden, hidden), nn.LayerNorm(hidden), nn.ReLU(), nn.Dropout(dropout)]
+    mods.append(nn.Linear(hidden if layers else n_in, n_out))
+    return nn.Sequential(*mods)
+
+
+def _default_stats() -> dict[str, Tensor]:
+    """Identity normalisation (mean 0, std 1) for a model built before statistics exist."""
+    return {"delta_mean": torch.zeros(I.DELTA_DIM), "delta_std": torch.ones(I.DELTA_DIM),
+            "state_mean": torch.zeros(I.STATE_DIM), "state_std": torch.ones(I.STATE_DIM),
+            "intention_mean": torch.zeros(I.INTENTION_DIM), "intention_std": torch.ones(I.INTENTION_DIM)}
+
+
+class WandrCVAE(nn.Module):
+    """The c-VAE: encoder (d_i, c_i) -> q(z), decoder (z, c_i) -> d̂_i; c_i = normalised (state, kept intention)."""
+
+    def __init__(self, cfg: WandrConfig | None = None, stats: dict[str, Tensor] | None = None) -> None:
+        super().__init__()
+        self.cfg = cfg = cfg or WandrConfig()
+        for k, v in (stats or _default_stats()).items():
+            self.register_buffer(k, torch.as_tensor(v, dtype=torch.float32).clone())
+        keep = torch.zeros(I.INTENTION_DIM, dtype=torch.bool)
+        for part in cfg.intention:
+            keep[I.INTENTION_PARTS[part]] = True
+        self.register_buffer("intention_keep", keep)
+        self.cond_dim = I.STATE_DIM + int(keep.sum())
+        self.encoder = _mlp(I.DELTA_DIM + self.cond_dim, cfg.hidden, cfg.enc_layers, cfg.hidden, cfg.dropout)
+        self.head = GaussianHead(cfg.hidden, cfg.latent)
+        self.decoder = _mlp(cfg.latent + self.cond_dim, cfg.hidden, cfg.dec_layers, I.DELTA_DIM, cfg.dropout)
+
+    def condition(self, state: Tensor, inten: Tensor) -> Tensor:
+        """Normalised condition (B, cond_dim) from raw state (B, 268) and intention (B, 7); dropped parts removed."""
+        s = (state - self.state_mean) / self.state_std
+        i = ((inten - self.intention_mean) / self.intention_std)[..., self.intention_keep]
+        return torch.cat([s, i], dim=-1)
+
+    def normalise_delta(self, d: Tensor) -> Tensor:
+        """Raw delta (B, 135) -> normalised."""
+        return (d - self.delta_mean) / self.delta_std
+
+    def encode(self, d: Tensor, cond: Tensor) -> tuple[Tensor, Tensor]:
+        """q(z | d, c): raw delta (B, 135), condition (B, cond_dim) -> mean, log-variance (B, latent)."""
+        return self.head(self.encoder(torch.cat([self.normalise_delta(d), cond], dim=-1)))
+
+    def decode(self, z: Tensor, cond: Tensor) -> Tensor:
+        """Decoder: z (B, latent), condition (B, cond_dim) -> raw delta d̂ (B, 135)."""
+        return self.decoder(torch.cat([z, cond], dim=-1)) * self.delta_std + self.delta_mean
+
+
+# ----------------------------------------------------------------------------------------------------- training
+def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
+                    generator: torch.Generator | None = None) -> dict[str, Tensor]:
+    """§3.4 losses over a batch of windows (items (B, 2)) with `steps` rollout steps (Sup. B.2)."""
+    cfg = model.cfg
+    b = make_batch(clips, items, steps, generator=generator)
+    p, rest, goal, t_goal, gh = b["p"], b["rest"], b["goal"], b["t_goal"], b["goal_heading"]
+    d_gt = I.poses_to_deltas(p)                                  # (B, steps+2, 135): d_i .. d_{i+1+steps}
+    with torch.no_grad():
+        J_gt = I.body_joints(p[:, 2:], rest[:, None])             # (B, steps+1, 22, 3)
+    cur_p, cur_d = p[:, 1], d_gt[:, 0]
+    rec = joint = kl = torch.zeros((), dtype=p.dtype)
+    for k in range(steps + 1):
+        state, inten = window_condition(cur_p, cur_d, rest, goal, t_goal - k, gh)
+        cond = model.condition(state, inten)
+        target = d_gt[:, k + 1]
+        if k == 0 or cfg.rollout_latent == "posterior":
+            mu, logvar = model.encode(target, cond)
+            z = mu + torch.exp(0.5 * logvar) * torch.randn(mu.shape, generator=generator)
+            kl = kl + kl_standard_normal(mu, logvar)
+        else:
+            z = torch.randn(len(cur_p), cfg.latent, generator=generator)
+        d_hat = model.decode(z, cond)
+        p_hat = I.integrate_delta(cur_p, d_hat)
+        rec = rec + (model.normalise_delta(d_hat) - model.normalise_delta(target)).pow(2).mean()
+        joint = joint + (I.body_joints(p_hat, rest) - J_gt[:, k]).pow(2).sum(-1).mean()
+        cur_p, cur_d = p_hat, d_hat
+    n = steps + 1
+    n_kl = n if cfg.rollout_latent == "posterior" else 1
+    rec, joint, kl = rec / n, joint / n, kl / n_kl
+    loss = rec + cfg.alpha_kl * kl + cfg.w_joint * joint
+    return {"loss": loss, "rec": rec.detach(), "kl": kl.detach(), "joint_m2": joint.detach(),
+            "steps": torch.tensor(float(steps))}
+
+
+def train_wandr(model: WandrCVAE, clips: ClipSet, cfg: TrainConfig, checkpoint: str | Path | None = None,
+                stride: dict[str, int] | None = None, progress: bool = True, time_limit_s: float | None = None
+                ) -> list[dict[str, float]]:
+    """Train with graspkit's loop (seeded, resumable): every epoch one pass over the windows (frame strides per kind,
+    e.g. {'locomotion': 4, 'reach': 2}, keep epochs short); the stats and the model config go into the checkpoint."""
+    ds = WindowDataset(clips, max_steps=model.cfg.max_steps)
+    if stride:
+        keep = torch.ones(len(ds), dtype=torch.bool)
+        for k, kind in enumerate(("locomotion", "reach")):
+            s = int(stride.get(kind, 1))
+            if s < 1:
+                raise ValueError(f"stride: expected >= 1 for {kind}, got {s}")
+            of_kind = clips.kind[ds.items[:, 0]] == k
+            keep &= ~of_kind | (ds.items[:, 1] % s == 0)
+        ds.items = ds.items[keep]
+
+    def step(net: nn.Module, items: Tensor, epoch: int) -> dict[str, Tensor]:
+        return training_losses(net, clips, items, model.cfg.rollout_steps(epoch))
+
+    extra = {"wandr_config": asdict(model.cfg)}
+    return fit(model, step, ds, cfg, checkpoint=checkpoint, extra=extra, progress=progress, time_limit_s=time_limit_s)
+
+
+def save_wandr(path: str | Path, model: WandrCVAE, history: Sequence[dict] = (), meta: dict[str, Any] | None = None) -> Path:
+    """A small shippable checkpoint: weights (with the normalisation buffers), config, history, meta; atomic write."""
+    cfg = asdict(model.cfg)
+    cfg["intention"] = list(cfg["intention"])
+    return save_checkpoint(path, {"model": model.state_dict(), "wandr_config": cfg, "history": list(history),
+                                  "meta": dict(meta or {})})
+
+
+def load_wandr(path: str | Path) -> WandrCVAE:
+    """A WandrCVAE from save_wandr's file or a `train_wandr` checkpoint (weights_only load); in eval mode."""
+    state = load_checkpoint(path)
+    cfg = state.get("wandr_config") or state.get("extra", {}).get("wandr_config")
+    if cfg is None or "model" not in state:
+        raise ValueError(f"checkpoint {path}: not a WANDR checkpoint (no 'wandr_config' / 'model')")
+    model = WandrCVAE(WandrConfig(**cfg))
+    model.load_state_dict(state["model"])
+    model.meta = state.get("meta", {})
+    model.history = state.get("history", [])
+    return model.eval()
+
+
+# ----------------------------------------------------------------------------------------------------- generation
+@dataclass
+class Rollout:
+    """A batch of generated motions: poses p (B, T, 135) and body joints (B, T, 22, 3) (frame 0 = the start), the goal
+    per frame (B, T, 3), rest joints (B, 22, 3); None where not kept."""
+
+    p: Tensor | None
+    joints: Tensor | None
+    goal: Tensor
+    rest: Tensor
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+FrameHook = Callable[[int, Tensor, Tensor, Tensor], None]
+
+
+def _per_frame(x: Tensor | int, B: int, T: int, width: int | None, name: str) -> Tensor:
+    """A goal / goal frame given once (w,), per sequence (B, w), per frame (1, T, w) or both (B, T, w) -> (B, T, w)
+    (w omitted for goal frames)."""
+    x = torch.as_tensor(x)
+    w = (width,) if width else ()
+    if x.shape == w:
+        return x.expand((B, T) + w)
+    if x.shape == (B,) + w:
+        return x.unsqueeze(1).expand((B, T) + w)
+    if x.dim() == len(w) + 2 and x.shape[1:] == (T,) + w and x.shape[0] in (1, B):
+        return x.expand((B, T) + w)
+    raise ValueError(f"{name}: expected shape {w}, {(B,) + w}, {(1, T) + w} or {(B, T) + w}, got {tuple(x.shape)}")
+
+
+def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Tensor, t_goal: Tensor | int,
+            frames: int, z: Tensor | None = None, generator: torch.Generator | None = None,
+            keep: bool = True, on_frame: FrameHook | None = None) -> Rollout:
+    """WANDR §3.5: from starts p_prev, p0 (B, 135) with rest joints (B, 22, 3), generate `frames` more frames.
+
+    goal (B, 3) or per frame (B, frames+1, 3); t_goal the goal frame (int, (B,) or per frame (B, frames+1)) counted
+    from the start (frame 0). Each frame: intention from the current pose (inference form of I^r), z from N(0, I) drawn
+    from `generator` (or z[:, k] when z (B, frames, latent) is given: differentiable, for latent optimisation), decode,
+    integrate. on_frame(k, p_k (B, 135), joints_k (B, 22, 3), global rotations (B, 22, 3, 3)) is called for
+    k = 0..frames; keep=False stores nothing.
+    """
+    B = p0.shape[0]
+    T = frames + 1
+    if p_prev.shape != p0.shape or p0.shape[-1] != I.POSE_DIM or p0.dim() != 2:
+        raise ValueError(f"p0: expected (B, 135) with p_prev alike, got {tuple(p0.shape)} and {tuple(p_prev.shape)}")
+    if rest.shape != (B, I.NUM_BODY, 3):
+        raise ValueError(f"rest: expected shape ({B}, 22, 3), got {tuple(rest.shape)}")
+    if z is not None and tuple(z.shape) != (B, frames, model.cfg.latent):
+        raise ValueError(f"z: expected shape ({B}, {frames}, {model.cfg.latent}), got {tuple(z.shape)}")
+    goals = _per_frame(goal, B, T, 3, "goal").to(p0.dtype)
+    tg = _per_frame(torch.as_tensor(t_goal), B, T, None, "t_goal")
+    cur_p, cur_d = p0, I.pose_to_delta(p_prev, p0)
+    ps, js = [], []
+    for k in range(T):
+        Rg, J = I.body_transforms(cur_p, rest)
+        if keep:
+            ps.append(cur_p)
+            js.append(J)
+        if on_frame is not None:
+            on_frame(k, cur_p, J, Rg)
+        if k == frames:
+            break
+        state = I.state_features(cur_p, cur_d)
+        inten = I.intention(J[:, I.WRIST], J[:, I.PELVIS], I.heading_of_pose(cur_p), goals[:, k],
+                            (tg[:, k] - k).to(p0.dtype) / I.FPS)
+        cond = model.condition(state, inten)
+        zk = z[:, k] if z is not None else torch.randn(B, model.cfg.latent, generator=generator, dtype=p0.dtype)
+        d_hat = model.decode(zk, cond)
+        cur_p, cur_d = I.integrate_delta(cur_p, d_hat), d_hat
+    return Rollout(torch.stack(ps, 1) if keep else None, torch.stack(js, 1) if keep else None, goals, rest)
+
+
+def expand_starts(starts: I.StartPose | Sequence[I.StartPose], goals: Tensor, n: int
+                  ) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
+    """Batch every (start, goal, sample) combination, start-major: p_prev, p0 (B, 135), rest (B, 22, 3), goal (B, 3),
+    and the index table (B, 3) = (start, goal, sample); B = S * G * n."""
+    starts = [starts] if isinstance(starts, I.StartPose) else list(starts)
+    goals = torch.as_tensor(goals, dtype=torch.float32).reshape(-1, 3)
+    if n < 1:
+        raise ValueError(f"n: expected >= 1, got {n}")
+    S, G = len(starts), len(goals)
+    idx = torch.stack(torch.meshgrid(torch.arange(S), torch.arange(G), torch.arange(n), indexing="ij"), -1).reshape(-1, 3)
+    pp = torch.stack([s.p_prev for s in starts])[idx[:, 0]]
+    p0 = torch.stack([s.p for s in starts])[idx[:, 0]]
+    rest = torch.stack([s.rest for s in starts])[idx[:, 0]]
+    return pp, p0, rest, goals[idx[:, 1]], idx
+
+
+@torch.no_grad()
+def generate(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal: Tensor, t_goal: int | Tensor,
+             n: int = 1, generator: torch.Generator | None = None, frames: int | None = None, keep: bool = True,
+             on_frame: FrameHook | None = None) -> Rollout:
+    """Reach goals (G, 3) from one or more starts, n samples each, all in one batched rollout (B = S * G * n,
+    start-major). t_goal: the goal frame (int or (G,)); frames: how many to generate (default max t_goal: the clip has
+    frames + 1 poses, the start included)."""
+    model.eval()
+    pp, p0, rest, g, idx = expand_starts(start, goal, n)
+    tg = torch.as_tensor(t_goal)
+    if tg.dim() == 1:
+        tg = tg[idx[:, 1]]
+    frames = int(tg.max()) if frames is None else frames
+    if frames < 1:
+        raise ValueError(f"frames: expected >= 1, got {frames}")
+    out = rollout(model, pp, p0, rest, g, tg, frames, generator=generator, keep=keep, on_frame=on_frame)
+    out.info["index"] = idx
+    return out
+
+
+def goal_schedule(goals: Tensor, t_goals: Sequence[int], frames: int) -> tuple[Tensor, Tensor]:
+    """Several goals in a row (Sup. C.2, Fig. S.2): goal k is active from t_{k-1} + 1 to its frame t_k. Returns the goal
+    (frames+1, 3) and goal frame (frames+1,) per frame, for `rollout` (expand to (B, T, ...))."""
+    goals = torch.as_tensor(goals, dtype=torch.float32).reshape(-1, 3)
+    if len(t_goals) != len(goals) or list(t_goals) != sorted(t_goals) or t_goals[0] < 1:
+        raise ValueError(f"t_goals: expected {len(goals)} increasing frames >= 1, got {list(t_goals)}")
+    g = torch.empty(frames + 1, 3)
+    tg = torch.empty(frames + 1, dtype=torch.long)
+    lo = 0
+    for k, t in enumerate(t_goals):
+        hi = frames + 1 if k == len(t_goals) - 1 else t + 1
+        g[lo:hi], tg[lo:hi] = goals[k], t
+        lo = hi
+    return g, tg
+
+
+__all__ = ["WandrConfig", "WandrCVAE", "training_losses", "train_wandr", "save_wandr", "load_wandr", "Rollout",
+           "rollout", "generate", "expand_starts", "goal_schedule", "FULL_INTENTION"]

@@ -1,0 +1,93 @@
+"""Latent optimisation through WANDR's differentiable rollout (Sup. B.3, C.2): "VAE + opt" and waypoints.
+
+The decoder turns one latent z_k per frame into a pose delta, and the whole rollout (decode, integrate, forward
+kinematics, intention) is differentiable, so the per-frame latents Z = (z_1 .. z_T) of a motion can be optimised:
+
+    L_opt = w_norm L_norm + w_goal L_goal (+ w_way L_way)
+    L_norm = mean_k,j z_kj^2 / 2           the negative log-likelihood of Z under N(0, I) (up to a constant):
+                                            keeps the motion where the prior puts its mass
+    L_goal = |W_{t_G} - G|^2               the right wrist at the goal frame vs the goal (m^2)
+    L_way  = sum_w |P^xy_{t_w} - w^xy|^2   the pelvis's ground projection at frame t_w vs each waypoint (m^2, Sup. C.2)
+
+"VAE + opt" (Tab. 2) optimises from random Z a model trained without intention; waypoints (Fig. S.3) start from the
+latents of a WANDR rollout and keep its intention. graspkit's choices (the paper gives none): Adam, learning rate
+0.05, w_norm = 0.01, w_goal = w_way = 1 (m^-2), a fixed number of iterations; the best iterate is kept.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import torch
+from torch import Tensor
+
+from graspkit import intention as I
+from graspkit.models.wandr import Rollout, WandrCVAE, expand_starts, rollout
+
+
+@dataclass
+class LatentResult:
+    """Optimised latents z (B, T-1, latent), the motion they decode to, and the loss terms per iteration."""
+
+    z: Tensor
+    motion: Rollout
+    history: list[dict[str, float]] = field(default_factory=list)
+
+
+def latent_loss(out: Rollout, z: Tensor, goal: Tensor, t_goal: int, waypoints: Sequence[tuple[int, Sequence[float]]] = (),
+                w_norm: float = 0.01, w_goal: float = 1.0, w_way: float = 1.0) -> dict[str, Tensor]:
+    """The loss terms (per sequence, (B,)) of a rollout `out` decoded from latents z (B, T-1, latent): norm, goal, way,
+    and their weighted sum 'loss'."""
+    norm = 0.5 * z.pow(2).mean(dim=(1, 2))
+    g = (out.joints[:, t_goal, I.WRIST] - goal).pow(2).sum(-1)
+    way = torch.zeros_like(g)
+    for frame, xy in waypoints:
+        target = torch.as_tensor(xy, dtype=out.joints.dtype)[:2]
+        way = way + (out.joints[:, frame, I.PELVIS, :2] - target).pow(2).sum(-1)
+    return {"loss": w_norm * norm + w_goal * g + w_way * way, "norm": norm, "goal": g, "way": way}
+
+
+def optimise_latents(model: WandrCVAE, start: I.StartPose, goal: Sequence[float] | Tensor, t_goal: int,
+                     frames: int | None = None, n: int = 1, waypoints: Sequence[tuple[int, Sequence[float]]] = (),
+                     z0: Tensor | None = None, iters: int = 40, lr: float = 0.05, w_norm: float = 0.01,
+                     w_goal: float = 1.0, w_way: float = 1.0, generator: torch.Generator | None = None) -> LatentResult:
+    """Optimise the per-frame latents of n motions from `start` towards `goal` (3,) (wrist there at frame t_goal),
+    passing the pelvis over `waypoints` [(frame, (x, y))]. z0 (n, frames, latent) or random N(0, I) from generator."""
+    frames = t_goal if frames is None else frames
+    if not 1 <= t_goal <= frames:
+        raise ValueError(f"t_goal: expected 1 <= t_goal <= frames ({frames}), got {t_goal}")
+    for frame, xy in waypoints:
+        if not 0 <= frame <= frames or len(xy) < 2:
+            raise ValueError(f"waypoints: expected (frame in [0, {frames}], (x, y)), got {(frame, xy)}")
+    if iters < 0:
+        raise ValueError(f"iters: expected >= 0, got {iters}")
+    model.eval()
+    for q in model.parameters():
+        q.requires_grad_(False)
+    pp, p0, rest, g, _ = expand_starts(start, torch.as_tensor(goal, dtype=torch.float32).reshape(1, 3), n)
+    L = model.cfg.latent
+    z = (torch.randn(n, frames, L, generator=generator) if z0 is None else z0.detach().clone()).requires_grad_(True)
+    if z.shape != (n, frames, L):
+        raise ValueError(f"z0: expected shape ({n}, {frames}, {L}), got {tuple(z.shape)}")
+    opt = torch.optim.Adam([z], lr=lr)
+    best_z, best = z.detach().clone(), torch.full((n,), float("inf"))
+    history: list[dict[str, float]] = []
+    try:
+        for it in range(iters + 1):
+            out = rollout(model, pp, p0, rest, g, t_goal, frames, z=z)
+            terms = latent_loss(out, z, g, t_goal, waypoints, w_norm, w_goal, w_way)
+            history.append({k: float(v.detach().mean()) for k, v in terms.items()})
+            better = terms["loss"].detach() < best
+            best = torch.where(better, terms["loss"].detach(), best)
+            best_z[better] = z.detach()[better]
+            if it == iters:
+                break
+            opt.zero_grad()
+            terms["loss"].sum().backward()
+            opt.step()
+    finally:
+        for q in model.parameters():
+            q.requires_grad_(True)
+    with torch.no_grad():
+        final = rollout(model, pp, p0, rest, g, t_goal, frames, z=best_z)
+    return LatentResult(best_z, final, history)

@@ -1,0 +1,100 @@
+"""WANDR's goal-grid evaluation (§4.2-4.3): the grid, SR / DTG on hand-made motions, FS on the fly against full meshes."""
+import numpy as np
+import pytest
+import torch
+
+from graspkit import eval_wandr as E
+from graspkit import intention as I
+from graspkit import metrics
+from graspkit.body import BodyModel
+from graspkit.data import load_motion
+from graspkit.data.wandr_dataset import rest_joints
+from graspkit.paths import DATA_STUBS, default_model_path
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    """One torch thread: the machine's cores are shared, and small ops thrash with more."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+@pytest.fixture(scope="module")
+def bm():
+    return BodyModel.from_file(default_model_path())
+
+
+def _clip(bm, name="locomotion/locomotion_000003.npz"):
+    m = load_motion(DATA_STUBS / "motion" / name)
+    p = I.pose_from_axis_angle(torch.as_tensor(m.trans), torch.as_tensor(m.poses))
+    return m, p, rest_joints(bm, m.betas[None])[0]
+
+
+def test_the_grid_is_the_papers():
+    goals, cells = E.grid_goals()
+    assert goals.shape == (125, 3) and cells.shape == (125, 3)
+    assert sorted(set(cells[:, 0])) == [0, 72, 144, 216, 288]
+    assert np.allclose(sorted(set(cells[:, 1])), [0, 0.45, 0.9, 1.35, 1.8])
+    assert np.allclose(sorted(set(cells[:, 2])), [0.5, 1.625, 2.75, 3.875, 5.0])
+    for g, (a, h, d) in zip(goals.numpy(), cells):
+        assert np.allclose(g, [d * np.cos(np.radians(a)), d * np.sin(np.radians(a)), h], atol=1e-6)
+    assert E.T_GOAL == 239 and 5 * 5 * 5 * 6 * 5 == 3750
+
+
+def test_foot_vertices_are_posed_exactly_as_the_body_model_does(bm):
+    m, p, rest = _clip(bm)
+    feet = E.FootVertices(bm, torch.as_tensor(m.betas)[None])
+    frames = slice(30, 60)
+    Rg, pos = I.body_transforms(p[frames], rest)
+    body = torch.zeros(30, dtype=torch.long)
+    full = m.vertices(bm, 30, 60)[:, feet.ids]
+    assert torch.allclose(feet.points(Rg, pos, body), full, atol=1e-5)
+    assert torch.allclose(feet.heights(Rg, pos, body), full[..., 2], atol=1e-5)
+    one = torch.randint(len(feet.ids), (30,), generator=torch.Generator().manual_seed(0))
+    assert torch.allclose(feet.points(Rg, pos, body, one), full[torch.arange(30), one], atol=1e-5)
+    assert len(feet.ids) > 400 and set(feet.joints.tolist()) <= {4, 5, 7, 8, 10, 11}
+
+
+@pytest.mark.parametrize("name", ["locomotion/locomotion_000003.npz", "locomotion/locomotion_000007.npz",
+                                  "reach/reach_000002.npz"])
+def test_fs_on_the_fly_equals_wandrs_metric_on_full_meshes(bm, name):
+    m, p, rest = _clip(bm, name)
+    slid = p.clone()
+    slid[:, 0] += 0.04 * torch.sin(torch.arange(len(p)) / 3.0)       # a slide in x: some frames skate, some not
+    for q in (p, slid):
+        res = E.evaluate_motions(q[None], rest[None], torch.zeros(1, 3), torch.as_tensor(m.betas)[None], bm)
+        verts = torch.cat([bm.forward_rotmats(
+            torch.cat([I.pose_rotmats(q[a:a + 64])[1], m.rotmats()[a:a + 64, 22:]], 1),
+            betas=torch.as_tensor(m.betas)[None], transl=q[a:a + 64, :3]).vertices for a in range(0, len(q), 64)])
+        truth = metrics.foot_skating_wandr(verts).mean()
+        assert res.fs[0] == pytest.approx(truth, abs=1e-6)          # the same frames skate
+    assert res.fs[0] > 0.2                                              # the slid clip does skate
+
+
+def test_success_and_distance_to_goal_on_a_hand_made_motion(bm):
+    m, p, rest = _clip(bm, "reach/reach_000002.npz")
+    wrist = I.body_joints(p, rest)[:, I.WRIST]
+    k = 40
+    goals = torch.stack([wrist[k] + torch.tensor([0.05, 0.0, 0.0]), wrist[k] + torch.tensor([0.0, 0.0, 3.0])])
+    res = E.evaluate_motions(p[None].expand(2, -1, -1), rest[None].expand(2, -1, -1), goals,
+                             torch.as_tensor(m.betas)[None].expand(2, -1), bm, t_goal=k)
+    d = (wrist[None] - goals[:, None]).norm(dim=-1)
+    assert np.allclose(res.dtg, d.min(1).values.numpy(), atol=1e-6)
+    assert res.success.tolist() == [True, False]
+    assert res.reach_frame[0] == int((d[0] <= 0.10).nonzero()[0]) and res.reach_frame[1] == -1
+    assert res.error_at_goal[0] == pytest.approx(0.05, abs=1e-5)
+
+
+def test_summary_and_breakdown():
+    cells = np.array([[0, 0.0, 0.5], [72, 0.0, 5.0], [0, 1.8, 0.5], [72, 1.8, 5.0]])
+    r = E.GridResult(np.zeros(4, int), np.arange(4), np.zeros(4, int), cells, np.array([0.05, 0.5, 0.09, 0.2]),
+                     np.array([3, -1, 7, -1]), np.array([0.1, 0.0, 0.2, 0.1]), np.array([0.05, 0.6, 0.1, 0.3]))
+    s = E.summary(r)
+    assert s["SR"] == 50 and s["FS"] == pytest.approx(10) and s["DTG"] == pytest.approx(21)
+    assert E.breakdown(r, "angle") == {0.0: 100.0, 72.0: 0.0}
+    assert E.breakdown(r, "height") == {0.0: 50.0, 1.8: 50.0}
+    with pytest.raises(ValueError, match="by"):
+        E.breakdown(r, "colour")
+    assert "| WANDR | 50.0 | 10.0 | 21.0 | 32 | 16 | 24.8 |" in E.table({"WANDR": s})

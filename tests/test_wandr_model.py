@@ -1,0 +1,211 @@
+"""WANDR's CVAE, losses, rollout schedule, batched generation and latent optimisation (tiny networks, sample clips)."""
+import pytest
+import torch
+
+from graspkit import intention as I
+from graspkit.body import BodyModel
+from graspkit.data import load_motion
+from graspkit.data import wandr_dataset as W
+from graspkit.models import wandr as M
+from graspkit.optim.latent import latent_loss, optimise_latents
+from graspkit.paths import DATA_STUBS, default_model_path
+
+STUBS = DATA_STUBS / "motion"
+TINY = dict(latent=4, hidden=32, enc_layers=1, dec_layers=2, dropout=0.0)
+
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    """One torch thread: the machine's cores are shared, and small ops thrash with more."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+@pytest.fixture(scope="module")
+def bm():
+    return BodyModel.from_file(default_model_path())
+
+
+@pytest.fixture(scope="module")
+def clips(bm):
+    return W.load_clips(W.list_clips(STUBS, limit=3), bm)
+
+
+@pytest.fixture(scope="module")
+def stats(clips):
+    return W.compute_stats(clips, samples=500)
+
+
+@pytest.fixture(scope="module")
+def starts(bm):
+    names = ["locomotion/locomotion_000000.npz", "reach/reach_000001.npz"]
+    return W.held_out_starts([load_motion(STUBS / n) for n in names], names, bm, n=2, frame=3)
+
+
+def _model(stats, **kw):
+    torch.manual_seed(0)
+    return M.WandrCVAE(M.WandrConfig(**{**TINY, **kw}), stats).eval()
+
+
+def test_rollout_schedule_grows_linearly_to_ten():
+    cfg = M.WandrConfig(ramp_epochs=5)
+    assert [cfg.rollout_steps(e) for e in range(8)] == [0, 2, 4, 6, 8, 10, 10, 10]
+    assert M.WandrConfig(ramp_epochs=0).rollout_steps(0) == 10
+
+
+def test_ablations_drop_intention_parts_from_the_condition(stats):
+    full = _model(stats)
+    assert full.cond_dim == 268 + 7
+    assert _model(stats, intention=("wrist",)).cond_dim == 268 + 3
+    assert _model(stats, intention=("wrist", "pelvis")).cond_dim == 268 + 5
+    assert _model(stats, intention=()).cond_dim == 268
+    with pytest.raises(ValueError, match="intention"):
+        M.WandrConfig(intention=("elbow",))
+    s, i = torch.randn(2, 268), torch.randn(2, 7)
+    c = _model(stats, intention=("wrist", "orientation")).condition(s, i)
+    assert torch.allclose(c[:, 268:], ((i - stats["intention_mean"]) / stats["intention_std"])[:, :5])
+
+
+def test_losses_are_the_papers_terms(clips, stats):
+    model = _model(stats)
+    ds = W.WindowDataset(clips, max_steps=3)
+    items = ds.items[::40]
+    torch.manual_seed(0)
+    out = M.training_losses(model, clips, items, steps=3, generator=torch.Generator().manual_seed(0))
+    cfg = model.cfg
+    assert torch.isfinite(out["loss"])
+    assert out["loss"].item() == pytest.approx((out["rec"] + cfg.alpha_kl * out["kl"] + cfg.w_joint * out["joint_m2"]).item(),
+                                               rel=1e-5)
+    assert cfg.alpha_kl == 1e-2 and out["steps"] == 3
+
+
+def test_a_few_steps_of_training_lower_the_loss(clips, stats):
+    model = _model(stats).train()
+    ds = W.WindowDataset(clips, max_steps=2)
+    items = ds.items[torch.randperm(len(ds), generator=torch.Generator().manual_seed(0))[:64]]
+    opt = torch.optim.Adam(model.parameters(), 1e-2)
+    losses = []
+    for k in range(20):
+        out = M.training_losses(model, clips, items, steps=1, generator=torch.Generator().manual_seed(k))
+        opt.zero_grad()
+        out["loss"].backward()
+        opt.step()
+        losses.append(out["rec"].item())
+    assert sum(losses[-5:]) < 0.6 * sum(losses[:5])
+
+
+def test_generation_is_batched_deterministic_and_starts_at_the_start(stats, starts):
+    model = _model(stats)
+    goals = torch.tensor([[1.0, 0.5, 1.0], [-2.0, 0.0, 0.3], [0.0, 3.0, 1.6]])
+    a = M.generate(model, starts, goals, t_goal=20, n=2, generator=torch.Generator().manual_seed(0))
+    b = M.generate(model, starts, goals, t_goal=20, n=2, generator=torch.Generator().manual_seed(0))
+    c = M.generate(model, starts, goals, t_goal=20, n=2, generator=torch.Generator().manual_seed(1))
+    assert a.p.shape == (12, 21, 135) and a.joints.shape == (12, 21, 22, 3)
+    assert torch.equal(a.p, b.p) and not torch.allclose(a.p[:, 1:], c.p[:, 1:])
+    idx = a.info["index"]
+    assert idx.tolist()[:3] == [[0, 0, 0], [0, 0, 1], [0, 1, 0]]
+    for k, (s, g, _) in enumerate(idx.tolist()):
+        assert torch.equal(a.p[k, 0], starts[s].p) and torch.equal(a.goal[k, 0], goals[g])
+        assert torch.allclose(a.joints[k, 0], I.body_joints(starts[s].p, starts[s].rest))
+
+
+def test_batched_rollout_equals_a_loop_over_sequences(stats, starts):
+    """The batch computes exactly what a per-goal sequential loop computes with the same latents."""
+    model = _model(stats)
+    goals = torch.tensor([[1.0, 0.5, 1.0], [-2.0, 0.0, 0.3], [0.0, 3.0, 1.6]])
+    pp, p0, rest, g, _ = M.expand_starts(starts, goals, 1)
+    z = torch.randn(len(g), 15, 4, generator=torch.Generator().manual_seed(0))
+    with torch.no_grad():
+        batch = M.rollout(model, pp, p0, rest, g, 12, 15, z=z)
+        for k in range(len(g)):
+            one = M.rollout(model, pp[k:k + 1], p0[k:k + 1], rest[k:k + 1], g[k:k + 1], 12, 15, z=z[k:k + 1])
+            assert torch.allclose(one.p[0], batch.p[k], atol=1e-5)
+
+
+def test_each_frame_integrates_the_decoded_delta_of_its_intention(stats, starts):
+    model = _model(stats)
+    s = starts[0]
+    goal = torch.tensor([[2.0, -1.0, 0.8]])
+    z = torch.randn(1, 6, 4, generator=torch.Generator().manual_seed(3))
+    with torch.no_grad():
+        out = M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], goal, 4, 6, z=z)
+        d_prev = I.pose_to_delta(s.p_prev, s.p)[None]
+        for k in range(6):
+            p = out.p[:, k]
+            inten = I.intention_from_pose(p, s.rest[None], goal, torch.tensor([(4 - k) / 30.0]))
+            if k >= 4:
+                assert torch.equal(inten, torch.zeros(1, 7))           # at and past t_G
+            d = model.decode(z[:, k], model.condition(I.state_features(p, d_prev), inten))
+            assert torch.allclose(out.p[:, k + 1], I.integrate_delta(p, d), atol=1e-5)
+            d_prev = d
+
+
+def test_frame_hook_sees_every_frame_without_storing(stats, starts):
+    model = _model(stats)
+    seen = []
+    kept = M.generate(model, starts[0], torch.tensor([[1.0, 1.0, 1.0]]), 8, generator=torch.Generator().manual_seed(0))
+    none = M.generate(model, starts[0], torch.tensor([[1.0, 1.0, 1.0]]), 8, generator=torch.Generator().manual_seed(0),
+                      keep=False, on_frame=lambda k, p, j, r: seen.append((k, p.clone())))
+    assert none.p is None and [k for k, _ in seen] == list(range(9))
+    assert all(torch.equal(p, kept.p[:, k]) for k, p in seen)
+
+
+def test_goal_schedule_switches_goals_after_each_goal_frame():
+    g, tg = M.goal_schedule(torch.tensor([[1.0, 0, 1], [2.0, 0, 1], [3.0, 0, 1]]), [10, 20, 30], 35)
+    assert g.shape == (36, 3) and tg.shape == (36,)
+    assert g[10, 0] == 1 and g[11, 0] == 2 and g[20, 0] == 2 and g[21, 0] == 3 and g[35, 0] == 3
+    assert tg[0] == 10 and tg[11] == 20 and tg[35] == 30
+    with pytest.raises(ValueError, match="t_goals"):
+        M.goal_schedule(torch.zeros(2, 3), [20, 10], 30)
+
+
+def test_rollout_errors_name_the_argument(stats, starts):
+    model = _model(stats)
+    s = starts[0]
+    with pytest.raises(ValueError, match="rest"):
+        M.rollout(model, s.p_prev[None], s.p[None], s.rest, torch.zeros(1, 3), 5, 5)
+    with pytest.raises(ValueError, match="goal"):
+        M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], torch.zeros(2, 2), 5, 5)
+    with pytest.raises(ValueError, match="z"):
+        M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], torch.zeros(3), 5, 5, z=torch.zeros(1, 4, 4))
+
+
+def test_checkpoint_round_trip_is_weights_only(stats, starts, tmp_path):
+    model = _model(stats, intention=("wrist", "pelvis"))
+    path = M.save_wandr(tmp_path / "w.pt", model, [{"epoch": 1, "loss": 0.5}], {"note": "test"})
+    torch.load(path, weights_only=True)
+    back = M.load_wandr(path)
+    assert back.cfg == model.cfg and back.meta == {"note": "test"}
+    goal = torch.tensor([[1.0, 0.0, 1.0]])
+    a = M.generate(model, starts[0], goal, 5, generator=torch.Generator().manual_seed(0))
+    b = M.generate(back, starts[0], goal, 5, generator=torch.Generator().manual_seed(0))
+    assert torch.equal(a.p, b.p) and torch.equal(back.delta_std, stats["delta_std"])
+
+
+def test_train_wandr_writes_a_resumable_checkpoint(clips, stats, tmp_path):
+    from graspkit.train import TrainConfig
+
+    model = _model(stats, max_steps=1, ramp_epochs=1)
+    cfg = TrainConfig(epochs=2, batch_size=256, lr=1e-3, seed=0)
+    hist = M.train_wandr(model, clips, cfg, checkpoint=tmp_path / "ck.pt", stride={"locomotion": 8, "reach": 8},
+                         progress=False)
+    assert [h["steps"] for h in hist] == [0.0, 1.0]
+    again = M.load_wandr(tmp_path / "ck.pt")
+    assert all(torch.equal(a, b) for a, b in zip(again.state_dict().values(), model.state_dict().values()))
+
+
+def test_latent_optimisation_pulls_the_wrist_to_the_goal_and_the_pelvis_over_a_waypoint(stats, starts):
+    model = _model(stats)
+    goal = torch.tensor([0.8, 0.3, 1.0])
+    res = optimise_latents(model, starts[1], goal, t_goal=20, iters=20, lr=0.2, w_norm=1e-4,
+                           waypoints=[(10, (0.2, 0.2))], generator=torch.Generator().manual_seed(0))
+    h = res.history
+    assert h[-1]["goal"] < 0.9 * h[0]["goal"] and h[-1]["way"] < 0.9 * h[0]["way"]
+    assert all(b["loss"] <= a["loss"] + 1e-6 for a, b in zip(h[:-1], h[1:]))      # Adam steps go downhill here
+    terms = latent_loss(res.motion, res.z, goal[None], 20, [(10, (0.2, 0.2))], 1e-4)
+    assert terms["loss"].item() == pytest.approx(min(x["loss"] for x in h), rel=1e-4)   # the best iterate is kept
+    assert all(q.requires_grad for q in model.parameters())
+    with pytest.raises(ValueError, match="waypoints"):
+        optimise_latents(model, starts[1], goal, t_goal=10, waypoints=[(50, (0, 0))])
