@@ -63,10 +63,12 @@ def file_path(out: Path, kind: str, index: int) -> Path:
 def accepted(q: dict, grasp_type: str) -> bool:
     """The acceptance test of a fitted grasp's quality dict: in contact, penetration <= 0.5 cm deep and <= 4 cm^3,
     both feet within 1 cm of the ground, the wrist within 75 deg of its rest, and a real grasp: pinch = thumb and
-    index or middle pad within 3 mm; other types = the palm or thumb and at least three regions within 3 mm."""
+    index or middle pad within 3 mm; other types = at least three regions (palm, pads) within 3 mm, with the palm
+    within 6 mm or the thumb within 3 mm."""
     r = np.asarray(q["regions_mm"])            # palm, thumb, index, middle, ring, pinky
     touch = r <= 3.0
-    grip = (touch[1] and (touch[2] or touch[3])) if grasp_type == "pinch" else ((touch[0] or touch[1]) and touch.sum() >= 3)
+    grip = ((touch[1] and (touch[2] or touch[3])) if grasp_type == "pinch"
+            else ((r[0] <= 6.0 or touch[1]) and touch.sum() >= 3))
     return bool(q["contact"] and q["depth_cm"] <= 0.5 and q["volume_cm3"] <= 4.0 and q["feet_cm"] <= 1.0
                 and q["arm_residual_deg"] <= 75.0 and grip)
 

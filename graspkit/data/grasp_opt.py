@@ -417,7 +417,8 @@ def polish(pb: PartialBody, hm: HandModel, head_pb: PartialBody, head_pair: tupl
            coeffs: Tensor, transl: Tensor, sdf: PosedSDF, targets: PolishTargets, object_points: Tensor,
            steps: int = 50, lr: float = 0.005, weights: PolishWeights | None = None, wrist_limit_deg: float = 80.0,
            history: list | None = None) -> Tensor:
-    """Adam on rotation offsets of the spine, neck, head, right arm and fingers; returns the polished rot (B,55,3,3).
+    """Adam (learning rate decaying linearly to a tenth) on rotation offsets of the spine, neck, head, right arm and
+    fingers; returns the polished rot (B,55,3,3).
 
     object_points (B,P,3): world points on each object for the object-in-hand term. history, if a list, receives
     per-step dicts of the mean energy terms (for plots)."""
@@ -427,6 +428,7 @@ def polish(pb: PartialBody, hm: HandModel, head_pb: PartialBody, head_pair: tupl
     n_body = len(FREE_BODY)
     delta = torch.zeros(B, len(free), 3, dtype=rot0.dtype, requires_grad=True)
     opt = torch.optim.Adam([delta], lr=lr)
+    sched = torch.optim.lr_scheduler.LambdaLR(opt, lambda k: 1.0 - 0.9 * k / max(steps, 1))   # linear decay to lr / 10
     t_palm = torch.as_tensor(targets.palm, dtype=rot0.dtype)
     t_norm = torch.as_tensor(targets.normal, dtype=rot0.dtype)
     t_centre = torch.as_tensor(targets.centre, dtype=rot0.dtype)
@@ -487,6 +489,7 @@ def polish(pb: PartialBody, hm: HandModel, head_pb: PartialBody, head_pair: tupl
         opt.zero_grad()
         E.sum().backward()
         opt.step()
+        sched.step()
     with torch.no_grad():
         R = rot0.clone()
         R[:, free_t] = rot0[:, free_t] @ axis_angle_to_matrix(delta)

@@ -1,0 +1,99 @@
+"""The shipped samples (data_stubs/grasps, data_stubs/approach, made by `graspkit data make`): a third party rebuilds a
+scene with smplx + trimesh alone, the labels agree with the body model, the datasets read them."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+import smplx
+import torch
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from graspkit.body import BodyModel
+from graspkit.body.skeleton import SMPLX_LANDMARK_VERTEX_IDS
+from graspkit.data.grab import load_grasp_sequence
+from graspkit.data.grasp_datasets import ApproachDataset, GNetDataset, WholeGraspDataset
+
+from conftest import PROCEDURAL_MODEL
+
+STUBS = Path(__file__).resolve().parents[1] / "data_stubs"
+GRASPS = sorted((STUBS / "grasps").glob("grasp_*.npz"))
+APPROACH = sorted((STUBS / "approach").glob("approach_*.npz"))
+PARAMS = ("global_orient", "body_pose", "jaw_pose", "leye_pose", "reye_pose", "left_hand_pose", "right_hand_pose",
+          "transl", "expression")
+
+
+def test_samples_are_shipped():
+    assert len(GRASPS) >= 8 and len(APPROACH) >= 2
+    assert sum(p.stat().st_size for p in (STUBS / "grasps").rglob("*") if p.is_file()) < 3e6
+
+
+@pytest.mark.parametrize("path", GRASPS[:1] + GRASPS[-1:], ids=lambda p: p.stem)
+def test_a_scene_rebuilt_with_smplx_and_trimesh_alone(path):
+    """Grasp file + procedural body file + PLY: contact, penetration and the contact labels recomputed independently."""
+    z = dict(np.load(path, allow_pickle=False))
+    model = smplx.create(str(STUBS / "body_models"), model_type="smplx", gender="neutral", ext="npz", use_pca=False,
+                         flat_hand_mean=True, num_betas=10, dtype=torch.float64)
+    out = model(betas=torch.as_tensor(z["body.betas"][None], dtype=torch.float64),
+                **{k: torch.as_tensor(z[f"body.params.{k}"], dtype=torch.float64) for k in PARAMS})
+    v = out.vertices[0].detach().numpy()
+    body = trimesh.Trimesh(v, model.faces, process=False)
+    obj = trimesh.load(path.parent / str(z["object.object_mesh"]), process=False)
+    R = Rotation.from_rotvec(z["object.params.global_orient"][0]).as_matrix()
+    t = z["object.params.transl"][0].astype(np.float64)
+    obj.apply_transform(np.block([[R, t[:, None]], [np.zeros((1, 3)), np.ones((1, 1))]]))
+    inter = trimesh.boolean.intersection([body, obj], engine="manifold")
+    vol = 0.0 if inter.is_empty else inter.volume * 1e6
+    assert abs(vol - float(z["grasp.quality.volume_cm3"])) < 0.05 + 0.05 * vol
+    near = np.all((v > obj.bounds[0] - 0.03) & (v < obj.bounds[1] + 0.03), axis=1)
+    sd = trimesh.proximity.signed_distance(obj, v[near])                       # > 0 inside
+    assert abs(max(sd.max(), 0.0) * 100 - float(z["grasp.quality.depth_cm"])) < 0.02
+    assert sd.max() > -0.002 and sd.max() < 0.005                              # in contact, at most 5 mm deep
+    pts = z["object.points"].astype(np.float64) @ R.T + t                      # C_O: object points within 1 cm of the body
+    _, dist, _ = trimesh.proximity.closest_point(body, pts)
+    assert np.mean((dist <= 0.01) == z["contact.object"][0].astype(bool)) > 0.995
+    markers = v[z["saga.marker_ids"]]                                          # C_M: markers within 2 cm of the object
+    assert np.abs(markers - z["saga.markers"]).max() < 1e-5
+    _, dm, _ = trimesh.proximity.closest_point(obj, markers)
+    assert np.mean((dm <= 0.02) == z["contact.markers"][0].astype(bool)) > 0.99
+
+
+def test_goal_labels_agree_with_the_body_model():
+    bm = BodyModel.from_file(PROCEDURAL_MODEL, dtype=torch.float64)
+    for path in GRASPS[:4]:
+        s = load_grasp_sequence(path)
+        assert bool(s.extras["grasp.accepted"]) and (path.parent / s.object_mesh).is_file()
+        v = torch.as_tensor(s.poses, dtype=torch.float64)
+        from graspkit.rotations import axis_angle_to_matrix
+        V = bm.forward_rotmats(axis_angle_to_matrix(v), betas=torch.as_tensor(s.betas[None], dtype=torch.float64),
+                               transl=torch.as_tensor(s.trans, dtype=torch.float64)).vertices[0].numpy()
+        e = s.extras
+        verts = V[e["goal.vertex_ids"]]
+        assert np.abs(verts - e["goal.vertices"]).max() < 1e-5
+        pts = s.object_points.astype(np.float64) @ s.object_rotation()[0].T + s.object_transl[0]
+        nearest = pts[np.argmin(((verts[:, None] - pts[None]) ** 2).sum(-1), axis=1)]
+        assert np.abs(nearest - verts - e["goal.offsets"]).max() < 1e-4
+        assert np.array_equal(e["goal.hand_offsets"], e["goal.offsets"][e["goal.right_hand"]])
+        assert abs(float(e["object.height"]) - s.object_transl[0, 2]) < 1e-6
+        q, to = e["goal.head_direction"], s.object_transl[0] - V[SMPLX_LANDMARK_VERTEX_IDS["nose"]]
+        assert abs(np.linalg.norm(q) - 1) < 1e-5 and q @ to / np.linalg.norm(to) > np.cos(np.deg2rad(45))
+
+
+def test_the_datasets_read_the_samples():
+    wg = WholeGraspDataset(STUBS / "grasps", split=None)
+    a = dict(np.load(GRASPS[0], allow_pickle=False))
+    assert np.allclose(wg[0]["markers"].numpy() + a["object.params.transl"][0], a["saga.markers"], atol=1e-6)
+    assert wg[0]["object_points"].shape == (2048, 3) and wg[0]["object_contacts"].shape == (2048,)
+    with pytest.raises(ValueError, match="root"):
+        WholeGraspDataset(STUBS / "grasps", split="val")                     # mug (test) and pitcher (train) only
+    gn = GNetDataset(STUBS / "grasps", split=None)
+    assert gn[0]["fullpose_6d"].shape == (55, 6) and gn[0]["bps_object"].shape == (1024,)
+    bm = BodyModel.from_file(PROCEDURAL_MODEL)
+    ap = ApproachDataset(STUBS / "approach", split=None, bm=bm)
+    item = ap[0]
+    g = int(item["goal_frame"])
+    assert item["fullpose"].shape == (62, 55, 3) and 0 <= g < 62
+    assert item["hand_to_goal"][g:].abs().max() < 1e-4                      # the grasp is held from the goal frame on
+    assert item["foot_contacts"][g:].all()
+    whole = ApproachDataset(STUBS / "approach", split=None, window=None)
+    assert whole[0]["fullpose"].shape[0] == len(load_grasp_sequence(APPROACH[0]).poses)
