@@ -88,14 +88,14 @@ class Placement:
     body: dict[str, Tensor]   # ground-truth SMPL-X parameters (object frame): fullpose (55,3) absolute, transl, betas
 
 
-def load_placements(root: str | Path, name: str, n: int) -> list[Placement]:
-    """The first n accepted test grasps of object `name` in `root` as placements."""
+def load_placements(root: str | Path, name: str, n: int, split: str = "test") -> list[Placement]:
+    """The first n accepted grasps of object `name` (of `split`) in `root` as placements."""
     from graspkit.data.grab import read_arrays
     from graspkit.data.grasp_datasets import grasp_files
     from graspkit.rotations import axis_angle_to_matrix
 
     out = []
-    for p in grasp_files(root, "grasp", split="test"):
+    for p in grasp_files(root, "grasp", split=split):
         a = read_arrays(p)
         if str(a["obj_name"]) != name:
             continue
@@ -111,7 +111,7 @@ def load_placements(root: str | Path, name: str, n: int) -> list[Placement]:
         if len(out) == n:
             break
     if not out:
-        raise ValueError(f"root: no accepted test grasps of {name!r} in {root}")
+        raise ValueError(f"root: no accepted {split} grasps of {name!r} in {root}")
     return out
 
 
@@ -175,16 +175,18 @@ def fit_variants(opt, markers: Tensor, obj, mc: Tensor | None, oc: Tensor | None
 
 
 def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = True,
-             out: str | Path | None = RESULTS_PATH) -> dict[str, Any]:
-    """Run the whole protocol; returns (and writes atomically to `out`, JSON) per-object and overall summaries."""
+             out: str | Path | None = RESULTS_PATH, checkpoints: str | Path = DATA_STUBS / "checkpoints"
+             ) -> dict[str, Any]:
+    """Run the whole protocol with the models in `checkpoints` (wholegrasp.pt, wholegrasp_single.pt,
+    wholegrasp_grabnet_smplx.pt, pose_prior.pt); returns (and writes atomically to `out`, JSON) the summaries."""
     from tqdm.auto import tqdm
 
     from graspkit.body import BodyModel
     from graspkit.body.markers import saga_markers
     from graspkit.data.grasp_io import cached_sdf_grid
     from graspkit.models.pose_prior import load_pose_prior
-    from graspkit.models.wholegrasp import (GRABNET_SMPLX_PATH, GrabNetSMPLX, HandPCA, load_wholegrasp,
-                                            params_to_rotmats)
+    from graspkit.models.wholegrasp import (GRABNET_SMPLX_PATH, GrabNetSMPLX, HandPCA, WholeGraspVAE,
+                                            load_wholegrasp, params_to_rotmats)
     from graspkit.optim.grasppose import GraspPoseConfig, GraspPoseOpt
     from graspkit.paths import default_model_path
     from graspkit.train import load_checkpoint
@@ -194,10 +196,12 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
     t0 = time.perf_counter()
     bm = BodyModel.from_file(default_model_path())
     ids = torch.as_tensor(saga_markers(bm).vertex_ids)
-    prior = load_pose_prior()
-    wg, single = load_wholegrasp(), load_wholegrasp(multitask=False)
-    single_state = load_checkpoint(DATA_STUBS / "checkpoints" / "wholegrasp_single.pt")
-    grabnet = GrabNetSMPLX.from_state(load_checkpoint(GRABNET_SMPLX_PATH))
+    ck = Path(checkpoints)
+    prior = load_pose_prior(ck / "pose_prior.pt") if (ck / "pose_prior.pt").is_file() else load_pose_prior()
+    wg = load_wholegrasp(ck / "wholegrasp.pt")
+    single_state = load_checkpoint(ck / "wholegrasp_single.pt")
+    single = WholeGraspVAE.from_state(single_state)
+    grabnet = GrabNetSMPLX.from_state(load_checkpoint(ck / GRABNET_SMPLX_PATH.name))
     pca = HandPCA(bm)
     base_cfg = GraspPoseConfig(steps=cfg.steps)
     opt = GraspPoseOpt(bm, prior, base_cfg)
@@ -333,11 +337,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--samples", type=int, default=EvalConfig.samples)
     ap.add_argument("--gt", type=int, default=EvalConfig.gt_grasps)
     ap.add_argument("--objects", nargs="*", default=None)
+    ap.add_argument("--checkpoints", type=Path, default=DATA_STUBS / "checkpoints")
+    ap.add_argument("--steps", type=int, nargs=3, default=EvalConfig.steps)
     args = ap.parse_args(argv)
-    cfg = EvalConfig(placements=args.placements, samples=args.samples, gt_grasps=args.gt)
+    cfg = EvalConfig(placements=args.placements, samples=args.samples, gt_grasps=args.gt, steps=tuple(args.steps))
     if args.objects:
         cfg = replace(cfg, objects=tuple(args.objects))
-    res = evaluate(args.data, cfg, out=args.out)
+    res = evaluate(args.data, cfg, out=args.out, checkpoints=args.checkpoints)
     print(table1(res))
     print()
     print(table2(res))
@@ -404,3 +410,46 @@ def grasp_body_poses(root: str | Path, split: str = "train") -> np.ndarray:
 
     files = grasp_files(root, "grasp", split=split)
     return np.stack([read_arrays(p)["body.params.body_pose"][0].reshape(21, 3) for p in files]).astype(np.float32)
+
+
+# ------------------------------------------------------------------------------------------------ lesson examples
+EXAMPLES_PATH = DATA_STUBS / "checkpoints" / "wholegrasp_examples.pt"
+
+
+def save_examples(root: str | Path, path: str | Path = EXAMPLES_PATH, per_object: int = 4,
+                  split: str = "val") -> Path:
+    """A few grasps of one split (placements, float16, weights-only) for the lesson: `per_object` per object."""
+    from graspkit.data.grasp import SPLITS
+    from graspkit.train import save_checkpoint
+
+    items: dict[str, list] = {}
+    for name in SPLITS[split]:
+        try:
+            found = load_placements(root, name, per_object, split)
+        except ValueError:
+            continue                                     # no grasp of this object in the folder
+        for p in found:
+            row = {"points": p.points, "normals": p.normals, "height": torch.tensor(p.height),
+                   "rotation": p.rotation, "markers": p.markers, "marker_contact": p.marker_contact,
+                   "object_contact": p.object_contact, **p.body}
+            for k, v in row.items():
+                items.setdefault(k, []).append(v)
+            items.setdefault("names", []).append(name)
+    if not items:
+        raise ValueError(f"root: no {split} grasps in {root}")
+    state = {k: (torch.stack(v).half() if k not in ("names", "rotation") else
+                 (torch.stack(v) if k == "rotation" else list(v))) for k, v in items.items()}
+    return save_checkpoint(path, state)
+
+
+def load_examples(path: str | Path = EXAMPLES_PATH) -> list[Placement]:
+    """The lesson's example grasps as Placements."""
+    from graspkit.train import load_checkpoint
+
+    s = load_checkpoint(path)
+    return [Placement(n, s["points"][i].float(), s["normals"][i].float(), float(s["height"][i]),
+                      s["rotation"][i].float(), s["markers"][i].float(), s["marker_contact"][i].float(),
+                      s["object_contact"][i].float(),
+                      {"fullpose": s["fullpose"][i].float(), "transl": s["transl"][i].float(),
+                       "betas": s["betas"][i].float()})
+            for i, n in enumerate(s["names"])]

@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from graspkit.models.wholegrasp import WholeGraspVAE
-from graspkit.viz.grasp_latent import CONTACT_LEVEL, LatentWalk
+from graspkit.viz.saga import CONTACT_LEVEL, LatentWalk
 
 
 @pytest.fixture(scope="module")

@@ -125,6 +125,8 @@ class WholeGraspVAE(nn.Module):
         # emit standardised markers, the losses are in metres
         self.register_buffer("marker_mean", torch.zeros(n, 3))
         self.register_buffer("marker_std", torch.ones(3))
+        nn.init.zeros_(self.out_markers.weight)           # training starts from the mean grasp
+        nn.init.zeros_(self.out_markers.bias)
         if mt:
             self.out_marker_contact = nn.Linear(h, n)
             lv = self.obj_dec.level_channels                      # [3, 128, 256, 512]
@@ -396,10 +398,14 @@ def reconstruction_metrics(model: WholeGraspVAE, data: WholeGraspTrainingSet, ba
 
 def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask: bool = True, epochs: int = 12,
                      batch_size: int = 32, lr: float = 1e-3, seed: int = 0, time_limit_s: float | None = 600.0,
-                     threads: int | None = 1, progress: bool = True, half: bool = True) -> dict[str, Any]:
-    """Train WholeGrasp-VAE (or WholeGrasp-single) on `<root>/grasp_*.npz` (train split, yaw-augmented; the val
-    split logged) with graspkit.train.fit; write weights-only `out` (float16 when `half`) and `out`.run.pt/.csv.
-    Returns {'history', 'seconds', 'val': reconstruction_metrics on the val split, 'out'}."""
+                     threads: int | None = 1, progress: bool = True, half: bool = True,
+                     augment_yaw: bool = False) -> dict[str, Any]:
+    """Train WholeGrasp-VAE (or WholeGrasp-single) on `<root>/grasp_*.npz` (train split; the val split logged)
+    with graspkit.train.fit; write weights-only `out` (float16 when `half`) and `out`.run.pt/.csv.
+    Returns {'history', 'seconds', 'val': reconstruction_metrics on the val split, 'out'}.
+
+    As in SAGA (GRAB), the data keep the world orientation: people come to the object from the side they start
+    on, so grasps are not spread evenly around it; `augment_yaw` would spread them (not SAGA's setting)."""
     import time
 
     from graspkit.train import TrainConfig, fit, save_checkpoint
@@ -410,7 +416,7 @@ def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask:
     torch.manual_seed(seed)
     model = WholeGraspVAE(WholeGraspConfig(multitask=multitask))
     t0 = time.perf_counter()
-    train = WholeGraspTrainingSet.from_folder(root, "train", model, augment_yaw=True)
+    train = WholeGraspTrainingSet.from_folder(root, "train", model, augment_yaw=augment_yaw)
     val = WholeGraspTrainingSet.from_folder(root, "val", model)
     model.fit_normalisation(yaw_spread(train.data["markers"]) if train.augment_yaw else train.data["markers"])
     prep = time.perf_counter() - t0
@@ -508,6 +514,8 @@ class GrabNetSMPLX(nn.Module):
                                  ResBlock(hidden, hidden, n_hidden=hidden // 2), nn.Linear(hidden, self.n_params))
         self.register_buffer("param_mean", torch.zeros(self.n_params))     # standardised parameters in and out
         self.register_buffer("param_std", torch.ones(self.n_params))
+        nn.init.zeros_(self.dec[-1].weight)                                 # training starts from the mean grasp
+        nn.init.zeros_(self.dec[-1].bias)
 
     def fit_normalisation(self, params: Tensor) -> None:
         """Set the parameter statistics from training parameter vectors (B, 193)."""
@@ -640,7 +648,7 @@ def turn_params(params: Tensor, root_joint: Tensor, Q: Tensor) -> Tensor:
 
 def train_grabnet_smplx(root: str | Path, out: str | Path | None = None, epochs: int = 12, batch_size: int = 32,
                         lr: float = 1e-3, seed: int = 0, time_limit_s: float | None = 600.0, threads: int | None = 1,
-                        progress: bool = True, half: bool = True) -> dict[str, Any]:
+                        progress: bool = True, half: bool = True, augment_yaw: bool = False) -> dict[str, Any]:
     """Train the GrabNet-SMPLX baseline like `train_wholegrasp`; returns {'history', 'seconds', 'out'}."""
     import time
 
@@ -658,12 +666,15 @@ def train_grabnet_smplx(root: str | Path, out: str | Path | None = None, epochs:
     body, pca = SparseBody(bm, saga_markers(bm).vertex_ids), HandPCA(bm)
     model = GrabNetSMPLX()
     t0 = time.perf_counter()
-    train = GrabNetTrainingSet(root, "train", bm, model, augment_yaw=True)
+    train = GrabNetTrainingSet(root, "train", bm, model, augment_yaw=augment_yaw)
     val = GrabNetTrainingSet(root, "val", bm, model)
-    g = torch.Generator().manual_seed(seed)       # statistics of the yaw-augmented training parameters
-    turned = [turn_params(train.data["params"], train.data["root_joint"], _yaw(float(torch.rand((), generator=g)) * 6.2832))
-              for _ in range(8)]
-    model.fit_normalisation(torch.cat(turned))
+    if augment_yaw:                               # statistics of the yaw-augmented training parameters
+        g = torch.Generator().manual_seed(seed)
+        model.fit_normalisation(torch.cat([turn_params(train.data["params"], train.data["root_joint"],
+                                                       _yaw(float(torch.rand((), generator=g)) * 2 * math.pi))
+                                           for _ in range(8)]))
+    else:
+        model.fit_normalisation(train.data["params"])
 
     def step(m: nn.Module, batch: dict[str, Tensor], epoch: int) -> dict[str, Tensor]:
         """One batch of the GrabNet-style loss."""

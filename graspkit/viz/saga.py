@@ -1,4 +1,4 @@
-"""Walk WholeGrasp-VAE's latent space for one object (lesson 05's widget).
+"""SAGA stage-1 pictures: the WholeGrasp-VAE diagram and a walk through its latent space (lesson 05).
 
 `LatentWalk` holds the object and a latent z (16-D); `update(name, value)` changes one latent coordinate (or draws
 a new z from a seed) and decodes the grasp: markers, marker contacts, object contacts (SAGA §3.2, inference). It is
@@ -14,6 +14,49 @@ import numpy as np
 import torch
 from matplotlib.figure import Figure
 from torch import Tensor
+
+_BOXES = [  # (x, y, w, h, text, colour) of the WholeGrasp-VAE diagram (SAGA Fig. 3)
+    (0.0, 2.6, 1.9, 0.7, "markers M (143x3)\n+ contacts C_M", "#3b6ea8"),
+    (0.0, 1.4, 1.9, 0.7, "object O (2048 pts,\nxyz + normal) + C_O", "#c0504d"),
+    (2.3, 2.6, 1.6, 0.7, "ResBlocks\n(body branch)", "#3b6ea8"),
+    (2.3, 1.4, 1.6, 0.7, "PointNet++ (enc)\nSA 256/128/all", "#c0504d"),
+    (4.3, 2.0, 1.3, 0.7, "[F_B, F_O, t_O]\n-> mu, sigma", "#6a3d9a"),
+    (6.0, 2.0, 1.0, 0.7, "z (16-D)", "#6a3d9a"),
+    (6.0, 0.5, 2.0, 0.7, "object O\n(xyz + normal), t_O", "#c0504d"),
+    (7.4, 2.0, 1.6, 0.7, "ResBlocks\n(decoder)", "#2ca02c"),
+    (8.4, 0.5, 1.6, 0.7, "PointNet++ (dec)\n+ feature prop.", "#c0504d"),
+    (9.4, 2.9, 1.6, 0.6, "markers M^", "#2ca02c"),
+    (9.4, 2.1, 1.6, 0.6, "sigmoid C^_M", "#2ca02c"),
+    (10.4, 1.2, 1.5, 0.6, "sigmoid C^_O\n(per point)", "#2ca02c"),
+]
+_ARROWS = [(0, 2), (1, 3), (2, 4), (3, 4), (4, 5), (5, 7), (6, 8), (8, 7), (7, 9), (7, 10), (8, 11), (7, 11)]
+
+
+def wholegrasp_diagram(width: float = 11.0) -> Figure:
+    """WholeGrasp-VAE as boxes and arrows (SAGA Fig. 3; encoder used in training only)."""
+    from matplotlib.patches import FancyArrowPatch, FancyBboxPatch
+
+    fig = Figure(figsize=(width, width * 0.32), dpi=72)
+    ax = fig.add_subplot(1, 1, 1)
+    ax.set_xlim(-0.1, 12.0)
+    ax.set_ylim(0.2, 3.7)
+    ax.axis("off")
+    for x, y, w, h, text, c in _BOXES:
+        ax.add_patch(FancyBboxPatch((x, y), w, h, boxstyle="round,pad=0.03", fc=c, alpha=0.25, ec=c))
+        ax.text(x + w / 2, y + h / 2, text, ha="center", va="center", fontsize=7.5)
+    for a, b in _ARROWS:
+        xa, ya, wa, ha = _BOXES[a][:4]
+        xb, yb, wb, hb = _BOXES[b][:4]
+        up = yb > ya + ha                     # the target sits above: leave from the top, enter at the bottom
+        start = (xa + wa / 2, ya + ha) if up and xb < xa + wa else (xa + wa, ya + ha / 2)
+        end = (xb + wb / 2, yb) if up and xb < xa + wa else (xb, yb + hb / 2)
+        ax.add_patch(FancyArrowPatch(start, end, arrowstyle="-|>", mutation_scale=10, color="0.35",
+                                     shrinkA=2, shrinkB=2))
+    ax.text(2.6, 3.55, "encoder q(z | M, C_M, C_O, t_O, O): training only", fontsize=8, color="0.3")
+    ax.text(7.2, 3.55, "decoder p(M, C_M, C_O | z, t_O, O): sampling", fontsize=8, color="0.3")
+    ax.axvline(5.8, color="0.8", lw=0.8, ls="--")
+    return fig
+
 
 SEED_SLIDER = "seed"
 MARKER_IN_CONTACT = "#2ca02c"     # SAGA Fig. 3: markers in contact in green
