@@ -14,15 +14,18 @@ The perceptual studies (Tab. 3-4) are not reproduced.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 import torch
+from scipy.spatial import cKDTree
 from torch import Tensor
 
 from graspkit.models.gnet import pose_rotmats
 from graspkit.models.mnet import MNet, MNetWindows, predict_horizon
+from graspkit.rotations import rotation_about_z
 
 PAPER_TAB1 = {  # GOAL Tab. 1: penetration volume (cm^3), contact ratio
     "GrabNet [57]": (2.65, 1.00), "GrabNet-SMPL-X": (7.33, 0.87), "GNet w/o opt": (5.32, 0.87),
@@ -110,31 +113,66 @@ def object_points_world(seq, frame: int = 0) -> Tensor:
     return torch.as_tensor(np.asarray(seq.object_points, np.float64) @ R.T + t).float()
 
 
+def kd_offsets(v: Tensor, points: Tensor) -> Tensor:
+    """Offsets (B,N,3) from v (B,N,3) to the closest of points (B,P,3), by a KD-tree per sample (no gradient)."""
+    out = torch.empty_like(v)
+    for b in range(len(v)):
+        pts = points[b].double().numpy()
+        _, idx = cKDTree(pts).query(v[b].double().numpy())
+        out[b] = torch.as_tensor(pts[idx]).to(v.dtype) - v[b]
+    return out
+
+
+def kd_bps(points: Tensor, basis: Tensor) -> Tensor:
+    """BPS codes (B,K) of point clouds (B,P,3) (already relative to the basis centre), by a KD-tree per sample."""
+    return torch.stack([torch.as_tensor(cKDTree(p.double().numpy()).query(basis.double().numpy())[0]).float()
+                        for p in points])
+
+
 @torch.no_grad()
 def goal_labels(rot6d: Tensor, transl: Tensor, betas: Tensor, points: Tensor, obj_transl: Tensor) -> dict[str, Tensor]:
     """GOAL's labels of grasps (B,...) recomputed on graspkit's body (Eq. 2): the 400 sampled vertices, their offsets
     to the closest object point (points (B,P,3)), the head direction q and the object's BPS code (points minus the
     object translation, the fixed 1024-point basis of radius 0.15 m)."""
-    from graspkit.objects.bps import bps_basis, bps_encode
-    from graspkit.optim.goal_refine import hand_object_offsets
+    from graspkit.objects.bps import bps_basis
 
     _, gv, body = _body()
     head = _head_body()
     v = body(pose_rotmats(rot6d), betas, transl)[0].float()
     hv = head(pose_rotmats(rot6d), betas, transl)[0].float()
-    return {"verts": v, "offsets": hand_object_offsets(v, points), "head_dir": torch.nn.functional.normalize(
-            hv[:, 1] - hv[:, 0], dim=-1), "bps": bps_encode(points - obj_transl[:, None], bps_basis()).float()}
+    return {"verts": v, "offsets": kd_offsets(v, points), "head_dir": torch.nn.functional.normalize(
+            hv[:, 1] - hv[:, 0], dim=-1), "bps": kd_bps(points - obj_transl[:, None], bps_basis())}
+
+
+def gnet_frame(start_xy: Tensor, centre: Tensor) -> tuple[Tensor, Tensor]:
+    """GNet's frame (x' = R (x − o)) for starts (B,2) and object centres (B,3): the origin on the floor under the object
+    centre, the horizontal direction from the start to the object along −y (the data's start faces −y)."""
+    d = centre[:, :2] - start_xy
+    R = rotation_about_z(-math.pi / 2 - torch.atan2(d[:, 1], d[:, 0]))
+    return R.to(centre.dtype), torch.cat([centre[:, :2], torch.zeros_like(centre[:, :1])], 1)
+
+
+def _start_xy(seq) -> np.ndarray:
+    """Where the sequence's person started (x, y): the stored task start, else the first frame's pelvis."""
+    if "grasp.start" in seq.extras:
+        return np.asarray(seq.extras["grasp.start"], np.float64)[:2]
+    bm, _, _ = _body()
+    from graspkit.models.mnet import rest_root
+    return (rest_root(bm, torch.as_tensor(seq.betas[None, :10]).float())[0].double().numpy() + seq.trans[0])[:2]
 
 
 def gnet_samples(seqs: list, accepted_only: bool = True) -> dict[str, Tensor]:
-    """GNet's tensors (see GNet.features) from GRAB-style grasp or approach sequences at their grasp frame; the labels
-    are recomputed from the stored parameters and object (`goal_labels`), so they always match graspkit's body."""
+    """GNet's tensors (see GNet.features) from GRAB-style grasp or approach sequences at their grasp frame, in GNet's
+    frame (`gnet_frame`); the labels are recomputed from the stored parameters and object (`goal_labels`), so they
+    always match graspkit's body. Also: 'points' (B,P,3) the object's points, 'R' (B,3,3), 'o' (B,3) the frame."""
+    from graspkit.models.mnet import rest_root, transform_params, transform_points
     from graspkit.rotations import axis_angle_to_rot6d
 
     if accepted_only:
         seqs = [s for s in seqs if bool(s.extras.get("grasp.accepted", True))]
     if not seqs:
         raise ValueError("seqs: no (accepted) sequences")
+    bm, _, _ = _body()
     frames = [int(s.extras.get("grasp.goal_frame", s.extras.get("grasp.frame", np.array(0)))) for s in seqs]
     rot6d = torch.stack([axis_angle_to_rot6d(torch.as_tensor(s.poses[f], dtype=torch.float64)).float()
                          for s, f in zip(seqs, frames)])
@@ -143,7 +181,10 @@ def gnet_samples(seqs: list, accepted_only: bool = True) -> dict[str, Tensor]:
     obj_t = torch.stack([torch.as_tensor(np.array(s.object_transl[f])) for s, f in zip(seqs, frames)]).float()
     P = min(len(s.object_points) for s in seqs)
     points = torch.stack([object_points_world(s, f)[:P] for s, f in zip(seqs, frames)])
-    out = {"rot6d": rot6d, "transl": transl, "betas": betas, "obj_transl": obj_t}
+    R, o = gnet_frame(torch.as_tensor(np.stack([_start_xy(s) for s in seqs])).float(), obj_t)
+    rot6d, transl = transform_params(rot6d, transl, rest_root(bm, betas), R, o)
+    points, obj_t = transform_points(points, R, o), transform_points(obj_t[:, None], R, o)[:, 0]
+    out = {"rot6d": rot6d, "transl": transl, "betas": betas, "obj_transl": obj_t, "points": points, "R": R, "o": o}
     for i in range(0, len(seqs), 256):
         lab = goal_labels(rot6d[i:i + 256], transl[i:i + 256], betas[i:i + 256], points[i:i + 256], obj_t[i:i + 256])
         for k, v in lab.items():
@@ -345,36 +386,40 @@ def _grasp_row(bm, rot6d: Tensor, transl: Tensor, betas: Tensor, meshes: list) -
 
 
 def gnet_table(gnet, baseline, seqs: list, seed: int = 0, refine_weights=None) -> dict:
-    """GOAL Tab. 1 on grasps `seqs` (one GNet sample per ground-truth grasp, same object pose and body shape):
-    {row: {'volume_cm3', 'contact_ratio', 'depth_cm', 'n'}} and the per-grasp metrics / bodies under 'samples'."""
+    """GOAL Tab. 1 on grasps `seqs` (one GNet sample per ground-truth grasp, same object pose, start and body shape),
+    in GNet's frame: {row: {'volume_cm3', 'contact_ratio', 'depth_cm', 'feet_cm', 'n'}}, per-grasp metrics and bodies
+    under 'samples', the refinement's energies under 'refine_history'."""
     from graspkit.optim.goal_refine import GraspRefiner
 
     bm, gv, _ = _body()
     gt = gnet_samples(seqs, accepted_only=False)
     frames = [int(s.extras.get("grasp.goal_frame", s.extras.get("grasp.frame", np.array(0)))) for s in seqs]
-    meshes = [object_mesh_world(s, f) for s, f in zip(seqs, frames)]
-    P = min(len(s.object_points) for s in seqs)
-    points = torch.stack([object_points_world(s, f)[:P] for s, f in zip(seqs, frames)])
-    g = torch.Generator().manual_seed(seed)
-    z = torch.randn(len(seqs), gnet.cfg.latent, generator=g)
+    meshes = []
+    for b, (s, f) in enumerate(zip(seqs, frames)):
+        m = object_mesh_world(s, f)
+        T = np.eye(4)
+        T[:3, :3] = gt["R"][b].double().numpy()
+        T[:3, 3] = -T[:3, :3] @ gt["o"][b].double().numpy()
+        m.apply_transform(T)
+        meshes.append(m)
+    z = torch.randn(len(seqs), gnet.cfg.latent, generator=torch.Generator().manual_seed(seed))
     hat = gnet.sample(gt["bps"], gt["obj_transl"], gt["betas"], z=z)
-    refined = GraspRefiner(bm, gv)(hat, gt["betas"], points, refine_weights)
-    bodies = {"GrabNet-SMPL-X": None, "GNet w/o opt": (hat["rot6d"], hat["transl"]),
-              "GNet": (refined.rot6d, refined.transl), "synthetic GT": (gt["rot6d"], gt["transl"])}
+    refined = GraspRefiner(bm, gv)(hat, gt["betas"], gt["points"], refine_weights)
+    bodies = {"GNet w/o opt": (hat["rot6d"], hat["transl"]), "GNet": (refined.rot6d, refined.transl),
+              "synthetic GT": (gt["rot6d"], gt["transl"])}
     if baseline is not None:
         b = baseline.sample(gt["bps"], gt["obj_transl"], gt["betas"], z=z)
-        bodies["GrabNet-SMPL-X"] = (b["rot6d"], b["transl"])
+        bodies = {"GrabNet-SMPL-X": (b["rot6d"], b["transl"]), **bodies}
     table, samples = {}, {}
     for name, body in bodies.items():
-        if body is None:
-            continue
         rows = _grasp_row(bm, body[0], body[1], gt["betas"], meshes)
         samples[name] = {"rows": rows, "rot6d": body[0], "transl": body[1]}
         table[name] = {"volume_cm3": float(np.mean([r["volume_cm3"] for r in rows])),
                        "contact_ratio": float(np.mean([r["contact"] for r in rows])),
                        "depth_cm": float(np.mean([r["depth_cm"] for r in rows])),
                        "feet_cm": float(np.mean([abs(r["feet_cm"]) for r in rows])), "n": len(rows)}
-    return {"table": table, "samples": samples, "refine_history": refined.history}
+    return {"table": table, "samples": samples, "refine_history": refined.history, "hat": hat, "gt": gt,
+            "meshes": meshes}
 
 
 # ------------------------------------------------------------------------------------------- rollouts, foot sliding
@@ -506,21 +551,34 @@ def evaluate(folders=None, stubs=None, n_grasps: int = 60, n_rollouts: int = 24,
     return res
 
 
-def _gnet_goals(gnet, clips: list, seed: int) -> list:
-    """GNet + refinement grasps (rot6d, transl) for each clip's object and body (one sample each)."""
-    from graspkit.objects.bps import bps_basis, bps_encode
+def gnet_goal(gnet, start: tuple[Tensor, Tensor], betas: Tensor, object_points: Tensor, obj_centre: Tensor,
+              z: Tensor | None = None, generator: torch.Generator | None = None, refine_weights=None
+              ) -> tuple[Tensor, Tensor, dict]:
+    """GOAL's first stage for one start pose (rot6d (55,6), transl (3,)) and object (points (P,3), centre (3,)) in the
+    world: GNet's frame from the start pelvis to the object, a sample, the refinement (Eq. 4-8), back to the world.
+    Returns the goal grasp's rot6d (55,6), transl (3,) and {'hat', 'refined', 'R', 'o'} (GNet's frame)."""
+    from graspkit.models.mnet import _invert, rest_root, transform_params, transform_points
+    from graspkit.objects.bps import bps_basis
     from graspkit.optim.goal_refine import GraspRefiner
 
     bm, gv, _ = _body()
-    P = min(len(c.object_points) for c in clips)
-    pts = torch.stack([c.object_points[:P] for c in clips])
-    centre = torch.stack([c.obj_centre for c in clips])
-    betas = torch.stack([c.betas for c in clips])
-    bps = bps_encode(pts - centre[:, None], bps_basis()).float()
-    z = torch.randn(len(clips), gnet.cfg.latent, generator=torch.Generator().manual_seed(seed + 1))
-    hat = gnet.sample(bps, centre, betas, z=z)
-    r = GraspRefiner(bm, gv)(hat, betas, pts)
-    return [(r.rot6d[i], r.transl[i]) for i in range(len(clips))]
+    b = betas.reshape(1, -1).float()
+    root = rest_root(bm, b)
+    R, o = gnet_frame((root[0] + start[1].float())[None, :2], obj_centre.reshape(1, 3).float())
+    pts = transform_points(object_points.reshape(1, -1, 3).float(), R, o)
+    c = transform_points(obj_centre.reshape(1, 1, 3).float(), R, o)[:, 0]
+    hat = gnet.sample(kd_bps(pts - c[:, None], bps_basis()), c, b, generator=generator, z=z)
+    ref = GraspRefiner(bm, gv)(hat, b, pts, refine_weights)
+    Ri, oi = _invert(R, o)
+    r6, t = transform_params(ref.rot6d, ref.transl, root, Ri, oi)
+    return r6[0], t[0], {"hat": hat, "refined": ref, "R": R, "o": o}
+
+
+def _gnet_goals(gnet, clips: list, seed: int) -> list:
+    """GNet + refinement grasps (rot6d, transl) in the world for each clip's start, object and body (one sample each)."""
+    g = torch.Generator().manual_seed(seed + 1)
+    return [gnet_goal(gnet, (c.rot6d[0], c.transl[0]), c.betas, c.object_points, c.obj_centre, generator=g)[:2]
+            for c in clips]
 
 
 if __name__ == "__main__":

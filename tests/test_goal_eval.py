@@ -26,6 +26,9 @@ def one_thread():
     torch.set_num_threads(n)
 
 
+REACH_START = (0.3, -0.2)
+
+
 def _sequence(k: int, name: str) -> GraspSequence:
     """A reaching clip of data_stubs as an approach clip: the object sits at the goal, turned about z."""
     m = load_motion(REACH[k])
@@ -33,7 +36,8 @@ def _sequence(k: int, name: str) -> GraspSequence:
     orient = np.array([0.0, 0.0, 0.4 + k], np.float32)
     pts, nrm = object_points(name)
     return GraspSequence(m.poses, m.trans, m.betas, 30.0, name, np.broadcast_to(m.goal, (T, 3)),
-                         np.broadcast_to(orient, (T, 3)), f"meshes/{name}.ply", {}, {"grasp.goal_frame": np.array(m.goal_frame)},
+                         np.broadcast_to(orient, (T, 3)), f"meshes/{name}.ply", {},
+                         {"grasp.goal_frame": np.array(m.goal_frame), "grasp.start": np.array([*REACH_START, 0.0])},
                          pts, nrm)
 
 
@@ -47,12 +51,19 @@ def test_labels_are_those_of_the_full_body_and_a_kd_tree():
         full = bm(betas=torch.as_tensor(seq.betas[None]), global_orient=p[:, :3], body_pose=p[:, 3:66],
                   jaw_pose=p[:, 66:69], leye_pose=p[:, 69:72], reye_pose=p[:, 72:75], left_hand_pose=p[:, 75:120],
                   right_hand_pose=p[:, 120:], transl=torch.as_tensor(seq.trans[f:f + 1])).vertices[0]
-        np.testing.assert_allclose(s["verts"][b].numpy(), full[gv.vertex_ids].numpy(), atol=1e-5)
-        pts = Rotation.from_rotvec(seq.object_orient[f]).apply(seq.object_points) + seq.object_transl[f]
+        R, o = s["R"][b].double().numpy(), s["o"][b].double().numpy()     # GNet's frame: x' = R (x - o)
+        start = np.asarray(REACH_START)
+        d = seq.object_transl[f, :2] - start
+        np.testing.assert_allclose(R @ np.r_[d / np.linalg.norm(d), 0], [0, -1, 0], atol=1e-6)   # start -> object: -y
+        np.testing.assert_allclose(o, np.r_[seq.object_transl[f, :2], 0], atol=1e-6)
+        full = (full.double().numpy() - o) @ R.T
+        np.testing.assert_allclose(s["verts"][b].numpy(), full[gv.vertex_ids], atol=2e-5)
+        pts = (Rotation.from_rotvec(seq.object_orient[f]).apply(seq.object_points) + seq.object_transl[f] - o) @ R.T
         _, idx = cKDTree(pts).query(s["verts"][b].numpy())
-        np.testing.assert_allclose(s["offsets"][b].numpy(), pts[idx] - s["verts"][b].numpy(), atol=1e-5)
-        q = goal_vertices(bm).head_direction(full)
+        np.testing.assert_allclose(s["offsets"][b].numpy(), pts[idx] - s["verts"][b].numpy(), atol=2e-5)
+        q = goal_vertices(bm).head_direction(torch.as_tensor(full))
         np.testing.assert_allclose(s["head_dir"][b].numpy(), q.numpy(), atol=1e-5)
+        np.testing.assert_allclose(s["obj_transl"][b].numpy(), [0, 0, seq.object_transl[f, 2]], atol=1e-6)
     assert s["bps"].shape == (2, 1024) and float(s["bps"].min()) >= 0
 
 
