@@ -3,8 +3,9 @@
 The reach plan that a grasp was fitted on (graspkit.data.grasp: plan_reach from a start 0.05-1.5 m away, facing
 the object within +-10 deg, SAGA Sec. 4.3 / GOAL Sec. 3) already walks and reaches; the approach clip adds:
 
-- the grasp: from half a second before the grasp frame the spine, neck, head and right arm rotate smoothly from the
-  plan into the fitted grasp pose (each joint: the plan's rotation times a growing fraction of the fitted change);
+- the grasp: the spine, neck and head rotate smoothly into the fitted pose over the last half second; the right arm
+  turns from the plan's configuration into the grasp's (local rotations slerped over ARM_BLEND_S) and the wrist's last
+  APPROACH_S seconds are a straight line in along the grasp's approach direction (IK per frame, the grasp's elbow pole);
   the fingers go from the plan's opening hand to the grasp type's open pre-shape, then close into the grasp in the
   last GRASP_CLOSE_S seconds; from the grasp frame on, the whole pose is held (GOAL's goal frame = this frame);
 - a GRAB-like start: half of the clips start in a T-pose (GRAB's start pose), whose arms lower into the plan's
@@ -91,7 +92,8 @@ def approach_motion(plan: Motion, grasp_frame: int, grasp_pose: np.ndarray, open
 
 APPROACH_S = 0.45      # s: the hand's straight final approach
 APPROACH_DIST = 0.10   # m: from this far out along the approach direction
-ARM_BLEND_S = 0.5      # s before the straight approach in which the arm leaves the plan
+ARM_BLEND_S = 0.7      # s before the straight approach in which the arm turns from the plan's into the grasp's
+MAX_TWIST = np.deg2rad(85.0)   # forearm twist moved from the wrist into the elbow at most (as grasp_opt.solve_arm)
 
 
 def _approach_arm(R: np.ndarray, Rg: np.ndarray, trans: np.ndarray, g: int, fps: float, s: np.ndarray, rig) -> None:
@@ -117,21 +119,29 @@ def _approach_arm(R: np.ndarray, Rg: np.ndarray, trans: np.ndarray, g: int, fps:
     b = smoothstep((tt + APPROACH_S + ARM_BLEND_S) / ARM_BLEND_S)[:, None]   # leave the plan's path
     target = (1 - b) * Pw[:, wr] + b * A
     hand = _slerp_from(Rw[:, wr], np.broadcast_to(H, Rw[:, wr].shape), b[:, 0])
-    # collar from the grasp, phased in with b; then two-bone IK with the grasp's elbow pole and the twist split
+    # collar from the grasp, phased in with b; then two-bone IK and the twist split
     Rc = _slerp_from(R[win, cs], np.broadcast_to(Rg[cs], R[win, cs].shape), b[:, 0])
     R[win, cs] = Rc
     Rw, Pw = forward_kinematics(rig, R[win], root[win])
     b1, b2 = rig.bone("right_shoulder", "right_elbow"), rig.bone("right_elbow", "right_wrist")
-    pole_w = normalize((1 - b) * (Pw[:, el] - Pw[:, sh]) + b * pole)
-    R_up, R_fore, _ = two_bone_ik(Pw[:, sh], target, pole_w, b1, b2, np.array([0.0, 0.0, -1.0]))
+    # the elbow swivels about the shoulder -> target line from the plan's side to the grasp's (angle blended by b),
+    # so the wrist stays on its path while the arm changes configuration
+    axis = normalize(target - Pw[:, sh])
+    perp = lambda x: normalize(x - (x * axis).sum(-1, keepdims=True) * axis)  # noqa: E731
+    p0, p1 = perp(Pw[:, el] - Pw[:, sh]), perp(np.broadcast_to(pole, target.shape))
+    ang = np.arctan2((np.cross(p0, p1) * axis).sum(-1), (p0 * p1).sum(-1))
+    th = (b[:, 0] * ang)[:, None]
+    pole_t = np.cos(th) * p0 + np.sin(th) * np.cross(axis, p0)
+    R_up, R_fore, _ = two_bone_ik(Pw[:, sh], target, pole_t, b1, b2, np.array([0.0, 0.0, -1.0]))
     d = normalize(b2)
     wrist = np.swapaxes(R_fore, -1, -2) @ hand
     aa = matrix_axis_angle(wrist)
-    twist = (aa @ d)[:, None] * d                                            # the wrist's rotation about the forearm
+    twist = np.clip(aa @ d, -MAX_TWIST, MAX_TWIST)[:, None] * d              # forearm twist into the elbow (limited)
     R_fore = R_fore @ axis_angle_matrix(twist)
     ik = np.stack([np.swapaxes(Rw[:, cs], -1, -2) @ R_up, np.swapaxes(R_up, -1, -2) @ R_fore,
                    np.swapaxes(R_fore, -1, -2) @ hand], 1)                   # local shoulder, elbow, wrist
-    R[win[:, None], [sh, el, wr]] = _slerp_from(R[win][:, [sh, el, wr]], ik, np.broadcast_to(b, (len(win), 3)))
+    c = smoothstep((tt - tt[0]) / 0.2)[:, None]                              # the plan's twist split -> ours
+    R[win[:, None], [sh, el, wr]] = _slerp_from(R[win][:, [sh, el, wr]], ik, np.broadcast_to(c, (len(win), 3)))
     # land exactly on the fitted arm at the grasp frame (a small correction, phased in over the straight approach)
     for j in (sh, el, wr):
         delta = matrix_axis_angle(R[g, j].T @ Rg[j])

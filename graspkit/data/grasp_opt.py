@@ -177,7 +177,8 @@ def _mean_normal(v: np.ndarray, faces: np.ndarray, ids: np.ndarray) -> np.ndarra
 # ----------------------------------------------------------------------------- hand shapes
 # degrees: per finger (index, middle, pinky, ring) (MCP, PIP, DIP) flexion; thumb (CMC flexion, CMC palmar
 # abduction, CMC twist, MCP flexion, IP flexion); MCP spread (index, middle, pinky, ring). Each grasp type
-# closes every digit from `open` towards `closed` until it touches (close_fingers).
+# closes every digit from `open` towards `closed` until it touches (close_fingers); no joint beyond 100 deg
+# (graspkit.metrics' finger range).
 @dataclass(frozen=True)
 class HandShape:
     """Open and closed finger angles of one grasp type (degrees)."""
@@ -190,8 +191,8 @@ class HandShape:
 
 
 HAND_SHAPES: dict[str, HandShape] = {
-    "power": HandShape(((8, 8, 2),) * 4, ((95, 110, 65),) * 4, (-5, 5, 25, 0, 0), (45, 60, 60, 45, 50)),
-    "handle": HandShape(((5, 5, 0),) * 4, ((100, 115, 70),) * 4, (-5, 5, 25, 0, 0), (45, 55, 55, 45, 50),
+    "power": HandShape(((8, 8, 2),) * 4, ((90, 100, 65),) * 4, (-5, 5, 25, 0, 0), (45, 60, 60, 45, 50)),
+    "handle": HandShape(((5, 5, 0),) * 4, ((90, 100, 70),) * 4, (-5, 5, 25, 0, 0), (45, 55, 55, 45, 50),
                         (1.0, 0.0, -2.0, -1.0)),
     "side": HandShape(((0, 0, 0),) * 4, ((80, 100, 60),) * 4, (-5, 0, 15, 0, 0), (35, 45, 40, 40, 45)),
     # pinch closes onto graspkit.body.hand_poses' 'pinch' template, where the thumb pad meets the index tip
