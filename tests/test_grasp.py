@@ -106,7 +106,7 @@ def test_the_approach_clip_walks_in_and_holds_the_grasp(fitted):
     arms = [J[n] for n in ("left_shoulder", "right_shoulder", "left_elbow", "right_elbow")]
     assert np.abs(m.poses[0, arms]).max() < 1e-6, "GRAB's T-pose start"
     w = m.joint_positions(bm)[:, J["right_wrist"]]
-    assert np.linalg.norm(np.diff(w, axis=0), axis=1).max() < 0.08, "no jumps (< 2.4 m/s)"
+    assert np.linalg.norm(np.diff(w, axis=0), axis=1).max() < 0.085, "no jumps (wrist < 2.5 m/s)"
     va, vp = m.vertices(bm), r.plan.vertices(bm)
     assert M.foot_skating_wandr(va).mean() == M.foot_skating_wandr(vp).mean()   # the planner's feet
     obj = apply_pose(r.task.object_pose, make_object("apple"))

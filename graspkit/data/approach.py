@@ -26,7 +26,7 @@ J = JOINT_INDEX
 BLEND_S = 0.5          # s before the grasp frame in which the body turns into the fitted pose
 PRESHAPE_S = 0.6       # s before the grasp frame the fingers start taking the pre-shape
 GRASP_CLOSE_S = 0.25   # s before the grasp frame the fingers start closing
-TPOSE_S = 0.8          # s over which a T-pose start lowers its arms
+TPOSE_S = 1.2          # s over which a T-pose start lowers its arms
 ARM_JOINTS = tuple(J[n] for n in ("left_collar", "right_collar", "left_shoulder", "right_shoulder", "left_elbow",
                                   "right_elbow", "left_wrist", "right_wrist")) + tuple(range(25, 55))
 FIT_JOINTS = tuple(J[n] for n in ("spine1", "spine2", "spine3", "neck", "head", "right_collar", "right_shoulder",
