@@ -6,7 +6,10 @@
 
 Reference: docs/data.md. Modules: motion (Motion), rig (body measurements), trajectory (root plans),
 footsteps (footstep planner, foot motion, contacts), ik (two-bone IK), posing (whole-body poses),
-locomotion, reaching, formats, cli.
+locomotion, reaching, formats, cli. Grasps (docs/grasps.md; import them from their modules): grasp (tasks, frames,
+GraspFitter), grasp_opt (partial skinning, arm IK, closing fingers, polish), grasp_make (labels, files, `graspkit data
+make --kind grasp|approach`), grasp_datasets (WholeGraspDataset, GNetDataset, ApproachDataset), grab (GRAB-style files),
+approach (approach-and-grasp clips).
 """
 from graspkit.data.formats import SequenceFileError, load_motion, save_motion
 from graspkit.data.locomotion import generate_locomotion
