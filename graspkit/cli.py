@@ -68,6 +68,12 @@ def build_parser() -> argparse.ArgumentParser:
                                                                                           required=True)
     from graspkit.eval_goal import add_goal_train_commands
     add_goal_train_commands(train)
+
+    # `graspkit eval <model>`: each model family adds its own evaluation subcommands to this parser
+    evaluate = sub.add_parser("eval", help="evaluate a model of the workbook").add_subparsers(dest="eval_command",
+                                                                                             required=True)
+    from graspkit.eval_wandr import add_wandr_commands
+    add_wandr_commands(train, evaluate)
     from graspkit.eval_saga import add_saga_train_commands
     add_saga_train_commands(train)
     return p

@@ -254,3 +254,283 @@ def table(rows: dict[str, dict[str, float]], paper: dict[str, tuple[float, float
 
 GRID_DESCRIPTION = {"angles_deg": EVAL_ANGLES_DEG, "heights_m": tuple(float(h) for h in EVAL_HEIGHTS),
                     "distances_m": tuple(float(d) for d in EVAL_DISTANCES), "frames": EVAL_FRAMES, "t_goal": T_GOAL}
+
+
+# ----------------------------------------------------------------------------------------------------- variants, CLI
+# Tab. 1 / Tab. 2 rows: which intention parts the condition keeps and which data the model learns from
+VARIANTS: dict[str, dict[str, Any]] = {
+    "wandr": {"intention": ("wrist", "orientation", "pelvis"), "kinds": ("locomotion", "reach"),
+              "row": "WANDR"},
+    "wandr_iw": {"intention": ("wrist",), "kinds": ("locomotion", "reach"), "row": "WANDR (I^w)"},
+    "wandr_iw_ip": {"intention": ("wrist", "pelvis"), "kinds": ("locomotion", "reach"), "row": "WANDR (I^w + I^p)"},
+    "wandr_iw_ir": {"intention": ("wrist", "orientation"), "kinds": ("locomotion", "reach"), "row": "WANDR (I^w + I^r)"},
+    "wandr_loco": {"intention": ("wrist", "orientation", "pelvis"), "kinds": ("locomotion",),
+                   "row": "WANDR / locomotion only (AMASS)"},
+    "wandr_reach": {"intention": ("wrist", "orientation", "pelvis"), "kinds": ("reach",),
+                    "row": "WANDR / reaching only (Circle)"},
+    "wandr_noint": {"intention": (), "kinds": ("locomotion", "reach"), "row": "VAE + opt"},
+}
+STRIDE = {"locomotion": 8, "reach": 4}          # frames between training windows (both kinds: ~69k windows per epoch)
+
+
+def starts_to_meta(starts: Sequence[I.StartPose]) -> dict[str, Any]:
+    """Start poses as plain tensors and strings (for a weights-only checkpoint)."""
+    return {k: torch.stack([getattr(s, k) for s in starts]) for k in ("p_prev", "p", "rest", "betas", "full_pose")} | {
+        "source": [s.source for s in starts]}
+
+
+def starts_from_meta(meta: dict[str, Any]) -> list[I.StartPose]:
+    """The held-out start poses stored in a checkpoint's meta."""
+    s = meta.get("starts")
+    if not s:
+        raise ValueError("checkpoint: no held-out start poses in its meta (train it with `graspkit train wandr`)")
+    return [I.StartPose(s["p_prev"][k], s["p"][k], s["rest"][k], s["betas"][k], s["full_pose"][k], s["source"][k])
+            for k in range(len(s["source"]))]
+
+
+def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str | None = None, epochs: int = 6,
+                    time_limit: float | None = None, seed: int = 0, threads: int = 2, batch_size: int = 512,
+                    lr: float = 1e-3, progress: bool = True) -> dict[str, Any]:
+    """Train one variant on the clips under `folder` (default <cache>/motion) and write a small checkpoint (with the
+    normalisation statistics, the held-out start poses of the test split, and the measured times) to `out`."""
+    import resource
+    import time
+    from pathlib import Path
+
+    from graspkit.body import BodyModel
+    from graspkit.data import load_motion
+    from graspkit.data.wandr_dataset import cached_clips, compute_stats, held_out_starts, split_clips, test_start_names
+    from graspkit.models.wandr import WandrConfig, WandrCVAE, save_wandr, train_wandr
+    from graspkit.paths import DATA_STUBS, cache_dir, default_model_path
+    from graspkit.train import TrainConfig
+
+    if variant not in VARIANTS:
+        raise ValueError(f"variant: expected one of {list(VARIANTS)}, got {variant!r}")
+    v = VARIANTS[variant]
+    folder = Path(folder) if folder else cache_dir() / "motion"
+    out = Path(out) if out else DATA_STUBS / "checkpoints" / f"{variant}.pt"
+    torch.set_num_threads(threads)
+    bm = BodyModel.from_file(default_model_path())
+    t0 = time.perf_counter()
+    clips = cached_clips(folder, bm)
+    names = split_clips(clips.names, seed=0)["train"]
+    train = clips.subset([n for n in names if n.split("/")[0] in v["kinds"]])
+    stats = compute_stats(train, seed=seed)
+    prep_s = time.perf_counter() - t0
+    start_names = test_start_names(folder, n=6)
+    starts = held_out_starts([load_motion(folder / n) for n in start_names], start_names, bm)
+    torch.manual_seed(seed)
+    model = WandrCVAE(WandrConfig(intention=v["intention"]), stats)
+    stride = {k: (s // 2 if len(v["kinds"]) == 1 else s) for k, s in STRIDE.items()}   # one kind: same epoch size
+    cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, num_threads=threads)
+    ck = cache_dir() / "wandr" / f"train_{variant}_s{seed}.pt"
+    cpu0, t1 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
+    history = train_wandr(model, train, cfg, checkpoint=ck, stride=stride, progress=progress, time_limit_s=time_limit)
+    cpu1 = resource.getrusage(resource.RUSAGE_SELF)
+    meta = {"variant": variant, "row": v["row"], "kinds": list(v["kinds"]), "train_clips": len(train),
+            "train_frames": int(train.lengths.sum()), "epochs": len(history), "train_wall_s": time.perf_counter() - t1,
+            "train_cpu_s": (cpu1.ru_utime + cpu1.ru_stime) - (cpu0.ru_utime + cpu0.ru_stime), "prep_wall_s": prep_s,
+            "threads": threads, "batch_size": batch_size, "stride": stride, "seed": seed,
+            "load_avg_end": float(__import__("os").getloadavg()[0]), "starts": starts_to_meta(starts)}
+    save_wandr(out, model, history, meta)
+    return {"out": out, **{k: meta[k] for k in ("epochs", "train_wall_s", "train_cpu_s")}, "history": history}
+
+
+def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = False, threads: int = 2
+                   ) -> dict[str, Any]:
+    """Evaluate a checkpoint on the full grid from its held-out starts; SR / FS / DTG and the Fig. 5 breakdowns."""
+    import time
+
+    from graspkit.body import BodyModel
+    from graspkit.models.wandr import load_wandr
+    from graspkit.paths import default_model_path
+
+    torch.set_num_threads(threads)
+    bm = BodyModel.from_file(default_model_path())
+    model = load_wandr(checkpoint)
+    starts = starts_from_meta(model.meta)
+    t0 = time.perf_counter()
+    if model.cfg.intention:
+        res = evaluate_grid(model, starts, bm, n=n, seed=seed)
+    else:                                  # "VAE + opt": no intention to steer, latents optimised per goal
+        from graspkit.optim.latent import evaluate_vae_opt
+        res = evaluate_vae_opt(model, starts, bm, seed=seed)
+    out = {"row": model.meta.get("row", "WANDR"), "summary": summary(res), "seconds": time.perf_counter() - t0,
+           "breakdown": {b: breakdown(res, b) for b in ("height", "angle", "distance")}}
+    if planner:
+        out["planner"] = summary(evaluate_planner(starts, bm))
+    return out
+
+
+def _cmd_train(args) -> int:
+    """`graspkit train wandr`."""
+    info = run_train_wandr(args.variant, args.data, args.out, args.epochs, args.time_limit, args.seed, args.threads)
+    print(f"wrote {info['out']}: {info['epochs']} epochs in {info['train_wall_s']:.0f} s wall "
+          f"({info['train_cpu_s']:.0f} s CPU); last loss {info['history'][-1]['loss']:.4f}")
+    return 0
+
+
+def _cmd_eval(args) -> int:
+    """`graspkit eval wandr`."""
+    rows, extra = {}, {}
+    for ck in args.checkpoint:
+        r = run_eval_wandr(ck, args.n, args.seed, planner=args.planner and not extra, threads=args.threads)
+        rows[r["row"]] = r["summary"]
+        print(f"{ck}: {r['row']}: SR {r['summary']['SR']:.1f} %, FS {r['summary']['FS']:.1f} %, "
+              f"DTG {r['summary']['DTG']:.1f} cm ({r['summary']['rollouts']} rollouts, {r['seconds']:.0f} s)")
+        for b, vals in r["breakdown"].items():
+            print(f"  SR by {b}: " + ", ".join(f"{k:g}: {x:.0f} %" for k, x in vals.items()))
+        if "planner" in r:
+            extra["procedural planner"] = r["planner"]
+    print(table({**rows, **extra}))
+    return 0
+
+
+def add_wandr_commands(train_sub, eval_sub) -> None:
+    """`graspkit train wandr` and `graspkit eval wandr`."""
+    from pathlib import Path
+
+    t = train_sub.add_parser("wandr", help="train WANDR (or a Tab. 1 / Tab. 2 ablation) on the procedural clips")
+    t.add_argument("--variant", choices=list(VARIANTS), default="wandr")
+    t.add_argument("--data", type=Path, default=None, help="folder with locomotion/ and reach/ clips (default: cache)")
+    t.add_argument("--out", type=Path, default=None, help="weights (default data_stubs/checkpoints/<variant>.pt)")
+    t.add_argument("--epochs", type=int, default=6)
+    t.add_argument("--time-limit", type=float, default=None, help="seconds; stops after the epoch that crosses it")
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--threads", type=int, default=2)
+    t.set_defaults(func=_cmd_train)
+    e = eval_sub.add_parser("wandr", help="WANDR's goal grid (SR / FS / DTG) for one or more checkpoints")
+    e.add_argument("--checkpoint", type=Path, action="append", required=True)
+    e.add_argument("--n", type=int, default=5, help="samples per start and goal")
+    e.add_argument("--seed", type=int, default=0)
+    e.add_argument("--planner", action="store_true", help="add the procedural planner's row")
+    e.add_argument("--threads", type=int, default=2)
+    e.set_defaults(func=_cmd_eval)
+
+
+# ----------------------------------------------------------------------------------------------------- meshes, widget
+def body_vertices(bm, p: Tensor, start: I.StartPose, chunk: int = 64) -> Tensor:
+    """Mesh vertices (T, V, 3) of generated poses p (T, 135) on the start's body; jaw, eyes and hands keep the start's
+    pose (WANDR generates the 22 body joints only)."""
+    from graspkit.rotations import axis_angle_to_matrix
+
+    other = axis_angle_to_matrix(start.full_pose[I.NUM_BODY:].to(bm.dtype))
+    out = []
+    with torch.no_grad():
+        for a in range(0, len(p), chunk):
+            t, R = I.pose_rotmats(p[a:a + chunk].to(bm.dtype))
+            rot = torch.cat([R, other.expand(len(R), -1, -1, -1)], 1)
+            out.append(bm.forward_rotmats(rot, betas=start.betas[None].to(bm.dtype), transl=t).vertices)
+    return torch.cat(out)
+
+
+def goal_from_cylinder(angle_deg: float, distance: float, height: float) -> Tensor:
+    """A goal (3,) around a canonical start: `angle_deg` counter-clockwise from its facing direction (+x), `distance`
+    m from its pelvis on the ground, `height` m above the ground (the grid's coordinates)."""
+    a = np.radians(angle_deg)
+    return torch.tensor([distance * np.cos(a), distance * np.sin(a), height], dtype=torch.float32)
+
+
+class GoalReacher:
+    """Place a goal around a start pose and let the model reach it (lesson 09's widget). The callback `update` is plain
+    Python (tested); `widget()` only wires ipywidgets sliders to it and shows the figure as PNG bytes in an Image."""
+
+    SLIDERS = {"angle": (0.0, 360.0, 15.0), "distance": (0.3, 5.0, 0.1), "height": (0.0, 1.8, 0.05),
+               "seconds": (1.0, 8.0, 0.5)}
+
+    def __init__(self, model, start: I.StartPose, seed: int = 0, angle: float = 45.0, distance: float = 2.0,
+                 height: float = 1.0, seconds: float = 4.0) -> None:
+        self.model, self.start, self.seed = model, start, seed
+        self.values = {"angle": angle, "distance": distance, "height": height, "seconds": seconds}
+        self.motion: Tensor | None = None
+        self.joints: Tensor | None = None
+
+    @property
+    def goal(self) -> Tensor:
+        """The current goal (3,)."""
+        v = self.values
+        return goal_from_cylinder(v["angle"], v["distance"], v["height"])
+
+    @property
+    def t_goal(self) -> int:
+        """The current goal frame (30 fps)."""
+        return max(1, int(round(self.values["seconds"] * I.FPS)))
+
+    def update(self, name: str, value: float) -> dict[str, float]:
+        """Set one slider (angle deg, distance m, height m, seconds), roll the model out, return the readout."""
+        if name not in self.values:
+            raise ValueError(f"name: expected one of {list(self.values)}, got {name!r}")
+        lo, hi, _ = self.SLIDERS[name]
+        if not lo <= float(value) <= hi:
+            raise ValueError(f"{name}: expected a value in [{lo}, {hi}], got {value}")
+        self.values[name] = float(value)
+        return self.run()
+
+    def run(self) -> dict[str, float]:
+        """Generate the motion for the current goal (one sample, fixed seed) and measure it."""
+        from graspkit.models.wandr import generate
+
+        out = generate(self.model, self.start, self.goal[None], self.t_goal, n=1,
+                       generator=torch.Generator().manual_seed(self.seed))
+        self.motion, self.joints = out.p[0], out.joints[0]
+        d = (self.joints[:, I.WRIST] - self.goal).norm(dim=-1)
+        k = int(d.argmin())
+        return {"dtg_cm": 100 * float(d.min()), "closest_frame": k, "closest_s": k / I.FPS,
+                "error_at_goal_cm": 100 * float(d[-1]), "reached": bool(d.min() <= WANDR_SUCCESS_RADIUS)}
+
+    def figure(self, readout: dict[str, float] | None = None):
+        """Top view of the pelvis and wrist paths with the goal, and the wrist's distance to the goal over time."""
+        import matplotlib.pyplot as plt
+
+        if self.joints is None:
+            readout = self.run()
+        J, g = self.joints.numpy(), self.goal.numpy()
+        fig, (ax, bx) = plt.subplots(1, 2, figsize=(8.5, 3.4), dpi=72)
+        ax.plot(J[:, 0, 0], J[:, 0, 1], color="#6a3d9a", label="pelvis")
+        ax.plot(J[:, I.WRIST, 0], J[:, I.WRIST, 1], color="#e377c2", label="right wrist")
+        ax.plot(*g[:2], "x", color="#d62728", ms=10, mew=2, label=f"goal ({g[2]:.2f} m high)")
+        ax.arrow(0, 0, 0.4, 0, width=0.02, color="k")
+        ax.set_aspect("equal")
+        ax.legend(fontsize=7, loc="best")
+        ax.set_title("seen from above (start faces +x)", fontsize=9)
+        d = np.linalg.norm(J[:, I.WRIST] - g, axis=-1)
+        bx.plot(np.arange(len(d)) / I.FPS, 100 * d, color="#e377c2")
+        bx.axhline(100 * WANDR_SUCCESS_RADIUS, color="#2ca02c", ls="--", lw=1, label="10 cm (success)")
+        bx.axvline(self.t_goal / I.FPS, color="0.5", ls=":", lw=1, label="t_G")
+        bx.set_xlabel("s")
+        bx.set_ylabel("wrist to goal (cm)")
+        bx.legend(fontsize=7)
+        fig.tight_layout()
+        return fig
+
+    def png(self, dpi: float = 72.0) -> bytes:
+        """The figure as PNG bytes."""
+        import io
+
+        import matplotlib.pyplot as plt
+
+        fig = self.figure()
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=dpi)
+        plt.close(fig)
+        return buf.getvalue()
+
+    def widget(self) -> Any:  # pragma: no cover - UI only; update / png are tested
+        """Sliders for angle, distance, height and time to the goal; the figure in an Image widget; a readout."""
+        import ipywidgets as w
+
+        image, text = w.Image(format="png"), w.HTML()
+
+        def show(r: dict[str, float]) -> None:
+            text.value = (f"closest {r['dtg_cm']:.1f} cm at {r['closest_s']:.1f} s; at t_G {r['error_at_goal_cm']:.1f} cm; "
+                          f"{'reached' if r['reached'] else 'not reached'}")
+            image.value = self.png()
+
+        sliders = []
+        for name, (lo, hi, step) in self.SLIDERS.items():
+            s = w.FloatSlider(value=self.values[name], min=lo, max=hi, step=step, description=name,
+                              continuous_update=False)
+            s.observe(lambda ch, name=name: show(self.update(name, ch["new"])), names="value")
+            sliders.append(s)
+        show(self.run())
+        return w.VBox([w.HBox([w.VBox(sliders), image]), text])

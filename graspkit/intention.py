@@ -108,17 +108,22 @@ def pose_to_delta(p_prev: Tensor, p: Tensor) -> Tensor:
     return torch.cat([dt, dr, (th1 - th0).flatten(-2)], dim=-1)
 
 
+def integrate_rotmats(t0: Tensor, R0: Tensor, d: Tensor) -> tuple[Tensor, Tensor]:
+    """integrate_delta on translation (..., 3) and local rotation matrices (..., 22, 3, 3): the new (t, R)."""
+    _check(d, DELTA_DIM, "d")
+    psi = yaw_of(R0[..., 0, :, :])
+    Rz = rotation_about_z(psi)
+    t1 = t0 + (Rz @ d[..., :3].unsqueeze(-1)).squeeze(-1)
+    root = Rz @ rot6d_to_matrix(matrix_to_rot6d(Rz.transpose(-1, -2) @ R0[..., 0, :, :]) + d[..., 3:9])
+    body = rot6d_to_matrix(matrix_to_rot6d(R0[..., 1:, :, :]) + d[..., 9:].unflatten(-1, (21, 6)))
+    return t1, torch.cat([root.unsqueeze(-3), body], dim=-3)
+
+
 def integrate_delta(p_prev: Tensor, d: Tensor) -> Tensor:
     """The pose p (..., 135) reached from p_prev (..., 135) by delta d (..., 135) (inverse of pose_to_delta); the 6D
     rotations are re-orthonormalised (Gram-Schmidt), so an imperfect predicted delta still gives valid rotations."""
-    _check(d, DELTA_DIM, "d")
-    t0, r0, th0 = split_pose(p_prev)
-    psi = yaw_of(rot6d_to_matrix(r0))
-    Rz = rotation_about_z(psi)
-    t1 = t0 + (Rz @ d[..., :3].unsqueeze(-1)).squeeze(-1)
-    r1 = matrix_to_rot6d(Rz @ rot6d_to_matrix(_yaw_free(r0, psi) + d[..., 3:9]))
-    th1 = matrix_to_rot6d(rot6d_to_matrix(th0 + d[..., 9:].unflatten(-1, (21, 6))))
-    return torch.cat([t1, r1, th1.flatten(-2)], dim=-1)
+    t0, R0 = pose_rotmats(p_prev)
+    return pose_from_rotmats(*integrate_rotmats(t0, R0, d))
 
 
 def poses_to_deltas(p: Tensor) -> Tensor:
@@ -126,23 +131,28 @@ def poses_to_deltas(p: Tensor) -> Tensor:
     return pose_to_delta(p[..., :-1, :], p[..., 1:, :])
 
 
-def state_features(p: Tensor, d_prev: Tensor) -> Tensor:
-    """WANDR §3.3 state p^dyn (..., 268): translation height, yaw-free root 6D, body 6D, the previous delta."""
-    t, r6, th = split_pose(p)
+def state_features(p: Tensor, d_prev: Tensor, root: Tensor | None = None) -> Tensor:
+    """WANDR §3.3 state p^dyn (..., 268): translation height, yaw-free root 6D, body 6D, the previous delta.
+    `root` (..., 3, 3) may pass the root's rotation matrix when known."""
+    _check(p, POSE_DIM, "p")
     _check(d_prev, DELTA_DIM, "d_prev")
-    psi = yaw_of(rot6d_to_matrix(r6))
-    return torch.cat([t[..., 2:], _yaw_free(r6, psi), th.flatten(-2), d_prev], dim=-1)
+    R = rot6d_to_matrix(p[..., 3:9]) if root is None else root
+    free = matrix_to_rot6d(rotation_about_z(-yaw_of(R)) @ R)
+    return torch.cat([p[..., 2:3], free, p[..., 9:], d_prev], dim=-1)
 
 
-# ----------------------------------------------------------------------------------------------------- joints
 def body_transforms(p: Tensor, rest: Tensor) -> tuple[Tensor, Tensor]:
     """Forward kinematics of poses p (..., 135) with shaped rest joints (..., 22, 3) (canonical frame, from
     BodyModel.shaped): global rotations (..., 22, 3, 3) and world positions (..., 22, 3) of the body joints. Same
     convention as BodyModel: the body rotates about its root joint, world = R (x - J_0) + J_0 + t."""
-    t, R = pose_rotmats(p)
+    return fk_rotmats(*pose_rotmats(p), rest)
+
+
+def fk_rotmats(t: Tensor, R: Tensor, rest: Tensor) -> tuple[Tensor, Tensor]:
+    """body_transforms from translation (..., 3) and local rotation matrices (..., 22, 3, 3)."""
     if rest.shape[-2:] != (NUM_BODY, 3):
         raise ValueError(f"rest: expected shape (..., 22, 3), got {tuple(rest.shape)}")
-    rest = rest.to(p.dtype).expand(R.shape[:-3] + (NUM_BODY, 3))
+    rest = rest.to(R.dtype).expand(R.shape[:-3] + (NUM_BODY, 3))
     Rg, pos = [R[..., 0, :, :]], [rest[..., 0, :]]          # the root: its own rotation, at its rest position
     for j in range(1, NUM_BODY):                              # parents come first in SMPL-X order
         q = PARENTS[j]

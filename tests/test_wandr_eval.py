@@ -98,3 +98,40 @@ def test_summary_and_breakdown():
     with pytest.raises(ValueError, match="by"):
         E.breakdown(r, "colour")
     assert "| WANDR | 50.0 | 10.0 | 21.0 | 32 | 16 | 24.8 |" in E.table({"WANDR": s})
+
+
+def test_body_vertices_are_the_body_models(bm):
+    m, p, rest = _clip(bm, "reach/reach_000002.npz")
+    k = 50
+    start = I.StartPose(p[k - 1], p[k], rest, torch.as_tensor(m.betas), torch.as_tensor(m.poses[k]))
+    v = E.body_vertices(bm, p[k:k + 1], start)
+    assert torch.allclose(v, m.vertices(bm, k, k + 1), atol=1e-5)
+
+
+def test_goal_from_cylinder_matches_the_grid():
+    goals, cells = E.grid_goals()
+    for g, (a, h, d) in zip(goals[::17], cells[::17]):
+        assert torch.allclose(E.goal_from_cylinder(a, d, h), g, atol=1e-6)
+
+
+def test_goal_reacher_callback(bm):
+    from graspkit.data.wandr_dataset import held_out_starts
+    from graspkit.models.wandr import WandrConfig, WandrCVAE, generate
+
+    m = load_motion(DATA_STUBS / "motion" / "reach" / "reach_000001.npz")
+    start = held_out_starts([m], ["reach_000001"], bm, n=1)[0]
+    torch.manual_seed(0)
+    model = WandrCVAE(WandrConfig(latent=4, hidden=32, enc_layers=1, dec_layers=1, dropout=0.0)).eval()
+    r = E.GoalReacher(model, start, seed=3, angle=0.0, distance=1.0, height=1.0, seconds=1.0)
+    out = r.update("angle", 90.0)
+    assert torch.allclose(r.goal, torch.tensor([0.0, 1.0, 1.0]), atol=1e-6) and r.t_goal == 30
+    ref = generate(model, start, r.goal[None], 30, generator=torch.Generator().manual_seed(3))
+    d = (ref.joints[0, :, I.WRIST] - r.goal).norm(dim=-1)
+    assert out["dtg_cm"] == pytest.approx(100 * float(d.min()), abs=1e-4)
+    assert out["closest_frame"] == int(d.argmin()) and out["reached"] == bool(d.min() <= 0.1)
+    assert r.update("seconds", 2.0) and r.t_goal == 60 and len(r.joints) == 61
+    assert r.png()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(ValueError, match="height"):
+        r.update("height", 3.0)
+    with pytest.raises(ValueError, match="name"):
+        r.update("colour", 1.0)

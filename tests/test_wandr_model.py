@@ -76,7 +76,7 @@ def test_losses_are_the_papers_terms(clips, stats):
     out = M.training_losses(model, clips, items, steps=3, generator=torch.Generator().manual_seed(0))
     cfg = model.cfg
     assert torch.isfinite(out["loss"])
-    assert out["loss"].item() == pytest.approx((out["rec"] + cfg.alpha_kl * out["kl"] + cfg.w_joint * out["joint_m2"]).item(),
+    assert out["loss"].item() == pytest.approx((out["rec"] + cfg.alpha_kl * out["kl"] + cfg.w_joint * out["joint_cm2"]).item(),
                                                rel=1e-5)
     assert cfg.alpha_kl == 1e-2 and out["steps"] == 3
 
@@ -174,7 +174,7 @@ def test_rollout_errors_name_the_argument(stats, starts):
 
 def test_checkpoint_round_trip_is_weights_only(stats, starts, tmp_path):
     model = _model(stats, intention=("wrist", "pelvis"))
-    path = M.save_wandr(tmp_path / "w.pt", model, [{"epoch": 1, "loss": 0.5}], {"note": "test"})
+    path = M.save_wandr(tmp_path / "w.pt", model, [{"epoch": 1, "loss": 0.5}], {"note": "test"}, half=False)
     torch.load(path, weights_only=True)
     back = M.load_wandr(path)
     assert back.cfg == model.cfg and back.meta == {"note": "test"}
@@ -182,6 +182,10 @@ def test_checkpoint_round_trip_is_weights_only(stats, starts, tmp_path):
     a = M.generate(model, starts[0], goal, 5, generator=torch.Generator().manual_seed(0))
     b = M.generate(back, starts[0], goal, 5, generator=torch.Generator().manual_seed(0))
     assert torch.equal(a.p, b.p) and torch.equal(back.delta_std, stats["delta_std"])
+    small = M.load_wandr(M.save_wandr(tmp_path / "h.pt", model))                 # float16 weights, float32 statistics
+    assert small.decoder[0].weight.dtype == torch.float32 and torch.equal(small.delta_std, stats["delta_std"])
+    assert torch.allclose(small.decoder[0].weight, model.decoder[0].weight, rtol=1e-3, atol=1e-4)
+    assert (tmp_path / "h.pt").stat().st_size < 0.7 * path.stat().st_size
 
 
 def test_train_wandr_writes_a_resumable_checkpoint(clips, stats, tmp_path):

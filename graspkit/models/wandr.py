@@ -9,10 +9,12 @@ dropout; the prior is fixed at N(0, I) (no prior network). The condition c_i = (
 intention (graspkit.intention); deltas, states and intentions enter normalised with training statistics, which live
 in the model's buffers (so in every checkpoint). Ablations (Tab. 2) drop intention parts from the condition.
 
-Loss (§3.4): L = L_rec + α L_KL + λ_J L_J with α = 1e-2: L_rec the MSE of the (normalised) deltas, L_KL the KL of
-q(z | .) from N(0, I) (summed over the latent, mean over the batch), L_J the MSE of the 22 body joints after
-integrating d̂ and forward kinematics (metres; λ_J scales it to the size of L_rec: graspkit's choice, the paper
-writes no weight). No goal-reaching loss.
+Loss (§3.4): L = L_rec + α L_KL + L_J with α = 1e-2: L_rec the squared error of the normalised deltas (summed over
+the 135 values, mean over the batch), L_KL the KL of q(z | .) from N(0, I) (summed over the latent, mean over the
+batch), L_J the squared distance of the 22 body joints after integrating d̂ and forward kinematics, in cm² (mean
+over joints and batch). The paper does not say how its MSEs are reduced; with means over the 135 values, α = 1e-2
+made the posterior collapse here (KL ≈ 0.003 nats: the decoder ignored z and predicted means), so the sums keep
+z informative, and centimetres put L_J on the scale of L_rec. No goal-reaching loss.
 
 Rollout schedule (Sup. B.2): after the reconstruction step, the model runs s more steps on its own output: each step
 integrates the predicted delta, recomputes state and intention from the generated pose, samples z from the prior and
@@ -48,7 +50,7 @@ class WandrConfig:
     dropout: float = 0.05
     intention: tuple[str, ...] = FULL_INTENTION        # Tab. 2 ablations: ("wrist",), ("wrist", "pelvis"), ...
     alpha_kl: float = 1e-2
-    w_joint: float = 100.0
+    w_joint: float = 1.0
     max_steps: int = 10
     ramp_epochs: int = 4
     rollout_latent: str = "prior"                      # "prior" (Sup. B.2) or "posterior" (encoder on the truth)
@@ -131,9 +133,12 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
     with torch.no_grad():
         J_gt = I.body_joints(p[:, 2:], rest[:, None])             # (B, steps+1, 22, 3)
     cur_p, cur_d = p[:, 1], d_gt[:, 0]
+    t, R = I.pose_rotmats(cur_p)
+    J = I.fk_rotmats(t, R, rest)[1]
     rec = joint = kl = torch.zeros((), dtype=p.dtype)
     for k in range(steps + 1):
-        state, inten = window_condition(cur_p, cur_d, rest, goal, t_goal - k, gh)
+        state = I.state_features(cur_p, cur_d, root=R[:, 0])
+        inten = I.intention(J[:, I.WRIST], J[:, I.PELVIS], I.yaw_of(R[:, 0]), goal, (t_goal - k).to(p.dtype) / I.FPS, gh)
         cond = model.condition(state, inten)
         target = d_gt[:, k + 1]
         if k == 0 or cfg.rollout_latent == "posterior":
@@ -143,15 +148,16 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
         else:
             z = torch.randn(len(cur_p), cfg.latent, generator=generator)
         d_hat = model.decode(z, cond)
-        p_hat = I.integrate_delta(cur_p, d_hat)
-        rec = rec + (model.normalise_delta(d_hat) - model.normalise_delta(target)).pow(2).mean()
-        joint = joint + (I.body_joints(p_hat, rest) - J_gt[:, k]).pow(2).sum(-1).mean()
-        cur_p, cur_d = p_hat, d_hat
+        t, R = I.integrate_rotmats(t, R, d_hat)
+        cur_p, cur_d = I.pose_from_rotmats(t, R), d_hat
+        J = I.fk_rotmats(t, R, rest)[1]
+        rec = rec + (model.normalise_delta(d_hat) - model.normalise_delta(target)).pow(2).sum(-1).mean()
+        joint = joint + (100 * (J - J_gt[:, k])).pow(2).sum(-1).mean()
     n = steps + 1
     n_kl = n if cfg.rollout_latent == "posterior" else 1
     rec, joint, kl = rec / n, joint / n, kl / n_kl
     loss = rec + cfg.alpha_kl * kl + cfg.w_joint * joint
-    return {"loss": loss, "rec": rec.detach(), "kl": kl.detach(), "joint_m2": joint.detach(),
+    return {"loss": loss, "rec": rec.detach(), "kl": kl.detach(), "joint_cm2": joint.detach(),
             "steps": torch.tensor(float(steps))}
 
 
@@ -178,11 +184,16 @@ def train_wandr(model: WandrCVAE, clips: ClipSet, cfg: TrainConfig, checkpoint: 
     return fit(model, step, ds, cfg, checkpoint=checkpoint, extra=extra, progress=progress, time_limit_s=time_limit_s)
 
 
-def save_wandr(path: str | Path, model: WandrCVAE, history: Sequence[dict] = (), meta: dict[str, Any] | None = None) -> Path:
-    """A small shippable checkpoint: weights (with the normalisation buffers), config, history, meta; atomic write."""
+def save_wandr(path: str | Path, model: WandrCVAE, history: Sequence[dict] = (), meta: dict[str, Any] | None = None,
+               half: bool = True) -> Path:
+    """A small shippable checkpoint: weights (float16 when `half`, the normalisation buffers float32), config, history,
+    meta; atomic write. Load with load_wandr (weights back in float32)."""
     cfg = asdict(model.cfg)
     cfg["intention"] = list(cfg["intention"])
-    return save_checkpoint(path, {"model": model.state_dict(), "wandr_config": cfg, "history": list(history),
+    stats = set(_default_stats())
+    weights = {k: (v.half() if half and v.is_floating_point() and k not in stats else v.clone())
+               for k, v in model.state_dict().items()}
+    return save_checkpoint(path, {"model": weights, "wandr_config": cfg, "history": list(history),
                                   "meta": dict(meta or {})})
 
 
@@ -193,7 +204,7 @@ def load_wandr(path: str | Path) -> WandrCVAE:
     if cfg is None or "model" not in state:
         raise ValueError(f"checkpoint {path}: not a WANDR checkpoint (no 'wandr_config' / 'model')")
     model = WandrCVAE(WandrConfig(**cfg))
-    model.load_state_dict(state["model"])
+    model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state["model"].items()})
     model.meta = state.get("meta", {})
     model.history = state.get("history", [])
     return model.eval()
@@ -231,14 +242,15 @@ def _per_frame(x: Tensor | int, B: int, T: int, width: int | None, name: str) ->
 
 def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Tensor, t_goal: Tensor | int,
             frames: int, z: Tensor | None = None, generator: torch.Generator | None = None,
-            keep: bool = True, on_frame: FrameHook | None = None) -> Rollout:
+            keep: bool = True, on_frame: FrameHook | None = None, goal_heading: Tensor | None = None) -> Rollout:
     """WANDR §3.5: from starts p_prev, p0 (B, 135) with rest joints (B, 22, 3), generate `frames` more frames.
 
     goal (B, 3) or per frame (B, frames+1, 3); t_goal the goal frame (int, (B,) or per frame (B, frames+1)) counted
     from the start (frame 0). Each frame: intention from the current pose (inference form of I^r), z from N(0, I) drawn
     from `generator` (or z[:, k] when z (B, frames, latent) is given: differentiable, for latent optimisation), decode,
     integrate. on_frame(k, p_k (B, 135), joints_k (B, 22, 3), global rotations (B, 22, 3, 3)) is called for
-    k = 0..frames; keep=False stores nothing.
+    k = 0..frames; keep=False stores nothing. goal_heading (B,) switches I^r to its training form (the heading wanted
+    at the goal) instead of the direction from the pelvis to the goal.
     """
     B = p0.shape[0]
     T = frames + 1
@@ -251,9 +263,10 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
     goals = _per_frame(goal, B, T, 3, "goal").to(p0.dtype)
     tg = _per_frame(torch.as_tensor(t_goal), B, T, None, "t_goal")
     cur_p, cur_d = p0, I.pose_to_delta(p_prev, p0)
+    t, R = I.pose_rotmats(p0)
     ps, js = [], []
     for k in range(T):
-        Rg, J = I.body_transforms(cur_p, rest)
+        Rg, J = I.fk_rotmats(t, R, rest)
         if keep:
             ps.append(cur_p)
             js.append(J)
@@ -261,13 +274,14 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
             on_frame(k, cur_p, J, Rg)
         if k == frames:
             break
-        state = I.state_features(cur_p, cur_d)
-        inten = I.intention(J[:, I.WRIST], J[:, I.PELVIS], I.heading_of_pose(cur_p), goals[:, k],
-                            (tg[:, k] - k).to(p0.dtype) / I.FPS)
+        state = I.state_features(cur_p, cur_d, root=R[:, 0])
+        inten = I.intention(J[:, I.WRIST], J[:, I.PELVIS], I.yaw_of(R[:, 0]), goals[:, k],
+                            (tg[:, k] - k).to(p0.dtype) / I.FPS, goal_heading)
         cond = model.condition(state, inten)
         zk = z[:, k] if z is not None else torch.randn(B, model.cfg.latent, generator=generator, dtype=p0.dtype)
         d_hat = model.decode(zk, cond)
-        cur_p, cur_d = I.integrate_delta(cur_p, d_hat), d_hat
+        t, R = I.integrate_rotmats(t, R, d_hat)
+        cur_p, cur_d = I.pose_from_rotmats(t, R), d_hat
     return Rollout(torch.stack(ps, 1) if keep else None, torch.stack(js, 1) if keep else None, goals, rest)
 
 

@@ -47,12 +47,15 @@ def latent_loss(out: Rollout, z: Tensor, goal: Tensor, t_goal: int, waypoints: S
     return {"loss": w_norm * norm + w_goal * g + w_way * way, "norm": norm, "goal": g, "way": way}
 
 
-def optimise_latents(model: WandrCVAE, start: I.StartPose, goal: Sequence[float] | Tensor, t_goal: int,
-                     frames: int | None = None, n: int = 1, waypoints: Sequence[tuple[int, Sequence[float]]] = (),
-                     z0: Tensor | None = None, iters: int = 40, lr: float = 0.05, w_norm: float = 0.01,
-                     w_goal: float = 1.0, w_way: float = 1.0, generator: torch.Generator | None = None) -> LatentResult:
-    """Optimise the per-frame latents of n motions from `start` towards `goal` (3,) (wrist there at frame t_goal),
-    passing the pelvis over `waypoints` [(frame, (x, y))]. z0 (n, frames, latent) or random N(0, I) from generator."""
+def optimise_latents(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal: Sequence[float] | Tensor,
+                     t_goal: int, frames: int | None = None, n: int = 1,
+                     waypoints: Sequence[tuple[int, Sequence[float]]] = (), z0: Tensor | None = None, iters: int = 40,
+                     lr: float = 0.05, w_norm: float = 0.01, w_goal: float = 1.0, w_way: float = 1.0,
+                     generator: torch.Generator | None = None) -> LatentResult:
+    """Optimise the per-frame latents of motions from `start` (one or more) towards goals (3,) or (G, 3) (the wrist
+    there at frame t_goal), n each (B = S * G * n, start-major as `generate`), the pelvis over `waypoints`
+    [(frame, (x, y))]. z0 (B, frames, latent), or random N(0, I) from `generator` (the latents of a plain rollout).
+    Adam is element-wise and the loss a sum over sequences, so a batch optimises each sequence independently."""
     frames = t_goal if frames is None else frames
     if not 1 <= t_goal <= frames:
         raise ValueError(f"t_goal: expected 1 <= t_goal <= frames ({frames}), got {t_goal}")
@@ -62,16 +65,17 @@ def optimise_latents(model: WandrCVAE, start: I.StartPose, goal: Sequence[float]
     if iters < 0:
         raise ValueError(f"iters: expected >= 0, got {iters}")
     model.eval()
+    pp, p0, rest, g, idx = expand_starts(start, torch.as_tensor(goal, dtype=torch.float32).reshape(-1, 3), n)
+    B, L = len(g), model.cfg.latent
+    z = (torch.randn(B, frames, L, generator=generator) if z0 is None else z0.detach().clone()).requires_grad_(True)
+    if z.shape != (B, frames, L):
+        raise ValueError(f"z0: expected shape ({B}, {frames}, {L}), got {tuple(z.shape)}")
+    opt = torch.optim.Adam([z], lr=lr)
+    best_z, best = z.detach().clone(), torch.full((B,), float("inf"))
+    history: list[dict[str, float]] = []
+    grads = [q.requires_grad for q in model.parameters()]
     for q in model.parameters():
         q.requires_grad_(False)
-    pp, p0, rest, g, _ = expand_starts(start, torch.as_tensor(goal, dtype=torch.float32).reshape(1, 3), n)
-    L = model.cfg.latent
-    z = (torch.randn(n, frames, L, generator=generator) if z0 is None else z0.detach().clone()).requires_grad_(True)
-    if z.shape != (n, frames, L):
-        raise ValueError(f"z0: expected shape ({n}, {frames}, {L}), got {tuple(z.shape)}")
-    opt = torch.optim.Adam([z], lr=lr)
-    best_z, best = z.detach().clone(), torch.full((n,), float("inf"))
-    history: list[dict[str, float]] = []
     try:
         for it in range(iters + 1):
             out = rollout(model, pp, p0, rest, g, t_goal, frames, z=z)
@@ -86,8 +90,34 @@ def optimise_latents(model: WandrCVAE, start: I.StartPose, goal: Sequence[float]
             terms["loss"].sum().backward()
             opt.step()
     finally:
-        for q in model.parameters():
-            q.requires_grad_(True)
+        for q, r in zip(model.parameters(), grads):
+            q.requires_grad_(r)
     with torch.no_grad():
         final = rollout(model, pp, p0, rest, g, t_goal, frames, z=best_z)
+    final.info["index"] = idx
     return LatentResult(best_z, final, history)
+
+
+def evaluate_vae_opt(model: WandrCVAE, starts: Sequence[I.StartPose], bm, seed: int = 0, n_starts: int = 2,
+                     iters: int = 30, chunk: int = 125, **kw):
+    """Tab. 2's "VAE + opt" on the goal grid: a model without intention, latents optimised from random draws towards
+    each goal (L_norm + L_goal at t_G), scored as evaluate_grid scores WANDR. Cost: every iteration is a rollout and its
+    backward pass, so this runs on the first `n_starts` starts with one sample per goal (documented in docs/wandr.md)."""
+    import numpy as np
+
+    from graspkit.eval_wandr import T_GOAL, GridResult, evaluate_motions, grid_goals
+
+    goals, cells = grid_goals()
+    gen = torch.Generator().manual_seed(seed)
+    parts = []
+    for s_i, s in enumerate(starts[:n_starts]):
+        for lo in range(0, len(goals), chunk):
+            res = optimise_latents(model, s, goals[lo:lo + chunk], T_GOAL, iters=iters, generator=gen, **kw)
+            m = res.motion
+            idx = res.motion.info["index"].clone()
+            idx[:, 0], idx[:, 1] = s_i, idx[:, 1] + lo
+            parts.append(evaluate_motions(m.p, m.rest, m.goal[:, 0], s.betas[None].expand(len(idx), -1), bm, T_GOAL,
+                                          cells[idx[:, 1].numpy()], idx))
+    cat = lambda k: np.concatenate([getattr(p, k) for p in parts])  # noqa: E731
+    return GridResult(cat("start"), cat("goal_index"), cat("sample"), cat("cell"), cat("dtg"), cat("reach_frame"),
+                      cat("fs"), cat("error_at_goal"), {"iters": iters, "starts": n_starts})
