@@ -33,6 +33,18 @@ FIT_JOINTS = tuple(J[n] for n in ("spine1", "spine2", "spine3", "neck", "head", 
                                   "right_elbow", "right_wrist"))
 
 
+def _continuous(aa: np.ndarray) -> np.ndarray:
+    """Axis-angle tracks (T,...,3) made continuous in time: where a rotation near pi flips its axis from one frame
+    to the next, the equivalent vector (2 pi - angle about the opposite axis) is used instead."""
+    aa = aa.copy()
+    for k in range(1, len(aa)):
+        ang = np.linalg.norm(aa[k], axis=-1, keepdims=True)
+        alt = aa[k] - 2 * np.pi * aa[k] / np.maximum(ang, 1e-12)
+        flip = (np.linalg.norm(alt - aa[k - 1], axis=-1) < np.linalg.norm(aa[k] - aa[k - 1], axis=-1))[..., None]
+        aa[k] = np.where(flip & (ang > np.pi / 2), alt, aa[k])
+    return aa
+
+
 def _slerp_from(R0: np.ndarray, R1: np.ndarray, w: np.ndarray) -> np.ndarray:
     """R0 (…,3,3) rotated a fraction w (…) of the way to R1: R0 exp(w log(R0^T R1))."""
     rel = matrix_axis_angle(np.swapaxes(R0, -1, -2) @ R1)
@@ -84,8 +96,8 @@ def approach_motion(plan: Motion, grasp_frame: int, grasp_pose: np.ndarray, open
     if start_pose == "t_pose":
         wt = smoothstep(t / TPOSE_S)
         ids = list(ARM_JOINTS)
-        R[:, ids] = _slerp_from(np.broadcast_to(np.eye(3), (T, len(ids), 3, 3)), R[:, ids],
-                                np.broadcast_to(wt[:, None], (T, len(ids))))
+        aa = _continuous(matrix_axis_angle(R[:, ids]))                      # from the T-pose (identity) to the plan
+        R[:, ids] = axis_angle_matrix(wt[:, None, None] * aa)
     poses = matrix_axis_angle(R)
     return Motion(poses, trans, plan.betas, fps, contacts=contacts, goal=None, goal_frame=None, hand=None)
 
@@ -93,7 +105,45 @@ def approach_motion(plan: Motion, grasp_frame: int, grasp_pose: np.ndarray, open
 APPROACH_S = 0.45      # s: the hand's straight final approach
 APPROACH_DIST = 0.10   # m: from this far out along the approach direction
 ARM_BLEND_S = 0.7      # s before the straight approach in which the arm turns from the plan's into the grasp's
+MAX_SWIVEL_DEG = 8.0   # deg per frame the elbow may swivel about the shoulder-wrist line
+REACH_MAX = 0.95       # fraction of the arm's length the approach path may ask for
 MAX_TWIST = np.deg2rad(85.0)   # forearm twist moved from the wrist into the elbow at most (as grasp_opt.solve_arm)
+
+
+def _rate_limited(dirs: np.ndarray, axis: np.ndarray, max_step: float) -> np.ndarray:
+    """Unit directions (T,3) perpendicular to axis (T,3) following `dirs` but turning at most max_step rad per frame
+    about the axis (the elbow's swivel speed stays bounded when the wanted side changes quickly)."""
+    out = np.zeros_like(dirs)
+    cur = dirs[0]
+    for k in range(len(dirs)):
+        cur = cur - (cur @ axis[k]) * axis[k]
+        cur = cur / max(np.linalg.norm(cur), 1e-12)
+        ang = np.arctan2(np.cross(cur, dirs[k]) @ axis[k], cur @ dirs[k])
+        step = np.clip(ang, -max_step, max_step)
+        cur = np.cos(step) * cur + np.sin(step) * np.cross(axis[k], cur)
+        out[k] = cur
+    return out
+
+
+def _swivel_dirs(v: np.ndarray, axis: np.ndarray, min_len: float = 0.02) -> np.ndarray:
+    """Unit components (T,3) of v (T,3) perpendicular to axis (T,3), carried over from the previous frame where the
+    component is shorter than min_len (a straight arm has no swivel direction of its own)."""
+    out = np.zeros_like(v)
+    prev = None
+    for k in range(len(v)):
+        c = v[k] - (v[k] @ axis[k]) * axis[k]
+        if np.linalg.norm(c) < min_len and prev is not None:
+            c = prev - (prev @ axis[k]) * axis[k]
+        out[k] = c / max(np.linalg.norm(c), 1e-12)
+        prev = out[k]
+    if np.linalg.norm(v[0] - (v[0] @ axis[0]) * axis[0]) < min_len:    # straight at the start: use the first good one
+        good = [k for k in range(len(v)) if np.linalg.norm(v[k] - (v[k] @ axis[k]) * axis[k]) >= min_len]
+        if good:
+            c = out[good[0]]
+            for k in range(good[0]):
+                d = c - (c @ axis[k]) * axis[k]
+                out[k] = d / max(np.linalg.norm(d), 1e-12)
+    return out
 
 
 def _approach_arm(R: np.ndarray, Rg: np.ndarray, trans: np.ndarray, g: int, fps: float, s: np.ndarray, rig) -> None:
@@ -118,20 +168,25 @@ def _approach_arm(R: np.ndarray, Rg: np.ndarray, trans: np.ndarray, g: int, fps:
     A = W + APPROACH_DIST * (1 - smoothstep(u))[:, None] * s                 # the straight approach path
     b = smoothstep((tt + APPROACH_S + ARM_BLEND_S) / ARM_BLEND_S)[:, None]   # leave the plan's path
     target = (1 - b) * Pw[:, wr] + b * A
+    reach = REACH_MAX * (np.linalg.norm(rig.bone("right_shoulder", "right_elbow"))
+                         + np.linalg.norm(rig.bone("right_elbow", "right_wrist")))
     hand = _slerp_from(Rw[:, wr], np.broadcast_to(H, Rw[:, wr].shape), b[:, 0])
     # collar from the grasp, phased in with b; then two-bone IK and the twist split
     Rc = _slerp_from(R[win, cs], np.broadcast_to(Rg[cs], R[win, cs].shape), b[:, 0])
     R[win, cs] = Rc
     Rw, Pw = forward_kinematics(rig, R[win], root[win])
+    off = target - Pw[:, sh]                  # a path point out of comfortable reach is pulled in (the elbow would
+    dist = np.linalg.norm(off, axis=1, keepdims=True)        # whip round near full extension)
+    target = Pw[:, sh] + off * np.minimum(1.0, reach / np.maximum(dist, 1e-9))
     b1, b2 = rig.bone("right_shoulder", "right_elbow"), rig.bone("right_elbow", "right_wrist")
     # the elbow swivels about the shoulder -> target line from the plan's side to the grasp's (angle blended by b),
     # so the wrist stays on its path while the arm changes configuration
     axis = normalize(target - Pw[:, sh])
-    perp = lambda x: normalize(x - (x * axis).sum(-1, keepdims=True) * axis)  # noqa: E731
-    p0, p1 = perp(Pw[:, el] - Pw[:, sh]), perp(np.broadcast_to(pole, target.shape))
-    ang = np.arctan2((np.cross(p0, p1) * axis).sum(-1), (p0 * p1).sum(-1))
+    p1 = _swivel_dirs(np.broadcast_to(pole, target.shape), axis)                       # the grasp's elbow side
+    p0 = _swivel_dirs(Pw[:, el] - Pw[:, sh], axis)                                       # the plan's
+    ang = np.unwrap(np.arctan2((np.cross(p0, p1) * axis).sum(-1), (p0 * p1).sum(-1)))   # no flip at +-pi
     th = (b[:, 0] * ang)[:, None]
-    pole_t = np.cos(th) * p0 + np.sin(th) * np.cross(axis, p0)
+    pole_t = _rate_limited(np.cos(th) * p0 + np.sin(th) * np.cross(axis, p0), axis, np.deg2rad(MAX_SWIVEL_DEG))
     R_up, R_fore, _ = two_bone_ik(Pw[:, sh], target, pole_t, b1, b2, np.array([0.0, 0.0, -1.0]))
     d = normalize(b2)
     wrist = np.swapaxes(R_fore, -1, -2) @ hand

@@ -114,8 +114,8 @@ class HandModel:
         self.palm_ids = np.asarray(palm_vertices(bm)["right"], np.int64)
         part = bm.lbs_weights.argmax(1).numpy()
         self.finger_ids = {f: np.flatnonzero(np.isin(part, js)) for f, js in FINGER_JOINTS.items()}
-        # fingertip pads: distal-segment vertices on the palm side of the finger (rest normal facing -y, or the
-        # thumb's pad facing its opposition direction), the regions that touch in a grasp
+        # fingertip pads: the third of each distal segment's vertices whose rest normals face the palm side (-y),
+        # the regions that touch in a grasp
         with torch.no_grad():
             out = bm()
         from graspkit.body.markers import vertex_normals
@@ -124,8 +124,7 @@ class HandModel:
         self.pad_ids = {}
         for f, js in FINGER_JOINTS.items():
             dist = np.flatnonzero(part == js[2])
-            facing = -n[dist, 1] if f != "thumb" else (-n[dist, 1] + n[dist, 2] * 0.0)
-            self.pad_ids[f] = dist[np.argsort(-facing)[:max(4, len(dist) // 3)]]
+            self.pad_ids[f] = dist[np.argsort(n[dist, 1])[:max(4, len(dist) // 3)]]
         self.rest_vertices = rest
         # vertices used by the polish: hand + forearm + upper arm (order: hand first)
         self.fit_ids = np.concatenate([self.hand_ids, self.arm_ids])
@@ -154,7 +153,7 @@ class HandModel:
         """The hand frame of body `betas` in its canonical rest pose."""
         v, j = self.rest(betas)
         palm = v[self.palm_ids]
-        normal = normalize(np.array([0.0, -1.0, 0.0]) * 0 + _mean_normal(v, self.bm.faces.numpy(), self.palm_ids))
+        normal = _mean_normal(v, self.bm.faces.numpy(), self.palm_ids)
         finger = j[J["right_middle1"]] - j[J["right_wrist"]]
         finger = normalize(finger - (finger @ normal) * normal)
         thumb = normalize(np.cross(normal, finger))
