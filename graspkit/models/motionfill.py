@@ -1,0 +1,286 @@
+"""MotionFill-VAE (SAGA §3.3, Fig. 4, Eq. 8-9, App. A.2-A.4): generative infilling of the motion between a start
+pose and a grasp, as two chained CVAEs.
+
+Data (graspkit.data.motionfill_dataset, A.3): windows of T + 1 = 61 frames at 30 fps, canonicalised at the first
+frame; root states Gamma_t = (x, y, cos g, sin g) for t = 0..T+1 (62); the sparse-hand markers (79) in each frame's
+heading frame (local motion); root velocities; four foot contacts.
+
+TrajFill (A.2): a CVAE over the trajectory deviation dGamma = Gamma - Gamma_bar from the straight trajectory Gamma_bar
+(linear interpolation Gamma_0 -> Gamma_T plus one extrapolated step), conditioned on Gamma_bar. Encoder: two residual
+blocks as wide as their input [dGamma, Gamma_bar] (2 x 62 x 4 = 496, i.e. ~8T), two linear heads to a 512-D latent.
+Decoder: [z, Gamma_bar] -> residual blocks of widths 8T and 4T -> dGamma; output Gamma_bar + dGamma.
+
+LocalMotionFill (A.2, after LEMO [64]): a CNN CVAE over the four-channel motion image I (4 x 61 x (79*3 + 4)):
+channel 0 the normalised local markers with the foot contacts, channels 1-3 the normalised root velocities; the
+condition image I_c is I with the in-between frames of channel 0 zeroed. Encoder q(z | I, I_c): strided convolutions
+on [I, I_c]; decoder p(I | z, I_c): the latent and a convolutional encoding of I_c, up-convolutions with skip
+connections from the I_c encoder (a U-Net), output channel 0 (markers and contact logits). The paper defers the
+CNN to LEMO; the widths here (16-32-64-64-64, 128-D latent) are graspkit's, sized for two CPU cores.
+
+Losses (Eq. 8-9, A.4): L = L_rec + lambda_KL L_KL,
+    L_rec = sum_t |Gamma_t - Gamma~_t| + l1 sum_t |v^Gamma_t - v~^Gamma_t| + l2 BCE(C_F, C~_F)
+            + l3 sum_t |M^l_t - M~^l_t| + l4 sum_t |v^Ml_t - v~^Ml_t|                               (Eq. 8)
+    L_KL  = Psi(KL(q(z_t | ...))) + Psi(KL(q(z_m | I, I_c)))                                     (Eq. 9)
+with {lambda_KL, l1, l2, l3, l4} = {1, 0.05, 1, 1, 0.5}. |.| is the L1 norm of a frame's vector, summed over frames
+and averaged over the batch; the local markers enter in their normalised units (the image's), the BCE is summed over
+frames and the four contacts.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+from torch.nn import functional as F
+
+from graspkit.models.blocks import GaussianHead, ResBlock, kl_standard_normal, reparameterize, robust_kl
+
+T = 60
+NUM_ROOT = T + 2          # root states Gamma_{0:T+1}
+NUM_FRAMES = T + 1        # local motion frames
+NUM_MARKERS = 79
+FEATURES = NUM_MARKERS * 3 + 4
+
+
+@dataclass
+class MotionFillConfig:
+    """Sizes and loss weights (A.2, A.4)."""
+
+    traj_latent: int = 512
+    motion_latent: int = 128
+    channels: tuple[int, ...] = (16, 32, 64, 64, 64)
+    lambda_kl: float = 1.0
+    l1: float = 0.05          # trajectory velocity
+    l2: float = 1.0           # foot-contact BCE
+    l3: float = 1.0           # local markers
+    l4: float = 0.5           # local marker velocity
+
+
+# ------------------------------------------------------------------------------------------------ TrajFill
+class TrajFill(nn.Module):
+    """CVAE over root trajectories (B, 62, 4) conditioned on the straight trajectory Gamma_bar (B, 62, 4)."""
+
+    def __init__(self, latent: int = 512, frames: int = NUM_ROOT) -> None:
+        super().__init__()
+        n = frames * 4
+        t = frames - 2
+        self.frames = frames
+        self.enc = nn.Sequential(ResBlock(2 * n, 2 * n), ResBlock(2 * n, 2 * n))
+        self.head = GaussianHead(2 * n, latent)
+        self.dec = nn.Sequential(ResBlock(latent + n, 8 * t), ResBlock(8 * t, 4 * t))
+        self.out = nn.Linear(4 * t, n)
+        nn.init.zeros_(self.out.weight)           # starts at the straight trajectory
+        nn.init.zeros_(self.out.bias)
+        self.latent = latent
+
+    def encode(self, traj: Tensor, traj_interp: Tensor) -> tuple[Tensor, Tensor]:
+        """q(z_t | Gamma, Gamma_bar): (B,62,4) x2 -> mean, log-variance (B, latent)."""
+        B = traj.shape[0]
+        return self.head(self.enc(torch.cat([(traj - traj_interp).reshape(B, -1), traj_interp.reshape(B, -1)], -1)))
+
+    def decode(self, z: Tensor, traj_interp: Tensor) -> Tensor:
+        """p(Gamma | z_t, Gamma_bar): Gamma_bar + the decoded deviation (B, 62, 4)."""
+        B = z.shape[0]
+        d = self.out(self.dec(torch.cat([z, traj_interp.reshape(B, -1)], -1)))
+        return traj_interp + d.view(B, self.frames, 4)
+
+    def forward(self, traj: Tensor, traj_interp: Tensor, generator: torch.Generator | None = None
+                ) -> tuple[Tensor, Tensor, Tensor]:
+        """Reconstruction (B,62,4), mean, log-variance."""
+        mu, logvar = self.encode(traj, traj_interp)
+        z = reparameterize(mu, logvar, generator) if self.training else mu
+        return self.decode(z, traj_interp), mu, logvar
+
+
+# ------------------------------------------------------------------------------------------------ LocalMotionFill
+def _conv(a: int, b: int) -> nn.Sequential:
+    """3x3 convolution, stride 2, LeakyReLU."""
+    return nn.Sequential(nn.Conv2d(a, b, 3, stride=2, padding=1), nn.LeakyReLU(0.2))
+
+
+def _crop(x: Tensor, like: Tensor) -> Tensor:
+    """x cropped to like's spatial size (top-left)."""
+    return x[..., :like.shape[-2], :like.shape[-1]]
+
+
+class _ConvEncoder(nn.Module):
+    """Strided convolutions; returns every level's feature map (finest first)."""
+
+    def __init__(self, c_in: int, channels: tuple[int, ...]) -> None:
+        super().__init__()
+        cs = (c_in,) + tuple(channels)
+        self.layers = nn.ModuleList(_conv(a, b) for a, b in zip(cs[:-1], cs[1:]))
+
+    def forward(self, x: Tensor) -> list[Tensor]:
+        """(B, C, H, W) -> [level 1, ..., level L] feature maps."""
+        out = []
+        for layer in self.layers:
+            x = layer(x)
+            out.append(x)
+        return out
+
+
+class LocalMotionFill(nn.Module):
+    """CNN CVAE over motion images (B, 4, 61, F): encoder on [I, I_c], U-Net decoder on z and I_c -> channel 0."""
+
+    def __init__(self, latent: int = 128, channels: tuple[int, ...] = (16, 32, 64, 64, 64),
+                 size: tuple[int, int] = (NUM_FRAMES, FEATURES)) -> None:
+        super().__init__()
+        self.latent, self.size = latent, size
+        self.enc = _ConvEncoder(8, channels)
+        self.cond = _ConvEncoder(4, channels)
+        with torch.no_grad():
+            shapes = [f.shape[1:] for f in self.cond(torch.zeros(1, 4, *size))]
+        self.shapes = shapes
+        flat = int(torch.tensor(shapes[-1]).prod())
+        self.head = GaussianHead(flat, latent)
+        self.from_z = nn.Linear(latent, flat)
+        cs = list(channels)
+        ups = []
+        for lvl in range(len(cs) - 1, -1, -1):        # from the coarsest level up to the input resolution
+            c_in = 2 * cs[lvl] if lvl == len(cs) - 1 else cs[lvl] + cs[lvl]
+            c_out = cs[lvl - 1] if lvl > 0 else 16
+            ups.append(nn.ModuleDict({"up": nn.ConvTranspose2d(c_in, c_out, 4, stride=2, padding=1),
+                                      "act": nn.LeakyReLU(0.2)}))
+        self.ups = nn.ModuleList(ups)
+        self.out = nn.Conv2d(16 + 4, 1, 3, padding=1)
+
+    def encode(self, image: Tensor, cond: Tensor) -> tuple[Tensor, Tensor]:
+        """q(z_m | I, I_c): (B,4,61,F) x2 -> mean, log-variance (B, latent)."""
+        return self.head(self.enc(torch.cat([image, cond], 1))[-1].flatten(1))
+
+    def decode(self, z: Tensor, cond: Tensor) -> Tensor:
+        """p(I | z_m, I_c): channel 0 of the motion image (B, 61, F) (markers normalised, contact logits)."""
+        skips = self.cond(cond)
+        h = self.from_z(z).view(z.shape[0], *self.shapes[-1])
+        h = torch.cat([h, skips[-1]], 1)
+        for k, up in enumerate(self.ups):
+            h = up["act"](up["up"](h))
+            target = skips[len(skips) - 2 - k] if k < len(self.ups) - 1 else cond
+            h = torch.cat([_crop(h, target), target], 1)
+        return self.out(h)[:, 0]
+
+    def forward(self, image: Tensor, cond: Tensor, generator: torch.Generator | None = None
+                ) -> tuple[Tensor, Tensor, Tensor]:
+        """Reconstruction of channel 0 (B,61,F), mean, log-variance."""
+        mu, logvar = self.encode(image, cond)
+        z = reparameterize(mu, logvar, generator) if self.training else mu
+        return self.decode(z, cond), mu, logvar
+
+
+# ------------------------------------------------------------------------------------------------ the whole model
+def traj_velocity(traj: Tensor) -> Tensor:
+    """Root velocities in each frame's heading frame (B, T+1, 3) = (dx, dy, dgamma) from Gamma (B, T+2, 4)
+    (as graspkit.data.motionfill_dataset.local_motion; differentiable)."""
+    g = torch.atan2(traj[..., 3], traj[..., 2])
+    c, s = torch.cos(g[:, :-1]), torch.sin(g[:, :-1])
+    d = traj[:, 1:, :2] - traj[:, :-1, :2]
+    dx, dy = c * d[..., 0] + s * d[..., 1], -s * d[..., 0] + c * d[..., 1]
+    dg = torch.atan2(torch.sin(g[:, 1:] - g[:, :-1]), torch.cos(g[:, 1:] - g[:, :-1]))
+    return torch.stack([dx, dy, dg], -1)
+
+
+class MotionFillVAE(nn.Module):
+    """TrajFill + LocalMotionFill with their normalisation statistics (buffers: marker_mean/std, vel_mean/std)."""
+
+    def __init__(self, cfg: MotionFillConfig | None = None) -> None:
+        super().__init__()
+        self.cfg = cfg = cfg or MotionFillConfig()
+        self.traj = TrajFill(cfg.traj_latent)
+        self.local = LocalMotionFill(cfg.motion_latent, cfg.channels)
+        for k, n in (("marker_mean", NUM_MARKERS * 3), ("marker_std", NUM_MARKERS * 3), ("vel_mean", 3),
+                     ("vel_std", 3)):
+            self.register_buffer(k, torch.zeros(n) if "mean" in k else torch.ones(n))
+
+    def set_stats(self, stats: Any) -> None:
+        """Copy MotionFillStats (graspkit.data.motionfill_dataset) into the buffers."""
+        for k in ("marker_mean", "marker_std", "vel_mean", "vel_std"):
+            getattr(self, k).copy_(getattr(stats, k))
+
+    def image(self, local: Tensor, contacts: Tensor, vel: Tensor) -> tuple[Tensor, Tensor]:
+        """Motion image I and condition image I_c (B, 4, 61, F) from local markers, contacts, root velocities."""
+        x = (local.flatten(2) - self.marker_mean) / self.marker_std
+        ch0 = torch.cat([x, contacts.to(x.dtype)], -1)
+        v = ((vel - self.vel_mean) / self.vel_std).permute(0, 2, 1)[..., None].expand(-1, -1, -1, ch0.shape[-1])
+        img = torch.cat([ch0[:, None], v], 1)
+        cond = img.clone()
+        cond[:, 0, 1:-1] = 0.0
+        return img, cond
+
+    def split(self, ch0: Tensor) -> tuple[Tensor, Tensor]:
+        """Decoded channel 0 (B, 61, F) -> local markers in metres (B, 61, 79, 3), contact logits (B, 61, 4)."""
+        local = (ch0[..., :-4] * self.marker_std + self.marker_mean).unflatten(-1, (NUM_MARKERS, 3))
+        return local, ch0[..., -4:]
+
+    def loss(self, batch: dict[str, Tensor], parts: tuple[str, ...] = ("traj", "local"),
+             trajectory: str = "truth") -> dict[str, Tensor]:
+        """Eq. 8-9 on a batch of MotionFillDataset items; `parts` picks the CVAEs trained; `trajectory` ('truth' or
+        'predicted') says which root velocities build LocalMotionFill's images (the fine-tuning uses TrajFill's)."""
+        cfg = self.cfg
+        logs: dict[str, Tensor] = {}
+        loss = torch.zeros(())
+        vel = batch["vel"]
+        if "traj" in parts:
+            traj_hat, mu, logvar = self.traj(batch["traj"], batch["traj_interp"])
+            logs["traj"] = (traj_hat - batch["traj"]).abs().sum(-1).sum(-1).mean()
+            v_hat = traj_hat[:, 1:] - traj_hat[:, :-1]
+            logs["traj_vel"] = (v_hat - (batch["traj"][:, 1:] - batch["traj"][:, :-1])).abs().sum(-1).sum(-1).mean()
+            logs["kl_traj"] = kl_standard_normal(mu, logvar)
+            loss = loss + logs["traj"] + cfg.l1 * logs["traj_vel"] + cfg.lambda_kl * robust_kl(mu, logvar)
+            if trajectory == "predicted":
+                vel = traj_velocity(traj_hat)
+        if "local" in parts:
+            img, cond = self.image(batch["local"], batch["contacts"], vel)
+            target, _ = self.image(batch["local"], batch["contacts"], batch["vel"])
+            ch0, mu, logvar = self.local(target, cond)
+            x, c = ch0[..., :-4], ch0[..., -4:]
+            xt, ct = target[:, 0, :, :-4], target[:, 0, :, -4:]
+            logs["markers"] = (x - xt).abs().sum(-1).sum(-1).mean()
+            logs["markers_vel"] = ((x[:, 1:] - x[:, :-1]) - (xt[:, 1:] - xt[:, :-1])).abs().sum(-1).sum(-1).mean()
+            logs["contacts"] = F.binary_cross_entropy_with_logits(c, ct, reduction="none").sum((1, 2)).mean()
+            logs["kl_motion"] = kl_standard_normal(mu, logvar)
+            loss = (loss + cfg.l2 * logs["contacts"] + cfg.l3 * logs["markers"] + cfg.l4 * logs["markers_vel"]
+                    + cfg.lambda_kl * robust_kl(mu, logvar))
+            with torch.no_grad():
+                local, _ = self.split(ch0)
+                logs["marker_error_cm"] = (local - batch["local"]).norm(dim=-1).mean() * 100
+        return {"loss": loss, **logs}
+
+    @torch.no_grad()
+    def sample(self, traj_interp: Tensor, local: Tensor, contacts: Tensor, n: int = 1,
+               generator: torch.Generator | None = None, traj: Tensor | None = None) -> dict[str, Tensor]:
+        """n infillings of one window: Gamma_bar (62,4), local markers (61,79,3) and contacts (61,4) of which only
+        frames 0 and T are used; `traj` (62,4) replaces TrajFill's sample (local infilling with a given trajectory).
+        Returns traj (n,62,4), local (n,61,79,3), contacts (n,61,4) probabilities, markers (n,61,79,3) canonical."""
+        from graspkit.data.motionfill_dataset import global_motion
+
+        was = self.training
+        self.eval()
+        ti = traj_interp.float().expand(n, -1, -1)
+        if traj is None:
+            zt = torch.randn(n, self.traj.latent, generator=generator)
+            traj_hat = self.traj.decode(zt, ti)
+        else:
+            traj_hat = traj.float().expand(n, -1, -1)
+        vel = traj_velocity(traj_hat)
+        loc = local.float().expand(n, -1, -1, -1).clone()
+        _, cond = self.image(loc, contacts.float().expand(n, -1, -1), vel)
+        zm = torch.randn(n, self.local.latent, generator=generator)
+        loc_hat, logits = self.split(self.local.decode(zm, cond))
+        markers = torch.as_tensor(global_motion(loc_hat.double().numpy(), traj_hat.double().numpy())).float()
+        self.train(was)
+        return {"traj": traj_hat, "local": loc_hat, "contacts": torch.sigmoid(logits), "markers": markers}
+
+    def state(self) -> dict[str, Any]:
+        """Weights, buffers and config (weights-only checkpoint)."""
+        return {"model": self.state_dict(), "model_config": asdict(self.cfg)}
+
+    @classmethod
+    def from_state(cls, state: dict[str, Any]) -> "MotionFillVAE":
+        """Rebuild from `state()` (or a fit checkpoint whose extra holds model_config)."""
+        cfg = dict(state.get("model_config") or state.get("extra", {}).get("model_config"))
+        cfg["channels"] = tuple(cfg["channels"])
+        model = cls(MotionFillConfig(**cfg))
+        model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state["model"].items()})
+        return model.eval()
