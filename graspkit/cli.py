@@ -38,6 +38,19 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_eval_all(args: argparse.Namespace) -> int:
+    """`graspkit eval --all`: run the cross-method benchmark and write its report (without --all: usage)."""
+    if not args.all:
+        raise ValueError("eval: name a model (e.g. `graspkit eval wandr ...`) or pass --all")
+    from graspkit.benchmark import markdown, run_all, write_report
+
+    rows = run_all(args.out, data=args.data, quick=args.quick, methods=tuple(m for m in args.methods.split(",") if m))
+    print(markdown(rows))
+    for path in write_report(rows, args.out):
+        print(f"wrote {path}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of the `graspkit` command."""
     from graspkit.paths import default_model_path
@@ -69,9 +82,17 @@ def build_parser() -> argparse.ArgumentParser:
     from graspkit.eval_goal import add_goal_train_commands
     add_goal_train_commands(train)
 
-    # `graspkit eval <model>`: each model family adds its own evaluation subcommands to this parser
-    evaluate = sub.add_parser("eval", help="evaluate a model of the workbook").add_subparsers(dest="eval_command",
-                                                                                             required=True)
+    # `graspkit eval <model>`: each model family adds its own evaluation subcommands to this parser;
+    # `graspkit eval --all`: every method on the same objects and goals (graspkit.benchmark)
+    ev = sub.add_parser("eval", help="evaluate a model of the workbook, or every method with --all")
+    ev.add_argument("--all", action="store_true", help="the cross-method benchmark (table, CSV and figure in --out)")
+    ev.add_argument("--out", type=Path, default=Path("outputs/benchmark"), help="folder for --all's report")
+    ev.add_argument("--quick", action="store_true", help="with --all: a few samples per method (minutes)")
+    ev.add_argument("--data", type=Path, action="append", default=None,
+                    help="with --all: a folder of grasp_*/approach_*.npz files (repeatable; default: made sets or stubs)")
+    ev.add_argument("--methods", default="gt,saga,goal,wandr", help="with --all: comma-separated subset")
+    ev.set_defaults(func=_cmd_eval_all)
+    evaluate = ev.add_subparsers(dest="eval_command", required=False)
     from graspkit.eval_wandr import add_wandr_commands
     add_wandr_commands(train, evaluate)
     from graspkit.eval_saga import add_saga_train_commands

@@ -1,0 +1,335 @@
+"""One benchmark for every method (`graspkit eval --all`): grasp and motion quality with one metrics module.
+
+Grasp quality (SAGA Sec. 4.1 / Tab. 1-2, GOAL Sec. 4.1 / Tab. 1): contact ratio, interpenetration volume (cm^3)
+and depth (cm), APD, all from `graspkit.metrics`, on the held-out (test-split) objects, for the synthetic ground
+truth, SAGA (WholeGrasp-VAE + GraspPose-Opt, and the GrabNet-SMPLX baseline) and GOAL (GNet + refinement).
+Motion quality (SAGA Sec. 4.3, GOAL Sec. 4.2, WANDR Sec. 4.3): foot skating (WANDR's and SAGA's definitions),
+foot sliding (GOAL's), mean jerk, and for reaching the success rate (SR) and distance to goal (DTG), for the
+procedural planner (the synthetic approach clips and the WANDR goal grid), GOAL's MNet and WANDR.
+
+Every method is evaluated by its own evaluator (`graspkit.eval_saga`, `graspkit.eval_goal`, `graspkit.eval_wandr`,
+all measuring with `graspkit.metrics`); this module runs them on the same objects and the same grid, measures the
+ground truth and the planner itself, and writes one table (markdown + CSV) and figures, the papers' published
+figures beside ours in rows labelled with their source. A method whose checkpoint is missing is listed as such.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+GRASP_METRICS = {  # key: (column title, higher is better)
+    "contact_ratio": ("contact ratio ↑", True), "volume_cm3": ("penetration volume cm³ ↓", False),
+    "depth_cm": ("penetration depth cm ↓", False), "apd": ("APD ↑", True)}
+MOTION_METRICS = {
+    "fs_wandr": ("foot skating % (WANDR) ↓", False), "skate_saga": ("foot skating (SAGA) ↓", False),
+    "slide_goal": ("foot sliding % (GOAL) ↓", False), "mean_jerk": ("jerk m/s³ ↓", False),
+    "ade": ("ADE m ↓", False), "SR": ("SR % ↑", True), "DTG": ("DTG cm ↓", False)}
+
+# The papers' published figures (their data: GRAB, AMASS, CIRCLE; ours: graspkit's synthetic data). Percentages as %.
+PAPER_ROWS: list[tuple[str, str, str, dict[str, float]]] = [
+    ("grasp", "SAGA (WholeGrasp w/ opt.)", "SAGA Tab. 1", {"apd": 2.92, "contact_ratio": 0.94, "volume_cm3": 0.48,
+                                                             "depth_cm": 0.16}),
+    ("grasp", "GrabNet-SMPLX", "SAGA Tab. 1", {"apd": 0.33, "contact_ratio": 0.65, "volume_cm3": 14.15, "depth_cm": 0.78}),
+    ("grasp", "ground truth (GRAB)", "SAGA Tab. 2", {"contact_ratio": 0.99, "volume_cm3": 2.04, "depth_cm": 0.45}),
+    ("grasp", "GOAL (GNet + refinement)", "GOAL Tab. 1", {"contact_ratio": 1.00, "volume_cm3": 2.22}),
+    ("grasp", "ground truth (GRAB)", "GOAL Tab. 1", {"contact_ratio": 1.00, "volume_cm3": 1.95}),
+    ("motion", "SAGA (MotionFill, traj + local)", "SAGA Tab. 3", {"ade": 0.083, "skate_saga": 0.394}),
+    ("motion", "GOAL (GNet + MNet)", "GOAL Sec. 4.2", {"slide_goal": 13.7}),
+    ("motion", "ground truth (GRAB)", "GOAL Sec. 4.2", {"slide_goal": 6.7}),
+    ("motion", "WANDR", "WANDR Tab. 1", {"SR": 32.0, "fs_wandr": 16.0, "DTG": 24.8}),
+    ("motion", "GOAL (on WANDR's grid)", "WANDR Tab. 1", {"SR": 0.0, "fs_wandr": 29.0, "DTG": 149.2}),
+]
+
+
+@dataclass
+class Row:
+    """One line of the benchmark: which table ('grasp' / 'motion'), the method, where the figures come from
+    ('graspkit' for ours, else the paper and table), the metric values, and a note (counts, what is missing)."""
+
+    table: str
+    method: str
+    source: str
+    values: dict[str, float] = field(default_factory=dict)
+    note: str = ""
+
+
+# ----------------------------------------------------------------------------------------------- ours, measured here
+
+def _grasp_files(folders: list[Path], kind: str, split: str) -> list:
+    """GRAB-style sequences of `kind` whose object is in `split`, from every folder that has such files."""
+    from graspkit.data.grab import load_grasp_sequence
+    from graspkit.data.grasp import split_of
+
+    out = []
+    for f in folders:
+        for p in sorted(Path(f).glob(f"{kind}_*.npz")):
+            s = load_grasp_sequence(p)
+            if split_of(s.object_name) == split and bool(s.extras.get("grasp.accepted", True)):
+                out.append(s)
+    return out
+
+
+def _object_world(seq, frame: int):
+    """The sequence's catalogue object as a trimesh at its pose at `frame`."""
+    from graspkit.objects.catalogue import make_object
+    from graspkit.objects.placement import ObjectPose, apply_pose
+
+    return apply_pose(ObjectPose(seq.object_transl[frame].astype(np.float64), seq.object_rotation()[frame]),
+                      make_object(seq.object_name))
+
+
+def _motion(seq):
+    """A GraspSequence as a graspkit Motion (same poses, translation, shape and frame rate)."""
+    from graspkit.data.motion import Motion
+
+    return Motion(seq.poses, seq.trans, seq.betas[:10], seq.fps)
+
+
+def ground_truth_grasps(bm, folders: list[Path], split: str = "test", n: int | None = None) -> Row:
+    """Grasp quality of the synthetic ground truth: the last frame of every accepted `split` grasp file (<= n)."""
+    from graspkit.metrics import grasp_metrics, grasp_quality_table
+
+    seqs = _grasp_files(folders, "grasp", split)[:n]
+    if not seqs:
+        return Row("grasp", "ground truth (synthetic)", "graspkit", note=f"no accepted {split} grasps in {folders}")
+    rows = [grasp_metrics(_motion(s).vertices(bm, s.num_frames - 1)[0].double(), bm.faces, _object_world(s, -1))
+            for s in seqs]
+    q = grasp_quality_table(rows)
+    objs = sorted({s.object_name for s in seqs})
+    return Row("grasp", "ground truth (synthetic)", "graspkit",
+               {"contact_ratio": q["contact_ratio"], "volume_cm3": q["volume_mean_cm3"], "depth_cm": q["depth_mean_cm"]},
+               f"{len(seqs)} grasps of {', '.join(objs)}")
+
+
+def planner_motion(bm, folders: list[Path], split: str = "test", n: int | None = None) -> Row:
+    """Motion quality of the procedural planner's approach-and-grasp clips (`split` objects, <= n clips)."""
+    from graspkit.metrics import motion_quality
+
+    seqs = _grasp_files(folders, "approach", split)[:n]
+    if not seqs:
+        return Row("motion", "procedural planner (approach clips)", "graspkit", note=f"no {split} approach clips")
+    q = motion_quality(bm, [_motion(s) for s in seqs])
+    return Row("motion", "procedural planner (approach clips)", "graspkit",
+               {"fs_wandr": 100 * q["fs_wandr"], "skate_saga": q["skate_saga"], "slide_goal": 100 * q["slide_goal"],
+                "mean_jerk": q["mean_jerk"]}, f"{q['clips']} clips, {q['frames']} frames")
+
+
+# ------------------------------------------------------------------------------------- ours, from each evaluator
+
+def saga_grasps(root: Path, out: Path, quick: bool, checkpoints: Path) -> list[Row]:
+    """SAGA's Tab. 1 rows from graspkit.eval_saga on the test objects found in `root`."""
+    from graspkit.eval_saga import EvalConfig, evaluate
+
+    objs = sorted({s.object_name for s in _grasp_files([root], "grasp", "test")})
+    if not objs:
+        return [Row("grasp", "SAGA (WholeGrasp w/ opt.)", "graspkit", note=f"no test grasps in {root}")]
+    cfg = EvalConfig(objects=tuple(objs), placements=1, samples=3, gt_grasps=1, steps=(30, 30, 30)) if quick else \
+        EvalConfig(objects=tuple(objs))
+    res = evaluate(root, cfg, progress=True, out=out, checkpoints=checkpoints)
+    names = {"WholeGrasp w/ opt. (Ours)": "SAGA (WholeGrasp w/ opt.)", "GrabNet-SMPLX": "GrabNet-SMPLX"}
+    rows = []
+    for key, name in names.items():
+        r = res["rows"].get(key)
+        if r:
+            rows.append(Row("grasp", name, "graspkit", {k: r[k] for k in GRASP_METRICS if k in r},
+                            f"{r.get('n', '?')} grasps of {', '.join(objs)}"))
+    return rows
+
+
+def goal_results(folders: list[Path], out: Path, quick: bool, checkpoints: Path) -> list[Row]:
+    """GOAL's Tab. 1 row (GNet) and the sliding of its motions (GNet + MNet) from graspkit.eval_goal."""
+    from graspkit.eval_goal import evaluate
+
+    kw = dict(n_grasps=4, n_rollouts=2, window_stride=20) if quick else {}
+    res = evaluate(folders, checkpoints, out=out, **kw)
+    rows = []
+    for key, r in res.get("tab1", {}).items():
+        if key.startswith("GNet") and "w/o" not in key:
+            rows.append(Row("grasp", "GOAL (GNet + refinement)", "graspkit",
+                            {k: r[k] for k in ("contact_ratio", "volume_cm3", "depth_cm") if k in r}, f"{r.get('n', '?')} grasps"))
+            break
+    sl = res.get("sliding", {})
+    for key, v in sl.items():
+        if key.startswith("GOAL"):
+            rows.append(Row("motion", "GOAL (GNet + MNet)", "graspkit", {"slide_goal": 100 * float(v)},
+                            f"{res['rollouts']['clips']} rollouts"))
+    return rows
+
+
+def wandr_results(checkpoint: Path, quick: bool) -> list[Row]:
+    """WANDR's goal-grid row and the procedural planner's on the same grid from graspkit.eval_wandr."""
+    from graspkit.eval_wandr import run_eval_wandr
+
+    r = run_eval_wandr(str(checkpoint), n=1 if quick else 5, planner=True, threads=torch.get_num_threads())
+    pick = lambda s: {"SR": s["SR"], "fs_wandr": s["FS"], "DTG": s["DTG"]}  # noqa: E731
+    rows = [Row("motion", "WANDR", "graspkit", pick(r["summary"]), f"{r['summary']['rollouts']} rollouts on the grid")]
+    if "planner" in r:
+        rows.append(Row("motion", "procedural planner (WANDR grid)", "graspkit", pick(r["planner"]),
+                        f"{r['planner']['rollouts']} motions"))
+    return rows
+
+
+# ---------------------------------------------------------------------------------------------------------- driver
+
+def paper_rows() -> list[Row]:
+    """The papers' published figures as rows."""
+    return [Row(t, m, s, dict(v), "published") for t, m, s, v in PAPER_ROWS]
+
+
+def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = False,
+            checkpoints: str | Path | None = None, methods: tuple[str, ...] = ("gt", "saga", "goal", "wandr")
+            ) -> list[Row]:
+    """Evaluate every method (and the ground truth / planner) into out_dir; returns all rows, papers' included.
+
+    data: folders with grasp_*.npz / approach_*.npz (default: the made training sets if present, else data_stubs);
+    quick: a few samples per method (minutes on two cores) instead of the full protocol."""
+    from tqdm.auto import tqdm
+
+    from graspkit.body import BodyModel
+    from graspkit.paths import DATA_STUBS, cache_dir, default_model_path
+
+    unknown = set(methods) - {"gt", "saga", "goal", "wandr"}
+    if unknown:
+        raise ValueError(f"methods: unknown {sorted(unknown)}; expected some of gt, saga, goal, wandr")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    ck = Path(checkpoints) if checkpoints else DATA_STUBS / "checkpoints"
+    made = [cache_dir() / "grasps" / "grasp", cache_dir() / "grasps" / "approach"]
+    folders = [Path(p) for p in data] if data else (made if any(any(p.glob("*.npz")) for p in made if p.is_dir())
+                                                    else [DATA_STUBS / "grasps", DATA_STUBS / "approach"])
+    for f in folders:
+        if not f.is_dir():
+            raise FileNotFoundError(f"data: no folder {f}")
+    bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    rows: list[Row] = []
+    steps = tqdm(list(methods), desc="eval --all", unit="method")
+    for m in steps:
+        steps.set_postfix_str(m)
+        t0 = time.perf_counter()
+        if m == "gt":
+            new = [ground_truth_grasps(bm, folders, n=8 if quick else None),
+                   planner_motion(bm, folders, n=4 if quick else None)]
+        elif m == "saga":
+            new = _guarded("SAGA (WholeGrasp w/ opt.)", "grasp", ck / "wholegrasp.pt",
+                           lambda: saga_grasps(folders[0], out / "saga_eval.json", quick, ck))
+        elif m == "goal":
+            new = _guarded("GOAL (GNet + refinement)", "grasp", ck / "gnet.pt",
+                           lambda: goal_results(folders, out / "goal_eval.json", quick, ck))
+        else:
+            new = _guarded("WANDR", "motion", ck / "wandr.pt", lambda: wandr_results(ck / "wandr.pt", quick))
+        for r in new:
+            r.note = (r.note + "; " if r.note else "") + f"{time.perf_counter() - t0:.0f} s"
+        rows += new
+    return rows + paper_rows()
+
+
+def _guarded(method: str, table: str, checkpoint: Path, run) -> list[Row]:
+    """run() if the method's checkpoint exists, else a row saying which file is missing."""
+    if not checkpoint.is_file():
+        return [Row(table, method, "graspkit", note=f"checkpoint missing: {checkpoint}")]
+    return run()
+
+
+# ---------------------------------------------------------------------------------------------------------- report
+
+def _fmt(v: float | None) -> str:
+    """A table cell: 3 significant figures, '—' for missing."""
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "—"
+    return f"{v:.3g}"
+
+
+def markdown(rows: list[Row]) -> str:
+    """Two markdown tables (grasp, motion); ours first, the papers' rows after, each row with its source."""
+    parts = []
+    for table, metrics in (("grasp", GRASP_METRICS), ("motion", MOTION_METRICS)):
+        sel = sorted([r for r in rows if r.table == table], key=lambda r: r.source != "graspkit")
+        cols = [k for k in metrics if any(k in r.values for r in sel)]
+        head = "| method | source | " + " | ".join(metrics[k][0] for k in cols) + " | note |"
+        lines = [f"### {table} quality", "", head, "|" + "---|" * (len(cols) + 3)]
+        for r in sel:
+            src = "graspkit (ours)" if r.source == "graspkit" else f"paper: {r.source}"
+            lines.append(f"| {r.method} | {src} | " + " | ".join(_fmt(r.values.get(k)) for k in cols) + f" | {r.note} |")
+        parts.append("\n".join(lines))
+    return "\n\n".join(parts) + "\n"
+
+
+def to_csv(rows: list[Row]) -> str:
+    """Long-format CSV: table, method, source, metric, value, note."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["table", "method", "source", "metric", "value", "note"])
+    for r in rows:
+        for k, v in r.values.items():
+            w.writerow([r.table, r.method, r.source, k, f"{v:.6g}", r.note])
+        if not r.values:
+            w.writerow([r.table, r.method, r.source, "", "", r.note])
+    return buf.getvalue()
+
+
+def figure(rows: list[Row]):
+    """Bar charts, one panel per metric that has both ours and a paper's figure: ours solid, the papers' hatched."""
+    import matplotlib.pyplot as plt
+
+    keys = [(t, k) for t, ms in (("grasp", GRASP_METRICS), ("motion", MOTION_METRICS)) for k in ms
+            if any(k in r.values for r in rows if r.table == t)]
+    ncol = 4
+    nrow = max(1, math.ceil(len(keys) / ncol))
+    fig, axes = plt.subplots(nrow, ncol, figsize=(15, 2.6 * nrow), squeeze=False)
+    for ax in axes.flat[len(keys):]:
+        ax.set_axis_off()
+    for ax, (t, k) in zip(axes.flat, keys):
+        sel = [r for r in rows if r.table == t and k in r.values]
+        names = [f"{r.method}\n({'ours' if r.source == 'graspkit' else r.source})" for r in sel]
+        ours = [r.source == "graspkit" for r in sel]
+        bars = ax.barh(range(len(sel)), [r.values[k] for r in sel], edgecolor="#333333",
+                       color=["#4C72B0" if o else "#DDDDDD" for o in ours])
+        for bar, o in zip(bars, ours):
+            bar.set_hatch(None if o else "//")
+        ax.bar_label(bars, labels=[_fmt(r.values[k]) for r in sel], fontsize=7, padding=2)
+        ax.margins(x=0.25)
+        ax.set_yticks(range(len(sel)), names, fontsize=7)
+        ax.invert_yaxis()
+        ax.set_title(f"{t}: " + (GRASP_METRICS | MOTION_METRICS)[k][0], fontsize=9)
+        ax.tick_params(axis="x", labelsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def write_report(rows: list[Row], out_dir: str | Path) -> list[Path]:
+    """benchmark.md, benchmark.csv and benchmark.png in out_dir (each written atomically); returns the paths."""
+    import matplotlib.pyplot as plt
+
+    from graspkit.viz.export import write_atomic
+
+    out = Path(out_dir)
+    md = write_atomic(out / "benchmark.md", "# graspkit: every method on the same objects and goals\n\n" + markdown(rows))
+    cs = write_atomic(out / "benchmark.csv", to_csv(rows))
+    fig = figure(rows)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    png = write_atomic(out / "benchmark.png", buf.getvalue())
+    return [md, cs, png]
+
+
+def read_csv(path: str | Path) -> list[Row]:
+    """Rows back from a benchmark.csv (the inverse of to_csv)."""
+    rows: dict[tuple[str, str, str], Row] = {}
+    with open(path, newline="") as f:
+        r = csv.DictReader(f)
+        if r.fieldnames != ["table", "method", "source", "metric", "value", "note"]:
+            raise ValueError(f"path: {path} is not a graspkit benchmark.csv (columns {r.fieldnames})")
+        for line in r:
+            row = rows.setdefault((line["table"], line["method"], line["source"]),
+                                  Row(line["table"], line["method"], line["source"], note=line["note"]))
+            if line["metric"]:
+                row.values[line["metric"]] = float(line["value"])
+    return list(rows.values())

@@ -1,0 +1,105 @@
+"""The cross-method benchmark (`graspkit eval --all`): the ground-truth row against smplx + trimesh, the planner
+row against the metrics' definitions, the report round trip and the CLI's errors."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+import smplx
+import torch
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from graspkit.benchmark import Row, ground_truth_grasps, markdown, paper_rows, planner_motion, read_csv, write_report
+from graspkit.body import BodyModel
+from graspkit.cli import main
+from graspkit.data.grasp import split_of
+
+from conftest import PROCEDURAL_MODEL
+
+STUBS = Path(__file__).resolve().parents[1] / "data_stubs"
+PARAMS = ("global_orient", "body_pose", "jaw_pose", "leye_pose", "reye_pose", "left_hand_pose", "right_hand_pose",
+          "transl", "expression")
+
+
+@pytest.fixture(scope="module")
+def bm():
+    return BodyModel.from_file(PROCEDURAL_MODEL, flat_hand_mean=True)
+
+
+def _independent(path: Path, model) -> tuple[float, float, float]:
+    """(in contact, volume cm^3, depth cm) of a grasp file's last frame, with smplx + trimesh only."""
+    z = dict(np.load(path, allow_pickle=False))
+    out = model(betas=torch.as_tensor(z["body.betas"][None, :10], dtype=torch.float64),
+                **{k: torch.as_tensor(z[f"body.params.{k}"][-1:], dtype=torch.float64) for k in PARAMS})
+    v = out.vertices[0].detach().numpy()
+    body = trimesh.Trimesh(v, model.faces, process=False)
+    obj = trimesh.load(path.parent / str(z["object.object_mesh"]), process=False)
+    R = Rotation.from_rotvec(z["object.params.global_orient"][-1]).as_matrix()
+    obj.apply_transform(np.block([[R, z["object.params.transl"][-1].astype(np.float64)[:, None]],
+                                  [np.zeros((1, 3)), np.ones((1, 1))]]))
+    inter = trimesh.boolean.intersection([body, obj], engine="manifold")
+    near = np.all((v > obj.bounds[0] - 0.03) & (v < obj.bounds[1] + 0.03), axis=1)
+    sd = trimesh.proximity.signed_distance(obj, v[near])                     # > 0 inside
+    return float(sd.max() >= -0.002), 0.0 if inter.is_empty else inter.volume * 1e6, max(sd.max(), 0.0) * 100
+
+
+def test_ground_truth_row_matches_smplx_and_trimesh(bm):
+    """The row averages the test-split grasps' last frames; each recomputed with smplx + trimesh alone."""
+    files = [p for p in sorted((STUBS / "grasps").glob("grasp_*.npz"))
+             if split_of(str(np.load(p, allow_pickle=False)["obj_name"])) == "test"
+             and bool(np.load(p, allow_pickle=False).get("grasp.accepted", True))][:3]
+    assert files, "the stubs hold test-split grasps (mug)"
+    model = smplx.create(str(STUBS / "body_models"), model_type="smplx", gender="neutral", ext="npz", use_pca=False,
+                         flat_hand_mean=True, num_betas=10, dtype=torch.float64)
+    ref = np.array([_independent(p, model) for p in files])
+    row = ground_truth_grasps(bm, [STUBS / "grasps"], n=len(files))
+    assert row.table == "grasp" and row.source == "graspkit" and f"{len(files)} grasps" in row.note
+    assert row.values["contact_ratio"] == pytest.approx(ref[:, 0].mean())
+    assert row.values["volume_cm3"] == pytest.approx(ref[:, 1].mean(), abs=0.05, rel=0.05)
+    assert row.values["depth_cm"] == pytest.approx(ref[:, 2].mean(), abs=0.02)
+
+
+def test_planner_row_counts_sliding_frames_by_goals_definition(bm):
+    """GOAL's sliding on the approach clips, recounted from smplx vertices: the lowest vertex moves > 1 cm per frame."""
+    files = sorted((STUBS / "approach").glob("approach_*.npz"))
+    row = planner_motion(bm, [STUBS / "approach"])
+    slid = pairs = 0
+    for p in files:
+        z = dict(np.load(p, allow_pickle=False))
+        if split_of(str(z["obj_name"])) != "test":
+            continue
+        T = len(z["body.params.transl"])
+        model_t = smplx.create(str(STUBS / "body_models"), model_type="smplx", gender="neutral", ext="npz",
+                               use_pca=False, flat_hand_mean=True, num_betas=10, batch_size=T, dtype=torch.float64)
+        v = model_t(betas=torch.as_tensor(z["body.betas"][None, :10], dtype=torch.float64).expand(T, -1),
+                    **{k: torch.as_tensor(z[f"body.params.{k}"], dtype=torch.float64) for k in PARAMS}).vertices
+        v = v.detach().numpy()
+        low = v[:-1, :, 2].argmin(1)
+        move = np.linalg.norm(v[1:, :, :][np.arange(T - 1), low] - v[:-1][np.arange(T - 1), low], axis=1)
+        slid, pairs = slid + int((move > 0.01).sum()), pairs + T - 1
+    assert pairs > 0
+    assert row.values["slide_goal"] == pytest.approx(100 * slid / pairs, abs=1e-6)
+
+
+def test_report_round_trips_and_labels_the_papers(tmp_path):
+    ours = [Row("grasp", "ground truth (synthetic)", "graspkit", {"contact_ratio": 1.0, "volume_cm3": 0.25}, "3 grasps"),
+            Row("motion", "WANDR", "graspkit", note="checkpoint missing: x.pt")]
+    rows = ours + paper_rows()
+    md, cs, png = write_report(rows, tmp_path)
+    text = md.read_text()
+    assert "| ground truth (synthetic) | graspkit (ours) | 1 | 0.25 |" in text
+    assert "| WANDR | paper: WANDR Tab. 1 |" in text and "| GOAL (GNet + refinement) | paper: GOAL Tab. 1 |" in text
+    back = read_csv(cs)
+    assert [(r.table, r.method, r.source, r.values, r.note) for r in back] == \
+        [(r.table, r.method, r.source, r.values, r.note) for r in rows]
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and not list(tmp_path.glob("*.tmp"))
+    assert markdown(back) == markdown(rows)
+
+
+def test_eval_cli_errors_name_what_is_wrong(tmp_path, capsys):
+    assert main(["eval"]) == 2
+    assert "--all" in capsys.readouterr().err
+    assert main(["eval", "--all", "--methods", "gt,nope", "--out", str(tmp_path)]) == 2
+    assert "methods" in capsys.readouterr().err
+    assert main(["eval", "--all", "--data", str(tmp_path / "missing"), "--out", str(tmp_path)]) == 2
+    assert "data" in capsys.readouterr().err
