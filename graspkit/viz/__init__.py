@@ -10,14 +10,14 @@ mesh export (export) and the shared palette (style).
 Note: `viz.animate` is the function; import the module's other names with `from graspkit.viz.animate import ...`.
 """
 from graspkit.viz.animate import animate, save_animation, show_animation, to_html
-from graspkit.viz.export import export_scene, export_sequence_glb, load_sequence_glb
+from graspkit.viz.export import export_motion, export_scene, export_sequence_glb, load_sequence_glb
 from graspkit.viz.scene import (as_array, as_mesh, as_points, bounds_of, draw_arrows, draw_goal, draw_ground,
                                 draw_markers, draw_mesh, draw_meshes, draw_path, draw_points, figure, lambert,
                                 set_equal, show_scene, sphere, to_numpy, value_colors)
 from graspkit.viz.style import (ARROW, CONTACT_CMAP, GOAL, GROUND, MARKER, OBJECT, OBJECT_2, SEQUENCE, SKIN,
                                 TRAJECTORY, VIEWS)
 
-__all__ = ["animate", "save_animation", "show_animation", "to_html", "export_scene", "export_sequence_glb",
+__all__ = ["animate", "save_animation", "show_animation", "to_html", "export_motion", "export_scene", "export_sequence_glb",
            "load_sequence_glb", "as_array", "as_mesh", "as_points", "bounds_of", "draw_arrows", "draw_goal",
            "draw_ground", "draw_markers", "draw_mesh", "draw_meshes", "draw_path", "draw_points", "figure", "lambert",
            "set_equal", "show_scene", "sphere", "to_numpy", "value_colors", "ARROW", "CONTACT_CMAP", "GOAL", "GROUND",

@@ -245,3 +245,28 @@ def load_sequence_glb(path: str | os.PathLike, name: str = "body",
         times = arr(anim["samplers"][0]["input"]).astype(np.float64)
     rot = Z_UP_TO_Y_UP if y_up else np.eye(3)
     return np.stack(frames) @ rot, arr(prim["indices"]).reshape(-1, 3).astype(np.int64), times
+
+
+def export_motion(motion: Any, bm: Any, folder: str | os.PathLike, name: str,
+                  objects: Mapping[str, Any] | None = None, stride: int = 2) -> dict[str, Path]:
+    """A whole sequence (graspkit.data.Motion) for other tools: `<name>.npz` (AMASS-style SMPL-X parameters, loads
+    in the smplx package), `<name>.glb` (animated: morph targets every `stride` frames) and `<name>_final.glb`
+    (the last frame with the static `objects` {name: (vertices, faces) or Trimesh}, through trimesh). Returns
+    {'npz', 'glb', 'final_glb'} paths; every file is written atomically."""
+    from graspkit.data.formats import save_motion
+
+    folder = Path(folder)
+    if not name or Path(name).name != name:
+        raise ValueError(f"name: expected a plain file stem, got {name!r}")
+    v = _motion_vertices(motion, bm)
+    faces = np.asarray(bm.faces, np.int64)
+    out = {"npz": save_motion(folder / f"{name}.npz", motion),
+           "glb": export_sequence_glb(v, faces, folder / f"{name}.glb", fps=motion.fps, objects=objects,
+                                      stride=stride),
+           "final_glb": export_scene({"body": (v[-1], faces), **dict(objects or {})}, folder / f"{name}_final.glb")}
+    return out
+
+
+def _motion_vertices(motion: Any, bm: Any, chunk: int = 64) -> np.ndarray:
+    """Mesh vertices (T,V,3) of a Motion on body model bm as a float32 numpy array."""
+    return np.concatenate([v.numpy().astype(np.float32) for _, v in motion.iter_vertices(bm, chunk=chunk)])
