@@ -45,31 +45,43 @@ FEATURES = NUM_MARKERS * 3 + 4
 
 @dataclass
 class MotionFillConfig:
-    """Sizes and loss weights (A.2, A.4)."""
+    """Sizes and loss weights (A.2, A.4). The defaults are graspkit's shipped sizes (about 0.72 M weights, 1.4 MB in
+    float16); `paper()` gives A.2's (512-D trajectory latent, decoder blocks 8T and 4T wide: 3.8 M weights)."""
 
-    traj_latent: int = 512
-    motion_latent: int = 128
-    channels: tuple[int, ...] = (16, 32, 64, 64, 64)
+    traj_latent: int = 64
+    traj_enc: int = 128                   # encoder block width (A.2: as wide as its input, 2 * 62 * 4 = 496)
+    traj_widths: tuple[int, int] = (3 * T, 2 * T)     # decoder residual blocks (A.2: 8T, 4T)
+    motion_latent: int = 64
+    channels: tuple[int, ...] = (16, 32, 32, 32, 32)
     lambda_kl: float = 1.0
     l1: float = 0.05          # trajectory velocity
     l2: float = 1.0           # foot-contact BCE
     l3: float = 1.0           # local markers
     l4: float = 0.5           # local marker velocity
 
+    @classmethod
+    def paper(cls) -> "MotionFillConfig":
+        """SAGA A.2's sizes (512-D TrajFill latent, blocks 8T / 4T; the CNN widths are LEMO-like, graspkit's)."""
+        return cls(traj_latent=512, traj_enc=2 * NUM_ROOT * 4, traj_widths=(8 * T, 4 * T), motion_latent=128,
+                   channels=(16, 32, 64, 64, 64))
+
 
 # ------------------------------------------------------------------------------------------------ TrajFill
 class TrajFill(nn.Module):
     """CVAE over root trajectories (B, 62, 4) conditioned on the straight trajectory Gamma_bar (B, 62, 4)."""
 
-    def __init__(self, latent: int = 512, frames: int = NUM_ROOT) -> None:
+    def __init__(self, latent: int = 512, frames: int = NUM_ROOT, enc: int | None = None,
+                 widths: tuple[int, int] | None = None) -> None:
         super().__init__()
         n = frames * 4
         t = frames - 2
+        enc = enc or 2 * n
+        w1, w2 = widths or (8 * t, 4 * t)
         self.frames = frames
-        self.enc = nn.Sequential(ResBlock(2 * n, 2 * n), ResBlock(2 * n, 2 * n))
-        self.head = GaussianHead(2 * n, latent)
-        self.dec = nn.Sequential(ResBlock(latent + n, 8 * t), ResBlock(8 * t, 4 * t))
-        self.out = nn.Linear(4 * t, n)
+        self.enc = nn.Sequential(ResBlock(2 * n, enc), ResBlock(enc, enc))
+        self.head = GaussianHead(enc, latent)
+        self.dec = nn.Sequential(ResBlock(latent + n, w1), ResBlock(w1, w2))
+        self.out = nn.Linear(w2, n)
         nn.init.zeros_(self.out.weight)           # starts at the straight trajectory
         nn.init.zeros_(self.out.bias)
         self.latent = latent
@@ -187,7 +199,7 @@ class MotionFillVAE(nn.Module):
     def __init__(self, cfg: MotionFillConfig | None = None) -> None:
         super().__init__()
         self.cfg = cfg = cfg or MotionFillConfig()
-        self.traj = TrajFill(cfg.traj_latent)
+        self.traj = TrajFill(cfg.traj_latent, enc=cfg.traj_enc, widths=tuple(cfg.traj_widths))
         self.local = LocalMotionFill(cfg.motion_latent, cfg.channels)
         for k, n in (("marker_mean", NUM_MARKERS * 3), ("marker_std", NUM_MARKERS * 3), ("vel_mean", 3),
                      ("vel_std", 3)):
@@ -216,7 +228,8 @@ class MotionFillVAE(nn.Module):
     def loss(self, batch: dict[str, Tensor], parts: tuple[str, ...] = ("traj", "local"),
              trajectory: str = "truth") -> dict[str, Tensor]:
         """Eq. 8-9 on a batch of MotionFillDataset items; `parts` picks the CVAEs trained; `trajectory` ('truth' or
-        'predicted') says which root velocities build LocalMotionFill's images (the fine-tuning uses TrajFill's)."""
+        'predicted') says which root velocities build LocalMotionFill's condition image (the fine-tuning uses TrajFill's,
+        without gradient into TrajFill)."""
         cfg = self.cfg
         logs: dict[str, Tensor] = {}
         loss = torch.zeros(())
@@ -228,8 +241,8 @@ class MotionFillVAE(nn.Module):
             logs["traj_vel"] = (v_hat - (batch["traj"][:, 1:] - batch["traj"][:, :-1])).abs().sum(-1).sum(-1).mean()
             logs["kl_traj"] = kl_standard_normal(mu, logvar)
             loss = loss + logs["traj"] + cfg.l1 * logs["traj_vel"] + cfg.lambda_kl * robust_kl(mu, logvar)
-            if trajectory == "predicted":
-                vel = traj_velocity(traj_hat)
+            if trajectory == "predicted":      # detached: the local terms would pull TrajFill off the data
+                vel = traj_velocity(traj_hat).detach()
         if "local" in parts:
             img, cond = self.image(batch["local"], batch["contacts"], vel)
             target, _ = self.image(batch["local"], batch["contacts"], batch["vel"])
@@ -280,7 +293,7 @@ class MotionFillVAE(nn.Module):
     def from_state(cls, state: dict[str, Any]) -> "MotionFillVAE":
         """Rebuild from `state()` (or a fit checkpoint whose extra holds model_config)."""
         cfg = dict(state.get("model_config") or state.get("extra", {}).get("model_config"))
-        cfg["channels"] = tuple(cfg["channels"])
+        cfg["channels"], cfg["traj_widths"] = tuple(cfg["channels"]), tuple(cfg["traj_widths"])
         model = cls(MotionFillConfig(**cfg))
         model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state["model"].items()})
         return model.eval()

@@ -1,0 +1,133 @@
+"""MotionFill-VAE (SAGA §3.3): shapes, the trajectory velocity against the data module, Eq. 8 on hand-made cases."""
+import numpy as np
+import pytest
+import torch
+
+from graspkit.data.motionfill_dataset import MotionFillStats, interpolated_trajectory, local_motion
+from graspkit.models.blocks import kl_standard_normal, robust_kl
+from graspkit.models.motionfill import (FEATURES, NUM_FRAMES, NUM_ROOT, LocalMotionFill, MotionFillConfig,
+                                        MotionFillVAE, TrajFill, traj_velocity)
+
+
+def _batch(B: int = 3, seed: int = 0) -> dict[str, torch.Tensor]:
+    g = np.random.default_rng(seed)
+    heading = np.cumsum(g.normal(0, 0.02, (B, NUM_ROOT)), 1)
+    xy = np.cumsum(g.normal(0, 0.02, (B, NUM_ROOT, 2)), 1)
+    traj = np.concatenate([xy, np.cos(heading)[..., None], np.sin(heading)[..., None]], -1).astype(np.float32)
+    local, vel = zip(*[local_motion(g.normal(0, 0.3, (NUM_FRAMES, 79, 3)), t) for t in traj])
+    return {"traj": torch.as_tensor(traj), "traj_interp": torch.as_tensor(interpolated_trajectory(traj)),
+            "local": torch.as_tensor(np.stack(local)).float(), "vel": torch.as_tensor(np.stack(vel)).float(),
+            "contacts": torch.as_tensor(g.random((B, NUM_FRAMES, 4)) < 0.5).float()}
+
+
+def test_trajectory_velocity_matches_the_data_module():
+    b = _batch()
+    torch.testing.assert_close(traj_velocity(b["traj"]), b["vel"], atol=1e-5, rtol=1e-4)
+
+
+def test_trajfill_starts_at_the_straight_trajectory_and_local_fill_keeps_the_image_size():
+    b = _batch()
+    tf = TrajFill().eval()
+    out, mu, logvar = tf(b["traj"], b["traj_interp"])            # A.2's sizes by default
+    torch.testing.assert_close(out, b["traj_interp"])            # zero-initialised output layer
+    assert mu.shape == (3, 512)
+    lm = LocalMotionFill()
+    img = torch.randn(2, 4, NUM_FRAMES, FEATURES)
+    ch0, mu, _ = lm(img, img)
+    assert ch0.shape == (2, NUM_FRAMES, FEATURES) and mu.shape == (2, 128)
+
+
+def test_loss_terms_and_gradients():
+    torch.manual_seed(0)
+    m = MotionFillVAE()
+    b = _batch()
+    logs = m.loss(b, trajectory="predicted")
+    logs["loss"].backward()
+    assert all(torch.isfinite(v) for v in logs.values())
+    # at initialisation TrajFill returns Gamma_bar, so its term is |Gamma - Gamma_bar| summed
+    want = (b["traj"] - b["traj_interp"]).abs().sum((1, 2)).mean()
+    m.eval()
+    assert m.loss(b, parts=("traj",))["traj"].item() == pytest.approx(want.item(), rel=1e-5)
+    missing = [n for n, p in m.named_parameters() if p.grad is None]
+    assert not missing
+
+
+def test_image_round_trip_and_deterministic_sampling():
+    torch.manual_seed(0)
+    m = MotionFillVAE().eval()
+    b = _batch()
+    img, cond = m.image(b["local"], b["contacts"], b["vel"])
+    local, contacts = m.split(img[:, 0])
+    torch.testing.assert_close(local, b["local"])
+    assert (cond[:, 0, 1:-1] == 0).all() and torch.equal(cond[:, 0, [0, -1]], img[:, 0, [0, -1]])
+    s1 = m.sample(b["traj_interp"][0], b["local"][0], b["contacts"][0], 2, torch.Generator().manual_seed(1))
+    s2 = m.sample(b["traj_interp"][0], b["local"][0], b["contacts"][0], 2, torch.Generator().manual_seed(1))
+    torch.testing.assert_close(s1["markers"], s2["markers"])
+    assert s1["markers"].shape == (2, NUM_FRAMES, 79, 3)
+    again = MotionFillVAE.from_state(m.state())
+    z = torch.ones(1, m.cfg.traj_latent)
+    torch.testing.assert_close(again.traj.decode(z, b["traj_interp"][:1]), m.traj.decode(z, b["traj_interp"][:1]))
+    s3 = m.sample(b["traj_interp"][0], b["local"][0], b["contacts"][0], 2, torch.Generator().manual_seed(2))
+    assert not torch.allclose(s1["markers"], s3["markers"])       # another seed, another sample
+
+
+def test_kl_terms_against_torch_distributions():
+    g = torch.Generator().manual_seed(0)
+    mu, logvar = torch.randn(5, 7, generator=g), torch.randn(5, 7, generator=g)
+    q = torch.distributions.Normal(mu, (0.5 * logvar).exp())
+    p = torch.distributions.Normal(torch.zeros(5, 7), torch.ones(5, 7))
+    want = torch.distributions.kl_divergence(q, p).sum(-1).mean()
+    torch.testing.assert_close(kl_standard_normal(mu, logvar), want)
+    torch.testing.assert_close(robust_kl(mu, logvar), torch.sqrt(1 + want ** 2) - 1)      # Eq. 2 / Eq. 9's Psi
+    assert kl_standard_normal(torch.zeros(2, 3), torch.zeros(2, 3)).item() == 0.0
+
+
+def test_paper_sizes_and_shipped_sizes():
+    paper = MotionFillVAE(MotionFillConfig.paper())
+    assert paper.traj.latent == 512 and paper.traj.out.in_features == 4 * 60 and paper.traj.dec[0].fc1.out_features == 8 * 60
+    small = MotionFillVAE()
+    n = sum(p.numel() for p in small.parameters())
+    assert n * 2 < 1.5e6                                            # float16 weights under 1.5 MB
+
+
+def test_global_motion_round_trip_through_the_model_image():
+    """Canonical markers -> (local, vel) -> image -> split -> global markers gives the markers back."""
+    from graspkit.data.motionfill_dataset import global_motion
+
+    b = _batch(B=2, seed=3)
+    g = np.random.default_rng(3)
+    markers = g.normal(0, 0.3, (NUM_FRAMES, 79, 3))
+    local, vel = local_motion(markers, b["traj"][0].double().numpy())
+    m = MotionFillVAE().eval()
+    img, _ = m.image(torch.as_tensor(local)[None].float(), b["contacts"][:1], torch.as_tensor(vel)[None].float())
+    loc, logits = m.split(img[:, 0])
+    back = global_motion(loc[0].double().numpy(), b["traj"][0].double().numpy())
+    np.testing.assert_allclose(back, markers, atol=1e-5)
+    torch.testing.assert_close(logits, b["contacts"][:1])
+    torch.testing.assert_close(traj_velocity(b["traj"][:1].double()).float(), torch.as_tensor(vel)[None].float(),
+                               atol=1e-5, rtol=1e-4)
+
+
+def test_a_tiny_overfit_reduces_every_reconstruction_term():
+    torch.manual_seed(0)
+    m = MotionFillVAE(MotionFillConfig(traj_latent=8, traj_enc=64, traj_widths=(64, 64), motion_latent=8,
+                                       channels=(8, 8, 8, 8, 8)))
+    b = _batch(B=4, seed=1)
+    t = torch.linspace(0, 1, NUM_FRAMES)[None, :, None, None]
+    template = torch.as_tensor(np.random.default_rng(1).normal(0, 0.3, (1, 1, 79, 3))).float()
+    b["local"] = template + 0.1 * torch.sin(2 * np.pi * t * torch.arange(1, 5).view(4, 1, 1, 1))   # smooth motions
+    b["contacts"] = (torch.sin(2 * np.pi * t[..., 0] * 2 + torch.arange(4)) > 0).float().expand(4, -1, 4)
+    opt = torch.optim.Adam(m.parameters(), lr=3e-3)
+    m.set_stats(MotionFillStats.fit({"local": b["local"].numpy(), "vel": b["vel"].numpy()}))
+    first = {k: v.item() for k, v in m.loss(b).items()}
+    for _ in range(80):
+        logs = m.loss(b)
+        opt.zero_grad()
+        logs["loss"].backward()
+        opt.step()
+    last = {k: v.item() for k, v in m.loss(b).items()}           # train mode: batch statistics, sampled latents
+    assert last["loss"] < 0.2 * first["loss"]
+    for k in ("traj", "markers", "markers_vel"):
+        assert last[k] < 0.5 * first[k], k
+    assert last["traj_vel"] < first["traj_vel"]
+    assert last["marker_error_cm"] < 1.0
