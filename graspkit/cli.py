@@ -33,7 +33,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     """Run the main job: everything the workbook can show so far, written to --out."""
     from graspkit.demo import run_demo
 
-    for path in run_demo(Path(args.out), model_path=args.model):
+    stages = tuple(s for s in args.stages.split(",") if s)
+    for path in run_demo(Path(args.out), model_path=args.model, stages=stages):
         print(f"wrote {path}")
     return 0
 
@@ -72,6 +73,8 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("demo", help="run the main job and write its figures to --out")
     d.add_argument("--out", type=Path, default=Path("outputs/demo"))
     d.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
+    d.add_argument("--stages", default="body,planner,saga,goal,wandr",
+                   help="comma-separated subset of body, planner, saga, goal, wandr")
     d.set_defaults(func=_cmd_demo)
     from graspkit.data.cli import add_data_commands
     add_data_commands(sub)

@@ -1,6 +1,12 @@
-"""The main job (`graspkit demo`): everything the workbook can show, written to an output folder.
+"""The main job (`graspkit demo`): the whole pipeline on one object and one goal, written to an output folder.
 
-So far: the body model in several poses and shapes (figure + GLB). Later stages add SAGA, GOAL and WANDR.
+Stages (each writes stills, animations (GIF), AMASS-style npz and GLB exports of its final scene):
+- body: the procedural humanoid in several poses and shapes;
+- planner: the procedural approach-and-grasp clip (the synthetic ground truth) for the mug;
+- saga: SAGA stage 1 (WholeGrasp-VAE sample + GraspPose-Opt, Sec. 3.2, Alg. 1) on the same mug placement;
+- goal: GOAL (GNet grasp + refinement, then MNet's autoregressive approach, Sec. 3.1-3.5) from the clip's start;
+- wandr: WANDR reaching a goal in 4 s from a held-out start pose (Sec. 3.2-3.5).
+A method whose shipped checkpoint is missing is skipped with a message naming the file.
 """
 from __future__ import annotations
 
@@ -10,12 +16,16 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 from graspkit.body import BodyModel  # noqa: E402
 from graspkit.body.poses import body_pose, y_up_to_z_up  # noqa: E402
-from graspkit.paths import default_model_path  # noqa: E402
+from graspkit.paths import DATA_STUBS, default_model_path  # noqa: E402
+
+STAGES = ("body", "planner", "saga", "goal", "wandr")
+CHECKPOINTS = DATA_STUBS / "checkpoints"
 
 DEMO_BODIES = [("t_pose", 0.0), ("a_pose", 0.0), ("walk", 0.0), ("reach_high", 0.0), ("squat", 0.0),
                ("bend_pick", 0.0), ("a_pose", -2.0), ("a_pose", 2.0)]
@@ -33,7 +43,6 @@ def load_or_build_body(model_path: Path | None = None) -> BodyModel:
 
 def body_gallery(bm: BodyModel, bodies: list[tuple[str, float]] = DEMO_BODIES) -> tuple[plt.Figure, torch.Tensor]:
     """A row of bodies (pose name, height beta) side by side in the z-up world; returns the figure and vertices (N,V,3)."""
-    import numpy as np
 
     from graspkit.viz import draw_ground, draw_mesh, set_equal
 
@@ -59,25 +68,156 @@ def body_gallery(bm: BodyModel, bodies: list[tuple[str, float]] = DEMO_BODIES) -
     return fig, v
 
 
-def run_demo(out_dir: Path, model_path: Path | None = None) -> list[Path]:
-    """Run every stage of the demo into out_dir; returns the files written."""
+def _motion_from_rot6d(rot6d: torch.Tensor, transl: torch.Tensor, betas: torch.Tensor, **kw):
+    """A graspkit Motion from 6D rotations (T,55,6), translations (T,3) and betas."""
+    from graspkit.data.motion import Motion
+    from graspkit.rotations import matrix_to_axis_angle, rot6d_to_matrix
+
+    aa = matrix_to_axis_angle(rot6d_to_matrix(rot6d.double())).float()
+    return Motion(aa.numpy(), transl.detach().numpy(), betas.reshape(-1)[:10].detach().numpy(), 30.0, **kw)
+
+
+def _write_clip(bm: BodyModel, motion, out_dir: Path, name: str, objects: dict, title: str,
+                goals=None) -> list[Path]:
+    """A clip's GIF (front and side views), still of its last frame, npz, animated GLB and final-scene GLB."""
+    from graspkit.viz import animate, save_animation, show_scene
+    from graspkit.viz.export import _motion_vertices, export_motion
+
+    v = _motion_vertices(motion, bm)
+    faces = bm.faces.numpy()
+    objs = [(np.asarray(m.vertices), np.asarray(m.faces)) for m in objects.values()]
+    anim = animate(v, faces, objects=objs, goals=goals, title=title, max_frames=45, size=2.6)
+    paths = [save_animation(anim, out_dir / f"{name}.gif", progress=False)]
+    fig = show_scene(meshes=[(v[-1], faces)] + objs, title=f"{title}: last frame")
+    fig.savefig(out_dir / f"{name}.png", dpi=90)
+    plt.close(fig)
+    paths.append(out_dir / f"{name}.png")
+    paths += list(export_motion(motion, bm, out_dir, name, objects=objects, stride=3).values())
+    return paths
+
+
+def _test_clip():
+    """The first shipped approach-and-grasp clip of a test-split object, and its object mesh in the world."""
+    from graspkit.benchmark import _grasp_files, _object_world
+
+    seqs = _grasp_files([DATA_STUBS / "approach"], "approach", "test")
+    if not seqs:
+        raise FileNotFoundError(f"data_stubs: no test-split approach clip in {DATA_STUBS / 'approach'}")
+    return seqs[0], _object_world(seqs[0], 0)
+
+
+def planner_stage(bm: BodyModel, out_dir: Path) -> list[Path]:
+    """The synthetic ground truth: the procedural approach-and-grasp clip."""
+    from graspkit.benchmark import _motion
+
+    seq, obj = _test_clip()
+    return _write_clip(bm, _motion(seq), out_dir, "planner_approach", {seq.object_name: obj},
+                       f"procedural planner: {seq.object_name}")
+
+
+def saga_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int, int] = (100, 150, 200)) -> list[Path]:
+    """SAGA stage 1 on the clip's object placement: a WholeGrasp-VAE sample fitted by GraspPoseOpt (Alg. 1)."""
+    from graspkit.data.grasp_io import cached_sdf_grid
+    from graspkit.data.motion import Motion
+    from graspkit.eval_saga import _object_batch, fit_variants, load_placements
+    from graspkit.models.pose_prior import load_pose_prior
+    from graspkit.models.wholegrasp import load_wholegrasp
+    from graspkit.optim.grasppose import GraspPoseConfig, GraspPoseOpt
+
+    seq, obj = _test_clip()
+    pl = load_placements(DATA_STUBS / "grasps", seq.object_name, 1)[0]
+    wg = load_wholegrasp(CHECKPOINTS / "wholegrasp.pt")
+    prior = load_pose_prior(CHECKPOINTS / "pose_prior.pt")
+    g = torch.Generator().manual_seed(0)
+    s = wg.sample(pl.points, pl.normals, pl.height, 1, g, centre=torch.zeros(3))
+    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=steps))
+    res = fit_variants(opt, s.markers, _object_batch([pl], 1, cached_sdf_grid(pl.name)), s.marker_contact,
+                       s.object_contact, ["full"])["full"]
+    p = res.params
+    full = torch.cat([p["global_orient"][:, None], p["body_pose"].view(1, 21, 3), p["jaw_pose"][:, None],
+                      p["leye_pose"][:, None], p["reye_pose"][:, None], p["left_hand_pose"].view(1, 15, 3),
+                      p["right_hand_pose"].view(1, 15, 3)], 1)
+    # the placement's frame is the world translated to the object centre: move the object mesh there
+    centre = torch.as_tensor(seq.object_transl[-1]).float()
+    mesh = obj.copy()
+    mesh.apply_translation(-centre.numpy())
+    motion = Motion(full.detach().numpy(), p["transl"].detach().numpy(), p["betas"][0].detach().numpy(), 30.0)
+    return _write_clip(bm, motion, out_dir, "saga_grasp", {seq.object_name: mesh}, "SAGA: WholeGrasp + GraspPose-Opt")
+
+
+def goal_stage(bm: BodyModel, out_dir: Path, max_frames: int = 150) -> list[Path]:
+    """GOAL from the clip's start: GNet's grasp (refined), then MNet's approach to it (§3.4)."""
+    from graspkit.eval_goal import _body, approach_clips, gnet_goal
+    from graspkit.models.gnet import load_gnet
+    from graspkit.models.mnet import load_mnet, rollout
+    from graspkit.objects.bps import bps_basis
+
+    seq, obj = _test_clip()
+    clip = approach_clips([seq])[0]
+    gnet, mnet = load_gnet(CHECKPOINTS / "gnet.pt"), load_mnet(CHECKPOINTS / "mnet.pt")
+    start = (clip.rot6d[0], clip.transl[0])
+    goal = gnet_goal(gnet, start, clip.betas, clip.object_points, clip.obj_centre,
+                     generator=torch.Generator().manual_seed(0))[:2]
+    _, _, body = _body()
+    roll = rollout(mnet, body, start, goal, clip.betas, clip.object_points, clip.obj_centre, bps_basis(),
+                   max_frames=max_frames)
+    motion = _motion_from_rot6d(roll.rot6d, roll.transl, clip.betas)
+    return _write_clip(bm, motion, out_dir, "goal_approach", {seq.object_name: obj}, "GOAL: GNet + MNet")
+
+
+def wandr_stage(bm: BodyModel, out_dir: Path, seconds: float = 4.0) -> list[Path]:
+    """WANDR from its first held-out start pose to a goal 2 m ahead-left, 1 m high, in `seconds`."""
+    import graspkit.intention as I
+    from graspkit.data.motion import Motion
+    from graspkit.eval_wandr import goal_from_cylinder, starts_from_meta
+    from graspkit.models.wandr import generate, load_wandr
+    from graspkit.viz.scene import sphere
+
+    import trimesh
+
+    model = load_wandr(CHECKPOINTS / "wandr.pt")
+    start = starts_from_meta(model.meta)[0].canonical()
+    goal = goal_from_cylinder(45.0, 2.0, 1.0)
+    t_goal = int(round(seconds * I.FPS))
+    out = generate(model, start, goal[None], t_goal, n=1, generator=torch.Generator().manual_seed(0))
+    trans, aa = I.pose_to_axis_angle(out.p[0], start.full_pose)
+    motion = Motion(aa.numpy(), trans.numpy(), start.betas.numpy(), I.FPS, goal=goal.numpy(), goal_frame=t_goal,
+                    hand="right")
+    sv, sf = sphere(goal.numpy(), 0.05)
+    return _write_clip(bm, motion, out_dir, "wandr_reach", {"goal": trimesh.Trimesh(sv, sf, process=False)},
+                       "WANDR: reach the goal in 4 s", goals=goal[None].numpy())
+
+
+METHOD_STAGES = {"planner": (planner_stage, None), "saga": (saga_stage, "wholegrasp.pt"),
+                 "goal": (goal_stage, "mnet.pt"), "wandr": (wandr_stage, "wandr.pt")}
+
+
+def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, ...] = STAGES) -> list[Path]:
+    """Run the demo's stages into out_dir (see the module doc); returns the files written."""
     from graspkit.viz.export import export_scene
 
+    bad = [s for s in stages if s not in STAGES]
+    if bad:
+        raise ValueError(f"stages: unknown {bad}; expected some of {list(STAGES)}")
     out_dir.mkdir(parents=True, exist_ok=True)
+    bm = load_or_build_body(model_path)
     written: list[Path] = []
-    steps = tqdm(["body model", "gallery figure", "GLB export"], desc="demo", unit="step")
-    for step in steps:
-        steps.set_postfix_str(step)
-        if step == "body model":
-            bm = load_or_build_body(model_path)
-        elif step == "gallery figure":
+    steps = tqdm(list(stages), desc="demo", unit="stage")
+    for stage in steps:
+        steps.set_postfix_str(stage)
+        if stage == "body":
             fig, verts = body_gallery(bm)
             path = out_dir / "body_poses_shapes.png"
             fig.savefig(path, dpi=110)
             plt.close(fig)
-            written.append(path)
-        else:
             faces = bm.faces.numpy()
             scene = {f"body_{k}": (verts[k].numpy(), faces) for k in range(len(verts))}
-            written.append(export_scene(scene, out_dir / "body_poses_shapes.glb"))
+            written += [path, export_scene(scene, out_dir / "body_poses_shapes.glb")]
+            continue
+        fn, ck = METHOD_STAGES[stage]
+        if ck is not None and not (CHECKPOINTS / ck).is_file():
+            tqdm.write(f"demo: skipping {stage}: its checkpoint {CHECKPOINTS / ck} is missing "
+                       f"(train it with `graspkit train ...`, see README)")
+            continue
+        written += fn(bm, out_dir)
     return written

@@ -36,10 +36,33 @@ def test_demo_writes_a_figure_and_a_glb_that_trimesh_reads(tmp_path):
 
     from graspkit.demo import DEMO_BODIES, run_demo
 
-    files = run_demo(tmp_path)
+    files = run_demo(tmp_path, stages=("body",))
     png, glb = sorted(files, key=lambda p: p.suffix)[::-1]
     assert png.suffix == ".png" and Image.open(png).size[0] > 1000
     scene = trimesh.load(glb)
     assert len(scene.geometry) == len(DEMO_BODIES)
     heights = sorted(float(np.ptp(g.vertices[:, 1])) for g in scene.geometry.values())
     assert 1.45 < heights[-1] < 2.0          # a standing adult; glTF is y up
+
+
+def test_demo_planner_stage_writes_clip_files_that_read_back(tmp_path):
+    """The planner stage: a GIF, a still, and exports whose npz is the shipped clip's motion."""
+    from PIL import Image
+
+    from graspkit.benchmark import _grasp_files, _motion
+    from graspkit.data import load_motion
+    from graspkit.demo import run_demo
+    from graspkit.paths import DATA_STUBS
+
+    files = {p.name: p for p in run_demo(tmp_path, stages=("planner",))}
+    assert set(files) == {f"planner_approach{s}" for s in (".gif", ".png", ".npz", ".glb", "_final.glb")}
+    gif = Image.open(files["planner_approach.gif"])
+    assert gif.n_frames >= 20
+    seq = _grasp_files([DATA_STUBS / "approach"], "approach", "test")[0]
+    m = load_motion(files["planner_approach.npz"])
+    assert np.allclose(m.poses, _motion(seq).poses, atol=1e-6) and np.allclose(m.trans, seq.trans, atol=1e-6)
+
+
+def test_demo_refuses_unknown_stages(tmp_path):
+    r = _run("demo", "--out", str(tmp_path), "--stages", "body,saga2")
+    assert r.returncode == 2 and "stages" in r.stderr and "saga2" in r.stderr
