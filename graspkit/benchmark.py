@@ -62,7 +62,7 @@ class Row:
 
 # ----------------------------------------------------------------------------------------------- ours, measured here
 
-def _grasp_files(folders: list[Path], kind: str, split: str) -> list:
+def split_sequences(folders: list[Path], kind: str, split: str) -> list:
     """GRAB-style sequences of `kind` whose object is in `split`, from every folder that has such files."""
     from graspkit.data.grab import load_grasp_sequence
     from graspkit.data.grasp import split_of
@@ -76,7 +76,7 @@ def _grasp_files(folders: list[Path], kind: str, split: str) -> list:
     return out
 
 
-def _object_world(seq, frame: int):
+def object_mesh_at(seq, frame: int):
     """The sequence's catalogue object as a trimesh at its pose at `frame`."""
     from graspkit.objects.catalogue import make_object
     from graspkit.objects.placement import ObjectPose, apply_pose
@@ -85,7 +85,7 @@ def _object_world(seq, frame: int):
                       make_object(seq.object_name))
 
 
-def _motion(seq):
+def sequence_motion(seq):
     """A GraspSequence as a graspkit Motion (same poses, translation, shape and frame rate)."""
     from graspkit.data.motion import Motion
 
@@ -96,10 +96,11 @@ def ground_truth_grasps(bm, folders: list[Path], split: str = "test", n: int | N
     """Grasp quality of the synthetic ground truth: the last frame of every accepted `split` grasp file (<= n)."""
     from graspkit.metrics import grasp_metrics, grasp_quality_table
 
-    seqs = _grasp_files(folders, "grasp", split)[:n]
+    seqs = split_sequences(folders, "grasp", split)[:n]
     if not seqs:
         return Row("grasp", "ground truth (synthetic)", "graspkit", note=f"no accepted {split} grasps in {folders}")
-    rows = [grasp_metrics(_motion(s).vertices(bm, s.num_frames - 1)[0].double(), bm.faces, _object_world(s, -1))
+    rows = [grasp_metrics(sequence_motion(s).vertices(bm, s.num_frames - 1)[0].double(), bm.faces,
+                          object_mesh_at(s, -1))
             for s in seqs]
     q = grasp_quality_table(rows)
     objs = sorted({s.object_name for s in seqs})
@@ -112,10 +113,10 @@ def planner_motion(bm, folders: list[Path], split: str = "test", n: int | None =
     """Motion quality of the procedural planner's approach-and-grasp clips (`split` objects, <= n clips)."""
     from graspkit.metrics import motion_quality
 
-    seqs = _grasp_files(folders, "approach", split)[:n]
+    seqs = split_sequences(folders, "approach", split)[:n]
     if not seqs:
         return Row("motion", "procedural planner (approach clips)", "graspkit", note=f"no {split} approach clips")
-    q = motion_quality(bm, [_motion(s) for s in seqs])
+    q = motion_quality(bm, [sequence_motion(s) for s in seqs])
     return Row("motion", "procedural planner (approach clips)", "graspkit",
                {"fs_wandr": 100 * q["fs_wandr"], "skate_saga": q["skate_saga"], "slide_goal": 100 * q["slide_goal"],
                 "mean_jerk": q["mean_jerk"]}, f"{q['clips']} clips, {q['frames']} frames")
@@ -127,7 +128,7 @@ def saga_grasps(root: Path, out: Path, quick: bool, checkpoints: Path) -> list[R
     """SAGA's Tab. 1 rows from graspkit.eval_saga on the test objects found in `root`."""
     from graspkit.eval_saga import EvalConfig, evaluate
 
-    objs = sorted({s.object_name for s in _grasp_files([root], "grasp", "test")})
+    objs = sorted({s.object_name for s in split_sequences([root], "grasp", "test")})
     if not objs:
         return [Row("grasp", "SAGA (WholeGrasp w/ opt.)", "graspkit", note=f"no test grasps in {root}")]
     cfg = EvalConfig(objects=tuple(objs), placements=1, samples=3, gt_grasps=1, steps=(30, 30, 30)) if quick else \

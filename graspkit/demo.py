@@ -81,9 +81,9 @@ def _write_clip(bm: BodyModel, motion, out_dir: Path, name: str, objects: dict, 
                 goals=None) -> list[Path]:
     """A clip's GIF (front and side views), still of its last frame, npz, animated GLB and final-scene GLB."""
     from graspkit.viz import animate, save_animation, show_scene
-    from graspkit.viz.export import _motion_vertices, export_motion
+    from graspkit.viz.export import export_motion, motion_vertices
 
-    v = _motion_vertices(motion, bm)
+    v = motion_vertices(motion, bm)
     faces = bm.faces.numpy()
     objs = [(np.asarray(m.vertices), np.asarray(m.faces)) for m in objects.values()]
     anim = animate(v, faces, objects=objs, goals=goals, title=title, max_frames=45, size=2.6)
@@ -98,20 +98,20 @@ def _write_clip(bm: BodyModel, motion, out_dir: Path, name: str, objects: dict, 
 
 def _test_clip():
     """The first shipped approach-and-grasp clip of a test-split object, and its object mesh in the world."""
-    from graspkit.benchmark import _grasp_files, _object_world
+    from graspkit.benchmark import object_mesh_at, split_sequences
 
-    seqs = _grasp_files([DATA_STUBS / "approach"], "approach", "test")
+    seqs = split_sequences([DATA_STUBS / "approach"], "approach", "test")
     if not seqs:
         raise FileNotFoundError(f"data_stubs: no test-split approach clip in {DATA_STUBS / 'approach'}")
-    return seqs[0], _object_world(seqs[0], 0)
+    return seqs[0], object_mesh_at(seqs[0], 0)
 
 
 def planner_stage(bm: BodyModel, out_dir: Path) -> list[Path]:
     """The synthetic ground truth: the procedural approach-and-grasp clip."""
-    from graspkit.benchmark import _motion
+    from graspkit.benchmark import sequence_motion
 
     seq, obj = _test_clip()
-    return _write_clip(bm, _motion(seq), out_dir, "planner_approach", {seq.object_name: obj},
+    return _write_clip(bm, sequence_motion(seq), out_dir, "planner_approach", {seq.object_name: obj},
                        f"procedural planner: {seq.object_name}")
 
 

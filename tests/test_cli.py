@@ -49,7 +49,7 @@ def test_demo_planner_stage_writes_clip_files_that_read_back(tmp_path):
     """The planner stage: a GIF, a still, and exports whose npz is the shipped clip's motion."""
     from PIL import Image
 
-    from graspkit.benchmark import _grasp_files, _motion
+    from graspkit.benchmark import sequence_motion, split_sequences
     from graspkit.data import load_motion
     from graspkit.demo import run_demo
     from graspkit.paths import DATA_STUBS
@@ -58,9 +58,9 @@ def test_demo_planner_stage_writes_clip_files_that_read_back(tmp_path):
     assert set(files) == {f"planner_approach{s}" for s in (".gif", ".png", ".npz", ".glb", "_final.glb")}
     gif = Image.open(files["planner_approach.gif"])
     assert gif.n_frames >= 20
-    seq = _grasp_files([DATA_STUBS / "approach"], "approach", "test")[0]
+    seq = split_sequences([DATA_STUBS / "approach"], "approach", "test")[0]
     m = load_motion(files["planner_approach.npz"])
-    assert np.allclose(m.poses, _motion(seq).poses, atol=1e-6) and np.allclose(m.trans, seq.trans, atol=1e-6)
+    assert np.allclose(m.poses, sequence_motion(seq).poses, atol=1e-6) and np.allclose(m.trans, seq.trans, atol=1e-6)
 
 
 def test_demo_refuses_unknown_stages(tmp_path):

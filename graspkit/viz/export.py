@@ -258,7 +258,7 @@ def export_motion(motion: Any, bm: Any, folder: str | os.PathLike, name: str,
     folder = Path(folder)
     if not name or Path(name).name != name:
         raise ValueError(f"name: expected a plain file stem, got {name!r}")
-    v = _motion_vertices(motion, bm)
+    v = motion_vertices(motion, bm)
     faces = np.asarray(bm.faces, np.int64)
     out = {"npz": save_motion(folder / f"{name}.npz", motion),
            "glb": export_sequence_glb(v, faces, folder / f"{name}.glb", fps=motion.fps, objects=objects,
@@ -267,6 +267,6 @@ def export_motion(motion: Any, bm: Any, folder: str | os.PathLike, name: str,
     return out
 
 
-def _motion_vertices(motion: Any, bm: Any, chunk: int = 64) -> np.ndarray:
+def motion_vertices(motion: Any, bm: Any, chunk: int = 64) -> np.ndarray:
     """Mesh vertices (T,V,3) of a Motion on body model bm as a float32 numpy array."""
     return np.concatenate([v.numpy().astype(np.float32) for _, v in motion.iter_vertices(bm, chunk=chunk)])
