@@ -100,6 +100,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_wandr_commands(train, evaluate)
     from graspkit.eval_saga import add_saga_train_commands
     add_saga_train_commands(train)
+    from graspkit.eval_motionfill import add_motionfill_train_commands
+    add_motionfill_train_commands(train)
     return p
 
 

@@ -1,0 +1,188 @@
+"""MotionFill-VAE's training and evaluation on the procedural clips (SAGA §3.3, App. A.3-A.4, §4.2 Tab. 3).
+
+Training follows A.4 in three runs (each one `graspkit train motionfill --stage ...`, one CPU thread, <= 10 min):
+
+1. `local`: LocalMotionFill alone on locomotion windows (AMASS stand-in, `graspkit data make --kind locomotion`),
+   62-frame windows every 30 frames, ground-truth root velocities in the condition image;
+2. `traj`: TrajFill alone on approach windows (`graspkit data make --kind approach`): one window per accepted clip,
+   ending at its goal frame (the first frame of the held grasp is frame T), GRAB's object split (test objects held
+   out, `graspkit.data.grasp.SPLITS`);
+3. `finetune`: both CVAEs on the approach windows, LocalMotionFill conditioned on TrajFill's trajectories.
+
+Windows are cached in `<cache>/motionfill/`; normalisation statistics come from stage 1's training windows and stay
+with the model. The shipped checkpoint (`data_stubs/checkpoints/motionfill.pt`) holds float16 weights.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from graspkit.data.motionfill_dataset import (MotionFillDataset, MotionFillStats, load_windows, make_windows,
+                                              save_windows, split_clips)
+from graspkit.models.motionfill import MotionFillConfig, MotionFillVAE
+
+CHECKPOINT = Path(__file__).resolve().parent.parent / "data_stubs" / "checkpoints" / "motionfill.pt"
+STAGES = {"local": ("locomotion", ("local",), "truth"), "traj": ("approach", ("traj",), "truth"),
+          "finetune": ("approach", ("traj", "local"), "predicted")}
+DEFAULT_CLIPS = {"locomotion": 160, "reach": 600, "approach": 144}
+
+
+def approach_motions(root: str | Path, n: int | None = None) -> tuple[list, list[str]]:
+    """Approach-and-grasp clips (graspkit data make --kind approach) as Motions cut at the goal frame (the grasp is
+    frame T of the window), and their object names; accepted grasps only."""
+    from graspkit.data.motion import Motion
+
+    files = sorted(Path(root).glob("approach_*.npz"))[:n]
+    motions, names = [], []
+    for f in files:
+        with np.load(f, allow_pickle=False) as a:
+            if "grasp.accepted" in a.files and not bool(a["grasp.accepted"]):
+                continue
+            g = int(a["grasp.goal_frame"])
+            motions.append(Motion(a["body.params.fullpose"][:g + 1].reshape(-1, 55, 3), a["body.params.transl"][:g + 1],
+                                  a["body.betas"], 30.0, contacts=a["contact.feet"][:g + 1].astype(bool)))
+            names.append(str(a["obj_name"]))
+    return motions, names
+
+
+def windows(kind: str, n: int, bm=None, data: Path | None = None, progress: bool = True) -> dict[str, np.ndarray]:
+    """Cached windows of the first `n` clips of a procedural set: 'locomotion' (every 30 frames) or 'reach' (one window
+    per clip, ending at its goal frame: the wrist on the target, as an approach clip ends at the grasp)."""
+    from graspkit.data import load_motion
+    from graspkit.paths import cache_dir
+
+    if kind not in ("locomotion", "reach", "approach"):
+        raise ValueError(f"kind: expected 'locomotion', 'reach' or 'approach', got {kind!r}")
+    out = cache_dir() / "motionfill" / f"{kind}_{n}.npz"
+    if out.is_file():
+        return load_windows(out)
+    sub = ("grasps", "approach") if kind == "approach" else ("motion", kind)
+    root = Path(data) if data else cache_dir().joinpath(*sub)
+    files = sorted(root.glob(f"{kind}_*.npz"))[:n]
+    if len(files) < n:
+        raise FileNotFoundError(f"data: {root} holds {len(files)} {kind} clips, {n} wanted "
+                                f"(graspkit data make --kind {kind} --n {n})")
+    if bm is None:
+        from graspkit.body import BodyModel
+        from graspkit.paths import default_model_path
+
+        bm = BodyModel.from_file(default_model_path())
+    names = None
+    if kind == "approach":
+        motions, names = approach_motions(root, n)
+    else:
+        motions = [load_motion(f) for f in files]
+    if kind == "reach":
+        motions = [m.slice(0, m.goal_frame + 1) for m in motions]
+    arr = make_windows(motions, bm, stride=30, align_end=kind != "locomotion", progress=progress)
+    if names is not None:                      # GRAB's object split (graspkit.data.grasp.SPLITS): 0 train, 1 val, 2 test
+        from graspkit.data.grasp import split_of
+
+        arr["split"] = np.array([("train", "val", "test").index(split_of(names[c])) for c in arr["clip"]], np.int64)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    save_windows(out, arr)
+    return arr
+
+
+def clip_split(arr: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Clip ids per split: by object for approach windows (GRAB's test objects held out), else `split_clips`."""
+    if "split" in arr:
+        return {k: np.unique(arr["clip"][arr["split"] == i]) for i, k in enumerate(("train", "val", "test"))}
+    return split_clips(int(arr["clip"].max()) + 1, seed=0)
+
+
+def shipped_state(model: MotionFillVAE) -> dict[str, Any]:
+    """Weights in float16 (buffers and integers kept) and the config: the shipped checkpoint."""
+    st = model.state()
+    st["model"] = {k: v.half() if v.is_floating_point() and "mean" not in k and "std" not in k else v
+                   for k, v in st["model"].items()}
+    return st
+
+
+def load_motionfill(path: str | Path = CHECKPOINT) -> MotionFillVAE:
+    """A trained MotionFill-VAE (eval mode) from a shipped or a run checkpoint (weights_only)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"path: no MotionFill checkpoint at {path} (graspkit train motionfill)")
+    return MotionFillVAE.from_state(torch.load(path, weights_only=True, map_location="cpu"))
+
+
+def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, seed: int = 0,
+                time_limit_s: float | None = 540.0, clips: dict[str, int] | None = None, batch_size: int = 32,
+                lr: float = 1e-3, progress: bool = True, data: Path | None = None) -> tuple[MotionFillVAE, list[dict[str, float]]]:
+    """One of A.4's training runs (`STAGES`); starts from `init` (a checkpoint) when given; writes `out` (shipped
+    float16 state) and a resumable run checkpoint beside it in the cache."""
+    from graspkit.paths import cache_dir
+    from graspkit.train import TrainConfig, fit
+
+    if stage not in STAGES:
+        raise ValueError(f"stage: expected one of {list(STAGES)}, got {stage!r}")
+    kind, parts, trajectory = STAGES[stage]
+    clips = {**DEFAULT_CLIPS, **(clips or {})}
+    arr = windows(kind, clips[kind], data=data, progress=progress)
+    split = clip_split(arr)
+    torch.manual_seed(seed)
+    if init is not None:
+        model = load_motionfill(init).train()
+    else:
+        model = MotionFillVAE(MotionFillConfig())
+        model.set_stats(MotionFillStats.fit({k: arr[k][np.isin(arr["clip"], split["train"])]
+                                             for k in ("local", "vel")}))
+    stats = MotionFillStats(model.marker_mean.clone(), model.marker_std.clone(), model.vel_mean.clone(),
+                            model.vel_std.clone())
+    train, val = MotionFillDataset(arr, stats, split["train"]), MotionFillDataset(arr, stats, split["val"])
+    if stage == "traj":                     # the pretrained LocalMotionFill stays as it is
+        for p in model.local.parameters():
+            p.requires_grad_(False)
+
+    def step(net: MotionFillVAE, batch: dict[str, torch.Tensor], epoch: int) -> dict[str, torch.Tensor]:
+        """Eq. 8-9 on the stage's parts."""
+        return net.loss(batch, parts=parts, trajectory=trajectory)
+
+    run = cache_dir() / "runs" / f"motionfill_{stage}_s{seed}.pt"
+    cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
+    history = fit(model, step, train, cfg, checkpoint=run, val_dataset=val, progress=progress,
+                  time_limit_s=time_limit_s, extra={"model_config": model.state()["model_config"]})
+    for p in model.parameters():
+        p.requires_grad_(True)
+    from graspkit.train import save_checkpoint
+
+    save_checkpoint(out, shipped_state(model.eval()))
+    return model, history
+
+
+def add_motionfill_train_commands(train_sub) -> None:
+    """`graspkit train motionfill --stage {local,traj,finetune}` (A.4's three runs)."""
+    p = train_sub.add_parser("motionfill", help="train SAGA's MotionFill-VAE (§3.3), one A.4 stage per run")
+    p.add_argument("--stage", choices=list(STAGES), required=True)
+    p.add_argument("--init", type=Path, default=None, help="start from this checkpoint (stages traj, finetune)")
+    p.add_argument("--out", type=Path, default=CHECKPOINT)
+    p.add_argument("--epochs", type=int, default=20)
+    p.add_argument("--clips", type=int, default=None, help="clips of the stage's set (default 160 locomotion, "
+                   "144 approach)")
+    p.add_argument("--data", type=Path, default=None, help="folder of the stage's clips (default: the cache's "
+                   "motion/locomotion or grasps/approach)")
+    p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument("--time-limit", type=float, default=540.0, help="seconds; stops after the epoch that crosses it")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--threads", type=int, default=1)
+    p.set_defaults(func=_cmd_train)
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    """Run one stage and print the last epoch's figures."""
+    torch.set_num_threads(args.threads)
+    kind = STAGES[args.stage][0]
+    t0 = time.perf_counter()
+    _, hist = train_stage(args.stage, args.epochs, args.out, init=args.init, seed=args.seed,
+                          time_limit_s=args.time_limit, clips={kind: args.clips} if args.clips else None, lr=args.lr,
+                          data=args.data)
+    last = hist[-1]
+    print(f"motionfill {args.stage}: {len(hist)} epochs in {time.perf_counter() - t0:.0f} s -> {args.out}")
+    print("  " + ", ".join(f"{k} {v:.3f}" for k, v in last.items() if k != "epoch"))
+    return 0
