@@ -15,7 +15,7 @@ The perceptual studies (Tab. 3-4) are not reproduced.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -264,14 +264,26 @@ def gnet_data(folders) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
     return gnet_samples(train), (gnet_samples(val) if val else None)
 
 
-def run_train_gnet(folders, out, variant: str = "gnet", epochs: int = 60, time_limit_s: float | None = 600.0,
-                   seed: int = 0, threads: int = 2, run_dir=None, progress: bool = True) -> dict:
-    """Train GNet ('gnet') or the GrabNet-style SMPL-X CVAE ('smplx') and ship its float16 weights to `out`."""
-    import time
+def _run_path(run_dir, name: str, seed: int, **settings) -> "Path":
+    """The resumable training checkpoint of one run: named by a hash of everything that shapes it (config, weights,
+    data folders, epochs), so a changed run never resumes from another's file."""
+    import hashlib
+    import json
     from pathlib import Path
 
-    from graspkit.models.gnet import GNetConfig, save_weights, train_gnet
     from graspkit.paths import cache_dir
+
+    key = hashlib.blake2b(json.dumps(settings, sort_keys=True, default=str).encode(), digest_size=5).hexdigest()
+    return Path(run_dir or cache_dir() / "runs") / f"{name}_s{seed}_{key}.pt"
+
+
+def run_train_gnet(folders, out, variant: str = "gnet", epochs: int = 60, time_limit_s: float | None = 600.0,
+                   seed: int = 0, threads: int = 2, run_dir=None, progress: bool = True, kl: float | None = None) -> dict:
+    """Train GNet ('gnet') or the GrabNet-style SMPL-X CVAE ('smplx') and ship its float16 weights to `out`;
+    `kl` overrides λ_KL of Eq. 3 (GNetLossWeights.kl)."""
+    import time
+
+    from graspkit.models.gnet import GNetConfig, GNetLossWeights, save_weights, train_gnet
     from graspkit.train import TrainConfig
 
     if variant not in ("gnet", "smplx"):
@@ -279,37 +291,41 @@ def run_train_gnet(folders, out, variant: str = "gnet", epochs: int = 60, time_l
     torch.set_num_threads(threads)
     bm, gv, body = _body()
     train, val = gnet_data(folders)
-    run = Path(run_dir or cache_dir() / "runs") / f"gnet_{variant}_s{seed}.pt"
+    weights = GNetLossWeights() if kl is None else GNetLossWeights(kl=kl)
+    cfg = GNetConfig(offsets=variant == "gnet")
+    run = _run_path(run_dir, f"gnet_{variant}", seed, cfg=asdict(cfg), weights=asdict(weights), epochs=epochs,
+                    data=[str(f) for f in folders], n=len(train["rot6d"]))
     t0 = time.perf_counter()
-    net, hist = train_gnet(train, val, body, GNetConfig(offsets=variant == "gnet"),
+    net, hist = train_gnet(train, val, body, cfg, weights,
                            train_cfg=TrainConfig(epochs=epochs, batch_size=64, lr=1e-3, seed=seed, num_threads=threads),
                            checkpoint=run, time_limit_s=time_limit_s, progress=progress)
-    info = {"variant": variant, "train_samples": len(train["rot6d"]), "epochs": len(hist),
+    info = {"variant": variant, "train_samples": len(train["rot6d"]), "epochs": len(hist), "kl_weight": weights.kl,
             "seconds": time.perf_counter() - t0, "history": hist}
     save_weights(out, net, "gnet", extra=info)
     return info
 
 
-def mnet_windows(folders, split: str, cfg=None, stride: int = 1) -> MNetWindows:
-    """MNet windows of the approach clips of `split`."""
+def mnet_windows(folders, split: str, cfg=None, stride: int = 1, goal_repeat: int = 1) -> MNetWindows:
+    """MNet windows of the approach clips of `split` (`goal_repeat`: see MNetWindows)."""
     from graspkit.objects.bps import bps_basis
 
     _, _, body = _body()
     seqs = _all_files(folders, "approach", split)
     if not seqs:
         raise FileNotFoundError(f"data: no {split} approach clips in {[str(f) for f in folders]}")
-    return MNetWindows(approach_clips(seqs), body, bps_basis(), cfg, stride=stride)
+    return MNetWindows(approach_clips(seqs), body, bps_basis(), cfg, stride=stride, goal_repeat=goal_repeat)
 
 
 def run_train_mnet(folders, out, variant: str = "mnet", epochs: int = 20, time_limit_s: float | None = 600.0,
-                   seed: int = 0, threads: int = 2, stride: int = 1, run_dir=None, progress: bool = True) -> dict:
-    """Train MNet or one of its Tab. 2 ablations (MNET_VARIANTS) and ship its float16 weights to `out`."""
+                   seed: int = 0, threads: int = 2, stride: int = 1, run_dir=None, progress: bool = True,
+                   goal_repeat: int = 4, vel_noise: float = 0.005) -> dict:
+    """Train MNet or one of its Tab. 2 ablations (MNET_VARIANTS) and ship its float16 weights to `out`; windows within
+    30 frames before / 5 after the goal frame are shown `goal_repeat` times per epoch, and the input velocities are
+    perturbed by `vel_noise` m/frame (Gaussian) during training."""
     import time
-    from pathlib import Path
 
     from graspkit.models.gnet import save_weights
     from graspkit.models.mnet import MNetConfig, train_mnet
-    from graspkit.paths import cache_dir
     from graspkit.train import TrainConfig
 
     if variant not in MNET_VARIANTS:
@@ -317,13 +333,15 @@ def run_train_mnet(folders, out, variant: str = "mnet", epochs: int = 20, time_l
     torch.set_num_threads(threads)
     cfg = MNetConfig(**MNET_VARIANTS[variant])
     t0 = time.perf_counter()
-    train = mnet_windows(folders, "train", cfg, stride)
+    train = mnet_windows(folders, "train", cfg, stride, goal_repeat)
     val = mnet_windows(folders, "val", cfg, max(stride, 4))
-    run = Path(run_dir or cache_dir() / "runs") / f"mnet_{variant}_s{seed}.pt"
+    run = _run_path(run_dir, f"mnet_{variant}", seed, cfg=asdict(cfg), epochs=epochs, stride=stride,
+                    data=[str(f) for f in folders], n=len(train), goal_repeat=goal_repeat, vel_noise=vel_noise)
     net, hist = train_mnet(train, val, cfg, train_cfg=TrainConfig(epochs=epochs, batch_size=128, lr=1e-3, seed=seed,
                                                                    num_threads=threads),
-                           checkpoint=run, time_limit_s=time_limit_s, progress=progress)
-    info = {"variant": variant, "train_windows": len(train), "epochs": len(hist),
+                           checkpoint=run, time_limit_s=time_limit_s, progress=progress, vel_noise=vel_noise)
+    info = {"variant": variant, "train_windows": len(train), "epochs": len(hist), "goal_repeat": goal_repeat,
+            "vel_noise": vel_noise,
             "seconds": time.perf_counter() - t0, "history": hist}
     save_weights(out, net, "mnet", extra=info)
     return info
@@ -346,6 +364,11 @@ def add_goal_train_commands(train_sub) -> None:
         p.add_argument("--time-limit", type=float, default=600.0, help="seconds; stops after the epoch that crosses it")
         p.add_argument("--seed", type=int, default=0)
         p.add_argument("--threads", type=int, default=2)
+        if name == "gnet":
+            p.add_argument("--kl", type=float, default=None, help="λ_KL of Eq. 3 (default GNetLossWeights.kl)")
+        else:
+            p.add_argument("--goal-repeat", type=int, default=4, help="times the windows near the goal frame are shown")
+            p.add_argument("--vel-noise", type=float, default=0.005, help="m/frame of noise on the input velocities")
         p.set_defaults(func=lambda a, name=name: _cmd_train(a, name, DATA_STUBS / "checkpoints"))
 
 
@@ -354,8 +377,12 @@ def _cmd_train(args, name: str, stubs) -> int:
     folders = args.data or default_data_folders()
     suffix = "" if args.variant == name else f"_{args.variant}"
     out = args.out or stubs / f"{name}{suffix}.pt"
-    run = run_train_gnet if name == "gnet" else run_train_mnet
-    info = run(folders, out, args.variant, args.epochs, args.time_limit, args.seed, args.threads)
+    if name == "gnet":
+        info = run_train_gnet(folders, out, args.variant, args.epochs, args.time_limit, args.seed, args.threads,
+                              kl=args.kl)
+    else:
+        info = run_train_mnet(folders, out, args.variant, args.epochs, args.time_limit, args.seed, args.threads,
+                              goal_repeat=args.goal_repeat, vel_noise=args.vel_noise)
     print(f"wrote {out}: {info['epochs']} epochs in {info['seconds']:.0f} s; last loss {info['history'][-1]['loss']:.4f}")
     return 0
 
@@ -581,9 +608,29 @@ def _gnet_goals(gnet, clips: list, seed: int) -> list:
             for c in clips]
 
 
+def main(argv: list[str] | None = None) -> int:
+    """`python -m graspkit.eval_goal [--data DIR ...] [--checkpoints DIR] [--out FILE] [--n-grasps N] [--n-rollouts N]`."""
+    import argparse
+    import json
+    from pathlib import Path
+
+    p = argparse.ArgumentParser(prog="python -m graspkit.eval_goal", description=evaluate.__doc__)
+    p.add_argument("--data", type=Path, action="append", default=None, help="grasp/approach folders (repeatable)")
+    p.add_argument("--checkpoints", type=Path, default=None, help="gnet.pt, gnet_smplx.pt, mnet[_variant].pt")
+    p.add_argument("--out", type=Path, default=None, help="JSON (default <checkpoints>/goal_eval.json)")
+    p.add_argument("--n-grasps", type=int, default=60)
+    p.add_argument("--n-rollouts", type=int, default=24)
+    p.add_argument("--window-stride", type=int, default=5)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--threads", type=int, default=2)
+    a = p.parse_args(argv)
+    torch.set_num_threads(a.threads)
+    r = evaluate(a.data, a.checkpoints, a.n_grasps, a.n_rollouts, a.window_stride, a.seed, a.out)
+    print(json.dumps({k: r[k] for k in ("tab1", "tab2", "sliding")}, indent=1, default=float))
+    return 0
+
+
 if __name__ == "__main__":
     import sys
 
-    torch.set_num_threads(int(sys.argv[1]) if len(sys.argv) > 1 else 2)
-    r = evaluate()
-    print({k: r[k] for k in ("tab1", "tab2", "sliding")})
+    sys.exit(main())

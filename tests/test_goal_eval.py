@@ -90,3 +90,15 @@ def test_train_commands_write_loadable_half_precision_weights(tmp_path):
         model = (load_gnet if net == "gnet" else load_mnet)(out)
         assert not model.training and all(p.dtype == torch.float32 for p in model.parameters())
     assert Path(tmp_path / "gnet.pt").stat().st_size < 2.5e6
+
+
+def test_run_paths_differ_when_anything_that_shapes_the_run_differs(tmp_path):
+    from graspkit.eval_goal import _run_path
+
+    a = _run_path(tmp_path, "gnet_gnet", 0, cfg={"hidden": 128}, epochs=60, data=["/x"])
+    assert a == _run_path(tmp_path, "gnet_gnet", 0, epochs=60, data=["/x"], cfg={"hidden": 128})    # order-free
+    others = [_run_path(tmp_path, "gnet_gnet", 0, cfg={"hidden": 192}, epochs=60, data=["/x"]),
+              _run_path(tmp_path, "gnet_gnet", 0, cfg={"hidden": 128}, epochs=61, data=["/x"]),
+              _run_path(tmp_path, "gnet_gnet", 0, cfg={"hidden": 128}, epochs=60, data=["/y"]),
+              _run_path(tmp_path, "gnet_gnet", 1, cfg={"hidden": 128}, epochs=60, data=["/x"])]
+    assert len({a, *others}) == 5 and all(p.parent == tmp_path for p in others)

@@ -239,3 +239,21 @@ def test_window_features_match_the_direct_computation(setup):
     stored, _ = w.batch(idx)[:2]
     for k in direct:
         torch.testing.assert_close(stored[k], direct[k], atol=1e-5, rtol=1e-5)
+
+
+def test_goal_repeat_adds_the_windows_near_the_goal_and_vel_noise_moves_only_velocities(setup):
+    from graspkit.models.mnet import MNetWindows
+    bm, gv, body = setup
+    clips = _reach_clips(1)
+    w1 = MNetWindows(clips, body, bps_basis())
+    w3 = MNetWindows(clips, body, bps_basis(), goal_repeat=3, goal_span=(-30, 5))
+    g, T = clips[0].goal_frame, len(clips[0].rot6d)
+    near = [t for t in range(T) if -30 <= t - g <= 5]
+    assert len(w3) == len(w1) + 2 * len(near)
+    assert sorted(w3.windows[len(w1):].tolist()) == sorted(near * 2)
+    torch.manual_seed(0)
+    clean, _, _ = w1.batch(torch.tensor([10, 20]))
+    noisy, _, _ = w1.batch(torch.tensor([10, 20]), vel_noise=0.01)
+    for k in ("pose", "goal", "iaa"):                                          # only v̇_t (in 'verts') changes
+        torch.testing.assert_close(noisy[k], clean[k])
+    assert not torch.allclose(noisy["verts"], clean["verts"])

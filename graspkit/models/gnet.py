@@ -125,9 +125,9 @@ class GNetConfig:
     """GNet sizes. GOAL: 16-D latent, N_b = 400, N_h = 99, 1024 BPS points; widths are graspkit's (small)."""
 
     latent: int = 16
-    enc_hidden: int = 128    # encoder width
-    hidden: int = 192        # decoder width
-    cond: int = 128          # width of the shared code of the condition [b°, γ°, β]
+    enc_hidden: int = 64     # encoder width
+    hidden: int = 128        # decoder width
+    cond: int = 96           # width of the shared code of the condition [b°, γ°, β]
     n_bps: int = 1024
     n_verts: int = 400
     n_hand: int = 99

@@ -154,8 +154,9 @@ class MNetConfig:
     n_hand: int = 99
     n_betas: int = 10
     n_bps: int = 1024
-    hidden: int = 192
-    code: int = 48            # per-frame code width of the factorised output head
+    hidden: int = 160
+    code: int = 40            # per-frame code width of the factorised output head
+    proj: tuple[int, int, int, int] = (64, 40, 48, 32)   # projection widths of the pose, vertex, goal and attention groups
     attention: bool = True
     outputs: str = "full"     # 'full': ΔΘ, Δv, Δd (Eq. 10); 'pose': ΔΘ only
 
@@ -174,8 +175,9 @@ class MNetLossWeights:
 def _group_sizes(cfg: MNetConfig) -> dict[str, tuple[int, int]]:
     """(input size, projection width) per input group."""
     iaa = 4 * cfg.n_verts if cfg.attention else 3 * cfg.n_verts
-    return {"pose": (cfg.n_past * POSE_DIM + cfg.n_betas, 128), "verts": (6 * cfg.n_verts, 64),
-            "goal": (3 * cfg.n_hand + cfg.n_bps, 64), "iaa": (iaa, 32)}
+    w = tuple(cfg.proj)
+    return {"pose": (cfg.n_past * POSE_DIM + cfg.n_betas, w[0]), "verts": (6 * cfg.n_verts, w[1]),
+            "goal": (3 * cfg.n_hand + cfg.n_bps, w[2]), "iaa": (iaa, w[3])}
 
 
 class MNet(nn.Module):
@@ -381,8 +383,8 @@ def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, 
             ts.append(t[0])
             vs.append(verts(r, t)[0])
             dist.append(float((vs[-1][:c.n_hand] - goal_hand[0]).norm(dim=-1).mean()))
-            if len(rs) >= max_frames or dist[-1] <= reach_tol:
-                break
+            if len(rs) >= max_frames or dist[-1] <= reach_tol or (refine and not near and dist[-1] < GOAL_HAND_RADIUS):
+                break                                  # (within 10 cm: the rest of this step's frames are re-planned)
     return Rollout(torch.stack(rs), torch.stack(ts), torch.tensor(dist), dist[-1] <= reach_tol, first_refined)
 
 
@@ -410,7 +412,7 @@ class MNetWindows:
     computed once; everything that depends on frame t's canonical frame is computed in `batch`."""
 
     def __init__(self, clips: list[ApproachClip], body, basis: Tensor, cfg: MNetConfig | None = None,
-                 stride: int = 1, chunk: int = 256) -> None:
+                 stride: int = 1, chunk: int = 256, goal_repeat: int = 1, goal_span: tuple[int, int] = (-30, 5)) -> None:
         from graspkit.models.gnet import pose_rotmats
 
         if not clips:
@@ -419,6 +421,7 @@ class MNetWindows:
         P = min(len(c.object_points) for c in clips)
         self.points = torch.stack([c.object_points[:P].float() for c in clips])       # (clips, P, 3)
         rot, tr, vs, offs, start, end, goal, clip_of, betas, centre = [], [], [], [], [], [], [], [], [], []
+        goals: list[int] = []
         n = 0
         for k, c in enumerate(clips):
             T = len(c.rot6d)
@@ -437,6 +440,7 @@ class MNetWindows:
             goal.append(v[c.goal_frame, :self.cfg.n_hand].detach())
             betas.append(b[0])
             centre.append(c.obj_centre.float().reshape(3))
+            goals.append(n + c.goal_frame)
             start.append(torch.full((T,), n))
             end.append(torch.full((T,), n + T - 1))
             clip_of.append(torch.full((T,), k))
@@ -447,6 +451,10 @@ class MNetWindows:
         self.root = rest_root(body.bm, self.betas)
         self.feet = torch.as_tensor(feet_positions(body))
         self.windows = torch.arange(0, n, stride)
+        if goal_repeat > 1:          # the reach and the grasp are a small share of each clip: show them more often
+            g = torch.as_tensor(goals)[self.clip[self.windows]]
+            near = self.windows[(self.windows - g >= goal_span[0]) & (self.windows - g <= goal_span[1])]
+            self.windows = torch.cat([self.windows] + [near] * (goal_repeat - 1))
         self.bps = torch.cat([self._bps(self.windows[i:i + chunk]) for i in range(0, len(self.windows), chunk)])
 
     def _bps(self, t: Tensor) -> Tensor:
@@ -475,10 +483,13 @@ class MNetWindows:
         return MNetState(self.rot6d[past], self.transl[past], self.betas[c], self.verts[t], self.verts[prev],
                          self.goal_hand[c], self.centre[c], self.offsets[t], self.root[c])
 
-    def batch(self, index: Tensor) -> tuple[dict[str, Tensor], dict[str, Tensor], Tensor]:
-        """Features, targets and the foot mask of windows `index` (B,) (positions in this set)."""
+    def batch(self, index: Tensor, vel_noise: float = 0.0) -> tuple[dict[str, Tensor], dict[str, Tensor], Tensor]:
+        """Features, targets and the foot mask of windows `index` (B,) (positions in this set); `vel_noise` (m/frame)
+        perturbs the input velocities v̇_t (training only), so that MNet does not merely continue the past motion."""
         t = self.windows[index]
         s = self.state(t)
+        if vel_noise > 0:
+            s.verts_prev = s.verts_prev + vel_noise * torch.randn(s.verts_prev.shape[0], 1, 3)
         feats, R, o = mnet_inputs(s, self.basis, self.cfg.attention, self.cfg.n_hand, self.bps[index])
         fut = torch.minimum(t[:, None] + torch.arange(1, self.cfg.n_future + 1), self.end[t][:, None])
         tgt = mnet_targets(s, R, o, self.rot6d[fut], self.transl[fut], self.verts[fut], self.offsets[fut], self.cfg.n_hand)
@@ -495,7 +506,7 @@ def feet_positions(body) -> list[int]:
 
 def train_mnet(train: MNetWindows, val: MNetWindows | None, cfg: MNetConfig | None = None,
                weights: MNetLossWeights | None = None, train_cfg=None, checkpoint=None, time_limit_s=None,
-               progress: bool = True) -> tuple[MNet, list[dict[str, float]]]:
+               progress: bool = True, vel_noise: float = 0.0) -> tuple[MNet, list[dict[str, float]]]:
     """Fit MNet with the shared loop (graspkit.train.fit) on windows; normalisation from up to 4096 windows."""
     from graspkit.train import TrainConfig, fit
 
@@ -510,8 +521,7 @@ def train_mnet(train: MNetWindows, val: MNetWindows | None, cfg: MNetConfig | No
     net.fit_normalisation(feats, tgt)
 
     def step(model, batch, epoch):
-        sets = train if model.training else val
-        f, y, foot = sets.batch(batch[0])
+        f, y, foot = train.batch(batch[0], vel_noise) if model.training else val.batch(batch[0])
         return mnet_loss(model(f), y, foot, weights, net.cfg.n_hand)
 
     data = torch.utils.data.TensorDataset(torch.arange(len(train)))
