@@ -15,7 +15,8 @@ channel 0 the normalised local markers with the foot contacts, channels 1-3 the 
 condition image I_c is I with the in-between frames of channel 0 zeroed. Encoder q(z | I, I_c): strided convolutions
 on [I, I_c]; decoder p(I | z, I_c): the latent and a convolutional encoding of I_c, up-convolutions with skip
 connections from the I_c encoder (a U-Net), output channel 0 (markers and contact logits). The paper defers the
-CNN to LEMO; the widths here (16-32-64-64-64, 128-D latent) are graspkit's, sized for two CPU cores.
+CNN to LEMO; the widths here (8-16-32-32-32, 64-D latent; `MotionFillConfig.paper()`: 16-32-64-64-64, 128-D) are
+graspkit's, sized for two CPU cores.
 
 Losses (Eq. 8-9, A.4): L = L_rec + lambda_KL L_KL,
     L_rec = sum_t |Gamma_t - Gamma~_t| + l1 sum_t |v^Gamma_t - v~^Gamma_t| + l2 BCE(C_F, C~_F)
@@ -52,7 +53,7 @@ class MotionFillConfig:
     traj_enc: int = 128                   # encoder block width (A.2: as wide as its input, 2 * 62 * 4 = 496)
     traj_widths: tuple[int, int] = (3 * T, 2 * T)     # decoder residual blocks (A.2: 8T, 4T)
     motion_latent: int = 64
-    channels: tuple[int, ...] = (16, 32, 32, 32, 32)
+    channels: tuple[int, ...] = (8, 16, 32, 32, 32)
     lambda_kl: float = 1.0
     l1: float = 0.05          # trajectory velocity
     l2: float = 1.0           # foot-contact BCE
@@ -152,11 +153,11 @@ class LocalMotionFill(nn.Module):
         ups = []
         for lvl in range(len(cs) - 1, -1, -1):        # from the coarsest level up to the input resolution
             c_in = 2 * cs[lvl] if lvl == len(cs) - 1 else cs[lvl] + cs[lvl]
-            c_out = cs[lvl - 1] if lvl > 0 else 16
+            c_out = cs[lvl - 1] if lvl > 0 else cs[0]
             ups.append(nn.ModuleDict({"up": nn.ConvTranspose2d(c_in, c_out, 4, stride=2, padding=1),
                                       "act": nn.LeakyReLU(0.2)}))
         self.ups = nn.ModuleList(ups)
-        self.out = nn.Conv2d(16 + 4, 1, 3, padding=1)
+        self.out = nn.Conv2d(cs[0] + 4, 1, 3, padding=1)
 
     def encode(self, image: Tensor, cond: Tensor) -> tuple[Tensor, Tensor]:
         """q(z_m | I, I_c): (B,4,61,F) x2 -> mean, log-variance (B, latent)."""

@@ -1,0 +1,352 @@
+"""GraspMotion-Opt (SAGA §3.4, Eq. 10-11, App. S.1-S.2, Alg. 2): fit SMPL-X bodies to an infilled marker sequence.
+
+    E_basic  = sum_t (E_fit(Theta_t) + E^o_colli(Theta_t)) + sum_{t=T-4..T} E^o_cont(Theta_t)          (Eq. 10)
+    E_g      = sum_t alpha_t sum_{m in V^p_B} 1(d(m, O) < sigma) (cos gamma_m - 1)^2, alpha_t = 1 - (t/T)^2  (Eq. 11)
+    E_smooth = a^B_s sum_t |S_{t+1} - S_t|^2 + a^h_s sum_t |V^h_{t+1} - V^h_t|^2, S = AE(M_{1:T} - M_{0:T-1}) (S.1)
+    E_skat   = a_skat sum_{t in T_c} sum_{|v^foot_t| >= sigma} (|v^foot_t| - sigma)                          (S.2)
+
+E_fit, E^o_colli, E^o_cont as GraspPose-Opt (Eq. 5-7, graspkit.optim.grasppose): L1 marker distance plus a small
+prior on the latents; the hand vertices' signed distance to the object below -sigma_b; sum_o C^_o d(o, V^h_B).
+Theta_t = (t, R (6D), theta_b (pose-prior latent, in place of VPoser), theta_h (24 PCA per hand)); beta is fixed.
+V^p_B: the right palm's vertices (`body.markers.palm_vertices`), gamma_m the angle between the palm normal and the
+vector to the closest object point, sigma = 1 cm. S: the latent sequence of a small temporal-convolution
+autoencoder of marker differences (`MarkerDiffAE`, trained on the motion windows; shipped). T_c: frames whose
+predicted foot contact (left heel, left toe, right heel, right toe) is above 0.5; v^foot: each sole vertex's
+displacement to the next frame.
+
+Alg. 2: stage 1, 100 Adam steps of E_fit on (t, R, theta) (lr 0.1 for the first frame, 0.01 for the others; 0.01 for
+all after step 60, 0.003 after step 80); stage 2, 300 steps of E_basic + E_g + E_smooth + E_skat (lr 0.01, 0.005
+after step 150).
+
+graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
+- S.2's sigma = 0.1 would be 3 m/s for a per-frame displacement at 30 fps and never switch on; it is read as 0.1 m/s
+  (3.3 mm per frame). a_skat = 100 per sole vertex and metre; a^B_s = 1, a^h_s = 10 on the mean squared hand-vertex displacement (m^2);
+  alpha_g (E_g's weight) = 10; contact and collision weights as GraspPose-Opt (15, 200), sigma_b = 1 mm.
+- Only the right hand meets the object (graspkit's grasps are right-handed); E^o_colli is the hand-in-object hinge
+  (GraspPose-Opt's object-in-hand term needs the hand's surface normals per frame and is left out); E^o_cont uses the
+  object contact map C^_O (the 143-marker contact map of stage 1 has no sparse-marker counterpart).
+- Initialisation: the prior's mean pose, rigidly aligned per frame (Kabsch on the body and face markers).
+- Energies are summed over the sequences of a batch (independent sequences; Adam's steps are per parameter).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+from tqdm.auto import tqdm
+
+from graspkit.body.markers import foot_vertices, palm_vertices, saga_sparse_markers, vertex_normals
+from graspkit.models.gnet import SparseBody
+from graspkit.optim.grasppose import GraspObject, _nearest, hand_vertex_ids, kabsch
+from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
+
+SMOOTH_AE_PATH = Path(__file__).resolve().parents[2] / "data_stubs" / "checkpoints" / "motionfill_smooth_ae.pt"
+FOOT_PARTS = ("left_heel", "left_toe", "right_heel", "right_toe")
+
+
+# ------------------------------------------------------------------------------------------------ S.1's autoencoder
+class MarkerDiffAE(nn.Module):
+    """Temporal-convolution autoencoder of marker differences (S.1, after LEMO): (B, T, M*3) -> latents (B, T, d)."""
+
+    def __init__(self, n_in: int = 79 * 3, hidden: int = 128, latent: int = 32) -> None:
+        super().__init__()
+        self.n_in, self.hidden, self.latent_dim = n_in, hidden, latent
+        self.enc = nn.Sequential(nn.Conv1d(n_in, hidden, 3, padding=1), nn.LeakyReLU(0.2),
+                                 nn.Conv1d(hidden, latent, 3, padding=1))
+        self.dec = nn.Sequential(nn.Conv1d(latent, hidden, 3, padding=1), nn.LeakyReLU(0.2),
+                                 nn.Conv1d(hidden, n_in, 3, padding=1))
+        self.register_buffer("scale", torch.ones(()))
+
+    def encode(self, diffs: Tensor) -> Tensor:
+        """Marker differences (B, T, M*3) in metres -> latents (B, T, d)."""
+        return self.enc((diffs / self.scale).transpose(1, 2)).transpose(1, 2)
+
+    def forward(self, diffs: Tensor) -> Tensor:
+        """Reconstructed differences (B, T, M*3)."""
+        return self.dec(self.encode(diffs).transpose(1, 2)).transpose(1, 2) * self.scale
+
+    def state(self) -> dict[str, Any]:
+        """Weights and sizes (weights-only checkpoint)."""
+        return {"model": self.state_dict(), "sizes": [self.n_in, self.hidden, self.latent_dim]}
+
+    @classmethod
+    def from_state(cls, state: dict[str, Any]) -> "MarkerDiffAE":
+        """Back from `state()`."""
+        m = cls(*[int(s) for s in state["sizes"]])
+        m.load_state_dict({k: v.float() for k, v in state["model"].items()})
+        return m.eval()
+
+
+def train_smooth_ae(markers: np.ndarray, epochs: int = 30, seed: int = 0, out: str | Path | None = SMOOTH_AE_PATH,
+                    batch_size: int = 64, lr: float = 2e-3) -> tuple[MarkerDiffAE, list[float]]:
+    """Train S.1's autoencoder on marker windows (N, T+1, M, 3) (reconstruction L1 of the differences); save it."""
+    from graspkit.train import save_checkpoint
+
+    g = torch.Generator().manual_seed(seed)
+    torch.manual_seed(seed)
+    d = torch.as_tensor(np.diff(markers, axis=1)).float().flatten(2)          # (N, T, M*3)
+    ae = MarkerDiffAE(d.shape[-1])
+    ae.scale.fill_(float(d.abs().mean()))
+    opt = torch.optim.Adam(ae.parameters(), lr=lr)
+    hist = []
+    for _ in range(epochs):
+        perm = torch.randperm(len(d), generator=g)
+        tot = 0.0
+        for a in range(0, len(d), batch_size):
+            x = d[perm[a:a + batch_size]]
+            loss = ((ae(x) - x) / ae.scale).abs().mean()
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            tot += float(loss.detach()) * len(x)
+        hist.append(tot / len(d))
+    ae.eval()
+    if out is not None:
+        st = ae.state()
+        st["model"] = {k: v.half() if k != "scale" else v for k, v in st["model"].items()}
+        save_checkpoint(out, st)
+    return ae, hist
+
+
+def load_smooth_ae(path: str | Path = SMOOTH_AE_PATH) -> MarkerDiffAE:
+    """The shipped S.1 autoencoder (weights_only)."""
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"path: no marker-difference autoencoder at {path} (graspkit train motionfill "
+                                "--stage smooth_ae)")
+    return MarkerDiffAE.from_state(torch.load(path, weights_only=True, map_location="cpu"))
+
+
+# ------------------------------------------------------------------------------------------------ the optimiser
+@dataclass
+class GraspMotionWeights:
+    """Weights and thresholds (see the module docstring for which are the paper's)."""
+
+    prior: float = 5e-4            # alpha_theta (Eq. 5, as GraspPose-Opt)
+    colli: float = 200.0           # alpha^B_colli
+    sigma_b: float = 1e-3          # m
+    contact: float = 15.0          # alpha^o_cont
+    palm: float = 10.0             # E_g's weight
+    palm_sigma: float = 0.01       # m (Eq. 11)
+    smooth_latent: float = 1.0     # a^B_s
+    smooth_hand: float = 10.0      # a^h_s (on the mean over hand vertices)
+    skate: float = 100.0           # a_skat
+    skate_sigma: float = 0.1 / 30  # m per frame (S.2's 0.1, read as m/s)
+
+
+@dataclass
+class GraspMotionConfig:
+    """Alg. 2's schedule and the switches of stage 2's terms."""
+
+    steps: tuple[int, int] = (100, 300)
+    n_pca: int = 24
+    contact_frames: int = 5        # Eq. 10: object contact on the last 5 frames
+    log_every: int = 10
+    terms: tuple[str, ...] = ("colli", "contact", "palm", "smooth", "skate")
+    weights: GraspMotionWeights = field(default_factory=GraspMotionWeights)
+
+
+@dataclass
+class GraspMotionResult:
+    """Fitted sequences: SMPL-X parameters per frame (B, T+1, ...), fitted markers, joints, energies, a step log."""
+
+    params: dict[str, Tensor]
+    markers: Tensor                 # (B, T+1, 79, 3)
+    joints: Tensor                  # (B, T+1, 55, 3)
+    energies: dict[str, dict[str, Tensor]]     # {'stage1': {term: (B,)}, 'stage2': ...} after each stage
+    log: list[dict[str, float]]
+
+
+class GraspMotionOpt:
+    """SAGA's GraspMotion-Opt for a BodyModel (flat_hand_mean=False), the pose prior and S.1's autoencoder."""
+
+    def __init__(self, bm, prior, smooth_ae: MarkerDiffAE | None = None, config: GraspMotionConfig | None = None
+                 ) -> None:
+        if bm.flat_hand_mean:
+            raise ValueError("bm: build the BodyModel with flat_hand_mean=False (hand PCA about the mean hand)")
+        self.bm, self.prior, self.ae = bm, prior.eval(), smooth_ae
+        for m in (self.prior, self.ae):
+            if m is not None:
+                for p in m.parameters():
+                    p.requires_grad_(False)
+        self.cfg = config or GraspMotionConfig()
+        ms = saga_sparse_markers(bm)
+        self.n_markers = len(ms)
+        self.body_face = torch.arange(ms.groups["face"][1])
+        hands = np.union1d(hand_vertex_ids(bm, ("right",)), palm_vertices(bm)["right"])
+        feet = foot_vertices(bm)
+        foot_ids = np.concatenate([feet[k] for k in FOOT_PARTS])
+        self.foot_part = torch.as_tensor(np.concatenate([np.full(len(feet[k]), i) for i, k in enumerate(FOOT_PARTS)]))
+        ids = np.concatenate([ms.vertex_ids, hands, foot_ids])
+        self.sparse = SparseBody(bm, torch.as_tensor(ids))
+        n_m, n_h = len(ms.vertex_ids), len(hands)
+        self.sl_m, self.sl_h, self.sl_f = slice(0, n_m), slice(n_m, n_m + n_h), slice(n_m + n_h, None)
+        pos = torch.full((bm.num_vertices,), -1, dtype=torch.long)
+        pos[torch.as_tensor(hands)] = torch.arange(n_h)
+        f = pos[bm.faces.long()]
+        self.hand_faces = f[(f >= 0).all(1)]
+        self.palm = pos[torch.as_tensor(palm_vertices(bm)["right"])]
+        k = self.cfg.n_pca
+        self.pca = {s: getattr(bm, f"{s}_hand_components")[:k].float() for s in ("left", "right")}
+        self.hand_mean = {"left": bm.pose_mean[75:120].float(), "right": bm.pose_mean[120:165].float()}
+
+    # ------------------------------------------------------------------ the body
+    def rotmats(self, p: dict[str, Tensor]) -> Tensor:
+        """All 55 joint rotations (N,55,3,3) of frame parameters (N, ...) (hand mean added, jaw and eyes zero)."""
+        N = p["transl"].shape[0]
+        eye = torch.eye(3).expand(N, 3, 3, 3)
+        hands = [axis_angle_to_matrix((p[f"{s}_pca"] @ self.pca[s] + self.hand_mean[s]).view(N, 15, 3))
+                 for s in ("left", "right")]
+        return torch.cat([rot6d_to_matrix(p["orient6d"]).unsqueeze(1), self.prior.decode_rotmats(p["z"]), eye,
+                          hands[0], hands[1]], 1)
+
+    def body(self, p: dict[str, Tensor], betas: Tensor) -> tuple[Tensor, Tensor]:
+        """Markers, hand and foot vertices (N, n, 3) and joints (N, 55, 3) of frame parameters."""
+        return self.sparse(self.rotmats(p), betas, p["transl"])
+
+    def init_params(self, markers: Tensor, betas: Tensor) -> dict[str, Tensor]:
+        """Per-frame start (N = B (T+1) frames): the prior's mean pose, Kabsch-aligned to the body and face markers."""
+        N = markers.shape[0]
+        p = {"transl": torch.zeros(N, 3), "orient6d": matrix_to_rot6d(torch.eye(3).expand(N, 3, 3)).clone(),
+             "z": torch.zeros(N, self.prior.cfg.latent), "left_pca": torch.zeros(N, self.cfg.n_pca),
+             "right_pca": torch.zeros(N, self.cfg.n_pca)}
+        with torch.no_grad():
+            v, J = self.body(p, betas)
+            R, c = kabsch(v[:, self.sl_m][:, self.body_face].float(), markers[:, self.body_face])
+            J0 = J[:, 0].float()
+            p["orient6d"] = matrix_to_rot6d(R)
+            p["transl"] = (R @ J0.unsqueeze(-1)).squeeze(-1) + c - J0
+        return p
+
+    # ------------------------------------------------------------------ the energy
+    def energy(self, p: dict[str, Tensor], target: Tensor, betas: Tensor, stage: int, foot_contact: Tensor | None,
+               obj: GraspObject | None, object_contact: Tensor | None) -> dict[str, Tensor]:
+        """Each term per sequence (B,) for frame parameters (B*(T+1), ...) and target markers (B, T+1, M, 3)."""
+        cfg, w = self.cfg, self.cfg.weights
+        B, F = target.shape[:2]
+        v, _ = self.body(p, betas)
+        v = v.float().view(B, F, -1, 3)
+        m, hands, feet = v[:, :, self.sl_m], v[:, :, self.sl_h], v[:, :, self.sl_f]
+        e = {"fit": (m - target).abs().sum((1, 2, 3)),
+             "prior": w.prior * (p["z"].pow(2).sum(-1) + p["left_pca"].pow(2).sum(-1)
+                                 + p["right_pca"].pow(2).sum(-1)).view(B, F).sum(1)}
+        if stage < 2:
+            return e
+        terms = cfg.terms
+        if obj is not None:
+            pts, nrm, _ = obj.batch(B)
+            hf = hands.reshape(B, F * hands.shape[2], 3)
+            if "colli" in terms:
+                if obj.sdf is not None:
+                    sd = obj.signed_distance(hf)
+                else:
+                    from graspkit.optim.grasppose import _signed_to_cloud
+                    sd, _ = _signed_to_cloud(hf, pts, nrm)
+                e["colli"] = w.colli * torch.relu(-sd - w.sigma_b).sum(-1)
+            if "contact" in terms and object_contact is not None:
+                last = hands[:, -cfg.contact_frames:]
+                idx = object_contact.topk(min(256, object_contact.shape[1]), -1).indices
+                po = torch.gather(pts, 1, idx.unsqueeze(-1).expand(-1, -1, 3))
+                d2 = torch.stack([_nearest(po, last[:, k])[0] for k in range(last.shape[1])], 1)   # (B, 5, 256)
+                e["contact"] = w.contact * (torch.gather(object_contact, 1, idx)[:, None] * d2).sum((1, 2))
+            if "palm" in terms:
+                e["palm"] = w.palm * self.palm_term(hands, pts)
+        if "smooth" in terms:
+            hv = (hands[:, 1:] - hands[:, :-1]).pow(2).sum(-1).mean(-1).sum(1)       # mean over the hand vertices
+            e["smooth"] = w.smooth_hand * hv
+            if self.ae is not None:
+                S = self.ae.encode((m[:, 1:] - m[:, :-1]).flatten(2))
+                e["smooth"] = e["smooth"] + w.smooth_latent * (S[:, 1:] - S[:, :-1]).pow(2).sum((1, 2))
+        if "skate" in terms and foot_contact is not None:
+            speed = (feet[:, 1:] - feet[:, :-1]).norm(dim=-1)                     # (B, T, n_foot)
+            on = (foot_contact[:, :-1] > 0.5)[:, :, self.foot_part].to(speed.dtype)
+            e["skate"] = w.skate * (on * torch.relu(speed - w.skate_sigma)).sum((1, 2))
+        return e
+
+    def palm_term(self, hands: Tensor, pts: Tensor) -> Tensor:
+        """Eq. 11 per sequence (B,): alpha_t 1(d < sigma) (cos gamma - 1)^2 over the palm vertices of every frame."""
+        B, F, H, _ = hands.shape
+        hn = vertex_normals(hands.reshape(B * F, H, 3), self.hand_faces)[:, self.palm]      # (BF, P, 3)
+        pv = hands.reshape(B * F, H, 3)[:, self.palm]
+        ptsf = pts.repeat_interleave(F, 0)
+        d2, idx = _nearest(pv, ptsf)
+        near = torch.gather(ptsf, 1, idx.unsqueeze(-1).expand(-1, -1, 3))
+        cos = torch.nn.functional.cosine_similarity(hn, near - pv, dim=-1)
+        on = (d2.detach() < self.cfg.weights.palm_sigma ** 2).to(cos.dtype)
+        t = torch.arange(F, dtype=cos.dtype)
+        alpha = 1.0 - (t / (F - 1)) ** 2
+        return (alpha[None, :, None] * (on * (cos - 1) ** 2).view(B, F, -1)).sum((1, 2))
+
+    # ------------------------------------------------------------------ Alg. 2
+    def fit(self, markers: Tensor, betas: Tensor, foot_contact: Tensor | None = None, obj: GraspObject | None = None,
+            object_contact: Tensor | None = None, progress: bool = True) -> GraspMotionResult:
+        """Alg. 2 on a batch: markers (B, T+1, 79, 3), betas (B, 10), foot contacts (B, T+1, 4) probabilities, the
+        object in the markers' frame, its contact map (B, P) -> GraspMotionResult."""
+        if not isinstance(markers, Tensor) or markers.dim() != 4 or tuple(markers.shape[2:]) != (self.n_markers, 3):
+            got = tuple(markers.shape) if isinstance(markers, Tensor) else type(markers).__name__
+            raise ValueError(f"markers: expected shape (B, T+1, {self.n_markers}, 3), got {got}")
+        B, F = markers.shape[:2]
+        if betas.shape[0] != B:
+            raise ValueError(f"betas: expected {B} rows (one per sequence), got {tuple(betas.shape)}")
+        if foot_contact is not None and tuple(foot_contact.shape) != (B, F, 4):
+            raise ValueError(f"foot_contact: expected shape ({B}, {F}, 4), got {tuple(foot_contact.shape)}")
+        if object_contact is not None and (obj is None or tuple(object_contact.shape) != (B, obj.num_points)):
+            raise ValueError(f"object_contact: expected shape ({B}, P) with an object of P points")
+        target = markers.detach().float()
+        bet = betas.float().repeat_interleave(F, 0)
+        p0 = self.init_params(target.flatten(0, 1), bet)
+        first = {k: v.view(B, F, -1)[:, :1].clone().requires_grad_(True) for k, v in p0.items()}
+        rest = {k: v.view(B, F, -1)[:, 1:].clone().requires_grad_(True) for k, v in p0.items()}
+
+        def params() -> dict[str, Tensor]:
+            return {k: torch.cat([first[k], rest[k]], 1).flatten(0, 1) for k in first}
+
+        log: list[dict[str, float]] = []
+        energies: dict[str, dict[str, Tensor]] = {}
+        bar = tqdm(total=sum(self.cfg.steps), desc="GraspMotion-Opt", disable=not progress)
+        step = 0
+        for stage, n in ((1, self.cfg.steps[0]), (2, self.cfg.steps[1])):
+            opt = torch.optim.Adam([{"params": list(first.values()), "lr": 0.1 if stage == 1 else 0.01},
+                                    {"params": list(rest.values()), "lr": 0.01}])
+            for i in range(n):
+                if stage == 1 and i in (60, 80):
+                    for g in opt.param_groups:
+                        g["lr"] = 0.01 if i == 60 else 0.003
+                if stage == 2 and i == 150:
+                    for g in opt.param_groups:
+                        g["lr"] = 0.005
+                e = self.energy(params(), target, bet, stage, foot_contact, obj, object_contact)
+                loss = sum(t.sum() for t in e.values())
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                opt.step()
+                if i % self.cfg.log_every == 0:
+                    log.append({"step": step, "stage": stage, **{k: float(t.detach().sum()) for k, t in e.items()}})
+                step += 1
+                bar.update(1)
+            with torch.no_grad():
+                energies[f"stage{stage}"] = {k: t.detach() for k, t in self.energy(
+                    params(), target, bet, 2, foot_contact, obj, object_contact).items()}
+        bar.close()
+        with torch.no_grad():
+            p = params()
+            rot = self.rotmats(p)
+            v, J = self.sparse(rot, bet, p["transl"])
+            aa = matrix_to_axis_angle(rot).view(B, F, 55, 3)
+            out = {"betas": betas.float(), "transl": p["transl"].view(B, F, 3), "global_orient": aa[:, :, 0],
+                   "body_pose": aa[:, :, 1:22].reshape(B, F, 63), "left_hand_pose": aa[:, :, 25:40].reshape(B, F, 45),
+                   "right_hand_pose": aa[:, :, 40:55].reshape(B, F, 45), "poses": aa.reshape(B, F, 165)}
+        return GraspMotionResult(out, v[:, self.sl_m].float().view(B, F, -1, 3), J.float().view(B, F, 55, 3),
+                                 energies, log)
+
+    def vertices(self, result: GraspMotionResult, b: int = 0) -> Tensor:
+        """Full meshes (T+1, V, 3) of sequence b (absolute rotations, this BodyModel's hand mean included)."""
+        pr = result.params
+        F = pr["transl"].shape[1]
+        rot = axis_angle_to_matrix(pr["poses"][b].view(F, 55, 3))
+        with torch.no_grad():
+            return self.bm.forward_rotmats(rot, betas=pr["betas"][b:b + 1].expand(F, -1),
+                                           transl=pr["transl"][b]).vertices.float()

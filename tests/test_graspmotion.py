@@ -1,0 +1,113 @@
+"""GraspMotion-Opt (SAGA §3.4, Alg. 2): recovery of a known body sequence from its markers; S.2 and Eq. 11 on
+hand-made cases."""
+import numpy as np
+import pytest
+import torch
+
+from graspkit.body import BodyModel
+from graspkit.body.markers import saga_sparse_markers
+from graspkit.data import load_motion
+from graspkit.models.pose_prior import load_pose_prior
+from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, MarkerDiffAE, train_smooth_ae
+from graspkit.optim.grasppose import GraspObject
+from graspkit.paths import DATA_STUBS, default_model_path
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _threads():
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+@pytest.fixture(scope="module")
+def bm():
+    return BodyModel.from_file(default_model_path())
+
+
+@pytest.fixture(scope="module")
+def clip(bm):
+    """12 frames of a shipped locomotion clip: markers, joints and betas of the known body."""
+    m = load_motion(DATA_STUBS / "motion" / "locomotion" / "locomotion_000001.npz").slice(30, 42)
+    flat = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    markers = saga_sparse_markers(bm).select(m.vertices(flat)).float()
+    return markers, torch.as_tensor(m.joint_positions(flat)).float(), torch.as_tensor(m.betas).float(), m
+
+
+def test_markers_of_a_known_sequence_give_the_sequence_back(bm, clip):
+    markers, joints, betas, m = clip
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("smooth",)))
+    res = opt.fit(markers[None], betas[None, :10], progress=False)
+    err_m = (res.markers[0] - markers).norm(dim=-1).mean()
+    err_j = (res.joints[0, :, :22] - joints[:, :22]).norm(dim=-1).mean()
+    assert err_m < 0.015 and err_j < 0.03, (float(err_m), float(err_j))
+    assert res.params["poses"].shape == (1, 12, 165) and res.energies["stage2"]["fit"] <= res.energies["stage1"]["fit"] * 1.5
+    # the full mesh of the fitted parameters carries the fitted markers
+    v = opt.vertices(res)
+    torch.testing.assert_close(saga_sparse_markers(bm).select(v), res.markers[0], atol=1e-4, rtol=0)
+
+
+def test_foot_skating_term_is_analytic_for_a_sliding_body(bm):
+    """A body translated by a constant 2 cm per frame: S.2 = a (|v| - sigma) per sole vertex and contact frame."""
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("skate",)))
+    F = 5
+    p = opt.init_params(torch.zeros(F, 79, 3), torch.zeros(F, 10))
+    p = {k: torch.zeros_like(v) if k != "orient6d" else v for k, v in p.items()}
+    p["transl"] = torch.arange(F, dtype=torch.float32)[:, None] * torch.tensor([0.02, 0.0, 0.0])
+    contact = torch.zeros(1, F, 4)
+    contact[:, :, 0] = 1.0                                       # left heel in contact on every frame
+    e = opt.energy(p, torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, contact, None, None)
+    w = opt.cfg.weights
+    n_heel = int((opt.foot_part == 0).sum())
+    assert e["skate"].item() == pytest.approx(w.skate * n_heel * (F - 1) * (0.02 - w.skate_sigma), rel=1e-4)
+    assert opt.energy(p, torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, torch.zeros(1, F, 4), None,
+                      None)["skate"].item() == 0.0
+
+
+def test_palm_term_is_small_for_a_palm_facing_a_wall_and_large_for_a_wall_behind_it(bm):
+    """Eq. 11 with the rest hand (palm facing -y) and a plane of points 3 mm below the palm (cos gamma ~ 1) or 3 mm
+    past its highest palm vertex (the vector to the plane points against the palm normal: cos gamma ~ -1)."""
+    opt = GraspMotionOpt(bm, load_pose_prior())
+    rot = torch.eye(3).expand(1, 55, 3, 3)
+    v, _ = opt.sparse(rot, torch.zeros(1, 10), torch.zeros(1, 3))
+    hands = v[:, opt.sl_h].float()[:, None].expand(1, 3, -1, -1)              # three frames of the same hand
+    palm = hands[0, 0, opt.palm]
+    lo, hi = palm.min(0).values, palm.max(0).values
+    xs = torch.arange(float(lo[0]) - 0.03, float(hi[0]) + 0.03, 0.002)
+    zs = torch.arange(float(lo[2]) - 0.03, float(hi[2]) + 0.03, 0.002)
+    grid = torch.stack(torch.meshgrid(xs, zs, indexing="ij"), -1).reshape(-1, 2)
+
+    def plane(y: float) -> torch.Tensor:
+        return torch.stack([grid[:, 0], torch.full((len(grid),), y), grid[:, 1]], -1)[None]
+
+    facing = opt.palm_term(hands, plane(float(lo[1]) - 0.003)).item()
+    behind = opt.palm_term(hands, plane(float(hi[1]) + 0.003)).item()
+    assert behind > 1.0 and facing < 0.1 * behind, (facing, behind)
+    # alpha_t = 1 - (t/T)^2: the last frame does not count, the first counts fully
+    far = opt.palm_term(hands, plane(float(hi[1]) + 0.5)).item()
+    assert far == 0.0
+
+
+def test_smoothness_autoencoder_trains_and_round_trips_its_checkpoint(tmp_path):
+    g = np.random.default_rng(0)
+    t = np.linspace(0, 2, 21)[None, :, None, None]
+    markers = g.normal(0, 0.3, (16, 1, 79, 3)) + 0.2 * np.sin(t * g.uniform(1, 3, (16, 1, 1, 1)))
+    ae, hist = train_smooth_ae(markers.astype(np.float32), epochs=25, out=tmp_path / "ae.pt")
+    assert hist[-1] < 0.6 * hist[0]
+    from graspkit.optim.graspmotion import load_smooth_ae
+
+    again = load_smooth_ae(tmp_path / "ae.pt")
+    x = torch.as_tensor(np.diff(markers, axis=1)).float().flatten(2)
+    torch.testing.assert_close(again.encode(x), ae.encode(x), atol=2e-2, rtol=2e-2)        # float16 weights
+    assert isinstance(again, MarkerDiffAE)
+
+
+def test_errors_name_the_argument(bm):
+    opt = GraspMotionOpt(bm, load_pose_prior())
+    with pytest.raises(ValueError, match="markers"):
+        opt.fit(torch.zeros(1, 5, 80, 3), torch.zeros(1, 10))
+    with pytest.raises(ValueError, match="foot_contact"):
+        opt.fit(torch.zeros(1, 5, 79, 3), torch.zeros(1, 10), foot_contact=torch.zeros(1, 5, 2))
+    with pytest.raises(ValueError, match="flat_hand_mean"):
+        GraspMotionOpt(BodyModel.from_file(default_model_path(), flat_hand_mean=True), load_pose_prior())
