@@ -36,7 +36,8 @@ MOTION_METRICS = {
 PAPER_ROWS: list[tuple[str, str, str, dict[str, float]]] = [
     ("grasp", "SAGA (WholeGrasp w/ opt.)", "SAGA Tab. 1", {"apd": 2.92, "contact_ratio": 0.94, "volume_cm3": 0.48,
                                                              "depth_cm": 0.16}),
-    ("grasp", "GrabNet-SMPLX", "SAGA Tab. 1", {"apd": 0.33, "contact_ratio": 0.65, "volume_cm3": 14.15, "depth_cm": 0.78}),
+    ("grasp", "GrabNet-SMPLX", "SAGA Tab. 1", {"apd": 0.33, "contact_ratio": 0.65, "volume_cm3": 14.15,
+                                                "depth_cm": 0.78}),
     ("grasp", "ground truth (GRAB)", "SAGA Tab. 2", {"contact_ratio": 0.99, "volume_cm3": 2.04, "depth_cm": 0.45}),
     ("grasp", "GOAL (GNet + refinement)", "GOAL Tab. 1", {"contact_ratio": 1.00, "volume_cm3": 2.22}),
     ("grasp", "ground truth (GRAB)", "GOAL Tab. 1", {"contact_ratio": 1.00, "volume_cm3": 1.95}),
@@ -105,7 +106,8 @@ def ground_truth_grasps(bm, folders: list[Path], split: str = "test", n: int | N
     q = grasp_quality_table(rows)
     objs = sorted({s.object_name for s in seqs})
     return Row("grasp", "ground truth (synthetic)", "graspkit",
-               {"contact_ratio": q["contact_ratio"], "volume_cm3": q["volume_mean_cm3"], "depth_cm": q["depth_mean_cm"]},
+               {"contact_ratio": q["contact_ratio"], "volume_cm3": q["volume_mean_cm3"],
+                "depth_cm": q["depth_mean_cm"]},
                f"{len(seqs)} grasps of {', '.join(objs)}")
 
 
@@ -154,7 +156,8 @@ def goal_results(folders: list[Path], out: Path, quick: bool, checkpoints: Path)
     for key, r in res.get("tab1", {}).items():
         if key.startswith("GNet") and "w/o" not in key:
             rows.append(Row("grasp", "GOAL (GNet + refinement)", "graspkit",
-                            {k: r[k] for k in ("contact_ratio", "volume_cm3", "depth_cm") if k in r}, f"{r.get('n', '?')} grasps"))
+                            {k: r[k] for k in ("contact_ratio", "volume_cm3", "depth_cm") if k in r},
+                            f"{r.get('n', '?')} grasps"))
             break
     sl = res.get("sliding", {})
     for key, v in sl.items():
@@ -190,7 +193,8 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
     """Evaluate every method (and the ground truth / planner) into out_dir; returns all rows, papers' included.
 
     data: folders with grasp_*.npz / approach_*.npz (default: the made training sets if present, else data_stubs);
-    quick: a few samples per method (minutes on two cores) instead of the full protocol."""
+    quick: a few samples per method (minutes on two cores) instead of the full protocol (200 ground-truth grasps,
+    40 approach clips, each evaluator's own defaults)."""
     from tqdm.auto import tqdm
 
     from graspkit.body import BodyModel
@@ -215,8 +219,8 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
         steps.set_postfix_str(m)
         t0 = time.perf_counter()
         if m == "gt":
-            new = [ground_truth_grasps(bm, folders, n=8 if quick else None),
-                   planner_motion(bm, folders, n=4 if quick else None)]
+            new = [ground_truth_grasps(bm, folders, n=8 if quick else 200),
+                   planner_motion(bm, folders, n=4 if quick else 40)]
         elif m == "saga":
             new = _guarded("SAGA (WholeGrasp w/ opt.)", "grasp", ck / "wholegrasp.pt",
                            lambda: saga_grasps(folders[0], out / "saga_eval.json", quick, ck))
@@ -257,7 +261,8 @@ def markdown(rows: list[Row]) -> str:
         lines = [f"### {table} quality", "", head, "|" + "---|" * (len(cols) + 3)]
         for r in sel:
             src = "graspkit (ours)" if r.source == "graspkit" else f"paper: {r.source}"
-            lines.append(f"| {r.method} | {src} | " + " | ".join(_fmt(r.values.get(k)) for k in cols) + f" | {r.note} |")
+            cells = " | ".join(_fmt(r.values.get(k)) for k in cols)
+            lines.append(f"| {r.method} | {src} | {cells} | {r.note} |")
         parts.append("\n".join(lines))
     return "\n\n".join(parts) + "\n"
 
@@ -311,7 +316,8 @@ def write_report(rows: list[Row], out_dir: str | Path) -> list[Path]:
     from graspkit.viz.export import write_atomic
 
     out = Path(out_dir)
-    md = write_atomic(out / "benchmark.md", "# graspkit: every method on the same objects and goals\n\n" + markdown(rows))
+    title = "# graspkit: every method on the same objects and goals\n\n"
+    md = write_atomic(out / "benchmark.md", title + markdown(rows))
     cs = write_atomic(out / "benchmark.csv", to_csv(rows))
     fig = figure(rows)
     buf = io.BytesIO()

@@ -77,9 +77,13 @@ def _motion_from_rot6d(rot6d: torch.Tensor, transl: torch.Tensor, betas: torch.T
     return Motion(aa.numpy(), transl.detach().numpy(), betas.reshape(-1)[:10].detach().numpy(), 30.0, **kw)
 
 
+Panel = tuple[str, np.ndarray, list, object]   # title, last-frame vertices (V,3), object meshes, goals (G,3) or None
+
+
 def _write_clip(bm: BodyModel, motion, out_dir: Path, name: str, objects: dict, title: str,
-                goals=None) -> list[Path]:
-    """A clip's GIF (front and side views), still of its last frame, npz, animated GLB and final-scene GLB."""
+                goals=None) -> tuple[list[Path], Panel]:
+    """A clip's GIF (front and side views), still of its last frame, npz, animated GLB and final-scene GLB; returns
+    the paths and the last frame for the overview."""
     from graspkit.viz import animate, save_animation, show_scene
     from graspkit.viz.export import export_motion, motion_vertices
 
@@ -93,7 +97,30 @@ def _write_clip(bm: BodyModel, motion, out_dir: Path, name: str, objects: dict, 
     plt.close(fig)
     paths.append(out_dir / f"{name}.png")
     paths += list(export_motion(motion, bm, out_dir, name, objects=objects, stride=3).values())
-    return paths
+    return paths, (title, v[-1], objs, goals)
+
+
+def overview(panels: list[Panel], faces: np.ndarray) -> plt.Figure:
+    """One row: the last frame of every method's clip, seen from the side, on the same scale."""
+    from graspkit.viz import draw_ground, draw_mesh, set_equal
+    from graspkit.viz.scene import draw_goal
+
+    fig = plt.figure(figsize=(3.2 * len(panels), 3.6))
+    for k, (title, v, objs, goals) in enumerate(panels):
+        ax = fig.add_subplot(1, len(panels), k + 1, projection="3d", proj_type="ortho")
+        draw_mesh(ax, v, faces)
+        for ov, of in objs:
+            draw_mesh(ax, ov, of, color="#4C72B0")
+        for g in ([] if goals is None else np.asarray(goals).reshape(-1, 3)):
+            draw_goal(ax, g)
+        c = v.mean(0)
+        draw_ground(ax, (c[0] - 1.0, c[0] + 1.0, c[1] - 1.0, c[1] + 1.0))
+        set_equal(ax, np.array([[c[0] - 1.0, c[1] - 1.0, 0.0], [c[0] + 1.0, c[1] + 1.0, 2.0]]), pad=0.0, zoom=1.3)
+        ax.view_init(elev=12, azim=-60)
+        ax.set_axis_off()
+        ax.set_title(title, fontsize=9)
+    fig.subplots_adjust(0, 0, 1, 0.95, wspace=0)
+    return fig
 
 
 def _test_clip():
@@ -106,7 +133,7 @@ def _test_clip():
     return seqs[0], object_mesh_at(seqs[0], 0)
 
 
-def planner_stage(bm: BodyModel, out_dir: Path) -> list[Path]:
+def planner_stage(bm: BodyModel, out_dir: Path) -> tuple[list[Path], Panel]:
     """The synthetic ground truth: the procedural approach-and-grasp clip."""
     from graspkit.benchmark import sequence_motion
 
@@ -115,7 +142,8 @@ def planner_stage(bm: BodyModel, out_dir: Path) -> list[Path]:
                        f"procedural planner: {seq.object_name}")
 
 
-def saga_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int, int] = (100, 150, 200)) -> list[Path]:
+def saga_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int, int] = (100, 150, 200)
+               ) -> tuple[list[Path], Panel]:
     """SAGA stage 1 on the clip's object placement: a WholeGrasp-VAE sample fitted by GraspPoseOpt (Alg. 1)."""
     from graspkit.data.grasp_io import cached_sdf_grid
     from graspkit.data.motion import Motion
@@ -145,7 +173,7 @@ def saga_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int, int] = (100,
     return _write_clip(bm, motion, out_dir, "saga_grasp", {seq.object_name: mesh}, "SAGA: WholeGrasp + GraspPose-Opt")
 
 
-def goal_stage(bm: BodyModel, out_dir: Path, max_frames: int = 150) -> list[Path]:
+def goal_stage(bm: BodyModel, out_dir: Path, max_frames: int = 150) -> tuple[list[Path], Panel]:
     """GOAL from the clip's start: GNet's grasp (refined), then MNet's approach to it (§3.4)."""
     from graspkit.eval_goal import _body, approach_clips, gnet_goal
     from graspkit.models.gnet import load_gnet
@@ -165,7 +193,7 @@ def goal_stage(bm: BodyModel, out_dir: Path, max_frames: int = 150) -> list[Path
     return _write_clip(bm, motion, out_dir, "goal_approach", {seq.object_name: obj}, "GOAL: GNet + MNet")
 
 
-def wandr_stage(bm: BodyModel, out_dir: Path, seconds: float = 4.0) -> list[Path]:
+def wandr_stage(bm: BodyModel, out_dir: Path, seconds: float = 4.0) -> tuple[list[Path], Panel]:
     """WANDR from its first held-out start pose to a goal 2 m ahead-left, 1 m high, in `seconds`."""
     import graspkit.intention as I
     from graspkit.data.motion import Motion
@@ -193,7 +221,8 @@ METHOD_STAGES = {"planner": (planner_stage, None), "saga": (saga_stage, "wholegr
 
 
 def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, ...] = STAGES) -> list[Path]:
-    """Run the demo's stages into out_dir (see the module doc); returns the files written."""
+    """Run the demo's stages into out_dir (see the module doc), then `pipeline_overview.png` (every method's last
+    frame side by side) when a method stage ran; returns the files written."""
     from graspkit.viz.export import export_scene
 
     bad = [s for s in stages if s not in STAGES]
@@ -202,6 +231,7 @@ def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, .
     out_dir.mkdir(parents=True, exist_ok=True)
     bm = load_or_build_body(model_path)
     written: list[Path] = []
+    panels: list[Panel] = []
     steps = tqdm(list(stages), desc="demo", unit="stage")
     for stage in steps:
         steps.set_postfix_str(stage)
@@ -219,5 +249,12 @@ def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, .
             tqdm.write(f"demo: skipping {stage}: its checkpoint {CHECKPOINTS / ck} is missing "
                        f"(train it with `graspkit train ...`, see README)")
             continue
-        written += fn(bm, out_dir)
+        paths, panel = fn(bm, out_dir)
+        written += paths
+        panels.append(panel)
+    if panels:
+        fig = overview(panels, bm.faces.numpy())
+        fig.savefig(out_dir / "pipeline_overview.png", dpi=100)
+        plt.close(fig)
+        written.append(out_dir / "pipeline_overview.png")
     return written

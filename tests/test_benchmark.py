@@ -82,7 +82,8 @@ def test_planner_row_counts_sliding_frames_by_goals_definition(bm):
 
 
 def test_report_round_trips_and_labels_the_papers(tmp_path):
-    ours = [Row("grasp", "ground truth (synthetic)", "graspkit", {"contact_ratio": 1.0, "volume_cm3": 0.25}, "3 grasps"),
+    ours = [Row("grasp", "ground truth (synthetic)", "graspkit", {"contact_ratio": 1.0, "volume_cm3": 0.25},
+                "3 grasps"),
             Row("motion", "WANDR", "graspkit", note="checkpoint missing: x.pt")]
     rows = ours + paper_rows()
     md, cs, png = write_report(rows, tmp_path)

@@ -55,7 +55,8 @@ def test_demo_planner_stage_writes_clip_files_that_read_back(tmp_path):
     from graspkit.paths import DATA_STUBS
 
     files = {p.name: p for p in run_demo(tmp_path, stages=("planner",))}
-    assert set(files) == {f"planner_approach{s}" for s in (".gif", ".png", ".npz", ".glb", "_final.glb")}
+    assert set(files) == {f"planner_approach{s}" for s in (".gif", ".png", ".npz", ".glb", "_final.glb")} | {
+        "pipeline_overview.png"}
     gif = Image.open(files["planner_approach.gif"])
     assert gif.n_frames >= 20
     seq = split_sequences([DATA_STUBS / "approach"], "approach", "test")[0]
