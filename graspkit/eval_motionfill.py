@@ -159,7 +159,8 @@ def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, se
 def add_motionfill_train_commands(train_sub) -> None:
     """`graspkit train motionfill --stage {local,traj,finetune}` (A.4's three runs)."""
     p = train_sub.add_parser("motionfill", help="train SAGA's MotionFill-VAE (§3.3), one A.4 stage per run")
-    p.add_argument("--stage", choices=list(STAGES), required=True)
+    p.add_argument("--stage", choices=list(STAGES) + ["smooth_ae"], required=True,
+                   help="smooth_ae: GraspMotion-Opt's marker-difference autoencoder (S.1) on both window sets")
     p.add_argument("--init", type=Path, default=None, help="start from this checkpoint (stages traj, finetune)")
     p.add_argument("--out", type=Path, default=CHECKPOINT)
     p.add_argument("--epochs", type=int, default=20)
@@ -177,8 +178,20 @@ def add_motionfill_train_commands(train_sub) -> None:
 def _cmd_train(args: argparse.Namespace) -> int:
     """Run one stage and print the last epoch's figures."""
     torch.set_num_threads(args.threads)
-    kind = STAGES[args.stage][0]
     t0 = time.perf_counter()
+    if args.stage == "smooth_ae":
+        from graspkit.optim.graspmotion import SMOOTH_AE_PATH, train_smooth_ae
+
+        out = args.out if args.out != CHECKPOINT else SMOOTH_AE_PATH
+        marks = []
+        for kind in ("locomotion", "approach"):
+            arr = windows(kind, DEFAULT_CLIPS[kind], data=args.data if kind == "approach" else None)
+            marks.append(arr["markers"][np.isin(arr["clip"], clip_split(arr)["train"])])
+        _, hist = train_smooth_ae(np.concatenate(marks), epochs=args.epochs, seed=args.seed, out=out)
+        print(f"smooth_ae: {len(hist)} epochs in {time.perf_counter() - t0:.0f} s -> {out}; L1 (scaled) "
+              f"{hist[0]:.3f} -> {hist[-1]:.3f}")
+        return 0
+    kind = STAGES[args.stage][0]
     _, hist = train_stage(args.stage, args.epochs, args.out, init=args.init, seed=args.seed,
                           time_limit_s=args.time_limit, clips={kind: args.clips} if args.clips else None, lr=args.lr,
                           data=args.data)
@@ -186,3 +199,100 @@ def _cmd_train(args: argparse.Namespace) -> int:
     print(f"motionfill {args.stage}: {len(hist)} epochs in {time.perf_counter() - t0:.0f} s -> {args.out}")
     print("  " + ", ".join(f"{k} {v:.3f}" for k, v in last.items() if k != "epoch"))
     return 0
+
+
+# ------------------------------------------------------------------------------------------------ Tab. 3
+# SAGA Tab. 3 (AMASS / GRAB): ADE (m), skating (fraction of frames), PSKL-J (P, GT) and (GT, P)
+PAPER = {"CNN-AE (local)": (0.091, 0.245, 0.804, 0.739), "LEMO (local)": (0.083, 0.152, 0.507, 0.447),
+         "PoseNet (local)": (0.090, 0.236, 0.611, 0.668), "Ours-Local": (0.079, 0.137, 0.377, 0.327),
+         "Route+PoseNet": (0.219, 0.575, 0.955, 0.884), "Ours": (0.083, 0.394, 0.772, 0.609)}
+
+
+def pskl(pred: np.ndarray, gt: np.ndarray, eps: float = 1e-8) -> tuple[float, float]:
+    """PSKL (LEMO, SAGA §4.2): KL between the normalised power spectra of the accelerations, per point and axis,
+    averaged; both directions (KL(P || GT), KL(GT || P)). pred, gt (N, T, J, 3); pred may be (N, K, T, J, 3)."""
+    def spectrum(x: np.ndarray) -> np.ndarray:
+        acc = x[..., 2:, :, :] - 2 * x[..., 1:-1, :, :] + x[..., :-2, :, :]
+        ps = np.abs(np.fft.rfft(acc, axis=-3)) ** 2
+        return ps / (ps.sum(-3, keepdims=True) + eps) + eps
+
+    p, g = spectrum(pred), spectrum(gt)
+    if p.ndim == g.ndim + 1:
+        g = g[:, None]
+    return float((p * np.log(p / g)).sum(-3).mean()), float((g * np.log(g / p)).sum(-3).mean())
+
+
+def heel_columns() -> list[int]:
+    """Columns of the left and right heel markers in SAGA's sparse set."""
+    from graspkit.body import BodyModel
+    from graspkit.body.markers import saga_sparse_markers
+    from graspkit.paths import default_model_path
+
+    names = saga_sparse_markers(BodyModel.from_file(default_model_path())).names
+    return [names.index("LHEE"), names.index("RHEE")]
+
+
+def skating(markers: np.ndarray, floor: np.ndarray, heels: list[int]) -> float:
+    """SAGA's skating rate (§4.2: both heels within 5 cm of the ground and faster than 75 mm/s) of marker sequences
+    (..., T, M, 3) whose ground height is `floor` (...) (the lowest foot marker of the ground truth window)."""
+    from graspkit.metrics import foot_skating_saga
+
+    h = markers[..., heels, :].copy()
+    h[..., 2] -= np.asarray(floor)[..., None, None]
+    flat = h.reshape(-1, *h.shape[-3:])
+    return float(np.mean([foot_skating_saga(x).mean() for x in flat]))
+
+
+def linear_local(local: np.ndarray) -> np.ndarray:
+    """The linear-interpolation baseline of the local motion: frames 0 -> T blended linearly (N, T+1, M, 3)."""
+    s = np.linspace(0, 1, local.shape[1])[None, :, None, None]
+    return (1 - s) * local[:, :1] + s * local[:, -1:]
+
+
+def evaluate(model: MotionFillVAE, arr: dict[str, np.ndarray], clips: np.ndarray, n: int = 10, seed: int = 0
+             ) -> dict[str, dict[str, float]]:
+    """Tab. 3 on the windows of `clips`: local infilling with the true trajectory and trajectory + local, ours (n samples,
+    ADE = min over samples) and linear interpolation; skating, PSKL both ways, APD; the ground truth's skating."""
+    from graspkit.data.motionfill_dataset import global_motion, interpolated_trajectory
+    from graspkit.metrics import apd
+
+    keep = np.isin(arr["clip"], clips)
+    a = {k: v[keep] for k, v in arr.items()}
+    gt = a["markers"].astype(np.float64)
+    heels = heel_columns()
+    feet = [heels[0], heels[1]]
+    floor = gt[:, :, feet, 2].min((1, 2))
+    ti = interpolated_trajectory(a["traj"].astype(np.float64))
+    g = torch.Generator().manual_seed(seed)
+    out: dict[str, np.ndarray] = {"Ours-Local": [], "Ours": []}
+    for i in range(len(gt)):
+        for name, traj in (("Ours-Local", torch.as_tensor(a["traj"][i])), ("Ours", None)):
+            s = model.sample(torch.as_tensor(ti[i]).float(), torch.as_tensor(a["local"][i]),
+                             torch.as_tensor(a["contacts"][i]).float(), n, g, traj=traj)
+            out[name].append(s["markers"].double().numpy())
+    preds = {k: np.stack(v) for k, v in out.items()}                       # (N, n, T+1, M, 3)
+    preds["Linear (local)"] = global_motion(linear_local(a["local"].astype(np.float64)), a["traj"].astype(np.float64))[:, None]
+    preds["Linear"] = global_motion(linear_local(a["local"].astype(np.float64)), ti)[:, None]
+    rows = {}
+    for name, p in preds.items():
+        err = np.linalg.norm(p - gt[:, None], axis=-1).mean((2, 3))         # (N, n)
+        pg, gp = pskl(p, gt)
+        rows[name] = {"ADE": float(err.min(1).mean()), "skating": skating(p, floor[:, None], heels), "PSKL (P, GT)": pg,
+                      "PSKL (GT, P)": gp, "APD": float(np.mean([apd(x) for x in p])) if p.shape[1] > 1 else 0.0}
+    rows["Ground truth"] = {"ADE": 0.0, "skating": skating(gt, floor, heels), "PSKL (P, GT)": 0.0, "PSKL (GT, P)": 0.0,
+                            "APD": 0.0}
+    return rows
+
+
+def table(rows: dict[str, dict[str, float]]) -> str:
+    """Markdown table of `evaluate`'s rows with the paper's Tab. 3 figures beside them."""
+    paper_of = {"Ours-Local": "Ours-Local", "Ours": "Ours", "Linear (local)": None, "Linear": None}
+    lines = ["| method | ADE (m) | skating | PSKL (P, GT) | PSKL (GT, P) | APD (m) | paper: ADE / skating / PSKL (P,GT) / (GT,P) |",
+             "|---|---|---|---|---|---|---|"]
+    for k, r in rows.items():
+        ref = PAPER.get(paper_of.get(k) or "", None)
+        lines.append(f"| {k} | {r['ADE']:.3f} | {r['skating']:.3f} | {r['PSKL (P, GT)']:.3f} | {r['PSKL (GT, P)']:.3f} "
+                     f"| {r['APD']:.3f} | {' / '.join(f'{x:.3f}' for x in ref) if ref else '—'} |")
+    for k in ("CNN-AE (local)", "LEMO (local)", "PoseNet (local)", "Route+PoseNet"):
+        lines.append(f"| {k} (paper only) | | | | | | {' / '.join(f'{x:.3f}' for x in PAPER[k])} |")
+    return "\n".join(lines)

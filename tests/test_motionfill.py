@@ -35,6 +35,10 @@ def test_trajfill_starts_at_the_straight_trajectory_and_local_fill_keeps_the_ima
     img = torch.randn(2, 4, NUM_FRAMES, FEATURES)
     ch0, mu, _ = lm(img, img)
     assert ch0.shape == (2, NUM_FRAMES, FEATURES) and mu.shape == (2, 128)
+    # zero-initialised output: the linear blend of the two known frames, contact logits 0
+    s = torch.linspace(0, 1, NUM_FRAMES)[None, :, None]
+    torch.testing.assert_close(ch0[..., :-4], ((1 - s) * img[:, 0, :1] + s * img[:, 0, -1:])[..., :-4])
+    assert (ch0[..., -4:] == 0).all()
 
 
 def test_loss_terms_and_gradients():
@@ -67,6 +71,9 @@ def test_image_round_trip_and_deterministic_sampling():
     again = MotionFillVAE.from_state(m.state())
     z = torch.ones(1, m.cfg.traj_latent)
     torch.testing.assert_close(again.traj.decode(z, b["traj_interp"][:1]), m.traj.decode(z, b["traj_interp"][:1]))
+    torch.nn.init.normal_(m.local.out.weight, std=0.1)           # zero-initialised outputs ignore the latents
+    torch.nn.init.normal_(m.traj.out.weight, std=0.1)
+    s1 = m.sample(b["traj_interp"][0], b["local"][0], b["contacts"][0], 2, torch.Generator().manual_seed(1))
     s3 = m.sample(b["traj_interp"][0], b["local"][0], b["contacts"][0], 2, torch.Generator().manual_seed(2))
     assert not torch.allclose(s1["markers"], s3["markers"])       # another seed, another sample
 

@@ -14,7 +14,8 @@ LocalMotionFill (A.2, after LEMO [64]): a CNN CVAE over the four-channel motion 
 channel 0 the normalised local markers with the foot contacts, channels 1-3 the normalised root velocities; the
 condition image I_c is I with the in-between frames of channel 0 zeroed. Encoder q(z | I, I_c): strided convolutions
 on [I, I_c]; decoder p(I | z, I_c): the latent and a convolutional encoding of I_c, up-convolutions with skip
-connections from the I_c encoder (a U-Net), output channel 0 (markers and contact logits). The paper defers the
+connections from the I_c encoder (a U-Net), output channel 0 (markers and contact logits) as a residual over the
+linear blend of the two known frames (graspkit's choice, as TrajFill's residual over Gamma_bar; zero-initialised). The paper defers the
 CNN to LEMO; the widths here (8-16-32-32-32, 64-D latent; `MotionFillConfig.paper()`: 16-32-64-64-64, 128-D) are
 graspkit's, sized for two CPU cores.
 
@@ -158,6 +159,8 @@ class LocalMotionFill(nn.Module):
                                       "act": nn.LeakyReLU(0.2)}))
         self.ups = nn.ModuleList(ups)
         self.out = nn.Conv2d(cs[0] + 4, 1, 3, padding=1)
+        nn.init.zeros_(self.out.weight)               # starts at the linear blend of the known frames (`base`)
+        nn.init.zeros_(self.out.bias)
 
     def encode(self, image: Tensor, cond: Tensor) -> tuple[Tensor, Tensor]:
         """q(z_m | I, I_c): (B,4,61,F) x2 -> mean, log-variance (B, latent)."""
@@ -172,7 +175,16 @@ class LocalMotionFill(nn.Module):
             h = up["act"](up["up"](h))
             target = skips[len(skips) - 2 - k] if k < len(self.ups) - 1 else cond
             h = torch.cat([_crop(h, target), target], 1)
-        return self.out(h)[:, 0]
+        return self.out(h)[:, 0] + self.base(cond)
+
+    @staticmethod
+    def base(cond: Tensor) -> Tensor:
+        """The decoder's starting point: channel 0 blended linearly from frame 0 to frame T (markers), zero contact
+        logits (B, T+1, F) (graspkit's residual, as TrajFill's over Gamma_bar)."""
+        c = cond[:, 0]
+        s = torch.linspace(0, 1, c.shape[1], dtype=c.dtype, device=c.device)[None, :, None]
+        b = (1 - s) * c[:, :1] + s * c[:, -1:]
+        return torch.cat([b[..., :-4], torch.zeros_like(b[..., -4:])], -1)
 
     def forward(self, image: Tensor, cond: Tensor, generator: torch.Generator | None = None
                 ) -> tuple[Tensor, Tensor, Tensor]:
