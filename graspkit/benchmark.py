@@ -126,58 +126,75 @@ def planner_motion(bm, folders: list[Path], split: str = "test", n: int | None =
 
 # ------------------------------------------------------------------------------------- ours, from each evaluator
 
-def saga_grasps(root: Path, out: Path, quick: bool, checkpoints: Path) -> list[Row]:
-    """SAGA's Tab. 1 rows from graspkit.eval_saga on the test objects found in `root`."""
-    from graspkit.eval_saga import EvalConfig, evaluate
-
-    objs = sorted({s.object_name for s in split_sequences([root], "grasp", "test")})
-    if not objs:
-        return [Row("grasp", "SAGA (WholeGrasp w/ opt.)", "graspkit", note=f"no test grasps in {root}")]
-    cfg = EvalConfig(objects=tuple(objs), placements=1, samples=3, gt_grasps=1, steps=(30, 30, 30)) if quick else \
-        EvalConfig(objects=tuple(objs))
-    res = evaluate(root, cfg, progress=True, out=out, checkpoints=checkpoints)
+def saga_rows(res: dict) -> list[Row]:
+    """SAGA's Tab. 1 rows (ours and the GrabNet-SMPLX baseline) from a graspkit.eval_saga result."""
+    objs = ", ".join(res.get("config", {}).get("objects", []))
     names = {"WholeGrasp w/ opt. (Ours)": "SAGA (WholeGrasp w/ opt.)", "GrabNet-SMPLX": "GrabNet-SMPLX"}
     rows = []
     for key, name in names.items():
-        r = res["rows"].get(key)
+        r = res.get("rows", {}).get(key)
         if r:
-            rows.append(Row("grasp", name, "graspkit", {k: r[k] for k in GRASP_METRICS if k in r},
-                            f"{r.get('n', '?')} grasps of {', '.join(objs)}"))
+            rows.append(Row("grasp", name, "graspkit", {k: float(r[k]) for k in GRASP_METRICS if k in r},
+                            f"{r.get('n', '?')} grasps of {objs}"))
     return rows
 
 
-def goal_results(folders: list[Path], out: Path, quick: bool, checkpoints: Path) -> list[Row]:
-    """GOAL's Tab. 1 row (GNet) and the sliding of its motions (GNet + MNet) from graspkit.eval_goal."""
-    from graspkit.eval_goal import evaluate
-
-    kw = dict(n_grasps=4, n_rollouts=2, window_stride=20) if quick else {}
-    res = evaluate(folders, checkpoints, out=out, **kw)
+def goal_rows(res: dict) -> list[Row]:
+    """GOAL's Tab. 1 row (GNet + refinement) and its motions' sliding (GNet + MNet) from a graspkit.eval_goal result."""
     rows = []
     for key, r in res.get("tab1", {}).items():
         if key.startswith("GNet") and "w/o" not in key:
             rows.append(Row("grasp", "GOAL (GNet + refinement)", "graspkit",
-                            {k: r[k] for k in ("contact_ratio", "volume_cm3", "depth_cm") if k in r},
+                            {k: float(r[k]) for k in ("contact_ratio", "volume_cm3", "depth_cm") if k in r},
                             f"{r.get('n', '?')} grasps"))
             break
-    sl = res.get("sliding", {})
-    for key, v in sl.items():
+    for key, v in res.get("sliding", {}).items():
         if key.startswith("GOAL"):
             rows.append(Row("motion", "GOAL (GNet + MNet)", "graspkit", {"slide_goal": 100 * float(v)},
-                            f"{res['rollouts']['clips']} rollouts"))
+                            f"{res.get('rollouts', {}).get('clips', '?')} rollouts"))
     return rows
 
 
-def wandr_results(checkpoint: Path, quick: bool) -> list[Row]:
-    """WANDR's goal-grid row and the procedural planner's on the same grid from graspkit.eval_wandr."""
+def wandr_rows(res: dict) -> list[Row]:
+    """WANDR's goal-grid row and the procedural planner's on the same grid from graspkit.eval_wandr.run_eval_wandr."""
+    pick = lambda s: {"SR": float(s["SR"]), "fs_wandr": float(s["FS"]), "DTG": float(s["DTG"])}  # noqa: E731
+    rows = [Row("motion", "WANDR", "graspkit", pick(res["summary"]),
+                f"{res['summary']['rollouts']} rollouts on the grid")]
+    if "planner" in res:
+        rows.append(Row("motion", "procedural planner (WANDR grid)", "graspkit", pick(res["planner"]),
+                        f"{res['planner']['rollouts']} motions"))
+    return rows
+
+
+def run_saga(root: Path, out: Path, quick: bool, checkpoints: Path) -> dict:
+    """graspkit.eval_saga on the test objects found in `root` (quick: one placement, three samples each)."""
+    from graspkit.eval_saga import EvalConfig, evaluate
+
+    objs = tuple(sorted({s.object_name for s in split_sequences([root], "grasp", "test")}))
+    if not objs:
+        raise FileNotFoundError(f"data: no accepted test-split grasps in {root}")
+    cfg = EvalConfig(objects=objs, placements=1, samples=3, gt_grasps=1) if quick else EvalConfig(objects=objs)
+    return evaluate(root, cfg, progress=True, out=out, checkpoints=checkpoints)
+
+
+def run_goal(folders: list[Path], out: Path, quick: bool, checkpoints: Path) -> dict:
+    """graspkit.eval_goal on the test objects in `folders` (quick: 4 grasps, 2 rollouts)."""
+    from graspkit.eval_goal import evaluate
+
+    kw = dict(n_grasps=4, n_rollouts=2, window_stride=20) if quick else {}
+    return evaluate(folders, checkpoints, out=out, **kw)
+
+
+def run_wandr(checkpoint: Path, out: Path, quick: bool) -> dict:
+    """graspkit.eval_wandr's goal grid (quick: one sample per start and goal), with the planner; saved as JSON."""
+    import json
+
     from graspkit.eval_wandr import run_eval_wandr
+    from graspkit.viz.export import write_atomic
 
-    r = run_eval_wandr(str(checkpoint), n=1 if quick else 5, planner=True, threads=torch.get_num_threads())
-    pick = lambda s: {"SR": s["SR"], "fs_wandr": s["FS"], "DTG": s["DTG"]}  # noqa: E731
-    rows = [Row("motion", "WANDR", "graspkit", pick(r["summary"]), f"{r['summary']['rollouts']} rollouts on the grid")]
-    if "planner" in r:
-        rows.append(Row("motion", "procedural planner (WANDR grid)", "graspkit", pick(r["planner"]),
-                        f"{r['planner']['rollouts']} motions"))
-    return rows
+    res = run_eval_wandr(str(checkpoint), n=1 if quick else 5, planner=True, threads=torch.get_num_threads())
+    write_atomic(out, json.dumps(res, indent=1, default=float))
+    return res
 
 
 # ---------------------------------------------------------------------------------------------------------- driver
@@ -188,13 +205,15 @@ def paper_rows() -> list[Row]:
 
 
 def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = False,
-            checkpoints: str | Path | None = None, methods: tuple[str, ...] = ("gt", "saga", "goal", "wandr")
-            ) -> list[Row]:
+            checkpoints: str | Path | None = None, methods: tuple[str, ...] = ("gt", "saga", "goal", "wandr"),
+            reuse: bool = False) -> list[Row]:
     """Evaluate every method (and the ground truth / planner) into out_dir; returns all rows, papers' included.
 
     data: folders with grasp_*.npz / approach_*.npz (default: the made training sets if present, else data_stubs);
     quick: a few samples per method (minutes on two cores) instead of the full protocol (200 ground-truth grasps,
-    40 approach clips, each evaluator's own defaults)."""
+    40 approach clips, each evaluator's own defaults); reuse: take a method's shipped evaluation
+    (data_stubs/checkpoints/<method>_eval.json, written by its evaluator with the shipped checkpoint) instead of
+    running it again."""
     from tqdm.auto import tqdm
 
     from graspkit.body import BodyModel
@@ -222,24 +241,34 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
             new = [ground_truth_grasps(bm, folders, n=8 if quick else 200),
                    planner_motion(bm, folders, n=4 if quick else 40)]
         elif m == "saga":
-            new = _guarded("SAGA (WholeGrasp w/ opt.)", "grasp", ck / "wholegrasp.pt",
-                           lambda: saga_grasps(folders[0], out / "saga_eval.json", quick, ck))
+            new = _method(ck / "wholegrasp.pt", out / "saga_eval.json", ck / "wholegrasp_eval.json", reuse, saga_rows,
+                          lambda o: run_saga(folders[0], o, quick, ck), "SAGA (WholeGrasp w/ opt.)", "grasp")
         elif m == "goal":
-            new = _guarded("GOAL (GNet + refinement)", "grasp", ck / "gnet.pt",
-                           lambda: goal_results(folders, out / "goal_eval.json", quick, ck))
+            new = _method(ck / "gnet.pt", out / "goal_eval.json", ck / "goal_eval.json", reuse, goal_rows,
+                          lambda o: run_goal(folders, o, quick, ck), "GOAL (GNet + refinement)", "grasp")
         else:
-            new = _guarded("WANDR", "motion", ck / "wandr.pt", lambda: wandr_results(ck / "wandr.pt", quick))
+            new = _method(ck / "wandr.pt", out / "wandr_eval.json", ck / "wandr_eval.json", reuse, wandr_rows,
+                          lambda o: run_wandr(ck / "wandr.pt", o, quick), "WANDR", "motion")
         for r in new:
             r.note = (r.note + "; " if r.note else "") + f"{time.perf_counter() - t0:.0f} s"
         rows += new
     return rows + paper_rows()
 
 
-def _guarded(method: str, table: str, checkpoint: Path, run) -> list[Row]:
-    """run() if the method's checkpoint exists, else a row saying which file is missing."""
+def _method(checkpoint: Path, out: Path, shipped: Path, reuse: bool, rows_of, run, method: str, table: str
+            ) -> list[Row]:
+    """A method's rows: from its shipped evaluation (`shipped`, when reuse and present), else by running its evaluator
+    into `out`; a row naming the file when its checkpoint is missing."""
+    import json
+
+    if reuse and shipped.is_file():
+        rows = rows_of(json.loads(shipped.read_text()))
+        for r in rows:
+            r.note += f" (from {shipped.name})"
+        return rows
     if not checkpoint.is_file():
         return [Row(table, method, "graspkit", note=f"checkpoint missing: {checkpoint}")]
-    return run()
+    return rows_of(run(out))
 
 
 # ---------------------------------------------------------------------------------------------------------- report

@@ -45,7 +45,8 @@ def _cmd_eval_all(args: argparse.Namespace) -> int:
         raise ValueError("eval: name a model (e.g. `graspkit eval wandr ...`) or pass --all")
     from graspkit.benchmark import markdown, run_all, write_report
 
-    rows = run_all(args.out, data=args.data, quick=args.quick, methods=tuple(m for m in args.methods.split(",") if m))
+    rows = run_all(args.out, data=args.data, quick=args.quick, methods=tuple(m for m in args.methods.split(",") if m),
+                   reuse=args.reuse)
     print(markdown(rows))
     for path in write_report(rows, args.out):
         print(f"wrote {path}")
@@ -94,6 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--data", type=Path, action="append", default=None,
                     help="with --all: a folder of grasp_*/approach_*.npz files (repeatable; default: made sets or stubs)")
     ev.add_argument("--methods", default="gt,saga,goal,wandr", help="with --all: comma-separated subset")
+    ev.add_argument("--reuse", action="store_true",
+                    help="with --all: take each method's shipped evaluation (data_stubs/checkpoints/*_eval.json)")
     ev.set_defaults(func=_cmd_eval_all)
     evaluate = ev.add_subparsers(dest="eval_command", required=False)
     from graspkit.eval_wandr import add_wandr_commands

@@ -104,3 +104,25 @@ def test_eval_cli_errors_name_what_is_wrong(tmp_path, capsys):
     assert "methods" in capsys.readouterr().err
     assert main(["eval", "--all", "--data", str(tmp_path / "missing"), "--out", str(tmp_path)]) == 2
     assert "data" in capsys.readouterr().err
+
+
+def test_a_method_comes_from_its_shipped_evaluation_or_says_what_is_missing(tmp_path):
+    """--reuse reads <method>_eval.json (the evaluator's own output format); without it and without weights, a row
+    names the missing checkpoint."""
+    import json
+
+    from graspkit.benchmark import run_all
+
+    ck = tmp_path / "ck"
+    ck.mkdir()
+    saga = {"config": {"objects": ["mug"]}, "rows": {
+        "WholeGrasp w/ opt. (Ours)": {"n": 6, "contact_ratio": 0.5, "volume_cm3": 1.25, "depth_cm": 0.5, "apd": 2.0},
+        "GrabNet-SMPLX": {"n": 6, "contact_ratio": 0.25, "volume_cm3": 8.0, "depth_cm": 1.0, "apd": 0.5}}}
+    (ck / "wholegrasp_eval.json").write_text(json.dumps(saga))
+    rows = run_all(tmp_path / "out", data=[STUBS / "grasps"], checkpoints=ck, methods=("saga", "goal"), reuse=True)
+    ours = {r.method: r for r in rows if r.source == "graspkit"}
+    assert ours["SAGA (WholeGrasp w/ opt.)"].values == {"contact_ratio": 0.5, "volume_cm3": 1.25, "depth_cm": 0.5,
+                                                        "apd": 2.0}
+    assert ours["GrabNet-SMPLX"].values["volume_cm3"] == 8.0 and "wholegrasp_eval.json" in ours["GrabNet-SMPLX"].note
+    assert not ours["GOAL (GNet + refinement)"].values
+    assert f"checkpoint missing: {ck / 'gnet.pt'}" in ours["GOAL (GNet + refinement)"].note
