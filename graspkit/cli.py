@@ -93,7 +93,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--out", type=Path, default=Path("outputs/benchmark"), help="folder for --all's report")
     ev.add_argument("--quick", action="store_true", help="with --all: a few samples per method (minutes)")
     ev.add_argument("--data", type=Path, action="append", default=None,
-                    help="with --all: a folder of grasp_*/approach_*.npz files (repeatable; default: made sets or stubs)")
+                    help="with --all: a folder of grasp_*/approach_*.npz files (repeatable; default: made "
+                         "sets or stubs)")
     ev.add_argument("--methods", default="gt,saga,goal,wandr", help="with --all: comma-separated subset")
     ev.add_argument("--reuse", action="store_true",
                     help="with --all: take each method's shipped evaluation (data_stubs/checkpoints/*_eval.json)")
