@@ -175,3 +175,31 @@ def test_grabnet_parameters_turn_with_the_body():
     m0 = body(*params_to_rotmats(x, pca))[0]
     m1 = body(*params_to_rotmats(turn_params(x, rest_root_joint(bm, betas), Q), pca))[0]
     torch.testing.assert_close(m1, m0 @ Q.T, atol=1e-5, rtol=0)
+
+
+def test_int8_storage_round_trip_error_is_within_half_a_step_and_the_model_reloads(tmp_path):
+    from graspkit.models.wholegrasp import INT8_SCALE, dequantize_state, quantize_state
+    from graspkit.train import load_checkpoint, save_checkpoint
+
+    torch.manual_seed(0)
+    model = WholeGraspVAE()
+    for p in model.parameters():                        # non-zero output layers, so the comparison means something
+        torch.nn.init.normal_(p, std=0.05)
+    sd = model.state_dict()
+    q = quantize_state(sd)
+    w = sd["body_enc.0.weight"]
+    assert q["body_enc.0.weight"].dtype == torch.int8
+    step = w.abs().amax(1, keepdim=True) / 127                      # the quantisation step of each row
+    err = (dequantize_state(q)["body_enc.0.weight"] - w).abs()
+    assert (err <= step / 2 + 1e-3 * step + 1e-7).all()             # + float16 rounding of the scale
+    assert q["body_enc.0.bias"].dtype == torch.float16 and q["marker_mean"].dtype == torch.float16
+    assert not any(k.endswith(INT8_SCALE) for k in dequantize_state(q))
+    path = save_checkpoint(tmp_path / "wg.pt", {"model": q, "model_config": model.state()["model_config"]})
+    back = WholeGraspVAE.from_state(load_checkpoint(path))          # weights_only load
+    g = torch.Generator
+    pts = torch.randn(P, 3, generator=g().manual_seed(3)) * 0.05
+    nrm = torch.nn.functional.normalize(pts, dim=-1)
+    a = model.sample(pts, nrm, 0.8, 3, g().manual_seed(1))
+    b = back.sample(pts, nrm, 0.8, 3, g().manual_seed(1))
+    assert (a.markers - b.markers).abs().max() < 0.02 * a.markers.abs().max()
+    assert (a.object_contact - b.object_contact).abs().max() < 0.02

@@ -137,7 +137,7 @@ class WholeGraspVAE(nn.Module):
             self.global_proj = nn.Linear(o + h, 128)
             self.fp3 = FeaturePropagation(128 + lv[2], [128], norm=cfg.point_norm)
             self.fp2 = FeaturePropagation(128 + lv[1], [64], norm=cfg.point_norm)
-            self.fp1 = FeaturePropagation(64 + lv[0], [64, 64], norm=cfg.point_norm)
+            self.fp1 = FeaturePropagation(64 + 3 + lv[0], [64, 64], norm=cfg.point_norm)   # + xyz of each point
             self.out_object_contact = nn.Linear(64, 1)
 
     def fit_normalisation(self, markers: Tensor) -> None:
@@ -206,7 +206,7 @@ class WholeGraspVAE(nn.Module):
             w2 = (pre["fp2_idx"], pre["fp2_w"]) if pre and "fp2_idx" in pre else None
             w1 = (pre["fp1_idx"], pre["fp1_w"]) if pre and "fp1_idx" in pre else None
             f = self.fp2(lv.xyz[1], lv.xyz[2], lv.features[1], f, w2)
-            f = self.fp1(lv.xyz[0], lv.xyz[1], lv.features[0], f, w1)
+            f = self.fp1(lv.xyz[0], lv.xyz[1], torch.cat([lv.xyz[0], lv.features[0]], -1), f, w1)
             out["object_contact"] = torch.sigmoid(self.out_object_contact(f).squeeze(-1))
         return out
 
@@ -306,9 +306,41 @@ class WholeGraspVAE(nn.Module):
         if cfg is None or "latent" not in cfg:
             raise ValueError("state: no WholeGrasp config in it (expected key 'config' or extra['model_config'])")
         model = cls(WholeGraspConfig(**cfg))
-        model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state["model"].items()})
+        model.load_state_dict(dequantize_state(state["model"]))
         model.eval()
         return model
+
+
+INT8_SCALE = "::int8_scale"     # key suffix of the per-row scales of a matrix stored as int8
+
+
+def quantize_state(weights: dict[str, Tensor], min_numel: int = 4096) -> dict[str, Tensor]:
+    """Compact weights for shipping: matrices with at least `min_numel` entries as int8 with one float16 scale per
+    output row (symmetric, round to nearest: |error| <= scale / 2 = max|row| / 254), other floats as float16."""
+    out: dict[str, Tensor] = {}
+    for k, v in weights.items():
+        if v.is_floating_point() and v.dim() >= 2 and v.numel() >= min_numel:
+            rows = v.float().reshape(v.shape[0], -1)
+            scale = (rows.abs().amax(1, keepdim=True) / 127).clamp_min(1e-12).half()
+            out[k] = torch.round(rows / scale.float()).clamp(-127, 127).to(torch.int8).reshape(v.shape)
+            out[k + INT8_SCALE] = scale
+        else:
+            out[k] = v.half() if v.is_floating_point() else v
+    return out
+
+
+def dequantize_state(weights: dict[str, Tensor]) -> dict[str, Tensor]:
+    """Float32 weights from `quantize_state`'s output (or from plain float16/float32 weights)."""
+    out = {}
+    for k, v in weights.items():
+        if k.endswith(INT8_SCALE):
+            continue
+        s = weights.get(k + INT8_SCALE)
+        if s is not None:
+            out[k] = (v.float().reshape(v.shape[0], -1) * s.float()).reshape(v.shape)
+        else:
+            out[k] = v.float() if v.is_floating_point() else v
+    return out
 
 
 # ------------------------------------------------------------------------------------------------ data and training
@@ -405,7 +437,7 @@ def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask:
                      threads: int | None = 1, progress: bool = True, half: bool = True,
                      augment_yaw: bool = False) -> dict[str, Any]:
     """Train WholeGrasp-VAE (or WholeGrasp-single) on `<root>/grasp_*.npz` (train split; the val split logged)
-    with graspkit.train.fit; write weights-only `out` (float16 when `half`) and `out`.run.pt/.csv.
+    with graspkit.train.fit; write weights-only `out` (compact when `half`: `quantize_state`) and `out`.run.pt/.csv.
     Returns {'history', 'seconds', 'val': reconstruction_metrics on the val split, 'out'}.
 
     As in SAGA (GRAB), the data keep the world orientation: people come to the object from the side they start
@@ -437,8 +469,8 @@ def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask:
     seconds = time.perf_counter() - t0
     metrics = reconstruction_metrics(model, val)
     state = model.state()
-    if half:
-        state["model"] = {k: v.half() if v.is_floating_point() else v for k, v in state["model"].items()}
+    if half:   # float16, the large matrices int8 with per-row scales (`quantize_state`): ~1.4 MB instead of 5.4
+        state["model"] = quantize_state(state["model"])
     state.update(history=hist, val=metrics, seconds=seconds, train_items=len(train))
     if not multitask:   # S.3's hand contact prior C_H (per body vertex) for the heuristic optimisation
         from graspkit.eval_saga import hand_contact_prior

@@ -1,0 +1,47 @@
+"""SAGA evaluation bookkeeping (graspkit.eval_saga): pooled rows, interrupted runs, the tables beside the paper's."""
+import json
+
+import numpy as np
+import pytest
+
+from graspkit.eval_saga import PAPER_TAB1, finish_partial, rows_from_objects, summarise, table1, table2
+
+
+def _rows(contacts, volumes, depths):
+    return [{"contact": c, "volume_cm3": v, "depth_cm": d} for c, v, d in zip(contacts, volumes, depths)]
+
+
+def test_rows_from_objects_pools_bodies_and_averages_apd_over_objects():
+    a = _rows([1, 0, 1], [0.5, 0.0, 1.0], [0.1, 0.0, 0.2])
+    b = _rows([1], [3.0], [0.4])
+    per = {"mug": {"x": {**summarise(a), "apd": 2.0}}, "camera": {"x": {**summarise(b), "apd": 4.0}}}
+    r = rows_from_objects(per)["x"]
+    everything = a + b                                             # the pooled mean over all four bodies
+    assert r["n"] == 4
+    assert r["contact_ratio"] == pytest.approx(np.mean([x["contact"] for x in everything]))
+    assert r["volume_cm3"] == pytest.approx(np.mean([x["volume_cm3"] for x in everything]))
+    assert r["depth_cm"] == pytest.approx(np.mean([x["depth_cm"] for x in everything]))
+    assert r["apd"] == pytest.approx(3.0)
+
+
+def test_finish_partial_writes_a_table_with_the_objects_done(tmp_path):
+    per = {"mug": {"WholeGrasp w/ opt. (Ours)": {**summarise(_rows([1, 1], [0.2, 0.4], [0.1, 0.1])), "apd": 1.5}}}
+    part = tmp_path / "eval.partial.json"
+    part.write_text(json.dumps({"config": {"objects": ["mug", "camera"], "placements": 1}, "seconds": 12.0,
+                                "per_object": per}))
+    res = finish_partial(part, tmp_path / "eval.json")
+    assert res["config"]["objects"] == ["mug"] and res["interrupted"]
+    assert json.loads((tmp_path / "eval.json").read_text())["rows"] == res["rows"]
+    t = table1(res)
+    assert "| WholeGrasp w/ opt. (Ours) | 1.50 / 2.92 | 1.00 / 0.94 | 0.30 / 0.48 | 0.10 / 0.16 |" in t
+    assert "- / -" in table2(res)                                   # rows not run print as '-'
+
+
+def test_summarise_apd_is_the_mean_pairwise_marker_distance_per_run():
+    import torch
+
+    m = torch.zeros(4, 143, 3)
+    m[1, 0, 0] = 3.0                                               # run 1: two sets 3 apart; run 2: identical
+    s = summarise(_rows([1] * 4, [0] * 4, [0] * 4), m, per=2)
+    assert s["apd"] == pytest.approx((3.0 + 0.0) / 2)
+    assert set(PAPER_TAB1) >= {"GrabNet-SMPLX", "WholeGrasp w/ opt. (Ours)"}
