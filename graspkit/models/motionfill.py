@@ -15,7 +15,9 @@ channel 0 the normalised local markers with the foot contacts, channels 1-3 the 
 condition image I_c is I with the in-between frames of channel 0 zeroed. Encoder q(z | I, I_c): strided convolutions
 on [I, I_c]; decoder p(I | z, I_c): the latent and a convolutional encoding of I_c, up-convolutions with skip
 connections from the I_c encoder (a U-Net), output channel 0 (markers and contact logits) as a residual over the
-linear blend of the two known frames (graspkit's choice, as TrajFill's residual over Gamma_bar; zero-initialised). The paper defers the
+linear blend of the two known frames (graspkit's choice, as TrajFill's residual over Gamma_bar; zero-initialised);
+the four contact logits add a linear read-out of each frame's last feature map (a convolution alone cannot tell the
+contact columns from the marker columns). The paper defers the
 CNN to LEMO; the widths here (8-16-32-32-32, 64-D latent; `MotionFillConfig.paper()`: 16-32-64-64-64, 128-D) are
 graspkit's, sized for two CPU cores.
 
@@ -161,6 +163,9 @@ class LocalMotionFill(nn.Module):
         self.out = nn.Conv2d(cs[0] + 4, 1, 3, padding=1)
         nn.init.zeros_(self.out.weight)               # starts at the linear blend of the known frames (`base`)
         nn.init.zeros_(self.out.bias)
+        self.contact_head = nn.Linear((cs[0] + 4) * size[1], 4)      # foot-contact logits read from a whole frame
+        nn.init.zeros_(self.contact_head.weight)
+        nn.init.zeros_(self.contact_head.bias)
 
     def encode(self, image: Tensor, cond: Tensor) -> tuple[Tensor, Tensor]:
         """q(z_m | I, I_c): (B,4,61,F) x2 -> mean, log-variance (B, latent)."""
@@ -175,7 +180,9 @@ class LocalMotionFill(nn.Module):
             h = up["act"](up["up"](h))
             target = skips[len(skips) - 2 - k] if k < len(self.ups) - 1 else cond
             h = torch.cat([_crop(h, target), target], 1)
-        return self.out(h)[:, 0] + self.base(cond)
+        y = self.out(h)[:, 0] + self.base(cond)
+        logits = self.contact_head(h.permute(0, 2, 1, 3).flatten(2))             # per frame, all features
+        return torch.cat([y[..., :-4], y[..., -4:] + logits], -1)
 
     @staticmethod
     def base(cond: Tensor) -> Tensor:
