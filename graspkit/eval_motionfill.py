@@ -144,9 +144,11 @@ def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, se
         """Eq. 8-9 on the stage's parts."""
         return net.loss(batch, parts=parts, trajectory=trajectory)
 
+    if len(train) == 0:
+        raise ValueError(f"data: no training windows among the {kind} clips (split by object: {sorted(split)})")
     run = cache_dir() / "runs" / f"motionfill_{stage}_s{seed}.pt"
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
-    history = fit(model, step, train, cfg, checkpoint=run, val_dataset=val, progress=progress,
+    history = fit(model, step, train, cfg, checkpoint=run, val_dataset=val if len(val) else None, progress=progress,
                   time_limit_s=time_limit_s, extra={"model_config": model.state()["model_config"]})
     for p in model.parameters():
         p.requires_grad_(True)
@@ -296,3 +298,82 @@ def table(rows: dict[str, dict[str, float]]) -> str:
     for k in ("CNN-AE (local)", "LEMO (local)", "PoseNet (local)", "Route+PoseNet"):
         lines.append(f"| {k} (paper only) | | | | | | {' / '.join(f'{x:.3f}' for x in PAPER[k])} |")
     return "\n".join(lines)
+
+
+# ------------------------------------------------------------------------------------------------ GraspMotion-Opt
+def approach_scene(path: str | Path, bm) -> dict[str, Any]:
+    """One approach clip as MotionFill sees it (the window ending at the goal frame, canonical frame A.3) and its
+    object in that frame: markers (61,79,3), traj (62,4), local, vel, contacts, betas, floor height, object points,
+    normals (P,3), contact map C_O at the grasp (P,), the object's mesh (trimesh) and name."""
+    from graspkit.data.motion import Motion, canonicalize
+    from graspkit.objects.catalogue import make_object
+    from graspkit.rotations import axis_angle_to_matrix
+
+    with np.load(path, allow_pickle=False) as a:
+        g = int(a["grasp.goal_frame"])
+        m = Motion(a["body.params.fullpose"][:g + 1].reshape(-1, 55, 3), a["body.params.transl"][:g + 1],
+                   a["body.betas"], 30.0, contacts=a["contact.feet"][:g + 1].astype(bool))
+        R_o = axis_angle_to_matrix(torch.as_tensor(a["object.params.global_orient"][g]).double()).numpy()
+        t_o = a["object.params.transl"][g].astype(np.float64)
+        pts, nrm = a["object.points"].astype(np.float64), a["object.normals"].astype(np.float64)
+        c_o = a["contact.object"][g].astype(np.float32) if "contact.object" in a.files else None
+        name = str(a["obj_name"])
+    arr = make_windows([m], bm, align_end=True, progress=False)
+    joints = m.joint_positions(bm)
+    n = len(joints)
+    if n < 62:
+        joints = np.concatenate([joints[:1].repeat(62 - n, 0), joints])
+        n = 62
+    R, o = canonicalize(joints[n - 61:])
+    to_c = lambda x: (x - o) @ R.T  # noqa: E731
+    mesh = make_object(name)
+    mesh.vertices = to_c(mesh.vertices @ R_o.T + t_o)
+    return {**{k: v[0] for k, v in arr.items()}, "betas": m.betas[:10], "floor": float(-o[2]), "name": name,
+            "points": to_c(pts @ R_o.T + t_o), "normals": nrm @ R_o.T @ R.T, "object_contact": c_o, "mesh": mesh}
+
+
+def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, steps: tuple[int, int] = (100, 300),
+                     progress: bool = True) -> dict[str, Any]:
+    """One MotionFill-VAE sample per approach clip, then GraspMotion-Opt (batched): skating (SAGA) of the ground truth,
+    the sample and the fitted bodies; the last frame's contact, penetration volume and depth for the fitted and the
+    ground-truth bodies; palm angle per frame. Returns rows and the arrays for plots."""
+    from graspkit.body import BodyModel
+    from graspkit.metrics import grasp_metrics
+    from graspkit.models.pose_prior import load_pose_prior
+    from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, load_smooth_ae
+    from graspkit.optim.grasppose import GraspObject
+    from graspkit.paths import default_model_path
+
+    bm = BodyModel.from_file(default_model_path())
+    scenes = [approach_scene(f, bm) for f in files]
+    g = torch.Generator().manual_seed(seed)
+    heels = heel_columns()
+    samples = [model.sample(torch.as_tensor(interp(s["traj"])).float(), torch.as_tensor(s["local"]),
+                            torch.as_tensor(s["contacts"]).float(), 1, g) for s in scenes]
+    markers = torch.cat([s["markers"] for s in samples])
+    contacts = torch.cat([s["contacts"] for s in samples])
+    P = min(len(s["points"]) for s in scenes)
+    obj = GraspObject(torch.as_tensor(np.stack([s["points"][:P] for s in scenes])).float(),
+                      torch.as_tensor(np.stack([s["normals"][:P] for s in scenes])).float(), 0.0)
+    c_o = torch.as_tensor(np.stack([s["object_contact"][:P] for s in scenes])).float()
+    opt = GraspMotionOpt(bm, load_pose_prior(), load_smooth_ae(), GraspMotionConfig(steps=steps))
+    res = opt.fit(markers, torch.as_tensor(np.stack([s["betas"] for s in scenes])).float(), contacts, obj, c_o,
+                  progress=progress)
+    rows = []
+    for i, s in enumerate(scenes):
+        floor = np.array(s["floor"])
+        v = opt.vertices(res, i)
+        fit = grasp_metrics(v[-1], bm.faces, s["mesh"])
+        rows.append({"object": s["name"], "skating_gt": skating(s["markers"][None].astype(np.float64), floor[None], heels),
+                     "skating_sample": skating(markers[i:i + 1].double().numpy(), floor[None], heels),
+                     "skating_opt": skating(res.markers[i:i + 1].double().numpy(), floor[None], heels),
+                     "fit_cm": float((res.markers[i] - markers[i]).norm(dim=-1).mean() * 100),
+                     "contact_mm": fit["min_distance"] * 1000, "volume_cm3": fit["volume_cm3"], "depth_cm": fit["depth_cm"]})
+    return {"rows": rows, "result": res, "markers": markers, "contacts": contacts, "scenes": scenes}
+
+
+def interp(traj: np.ndarray) -> np.ndarray:
+    """Gamma_bar of one window (62, 4)."""
+    from graspkit.data.motionfill_dataset import interpolated_trajectory
+
+    return interpolated_trajectory(np.asarray(traj, np.float64)[None])[0]

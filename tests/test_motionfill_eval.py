@@ -1,0 +1,53 @@
+"""MotionFill evaluation (SAGA Tab. 3) and training command: PSKL, skating, the approach scene, `graspkit train motionfill`."""
+import numpy as np
+import pytest
+import torch
+
+from graspkit.body import BodyModel
+from graspkit.eval_motionfill import approach_scene, heel_columns, linear_local, pskl, skating
+from graspkit.paths import DATA_STUBS, default_model_path
+
+STUB = DATA_STUBS / "approach" / "approach_000000.npz"
+
+
+def test_pskl_is_zero_for_equal_motions_and_positive_otherwise():
+    g = np.random.default_rng(0)
+    x = np.cumsum(g.normal(0, 0.01, (2, 30, 5, 3)), 1)
+    assert pskl(x, x) == pytest.approx((0.0, 0.0), abs=1e-9)
+    y = x + g.normal(0, 0.01, x.shape)                       # white noise on top: a flatter acceleration spectrum
+    a, b = pskl(y, x)
+    assert a > 0 and b > 0 and a != pytest.approx(b)
+    assert pskl(np.stack([y, y], 1), x) == pytest.approx((a, b))   # (N, K, ...) samples against (N, ...)
+
+
+def test_skating_counts_frames_where_both_heels_slide_near_the_ground():
+    heels = heel_columns()
+    T = 11
+    m = np.zeros((T, 79, 3))
+    m[:, heels, 0] = np.arange(T)[:, None] * 0.01            # 0.3 m/s, both heels, on the ground
+    assert skating(m, np.array(0.0), heels) == 1.0
+    m[:, heels[0], 0] = 0.0                                  # one heel planted
+    assert skating(m, np.array(0.0), heels) == 0.0
+    m[:, heels[0], 0] = m[:, heels[1], 0]
+    assert skating(m, np.array(-0.2), heels) == 0.0          # both 20 cm above the ground: stepping, not skating
+
+
+def test_linear_local_keeps_the_known_frames():
+    x = np.random.default_rng(1).normal(size=(2, 61, 79, 3))
+    y = linear_local(x)
+    np.testing.assert_allclose(y[:, [0, -1]], x[:, [0, -1]])
+    np.testing.assert_allclose(y[:, 30], 0.5 * (x[:, 0] + x[:, -1]))
+
+
+def test_approach_scene_puts_the_object_in_the_window_frame():
+    torch.set_num_threads(1)
+    bm = BodyModel.from_file(default_model_path())
+    s = approach_scene(STUB, bm)
+    assert s["markers"].shape == (61, 79, 3) and s["traj"].shape == (62, 4)
+    d = np.linalg.norm(s["markers"][-1][:, None] - s["points"][None], axis=-1).min()
+    assert d < 0.02                                          # the grasping hand touches the object at frame T
+    assert abs(s["markers"][..., 2].min() - s["floor"]) < 0.03
+    # the mesh and the sampled points are the same object in the same frame
+    near = np.abs(s["mesh"].nearest.signed_distance(s["points"][:200])).max()
+    assert near < 2e-3
+    np.testing.assert_allclose(np.linalg.norm(s["normals"], axis=-1), 1.0, atol=1e-5)
