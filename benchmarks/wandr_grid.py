@@ -14,6 +14,7 @@ import argparse
 import os
 import time
 
+import numpy as np
 import torch
 
 from graspkit.body import BodyModel
@@ -54,11 +55,16 @@ def main() -> None:
           f"(measured on {args.loop}, scaled) | {t_loop / t_batch:.0f}x |")
     print()
     paper = PAPER["WANDR"]
-    print("| | SR % | FS % | DTG cm |\n|---|---|---|---|")
-    print(f"| graspkit WANDR ({s['rollouts']} rollouts) | {s['SR']:.1f} | {s['FS']:.1f} | {s['DTG']:.1f} |")
-    print(f"| WANDR paper (Tab. 1) | {paper[0]:g} | {paper[1]:g} | {paper[2]:g} |")
+    print("| | SR % | FS % | DTG cm (mean) | DTG cm (median) | wrist error at t_G cm | time to goal s |")
+    print("|---|---|---|---|---|---|---|")
+    print(f"| graspkit WANDR ({s['rollouts']} rollouts) | {s['SR']:.1f} | {s['FS']:.1f} | {s['DTG']:.1f} | "
+          f"{s['DTG_median']:.1f} | {s['error_at_goal']:.1f} | {s['time_to_goal_s']:.2f} |")
+    print(f"| WANDR paper (Tab. 1) | {paper[0]:g} | {paper[1]:g} | {paper[2]:g} | — | — | — |")
     for b in ("height", "angle", "distance"):
-        print(f"SR by {b}: " + ", ".join(f"{k:g}: {v:.0f} %" for k, v in breakdown(res, b).items()))
+        col = {"angle": 0, "height": 1, "distance": 2}[b]
+        dtg = {k: 100 * res.dtg[np.isclose(res.cell[:, col], k)].mean() for k in np.unique(res.cell[:, col])}
+        print(f"SR by {b}: " + ", ".join(f"{k:g}: {v:.1f} %" for k, v in breakdown(res, b).items())
+              + "; mean DTG: " + ", ".join(f"{k:g}: {v:.0f} cm" for k, v in dtg.items()))
 
 
 if __name__ == "__main__":

@@ -226,10 +226,13 @@ def evaluate_planner(starts: Sequence[I.StartPose], bm, t_goal: int = T_GOAL, se
 
 
 def summary(res: GridResult) -> dict[str, float]:
-    """SR (%), FS (%), DTG (cm, mean), the median DTG (cm), the mean wrist error at t_G (cm) and the rollout count."""
+    """SR (%), FS (%), DTG (cm, mean), the median DTG (cm), the mean wrist error at t_G (cm), the time to goal (s: the
+    first frame within 10 cm, mean over successful motions; nan when none) and the rollout count."""
+    hit = res.reach_frame >= 0
+    ttg = float(res.reach_frame[hit].mean()) / I.FPS if hit.any() else float("nan")
     return {"SR": 100 * float(res.success.mean()), "FS": 100 * float(res.fs.mean()), "DTG": 100 * float(res.dtg.mean()),
             "DTG_median": 100 * float(np.median(res.dtg)), "error_at_goal": 100 * float(np.nanmean(res.error_at_goal)),
-            "rollouts": int(len(res.dtg))}
+            "time_to_goal_s": ttg, "rollouts": int(len(res.dtg))}
 
 
 def breakdown(res: GridResult, by: str) -> dict[float, float]:
@@ -290,9 +293,12 @@ def starts_from_meta(meta: dict[str, Any]) -> list[I.StartPose]:
 
 def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str | None = None, epochs: int = 6,
                     time_limit: float | None = None, seed: int = 0, threads: int = 2, batch_size: int = 512,
-                    lr: float = 1e-3, progress: bool = True) -> dict[str, Any]:
+                    lr: float = 1e-3, progress: bool = True, max_steps: int = 10, ramp_epochs: int = 4,
+                    stride_scale: int = 1) -> dict[str, Any]:
     """Train one variant on the clips under `folder` (default <cache>/motion) and write a small checkpoint (with the
-    normalisation statistics, the held-out start poses of the test split, and the measured times) to `out`."""
+    normalisation statistics, the held-out start poses of the test split, and the measured times) to `out`.
+    max_steps / ramp_epochs: the rollout schedule (Sup. B.2); stride_scale multiplies the window strides (fewer
+    windows per epoch). The resumable training state lives in <cache>/wandr, named by every setting."""
     import resource
     import time
     from pathlib import Path
@@ -306,6 +312,8 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
 
     if variant not in VARIANTS:
         raise ValueError(f"variant: expected one of {list(VARIANTS)}, got {variant!r}")
+    if stride_scale < 1:
+        raise ValueError(f"stride_scale: expected >= 1, got {stride_scale}")
     v = VARIANTS[variant]
     folder = Path(folder) if folder else cache_dir() / "motion"
     out = Path(out) if out else DATA_STUBS / "checkpoints" / f"{variant}.pt"
@@ -320,17 +328,21 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     start_names = test_start_names(folder, n=6)
     starts = held_out_starts([load_motion(folder / n) for n in start_names], start_names, bm)
     torch.manual_seed(seed)
-    model = WandrCVAE(WandrConfig(intention=v["intention"]), stats)
-    stride = {k: (s // 2 if len(v["kinds"]) == 1 else s) for k, s in STRIDE.items()}   # one kind: same epoch size
+    model = WandrCVAE(WandrConfig(intention=v["intention"], max_steps=max_steps, ramp_epochs=ramp_epochs), stats)
+    stride = {k: stride_scale * (s // 2 if len(v["kinds"]) == 1 else s) for k, s in STRIDE.items()}   # one kind: same epoch size
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, num_threads=threads)
-    ck = cache_dir() / "wandr" / f"train_{variant}_s{seed}.pt"
+    tag = f"e{epochs}_b{batch_size}_lr{lr:g}_m{max_steps}_r{ramp_epochs}_x{stride_scale}"
+    ck = cache_dir() / "wandr" / f"train_{variant}_s{seed}_{tag}.pt"
     cpu0, t1 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
     history = train_wandr(model, train, cfg, checkpoint=ck, stride=stride, progress=progress, time_limit_s=time_limit)
     cpu1 = resource.getrusage(resource.RUSAGE_SELF)
     meta = {"variant": variant, "row": v["row"], "kinds": list(v["kinds"]), "train_clips": len(train),
             "train_frames": int(train.lengths.sum()), "epochs": len(history), "train_wall_s": time.perf_counter() - t1,
             "train_cpu_s": (cpu1.ru_utime + cpu1.ru_stime) - (cpu0.ru_utime + cpu0.ru_stime), "prep_wall_s": prep_s,
-            "threads": threads, "batch_size": batch_size, "stride": stride, "seed": seed,
+            "threads": threads, "batch_size": batch_size, "lr": lr, "stride": stride, "seed": seed,
+            "command": f"graspkit train wandr --variant {variant} --epochs {epochs} --batch-size {batch_size} "
+                       f"--lr {lr:g} --max-steps {max_steps} --ramp-epochs {ramp_epochs} --stride-scale {stride_scale} "
+                       f"--seed {seed}",
             "load_avg_end": float(__import__("os").getloadavg()[0]), "starts": starts_to_meta(starts)}
     save_wandr(out, model, history, meta)
     return {"out": out, **{k: meta[k] for k in ("epochs", "train_wall_s", "train_cpu_s")}, "history": history}
@@ -364,7 +376,9 @@ def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = F
 
 def _cmd_train(args) -> int:
     """`graspkit train wandr`."""
-    info = run_train_wandr(args.variant, args.data, args.out, args.epochs, args.time_limit, args.seed, args.threads)
+    info = run_train_wandr(args.variant, args.data, args.out, args.epochs, args.time_limit, args.seed, args.threads,
+                           args.batch_size, args.lr, max_steps=args.max_steps, ramp_epochs=args.ramp_epochs,
+                           stride_scale=args.stride_scale)
     print(f"wrote {info['out']}: {info['epochs']} epochs in {info['train_wall_s']:.0f} s wall "
           f"({info['train_cpu_s']:.0f} s CPU); last loss {info['history'][-1]['loss']:.4f}")
     return 0
@@ -398,6 +412,11 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     t.add_argument("--time-limit", type=float, default=None, help="seconds; stops after the epoch that crosses it")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--threads", type=int, default=2)
+    t.add_argument("--batch-size", type=int, default=512)
+    t.add_argument("--lr", type=float, default=1e-3)
+    t.add_argument("--max-steps", type=int, default=10, help="rollout steps at the end of the ramp (Sup. B.2)")
+    t.add_argument("--ramp-epochs", type=int, default=4, help="epochs over which the rollout grows from 0")
+    t.add_argument("--stride-scale", type=int, default=1, help="multiply the window strides (shorter epochs)")
     t.set_defaults(func=_cmd_train)
     e = eval_sub.add_parser("wandr", help="WANDR's goal grid (SR / FS / DTG) for one or more checkpoints")
     e.add_argument("--checkpoint", type=Path, action="append", required=True)

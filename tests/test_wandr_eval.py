@@ -93,6 +93,7 @@ def test_summary_and_breakdown():
                      np.array([3, -1, 7, -1]), np.array([0.1, 0.0, 0.2, 0.1]), np.array([0.05, 0.6, 0.1, 0.3]))
     s = E.summary(r)
     assert s["SR"] == 50 and s["FS"] == pytest.approx(10) and s["DTG"] == pytest.approx(21)
+    assert s["time_to_goal_s"] == pytest.approx(5 / 30)              # frames 3 and 7 at 30 fps
     assert E.breakdown(r, "angle") == {0.0: 100.0, 72.0: 0.0}
     assert E.breakdown(r, "height") == {0.0: 50.0, 1.8: 50.0}
     with pytest.raises(ValueError, match="by"):
@@ -135,3 +136,18 @@ def test_goal_reacher_callback(bm):
         r.update("height", 3.0)
     with pytest.raises(ValueError, match="name"):
         r.update("colour", 1.0)
+
+
+def test_train_command_parses_the_schedule_flags():
+    import argparse
+
+    ap = argparse.ArgumentParser()
+    sub = ap.add_subparsers(dest="cmd")
+    E.add_wandr_commands(sub.add_parser("train").add_subparsers(dest="what"),
+                         sub.add_parser("eval").add_subparsers(dest="what"))
+    a = ap.parse_args(["train", "wandr", "--epochs", "5", "--batch-size", "256", "--lr", "2e-3", "--max-steps", "5",
+                       "--ramp-epochs", "1", "--stride-scale", "2"])
+    assert (a.epochs, a.batch_size, a.lr, a.max_steps, a.ramp_epochs, a.stride_scale) == (5, 256, 2e-3, 5, 1, 2)
+    assert a.func is E._cmd_train
+    with pytest.raises(ValueError, match="stride_scale"):
+        E.run_train_wandr(stride_scale=0, folder="/nonexistent")

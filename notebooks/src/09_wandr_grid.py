@@ -1,0 +1,194 @@
+# %% [markdown]
+# # 09 · WANDR on the goal grid; time control, goals in a row, waypoints
+#
+# Lesson 08 built WANDR and generated one motion. Here the trained model is **measured** the way the paper measures it
+# (§4.2–4.3, Tab. 1–2, Fig. 5) and **used** the ways its supplement shows (Sup. C): the same goal asked for at different
+# times, several goals one after another, a waypoint the pelvis must pass (by optimising the latents through the
+# differentiable rollout, Sup. B.3 / C.2), and a widget that places a goal and reaches it.
+#
+# | | where | paper |
+# |---|---|---|
+# | the goal grid, SR / FS / DTG, breakdowns | `graspkit.eval_wandr` | §4.2–4.3, Fig. 5 |
+# | time control | `generate(..., t_goal=...)` | §3.5, Sup. C.1 |
+# | several goals | `goal_schedule` + `rollout` | Sup. C.2, Fig. S.2 |
+# | waypoints, VAE + opt | `graspkit.optim.latent` | Sup. B.3, C.2, Fig. S.3, Tab. 2 |
+
+# %%
+%matplotlib inline
+import matplotlib.pyplot as plt
+import numpy as np
+import torch
+
+from graspkit import eval_wandr as E
+from graspkit import intention as I
+from graspkit.body import BodyModel
+from graspkit.models import wandr as M
+from graspkit.optim.latent import optimise_latents
+from graspkit.paths import DATA_STUBS, default_model_path
+
+torch.set_num_threads(1)
+plt.rcParams["figure.dpi"] = 72
+bm = BodyModel.from_file(default_model_path())
+model = M.load_wandr(DATA_STUBS / "checkpoints" / "wandr.pt")
+starts = E.starts_from_meta(model.meta)
+print("held-out start poses:", ", ".join(s.source for s in starts))
+
+# %% [markdown]
+# ## 1 · The goal grid (§4.2)
+#
+# Goals fill a cylinder around the start: **5 angles** (0°, 72°, 144°, 216°, 288° counter-clockwise from the facing
+# direction) × **5 heights** (0, 0.45, 0.9, 1.35, 1.8 m) × **5 distances** (0.5, 1.625, 2.75, 3.875, 5 m from the pelvis),
+# from **6 held-out start poses**, **5 samples** each: 3,750 motions of 240 frames (8 s, $t_G$ = the last frame), always
+# run to the end. **SR**: the right wrist comes within 10 cm of the goal at some frame. **FS**: per motion, the share of
+# frames whose lowest mesh vertex moves more than 0.66 cm horizontally to the next frame. **DTG**: the wrist's closest
+# distance (cm). The full grid runs in `benchmarks/wandr_grid.py` (one batch, FS computed on the fly from the foot
+# vertices); here two of the starts, one sample per goal (250 motions), to stay fast.
+#
+# **Expect low numbers.** The shipped model is trained for minutes on one CPU core (the paper: 900 epochs on
+# AMASS + CIRCLE). It walks and turns, but seldom ends with the wrist within 10 cm; `docs/wandr.md` has the full
+# grid beside the paper's Tab. 1. The point of this section is the *measurement*, which is the paper's in full.
+
+# %%
+goals, cells = E.grid_goals()
+res = E.evaluate_grid(model, starts[:2], bm, n=1, seed=0)
+s = E.summary(res)
+print(f"{s['rollouts']} motions: SR {s['SR']:.1f} %, FS {s['FS']:.1f} %, DTG {s['DTG']:.1f} cm (median {s['DTG_median']:.1f} cm)")
+print("paper (Tab. 1, WANDR): SR 32 %, FS 16 %, DTG 24.8 cm")
+
+fig = plt.figure(figsize=(11, 3.6))
+ax = fig.add_subplot(1, 2, 1, projection="3d")
+ok = res.success[res.start == 0]
+g = goals.numpy()
+ax.scatter(*g[ok].T, c="#2ca02c", s=18, label="reached")
+ax.scatter(*g[~ok].T, c="#d62728", marker="x", s=18, label="missed")
+ax.quiver(0, 0, 0, 0.8, 0, 0, color="k")
+ax.view_init(35, -60)
+ax.set_title(f"start 0 ({starts[0].source}): 125 goals", fontsize=9)
+ax.legend(fontsize=7)
+bx = fig.add_subplot(1, 2, 2)
+bx.hist(100 * res.dtg, bins=30, color="#7f7f7f")
+bx.axvline(10, color="#2ca02c", ls="--", label="10 cm")
+bx.set_xlabel("DTG (cm)")
+bx.legend(fontsize=8)
+fig.tight_layout()
+
+# %% [markdown]
+# ## 2 · Where it succeeds (Fig. 5)
+#
+# The paper finds SR flat over distance and direction, and best at middle heights ("closer to the natural position
+# of the wrist", §4.4.1): low goals need bending and squatting, high ones stretching, both rarer in the training data.
+
+# %%
+fig, axs = plt.subplots(1, 3, figsize=(11, 2.6), sharey=True)
+for ax, by, c in zip(axs, ("height", "angle", "distance"), ("#bcbd22", "#2ca02c", "#1f77b4")):
+    b = E.breakdown(res, by)
+    ax.bar([f"{k:g}" for k in b], list(b.values()), color=c)
+    ax.set_title(f"SR by {by}", fontsize=9)
+axs[0].set_ylabel("SR (%)")
+fig.tight_layout()
+
+# %% [markdown]
+# ## 3 · Time control (Sup. C.1)
+#
+# Only $I^w = (G - W_i)/(t_G - i)$ knows the time. Asking for the same goal at 2.5, 4 or 7 s changes the average
+# velocity the wrist is told to keep, and with it the pace of the whole motion.
+
+# %%
+start = starts[1]
+goal = torch.tensor([[1.8, -0.6, 1.1]])
+fig, ax = plt.subplots(figsize=(7, 2.8))
+for t_goal in (75, 120, 210):
+    out = M.generate(model, start, goal, t_goal=t_goal, frames=239, n=1, generator=torch.Generator().manual_seed(0))
+    d = 100 * (out.joints[0, :, I.WRIST] - goal[0]).norm(dim=-1)
+    k = int(d.argmin())
+    ax.plot(np.arange(240) / 30, d.numpy(), label=f"t_G = {t_goal / 30:.1f} s: closest {d[k]:.0f} cm at {k / 30:.1f} s")
+    ax.axvline(t_goal / 30, color="0.8", lw=0.8)
+ax.axhline(10, color="#2ca02c", ls="--", lw=1)
+ax.set_xlabel("s"); ax.set_ylabel("wrist to goal (cm)"); ax.legend(fontsize=8)
+fig.tight_layout()
+
+# %% [markdown]
+# ## 4 · Several goals in a row (Sup. C.2, Fig. S.2)
+#
+# Nothing in the model knows about "the" goal: intention is recomputed every frame, so the goal can simply change
+# mid-rollout. `goal_schedule` makes goal $k$ active until its frame $t_k$, then the next one takes over.
+
+# %%
+path_goals = torch.tensor([[1.5, 0.5, 1.0], [1.5, -1.5, 0.8], [-0.5, -1.0, 1.3]])
+t_goals = [90, 180, 270]
+g_seq, tg_seq = M.goal_schedule(path_goals, t_goals, frames=270)
+with torch.no_grad():
+    out = M.rollout(model, start.p_prev[None], start.p[None], start.rest[None], g_seq[None], tg_seq[None], 270,
+                    generator=torch.Generator().manual_seed(0))
+J = out.joints[0]
+d = (J[:, I.WRIST] - g_seq).norm(dim=-1)
+fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 3.2))
+ax.plot(J[:, 0, 0], J[:, 0, 1], color="#6a3d9a", label="pelvis")
+ax.plot(J[:, I.WRIST, 0], J[:, I.WRIST, 1], color="#e377c2", lw=0.8, label="right wrist")
+for k, (gg, t) in enumerate(zip(path_goals, t_goals)):
+    ax.plot(gg[0], gg[1], "x", ms=9, mew=2, color="#d62728")
+    ax.annotate(f"goal {k + 1} ({gg[2]:.1f} m) by {t / 30:.0f} s", (gg[0], gg[1]), fontsize=7, xytext=(4, 4),
+                textcoords="offset points")
+ax.set_aspect("equal"); ax.legend(fontsize=7); ax.set_title("seen from above", fontsize=9)
+bx.plot(np.arange(len(d)) / 30, 100 * d.numpy(), color="#e377c2")
+for t in t_goals:
+    bx.axvline(t / 30, color="0.7", ls=":")
+bx.axhline(10, color="#2ca02c", ls="--", lw=1)
+bx.set_xlabel("s"); bx.set_ylabel("wrist to the active goal (cm)")
+fig.tight_layout()
+for k, t in enumerate(t_goals):
+    lo = 0 if k == 0 else t_goals[k - 1] + 1
+    print(f"goal {k + 1}: closest {100 * d[lo:t + 1].min():.0f} cm")
+
+# %% [markdown]
+# ## 5 · A waypoint, by optimising the latents (Sup. B.3, C.2, Fig. S.3)
+#
+# The decoder turns one latent $z_k$ per frame into a delta, and the whole rollout is differentiable. So the latents of
+# a motion can be optimised: $\mathcal L = w_{norm}\,\tfrac12\overline{z^2} + |W_{t_G} - G|^2 + |P^{xy}_{t_w} - w|^2$ —
+# stay likely under $\mathcal N(0, I)$, keep the wrist on the goal at $t_G$, put the pelvis over the waypoint at frame
+# $t_w$. Adam, learning rate 0.05, from the latents of the plain WANDR rollout.
+
+# %%
+goal = torch.tensor([2.2, 0.0, 1.0])
+waypoint = (60, (0.9, 0.9))
+res_w = optimise_latents(model, start, goal, t_goal=120, waypoints=[waypoint], iters=10, lr=0.05,
+                         generator=torch.Generator().manual_seed(0))
+plain = M.rollout(model, start.p_prev[None], start.p[None], start.rest[None], goal[None], 120, 120,
+                  z=torch.randn(1, 120, model.cfg.latent, generator=torch.Generator().manual_seed(0)))
+h0, h1 = res_w.history[0], min(res_w.history, key=lambda h: h["loss"])
+print(f"pelvis to waypoint at frame {waypoint[0]}: {100 * h0['way'] ** 0.5:.0f} cm -> {100 * h1['way'] ** 0.5:.0f} cm; "
+      f"wrist to goal at t_G: {100 * h0['goal'] ** 0.5:.0f} cm -> {100 * h1['goal'] ** 0.5:.0f} cm")
+fig, ax = plt.subplots(figsize=(5.5, 3.6))
+for m, name, c in ((plain, "WANDR", "0.6"), (res_w.motion, "optimised", "#6a3d9a")):
+    Jm = m.joints[0].detach()
+    ax.plot(Jm[:, 0, 0], Jm[:, 0, 1], color=c, label=f"pelvis, {name}")
+ax.plot(*waypoint[1], "o", color="#1f77b4", ms=9, label=f"waypoint (frame {waypoint[0]})")
+ax.plot(goal[0], goal[1], "x", color="#d62728", ms=10, mew=2, label="goal")
+ax.set_aspect("equal"); ax.legend(fontsize=7)
+fig.tight_layout()
+
+# %% [markdown]
+# ## 6 · Place a goal yourself
+#
+# `GoalReacher` holds a start pose and the model; `update(name, value)` moves the goal (angle, distance, height) or
+# the time to reach it, rolls the model out and returns what happened. The widget wires sliders to it and shows the
+# result as an image (drag the sliders in a live notebook; a static page shows only the controls).
+
+# %%
+reacher = E.GoalReacher(model, start, angle=45.0, distance=2.0, height=1.0, seconds=4.0)
+r = reacher.update("angle", 90.0)
+print({k: round(v, 2) if isinstance(v, float) else v for k, v in r.items()})
+r = reacher.update("height", 0.4)
+print({k: round(v, 2) if isinstance(v, float) else v for k, v in r.items()})
+
+# %%
+reacher.widget()
+
+# %% [markdown]
+# ## Exercise
+#
+# 1. Evaluate the full grid for one start (`E.evaluate_grid(model, starts[:1], bm, n=5)`) and compare its height
+#    breakdown with the paper's Fig. 5. Which heights fail, and what would you add to the training data?
+# 2. In section 3, ask for 1 s. What happens when $I^w$ asks for more than a person can do?
+# 3. Add a second waypoint at frame 90 in section 5. How many iterations does the optimiser need, and what happens to
+#    $\mathcal L_{norm}$ (how likely are the latents) as the constraints pile up?
