@@ -26,6 +26,9 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   (GraspPose-Opt's object-in-hand term needs the hand's surface normals per frame and is left out); E^o_cont uses the
   object contact map C^_O (the 143-marker contact map of stage 1 has no sparse-marker counterpart).
 - Initialisation: the prior's mean pose, rigidly aligned per frame (Kabsch on the body and face markers).
+- E^o_colli and E_g are evaluated on the frames where a hand vertex is within 2 cm of the object's bounding box
+  (chosen without gradient each step; elsewhere both are 0 by definition: no vertex can be inside or within 1 cm),
+  against every 4th object point (512 of 2048; the collision sign comes from the nearest point's normal).
 - Energies are summed over the sequences of a batch (independent sequences; Adam's steps are per parameter).
 """
 from __future__ import annotations
@@ -144,6 +147,7 @@ class GraspMotionConfig:
     steps: tuple[int, int] = (100, 300)
     n_pca: int = 24
     contact_frames: int = 5        # Eq. 10: object contact on the last 5 frames
+    point_stride: int = 4          # E^o_colli and E_g use every 4th object point (512 of SAGA's 2048)
     log_every: int = 10
     terms: tuple[str, ...] = ("colli", "contact", "palm", "smooth", "skate")
     weights: GraspMotionWeights = field(default_factory=GraspMotionWeights)
@@ -238,7 +242,11 @@ class GraspMotionOpt:
         terms = cfg.terms
         if obj is not None:
             pts, nrm, _ = obj.batch(B)
-            hf = hands.reshape(B, F * hands.shape[2], 3)
+            with torch.no_grad():               # frames with a hand vertex within 2 cm of the object's box
+                lo, hi = pts.min(1).values[:, None, None] - 0.02, pts.max(1).values[:, None, None] + 0.02
+                near = ((hands > lo) & (hands < hi)).all(-1).any(-1).any(0).nonzero()[:, 0]     # (K,)
+            hf = hands[:, near].reshape(B, -1, 3)
+            pts, nrm = pts[:, ::cfg.point_stride], nrm[:, ::cfg.point_stride]
             if "colli" in terms:
                 if obj.sdf is not None:
                     sd = obj.signed_distance(hf)
@@ -249,11 +257,11 @@ class GraspMotionOpt:
             if "contact" in terms and object_contact is not None:
                 last = hands[:, -cfg.contact_frames:]
                 idx = object_contact.topk(min(256, object_contact.shape[1]), -1).indices
-                po = torch.gather(pts, 1, idx.unsqueeze(-1).expand(-1, -1, 3))
+                po = torch.gather(obj.batch(B)[0], 1, idx.unsqueeze(-1).expand(-1, -1, 3))
                 d2 = torch.stack([_nearest(po, last[:, k])[0] for k in range(last.shape[1])], 1)   # (B, 5, 256)
                 e["contact"] = w.contact * (torch.gather(object_contact, 1, idx)[:, None] * d2).sum((1, 2))
             if "palm" in terms:
-                e["palm"] = w.palm * self.palm_term(hands, pts)
+                e["palm"] = w.palm * self.palm_term(hands[:, near], pts, near, F)
         if "smooth" in terms:
             hv = (hands[:, 1:] - hands[:, :-1]).pow(2).sum(-1).mean(-1).sum(1)       # mean over the hand vertices
             e["smooth"] = w.smooth_hand * hv
@@ -266,9 +274,12 @@ class GraspMotionOpt:
             e["skate"] = w.skate * (on * torch.relu(speed - w.skate_sigma)).sum((1, 2))
         return e
 
-    def palm_term(self, hands: Tensor, pts: Tensor) -> Tensor:
-        """Eq. 11 per sequence (B,): alpha_t 1(d < sigma) (cos gamma - 1)^2 over the palm vertices of every frame."""
+    def palm_term(self, hands: Tensor, pts: Tensor, frames: Tensor | None = None, total: int | None = None) -> Tensor:
+        """Eq. 11 per sequence (B,): alpha_t 1(d < sigma) (cos gamma - 1)^2 over the palm vertices of every frame;
+        `frames` (F,) are the frame indices of `hands` (B, F, H, 3) in a sequence of `total` frames (default: all)."""
         B, F, H, _ = hands.shape
+        if F == 0:
+            return hands.new_zeros(B)
         hn = vertex_normals(hands.reshape(B * F, H, 3), self.hand_faces)[:, self.palm]      # (BF, P, 3)
         pv = hands.reshape(B * F, H, 3)[:, self.palm]
         ptsf = pts.repeat_interleave(F, 0)
@@ -276,8 +287,8 @@ class GraspMotionOpt:
         near = torch.gather(ptsf, 1, idx.unsqueeze(-1).expand(-1, -1, 3))
         cos = torch.nn.functional.cosine_similarity(hn, near - pv, dim=-1)
         on = (d2.detach() < self.cfg.weights.palm_sigma ** 2).to(cos.dtype)
-        t = torch.arange(F, dtype=cos.dtype)
-        alpha = 1.0 - (t / (F - 1)) ** 2
+        t = torch.arange(F, dtype=cos.dtype) if frames is None else frames.to(cos.dtype)
+        alpha = 1.0 - (t / ((total or F) - 1)) ** 2
         return (alpha[None, :, None] * (on * (cos - 1) ** 2).view(B, F, -1)).sum((1, 2))
 
     # ------------------------------------------------------------------ Alg. 2
