@@ -333,7 +333,7 @@ def approach_scene(path: str | Path, bm) -> dict[str, Any]:
 
 
 def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, steps: tuple[int, int] = (100, 300),
-                     progress: bool = True) -> dict[str, Any]:
+                     progress: bool = True, weights: Any = None) -> dict[str, Any]:
     """One MotionFill-VAE sample per approach clip, then GraspMotion-Opt (batched): skating (SAGA) of the ground truth,
     the sample and the fitted bodies; the last frame's contact, penetration volume and depth for the fitted and the
     ground-truth bodies; palm angle per frame. Returns rows and the arrays for plots."""
@@ -356,7 +356,8 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
     obj = GraspObject(torch.as_tensor(np.stack([s["points"][:P] for s in scenes])).float(),
                       torch.as_tensor(np.stack([s["normals"][:P] for s in scenes])).float(), 0.0)
     c_o = torch.as_tensor(np.stack([s["object_contact"][:P] for s in scenes])).float()
-    opt = GraspMotionOpt(bm, load_pose_prior(), load_smooth_ae(), GraspMotionConfig(steps=steps))
+    cfg = GraspMotionConfig(steps=steps) if weights is None else GraspMotionConfig(steps=steps, weights=weights)
+    opt = GraspMotionOpt(bm, load_pose_prior(), load_smooth_ae(), cfg)
     res = opt.fit(markers, torch.as_tensor(np.stack([s["betas"] for s in scenes])).float(), contacts, obj, c_o,
                   progress=progress)
     rows = []

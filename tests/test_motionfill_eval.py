@@ -66,3 +66,23 @@ def test_shipped_model_beats_linear_interpolation_on_the_shipped_approach_clips(
     assert rows["Ours-Local"]["ADE"] < rows["Linear (local)"]["ADE"]
     assert rows["Ours"]["ADE"] < rows["Linear"]["ADE"]
     assert rows["Ours"]["APD"] > 0 and rows["Ground truth"]["skating"] < 0.1
+
+
+def test_train_command_end_to_end_on_the_shipped_approach_clips(tmp_path, monkeypatch):
+    """`graspkit train motionfill --stage traj` on the four shipped clips (bottle: train, mug: test) writes a
+    float16 checkpoint that loads; the windows are cached; an unknown stage is refused."""
+    from graspkit.cli import main
+    from graspkit.eval_motionfill import load_motionfill
+
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
+    out = tmp_path / "mf.pt"
+    rc = main(["train", "motionfill", "--stage", "traj", "--data", str(DATA_STUBS / "approach"), "--clips", "4",
+               "--epochs", "2", "--out", str(out)])
+    assert rc == 0 and out.is_file()
+    assert (tmp_path / "cache" / "motionfill" / "approach_4.npz").is_file()
+    state = torch.load(out, weights_only=True)
+    assert state["model"]["traj.out.weight"].dtype == torch.float16
+    model = load_motionfill(out)
+    assert not model.training and model.cfg.traj_latent == 64
+    with pytest.raises(SystemExit):
+        main(["train", "motionfill", "--stage", "nope"])
