@@ -85,7 +85,8 @@ print(f"sample spread at mid-motion: {float(s['traj'][:, 30, :2].std(0).norm()):
 # %% [markdown]
 # ## GraspMotion-Opt: from markers to bodies
 # The shipped example ran Alg. 2 (100 steps of marker fitting, then 300 steps of every term) on one sample for this
-# mug clip (`graspkit.eval_motionfill.graspmotion_eval`, about 4 minutes on one core, so it is loaded here). Below:
+# mug clip (`graspkit.eval_motionfill.graspmotion_eval`, batched with a binoculars clip: 3 minutes on one core, so it
+# is loaded here). Below:
 # the energies along the run, then the heels' speed of the sampled markers and of the fitted bodies on the frames
 # MotionFill predicts in contact (skating: both heels low and faster than 75 mm/s).
 
