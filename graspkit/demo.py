@@ -23,6 +23,7 @@ from tqdm import tqdm  # noqa: E402
 from graspkit.body import BodyModel  # noqa: E402
 from graspkit.body.poses import body_pose, y_up_to_z_up  # noqa: E402
 from graspkit.paths import DATA_STUBS, default_model_path  # noqa: E402
+from graspkit.viz.style import OBJECT  # noqa: E402
 
 STAGES = ("body", "planner", "saga", "goal", "wandr")
 CHECKPOINTS = DATA_STUBS / "checkpoints"
@@ -42,7 +43,8 @@ def load_or_build_body(model_path: Path | None = None) -> BodyModel:
 
 
 def body_gallery(bm: BodyModel, bodies: list[tuple[str, float]] = DEMO_BODIES) -> tuple[plt.Figure, torch.Tensor]:
-    """A row of bodies (pose name, height beta) side by side in the z-up world; returns the figure and vertices (N,V,3)."""
+    """A row of bodies (pose name, height beta) side by side in the z-up world; returns the figure and vertices
+    (N,V,3)."""
 
     from graspkit.viz import draw_ground, draw_mesh, set_equal
 
@@ -92,7 +94,7 @@ def _write_clip(bm: BodyModel, motion, out_dir: Path, name: str, objects: dict, 
     objs = [(np.asarray(m.vertices), np.asarray(m.faces)) for m in objects.values()]
     anim = animate(v, faces, objects=objs, goals=goals, title=title, max_frames=45, size=2.6)
     paths = [save_animation(anim, out_dir / f"{name}.gif", progress=False)]
-    fig = show_scene(meshes=[(v[-1], faces)] + objs, title=f"{title}: last frame")
+    fig = show_scene(meshes=[(v[-1], faces)] + [(ov, of, OBJECT) for ov, of in objs], title=f"{title}: last frame")
     fig.savefig(out_dir / f"{name}.png", dpi=90)
     plt.close(fig)
     paths.append(out_dir / f"{name}.png")
@@ -110,7 +112,7 @@ def overview(panels: list[Panel], faces: np.ndarray) -> plt.Figure:
         ax = fig.add_subplot(1, len(panels), k + 1, projection="3d", proj_type="ortho")
         draw_mesh(ax, v, faces)
         for ov, of in objs:
-            draw_mesh(ax, ov, of, color="#4C72B0")
+            draw_mesh(ax, ov, of, color=OBJECT)
         for g in ([] if goals is None else np.asarray(goals).reshape(-1, 3)):
             draw_goal(ax, g)
         c = v.mean(0)
