@@ -74,8 +74,8 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("demo", help="run the main job and write its figures to --out")
     d.add_argument("--out", type=Path, default=Path("outputs/demo"))
     d.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
-    d.add_argument("--stages", default="body,planner,saga,goal,wandr",
-                   help="comma-separated subset of body, planner, saga, goal, wandr")
+    d.add_argument("--stages", default="body,planner,saga,saga_motion,goal,wandr",
+                   help="comma-separated subset of body, planner, saga, saga_motion, goal, wandr")
     d.set_defaults(func=_cmd_demo)
     from graspkit.data.cli import add_data_commands
     add_data_commands(sub)

@@ -4,6 +4,7 @@ Stages (each writes stills, animations (GIF), AMASS-style npz and GLB exports of
 - body: the procedural humanoid in several poses and shapes;
 - planner: the procedural approach-and-grasp clip (the synthetic ground truth) for the mug;
 - saga: SAGA stage 1 (WholeGrasp-VAE sample + GraspPose-Opt, Sec. 3.2, Alg. 1) on the same mug placement;
+- saga_motion: SAGA stage 2 (MotionFill-VAE sample + GraspMotion-Opt, Sec. 3.3, Alg. 2) into the clip's grasp;
 - goal: GOAL (GNet grasp + refinement, then MNet's autoregressive approach, Sec. 3.1-3.5) from the clip's start;
 - wandr: WANDR reaching a goal in 4 s from a held-out start pose (Sec. 3.2-3.5).
 A method whose shipped checkpoint is missing is skipped with a message naming the file.
@@ -25,7 +26,7 @@ from graspkit.body.poses import body_pose, y_up_to_z_up  # noqa: E402
 from graspkit.paths import DATA_STUBS, default_model_path  # noqa: E402
 from graspkit.viz.style import OBJECT  # noqa: E402
 
-STAGES = ("body", "planner", "saga", "goal", "wandr")
+STAGES = ("body", "planner", "saga", "saga_motion", "goal", "wandr")
 CHECKPOINTS = DATA_STUBS / "checkpoints"
 
 DEMO_BODIES = [("t_pose", 0.0), ("a_pose", 0.0), ("walk", 0.0), ("reach_high", 0.0), ("squat", 0.0),
@@ -175,6 +176,28 @@ def saga_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int, int] = (100,
     return _write_clip(bm, motion, out_dir, "saga_grasp", {seq.object_name: mesh}, "SAGA: WholeGrasp + GraspPose-Opt")
 
 
+def saga_motion_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int] = (100, 300)
+                      ) -> tuple[list[Path], Panel]:
+    """SAGA stage 2 on the clip's last 2 s: a MotionFill-VAE sample from the start pose to the grasp, fitted by
+    GraspMotion-Opt (Alg. 2); shown in MotionFill's canonical frame (A.3) with the object."""
+    from graspkit.data.motion import Motion
+    from graspkit.eval_motionfill import graspmotion_eval, load_motionfill
+
+    seq, _ = _test_clip()
+    files = sorted((DATA_STUBS / "approach").glob("approach_*.npz"))
+    path = next(f for f in files if str(np.load(f, allow_pickle=False)["obj_name"]) == seq.object_name)
+    ev = graspmotion_eval(load_motionfill(CHECKPOINTS / "motionfill.pt"), [path], steps=steps, progress=False)
+    pr, scene = ev["result"].params, ev["scenes"][0]
+    F = pr["transl"].shape[1]
+    lift = np.array([0.0, 0.0, -scene["floor"]])            # canonical frame -> floor at z = 0
+    motion = Motion(pr["poses"][0].view(F, 55, 3).detach().numpy(), pr["transl"][0].detach().numpy() + lift,
+                    pr["betas"][0].detach().numpy(), 30.0)
+    mesh = scene["mesh"].copy()
+    mesh.apply_translation(lift)
+    return _write_clip(bm, motion, out_dir, "saga_motion", {seq.object_name: mesh},
+                       "SAGA: MotionFill + GraspMotion-Opt")
+
+
 def goal_stage(bm: BodyModel, out_dir: Path, max_frames: int = 150) -> tuple[list[Path], Panel]:
     """GOAL from the clip's start: GNet's grasp (refined), then MNet's approach to it (§3.4)."""
     from graspkit.eval_goal import _body, approach_clips, gnet_goal
@@ -219,6 +242,7 @@ def wandr_stage(bm: BodyModel, out_dir: Path, seconds: float = 4.0) -> tuple[lis
 
 
 METHOD_STAGES = {"planner": (planner_stage, None), "saga": (saga_stage, "wholegrasp.pt"),
+                 "saga_motion": (saga_motion_stage, "motionfill.pt"),
                  "goal": (goal_stage, "mnet.pt"), "wandr": (wandr_stage, "wandr.pt")}
 
 
