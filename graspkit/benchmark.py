@@ -49,6 +49,9 @@ PAPER_ROWS: list[tuple[str, str, str, dict[str, float]]] = [
 ]
 
 
+METHODS = ("gt", "saga", "saga_motion", "goal", "wandr")
+
+
 @dataclass
 class Row:
     """One line of the benchmark: which table ('grasp' / 'motion'), the method, where the figures come from
@@ -155,6 +158,19 @@ def goal_rows(res: dict) -> list[Row]:
     return rows
 
 
+def saga_motion_rows(res: dict) -> list[Row]:
+    """SAGA's Tab. 3 rows (MotionFill-VAE with its own trajectory, and with the true one) from graspkit.eval_motionfill
+    results ({'rows': {...}, 'test_windows': n}); skating is SAGA's heel definition on the sampled markers."""
+    names = {"Ours": "SAGA (MotionFill, traj + local)", "Ours-Local": "SAGA (MotionFill, local, true trajectory)"}
+    rows = []
+    for key, name in names.items():
+        r = res.get("rows", {}).get(key)
+        if r:
+            rows.append(Row("motion", name, "graspkit", {"ade": float(r["ADE"]), "skate_saga": float(r["skating"])},
+                            f"{res.get('test_windows', '?')} test windows, min of {res.get('samples', 10)} samples"))
+    return rows
+
+
 def wandr_rows(res: dict) -> list[Row]:
     """WANDR's goal-grid row and the procedural planner's on the same grid from graspkit.eval_wandr.run_eval_wandr."""
     pick = lambda s: {"SR": float(s["SR"]), "fs_wandr": float(s["FS"]), "DTG": float(s["DTG"])}  # noqa: E731
@@ -175,6 +191,29 @@ def run_saga(root: Path, out: Path, quick: bool, checkpoints: Path) -> dict:
         raise FileNotFoundError(f"data: no accepted test-split grasps in {root}")
     cfg = EvalConfig(objects=objs, placements=1, samples=3, gt_grasps=1) if quick else EvalConfig(objects=objs)
     return evaluate(root, cfg, progress=True, out=out, checkpoints=checkpoints)
+
+
+def run_saga_motion(approach: Path, out: Path, quick: bool, checkpoints: Path) -> dict:
+    """graspkit.eval_motionfill's Tab. 3 on the test-object approach windows in `approach` (quick: 3 samples)."""
+    import json
+
+    from graspkit.body import BodyModel
+    from graspkit.data.grasp import split_of
+    from graspkit.data.motionfill_dataset import make_windows
+    from graspkit.eval_motionfill import approach_motions, evaluate, load_motionfill
+    from graspkit.paths import default_model_path
+    from graspkit.viz.export import write_atomic
+
+    motions, names = approach_motions(approach)
+    arr = make_windows(motions, BodyModel.from_file(default_model_path()), stride=30, align_end=True, progress=False)
+    test = np.unique(arr["clip"][[split_of(names[c]) == "test" for c in arr["clip"]]])
+    if not len(test):
+        raise FileNotFoundError(f"data: no test-object approach clips in {approach}")
+    n = 3 if quick else 10
+    rows = evaluate(load_motionfill(checkpoints / "motionfill.pt"), arr, test, n=n)
+    res = {"rows": rows, "test_windows": int(np.isin(arr["clip"], test).sum()), "samples": n}
+    write_atomic(out, json.dumps(res, indent=1))
+    return res
 
 
 def run_goal(folders: list[Path], out: Path, quick: bool, checkpoints: Path) -> dict:
@@ -205,7 +244,7 @@ def paper_rows() -> list[Row]:
 
 
 def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = False,
-            checkpoints: str | Path | None = None, methods: tuple[str, ...] = ("gt", "saga", "goal", "wandr"),
+            checkpoints: str | Path | None = None, methods: tuple[str, ...] = METHODS,
             reuse: bool = False) -> list[Row]:
     """Evaluate every method (and the ground truth / planner) into out_dir; returns all rows, papers' included.
 
@@ -219,9 +258,9 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
     from graspkit.body import BodyModel
     from graspkit.paths import DATA_STUBS, cache_dir, default_model_path
 
-    unknown = set(methods) - {"gt", "saga", "goal", "wandr"}
+    unknown = set(methods) - set(METHODS)
     if unknown:
-        raise ValueError(f"methods: unknown {sorted(unknown)}; expected some of gt, saga, goal, wandr")
+        raise ValueError(f"methods: unknown {sorted(unknown)}; expected some of {', '.join(METHODS)}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     ck = Path(checkpoints) if checkpoints else DATA_STUBS / "checkpoints"
@@ -243,6 +282,10 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
         elif m == "saga":
             new = _method(ck / "wholegrasp.pt", out / "saga_eval.json", ck / "wholegrasp_eval.json", reuse, saga_rows,
                           lambda o: run_saga(folders[0], o, quick, ck), "SAGA (WholeGrasp w/ opt.)", "grasp")
+        elif m == "saga_motion":
+            new = _method(ck / "motionfill.pt", out / "motionfill_eval.json", ck / "motionfill_eval.json", reuse,
+                          saga_motion_rows, lambda o: run_saga_motion(folders[-1], o, quick, ck),
+                          "SAGA (MotionFill, traj + local)", "motion")
         elif m == "goal":
             new = _method(ck / "gnet.pt", out / "goal_eval.json", ck / "goal_eval.json", reuse, goal_rows,
                           lambda o: run_goal(folders, o, quick, ck), "GOAL (GNet + refinement)", "grasp")

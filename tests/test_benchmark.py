@@ -126,3 +126,24 @@ def test_a_method_comes_from_its_shipped_evaluation_or_says_what_is_missing(tmp_
     assert ours["GrabNet-SMPLX"].values["volume_cm3"] == 8.0 and "wholegrasp_eval.json" in ours["GrabNet-SMPLX"].note
     assert not ours["GOAL (GNet + refinement)"].values
     assert f"checkpoint missing: {ck / 'gnet.pt'}" in ours["GOAL (GNet + refinement)"].note
+
+
+def test_saga_motion_rows_from_a_run_equal_those_from_its_saved_evaluation(tmp_path):
+    """MotionFill's Tab. 3 on the shipped test-object approach clips: run, saved as JSON, read back with --reuse."""
+    import shutil
+
+    from graspkit.benchmark import run_all
+    from graspkit.paths import DATA_STUBS
+
+    ck = tmp_path / "ck"
+    ck.mkdir()
+    shutil.copy(DATA_STUBS / "checkpoints" / "motionfill.pt", ck / "motionfill.pt")
+    run = [r for r in run_all(tmp_path / "a", data=[STUBS / "approach"], quick=True, checkpoints=ck,
+                              methods=("saga_motion",)) if r.source == "graspkit"]
+    assert {r.method for r in run} == {"SAGA (MotionFill, traj + local)", "SAGA (MotionFill, local, true trajectory)"}
+    for r in run:
+        assert 0 < r.values["ade"] < 1 and 0 <= r.values["skate_saga"] <= 1 and "min of 3 samples" in r.note
+    shutil.copy(tmp_path / "a" / "motionfill_eval.json", ck / "motionfill_eval.json")
+    again = [r for r in run_all(tmp_path / "b", data=[STUBS / "approach"], quick=True, checkpoints=ck,
+                                methods=("saga_motion",), reuse=True) if r.source == "graspkit"]
+    assert [r.values for r in again] == [r.values for r in run]
