@@ -1,9 +1,12 @@
-"""Shared fixtures: a random dense SMPL-X-format model file in a smplx-style folder."""
+"""Shared fixtures: one torch thread per test module, the shipped body model, and a random dense SMPL-X-format model
+file in a smplx-style folder."""
 from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
+from graspkit.body import BodyModel
 from graspkit.body.random_model import random_smplx_arrays
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -17,3 +20,20 @@ def random_model_dir(tmp_path_factory) -> Path:
     (root / "smplx").mkdir()
     np.savez(root / "smplx" / "SMPLX_NEUTRAL.npz", **random_smplx_arrays(seed=7))
     return root
+
+
+@pytest.fixture(autouse=True, scope="module")
+def one_thread():
+    """One torch thread in every test module (restored afterwards): the machine's two cores are shared, and the many
+    small tensor ops of the tests run several times faster on one thread than on two."""
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+@pytest.fixture(scope="module")
+def bm() -> BodyModel:
+    """The shipped procedural humanoid (float32, hand mean added), one per test module; a module that needs another
+    body model defines its own `bm`."""
+    return BodyModel.from_file(PROCEDURAL_MODEL)

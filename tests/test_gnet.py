@@ -12,15 +12,6 @@ from graspkit.rotations import axis_angle_to_rot6d
 from graspkit.train import TrainConfig, fit
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """One torch thread (the machine's cores are shared), restored afterwards."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
 @pytest.fixture(scope="module")
 def bm(random_model_dir):
     return BodyModel.from_file(random_model_dir / "smplx" / "SMPLX_NEUTRAL.npz", flat_hand_mean=True)

@@ -2,7 +2,6 @@
 from pathlib import Path
 
 import numpy as np
-import pytest
 import torch
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
@@ -15,15 +14,6 @@ from graspkit.eval_goal import _body, approach_clips, gnet_samples
 from graspkit.paths import DATA_STUBS
 
 REACH = sorted((DATA_STUBS / "motion" / "reach").glob("*.npz"))
-
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    """One torch thread (the machine's cores are shared), restored afterwards."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
 
 
 REACH_START = (0.3, -0.2)

@@ -16,15 +16,6 @@ from graspkit.paths import default_model_path
 from graspkit.rotations import axis_angle_to_rot6d
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    """One torch thread (the machine's cores are shared), restored afterwards."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
 @pytest.fixture(scope="module")
 def setup():
     bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)

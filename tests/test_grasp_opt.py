@@ -4,7 +4,6 @@ import pytest
 import torch
 import trimesh
 
-from graspkit.body import BodyModel
 from graspkit.body.hand_poses import _FINGER_TEMPLATES, _SPREAD, _THUMB_TEMPLATES, hand_axes, template_pose
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX as J
 from graspkit.data import grasp_opt as go
@@ -13,13 +12,6 @@ from graspkit.data.posing import forward_kinematics
 from graspkit.data.rig import build_rig
 from graspkit.objects.sdf import SDFGrid
 from graspkit.rotations import axis_angle_to_matrix
-
-from conftest import PROCEDURAL_MODEL
-
-
-@pytest.fixture(scope="module")
-def bm():
-    return BodyModel.from_file(PROCEDURAL_MODEL)
 
 
 @pytest.fixture(scope="module")

@@ -9,21 +9,7 @@ from graspkit.body.markers import saga_sparse_markers
 from graspkit.data import load_motion
 from graspkit.models.pose_prior import load_pose_prior
 from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, MarkerDiffAE, train_smooth_ae
-from graspkit.optim.grasppose import GraspObject
 from graspkit.paths import DATA_STUBS, default_model_path
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _threads():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
-@pytest.fixture(scope="module")
-def bm():
-    return BodyModel.from_file(default_model_path())
 
 
 @pytest.fixture(scope="module")

@@ -11,22 +11,7 @@ from graspkit.body.markers import foot_vertices, palm_vertices
 from graspkit.models.pose_prior import load_pose_prior
 from graspkit.objects.sdf import SDFGrid, signed_distance
 from graspkit.optim.grasppose import GraspObject, GraspPoseConfig, GraspPoseOpt, hand_vertex_ids, kabsch
-from graspkit.paths import default_model_path
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d
-
-
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    """Many small tensor ops: one thread is several times faster than two on shared cores."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
-@pytest.fixture(scope="module")
-def bm():
-    return BodyModel.from_file(default_model_path())
 
 
 @pytest.fixture(scope="module")

@@ -13,15 +13,6 @@ from graspkit.rotations import axis_angle_to_matrix, rotation_about_z
 ROOT = "data_stubs/motion"
 
 
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    """One torch thread: the machine's cores are shared, and small ops thrash with more."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
 def _standing(heading: float = 0.0, xy=(0.0, 0.0), z: float = 0.9) -> torch.Tensor:
     """p (135,) of a rest-pose body facing `heading` (rad from world +x) with its root at (x, y, z)."""
     R = torch.zeros(22, 3, 3, dtype=torch.float64)

@@ -1,22 +1,13 @@
 """Footstep planner, foot motion and contact labels, locomotion clips measured on the procedural humanoid's mesh."""
 import numpy as np
 import pytest
-import torch
 
 from graspkit import metrics as M
-from graspkit.body import BodyModel
 from graspkit.body.markers import foot_vertices
 from graspkit.data import generate_locomotion
 from graspkit.data.footsteps import GaitStyle, foot_tracks, plan_footsteps
 from graspkit.data.rig import build_rig
 from graspkit.data.trajectory import RootPlan, heading_profile, integrate_controls, straight_walk
-
-from conftest import PROCEDURAL_MODEL
-
-
-@pytest.fixture(scope="module")
-def bm():
-    return BodyModel.from_file(PROCEDURAL_MODEL, dtype=torch.float32)
 
 
 @pytest.fixture(scope="module")

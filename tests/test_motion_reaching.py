@@ -1,21 +1,13 @@
 """The procedural reaching planner (WANDR's time-controlled goal reaching) and CIRCLE-style clips."""
 import numpy as np
 import pytest
-import torch
 
 from graspkit import metrics as M
-from graspkit.body import BodyModel
 from graspkit.data import Start, evaluation_goals, generate_reach, plan_reach
 from graspkit.data.reaching import FLOOR_WRIST
 
-from conftest import PROCEDURAL_MODEL
 
 WRIST = 21
-
-
-@pytest.fixture(scope="module")
-def bm():
-    return BodyModel.from_file(PROCEDURAL_MODEL, dtype=torch.float32)
 
 
 @pytest.mark.parametrize("goal", [(0.9, -0.4, 0.05), (1.6, 0.8, 0.9), (-0.3, 1.2, 1.75)])

@@ -4,20 +4,13 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from graspkit.body import BodyModel
 from graspkit.body.markers import saga_sparse_markers
 from graspkit.data import load_motion
 from graspkit.data.motion import Motion
 from graspkit.data import motionfill_dataset as mf
-from graspkit.paths import default_model_path
 from pathlib import Path
 
 STUBS = Path(__file__).resolve().parents[1] / "data_stubs" / "motion"
-
-
-@pytest.fixture(scope="module")
-def bm():
-    return BodyModel.from_file(default_model_path())
 
 
 @pytest.fixture(scope="module")

@@ -3,17 +3,11 @@ import numpy as np
 import pytest
 import torch
 
-from graspkit.body import BodyModel
 from graspkit.data import load_motion
 from graspkit.metrics import joint_limit_violation
 from graspkit.models.pose_prior import (POSE_PRIOR_PATH, PosePrior, body_poses_from_motions, load_pose_prior,
                                         mirror_body_pose)
-from graspkit.paths import DATA_STUBS, default_model_path
-
-
-@pytest.fixture(scope="module")
-def bm():
-    return BodyModel.from_file(default_model_path())
+from graspkit.paths import DATA_STUBS
 
 
 @pytest.fixture(scope="module")

@@ -6,26 +6,11 @@ import pytest
 import torch
 
 from graspkit import intention as I
-from graspkit.body import BodyModel
 from graspkit.data import heading_of, load_motion
 from graspkit.data import wandr_dataset as W
-from graspkit.paths import DATA_STUBS, default_model_path
+from graspkit.paths import DATA_STUBS
 
 STUBS = DATA_STUBS / "motion"
-
-
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    """One torch thread: the machine's cores are shared, and small ops thrash with more."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-@pytest.fixture(scope="module")
-def bm():
-    return BodyModel.from_file(default_model_path())
 
 
 @pytest.fixture(scope="module")

@@ -6,24 +6,9 @@ import torch
 from graspkit import eval_wandr as E
 from graspkit import intention as I
 from graspkit import metrics
-from graspkit.body import BodyModel
 from graspkit.data import load_motion
 from graspkit.data.wandr_dataset import rest_joints
-from graspkit.paths import DATA_STUBS, default_model_path
-
-
-@pytest.fixture(autouse=True, scope="module")
-def _one_thread():
-    """One torch thread: the machine's cores are shared, and small ops thrash with more."""
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
-
-
-@pytest.fixture(scope="module")
-def bm():
-    return BodyModel.from_file(default_model_path())
+from graspkit.paths import DATA_STUBS
 
 
 def _clip(bm, name="locomotion/locomotion_000003.npz"):
