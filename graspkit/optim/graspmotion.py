@@ -47,6 +47,7 @@ from tqdm.auto import tqdm
 from graspkit.body.markers import foot_vertices, palm_vertices, saga_sparse_markers, vertex_normals
 from graspkit.models.gnet import SparseBody
 from graspkit.optim.grasppose import GraspObject, _nearest, hand_vertex_ids, kabsch
+from graspkit.optim.step import energy_step
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
 
 SMOOTH_AE_PATH = Path(__file__).resolve().parents[2] / "data_stubs" / "checkpoints" / "motionfill_smooth_ae.pt"
@@ -332,12 +333,7 @@ class GraspMotionOpt:
                     for g in opt.param_groups:
                         g["lr"] = 0.005
                 e = self.energy(params(), target, bet, stage, foot_contact, obj, object_contact)
-                loss = sum(t.sum() for t in e.values())
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
-                if i % self.cfg.log_every == 0:
-                    log.append({"step": step, "stage": stage, **{k: float(t.detach().sum()) for k, t in e.items()}})
+                energy_step(opt, e, log, i, step, stage, self.cfg.log_every)
                 step += 1
                 bar.update(1)
             with torch.no_grad():

@@ -47,6 +47,7 @@ from graspkit.body.markers import foot_vertices, saga_markers, vertex_normals
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX
 from graspkit.models.gnet import SparseBody
 from graspkit.objects.sdf import SDFGrid
+from graspkit.optim.step import energy_step
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
 
 TERMS = ("fit", "prior", "contact_object", "contact_marker", "colli_body", "colli_object", "ground", "heuristic")
@@ -348,12 +349,7 @@ class GraspPoseOpt:
             for i in range(self.cfg.steps[stage - 1]):
                 e = self.energy(p, target, obj, stage, marker_contact, object_contact, cache,
                                 refresh=i % self.cfg.nn_every == 0)
-                loss = sum(t.sum() for t in e.values())
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
-                if i % self.cfg.log_every == 0:
-                    log.append({"step": step, "stage": stage, **{k: float(t.detach().sum()) for k, t in e.items()}})
+                energy_step(opt, e, log, i, step, stage, self.cfg.log_every)
                 step += 1
                 bar.update(1)
             with torch.no_grad():
