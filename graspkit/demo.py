@@ -147,16 +147,23 @@ def planner_stage(bm: BodyModel, out_dir: Path) -> tuple[list[Path], Panel]:
 
 def saga_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int, int] = (100, 150, 200)
                ) -> tuple[list[Path], Panel]:
-    """SAGA stage 1 on the clip's object placement: a WholeGrasp-VAE sample fitted by GraspPoseOpt (Alg. 1)."""
+    """SAGA stage 1 on the first shipped test-object grasp's placement (the clip's object): a WholeGrasp-VAE sample
+    fitted by GraspPose-Opt (Alg. 1), shown in the world."""
+    from graspkit.data.grab import read_arrays
+    from graspkit.data.grasp_datasets import grasp_files
     from graspkit.data.grasp_io import cached_sdf_grid
     from graspkit.data.motion import Motion
     from graspkit.eval_saga import _object_batch, fit_variants, load_placements
     from graspkit.models.pose_prior import load_pose_prior
     from graspkit.models.wholegrasp import load_wholegrasp
+    from graspkit.objects.catalogue import make_object
     from graspkit.optim.grasppose import GraspPoseConfig, GraspPoseOpt
 
-    seq, obj = _test_clip()
+    seq, _ = _test_clip()
     pl = load_placements(DATA_STUBS / "grasps", seq.object_name, 1)[0]
+    first = next(f for f in grasp_files(DATA_STUBS / "grasps", "grasp", split="test")
+                 if str(read_arrays(f)["obj_name"]) == seq.object_name)
+    centre = read_arrays(first)["object.params.transl"][0].astype(np.float64)   # the placement frame's origin
     wg = load_wholegrasp(CHECKPOINTS / "wholegrasp.pt")
     prior = load_pose_prior(CHECKPOINTS / "pose_prior.pt")
     g = torch.Generator().manual_seed(0)
@@ -168,12 +175,10 @@ def saga_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int, int] = (100,
     full = torch.cat([p["global_orient"][:, None], p["body_pose"].view(1, 21, 3), p["jaw_pose"][:, None],
                       p["leye_pose"][:, None], p["reye_pose"][:, None], p["left_hand_pose"].view(1, 15, 3),
                       p["right_hand_pose"].view(1, 15, 3)], 1)
-    # the placement's frame is the world translated to the object centre: move the object mesh there
-    centre = torch.as_tensor(seq.object_transl[-1]).float()
-    mesh = obj.copy()
-    mesh.apply_translation(-centre.numpy())
-    motion = Motion(full.detach().numpy(), p["transl"].detach().numpy(), p["betas"][0].detach().numpy(), 30.0)
-    return _write_clip(bm, motion, out_dir, "saga_grasp", {seq.object_name: mesh}, "SAGA: WholeGrasp + GraspPose-Opt")
+    mesh = make_object(pl.name)
+    mesh.vertices = np.asarray(mesh.vertices) @ pl.rotation.double().numpy().T + centre
+    motion = Motion(full.detach().numpy(), p["transl"].detach().numpy() + centre, p["betas"][0].detach().numpy(), 30.0)
+    return _write_clip(bm, motion, out_dir, "saga_grasp", {pl.name: mesh}, "SAGA: WholeGrasp + GraspPose-Opt")
 
 
 def saga_motion_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int] = (100, 300)
