@@ -49,7 +49,7 @@ PAPER_ROWS: list[tuple[str, str, str, dict[str, float]]] = [
 ]
 
 
-METHODS = ("gt", "saga", "saga_motion", "goal", "wandr")
+METHODS = ("gt", "saga", "saga_motion", "goal", "wandr", "motion")
 
 
 @dataclass
@@ -236,6 +236,105 @@ def run_wandr(checkpoint: Path, out: Path, quick: bool) -> dict:
     return res
 
 
+# ------------------------------------------------------------------------ every method's motions, one metrics function
+
+def motionfill_motions(files: list[Path], checkpoints: Path, steps: tuple[int, int] = (100, 300), seed: int = 0):
+    """SAGA stage 2 on approach clips `files`: one MotionFill-VAE sample each into the clip's grasp, fitted by
+    GraspMotion-Opt (Alg. 2, batched); Motions in MotionFill's canonical frame (A.3) with the floor at z = 0, and
+    the scenes (object mesh moved the same way)."""
+    from graspkit.data.motion import Motion
+    from graspkit.eval_motionfill import graspmotion_eval, load_motionfill
+
+    ev = graspmotion_eval(load_motionfill(checkpoints / "motionfill.pt"), files, seed=seed, steps=steps,
+                          progress=False)
+    pr, out = ev["result"].params, []
+    F = pr["transl"].shape[1]
+    for b, scene in enumerate(ev["scenes"]):
+        lift = np.array([0.0, 0.0, -scene["floor"]])
+        out.append(Motion(pr["poses"][b].view(F, 55, 3).detach().numpy(), pr["transl"][b].detach().numpy() + lift,
+                          pr["betas"][b].detach().numpy(), 30.0))
+        scene["mesh"] = scene["mesh"].copy()
+        scene["mesh"].apply_translation(lift)
+    return out, ev["scenes"]
+
+
+def goal_motions(seqs: list, checkpoints: Path, seed: int = 0, max_frames: int = 150) -> list:
+    """GOAL from each approach clip's start: GNet's grasp (refined), then MNet's rollout to it (§3.4); Motions."""
+    from graspkit.data.motion import Motion
+    from graspkit.eval_goal import _body, approach_clips, gnet_goal
+    from graspkit.models.gnet import load_gnet
+    from graspkit.models.mnet import load_mnet, rollout
+    from graspkit.objects.bps import bps_basis
+    from graspkit.rotations import matrix_to_axis_angle, rot6d_to_matrix
+
+    gnet, mnet = load_gnet(checkpoints / "gnet.pt"), load_mnet(checkpoints / "mnet.pt")
+    _, _, body = _body()
+    g, out = torch.Generator().manual_seed(seed), []
+    for clip in approach_clips(seqs):
+        start = (clip.rot6d[0], clip.transl[0])
+        goal = gnet_goal(gnet, start, clip.betas, clip.object_points, clip.obj_centre, generator=g)[:2]
+        r = rollout(mnet, body, start, goal, clip.betas, clip.object_points, clip.obj_centre, bps_basis(),
+                    max_frames=max_frames)
+        aa = matrix_to_axis_angle(rot6d_to_matrix(r.rot6d.double())).float()
+        out.append(Motion(aa.numpy(), r.transl.detach().numpy(), clip.betas.reshape(-1)[:10].numpy(), 30.0))
+    return out
+
+
+def wandr_motions(checkpoint: Path, goals: torch.Tensor, t_goal: int, seed: int = 0) -> list:
+    """WANDR from its first held-out start pose (canonical) to each goal (G,3) at frame t_goal, one batch; Motions."""
+    import graspkit.intention as I
+    from graspkit.data.motion import Motion
+    from graspkit.eval_wandr import starts_from_meta
+    from graspkit.models.wandr import generate, load_wandr
+
+    model = load_wandr(checkpoint)
+    start = starts_from_meta(model.meta)[0].canonical()
+    out = generate(model, start, goals, t_goal, n=1, generator=torch.Generator().manual_seed(seed))
+    motions = []
+    for b, goal in enumerate(goals):
+        trans, aa = I.pose_to_axis_angle(out.p[b], start.full_pose)
+        motions.append(Motion(aa.numpy(), trans.numpy(), start.betas.numpy(), I.FPS, goal=goal.numpy(),
+                              goal_frame=t_goal, hand="right"))
+    return motions
+
+
+def common_motion_rows(bm, folders: list[Path], checkpoints: Path, k: int = 4) -> list[Row]:
+    """graspkit.metrics.motion_quality (WANDR's FS, SAGA's skating, GOAL's sliding, jerk) on k motions of each
+    method: SAGA's MotionFill + GraspMotion-Opt and GOAL's GNet + MNet from the first k test-object approach clips,
+    WANDR to k goals of its grid (2 m, 0.9 m high, k directions, 4 s). Rows named as the evaluators' (merged)."""
+    from graspkit.eval_wandr import goal_from_cylinder
+    from graspkit.metrics import motion_quality
+
+    seqs = split_sequences(folders, "approach", "test")[:k]
+    files = _approach_files(folders, k)
+    made: list[tuple[str, list]] = []
+    if (checkpoints / "motionfill.pt").is_file() and files:
+        made.append(("SAGA (MotionFill, traj + local)", motionfill_motions(files, checkpoints)[0]))
+    if (checkpoints / "mnet.pt").is_file() and seqs:
+        made.append(("GOAL (GNet + MNet)", goal_motions(seqs, checkpoints)))
+    if (checkpoints / "wandr.pt").is_file():
+        goals = torch.stack([goal_from_cylinder(a, 2.0, 0.9) for a in np.linspace(0.0, 360.0, k, endpoint=False)])
+        made.append(("WANDR", wandr_motions(checkpoints / "wandr.pt", goals, 120)))
+    rows = []
+    for name, motions in made:
+        q = motion_quality(bm, motions)
+        rows.append(Row("motion", name, "graspkit", {"fs_wandr": 100 * q["fs_wandr"], "skate_saga": q["skate_saga"],
+                                                      "slide_goal": 100 * q["slide_goal"], "mean_jerk": q["mean_jerk"]},
+                        f"FS, skating, sliding, jerk on {q['clips']} motions ({q['frames']} frames)"))
+    return rows
+
+
+def _approach_files(folders: list[Path], k: int) -> list[Path]:
+    """The first k accepted test-object approach files in `folders`."""
+    from graspkit.data.grasp_datasets import grasp_files
+
+    out = []
+    for f in folders:
+        if Path(f).is_dir():
+            out += grasp_files(f, "approach", split="test")
+    return out[:k]
+
+
 # ---------------------------------------------------------------------------------------------------------- driver
 
 def paper_rows() -> list[Row]:
@@ -286,6 +385,8 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
             new = _method(ck / "motionfill.pt", out / "motionfill_eval.json", ck / "motionfill_eval.json", reuse,
                           saga_motion_rows, lambda o: run_saga_motion(folders[-1], o, quick, ck),
                           "SAGA (MotionFill, traj + local)", "motion")
+        elif m == "motion":
+            new = common_motion_rows(bm, folders, ck, k=2 if quick else 4)
         elif m == "goal":
             new = _method(ck / "gnet.pt", out / "goal_eval.json", ck / "goal_eval.json", reuse, goal_rows,
                           lambda o: run_goal(folders, o, quick, ck), "GOAL (GNet + refinement)", "grasp")
@@ -296,7 +397,22 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
             if "(from " not in r.note:
                 r.note = (r.note + "; " if r.note else "") + f"{time.perf_counter() - t0:.0f} s"
         rows += new
-    return rows + paper_rows()
+    return merge(rows) + paper_rows()
+
+
+def merge(rows: list[Row]) -> list[Row]:
+    """One row per (table, method, source): values joined (the first row's value kept where both give one), notes
+    joined; order of first appearance."""
+    out: dict[tuple[str, str, str], Row] = {}
+    for r in rows:
+        key = (r.table, r.method, r.source)
+        if key not in out:
+            out[key] = Row(r.table, r.method, r.source, dict(r.values), r.note)
+            continue
+        o = out[key]
+        o.values = {**r.values, **o.values}
+        o.note = "; ".join(n for n in (o.note, r.note) if n)
+    return list(out.values())
 
 
 def _method(checkpoint: Path, out: Path, shipped: Path, reuse: bool, rows_of, run, method: str, table: str

@@ -95,7 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--data", type=Path, action="append", default=None,
                     help="with --all: a folder of grasp_*/approach_*.npz files (repeatable; default: made "
                          "sets or stubs)")
-    ev.add_argument("--methods", default="gt,saga,saga_motion,goal,wandr", help="with --all: comma-separated subset")
+    ev.add_argument("--methods", default="gt,saga,saga_motion,goal,wandr,motion",
+                    help="with --all: comma-separated subset of gt, saga, saga_motion, goal, wandr, motion")
     ev.add_argument("--reuse", action="store_true",
                     help="with --all: take each method's shipped evaluation (data_stubs/checkpoints/*_eval.json)")
     ev.set_defaults(func=_cmd_eval_all)

@@ -71,15 +71,6 @@ def body_gallery(bm: BodyModel, bodies: list[tuple[str, float]] = DEMO_BODIES) -
     return fig, v
 
 
-def _motion_from_rot6d(rot6d: torch.Tensor, transl: torch.Tensor, betas: torch.Tensor, **kw):
-    """A graspkit Motion from 6D rotations (T,55,6), translations (T,3) and betas."""
-    from graspkit.data.motion import Motion
-    from graspkit.rotations import matrix_to_axis_angle, rot6d_to_matrix
-
-    aa = matrix_to_axis_angle(rot6d_to_matrix(rot6d.double())).float()
-    return Motion(aa.numpy(), transl.detach().numpy(), betas.reshape(-1)[:10].detach().numpy(), 30.0, **kw)
-
-
 Panel = tuple[str, np.ndarray, list, object]   # title, last-frame vertices (V,3), object meshes, goals (G,3) or None
 
 
@@ -185,65 +176,38 @@ def saga_motion_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int] = (10
                       ) -> tuple[list[Path], Panel]:
     """SAGA stage 2 on the clip's last 2 s: a MotionFill-VAE sample from the start pose to the grasp, fitted by
     GraspMotion-Opt (Alg. 2); shown in MotionFill's canonical frame (A.3) with the object."""
-    from graspkit.data.motion import Motion
-    from graspkit.eval_motionfill import graspmotion_eval, load_motionfill
+    from graspkit.benchmark import motionfill_motions
 
     seq, _ = _test_clip()
     files = sorted((DATA_STUBS / "approach").glob("approach_*.npz"))
     path = next(f for f in files if str(np.load(f, allow_pickle=False)["obj_name"]) == seq.object_name)
-    ev = graspmotion_eval(load_motionfill(CHECKPOINTS / "motionfill.pt"), [path], steps=steps, progress=False)
-    pr, scene = ev["result"].params, ev["scenes"][0]
-    F = pr["transl"].shape[1]
-    lift = np.array([0.0, 0.0, -scene["floor"]])            # canonical frame -> floor at z = 0
-    motion = Motion(pr["poses"][0].view(F, 55, 3).detach().numpy(), pr["transl"][0].detach().numpy() + lift,
-                    pr["betas"][0].detach().numpy(), 30.0)
-    mesh = scene["mesh"].copy()
-    mesh.apply_translation(lift)
-    return _write_clip(bm, motion, out_dir, "saga_motion", {seq.object_name: mesh},
+    motions, scenes = motionfill_motions([path], CHECKPOINTS, steps)
+    return _write_clip(bm, motions[0], out_dir, "saga_motion", {seq.object_name: scenes[0]["mesh"]},
                        "SAGA: MotionFill + GraspMotion-Opt")
 
 
-def goal_stage(bm: BodyModel, out_dir: Path, max_frames: int = 150) -> tuple[list[Path], Panel]:
+def goal_stage(bm: BodyModel, out_dir: Path) -> tuple[list[Path], Panel]:
     """GOAL from the clip's start: GNet's grasp (refined), then MNet's approach to it (§3.4)."""
-    from graspkit.eval_goal import _body, approach_clips, gnet_goal
-    from graspkit.models.gnet import load_gnet
-    from graspkit.models.mnet import load_mnet, rollout
-    from graspkit.objects.bps import bps_basis
+    from graspkit.benchmark import goal_motions
 
     seq, obj = _test_clip()
-    clip = approach_clips([seq])[0]
-    gnet, mnet = load_gnet(CHECKPOINTS / "gnet.pt"), load_mnet(CHECKPOINTS / "mnet.pt")
-    start = (clip.rot6d[0], clip.transl[0])
-    goal = gnet_goal(gnet, start, clip.betas, clip.object_points, clip.obj_centre,
-                     generator=torch.Generator().manual_seed(0))[:2]
-    _, _, body = _body()
-    roll = rollout(mnet, body, start, goal, clip.betas, clip.object_points, clip.obj_centre, bps_basis(),
-                   max_frames=max_frames)
-    motion = _motion_from_rot6d(roll.rot6d, roll.transl, clip.betas)
-    return _write_clip(bm, motion, out_dir, "goal_approach", {seq.object_name: obj}, "GOAL: GNet + MNet")
+    return _write_clip(bm, goal_motions([seq], CHECKPOINTS)[0], out_dir, "goal_approach", {seq.object_name: obj},
+                       "GOAL: GNet + MNet")
 
 
 def wandr_stage(bm: BodyModel, out_dir: Path, seconds: float = 4.0) -> tuple[list[Path], Panel]:
     """WANDR from its first held-out start pose to a goal 2 m ahead-left, 1 m high, in `seconds`."""
-    import graspkit.intention as I
-    from graspkit.data.motion import Motion
-    from graspkit.eval_wandr import goal_from_cylinder, starts_from_meta
-    from graspkit.models.wandr import generate, load_wandr
-    from graspkit.viz.scene import sphere
-
     import trimesh
 
-    model = load_wandr(CHECKPOINTS / "wandr.pt")
-    start = starts_from_meta(model.meta)[0].canonical()
+    from graspkit.benchmark import wandr_motions
+    from graspkit.eval_wandr import goal_from_cylinder
+    from graspkit.viz.scene import sphere
+
     goal = goal_from_cylinder(45.0, 2.0, 1.0)
-    t_goal = int(round(seconds * I.FPS))
-    out = generate(model, start, goal[None], t_goal, n=1, generator=torch.Generator().manual_seed(0))
-    trans, aa = I.pose_to_axis_angle(out.p[0], start.full_pose)
-    motion = Motion(aa.numpy(), trans.numpy(), start.betas.numpy(), I.FPS, goal=goal.numpy(), goal_frame=t_goal,
-                    hand="right")
+    motion = wandr_motions(CHECKPOINTS / "wandr.pt", goal[None], int(round(seconds * 30.0)))[0]
     sv, sf = sphere(goal.numpy(), 0.05)
     return _write_clip(bm, motion, out_dir, "wandr_reach", {"goal": trimesh.Trimesh(sv, sf, process=False)},
-                       "WANDR: reach the goal in 4 s", goals=goal[None].numpy())
+                       f"WANDR: reach the goal in {seconds:g} s", goals=goal[None].numpy())
 
 
 METHOD_STAGES = {"planner": (planner_stage, None), "saga": (saga_stage, "wholegrasp.pt"),

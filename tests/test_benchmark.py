@@ -147,3 +147,16 @@ def test_saga_motion_rows_from_a_run_equal_those_from_its_saved_evaluation(tmp_p
     again = [r for r in run_all(tmp_path / "b", data=[STUBS / "approach"], quick=True, checkpoints=ck,
                                 methods=("saga_motion",), reuse=True) if r.source == "graspkit"]
     assert [r.values for r in again] == [r.values for r in run]
+
+
+def test_rows_of_one_method_merge_and_keep_the_first_value():
+    from graspkit.benchmark import merge
+
+    a = Row("motion", "GOAL (GNet + MNet)", "graspkit", {"slide_goal": 6.0}, "8 rollouts")
+    b = Row("motion", "GOAL (GNet + MNet)", "graspkit", {"slide_goal": 2.0, "mean_jerk": 200.0}, "2 motions")
+    c = Row("motion", "GOAL (GNet + MNet)", "GOAL Sec. 4.2", {"slide_goal": 13.7}, "published")
+    out = merge([a, c, b])
+    assert [(r.source, r.values, r.note) for r in out] == [
+        ("graspkit", {"slide_goal": 6.0, "mean_jerk": 200.0}, "8 rollouts; 2 motions"),
+        ("GOAL Sec. 4.2", {"slide_goal": 13.7}, "published")]
+    assert a.values == {"slide_goal": 6.0}                      # inputs untouched
