@@ -477,7 +477,7 @@ def figure(rows: list[Row]):
             if any(k in r.values for r in rows if r.table == t)]
     ncol = 4
     nrow = max(1, math.ceil(len(keys) / ncol))
-    fig, axes = plt.subplots(nrow, ncol, figsize=(15, 2.6 * nrow), squeeze=False)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(15, 3.3 * nrow), squeeze=False)
     for ax in axes.flat[len(keys):]:
         ax.set_axis_off()
     for ax, (t, k) in zip(axes.flat, keys):
