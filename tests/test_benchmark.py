@@ -59,11 +59,13 @@ def test_ground_truth_row_matches_smplx_and_trimesh(bm):
     assert row.values["depth_cm"] == pytest.approx(ref[:, 2].mean(), abs=0.02)
 
 
-def test_planner_row_counts_sliding_frames_by_goals_definition(bm):
-    """GOAL's sliding on the approach clips, recounted from smplx vertices: the lowest vertex moves > 1 cm per frame."""
+def test_planner_row_recounts_sliding_and_jerk_with_smplx(bm):
+    """GOAL's sliding (the lowest vertex moves > 1 cm per frame) and the mean jerk of the body joints on the approach
+    clips, recounted from smplx's vertices and joints."""
     files = sorted((STUBS / "approach").glob("approach_*.npz"))
     row = planner_motion(bm, [STUBS / "approach"])
     slid = pairs = 0
+    jerks = []
     for p in files:
         z = dict(np.load(p, allow_pickle=False))
         if split_of(str(z["obj_name"])) != "test":
@@ -71,14 +73,18 @@ def test_planner_row_counts_sliding_frames_by_goals_definition(bm):
         T = len(z["body.params.transl"])
         model_t = smplx.create(str(STUBS / "body_models"), model_type="smplx", gender="neutral", ext="npz",
                                use_pca=False, flat_hand_mean=True, num_betas=10, batch_size=T, dtype=torch.float64)
-        v = model_t(betas=torch.as_tensor(z["body.betas"][None, :10], dtype=torch.float64).expand(T, -1),
-                    **{k: torch.as_tensor(z[f"body.params.{k}"], dtype=torch.float64) for k in PARAMS}).vertices
-        v = v.detach().numpy()
+        out = model_t(betas=torch.as_tensor(z["body.betas"][None, :10], dtype=torch.float64).expand(T, -1),
+                      **{k: torch.as_tensor(z[f"body.params.{k}"], dtype=torch.float64) for k in PARAMS})
+        j = out.joints[:, :22].detach().numpy()
+        v = out.vertices.detach().numpy()
+        d3 = j[3:] - 3 * j[2:-1] + 3 * j[1:-2] - j[:-3]
+        jerks.append(np.linalg.norm(d3, axis=-1).ravel() * 30.0 ** 3)
         low = v[:-1, :, 2].argmin(1)
         move = np.linalg.norm(v[1:, :, :][np.arange(T - 1), low] - v[:-1][np.arange(T - 1), low], axis=1)
         slid, pairs = slid + int((move > 0.01).sum()), pairs + T - 1
     assert pairs > 0
     assert row.values["slide_goal"] == pytest.approx(100 * slid / pairs, abs=1e-6)
+    assert row.values["mean_jerk"] == pytest.approx(np.concatenate(jerks).mean(), rel=1e-3)
 
 
 def test_report_round_trips_and_labels_the_papers(tmp_path):
