@@ -52,7 +52,8 @@ def paper_ratio_table(rows: list[Row]) -> str:
             if o is None or k not in o.values:
                 continue
             q = o.values[k] / v if v else math.inf
-            lines.append(f"| {o.method} vs {p.method} | {k} | {o.values[k]:.3g} | {v:.3g} | {p.source} | {q:.2f}× |")
+            name = o.method if o.method == p.method else f"{o.method} vs {p.method}"
+            lines.append(f"| {name} | {k} | {o.values[k]:.3g} | {v:.3g} | {p.source} | {q:.2f}× |")
     return "\n".join(lines)
 
 
