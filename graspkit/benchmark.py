@@ -355,7 +355,8 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
     from tqdm.auto import tqdm
 
     from graspkit.body import BodyModel
-    from graspkit.paths import DATA_STUBS, cache_dir, default_model_path
+    from graspkit.eval_goal import default_data_folders
+    from graspkit.paths import DATA_STUBS, default_model_path
 
     unknown = set(methods) - set(METHODS)
     if unknown:
@@ -363,7 +364,7 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     ck = Path(checkpoints) if checkpoints else DATA_STUBS / "checkpoints"
-    made = [cache_dir() / "grasps" / "grasp", cache_dir() / "grasps" / "approach"]
+    made = default_data_folders()                       # where `graspkit data make` writes by default
     folders = [Path(p) for p in data] if data else (made if any(any(p.glob("*.npz")) for p in made if p.is_dir())
                                                     else [DATA_STUBS / "grasps", DATA_STUBS / "approach"])
     for f in folders:

@@ -11,6 +11,7 @@ A method whose shipped checkpoint is missing is skipped with a message naming th
 """
 from __future__ import annotations
 
+from functools import lru_cache
 from pathlib import Path
 
 import matplotlib
@@ -117,6 +118,7 @@ def overview(panels: list[Panel], faces: np.ndarray) -> plt.Figure:
     return fig
 
 
+@lru_cache(maxsize=1)
 def _test_clip():
     """The first shipped approach-and-grasp clip of a test-split object, and its object mesh in the world."""
     from graspkit.benchmark import object_mesh_at, split_sequences
