@@ -9,6 +9,7 @@ Motion metrics (this section) take world vertices / joints in the z-up frame, me
 | foot sliding | GOAL Sec. 4.2 | the vertex closest to the ground moves more than 1 cm per frame (GRAB's captured motion: 6.7 %) |
 | success rate (SR), distance to goal (DTG) | WANDR Sec. 4.3 | the right wrist comes within 10 cm of the goal; DTG its closest distance |
 | ground penetration | SAGA Sec. 4.3 (non-collision), GOAL Sec. 3.4 | depth of the lowest vertex below the ground plane z = 0 |
+| non-collision score | SAGA Sec. 4.2 | share of body mesh vertices above the ground (GRAB 0.9771, SAGA 0.9743), per frame |
 | joint speed, jerk | smoothness | finite differences of joint positions (body joints 0..21) |
 | joint limits | human range of motion | rotation of each joint beyond the ranges in `JOINT_LIMITS_DEG` |
 
@@ -83,6 +84,12 @@ def foot_skating_saga(heels: Any, fps: float = 30.0, height: float = SAGA_SKATE_
 def ground_penetration(vertices: Any) -> np.ndarray:
     """Depth (T,) of the lowest vertex below the ground z = 0 (0 when above)."""
     return torch.clamp(-_t(vertices)[:, :, 2].min(1).values, min=0).double().numpy()
+
+
+def non_collision_score(vertices: Any, floor: float = 0.0) -> np.ndarray:
+    """SAGA's non-collision score per frame (T,): the share of the mesh vertices (T,V,3) at or above the ground
+    z = floor (SAGA Sec. 4.2: "the number of body mesh vertices above the ground divided by the total")."""
+    return (_t(vertices)[..., 2] >= floor).double().mean(-1).numpy()
 
 
 def joint_speed(joints: Any, fps: float = 30.0) -> np.ndarray:

@@ -47,8 +47,15 @@ def test_foot_skating_term_is_analytic_for_a_sliding_body(bm):
     w = opt.cfg.weights
     n_heel = int((opt.foot_part == 0).sum())
     assert e["skate"].item() == pytest.approx(w.skate * n_heel * (F - 1) * (0.02 - w.skate_sigma), rel=1e-4)
-    assert opt.energy(p, torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, torch.zeros(1, F, 4), None,
-                      None)["skate"].item() == 0.0
+    paper = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("skate",), one_foot_down=False))
+    assert paper.energy(p, torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, torch.zeros(1, F, 4), None,
+                        None)["skate"].item() == 0.0
+    # one_foot_down: with every probability below 0.5, the most probable part (here the right toe) still counts
+    low = torch.full((1, F, 4), 0.1)
+    low[:, :, 3] = 0.3
+    n_toe = int((opt.foot_part == 3).sum())
+    e = opt.energy(p, torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, low, None, None)
+    assert e["skate"].item() == pytest.approx(w.skate * n_toe * (F - 1) * (0.02 - w.skate_sigma), rel=1e-4)
 
 
 def test_palm_term_is_small_for_a_palm_facing_a_wall_and_large_for_a_wall_behind_it(bm):

@@ -81,3 +81,12 @@ def test_distance_to_goal_and_success():
     w = np.stack([np.linspace(0, 1, 11), np.zeros(11), np.ones(11)], 1)
     assert np.isclose(M.distance_to_goal(w, [1.0, 0.05, 1.0]), 0.05)
     assert M.goal_reached(w, [1.0, 0.09, 1.0]) and not M.goal_reached(w, [1.0, 0.11, 1.0])
+
+
+def test_non_collision_score_counts_vertices_above_the_ground():
+    v = _cloud(4)                                   # 50 points well above the ground, the sole point at z = 0
+    assert np.allclose(M.non_collision_score(v), 1.0)
+    sunk = _cloud(4, lift=-0.5)                     # points below z = 0 now: count them by hand
+    expected = (sunk[..., 2] >= 0).mean(-1)
+    assert np.allclose(M.non_collision_score(sunk), expected) and 0 < expected[0] < 1
+    assert np.allclose(M.non_collision_score(v, floor=2.0), 0.0)     # a floor above everything

@@ -203,3 +203,29 @@ def test_int8_storage_round_trip_error_is_within_half_a_step_and_the_model_reloa
     b = back.sample(pts, nrm, 0.8, 3, g().manual_seed(1))
     assert (a.markers - b.markers).abs().max() < 0.02 * a.markers.abs().max()
     assert (a.object_contact - b.object_contact).abs().max() < 0.02
+
+
+def test_floor_frame_normalisation_keeps_the_mean_grasp_on_the_floor():
+    """With floor_frame, the untrained decoder (the mean grasp) puts the same body on the floor at any object height:
+    an object 0.4 m higher gives markers exactly 0.4 m lower in the object frame, i.e. the same world heights."""
+    torch.manual_seed(0)
+    batch = _batch()
+    model = WholeGraspVAE().eval()
+    model.fit_normalisation(batch["markers"], batch["height"])
+    z = torch.zeros(3, 16)
+    lo = model.decode(z, batch["points"], batch["normals"], torch.full((3, 1), 0.6))["markers"]
+    hi = model.decode(z, batch["points"], batch["normals"], torch.full((3, 1), 1.0))["markers"]
+    torch.testing.assert_close(hi[..., 2] + 1.0, lo[..., 2] + 0.6, atol=1e-5, rtol=0)
+    torch.testing.assert_close(hi[..., :2], lo[..., :2])
+    # the statistics are those of the floor-referenced markers
+    lifted = batch["markers"].clone()
+    lifted[..., 2] += batch["height"]
+    torch.testing.assert_close(model.marker_mean, lifted.mean(0))
+    # without it (and for checkpoints written before the option) the decoder ignores t_O in its output offset
+    old = WholeGraspVAE(WholeGraspConfig(floor_frame=False)).eval()
+    a = old.decode(z, batch["points"], batch["normals"], torch.full((3, 1), 0.6))["markers"]
+    b = old.decode(z, batch["points"], batch["normals"], torch.full((3, 1), 1.0))["markers"]
+    torch.testing.assert_close(a, b)
+    st = model.state()
+    st["model_config"].pop("floor_frame")
+    assert WholeGraspVAE.from_state(st).cfg.floor_frame is False

@@ -24,6 +24,12 @@ weights 5 (markers) and 3 (object), lambda_KL = 0.005 e (epoch e) over SAGA's 40
 Reductions (the paper does not give them): |.|_1 and the sums of Eq. 3 are summed over markers / points and
 averaged over the batch (as written); the BCEs are means over markers / points (the usual L_bce).
 `multitask=False` gives the paper's WholeGrasp-single baseline (App. B.1, Fig. S3b): markers only.
+
+Marker normalisation (graspkit's choice): the networks see and emit standardised markers whose height is measured
+from the floor, M + (0, 0, t_O), while the losses, inputs and outputs stay object-centred as A.3. Without it the
+decoder learned one body height for every t_O (the posterior carried the body's height, so prior samples put the feet
+up to 0.6 m under or above the floor; measured on the first shipped checkpoint). `floor_frame=False` is the plain
+object-centred standardisation (checkpoints written before this option load with it).
 """
 from __future__ import annotations
 
@@ -59,6 +65,7 @@ class WholeGraspConfig:
     lambda_o: float = 1.0             # A.4: lambda_O of Eq. 1
     lambda_c: float = 1.0             # A.4: lambda_c
     kl_final: float = 0.2             # A.4: 0.005 e at SAGA's last epoch e = 40
+    floor_frame: bool = True          # standardise markers with their height above the floor (module docstring)
 
 
 @dataclass
@@ -140,10 +147,17 @@ class WholeGraspVAE(nn.Module):
             self.fp1 = FeaturePropagation(64 + 3 + lv[0], [64, 64], norm=cfg.point_norm)   # + xyz of each point
             self.out_object_contact = nn.Linear(64, 1)
 
-    def fit_normalisation(self, markers: Tensor) -> None:
-        """Set the marker statistics from training markers (B, N, 3)."""
+    def fit_normalisation(self, markers: Tensor, height: Tensor | None = None) -> None:
+        """Set the marker statistics from training markers (B, N, 3) and their object heights (B, 1)."""
+        if height is not None:
+            markers = markers + self._lift(height)
         self.marker_mean.copy_(markers.mean(0))
         self.marker_std.copy_((markers - markers.mean(0)).std(dim=(0, 1)).clamp_min(1e-3))
+
+    def _lift(self, height: Tensor) -> Tensor:
+        """(B, 1, 3) offset from object-centred to floor-referenced markers: (0, 0, t_O), or 0 without floor_frame."""
+        h = height.reshape(-1, 1, 1)
+        return torch.cat([torch.zeros_like(h), torch.zeros_like(h), h], -1) * float(self.cfg.floor_frame)
 
     # ------------------------------------------------------------------ pieces
     @staticmethod
@@ -181,7 +195,7 @@ class WholeGraspVAE(nn.Module):
         """q(z | M, C_M, C_O, t_O, O): markers (B,N,3), contacts (B,N), (B,P), points/normals (B,P,3), height (B,1)
         -> mean, log-variance (B, latent)."""
         B = markers.shape[0]
-        body = ((markers - self.marker_mean) / self.marker_std).reshape(B, -1)
+        body = ((markers + self._lift(height) - self.marker_mean) / self.marker_std).reshape(B, -1)
         feat = normals
         if self.cfg.multitask:
             body = torch.cat([body, marker_contact], -1)
@@ -198,7 +212,8 @@ class WholeGraspVAE(nn.Module):
         lv = self.obj_dec(points, normals, groupings)
         f_o = self.obj_dec_proj(lv.global_feature)
         h = self.dec(torch.cat([z, f_o, height], -1))
-        out = {"markers": self.out_markers(h).view(B, self.cfg.n_markers, 3) * self.marker_std + self.marker_mean}
+        out = {"markers": self.out_markers(h).view(B, self.cfg.n_markers, 3) * self.marker_std + self.marker_mean
+                          - self._lift(height)}
         if self.cfg.multitask:
             out["marker_contact"] = torch.sigmoid(self.out_marker_contact(h))
             g = self.global_proj(torch.cat([f_o, h], -1)).unsqueeze(1)          # (B, 1, 128)
@@ -305,7 +320,7 @@ class WholeGraspVAE(nn.Module):
             cfg = state["extra"]["model_config"]
         if cfg is None or "latent" not in cfg:
             raise ValueError("state: no WholeGrasp config in it (expected key 'config' or extra['model_config'])")
-        model = cls(WholeGraspConfig(**cfg))
+        model = cls(WholeGraspConfig(**{"floor_frame": False, **cfg}))   # older checkpoints: object-centred
         model.load_state_dict(dequantize_state(state["model"]))
         model.eval()
         return model
@@ -454,7 +469,9 @@ def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask:
     t0 = time.perf_counter()
     train = WholeGraspTrainingSet.from_folder(root, "train", model, augment_yaw=augment_yaw)
     val = WholeGraspTrainingSet.from_folder(root, "val", model)
-    model.fit_normalisation(yaw_spread(train.data["markers"]) if train.augment_yaw else train.data["markers"])
+    h = train.data["height"]
+    model.fit_normalisation(yaw_spread(train.data["markers"]) if train.augment_yaw else train.data["markers"],
+                            h.repeat(8, 1) if train.augment_yaw else h)
     prep = time.perf_counter() - t0
 
     def step(m: nn.Module, batch: dict[str, Tensor], epoch: int) -> dict[str, Tensor]:

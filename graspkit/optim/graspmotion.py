@@ -24,6 +24,10 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   two test clips fell only from 0.68 / 0.82 to 0.58 / 0.47; with these values to 0.10 / 0.25). a_skat = 300 per sole
   vertex and metre; a^B_s = 1, a^h_s = 10 on the mean squared hand-vertex displacement (m^2);
   alpha_g (E_g's weight) = 10; contact and collision weights as GraspPose-Opt (15, 200), sigma_b = 1 mm.
+- T_c: S.2 takes MotionFill's predicted contacts; graspkit also counts, on every frame, the foot part (heel or toe)
+  with the highest predicted probability (`GraspMotionConfig.one_foot_down`): a walking or standing person always
+  has a foot on the ground, and the samples' probabilities often fall below 0.5 for all four parts mid-stride, which
+  left both feet free to glide (SAGA's skating metric counts exactly the frames where no heel is planted).
 - Only the right hand meets the object (graspkit's grasps are right-handed); E^o_colli is the hand-in-object hinge
   (GraspPose-Opt's object-in-hand term needs the hand's surface normals per frame and is left out); E^o_cont uses the
   object contact map C^_O (the 143-marker contact map of stage 1 has no sparse-marker counterpart).
@@ -153,6 +157,7 @@ class GraspMotionConfig:
     point_stride: int = 4          # E^o_colli and E_g use every 4th object point (512 of SAGA's 2048)
     log_every: int = 10
     terms: tuple[str, ...] = ("colli", "contact", "palm", "smooth", "skate")
+    one_foot_down: bool = True     # T_c also holds each frame's most probable foot part (a foot is always planted)
     weights: GraspMotionWeights = field(default_factory=GraspMotionWeights)
 
 
@@ -273,7 +278,11 @@ class GraspMotionOpt:
                 e["smooth"] = e["smooth"] + w.smooth_latent * (S[:, 1:] - S[:, :-1]).pow(2).sum((1, 2))
         if "skate" in terms and foot_contact is not None:
             speed = (feet[:, 1:] - feet[:, :-1]).norm(dim=-1)                     # (B, T, n_foot)
-            on = (foot_contact[:, :-1] > 0.5)[:, :, self.foot_part].to(speed.dtype)
+            c = foot_contact[:, :-1]
+            on = c > 0.5
+            if cfg.one_foot_down:              # the most probable part is down on every frame (first of ties)
+                on = on | torch.nn.functional.one_hot(c.argmax(-1), 4).bool()
+            on = on[:, :, self.foot_part].to(speed.dtype)
             e["skate"] = w.skate * (on * torch.relu(speed - w.skate_sigma)).sum((1, 2))
         return e
 
