@@ -9,6 +9,10 @@ Training follows A.4 in three runs (each one `graspkit train motionfill --stage 
    out, `graspkit.data.grasp.SPLITS`);
 3. `finetune`: both CVAEs on the approach windows, LocalMotionFill conditioned on TrajFill's trajectories.
 
+Tab. 3's deterministic baselines (CNN-AE, PoseNet, RouteNet: graspkit.models.motionfill_baselines) train with
+`graspkit train motionfill_baseline --model {cnn_ae,posenet,routenet}` (`train_baseline`, on the same windows) and
+join `evaluate` through `load_baselines()`.
+
 Windows are cached in `<cache>/motionfill/`; normalisation statistics come from stage 1's training windows and stay
 with the model. The shipped checkpoint (`data_stubs/checkpoints/motionfill.pt`) holds float16 weights.
 """
@@ -158,6 +162,82 @@ def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, se
     return model, history
 
 
+BASELINE_DIR = CHECKPOINT.parent
+BASELINE_DATA = {"cnn_ae": ("locomotion", "approach"), "posenet": ("locomotion", "approach"), "routenet": ("approach",)}
+
+
+def baseline_path(name: str, folder: str | Path = BASELINE_DIR) -> Path:
+    """Where a Tab. 3 baseline's checkpoint lives: <folder>/motionfill_<name>.pt."""
+    return Path(folder) / f"motionfill_{name}.pt"
+
+
+def train_baseline(name: str, epochs: int, out: Path | None = None, seed: int = 0, time_limit_s: float | None = 300.0,
+                   lr: float = 1e-3, batch_size: int = 32, clips: dict[str, int] | None = None,
+                   stats_from: Path | None = CHECKPOINT, data: Path | None = None, progress: bool = True
+                   ) -> tuple[Any, list[dict[str, float]]]:
+    """Train one of Tab. 3's deterministic baselines (graspkit.models.motionfill_baselines: 'cnn_ae', 'posenet',
+    'routenet') through `graspkit.train.fit` on the training splits of `BASELINE_DATA[name]`'s windows (locomotion
+    and approach for the local infillers, with ground-truth root velocities; approach for RouteNet; GRAB's object
+    split); normalisation statistics from MotionFill-VAE's checkpoint `stats_from` (else fitted on these training
+    windows). Writes `out` (float16 weights) and a resumable run checkpoint + CSV log in the cache."""
+    from torch.utils.data import ConcatDataset
+
+    from graspkit.models.motionfill_baselines import BASELINES
+    from graspkit.paths import cache_dir
+    from graspkit.train import TrainConfig, fit, save_checkpoint
+
+    if name not in BASELINES:
+        raise ValueError(f"name: expected one of {sorted(BASELINES)}, got {name!r}")
+    clips = {**DEFAULT_CLIPS, **(clips or {})}
+    keys = ("traj", "markers", "local", "vel", "contacts", "clip")
+    sets = {kind: windows(kind, clips[kind], data=data if kind == "approach" else None, progress=progress)
+            for kind in BASELINE_DATA[name]}
+    splits = {kind: clip_split(arr) for kind, arr in sets.items()}
+    torch.manual_seed(seed)
+    model = BASELINES[name]()
+    if stats_from is not None and Path(stats_from).is_file():
+        model.set_stats(load_motionfill(stats_from))
+    else:
+        fit_on = {k: np.concatenate([arr[k][np.isin(arr["clip"], splits[kind]["train"])] for kind, arr in sets.items()])
+                  for k in ("local", "vel")}
+        model.set_stats(MotionFillStats.fit(fit_on))
+    stats = MotionFillStats(model.marker_mean.clone(), model.marker_std.clone(), model.vel_mean.clone(),
+                            model.vel_std.clone())
+    part = {s: [MotionFillDataset({k: arr[k] for k in keys}, stats, splits[kind][s]) for kind, arr in sets.items()]
+            for s in ("train", "val")}
+    train, val = ConcatDataset(part["train"]), ConcatDataset(part["val"])
+    if len(train) == 0:
+        raise ValueError(f"data: no training windows among the {list(sets)} clips")
+
+    def step(net: Any, batch: dict[str, torch.Tensor], epoch: int) -> dict[str, torch.Tensor]:
+        """Eq. 8's deterministic terms (motionfill_baselines' module docstring)."""
+        return net.loss(batch)
+
+    out = Path(out) if out is not None else baseline_path(name)
+    run = cache_dir() / "runs" / f"motionfill_{name}_s{seed}.pt"
+    cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
+    history = fit(model, step, train, cfg, checkpoint=run, val_dataset=val if len(val) else None, progress=progress,
+                  time_limit_s=time_limit_s, extra={"model_config": model.config(), "kind": name})
+    st = model.eval().state()
+    st["model"] = {k: v.half() if v.is_floating_point() and "mean" not in k and "std" not in k else v
+                   for k, v in st["model"].items()}
+    save_checkpoint(out, st)
+    return model, history
+
+
+def load_baselines(folder: str | Path = BASELINE_DIR) -> dict[str, Any]:
+    """Tab. 3's trained baselines {cnn_ae, posenet, routenet} from <folder>/motionfill_<name>.pt (weights_only);
+    missing files are left out."""
+    from graspkit.models.motionfill_baselines import BASELINES, baseline_from_state
+
+    out = {}
+    for name in BASELINES:
+        path = baseline_path(name, folder)
+        if path.is_file():
+            out[name] = baseline_from_state(torch.load(path, weights_only=True, map_location="cpu"))
+    return out
+
+
 def add_motionfill_train_commands(train_sub) -> None:
     """`graspkit train motionfill --stage {local,traj,finetune}` (A.4's three runs)."""
     p = train_sub.add_parser("motionfill", help="train SAGA's MotionFill-VAE (§3.3), one A.4 stage per run")
@@ -175,6 +255,30 @@ def add_motionfill_train_commands(train_sub) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=1)
     p.set_defaults(func=_cmd_train)
+    b = train_sub.add_parser("motionfill_baseline", help="train one of SAGA Tab. 3's deterministic infilling "
+                             "baselines (CNN-AE, PoseNet, RouteNet)")
+    b.add_argument("--model", choices=list(BASELINE_DATA), required=True)
+    b.add_argument("--epochs", type=int, default=30)
+    b.add_argument("--out", type=Path, default=None, help="default data_stubs/checkpoints/motionfill_<model>.pt")
+    b.add_argument("--data", type=Path, default=None, help="folder of the approach clips (default: the cache's)")
+    b.add_argument("--clips", type=int, default=None, help="approach clips (default 144)")
+    b.add_argument("--lr", type=float, default=1e-3)
+    b.add_argument("--time-limit", type=float, default=300.0, help="seconds; stops after the epoch that crosses it")
+    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--threads", type=int, default=1)
+    b.set_defaults(func=_cmd_train_baseline)
+
+
+def _cmd_train_baseline(args: argparse.Namespace) -> int:
+    """Train one Tab. 3 baseline and print the last epoch's figures."""
+    torch.set_num_threads(args.threads)
+    t0 = time.perf_counter()
+    out = args.out or baseline_path(args.model)
+    _, hist = train_baseline(args.model, args.epochs, out, seed=args.seed, time_limit_s=args.time_limit, lr=args.lr,
+                             data=args.data, clips={"approach": args.clips} if args.clips else None)
+    print(f"motionfill_baseline {args.model}: {len(hist)} epochs in {time.perf_counter() - t0:.0f} s -> {out}")
+    print("  " + ", ".join(f"{k} {v:.3f}" for k, v in hist[-1].items() if k != "epoch"))
+    return 0
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
@@ -251,10 +355,13 @@ def linear_local(local: np.ndarray) -> np.ndarray:
     return (1 - s) * local[:, :1] + s * local[:, -1:]
 
 
-def evaluate(model: MotionFillVAE, arr: dict[str, np.ndarray], clips: np.ndarray, n: int = 10, seed: int = 0
-             ) -> dict[str, dict[str, float]]:
+def evaluate(model: MotionFillVAE, arr: dict[str, np.ndarray], clips: np.ndarray, n: int = 10, seed: int = 0,
+             baselines: dict[str, Any] | None = None) -> dict[str, dict[str, float]]:
     """Tab. 3 on the windows of `clips`: local infilling with the true trajectory and trajectory + local, ours (n samples,
-    ADE = min over samples) and linear interpolation; skating, PSKL both ways, APD; the ground truth's skating."""
+    ADE = min over samples) and linear interpolation; skating, PSKL both ways, APD; the ground truth's skating.
+    `baselines` ({cnn_ae, posenet, routenet}, e.g. `load_baselines()`) adds Tab. 3's deterministic rows (one output
+    each, APD 0): "CNN-AE (local)" and "PoseNet (local)" on the true trajectory, "Route+PoseNet" (RouteNet's
+    trajectory, then PoseNet)."""
     from graspkit.data.motionfill_dataset import global_motion, interpolated_trajectory
     from graspkit.metrics import apd
 
@@ -272,6 +379,17 @@ def evaluate(model: MotionFillVAE, arr: dict[str, np.ndarray], clips: np.ndarray
             s = model.sample(torch.as_tensor(ti[i]).float(), torch.as_tensor(a["local"][i]),
                              torch.as_tensor(a["contacts"][i]).float(), n, g, traj=traj)
             out[name].append(s["markers"].double().numpy())
+    for name, key, route in (("CNN-AE (local)", "cnn_ae", "truth"), ("PoseNet (local)", "posenet", "truth"),
+                             ("Route+PoseNet", "posenet", "routenet")):
+        if not baselines or key not in baselines or (route != "truth" and route not in baselines):
+            continue
+        out[name] = []
+        for i in range(len(gt)):
+            ti_i = torch.as_tensor(ti[i]).float()
+            traj = torch.as_tensor(a["traj"][i]) if route == "truth" else baselines[route].predict(ti_i)["traj"][0]
+            s = baselines[key].predict(ti_i, torch.as_tensor(a["local"][i]), torch.as_tensor(a["contacts"][i]).float(),
+                                       traj=traj)
+            out[name].append(s["markers"].double().numpy())
     preds = {k: np.stack(v) for k, v in out.items()}                       # (N, n, T+1, M, 3)
     preds["Linear (local)"] = global_motion(linear_local(a["local"].astype(np.float64)), a["traj"].astype(np.float64))[:, None]
     preds["Linear"] = global_motion(linear_local(a["local"].astype(np.float64)), ti)[:, None]
@@ -288,7 +406,8 @@ def evaluate(model: MotionFillVAE, arr: dict[str, np.ndarray], clips: np.ndarray
 
 def table(rows: dict[str, dict[str, float]]) -> str:
     """Markdown table of `evaluate`'s rows with the paper's Tab. 3 figures beside them."""
-    paper_of = {"Ours-Local": "Ours-Local", "Ours": "Ours", "Linear (local)": None, "Linear": None}
+    paper_of = {"Ours-Local": "Ours-Local", "Ours": "Ours", "Linear (local)": None, "Linear": None,
+                "CNN-AE (local)": "CNN-AE (local)", "PoseNet (local)": "PoseNet (local)", "Route+PoseNet": "Route+PoseNet"}
     lines = ["| method | ADE (m) | skating | PSKL (P, GT) | PSKL (GT, P) | APD (m) | paper: ADE / skating / PSKL (P,GT) / (GT,P) |",
              "|---|---|---|---|---|---|---|"]
     for k, r in rows.items():
@@ -296,6 +415,8 @@ def table(rows: dict[str, dict[str, float]]) -> str:
         lines.append(f"| {k} | {r['ADE']:.3f} | {r['skating']:.3f} | {r['PSKL (P, GT)']:.3f} | {r['PSKL (GT, P)']:.3f} "
                      f"| {r['APD']:.3f} | {' / '.join(f'{x:.3f}' for x in ref) if ref else '—'} |")
     for k in ("CNN-AE (local)", "LEMO (local)", "PoseNet (local)", "Route+PoseNet"):
+        if k in rows:                      # measured above (evaluate(..., baselines=...))
+            continue
         lines.append(f"| {k} (paper only) | | | | | | {' / '.join(f'{x:.3f}' for x in PAPER[k])} |")
     return "\n".join(lines)
 
@@ -304,7 +425,8 @@ def table(rows: dict[str, dict[str, float]]) -> str:
 def approach_scene(path: str | Path, bm) -> dict[str, Any]:
     """One approach clip as MotionFill sees it (the window ending at the goal frame, canonical frame A.3) and its
     object in that frame: markers (61,79,3), traj (62,4), local, vel, contacts, betas, floor height, object points,
-    normals (P,3), contact map C_O at the grasp (P,), the object's mesh (trimesh) and name."""
+    normals (P,3), contact map C_O at the grasp (P,), the object's mesh (trimesh), name and the clip's last 61
+    frames (a Motion in the world)."""
     from graspkit.data.motion import Motion, canonicalize
     from graspkit.objects.catalogue import make_object
     from graspkit.rotations import axis_angle_to_matrix
@@ -329,16 +451,18 @@ def approach_scene(path: str | Path, bm) -> dict[str, Any]:
     mesh = make_object(name)
     mesh.vertices = to_c(mesh.vertices @ R_o.T + t_o)
     return {**{k: v[0] for k, v in arr.items()}, "betas": m.betas[:10], "floor": float(-o[2]), "name": name,
-            "points": to_c(pts @ R_o.T + t_o), "normals": nrm @ R_o.T @ R.T, "object_contact": c_o, "mesh": mesh}
+            "points": to_c(pts @ R_o.T + t_o), "normals": nrm @ R_o.T @ R.T, "object_contact": c_o, "mesh": mesh,
+            "motion": m.slice(max(m.num_frames - 61, 0))}
 
 
 def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, steps: tuple[int, int] = (100, 300),
                      progress: bool = True, weights: Any = None) -> dict[str, Any]:
     """One MotionFill-VAE sample per approach clip, then GraspMotion-Opt (batched): skating (SAGA) of the ground truth,
-    the sample and the fitted bodies; the last frame's contact, penetration volume and depth for the fitted and the
-    ground-truth bodies; palm angle per frame. Returns rows and the arrays for plots."""
+    the sample and the fitted bodies; the last frame's contact, penetration volume and depth of the fitted bodies;
+    SAGA's non-collision score (§4.2) of the fitted and the ground-truth meshes over the window. Returns rows and the
+    arrays for plots."""
     from graspkit.body import BodyModel
-    from graspkit.metrics import grasp_metrics
+    from graspkit.metrics import grasp_metrics, non_collision_score
     from graspkit.models.pose_prior import load_pose_prior
     from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, load_smooth_ae
     from graspkit.optim.grasppose import GraspObject
@@ -369,7 +493,9 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
                      "skating_sample": skating(markers[i:i + 1].double().numpy(), floor[None], heels),
                      "skating_opt": skating(res.markers[i:i + 1].double().numpy(), floor[None], heels),
                      "fit_cm": float((res.markers[i] - markers[i]).norm(dim=-1).mean() * 100),
-                     "contact_mm": fit["min_distance"] * 1000, "volume_cm3": fit["volume_cm3"], "depth_cm": fit["depth_cm"]})
+                     "contact_mm": fit["min_distance"] * 1000, "volume_cm3": fit["volume_cm3"], "depth_cm": fit["depth_cm"],
+                     "noncollision_opt": float(non_collision_score(v, s["floor"]).mean()),
+                     "noncollision_gt": float(non_collision_score(s["motion"].vertices(bm)).mean())})
     return {"rows": rows, "result": res, "markers": markers, "contacts": contacts, "scenes": scenes}
 
 
