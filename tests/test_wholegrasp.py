@@ -205,27 +205,37 @@ def test_int8_storage_round_trip_error_is_within_half_a_step_and_the_model_reloa
     assert (a.object_contact - b.object_contact).abs().max() < 0.02
 
 
-def test_floor_frame_normalisation_keeps_the_mean_grasp_on_the_floor():
-    """With floor_frame, the untrained decoder (the mean grasp) puts the same body on the floor at any object height:
-    an object 0.4 m higher gives markers exactly 0.4 m lower in the object frame, i.e. the same world heights."""
+def test_height_slope_normalisation_recovers_a_linear_height_dependence():
+    """Markers built so that marker 0 (a 'foot') sits at z = -t_O (on the floor) and marker 1 (a 'hand') at a fixed
+    place by the object: the fitted slopes are -1 and 0, and the untrained decoder (the conditional mean grasp) keeps
+    the foot on the floor and the hand at the object at any height."""
     torch.manual_seed(0)
-    batch = _batch()
+    batch = _batch(B=40)
+    h = batch["height"]
+    m = batch["markers"] * 0.01
+    m[:, 0, 2] = -h[:, 0]
+    m[:, 1] = torch.tensor([0.05, 0.0, 0.02])
     model = WholeGraspVAE().eval()
-    model.fit_normalisation(batch["markers"], batch["height"])
-    z = torch.zeros(3, 16)
-    lo = model.decode(z, batch["points"], batch["normals"], torch.full((3, 1), 0.6))["markers"]
-    hi = model.decode(z, batch["points"], batch["normals"], torch.full((3, 1), 1.0))["markers"]
-    torch.testing.assert_close(hi[..., 2] + 1.0, lo[..., 2] + 0.6, atol=1e-5, rtol=0)
-    torch.testing.assert_close(hi[..., :2], lo[..., :2])
-    # the statistics are those of the floor-referenced markers
-    lifted = batch["markers"].clone()
-    lifted[..., 2] += batch["height"]
-    torch.testing.assert_close(model.marker_mean, lifted.mean(0))
-    # without it (and for checkpoints written before the option) the decoder ignores t_O in its output offset
-    old = WholeGraspVAE(WholeGraspConfig(floor_frame=False)).eval()
-    a = old.decode(z, batch["points"], batch["normals"], torch.full((3, 1), 0.6))["markers"]
-    b = old.decode(z, batch["points"], batch["normals"], torch.full((3, 1), 1.0))["markers"]
+    model.fit_normalisation(m, h)
+    assert model.marker_slope[0, 2].item() == pytest.approx(-1.0, abs=1e-5)
+    assert model.marker_slope[1].abs().max().item() < 1e-6
+    z = torch.zeros(2, 16)
+    pts, nrm = batch["points"][:2], batch["normals"][:2]
+    for t in (0.6, 1.4):
+        out = model.decode(z, pts, nrm, torch.full((2, 1), t))["markers"]
+        torch.testing.assert_close(out[:, 0, 2], torch.full((2,), -t), atol=1e-4, rtol=0)
+        torch.testing.assert_close(out[:, 1], torch.tensor([[0.05, 0.0, 0.02]] * 2), atol=1e-5, rtol=0)
+    # the residual std is what is left after the slope (the foot's z is exact here)
+    resid = m - model.marker_mean - model.marker_slope * (h[:, :, None] - model.height_mean)
+    torch.testing.assert_close(model.marker_std, resid.std(dim=(0, 1)).clamp_min(1e-3))
+    # without it the decoder's mean ignores t_O, and checkpoints without the option load that way
+    old = WholeGraspVAE(WholeGraspConfig(height_slope=False)).eval()
+    old.fit_normalisation(m, h)
+    a = old.decode(z, pts, nrm, torch.full((2, 1), 0.6))["markers"]
+    b = old.decode(z, pts, nrm, torch.full((2, 1), 1.4))["markers"]
     torch.testing.assert_close(a, b)
     st = model.state()
-    st["model_config"].pop("floor_frame")
-    assert WholeGraspVAE.from_state(st).cfg.floor_frame is False
+    st["model_config"].pop("height_slope")
+    for k in ("marker_slope", "height_mean"):
+        st["model"].pop(k)
+    assert WholeGraspVAE.from_state(st).cfg.height_slope is False

@@ -25,10 +25,13 @@ Reductions (the paper does not give them): |.|_1 and the sums of Eq. 3 are summe
 averaged over the batch (as written); the BCEs are means over markers / points (the usual L_bce).
 `multitask=False` gives the paper's WholeGrasp-single baseline (App. B.1, Fig. S3b): markers only.
 
-Marker normalisation (graspkit's choice): the networks see and emit standardised markers whose height is measured
-from the floor, M + (0, 0, t_O), while the losses, inputs and outputs stay object-centred as A.3. Without it the
-decoder learned one body height for every t_O (the posterior carried the body's height, so prior samples put the feet
-up to 0.6 m under or above the floor; measured on the first shipped checkpoint). `floor_frame=False` is the plain
+Marker normalisation (graspkit's choice): the networks see and emit standardised markers whose mean depends
+linearly on the object height, M = mean + slope (t_O - mean t_O) + std * (network units), the slope fitted per marker
+coordinate by least squares on the training grasps (feet come out near -1: they stay on the floor; the hand near 0:
+it stays at the object). The losses, inputs and outputs stay object-centred as A.3. Without it the decoder learned
+one body for every t_O (the posterior carried the body's height and the decoder ignored t_O, so prior samples put
+the feet up to 0.6 m under or above the floor; measured on the first shipped checkpoint); with the opposite fix,
+markers measured from the floor, the hand drifted 10-35 cm off the object instead. `height_slope=False` is the plain
 object-centred standardisation (checkpoints written before this option load with it).
 """
 from __future__ import annotations
@@ -65,7 +68,7 @@ class WholeGraspConfig:
     lambda_o: float = 1.0             # A.4: lambda_O of Eq. 1
     lambda_c: float = 1.0             # A.4: lambda_c
     kl_final: float = 0.2             # A.4: 0.005 e at SAGA's last epoch e = 40
-    floor_frame: bool = True          # standardise markers with their height above the floor (module docstring)
+    height_slope: bool = True         # marker means linear in t_O (module docstring: marker normalisation)
 
 
 @dataclass
@@ -136,6 +139,8 @@ class WholeGraspVAE(nn.Module):
         # emit standardised markers, the losses are in metres
         self.register_buffer("marker_mean", torch.zeros(n, 3))
         self.register_buffer("marker_std", torch.ones(3))
+        self.register_buffer("marker_slope", torch.zeros(n, 3))   # d mean / d t_O (height_slope)
+        self.register_buffer("height_mean", torch.zeros(1))
         nn.init.zeros_(self.out_markers.weight)           # training starts from the mean grasp
         nn.init.zeros_(self.out_markers.bias)
         if mt:
@@ -148,16 +153,22 @@ class WholeGraspVAE(nn.Module):
             self.out_object_contact = nn.Linear(64, 1)
 
     def fit_normalisation(self, markers: Tensor, height: Tensor | None = None) -> None:
-        """Set the marker statistics from training markers (B, N, 3) and their object heights (B, 1)."""
-        if height is not None:
-            markers = markers + self._lift(height)
-        self.marker_mean.copy_(markers.mean(0))
-        self.marker_std.copy_((markers - markers.mean(0)).std(dim=(0, 1)).clamp_min(1e-3))
+        """Set the marker statistics from training markers (B, N, 3) and their object heights (B, 1): the mean, the
+        least-squares slope on t_O (with `height_slope`) and one residual std per axis."""
+        mean = markers.mean(0)
+        if height is not None and self.cfg.height_slope:
+            h = height.reshape(-1, 1, 1).to(markers.dtype)
+            hc = h - h.mean()
+            self.height_mean.copy_(h.mean().reshape(1))
+            self.marker_slope.copy_((hc * (markers - mean)).sum(0) / hc.pow(2).sum().clamp_min(1e-8))
+        self.marker_mean.copy_(mean)
+        self.marker_std.copy_((markers - mean - self._offset(height)).std(dim=(0, 1)).clamp_min(1e-3))
 
-    def _lift(self, height: Tensor) -> Tensor:
-        """(B, 1, 3) offset from object-centred to floor-referenced markers: (0, 0, t_O), or 0 without floor_frame."""
-        h = height.reshape(-1, 1, 1)
-        return torch.cat([torch.zeros_like(h), torch.zeros_like(h), h], -1) * float(self.cfg.floor_frame)
+    def _offset(self, height: Tensor | None) -> Tensor:
+        """(B, N, 3) height-dependent part of the marker mean, slope (t_O - mean t_O); 0 without height_slope."""
+        if height is None or not self.cfg.height_slope:
+            return torch.zeros_like(self.marker_mean)
+        return self.marker_slope * (height.reshape(-1, 1, 1) - self.height_mean)
 
     # ------------------------------------------------------------------ pieces
     @staticmethod
@@ -195,7 +206,7 @@ class WholeGraspVAE(nn.Module):
         """q(z | M, C_M, C_O, t_O, O): markers (B,N,3), contacts (B,N), (B,P), points/normals (B,P,3), height (B,1)
         -> mean, log-variance (B, latent)."""
         B = markers.shape[0]
-        body = ((markers + self._lift(height) - self.marker_mean) / self.marker_std).reshape(B, -1)
+        body = ((markers - self._offset(height) - self.marker_mean) / self.marker_std).reshape(B, -1)
         feat = normals
         if self.cfg.multitask:
             body = torch.cat([body, marker_contact], -1)
@@ -213,7 +224,7 @@ class WholeGraspVAE(nn.Module):
         f_o = self.obj_dec_proj(lv.global_feature)
         h = self.dec(torch.cat([z, f_o, height], -1))
         out = {"markers": self.out_markers(h).view(B, self.cfg.n_markers, 3) * self.marker_std + self.marker_mean
-                          - self._lift(height)}
+                          + self._offset(height)}
         if self.cfg.multitask:
             out["marker_contact"] = torch.sigmoid(self.out_marker_contact(h))
             g = self.global_proj(torch.cat([f_o, h], -1)).unsqueeze(1)          # (B, 1, 128)
@@ -320,8 +331,11 @@ class WholeGraspVAE(nn.Module):
             cfg = state["extra"]["model_config"]
         if cfg is None or "latent" not in cfg:
             raise ValueError("state: no WholeGrasp config in it (expected key 'config' or extra['model_config'])")
-        model = cls(WholeGraspConfig(**{"floor_frame": False, **cfg}))   # older checkpoints: object-centred
-        model.load_state_dict(dequantize_state(state["model"]))
+        model = cls(WholeGraspConfig(**{"height_slope": False, **cfg}))   # older checkpoints: object-centred
+        weights = dequantize_state(state["model"])
+        for k, v in (("marker_slope", model.marker_slope), ("height_mean", model.height_mean)):
+            weights.setdefault(k, v)                                       # absent from older checkpoints
+        model.load_state_dict(weights)
         model.eval()
         return model
 
@@ -471,7 +485,7 @@ def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask:
     val = WholeGraspTrainingSet.from_folder(root, "val", model)
     h = train.data["height"]
     model.fit_normalisation(yaw_spread(train.data["markers"]) if train.augment_yaw else train.data["markers"],
-                            h.repeat(8, 1) if train.augment_yaw else h)
+                            h.repeat(8, 1) if train.augment_yaw else h)     # yaw_spread stacks 8 turns of the set
     prep = time.perf_counter() - t0
 
     def step(m: nn.Module, batch: dict[str, Tensor], epoch: int) -> dict[str, Tensor]:
