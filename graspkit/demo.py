@@ -4,7 +4,8 @@ Stages (each writes stills, animations (GIF), AMASS-style npz and GLB exports of
 - body: the procedural humanoid in several poses and shapes;
 - planner: the procedural approach-and-grasp clip (the synthetic ground truth) for the mug;
 - saga: SAGA stage 1 (WholeGrasp-VAE sample + GraspPose-Opt, Sec. 3.2, Alg. 1) on the same mug placement;
-- saga_motion: SAGA stage 2 (MotionFill-VAE sample + GraspMotion-Opt, Sec. 3.3, Alg. 2) into the clip's grasp;
+- saga_motion: SAGA end to end (graspkit.saga.synthesize): object -> WholeGrasp-VAE + GraspPose-Opt -> MotionFill-VAE
+  + GraspMotion-Opt (Sec. 3.2-3.4, Alg. 1-2), a standing start walking into the sampled grasp;
 - goal: GOAL (GNet grasp + refinement, then MNet's autoregressive approach, Sec. 3.1-3.5) from the clip's start;
 - wandr: WANDR reaching a goal in 4 s from a held-out start pose (Sec. 3.2-3.5).
 A method whose shipped checkpoint is missing is skipped with a message naming the file.
@@ -176,16 +177,18 @@ def saga_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int, int] = (100,
 
 def saga_motion_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int] = (100, 300)
                       ) -> tuple[list[Path], Panel]:
-    """SAGA stage 2 on the clip's last 2 s: a MotionFill-VAE sample from the start pose to the grasp, fitted by
-    GraspMotion-Opt (Alg. 2); shown in MotionFill's canonical frame (A.3) with the object."""
-    from graspkit.benchmark import motionfill_motions
+    """SAGA end to end (`graspkit.saga.synthesize`) for the clip's object where the clip puts it: a WholeGrasp-VAE
+    grasp fitted by GraspPose-Opt (Alg. 1), then 2 s of MotionFill-VAE motion from a standing start into that grasp,
+    fitted by GraspMotion-Opt (Alg. 2); in the world."""
+    from graspkit.objects.placement import ObjectPose
+    from graspkit.saga import synthesize
 
     seq, _ = _test_clip()
-    files = sorted((DATA_STUBS / "approach").glob("approach_*.npz"))
-    path = next(f for f in files if str(np.load(f, allow_pickle=False)["obj_name"]) == seq.object_name)
-    motions, scenes = motionfill_motions([path], CHECKPOINTS, steps)
-    return _write_clip(bm, motions[0], out_dir, "saga_motion", {seq.object_name: scenes[0]["mesh"]},
-                       "SAGA: MotionFill + GraspMotion-Opt")
+    pose = ObjectPose(seq.object_transl[0].astype(np.float64), seq.object_rotation()[0])
+    r = synthesize(seq.object_name, bm, object_pose=pose, seed=0, motion_steps=steps, checkpoints=CHECKPOINTS,
+                   progress=False)
+    return _write_clip(bm, r.motion, out_dir, "saga_motion", {seq.object_name: r.mesh},
+                       "SAGA: object -> grasp -> motion")
 
 
 def goal_stage(bm: BodyModel, out_dir: Path) -> tuple[list[Path], Panel]:

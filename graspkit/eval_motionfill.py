@@ -412,7 +412,8 @@ def table(rows: dict[str, dict[str, float]]) -> str:
              "|---|---|---|---|---|---|---|"]
     for k, r in rows.items():
         ref = PAPER.get(paper_of.get(k) or "", None)
-        lines.append(f"| {k} | {r['ADE']:.3f} | {r['skating']:.3f} | {r['PSKL (P, GT)']:.3f} | {r['PSKL (GT, P)']:.3f} "
+        label = f"{k} (our extra)" if k.startswith("Linear") else k       # not in the paper's table
+        lines.append(f"| {label} | {r['ADE']:.3f} | {r['skating']:.3f} | {r['PSKL (P, GT)']:.3f} | {r['PSKL (GT, P)']:.3f} "
                      f"| {r['APD']:.3f} | {' / '.join(f'{x:.3f}' for x in ref) if ref else '—'} |")
     for k in ("CNN-AE (local)", "LEMO (local)", "PoseNet (local)", "Route+PoseNet"):
         if k in rows:                      # measured above (evaluate(..., baselines=...))

@@ -1,0 +1,181 @@
+"""SAGA end to end (`../shared/papers/SAGA.txt` §3, Fig. 2): an object in, an approach-and-grasp motion out, one call.
+
+    object -> WholeGrasp-VAE sample (§3.2) -> GraspPose-Opt (Alg. 1) -> the grasp body
+    start pose + grasp body -> MotionFill-VAE sample (§3.3) -> GraspMotion-Opt (Alg. 2) -> 61 frames (2 s, 30 fps)
+
+`synthesize("mug")` runs it for any catalogue object with the shipped checkpoints. The object is placed as the grasp
+generator places it (`graspkit.objects.placement.sample_object_pose`, seeded) unless a pose is given; the start is a
+standing body (the procedural planner's first frame) `start_distance` metres from the grasp, facing the object,
+unless a `Start` is given. Everything is returned in the world frame (z up, floor z = 0).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from graspkit.data.motion import Motion
+from graspkit.data.reaching import Start
+from graspkit.objects.placement import ObjectPose
+
+CHECKPOINTS = Path(__file__).resolve().parent.parent / "data_stubs" / "checkpoints"
+
+
+@dataclass
+class SagaResult:
+    """The grasp (object frame moved to the world), the motion (world), the sampled markers and the figures."""
+
+    name: str
+    object_pose: ObjectPose
+    mesh: Any                        # trimesh.Trimesh in the world
+    grasp: Any                       # GraspPoseResult in the world (the WholeGrasp sample after Alg. 1)
+    motion: Motion                   # 61 frames, world, absolute hand poses
+    start: Motion                    # the start body (1 frame)
+    markers: torch.Tensor            # MotionFill's sampled markers (61, 79, 3), world
+    foot_contact: torch.Tensor       # MotionFill's foot-contact probabilities (61, 4)
+    metrics: dict[str, float]        # grasp figures of the grasp body and of the motion's last frame, skating
+
+
+def rigid_params(poses: np.ndarray, transl: np.ndarray, betas: np.ndarray, R: np.ndarray, o: np.ndarray, bm
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """SMPL-X poses (T,55,3) and transl (T,3) of bodies moved by x -> R x + o: the global rotation turns about the
+    rest pelvis J0 (which depends on betas), so transl' = R (J0 + t) + o - J0."""
+    from graspkit.rotations import axis_angle_to_matrix
+
+    with torch.no_grad():
+        J0 = bm(betas=torch.as_tensor(betas, dtype=torch.float32).reshape(1, -1)).joints[0, 0].double().numpy()
+    g = axis_angle_to_matrix(torch.as_tensor(poses[:, 0], dtype=torch.float64)).numpy()
+    out = np.array(poses, np.float64, copy=True)
+    out[:, 0] = matrix_axis(R[None] @ g)
+    return out, (np.asarray(transl, np.float64) + J0) @ R.T + o - J0
+
+
+def matrix_axis(R: np.ndarray) -> np.ndarray:
+    """Axis-angle (...,3) of rotation matrices (...,3,3)."""
+    from graspkit.rotations import matrix_to_axis_angle
+
+    return matrix_to_axis_angle(torch.as_tensor(R, dtype=torch.float64)).numpy()
+
+
+def default_start(grasp_transl: np.ndarray, grasp_pelvis: np.ndarray, centre: np.ndarray, betas: np.ndarray,
+                  distance: float, bm, seed: int = 0) -> Motion:
+    """A standing body (the procedural planner's first frame) `distance` m from the grasp pelvis, on the side away
+    from the object centre, facing it."""
+    from graspkit.data.reaching import plan_reach
+
+    d = np.asarray(grasp_pelvis, np.float64)[:2] - np.asarray(centre, np.float64)[:2]
+    n = np.linalg.norm(d)
+    d = d / n if n > 1e-6 else np.array([1.0, 0.0])
+    xy = np.asarray(grasp_pelvis, np.float64)[:2] + distance * d
+    heading = float(np.arctan2(-d[1], -d[0]))
+    plan = plan_reach(Start(float(xy[0]), float(xy[1]), heading), centre, 60, betas=betas, seed=seed, bm=bm)
+    return plan.slice(0, 1)
+
+
+def synthesize(name: str, bm=None, object_pose: ObjectPose | None = None, start: Start | Motion | None = None,
+               seed: int = 0, start_distance: float = 0.4, grasp_steps: tuple[int, int, int] = (300, 400, 500),
+               motion_steps: tuple[int, int] = (100, 300), checkpoints: str | Path = CHECKPOINTS,
+               progress: bool = True) -> SagaResult:
+    """SAGA for catalogue object `name`: one grasp and one 2-s approach motion into it (Fig. 2), seeded.
+
+    object_pose: where the object is (default: drawn by `sample_object_pose(seed)` in front of the origin);
+    start: a Start (x, y, heading: a standing body there) or a one-frame Motion (any body) or None (see module doc).
+    """
+    from graspkit.body import BodyModel
+    from graspkit.data.grasp import object_points
+    from graspkit.data.grasp_io import cached_sdf_grid
+    from graspkit.data.motion import canonicalize
+    from graspkit.data.motionfill_dataset import make_windows
+    from graspkit.eval_motionfill import heel_columns, interp, load_motionfill, skating
+    from graspkit.metrics import grasp_metrics
+    from graspkit.models.pose_prior import load_pose_prior
+    from graspkit.models.wholegrasp import load_wholegrasp
+    from graspkit.objects.catalogue import list_objects, make_object
+    from graspkit.objects.placement import sample_object_pose
+    from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, load_smooth_ae
+    from graspkit.optim.grasppose import GraspObject, GraspPoseConfig, GraspPoseOpt
+    from graspkit.paths import default_model_path
+
+    if name not in list_objects():
+        raise ValueError(f"name: unknown object {name!r}; valid names are {list_objects()}")
+    if start_distance <= 0:
+        raise ValueError(f"start_distance: expected a positive distance in metres, got {start_distance}")
+    ck = Path(checkpoints)
+    for f in ("wholegrasp.pt", "pose_prior.pt", "motionfill.pt", "motionfill_smooth_ae.pt"):
+        if not (ck / f).is_file():
+            raise FileNotFoundError(f"checkpoints: {ck / f} is missing (see docs/saga.md and docs/saga_motion.md)")
+    bm = bm if bm is not None else BodyModel.from_file(default_model_path())
+    rng = np.random.default_rng(seed)
+    pose = object_pose if object_pose is not None else sample_object_pose(rng, height_range=(0.6, 1.2),
+                                                                          distance_range=(0.5, 0.8))
+    R_o, centre = np.asarray(pose.rotation, np.float64), np.asarray(pose.translation, np.float64)
+    pts, nrm = object_points(name)
+    R_t = torch.as_tensor(R_o).float()
+    P, N = torch.as_tensor(pts).float() @ R_t.T, torch.as_tensor(nrm).float() @ R_t.T   # object frame (world axes)
+    g = torch.Generator().manual_seed(seed)
+
+    # stage 1: WholeGrasp-VAE + GraspPose-Opt (object frame), then into the world
+    wg = load_wholegrasp(ck / "wholegrasp.pt")
+    prior = load_pose_prior(ck / "pose_prior.pt")
+    s = wg.sample(P, N, float(centre[2]), 1, g, centre=torch.zeros(3))
+    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=grasp_steps))
+    res = opt.fit(s.markers, GraspObject(P, N, float(centre[2]), cached_sdf_grid(name), R_t), s.marker_contact,
+                  s.object_contact, progress=progress).to_world(torch.as_tensor(centre).float())
+    mesh = make_object(name)
+    mesh.vertices = np.asarray(mesh.vertices) @ R_o.T + centre
+    pr = res.params
+    gpose = torch.cat([pr["global_orient"][:, None], pr["body_pose"].view(1, 21, 3), pr["jaw_pose"][:, None],
+                       pr["leye_pose"][:, None], pr["reye_pose"][:, None], pr["left_hand_pose"].view(1, 15, 3),
+                       pr["right_hand_pose"].view(1, 15, 3)], 1)[0].detach().double().numpy()
+    gtransl, betas = pr["transl"][0].detach().double().numpy(), pr["betas"][0].detach().double().numpy()
+    grasp_body = Motion(gpose[None], gtransl[None], betas, 30.0)
+
+    # the start body
+    if start is None or isinstance(start, Start):
+        pelvis = grasp_body.joint_positions(bm)[0, 0]
+        if isinstance(start, Start):
+            from graspkit.data.reaching import plan_reach
+
+            st = plan_reach(start, centre, 60, betas=betas, seed=seed, bm=bm).slice(0, 1)
+        else:
+            st = default_start(gtransl, pelvis, centre, betas, start_distance, bm, seed)
+    elif isinstance(start, Motion):
+        st = start.slice(0, 1)
+    else:
+        raise ValueError(f"start: expected a Start, a one-frame Motion or None, got {type(start).__name__}")
+    st = Motion(st.poses, st.trans, betas, 30.0)         # the grasp's shape: beta is fixed in GraspMotion-Opt
+
+    # stage 2: the window from the start (frame 0) to the grasp (frame T); only those two frames are known
+    T = 60
+    clip = Motion(np.concatenate([st.poses[:1], np.repeat(gpose[None], T, 0)]),
+                  np.concatenate([st.trans[:1], np.repeat(gtransl[None], T, 0)]), betas, 30.0)
+    win = make_windows([clip], bm, align_end=True, progress=False)
+    j = clip.joint_positions(bm)
+    R_c, o_c = canonicalize(np.concatenate([j, j[-1:]]))
+    mf = load_motionfill(ck / "motionfill.pt")
+    smp = mf.sample(torch.as_tensor(interp(win["traj"][0])).float(), torch.as_tensor(win["local"][0]),
+                    torch.as_tensor(win["contacts"][0]).float(), 1, g)
+    to_c = lambda x: (np.asarray(x, np.float64) - o_c) @ R_c.T  # noqa: E731
+    obj = GraspObject(torch.as_tensor(to_c(P.double().numpy() + centre)).float()[None],
+                      torch.as_tensor(N.double().numpy() @ R_c.T).float()[None], 0.0)
+    mopt = GraspMotionOpt(bm, prior, load_smooth_ae(ck / "motionfill_smooth_ae.pt"), GraspMotionConfig(steps=motion_steps))
+    mres = mopt.fit(smp["markers"], torch.as_tensor(betas[None, :10]).float(), smp["contacts"], obj,
+                    s.object_contact.float(), progress=progress)
+    poses_w, transl_w = rigid_params(mres.params["poses"][0].view(-1, 55, 3).double().numpy(),
+                                     mres.params["transl"][0].double().numpy(), betas, R_c.T, o_c, bm)
+    motion = Motion(poses_w, transl_w, betas, 30.0)
+    markers_w = torch.as_tensor(smp["markers"][0].double().numpy() @ R_c + o_c).float()
+
+    # figures: the grasp body and the motion's last frame against the object; SAGA's skating of the fitted markers
+    last = motion.vertices(bm, T, T + 1)[0]
+    gm, lm = grasp_metrics(res.vertices[0], bm.faces, mesh), grasp_metrics(last, bm.faces, mesh)
+    fitted = mres.markers[0].double().numpy() @ R_c + o_c
+    heels = heel_columns()
+    metrics = {"grasp_contact": gm["contact"], "grasp_volume_cm3": gm["volume_cm3"], "grasp_depth_cm": gm["depth_cm"],
+               "end_contact": lm["contact"], "end_volume_cm3": lm["volume_cm3"], "end_depth_cm": lm["depth_cm"],
+               "skating_sample": skating(markers_w.double().numpy()[None], np.zeros(1), heels),
+               "skating_opt": skating(fitted[None], np.zeros(1), heels)}
+    return SagaResult(name, pose, mesh, res, motion, st, markers_w, smp["contacts"][0], metrics)

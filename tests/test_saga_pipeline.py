@@ -1,0 +1,60 @@
+"""SAGA end to end (graspkit.saga): the world-frame conversion against moved vertices, and one call from a new object
+to an approach-and-grasp motion, checked with trimesh against the object and the floor."""
+import numpy as np
+import pytest
+import torch
+
+from graspkit.data.motion import Motion
+from graspkit.saga import rigid_params, synthesize
+
+
+def test_rigid_params_equals_moving_every_vertex(bm):
+    """Parameters moved by x -> R x + o give the vertices R v + o (the global rotation turns about the rest pelvis)."""
+    g = torch.Generator().manual_seed(0)
+    poses = (torch.randn(3, 55, 3, generator=g) * 0.3).double().numpy()
+    transl = torch.randn(3, 3, generator=g).double().numpy()
+    betas = (torch.randn(10, generator=g) * 0.8).double().numpy()
+    a = 0.7
+    R = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+    R = R @ np.array([[1.0, 0.0, 0.0], [0.0, np.cos(0.3), -np.sin(0.3)], [0.0, np.sin(0.3), np.cos(0.3)]])
+    o = np.array([0.4, -1.2, 0.25])
+    p2, t2 = rigid_params(poses, transl, betas, R, o, bm)
+    v1 = Motion(poses, transl, betas, 30.0).vertices(bm).double().numpy()
+    v2 = Motion(p2, t2, betas, 30.0).vertices(bm).double().numpy()
+    np.testing.assert_allclose(v2, v1 @ R.T + o, atol=1e-4)
+
+
+def test_one_call_from_a_new_object_to_a_motion_that_ends_in_the_grasp(bm):
+    """synthesize(): WholeGrasp-VAE -> GraspPose-Opt -> MotionFill-VAE -> GraspMotion-Opt for a held-out object at a
+    placement of our choosing; the motion starts at the start body, ends with the right hand on the object (trimesh
+    distance), stays on the floor, and the same seed gives the same motion."""
+    import trimesh
+
+    from graspkit.objects.placement import ObjectPose
+    from graspkit.body.markers import palm_vertices
+
+    pose = ObjectPose.from_yaw(0.8, np.array([0.3, -0.6, 0.85]))
+    kw = dict(object_pose=pose, seed=3, grasp_steps=(100, 120, 150), motion_steps=(60, 80), progress=False)
+    r = synthesize("camera", bm, **kw)
+    assert r.motion.num_frames == 61 and r.markers.shape == (61, 79, 3) and r.foot_contact.shape == (61, 4)
+    np.testing.assert_allclose(np.asarray(r.mesh.vertices).mean(0), pose.translation, atol=0.05)
+    v = r.motion.vertices(bm)
+    v0 = r.start.vertices(bm)[0]
+    assert float((v[0] - v0).norm(dim=-1).mean()) < 0.12            # starts at the start body (fitted to markers)
+    palm = torch.as_tensor(palm_vertices(bm)["right"])
+    d = trimesh.proximity.ProximityQuery(r.mesh).signed_distance(v[-1, palm].double().numpy())
+    assert np.abs(d).min() < 0.03                                     # the right palm on the object at the end
+    feet = v[:, :, 2].min(1).values
+    assert feet.abs().max() < 0.08                                    # the body stays on the floor (z = 0)
+    assert set(r.metrics) >= {"grasp_contact", "end_contact", "end_volume_cm3", "skating_opt"}
+    again = synthesize("camera", bm, **kw)
+    np.testing.assert_array_equal(again.motion.poses, r.motion.poses)
+    with pytest.raises(ValueError, match="name"):
+        synthesize("teapot", bm)
+
+
+def test_saga_command_names_a_bad_object(capsys):
+    from graspkit.cli import main
+
+    assert main(["saga", "--object", "teapot", "--out", "unused"]) == 2
+    assert "name: unknown object 'teapot'" in capsys.readouterr().err
