@@ -43,25 +43,18 @@ def rigid_params(poses: np.ndarray, transl: np.ndarray, betas: np.ndarray, R: np
                  ) -> tuple[np.ndarray, np.ndarray]:
     """SMPL-X poses (T,55,3) and transl (T,3) of bodies moved by x -> R x + o: the global rotation turns about the
     rest pelvis J0 (which depends on betas), so transl' = R (J0 + t) + o - J0."""
-    from graspkit.rotations import axis_angle_to_matrix
+    from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 
     with torch.no_grad():
         J0 = bm(betas=torch.as_tensor(betas, dtype=torch.float32).reshape(1, -1)).joints[0, 0].double().numpy()
     g = axis_angle_to_matrix(torch.as_tensor(poses[:, 0], dtype=torch.float64)).numpy()
     out = np.array(poses, np.float64, copy=True)
-    out[:, 0] = matrix_axis(R[None] @ g)
+    out[:, 0] = matrix_to_axis_angle(torch.as_tensor(R[None] @ g)).numpy()
     return out, (np.asarray(transl, np.float64) + J0) @ R.T + o - J0
 
 
-def matrix_axis(R: np.ndarray) -> np.ndarray:
-    """Axis-angle (...,3) of rotation matrices (...,3,3)."""
-    from graspkit.rotations import matrix_to_axis_angle
-
-    return matrix_to_axis_angle(torch.as_tensor(R, dtype=torch.float64)).numpy()
-
-
-def default_start(grasp_transl: np.ndarray, grasp_pelvis: np.ndarray, centre: np.ndarray, betas: np.ndarray,
-                  distance: float, bm, seed: int = 0) -> Motion:
+def default_start(grasp_pelvis: np.ndarray, centre: np.ndarray, betas: np.ndarray, distance: float, bm,
+                  seed: int = 0) -> Motion:
     """A standing body (the procedural planner's first frame) `distance` m from the grasp pelvis, on the side away
     from the object centre, facing it."""
     from graspkit.data.reaching import plan_reach
@@ -141,7 +134,7 @@ def synthesize(name: str, bm=None, object_pose: ObjectPose | None = None, start:
 
             st = plan_reach(start, centre, 60, betas=betas, seed=seed, bm=bm).slice(0, 1)
         else:
-            st = default_start(gtransl, pelvis, centre, betas, start_distance, bm, seed)
+            st = default_start(pelvis, centre, betas, start_distance, bm, seed)
     elif isinstance(start, Motion):
         st = start.slice(0, 1)
     else:

@@ -197,11 +197,14 @@ print("validation:", {k: round(v, 3) for k, v in ck["val"].items()})
 # the mechanics and the loss going down).
 
 # %%
+# NBVAL_IGNORE_OUTPUT
+# (the printed losses vary in the last digits between CPUs; the assert below is what the tests check)
 fresh = WholeGraspVAE()
 fresh.fit_normalisation(batch["markers"], batch["height"])      # mean, slope on t_O, residual std
 hist = fit(fresh, lambda mdl, b, e: mdl.loss(b, mdl(b), e, 3), batch_set, TrainConfig(epochs=3, batch_size=8, lr=1e-3),
            progress=False)
 print([round(h["loss"], 2) for h in hist])
+assert hist[-1]["loss"] < hist[0]["loss"]
 
 # %% [markdown]
 # ## 5 · Grasps for an unseen object (Fig. 5 and Fig. 3 style)
@@ -247,6 +250,8 @@ fig.tight_layout()
 # samples** to stay within a minute (the evaluation below uses the paper's schedule).
 
 # %%
+# NBVAL_IGNORE_OUTPUT
+# (an optimisation's energies vary in the last digits between CPUs; the asserts below are what the tests check)
 prior = load_pose_prior()
 opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(100, 150, 150)))
 sdf = cached_sdf_grid("mug")                                   # the mug's signed-distance grid (shipped)
@@ -257,6 +262,9 @@ rows = energies_table(res)
 print(f"{'stage':>5} {'term':16s} {'before':>10} {'after':>10}")
 for r in rows:
     print(f"{r['stage']:>5} {r['term']:16s} {r['before']:10.4f} {r['after']:10.4f}")
+by = {(r["stage"], r["term"]): r for r in rows}
+assert by[(2, "fit")]["after"] < 0.5 * by[(1, "fit")]["before"]                   # the markers are fitted
+assert by[(3, "colli_object")]["after"] < by[(3, "colli_object")]["before"]       # stage 3 pushes the hand out
 
 # %%
 fig, ax = plt.subplots(figsize=(9, 3.2))

@@ -189,6 +189,8 @@ print("| mean | " + " | ".join(f"{np.mean([r[k] for r in ev['graspmotion']['rows
 # it takes about 45 s on one core (`graspkit saga --object wine_glass` writes GIF, npz and GLB); here with fewer steps.
 
 # %%
+# NBVAL_IGNORE_OUTPUT
+# (optimisation figures vary in the last digits between CPUs; the asserts below are what the tests check)
 from graspkit.objects.placement import ObjectPose
 from graspkit.saga import synthesize
 
@@ -198,6 +200,7 @@ print({k: round(v, 3) for k, v in r.metrics.items()})
 v = r.motion.vertices(bm).numpy()
 print(f"lowest vertex over the motion: {v[..., 2].min() * 100:.1f} cm; pelvis travels "
       f"{np.linalg.norm(r.motion.trans[-1, :2] - r.motion.trans[0, :2]):.2f} m")
+assert r.metrics["grasp_contact"] == 1.0 and r.metrics["end_contact"] == 1.0 and v[..., 2].min() > -0.05
 
 # %%
 # NBVAL_IGNORE_OUTPUT

@@ -142,11 +142,14 @@ print(f"mean vertex distance between samples: {100 * spread:.1f} cm")
 # hand has moved so that its true offsets match them.
 
 # %%
+# NBVAL_IGNORE_OUTPUT
+# (an optimisation's energies vary in the last digits between CPUs; the assert below is what the tests check)
 refiner = GraspRefiner(bm, gv)
 ref = refiner(hat, cond["betas"], scene["points"].expand(K, -1, -1))
 print("energy per term (mean over samples), first and last step:")
 for h in ref.history:
     print({k: round(v, 4) for k, v in h.items()})
+assert ref.history[-1]["E"] < ref.history[0]["E"]
 V_ref = grasp_bodies(ref.rot6d, ref.transl, cond["betas"])
 i = 0
 fig = plt.figure(figsize=(9, 4))

@@ -61,8 +61,9 @@ q, back = p[0], [p[0]]
 for k in range(len(d)):                       # integrate the deltas from the first pose
     q = I.integrate_delta(q, d[k])
     back.append(q)
-print(f"p {tuple(p.shape)}, d {tuple(d.shape)}; integrating every delta gives the clip back to "
-      f"{(torch.stack(back) - p).abs().max():.1e}")
+err = float((torch.stack(back) - p).abs().max())
+print(f"p {tuple(p.shape)}, d {tuple(d.shape)}; integrating every delta gives the clip back to within 1e-6: "
+      f"{err < 1e-6}")
 
 # the same walk turned by 90 degrees about z and moved elsewhere
 t, R = I.pose_rotmats(p)
@@ -71,7 +72,8 @@ J0 = W.rest_joints(bm, walk.betas[None])[0, 0]
 R2 = R.clone()
 R2[:, 0] = Rz @ R[:, 0]
 p2 = I.pose_from_rotmats((Rz @ (t + J0).unsqueeze(-1)).squeeze(-1) + torch.tensor([3.0, -2.0, 0.0]) - J0, R2)
-print(f"turned walk: poses differ by up to {(p2 - p).abs().max():.2f}, deltas by {(I.poses_to_deltas(p2) - d).abs().max():.1e}")
+print(f"turned walk: poses differ by up to {(p2 - p).abs().max():.2f}; deltas equal within 1e-5: "
+      f"{bool((I.poses_to_deltas(p2) - d).abs().max() < 1e-5)}")
 print(f"forward step per frame (d^t_x): mean {100 * d[:, 0].mean():.2f} cm -> {30 * d[:, 0].mean():.2f} m/s")
 
 # %% [markdown]
@@ -197,6 +199,8 @@ fig.tight_layout()
 # trained with `graspkit train wandr` on 2,000 + 2,000 generated clips; see `docs/wandr.md`).
 
 # %%
+# NBVAL_IGNORE_OUTPUT
+# (the losses vary in the last digits between CPUs; the assert below is what the tests check)
 torch.manual_seed(0)                          # initial weights and dropout masks
 small = M.WandrCVAE(M.WandrConfig(hidden=64, dec_layers=2, enc_layers=2, latent=8),
                     W.compute_stats(clips, samples=2000)).train()
@@ -210,6 +214,8 @@ for it in range(31):
     opt.step()
     if it % 10 == 0:
         print(f"step {it:2d}: L_rec {out['rec']:6.2f}   KL {out['kl']:5.2f}   L_J {out['joint_cm2']:6.2f} cm^2")
+        first = first if it else float(out["rec"])
+assert float(out["rec"]) < first
 
 # %% [markdown]
 # ## 5 · The shipped model
