@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 from functools import lru_cache
+from itertools import zip_longest
 
 import numpy as np
 import torch
@@ -505,6 +506,51 @@ def clip_sliding(clips: list, until_goal: bool = True) -> float:
     return slide / max(pairs, 1)
 
 
+def saga_sliding(seqs: list, seed: int = 0, progress: bool = False, **saga_kwargs) -> dict:
+    """SAGA's motions (graspkit.saga.synthesize: WholeGrasp + GraspPose-Opt, MotionFill + GraspMotion-Opt) for GRAB-style
+    approach sequences: each sequence's object where it stands and its first frame as the start body; GOAL's foot
+    sliding over the 61 frames, and the end grasp's contact. Returns the pooled sliding, per-sequence figures and the
+    SagaResults ('results'); saga_kwargs go to synthesize (e.g. fewer optimiser steps)."""
+    from graspkit.data.motion import Motion
+    from graspkit.objects.placement import ObjectPose
+    from graspkit.rotations import axis_angle_to_rot6d
+    from graspkit.saga import synthesize
+
+    from graspkit.body import BodyModel
+    from graspkit.paths import default_model_path
+
+    bm, _, _ = _body()                                   # flat hand mean: SAGA's motions carry absolute hand poses
+    saga_bm = BodyModel.from_file(default_model_path())  # GraspPose-Opt's hand PCA is about the mean hand
+    per, results, slide, pairs = [], [], 0, 0
+    for k, sq in enumerate(seqs):
+        pose = ObjectPose(np.asarray(sq.object_transl[0], np.float64), np.asarray(sq.object_rotation()[0], np.float64))
+        start = Motion(np.asarray(sq.poses[:1], np.float64), np.asarray(sq.trans[:1], np.float64),
+                       np.asarray(sq.betas[:10], np.float64), 30.0)
+        r = synthesize(sq.object_name, saga_bm, pose, start, seed=seed + k, progress=progress, **saga_kwargs)
+        m = r.motion
+        results.append(r)
+        v = full_vertices(bm, axis_angle_to_rot6d(torch.as_tensor(m.poses)).float(), torch.as_tensor(m.trans).float(),
+                          torch.as_tensor(m.betas[:10]).float())
+        n_s, n = sliding(v)
+        slide, pairs = slide + n_s, pairs + n
+        per.append({"object": sq.object_name, "frames": m.num_frames, "sliding": n_s / max(n, 1),
+                    "end_contact": r.metrics["end_contact"], "end_volume_cm3": r.metrics["end_volume_cm3"]})
+    return {"sliding": slide / max(pairs, 1), "per_clip": per, "results": results,
+            "end_contact": float(np.mean([p["end_contact"] for p in per])) if per else float("nan")}
+
+
+def rollout_sequences(folders, n_rollouts: int) -> list:
+    """The test approach sequences of the rollout evaluation: accepted, starting 0.5-1.5 m from the object, n of them
+    taken in turn from each test object (file order within an object)."""
+    seqs = [s for s in _all_files(folders, "approach", "test") if bool(s.extras.get("grasp.accepted", True))]
+    keep = [s for s, c in zip(seqs, approach_clips(seqs)) if 0.5 <= start_distance(c) <= 1.5]
+    by_object: dict[str, list] = {}
+    for s in keep:
+        by_object.setdefault(s.object_name, []).append(s)
+    turns = [s for group in zip_longest(*by_object.values()) for s in group if s is not None]
+    return turns[:n_rollouts]
+
+
 # ------------------------------------------------------------------------------------------- the whole evaluation
 
 def start_distance(clip) -> float:
@@ -558,9 +604,8 @@ def evaluate(folders=None, stubs=None, n_grasps: int = 60, n_rollouts: int = 24,
     res["tab2_seconds"] = time.perf_counter() - t1
     # rollouts: from the test clips' starts (0.5-1.5 m from the object) to the true goal grasp and to GNet's grasp
     t2 = time.perf_counter()
-    clips = [c for c in approach_clips([s for s in _all_files(folders, "approach", "test")
-                                        if bool(s.extras.get("grasp.accepted", True))])
-             if 0.5 <= start_distance(c) <= 1.5][:n_rollouts]
+    seqs = rollout_sequences(folders, n_rollouts)
+    clips = approach_clips(seqs)
     mnet = load_mnet(stubs / "mnet.pt")
     to_gt = rollout_eval(mnet, clips)
     goals = _gnet_goals(gnet, clips, seed)
@@ -572,10 +617,20 @@ def evaluate(folders=None, stubs=None, n_grasps: int = 60, n_rollouts: int = 24,
                       "synthetic GT (approach frames)": clip_sliding(clips)}
     res["rollout_seconds"] = time.perf_counter() - t2
     out = Path(out or stubs / "goal_eval.json")
-    tmp = out.with_name(out.name + ".tmp")
-    tmp.write_text(json.dumps(res, indent=1, default=float))
-    tmp.replace(out)
+    _write_json(out, res)                          # GOAL's tables first: SAGA's row below takes minutes more
+    _write_json(out, add_saga_rows(res, seqs, seed))
     return res
+
+
+def _write_json(path, obj: dict) -> None:
+    """Write obj as JSON atomically (temporary file, then rename)."""
+    import json
+    from pathlib import Path
+
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(obj, indent=1, default=float))
+    tmp.replace(path)
 
 
 def gnet_goal(gnet, start: tuple[Tensor, Tensor], betas: Tensor, object_points: Tensor, obj_centre: Tensor,
@@ -601,6 +656,17 @@ def gnet_goal(gnet, start: tuple[Tensor, Tensor], betas: Tensor, object_points: 
     return r6[0], t[0], {"hat": hat, "refined": ref, "R": R, "o": o}
 
 
+def add_saga_rows(res: dict, seqs: list, seed: int = 0) -> dict:
+    """Put SAGA's foot sliding on the rollout sequences (`saga_sliding`) into an evaluation result, in place."""
+    import time
+
+    t = time.perf_counter()
+    saga = saga_sliding(seqs, seed)
+    res["sliding"]["SAGA (WholeGrasp + MotionFill, ours)"] = saga["sliding"]
+    res["saga"] = {"per_clip": saga["per_clip"], "end_contact": saga["end_contact"], "seconds": time.perf_counter() - t}
+    return res
+
+
 def _gnet_goals(gnet, clips: list, seed: int) -> list:
     """GNet + refinement grasps (rot6d, transl) in the world for each clip's start, object and body (one sample each)."""
     g = torch.Generator().manual_seed(seed + 1)
@@ -623,8 +689,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--window-stride", type=int, default=5)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--saga-only", action="store_true",
+                   help="add only SAGA's foot-sliding row to an existing JSON (the same rollout sequences)")
     a = p.parse_args(argv)
     torch.set_num_threads(a.threads)
+    if a.saga_only:
+        from graspkit.paths import DATA_STUBS
+
+        out = Path(a.out or Path(a.checkpoints or DATA_STUBS / "checkpoints") / "goal_eval.json")
+        if not out.is_file():
+            raise FileNotFoundError(f"--out: no evaluation at {out} to add SAGA's row to (run without --saga-only)")
+        r = add_saga_rows(json.loads(out.read_text()), rollout_sequences(a.data or default_data_folders(),
+                                                                         a.n_rollouts), a.seed)
+        _write_json(out, r)
+        print(json.dumps({"sliding": r["sliding"], "saga_end_contact": r["saga"]["end_contact"]}, indent=1))
+        return 0
     r = evaluate(a.data, a.checkpoints, a.n_grasps, a.n_rollouts, a.window_stride, a.seed, a.out)
     print(json.dumps({k: r[k] for k in ("tab1", "tab2", "sliding")}, indent=1, default=float))
     return 0

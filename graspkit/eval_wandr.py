@@ -225,6 +225,29 @@ def evaluate_planner(starts: Sequence[I.StartPose], bm, t_goal: int = T_GOAL, se
     return res
 
 
+@torch.no_grad()
+def evaluate_clips(model, clips, seed: int = 0, after_s: float = 1.0) -> dict[str, float]:
+    """The model on held-out reaching clips (a ClipSet of goal clips, e.g. the test split's): from each clip's frames
+    0-1 towards its own goal at its own goal frame (the timing of the data, not the grid's 8 s), all in one batch. SR
+    (%: the wrist within 10 cm at any frame up to `after_s` seconds past t_G), DTG (cm, the closest over the same
+    frames) and the wrist error at t_G (cm)."""
+    from graspkit.models.wandr import rollout
+
+    if len(clips) == 0 or bool((clips.goal_frame < 2).any()):
+        raise ValueError("clips: expected reaching clips, each with a goal frame >= 2")
+    p_prev = torch.stack([clips.clip(c)[0] for c in range(len(clips))])
+    p0 = torch.stack([clips.clip(c)[1] for c in range(len(clips))])
+    tg = clips.goal_frame - 1                        # counted from frame 1, the rollout's frame 0
+    extra = int(round(after_s * I.FPS))
+    out = rollout(model.eval(), p_prev, p0, clips.rest, clips.goal, tg, int(tg.max()) + extra,
+                  generator=torch.Generator().manual_seed(seed))
+    d = (out.joints[:, :, I.WRIST] - clips.goal[:, None]).norm(dim=-1)             # (B, T)
+    d = d.masked_fill(torch.arange(d.shape[1])[None] > (tg + extra)[:, None], float("inf"))
+    dmin = d.min(1).values
+    return {"SR": 100 * float((dmin <= WANDR_SUCCESS_RADIUS).float().mean()), "DTG": 100 * float(dmin.mean()),
+            "error_at_goal": 100 * float(d[torch.arange(len(tg)), tg].mean()), "clips": len(tg)}
+
+
 def summary(res: GridResult) -> dict[str, float]:
     """SR (%), FS (%), DTG (cm, mean), the median DTG (cm), the mean wrist error at t_G (cm), the time to goal (s: the
     first frame within 10 cm, mean over successful motions; nan when none) and the rollout count."""
@@ -294,18 +317,21 @@ def starts_from_meta(meta: dict[str, Any]) -> list[I.StartPose]:
 def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str | None = None, epochs: int = 6,
                     time_limit: float | None = None, seed: int = 0, threads: int = 2, batch_size: int = 512,
                     lr: float = 1e-3, progress: bool = True, max_steps: int = 10, ramp_epochs: int = 4,
-                    stride_scale: int = 1) -> dict[str, Any]:
+                    stride_scale: int = 1, reach_far: bool = False) -> dict[str, Any]:
     """Train one variant on the clips under `folder` (default <cache>/motion) and write a small checkpoint (with the
     normalisation statistics, the held-out start poses of the test split, and the measured times) to `out`.
     max_steps / ramp_epochs: the rollout schedule (Sup. B.2); stride_scale multiplies the window strides (fewer
-    windows per epoch). The resumable training state lives in <cache>/wandr, named by every setting."""
+    windows per epoch); reach_far adds the room-scale reaching clips of <folder>/reach_far (docs/data.md; an
+    experiment, see docs/wandr.md). The resumable training state lives in <cache>/wandr, named by every setting."""
+    import hashlib
     import resource
     import time
     from pathlib import Path
 
     from graspkit.body import BodyModel
     from graspkit.data import load_motion
-    from graspkit.data.wandr_dataset import cached_clips, compute_stats, held_out_starts, split_clips, test_start_names
+    from graspkit.data.wandr_dataset import (FOLDERS, cached_clips, compute_stats, held_out_starts, split_clips,
+                                             test_start_names)
     from graspkit.models.wandr import WandrConfig, WandrCVAE, save_wandr, train_wandr
     from graspkit.paths import DATA_STUBS, cache_dir, default_model_path
     from graspkit.train import TrainConfig
@@ -320,9 +346,9 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     torch.set_num_threads(threads)
     bm = BodyModel.from_file(default_model_path())
     t0 = time.perf_counter()
-    clips = cached_clips(folder, bm)
+    clips = cached_clips(folder, bm, kinds=("locomotion", "reach") + (("reach_far",) if reach_far else ()))
     names = split_clips(clips.names, seed=0)["train"]
-    train = clips.subset([n for n in names if n.split("/")[0] in v["kinds"]])
+    train = clips.subset([n for n in names if FOLDERS.get(n.split("/")[0]) in v["kinds"]])
     stats = compute_stats(train, seed=seed)
     prep_s = time.perf_counter() - t0
     start_names = test_start_names(folder, n=6)
@@ -331,7 +357,9 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     model = WandrCVAE(WandrConfig(intention=v["intention"], max_steps=max_steps, ramp_epochs=ramp_epochs), stats)
     stride = {k: stride_scale * (s // 2 if len(v["kinds"]) == 1 else s) for k, s in STRIDE.items()}   # one kind: same epoch size
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, num_threads=threads)
-    tag = f"e{epochs}_b{batch_size}_lr{lr:g}_m{max_steps}_r{ramp_epochs}_x{stride_scale}"
+    data_key = hashlib.blake2b(f"{train.names}:{int(train.lengths.sum())}:{float(train.p.sum()):.6e}".encode(),
+                               digest_size=4).hexdigest()       # other clips never resume this run
+    tag = f"e{epochs}_b{batch_size}_lr{lr:g}_m{max_steps}_r{ramp_epochs}_x{stride_scale}_d{data_key}"
     ck = cache_dir() / "wandr" / f"train_{variant}_s{seed}_{tag}.pt"
     cpu0, t1 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
     history = train_wandr(model, train, cfg, checkpoint=ck, stride=stride, progress=progress, time_limit_s=time_limit)
@@ -342,15 +370,16 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
             "threads": threads, "batch_size": batch_size, "lr": lr, "stride": stride, "seed": seed,
             "command": f"graspkit train wandr --variant {variant} --epochs {epochs} --batch-size {batch_size} "
                        f"--lr {lr:g} --max-steps {max_steps} --ramp-epochs {ramp_epochs} --stride-scale {stride_scale} "
-                       f"--seed {seed}",
+                       f"--seed {seed}" + (" --reach-far" if reach_far else ""),
             "load_avg_end": float(__import__("os").getloadavg()[0]), "starts": starts_to_meta(starts)}
     save_wandr(out, model, history, meta)
     return {"out": out, **{k: meta[k] for k in ("epochs", "train_wall_s", "train_cpu_s")}, "history": history}
 
 
-def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = False, threads: int = 2
-                   ) -> dict[str, Any]:
-    """Evaluate a checkpoint on the full grid from its held-out starts; SR / FS / DTG and the Fig. 5 breakdowns."""
+def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = False, threads: int = 2,
+                   clips_folder: str | None = None) -> dict[str, Any]:
+    """Evaluate a checkpoint on the full grid from its held-out starts; SR / FS / DTG and the Fig. 5 breakdowns; with
+    clips_folder, also `evaluate_clips` on the test-split reaching clips there (reach/, and reach_far/ if present)."""
     import time
 
     from graspkit.body import BodyModel
@@ -371,6 +400,17 @@ def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = F
            "breakdown": {b: breakdown(res, b) for b in ("height", "angle", "distance")}}
     if planner:
         out["planner"] = summary(evaluate_planner(starts, bm))
+    if clips_folder is not None:
+        from pathlib import Path
+
+        from graspkit.data.wandr_dataset import cached_clips, split_clips
+
+        out["clips"] = {}
+        for sub in ("reach", "reach_far"):
+            if not any(Path(clips_folder, sub).glob("*.npz")):
+                continue
+            cs = cached_clips(clips_folder, bm, kinds=(sub,))
+            out["clips"][sub] = evaluate_clips(model, cs.subset(split_clips(cs.names)["test"]), seed=seed)
     return out
 
 
@@ -378,7 +418,7 @@ def _cmd_train(args) -> int:
     """`graspkit train wandr`."""
     info = run_train_wandr(args.variant, args.data, args.out, args.epochs, args.time_limit, args.seed, args.threads,
                            args.batch_size, args.lr, max_steps=args.max_steps, ramp_epochs=args.ramp_epochs,
-                           stride_scale=args.stride_scale)
+                           stride_scale=args.stride_scale, reach_far=args.reach_far)
     print(f"wrote {info['out']}: {info['epochs']} epochs in {info['train_wall_s']:.0f} s wall "
           f"({info['train_cpu_s']:.0f} s CPU); last loss {info['history'][-1]['loss']:.4f}")
     return 0
@@ -386,14 +426,21 @@ def _cmd_train(args) -> int:
 
 def _cmd_eval(args) -> int:
     """`graspkit eval wandr`."""
+    if args.clips is not None and str(args.clips) == "__cache__":
+        from graspkit.paths import cache_dir
+        args.clips = cache_dir() / "motion"
     rows, extra = {}, {}
     for ck in args.checkpoint:
-        r = run_eval_wandr(ck, args.n, args.seed, planner=args.planner and not extra, threads=args.threads)
+        r = run_eval_wandr(ck, args.n, args.seed, planner=args.planner and not extra, threads=args.threads,
+                           clips_folder=args.clips)
         rows[r["row"]] = r["summary"]
         print(f"{ck}: {r['row']}: SR {r['summary']['SR']:.1f} %, FS {r['summary']['FS']:.1f} %, "
               f"DTG {r['summary']['DTG']:.1f} cm ({r['summary']['rollouts']} rollouts, {r['seconds']:.0f} s)")
         for b, vals in r["breakdown"].items():
             print(f"  SR by {b}: " + ", ".join(f"{k:g}: {x:.0f} %" for k, x in vals.items()))
+        for sub, c in r.get("clips", {}).items():
+            print(f"  {c['clips']} test {sub} clips at their own goal frames: SR {c['SR']:.1f} %, DTG {c['DTG']:.1f} cm, "
+                  f"wrist error at t_G {c['error_at_goal']:.1f} cm")
         if "planner" in r:
             extra["procedural planner"] = r["planner"]
     print(table({**rows, **extra}))
@@ -417,6 +464,8 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     t.add_argument("--max-steps", type=int, default=10, help="rollout steps at the end of the ramp (Sup. B.2)")
     t.add_argument("--ramp-epochs", type=int, default=4, help="epochs over which the rollout grows from 0")
     t.add_argument("--stride-scale", type=int, default=1, help="multiply the window strides (shorter epochs)")
+    t.add_argument("--reach-far", action="store_true",
+                   help="also train on <data>/reach_far (room-scale reaching clips; an experiment, docs/wandr.md)")
     t.set_defaults(func=_cmd_train)
     e = eval_sub.add_parser("wandr", help="WANDR's goal grid (SR / FS / DTG) for one or more checkpoints")
     e.add_argument("--checkpoint", type=Path, action="append", required=True)
@@ -424,6 +473,9 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     e.add_argument("--seed", type=int, default=0)
     e.add_argument("--planner", action="store_true", help="add the procedural planner's row")
     e.add_argument("--threads", type=int, default=2)
+    e.add_argument("--clips", type=Path, nargs="?", const=Path("__cache__"), default=None,
+                   help="also roll out towards the test-split reaching clips' own goals, at their own goal frames "
+                        "(folder with reach/ [reach_far/]; default: <cache>/motion)")
     e.set_defaults(func=_cmd_eval)
 
 

@@ -92,3 +92,21 @@ def test_run_paths_differ_when_anything_that_shapes_the_run_differs(tmp_path):
               _run_path(tmp_path, "gnet_gnet", 0, cfg={"hidden": 128}, epochs=60, data=["/y"]),
               _run_path(tmp_path, "gnet_gnet", 1, cfg={"hidden": 128}, epochs=60, data=["/x"])]
     assert len({a, *others}) == 5 and all(p.parent == tmp_path for p in others)
+
+
+def test_saga_sliding_starts_from_the_sequence_and_counts_goals_sliding_frames():
+    from graspkit.eval_goal import saga_sliding
+
+    seq = _sequence(0, "mug")
+    out = saga_sliding([seq], grasp_steps=(3, 3, 3), motion_steps=(3, 3))
+    r = out["results"][0]
+    bm, _, _ = _body()
+    m = r.motion
+    assert m.num_frames == 61 and out["per_clip"][0]["frames"] == 61
+    assert np.allclose(r.start.poses[0], seq.poses[0]) and np.allclose(r.start.trans[0], seq.trans[0])
+    pelvis = m.joint_positions(bm)[:, 0]                                      # begins near that body, ends elsewhere
+    assert np.linalg.norm(pelvis[0] - r.start.joint_positions(bm)[0, 0]) < 0.15
+    v = m.vertices(bm).double().numpy()                                       # GOAL §4.2 by hand, numpy
+    low, ar = v[:-1, :, 2].argmin(1), np.arange(60)
+    step = np.linalg.norm(v[1:][ar, low] - v[:-1][ar, low], axis=1)
+    assert abs(out["sliding"] - float((step > 0.01).mean())) < 1e-9

@@ -55,6 +55,26 @@ def test_circle_style_clips_are_short_mostly_reaching_and_store_their_goal(bm):
         assert steps <= 4
 
 
+def test_room_scale_tasks_cover_wandrs_grid_and_their_clips_reach_the_goal(bm):
+    from graspkit.data.reaching import sample_reach_task
+
+    rng = np.random.default_rng(0)
+    tasks = [sample_reach_task(rng, far=True) for _ in range(300)]
+    d = np.array([np.hypot(t.goal[0] - t.start.x, t.goal[1] - t.start.y) for t in tasks])
+    rel = np.array([np.angle(np.exp(1j * (np.arctan2(t.goal[1] - t.start.y, t.goal[0] - t.start.x) - t.start.heading)))
+                    for t in tasks])
+    tg = np.array([t.goal_frame for t in tasks]) / 30.0
+    assert d.min() > 0.2 and d.max() < 5.6 and d.max() > 4.5                 # 0.3-5 m (start jitter: +-0.5 m)
+    assert (np.abs(rel) > 2.5).mean() > 0.1                                  # goals behind the start too
+    assert tg.max() <= 9.0 and np.all(tg > d / 1.6)                          # reachable at a brisk walk, <= 9 s
+    near = [t for t in (sample_reach_task(np.random.default_rng(s)) for s in range(50))]
+    assert max(np.hypot(t.goal[0] - t.start.x, t.goal[1] - t.start.y) for t in near) < 1.9   # default unchanged
+    for seed in range(2):
+        m = generate_reach(seed, bm, far=True)
+        j = m.joint_positions(bm)
+        assert np.linalg.norm(j[m.goal_frame, WRIST] - np.maximum(m.goal, [-9, -9, FLOOR_WRIST])) < 0.02
+
+
 def test_evaluation_grid_is_wandrs():
     g = evaluation_goals(Start(1.0, 2.0, 0.5))
     assert g.shape == (125, 5)

@@ -136,3 +136,36 @@ def test_train_command_parses_the_schedule_flags():
     assert a.func is E._cmd_train
     with pytest.raises(ValueError, match="stride_scale"):
         E.run_train_wandr(stride_scale=0, folder="/nonexistent")
+
+
+class _Replay:
+    """A stand-in model whose decoder returns each clip's true next delta: its rollouts are the clips themselves."""
+
+    def __init__(self, deltas):
+        self.deltas, self.k = deltas, 0
+        self.cfg = type("Cfg", (), {"latent": 2})()
+
+    def eval(self):
+        return self
+
+    def condition(self, state, inten):
+        return state
+
+    def decode(self, z, cond):
+        self.k += 1
+        return self.deltas[:, self.k]
+
+
+def test_evaluate_clips_times_goals_as_the_data_does(bm):
+    from graspkit.data.wandr_dataset import list_clips, load_clips
+
+    clips = load_clips(list_clips(DATA_STUBS / "motion", kinds=("reach",)), bm)
+    L = int(clips.lengths.max()) + 40
+    p = torch.stack([torch.cat([clips.clip(c), clips.clip(c)[-1:].expand(L - len(clips.clip(c)), -1)])
+                     for c in range(len(clips))])
+    r = E.evaluate_clips(_Replay(I.poses_to_deltas(p)), clips)      # replayed clips put the wrist on their goals
+    assert r["clips"] == len(clips) and r["SR"] == 100.0 and r["error_at_goal"] < 2.0
+    late = E.evaluate_clips(_Replay(I.poses_to_deltas(p[:, :1].expand(-1, L, -1))), clips)   # standing still: misses
+    assert late["SR"] < 50 and late["DTG"] > 20
+    with pytest.raises(ValueError, match="clips"):
+        E.evaluate_clips(_Replay(None), load_clips(list_clips(DATA_STUBS / "motion", kinds=("locomotion",)), bm))

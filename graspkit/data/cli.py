@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-KINDS = ("locomotion", "reach")
+KINDS = ("locomotion", "reach", "reach_far")   # reach_far: room-scale CIRCLE-style tasks (WANDR's grid)
 GRASP_KINDS = ("grasp", "approach")          # graspkit.data.grasp_make (chunked, batched grasp fitting)
-DEFAULT_N = {"locomotion": 2000, "reach": 2000, "grasp": 1700, "approach": 510}
+DEFAULT_N = {"locomotion": 2000, "reach": 2000, "reach_far": 2000, "grasp": 1700, "approach": 510}
 _BM = None
 
 
@@ -49,7 +49,7 @@ def make_clip(kind: str, seed: int, index: int, out: str) -> str:
     from graspkit.data.reaching import generate_reach
 
     s = clip_seed(seed, kind, index)
-    m = generate_locomotion(s, _BM) if kind == "locomotion" else generate_reach(s, _BM)
+    m = generate_locomotion(s, _BM) if kind == "locomotion" else generate_reach(s, _BM, far=kind == "reach_far")
     return str(save_motion(clip_path(Path(out), kind, index), m))
 
 

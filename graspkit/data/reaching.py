@@ -244,15 +244,21 @@ class ReachTask:
     betas: np.ndarray
 
 
-def sample_reach_task(rng: np.random.Generator) -> ReachTask:
+def sample_reach_task(rng: np.random.Generator, far: bool = False) -> ReachTask:
     """Draw a CIRCLE-style task: a right-hand goal 0.3-1.2 m from a standing start, mostly ahead, heights mostly
     0.7-1.5 m (25 % at 0.25-0.7, 10 % at 1.5-1.8, 5 % below 0.25), reached when a person would (a step closer if
-    needed, a slower reach for low goals, a short pause first: about 1.1-3.2 s) and held 0.3-1.0 s."""
+    needed, a slower reach for low goals, a short pause first: about 1.1-3.2 s) and held 0.3-1.0 s.
+
+    far=True draws a room-scale task (CIRCLE's subjects walk about a room to their targets): the goal 0.3-5 m away
+    in any direction (a turn first when it is behind), the same heights, and the goal frame the natural time (turn,
+    walk at ~0.8 m/s, reach) plus a short pause first (0.2-0.8 s), at most 9 s."""
     betas = sample_betas(rng)
     h0 = rng.uniform(-np.pi, np.pi)
     u = rng.random()
     z = (rng.uniform(0.7, 1.5) if u < 0.6 else rng.uniform(0.25, 0.7) if u < 0.85
          else rng.uniform(1.5, 1.8) if u < 0.95 else rng.uniform(0.0, 0.25))
+    if far:
+        return _far_task(rng, betas, h0, z)
     r = rng.uniform(0.3, 1.2)
     ang = h0 + np.clip(rng.normal(-0.2, 0.6), -1.8, 1.6)
     xy0 = rng.uniform(-0.5, 0.5, 2)
@@ -264,10 +270,25 @@ def sample_reach_task(rng: np.random.Generator) -> ReachTask:
     return ReachTask(Start(float(xy0[0]), float(xy0[1]), float(h0)), goal, t_goal, int(rng.integers(9, 31)), betas)
 
 
-def generate_reach(seed: int, bm, betas: np.ndarray | None = None) -> Motion:
-    """One CIRCLE-style clip (a step or two at most, then a right-hand reach) for the task `sample_reach_task` draws."""
+def _far_task(rng: np.random.Generator, betas: np.ndarray, h0: float, z: float) -> ReachTask:
+    """The room-scale task of sample_reach_task(far=True), given the person, start heading and goal height."""
+    r = rng.uniform(0.3, 5.0)
+    rel = rng.uniform(-np.pi, np.pi)                     # goal direction relative to the start heading
+    xy0 = rng.uniform(-0.5, 0.5, 2)
+    goal = np.array([xy0[0] + r * np.cos(h0 + rel), xy0[1] + r * np.sin(h0 + rel), z])
+    turn = abs(rel) / 2.2 + 0.35 if abs(rel) > 0.3 else 0.0
+    walk = max(r - 0.55, 0.0) / 0.8 + (0.6 if r > 0.55 else 0.0)
+    reach = 0.9 + 0.5 * max(0.9 - z, 0.0)
+    t_goal = min(turn + walk + reach + rng.uniform(0.2, 0.8), 9.0)
+    return ReachTask(Start(float(xy0[0]), float(xy0[1]), float(h0)), goal, int(round(t_goal * 30)),
+                     int(rng.integers(9, 31)), betas)
+
+
+def generate_reach(seed: int, bm, betas: np.ndarray | None = None, far: bool = False) -> Motion:
+    """One CIRCLE-style clip (a step or two at most, then a right-hand reach; far=True: a room-scale task, see
+    `sample_reach_task`) for the task `sample_reach_task` draws."""
     rng = np.random.default_rng(seed)
-    task = sample_reach_task(rng)
+    task = sample_reach_task(rng, far=far)
     style, gait = sample_style(rng), sample_gait_style(rng)
     m = plan_reach(task.start, task.goal, task.goal_frame, betas=task.betas if betas is None else betas,
                    seed=int(rng.integers(2**31)), bm=bm, hold_frames=task.hold_frames, style=style, gait=gait,

@@ -43,6 +43,8 @@ HINDSIGHT_HORIZON = 240         # frames: the 8 s test horizon (§4.2)
 SPLIT_FRACTIONS = (0.8, 0.1, 0.1)
 FOOT_JOINTS = [JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
 KINDS = ("locomotion", "reach")
+FOLDERS = {"locomotion": "locomotion", "reach": "reach", "reach_far": "reach"}   # clip folder -> kind (reach_far:
+                                                                                # room-scale CIRCLE-style tasks)
 STD_FLOOR = 1e-3
 
 
@@ -96,12 +98,13 @@ class ClipSet:
 
 
 def list_clips(folder: str | Path, kinds: Sequence[str] = KINDS, limit: int | None = None) -> list[Path]:
-    """The clip files `<folder>/<kind>/*.npz` (sorted), at most `limit` per kind."""
+    """The clip files `<folder>/<sub>/*.npz` (sorted) of the sub-folders `kinds` (of locomotion, reach and the opt-in
+    reach_far; a missing one is skipped), at most `limit` per sub-folder."""
     folder = Path(folder)
     out: list[Path] = []
     for kind in kinds:
-        if kind not in KINDS:
-            raise ValueError(f"kinds: expected names from {KINDS}, got {kind!r}")
+        if kind not in FOLDERS:
+            raise ValueError(f"kinds: expected names from {tuple(FOLDERS)}, got {kind!r}")
         files = sorted((folder / kind).glob("*.npz"))
         out += files[:limit] if limit is not None else files
     if not out:
@@ -337,10 +340,11 @@ def load_clipset(path: str | Path) -> ClipSet:
         return ClipSet(names=[str(n) for n in z["names"]], **t)
 
 
-def cached_clips(folder: str | Path, bm, limit: int | None = None, cache: str | Path | None = None) -> ClipSet:
-    """All clips under `folder` ({locomotion,reach}/*.npz, at most `limit` per kind) as a ClipSet, read from / written
-    to a cache file named after the folder's file list (so new clips rebuild it)."""
-    files = list_clips(folder, limit=limit)
+def cached_clips(folder: str | Path, bm, limit: int | None = None, cache: str | Path | None = None,
+                 kinds: Sequence[str] = KINDS) -> ClipSet:
+    """All clips under `folder` (<kind>/*.npz for the sub-folders `kinds`, at most `limit` per kind) as a ClipSet, read
+    from / written to a cache file named after the folder's file list (so new clips rebuild it)."""
+    files = list_clips(folder, kinds=kinds, limit=limit)
     key = hashlib.blake2b("\n".join(f"{f.parent.name}/{f.name}:{f.stat().st_size}" for f in files).encode(),
                           digest_size=6).hexdigest()
     if cache is None:
