@@ -511,13 +511,12 @@ def saga_sliding(seqs: list, seed: int = 0, progress: bool = False, **saga_kwarg
     approach sequences: each sequence's object where it stands and its first frame as the start body; GOAL's foot
     sliding over the 61 frames, and the end grasp's contact. Returns the pooled sliding, per-sequence figures and the
     SagaResults ('results'); saga_kwargs go to synthesize (e.g. fewer optimiser steps)."""
+    from graspkit.body import BodyModel
     from graspkit.data.motion import Motion
     from graspkit.objects.placement import ObjectPose
+    from graspkit.paths import default_model_path
     from graspkit.rotations import axis_angle_to_rot6d
     from graspkit.saga import synthesize
-
-    from graspkit.body import BodyModel
-    from graspkit.paths import default_model_path
 
     bm, _, _ = _body()                                   # flat hand mean: SAGA's motions carry absolute hand poses
     saga_bm = BodyModel.from_file(default_model_path())  # GraspPose-Opt's hand PCA is about the mean hand
