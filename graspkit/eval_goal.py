@@ -571,6 +571,7 @@ def evaluate(folders=None, stubs=None, n_grasps: int = 60, n_rollouts: int = 24,
     from graspkit.models.gnet import load_gnet
     from graspkit.models.mnet import MNetConfig, load_mnet
     from graspkit.paths import DATA_STUBS
+    from graspkit.viz.export import write_atomic
 
     folders = folders or default_data_folders()
     stubs = Path(stubs or DATA_STUBS / "checkpoints")
@@ -616,20 +617,9 @@ def evaluate(folders=None, stubs=None, n_grasps: int = 60, n_rollouts: int = 24,
                       "synthetic GT (approach frames)": clip_sliding(clips)}
     res["rollout_seconds"] = time.perf_counter() - t2
     out = Path(out or stubs / "goal_eval.json")
-    _write_json(out, res)                          # GOAL's tables first: SAGA's row below takes minutes more
-    _write_json(out, add_saga_rows(res, seqs, seed))
+    write_atomic(out, json.dumps(res, indent=1, default=float))      # GOAL's tables first: SAGA's row takes minutes
+    write_atomic(out, json.dumps(add_saga_rows(res, seqs, seed), indent=1, default=float))
     return res
-
-
-def _write_json(path, obj: dict) -> None:
-    """Write obj as JSON atomically (temporary file, then rename)."""
-    import json
-    from pathlib import Path
-
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(obj, indent=1, default=float))
-    tmp.replace(path)
 
 
 def gnet_goal(gnet, start: tuple[Tensor, Tensor], betas: Tensor, object_points: Tensor, obj_centre: Tensor,
@@ -694,13 +684,14 @@ def main(argv: list[str] | None = None) -> int:
     torch.set_num_threads(a.threads)
     if a.saga_only:
         from graspkit.paths import DATA_STUBS
+        from graspkit.viz.export import write_atomic
 
         out = Path(a.out or Path(a.checkpoints or DATA_STUBS / "checkpoints") / "goal_eval.json")
         if not out.is_file():
             raise FileNotFoundError(f"--out: no evaluation at {out} to add SAGA's row to (run without --saga-only)")
         r = add_saga_rows(json.loads(out.read_text()), rollout_sequences(a.data or default_data_folders(),
                                                                          a.n_rollouts), a.seed)
-        _write_json(out, r)
+        write_atomic(out, json.dumps(r, indent=1, default=float))
         print(json.dumps({"sliding": r["sliding"], "saga_end_contact": r["saga"]["end_contact"]}, indent=1))
         return 0
     r = evaluate(a.data, a.checkpoints, a.n_grasps, a.n_rollouts, a.window_stride, a.seed, a.out)

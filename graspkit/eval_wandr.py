@@ -426,9 +426,6 @@ def _cmd_train(args) -> int:
 
 def _cmd_eval(args) -> int:
     """`graspkit eval wandr`."""
-    if args.clips is not None and str(args.clips) == "__cache__":
-        from graspkit.paths import cache_dir
-        args.clips = cache_dir() / "motion"
     rows, extra = {}, {}
     for ck in args.checkpoint:
         r = run_eval_wandr(ck, args.n, args.seed, planner=args.planner and not extra, threads=args.threads,
@@ -450,6 +447,8 @@ def _cmd_eval(args) -> int:
 def add_wandr_commands(train_sub, eval_sub) -> None:
     """`graspkit train wandr` and `graspkit eval wandr`."""
     from pathlib import Path
+
+    from graspkit.paths import cache_dir
 
     t = train_sub.add_parser("wandr", help="train WANDR (or a Tab. 1 / Tab. 2 ablation) on the procedural clips")
     t.add_argument("--variant", choices=list(VARIANTS), default="wandr")
@@ -473,7 +472,7 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     e.add_argument("--seed", type=int, default=0)
     e.add_argument("--planner", action="store_true", help="add the procedural planner's row")
     e.add_argument("--threads", type=int, default=2)
-    e.add_argument("--clips", type=Path, nargs="?", const=Path("__cache__"), default=None,
+    e.add_argument("--clips", type=Path, nargs="?", const=cache_dir() / "motion", default=None,
                    help="also roll out towards the test-split reaching clips' own goals, at their own goal frames "
                         "(folder with reach/ [reach_far/]; default: <cache>/motion)")
     e.set_defaults(func=_cmd_eval)

@@ -67,7 +67,7 @@ def test_room_scale_tasks_cover_wandrs_grid_and_their_clips_reach_the_goal(bm):
     assert d.min() > 0.2 and d.max() < 5.6 and d.max() > 4.5                 # 0.3-5 m (start jitter: +-0.5 m)
     assert (np.abs(rel) > 2.5).mean() > 0.1                                  # goals behind the start too
     assert tg.max() <= 9.0 and np.all(tg > d / 1.6)                          # reachable at a brisk walk, <= 9 s
-    near = [t for t in (sample_reach_task(np.random.default_rng(s)) for s in range(50))]
+    near = [sample_reach_task(np.random.default_rng(s)) for s in range(50)]
     assert max(np.hypot(t.goal[0] - t.start.x, t.goal[1] - t.start.y) for t in near) < 1.9   # default unchanged
     for seed in range(2):
         m = generate_reach(seed, bm, far=True)

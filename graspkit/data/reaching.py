@@ -263,11 +263,16 @@ def sample_reach_task(rng: np.random.Generator, far: bool = False) -> ReachTask:
     ang = h0 + np.clip(rng.normal(-0.2, 0.6), -1.8, 1.6)
     xy0 = rng.uniform(-0.5, 0.5, 2)
     goal = np.array([xy0[0] + r * np.cos(ang), xy0[1] + r * np.sin(ang), z])
-    # the goal frame: time to step closer (if the goal is beyond arm's reach) and to reach, plus a pause
+    t_goal = int(round((_natural_time(r, z) + rng.uniform(0.2, 0.8)) * 30))      # plus a pause first
+    return ReachTask(Start(float(xy0[0]), float(xy0[1]), float(h0)), goal, t_goal, int(rng.integers(9, 31)), betas)
+
+
+def _natural_time(r: float, z: float) -> float:
+    """Seconds to step or walk to within reach of a goal r m away (~0.8 m/s) and to reach it at height z m (slower for
+    low goals); no pause, no turn."""
     walk = max(r - 0.55, 0.0) / 0.8 + (0.6 if r > 0.55 else 0.0)
     reach = 0.9 + 0.5 * max(0.9 - z, 0.0)
-    t_goal = int(round((walk + reach + rng.uniform(0.2, 0.8)) * 30))
-    return ReachTask(Start(float(xy0[0]), float(xy0[1]), float(h0)), goal, t_goal, int(rng.integers(9, 31)), betas)
+    return walk + reach
 
 
 def _far_task(rng: np.random.Generator, betas: np.ndarray, h0: float, z: float) -> ReachTask:
@@ -277,9 +282,7 @@ def _far_task(rng: np.random.Generator, betas: np.ndarray, h0: float, z: float) 
     xy0 = rng.uniform(-0.5, 0.5, 2)
     goal = np.array([xy0[0] + r * np.cos(h0 + rel), xy0[1] + r * np.sin(h0 + rel), z])
     turn = abs(rel) / 2.2 + 0.35 if abs(rel) > 0.3 else 0.0
-    walk = max(r - 0.55, 0.0) / 0.8 + (0.6 if r > 0.55 else 0.0)
-    reach = 0.9 + 0.5 * max(0.9 - z, 0.0)
-    t_goal = min(turn + walk + reach + rng.uniform(0.2, 0.8), 9.0)
+    t_goal = min(turn + _natural_time(r, z) + rng.uniform(0.2, 0.8), 9.0)
     return ReachTask(Start(float(xy0[0]), float(xy0[1]), float(h0)), goal, int(round(t_goal * 30)),
                      int(rng.integers(9, 31)), betas)
 
