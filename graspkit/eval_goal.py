@@ -442,12 +442,16 @@ def gnet_table(gnet, baseline, seqs: list, seed: int = 0, refine_weights=None) -
     for name, body in bodies.items():
         rows = _grasp_row(bm, body[0], body[1], gt["betas"], meshes)
         samples[name] = {"rows": rows, "rot6d": body[0], "transl": body[1]}
-        table[name] = {"volume_cm3": float(np.mean([r["volume_cm3"] for r in rows])),
+        vol = np.array([r["volume_cm3"] for r in rows])
+        table[name] = {"volume_cm3": float(vol.mean()), "volume_median_cm3": float(np.median(vol)),
+                       "volume_p90_cm3": float(np.percentile(vol, 90)),
                        "contact_ratio": float(np.mean([r["contact"] for r in rows])),
                        "depth_cm": float(np.mean([r["depth_cm"] for r in rows])),
                        "feet_cm": float(np.mean([abs(r["feet_cm"]) for r in rows])), "n": len(rows)}
+    ref, raw = (np.array([r["volume_cm3"] for r in samples[k]["rows"]]) for k in ("GNet", "GNet w/o opt"))
+    paired = {"refined_lower": int((ref < raw).sum()), "refined_higher": int((ref > raw).sum()), "n": len(ref)}
     return {"table": table, "samples": samples, "refine_history": refined.history, "hat": hat, "gt": gt,
-            "meshes": meshes}
+            "meshes": meshes, "paired": paired}
 
 
 # ------------------------------------------------------------------------------------------- rollouts, foot sliding
@@ -577,18 +581,8 @@ def evaluate(folders=None, stubs=None, n_grasps: int = 60, n_rollouts: int = 24,
     stubs = Path(stubs or DATA_STUBS / "checkpoints")
     bm, gv, body = _body()
     res: dict = {"paper": {"tab1": PAPER_TAB1, "tab2": PAPER_TAB2, "sliding": PAPER_SLIDING}}
-    t0 = time.perf_counter()
-    # Tab. 1: one sample per test grasp, evenly over the test objects
-    tests = [s for s in _all_files(folders, "grasp", "test") + _all_files(folders, "approach", "test")
-             if bool(s.extras.get("grasp.accepted", True))]
-    rng = np.random.default_rng(seed)
-    pick = sorted(rng.permutation(len(tests))[:n_grasps].tolist())
+    res.update(tab1_results(folders, stubs, n_grasps, seed))
     gnet = load_gnet(stubs / "gnet.pt")
-    base = load_gnet(stubs / "gnet_smplx.pt") if (stubs / "gnet_smplx.pt").is_file() else None
-    tab1 = gnet_table(gnet, base, [tests[i] for i in pick], seed=seed)
-    res["tab1"] = tab1["table"]
-    res["tab1_refine_energy"] = tab1["refine_history"]
-    res["tab1_seconds"] = time.perf_counter() - t0
     # Tab. 2: teacher-forced 10-frame horizon on the test clips' windows
     t1 = time.perf_counter()
     windows = mnet_windows(folders, "test", MNetConfig(), stride=window_stride)
@@ -620,6 +614,28 @@ def evaluate(folders=None, stubs=None, n_grasps: int = 60, n_rollouts: int = 24,
     write_atomic(out, json.dumps(res, indent=1, default=float))      # GOAL's tables first: SAGA's row takes minutes
     write_atomic(out, json.dumps(add_saga_rows(res, seqs, seed), indent=1, default=float))
     return res
+
+
+def tab1_results(folders, stubs, n_grasps: int = 60, seed: int = 0) -> dict:
+    """Tab. 1 with the checkpoints in `stubs`: one sample per accepted test grasp of `folders` (n_grasps of them drawn
+    with `seed`; 0: every one). {'tab1', 'tab1_paired', 'tab1_refine_energy', 'tab1_seconds'}."""
+    import time
+    from pathlib import Path
+
+    from graspkit.models.gnet import load_gnet
+
+    t0 = time.perf_counter()
+    tests = [s for s in _all_files(folders, "grasp", "test") + _all_files(folders, "approach", "test")
+             if bool(s.extras.get("grasp.accepted", True))]
+    if not tests:
+        raise ValueError(f"folders: no accepted test grasps in {[str(f) for f in folders]}")
+    n = len(tests) if n_grasps <= 0 else n_grasps
+    pick = sorted(np.random.default_rng(seed).permutation(len(tests))[:n].tolist())
+    gnet = load_gnet(Path(stubs) / "gnet.pt")
+    base = load_gnet(Path(stubs) / "gnet_smplx.pt") if (Path(stubs) / "gnet_smplx.pt").is_file() else None
+    tab1 = gnet_table(gnet, base, [tests[i] for i in pick], seed=seed)
+    return {"tab1": tab1["table"], "tab1_paired": tab1["paired"], "tab1_refine_energy": tab1["refine_history"],
+            "tab1_seconds": time.perf_counter() - t0}
 
 
 def gnet_goal(gnet, start: tuple[Tensor, Tensor], betas: Tensor, object_points: Tensor, obj_centre: Tensor,
@@ -678,10 +694,24 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--window-stride", type=int, default=5)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--tab1-only", action="store_true",
+                   help="recompute only Tab. 1 in an existing JSON (--n-grasps 0: every test grasp)")
     p.add_argument("--saga-only", action="store_true",
                    help="add only SAGA's foot-sliding row to an existing JSON (the same rollout sequences)")
     a = p.parse_args(argv)
     torch.set_num_threads(a.threads)
+    if a.tab1_only:
+        from graspkit.paths import DATA_STUBS
+        from graspkit.viz.export import write_atomic
+
+        stubs = Path(a.checkpoints or DATA_STUBS / "checkpoints")
+        out = Path(a.out or stubs / "goal_eval.json")
+        if not out.is_file():
+            raise FileNotFoundError(f"--out: no evaluation at {out} to update (run without --tab1-only)")
+        r = {**json.loads(out.read_text()), **tab1_results(a.data or default_data_folders(), stubs, a.n_grasps, a.seed)}
+        write_atomic(out, json.dumps(r, indent=1, default=float))
+        print(json.dumps({k: r[k] for k in ("tab1", "tab1_paired")}, indent=1))
+        return 0
     if a.saga_only:
         from graspkit.paths import DATA_STUBS
         from graspkit.viz.export import write_atomic

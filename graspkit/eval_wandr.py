@@ -317,12 +317,15 @@ def starts_from_meta(meta: dict[str, Any]) -> list[I.StartPose]:
 def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str | None = None, epochs: int = 6,
                     time_limit: float | None = None, seed: int = 0, threads: int = 2, batch_size: int = 512,
                     lr: float = 1e-3, progress: bool = True, max_steps: int = 10, ramp_epochs: int = 4,
-                    stride_scale: int = 1, reach_far: bool = False) -> dict[str, Any]:
+                    stride_scale: int = 1, reach_far: bool = False, rollout_latent: str = "prior",
+                    alpha_kl: float = 1e-2) -> dict[str, Any]:
     """Train one variant on the clips under `folder` (default <cache>/motion) and write a small checkpoint (with the
     normalisation statistics, the held-out start poses of the test split, and the measured times) to `out`.
     max_steps / ramp_epochs: the rollout schedule (Sup. B.2); stride_scale multiplies the window strides (fewer
     windows per epoch); reach_far adds the room-scale reaching clips of <folder>/reach_far (docs/data.md; an
-    experiment, see docs/wandr.md). The resumable training state lives in <cache>/wandr, named by every setting."""
+    experiment, see docs/wandr.md); rollout_latent: where the rollout steps draw z ("prior": Sup. B.2 read as sampling
+    the prior; "posterior": the encoder on the true delta, see docs/wandr.md); alpha_kl: the KL weight α (§3.4: 1e-2).
+    The resumable training state lives in <cache>/wandr, named by every setting."""
     import hashlib
     import resource
     import time
@@ -354,12 +357,14 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     start_names = test_start_names(folder, n=6)
     starts = held_out_starts([load_motion(folder / n) for n in start_names], start_names, bm)
     torch.manual_seed(seed)
-    model = WandrCVAE(WandrConfig(intention=v["intention"], max_steps=max_steps, ramp_epochs=ramp_epochs), stats)
+    model = WandrCVAE(WandrConfig(intention=v["intention"], max_steps=max_steps, ramp_epochs=ramp_epochs,
+                                   rollout_latent=rollout_latent, alpha_kl=alpha_kl), stats)
     stride = {k: stride_scale * (s // 2 if len(v["kinds"]) == 1 else s) for k, s in STRIDE.items()}   # one kind: same epoch size
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, num_threads=threads)
     data_key = hashlib.blake2b(f"{train.names}:{int(train.lengths.sum())}:{float(train.p.sum()):.6e}".encode(),
                                digest_size=4).hexdigest()       # other clips never resume this run
-    tag = f"e{epochs}_b{batch_size}_lr{lr:g}_m{max_steps}_r{ramp_epochs}_x{stride_scale}_d{data_key}"
+    tag = (f"e{epochs}_b{batch_size}_lr{lr:g}_m{max_steps}_r{ramp_epochs}_x{stride_scale}_d{data_key}"
+           + ("_zpost" if rollout_latent == "posterior" else "") + (f"_a{alpha_kl:g}" if alpha_kl != 1e-2 else ""))
     ck = cache_dir() / "wandr" / f"train_{variant}_s{seed}_{tag}.pt"
     cpu0, t1 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
     history = train_wandr(model, train, cfg, checkpoint=ck, stride=stride, progress=progress, time_limit_s=time_limit)
@@ -370,7 +375,9 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
             "threads": threads, "batch_size": batch_size, "lr": lr, "stride": stride, "seed": seed,
             "command": f"graspkit train wandr --variant {variant} --epochs {epochs} --batch-size {batch_size} "
                        f"--lr {lr:g} --max-steps {max_steps} --ramp-epochs {ramp_epochs} --stride-scale {stride_scale} "
-                       f"--seed {seed}" + (" --reach-far" if reach_far else ""),
+                       f"--seed {seed}" + (" --reach-far" if reach_far else "")
+                       + (f" --rollout-latent {rollout_latent}" if rollout_latent != "prior" else "")
+                       + (f" --alpha-kl {alpha_kl:g}" if alpha_kl != 1e-2 else ""),
             "load_avg_end": float(__import__("os").getloadavg()[0]), "starts": starts_to_meta(starts)}
     save_wandr(out, model, history, meta)
     return {"out": out, **{k: meta[k] for k in ("epochs", "train_wall_s", "train_cpu_s")}, "history": history}
@@ -418,7 +425,8 @@ def _cmd_train(args) -> int:
     """`graspkit train wandr`."""
     info = run_train_wandr(args.variant, args.data, args.out, args.epochs, args.time_limit, args.seed, args.threads,
                            args.batch_size, args.lr, max_steps=args.max_steps, ramp_epochs=args.ramp_epochs,
-                           stride_scale=args.stride_scale, reach_far=args.reach_far)
+                           stride_scale=args.stride_scale, reach_far=args.reach_far,
+                           rollout_latent=args.rollout_latent, alpha_kl=args.alpha_kl)
     print(f"wrote {info['out']}: {info['epochs']} epochs in {info['train_wall_s']:.0f} s wall "
           f"({info['train_cpu_s']:.0f} s CPU); last loss {info['history'][-1]['loss']:.4f}")
     return 0
@@ -463,6 +471,9 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     t.add_argument("--max-steps", type=int, default=10, help="rollout steps at the end of the ramp (Sup. B.2)")
     t.add_argument("--ramp-epochs", type=int, default=4, help="epochs over which the rollout grows from 0")
     t.add_argument("--stride-scale", type=int, default=1, help="multiply the window strides (shorter epochs)")
+    t.add_argument("--rollout-latent", choices=("prior", "posterior"), default="prior",
+                   help="z for the rollout steps: the prior (default, Sup. B.2) or the encoder on the truth")
+    t.add_argument("--alpha-kl", type=float, default=1e-2, help="the KL weight (paper: 1e-2)")
     t.add_argument("--reach-far", action="store_true",
                    help="also train on <data>/reach_far (room-scale reaching clips; an experiment, docs/wandr.md)")
     t.set_defaults(func=_cmd_train)

@@ -110,3 +110,36 @@ def test_saga_sliding_starts_from_the_sequence_and_counts_goals_sliding_frames()
     low, ar = v[:-1, :, 2].argmin(1), np.arange(60)
     step = np.linalg.norm(v[1:][ar, low] - v[:-1][ar, low], axis=1)
     assert abs(out["sliding"] - float((step > 0.01).mean())) < 1e-9
+
+
+def test_tab1_only_recomputes_table_1_and_keeps_the_rest(tmp_path):
+    """`python -m graspkit.eval_goal --tab1-only`: Tab. 1 over every test grasp (n_grasps 0), its medians, 90th
+    percentiles and paired counts the numpy statistics of the per-grasp rows of `gnet_table`; the rest of the JSON kept."""
+    import json
+
+    import pytest
+
+    from graspkit.eval_goal import _all_files, gnet_table, main, tab1_results
+    from graspkit.models.gnet import load_gnet
+
+    for k in range(3):                                                  # the mug is a test object
+        save_grasp_sequence(tmp_path / f"approach_{k:06d}.npz", _sequence(k, "mug"))
+    out = tmp_path / "goal_eval.json"
+    args = ["--tab1-only", "--data", str(tmp_path), "--n-grasps", "0", "--out", str(out), "--threads", "1"]
+    with pytest.raises(FileNotFoundError, match="--out"):
+        main(args)
+    out.write_text(json.dumps({"tab2": {"MNet": {"body": 1.0}}, "tab1": {"old": {}}}))
+    assert main(args) == 0
+    r = json.loads(out.read_text())
+    assert r["tab2"] == {"MNet": {"body": 1.0}} and set(r["tab1"]) == {"GNet w/o opt", "GNet", "synthetic GT"}
+    t = gnet_table(load_gnet(DATA_STUBS / "checkpoints" / "gnet.pt"), None, _all_files([tmp_path], "approach", "test"))
+    for name, rows in t["samples"].items():
+        v = np.array([x["volume_cm3"] for x in rows["rows"]])
+        row = r["tab1"][name]
+        assert row["n"] == 3 and row["volume_cm3"] == pytest.approx(v.mean(), abs=1e-9)
+        assert row["volume_median_cm3"] == pytest.approx(np.median(v), abs=1e-9)
+        assert row["volume_p90_cm3"] == pytest.approx(np.percentile(v, 90), abs=1e-9)
+    ref, raw = (np.array([x["volume_cm3"] for x in t["samples"][k]["rows"]]) for k in ("GNet", "GNet w/o opt"))
+    assert r["tab1_paired"] == {"refined_lower": int((ref < raw).sum()), "refined_higher": int((ref > raw).sum()), "n": 3}
+    with pytest.raises(ValueError, match="folders"):
+        tab1_results([tmp_path / "empty"], DATA_STUBS / "checkpoints")

@@ -1,5 +1,7 @@
 """GraspPose-Opt (SAGA Eq. 4-7, Alg. 1): a known body refitted from its markers, each energy term against an
 independent computation (scipy KD-tree, trimesh-free exact signed distance, closed-form heights)."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -143,6 +145,31 @@ def test_collision_stage_pushes_the_hand_out_of_the_object(bm, prior):
     assert e["after"]["colli_body"].item() < 0.1 * e["before"]["colli_body"].item()
     depth = lambda vv: max(0.0, -signed_distance(vv[0, hand].double(), ball).min().item())  # noqa: E731
     assert depth(verts) > 0.008 and depth(res.vertices) < 0.25 * depth(verts)
+
+
+def test_stage3_moves_only_its_variables(bm, prior):
+    """Alg. 1's stage 3 frees the pose latent, hand PCA and eyes only; `stage3_free` adds the global translation."""
+    verts, truth = _truth(bm, prior, B=1, seed=3)
+    hand = hand_vertex_ids(bm, ("right",))
+    ball = trimesh.creation.icosphere(3, 0.04)
+    ball.apply_translation(verts[0, hand].mean(0).double().numpy())          # the ball swallows the right hand
+    pts_np, face = trimesh.sample.sample_surface_even(ball, 800, seed=0)
+    obj = GraspObject(torch.tensor(pts_np, dtype=torch.float32), torch.tensor(ball.face_normals[face]).float(),
+                      height=1.0, sdf=SDFGrid.from_mesh(ball, resolution=32, padding=0.02))
+    init = _params_of(None, truth)
+    cfg = GraspPoseConfig(steps=(0, 0, 20), contact=False, ground=False)
+    fixed = GraspPoseOpt(bm, prior, cfg).fit(verts[:, GraspPoseOpt(bm, prior).marker_ids], obj, init=init,
+                                             stages=(3,), progress=False)
+    for k in ("transl", "orient6d", "betas"):
+        assert torch.equal(fixed.state[k], init[k]), k
+    assert not torch.equal(fixed.state["z"], init["z"])
+    free = GraspPoseOpt(bm, prior, replace(cfg, stage3_free=("transl",) + cfg.stage3_free))
+    moved = free.fit(verts[:, free.marker_ids], obj, init=init, stages=(3,), progress=False)
+    assert (moved.state["transl"] - init["transl"]).norm() > 1e-3
+    assert torch.equal(moved.state["betas"], init["betas"])
+    with pytest.raises(ValueError, match="stage3_free"):
+        GraspPoseOpt(bm, prior, replace(cfg, stage3_free=("wrist",))).fit(verts[:, free.marker_ids], obj, init=init,
+                                                                        stages=(3,), progress=False)
 
 
 def test_bad_inputs_are_named(bm, prior):

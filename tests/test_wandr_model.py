@@ -66,6 +66,20 @@ def test_losses_are_the_papers_terms(clips, stats):
     assert cfg.alpha_kl == 1e-2 and out["steps"] == 3
 
 
+def test_posterior_rollout_latents_change_only_the_rollout_steps(clips, stats):
+    """rollout_latent="posterior" draws the rollout steps' z from the encoder: the same losses without rollout steps,
+    different ones (and a KL averaged over every step) with them."""
+    items = W.WindowDataset(clips, max_steps=3).items[::40]
+    run = lambda mode, steps: M.training_losses(_model(stats, rollout_latent=mode), clips, items, steps,  # noqa: E731
+                                               generator=torch.Generator().manual_seed(0))
+    a, b = run("prior", 0), run("posterior", 0)
+    assert all(torch.equal(a[k], b[k]) for k in ("loss", "rec", "kl", "joint_cm2"))
+    a, b = run("prior", 3), run("posterior", 3)
+    assert torch.isfinite(b["loss"]) and not torch.equal(a["kl"], b["kl"]) and not torch.equal(a["rec"], b["rec"])
+    with pytest.raises(ValueError, match="rollout_latent"):
+        M.WandrConfig(rollout_latent="mean")
+
+
 def test_a_few_steps_of_training_lower_the_loss(clips, stats):
     model = _model(stats).train()
     ds = W.WindowDataset(clips, max_steps=2)

@@ -70,6 +70,10 @@ class GraspPoseWeights:
     heuristic_radius: float = 0.02  # ... and closer than this (m) are pulled to the object
 
 
+PARAMS = ("transl", "orient6d", "betas", "z", "left_pca", "right_pca", "eyes")
+STAGE3_FREE = ("z", "left_pca", "right_pca", "eyes")
+
+
 @dataclass
 class GraspPoseConfig:
     """Alg. 1 schedule and which terms stage 3 uses (Tab. 2 ablations switch them)."""
@@ -85,6 +89,7 @@ class GraspPoseConfig:
     n_pca: int = 24               # hand PCA components per hand (SAGA)
     log_every: int = 10
     nn_every: int = 10            # stage 3: nearest-neighbour pairs recomputed every this many steps (held between)
+    stage3_free: tuple[str, ...] = STAGE3_FREE     # Alg. 1's stage-3 variables (an experiment may add t, R: docs/saga.md)
     weights: GraspPoseWeights = field(default_factory=GraspPoseWeights)
 
 
@@ -326,10 +331,12 @@ class GraspPoseOpt:
                              f"got {tuple(object_contact.shape)}")
         if self.cfg.heuristic and self.hand_contact_prior is None:
             raise ValueError("hand_contact_prior: the heuristic contact of S.3 needs it")
+        if not self.cfg.stage3_free or set(self.cfg.stage3_free) - set(PARAMS):
+            raise ValueError(f"stage3_free: expected a non-empty subset of {PARAMS}, got {self.cfg.stage3_free}")
         target = markers.detach().float()
         p = {k: v.detach().clone() for k, v in (init or self.init_params(target)).items()}
         free = {1: ("transl", "orient6d"), 2: ("transl", "orient6d", "betas", "z"),
-                3: ("z", "left_pca", "right_pca", "eyes")}
+                3: self.cfg.stage3_free}
         energies: list[dict[str, dict[str, Tensor]]] = []
         log: list[dict[str, float]] = []
         cache: dict[str, Tensor] = {}
