@@ -122,6 +122,12 @@ def test_energy_terms_against_independent_computations(bm, prior):
     assert want > 0.5
     assert e["colli_body"].item() == pytest.approx(want, rel=0.05)
     assert e["colli_object"].item() > 0                                     # box points inside the closed hand too
+    # sunk_depth: E^O is switched off exactly while some hand vertex is deeper than it inside the box
+    deepest = float(-sd.min())
+    for depth, on in ((deepest + 2e-3, True), (deepest - 2e-3, False)):
+        g = opt.with_config(sunk_depth=depth).energy(p, target, obj, 3, cm, co, cache)
+        assert g["colli_object"].item() == (pytest.approx(e["colli_object"].item()) if on else 0.0)
+        assert g["colli_body"].item() == pytest.approx(e["colli_body"].item())
 
 
 def test_collision_stage_pushes_the_hand_out_of_the_object(bm, prior):

@@ -89,6 +89,7 @@ class GraspPoseConfig:
     n_pca: int = 24               # hand PCA components per hand (SAGA)
     log_every: int = 10
     nn_every: int = 10            # stage 3: nearest-neighbour pairs recomputed every this many steps (held between)
+    sunk_depth: float | None = None  # m: E^O_colli off for a sample while a hand vertex is deeper inside (docs/saga.md)
     stage3_free: tuple[str, ...] = STAGE3_FREE     # Alg. 1's stage-3 variables (an experiment may add t, R: docs/saga.md)
     weights: GraspPoseWeights = field(default_factory=GraspPoseWeights)
 
@@ -308,7 +309,12 @@ class GraspPoseOpt:
             cp = torch.gather(pts, 1, cache["collision_idx"].unsqueeze(-1).expand(-1, -1, 3))
             so, cache["nn_colli_object"] = _signed_to_cloud(cp, hands, hn, None if refresh else
                                                             cache.get("nn_colli_object"))
-            e["colli_object"] = w.colli_object * torch.relu(-so - w.sigma_o).sum(-1)
+            pen = torch.relu(-so - w.sigma_o).sum(-1)
+            if cfg.sunk_depth is not None:
+                # while the hand is sunk into the object, the object points inside the hand leave it fastest through
+                # the back of the hand, i.e. by pushing the hand deeper: E^O waits until E^B has lifted it out
+                pen = pen * (sd.detach().min(-1).values > -cfg.sunk_depth).to(pen.dtype)
+            e["colli_object"] = w.colli_object * pen
         return e
 
     # ------------------------------------------------------------------ Alg. 1
