@@ -694,35 +694,31 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--window-stride", type=int, default=5)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=2)
-    p.add_argument("--tab1-only", action="store_true",
-                   help="recompute only Tab. 1 in an existing JSON (--n-grasps 0: every test grasp)")
-    p.add_argument("--saga-only", action="store_true",
-                   help="add only SAGA's foot-sliding row to an existing JSON (the same rollout sequences)")
+    only = p.add_mutually_exclusive_group()
+    only.add_argument("--tab1-only", action="store_true",
+                      help="recompute only Tab. 1 in an existing JSON (--n-grasps 0: every test grasp)")
+    only.add_argument("--saga-only", action="store_true",
+                      help="add only SAGA's foot-sliding row to an existing JSON (the same rollout sequences)")
     a = p.parse_args(argv)
     torch.set_num_threads(a.threads)
-    if a.tab1_only:
+    if a.tab1_only or a.saga_only:                  # update one part of an existing evaluation
         from graspkit.paths import DATA_STUBS
         from graspkit.viz.export import write_atomic
 
         stubs = Path(a.checkpoints or DATA_STUBS / "checkpoints")
         out = Path(a.out or stubs / "goal_eval.json")
+        flag = "--tab1-only" if a.tab1_only else "--saga-only"
         if not out.is_file():
-            raise FileNotFoundError(f"--out: no evaluation at {out} to update (run without --tab1-only)")
-        r = {**json.loads(out.read_text()), **tab1_results(a.data or default_data_folders(), stubs, a.n_grasps, a.seed)}
+            raise FileNotFoundError(f"--out: no evaluation at {out} to update (run without {flag})")
+        folders, r = a.data or default_data_folders(), json.loads(out.read_text())
+        if a.tab1_only:
+            r.update(tab1_results(folders, stubs, a.n_grasps, a.seed))
+            shown = {k: r[k] for k in ("tab1", "tab1_paired")}
+        else:
+            r = add_saga_rows(r, rollout_sequences(folders, a.n_rollouts), a.seed)
+            shown = {"sliding": r["sliding"], "saga_end_contact": r["saga"]["end_contact"]}
         write_atomic(out, json.dumps(r, indent=1, default=float))
-        print(json.dumps({k: r[k] for k in ("tab1", "tab1_paired")}, indent=1))
-        return 0
-    if a.saga_only:
-        from graspkit.paths import DATA_STUBS
-        from graspkit.viz.export import write_atomic
-
-        out = Path(a.out or Path(a.checkpoints or DATA_STUBS / "checkpoints") / "goal_eval.json")
-        if not out.is_file():
-            raise FileNotFoundError(f"--out: no evaluation at {out} to add SAGA's row to (run without --saga-only)")
-        r = add_saga_rows(json.loads(out.read_text()), rollout_sequences(a.data or default_data_folders(),
-                                                                         a.n_rollouts), a.seed)
-        write_atomic(out, json.dumps(r, indent=1, default=float))
-        print(json.dumps({"sliding": r["sliding"], "saga_end_contact": r["saga"]["end_contact"]}, indent=1))
+        print(json.dumps(shown, indent=1))
         return 0
     r = evaluate(a.data, a.checkpoints, a.n_grasps, a.n_rollouts, a.window_stride, a.seed, a.out)
     print(json.dumps({k: r[k] for k in ("tab1", "tab2", "sliding")}, indent=1, default=float))

@@ -1,7 +1,5 @@
 """GraspPose-Opt (SAGA Eq. 4-7, Alg. 1): a known body refitted from its markers, each energy term against an
 independent computation (scipy KD-tree, trimesh-free exact signed distance, closed-form heights)."""
-from dataclasses import replace
-
 import numpy as np
 import pytest
 import torch
@@ -164,18 +162,18 @@ def test_stage3_moves_only_its_variables(bm, prior):
                       height=1.0, sdf=SDFGrid.from_mesh(ball, resolution=32, padding=0.02))
     init = _params_of(None, truth)
     cfg = GraspPoseConfig(steps=(0, 0, 20), contact=False, ground=False)
-    fixed = GraspPoseOpt(bm, prior, cfg).fit(verts[:, GraspPoseOpt(bm, prior).marker_ids], obj, init=init,
-                                             stages=(3,), progress=False)
+    opt = GraspPoseOpt(bm, prior, cfg)
+    markers = verts[:, opt.marker_ids]
+    fixed = opt.fit(markers, obj, init=init, stages=(3,), progress=False)
     for k in ("transl", "orient6d", "betas"):
         assert torch.equal(fixed.state[k], init[k]), k
     assert not torch.equal(fixed.state["z"], init["z"])
-    free = GraspPoseOpt(bm, prior, replace(cfg, stage3_free=("transl",) + cfg.stage3_free))
-    moved = free.fit(verts[:, free.marker_ids], obj, init=init, stages=(3,), progress=False)
+    moved = opt.with_config(stage3_free=("transl",) + cfg.stage3_free).fit(markers, obj, init=init, stages=(3,),
+                                                                            progress=False)
     assert (moved.state["transl"] - init["transl"]).norm() > 1e-3
     assert torch.equal(moved.state["betas"], init["betas"])
     with pytest.raises(ValueError, match="stage3_free"):
-        GraspPoseOpt(bm, prior, replace(cfg, stage3_free=("wrist",))).fit(verts[:, free.marker_ids], obj, init=init,
-                                                                        stages=(3,), progress=False)
+        opt.with_config(stage3_free=("wrist",)).fit(markers, obj, init=init, stages=(3,), progress=False)
 
 
 def test_bad_inputs_are_named(bm, prior):

@@ -68,7 +68,7 @@ def test_losses_are_the_papers_terms(clips, stats):
 
 def test_posterior_rollout_latents_change_only_the_rollout_steps(clips, stats):
     """rollout_latent="posterior" draws the rollout steps' z from the encoder: the same losses without rollout steps,
-    different ones (and a KL averaged over every step) with them."""
+    different reconstruction and KL with them."""
     items = W.WindowDataset(clips, max_steps=3).items[::40]
     run = lambda mode, steps: M.training_losses(_model(stats, rollout_latent=mode), clips, items, steps,  # noqa: E731
                                                generator=torch.Generator().manual_seed(0))
