@@ -363,8 +363,12 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, num_threads=threads)
     data_key = hashlib.blake2b(f"{train.names}:{int(train.lengths.sum())}:{float(train.p.sum()):.6e}".encode(),
                                digest_size=4).hexdigest()       # other clips never resume this run
+    # the experiment flags away from their defaults: (command-line text, run-name part); the data key covers reach_far
+    flags = ([(" --reach-far", "")] if reach_far else []) \
+        + ([(f" --rollout-latent {rollout_latent}", "_zpost")] if rollout_latent != "prior" else []) \
+        + ([(f" --alpha-kl {alpha_kl:g}", f"_a{alpha_kl:g}")] if alpha_kl != 1e-2 else [])
     tag = (f"e{epochs}_b{batch_size}_lr{lr:g}_m{max_steps}_r{ramp_epochs}_x{stride_scale}_d{data_key}"
-           + ("_zpost" if rollout_latent == "posterior" else "") + (f"_a{alpha_kl:g}" if alpha_kl != 1e-2 else ""))
+           + "".join(t for _, t in flags))
     ck = cache_dir() / "wandr" / f"train_{variant}_s{seed}_{tag}.pt"
     cpu0, t1 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
     history = train_wandr(model, train, cfg, checkpoint=ck, stride=stride, progress=progress, time_limit_s=time_limit)
@@ -375,9 +379,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
             "threads": threads, "batch_size": batch_size, "lr": lr, "stride": stride, "seed": seed,
             "command": f"graspkit train wandr --variant {variant} --epochs {epochs} --batch-size {batch_size} "
                        f"--lr {lr:g} --max-steps {max_steps} --ramp-epochs {ramp_epochs} --stride-scale {stride_scale} "
-                       f"--seed {seed}" + (" --reach-far" if reach_far else "")
-                       + (f" --rollout-latent {rollout_latent}" if rollout_latent != "prior" else "")
-                       + (f" --alpha-kl {alpha_kl:g}" if alpha_kl != 1e-2 else ""),
+                       f"--seed {seed}" + "".join(c for c, _ in flags),
             "load_avg_end": float(__import__("os").getloadavg()[0]), "starts": starts_to_meta(starts)}
     save_wandr(out, model, history, meta)
     return {"out": out, **{k: meta[k] for k in ("epochs", "train_wall_s", "train_cpu_s")}, "history": history}
