@@ -86,3 +86,17 @@ def test_train_command_end_to_end_on_the_shipped_approach_clips(tmp_path, monkey
     assert not model.training and model.cfg.traj_latent == 64
     with pytest.raises(SystemExit):
         main(["train", "motionfill", "--stage", "nope"])
+
+
+def test_first_test_clips_takes_each_test_objects_first_accepted_clip(tmp_path):
+    from graspkit.eval_motionfill import first_test_clips, main
+
+    for i, (name, ok) in enumerate([("apple", True), ("mug", False), ("mug", True), ("camera", True), ("mug", True)]):
+        np.savez(tmp_path / f"approach_{i:06d}.npz", obj_name=np.array(name), **{"grasp.accepted": np.array(ok)})
+    assert [f.name for f in first_test_clips(tmp_path)] == ["approach_000002.npz", "approach_000003.npz"]
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(FileNotFoundError, match="folder"):
+        first_test_clips(empty)
+    with pytest.raises(SystemExit):
+        main(["nothing"])

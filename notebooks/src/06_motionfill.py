@@ -86,9 +86,11 @@ print(f"sample spread at mid-motion: {float(s['traj'][:, 30, :2].std(0).norm()):
 
 # %% [markdown]
 # ## GraspMotion-Opt: from markers to bodies
-# The shipped example ran Alg. 2 (100 steps of marker fitting, then 300 steps of every term) on one sample for this
-# mug clip (`graspkit.eval_motionfill.graspmotion_eval`, batched with a binoculars clip: 3 minutes on one core, so it
-# is loaded here). Below:
+# The shipped example ran Alg. 2 (100 steps of marker fitting, then 300 steps of every term, then graspkit's 100-step
+# polish at a tenth of the learning rate) on one sample for this mug clip (`python -m graspkit.eval_motionfill
+# example`, batched with a binoculars clip: 80 s on one core, so it is loaded here). Why the polish: Adam's step is
+# about its learning rate whatever the gradient, so at the paper's last rate every frame's parameters jitter by
+# millimetres on their own, and 2.5 mm between two frames is already SAGA's skating speed (75 mm/s). Below:
 # the energies along the run, then the heels' speed of the sampled markers and of the fitted bodies on the frames
 # MotionFill predicts in contact (skating: both heels low and faster than 75 mm/s).
 
@@ -102,7 +104,8 @@ for k in ("fit", "contact", "skate", "smooth", "palm", "colli"):
     if st:
         ax.semilogy(st, [max(r[k], 1e-4) for r in log if k in r], label=k)
 ax.axvline(100, color="k", lw=0.5)
-ax.set_xlabel("Adam step (stage 1 | stage 2)")
+ax.axvline(400, color="k", lw=0.5, ls=":")
+ax.set_xlabel("Adam step (stage 1 | stage 2 | polish)")
 _ = ax.legend(fontsize=8, ncol=3)
 print({k: round(v, 3) if isinstance(v, float) else v for k, v in info["rows"][0].items()})
 
@@ -214,3 +217,6 @@ viz.show_animation(anim)
 #    spread of the end of the walk (frame 45). Is the spread larger sideways or forward? Why would the data make it so?
 # 2. Replace TrajFill's sample by the ground-truth trajectory (`model.sample(..., traj=torch.as_tensor(scene["traj"]))`)
 #    and compare the marker error at mid-motion with the full sample: how much of the error is the trajectory's?
+# 3. Fit a body standing still (one frame's markers repeated 12 times) with `GraspMotionConfig(terms=("smooth",))`
+#    and with `polish=(0, 0.0)` (the paper's schedule): plot the heel markers' speed per frame for both. Which frames
+#    would SAGA's skating metric count if the other foot were swinging?
