@@ -560,14 +560,33 @@ def main(argv: list[str] | None = None) -> int:
     from graspkit.viz.export import write_atomic
 
     p = argparse.ArgumentParser(prog="python -m graspkit.eval_motionfill")
-    p.add_argument("part", choices=["graspmotion", "example"])
+    p.add_argument("part", choices=["tab3", "graspmotion", "example"])
     p.add_argument("--data", type=Path, default=None, help="approach clips (default: the cache's grasps/approach)")
+    p.add_argument("--clips", type=int, default=272, help="tab3: approach clips whose test-object windows are used")
+    p.add_argument("--checkpoints", type=Path, default=CHECKPOINT.parent,
+                   help="tab3: folder of motionfill.pt and the baselines' motionfill_<name>.pt")
     p.add_argument("--out", type=Path, default=CHECKPOINT.parent / "motionfill_eval.json")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=1)
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
     data = args.data or cache_dir() / "grasps" / "approach"
+    if args.part == "tab3":
+        t0 = time.perf_counter()
+        arr = windows("approach", args.clips, data=args.data)
+        test = clip_split(arr)["test"]
+        rows = evaluate(load_motionfill(args.checkpoints / "motionfill.pt"), arr, test, n=10, seed=args.seed,
+                        baselines=load_baselines(args.checkpoints))
+        doc = json.loads(args.out.read_text()) if args.out.is_file() else {}
+        doc.update(rows=rows, test_windows=int(np.isin(arr["clip"], test).sum()),
+                   protocol=f"windows ending at the grasp of the six GRAB test objects among the first {args.clips} "
+                            f"clips of {data} (graspkit data make --kind approach --n 272 --seed 0); n = 10 samples, "
+                            f"seed {args.seed}; baselines from load_baselines({args.checkpoints.name})")
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(args.out, json.dumps(doc, indent=1))
+        print(f"{doc['test_windows']} test windows, {time.perf_counter() - t0:.0f} s -> {args.out}")
+        print(table(rows))
+        return 0
     files = first_test_clips(data)
     if args.part == "example":
         from graspkit.paths import DATA_STUBS
