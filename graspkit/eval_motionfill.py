@@ -13,8 +13,8 @@ Tab. 3's deterministic baselines (CNN-AE, PoseNet, RouteNet: graspkit.models.mot
 `graspkit train motionfill_baseline --model {cnn_ae,posenet,routenet}` (`train_baseline`, on the same windows) and
 join `evaluate` through `load_baselines()`.
 
-GraspMotion-Opt's evaluation on the first approach clip of each test object (`python -m graspkit.eval_motionfill
-graspmotion`) and lesson 06's worked example (`... example`) are written next to the checkpoint.
+Tab. 3 (`python -m graspkit.eval_motionfill tab3`), GraspMotion-Opt's evaluation on the first approach clip of each
+test object (`... graspmotion`) and lesson 06's worked example (`... example`) are written next to the checkpoint.
 
 Windows are cached in `<cache>/motionfill/`; normalisation statistics come from stage 1's training windows and stay
 with the model. The shipped checkpoint (`data_stubs/checkpoints/motionfill.pt`) holds float16 weights.
@@ -550,8 +550,8 @@ def write_example(files: list[Path], out: Path, seed: int = 0) -> dict[str, Any]
 
 
 def main(argv: list[str] | None = None) -> int:
-    """`python -m graspkit.eval_motionfill graspmotion`: GraspMotion-Opt on the first approach clip of each test
-    object, written into motionfill_eval.json's "graspmotion" section (the rest of the file kept); `... example`:
+    """`python -m graspkit.eval_motionfill tab3`: Tab. 3 on the test-object windows, written into
+    motionfill_eval.json's rows; `... graspmotion`: GraspMotion-Opt on the first approach clip of each test object, written into motionfill_eval.json's "graspmotion" section (the rest of the file kept); `... example`:
     lesson 06's example (the shipped mug clip batched with the first test clip) into motionfill_examples.npz/json."""
     import json
 
@@ -600,8 +600,8 @@ def main(argv: list[str] | None = None) -> int:
     secs = time.perf_counter() - t0
     doc = json.loads(args.out.read_text()) if args.out.is_file() else {}
     doc["graspmotion"] = {"rows": ev["rows"], "files": [f"{f.parent.name}/{f.name}" for f in files],
-                          "steps": [100, 300], "polish": list(GraspMotionConfig().polish), "seed": args.seed, "seconds": round(secs, 1),
-                          "threads": args.threads}
+                          "steps": list(GraspMotionConfig().steps), "polish": list(GraspMotionConfig().polish),
+                          "seed": args.seed, "seconds": round(secs, 1), "threads": args.threads}
     write_atomic(args.out, json.dumps(doc, indent=1))
     keys = ("skating_gt", "skating_sample", "skating_opt", "contact_mm", "volume_cm3", "depth_cm")
     for r in ev["rows"]:
