@@ -549,15 +549,25 @@ def write_example(files: list[Path], out: Path, seed: int = 0) -> dict[str, Any]
     return info
 
 
+def update_json(path: Path, **sections: Any) -> dict[str, Any]:
+    """Replace `sections` of the JSON file at `path` (created if missing, other keys kept; written atomically)."""
+    import json
+
+    from graspkit.viz.export import write_atomic
+
+    doc = json.loads(path.read_text()) if path.is_file() else {}
+    doc.update(sections)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_atomic(path, json.dumps(doc, indent=1))
+    return doc
+
+
 def main(argv: list[str] | None = None) -> int:
     """`python -m graspkit.eval_motionfill tab3`: Tab. 3 on the test-object windows, written into
     motionfill_eval.json's rows; `... graspmotion`: GraspMotion-Opt on the first approach clip of each test object, written into motionfill_eval.json's "graspmotion" section (the rest of the file kept); `... example`:
     lesson 06's example (the shipped mug clip batched with the first test clip) into motionfill_examples.npz/json."""
-    import json
-
     from graspkit.optim.graspmotion import GraspMotionConfig
     from graspkit.paths import cache_dir
-    from graspkit.viz.export import write_atomic
 
     p = argparse.ArgumentParser(prog="python -m graspkit.eval_motionfill")
     p.add_argument("part", choices=["tab3", "graspmotion", "example"])
@@ -577,13 +587,10 @@ def main(argv: list[str] | None = None) -> int:
         test = clip_split(arr)["test"]
         rows = evaluate(load_motionfill(args.checkpoints / "motionfill.pt"), arr, test, n=10, seed=args.seed,
                         baselines=load_baselines(args.checkpoints))
-        doc = json.loads(args.out.read_text()) if args.out.is_file() else {}
-        doc.update(rows=rows, test_windows=int(np.isin(arr["clip"], test).sum()),
-                   protocol=f"windows ending at the grasp of the six GRAB test objects among the first {args.clips} "
-                            f"clips of {data} (graspkit data make --kind approach --n 272 --seed 0); n = 10 samples, "
-                            f"seed {args.seed}; baselines from load_baselines({args.checkpoints.name})")
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        write_atomic(args.out, json.dumps(doc, indent=1))
+        doc = update_json(args.out, rows=rows, test_windows=int(np.isin(arr["clip"], test).sum()),
+                          protocol=f"windows ending at the grasp of the six GRAB test objects among the first {args.clips} "
+                                   f"clips of {data} (graspkit data make --kind approach --n 272 --seed 0); n = 10 "
+                                   f"samples, seed {args.seed}; baselines from load_baselines({args.checkpoints.name})")
         print(f"{doc['test_windows']} test windows, {time.perf_counter() - t0:.0f} s -> {args.out}")
         print(table(rows))
         return 0
@@ -598,11 +605,10 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     ev = graspmotion_eval(load_motionfill(), files, seed=args.seed)
     secs = time.perf_counter() - t0
-    doc = json.loads(args.out.read_text()) if args.out.is_file() else {}
-    doc["graspmotion"] = {"rows": ev["rows"], "files": [f"{f.parent.name}/{f.name}" for f in files],
-                          "steps": list(GraspMotionConfig().steps), "polish": list(GraspMotionConfig().polish),
-                          "seed": args.seed, "seconds": round(secs, 1), "threads": args.threads}
-    write_atomic(args.out, json.dumps(doc, indent=1))
+    update_json(args.out, graspmotion={"rows": ev["rows"], "files": [f"{f.parent.name}/{f.name}" for f in files],
+                                       "steps": list(GraspMotionConfig().steps),
+                                       "polish": list(GraspMotionConfig().polish), "seed": args.seed,
+                                       "seconds": round(secs, 1), "threads": args.threads})
     keys = ("skating_gt", "skating_sample", "skating_opt", "contact_mm", "volume_cm3", "depth_cm")
     for r in ev["rows"]:
         print(f"{r['object']:12s} " + " ".join(f"{k} {r[k]:.3f}" for k in keys))
