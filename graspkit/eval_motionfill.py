@@ -564,8 +564,9 @@ def update_json(path: Path, **sections: Any) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     """`python -m graspkit.eval_motionfill tab3`: Tab. 3 on the test-object windows, written into
-    motionfill_eval.json's rows; `... graspmotion`: GraspMotion-Opt on the first approach clip of each test object, written into motionfill_eval.json's "graspmotion" section (the rest of the file kept); `... example`:
-    lesson 06's example (the shipped mug clip batched with the first test clip) into motionfill_examples.npz/json."""
+    motionfill_eval.json's rows; `... graspmotion`: GraspMotion-Opt on the first approach clip of each test object,
+    into its "graspmotion" section (the rest of the file kept); `... example`: lesson 06's example (the shipped mug
+    clip batched with the first test clip) into motionfill_examples.npz/json."""
     from graspkit.optim.graspmotion import GraspMotionConfig
     from graspkit.paths import cache_dir
 
@@ -587,10 +588,10 @@ def main(argv: list[str] | None = None) -> int:
         test = clip_split(arr)["test"]
         rows = evaluate(load_motionfill(args.checkpoints / "motionfill.pt"), arr, test, n=10, seed=args.seed,
                         baselines=load_baselines(args.checkpoints))
-        doc = update_json(args.out, rows=rows, test_windows=int(np.isin(arr["clip"], test).sum()),
-                          protocol=f"windows ending at the grasp of the six GRAB test objects among the first {args.clips} "
-                                   f"clips of {data} (graspkit data make --kind approach --n 272 --seed 0); n = 10 "
-                                   f"samples, seed {args.seed}; baselines from load_baselines({args.checkpoints.name})")
+        protocol = (f"windows ending at the grasp of the six GRAB test objects among the first {args.clips} clips of "
+                    f"{data} (graspkit data make --kind approach --n 272 --seed 0); n = 10 samples, seed {args.seed}; "
+                    f"baselines from load_baselines({args.checkpoints.name})")
+        doc = update_json(args.out, rows=rows, test_windows=int(np.isin(arr["clip"], test).sum()), protocol=protocol)
         print(f"{doc['test_windows']} test windows, {time.perf_counter() - t0:.0f} s -> {args.out}")
         print(table(rows))
         return 0
@@ -605,9 +606,9 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     ev = graspmotion_eval(load_motionfill(), files, seed=args.seed)
     secs = time.perf_counter() - t0
+    cfg = GraspMotionConfig()                       # what graspmotion_eval ran
     update_json(args.out, graspmotion={"rows": ev["rows"], "files": [f"{f.parent.name}/{f.name}" for f in files],
-                                       "steps": list(GraspMotionConfig().steps),
-                                       "polish": list(GraspMotionConfig().polish), "seed": args.seed,
+                                       "steps": list(cfg.steps), "polish": list(cfg.polish), "seed": args.seed,
                                        "seconds": round(secs, 1), "threads": args.threads})
     keys = ("skating_gt", "skating_sample", "skating_opt", "contact_mm", "volume_cm3", "depth_cm")
     for r in ev["rows"]:

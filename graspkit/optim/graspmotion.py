@@ -36,7 +36,8 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   neighbouring frames independently: up to 5 mm per frame is 0.15 m/s, twice the 75 mm/s of SAGA's skating metric.
   Measured on the first approach clip of each of the 11 training objects (one MotionFill sample each, seed 0): skating
   0.23 after Alg. 2, 0.10 with the polish (0.12 when the last 100 of the 300 steps run at 0.001 instead); on a body
-  standing still the median heel-marker speed after the fit falls from 0.031 to 0.007 m/s (tests/test_graspmotion.py). `polish=(0, 0.0)` is the paper's schedule.
+  standing still the median heel-marker speed after the fit falls from 0.031 to 0.007 m/s
+  (tests/test_graspmotion.py). `polish=(0, 0.0)` is the paper's schedule.
 - Initialisation: the prior's mean pose, rigidly aligned per frame (Kabsch on the body and face markers).
 - E^o_colli and E_g are evaluated on the frames where a hand vertex is within 2 cm of the object's bounding box
   (chosen without gradient each step; elsewhere both are 0 by definition: no vertex can be inside or within 1 cm),
