@@ -65,8 +65,8 @@ class EvalConfig:
     """How much to evaluate (defaults: the run reported in docs/saga.md)."""
 
     objects: tuple[str, ...] = ("mug", "camera", "toothpaste", "wine_glass", "frying_pan", "binoculars")
-    placements: int = 3           # object placements per test object
-    samples: int = 5              # grasps drawn per placement and model
+    placements: int = 4           # object placements per test object
+    samples: int = 10             # grasps drawn per placement and model
     gt_grasps: int = 8            # ground-truth grasps per object for the Tab. 2 GT column
     steps: tuple[int, int, int] = (300, 400, 500)
     seed: int = 0
@@ -431,6 +431,9 @@ def add_saga_train_commands(train_sub) -> None:
         p.add_argument("--time-limit", type=float, default=600.0, help="seconds; stops after the epoch that crosses it")
         p.add_argument("--seed", type=int, default=0)
         p.add_argument("--threads", type=int, default=1)
+        if name == "wholegrasp":
+            p.add_argument("--consistency", choices=("paper", "signed"), default="paper",
+                           help="Eq. 3's distances: as printed (default) or signed Euclidean (the authors' code)")
         p.set_defaults(func=lambda a, name=name: _cmd_train(a, name))
 
 
@@ -456,7 +459,8 @@ def _cmd_train(args: argparse.Namespace, name: str) -> int:
                                      time_limit_s=args.time_limit, threads=args.threads)
     else:
         info = W.train_wholegrasp(args.data, args.out, multitask=name == "wholegrasp", epochs=args.epochs,
-                                  seed=args.seed, time_limit_s=args.time_limit, threads=args.threads)
+                                  seed=args.seed, time_limit_s=args.time_limit, threads=args.threads,
+                                  **({"consistency": args.consistency} if name == "wholegrasp" else {}))
     print(f"wrote {info['out']}: {len(info['history'])} epochs in {info['seconds']:.0f} s; "
           f"val {json.dumps(info.get('val', {}))}")
     return 0

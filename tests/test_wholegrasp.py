@@ -4,8 +4,8 @@ import math
 import pytest
 import torch
 
-from graspkit.models.wholegrasp import (WholeGraspConfig, WholeGraspVAE, consistency_loss, squared_min_distance,
-                                        weighted_bce)
+from graspkit.models.wholegrasp import (WholeGraspConfig, WholeGraspVAE, consistency_distances, consistency_loss,
+                                        squared_min_distance, weighted_bce)
 
 P = 512  # object points in these tests (the model takes any P >= 256; SAGA uses 2,048)
 
@@ -66,6 +66,31 @@ def test_consistency_loss_on_a_hand_made_case():
     assert consistency_loss(m_pred, m, cm, pts, co).item() == pytest.approx(1.6e-3, rel=1e-4)
     assert consistency_loss(m, m, cm, pts, co).item() == 0.0
     assert consistency_loss(m_pred, m, torch.zeros_like(cm), pts, torch.zeros_like(co)).item() == 0.0
+
+
+def test_signed_consistency_tells_inside_from_outside():
+    pts = torch.tensor([[[0.0, 0, 0], [1.0, 0, 0]]])
+    nrm = torch.tensor([[[0.0, 1, 0], [0.0, 1, 0]]])                          # outward normals along +y
+    m = torch.tensor([[[0.0, 0.02, 0], [1.0, 0.5, 0]]])                      # true marker 2 cm outside
+    inside = torch.tensor([[[0.0, -0.02, 0], [1.0, 0.5, 0]]])                # 2 cm inside: the mirror image
+    cm, co = torch.tensor([[1.0, 1.0]]), torch.tensor([[0.0, 0.0]])
+    dm, do = consistency_distances(inside, pts, nrm)
+    torch.testing.assert_close(dm, torch.tensor([[-0.02, 0.5]]))
+    torch.testing.assert_close(do, torch.tensor([[0.02, 0.5]]))
+    # as printed (unsigned, squared) the mirror image costs nothing; signed it costs |-0.02 - 0.02| = 0.04
+    assert consistency_loss(inside, m, cm, pts, co).item() == 0.0
+    assert consistency_loss(inside, m, cm, pts, co, normals=nrm).item() == pytest.approx(0.04, rel=1e-5)
+    assert consistency_loss(m, m, cm, pts, co, normals=nrm).item() == 0.0
+    with pytest.raises(ValueError, match="consistency"):
+        WholeGraspConfig(consistency="squared")
+    # the model's precomputed truths follow its setting: squared as printed, signed Euclidean otherwise
+    b = _batch(B=2)
+    signed = WholeGraspVAE(WholeGraspConfig(consistency="signed")).precompute(b["points"], b["markers"], b["normals"])
+    plain = WholeGraspVAE().precompute(b["points"], b["markers"])
+    torch.testing.assert_close(signed["dist_markers"].pow(2), plain["dist_markers"], atol=1e-7, rtol=1e-4)
+    torch.testing.assert_close(signed["dist_points"].pow(2), plain["dist_points"], atol=1e-7, rtol=1e-4)
+    with pytest.raises(ValueError, match="normals"):
+        WholeGraspVAE(WholeGraspConfig(consistency="signed")).precompute(b["points"], b["markers"])
 
 
 def test_kl_weight_rises_linearly_to_the_papers_end_point():

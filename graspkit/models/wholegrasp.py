@@ -23,6 +23,10 @@ weights 5 (markers) and 3 (object), lambda_KL = 0.005 e (epoch e) over SAGA's 40
 0.2; graspkit trains fewer epochs and keeps that end point: lambda_KL = 0.2 e / E.
 Reductions (the paper does not give them): |.|_1 and the sums of Eq. 3 are summed over markers / points and
 averaged over the batch (as written); the BCEs are means over markers / points (the usual L_bce).
+`consistency="signed"` takes Eq. 3's distances as the authors' released code does rather than as printed: Euclidean
+(not squared), and d(m, O) signed by the normal of the nearest object point (negative inside), so that a palm 2 cm
+inside the object no longer costs what one 2 cm outside does. Measured (docs/saga.md) it does not keep sampled palms
+out of unseen objects, so the default stays Eq. 3 as printed (`consistency="paper"`).
 `multitask=False` gives the paper's WholeGrasp-single baseline (App. B.1, Fig. S3b): markers only.
 
 Marker normalisation (graspkit's choice): the networks see and emit standardised markers whose mean depends
@@ -51,6 +55,9 @@ from graspkit.models.pointnet2 import (FeaturePropagation, Grouping, PointNet2En
                                        groupings_to_tensors, interpolation_weights)
 
 
+CONSISTENCY = ("signed", "paper")
+
+
 @dataclass
 class WholeGraspConfig:
     """Sizes and loss weights of WholeGrasp-VAE (SAGA A.2, A.4)."""
@@ -69,6 +76,11 @@ class WholeGraspConfig:
     lambda_c: float = 1.0             # A.4: lambda_c
     kl_final: float = 0.2             # A.4: 0.005 e at SAGA's last epoch e = 40
     height_slope: bool = True         # marker means linear in t_O (module docstring: marker normalisation)
+    consistency: str = "paper"        # Eq. 3's distances: "paper" (as printed) or "signed" (authors' code)
+
+    def __post_init__(self) -> None:
+        if self.consistency not in CONSISTENCY:
+            raise ValueError(f"consistency: expected one of {CONSISTENCY}, got {self.consistency!r}")
 
 
 @dataclass
@@ -97,18 +109,33 @@ def weighted_bce(prob: Tensor, target: Tensor, pos_weight: float) -> Tensor:
     return loss.mean()
 
 
+def consistency_distances(markers: Tensor, points: Tensor, normals: Tensor | None = None) -> tuple[Tensor, Tensor]:
+    """Eq. 3's d(m, O) (B,N) and d(o, M) (B,P) for markers (B,N,3), points (B,P,3): squared and unsigned as printed
+    (normals None), or, with the object normals (B,P,3), Euclidean with d(m, O) signed (negative inside)."""
+    if normals is None:
+        D = torch.cdist(markers, points).pow(2)                                # (B, N, P): both directions at once
+        return D.min(2).values, D.min(1).values
+    D = torch.cdist(markers, points)
+    dm, idx = D.min(2)
+    near = torch.gather(points, 1, idx.unsqueeze(-1).expand(-1, -1, 3))
+    n = torch.gather(normals, 1, idx.unsqueeze(-1).expand(-1, -1, 3))
+    sign = torch.where(((markers - near) * n).sum(-1) < 0, -1.0, 1.0).to(dm.dtype).detach()
+    return sign * dm, D.min(1).values
+
+
 def consistency_loss(markers_pred: Tensor, markers: Tensor | None, contact_pred_m: Tensor, points: Tensor,
-                     contact_pred_o: Tensor, truth: tuple[Tensor, Tensor] | None = None) -> Tensor:
-    """SAGA Eq. 3: marker-object and object-marker squared distances of the generated vs. ground-truth markers,
-    weighted by the predicted contacts. markers (B,N,3), contacts (B,N), points (B,P,3), (B,P) -> scalar.
+                     contact_pred_o: Tensor, truth: tuple[Tensor, Tensor] | None = None,
+                     normals: Tensor | None = None) -> Tensor:
+    """SAGA Eq. 3: marker-object and object-marker distances of the generated vs. ground-truth markers, weighted by
+    the predicted contacts. markers (B,N,3), contacts (B,N), points (B,P,3), (B,P) -> scalar. Squared and unsigned
+    as printed; with `normals` (B,P,3) as the authors' code (`consistency_distances`).
 
     `truth` = (d(m, O) (B,N), d(o, M) (B,P)) of the ground truth when precomputed (then `markers` may be None)."""
     if truth is None:
-        D = torch.cdist(markers, points).pow(2)
-        truth = (D.min(2).values, D.min(1).values)
-    D = torch.cdist(markers_pred, points).pow(2)                               # (B, N, P): both directions at once
-    dm = (D.min(2).values - truth[0]).abs()
-    do = (D.min(1).values - truth[1]).abs()
+        truth = consistency_distances(markers, points, normals)
+    pred = consistency_distances(markers_pred, points, normals)
+    dm = (pred[0] - truth[0]).abs()
+    do = (pred[1] - truth[1]).abs()
     # the contact weights act as weights only (no gradient): summed over 2,048 points, Eq. 3 otherwise outweighs
     # the mean BCE of every point and is lowered most cheaply by predicting no contact where the markers are still
     # wrong, i.e. at the true contacts (measured: C_O's validation AUC fell to 0.38 within two epochs)
@@ -184,10 +211,11 @@ class WholeGraspVAE(nn.Module):
         return self.obj_dec.group(points)
 
     @torch.no_grad()
-    def precompute(self, points: Tensor, markers: Tensor | None = None) -> dict[str, Tensor]:
+    def precompute(self, points: Tensor, markers: Tensor | None = None, normals: Tensor | None = None
+                   ) -> dict[str, Tensor]:
         """Everything of a batch that depends on geometry only, as tensors for a dataset to store once: the
         PointNet++ groupings and interpolation weights (invariant to rigid motions of the cloud) and, with the
-        ground-truth markers, Eq. 3's d(m, O) (B,N) and d(o, M) (B,P)."""
+        ground-truth markers, Eq. 3's d(m, O) (B,N) and d(o, M) (B,P) (`consistency="signed"` needs the normals)."""
         grp = self.group(points)
         out = groupings_to_tensors(grp)
         xyz = [points]
@@ -196,8 +224,11 @@ class WholeGraspVAE(nn.Module):
         out["fp1_idx"], out["fp1_w"] = interpolation_weights(xyz[0], xyz[1])
         out["fp2_idx"], out["fp2_w"] = interpolation_weights(xyz[1], xyz[2])
         if markers is not None:
-            D = torch.cdist(markers, points).pow(2)
-            out["dist_markers"], out["dist_points"] = D.min(2).values, D.min(1).values
+            signed = self.cfg.consistency == "signed"
+            if signed and normals is None:
+                raise ValueError("normals: consistency='signed' needs the object normals with the markers")
+            out["dist_markers"], out["dist_points"] = consistency_distances(markers, points,
+                                                                            normals if signed else None)
         return out
 
     def encode(self, markers: Tensor, marker_contact: Tensor | None, points: Tensor, normals: Tensor,
@@ -280,7 +311,8 @@ class WholeGraspVAE(nn.Module):
             logs["bce_object"] = weighted_bce(out["object_contact"], batch["object_contact"], cfg.object_contact_weight)
             truth = (batch["dist_markers"], batch["dist_points"]) if "dist_markers" in batch else None
             logs["consistency"] = consistency_loss(out["markers"], batch["markers"], out["marker_contact"],
-                                                   batch["points"], out["object_contact"], truth)
+                                                   batch["points"], out["object_contact"], truth,
+                                                   batch["normals"] if cfg.consistency == "signed" else None)
             rec = rec + cfg.lambda_m * logs["bce_markers"] + cfg.lambda_o * logs["bce_object"]
         logs["kl"] = kl_standard_normal(out["mu"], out["logvar"])
         kl_w = cfg.kl_final * (epoch + 1) / max(epochs, 1)
@@ -331,7 +363,8 @@ class WholeGraspVAE(nn.Module):
             cfg = state["extra"]["model_config"]
         if cfg is None or "latent" not in cfg:
             raise ValueError("state: no WholeGrasp config in it (expected key 'config' or extra['model_config'])")
-        model = cls(WholeGraspConfig(**{"height_slope": False, **cfg}))   # older checkpoints: object-centred
+        # older checkpoints: object-centred markers, Eq. 3 as printed
+        model = cls(WholeGraspConfig(**{"height_slope": False, "consistency": "paper", **cfg}))
         weights = dequantize_state(state["model"])
         for k, v in (("marker_slope", model.marker_slope), ("height_mean", model.height_mean)):
             weights.setdefault(k, v)                                       # absent from older checkpoints
@@ -388,7 +421,8 @@ class WholeGraspTrainingSet(torch.utils.data.Dataset):
                      "points": items["object_points"].float(), "normals": items["object_normals"].float(),
                      "object_contact": items["object_contacts"].float(),
                      "height": items["object_height"].float().reshape(-1, 1)}
-        pre = [model.precompute(self.data["points"][i:i + chunk], self.data["markers"][i:i + chunk])
+        pre = [model.precompute(self.data["points"][i:i + chunk], self.data["markers"][i:i + chunk],
+                                self.data["normals"][i:i + chunk])
                for i in range(0, len(self), chunk)]
         self.data.update({k: torch.cat([p[k] for p in pre]) for k in pre[0]})
         self.augment_yaw = augment_yaw
@@ -464,7 +498,7 @@ def reconstruction_metrics(model: WholeGraspVAE, data: WholeGraspTrainingSet, ba
 def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask: bool = True, epochs: int = 12,
                      batch_size: int = 32, lr: float = 1e-3, seed: int = 0, time_limit_s: float | None = 600.0,
                      threads: int | None = 1, progress: bool = True, half: bool = True,
-                     augment_yaw: bool = False) -> dict[str, Any]:
+                     augment_yaw: bool = False, consistency: str = "paper") -> dict[str, Any]:
     """Train WholeGrasp-VAE (or WholeGrasp-single) on `<root>/grasp_*.npz` (train split; the val split logged)
     with graspkit.train.fit; write weights-only `out` (compact when `half`: `quantize_state`) and `out`.run.pt/.csv.
     Returns {'history', 'seconds', 'val': reconstruction_metrics on the val split, 'out'}.
@@ -479,7 +513,7 @@ def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask:
         torch.set_num_threads(threads)
     out = Path(out or (WHOLEGRASP_PATH if multitask else WHOLEGRASP_SINGLE_PATH))
     torch.manual_seed(seed)
-    model = WholeGraspVAE(WholeGraspConfig(multitask=multitask))
+    model = WholeGraspVAE(WholeGraspConfig(multitask=multitask, consistency=consistency))
     t0 = time.perf_counter()
     train = WholeGraspTrainingSet.from_folder(root, "train", model, augment_yaw=augment_yaw)
     val = WholeGraspTrainingSet.from_folder(root, "val", model)
