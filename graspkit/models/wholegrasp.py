@@ -55,7 +55,7 @@ from graspkit.models.pointnet2 import (FeaturePropagation, Grouping, PointNet2En
                                        groupings_to_tensors, interpolation_weights)
 
 
-CONSISTENCY = ("signed", "paper")
+CONSISTENCY = ("paper", "signed")   # Eq. 3 as printed; as the authors' released code computes it
 
 
 @dataclass
