@@ -1,5 +1,7 @@
 """GraspPose-Opt (SAGA Eq. 4-7, Alg. 1): a known body refitted from its markers, each energy term against an
 independent computation (scipy KD-tree, trimesh-free exact signed distance, closed-form heights)."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -120,6 +122,10 @@ def test_energy_terms_against_independent_computations(bm, prior):
     assert want > 0.5
     assert e["colli_body"].item() == pytest.approx(want, rel=0.05)
     assert e["colli_object"].item() > 0                                     # box points inside the closed hand too
+    # a hinge floor lets penetration up to sigma go free: 3 mm subtracted from every depth, shallower ones cost 0
+    floored = opt.with_config(weights=replace(w, sigma_b=3e-3)).energy(p, target, obj, 3, cm, co, cache)
+    want3 = w.colli_body * np.maximum(-sd - 3e-3, 0).sum()
+    assert 0 < want3 < want and floored["colli_body"].item() == pytest.approx(want3, rel=0.05)
     # sunk_depth: E^O is switched off exactly while some hand vertex is deeper than it inside the box
     deepest = float(-sd.min())
     for depth, on in ((deepest + 2e-3, True), (deepest - 2e-3, False)):
