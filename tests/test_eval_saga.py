@@ -1,10 +1,13 @@
 """SAGA evaluation bookkeeping (graspkit.eval_saga): pooled rows, interrupted runs, the tables beside the paper's."""
 import json
+import shutil
 
 import numpy as np
 import pytest
 
-from graspkit.eval_saga import PAPER_TAB1, finish_partial, rows_from_objects, summarise, table1, table2
+from graspkit.eval_saga import (PAPER_TAB1, EvalConfig, evaluate, finish_partial, rows_from_objects, summarise,
+                                table1, table2)
+from graspkit.paths import DATA_STUBS
 
 
 def _rows(contacts, volumes, depths):
@@ -45,3 +48,16 @@ def test_summarise_apd_is_the_mean_pairwise_marker_distance_per_run():
     s = summarise(_rows([1] * 4, [0] * 4, [0] * 4), m, per=2)
     assert s["apd"] == pytest.approx((3.0 + 0.0) / 2)
     assert set(PAPER_TAB1) >= {"GrabNet-SMPLX", "WholeGrasp w/ opt. (Ours)"}
+
+
+def test_evaluation_without_the_unshipped_baselines_leaves_their_rows_out(tmp_path, capsys):
+    """The baselines' weights are not shipped: a run with only WholeGrasp-VAE evaluates it and the ground truth and
+    says which rows are missing and how to make them."""
+    shutil.copy(DATA_STUBS / "checkpoints" / "wholegrasp.pt", tmp_path / "wholegrasp.pt")
+    cfg = EvalConfig(objects=("mug",), placements=1, samples=2, gt_grasps=1, steps=(2, 2, 2))
+    r = evaluate(DATA_STUBS / "grasps", cfg, progress=False, out=None, checkpoints=tmp_path)
+    assert "graspkit train wholegrasp_single" in capsys.readouterr().out
+    rows = r["rows"]
+    assert not any(k.startswith(("WholeGrasp-single", "GrabNet")) for k in rows)
+    assert rows["WholeGrasp w/ opt. (Ours)"]["n"] == 2 and rows["GT + E_cont"]["n"] == 1 and rows["GT mesh"]["n"] == 1
+    assert "GrabNet-SMPLX" not in table1(r) and "WholeGrasp w/ opt. (Ours)" in table1(r)
