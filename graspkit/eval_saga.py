@@ -249,7 +249,7 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
         # variant once for the marker sets it applies to (2,700 steps per object instead of 6,100)
         nw = len(pls) * n
         n1 = len(mk1)                                              # 0 without WholeGrasp-single
-        places = [p for p in pls for _ in range(n)] * (1 + (n1 > 0)) + gts
+        places = [p for p in pls for _ in range(n)] * (2 if n1 else 1) + gts
         B = len(places)
         iw, i1, ig = torch.arange(nw), torch.arange(nw, nw + n1), torch.arange(nw + n1, B)
         obj = _object_batch(places, 1, sdf)

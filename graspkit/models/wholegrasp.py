@@ -49,6 +49,8 @@ import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
+from graspkit.objects.distance import nearest_neighbours
+from graspkit.objects.sdf import signed_distance_to_points
 from graspkit.paths import DATA_STUBS
 from graspkit.models.blocks import GaussianHead, ResBlock, kl_standard_normal, reparameterize, robust_kl
 from graspkit.models.pointnet2 import (FeaturePropagation, Grouping, PointNet2Encoder, gather, groupings_from_tensors,
@@ -115,12 +117,7 @@ def consistency_distances(markers: Tensor, points: Tensor, normals: Tensor | Non
     if normals is None:
         D = torch.cdist(markers, points).pow(2)                                # (B, N, P): both directions at once
         return D.min(2).values, D.min(1).values
-    D = torch.cdist(markers, points)
-    dm, idx = D.min(2)
-    near = torch.gather(points, 1, idx.unsqueeze(-1).expand(-1, -1, 3))
-    n = torch.gather(normals, 1, idx.unsqueeze(-1).expand(-1, -1, 3))
-    sign = torch.where(((markers - near) * n).sum(-1) < 0, -1.0, 1.0).to(dm.dtype).detach()
-    return sign * dm, D.min(1).values
+    return signed_distance_to_points(markers, points, normals), nearest_neighbours(points, markers)[0]
 
 
 def consistency_loss(markers_pred: Tensor, markers: Tensor | None, contact_pred_m: Tensor, points: Tensor,
