@@ -86,6 +86,14 @@ def _distributed() -> tuple[bool, int, int]:
     return False, 0, 1
 
 
+def _agree(flag: bool) -> bool:
+    """Rank 0's decision (e.g. the time limit) for every rank, so that all ranks stop at the same epoch."""
+    device = "cuda" if torch.distributed.get_backend() == "nccl" else "cpu"
+    t = torch.tensor([int(flag)], device=device)
+    torch.distributed.broadcast(t, src=0)
+    return bool(t.item())
+
+
 def _loader(dataset: Dataset, cfg: TrainConfig, epoch: int, world: tuple[bool, int, int]) -> DataLoader:
     """A DataLoader whose order depends only on (seed, epoch), sharded across ranks under DDP."""
     dist, rank, size = world
@@ -200,7 +208,12 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
                                          "scheduler": sched.state_dict(), "epoch": epoch + 1, "history": history,
                                          "rng": torch.get_rng_state(), "config": asdict(cfg), "extra": extra or {}})
             write_history_csv(Path(checkpoint).with_suffix(".csv"), history)
-        if (time_limit_s is not None and time.perf_counter() - t0 > time_limit_s) or epoch + 1 == stop_at:
+        stop = (time_limit_s is not None and time.perf_counter() - t0 > time_limit_s) or epoch + 1 == stop_at
+        if world[0]:
+            stop = _agree(stop)
+        if stop:
             break
+    if world[0]:
+        torch.distributed.barrier()      # no rank leaves (and tears down gloo) while rank 0 still writes
     model.eval()
     return history
