@@ -121,9 +121,11 @@ def load_motionfill(path: str | Path = CHECKPOINT) -> MotionFillVAE:
 
 def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, seed: int = 0,
                 time_limit_s: float | None = 540.0, clips: dict[str, int] | None = None, batch_size: int = 32,
-                lr: float = 1e-3, progress: bool = True, data: Path | None = None) -> tuple[MotionFillVAE, list[dict[str, float]]]:
+                lr: float = 1e-3, progress: bool = True, data: Path | None = None, reduction: str | None = None
+                ) -> tuple[MotionFillVAE, list[dict[str, float]]]:
     """One of A.4's training runs (`STAGES`); starts from `init` (a checkpoint) when given; writes `out` (shipped
-    float16 state) and a resumable run checkpoint beside it in the cache."""
+    float16 state) and a resumable run checkpoint beside it in the cache. `reduction` sets the loss's
+    (`MotionFillConfig.reduction`; default: the init checkpoint's, else "sum")."""
     from graspkit.paths import cache_dir
     from graspkit.train import TrainConfig, fit
 
@@ -136,8 +138,10 @@ def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, se
     torch.manual_seed(seed)
     if init is not None:
         model = load_motionfill(init).train()
+        if reduction is not None:
+            model.cfg.reduction = reduction
     else:
-        model = MotionFillVAE(MotionFillConfig())
+        model = MotionFillVAE(MotionFillConfig(reduction=reduction or "sum"))
         model.set_stats(MotionFillStats.fit({k: arr[k][np.isin(arr["clip"], split["train"])]
                                              for k in ("local", "vel")}))
     stats = MotionFillStats(model.marker_mean.clone(), model.marker_std.clone(), model.vel_mean.clone(),
@@ -153,7 +157,8 @@ def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, se
 
     if len(train) == 0:
         raise ValueError(f"data: no training windows among the {kind} clips (split by object: {sorted(split)})")
-    run = cache_dir() / "runs" / f"motionfill_{stage}_s{seed}.pt"
+    tag = "" if model.cfg.reduction == "sum" else f"_{model.cfg.reduction}"
+    run = cache_dir() / "runs" / f"motionfill_{stage}{tag}_s{seed}.pt"
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
     history = fit(model, step, train, cfg, checkpoint=run, val_dataset=val if len(val) else None, progress=progress,
                   time_limit_s=time_limit_s, extra={"model_config": model.state()["model_config"]})
@@ -257,6 +262,8 @@ def add_motionfill_train_commands(train_sub) -> None:
     p.add_argument("--time-limit", type=float, default=540.0, help="seconds; stops after the epoch that crosses it")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--reduction", choices=["sum", "mean"], default=None,
+                   help="Eq. 8-9's reduction: sum (as printed) or mean (the authors' code); default: --init's, else sum")
     p.set_defaults(func=_cmd_train)
     b = train_sub.add_parser("motionfill_baseline", help="train one of SAGA Tab. 3's deterministic infilling "
                              "baselines (CNN-AE, PoseNet, RouteNet)")
@@ -303,7 +310,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     kind = STAGES[args.stage][0]
     _, hist = train_stage(args.stage, args.epochs, args.out, init=args.init, seed=args.seed,
                           time_limit_s=args.time_limit, clips={kind: args.clips} if args.clips else None, lr=args.lr,
-                          data=args.data)
+                          data=args.data, reduction=args.reduction)
     last = hist[-1]
     print(f"motionfill {args.stage}: {len(hist)} epochs in {time.perf_counter() - t0:.0f} s -> {args.out}")
     print("  " + ", ".join(f"{k} {v:.3f}" for k, v in last.items() if k != "epoch"))

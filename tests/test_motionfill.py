@@ -56,6 +56,32 @@ def test_loss_terms_and_gradients():
     assert not missing
 
 
+def test_mean_reduction_is_the_per_element_average_of_the_sum():
+    """reduction="mean" (the authors' code): each reconstruction term is the "sum" term over its element count,
+    the KL term Psi of the per-dimension KL (torch.distributions as the reference)."""
+    b = _batch()
+    torch.manual_seed(0)
+    m_sum = MotionFillVAE(MotionFillConfig(reduction="sum")).eval()
+    m_mean = MotionFillVAE(MotionFillConfig(reduction="mean")).eval()
+    m_mean.load_state_dict(m_sum.state_dict())
+    torch.manual_seed(1)
+    s = m_sum.loss(b)
+    torch.manual_seed(1)
+    a = m_mean.loss(b)
+    counts = {"traj": NUM_ROOT * 4, "traj_vel": (NUM_ROOT - 1) * 4, "markers": NUM_FRAMES * (FEATURES - 4),
+              "markers_vel": (NUM_FRAMES - 1) * (FEATURES - 4), "contacts": NUM_FRAMES * 4}
+    for k, n in counts.items():
+        assert a[k].item() == pytest.approx(s[k].item() / n, rel=1e-5), k
+    torch.testing.assert_close(a["kl_motion"], s["kl_motion"])      # logged as the summed KL in both
+    cfg = m_mean.cfg
+    psi = lambda kl, d: (1 + (kl / d) ** 2) ** 0.5 - 1                # noqa: E731
+    want = (a["traj"] + cfg.l1 * a["traj_vel"] + psi(a["kl_traj"], cfg.traj_latent) + cfg.l2 * a["contacts"]
+            + cfg.l3 * a["markers"] + cfg.l4 * a["markers_vel"] + psi(a["kl_motion"], cfg.motion_latent))
+    assert a["loss"].item() == pytest.approx(want.item(), rel=1e-5)
+    with pytest.raises(ValueError, match="reduction"):
+        MotionFillVAE(MotionFillConfig(reduction="median")).loss(b)
+
+
 def test_image_round_trip_and_deterministic_sampling():
     torch.manual_seed(0)
     m = MotionFillVAE().eval()

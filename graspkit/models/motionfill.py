@@ -47,6 +47,20 @@ NUM_MARKERS = 79
 FEATURES = NUM_MARKERS * 3 + 4
 
 
+def _reduce(err: Tensor, reduction: str) -> Tensor:
+    """Per-element errors (B, frames, features) -> scalar: summed over frames and features and averaged over the
+    batch ("sum", Eq. 8 as printed), or averaged over every element ("mean", the authors' released code)."""
+    return err.sum((1, 2)).mean() if reduction == "sum" else err.mean()
+
+
+def _robust_kl(mu: Tensor, logvar: Tensor, reduction: str) -> Tensor:
+    """Eq. 9's Psi(KL): of the KL summed over the latent ("sum") or averaged over its dimensions ("mean")."""
+    if reduction == "sum":
+        return robust_kl(mu, logvar)
+    kl = kl_standard_normal(mu, logvar) / mu.shape[-1]
+    return torch.sqrt(1.0 + kl.pow(2)) - 1.0
+
+
 @dataclass
 class MotionFillConfig:
     """Sizes and loss weights (A.2, A.4). The defaults are graspkit's shipped sizes (about 0.72 M weights, 1.4 MB in
@@ -62,6 +76,7 @@ class MotionFillConfig:
     l2: float = 1.0           # foot-contact BCE
     l3: float = 1.0           # local markers
     l4: float = 0.5           # local marker velocity
+    reduction: str = "sum"    # "sum": Eq. 8 as printed; "mean": per element, KL per latent dim (the authors' code)
 
     @classmethod
     def paper(cls) -> "MotionFillConfig":
@@ -251,16 +266,18 @@ class MotionFillVAE(nn.Module):
         'predicted') says which root velocities build LocalMotionFill's condition image (the fine-tuning uses TrajFill's,
         without gradient into TrajFill)."""
         cfg = self.cfg
+        if cfg.reduction not in ("sum", "mean"):
+            raise ValueError(f"reduction: expected 'sum' or 'mean', got {cfg.reduction!r}")
         logs: dict[str, Tensor] = {}
         loss = torch.zeros(())
         vel = batch["vel"]
         if "traj" in parts:
             traj_hat, mu, logvar = self.traj(batch["traj"], batch["traj_interp"])
-            logs["traj"] = (traj_hat - batch["traj"]).abs().sum(-1).sum(-1).mean()
+            logs["traj"] = _reduce((traj_hat - batch["traj"]).abs(), cfg.reduction)
             v_hat = traj_hat[:, 1:] - traj_hat[:, :-1]
-            logs["traj_vel"] = (v_hat - (batch["traj"][:, 1:] - batch["traj"][:, :-1])).abs().sum(-1).sum(-1).mean()
+            logs["traj_vel"] = _reduce((v_hat - (batch["traj"][:, 1:] - batch["traj"][:, :-1])).abs(), cfg.reduction)
             logs["kl_traj"] = kl_standard_normal(mu, logvar)
-            loss = loss + logs["traj"] + cfg.l1 * logs["traj_vel"] + cfg.lambda_kl * robust_kl(mu, logvar)
+            loss = loss + logs["traj"] + cfg.l1 * logs["traj_vel"] + cfg.lambda_kl * _robust_kl(mu, logvar, cfg.reduction)
             if trajectory == "predicted":      # detached: the local terms would pull TrajFill off the data
                 vel = traj_velocity(traj_hat).detach()
         if "local" in parts:
@@ -269,12 +286,12 @@ class MotionFillVAE(nn.Module):
             ch0, mu, logvar = self.local(target, cond)
             x, c = ch0[..., :-4], ch0[..., -4:]
             xt, ct = target[:, 0, :, :-4], target[:, 0, :, -4:]
-            logs["markers"] = (x - xt).abs().sum(-1).sum(-1).mean()
-            logs["markers_vel"] = ((x[:, 1:] - x[:, :-1]) - (xt[:, 1:] - xt[:, :-1])).abs().sum(-1).sum(-1).mean()
-            logs["contacts"] = F.binary_cross_entropy_with_logits(c, ct, reduction="none").sum((1, 2)).mean()
+            logs["markers"] = _reduce((x - xt).abs(), cfg.reduction)
+            logs["markers_vel"] = _reduce(((x[:, 1:] - x[:, :-1]) - (xt[:, 1:] - xt[:, :-1])).abs(), cfg.reduction)
+            logs["contacts"] = _reduce(F.binary_cross_entropy_with_logits(c, ct, reduction="none"), cfg.reduction)
             logs["kl_motion"] = kl_standard_normal(mu, logvar)
             loss = (loss + cfg.l2 * logs["contacts"] + cfg.l3 * logs["markers"] + cfg.l4 * logs["markers_vel"]
-                    + cfg.lambda_kl * robust_kl(mu, logvar))
+                    + cfg.lambda_kl * _robust_kl(mu, logvar, cfg.reduction))
             with torch.no_grad():
                 local, _ = self.split(ch0)
                 logs["marker_error_cm"] = (local - batch["local"]).norm(dim=-1).mean() * 100
