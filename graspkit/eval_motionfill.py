@@ -263,7 +263,8 @@ def add_motionfill_train_commands(train_sub) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--reduction", choices=["sum", "mean"], default=None,
-                   help="Eq. 8-9's reduction: sum (as printed) or mean (the authors' code); default: --init's, else sum")
+                   help="Eq. 8-9's reduction: sum (as printed) or mean (the authors' code); "
+                   "default: --init's, else sum")
     p.set_defaults(func=_cmd_train)
     b = train_sub.add_parser("motionfill_baseline", help="train one of SAGA Tab. 3's deterministic infilling "
                              "baselines (CNN-AE, PoseNet, RouteNet)")

@@ -277,7 +277,8 @@ class MotionFillVAE(nn.Module):
             v_hat = traj_hat[:, 1:] - traj_hat[:, :-1]
             logs["traj_vel"] = _reduce((v_hat - (batch["traj"][:, 1:] - batch["traj"][:, :-1])).abs(), cfg.reduction)
             logs["kl_traj"] = kl_standard_normal(mu, logvar)
-            loss = loss + logs["traj"] + cfg.l1 * logs["traj_vel"] + cfg.lambda_kl * _robust_kl(mu, logvar, cfg.reduction)
+            loss = (loss + logs["traj"] + cfg.l1 * logs["traj_vel"]
+                    + cfg.lambda_kl * _robust_kl(mu, logvar, cfg.reduction))
             if trajectory == "predicted":      # detached: the local terms would pull TrajFill off the data
                 vel = traj_velocity(traj_hat).detach()
         if "local" in parts:
