@@ -53,9 +53,21 @@ def _t(x: Any) -> torch.Tensor:
     return x if isinstance(x, torch.Tensor) else torch.as_tensor(np.asarray(x))
 
 
+def _shaped(x: Any, name: str, shape: str, min_frames: int = 1) -> torch.Tensor:
+    """`x` as a tensor after checking it against `shape` ('T,V,3', 'T,2,3', 'T,3' or '3'); a ValueError names the
+    argument otherwise. `min_frames` is the least T."""
+    t = _t(x)
+    dims = shape.split(",")
+    ok = t.dim() == len(dims) and all(d not in "123456789" or t.shape[i] == int(d) for i, d in enumerate(dims))
+    if not ok or (dims[0] == "T" and t.shape[0] < min_frames):
+        need = f" with T >= {min_frames}" if min_frames > 1 else ""
+        raise ValueError(f"{name}: expected shape ({shape}){need}, got {tuple(t.shape)}")
+    return t
+
+
 def lowest_vertex_motion(vertices: Any) -> tuple[np.ndarray, np.ndarray]:
     """Horizontal and 3D displacement (T-1,) from frame t to t+1 of the vertex lowest at frame t; vertices (T,V,3)."""
-    v = _t(vertices)
+    v = _shaped(vertices, "vertices", "T,V,3", min_frames=2)
     idx = v[:-1, :, 2].argmin(1)
     ar = torch.arange(len(idx))
     d = v[1:][ar, idx] - v[:-1][ar, idx]
@@ -76,31 +88,31 @@ def foot_skating_saga(heels: Any, fps: float = 30.0, height: float = SAGA_SKATE_
                       speed: float = SAGA_SKATE_HEEL_SPEED) -> np.ndarray:
     """SAGA's skating per frame (T-1,) bool from heel positions (T,2,3) [left, right]: both heels within `height`
     of the ground and both faster than `speed` m/s (speed from frame t to t+1): no foot is planted."""
-    h = _t(heels).double()
+    h = _shaped(heels, "heels", "T,2,3", min_frames=2).double()
     v = (h[1:] - h[:-1]).norm(dim=-1) * fps                      # (T-1, 2)
     return ((h[:-1, :, 2] < height) & (v > speed)).all(1).numpy()
 
 
 def ground_penetration(vertices: Any) -> np.ndarray:
     """Depth (T,) of the lowest vertex below the ground z = 0 (0 when above)."""
-    return torch.clamp(-_t(vertices)[:, :, 2].min(1).values, min=0).double().numpy()
+    return torch.clamp(-_shaped(vertices, "vertices", "T,V,3")[:, :, 2].min(1).values, min=0).double().numpy()
 
 
 def non_collision_score(vertices: Any, floor: float = 0.0) -> np.ndarray:
     """SAGA's non-collision score per frame (T,): the share of the mesh vertices (T,V,3) at or above the ground
     z = floor (SAGA Sec. 4.2: "the number of body mesh vertices above the ground divided by the total")."""
-    return (_t(vertices)[..., 2] >= floor).double().mean(-1).numpy()
+    return (_shaped(vertices, "vertices", "T,V,3")[..., 2] >= floor).double().mean(-1).numpy()
 
 
 def joint_speed(joints: Any, fps: float = 30.0) -> np.ndarray:
     """Speeds (T-1,J) of joints (T,J,3) in m/s."""
-    j = _t(joints).double()
+    j = _shaped(joints, "joints", "T,J,3", min_frames=2).double()
     return ((j[1:] - j[:-1]).norm(dim=-1) * fps).numpy()
 
 
 def joint_jerk(joints: Any, fps: float = 30.0) -> np.ndarray:
     """Jerk magnitudes (T-3,J) in m/s^3: third finite differences of joints (T,J,3)."""
-    j = _t(joints).double()
+    j = _shaped(joints, "joints", "T,J,3", min_frames=4).double()
     d3 = j[3:] - 3 * j[2:-1] + 3 * j[1:-2] - j[:-3]
     return (d3.norm(dim=-1) * fps**3).numpy()
 
@@ -126,7 +138,8 @@ def joint_limit_violation(poses: Any) -> np.ndarray:
 
 def distance_to_goal(wrist: Any, goal: Any) -> float:
     """WANDR's DTG: closest distance (m) of the wrist track (T,3) to the goal (3,)."""
-    return float((_t(wrist).double() - _t(goal).double()).norm(dim=-1).min())
+    w, g = _shaped(wrist, "wrist", "T,3").double(), _shaped(goal, "goal", "3").double()
+    return float((w - g).norm(dim=-1).min())
 
 
 def goal_reached(wrist: Any, goal: Any, radius: float = WANDR_SUCCESS_RADIUS) -> bool:
@@ -224,7 +237,10 @@ def contact_ratio(min_distances: Any, threshold: float = GRASP_CONTACT_THRESHOLD
 
 def apd(samples: Any) -> float:
     """Average pairwise L2 distance between K samples (K, ...) flattened (SAGA Sec. 4.1 after DLow): mean over i != j."""
-    x = _t(samples).double().reshape(len(samples), -1)
+    x = _t(samples).double()
+    if x.dim() < 1 or x.numel() == 0:
+        raise ValueError(f"samples: expected (K, ...) with non-empty samples, got shape {tuple(x.shape)}")
+    x = x.reshape(len(x), -1)
     K = x.shape[0]
     if K < 2:
         raise ValueError(f"samples: APD needs at least 2 samples, got {K}")

@@ -90,3 +90,17 @@ def test_non_collision_score_counts_vertices_above_the_ground():
     expected = (sunk[..., 2] >= 0).mean(-1)
     assert np.allclose(M.non_collision_score(sunk), expected) and 0 < expected[0] < 1
     assert np.allclose(M.non_collision_score(v, floor=2.0), 0.0)     # a floor above everything
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: M.foot_skating_saga(np.zeros((5, 3))), r"heels: expected shape \(T,2,3\)"),
+    (lambda: M.foot_skating_saga(np.zeros((1, 2, 3))), r"heels: .*T >= 2"),
+    (lambda: M.foot_skating_wandr(np.zeros((4, 10, 2))), r"vertices: expected shape \(T,V,3\)"),
+    (lambda: M.distance_to_goal(np.zeros((3, 2)), [0, 0, 1]), r"wrist: expected shape \(T,3\)"),
+    (lambda: M.distance_to_goal(np.zeros((3, 3)), [0, 1]), r"goal: expected shape \(3\)"),
+    (lambda: M.joint_jerk(np.zeros((3, 22, 3))), r"joints: .*T >= 4"),
+    (lambda: M.apd(np.zeros((0, 3))), r"samples: expected"),
+])
+def test_bad_shapes_name_the_argument(call, message):
+    with pytest.raises(ValueError, match=message):
+        call()
