@@ -145,7 +145,7 @@ def saga_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int, int] = (100,
     fitted by GraspPose-Opt (Alg. 1), shown in the world."""
     from graspkit.data.grab import read_arrays
     from graspkit.data.grasp_datasets import grasp_files
-    from graspkit.data.grasp_io import cached_sdf_grid
+    from graspkit.data.grasp_io import collision_sdf_grid
     from graspkit.data.motion import Motion
     from graspkit.eval_saga import _object_batch, fit_variants, load_placements
     from graspkit.models.pose_prior import load_pose_prior
@@ -163,7 +163,7 @@ def saga_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int, int] = (100,
     g = torch.Generator().manual_seed(0)
     s = wg.sample(pl.points, pl.normals, pl.height, 1, g, centre=torch.zeros(3))
     opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=steps))
-    res = fit_variants(opt, s.markers, _object_batch([pl], 1, cached_sdf_grid(pl.name)), s.marker_contact,
+    res = fit_variants(opt, s.markers, _object_batch([pl], 1, collision_sdf_grid(pl.name)), s.marker_contact,
                        s.object_contact, ["full"])["full"]
     p = res.params
     full = torch.cat([p["global_orient"][:, None], p["body_pose"].view(1, 21, 3), p["jaw_pose"][:, None],

@@ -152,6 +152,12 @@ def summarise(rows: list[dict[str, float]], markers: Tensor | None = None, per: 
     return out
 
 
+def _object_index(name: str, position: int) -> int:
+    """The index that seeds object `name`'s draws: its place in EvalConfig's default objects, else `position`."""
+    default = EvalConfig.objects
+    return default.index(name) if name in default else position
+
+
 def _object_batch(placements: list[Placement], per: int, sdf) -> Any:
     """A batched GraspObject: each placement repeated `per` times."""
     from graspkit.optim.grasppose import GraspObject
@@ -192,7 +198,7 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
 
     from graspkit.body import BodyModel
     from graspkit.body.markers import saga_markers
-    from graspkit.data.grasp_io import cached_sdf_grid
+    from graspkit.data.grasp_io import collision_sdf_grid
     from graspkit.models.pose_prior import load_pose_prior
     from graspkit.models.wholegrasp import (GRABNET_SMPLX_PATH, GrabNetSMPLX, HandPCA, WholeGraspVAE,
                                             load_wholegrasp, params_to_rotmats)
@@ -237,8 +243,9 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
     for oi, name in enumerate(tqdm(cfg.objects, desc="SAGA eval", disable=not progress)):
         pls = load_placements(root, name, max(cfg.placements, cfg.gt_grasps))
         gts, pls = pls[:cfg.gt_grasps], pls[:cfg.placements]
-        sdf = cached_sdf_grid(name)
-        g = torch.Generator().manual_seed(cfg.seed * 1000 + oi)
+        sdf = collision_sdf_grid(name)
+        # seeded by the object's place in the default list, so a run on some objects draws what the full run draws
+        g = torch.Generator().manual_seed(cfg.seed * 1000 + _object_index(name, oi))
         s = [wg.sample(p.points, p.normals, p.height, n, g, centre=torch.zeros(3)) for p in pls]
         mk, mc, oc = (torch.cat([getattr(x, k) for x in s]) for k in ("markers", "marker_contact", "object_contact"))
         mk1 = mk[:0] if single is None else torch.cat(

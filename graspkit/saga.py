@@ -79,7 +79,7 @@ def synthesize(name: str, bm=None, object_pose: ObjectPose | None = None, start:
     """
     from graspkit.body import BodyModel
     from graspkit.data.grasp import object_points
-    from graspkit.data.grasp_io import cached_sdf_grid
+    from graspkit.data.grasp_io import collision_sdf_grid
     from graspkit.data.motion import canonicalize
     from graspkit.data.motionfill_dataset import make_windows
     from graspkit.eval_motionfill import heel_columns, interp, load_motionfill, skating
@@ -115,7 +115,7 @@ def synthesize(name: str, bm=None, object_pose: ObjectPose | None = None, start:
     prior = load_pose_prior(ck / "pose_prior.pt")
     s = wg.sample(P, N, float(centre[2]), 1, g, centre=torch.zeros(3))
     opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=grasp_steps))
-    res = opt.fit(s.markers, GraspObject(P, N, float(centre[2]), cached_sdf_grid(name), R_t), s.marker_contact,
+    res = opt.fit(s.markers, GraspObject(P, N, float(centre[2]), collision_sdf_grid(name), R_t), s.marker_contact,
                   s.object_contact, progress=progress).to_world(torch.as_tensor(centre).float())
     mesh = make_object(name)
     mesh.vertices = np.asarray(mesh.vertices) @ R_o.T + centre

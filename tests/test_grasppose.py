@@ -213,3 +213,34 @@ def test_rotated_object_grid_matches_the_exact_signed_distance_of_the_turned_mes
     assert (got - want).abs().median() < 5e-4
     pts, _, h = obj.batch(2)
     assert pts.shape == (2, 10, 3) and h[:, 0].tolist() == pytest.approx([0.8, 0.9])
+
+
+def test_polish_continues_stage3_at_its_learning_rate(bm, prior):
+    """`polish=(n, lr)` runs n more stage-3 steps on the same Adam state at lr. From a body that already fits its
+    markers (the object far away), stage 3 at 0.008 only jitters: the polish at 1e-3 ends with a lower energy than
+    as many more steps at 0.008; at a vanishing lr the result is stage 3's own; bad values are named."""
+    verts, truth = _truth(bm, prior, B=1, seed=3)
+    ball = trimesh.creation.icosphere(3, 0.04)
+    ball.apply_translation((verts[0].mean(0) + torch.tensor([2.0, 0.0, 0.0])).double().numpy())
+    pts_np, face = trimesh.sample.sample_surface_even(ball, 400, seed=0)
+    obj = GraspObject(torch.tensor(pts_np, dtype=torch.float32), torch.tensor(ball.face_normals[face]).float(),
+                      height=1.0, sdf=SDFGrid.from_mesh(ball, resolution=32, padding=0.02))
+    cfg = GraspPoseConfig(steps=(0, 0, 40), contact=False, ground=False, polish=(0, 0.0))
+    opt = GraspPoseOpt(bm, prior, cfg)
+    markers = verts[:, opt.marker_ids]
+    init = _params_of(opt, truth)
+
+    def run(polish):
+        r = opt.with_config(polish=polish).fit(markers, obj, init=init, stages=(3,), progress=False)
+        return r, sum(v.item() for v in r.energies[0]["after"].values())
+
+    plain, e_plain = run((0, 0.0))
+    still, _ = run((30, 1e-12))
+    for k in plain.state:
+        torch.testing.assert_close(still.state[k], plain.state[k], atol=1e-6, rtol=0)
+    assert still.log[-1]["step"] > plain.log[-1]["step"]                    # the extra steps ran
+    _, e_polish = run((30, 1e-3))
+    _, e_longer = run((30, cfg.lrs[2]))                                      # as many steps at stage 3's own lr
+    assert e_polish < e_longer and e_polish < e_plain, (e_polish, e_longer, e_plain)
+    with pytest.raises(ValueError, match="polish"):
+        run((10, 0.0))

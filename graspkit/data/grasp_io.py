@@ -1,8 +1,10 @@
 """Caches for grasp synthesis: per-object SDF grids stored in graspkit's cache folder (built once per machine;
-a few are shipped in data_stubs/sdf for the tests and lesson 04)."""
+a few are shipped in data_stubs/sdf for the tests and lessons 04-05). The grasp generator uses 64 nodes along the
+longest side; GraspPose-Opt's collision terms use `collision_sdf_grid` (cells of at most 2 mm)."""
 from __future__ import annotations
 
 import hashlib
+import math
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +15,10 @@ from graspkit.paths import DATA_STUBS
 from graspkit.objects.sdf import SDFGrid
 
 SDF_PADDING = 0.03
+# m: the largest cell of the grids the optimisers' collision terms use (GraspPose-Opt's E_colli). A fixed 64 nodes
+# gives cells of 2.9-7.5 mm on the larger objects and misses most points 1-2 mm inside their thin walls (frying pan,
+# wine glass, pitcher): E_colli cannot see a finger there. Measured in docs/objects.md.
+COLLISION_CELL = 0.002
 
 
 def mesh_digest(name: str) -> str:
@@ -42,3 +48,29 @@ def cached_sdf_grid(name: str, resolution: int = 64, folder: Path | None = None)
     grid = SDFGrid.from_mesh(make_object(name), resolution, SDF_PADDING)
     write_npz_atomic(path, {"values": grid.values.numpy(), "lower": grid.lower.numpy(), "upper": grid.upper.numpy()})
     return grid
+
+
+def resolution_for(name: str, cell: float, minimum: int = 64) -> int:
+    """Nodes along the longest side of object `name`'s padded box for cells of at most `cell` m (at least `minimum`)."""
+    if cell <= 0:
+        raise ValueError(f"cell: expected a positive size in metres, got {cell}")
+    m = make_object(name)
+    longest = float((m.bounds[1] - m.bounds[0]).max()) + 2 * SDF_PADDING
+    return max(minimum, math.ceil(longest / cell - 1e-9) + 1)
+
+
+def collision_sdf_grid(name: str, folder: Path | None = None) -> SDFGrid:
+    """The SDF grid of object `name` that GraspPose-Opt's collision terms use: cells of at most COLLISION_CELL."""
+    return cached_sdf_grid(name, resolution_for(name, COLLISION_CELL), folder)
+
+
+def ship_sdf_grid(name: str, resolution: int, folder: Path = DATA_STUBS / "sdf") -> Path:
+    """Write object `name`'s grid at `resolution` into `folder` with float16 values (within 0.03 mm of float32) for
+    shipping in data_stubs/sdf, e.g. `ship_sdf_grid("mug", resolution_for("mug", COLLISION_CELL))` (lesson 05)."""
+    from graspkit.data.formats import write_npz_atomic
+
+    grid = cached_sdf_grid(name, resolution)
+    path = Path(folder) / f"{name}_r{resolution}_{mesh_digest(name)}.npz"
+    write_npz_atomic(path, {"values": grid.values.numpy().astype(np.float16), "lower": grid.lower.numpy(),
+                            "upper": grid.upper.numpy()})
+    return path

@@ -27,11 +27,18 @@ graspkit's choices where the paper is silent (all in `GraspPoseWeights` / `Grasp
 - V_B in d(o, V_B) is the hand vertices (contacts are with the hands; the rest of the body is far), and only the
   256 object points with the highest C^_o enter that sum per sample; S(o, V^h_B) is taken for the 512 object points
   nearest the hand at the start of stage 3 (the hand moves little in stage 3), signed by the hand's vertex normals.
-  S(b, O) uses the object's signed-distance grid when one is given (exact to ~0.1 mm), else the point cloud with
-  its normals (SAGA's "signed distance from point x to point cloud Y").
+  S(b, O) uses the object's signed-distance grid when one is given, else the point cloud with its normals (SAGA's
+  "signed distance from point x to point cloud Y"). The evaluation, the lessons and `graspkit.saga` pass
+  `collision_sdf_grid(name)` (graspkit.data.grasp_io): cells of at most 2 mm. A 64-node grid (cells up to 7.5 mm)
+  reads most points 1-2 mm inside the thin walls of the frying pan and wine glass as outside, so E^B_colli could
+  not see a finger there (docs/objects.md).
 - In stage 3 the nearest-neighbour pairs behind d and S are recomputed every 10 steps and held in between (the
   distances stay differentiable through the held pairs; the body moves little in 10 steps); energies reported
   before and after a stage use fresh pairs.
+- The polish (`GraspPoseConfig.polish`, graspkit's): stage 3 goes on for 100 more steps of the same energy at lr
+  0.001. Adam moves every parameter by about its learning rate per step whatever the gradient, so at stage 3's
+  0.008 the fingers jitter by millimetres across the surface and the last step decides contact or penetration.
+  Chosen on the validation and training objects (docs/saga.md); `polish=(0, 0.0)` is Alg. 1's schedule.
 - Energies are summed over the samples of a batch (the samples are independent; Adam's steps are per parameter).
 Frames: everything in the object frame of WholeGrasp-VAE (object centre at 0, z up, floor at z = -t_O).
 """
@@ -94,6 +101,7 @@ class GraspPoseConfig:
     nn_every: int = 10            # stage 3: nearest-neighbour pairs recomputed every this many steps (held between)
     sunk_depth: float | None = None  # m: E^O_colli off for a sample while a hand vertex is deeper inside (docs/saga.md)
     stage3_free: tuple[str, ...] = STAGE3_FREE     # Alg. 1's stage-3 variables (an experiment may add t, R: docs/saga.md)
+    polish: tuple[int, float] = (100, 1e-3)  # stage 3 goes on polish[0] steps at lr polish[1] (graspkit's; docs)
     weights: GraspPoseWeights = field(default_factory=GraspPoseWeights)
 
 
@@ -340,6 +348,9 @@ class GraspPoseOpt:
                              f"got {tuple(object_contact.shape)}")
         if self.cfg.heuristic and self.hand_contact_prior is None:
             raise ValueError("hand_contact_prior: the heuristic contact of S.3 needs it")
+        n_polish, lr_polish = self.cfg.polish
+        if n_polish < 0 or (n_polish > 0 and lr_polish <= 0):
+            raise ValueError(f"polish: expected (steps >= 0, learning rate > 0), got {self.cfg.polish}")
         if not self.cfg.stage3_free or set(self.cfg.stage3_free) - set(PARAMS):
             raise ValueError(f"stage3_free: expected a non-empty subset of {PARAMS}, got {self.cfg.stage3_free}")
         target = markers.detach().float()
@@ -349,7 +360,7 @@ class GraspPoseOpt:
         energies: list[dict[str, dict[str, Tensor]]] = []
         log: list[dict[str, float]] = []
         cache: dict[str, Tensor] = {}
-        total = sum(self.cfg.steps[s - 1] for s in stages)
+        total = sum(self.cfg.steps[s - 1] for s in stages) + (n_polish if 3 in stages else 0)
         bar = tqdm(total=total, desc="GraspPose-Opt", disable=not progress)
         step = 0
         for stage in stages:
@@ -362,7 +373,11 @@ class GraspPoseOpt:
             with torch.no_grad():
                 before = {k: v.detach() for k, v in self.energy(p, target, obj, stage, marker_contact,
                                                                 object_contact, cache).items()}
-            for i in range(self.cfg.steps[stage - 1]):
+            n_steps = self.cfg.steps[stage - 1] + (n_polish if stage == 3 else 0)
+            for i in range(n_steps):
+                if stage == 3 and n_polish and i == self.cfg.steps[2]:     # the polish: same energy, lower lr
+                    for group in opt.param_groups:
+                        group["lr"] = lr_polish
                 e = self.energy(p, target, obj, stage, marker_contact, object_contact, cache,
                                 refresh=i % self.cfg.nn_every == 0)
                 energy_step(opt, e, log, i, step, stage, self.cfg.log_every)
