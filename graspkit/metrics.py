@@ -54,8 +54,8 @@ def _t(x: Any) -> torch.Tensor:
 
 
 def _shaped(x: Any, name: str, shape: str, min_frames: int = 1) -> torch.Tensor:
-    """`x` as a tensor after checking it against `shape` ('T,V,3', 'T,2,3', 'T,3' or '3'); a ValueError names the
-    argument otherwise. `min_frames` is the least T."""
+    """`x` as a tensor after checking it against `shape` (comma-separated: a digit is a fixed size, a letter any
+    size, e.g. 'T,V,3'); a ValueError names the argument otherwise. `min_frames` is the least T."""
     t = _t(x)
     dims = shape.split(",")
     ok = t.dim() == len(dims) and all(d not in "123456789" or t.shape[i] == int(d) for i, d in enumerate(dims))

@@ -27,7 +27,8 @@ Losses (Eq. 8-9, A.4): L = L_rec + lambda_KL L_KL,
     L_KL  = Psi(KL(q(z_t | ...))) + Psi(KL(q(z_m | I, I_c)))                                     (Eq. 9)
 with {lambda_KL, l1, l2, l3, l4} = {1, 0.05, 1, 1, 0.5}. |.| is the L1 norm of a frame's vector, summed over frames
 and averaged over the batch; the local markers enter in their normalised units (the image's), the BCE is summed over
-frames and the four contacts.
+frames and the four contacts. `MotionFillConfig(reduction="mean")` reduces as the authors' released code does (means
+over elements, Psi of the per-dimension KL); measured worse here (docs/saga_motion.md), so "sum" is the default.
 """
 from __future__ import annotations
 
