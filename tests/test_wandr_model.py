@@ -169,6 +169,13 @@ def test_rollout_errors_name_the_argument(stats, starts):
         M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], torch.zeros(2, 2), 5, 5)
     with pytest.raises(ValueError, match="z"):
         M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], torch.zeros(3), 5, 5, z=torch.zeros(1, 4, 4))
+    goal = torch.tensor([[1.0, 0.5, 1.0]])
+    for bad_goal in (torch.tensor([[1.0, 0.5]]), torch.tensor([[float("nan"), 0.5, 1.0]]), torch.zeros(0, 3)):
+        with pytest.raises(ValueError, match="goal"):
+            M.generate(model, s, bad_goal, 5)
+    for bad_t in (0, -3, 2.5, torch.tensor([5, 6])):
+        with pytest.raises(ValueError, match="t_goal"):
+            M.generate(model, s, goal, bad_t)
 
 
 def test_checkpoint_round_trip_is_weights_only(stats, starts, tmp_path):

@@ -290,7 +290,12 @@ def expand_starts(starts: I.StartPose | Sequence[I.StartPose], goals: Tensor, n:
     """Batch every (start, goal, sample) combination, start-major: p_prev, p0 (B, 135), rest (B, 22, 3), goal (B, 3),
     and the index table (B, 3) = (start, goal, sample); B = S * G * n."""
     starts = [starts] if isinstance(starts, I.StartPose) else list(starts)
-    goals = torch.as_tensor(goals, dtype=torch.float32).reshape(-1, 3)
+    goals = torch.as_tensor(goals, dtype=torch.float32)
+    if goals.dim() not in (1, 2) or goals.shape[-1] != 3 or goals.numel() == 0:
+        raise ValueError(f"goal: expected (3,) or (G, 3) positions in metres, got shape {tuple(goals.shape)}")
+    if not torch.isfinite(goals).all():
+        raise ValueError("goal: expected finite positions, got NaN or inf")
+    goals = goals.reshape(-1, 3)
     if n < 1:
         raise ValueError(f"n: expected >= 1, got {n}")
     S, G = len(starts), len(goals)
@@ -311,6 +316,10 @@ def generate(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal:
     model.eval()
     pp, p0, rest, g, idx = expand_starts(start, goal, n)
     tg = torch.as_tensor(t_goal)
+    if tg.dim() > 1 or (tg.dim() == 1 and len(tg) != len(torch.as_tensor(goal).reshape(-1, 3))):
+        raise ValueError(f"t_goal: expected a frame or one per goal, got shape {tuple(tg.shape)}")
+    if tg.dtype.is_floating_point or int(tg.min()) < 1:
+        raise ValueError(f"t_goal: expected goal frames (integers >= 1), got {t_goal}")
     if tg.dim() == 1:
         tg = tg[idx[:, 1]]
     frames = int(tg.max()) if frames is None else frames
