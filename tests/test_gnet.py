@@ -83,6 +83,11 @@ def test_shapes_and_seeded_sampling(bm):
     for k in s1:
         assert torch.equal(s1[k], s2[k])
     assert not torch.allclose(s1["rot6d"], s3["rot6d"])
+    for name, args in (("bps", (batch["bps"][:, :100], batch["obj_transl"], batch["betas"])),
+                       ("obj_transl", (batch["bps"], batch["obj_transl"][:2], batch["betas"])),
+                       ("betas", (batch["bps"], batch["obj_transl"], batch["betas"][:, :5]))):
+        with pytest.raises(ValueError, match=name):
+            net.sample(*args)
 
 
 def test_untrained_decoder_outputs_the_training_mean(bm):

@@ -102,6 +102,12 @@ def test_image_round_trip_and_deterministic_sampling():
     s1 = m.sample(b["traj_interp"][0], b["local"][0], b["contacts"][0], 2, torch.Generator().manual_seed(1))
     s3 = m.sample(b["traj_interp"][0], b["local"][0], b["contacts"][0], 2, torch.Generator().manual_seed(2))
     assert not torch.allclose(s1["markers"], s3["markers"])       # another seed, another sample
+    with pytest.raises(ValueError, match="traj_interp"):
+        m.sample(b["traj_interp"][0, :10], b["local"][0], b["contacts"][0], 2)
+    with pytest.raises(ValueError, match="local"):
+        m.sample(b["traj_interp"][0], b["local"][0, :, :78], b["contacts"][0], 2)
+    with pytest.raises(ValueError, match="n: "):
+        m.sample(b["traj_interp"][0], b["local"][0], b["contacts"][0], 0)
 
 
 def test_kl_terms_against_torch_distributions():

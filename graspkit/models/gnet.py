@@ -238,6 +238,11 @@ class GNet(nn.Module):
     def sample(self, bps: Tensor, obj_transl: Tensor, betas: Tensor, generator: torch.Generator | None = None,
                z: Tensor | None = None) -> dict[str, Tensor]:
         """Inference (§3.3): skip the encoder, z ~ N(0, I) from `generator` (or given), decode: (B,...) -> outputs."""
+        cfg = self.cfg
+        for name, x, width in (("bps", bps, cfg.n_bps), ("obj_transl", obj_transl, 3), ("betas", betas, cfg.n_betas)):
+            if not isinstance(x, Tensor) or x.dim() != 2 or x.shape[1] != width or len(x) != len(bps):
+                got = tuple(x.shape) if isinstance(x, Tensor) else type(x).__name__
+                raise ValueError(f"{name}: expected a tensor of shape ({len(bps)}, {width}), got {got}")
         was = self.training
         self.eval()
         if z is None:

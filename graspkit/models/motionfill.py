@@ -307,6 +307,13 @@ class MotionFillVAE(nn.Module):
         Returns traj (n,62,4), local (n,61,79,3), contacts (n,61,4) probabilities, markers (n,61,79,3) canonical."""
         from graspkit.data.motionfill_dataset import global_motion
 
+        shapes = {"traj_interp": (traj_interp, (NUM_ROOT, 4)), "local": (local, (NUM_FRAMES, NUM_MARKERS, 3)),
+                  "contacts": (contacts, (NUM_FRAMES, 4)), "traj": (traj, (NUM_ROOT, 4))}
+        for name, (x, shape) in shapes.items():
+            if x is not None and tuple(torch.as_tensor(x).shape) != shape:
+                raise ValueError(f"{name}: expected shape {shape}, got {tuple(torch.as_tensor(x).shape)}")
+        if n < 1:
+            raise ValueError(f"n: expected >= 1 samples, got {n}")
         was = self.training
         self.eval()
         ti = traj_interp.float().expand(n, -1, -1)
