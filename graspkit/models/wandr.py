@@ -316,7 +316,7 @@ def generate(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal:
     model.eval()
     pp, p0, rest, g, idx = expand_starts(start, goal, n)
     tg = torch.as_tensor(t_goal)
-    if tg.dim() > 1 or (tg.dim() == 1 and len(tg) != len(torch.as_tensor(goal).reshape(-1, 3))):
+    if tg.dim() > 1 or (tg.dim() == 1 and len(tg) != int(idx[:, 1].max()) + 1):
         raise ValueError(f"t_goal: expected a frame or one per goal, got shape {tuple(tg.shape)}")
     if tg.dtype.is_floating_point or int(tg.min()) < 1:
         raise ValueError(f"t_goal: expected goal frames (integers >= 1), got {t_goal}")
