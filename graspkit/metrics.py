@@ -58,7 +58,7 @@ def _shaped(x: Any, name: str, shape: str, min_frames: int = 1) -> torch.Tensor:
     size, e.g. 'T,V,3'); a ValueError names the argument otherwise. `min_frames` is the least T."""
     t = _t(x)
     dims = shape.split(",")
-    ok = t.dim() == len(dims) and all(d not in "123456789" or t.shape[i] == int(d) for i, d in enumerate(dims))
+    ok = t.dim() == len(dims) and all(not d.isdigit() or t.shape[i] == int(d) for i, d in enumerate(dims))
     if not ok or (dims[0] == "T" and t.shape[0] < min_frames):
         need = f" with T >= {min_frames}" if min_frames > 1 else ""
         raise ValueError(f"{name}: expected shape ({shape}){need}, got {tuple(t.shape)}")

@@ -58,7 +58,7 @@ def test_loss_terms_and_gradients():
 
 def test_mean_reduction_is_the_per_element_average_of_the_sum():
     """reduction="mean" (the authors' code): each reconstruction term is the "sum" term over its element count,
-    the KL term Psi of the per-dimension KL (torch.distributions as the reference)."""
+    the total loss the weighted terms plus Psi of each per-dimension KL, computed here by hand."""
     b = _batch()
     torch.manual_seed(0)
     m_sum = MotionFillVAE(MotionFillConfig(reduction="sum")).eval()

@@ -31,11 +31,10 @@ def mesh_digest(name: str) -> str:
 
 def cached_sdf_grid(name: str, resolution: int = 64, folder: Path | None = None) -> SDFGrid:
     """The SDF grid of catalogue object `name`, read from `<cache>/sdf/` or built (seconds) and stored atomically."""
-    from graspkit.data.formats import write_npz_atomic
     from graspkit.paths import cache_dir
 
     folder = Path(folder) if folder is not None else cache_dir() / "sdf"
-    fname = f"{name}_r{resolution}_{mesh_digest(name)}.npz"
+    fname = _grid_filename(name, resolution)
     path = folder / fname
     for p in (path, DATA_STUBS / "sdf" / fname):     # the cache, then the few grids shipped in data_stubs/sdf
         if p.is_file():
@@ -46,8 +45,21 @@ def cached_sdf_grid(name: str, resolution: int = 64, folder: Path | None = None)
             except (OSError, ValueError, KeyError):
                 pass   # a damaged cache file is rebuilt below
     grid = SDFGrid.from_mesh(make_object(name), resolution, SDF_PADDING)
-    write_npz_atomic(path, {"values": grid.values.numpy(), "lower": grid.lower.numpy(), "upper": grid.upper.numpy()})
+    _write_grid(path, grid)
     return grid
+
+
+def _grid_filename(name: str, resolution: int) -> str:
+    """The cache (and data_stubs/sdf) file name of object `name`'s grid: resolution and mesh hash in it."""
+    return f"{name}_r{resolution}_{mesh_digest(name)}.npz"
+
+
+def _write_grid(path: Path, grid: SDFGrid, dtype: type = np.float32) -> None:
+    """Write a grid atomically (values in `dtype`; the box corners in float32)."""
+    from graspkit.data.formats import write_npz_atomic
+
+    write_npz_atomic(path, {"values": grid.values.numpy().astype(dtype), "lower": grid.lower.numpy(),
+                            "upper": grid.upper.numpy()})
 
 
 def resolution_for(name: str, cell: float, minimum: int = 64) -> int:
@@ -67,10 +79,6 @@ def collision_sdf_grid(name: str, folder: Path | None = None) -> SDFGrid:
 def ship_sdf_grid(name: str, resolution: int, folder: Path = DATA_STUBS / "sdf") -> Path:
     """Write object `name`'s grid at `resolution` into `folder` with float16 values (within 0.03 mm of float32) for
     shipping in data_stubs/sdf, e.g. `ship_sdf_grid("mug", resolution_for("mug", COLLISION_CELL))` (lesson 05)."""
-    from graspkit.data.formats import write_npz_atomic
-
-    grid = cached_sdf_grid(name, resolution)
-    path = Path(folder) / f"{name}_r{resolution}_{mesh_digest(name)}.npz"
-    write_npz_atomic(path, {"values": grid.values.numpy().astype(np.float16), "lower": grid.lower.numpy(),
-                            "upper": grid.upper.numpy()})
+    path = Path(folder) / _grid_filename(name, resolution)
+    _write_grid(path, cached_sdf_grid(name, resolution), np.float16)
     return path

@@ -61,7 +61,10 @@ def kl_standard_normal(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
     return (0.5 * (mu.pow(2) + logvar.exp() - 1.0 - logvar)).sum(-1).mean()
 
 
-def robust_kl(mu: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
-    """SAGA Eq. 2: Psi(KL) with Psi(s) = sqrt(1 + s^2) - 1, which keeps the KL from collapsing the posterior."""
+def robust_kl(mu: torch.Tensor, logvar: torch.Tensor, per_dim: bool = False) -> torch.Tensor:
+    """SAGA Eq. 2: Psi(KL) with Psi(s) = sqrt(1 + s^2) - 1, which keeps the KL from collapsing the posterior; of the
+    KL summed over the latent, or with `per_dim` averaged over its dimensions (SAGA's released code)."""
     kl = kl_standard_normal(mu, logvar)
+    if per_dim:
+        kl = kl / mu.shape[-1]
     return torch.sqrt(1.0 + kl.pow(2)) - 1.0

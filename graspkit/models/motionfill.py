@@ -54,14 +54,6 @@ def _reduce(err: Tensor, reduction: str) -> Tensor:
     return err.sum((1, 2)).mean() if reduction == "sum" else err.mean()
 
 
-def _robust_kl(mu: Tensor, logvar: Tensor, reduction: str) -> Tensor:
-    """Eq. 9's Psi(KL): of the KL summed over the latent ("sum") or averaged over its dimensions ("mean")."""
-    if reduction == "sum":
-        return robust_kl(mu, logvar)
-    kl = kl_standard_normal(mu, logvar) / mu.shape[-1]
-    return torch.sqrt(1.0 + kl.pow(2)) - 1.0
-
-
 @dataclass
 class MotionFillConfig:
     """Sizes and loss weights (A.2, A.4). The defaults are graspkit's shipped sizes (about 0.72 M weights, 1.4 MB in
@@ -279,7 +271,7 @@ class MotionFillVAE(nn.Module):
             logs["traj_vel"] = _reduce((v_hat - (batch["traj"][:, 1:] - batch["traj"][:, :-1])).abs(), cfg.reduction)
             logs["kl_traj"] = kl_standard_normal(mu, logvar)
             loss = (loss + logs["traj"] + cfg.l1 * logs["traj_vel"]
-                    + cfg.lambda_kl * _robust_kl(mu, logvar, cfg.reduction))
+                    + cfg.lambda_kl * robust_kl(mu, logvar, per_dim=cfg.reduction == "mean"))
             if trajectory == "predicted":      # detached: the local terms would pull TrajFill off the data
                 vel = traj_velocity(traj_hat).detach()
         if "local" in parts:
@@ -293,7 +285,7 @@ class MotionFillVAE(nn.Module):
             logs["contacts"] = _reduce(F.binary_cross_entropy_with_logits(c, ct, reduction="none"), cfg.reduction)
             logs["kl_motion"] = kl_standard_normal(mu, logvar)
             loss = (loss + cfg.l2 * logs["contacts"] + cfg.l3 * logs["markers"] + cfg.l4 * logs["markers_vel"]
-                    + cfg.lambda_kl * _robust_kl(mu, logvar, cfg.reduction))
+                    + cfg.lambda_kl * robust_kl(mu, logvar, per_dim=cfg.reduction == "mean"))
             with torch.no_grad():
                 local, _ = self.split(ch0)
                 logs["marker_error_cm"] = (local - batch["local"]).norm(dim=-1).mean() * 100
@@ -310,8 +302,9 @@ class MotionFillVAE(nn.Module):
         shapes = {"traj_interp": (traj_interp, (NUM_ROOT, 4)), "local": (local, (NUM_FRAMES, NUM_MARKERS, 3)),
                   "contacts": (contacts, (NUM_FRAMES, 4)), "traj": (traj, (NUM_ROOT, 4))}
         for name, (x, shape) in shapes.items():
-            if x is not None and tuple(torch.as_tensor(x).shape) != shape:
-                raise ValueError(f"{name}: expected shape {shape}, got {tuple(torch.as_tensor(x).shape)}")
+            got = None if x is None else tuple(torch.as_tensor(x).shape)
+            if got is not None and got != shape:
+                raise ValueError(f"{name}: expected shape {shape}, got {got}")
         if n < 1:
             raise ValueError(f"n: expected >= 1 samples, got {n}")
         was = self.training
