@@ -38,6 +38,7 @@ from graspkit.data.trajectory import RootPlan, heading_profile, ramp, straight_w
 from graspkit.body.skeleton import JOINT_INDEX
 
 REACH_RHO = 0.86           # shoulder-to-wrist distance at the goal, as a fraction of the arm length
+FAR_MIN_SPEED = 0.45      # m/s: the slowest walk of a room-scale clip (it fills the time to its goal frame)
 FLOOR_WRIST = 0.07         # the wrist stays this high (m) above the floor: the hand lies flat below it
 LEVELS = np.linspace(-1.0, 1.0, 41)
 EVAL_ANGLES_DEG = (0.0, 72.0, 144.0, 216.0, 288.0)        # WANDR Sec. 4.2: 5 angles 72 deg apart
@@ -250,8 +251,9 @@ def sample_reach_task(rng: np.random.Generator, far: bool = False) -> ReachTask:
     needed, a slower reach for low goals, a short pause first: about 1.1-3.2 s) and held 0.3-1.0 s.
 
     far=True draws a room-scale task (CIRCLE's subjects walk about a room to their targets): the goal 0.3-5 m away
-    in any direction (a turn first when it is behind), the same heights, and the goal frame the natural time (turn,
-    walk at ~0.8 m/s, reach) plus a short pause first (0.2-0.8 s), at most 9 s."""
+    in any direction (a turn first when it is behind), the same heights, and the goal frame drawn uniformly between
+    the natural time (turn, walk at ~0.8 m/s, reach, a short pause first: 0.2-0.8 s; at most 9 s) and 9 s; the
+    clip (generate_reach) walks slower, down to 0.45 m/s, to arrive then."""
     betas = sample_betas(rng)
     h0 = rng.uniform(-np.pi, np.pi)
     u = rng.random()
@@ -282,7 +284,8 @@ def _far_task(rng: np.random.Generator, betas: np.ndarray, h0: float, z: float) 
     xy0 = rng.uniform(-0.5, 0.5, 2)
     goal = np.array([xy0[0] + r * np.cos(h0 + rel), xy0[1] + r * np.sin(h0 + rel), z])
     turn = abs(rel) / 2.2 + 0.35 if abs(rel) > 0.3 else 0.0
-    t_goal = min(turn + _natural_time(r, z) + rng.uniform(0.2, 0.8), 9.0)
+    t_nat = min(turn + _natural_time(r, z) + rng.uniform(0.2, 0.8), 9.0)
+    t_goal = rng.uniform(t_nat, 9.0)            # the slack goes into a slower walk (generate_reach), not a longer pause
     return ReachTask(Start(float(xy0[0]), float(xy0[1]), float(h0)), goal, int(round(t_goal * 30)),
                      int(rng.integers(9, 31)), betas)
 
@@ -293,9 +296,12 @@ def generate_reach(seed: int, bm, betas: np.ndarray | None = None, far: bool = F
     rng = np.random.default_rng(seed)
     task = sample_reach_task(rng, far=far)
     style, gait = sample_style(rng), sample_gait_style(rng)
+    plan_seed, v_pref = int(rng.integers(2**31)), float(rng.uniform(0.7, 1.1))  # this order: the default clips as before
+    # room-scale: walk as slowly as 0.45 m/s to arrive at the goal frame (plan_reach walks at v_pref when it can and
+    # stands first with the time left over; a long stand at full intention teaches a per-frame model to stand)
     m = plan_reach(task.start, task.goal, task.goal_frame, betas=task.betas if betas is None else betas,
-                   seed=int(rng.integers(2**31)), bm=bm, hold_frames=task.hold_frames, style=style, gait=gait,
-                   v_pref=float(rng.uniform(0.7, 1.1)))
+                   seed=plan_seed, bm=bm, hold_frames=task.hold_frames, style=style, gait=gait,
+                   v_pref=FAR_MIN_SPEED if far else v_pref)
     # a goal this body cannot reach (too high for a short person, too low for a stiff one) becomes the point the
     # wrist did reach: the stored goal is always where the hand is at the goal frame
     wrist = m.joint_positions(bm)[m.goal_frame, JOINT_INDEX["right_wrist"]]
