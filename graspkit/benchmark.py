@@ -15,7 +15,8 @@ figures beside ours in rows labelled with their source. A method whose checkpoin
 Reproducibility: every draw is seeded, so a rerun on the same machine with the same number of torch threads gives
 the same table. Across thread counts the float sums run in another order, and an autoregressive rollout that stops
 at a distance threshold can end a frame earlier or later (measured: GOAL's four benchmark rollouts last 96 / 150 /
-138 / 39 frames on one thread, 96 / 150 / 137 / 39 on two), which moves the motion rows in their last digit.
+138 / 39 frames on one thread, 96 / 150 / 137 / 39 on two), which moves the motion rows in their last digit
+(SAGA's sliding 7.5 % on one thread, 8.33 % on two). The shipped table (docs/benchmark) is made on one thread.
 """
 from __future__ import annotations
 

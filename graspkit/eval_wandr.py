@@ -322,9 +322,10 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     """Train one variant on the clips under `folder` (default <cache>/motion) and write a small checkpoint (with the
     normalisation statistics, the held-out start poses of the test split, and the measured times) to `out`.
     max_steps / ramp_epochs: the rollout schedule (Sup. B.2); stride_scale multiplies the window strides (fewer
-    windows per epoch); reach_far adds the room-scale reaching clips of <folder>/reach_far (docs/data.md; an
-    experiment, see docs/wandr.md); rollout_latent: where the rollout steps draw z ("prior": Sup. B.2 read as sampling
-    the prior; "posterior": the encoder on the true delta, see docs/wandr.md); alpha_kl: the KL weight α (§3.4: 1e-2).
+    windows per epoch); reach_far adds the room-scale reaching clips of <folder>/reach_far (docs/data.md; the
+    shipped checkpoint uses them, docs/wandr.md); rollout_latent: where the rollout steps draw z ("prior": Sup. B.2
+    read as sampling the prior; "posterior": the encoder on the true delta, see docs/wandr.md); alpha_kl: the KL
+    weight α (§3.4: 1e-2).
     The resumable training state lives in <cache>/wandr, named by every setting."""
     import hashlib
     import resource
@@ -477,7 +478,7 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
                    help="z for the rollout steps: the prior (default, Sup. B.2) or the encoder on the truth")
     t.add_argument("--alpha-kl", type=float, default=1e-2, help="the KL weight (paper: 1e-2)")
     t.add_argument("--reach-far", action="store_true",
-                   help="also train on <data>/reach_far (room-scale reaching clips; an experiment, docs/wandr.md)")
+                   help="also train on <data>/reach_far (room-scale reaching clips, as the shipped checkpoint; docs/wandr.md)")
     t.set_defaults(func=_cmd_train)
     e = eval_sub.add_parser("wandr", help="WANDR's goal grid (SR / FS / DTG) for one or more checkpoints")
     e.add_argument("--checkpoint", type=Path, action="append", required=True)
