@@ -75,6 +75,24 @@ def test_room_scale_tasks_cover_wandrs_grid_and_their_clips_reach_the_goal(bm):
         assert np.linalg.norm(j[m.goal_frame, WRIST] - np.maximum(m.goal, [-9, -9, FLOOR_WRIST])) < 0.02
 
 
+def test_a_slow_preferred_speed_fills_the_time_with_walking_not_standing(bm):
+    # the room-scale clips (generate_reach(far=True)) plan with v_pref = FAR_MIN_SPEED: with 8 s for 3 m the body sets
+    # off at once and walks slowly, where a natural pace stands first and then walks fast
+    from graspkit.data.reaching import FAR_MIN_SPEED
+
+    out = {}
+    for v in (FAR_MIN_SPEED, 1.0):
+        m = plan_reach(Start(), (3.0, -0.3, 1.0), 240, seed=0, bm=bm, hold_frames=0, v_pref=v)
+        pel = m.joint_positions(bm)[:, 0, :2]
+        moved = np.linalg.norm(pel - pel[0], axis=1)
+        speed = np.linalg.norm(np.diff(pel, axis=0), axis=1) * 30
+        out[v] = (int(np.argmax(moved > 0.1)), float(speed.max()))
+        assert np.linalg.norm(m.joint_positions(bm)[240, WRIST] - [3.0, -0.3, 1.0]) < 0.01   # arrives either way
+    (start_slow, top_slow), (start_fast, top_fast) = out[FAR_MIN_SPEED], out[1.0]
+    assert start_slow < 60 < start_fast            # off within 2 s, against a stand of more than 2 s
+    assert top_slow < 0.85 * top_fast
+
+
 def test_evaluation_grid_is_wandrs():
     g = evaluation_goals(Start(1.0, 2.0, 0.5))
     assert g.shape == (125, 5)
