@@ -318,14 +318,15 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
                     time_limit: float | None = None, seed: int = 0, threads: int = 2, batch_size: int = 512,
                     lr: float = 1e-3, progress: bool = True, max_steps: int = 10, ramp_epochs: int = 4,
                     stride_scale: int = 1, reach_far: bool = False, rollout_latent: str = "prior",
-                    alpha_kl: float = 1e-2) -> dict[str, Any]:
+                    alpha_kl: float = 1e-2, kinds: Sequence[str] | None = None) -> dict[str, Any]:
     """Train one variant on the clips under `folder` (default <cache>/motion) and write a small checkpoint (with the
     normalisation statistics, the held-out start poses of the test split, and the measured times) to `out`.
     max_steps / ramp_epochs: the rollout schedule (Sup. B.2); stride_scale multiplies the window strides (fewer
     windows per epoch); reach_far adds the room-scale reaching clips of <folder>/reach_far (docs/data.md; the
     shipped checkpoint uses them, docs/wandr.md); rollout_latent: where the rollout steps draw z ("prior": Sup. B.2
     read as sampling the prior; "posterior": the encoder on the true delta, see docs/wandr.md); alpha_kl: the KL
-    weight α (§3.4: 1e-2).
+    weight α (§3.4: 1e-2); kinds: the clip kinds to train on instead of the variant's (e.g. ("reach",): the reaching
+    and room-scale clips only, as the shipped checkpoint, docs/wandr.md).
     The resumable training state lives in <cache>/wandr, named by every setting."""
     import hashlib
     import resource
@@ -344,7 +345,13 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
         raise ValueError(f"variant: expected one of {list(VARIANTS)}, got {variant!r}")
     if stride_scale < 1:
         raise ValueError(f"stride_scale: expected >= 1, got {stride_scale}")
-    v = VARIANTS[variant]
+    v = dict(VARIANTS[variant])
+    if kinds is not None:
+        if not kinds or any(k not in ("locomotion", "reach") for k in kinds):
+            raise ValueError(f"kinds: expected a non-empty subset of ('locomotion', 'reach'), got {kinds!r}")
+        if tuple(kinds) != tuple(v["kinds"]):
+            v["kinds"] = tuple(k for k in ("locomotion", "reach") if k in kinds)
+            v["row"] = f"{v['row']} [{' + '.join(v['kinds'])} clips]"
     folder = Path(folder) if folder else cache_dir() / "motion"
     out = Path(out) if out else DATA_STUBS / "checkpoints" / f"{variant}.pt"
     torch.set_num_threads(threads)
@@ -367,7 +374,9 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     # the experiment flags away from their defaults: (command-line text, run-name part); the data key covers reach_far
     flags = ([(" --reach-far", "")] if reach_far else []) \
         + ([(f" --rollout-latent {rollout_latent}", "_zpost")] if rollout_latent != "prior" else []) \
-        + ([(f" --alpha-kl {alpha_kl:g}", f"_a{alpha_kl:g}")] if alpha_kl != 1e-2 else [])
+        + ([(f" --alpha-kl {alpha_kl:g}", f"_a{alpha_kl:g}")] if alpha_kl != 1e-2 else []) \
+        + ([(f" --kinds {','.join(v['kinds'])}", f"_k{''.join(k[0] for k in v['kinds'])}")]
+           if tuple(v["kinds"]) != tuple(VARIANTS[variant]["kinds"]) else [])
     tag = (f"e{epochs}_b{batch_size}_lr{lr:g}_m{max_steps}_r{ramp_epochs}_x{stride_scale}_d{data_key}"
            + "".join(t for _, t in flags))
     ck = cache_dir() / "wandr" / f"train_{variant}_s{seed}_{tag}.pt"
@@ -429,7 +438,8 @@ def _cmd_train(args) -> int:
     info = run_train_wandr(args.variant, args.data, args.out, args.epochs, args.time_limit, args.seed, args.threads,
                            args.batch_size, args.lr, max_steps=args.max_steps, ramp_epochs=args.ramp_epochs,
                            stride_scale=args.stride_scale, reach_far=args.reach_far,
-                           rollout_latent=args.rollout_latent, alpha_kl=args.alpha_kl)
+                           rollout_latent=args.rollout_latent, alpha_kl=args.alpha_kl,
+                           kinds=tuple(args.kinds.split(",")) if args.kinds else None)
     print(f"wrote {info['out']}: {info['epochs']} epochs in {info['train_wall_s']:.0f} s wall "
           f"({info['train_cpu_s']:.0f} s CPU); last loss {info['history'][-1]['loss']:.4f}")
     return 0
@@ -479,6 +489,9 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     t.add_argument("--alpha-kl", type=float, default=1e-2, help="the KL weight (paper: 1e-2)")
     t.add_argument("--reach-far", action="store_true",
                    help="also train on <data>/reach_far (room-scale reaching clips, as the shipped checkpoint; docs/wandr.md)")
+    t.add_argument("--kinds", default=None,
+                   help="train on these clip kinds instead of the variant's: 'reach' (reaching + room-scale clips: the "
+                        "shipped checkpoint), 'locomotion' or 'locomotion,reach'")
     t.set_defaults(func=_cmd_train)
     e = eval_sub.add_parser("wandr", help="WANDR's goal grid (SR / FS / DTG) for one or more checkpoints")
     e.add_argument("--checkpoint", type=Path, action="append", required=True)

@@ -1,10 +1,11 @@
 """The procedural reaching planner (WANDR's time-controlled goal reaching) and CIRCLE-style clips."""
 import numpy as np
 import pytest
+from scipy import stats
 
 from graspkit import metrics as M
 from graspkit.data import Start, evaluation_goals, generate_reach, plan_reach
-from graspkit.data.reaching import FLOOR_WRIST
+from graspkit.data.reaching import FAR_HEIGHTS, FLOOR_WRIST
 
 
 WRIST = 21
@@ -67,6 +68,10 @@ def test_room_scale_tasks_cover_wandrs_grid_and_their_clips_reach_the_goal(bm):
     assert d.min() > 0.2 and d.max() < 5.6 and d.max() > 4.5                 # 0.3-5 m (start jitter: +-0.5 m)
     assert (np.abs(rel) > 2.5).mean() > 0.1                                  # goals behind the start too
     assert tg.max() <= 9.0 and np.all(tg > d / 1.6)                          # reachable at a brisk walk, <= 9 s
+    z = np.array([t.goal[2] for t in tasks])                                # heights balanced over the grid's 0-1.8 m
+    lo, hi = FAR_HEIGHTS
+    assert stats.kstest(z, "uniform", args=(lo, hi - lo)).pvalue > 0.01
+    assert FAR_HEIGHTS[0] <= 0.0 and FAR_HEIGHTS[1] >= 1.8 and (z > 1.7).mean() > 0.05
     near = [sample_reach_task(np.random.default_rng(s)) for s in range(50)]
     assert max(np.hypot(t.goal[0] - t.start.x, t.goal[1] - t.start.y) for t in near) < 1.9   # default unchanged
     for seed in range(2):

@@ -39,6 +39,7 @@ from graspkit.body.skeleton import JOINT_INDEX
 
 REACH_RHO = 0.86           # shoulder-to-wrist distance at the goal, as a fraction of the arm length
 FAR_MIN_SPEED = 0.45      # m/s: the slowest walk of a room-scale clip (it fills the time to its goal frame)
+FAR_HEIGHTS = (0.0, 1.9)   # room-scale goal heights (m), uniform: the grid's 0-1.8 m evenly, a little above
 FLOOR_WRIST = 0.07         # the wrist stays this high (m) above the floor: the hand lies flat below it
 LEVELS = np.linspace(-1.0, 1.0, 41)
 EVAL_ANGLES_DEG = (0.0, 72.0, 144.0, 216.0, 288.0)        # WANDR Sec. 4.2: 5 angles 72 deg apart
@@ -251,16 +252,17 @@ def sample_reach_task(rng: np.random.Generator, far: bool = False) -> ReachTask:
     needed, a slower reach for low goals, a short pause first: about 1.1-3.2 s) and held 0.3-1.0 s.
 
     far=True draws a room-scale task (CIRCLE's subjects walk about a room to their targets): the goal 0.3-5 m away
-    in any direction (a turn first when it is behind), the same heights, and the goal frame drawn uniformly between
+    in any direction (a turn first when it is behind), heights uniform over FAR_HEIGHTS (0-1.9 m: WANDR's Fig. 5 finds
+    reaching weakest where data are scarce, at the floor and overhead), and the goal frame drawn uniformly between
     the natural time (turn, walk at ~0.8 m/s, reach, a short pause first: 0.2-0.8 s; at most 9 s) and 9 s; the
     clip (generate_reach) walks slower, down to 0.45 m/s, to arrive then."""
     betas = sample_betas(rng)
     h0 = rng.uniform(-np.pi, np.pi)
+    if far:
+        return _far_task(rng, betas, h0, float(rng.uniform(*FAR_HEIGHTS)))
     u = rng.random()
     z = (rng.uniform(0.7, 1.5) if u < 0.6 else rng.uniform(0.25, 0.7) if u < 0.85
          else rng.uniform(1.5, 1.8) if u < 0.95 else rng.uniform(0.0, 0.25))
-    if far:
-        return _far_task(rng, betas, h0, z)
     r = rng.uniform(0.3, 1.2)
     ang = h0 + np.clip(rng.normal(-0.2, 0.6), -1.8, 1.6)
     xy0 = rng.uniform(-0.5, 0.5, 2)
