@@ -198,8 +198,9 @@ fig.tight_layout()
 # The shipped model runs the schedule to **60** steps, not 10: with minutes of training instead of 900 epochs, a model
 # trained on 10-step rollouts drifts to a stand when it is fed its own output for 8 s, and the longer rollouts are what
 # made it walk to the goals (`docs/wandr.md` has the measurements). A few optimisation steps on the sample clips, with a
-# small network, to watch the three terms (the shipped model was trained with `graspkit train wandr --reach-far
-# --max-steps 60 --stride-scale 2` on 2,000 locomotion, 2,000 reaching and 2,000 room-scale reaching clips).
+# small network, to watch the three terms (the shipped model was trained with `graspkit train wandr --kinds reach --reach-far
+# --max-steps 60 --stride-scale 2 --epochs 5 --batch-size 256` on 2,000 reaching and 2,000 room-scale reaching clips;
+# the locomotion clips lowered its success rate, `docs/wandr.md`).
 
 # %%
 # NBVAL_IGNORE_OUTPUT
