@@ -347,11 +347,11 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
         raise ValueError(f"stride_scale: expected >= 1, got {stride_scale}")
     v = dict(VARIANTS[variant])
     if kinds is not None:
-        if not kinds or any(k not in ("locomotion", "reach") for k in kinds):
+        chosen = tuple(k for k in ("locomotion", "reach") if k in kinds)
+        if not chosen or len(chosen) != len(set(kinds)):
             raise ValueError(f"kinds: expected a non-empty subset of ('locomotion', 'reach'), got {kinds!r}")
-        if tuple(kinds) != tuple(v["kinds"]):
-            v["kinds"] = tuple(k for k in ("locomotion", "reach") if k in kinds)
-            v["row"] = f"{v['row']} [{' + '.join(v['kinds'])} clips]"
+        if chosen != v["kinds"]:
+            v["kinds"], v["row"] = chosen, f"{v['row']} [{' + '.join(chosen)} clips]"
     folder = Path(folder) if folder else cache_dir() / "motion"
     out = Path(out) if out else DATA_STUBS / "checkpoints" / f"{variant}.pt"
     torch.set_num_threads(threads)
@@ -376,7 +376,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
         + ([(f" --rollout-latent {rollout_latent}", "_zpost")] if rollout_latent != "prior" else []) \
         + ([(f" --alpha-kl {alpha_kl:g}", f"_a{alpha_kl:g}")] if alpha_kl != 1e-2 else []) \
         + ([(f" --kinds {','.join(v['kinds'])}", f"_k{''.join(k[0] for k in v['kinds'])}")]
-           if tuple(v["kinds"]) != tuple(VARIANTS[variant]["kinds"]) else [])
+           if v["kinds"] != VARIANTS[variant]["kinds"] else [])
     tag = (f"e{epochs}_b{batch_size}_lr{lr:g}_m{max_steps}_r{ramp_epochs}_x{stride_scale}_d{data_key}"
            + "".join(t for _, t in flags))
     ck = cache_dir() / "wandr" / f"train_{variant}_s{seed}_{tag}.pt"
