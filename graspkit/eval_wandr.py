@@ -335,8 +335,8 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
 
     from graspkit.body import BodyModel
     from graspkit.data import load_motion
-    from graspkit.data.wandr_dataset import (FOLDERS, cached_clips, compute_stats, held_out_starts, split_clips,
-                                             test_start_names)
+    from graspkit.data.wandr_dataset import (FOLDERS, KINDS, cached_clips, compute_stats, held_out_starts,
+                                             split_clips, test_start_names)
     from graspkit.models.wandr import WandrConfig, WandrCVAE, save_wandr, train_wandr
     from graspkit.paths import DATA_STUBS, cache_dir, default_model_path
     from graspkit.train import TrainConfig
@@ -347,9 +347,9 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
         raise ValueError(f"stride_scale: expected >= 1, got {stride_scale}")
     v = dict(VARIANTS[variant])
     if kinds is not None:
-        chosen = tuple(k for k in ("locomotion", "reach") if k in kinds)
+        chosen = tuple(k for k in KINDS if k in kinds)
         if not chosen or len(chosen) != len(set(kinds)):
-            raise ValueError(f"kinds: expected a non-empty subset of ('locomotion', 'reach'), got {kinds!r}")
+            raise ValueError(f"kinds: expected a non-empty subset of {KINDS}, got {kinds!r}")
         if chosen != v["kinds"]:
             v["kinds"], v["row"] = chosen, f"{v['row']} [{' + '.join(chosen)} clips]"
     folder = Path(folder) if folder else cache_dir() / "motion"
