@@ -170,6 +170,28 @@ ax.set_aspect("equal"); ax.legend(fontsize=7)
 fig.tight_layout()
 
 # %% [markdown]
+# The pelvis hardly moves towards the waypoint. The optimiser is not at fault: this decoder barely listens to $z$.
+# Roll the same start out with other latents and the motion stays the same:
+
+# %%
+z1 = torch.randn(1, 120, model.cfg.latent, generator=torch.Generator().manual_seed(1))
+with torch.no_grad():
+    other = M.rollout(model, start.p_prev[None], start.p[None], start.rest[None], goal[None], 120, 120, z=z1)
+    zero = M.rollout(model, start.p_prev[None], start.p[None], start.rest[None], goal[None], 120, 120,
+                     z=torch.zeros_like(z1))
+gap = lambda a, b: 100 * float((a.joints[0, :, 0] - b.joints[0, :, 0]).detach().norm(dim=-1).max())
+print(f"pelvis paths over 4 s: other latents differ by at most {gap(plain, other):.1f} cm, z = 0 by "
+      f"{gap(plain, zero):.1f} cm")
+
+# %% [markdown]
+# A couple of centimetres over a walk of nearly two metres: the c-VAE has become an almost deterministic regressor of
+# the next delta. Sup. B.2's rollout steps decode a $z$ drawn from the *prior* against the true next delta, and that
+# rewards a decoder that ignores $z$. `docs/wandr.md` measures both sides: training the rollout steps on the
+# encoder's $z$ instead (`--rollout-latent posterior`) makes $z$ matter (40 iterations bring the pelvis from 94 to
+# 40 cm of this waypoint) but the model then reaches 2 % of the grid; with the shipped model, the waypoint is reached
+# only by latents far outside $\mathcal N(0, I)$ (learning rate 0.5, $w_{norm}$ = 0.001: 26 cm, mean $z^2$ ≈ 32).
+
+# %% [markdown]
 # ## 6 · Place a goal yourself
 #
 # `GoalReacher` holds a start pose and the model; `update(name, value)` moves the goal (angle, distance, height) or
