@@ -47,7 +47,8 @@ print("held-out start poses:", ", ".join(s.source for s in starts))
 # **What to expect.** The shipped model is trained for minutes on two CPU cores (the paper: 900 epochs on
 # AMASS + CIRCLE), on graspkit's reaching and room-scale reaching clips. On the full grid it puts the wrist within
 # 10 cm in about two motions in five (38.9 %; the paper: 32 %), best at mid height and never at 1.8 m, and skates more
-# than the paper's (21 % against 16 %); `docs/wandr.md` has the full grid beside the paper's Tab. 1. The point of
+# than the paper's (21 % against 16 %). That is one training seed: the same command with another seed reaches 29.8 %.
+# `docs/wandr.md` has the full grid beside the paper's Tab. 1. The point of
 # this section is the *measurement*, which is the paper's in full.
 
 # %%
