@@ -177,9 +177,8 @@ fig.tight_layout()
 # %%
 z1 = torch.randn(1, 120, model.cfg.latent, generator=torch.Generator().manual_seed(1))
 with torch.no_grad():
-    other = M.rollout(model, start.p_prev[None], start.p[None], start.rest[None], goal[None], 120, 120, z=z1)
-    zero = M.rollout(model, start.p_prev[None], start.p[None], start.rest[None], goal[None], 120, 120,
-                     z=torch.zeros_like(z1))
+    other, zero = (M.rollout(model, start.p_prev[None], start.p[None], start.rest[None], goal[None], 120, 120, z=z)
+                   for z in (z1, torch.zeros_like(z1)))
 gap = lambda a, b: 100 * float((a.joints[0, :, 0] - b.joints[0, :, 0]).detach().norm(dim=-1).max())
 print(f"pelvis paths over 4 s: other latents differ by at most {gap(plain, other):.1f} cm, z = 0 by "
       f"{gap(plain, zero):.1f} cm")
