@@ -277,9 +277,11 @@ print(f"rollouts ({r['clips']} test clips): reached the true goal {100 * r['to_t
 # are not comparable with the paper's in absolute terms, only in how the rows relate to each other. They relate
 # partly as GOAL's: the refinement brings the contact ratio to 1 and the feet onto the floor, and MNet beats its
 # ablations on parameters only and with one output frame (all four trained 12 epochs), and the one without attention
-# on body and feet but not hand error; over all test grasps the refinement also lowers the mean penetration. They
-# also differ: it lowers it for only about half of the grasps (GNet's predicted offsets are ~1.5 cm off, and meeting
-# them pulls some hands into the object as it pulls others out), every GNet row stays tens of times above the
+# on body and feet but not hand error in this run (over three training seeds the attention's gain is within the
+# noise: `docs/goal.md`); over all test grasps the refinement also lowers the mean penetration. They
+# also differ: it lowers it for only about half of the grasps (GNet's latent is collapsed, so a sample is its mean
+# grasp, whose predicted offsets are ~1.5 cm off, and meeting them pulls some hands into the object as it pulls
+# others out; even the ground truth's own offsets leave ~3 cm³), every GNet row stays tens of times above the
 # synthetic ground truth, which does not slide its feet at all, and about half of the rollouts stop short of the
 # goal (section 5).
 #
