@@ -266,16 +266,10 @@ def gnet_data(folders) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
 
 
 def _run_path(run_dir, name: str, seed: int, **settings) -> "Path":
-    """The resumable training checkpoint of one run: named by a hash of everything that shapes it (config, weights,
-    data folders, epochs), so a changed run never resumes from another's file."""
-    import hashlib
-    import json
-    from pathlib import Path
+    """graspkit.train.run_path (GNet's and MNet's runs, named by a hash of everything that shapes them)."""
+    from graspkit.train import run_path
 
-    from graspkit.paths import cache_dir
-
-    key = hashlib.blake2b(json.dumps(settings, sort_keys=True, default=str).encode(), digest_size=5).hexdigest()
-    return Path(run_dir or cache_dir() / "runs") / f"{name}_s{seed}_{key}.pt"
+    return run_path(name, seed, run_dir, **settings)
 
 
 def run_train_gnet(folders, out, variant: str = "gnet", epochs: int = 60, time_limit_s: float | None = 600.0,

@@ -57,23 +57,33 @@ def approach_motions(root: str | Path, n: int | None = None) -> tuple[list, list
     return motions, names
 
 
-def windows(kind: str, n: int, bm=None, data: Path | None = None, progress: bool = True) -> dict[str, np.ndarray]:
-    """Cached windows of the first `n` clips of a procedural set: 'locomotion' (every 30 frames) or 'reach' (one window
-    per clip, ending at its goal frame: the wrist on the target, as an approach clip ends at the grasp)."""
-    from graspkit.data import load_motion
+def windows_source(kind: str, n: int, data: Path | None = None) -> tuple[Path, Path, list[Path]]:
+    """(cache file, clip folder, the first `n` clip files) of a window set; the cache file is named by the clips'
+    names and sizes, so remade or other clips never read another set's windows."""
+    import hashlib
+
     from graspkit.paths import cache_dir
 
     if kind not in ("locomotion", "reach", "approach"):
         raise ValueError(f"kind: expected 'locomotion', 'reach' or 'approach', got {kind!r}")
-    out = cache_dir() / "motionfill" / f"{kind}_{n}.npz"
-    if out.is_file():
-        return load_windows(out)
     sub = ("grasps", "approach") if kind == "approach" else ("motion", kind)
     root = Path(data) if data else cache_dir().joinpath(*sub)
     files = sorted(root.glob(f"{kind}_*.npz"))[:n]
     if len(files) < n:
         raise FileNotFoundError(f"data: {root} holds {len(files)} {kind} clips, {n} wanted "
                                 f"(graspkit data make --kind {kind} --n {n})")
+    key = hashlib.blake2b("\n".join(f"{f.name}:{f.stat().st_size}" for f in files).encode(), digest_size=5).hexdigest()
+    return cache_dir() / "motionfill" / f"{kind}_{n}_{key}.npz", root, files
+
+
+def windows(kind: str, n: int, bm=None, data: Path | None = None, progress: bool = True) -> dict[str, np.ndarray]:
+    """Cached windows of the first `n` clips of a procedural set: 'locomotion' (every 30 frames) or 'reach' (one window
+    per clip, ending at its goal frame: the wrist on the target, as an approach clip ends at the grasp)."""
+    from graspkit.data import load_motion
+
+    out, root, files = windows_source(kind, n, data)
+    if out.is_file():
+        return load_windows(out)
     if bm is None:
         from graspkit.body import BodyModel
         from graspkit.paths import default_model_path
@@ -126,8 +136,7 @@ def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, se
     """One of A.4's training runs (`STAGES`); starts from `init` (a checkpoint) when given; writes `out` (shipped
     float16 state) and a resumable run checkpoint beside it in the cache. `reduction` sets the loss's
     (`MotionFillConfig.reduction`; default: the init checkpoint's, else "sum")."""
-    from graspkit.paths import cache_dir
-    from graspkit.train import TrainConfig, fit
+    from graspkit.train import TrainConfig, file_key, fit, run_path
 
     if stage not in STAGES:
         raise ValueError(f"stage: expected one of {list(STAGES)}, got {stage!r}")
@@ -158,7 +167,9 @@ def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, se
     if len(train) == 0:
         raise ValueError(f"data: no training windows among the {kind} clips (split by object: {sorted(split)})")
     tag = "" if model.cfg.reduction == "sum" else f"_{model.cfg.reduction}"
-    run = cache_dir() / "runs" / f"motionfill_{stage}{tag}_s{seed}.pt"
+    run = run_path(f"motionfill_{stage}{tag}", seed, epochs=epochs, lr=lr, batch_size=batch_size,
+                   windows=windows_source(kind, clips[kind], data)[0].name, init=file_key(init),
+                   config=model.state()["model_config"])
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
     history = fit(model, step, train, cfg, checkpoint=run, val_dataset=val if len(val) else None, progress=progress,
                   time_limit_s=time_limit_s, extra={"model_config": model.state()["model_config"]})
@@ -191,8 +202,7 @@ def train_baseline(name: str, epochs: int, out: Path | None = None, seed: int = 
     from torch.utils.data import ConcatDataset
 
     from graspkit.models.motionfill_baselines import BASELINES
-    from graspkit.paths import cache_dir
-    from graspkit.train import TrainConfig, fit, save_checkpoint
+    from graspkit.train import TrainConfig, file_key, fit, run_path, save_checkpoint
 
     if name not in BASELINES:
         raise ValueError(f"name: expected one of {sorted(BASELINES)}, got {name!r}")
@@ -222,7 +232,9 @@ def train_baseline(name: str, epochs: int, out: Path | None = None, seed: int = 
         return net.loss(batch)
 
     out = Path(out) if out is not None else baseline_path(name)
-    run = cache_dir() / "runs" / f"motionfill_{name}_s{seed}.pt"
+    run = run_path(f"motionfill_{name}", seed, epochs=epochs, lr=lr, batch_size=batch_size,
+                   windows=[windows_source(k, clips[k], data if k == "approach" else None)[0].name for k in sets],
+                   stats=file_key(stats_from), config=model.config())
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
     history = fit(model, step, train, cfg, checkpoint=run, val_dataset=val if len(val) else None, progress=progress,
                   time_limit_s=time_limit_s, extra={"model_config": model.config(), "kind": name})

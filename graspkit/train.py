@@ -58,6 +58,29 @@ def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
     return path
 
 
+def run_path(name: str, seed: int, run_dir: str | Path | None = None, **settings: Any) -> Path:
+    """The resumable training checkpoint of one run, `<run_dir>/<name>_s<seed>_<key>.pt` (run_dir: <cache>/runs): `key`
+    hashes every setting that shapes the run (config, epochs, data, init), so a changed command never resumes
+    another run's file."""
+    import hashlib
+    import json
+
+    from graspkit.paths import cache_dir
+
+    key = hashlib.blake2b(json.dumps(settings, sort_keys=True, default=str).encode(), digest_size=5).hexdigest()
+    return Path(run_dir or cache_dir() / "runs") / f"{name}_s{seed}_{key}.pt"
+
+
+def file_key(path: str | Path) -> str:
+    """A short content hash of a file (e.g. an init checkpoint, for `run_path`); 'none' when there is no file."""
+    import hashlib
+
+    p = Path(path) if path is not None else None
+    if p is None or not p.is_file():
+        return "none"
+    return hashlib.blake2b(p.read_bytes(), digest_size=6).hexdigest()
+
+
 def load_checkpoint(path: str | Path) -> dict[str, Any]:
     """Read a checkpoint without pickle (weights_only); a missing or foreign file gives an error naming it."""
     path = Path(path)

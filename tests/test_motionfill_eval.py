@@ -79,7 +79,13 @@ def test_train_command_end_to_end_on_the_shipped_approach_clips(tmp_path, monkey
     rc = main(["train", "motionfill", "--stage", "traj", "--data", str(DATA_STUBS / "approach"), "--clips", "4",
                "--epochs", "2", "--out", str(out)])
     assert rc == 0 and out.is_file()
-    assert (tmp_path / "cache" / "motionfill" / "approach_4.npz").is_file()
+    assert len(list((tmp_path / "cache" / "motionfill").glob("approach_4_*.npz"))) == 1
+    # another epoch count is another run: it trains its own epoch instead of resuming the 2-epoch run's file
+    rc = main(["train", "motionfill", "--stage", "traj", "--data", str(DATA_STUBS / "approach"), "--clips", "4",
+               "--epochs", "1", "--out", str(tmp_path / "mf1.pt")])
+    logs = sorted((tmp_path / "cache" / "runs").glob("motionfill_traj_s0_*.csv"), key=lambda f: f.stat().st_mtime)
+    assert rc == 0 and len(logs) == 2
+    assert [len(f.read_text().strip().splitlines()) - 1 for f in logs] == [2, 1]      # header + one row per epoch
     state = torch.load(out, weights_only=True)
     assert state["model"]["traj.out.weight"].dtype == torch.float16
     model = load_motionfill(out)
