@@ -265,13 +265,6 @@ def gnet_data(folders) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
     return gnet_samples(train), (gnet_samples(val) if val else None)
 
 
-def _run_path(run_dir, name: str, seed: int, **settings) -> "Path":
-    """graspkit.train.run_path (GNet's and MNet's runs, named by a hash of everything that shapes them)."""
-    from graspkit.train import run_path
-
-    return run_path(name, seed, run_dir, **settings)
-
-
 def run_train_gnet(folders, out, variant: str = "gnet", epochs: int = 60, time_limit_s: float | None = 600.0,
                    seed: int = 0, threads: int = 2, run_dir=None, progress: bool = True, kl: float | None = None) -> dict:
     """Train GNet ('gnet') or the GrabNet-style SMPL-X CVAE ('smplx') and ship its float16 weights to `out`;
@@ -279,7 +272,7 @@ def run_train_gnet(folders, out, variant: str = "gnet", epochs: int = 60, time_l
     import time
 
     from graspkit.models.gnet import GNetConfig, GNetLossWeights, save_weights, train_gnet
-    from graspkit.train import TrainConfig
+    from graspkit.train import TrainConfig, run_path
 
     if variant not in ("gnet", "smplx"):
         raise ValueError(f"variant: expected 'gnet' or 'smplx', got {variant!r}")
@@ -288,7 +281,7 @@ def run_train_gnet(folders, out, variant: str = "gnet", epochs: int = 60, time_l
     train, val = gnet_data(folders)
     weights = GNetLossWeights() if kl is None else GNetLossWeights(kl=kl)
     cfg = GNetConfig(offsets=variant == "gnet")
-    run = _run_path(run_dir, f"gnet_{variant}", seed, cfg=asdict(cfg), weights=asdict(weights), epochs=epochs,
+    run = run_path(f"gnet_{variant}", seed, run_dir, cfg=asdict(cfg), weights=asdict(weights), epochs=epochs,
                     data=[str(f) for f in folders], n=len(train["rot6d"]))
     t0 = time.perf_counter()
     net, hist = train_gnet(train, val, body, cfg, weights,
@@ -321,7 +314,7 @@ def run_train_mnet(folders, out, variant: str = "mnet", epochs: int = 20, time_l
 
     from graspkit.models.gnet import save_weights
     from graspkit.models.mnet import MNetConfig, train_mnet
-    from graspkit.train import TrainConfig
+    from graspkit.train import TrainConfig, run_path
 
     if variant not in MNET_VARIANTS:
         raise ValueError(f"variant: expected one of {list(MNET_VARIANTS)}, got {variant!r}")
@@ -330,7 +323,7 @@ def run_train_mnet(folders, out, variant: str = "mnet", epochs: int = 20, time_l
     t0 = time.perf_counter()
     train = mnet_windows(folders, "train", cfg, stride, goal_repeat)
     val = mnet_windows(folders, "val", cfg, max(stride, 4))
-    run = _run_path(run_dir, f"mnet_{variant}", seed, cfg=asdict(cfg), epochs=epochs, stride=stride,
+    run = run_path(f"mnet_{variant}", seed, run_dir, cfg=asdict(cfg), epochs=epochs, stride=stride,
                     data=[str(f) for f in folders], n=len(train), goal_repeat=goal_repeat, vel_noise=vel_noise)
     net, hist = train_mnet(train, val, cfg, train_cfg=TrainConfig(epochs=epochs, batch_size=128, lr=1e-3, seed=seed,
                                                                    num_threads=threads),
