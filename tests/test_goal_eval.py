@@ -83,14 +83,14 @@ def test_train_commands_write_loadable_half_precision_weights(tmp_path):
 
 
 def test_run_paths_differ_when_anything_that_shapes_the_run_differs(tmp_path):
-    from graspkit.eval_goal import _run_path
+    from graspkit.train import run_path
 
-    a = _run_path(tmp_path, "gnet_gnet", 0, cfg={"hidden": 128}, epochs=60, data=["/x"])
-    assert a == _run_path(tmp_path, "gnet_gnet", 0, epochs=60, data=["/x"], cfg={"hidden": 128})    # order-free
-    others = [_run_path(tmp_path, "gnet_gnet", 0, cfg={"hidden": 192}, epochs=60, data=["/x"]),
-              _run_path(tmp_path, "gnet_gnet", 0, cfg={"hidden": 128}, epochs=61, data=["/x"]),
-              _run_path(tmp_path, "gnet_gnet", 0, cfg={"hidden": 128}, epochs=60, data=["/y"]),
-              _run_path(tmp_path, "gnet_gnet", 1, cfg={"hidden": 128}, epochs=60, data=["/x"])]
+    a = run_path("gnet_gnet", 0, tmp_path, cfg={"hidden": 128}, epochs=60, data=["/x"])
+    assert a == run_path("gnet_gnet", 0, tmp_path, epochs=60, data=["/x"], cfg={"hidden": 128})    # order-free
+    others = [run_path("gnet_gnet", 0, tmp_path, cfg={"hidden": 192}, epochs=60, data=["/x"]),
+              run_path("gnet_gnet", 0, tmp_path, cfg={"hidden": 128}, epochs=61, data=["/x"]),
+              run_path("gnet_gnet", 0, tmp_path, cfg={"hidden": 128}, epochs=60, data=["/y"]),
+              run_path("gnet_gnet", 1, tmp_path, cfg={"hidden": 128}, epochs=60, data=["/x"])]
     assert len({a, *others}) == 5 and all(p.parent == tmp_path for p in others)
 
 
