@@ -71,7 +71,7 @@ def run_path(name: str, seed: int, run_dir: str | Path | None = None, **settings
     return Path(run_dir or cache_dir() / "runs") / f"{name}_s{seed}_{key}.pt"
 
 
-def file_key(path: str | Path) -> str:
+def file_key(path: str | Path | None) -> str:
     """A short content hash of a file (e.g. an init checkpoint, for `run_path`); 'none' when there is no file."""
     import hashlib
 
