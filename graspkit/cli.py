@@ -40,7 +40,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_saga(args: argparse.Namespace) -> int:
-    """`graspkit saga --object NAME`: SAGA end to end (object -> grasp -> motion) with the shipped checkpoints."""
+    """`graspkit saga --object NAME|MESH`: SAGA end to end (object -> grasp -> motion) with the shipped checkpoints."""
     import numpy as np
 
     from graspkit.demo import _write_clip, load_or_build_body
@@ -51,8 +51,8 @@ def _cmd_saga(args: argparse.Namespace) -> int:
     bm = load_or_build_body(args.model)
     r = synthesize(args.object, bm, object_pose=pose, seed=args.seed)
     args.out.mkdir(parents=True, exist_ok=True)
-    paths, _ = _write_clip(bm, r.motion, args.out, f"saga_{args.object}_s{args.seed}", {args.object: r.mesh},
-                           f"SAGA: {args.object}")
+    paths, _ = _write_clip(bm, r.motion, args.out, f"saga_{r.name}_s{args.seed}", {r.name: r.mesh},
+                           f"SAGA: {r.name}")
     print(", ".join(f"{k} {v:.3f}" for k, v in r.metrics.items()))
     for path in paths:
         print(f"wrote {path}")
@@ -98,7 +98,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma-separated subset of body, planner, saga, saga_motion, goal, wandr")
     d.set_defaults(func=_cmd_demo)
     sg = sub.add_parser("saga", help="SAGA end to end for one object: grasp, then the approach motion into it")
-    sg.add_argument("--object", required=True, help="a catalogue object (graspkit.objects.list_objects())")
+    sg.add_argument("--object", required=True,
+                    help="a catalogue object (graspkit.objects.list_objects()) or a mesh file of one's own "
+                         "(closed, metres, z up; .obj, .ply, .stl, .glb)")
     sg.add_argument("--at", type=float, nargs=4, default=None, metavar=("X", "Y", "Z", "YAW_DEG"),
                     help="the object's centre (m) and yaw (default: drawn from --seed)")
     sg.add_argument("--seed", type=int, default=0)

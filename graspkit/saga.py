@@ -3,7 +3,9 @@
     object -> WholeGrasp-VAE sample (§3.2) -> GraspPose-Opt (Alg. 1) -> the grasp body
     start pose + grasp body -> MotionFill-VAE sample (§3.3) -> GraspMotion-Opt (Alg. 2) -> 61 frames (2 s, 30 fps)
 
-`synthesize("mug")` runs it for any catalogue object with the shipped checkpoints. The object is placed as the grasp
+`synthesize("mug")` runs it for any catalogue object with the shipped checkpoints, and `synthesize(mesh)` for an object
+of one's own (a trimesh.Trimesh or a mesh file: closed, metres, z up; `graspkit.objects.user.as_object`). The object
+is placed as the grasp
 generator places it (`graspkit.objects.placement.sample_object_pose`, seeded) unless a pose is given; the start is a
 standing body (the procedural planner's first frame) `start_distance` metres from the grasp, facing the object,
 unless a `Start` is given. Everything is returned in the world frame (z up, floor z = 0).
@@ -68,17 +70,18 @@ def default_start(grasp_pelvis: np.ndarray, centre: np.ndarray, betas: np.ndarra
     return plan.slice(0, 1)
 
 
-def synthesize(name: str, bm=None, object_pose: ObjectPose | None = None, start: Start | Motion | None = None,
-               seed: int = 0, start_distance: float = 0.4, grasp_steps: tuple[int, int, int] = (300, 400, 500),
+def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None = None,
+               start: Start | Motion | None = None, seed: int = 0, start_distance: float = 0.4,
+               grasp_steps: tuple[int, int, int] = (300, 400, 500),
                motion_steps: tuple[int, int] = (100, 300), checkpoints: str | Path = CHECKPOINTS,
                progress: bool = True) -> SagaResult:
-    """SAGA for catalogue object `name`: one grasp and one 2-s approach motion into it (Fig. 2), seeded.
+    """SAGA for object `name` (a catalogue name, a mesh file or a trimesh.Trimesh, closed and in metres): one grasp
+    and one 2-s approach motion into it (Fig. 2), seeded.
 
     object_pose: where the object is (default: drawn by `sample_object_pose(seed)` in front of the origin);
     start: a Start (x, y, heading: a standing body there) or a one-frame Motion (any body) or None (see module doc).
     """
     from graspkit.body import BodyModel
-    from graspkit.data.grasp import object_points
     from graspkit.data.grasp_io import collision_sdf_grid
     from graspkit.data.motion import canonicalize
     from graspkit.data.motionfill_dataset import make_windows
@@ -86,14 +89,16 @@ def synthesize(name: str, bm=None, object_pose: ObjectPose | None = None, start:
     from graspkit.metrics import grasp_metrics
     from graspkit.models.pose_prior import load_pose_prior
     from graspkit.models.wholegrasp import load_wholegrasp
-    from graspkit.objects.catalogue import list_objects, make_object
+    from graspkit.objects.catalogue import list_objects
     from graspkit.objects.placement import sample_object_pose
+    from graspkit.objects.sampling import sample_surface
+    from graspkit.objects.user import as_object
     from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, load_smooth_ae
     from graspkit.optim.grasppose import GraspObject, GraspPoseConfig, GraspPoseOpt
     from graspkit.paths import default_model_path
 
-    if name not in list_objects():
-        raise ValueError(f"name: unknown object {name!r}; valid names are {list_objects()}")
+    grid_key = name if isinstance(name, str) and name in list_objects() else None   # catalogue grids are shipped
+    name, obj_mesh = as_object(name, "name")
     if start_distance <= 0:
         raise ValueError(f"start_distance: expected a positive distance in metres, got {start_distance}")
     ck = Path(checkpoints)
@@ -105,7 +110,7 @@ def synthesize(name: str, bm=None, object_pose: ObjectPose | None = None, start:
     pose = object_pose if object_pose is not None else sample_object_pose(rng, height_range=(0.6, 1.2),
                                                                           distance_range=(0.5, 0.8))
     R_o, centre = np.asarray(pose.rotation, np.float64), np.asarray(pose.translation, np.float64)
-    pts, nrm = object_points(name)
+    pts, nrm = sample_surface(obj_mesh, 2048, seed=0)      # as graspkit.data.grasp.object_points for the catalogue
     R_t = torch.as_tensor(R_o).float()
     P, N = torch.as_tensor(pts).float() @ R_t.T, torch.as_tensor(nrm).float() @ R_t.T   # object frame (world axes)
     g = torch.Generator().manual_seed(seed)
@@ -115,9 +120,9 @@ def synthesize(name: str, bm=None, object_pose: ObjectPose | None = None, start:
     prior = load_pose_prior(ck / "pose_prior.pt")
     s = wg.sample(P, N, float(centre[2]), 1, g, centre=torch.zeros(3))
     opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=grasp_steps))
-    res = opt.fit(s.markers, GraspObject(P, N, float(centre[2]), collision_sdf_grid(name), R_t), s.marker_contact,
+    res = opt.fit(s.markers, GraspObject(P, N, float(centre[2]), collision_sdf_grid(grid_key or obj_mesh), R_t), s.marker_contact,
                   s.object_contact, progress=progress).to_world(torch.as_tensor(centre).float())
-    mesh = make_object(name)
+    mesh = obj_mesh.copy()
     mesh.vertices = np.asarray(mesh.vertices) @ R_o.T + centre
     pr = res.params
     gpose = torch.cat([pr["global_orient"][:, None], pr["body_pose"].view(1, 21, 3), pr["jaw_pose"][:, None],

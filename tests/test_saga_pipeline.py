@@ -58,3 +58,38 @@ def test_saga_command_names_a_bad_object(capsys):
 
     assert main(["saga", "--object", "teapot", "--out", "unused"]) == 2
     assert "name: unknown object 'teapot'" in capsys.readouterr().err
+
+
+def test_one_call_for_an_object_of_ones_own(bm, tmp_path, monkeypatch):
+    """synthesize() on a mesh the catalogue does not have (a box, given as a file): the grasp body touches it and the
+    motion ends with the right palm on it (trimesh's exact distance), the grid built in a fresh cache."""
+    import trimesh
+
+    from graspkit.body.markers import palm_vertices
+    from graspkit.objects.placement import ObjectPose
+
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
+    path = tmp_path / "parcel.ply"
+    trimesh.creation.box((0.05, 0.07, 0.10)).export(path)
+    pose = ObjectPose.from_yaw(-0.4, np.array([0.1, -0.7, 0.9]))
+    r = synthesize(path, bm, object_pose=pose, seed=0, grasp_steps=(100, 120, 150), motion_steps=(60, 80),
+                   progress=False)
+    assert r.name == "parcel"
+    assert list((tmp_path / "cache" / "sdf").glob("mesh_r*.npz"))
+    np.testing.assert_allclose(np.asarray(r.mesh.vertices).mean(0), pose.translation, atol=1e-9)
+    assert np.isclose(r.mesh.volume, 0.05 * 0.07 * 0.10)
+    q = trimesh.proximity.ProximityQuery(r.mesh)
+    assert np.abs(q.signed_distance(r.grasp.vertices[0].double().numpy())).min() < 0.005   # the grasp touches it
+    palm = torch.as_tensor(palm_vertices(bm)["right"])
+    assert np.abs(q.signed_distance(r.motion.vertices(bm)[-1, palm].double().numpy())).min() < 0.03
+
+
+def test_saga_command_names_a_bad_mesh_file(tmp_path, capsys):
+    import trimesh
+
+    from graspkit.cli import main
+
+    path = tmp_path / "huge.stl"
+    trimesh.creation.box((50.0, 70.0, 100.0)).export(path)      # millimetres
+    assert main(["saga", "--object", str(path), "--out", str(tmp_path)]) == 2
+    assert "in metres" in capsys.readouterr().err

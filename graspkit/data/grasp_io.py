@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+import trimesh
 
 from graspkit.objects.catalogue import make_object
 from graspkit.paths import DATA_STUBS
@@ -21,16 +22,23 @@ SDF_PADDING = 0.03
 COLLISION_CELL = 0.002
 
 
-def mesh_digest(name: str) -> str:
-    """A short hash of the canonical mesh of object `name` (a cached grid is rebuilt when the mesh changes)."""
-    m = make_object(name)
+def _mesh(obj: str | trimesh.Trimesh) -> trimesh.Trimesh:
+    """A catalogue object's canonical mesh, or the mesh itself (a user's object, see graspkit.objects.user)."""
+    return make_object(obj) if isinstance(obj, str) else obj
+
+
+def mesh_digest(obj: str | trimesh.Trimesh) -> str:
+    """A short hash of catalogue object `obj`'s canonical mesh, or of a given mesh (a cached grid is rebuilt when the
+    mesh changes)."""
+    m = _mesh(obj)
     h = hashlib.sha256(np.ascontiguousarray(m.vertices, np.float64).tobytes())
     h.update(np.ascontiguousarray(m.faces, np.int64).tobytes())
     return h.hexdigest()[:12]
 
 
-def cached_sdf_grid(name: str, resolution: int = 64, folder: Path | None = None) -> SDFGrid:
-    """The SDF grid of catalogue object `name`, read from `<cache>/sdf/` or built (seconds) and stored atomically."""
+def cached_sdf_grid(name: str | trimesh.Trimesh, resolution: int = 64, folder: Path | None = None) -> SDFGrid:
+    """The SDF grid of catalogue object `name` (or of a mesh in its object frame), read from `<cache>/sdf/` or built
+    (seconds) and stored atomically."""
     from graspkit.paths import cache_dir
 
     folder = Path(folder) if folder is not None else cache_dir() / "sdf"
@@ -44,14 +52,14 @@ def cached_sdf_grid(name: str, resolution: int = 64, folder: Path | None = None)
                                    torch.as_tensor(z["upper"]).float())
             except (OSError, ValueError, KeyError):
                 pass   # a damaged cache file is rebuilt below
-    grid = SDFGrid.from_mesh(make_object(name), resolution, SDF_PADDING)
+    grid = SDFGrid.from_mesh(_mesh(name), resolution, SDF_PADDING)
     _write_grid(path, grid)
     return grid
 
 
-def _grid_filename(name: str, resolution: int) -> str:
+def _grid_filename(name: str | trimesh.Trimesh, resolution: int) -> str:
     """The cache (and data_stubs/sdf) file name of object `name`'s grid: resolution and mesh hash in it."""
-    return f"{name}_r{resolution}_{mesh_digest(name)}.npz"
+    return f"{name if isinstance(name, str) else 'mesh'}_r{resolution}_{mesh_digest(name)}.npz"
 
 
 def _write_grid(path: Path, grid: SDFGrid, dtype: type = np.float32) -> None:
@@ -62,17 +70,19 @@ def _write_grid(path: Path, grid: SDFGrid, dtype: type = np.float32) -> None:
                             "upper": grid.upper.numpy()})
 
 
-def resolution_for(name: str, cell: float, minimum: int = 64) -> int:
-    """Nodes along the longest side of object `name`'s padded box for cells of at most `cell` m (at least `minimum`)."""
+def resolution_for(name: str | trimesh.Trimesh, cell: float, minimum: int = 64) -> int:
+    """Nodes along the longest side of object `name`'s (or a mesh's) padded box for cells of at most `cell` m (at
+    least `minimum`)."""
     if cell <= 0:
         raise ValueError(f"cell: expected a positive size in metres, got {cell}")
-    m = make_object(name)
+    m = _mesh(name)
     longest = float((m.bounds[1] - m.bounds[0]).max()) + 2 * SDF_PADDING
     return max(minimum, math.ceil(longest / cell - 1e-9) + 1)
 
 
-def collision_sdf_grid(name: str, folder: Path | None = None) -> SDFGrid:
-    """The SDF grid of object `name` that GraspPose-Opt's collision terms use: cells of at most COLLISION_CELL."""
+def collision_sdf_grid(name: str | trimesh.Trimesh, folder: Path | None = None) -> SDFGrid:
+    """The SDF grid of object `name` (or of a mesh in its object frame) that GraspPose-Opt's collision terms use:
+    cells of at most COLLISION_CELL."""
     return cached_sdf_grid(name, resolution_for(name, COLLISION_CELL), folder)
 
 

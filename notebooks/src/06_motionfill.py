@@ -186,7 +186,9 @@ print("| mean | " + " | ".join(f"{np.mean([r[k] for r in ev['graspmotion']['rows
 
 # %% [markdown]
 # ## The whole of SAGA in one call
-# `graspkit.saga.synthesize` chains everything for any catalogue object: WholeGrasp-VAE samples a grasp (lesson 05),
+# `graspkit.saga.synthesize` chains everything for any catalogue object, or for a mesh of your own (a
+# `trimesh.Trimesh` or a mesh file, closed and in metres; `graspkit.objects.user.as_object` says what it expects):
+# WholeGrasp-VAE samples a grasp (lesson 05),
 # GraspPose-Opt fits it, a standing start is placed 0.4 m behind it facing the object, MotionFill-VAE infills the two
 # seconds between them and GraspMotion-Opt fits the bodies, all moved back into the world. With the paper's step counts
 # it takes about 45 s on one core (`graspkit saga --object wine_glass` writes GIF, npz and GLB); here with fewer steps.
@@ -220,3 +222,6 @@ viz.show_animation(anim)
 # 3. Fit a body standing still (one frame's markers repeated 12 times) with `GraspMotionConfig(terms=("smooth",))`
 #    and with `polish=(0, 0.0)` (the paper's schedule): plot the heel markers' speed per frame for both. Which frames
 #    would SAGA's skating metric count if the other foot were swinging?
+# 4. Give `synthesize` an object the models never saw, e.g. `trimesh.creation.capsule(height=0.14, radius=0.035)` or
+#    a mesh file of your own, at two seeds. Does the grasp adapt to the shape (compare the hand's spread with the
+#    wine glass above), and where does the end frame penetrate (`r.metrics`)?
