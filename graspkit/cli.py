@@ -58,6 +58,57 @@ def _cmd_saga(args: argparse.Namespace) -> int:
         print(f"wrote {path}")
     return 0
 
+def _cmd_goal(args: argparse.Namespace) -> int:
+    """`graspkit goal --object NAME|MESH`: GOAL end to end (GNet grasp + refinement, MNet approach)."""
+    import numpy as np
+
+    from graspkit.demo import _write_clip, load_or_build_body
+    from graspkit.goal import synthesize
+    from graspkit.objects.placement import ObjectPose
+
+    pose = None if args.at is None else ObjectPose.from_yaw(np.deg2rad(args.at[3]), np.array(args.at[:3]))
+    r = synthesize(args.object, object_pose=pose, seed=args.seed, max_frames=args.max_frames)
+    bm = load_or_build_body(args.model)
+    args.out.mkdir(parents=True, exist_ok=True)
+    paths, _ = _write_clip(bm, r.motion, args.out, f"goal_{r.name}_s{args.seed}", {r.name: r.mesh}, f"GOAL: {r.name}")
+    print(f"goal grasp {'reached' if r.reached else 'not reached'} in {r.motion.num_frames} frames; "
+          + ", ".join(f"{k} {v:.3f}" for k, v in r.metrics.items()))
+    for path in paths:
+        print(f"wrote {path}")
+    return 0
+
+
+def _cmd_wandr(args: argparse.Namespace) -> int:
+    """`graspkit wandr --goal X Y Z`: WANDR from its held-out start pose to a goal (start frame) in --seconds."""
+    import numpy as np
+    import torch
+    import trimesh
+
+    from graspkit.benchmark import wandr_motions
+    from graspkit.demo import _write_clip, load_or_build_body
+    from graspkit.metrics import distance_to_goal
+    from graspkit.viz.scene import sphere
+
+    if not 0 < args.seconds <= 30:
+        raise ValueError(f"seconds: expected a time to the goal in (0, 30] s, got {args.seconds}")
+    if not args.checkpoint.is_file():
+        raise FileNotFoundError(f"checkpoint: {args.checkpoint} is missing (see docs/wandr.md)")
+    goal = torch.tensor(args.goal, dtype=torch.float32)
+    motion = wandr_motions(args.checkpoint, goal[None], int(round(args.seconds * 30.0)), seed=args.seed)[0]
+    bm = load_or_build_body(args.model)
+    sv, sf = sphere(goal.numpy(), 0.05)
+    args.out.mkdir(parents=True, exist_ok=True)
+    paths, _ = _write_clip(bm, motion, args.out, f"wandr_s{args.seed}",
+                           {"goal": trimesh.Trimesh(sv, sf, process=False)},
+                           f"WANDR: reach the goal in {args.seconds:g} s", goals=goal[None].numpy())
+    wrist = motion.joint_positions(bm)[:, 21]                   # SMPL-X joint 21: the right wrist
+    d = np.linalg.norm(wrist - goal.numpy(), axis=-1)
+    print(f"closest right-wrist distance to the goal {distance_to_goal(wrist, goal.numpy()) * 100:.1f} cm "
+          f"at {np.argmin(d) / 30.0:.2f} s (t_G {args.seconds:g} s)")
+    for path in paths:
+        print(f"wrote {path}")
+    return 0
+
 
 def _cmd_eval_all(args: argparse.Namespace) -> int:
     """`graspkit eval --all`: run the cross-method benchmark and write its report (without --all: usage)."""
@@ -107,6 +158,29 @@ def build_parser() -> argparse.ArgumentParser:
     sg.add_argument("--out", type=Path, default=Path("outputs/saga"))
     sg.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
     sg.set_defaults(func=_cmd_saga)
+    go = sub.add_parser("goal", help="GOAL end to end for one object: GNet's grasp, then MNet's approach into it")
+    go.add_argument("--object", required=True,
+                    help="a catalogue object (graspkit.objects.list_objects()) or a mesh file of one's own "
+                         "(closed, metres, z up; .obj, .ply, .stl, .glb)")
+    go.add_argument("--at", type=float, nargs=4, default=None, metavar=("X", "Y", "Z", "YAW_DEG"),
+                    help="the object's centre (m) and yaw (default: drawn from --seed)")
+    go.add_argument("--seed", type=int, default=0)
+    go.add_argument("--max-frames", type=int, default=150, help="MNet's rollout stops here if not at the grasp")
+    go.add_argument("--out", type=Path, default=Path("outputs/goal"))
+    go.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz for the pictures (default: the "
+                    "procedural humanoid)")
+    go.set_defaults(func=_cmd_goal)
+    from graspkit.paths import DATA_STUBS
+    wa = sub.add_parser("wandr", help="WANDR from its held-out start pose to one goal in a given time")
+    wa.add_argument("--goal", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"),
+                    help="the goal (m) in the start's frame: pelvis above the origin, facing +x, floor z = 0")
+    wa.add_argument("--seconds", type=float, default=4.0, help="time to the goal, t_G (default 4)")
+    wa.add_argument("--seed", type=int, default=0)
+    wa.add_argument("--checkpoint", type=Path, default=DATA_STUBS / "checkpoints" / "wandr.pt")
+    wa.add_argument("--out", type=Path, default=Path("outputs/wandr"))
+    wa.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz for the pictures (default: the "
+                    "procedural humanoid)")
+    wa.set_defaults(func=_cmd_wandr)
     from graspkit.data.cli import add_data_commands
     add_data_commands(sub)
 

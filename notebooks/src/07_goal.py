@@ -210,6 +210,10 @@ plt.show()
 # hand, just outside the 10 cm at which the Eq. 12–13 refinement takes over. Given up to 300 frames, as in the
 # evaluation of section 6, about half of the test rollouts get there; GOAL's ~117 M-parameter MNet, trained on
 # GRAB, does better.
+#
+# The same pipeline for any object in one call, a mesh of your own included: `graspkit.goal.synthesize(obj, seed=...)`
+# (object placed, a standing start 1 m away, GNet + refinement, MNet) or `graspkit goal --object FILE` on the command
+# line (GIF, npz, GLB).
 
 # %%
 goal_r6, goal_t, info = eval_goal.gnet_goal(gnet, (clip.rot6d[0], clip.transl[0]), clip.betas, clip.object_points,
@@ -292,3 +296,5 @@ print(f"rollouts ({r['clips']} test clips): reached the true goal {100 * r['to_t
 # 2. Change the attention weight `w` of `interaction_attention` to 1 and to 20 in section 4. Which body parts light
 #    up? Why does GOAL pick a kernel that is still ~0.6 at 10 cm?
 # 3. Start the rollout of section 5 with `refine=False`. Does MNet alone stop at the mug?
+# 4. Run `graspkit.goal.synthesize` on `trimesh.creation.torus(0.07, 0.02)` for seeds 0-3. Does GNet find the ring?
+#    When MNet does not reach the grasp, where is the body and where is the hand (`r.motion.joint_positions`)?

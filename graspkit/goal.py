@@ -1,0 +1,104 @@
+"""GOAL end to end (`../shared/papers/GOAL.txt` §3, Fig. 2): an object in, a grasp and the approach motion into it out.
+
+    object -> GNet sample (§3.3, Eq. 2) -> refinement towards its offsets (Eq. 4-8) -> the goal grasp
+    start body + goal grasp -> MNet, 10 frames a step, re-canonicalised, refined near the goal (§3.4, Eq. 9-13)
+
+`synthesize("mug")` runs it for any catalogue object with the shipped `gnet.pt` and `mnet.pt`, and
+`synthesize(mesh)` for an object of one's own (a trimesh.Trimesh or a mesh file: closed, metres, z up;
+`graspkit.objects.user.as_object`). The object is placed by `sample_object_pose(seed)` unless a pose is given; the
+start is a standing body (the procedural planner's first frame) `start_distance` m from the object centre on the
+ground, facing it (GOAL's protocol: 0.5-1.5 m, facing it within ±10°), unless a `Start` is given. World frame, z up.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from graspkit.data.motion import Motion
+from graspkit.data.reaching import Start
+from graspkit.objects.placement import ObjectPose
+
+CHECKPOINTS = Path(__file__).resolve().parent.parent / "data_stubs" / "checkpoints"
+
+
+@dataclass
+class GoalResult:
+    """The goal grasp and the approach motion (world, absolute hand poses), the object mesh there and the figures."""
+
+    name: str
+    object_pose: ObjectPose
+    mesh: Any                        # trimesh.Trimesh in the world
+    grasp: Motion                    # the refined GNet grasp (1 frame)
+    motion: Motion                   # MNet's rollout from the start to the grasp (up to max_frames)
+    reached: bool                    # the rollout met the goal grasp's hand before max_frames
+    metrics: dict[str, float]        # grasp figures of the goal grasp and of the motion's last frame, foot sliding
+
+
+def default_start(centre: np.ndarray, distance: float, yaw_offset: float = 0.0) -> Start:
+    """A standing start `distance` m from the object centre on the ground, on the -y side turned by `yaw_offset`
+    (rad) about the centre, facing the centre."""
+    a = -np.pi / 2 + yaw_offset
+    x, y = float(centre[0] + distance * np.cos(a)), float(centre[1] + distance * np.sin(a))
+    return Start(x, y, float(np.arctan2(centre[1] - y, centre[0] - x)))
+
+
+def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, start: Start | None = None,
+               seed: int = 0, start_distance: float = 1.0, max_frames: int = 150,
+               checkpoints: str | Path = CHECKPOINTS) -> GoalResult:
+    """GOAL for object `name` (a catalogue name, a mesh file or a trimesh.Trimesh, closed and in metres): one
+    refined GNet grasp and MNet's approach into it from a standing start, seeded."""
+    from graspkit.data.reaching import plan_reach
+    from graspkit.eval_goal import _body, gnet_goal, sliding
+    from graspkit.metrics import grasp_metrics
+    from graspkit.models.gnet import load_gnet
+    from graspkit.models.mnet import load_mnet, rollout
+    from graspkit.objects.bps import bps_basis
+    from graspkit.objects.placement import sample_object_pose
+    from graspkit.objects.sampling import sample_surface
+    from graspkit.objects.user import as_object
+    from graspkit.rotations import axis_angle_to_rot6d, matrix_to_axis_angle, rot6d_to_matrix
+
+    name, obj_mesh = as_object(name, "name")
+    if not 0 < start_distance <= 5.0:
+        raise ValueError(f"start_distance: expected metres in (0, 5], got {start_distance}")
+    if max_frames < 2:
+        raise ValueError(f"max_frames: expected at least 2 frames, got {max_frames}")
+    if start is not None and not isinstance(start, Start):
+        raise ValueError(f"start: expected a graspkit.data.reaching.Start or None, got {type(start).__name__}")
+    ck = Path(checkpoints)
+    for f in ("gnet.pt", "mnet.pt"):
+        if not (ck / f).is_file():
+            raise FileNotFoundError(f"checkpoints: {ck / f} is missing (see docs/goal.md)")
+    rng = np.random.default_rng(seed)
+    pose = object_pose if object_pose is not None else sample_object_pose(rng, height_range=(0.6, 1.2),
+                                                                          distance_range=(0.5, 0.8))
+    R_o, centre = np.asarray(pose.rotation, np.float64), np.asarray(pose.translation, np.float64)
+    mesh = obj_mesh.copy()
+    mesh.vertices = np.asarray(mesh.vertices) @ R_o.T + centre
+    pts = torch.as_tensor(sample_surface(obj_mesh, 2048, seed=0)[0] @ R_o.T + centre).float()
+    c = torch.as_tensor(centre).float()
+
+    bm, _, body = _body()                        # flat hand mean: poses are absolute, as in the data files
+    st = start if start is not None else default_start(centre, start_distance)
+    first = plan_reach(st, centre, 60, seed=seed, bm=bm).slice(0, 1)
+    betas = torch.as_tensor(first.betas[:10]).float()
+    s = (axis_angle_to_rot6d(torch.as_tensor(first.poses[0], dtype=torch.float64)).float(),
+         torch.as_tensor(first.trans[0]).float())
+    g = torch.Generator().manual_seed(seed)
+    goal = gnet_goal(load_gnet(ck / "gnet.pt"), s, betas, pts, c, generator=g)[:2]
+    r = rollout(load_mnet(ck / "mnet.pt"), body, s, goal, betas, pts, c, bps_basis(), max_frames=max_frames)
+
+    to_motion = lambda r6, t: Motion(matrix_to_axis_angle(rot6d_to_matrix(r6.double())).numpy(),  # noqa: E731
+                                     t.detach().double().numpy(), betas.double().numpy(), 30.0)
+    grasp, motion = to_motion(goal[0][None], goal[1][None]), to_motion(r.rot6d, r.transl)
+    gv, lv = grasp.vertices(bm)[0], motion.vertices(bm)
+    gm, lm = grasp_metrics(gv, bm.faces, mesh), grasp_metrics(lv[-1], bm.faces, mesh)
+    slid, pairs = sliding(lv)
+    metrics = {"grasp_contact": gm["contact"], "grasp_volume_cm3": gm["volume_cm3"], "grasp_depth_cm": gm["depth_cm"],
+               "end_contact": lm["contact"], "end_volume_cm3": lm["volume_cm3"], "end_depth_cm": lm["depth_cm"],
+               "frames": float(motion.num_frames), "sliding": slid / max(pairs, 1)}
+    return GoalResult(name, pose, mesh, grasp, motion, bool(r.reached), metrics)

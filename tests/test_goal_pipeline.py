@@ -1,0 +1,65 @@
+"""GOAL end to end (graspkit.goal): one call from an object (of the catalogue or one's own) to a refined GNet grasp
+and MNet's approach into it, checked with trimesh; the `graspkit goal` and `graspkit wandr` commands' errors."""
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+from graspkit.goal import default_start, synthesize
+from graspkit.objects.placement import ObjectPose
+
+
+def test_default_start_faces_the_object_from_the_given_distance():
+    c = np.array([0.4, -0.3, 0.9])
+    for yaw in (0.0, 1.0, -2.5):
+        s = default_start(c, 1.2, yaw)
+        assert np.isclose(np.hypot(s.x - c[0], s.y - c[1]), 1.2)
+        to_obj = np.arctan2(c[1] - s.y, c[0] - s.x)
+        assert np.isclose(np.angle(np.exp(1j * (s.heading - to_obj))), 0.0, atol=1e-12)
+
+
+def test_one_call_from_an_object_of_ones_own_to_a_grasp_and_an_approach():
+    """A capsule no model saw: the goal grasp touches it (trimesh), the motion starts where the start body stands
+    (1 m from the object, on the floor), ends at the grasp when reached, and the same seed gives the same motion."""
+    from graspkit.eval_goal import _body
+
+    mesh = trimesh.creation.capsule(height=0.14, radius=0.035)
+    pose = ObjectPose.from_yaw(0.3, np.array([0.2, -0.5, 0.9]))
+    r = synthesize(mesh, object_pose=pose, seed=0, max_frames=120)
+    bm = _body()[0]
+    np.testing.assert_allclose(np.asarray(r.mesh.vertices).mean(0), pose.translation, atol=1e-9)
+    q = trimesh.proximity.ProximityQuery(r.mesh)
+    gv = r.grasp.vertices(bm)[0].double().numpy()
+    assert np.abs(q.signed_distance(gv)).min() < 0.005                        # the grasp touches the capsule
+    assert r.metrics["grasp_contact"] == 1.0
+    pelvis = r.motion.joint_positions(bm)[:, 0]
+    assert abs(np.hypot(*(pelvis[0, :2] - pose.translation[:2])) - 1.0) < 0.15   # starts 1 m away
+    v = r.motion.vertices(bm)
+    assert float(v[0, :, 2].min()) == pytest.approx(0.0, abs=0.03)            # standing on the floor
+    assert r.reached and r.motion.num_frames < 120
+    hand_end = v[-1].double().numpy()
+    assert np.abs(np.linalg.norm(hand_end - gv, axis=-1)).min() < 0.01         # the motion ends in the grasp
+    again = synthesize(mesh, object_pose=pose, seed=0, max_frames=120)
+    np.testing.assert_array_equal(again.motion.poses, r.motion.poses)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(name="teapot"), "name: unknown object 'teapot'"),
+    (dict(name="mug", start_distance=0.0), "start_distance"),
+    (dict(name="mug", max_frames=1), "max_frames"),
+    (dict(name="mug", start=(0.0, 0.0, 0.0)), "start: expected"),
+])
+def test_goal_names_a_bad_argument(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        synthesize(**kwargs)
+
+
+def test_goal_and_wandr_commands_name_bad_arguments(tmp_path, capsys):
+    from graspkit.cli import main
+
+    assert main(["goal", "--object", "teapot", "--out", str(tmp_path)]) == 2
+    assert "unknown object 'teapot'" in capsys.readouterr().err
+    assert main(["wandr", "--goal", "1", "0", "1", "--seconds", "0", "--out", str(tmp_path)]) == 2
+    assert "seconds" in capsys.readouterr().err
+    assert main(["wandr", "--goal", "1", "0", "1", "--checkpoint", str(tmp_path / "none.pt")]) == 2
+    assert "checkpoint" in capsys.readouterr().err
