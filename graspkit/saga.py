@@ -5,10 +5,9 @@
 
 `synthesize("mug")` runs it for any catalogue object with the shipped checkpoints, and `synthesize(mesh)` for an object
 of one's own (a trimesh.Trimesh or a mesh file: closed, metres, z up; `graspkit.objects.user.as_object`). The object
-is placed as the grasp
-generator places it (`graspkit.objects.placement.sample_object_pose`, seeded) unless a pose is given; the start is a
-standing body (the procedural planner's first frame) `start_distance` metres from the grasp, facing the object,
-unless a `Start` is given. Everything is returned in the world frame (z up, floor z = 0).
+is placed as the grasp generator places it (`graspkit.objects.placement.sample_object_pose`, seeded) unless a pose is
+given; the start is a standing body (the procedural planner's first frame) `start_distance` metres from the grasp,
+facing the object, unless a `Start` is given. Everything is returned in the world frame (z up, floor z = 0).
 """
 from __future__ import annotations
 
@@ -120,8 +119,9 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     prior = load_pose_prior(ck / "pose_prior.pt")
     s = wg.sample(P, N, float(centre[2]), 1, g, centre=torch.zeros(3))
     opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=grasp_steps))
-    res = opt.fit(s.markers, GraspObject(P, N, float(centre[2]), collision_sdf_grid(grid_key or obj_mesh), R_t), s.marker_contact,
-                  s.object_contact, progress=progress).to_world(torch.as_tensor(centre).float())
+    grid = collision_sdf_grid(grid_key or obj_mesh)
+    res = opt.fit(s.markers, GraspObject(P, N, float(centre[2]), grid, R_t), s.marker_contact, s.object_contact,
+                  progress=progress).to_world(torch.as_tensor(centre).float())
     mesh = obj_mesh.copy()
     mesh.vertices = np.asarray(mesh.vertices) @ R_o.T + centre
     pr = res.params
