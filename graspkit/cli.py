@@ -58,6 +58,7 @@ def _cmd_saga(args: argparse.Namespace) -> int:
         print(f"wrote {path}")
     return 0
 
+
 def _cmd_goal(args: argparse.Namespace) -> int:
     """`graspkit goal --object NAME|MESH`: GOAL end to end (GNet grasp + refinement, MNet approach)."""
     import numpy as np
@@ -86,7 +87,6 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
 
     from graspkit.benchmark import wandr_motions
     from graspkit.demo import _write_clip, load_or_build_body
-    from graspkit.metrics import distance_to_goal
     from graspkit.viz.scene import sphere
 
     if not 0 < args.seconds <= 30:
@@ -103,8 +103,8 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
                            f"WANDR: reach the goal in {args.seconds:g} s", goals=goal[None].numpy())
     wrist = motion.joint_positions(bm)[:, 21]                   # SMPL-X joint 21: the right wrist
     d = np.linalg.norm(wrist - goal.numpy(), axis=-1)
-    print(f"closest right-wrist distance to the goal {distance_to_goal(wrist, goal.numpy()) * 100:.1f} cm "
-          f"at {np.argmin(d) / 30.0:.2f} s (t_G {args.seconds:g} s)")
+    print(f"closest right-wrist distance to the goal {d.min() * 100:.1f} cm at {d.argmin() / 30.0:.2f} s "
+          f"(t_G {args.seconds:g} s)")
     for path in paths:
         print(f"wrote {path}")
     return 0
@@ -148,28 +148,22 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--stages", default="body,planner,saga,saga_motion,goal,wandr",
                    help="comma-separated subset of body, planner, saga, saga_motion, goal, wandr")
     d.set_defaults(func=_cmd_demo)
-    sg = sub.add_parser("saga", help="SAGA end to end for one object: grasp, then the approach motion into it")
-    sg.add_argument("--object", required=True,
-                    help="a catalogue object (graspkit.objects.list_objects()) or a mesh file of one's own "
-                         "(closed, metres, z up; .obj, .ply, .stl, .glb)")
-    sg.add_argument("--at", type=float, nargs=4, default=None, metavar=("X", "Y", "Z", "YAW_DEG"),
-                    help="the object's centre (m) and yaw (default: drawn from --seed)")
-    sg.add_argument("--seed", type=int, default=0)
-    sg.add_argument("--out", type=Path, default=Path("outputs/saga"))
-    sg.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
-    sg.set_defaults(func=_cmd_saga)
-    go = sub.add_parser("goal", help="GOAL end to end for one object: GNet's grasp, then MNet's approach into it")
-    go.add_argument("--object", required=True,
-                    help="a catalogue object (graspkit.objects.list_objects()) or a mesh file of one's own "
-                         "(closed, metres, z up; .obj, .ply, .stl, .glb)")
-    go.add_argument("--at", type=float, nargs=4, default=None, metavar=("X", "Y", "Z", "YAW_DEG"),
-                    help="the object's centre (m) and yaw (default: drawn from --seed)")
-    go.add_argument("--seed", type=int, default=0)
-    go.add_argument("--max-frames", type=int, default=150, help="MNet's rollout stops here if not at the grasp")
-    go.add_argument("--out", type=Path, default=Path("outputs/goal"))
-    go.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz for the pictures (default: the "
-                    "procedural humanoid)")
-    go.set_defaults(func=_cmd_goal)
+    for method, cmd, what in (("saga", _cmd_saga, "SAGA end to end for one object: grasp, then the approach "
+                               "motion into it"),
+                              ("goal", _cmd_goal, "GOAL end to end for one object: GNet's grasp, then MNet's "
+                               "approach into it")):
+        sg = sub.add_parser(method, help=what)
+        sg.add_argument("--object", required=True,
+                        help="a catalogue object (graspkit.objects.list_objects()) or a mesh file of one's own "
+                             "(closed, metres, z up; .obj, .ply, .stl, .glb)")
+        sg.add_argument("--at", type=float, nargs=4, default=None, metavar=("X", "Y", "Z", "YAW_DEG"),
+                        help="the object's centre (m) and yaw (default: drawn from --seed)")
+        sg.add_argument("--seed", type=int, default=0)
+        sg.add_argument("--out", type=Path, default=Path(f"outputs/{method}"))
+        sg.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
+        if method == "goal":
+            sg.add_argument("--max-frames", type=int, default=150, help="MNet's rollout stops here if not at the grasp")
+        sg.set_defaults(func=cmd)
     from graspkit.paths import DATA_STUBS
     wa = sub.add_parser("wandr", help="WANDR from its held-out start pose to one goal in a given time")
     wa.add_argument("--goal", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"),

@@ -57,7 +57,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     from graspkit.models.gnet import load_gnet
     from graspkit.models.mnet import load_mnet, rollout
     from graspkit.objects.bps import bps_basis
-    from graspkit.objects.placement import sample_object_pose
+    from graspkit.objects.placement import apply_pose, within_reach_pose
     from graspkit.objects.sampling import sample_surface
     from graspkit.objects.user import as_object
     from graspkit.rotations import axis_angle_to_rot6d, matrix_to_axis_angle, rot6d_to_matrix
@@ -73,13 +73,10 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     for f in ("gnet.pt", "mnet.pt"):
         if not (ck / f).is_file():
             raise FileNotFoundError(f"checkpoints: {ck / f} is missing (see docs/goal.md)")
-    rng = np.random.default_rng(seed)
-    pose = object_pose if object_pose is not None else sample_object_pose(rng, height_range=(0.6, 1.2),
-                                                                          distance_range=(0.5, 0.8))
-    R_o, centre = np.asarray(pose.rotation, np.float64), np.asarray(pose.translation, np.float64)
-    mesh = obj_mesh.copy()
-    mesh.vertices = np.asarray(mesh.vertices) @ R_o.T + centre
-    pts = torch.as_tensor(sample_surface(obj_mesh, 2048, seed=0)[0] @ R_o.T + centre).float()
+    pose = object_pose if object_pose is not None else within_reach_pose(seed)
+    centre = np.asarray(pose.translation, np.float64)
+    mesh = apply_pose(pose, obj_mesh)
+    pts = torch.as_tensor(apply_pose(pose, sample_surface(obj_mesh, 2048, seed=0)[0])).float()
     c = torch.as_tensor(centre).float()
 
     bm, _, body = _body()                        # flat hand mean: poses are absolute, as in the data files

@@ -89,7 +89,7 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     from graspkit.models.pose_prior import load_pose_prior
     from graspkit.models.wholegrasp import load_wholegrasp
     from graspkit.objects.catalogue import list_objects
-    from graspkit.objects.placement import sample_object_pose
+    from graspkit.objects.placement import apply_pose, within_reach_pose
     from graspkit.objects.sampling import sample_surface
     from graspkit.objects.user import as_object
     from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, load_smooth_ae
@@ -105,9 +105,7 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
         if not (ck / f).is_file():
             raise FileNotFoundError(f"checkpoints: {ck / f} is missing (see docs/saga.md and docs/saga_motion.md)")
     bm = bm if bm is not None else BodyModel.from_file(default_model_path())
-    rng = np.random.default_rng(seed)
-    pose = object_pose if object_pose is not None else sample_object_pose(rng, height_range=(0.6, 1.2),
-                                                                          distance_range=(0.5, 0.8))
+    pose = object_pose if object_pose is not None else within_reach_pose(seed)
     R_o, centre = np.asarray(pose.rotation, np.float64), np.asarray(pose.translation, np.float64)
     pts, nrm = sample_surface(obj_mesh, 2048, seed=0)      # as graspkit.data.grasp.object_points for the catalogue
     R_t = torch.as_tensor(R_o).float()
@@ -122,8 +120,7 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     grid = collision_sdf_grid(grid_key or obj_mesh)
     res = opt.fit(s.markers, GraspObject(P, N, float(centre[2]), grid, R_t), s.marker_contact, s.object_contact,
                   progress=progress).to_world(torch.as_tensor(centre).float())
-    mesh = obj_mesh.copy()
-    mesh.vertices = np.asarray(mesh.vertices) @ R_o.T + centre
+    mesh = apply_pose(pose, obj_mesh)
     pr = res.params
     gpose = torch.cat([pr["global_orient"][:, None], pr["body_pose"].view(1, 21, 3), pr["jaw_pose"][:, None],
                        pr["leye_pose"][:, None], pr["reye_pose"][:, None], pr["left_hand_pose"].view(1, 15, 3),

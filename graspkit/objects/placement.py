@@ -95,6 +95,12 @@ def sample_object_pose(
     return ObjectPose.from_yaw(yaw, t)
 
 
+def within_reach_pose(seed: int) -> ObjectPose:
+    """The object pose `graspkit.saga.synthesize` and `graspkit.goal.synthesize` draw when none is given:
+    `sample_object_pose(seed)` at heights 0.6-1.2 m and 0.5-0.8 m in front of a person at the origin facing -y."""
+    return sample_object_pose(np.random.default_rng(seed), height_range=(0.6, 1.2), distance_range=(0.5, 0.8))
+
+
 @overload
 def apply_pose(pose: ObjectPose, x: trimesh.Trimesh, normals: None = None) -> trimesh.Trimesh: ...
 @overload
