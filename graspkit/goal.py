@@ -21,8 +21,7 @@ import torch
 from graspkit.data.motion import Motion
 from graspkit.data.reaching import Start
 from graspkit.objects.placement import ObjectPose
-
-CHECKPOINTS = Path(__file__).resolve().parent.parent / "data_stubs" / "checkpoints"
+from graspkit.saga import CHECKPOINTS
 
 
 @dataclass
@@ -53,7 +52,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     refined GNet grasp and MNet's approach into it from a standing start, seeded."""
     from graspkit.data.reaching import plan_reach
     from graspkit.eval_goal import _body, gnet_goal, sliding
-    from graspkit.metrics import grasp_metrics
+    from graspkit.metrics import grasp_and_end_figures
     from graspkit.models.gnet import load_gnet
     from graspkit.models.mnet import load_mnet, rollout
     from graspkit.objects.bps import bps_basis
@@ -93,9 +92,6 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
                                      t.detach().double().numpy(), betas.double().numpy(), 30.0)
     grasp, motion = to_motion(goal[0][None], goal[1][None]), to_motion(r.rot6d, r.transl)
     gv, lv = grasp.vertices(bm)[0], motion.vertices(bm)
-    gm, lm = grasp_metrics(gv, bm.faces, mesh), grasp_metrics(lv[-1], bm.faces, mesh)
     slid, pairs = sliding(lv)
-    metrics = {"grasp_contact": gm["contact"], "grasp_volume_cm3": gm["volume_cm3"], "grasp_depth_cm": gm["depth_cm"],
-               "end_contact": lm["contact"], "end_volume_cm3": lm["volume_cm3"], "end_depth_cm": lm["depth_cm"],
-               "frames": float(motion.num_frames), "sliding": slid / max(pairs, 1)}
+    metrics = {**grasp_and_end_figures(gv, lv[-1], bm.faces, mesh), "frames": float(motion.num_frames), "sliding": slid / max(pairs, 1)}
     return GoalResult(name, pose, mesh, grasp, motion, bool(r.reached), metrics)

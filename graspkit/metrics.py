@@ -93,6 +93,16 @@ def foot_skating_saga(heels: Any, fps: float = 30.0, height: float = SAGA_SKATE_
     return ((h[:-1, :, 2] < height) & (v > speed)).all(1).numpy()
 
 
+def grasp_and_end_figures(grasp_vertices: Any, end_vertices: Any, faces: Any, obj: Any) -> dict[str, float]:
+    """`grasp_metrics` of a generated grasp body (V,3) and of its motion's last frame (V,3) against one object mesh,
+    keyed grasp_* and end_* (contact, volume_cm3, depth_cm), as the one-call pipelines report them."""
+    out = {}
+    for prefix, v in (("grasp", grasp_vertices), ("end", end_vertices)):
+        m = grasp_metrics(v, faces, obj)
+        out.update({f"{prefix}_{k}": m[k] for k in ("contact", "volume_cm3", "depth_cm")})
+    return out
+
+
 def ground_penetration(vertices: Any) -> np.ndarray:
     """Depth (T,) of the lowest vertex below the ground z = 0 (0 when above)."""
     return torch.clamp(-_shaped(vertices, "vertices", "T,V,3")[:, :, 2].min(1).values, min=0).double().numpy()

@@ -21,8 +21,9 @@ import torch
 from graspkit.data.motion import Motion
 from graspkit.data.reaching import Start
 from graspkit.objects.placement import ObjectPose
+from graspkit.paths import DATA_STUBS
 
-CHECKPOINTS = Path(__file__).resolve().parent.parent / "data_stubs" / "checkpoints"
+CHECKPOINTS = DATA_STUBS / "checkpoints"
 
 
 @dataclass
@@ -85,7 +86,7 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     from graspkit.data.motion import canonicalize
     from graspkit.data.motionfill_dataset import make_windows
     from graspkit.eval_motionfill import heel_columns, interp, load_motionfill, skating
-    from graspkit.metrics import grasp_metrics
+    from graspkit.metrics import grasp_and_end_figures
     from graspkit.models.pose_prior import load_pose_prior
     from graspkit.models.wholegrasp import load_wholegrasp
     from graspkit.objects.catalogue import list_objects
@@ -166,11 +167,9 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
 
     # figures: the grasp body and the motion's last frame against the object; SAGA's skating of the fitted markers
     last = motion.vertices(bm, T, T + 1)[0]
-    gm, lm = grasp_metrics(res.vertices[0], bm.faces, mesh), grasp_metrics(last, bm.faces, mesh)
     fitted = mres.markers[0].double().numpy() @ R_c + o_c
     heels = heel_columns()
-    metrics = {"grasp_contact": gm["contact"], "grasp_volume_cm3": gm["volume_cm3"], "grasp_depth_cm": gm["depth_cm"],
-               "end_contact": lm["contact"], "end_volume_cm3": lm["volume_cm3"], "end_depth_cm": lm["depth_cm"],
+    metrics = {**grasp_and_end_figures(res.vertices[0], last, bm.faces, mesh),
                "skating_sample": skating(markers_w.double().numpy()[None], np.zeros(1), heels),
                "skating_opt": skating(fitted[None], np.zeros(1), heels)}
     return SagaResult(name, pose, mesh, res, motion, st, markers_w, smp["contacts"][0], metrics)

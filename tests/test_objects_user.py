@@ -69,7 +69,7 @@ def _millimetres() -> trimesh.Trimesh:
     (lambda: "teapot", "unknown object 'teapot'"), (lambda: 3.5, "got float"),
 ])
 def test_a_bad_object_names_the_argument_and_what_was_expected(make, message):
-    with pytest.raises(ValueError, match=f"obj: .*{message}|obj: {message}"):
+    with pytest.raises(ValueError, match=f"obj: .*{message}"):
         as_object(make())
 
 

@@ -14,7 +14,7 @@ import trimesh
 
 from graspkit.objects.catalogue import list_objects, make_object
 
-# m: the largest side a hand-held object may have. The grasp models were trained on objects of 8-35 cm (the
+# m: the largest side a hand-held object may have. The grasp models were trained on objects of 8-41 cm (the
 # catalogue); 0.6 m leaves room for larger ones and still tells metres from millimetres or centimetres.
 MAX_SIDE = 0.6
 MIN_SIDE = 0.01
