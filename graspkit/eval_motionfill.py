@@ -372,6 +372,15 @@ def skating(markers: np.ndarray, floor: np.ndarray, heels: list[int]) -> float:
     return float(np.mean([foot_skating_saga(x).mean() for x in flat]))
 
 
+def heel_jerkiness(markers: np.ndarray, heels: list[int], fps: float = 30.0) -> dict[str, float]:
+    """Largest heel-marker speed (m/s) and the 99th percentile of its acceleration (m/s^2) over a marker sequence
+    (T, M, 3): a foot that stands still and then jumps can pass the skating metric while moving unnaturally."""
+    h = np.asarray(markers, np.float64)[:, heels]
+    v = np.linalg.norm(np.diff(h, axis=0), axis=-1) * fps
+    a = np.linalg.norm(np.diff(h, 2, axis=0), axis=-1) * fps ** 2
+    return {"heel_speed_max": float(v.max()), "heel_acc_p99": float(np.percentile(a, 99))}
+
+
 def linear_local(local: np.ndarray) -> np.ndarray:
     """The linear-interpolation baseline of the local motion: frames 0 -> T blended linearly (N, T+1, M, 3)."""
     s = np.linspace(0, 1, local.shape[1])[None, :, None, None]
@@ -507,7 +516,7 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
     cfg = GraspMotionConfig(steps=steps) if weights is None else GraspMotionConfig(steps=steps, weights=weights)
     opt = GraspMotionOpt(bm, load_pose_prior(), load_smooth_ae(), cfg)
     res = opt.fit(markers, torch.as_tensor(np.stack([s["betas"] for s in scenes])).float(), contacts, obj, c_o,
-                  progress=progress)
+                  progress=progress, floor=torch.tensor([s["floor"] for s in scenes]).float())
     rows = []
     for i, s in enumerate(scenes):
         floor = np.array(s["floor"])
@@ -519,7 +528,9 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
                      "fit_cm": float((res.markers[i] - markers[i]).norm(dim=-1).mean() * 100),
                      "contact_mm": fit["min_distance"] * 1000, "volume_cm3": fit["volume_cm3"], "depth_cm": fit["depth_cm"],
                      "noncollision_opt": float(non_collision_score(v, s["floor"]).mean()),
-                     "noncollision_gt": float(non_collision_score(s["motion"].vertices(bm)).mean())})
+                     "noncollision_gt": float(non_collision_score(s["motion"].vertices(bm)).mean()),
+                     **{f"{k}_{tag}": x for tag, seq in (("gt", s["markers"]), ("opt", res.markers[i].numpy()))
+                        for k, x in heel_jerkiness(seq, heels).items()}})
     return {"rows": rows, "result": res, "markers": markers, "contacts": contacts, "scenes": scenes}
 
 
@@ -630,7 +641,8 @@ def main(argv: list[str] | None = None) -> int:
     update_json(args.out, graspmotion={"rows": ev["rows"], "files": [f"{f.parent.name}/{f.name}" for f in files],
                                        "steps": list(cfg.steps), "polish": list(cfg.polish), "seed": args.seed,
                                        "seconds": round(secs, 1), "threads": args.threads})
-    keys = ("skating_gt", "skating_sample", "skating_opt", "contact_mm", "volume_cm3", "depth_cm")
+    keys = ("skating_gt", "skating_sample", "skating_opt", "contact_mm", "volume_cm3", "depth_cm", "heel_acc_p99_gt",
+            "heel_acc_p99_opt")
     for r in ev["rows"]:
         print(f"{r['object']:12s} " + " ".join(f"{k} {r[k]:.3f}" for k in keys))
     print("mean         " + " ".join(f"{k} {np.mean([r[k] for r in ev['rows']]):.3f}" for k in keys)

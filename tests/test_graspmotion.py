@@ -76,6 +76,46 @@ def test_foot_skating_term_is_analytic_for_a_sliding_body(bm):
     assert e["skate"].item() == pytest.approx(w.skate * n_toe * (F - 1) * (0.02 - w.skate_sigma), rel=1e-4)
 
 
+def _sliding(opt, F: int, transl) -> dict:
+    """Frame parameters of the prior's mean pose translated by `transl` (F, 3)."""
+    p = opt.init_params(torch.zeros(F, 79, 3), torch.zeros(F, 10))
+    p = {k: torch.zeros_like(v) if k != "orient6d" else v for k, v in p.items()}
+    p["transl"] = transl
+    return p
+
+
+def test_planted_heel_term_is_analytic_and_off_when_a_heel_is_lifted(bm):
+    """graspkit's planted-heel term on a body sliding 2 cm per frame: both heel markers move 2 cm, so it is
+    a_heel (0.02 - sigma) per frame while both heels are within heel_height of the floor, and 0 above it."""
+    from graspkit.eval_motionfill import heel_columns
+
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("heel",)))
+    F, w = 5, opt.cfg.weights
+    p = _sliding(opt, F, torch.arange(F, dtype=torch.float32)[:, None] * torch.tensor([0.02, 0.0, 0.0]))
+    heel_z = opt.body(p, torch.zeros(F, 10))[0][0, opt.sl_m][heel_columns(), 2]
+    target = torch.zeros(1, F, 79, 3)
+    on_floor = heel_z.min().reshape(1) - 0.01              # heels 1 cm (and a few mm) above the floor
+    e = opt.energy(p, target, torch.zeros(F, 10), 2, None, None, None, on_floor)["heel"].item()
+    assert e == pytest.approx(w.heel * (F - 1) * (0.02 - w.skate_sigma), rel=1e-4)
+    lifted = heel_z.max().reshape(1) - w.heel_height - 0.01    # both heels higher than heel_height: off
+    assert opt.energy(p, target, torch.zeros(F, 10), 2, None, None, None, lifted)["heel"].item() == 0.0
+    # a body standing still costs nothing
+    still = _sliding(opt, F, torch.zeros(F, 3))
+    assert opt.energy(still, target, torch.zeros(F, 10), 2, None, None, None, on_floor)["heel"].item() < 1e-3
+
+
+def test_foot_acceleration_term_is_zero_at_constant_velocity_and_analytic_at_constant_acceleration(bm):
+    """The foot term graspkit adds beside S.2: sum over frames of the mean squared second difference of the foot
+    vertices; a body at constant velocity gives 0, one at constant acceleration a (m/frame^2) gives w a^2 (F - 2)."""
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("skate",)))
+    F, w, a = 6, opt.cfg.weights, 0.004
+    t = torch.arange(F, dtype=torch.float32)[:, None]
+    args = (torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, None, None, None)
+    assert opt.energy(_sliding(opt, F, t * torch.tensor([0.03, 0.01, 0.0])), *args)["foot_acc"].item() < 1e-3
+    e = opt.energy(_sliding(opt, F, 0.5 * a * t ** 2 * torch.tensor([1.0, 0.0, 0.0])), *args)["foot_acc"].item()
+    assert e == pytest.approx(w.foot_acc * a ** 2 * (F - 2), rel=1e-3)
+
+
 def test_palm_term_is_small_for_a_palm_facing_a_wall_and_large_for_a_wall_behind_it(bm):
     """Eq. 11 with the rest hand (palm facing -y) and a plane of points 3 mm below the palm (cos gamma ~ 1) or 3 mm
     past its highest palm vertex (the vector to the plane points against the palm normal: cos gamma ~ -1)."""

@@ -38,6 +38,18 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   0.23 after Alg. 2, 0.10 with the polish (0.12 when the last 100 of the 300 steps run at 0.001 instead); on a body
   standing still the median heel-marker speed after the fit falls from 0.031 to 0.007 m/s
   (tests/test_graspmotion.py). `polish=(0, 0.0)` is the paper's schedule.
+- Two foot terms beside S.2 (graspkit's, on with the defaults; `terms` without "heel" and `foot_acc=0` give S.2
+  alone). (1) A planted heel: a_heel sum_t 1(both heel markers within 6 cm of the floor) (min(|v^LHEE_t|,
+  |v^RHEE_t|) - sigma)_+, a_heel = 1e4 per metre: SAGA's skating metric counts the frames where both heels are low
+  and both move, and after S.2 these were mostly a planted toe with its heel rolling while the other foot shuffled
+  low. The floor is `fit(floor=...)` (default: the lowest heel marker of the target). (2) The feet's acceleration,
+  a_acc sum_t mean_v |V^foot_{t+1} - 2 V^foot_t + V^foot_{t-1}|^2, a_acc = 1e5 (m per frame^2): S.2's hinge is
+  linear, so a foot can stand still and then jump several centimetres in one frame at no extra cost, and the fit
+  did (heel markers up to 3.4 m/s, 99th-percentile acceleration 56 m/s^2 against the clips' 11). Chosen on the
+  first approach clip of each of the 11 training objects (one MotionFill sample each, seed 0; skating after Opt /
+  heel acceleration p99 m/s^2 / fitted vs sampled cm): S.2 alone 0.105 / 56 / 7.02; + heel 3e3 0.044 / 87 / 7.04;
+  + heel 3e3 and acc 1e4 0.044 / 43; 1e5: 0.065 / 19; heel 1e4 and acc 1e5 (shipped) 0.005 / 23 / 7.21; heel 3e4
+  0.000 / 27 / 7.14. Ground truth: 0.021 / 11.
 - Initialisation: the prior's mean pose, rigidly aligned per frame (Kabsch on the body and face markers).
 - E^o_colli and E_g are evaluated on the frames where a hand vertex is within 2 cm of the object's bounding box
   (chosen without gradient each step; elsewhere both are 0 by definition: no vertex can be inside or within 1 cm),
@@ -152,6 +164,9 @@ class GraspMotionWeights:
     smooth_hand: float = 10.0      # a^h_s (on the mean over hand vertices)
     skate: float = 300.0           # a_skat
     skate_sigma: float = 0.05 / 30  # m per frame (0.05 m/s: below SAGA's 75 mm/s skating threshold)
+    heel: float = 1e4              # graspkit's planted heel: the slower heel marker's speed above skate_sigma
+    heel_height: float = 0.06      # m above the floor: with both heels this low, one of them should stand still
+    foot_acc: float = 1e5          # graspkit's: squared foot-vertex acceleration (m/frame^2), mean over vertices
 
 
 @dataclass
@@ -164,7 +179,7 @@ class GraspMotionConfig:
     contact_frames: int = 5        # Eq. 10: object contact on the last 5 frames
     point_stride: int = 4          # E^o_colli and E_g use every 4th object point (512 of SAGA's 2048)
     log_every: int = 10
-    terms: tuple[str, ...] = ("colli", "contact", "palm", "smooth", "skate")
+    terms: tuple[str, ...] = ("colli", "contact", "palm", "smooth", "skate", "heel")
     one_foot_down: bool = True     # T_c also holds each frame's most probable foot part (a foot is always planted)
     weights: GraspMotionWeights = field(default_factory=GraspMotionWeights)
 
@@ -200,6 +215,7 @@ class GraspMotionOpt:
         self.cfg = config or GraspMotionConfig()
         ms = saga_sparse_markers(bm)
         self.n_markers = len(ms)
+        self.heels = [ms.names.index("LHEE"), ms.names.index("RHEE")]
         self.body_face = torch.arange(ms.groups["face"][1])
         hands = np.union1d(hand_vertex_ids(bm, ("right",)), palm_vertices(bm)["right"])
         feet = foot_vertices(bm)
@@ -248,7 +264,8 @@ class GraspMotionOpt:
 
     # ------------------------------------------------------------------ the energy
     def energy(self, p: dict[str, Tensor], target: Tensor, betas: Tensor, stage: int, foot_contact: Tensor | None,
-               obj: GraspObject | None, object_contact: Tensor | None) -> dict[str, Tensor]:
+               obj: GraspObject | None, object_contact: Tensor | None, floor: Tensor | None = None
+               ) -> dict[str, Tensor]:
         """Each term per sequence (B,) for frame parameters (B*(T+1), ...) and target markers (B, T+1, M, 3)."""
         cfg, w = self.cfg, self.cfg.weights
         B, F = target.shape[:2]
@@ -297,6 +314,15 @@ class GraspMotionOpt:
                 on = on | torch.nn.functional.one_hot(c.argmax(-1), 4).bool()
             on = on[:, :, self.foot_part].to(speed.dtype)
             e["skate"] = w.skate * (on * torch.relu(speed - w.skate_sigma)).sum((1, 2))
+        if "skate" in terms and w.foot_acc > 0:
+            e["foot_acc"] = w.foot_acc * (feet[:, 2:] - 2 * feet[:, 1:-1] + feet[:, :-2]).pow(2).sum(-1).mean(-1).sum(1)
+        if "heel" in terms and w.heel > 0:
+            if floor is None:                   # the lowest heel marker of the target sequence
+                floor = target[:, :, self.heels, 2].amin((1, 2))
+            h = m[:, :, self.heels]                                                 # (B, F, 2, 3)
+            speed = (h[:, 1:] - h[:, :-1]).norm(dim=-1)                             # (B, T, 2)
+            low = ((h[:, :-1, :, 2] - floor[:, None, None]) < w.heel_height).all(-1).detach()
+            e["heel"] = w.heel * (low * torch.relu(speed.min(-1).values - w.skate_sigma)).sum(1)
         return e
 
     def palm_term(self, hands: Tensor, pts: Tensor, frames: Tensor | None = None, total: int | None = None) -> Tensor:
@@ -318,7 +344,8 @@ class GraspMotionOpt:
 
     # ------------------------------------------------------------------ Alg. 2
     def fit(self, markers: Tensor, betas: Tensor, foot_contact: Tensor | None = None, obj: GraspObject | None = None,
-            object_contact: Tensor | None = None, progress: bool = True) -> GraspMotionResult:
+            object_contact: Tensor | None = None, progress: bool = True, floor: Tensor | None = None
+            ) -> GraspMotionResult:
         """Alg. 2 on a batch: markers (B, T+1, 79, 3), betas (B, 10), foot contacts (B, T+1, 4) probabilities, the
         object in the markers' frame, its contact map (B, P) -> GraspMotionResult."""
         if not isinstance(markers, Tensor) or markers.dim() != 4 or tuple(markers.shape[2:]) != (self.n_markers, 3):
@@ -355,13 +382,13 @@ class GraspMotionOpt:
                 if stage == 2 and i in (150, self.cfg.steps[1]):      # the paper's decay, then the polish
                     for g in opt.param_groups:
                         g["lr"] = lr_polish if i >= self.cfg.steps[1] else 0.005
-                e = self.energy(params(), target, bet, stage, foot_contact, obj, object_contact)
+                e = self.energy(params(), target, bet, stage, foot_contact, obj, object_contact, floor)
                 energy_step(opt, e, log, i, step, stage, self.cfg.log_every)
                 step += 1
                 bar.update(1)
             with torch.no_grad():
                 energies[f"stage{stage}"] = {k: t.detach() for k, t in self.energy(
-                    params(), target, bet, 2, foot_contact, obj, object_contact).items()}
+                    params(), target, bet, 2, foot_contact, obj, object_contact, floor).items()}
         bar.close()
         with torch.no_grad():
             p = params()
