@@ -422,6 +422,14 @@ def merge(rows: list[Row]) -> list[Row]:
     return list(out.values())
 
 
+def update(old: list[Row], new: list[Row]) -> list[Row]:
+    """`old` report rows with every row of `new` put in place of the old row of the same (table, method, source)
+    (a whole row: values and note); rows only in `new` appended; order of `old`."""
+    fresh = {(r.table, r.method, r.source): r for r in new}
+    out = [fresh.pop((r.table, r.method, r.source), r) for r in old]
+    return out + list(fresh.values())
+
+
 def _method(checkpoint: Path, out: Path, shipped: Path, reuse: bool, rows_of, run, method: str, table: str
             ) -> list[Row]:
     """A method's rows: from its shipped evaluation (`shipped`, when reuse and present), else by running its evaluator

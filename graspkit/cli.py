@@ -114,10 +114,17 @@ def _cmd_eval_all(args: argparse.Namespace) -> int:
     """`graspkit eval --all`: run the cross-method benchmark and write its report (without --all: usage)."""
     if not args.all:
         raise ValueError("eval: name a model (e.g. `graspkit eval wandr ...`) or pass --all")
-    from graspkit.benchmark import markdown, run_all, write_report
+    from graspkit.benchmark import markdown, read_csv, run_all, update, write_report
 
+    old = None
+    if args.update:
+        if not (args.out / "benchmark.csv").is_file():
+            raise FileNotFoundError(f"--update: no benchmark.csv in --out {args.out} to update")
+        old = read_csv(args.out / "benchmark.csv")
     rows = run_all(args.out, data=args.data, quick=args.quick, methods=tuple(m for m in args.methods.split(",") if m),
                    reuse=args.reuse)
+    if old is not None:
+        rows = update(old, rows)
     print(markdown(rows))
     for path in write_report(rows, args.out):
         print(f"wrote {path}")
@@ -197,6 +204,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="with --all: comma-separated subset of gt, saga, saga_motion, goal, wandr, motion")
     ev.add_argument("--reuse", action="store_true",
                     help="with --all: take each method's shipped evaluation (data_stubs/checkpoints/*_eval.json)")
+    ev.add_argument("--update", action="store_true",
+                    help="with --all: keep --out's benchmark.csv and replace only the rows the --methods make (a "
+                         "row whole: run together the methods that fill one row, e.g. saga_motion,motion)")
     ev.set_defaults(func=_cmd_eval_all)
     evaluate = ev.add_subparsers(dest="eval_command", required=False)
     from graspkit.eval_wandr import add_wandr_commands

@@ -273,6 +273,7 @@ def add_motionfill_train_commands(train_sub) -> None:
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--time-limit", type=float, default=540.0, help="seconds; stops after the epoch that crosses it")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--per-object", type=int, default=2, help="graspmotion: accepted clips per test object")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--reduction", choices=["sum", "mean"], default=None,
                    help="Eq. 8-9's reduction: sum (as printed) or mean (the authors' code); "
@@ -458,7 +459,7 @@ def table(rows: dict[str, dict[str, float]]) -> str:
 def approach_scene(path: str | Path, bm) -> dict[str, Any]:
     """One approach clip as MotionFill sees it (the window ending at the goal frame, canonical frame A.3) and its
     object in that frame: markers (61,79,3), traj (62,4), local, vel, contacts, betas, floor height, object points,
-    normals (P,3), contact map C_O at the grasp (P,), the object's mesh (trimesh), name and the clip's last 61
+    normals (P,3), contact map C_O at the grasp (P,), the object's mesh (trimesh), name, file name and the clip's last 61
     frames (a Motion in the world)."""
     from graspkit.data.motion import Motion, canonicalize
     from graspkit.objects.catalogue import make_object
@@ -484,7 +485,7 @@ def approach_scene(path: str | Path, bm) -> dict[str, Any]:
     mesh = make_object(name)
     mesh.vertices = to_c(mesh.vertices @ R_o.T + t_o)
     return {**{k: v[0] for k, v in arr.items()}, "betas": m.betas[:10], "floor": float(-o[2]), "name": name,
-            "points": to_c(pts @ R_o.T + t_o), "normals": nrm @ R_o.T @ R.T, "object_contact": c_o, "mesh": mesh,
+            "file": Path(path).name, "points": to_c(pts @ R_o.T + t_o), "normals": nrm @ R_o.T @ R.T, "object_contact": c_o, "mesh": mesh,
             "motion": m.slice(max(m.num_frames - 61, 0))}
 
 
@@ -522,7 +523,7 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
         floor = np.array(s["floor"])
         v = opt.vertices(res, i)
         fit = grasp_metrics(v[-1], bm.faces, s["mesh"])
-        rows.append({"object": s["name"], "skating_gt": skating(s["markers"][None].astype(np.float64), floor[None], heels),
+        rows.append({"object": s["name"], "clip": s["file"], "skating_gt": skating(s["markers"][None].astype(np.float64), floor[None], heels),
                      "skating_sample": skating(markers[i:i + 1].double().numpy(), floor[None], heels),
                      "skating_opt": skating(res.markers[i:i + 1].double().numpy(), floor[None], heels),
                      "fit_cm": float((res.markers[i] - markers[i]).norm(dim=-1).mean() * 100),
@@ -541,20 +542,23 @@ def interp(traj: np.ndarray) -> np.ndarray:
     return interpolated_trajectory(np.asarray(traj, np.float64)[None])[0]
 
 
-def first_test_clips(folder: str | Path) -> list[Path]:
-    """The first accepted approach clip (by file name) of each held-out test object in `folder`, in file order."""
+def test_clips(folder: str | Path, per_object: int = 1) -> list[Path]:
+    """The first `per_object` accepted approach clips (by file name) of each held-out test object in `folder`, in
+    file order."""
     from graspkit.objects.catalogue import TEST_OBJECTS
 
-    first: dict[str, Path] = {}
+    if int(per_object) != per_object or per_object < 1:
+        raise ValueError(f"per_object: expected a whole number >= 1, got {per_object}")
+    taken: dict[str, list[Path]] = {}
     for f in sorted(Path(folder).glob("approach_*.npz")):
         with np.load(f, allow_pickle=False) as a:
             name, ok = str(a["obj_name"]), bool(a["grasp.accepted"])
-        if ok and name in TEST_OBJECTS and name not in first:
-            first[name] = f
-    if not first:
+        if ok and name in TEST_OBJECTS and len(taken.setdefault(name, [])) < per_object:
+            taken[name].append(f)
+    if not any(taken.values()):
         raise FileNotFoundError(f"folder: no accepted approach clip of a test object {TEST_OBJECTS} in {folder} "
                                 "(graspkit data make --kind approach --n 272 --seed 0)")
-    return sorted(first.values())
+    return sorted(f for v in taken.values() for f in v)
 
 
 def write_example(files: list[Path], out: Path, seed: int = 0) -> dict[str, Any]:
@@ -595,8 +599,8 @@ def update_json(path: Path, **sections: Any) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     """`python -m graspkit.eval_motionfill tab3`: Tab. 3 on the test-object windows, written into
-    motionfill_eval.json's rows; `... graspmotion`: GraspMotion-Opt on the first approach clip of each test object,
-    into its "graspmotion" section (the rest of the file kept); `... example`: lesson 06's example (the shipped mug
+    motionfill_eval.json's rows; `... graspmotion`: GraspMotion-Opt on the first two (--per-object) approach clips of
+    each test object, batched, into its "graspmotion" section (the rest of the file kept); `... example`: lesson 06's example (the shipped mug
     clip batched with the first test clip) into motionfill_examples.npz/json."""
     from graspkit.optim.graspmotion import GraspMotionConfig
     from graspkit.paths import cache_dir
@@ -609,6 +613,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="tab3: folder of motionfill.pt and the baselines' motionfill_<name>.pt")
     p.add_argument("--out", type=Path, default=CHECKPOINT.parent / "motionfill_eval.json")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--per-object", type=int, default=2, help="graspmotion: accepted clips per test object")
     p.add_argument("--threads", type=int, default=1)
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
@@ -626,7 +631,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{doc['test_windows']} test windows, {time.perf_counter() - t0:.0f} s -> {args.out}")
         print(table(rows))
         return 0
-    files = first_test_clips(data)
+    files = test_clips(data, 1 if args.part == "example" else args.per_object)
     if args.part == "example":
         from graspkit.paths import DATA_STUBS
 
@@ -639,7 +644,8 @@ def main(argv: list[str] | None = None) -> int:
     secs = time.perf_counter() - t0
     cfg = GraspMotionConfig()                       # what graspmotion_eval ran
     update_json(args.out, graspmotion={"rows": ev["rows"], "files": [f"{f.parent.name}/{f.name}" for f in files],
-                                       "steps": list(cfg.steps), "polish": list(cfg.polish), "seed": args.seed,
+                                       "per_object": args.per_object, "steps": list(cfg.steps),
+                                       "polish": list(cfg.polish), "seed": args.seed,
                                        "seconds": round(secs, 1), "threads": args.threads})
     keys = ("skating_gt", "skating_sample", "skating_opt", "contact_mm", "volume_cm3", "depth_cm", "heel_acc_p99_gt",
             "heel_acc_p99_opt")

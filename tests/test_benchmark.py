@@ -166,3 +166,37 @@ def test_rows_of_one_method_merge_and_keep_the_first_value():
         ("graspkit", {"slide_goal": 6.0, "mean_jerk": 200.0}, "8 rollouts; 2 motions"),
         ("GOAL Sec. 4.2", {"slide_goal": 13.7}, "published")]
     assert a.values == {"slide_goal": 6.0}                      # inputs untouched
+
+
+def test_update_replaces_whole_rows_of_the_methods_run_and_keeps_the_others(tmp_path, capsys):
+    """`graspkit eval --all --update`: a saved report keeps its other rows; a reused method's rows are replaced by
+    those of its (new) evaluation file, values and note together."""
+    import json
+
+    from graspkit.benchmark import update
+
+    old = [Row("grasp", "ground truth (synthetic)", "graspkit", {"contact_ratio": 1.0}, "3 grasps"),
+           Row("grasp", "SAGA (WholeGrasp w/ opt.)", "graspkit", {"contact_ratio": 0.1, "apd": 9.0}, "old run")]
+    new = [Row("grasp", "SAGA (WholeGrasp w/ opt.)", "graspkit", {"contact_ratio": 0.5}, "new run"),
+           Row("grasp", "GrabNet-SMPLX", "graspkit", {"contact_ratio": 0.25}, "new run")]
+    assert [(r.method, r.values, r.note) for r in update(old, new)] == [
+        ("ground truth (synthetic)", {"contact_ratio": 1.0}, "3 grasps"),
+        ("SAGA (WholeGrasp w/ opt.)", {"contact_ratio": 0.5}, "new run"), ("GrabNet-SMPLX", {"contact_ratio": 0.25},
+                                                                          "new run")]
+    out = tmp_path / "report"
+    assert main(["eval", "--all", "--update", "--methods", "saga", "--out", str(out)]) == 2
+    assert "--update" in capsys.readouterr().err and not out.joinpath("benchmark.csv").exists()
+    write_report(old + paper_rows(), out)
+    ck = tmp_path / "ck"
+    ck.mkdir()
+    (ck / "wholegrasp_eval.json").write_text(json.dumps({"config": {"objects": ["mug"]}, "rows": {
+        "WholeGrasp w/ opt. (Ours)": {"n": 6, "contact_ratio": 0.5, "volume_cm3": 1.25, "depth_cm": 0.5, "apd": 2.0}}}))
+    from graspkit.benchmark import run_all
+
+    rows = update(read_csv(out / "benchmark.csv"), run_all(tmp_path / "x", data=[STUBS / "grasps"], checkpoints=ck,
+                                                            methods=("saga",), reuse=True))
+    ours = {r.method: r for r in rows if r.source == "graspkit"}
+    assert ours["ground truth (synthetic)"].values == {"contact_ratio": 1.0}
+    assert ours["SAGA (WholeGrasp w/ opt.)"].values == {"contact_ratio": 0.5, "volume_cm3": 1.25, "depth_cm": 0.5,
+                                                        "apd": 2.0}
+    assert len([r for r in rows if r.source != "graspkit"]) == len(paper_rows())
