@@ -52,6 +52,24 @@ def test_polish_removes_adams_frame_to_frame_jitter_on_a_body_standing_still(bm,
         GraspMotionConfig(polish=(10, 0.0))
 
 
+def test_sequences_of_a_batch_are_fitted_independently(bm, clip):
+    """A sequence fitted alone and beside another (the same body 1 m away and 30 cm lower, walking backwards) gets the same bodies
+    and energies, up to floating-point summation order (every term is a per-sequence sum; Adam is per parameter)."""
+    markers, _, betas, _ = clip
+    shift = torch.tensor([1.0, 0.0, -0.3])                # 30 cm lower: its own floor too
+    other = markers.flip(0) + shift
+    cfg = GraspMotionConfig(steps=(20, 20), polish=(10, 1e-3), terms=("smooth", "skate", "heel"))
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, cfg)
+    feet = torch.full((len(markers), 4), 0.6)
+    alone = opt.fit(markers[None], betas[None, :10], feet[None], progress=False)
+    both = opt.fit(torch.stack([markers, other]), betas[None, :10].expand(2, -1), feet[None].expand(2, -1, -1),
+                   progress=False)
+    torch.testing.assert_close(both.markers[0], alone.markers[0], atol=1e-3, rtol=0)
+    for k, e in alone.energies["stage2"].items():
+        assert float(both.energies["stage2"][k][0]) == pytest.approx(float(e[0]), rel=0.05, abs=1e-3), k
+    assert (both.markers[1] - both.markers[0] - shift).norm(dim=-1).mean() > 0.01
+
+
 def test_foot_skating_term_is_analytic_for_a_sliding_body(bm):
     """A body translated by a constant 2 cm per frame: S.2 = a (|v| - sigma) per sole vertex and contact frame."""
     opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("skate",)))
