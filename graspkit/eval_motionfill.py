@@ -273,7 +273,6 @@ def add_motionfill_train_commands(train_sub) -> None:
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--time-limit", type=float, default=540.0, help="seconds; stops after the epoch that crosses it")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--per-object", type=int, default=2, help="graspmotion: accepted clips per test object")
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--reduction", choices=["sum", "mean"], default=None,
                    help="Eq. 8-9's reduction: sum (as printed) or mean (the authors' code); "
@@ -459,8 +458,8 @@ def table(rows: dict[str, dict[str, float]]) -> str:
 def approach_scene(path: str | Path, bm) -> dict[str, Any]:
     """One approach clip as MotionFill sees it (the window ending at the goal frame, canonical frame A.3) and its
     object in that frame: markers (61,79,3), traj (62,4), local, vel, contacts, betas, floor height, object points,
-    normals (P,3), contact map C_O at the grasp (P,), the object's mesh (trimesh), name, file name and the clip's last 61
-    frames (a Motion in the world)."""
+    normals (P,3), contact map C_O at the grasp (P,), the object's mesh (trimesh), name, file name and the clip's
+    last 61 frames (a Motion in the world)."""
     from graspkit.data.motion import Motion, canonicalize
     from graspkit.objects.catalogue import make_object
     from graspkit.rotations import axis_angle_to_matrix
@@ -485,8 +484,8 @@ def approach_scene(path: str | Path, bm) -> dict[str, Any]:
     mesh = make_object(name)
     mesh.vertices = to_c(mesh.vertices @ R_o.T + t_o)
     return {**{k: v[0] for k, v in arr.items()}, "betas": m.betas[:10], "floor": float(-o[2]), "name": name,
-            "file": Path(path).name, "points": to_c(pts @ R_o.T + t_o), "normals": nrm @ R_o.T @ R.T, "object_contact": c_o, "mesh": mesh,
-            "motion": m.slice(max(m.num_frames - 61, 0))}
+            "file": Path(path).name, "points": to_c(pts @ R_o.T + t_o), "normals": nrm @ R_o.T @ R.T,
+            "object_contact": c_o, "mesh": mesh, "motion": m.slice(max(m.num_frames - 61, 0))}
 
 
 def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, steps: tuple[int, int] = (100, 300),
@@ -523,7 +522,8 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
         floor = np.array(s["floor"])
         v = opt.vertices(res, i)
         fit = grasp_metrics(v[-1], bm.faces, s["mesh"])
-        rows.append({"object": s["name"], "clip": s["file"], "skating_gt": skating(s["markers"][None].astype(np.float64), floor[None], heels),
+        rows.append({"object": s["name"], "clip": s["file"],
+                     "skating_gt": skating(s["markers"][None].astype(np.float64), floor[None], heels),
                      "skating_sample": skating(markers[i:i + 1].double().numpy(), floor[None], heels),
                      "skating_opt": skating(res.markers[i:i + 1].double().numpy(), floor[None], heels),
                      "fit_cm": float((res.markers[i] - markers[i]).norm(dim=-1).mean() * 100),
@@ -599,9 +599,9 @@ def update_json(path: Path, **sections: Any) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     """`python -m graspkit.eval_motionfill tab3`: Tab. 3 on the test-object windows, written into
-    motionfill_eval.json's rows; `... graspmotion`: GraspMotion-Opt on the first two (--per-object) approach clips of
-    each test object, batched, into its "graspmotion" section (the rest of the file kept); `... example`: lesson 06's example (the shipped mug
-    clip batched with the first test clip) into motionfill_examples.npz/json."""
+    motionfill_eval.json's rows; `... graspmotion`: GraspMotion-Opt on the first two (--per-object) approach clips
+    of each test object, batched, into its "graspmotion" section (the rest of the file kept); `... example`: lesson
+    06's example (the shipped mug clip batched with the first test clip) into motionfill_examples.npz/json."""
     from graspkit.optim.graspmotion import GraspMotionConfig
     from graspkit.paths import cache_dir
 

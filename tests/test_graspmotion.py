@@ -53,8 +53,9 @@ def test_polish_removes_adams_frame_to_frame_jitter_on_a_body_standing_still(bm,
 
 
 def test_sequences_of_a_batch_are_fitted_independently(bm, clip):
-    """A sequence fitted alone and beside another (the same body 1 m away and 30 cm lower, walking backwards) gets the same bodies
-    and energies, up to floating-point summation order (every term is a per-sequence sum; Adam is per parameter)."""
+    """A sequence fitted alone and beside another (the same body 1 m away and 30 cm lower, walking backwards) gets
+    the same bodies and energies, up to floating-point summation order (every term is a per-sequence sum; Adam is per
+    parameter)."""
     markers, _, betas, _ = clip
     shift = torch.tensor([1.0, 0.0, -0.3])                # 30 cm lower: its own floor too
     other = markers.flip(0) + shift

@@ -350,7 +350,8 @@ class GraspMotionOpt:
             object_contact: Tensor | None = None, progress: bool = True, floor: Tensor | None = None
             ) -> GraspMotionResult:
         """Alg. 2 on a batch: markers (B, T+1, 79, 3), betas (B, 10), foot contacts (B, T+1, 4) probabilities, the
-        object in the markers' frame, its contact map (B, P) -> GraspMotionResult."""
+        object in the markers' frame, its contact map (B, P), the floor's height (B,) for the planted-heel term
+        (default: each target's lowest heel marker) -> GraspMotionResult."""
         if not isinstance(markers, Tensor) or markers.dim() != 4 or tuple(markers.shape[2:]) != (self.n_markers, 3):
             got = tuple(markers.shape) if isinstance(markers, Tensor) else type(markers).__name__
             raise ValueError(f"markers: expected shape (B, T+1, {self.n_markers}, 3), got {got}")
