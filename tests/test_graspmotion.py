@@ -135,6 +135,27 @@ def test_foot_acceleration_term_is_zero_at_constant_velocity_and_analytic_at_con
     assert e == pytest.approx(w.foot_acc * a ** 2 * (F - 2), rel=1e-3)
 
 
+def test_cloud_collision_hinge_is_analytic_inside_a_sphere_and_zero_outside_its_box(bm):
+    """E^o_colli against a point cloud: queries inside a sphere of radius 5 cm get (r - |q| - sigma_b)_+ (SAGA's
+    S(x, O) from the nearest point's normal); a query 3 cm outside the sphere's box gets 0 even where the nearest
+    cloud point's normal is flipped (a thin wall's far side), which the normal's sign alone would call inside."""
+    opt = GraspMotionOpt(bm, load_pose_prior())
+    g = torch.Generator().manual_seed(0)
+    n = torch.nn.functional.normalize(torch.randn(1, 4000, 3, generator=g), dim=-1)
+    r, sig = 0.05, opt.cfg.weights.sigma_b
+    q = torch.tensor([[[0.01, 0.0, -0.01], [0.02, 0.0, 0.0], [0.0, -0.03, 0.0], [0.0, 0.0, r + 0.03]]])
+    flipped = n.clone()
+    flipped[0, (r * n[0] - q[0, 3]).norm(dim=-1).argmin()] *= -1          # the far query's nearest point
+    lo, hi = (r * n).min(1).values[:, None], (r * n).max(1).values[:, None]
+    pen = opt.cloud_penetration(q, r * n, flipped, lo, hi)
+    want = torch.relu(r - q[0, :3].norm(dim=-1) - sig)
+    torch.testing.assert_close(pen[0, :3], want, atol=2e-3, rtol=0)      # the cloud's sampling: < 2 mm here
+    assert pen[0, 3] == 0 and (pen[0, :3] > 0.01).all()
+    from graspkit.optim.grasppose import _signed_to_cloud
+
+    assert _signed_to_cloud(q[:, 3:], r * n, flipped)[0].item() < -0.02   # what the sign alone would say
+
+
 def test_palm_term_is_small_for_a_palm_facing_a_wall_and_large_for_a_wall_behind_it(bm):
     """Eq. 11 with the rest hand (palm facing -y) and a plane of points 3 mm below the palm (cos gamma ~ 1) or 3 mm
     past its highest palm vertex (the vector to the plane points against the palm normal: cos gamma ~ -1)."""

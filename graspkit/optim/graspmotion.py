@@ -53,7 +53,13 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
 - Initialisation: the prior's mean pose, rigidly aligned per frame (Kabsch on the body and face markers).
 - E^o_colli and E_g are evaluated on the frames where a hand vertex is within 2 cm of the object's bounding box
   (chosen without gradient each step; elsewhere both are 0 by definition: no vertex can be inside or within 1 cm),
-  against every 4th object point (512 of 2048; the collision sign comes from the nearest point's normal).
+  against every 4th object point (512 of 2048; the collision sign comes from the nearest point's normal), and
+  E^o_colli only on the hand vertices inside the object's box widened by 5 mm (`cloud_penetration`): outside it no
+  vertex can be inside the object, but the nearest point's normal called some inside — near a thin wall the nearest
+  sample can be on the far face — and pushed hands away from objects they did not touch (since 2026-11-27; the
+  weight choices above were measured before it). It also makes the term about 10x cheaper (9 % of the near frames'
+  hand vertices are in that box on the test clips): six test clips with 10 + 40 + 100 steps 52 -> 34 s, the
+  twelve-clip evaluation 299 -> 229 s on two threads.
 - Energies are summed over the sequences of a batch (independent sequences; Adam's steps are per parameter), up to
   floating-point summation order: a test clip fitted alone and batched with another differs by 0.5 mm (largest
   marker difference after 20 + 40 + 100 steps), and over the full schedule such differences can settle a frame's
@@ -284,17 +290,17 @@ class GraspMotionOpt:
         if obj is not None:
             pts, nrm, _ = obj.batch(B)
             with torch.no_grad():               # frames with a hand vertex within 2 cm of the object's box
-                lo, hi = pts.min(1).values[:, None, None] - 0.02, pts.max(1).values[:, None, None] + 0.02
-                near = ((hands > lo) & (hands < hi)).all(-1).any(-1).any(0).nonzero()[:, 0]     # (K,)
+                lo, hi = pts.min(1).values[:, None], pts.max(1).values[:, None]                   # (B, 1, 3)
+                near = ((hands > lo[:, None] - 0.02) & (hands < hi[:, None] + 0.02)).all(-1).any(-1).any(0)
+                near = near.nonzero()[:, 0]                                                     # (K,)
             hf = hands[:, near].reshape(B, -1, 3)
             pts, nrm = pts[:, ::cfg.point_stride], nrm[:, ::cfg.point_stride]
             if "colli" in terms:
                 if obj.sdf is not None:
-                    sd = obj.signed_distance(hf)
+                    pen = torch.relu(-obj.signed_distance(hf) - w.sigma_b)
                 else:
-                    from graspkit.optim.grasppose import _signed_to_cloud
-                    sd, _ = _signed_to_cloud(hf, pts, nrm)
-                e["colli"] = w.colli * torch.relu(-sd - w.sigma_b).sum(-1)
+                    pen = self.cloud_penetration(hf, pts, nrm, lo, hi)
+                e["colli"] = w.colli * pen.sum(-1)
             if "contact" in terms and object_contact is not None:
                 last = hands[:, -cfg.contact_frames:]
                 idx = object_contact.topk(min(256, object_contact.shape[1]), -1).indices
@@ -327,6 +333,23 @@ class GraspMotionOpt:
             low = ((h[:, :-1, :, 2] - floor[:, None, None]) < w.heel_height).all(-1).detach()
             e["heel"] = w.heel * (low * torch.relu(speed.min(-1).values - w.skate_sigma)).sum(1)
         return e
+
+    def cloud_penetration(self, q: Tensor, pts: Tensor, nrm: Tensor, lo: Tensor, hi: Tensor) -> Tensor:
+        """E^o_colli's hinge (S(q, O) below -sigma_b)_+ per query (B, N) against a point cloud with normals (B, P, 3),
+        computed only for the queries inside the cloud's box [lo, hi] (B, 1, 3) widened by 5 mm (elsewhere the
+        object's signed distance is positive and the hinge 0): most hand vertices of a near frame are outside it."""
+        from graspkit.optim.grasppose import _signed_to_cloud
+
+        B, N, _ = q.shape
+        with torch.no_grad():
+            inside = ((q > lo - 0.005) & (q < hi + 0.005)).all(-1)                                  # (B, N)
+            k = int(inside.sum(1).max())
+            idx = inside.to(q.dtype).topk(k, dim=1).indices if k else q.new_zeros(B, 0, dtype=torch.long)
+        if k == 0:
+            return q.new_zeros(B, N)
+        sd, _ = _signed_to_cloud(torch.gather(q, 1, idx.unsqueeze(-1).expand(-1, -1, 3)), pts, nrm)
+        val = torch.relu(-sd - self.cfg.weights.sigma_b) * torch.gather(inside, 1, idx).to(q.dtype)
+        return q.new_zeros(B, N).scatter(1, idx, val)
 
     def palm_term(self, hands: Tensor, pts: Tensor, frames: Tensor | None = None, total: int | None = None) -> Tensor:
         """Eq. 11 per sequence (B,): alpha_t 1(d < sigma) (cos gamma - 1)^2 over the palm vertices of every frame;

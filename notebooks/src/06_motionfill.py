@@ -88,7 +88,7 @@ print(f"sample spread at mid-motion: {float(s['traj'][:, 30, :2].std(0).norm()):
 # ## GraspMotion-Opt: from markers to bodies
 # The shipped example ran Alg. 2 (100 steps of marker fitting, then 300 steps of every term, then graspkit's 100-step
 # polish at a tenth of the learning rate) on one sample for this mug clip (`python -m graspkit.eval_motionfill
-# example`, batched with a binoculars clip: 80 s on one core, so it is loaded here). Why the polish: Adam's step is
+# example`, batched with a binoculars clip: about a minute on one core, so it is loaded here). Why the polish: Adam's step is
 # about its learning rate whatever the gradient, so at the paper's last rate every frame's parameters jitter by
 # millimetres on their own, and 2.5 mm between two frames is already SAGA's skating speed (75 mm/s). graspkit adds two
 # foot terms beside S.2's skating hinge: a planted heel (while both heels are within 6 cm of the floor, the slower
