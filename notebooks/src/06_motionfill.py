@@ -197,7 +197,7 @@ print("| mean | " + " | ".join(f"{np.mean([r[k] for r in ev['graspmotion']['rows
 # WholeGrasp-VAE samples a grasp (lesson 05),
 # GraspPose-Opt fits it, a standing start is placed 0.4 m behind it facing the object, MotionFill-VAE infills the two
 # seconds between them and GraspMotion-Opt fits the bodies, all moved back into the world. With the paper's step counts
-# it takes about 45 s on one core (`graspkit saga --object wine_glass` writes GIF, npz and GLB); here with fewer steps.
+# it takes about 30 s on one core (`graspkit saga --object wine_glass` writes GIF, npz and GLB); here with fewer steps.
 
 # %%
 # NBVAL_IGNORE_OUTPUT
