@@ -341,12 +341,11 @@ class GraspMotionOpt:
         from graspkit.optim.grasppose import _signed_to_cloud
 
         B, N, _ = q.shape
-        with torch.no_grad():
-            inside = ((q > lo - 0.005) & (q < hi + 0.005)).all(-1)                                  # (B, N)
-            k = int(inside.sum(1).max())
-            idx = inside.to(q.dtype).topk(k, dim=1).indices if k else q.new_zeros(B, 0, dtype=torch.long)
+        inside = ((q > lo - 0.005) & (q < hi + 0.005)).all(-1).detach()                             # (B, N)
+        k = int(inside.sum(1).max())
         if k == 0:
             return q.new_zeros(B, N)
+        idx = inside.to(q.dtype).topk(k, dim=1).indices          # each row's inside queries first, padded with others
         sd, _ = _signed_to_cloud(torch.gather(q, 1, idx.unsqueeze(-1).expand(-1, -1, 3)), pts, nrm)
         val = torch.relu(-sd - self.cfg.weights.sigma_b) * torch.gather(inside, 1, idx).to(q.dtype)
         return q.new_zeros(B, N).scatter(1, idx, val)
