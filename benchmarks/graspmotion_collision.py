@@ -11,10 +11,9 @@ Run: python benchmarks/graspmotion_collision.py
 from __future__ import annotations
 
 import argparse
-import time
 
-import numpy as np
 import torch
+from geometry import _best                      # benchmarks/geometry.py: best wall time of a few calls
 
 from graspkit.body import BodyModel
 from graspkit.eval_motionfill import approach_scene, interp, load_motionfill
@@ -22,16 +21,7 @@ from graspkit.models.pose_prior import load_pose_prior
 from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt
 from graspkit.optim.grasppose import _signed_to_cloud
 from graspkit.paths import DATA_STUBS, default_model_path
-
-
-def _best(fn, repeat: int = 5) -> float:
-    """Best wall time of `repeat` calls, in seconds."""
-    times = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
+from graspkit.rotations import axis_angle_to_matrix
 
 
 def near_hands(opt: GraspMotionOpt, scene: dict, seed: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -41,14 +31,11 @@ def near_hands(opt: GraspMotionOpt, scene: dict, seed: int) -> tuple[torch.Tenso
     s = load_motionfill().sample(torch.as_tensor(interp(scene["traj"])).float(), torch.as_tensor(scene["local"]),
                                  torch.as_tensor(scene["contacts"]).float(), 1, g)
     res = opt.fit(s["markers"], torch.as_tensor(scene["betas"][None]).float(), progress=False)
-    p = {"transl": res.params["transl"][0]}
     pts = torch.as_tensor(scene["points"]).float()[None]
     nrm = torch.as_tensor(scene["normals"]).float()[None]
     with torch.no_grad():
-        rot = torch.as_tensor(res.params["poses"][0]).view(-1, 55, 3)
-        from graspkit.rotations import axis_angle_to_matrix
-
-        v, _ = opt.sparse(axis_angle_to_matrix(rot), res.params["betas"].expand(len(rot), -1), p["transl"])
+        rot = axis_angle_to_matrix(res.params["poses"][0].view(-1, 55, 3))
+        v, _ = opt.sparse(rot, res.params["betas"].expand(len(rot), -1), res.params["transl"][0])
         hands = v[:, opt.sl_h].float()[None]                                            # (1, F, H, 3)
         lo, hi = pts.min(1).values[:, None], pts.max(1).values[:, None]
         near = ((hands > lo[:, None] - 0.02) & (hands < hi[:, None] + 0.02)).all(-1).any(-1).any(0)
@@ -86,7 +73,7 @@ def main() -> None:
             if e.requires_grad:
                 e.backward()
 
-        t_box, t_all = _best(lambda: step(box)), _best(lambda: step(every))
+        t_box, t_all = _best(lambda: step(box), 5), _best(lambda: step(every), 5)
         with torch.no_grad():
             e_box, e_all = box(), every()
             inbox = ((q > lo - 0.005) & (q < hi + 0.005)).all(-1)
