@@ -542,7 +542,7 @@ def interp(traj: np.ndarray) -> np.ndarray:
     return interpolated_trajectory(np.asarray(traj, np.float64)[None])[0]
 
 
-def test_clips(folder: str | Path, per_object: int = 1) -> list[Path]:
+def held_out_clips(folder: str | Path, per_object: int = 1) -> list[Path]:
     """The first `per_object` accepted approach clips (by file name) of each held-out test object in `folder`, in
     file order."""
     from graspkit.objects.catalogue import TEST_OBJECTS
@@ -631,7 +631,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{doc['test_windows']} test windows, {time.perf_counter() - t0:.0f} s -> {args.out}")
         print(table(rows))
         return 0
-    files = test_clips(data, 1 if args.part == "example" else args.per_object)
+    files = held_out_clips(data, 1 if args.part == "example" else args.per_object)
     if args.part == "example":
         from graspkit.paths import DATA_STUBS
 

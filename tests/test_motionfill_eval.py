@@ -94,19 +94,19 @@ def test_train_command_end_to_end_on_the_shipped_approach_clips(tmp_path, monkey
         main(["train", "motionfill", "--stage", "nope"])
 
 
-def test_test_clips_take_each_test_objects_first_accepted_clips(tmp_path):
-    from graspkit.eval_motionfill import main, test_clips
+def test_held_out_clips_are_each_test_objects_first_accepted_clips(tmp_path):
+    from graspkit.eval_motionfill import held_out_clips, main
 
     for i, (name, ok) in enumerate([("apple", True), ("mug", False), ("mug", True), ("camera", True), ("mug", True)]):
         np.savez(tmp_path / f"approach_{i:06d}.npz", obj_name=np.array(name), **{"grasp.accepted": np.array(ok)})
-    assert [f.name for f in test_clips(tmp_path)] == ["approach_000002.npz", "approach_000003.npz"]
-    assert [f.name for f in test_clips(tmp_path, 2)] == ["approach_000002.npz", "approach_000003.npz",
-                                                         "approach_000004.npz"]
+    assert [f.name for f in held_out_clips(tmp_path)] == ["approach_000002.npz", "approach_000003.npz"]
+    assert [f.name for f in held_out_clips(tmp_path, 2)] == ["approach_000002.npz", "approach_000003.npz",
+                                                             "approach_000004.npz"]
     with pytest.raises(ValueError, match="per_object"):
-        test_clips(tmp_path, 0)
+        held_out_clips(tmp_path, 0)
     empty = tmp_path / "empty"
     empty.mkdir()
     with pytest.raises(FileNotFoundError, match="folder"):
-        test_clips(empty)
+        held_out_clips(empty)
     with pytest.raises(SystemExit):
         main(["nothing"])
