@@ -18,15 +18,15 @@ from geometry import _best                      # benchmarks/geometry.py: best w
 from graspkit.body import BodyModel
 from graspkit.eval_motionfill import approach_scene, interp, load_motionfill
 from graspkit.models.pose_prior import load_pose_prior
-from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt
+from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, in_box
 from graspkit.optim.grasppose import _signed_to_cloud
 from graspkit.paths import DATA_STUBS, default_model_path
 from graspkit.rotations import axis_angle_to_matrix
 
 
-def near_hands(opt: GraspMotionOpt, scene: dict, seed: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def near_hands(opt: GraspMotionOpt, scene: dict, seed: int) -> tuple[torch.Tensor, ...]:
     """Hand vertices (1, K*H, 3) of the frames within 2 cm of the object's box after Alg. 2's stage 1 on one
-    MotionFill sample, and the object's points and normals (1, P, 3)."""
+    MotionFill sample, the object's points and normals (1, P, 3) and its box lo, hi (1, 1, 3)."""
     g = torch.Generator().manual_seed(seed)
     s = load_motionfill().sample(torch.as_tensor(interp(scene["traj"])).float(), torch.as_tensor(scene["local"]),
                                  torch.as_tensor(scene["contacts"]).float(), 1, g)
@@ -38,8 +38,8 @@ def near_hands(opt: GraspMotionOpt, scene: dict, seed: int) -> tuple[torch.Tenso
         v, _ = opt.sparse(rot, res.params["betas"].expand(len(rot), -1), res.params["transl"][0])
         hands = v[:, opt.sl_h].float()[None]                                            # (1, F, H, 3)
         lo, hi = pts.min(1).values[:, None], pts.max(1).values[:, None]
-        near = ((hands > lo[:, None] - 0.02) & (hands < hi[:, None] + 0.02)).all(-1).any(-1).any(0)
-    return hands[:, near].reshape(1, -1, 3), pts, nrm
+        near = in_box(hands, lo[:, None], hi[:, None], 0.02).any(-1).any(0)
+    return hands[:, near].reshape(1, -1, 3), pts, nrm, lo, hi
 
 
 def main() -> None:
@@ -56,10 +56,8 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|")
     for f in sorted((DATA_STUBS / "approach").glob("approach_*.npz")):
         scene = approach_scene(f, bm)
-        q, pts, nrm = near_hands(opt, scene, args.seed)
+        q, pts, nrm, lo, hi = near_hands(opt, scene, args.seed)
         pts, nrm = pts[:, ::opt.cfg.point_stride], nrm[:, ::opt.cfg.point_stride]
-        full = torch.as_tensor(scene["points"]).float()[None]
-        lo, hi = full.min(1).values[:, None], full.max(1).values[:, None]
         qg = q.clone().requires_grad_(True)
 
         def box() -> torch.Tensor:
@@ -76,7 +74,7 @@ def main() -> None:
         t_box, t_all = _best(lambda: step(box), 5), _best(lambda: step(every), 5)
         with torch.no_grad():
             e_box, e_all = box(), every()
-            inbox = ((q > lo - 0.005) & (q < hi + 0.005)).all(-1)
+            inbox = in_box(q, lo, hi, 0.005)
         print(f"| {f.stem} | {scene['name']} | {q.shape[1]} | {int(inbox.sum())} ({100 * float(inbox.float().mean()):.0f} %)"
               f" | {1000 * t_box:.1f} | {1000 * t_all:.1f} | {t_all / max(t_box, 1e-9):.1f}x | "
               f"{float(e_box.sum()):.3f} / {float(e_all.sum()):.3f} | {int(((e_all > 0) & ~inbox).sum())} |")

@@ -158,6 +158,11 @@ def load_smooth_ae(path: str | Path = SMOOTH_AE_PATH) -> MarkerDiffAE:
     return MarkerDiffAE.from_state(torch.load(path, weights_only=True, map_location="cpu"))
 
 
+def in_box(x: Tensor, lo: Tensor, hi: Tensor, margin: float) -> Tensor:
+    """Which points x (B, ..., 3) lie inside the box [lo - margin, hi + margin] (lo, hi broadcastable) -> (B, ...)."""
+    return ((x > lo - margin) & (x < hi + margin)).all(-1)
+
+
 # ------------------------------------------------------------------------------------------------ the optimiser
 @dataclass
 class GraspMotionWeights:
@@ -291,8 +296,7 @@ class GraspMotionOpt:
             pts, nrm, _ = obj.batch(B)
             with torch.no_grad():               # frames with a hand vertex within 2 cm of the object's box
                 lo, hi = pts.min(1).values[:, None], pts.max(1).values[:, None]                   # (B, 1, 3)
-                near = ((hands > lo[:, None] - 0.02) & (hands < hi[:, None] + 0.02)).all(-1).any(-1).any(0)
-                near = near.nonzero()[:, 0]                                                     # (K,)
+                near = in_box(hands, lo[:, None], hi[:, None], 0.02).any(-1).any(0).nonzero()[:, 0]   # (K,)
             hf = hands[:, near].reshape(B, -1, 3)
             pts, nrm = pts[:, ::cfg.point_stride], nrm[:, ::cfg.point_stride]
             if "colli" in terms:
@@ -341,7 +345,7 @@ class GraspMotionOpt:
         from graspkit.optim.grasppose import _signed_to_cloud
 
         B, N, _ = q.shape
-        inside = ((q > lo - 0.005) & (q < hi + 0.005)).all(-1).detach()                             # (B, N)
+        inside = in_box(q, lo, hi, 0.005)                                                           # (B, N)
         k = int(inside.sum(1).max())
         if k == 0:
             return q.new_zeros(B, N)
