@@ -233,5 +233,5 @@ viz.show_animation(anim)
 #    a mesh file of your own, at two seeds. Does the grasp adapt to the shape (compare the hand's spread with the
 #    wine glass above), and where does the end frame penetrate (`r.metrics`)?
 # 5. Run `graspkit.eval_motionfill.graspmotion_eval` on one test clip with `weights=GraspMotionWeights(heel=0,
-#    foot_acc=0)` (S.2 alone) and with the defaults (about a minute each). Compare the skating and the heel speed per
+#    foot_acc=0)` (S.2 alone) and with the defaults (about 25 s each). Compare the skating and the heel speed per
 #    frame: where does the metric drop, and what does a foot do that the metric cannot see?
