@@ -131,11 +131,12 @@ def load_motionfill(path: str | Path = CHECKPOINT) -> MotionFillVAE:
 
 def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, seed: int = 0,
                 time_limit_s: float | None = 540.0, clips: dict[str, int] | None = None, batch_size: int = 32,
-                lr: float = 1e-3, progress: bool = True, data: Path | None = None, reduction: str | None = None
-                ) -> tuple[MotionFillVAE, list[dict[str, float]]]:
+                lr: float = 1e-3, progress: bool = True, data: Path | None = None, reduction: str | None = None,
+                local_arch: str | None = None) -> tuple[MotionFillVAE, list[dict[str, float]]]:
     """One of A.4's training runs (`STAGES`); starts from `init` (a checkpoint) when given; writes `out` (shipped
     float16 state) and a resumable run checkpoint beside it in the cache. `reduction` sets the loss's
-    (`MotionFillConfig.reduction`; default: the init checkpoint's, else "sum")."""
+    (`MotionFillConfig.reduction`; default: the init checkpoint's, else the config's); `local_arch` LocalMotionFill's
+    network for a new model ("temporal" or "image", `MotionFillConfig.local_arch`; with `init`, the checkpoint's)."""
     from graspkit.train import TrainConfig, file_key, fit, run_path
 
     if stage not in STAGES:
@@ -147,10 +148,14 @@ def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, se
     torch.manual_seed(seed)
     if init is not None:
         model = load_motionfill(init).train()
+        if local_arch is not None and local_arch != model.cfg.local_arch:
+            raise ValueError(f"local_arch: {local_arch!r} differs from the --init checkpoint's "
+                             f"{model.cfg.local_arch!r} ({init})")
         if reduction is not None:
             model.cfg.reduction = reduction
     else:
-        model = MotionFillVAE(MotionFillConfig(reduction=reduction or "sum"))
+        given = {"reduction": reduction, "local_arch": local_arch}
+        model = MotionFillVAE(MotionFillConfig(**{k: v for k, v in given.items() if v is not None}))
         model.set_stats(MotionFillStats.fit({k: arr[k][np.isin(arr["clip"], split["train"])]
                                              for k in ("local", "vel")}))
     stats = MotionFillStats(model.marker_mean.clone(), model.marker_std.clone(), model.vel_mean.clone(),
@@ -166,7 +171,7 @@ def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, se
 
     if len(train) == 0:
         raise ValueError(f"data: no training windows among the {kind} clips (split by object: {sorted(split)})")
-    tag = "" if model.cfg.reduction == "sum" else f"_{model.cfg.reduction}"
+    tag = "" if model.cfg.reduction == "mean" else f"_{model.cfg.reduction}"
     run = run_path(f"motionfill_{stage}{tag}", seed, epochs=epochs, lr=lr, batch_size=batch_size,
                    windows=windows_source(kind, clips[kind], data)[0].name, init=file_key(init),
                    config=model.state()["model_config"])
@@ -275,8 +280,12 @@ def add_motionfill_train_commands(train_sub) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--reduction", choices=["sum", "mean"], default=None,
-                   help="Eq. 8-9's reduction: sum (as printed) or mean (the authors' code); "
-                   "default: --init's, else sum")
+                   help="Eq. 8-9's reduction: mean (the authors' code) or sum (as printed); "
+                   "default: --init's, else mean")
+    p.add_argument("--local-arch", choices=["temporal", "image"], default=None,
+                   help="LocalMotionFill's network for a new model (stage local): convolutions over time reading each "
+                   "frame of the motion image whole (default) or 2-D convolutions over the image (LEMO); with --init, "
+                   "the checkpoint's")
     p.set_defaults(func=_cmd_train)
     b = train_sub.add_parser("motionfill_baseline", help="train one of SAGA Tab. 3's deterministic infilling "
                              "baselines (CNN-AE, PoseNet, RouteNet)")
@@ -323,7 +332,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     kind = STAGES[args.stage][0]
     _, hist = train_stage(args.stage, args.epochs, args.out, init=args.init, seed=args.seed,
                           time_limit_s=args.time_limit, clips={kind: args.clips} if args.clips else None, lr=args.lr,
-                          data=args.data, reduction=args.reduction)
+                          data=args.data, reduction=args.reduction, local_arch=args.local_arch)
     last = hist[-1]
     print(f"motionfill {args.stage}: {len(hist)} epochs in {time.perf_counter() - t0:.0f} s -> {args.out}")
     print("  " + ", ".join(f"{k} {v:.3f}" for k, v in last.items() if k != "epoch"))

@@ -6,7 +6,7 @@ import torch
 from graspkit.data.motionfill_dataset import MotionFillStats, interpolated_trajectory, local_motion
 from graspkit.models.blocks import kl_standard_normal, robust_kl
 from graspkit.models.motionfill import (FEATURES, NUM_FRAMES, NUM_ROOT, LocalMotionFill, MotionFillConfig,
-                                        MotionFillVAE, TrajFill, traj_velocity)
+                                        MotionFillVAE, TemporalMotionFill, TrajFill, dct_basis, traj_velocity)
 
 
 def _batch(B: int = 3, seed: int = 0) -> dict[str, torch.Tensor]:
@@ -48,8 +48,8 @@ def test_loss_terms_and_gradients():
     logs = m.loss(b, trajectory="predicted")
     logs["loss"].backward()
     assert all(torch.isfinite(v) for v in logs.values())
-    # at initialisation TrajFill returns Gamma_bar, so its term is |Gamma - Gamma_bar| summed
-    want = (b["traj"] - b["traj_interp"]).abs().sum((1, 2)).mean()
+    # at initialisation TrajFill returns Gamma_bar, so its term is |Gamma - Gamma_bar| averaged (reduction "mean")
+    want = (b["traj"] - b["traj_interp"]).abs().mean()
     m.eval()
     assert m.loss(b, parts=("traj",))["traj"].item() == pytest.approx(want.item(), rel=1e-5)
     missing = [n for n, p in m.named_parameters() if p.grad is None]
@@ -124,9 +124,82 @@ def test_kl_terms_against_torch_distributions():
 def test_paper_sizes_and_shipped_sizes():
     paper = MotionFillVAE(MotionFillConfig.paper())
     assert paper.traj.latent == 512 and paper.traj.out.in_features == 4 * 60 and paper.traj.dec[0].fc1.out_features == 8 * 60
+    assert paper.traj.out.out_features == NUM_ROOT * 4 and isinstance(paper.local, LocalMotionFill)
     small = MotionFillVAE()
+    assert isinstance(small.local, TemporalMotionFill) and small.traj.out.out_features == 16 * 4
     n = sum(p.numel() for p in small.parameters())
-    assert n * 2 < 1.5e6                                            # float16 weights under 1.5 MB
+    assert n * 2 < 2.5e6                                            # float16 weights under 2.5 MB
+    with pytest.raises(ValueError, match="local_arch"):
+        MotionFillVAE(MotionFillConfig(local_arch="graph"))
+    with pytest.raises(ValueError, match="basis"):
+        TrajFill(basis=63)
+
+
+def test_dct_basis_is_scipys_orthonormal_inverse_dct():
+    from scipy.fft import idct
+
+    c = np.random.default_rng(0).normal(size=(NUM_ROOT, 3))
+    np.testing.assert_allclose(dct_basis(NUM_ROOT, NUM_ROOT).double().numpy() @ c, idct(c, axis=0, norm="ortho"),
+                               atol=1e-5)
+    np.testing.assert_allclose(dct_basis(NUM_ROOT, 16).double().numpy() @ c[:16],
+                               idct(np.concatenate([c[:16], np.zeros((NUM_ROOT - 16, 3))]), axis=0, norm="ortho"),
+                               atol=1e-5)
+
+
+def test_band_limited_trajfill_has_no_frequencies_above_its_basis():
+    """traj_basis = K: whatever the weights, the deviation from Gamma_bar has zero DCT coefficients above K."""
+    from scipy.fft import dct
+
+    b = _batch(B=4)
+    torch.manual_seed(0)
+    tf = TrajFill(latent=8, enc=64, widths=(64, 64), basis=16).eval()
+    torch.nn.init.normal_(tf.out.weight, std=0.3)
+    out = tf.decode(torch.randn(4, 8), b["traj_interp"]).detach().double().numpy()
+    coef = dct(out - b["traj_interp"].double().numpy(), axis=1, norm="ortho")
+    assert np.abs(coef[:, 16:]).max() < 1e-5 and np.abs(coef[:, :16]).max() > 1e-2
+    full = TrajFill(latent=8, enc=64, widths=(64, 64)).eval()        # basis 0: A.2's per-frame output layer
+    torch.nn.init.normal_(full.out.weight, std=0.3)
+    coef = dct(full.decode(torch.randn(4, 8), b["traj_interp"]).detach().double().numpy()
+               - b["traj_interp"].double().numpy(), axis=1, norm="ortho")
+    assert np.abs(coef[:, 16:]).max() > 1e-2
+
+
+def test_temporal_local_fill_starts_at_the_blend_and_reads_only_the_known_frames():
+    torch.manual_seed(0)
+    lm = TemporalMotionFill(latent=8, width=16).eval()
+    img = torch.randn(2, 4, NUM_FRAMES, FEATURES)
+    img[:, 1:] = img[:, 1:, :, :1]                                 # velocity channels: one value per frame
+    cond = img.clone()
+    cond[:, 0, 1:-1] = 0
+    ch0, mu, _ = lm(img, cond)
+    assert ch0.shape == (2, NUM_FRAMES, FEATURES) and mu.shape == (2, 8)
+    torch.testing.assert_close(ch0, LocalMotionFill.base(cond))     # zero-initialised output layer
+    torch.nn.init.normal_(lm.out.weight, std=0.1)
+    z = torch.randn(2, 8)
+    out = lm.decode(z, cond)
+    other = cond.clone()
+    other[:, 0, 1:-1] = 5.0                                         # the decoder sees I_c only, not the hidden frames
+    torch.testing.assert_close(lm.decode(z, cond), out)
+    assert not torch.allclose(lm.decode(z, other), out)
+    late = cond.clone()
+    late[:, 1:, 45:] += 1.0                                         # root velocities of frames 45.. change
+    diff = (lm.decode(z, late) - out).abs().amax((0, 2))            # per output frame
+    # the convolutions reach about 20 frames: a frame hears of what lies further only through z and the blend
+    assert diff[45:].min() > 0 and diff[:20].max() == 0
+
+
+def test_checkpoints_from_before_the_temporal_network_load_as_they_were():
+    """A state whose model_config predates local_arch / traj_basis rebuilds the image network and A.2's output."""
+    torch.manual_seed(0)
+    old = MotionFillVAE(MotionFillConfig(local_arch="image", traj_basis=0)).eval()
+    state = old.state()
+    for k in ("local_arch", "traj_basis", "temporal_width"):
+        del state["model_config"][k]
+    again = MotionFillVAE.from_state(state)
+    assert again.cfg.local_arch == "image" and again.cfg.traj_basis == 0
+    b = _batch()
+    z = torch.randn(3, old.cfg.traj_latent)
+    torch.testing.assert_close(again.traj.decode(z, b["traj_interp"]), old.traj.decode(z, b["traj_interp"]))
 
 
 def test_global_motion_round_trip_through_the_model_image():
@@ -147,10 +220,12 @@ def test_global_motion_round_trip_through_the_model_image():
                                atol=1e-5, rtol=1e-4)
 
 
-def test_a_tiny_overfit_reduces_every_reconstruction_term():
+@pytest.mark.parametrize("arch", ["temporal", "image"])
+def test_a_tiny_overfit_reduces_every_reconstruction_term(arch):
     torch.manual_seed(0)
     m = MotionFillVAE(MotionFillConfig(traj_latent=8, traj_enc=64, traj_widths=(64, 64), motion_latent=8,
-                                       channels=(8, 8, 8, 8, 8)))
+                                       channels=(8, 8, 8, 8, 8), local_arch=arch, temporal_width=64,
+                                       reduction="sum"))
     b = _batch(B=4, seed=1)
     t = torch.linspace(0, 1, NUM_FRAMES)[None, :, None, None]
     template = torch.as_tensor(np.random.default_rng(1).normal(0, 0.3, (1, 1, 79, 3))).float()

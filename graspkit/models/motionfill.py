@@ -8,27 +8,34 @@ heading frame (local motion); root velocities; four foot contacts.
 TrajFill (A.2): a CVAE over the trajectory deviation dGamma = Gamma - Gamma_bar from the straight trajectory Gamma_bar
 (linear interpolation Gamma_0 -> Gamma_T plus one extrapolated step), conditioned on Gamma_bar. Encoder: two residual
 blocks as wide as their input [dGamma, Gamma_bar] (2 x 62 x 4 = 496, i.e. ~8T), two linear heads to a 512-D latent.
-Decoder: [z, Gamma_bar] -> residual blocks of widths 8T and 4T -> dGamma; output Gamma_bar + dGamma.
+Decoder: [z, Gamma_bar] -> residual blocks of widths 8T and 4T -> dGamma; output Gamma_bar + dGamma. graspkit's
+output layer writes dGamma as its 16 lowest DCT frequencies per channel (`traj_basis`; 0 gives A.2's full layer).
 
 LocalMotionFill (A.2, after LEMO [64]): a CNN CVAE over the four-channel motion image I (4 x 61 x (79*3 + 4)):
 channel 0 the normalised local markers with the foot contacts, channels 1-3 the normalised root velocities; the
-condition image I_c is I with the in-between frames of channel 0 zeroed. Encoder q(z | I, I_c): strided convolutions
-on [I, I_c]; decoder p(I | z, I_c): the latent and a convolutional encoding of I_c, up-convolutions with skip
-connections from the I_c encoder (a U-Net), output channel 0 (markers and contact logits) as a residual over the
-linear blend of the two known frames (graspkit's choice, as TrajFill's residual over Gamma_bar; zero-initialised);
-the four contact logits add a linear read-out of each frame's last feature map (a convolution alone cannot tell the
-contact columns from the marker columns). The paper defers the
-CNN to LEMO; the widths here (8-16-32-32-32, 64-D latent; `MotionFillConfig.paper()`: 16-32-64-64-64, 128-D) are
-graspkit's, sized for two CPU cores.
+condition image I_c is I with the in-between frames of channel 0 zeroed. Decoder output: channel 0 (markers and
+contact logits) as a residual over the linear blend of the two known frames (graspkit's choice, as TrajFill's
+residual over Gamma_bar; zero-initialised). Two networks (`MotionFillConfig.local_arch`):
+- "temporal" (shipped, `TemporalMotionFill`): the first convolution reads each frame's row of I whole (3 frames x
+  all features), then convolutions run over time only (61 -> 31 -> 16 -> 8 frames, 96 maps); the decoder is a
+  temporal U-Net on z and the encoding of I_c, upsampling by linear resizing + convolution.
+- "image" (`LocalMotionFill`, LEMO's layout): 3 x 3 convolutions over the image with strides 2, a U-Net decoder with
+  transposed convolutions and skips from the I_c encoder; the four contact logits add a linear read-out of each
+  frame's last feature map (a convolution alone cannot tell the contact columns from the marker columns). Widths
+  8-16-32-32-32 (`paper()`: 16-32-64-64-64, 128-D latent).
+The paper defers the CNN to LEMO and gives no widths; both are graspkit's, sized for two CPU cores. The image
+network's kernels slide across neighbouring marker coordinates, which generalised to held-out objects worse than a
+per-frame LSTM (docs/saga_motion.md: Tab. 3's ADE and PSKL, both networks measured).
 
 Losses (Eq. 8-9, A.4): L = L_rec + lambda_KL L_KL,
     L_rec = sum_t |Gamma_t - Gamma~_t| + l1 sum_t |v^Gamma_t - v~^Gamma_t| + l2 BCE(C_F, C~_F)
             + l3 sum_t |M^l_t - M~^l_t| + l4 sum_t |v^Ml_t - v~^Ml_t|                               (Eq. 8)
     L_KL  = Psi(KL(q(z_t | ...))) + Psi(KL(q(z_m | I, I_c)))                                     (Eq. 9)
-with {lambda_KL, l1, l2, l3, l4} = {1, 0.05, 1, 1, 0.5}. |.| is the L1 norm of a frame's vector, summed over frames
-and averaged over the batch; the local markers enter in their normalised units (the image's), the BCE is summed over
-frames and the four contacts. `MotionFillConfig(reduction="mean")` reduces as the authors' released code does (means
-over elements, Psi of the per-dimension KL); measured worse here (docs/saga_motion.md), so "sum" is the default.
+with {lambda_KL, l1, l2, l3, l4} = {1, 0.05, 1, 1, 0.5}. Reduced as the authors' released code does
+(`reduction="mean"`, default): each L1 / BCE term averaged over its elements, Psi of the KL averaged over the latent's
+dimensions. `reduction="sum"` reads Eq. 8 as printed (|.| the L1 norm of a frame's vector summed over frames, Psi of
+the summed KL); with the temporal network it lets the motion latent carry ~200 nats and the samples land further
+from the data (docs/saga_motion.md). The local markers enter in their normalised units (the image's).
 """
 from __future__ import annotations
 
@@ -56,44 +63,64 @@ def _reduce(err: Tensor, reduction: str) -> Tensor:
 
 @dataclass
 class MotionFillConfig:
-    """Sizes and loss weights (A.2, A.4). The defaults are graspkit's shipped sizes (about 0.72 M weights, 1.4 MB in
-    float16); `paper()` gives A.2's (512-D trajectory latent, decoder blocks 8T and 4T wide: 3.8 M weights)."""
+    """Sizes and loss weights (A.2, A.4). The defaults are graspkit's shipped sizes (1.22 M weights, 2.4 MB in
+    float16); `paper()` gives A.2's (512-D trajectory latent, decoder blocks 8T and 4T wide, full output layer; the
+    image network: 3.8 M weights)."""
 
     traj_latent: int = 64
     traj_enc: int = 128                   # encoder block width (A.2: as wide as its input, 2 * 62 * 4 = 496)
     traj_widths: tuple[int, int] = (3 * T, 2 * T)     # decoder residual blocks (A.2: 8T, 4T)
+    traj_basis: int = 16      # TrajFill's output: the K lowest DCT frequencies per channel (0: a full linear layer, A.2)
     motion_latent: int = 64
     channels: tuple[int, ...] = (8, 16, 32, 32, 32)
+    local_arch: str = "temporal"  # "temporal": rows of the motion image read whole, convolutions over time;
+    temporal_width: int = 96      # "image": 2-D convolutions over the image (LEMO) with `channels`
     lambda_kl: float = 1.0
     l1: float = 0.05          # trajectory velocity
     l2: float = 1.0           # foot-contact BCE
     l3: float = 1.0           # local markers
     l4: float = 0.5           # local marker velocity
-    reduction: str = "sum"    # "sum": Eq. 8 as printed; "mean": per element, KL per latent dim (the authors' code)
+    reduction: str = "mean"   # "mean": per element, KL per latent dim (the authors' code); "sum": Eq. 8 as printed
 
     @classmethod
     def paper(cls) -> "MotionFillConfig":
         """SAGA A.2's sizes (512-D TrajFill latent, blocks 8T / 4T; the CNN widths are LEMO-like, graspkit's)."""
-        return cls(traj_latent=512, traj_enc=2 * NUM_ROOT * 4, traj_widths=(8 * T, 4 * T), motion_latent=128,
-                   channels=(16, 32, 64, 64, 64))
+        return cls(traj_latent=512, traj_enc=2 * NUM_ROOT * 4, traj_widths=(8 * T, 4 * T), traj_basis=0,
+                   motion_latent=128, local_arch="image", channels=(16, 32, 64, 64, 64))
 
 
 # ------------------------------------------------------------------------------------------------ TrajFill
+def dct_basis(frames: int, k: int) -> Tensor:
+    """Orthonormal DCT-II synthesis matrix (frames, k): column j is the j-th cosine, cos(pi (t + 1/2) j / frames)."""
+    t = torch.arange(frames, dtype=torch.float64)[:, None] + 0.5
+    j = torch.arange(k, dtype=torch.float64)[None]
+    b = torch.cos(torch.pi * t * j / frames) * (2.0 / frames) ** 0.5
+    b[:, 0] /= 2 ** 0.5
+    return b.float()
+
+
 class TrajFill(nn.Module):
     """CVAE over root trajectories (B, 62, 4) conditioned on the straight trajectory Gamma_bar (B, 62, 4)."""
 
     def __init__(self, latent: int = 512, frames: int = NUM_ROOT, enc: int | None = None,
-                 widths: tuple[int, int] | None = None) -> None:
+                 widths: tuple[int, int] | None = None, basis: int = 0) -> None:
         super().__init__()
         n = frames * 4
         t = frames - 2
         enc = enc or 2 * n
         w1, w2 = widths or (8 * t, 4 * t)
+        if not 0 <= basis <= frames:
+            raise ValueError(f"basis: expected 0 (full output) to {frames} DCT frequencies, got {basis}")
         self.frames = frames
         self.enc = nn.Sequential(ResBlock(2 * n, enc), ResBlock(enc, enc))
         self.head = GaussianHead(enc, latent)
         self.dec = nn.Sequential(ResBlock(latent + n, w1), ResBlock(w1, w2))
-        self.out = nn.Linear(w2, n)
+        # basis > 0: the deviation is synthesised from its `basis` lowest DCT-II frequencies per channel (16 of 62:
+        # up to 3.9 Hz at 30 fps). A per-frame output's sub-millimetre noise is doubled twice by the second difference
+        # and swamps the spectrum of a root's acceleration (SAGA's PSKL); the data's trajectories lose 0.1 of their
+        # 4-unit L1 error to this truncation (docs/saga_motion.md).
+        self.register_buffer("dct", dct_basis(frames, basis) if basis else torch.zeros(0, 0), persistent=False)
+        self.out = nn.Linear(w2, 4 * basis if basis else n)
         nn.init.zeros_(self.out.weight)           # starts at the straight trajectory
         nn.init.zeros_(self.out.bias)
         self.latent = latent
@@ -107,6 +134,8 @@ class TrajFill(nn.Module):
         """p(Gamma | z_t, Gamma_bar): Gamma_bar + the decoded deviation (B, 62, 4)."""
         B = z.shape[0]
         d = self.out(self.dec(torch.cat([z, traj_interp.reshape(B, -1)], -1)))
+        if self.dct.numel():                                   # (B, K, 4) coefficients -> (B, frames, 4)
+            return traj_interp + self.dct @ d.view(B, -1, 4)
         return traj_interp + d.view(B, self.frames, 4)
 
     def forward(self, traj: Tensor, traj_interp: Tensor, generator: torch.Generator | None = None
@@ -209,6 +238,70 @@ class LocalMotionFill(nn.Module):
         return self.decode(z, cond), mu, logvar
 
 
+def _rows(image: Tensor) -> Tensor:
+    """Motion or condition image (B, 4, 61, F) -> per-frame rows (B, F + 3, 61): channel 0 whole and the three root
+    velocities once (channels 1-3 hold each frame's velocity in every column)."""
+    return torch.cat([image[:, 0], image[:, 1:, :, 0].transpose(1, 2)], -1).transpose(1, 2)
+
+
+def _tconv(a: int, b: int, stride: int) -> nn.Sequential:
+    """Temporal convolution, kernel 3 (stride 1 or 2), LeakyReLU: (B, a, T) -> (B, b, T')."""
+    return nn.Sequential(nn.Conv1d(a, b, 3, stride=stride, padding=1), nn.LeakyReLU(0.2))
+
+
+class TemporalMotionFill(nn.Module):
+    """LocalMotionFill with convolutions over time only (`MotionFillConfig(local_arch="temporal")`, graspkit's
+    variant): the first convolution reads each frame's row of the motion image whole (kernel 3 frames x all features),
+    then strided temporal convolutions (61 -> 31 -> 16 -> 8 frames); the decoder is a temporal U-Net on z and the
+    condition image's encoding. Same interface and losses as `LocalMotionFill`."""
+
+    def __init__(self, latent: int = 64, width: int = 128, size: tuple[int, int] = (NUM_FRAMES, FEATURES),
+                 levels: int = 3) -> None:
+        super().__init__()
+        self.latent, self.size = latent, size
+        F_in = size[1] + 3
+        self.enc = nn.Sequential(_tconv(2 * F_in, width, 1), *[_tconv(width, width, 2) for _ in range(levels)])
+        self.cond = nn.ModuleList([_tconv(F_in, width, 1)] + [_tconv(width, width, 2) for _ in range(levels)])
+        with torch.no_grad():
+            lengths = [size[0]]
+            for _ in range(levels):
+                lengths.append((lengths[-1] - 1) // 2 + 1)
+        self.lengths = lengths
+        self.head = GaussianHead(width * lengths[-1], latent)
+        self.from_z = nn.Linear(latent, width * lengths[-1])
+        # resize-convolutions (linear upsampling, then a convolution): transposed convolutions of stride 2 leave a
+        # two-frame ripple in the output, which shows in the accelerations (PSKL)
+        self.ups = nn.ModuleList(nn.Sequential(nn.Upsample(scale_factor=2, mode="linear", align_corners=False),
+                                               _tconv(2 * width, width, 1)) for _ in range(levels))
+        self.fuse = _tconv(2 * width, width, 1)
+        self.out = nn.Conv1d(width, size[1], 3, padding=1)
+        nn.init.zeros_(self.out.weight)               # starts at the linear blend of the known frames (`base`)
+        nn.init.zeros_(self.out.bias)
+
+    def encode(self, image: Tensor, cond: Tensor) -> tuple[Tensor, Tensor]:
+        """q(z_m | I, I_c): (B,4,61,F) x2 -> mean, log-variance (B, latent)."""
+        return self.head(self.enc(torch.cat([_rows(image), _rows(cond)], 1)).flatten(1))
+
+    def decode(self, z: Tensor, cond: Tensor) -> Tensor:
+        """p(I | z_m, I_c): channel 0 of the motion image (B, 61, F) (markers normalised, contact logits)."""
+        skips, h = [], _rows(cond)
+        for layer in self.cond:
+            h = layer(h)
+            skips.append(h)
+        h = self.from_z(z).view(z.shape[0], -1, self.lengths[-1])
+        for k, up in enumerate(self.ups):
+            h = up(torch.cat([h, skips[-1 - k]], 1))[..., :self.lengths[-2 - k]]
+        y = self.out(self.fuse(torch.cat([h, skips[0]], 1))).transpose(1, 2)
+        return y + LocalMotionFill.base(cond)
+
+    def forward(self, image: Tensor, cond: Tensor, generator: torch.Generator | None = None
+                ) -> tuple[Tensor, Tensor, Tensor]:
+        """Reconstruction of channel 0 (B,61,F), mean, log-variance."""
+        mu, logvar = self.encode(image, cond)
+        z = reparameterize(mu, logvar, generator) if self.training else mu
+        return self.decode(z, cond), mu, logvar
+
+
 # ------------------------------------------------------------------------------------------------ the whole model
 def traj_velocity(traj: Tensor) -> Tensor:
     """Root velocities in each frame's heading frame (B, T+1, 3) = (dx, dy, dgamma) from Gamma (B, T+2, 4)
@@ -227,8 +320,13 @@ class MotionFillVAE(nn.Module):
     def __init__(self, cfg: MotionFillConfig | None = None) -> None:
         super().__init__()
         self.cfg = cfg = cfg or MotionFillConfig()
-        self.traj = TrajFill(cfg.traj_latent, enc=cfg.traj_enc, widths=tuple(cfg.traj_widths))
-        self.local = LocalMotionFill(cfg.motion_latent, cfg.channels)
+        self.traj = TrajFill(cfg.traj_latent, enc=cfg.traj_enc, widths=tuple(cfg.traj_widths), basis=cfg.traj_basis)
+        if cfg.local_arch == "image":
+            self.local: nn.Module = LocalMotionFill(cfg.motion_latent, cfg.channels)
+        elif cfg.local_arch == "temporal":
+            self.local = TemporalMotionFill(cfg.motion_latent, cfg.temporal_width)
+        else:
+            raise ValueError(f"local_arch: expected 'image' or 'temporal', got {cfg.local_arch!r}")
         for k, n in (("marker_mean", NUM_MARKERS * 3), ("marker_std", NUM_MARKERS * 3), ("vel_mean", 3),
                      ("vel_std", 3)):
             self.register_buffer(k, torch.zeros(n) if "mean" in k else torch.ones(n))
@@ -333,6 +431,8 @@ class MotionFillVAE(nn.Module):
         """Rebuild from `state()` (or a fit checkpoint whose extra holds model_config)."""
         cfg = dict(state.get("model_config") or state.get("extra", {}).get("model_config"))
         cfg["channels"], cfg["traj_widths"] = tuple(cfg["channels"]), tuple(cfg["traj_widths"])
+        cfg.setdefault("traj_basis", 0)                 # checkpoints from before these options
+        cfg.setdefault("local_arch", "image")
         model = cls(MotionFillConfig(**cfg))
         model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state["model"].items()})
         return model.eval()
