@@ -1,6 +1,6 @@
 """MotionFill-VAE's training and evaluation on the procedural clips (SAGA §3.3, App. A.3-A.4, §4.2 Tab. 3).
 
-Training follows A.4 in three runs (each one `graspkit train motionfill --stage ...`, one CPU thread, <= 10 min):
+Training follows A.4 in three runs (each one `graspkit train motionfill --stage ...`, two CPU threads, <= 1 min):
 
 1. `local`: LocalMotionFill alone on locomotion windows (AMASS stand-in, `graspkit data make --kind locomotion`),
    62-frame windows every 30 frames, ground-truth root velocities in the condition image;
@@ -13,8 +13,8 @@ Tab. 3's deterministic baselines (CNN-AE, PoseNet, RouteNet: graspkit.models.mot
 `graspkit train motionfill_baseline --model {cnn_ae,posenet,routenet}` (`train_baseline`, on the same windows) and
 join `evaluate` through `load_baselines()`.
 
-Tab. 3 (`python -m graspkit.eval_motionfill tab3`), GraspMotion-Opt's evaluation on the first approach clip of each
-test object (`... graspmotion`) and lesson 06's worked example (`... example`) are written next to the checkpoint.
+Tab. 3 (`python -m graspkit.eval_motionfill tab3`), GraspMotion-Opt's evaluation on the first two approach clips of
+each test object (`... graspmotion`) and lesson 06's worked example (`... example`) are written next to the checkpoint.
 
 Windows are cached in `<cache>/motionfill/`; normalisation statistics come from stage 1's training windows and stay
 with the model. The shipped checkpoint (`data_stubs/checkpoints/motionfill.pt`) holds float16 weights.
