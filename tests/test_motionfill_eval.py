@@ -89,7 +89,7 @@ def test_train_command_end_to_end_on_the_shipped_approach_clips(tmp_path, monkey
     state = torch.load(out, weights_only=True)
     assert state["model"]["traj.out.weight"].dtype == torch.float16
     model = load_motionfill(out)
-    assert not model.training and model.cfg.traj_latent == 64
+    assert not model.training and model.cfg.traj_latent == 512                  # the shipped config (A.2)
     with pytest.raises(SystemExit):
         main(["train", "motionfill", "--stage", "nope"])
 

@@ -182,7 +182,7 @@ print(table(ev["rows"]))
 # After GraspMotion-Opt, on two clips of each test object: SAGA's skating of the sampled and of the fitted markers,
 # the end grasp, and the **non-collision score** (§4.2: the share of mesh vertices above the ground; the paper reports
 # 0.9743 for its motions and 0.9771 for GRAB). The optimisation brings the skating down to the ground truth's level
-# (SAGA's target: no more than 2 points above it; met on the mean and on every clip); the last two columns
+# (SAGA's target: no more than 2 points above it; met on the mean, not on every clip); the last two columns
 # show that the heels get there without jumping (99th percentile of the heel markers' acceleration, m/s²; the clips'
 # own beside it).
 
