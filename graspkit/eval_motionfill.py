@@ -1,6 +1,6 @@
 """MotionFill-VAE's training and evaluation on the procedural clips (SAGA §3.3, App. A.3-A.4, §4.2 Tab. 3).
 
-Training follows A.4 in three runs (each one `graspkit train motionfill --stage ...`, two CPU threads, <= 1 min):
+Training follows A.4 in three runs (each one `graspkit train motionfill --stage ...`, two CPU threads, about a minute):
 
 1. `local`: LocalMotionFill alone on locomotion windows (AMASS stand-in, `graspkit data make --kind locomotion`),
    62-frame windows every 30 frames, ground-truth root velocities in the condition image;

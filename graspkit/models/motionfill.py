@@ -148,6 +148,35 @@ class TrajFill(nn.Module):
 
 
 # ------------------------------------------------------------------------------------------------ LocalMotionFill
+class _InfillCVAE(nn.Module):
+    """What the two LocalMotionFill networks share: the residual's starting point and the CVAE's forward pass (their
+    own `encode` (I, I_c) -> q(z_m) and `decode` (z_m, I_c) -> channel 0)."""
+
+    latent: int
+
+    def encode(self, image: Tensor, cond: Tensor) -> tuple[Tensor, Tensor]:
+        raise NotImplementedError
+
+    def decode(self, z: Tensor, cond: Tensor) -> Tensor:
+        raise NotImplementedError
+
+    @staticmethod
+    def base(cond: Tensor) -> Tensor:
+        """The decoder's starting point: channel 0 blended linearly from frame 0 to frame T (markers), zero contact
+        logits (B, T+1, F) (graspkit's residual, as TrajFill's over Gamma_bar)."""
+        c = cond[:, 0]
+        s = torch.linspace(0, 1, c.shape[1], dtype=c.dtype, device=c.device)[None, :, None]
+        b = (1 - s) * c[:, :1] + s * c[:, -1:]
+        return torch.cat([b[..., :-4], torch.zeros_like(b[..., -4:])], -1)
+
+    def forward(self, image: Tensor, cond: Tensor, generator: torch.Generator | None = None
+                ) -> tuple[Tensor, Tensor, Tensor]:
+        """Reconstruction of channel 0 (B,61,F), mean, log-variance."""
+        mu, logvar = self.encode(image, cond)
+        z = reparameterize(mu, logvar, generator) if self.training else mu
+        return self.decode(z, cond), mu, logvar
+
+
 def _conv(a: int, b: int) -> nn.Sequential:
     """3x3 convolution, stride 2, LeakyReLU."""
     return nn.Sequential(nn.Conv2d(a, b, 3, stride=2, padding=1), nn.LeakyReLU(0.2))
@@ -175,7 +204,7 @@ class _ConvEncoder(nn.Module):
         return out
 
 
-class LocalMotionFill(nn.Module):
+class LocalMotionFill(_InfillCVAE):
     """CNN CVAE over motion images (B, 4, 61, F): encoder on [I, I_c], U-Net decoder on z and I_c -> channel 0."""
 
     def __init__(self, latent: int = 128, channels: tuple[int, ...] = (16, 32, 64, 64, 64),
@@ -222,21 +251,7 @@ class LocalMotionFill(nn.Module):
         logits = self.contact_head(h.permute(0, 2, 1, 3).flatten(2))             # per frame, all features
         return torch.cat([y[..., :-4], y[..., -4:] + logits], -1)
 
-    @staticmethod
-    def base(cond: Tensor) -> Tensor:
-        """The decoder's starting point: channel 0 blended linearly from frame 0 to frame T (markers), zero contact
-        logits (B, T+1, F) (graspkit's residual, as TrajFill's over Gamma_bar)."""
-        c = cond[:, 0]
-        s = torch.linspace(0, 1, c.shape[1], dtype=c.dtype, device=c.device)[None, :, None]
-        b = (1 - s) * c[:, :1] + s * c[:, -1:]
-        return torch.cat([b[..., :-4], torch.zeros_like(b[..., -4:])], -1)
 
-    def forward(self, image: Tensor, cond: Tensor, generator: torch.Generator | None = None
-                ) -> tuple[Tensor, Tensor, Tensor]:
-        """Reconstruction of channel 0 (B,61,F), mean, log-variance."""
-        mu, logvar = self.encode(image, cond)
-        z = reparameterize(mu, logvar, generator) if self.training else mu
-        return self.decode(z, cond), mu, logvar
 
 
 def _rows(image: Tensor) -> Tensor:
@@ -250,23 +265,22 @@ def _tconv(a: int, b: int, stride: int) -> nn.Sequential:
     return nn.Sequential(nn.Conv1d(a, b, 3, stride=stride, padding=1), nn.LeakyReLU(0.2))
 
 
-class TemporalMotionFill(nn.Module):
+class TemporalMotionFill(_InfillCVAE):
     """LocalMotionFill with convolutions over time only (`MotionFillConfig(local_arch="temporal")`, graspkit's
     variant): the first convolution reads each frame's row of the motion image whole (kernel 3 frames x all features),
     then strided temporal convolutions (61 -> 31 -> 16 -> 8 frames); the decoder is a temporal U-Net on z and the
     condition image's encoding. Same interface and losses as `LocalMotionFill`."""
 
-    def __init__(self, latent: int = 64, width: int = 128, size: tuple[int, int] = (NUM_FRAMES, FEATURES),
+    def __init__(self, latent: int = 64, width: int = 96, size: tuple[int, int] = (NUM_FRAMES, FEATURES),
                  levels: int = 3) -> None:
         super().__init__()
         self.latent, self.size = latent, size
         F_in = size[1] + 3
         self.enc = nn.Sequential(_tconv(2 * F_in, width, 1), *[_tconv(width, width, 2) for _ in range(levels)])
         self.cond = nn.ModuleList([_tconv(F_in, width, 1)] + [_tconv(width, width, 2) for _ in range(levels)])
-        with torch.no_grad():
-            lengths = [size[0]]
-            for _ in range(levels):
-                lengths.append((lengths[-1] - 1) // 2 + 1)
+        lengths = [size[0]]                            # frames per level: 61, 31, 16, 8
+        for _ in range(levels):
+            lengths.append((lengths[-1] - 1) // 2 + 1)
         self.lengths = lengths
         self.head = GaussianHead(width * lengths[-1], latent)
         self.from_z = nn.Linear(latent, width * lengths[-1])
@@ -293,14 +307,8 @@ class TemporalMotionFill(nn.Module):
         for k, up in enumerate(self.ups):
             h = up(torch.cat([h, skips[-1 - k]], 1))[..., :self.lengths[-2 - k]]
         y = self.out(self.fuse(torch.cat([h, skips[0]], 1))).transpose(1, 2)
-        return y + LocalMotionFill.base(cond)
+        return y + self.base(cond)
 
-    def forward(self, image: Tensor, cond: Tensor, generator: torch.Generator | None = None
-                ) -> tuple[Tensor, Tensor, Tensor]:
-        """Reconstruction of channel 0 (B,61,F), mean, log-variance."""
-        mu, logvar = self.encode(image, cond)
-        z = reparameterize(mu, logvar, generator) if self.training else mu
-        return self.decode(z, cond), mu, logvar
 
 
 # ------------------------------------------------------------------------------------------------ the whole model
@@ -323,7 +331,7 @@ class MotionFillVAE(nn.Module):
         self.cfg = cfg = cfg or MotionFillConfig()
         self.traj = TrajFill(cfg.traj_latent, enc=cfg.traj_enc, widths=tuple(cfg.traj_widths), basis=cfg.traj_basis)
         if cfg.local_arch == "image":
-            self.local: nn.Module = LocalMotionFill(cfg.motion_latent, cfg.channels)
+            self.local: _InfillCVAE = LocalMotionFill(cfg.motion_latent, cfg.channels)
         elif cfg.local_arch == "temporal":
             self.local = TemporalMotionFill(cfg.motion_latent, cfg.temporal_width)
         else:
