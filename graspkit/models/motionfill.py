@@ -85,9 +85,9 @@ class MotionFillConfig:
 
     @classmethod
     def paper(cls) -> "MotionFillConfig":
-        """SAGA A.2's sizes (512-D TrajFill latent, blocks 8T / 4T; the CNN widths are LEMO-like, graspkit's)."""
-        return cls(traj_latent=512, traj_enc=2 * NUM_ROOT * 4, traj_widths=(8 * T, 4 * T), traj_basis=0,
-                   motion_latent=128, local_arch="image", channels=(16, 32, 64, 64, 64))
+        """SAGA A.2 as printed: the defaults' TrajFill sizes with a per-frame output layer, and the image network
+        (LEMO's layout; its widths and 128-D latent are graspkit's, LEMO-like)."""
+        return cls(traj_basis=0, motion_latent=128, local_arch="image", channels=(16, 32, 64, 64, 64))
 
 
 # ------------------------------------------------------------------------------------------------ TrajFill
@@ -252,8 +252,6 @@ class LocalMotionFill(_InfillCVAE):
         return torch.cat([y[..., :-4], y[..., -4:] + logits], -1)
 
 
-
-
 def _rows(image: Tensor) -> Tensor:
     """Motion or condition image (B, 4, 61, F) -> per-frame rows (B, F + 3, 61): channel 0 whole and the three root
     velocities once (channels 1-3 hold each frame's velocity in every column)."""
@@ -308,7 +306,6 @@ class TemporalMotionFill(_InfillCVAE):
             h = up(torch.cat([h, skips[-1 - k]], 1))[..., :self.lengths[-2 - k]]
         y = self.out(self.fuse(torch.cat([h, skips[0]], 1))).transpose(1, 2)
         return y + self.base(cond)
-
 
 
 # ------------------------------------------------------------------------------------------------ the whole model
