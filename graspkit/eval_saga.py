@@ -71,6 +71,7 @@ class EvalConfig:
     steps: tuple[int, int, int] = (300, 400, 500)
     seed: int = 0
     threads: int = 1
+    free_joints: tuple[str, ...] = ()   # GraspPoseConfig.free_joints (an experiment, off in Alg. 1: docs/saga.md)
 
 
 @dataclass
@@ -224,7 +225,7 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
         print(f"checkpoints: no {' or '.join(missing)} in {ck} (`graspkit train wholegrasp_single` / "
               "`graspkit train grabnet_smplx` make them): their rows are left out")
     pca = HandPCA(bm)
-    base_cfg = GraspPoseConfig(steps=cfg.steps)
+    base_cfg = GraspPoseConfig(steps=cfg.steps, free_joints=tuple(cfg.free_joints))
     opt = GraspPoseOpt(bm, prior, base_cfg)
     ch = None if single_state is None else single_state.get("hand_contact_prior")
     opt_h = GraspPoseOpt(bm, prior, base_cfg, hand_contact_prior=None if ch is None else ch.float()[opt.hand_ids])
@@ -407,6 +408,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--objects", nargs="*", default=None)
     ap.add_argument("--checkpoints", type=Path, default=DATA_STUBS / "checkpoints")
     ap.add_argument("--steps", type=int, nargs=3, default=EvalConfig.steps)
+    ap.add_argument("--free-joints", nargs="*", default=[], metavar="JOINT",
+                    help="body joints given a free rotation on top of the pose prior in stages 2-3 ('arms': the "
+                         "collars, shoulders, elbows and wrists; default none, as Alg. 1)")
     ap.add_argument("--finish", type=Path, default=None, help="only turn this .partial.json into --out and print it")
     args = ap.parse_args(argv)
     if args.finish is not None:
@@ -415,7 +419,11 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.data is None:
         ap.error("--data: the folder of grasp_*.npz is required (unless --finish)")
-    cfg = EvalConfig(placements=args.placements, samples=args.samples, gt_grasps=args.gt, steps=tuple(args.steps))
+    from graspkit.optim.grasppose import ARM_JOINTS
+
+    free = tuple(j for name in args.free_joints for j in (ARM_JOINTS if name == "arms" else (name,)))
+    cfg = EvalConfig(placements=args.placements, samples=args.samples, gt_grasps=args.gt, steps=tuple(args.steps),
+                     free_joints=free)
     if args.objects:
         cfg = replace(cfg, objects=tuple(args.objects))
     res = evaluate(args.data, cfg, out=args.out, checkpoints=args.checkpoints)

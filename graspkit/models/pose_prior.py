@@ -170,7 +170,8 @@ def pose_training_set(n_clips: int = 300, seed: int = 0, extra: np.ndarray | Non
 
 def train_pose_prior(out: str | Path = POSE_PRIOR_PATH, poses: np.ndarray | None = None, epochs: int = 30,
                      batch_size: int = 256, lr: float = 2e-3, seed: int = 0, n_clips: int = 200,
-                     val_fraction: float = 0.05, progress: bool = True, half: bool = True) -> list[dict[str, float]]:
+                     val_fraction: float = 0.05, progress: bool = True, half: bool = True,
+                     config: PosePriorConfig | None = None) -> list[dict[str, float]]:
     """Train the prior on `poses` (n, 21, 3) (default: `pose_training_set(n_clips, seed)`) with graspkit.train.fit;
     the final weights go to `out` (float16 when `half`, a weights-only checkpoint), the run to `out`.run.pt/.csv."""
     from torch.utils.data import TensorDataset
@@ -183,7 +184,7 @@ def train_pose_prior(out: str | Path = POSE_PRIOR_PATH, poses: np.ndarray | None
     n_val = max(1, int(len(x) * val_fraction))
     train, val = TensorDataset(x[perm[n_val:]]), TensorDataset(x[perm[:n_val]])
     torch.manual_seed(seed)
-    model = PosePrior()
+    model = PosePrior(config)
     out = Path(out)
     run = out.with_name(out.stem + ".run.pt")
 

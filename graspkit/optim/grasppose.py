@@ -54,7 +54,7 @@ from torch import Tensor
 from tqdm.auto import tqdm
 
 from graspkit.body.markers import foot_vertices, saga_markers, vertex_normals
-from graspkit.body.skeleton import FINGERS, JOINT_INDEX
+from graspkit.body.skeleton import FINGERS, JOINT_INDEX, JOINT_NAMES
 from graspkit.models.gnet import SparseBody
 from graspkit.objects.sdf import SDFGrid
 from graspkit.optim.step import energy_step
@@ -80,8 +80,11 @@ class GraspPoseWeights:
     heuristic_radius: float = 0.02  # ... and closer than this (m) are pulled to the object
 
 
-PARAMS = ("transl", "orient6d", "betas", "z", "left_pca", "right_pca", "eyes")
+PARAMS = ("transl", "orient6d", "betas", "z", "left_pca", "right_pca", "eyes", "joint6d")
 STAGE3_FREE = ("z", "left_pca", "right_pca", "eyes")
+# the arm chains, for GraspPoseConfig.free_joints (an experiment of docs/saga.md, not Alg. 1)
+ARM_JOINTS = ("left_collar", "right_collar", "left_shoulder", "right_shoulder", "left_elbow", "right_elbow",
+              "left_wrist", "right_wrist")
 
 
 @dataclass
@@ -102,6 +105,9 @@ class GraspPoseConfig:
     sunk_depth: float | None = None  # m: E^O_colli off for a sample while a hand vertex is deeper inside (docs/saga.md)
     stage3_free: tuple[str, ...] = STAGE3_FREE     # Alg. 1's stage-3 variables (an experiment may add t, R: docs/saga.md)
     polish: tuple[int, float] = (100, 1e-3)  # stage 3 goes on polish[0] steps at lr polish[1] (graspkit's; docs)
+    # body joints (SMPL-X names) given a free rotation on top of the prior's decoded pose, optimised with theta_b in
+    # stages 2-3 and penalised by alpha_theta like it (graspkit's experiment, off in Alg. 1: docs/saga.md)
+    free_joints: tuple[str, ...] = ()
     weights: GraspPoseWeights = field(default_factory=GraspPoseWeights)
 
 
@@ -164,6 +170,18 @@ class GraspPoseResult:
         return replace(self, params=params, vertices=self.vertices + t, markers=self.markers + t)
 
 
+_EYE6 = matrix_to_rot6d(torch.eye(3))
+
+
+def _body_joint_ids(names: tuple[str, ...]) -> Tensor:
+    """Indices (k,) into the 21 body joints of SMPL-X joint names; ValueError naming free_joints otherwise."""
+    body = JOINT_NAMES[1:22]
+    bad = [n for n in names if n not in body]
+    if bad or len(set(names)) != len(names):
+        raise ValueError(f"free_joints: expected distinct body-joint names of {body}, got {tuple(names)}")
+    return torch.tensor([body.index(n) for n in names], dtype=torch.long)
+
+
 def hand_vertex_ids(bm, sides: tuple[str, ...] = ("left", "right")) -> np.ndarray:
     """Vertex ids (sorted) dominated by the wrists and fingers of the given hands."""
     parts = [JOINT_INDEX[f"{s}_wrist"] for s in sides]
@@ -212,6 +230,7 @@ class GraspPoseOpt:
         for p in self.prior.parameters():
             p.requires_grad_(False)
         self.cfg = config or GraspPoseConfig()
+        self.free_ids = _body_joint_ids(self.cfg.free_joints)
         ms = saga_markers(bm)
         self.marker_ids = torch.as_tensor(ms.vertex_ids)
         self.body_face = torch.arange(ms.groups["face"][1])              # body + face markers for Kabsch
@@ -241,6 +260,7 @@ class GraspPoseOpt:
         """A copy that shares the body, prior and vertex sets, with some GraspPoseConfig fields changed."""
         other = copy.copy(self)
         other.cfg = replace(self.cfg, **changes)
+        other.free_ids = _body_joint_ids(other.cfg.free_joints)
         return other
 
     # ------------------------------------------------------------------ the body
@@ -250,7 +270,11 @@ class GraspPoseOpt:
         eye = torch.eye(3).expand(B, 1, 3, 3)
         hands = [axis_angle_to_matrix((p[f"{s}_pca"] @ self.pca[s] + self.hand_mean[s]).view(B, 15, 3))
                  for s in ("left", "right")]
-        return torch.cat([rot6d_to_matrix(p["orient6d"]).unsqueeze(1), self.prior.decode_rotmats(p["z"]), eye,
+        body = self.prior.decode_rotmats(p["z"])
+        if len(self.free_ids):
+            body = body.clone()
+            body[:, self.free_ids] = body[:, self.free_ids] @ rot6d_to_matrix(p["joint6d"] + _EYE6)
+        return torch.cat([rot6d_to_matrix(p["orient6d"]).unsqueeze(1), body, eye,
                           axis_angle_to_matrix(p["eyes"].view(B, 2, 3)), hands[0], hands[1]], 1)
 
     def body(self, p: dict[str, Tensor]) -> Tensor:
@@ -263,7 +287,7 @@ class GraspPoseOpt:
         p = {"transl": torch.zeros(B, 3), "orient6d": matrix_to_rot6d(torch.eye(3).expand(B, 3, 3)).clone(),
              "betas": torch.zeros(B, 10), "z": torch.zeros(B, self.prior.cfg.latent),
              "left_pca": torch.zeros(B, self.cfg.n_pca), "right_pca": torch.zeros(B, self.cfg.n_pca),
-             "eyes": torch.zeros(B, 6)}
+             "eyes": torch.zeros(B, 6), "joint6d": torch.zeros(B, len(self.free_ids), 6)}
         with torch.no_grad():
             rot = self.rotmats(p)
             v, J = self.sparse(rot, p["betas"], p["transl"])
@@ -287,7 +311,8 @@ class GraspPoseOpt:
         B = v.shape[0]
         e = {"fit": (m - target).abs().sum((1, 2)),
              "prior": w.prior * (p["z"].pow(2).sum(-1) + p["left_pca"].pow(2).sum(-1)
-                                 + p["right_pca"].pow(2).sum(-1) + p["eyes"].pow(2).sum(-1))}
+                                 + p["right_pca"].pow(2).sum(-1) + p["eyes"].pow(2).sum(-1)
+                                 + (p["joint6d"].pow(2).sum((1, 2)) if "joint6d" in p else 0.0))}
         if stage < 3:
             return e
         pts, nrm, height = obj.batch(B)
@@ -355,8 +380,11 @@ class GraspPoseOpt:
             raise ValueError(f"stage3_free: expected a non-empty subset of {PARAMS}, got {self.cfg.stage3_free}")
         target = markers.detach().float()
         p = {k: v.detach().clone() for k, v in (init or self.init_params(target)).items()}
-        free = {1: ("transl", "orient6d"), 2: ("transl", "orient6d", "betas", "z"),
-                3: self.cfg.stage3_free}
+        if p.get("joint6d") is None or p["joint6d"].shape[1] != len(self.free_ids):   # e.g. an init without them
+            p["joint6d"] = torch.zeros(B, len(self.free_ids), 6)
+        extra = ("joint6d",) if len(self.free_ids) else ()
+        free = {1: ("transl", "orient6d"), 2: ("transl", "orient6d", "betas", "z") + extra,
+                3: tuple(dict.fromkeys(tuple(self.cfg.stage3_free) + extra))}
         energies: list[dict[str, dict[str, Tensor]]] = []
         log: list[dict[str, float]] = []
         cache: dict[str, Tensor] = {}
