@@ -40,6 +40,10 @@ graspkit's choices where the paper is silent (all in `GraspPoseWeights` / `Grasp
   0.008 the fingers jitter by millimetres across the surface and the last step decides contact or penetration.
   Chosen on the validation and training objects (docs/saga.md); `polish=(0, 0.0)` is Alg. 1's schedule.
 - Energies are summed over the samples of a batch (the samples are independent; Adam's steps are per parameter).
+- `GraspPoseConfig.free_joints` (off, as Alg. 1): named body joints get a 6D rotation on top of the prior's decoded
+  pose, optimised with theta_b in stages 2-3 (penalised by `weights.free_joints`). Our prior is narrower than VPoser
+  and holds the hands 0.4-0.8 cm off ground-truth markers; with the arm joints free (`ARM_JOINTS`) ground-truth
+  refits come back to the meshes' penetration, at the cost of arm rotations outside the prior (docs/saga.md).
 Frames: everything in the object frame of WholeGrasp-VAE (object centre at 0, z up, floor at z = -t_O).
 """
 from __future__ import annotations
@@ -74,6 +78,7 @@ class GraspPoseWeights:
     colli_body: float = 200.0     # alpha^B_colli (hand vertices inside the object)
     sigma_b: float = 0.0          # m: hinge floor of E^B_colli (penetration allowed for free)
     sigma_o: float = 0.0          # m: hinge floor of E^O_colli
+    free_joints: float = 5e-4     # on the 6D offsets of GraspPoseConfig.free_joints (graspkit's; = alpha_theta)
     ground: float = 1.0           # alpha_g (not in the paper)
     heuristic: float = 15.0       # alpha^h_cont of S.3 (not in the paper)
     heuristic_prior: float = 0.7  # S.3: hand vertices with prior contact probability above this ...
@@ -106,7 +111,7 @@ class GraspPoseConfig:
     stage3_free: tuple[str, ...] = STAGE3_FREE     # Alg. 1's stage-3 variables (an experiment may add t, R: docs/saga.md)
     polish: tuple[int, float] = (100, 1e-3)  # stage 3 goes on polish[0] steps at lr polish[1] (graspkit's; docs)
     # body joints (SMPL-X names) given a free rotation on top of the prior's decoded pose, optimised with theta_b in
-    # stages 2-3 and penalised by alpha_theta like it (graspkit's experiment, off in Alg. 1: docs/saga.md)
+    # stages 2-3, penalised by weights.free_joints (graspkit's experiment, off in Alg. 1: docs/saga.md)
     free_joints: tuple[str, ...] = ()
     weights: GraspPoseWeights = field(default_factory=GraspPoseWeights)
 
@@ -311,8 +316,9 @@ class GraspPoseOpt:
         B = v.shape[0]
         e = {"fit": (m - target).abs().sum((1, 2)),
              "prior": w.prior * (p["z"].pow(2).sum(-1) + p["left_pca"].pow(2).sum(-1)
-                                 + p["right_pca"].pow(2).sum(-1) + p["eyes"].pow(2).sum(-1)
-                                 + (p["joint6d"].pow(2).sum((1, 2)) if "joint6d" in p else 0.0))}
+                                 + p["right_pca"].pow(2).sum(-1) + p["eyes"].pow(2).sum(-1))}
+        if len(self.free_ids):
+            e["prior"] = e["prior"] + w.free_joints * p["joint6d"].pow(2).sum((1, 2))
         if stage < 3:
             return e
         pts, nrm, height = obj.batch(B)

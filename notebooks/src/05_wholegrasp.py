@@ -353,6 +353,10 @@ walk.widget()
 # 2. Refit the two samples above with `GraspPoseConfig(collision=True, contact=False)` (Tab. 2's "+ E_colli" row) and
 #    compare the contact and penetration with the full energy. Which term keeps the hand on the mug?
 # 3. Change $\sigma_b$ (`GraspPoseConfig().weights.sigma_b`) from 0 to 1 mm and to 5 mm: how do depth and contact move?
+# 4. Our pose prior knows fewer poses than VPoser. Refit with `GraspPoseConfig(free_joints=ARM_JOINTS)`
+#    (`from graspkit.optim.grasppose import ARM_JOINTS`: the arm joints get a free rotation on top of $\theta_b$) and
+#    compare the hand-marker error and the penetration; then look at how far the wrists turned away from the prior
+#    (`result.state["joint6d"]`). docs/saga.md measures both on the test objects.
 
 # %%
 # NBVAL_IGNORE_OUTPUT
