@@ -249,7 +249,7 @@ def test_polish_continues_stage3_at_its_learning_rate(bm, prior):
 def test_free_joints_reach_a_wrist_the_prior_cannot(bm, prior):
     """free_joints (docs/saga.md): at zero residual the body is the prior's; a wrist turned 50 degrees off the
     prior's pose is refitted far better with that wrist free than through the latent alone."""
-    verts, truth = _truth(bm, prior, B=2, seed=3)
+    _, truth = _truth(bm, prior, B=2, seed=3)
     turn = axis_angle_to_matrix(torch.tensor([[0.0, 0.0, 0.87], [0.87, 0.0, 0.0]]))     # 50 degrees, per sample
     body = prior.decode_rotmats(truth["z"]).clone()
     body[:, 20] = body[:, 20] @ turn
