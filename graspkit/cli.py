@@ -45,11 +45,12 @@ def _cmd_saga(args: argparse.Namespace) -> int:
 
     from graspkit.demo import _write_clip, load_or_build_body
     from graspkit.objects.placement import ObjectPose
+    from graspkit.optim.grasppose import expand_free_joints
     from graspkit.saga import synthesize
 
     pose = None if args.at is None else ObjectPose.from_yaw(np.deg2rad(args.at[3]), np.array(args.at[:3]))
     bm = load_or_build_body(args.model)
-    r = synthesize(args.object, bm, object_pose=pose, seed=args.seed)
+    r = synthesize(args.object, bm, object_pose=pose, seed=args.seed, free_joints=expand_free_joints(args.free_joints))
     args.out.mkdir(parents=True, exist_ok=True)
     paths, _ = _write_clip(bm, r.motion, args.out, f"saga_{r.name}_s{args.seed}", {r.name: r.mesh},
                            f"SAGA: {r.name}")
@@ -168,6 +169,10 @@ def build_parser() -> argparse.ArgumentParser:
         sg.add_argument("--seed", type=int, default=0)
         sg.add_argument("--out", type=Path, default=Path(f"outputs/{method}"))
         sg.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
+        if method == "saga":
+            sg.add_argument("--free-joints", nargs="*", default=[], metavar="JOINT",
+                            help="GraspPose-Opt: body joints given a free rotation on top of the pose prior ('arms': "
+                                 "collars, shoulders, elbows, wrists; default none, as Alg. 1; docs/saga.md)")
         if method == "goal":
             sg.add_argument("--max-frames", type=int, default=150, help="MNet's rollout stops here if not at the grasp")
         sg.set_defaults(func=cmd)

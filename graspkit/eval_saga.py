@@ -419,11 +419,10 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.data is None:
         ap.error("--data: the folder of grasp_*.npz is required (unless --finish)")
-    from graspkit.optim.grasppose import ARM_JOINTS
+    from graspkit.optim.grasppose import expand_free_joints
 
-    free = tuple(j for name in args.free_joints for j in (ARM_JOINTS if name == "arms" else (name,)))
     cfg = EvalConfig(placements=args.placements, samples=args.samples, gt_grasps=args.gt, steps=tuple(args.steps),
-                     free_joints=free)
+                     free_joints=expand_free_joints(args.free_joints))
     if args.objects:
         cfg = replace(cfg, objects=tuple(args.objects))
     res = evaluate(args.data, cfg, out=args.out, checkpoints=args.checkpoints)

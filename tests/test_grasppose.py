@@ -12,7 +12,8 @@ from graspkit.body import BodyModel
 from graspkit.body.markers import foot_vertices, palm_vertices
 from graspkit.models.pose_prior import load_pose_prior
 from graspkit.objects.sdf import SDFGrid, signed_distance
-from graspkit.optim.grasppose import GraspObject, GraspPoseConfig, GraspPoseOpt, hand_vertex_ids, kabsch
+from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, GraspPoseConfig, GraspPoseOpt, expand_free_joints,
+                                      hand_vertex_ids, kabsch)
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d
 
 
@@ -275,3 +276,5 @@ def test_free_joints_reach_a_wrist_the_prior_cannot(bm, prior):
         GraspPoseOpt(bm, prior, GraspPoseConfig(free_joints=("right_hand",)))
     with pytest.raises(ValueError, match="free_joints"):
         plain.with_config(free_joints=("right_wrist", "right_wrist"))
+    assert expand_free_joints(["neck", "arms"]) == ("neck",) + ARM_JOINTS        # the command line's shorthand
+    GraspPoseOpt(bm, prior, GraspPoseConfig(free_joints=expand_free_joints(["arms"])))   # every arm joint is valid

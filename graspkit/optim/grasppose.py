@@ -178,6 +178,11 @@ class GraspPoseResult:
 _EYE6 = matrix_to_rot6d(torch.eye(3))
 
 
+def expand_free_joints(names: list[str] | tuple[str, ...]) -> tuple[str, ...]:
+    """Command-line joint names -> GraspPoseConfig.free_joints: 'arms' stands for ARM_JOINTS, others pass as given."""
+    return tuple(j for name in names for j in (ARM_JOINTS if name == "arms" else (name,)))
+
+
 def _body_joint_ids(names: tuple[str, ...]) -> Tensor:
     """Indices (k,) into the 21 body joints of SMPL-X joint names; ValueError naming free_joints otherwise."""
     body = JOINT_NAMES[1:22]
