@@ -129,7 +129,13 @@ def joint_jerk(joints: Any, fps: float = 30.0) -> np.ndarray:
 
 def joint_limit_violation(poses: Any) -> np.ndarray:
     """Degrees beyond the human range (T,55) of local rotations poses (T,55,3) axis-angle; 0 inside the range."""
-    p = _t(poses).double().reshape(-1, NUM_JOINTS, 3)
+    with torch.no_grad():
+        return joint_limit_excess(_t(poses).double()).numpy()
+
+
+def joint_limit_excess(poses: torch.Tensor) -> torch.Tensor:
+    """joint_limit_violation as a differentiable tensor (T,55) in the dtype of poses (T,55,3) (an energy term)."""
+    p = poses.reshape(-1, NUM_JOINTS, 3)
     ang = torch.rad2deg(p.norm(dim=-1))
     out = torch.zeros_like(ang)
     for name, lim in JOINT_LIMITS_DEG.items():
@@ -143,7 +149,7 @@ def joint_limit_violation(poses: Any) -> np.ndarray:
         out[:, j] = torch.clamp(lo - flex, min=0) + torch.clamp(flex - hi, min=0) + torch.clamp(rest - off, min=0)
     finger = torch.clamp(ang[:, 25:] - 100.0, min=0)
     out[:, 25:] = finger
-    return out.numpy()
+    return out
 
 
 def distance_to_goal(wrist: Any, goal: Any) -> float:

@@ -10,10 +10,11 @@ from scipy.spatial import cKDTree
 
 from graspkit.body import BodyModel
 from graspkit.body.markers import foot_vertices, palm_vertices
+from graspkit.metrics import joint_limit_violation
 from graspkit.models.pose_prior import load_pose_prior
 from graspkit.objects.sdf import SDFGrid, signed_distance
-from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, GraspPoseConfig, GraspPoseOpt, expand_free_joints,
-                                      hand_vertex_ids, kabsch)
+from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, GraspPoseConfig, GraspPoseOpt, GraspPoseWeights,
+                                      expand_free_joints, hand_vertex_ids, kabsch)
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d
 
 
@@ -277,4 +278,15 @@ def test_free_joints_reach_a_wrist_the_prior_cannot(bm, prior):
     with pytest.raises(ValueError, match="free_joints"):
         plain.with_config(free_joints=("right_wrist", "right_wrist"))
     assert expand_free_joints(["neck", "arms"]) == ("neck",) + ARM_JOINTS        # the command line's shorthand
+    # weights.limits: the free joints' degrees past the human range, as metrics.joint_limit_violation counts them
+    lim = GraspPoseOpt(bm, prior, replace(cfg, free_joints=("right_wrist", "right_collar"),
+                                          weights=GraspPoseWeights(limits=0.05)))
+    q = {**_params_of(lim, truth), "joint6d": torch.zeros(B, 2, 6)}
+    q["joint6d"][:, 0] = matrix_to_rot6d(axis_angle_to_matrix(torch.tensor([0.0, 2.4, 0.0]))) - matrix_to_rot6d(
+        torch.eye(3))                                                          # the wrist turned a further 137 deg
+    e = lim.energy(q, markers, _dummy_object(), 1, None, None, {})
+    aa = matrix_to_axis_angle(lim.rotmats(q).detach().double())
+    want = joint_limit_violation(aa.numpy())[:, [21, 14]].sum(-1)              # SMPL-X joints right_wrist, right_collar
+    assert want.min() > 10.0
+    np.testing.assert_allclose(e["limits"].detach().numpy(), 0.05 * want, rtol=1e-3)
     GraspPoseOpt(bm, prior, GraspPoseConfig(free_joints=expand_free_joints(["arms"])))   # every arm joint is valid

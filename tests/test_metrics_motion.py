@@ -77,6 +77,24 @@ def test_joint_limits_flag_a_hyperextended_knee_and_a_broken_neck_only():
     assert np.isclose(lim[2, 4], 20, atol=1e-6) and np.isclose(lim[2, 12], 40, atol=1e-6)
 
 
+def test_joint_limit_excess_is_the_metric_with_a_gradient_along_the_turn():
+    """The differentiable form (GraspPose-Opt's limits term) gives the metric's degrees, and d(excess)/d(axis-angle)
+    of a wrist turned 120 deg about u is (180/pi) u: one degree of excess per degree of turn."""
+    import torch
+
+    u = torch.tensor([0.6, 0.0, 0.8], dtype=torch.float64)
+    poses = torch.zeros(2, 55, 3, dtype=torch.float64)
+    poses[1, 21] = np.deg2rad(120.0) * u                     # right wrist: 30 deg past its 90
+    poses[1, 12] = torch.tensor([0.0, np.deg2rad(100.0), 0.0])
+    poses.requires_grad_(True)
+    ex = M.joint_limit_excess(poses)
+    np.testing.assert_allclose(ex.detach().numpy(), M.joint_limit_violation(poses.detach().numpy()), atol=1e-9)
+    assert np.isclose(float(ex[1, 21].detach()), 30.0)
+    ex[1, 21].backward()
+    np.testing.assert_allclose(poses.grad[1, 21].numpy(), np.rad2deg(1.0) * u.numpy(), rtol=1e-9)
+    assert float(poses.grad.abs().sum() - poses.grad[1, 21].abs().sum()) == 0.0
+
+
 def test_distance_to_goal_and_success():
     w = np.stack([np.linspace(0, 1, 11), np.zeros(11), np.ones(11)], 1)
     assert np.isclose(M.distance_to_goal(w, [1.0, 0.05, 1.0]), 0.05)

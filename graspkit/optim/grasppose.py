@@ -59,12 +59,14 @@ from tqdm.auto import tqdm
 
 from graspkit.body.markers import foot_vertices, saga_markers, vertex_normals
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX, JOINT_NAMES
+from graspkit.metrics import joint_limit_excess
 from graspkit.models.gnet import SparseBody
 from graspkit.objects.sdf import SDFGrid
 from graspkit.optim.step import energy_step
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
 
-TERMS = ("fit", "prior", "contact_object", "contact_marker", "colli_body", "colli_object", "ground", "heuristic")
+TERMS = ("fit", "prior", "contact_object", "contact_marker", "colli_body", "colli_object", "ground", "heuristic",
+         "limits")
 
 
 @dataclass
@@ -79,6 +81,7 @@ class GraspPoseWeights:
     sigma_b: float = 0.0          # m: hinge floor of E^B_colli (penetration allowed for free)
     sigma_o: float = 0.0          # m: hinge floor of E^O_colli
     free_joints: float = 5e-4     # on the 6D offsets of GraspPoseConfig.free_joints (graspkit's; = alpha_theta)
+    limits: float = 0.0           # per degree a free joint turns past the human range (metrics.joint_limit_excess)
     ground: float = 1.0           # alpha_g (not in the paper)
     heuristic: float = 15.0       # alpha^h_cont of S.3 (not in the paper)
     heuristic_prior: float = 0.7  # S.3: hand vertices with prior contact probability above this ...
@@ -316,7 +319,8 @@ class GraspPoseOpt:
 
         `refresh=False` reuses the nearest-neighbour pairs kept in `cache` from the last refresh."""
         cfg, w = self.cfg, self.cfg.weights
-        v = self.body(p)
+        rot = self.rotmats(p)
+        v = self.sparse(rot, p["betas"], p["transl"])[0]
         m, hands, feet = v[:, self.sl_markers], v[:, self.sl_hands], v[:, self.sl_feet]
         B = v.shape[0]
         e = {"fit": (m - target).abs().sum((1, 2)),
@@ -324,6 +328,10 @@ class GraspPoseOpt:
                                  + p["right_pca"].pow(2).sum(-1) + p["eyes"].pow(2).sum(-1))}
         if len(self.free_ids):
             e["prior"] = e["prior"] + w.free_joints * p["joint6d"].pow(2).sum((1, 2))
+            if w.limits > 0:
+                j = 1 + self.free_ids                                    # the free joints among the 55
+                aa = torch.zeros(B, rot.shape[1], 3, dtype=rot.dtype).index_copy(1, j, matrix_to_axis_angle(rot[:, j]))
+                e["limits"] = w.limits * joint_limit_excess(aa)[:, j].sum(-1)
         if stage < 3:
             return e
         pts, nrm, height = obj.batch(B)
