@@ -43,7 +43,7 @@ graspkit's choices where the paper is silent (all in `GraspPoseWeights` / `Grasp
 - `GraspPoseConfig.free_joints` (off, as Alg. 1): named body joints get a 6D rotation on top of the prior's decoded
   pose, optimised with theta_b in stages 2-3 (penalised by `weights.free_joints`, and by `weights.limits` per degree
   past the human range of metrics.joint_limit_excess). Our prior is narrower than VPoser
-  and holds the hands 0.4-0.8 cm off ground-truth markers; with the arm joints free (`ARM_JOINTS`) ground-truth
+  and holds the hands up to 0.8 cm off ground-truth markers; with the arm joints free (`ARM_JOINTS`) ground-truth
   refits come back to the meshes' penetration, at the cost of arm rotations outside the prior (docs/saga.md).
 Frames: everything in the object frame of WholeGrasp-VAE (object centre at 0, z up, floor at z = -t_O).
 """
