@@ -170,9 +170,9 @@ def build_parser() -> argparse.ArgumentParser:
         sg.add_argument("--out", type=Path, default=Path(f"outputs/{method}"))
         sg.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
         if method == "saga":
-            sg.add_argument("--free-joints", nargs="*", default=[], metavar="JOINT",
-                            help="GraspPose-Opt: body joints given a free rotation on top of the pose prior ('arms': "
-                                 "collars, shoulders, elbows, wrists; default none, as Alg. 1; docs/saga.md)")
+            sg.add_argument("--free-joints", nargs="*", default=["arms"], metavar="JOINT",
+                            help="GraspPose-Opt: body joints given a free rotation on top of the pose prior ('arms', "
+                                 "the default: collars, shoulders, elbows, wrists; 'none': Alg. 1; docs/saga.md)")
         if method == "goal":
             sg.add_argument("--max-frames", type=int, default=150, help="MNet's rollout stops here if not at the grasp")
         sg.set_defaults(func=cmd)

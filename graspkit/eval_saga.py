@@ -16,6 +16,8 @@ sampled markers with E_fit + E^g_cont (the paper's footnote says E_fit only, but
 figures for "w/o opt." and "E_fit + E^g_cont", so that is what was run). Tab. 2 rows: stage 3 with E_fit + E^g_cont,
 + E_colli, + E^o_cont on the ground-truth markers (with the ground-truth contact labels) and on sampled markers, and
 the ground-truth meshes. Stages 1-2 of Alg. 1 are run once per marker set and shared by its stage-3 variants.
+GraspPose-Opt runs with its defaults, the arm joints free on top of the pose prior (`--free-joints none`: Alg. 1's
+prior latent alone; docs/saga.md).
 
     python -m graspkit.eval_saga --data ~/.cache/graspkit/grasps/grasp        # prints both tables, writes JSON
 """
@@ -33,6 +35,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from graspkit.optim.grasppose import ARM_JOINTS
 from graspkit.paths import DATA_STUBS
 
 RESULTS_PATH = DATA_STUBS / "checkpoints" / "wholegrasp_eval.json"
@@ -71,7 +74,7 @@ class EvalConfig:
     steps: tuple[int, int, int] = (300, 400, 500)
     seed: int = 0
     threads: int = 1
-    free_joints: tuple[str, ...] = ()   # GraspPoseConfig.free_joints (an experiment, off in Alg. 1: docs/saga.md)
+    free_joints: tuple[str, ...] = ARM_JOINTS   # GraspPoseConfig.free_joints (graspkit's; () is Alg. 1: docs/saga.md)
 
 
 @dataclass
@@ -408,9 +411,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--objects", nargs="*", default=None)
     ap.add_argument("--checkpoints", type=Path, default=DATA_STUBS / "checkpoints")
     ap.add_argument("--steps", type=int, nargs=3, default=EvalConfig.steps)
-    ap.add_argument("--free-joints", nargs="*", default=[], metavar="JOINT",
-                    help="body joints given a free rotation on top of the pose prior in stages 2-3 ('arms': the "
-                         "collars, shoulders, elbows and wrists; default none, as Alg. 1)")
+    ap.add_argument("--free-joints", nargs="*", default=["arms"], metavar="JOINT",
+                    help="body joints given a free rotation on top of the pose prior in stages 2-3 ('arms', the "
+                         "default: the collars, shoulders, elbows and wrists; 'none': Alg. 1's prior latent alone)")
     ap.add_argument("--finish", type=Path, default=None, help="only turn this .partial.json into --out and print it")
     args = ap.parse_args(argv)
     if args.finish is not None:

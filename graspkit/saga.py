@@ -11,7 +11,7 @@ facing the object, unless a `Start` is given. Everything is returned in the worl
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -74,13 +74,14 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
                start: Start | Motion | None = None, seed: int = 0, start_distance: float = 0.4,
                grasp_steps: tuple[int, int, int] = (300, 400, 500),
                motion_steps: tuple[int, int] = (100, 300), checkpoints: str | Path = CHECKPOINTS,
-               progress: bool = True, free_joints: tuple[str, ...] = ()) -> SagaResult:
+               progress: bool = True, free_joints: tuple[str, ...] | None = None) -> SagaResult:
     """SAGA for object `name` (a catalogue name, a mesh file or a trimesh.Trimesh, closed and in metres): one grasp
     and one 2-s approach motion into it (Fig. 2), seeded.
 
     object_pose: where the object is (default: drawn by `sample_object_pose(seed)` in front of the origin);
     start: a Start (x, y, heading: a standing body there) or a one-frame Motion (any body) or None (see module doc).
-    free_joints: GraspPose-Opt's `GraspPoseConfig.free_joints` (default none, as Alg. 1; docs/saga.md).
+    free_joints: GraspPose-Opt's `GraspPoseConfig.free_joints` (None: its default, the arm chains; () is Alg. 1's
+    prior latent alone; docs/saga.md).
     """
     from graspkit.body import BodyModel
     from graspkit.data.grasp_io import collision_sdf_grid
@@ -118,7 +119,8 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     wg = load_wholegrasp(ck / "wholegrasp.pt")
     prior = load_pose_prior(ck / "pose_prior.pt")
     s = wg.sample(P, N, float(centre[2]), 1, g, centre=torch.zeros(3))
-    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=grasp_steps, free_joints=tuple(free_joints)))
+    gcfg = GraspPoseConfig(steps=grasp_steps)
+    opt = GraspPoseOpt(bm, prior, gcfg if free_joints is None else replace(gcfg, free_joints=tuple(free_joints)))
     grid = collision_sdf_grid(grid_key or obj_mesh)
     res = opt.fit(s.markers, GraspObject(P, N, float(centre[2]), grid, R_t), s.marker_contact, s.object_contact,
                   progress=progress).to_world(torch.as_tensor(centre).float())

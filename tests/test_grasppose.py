@@ -78,9 +78,12 @@ def test_markers_of_a_known_body_are_refitted_to_within_a_centimetre(bm, prior):
 
 def _params_of(opt, truth):
     B = truth["z"].shape[0]
-    return {"transl": truth["transl"], "orient6d": matrix_to_rot6d(truth["R"]), "betas": truth["betas"],
-            "z": truth["z"], "left_pca": truth["pca"]["left"], "right_pca": truth["pca"]["right"],
-            "eyes": torch.zeros(B, 6)}
+    p = {"transl": truth["transl"], "orient6d": matrix_to_rot6d(truth["R"]), "betas": truth["betas"],
+         "z": truth["z"], "left_pca": truth["pca"]["left"], "right_pca": truth["pca"]["right"],
+         "eyes": torch.zeros(B, 6)}
+    if len(opt.free_ids):                                   # the free joints at zero residual: the prior's pose
+        p["joint6d"] = torch.zeros(B, len(opt.free_ids), 6)
+    return p
 
 
 def test_energy_terms_against_independent_computations(bm, prior):
@@ -168,9 +171,9 @@ def test_stage3_moves_only_its_variables(bm, prior):
     pts_np, face = trimesh.sample.sample_surface_even(ball, 800, seed=0)
     obj = GraspObject(torch.tensor(pts_np, dtype=torch.float32), torch.tensor(ball.face_normals[face]).float(),
                       height=1.0, sdf=SDFGrid.from_mesh(ball, resolution=32, padding=0.02))
-    init = _params_of(None, truth)
     cfg = GraspPoseConfig(steps=(0, 0, 20), contact=False, ground=False)
     opt = GraspPoseOpt(bm, prior, cfg)
+    init = _params_of(opt, truth)
     markers = verts[:, opt.marker_ids]
     fixed = opt.fit(markers, obj, init=init, stages=(3,), progress=False)
     for k in ("transl", "orient6d", "betas"):
@@ -262,7 +265,8 @@ def test_free_joints_reach_a_wrist_the_prior_cannot(bm, prior):
                    left_hand_pose=truth["pca"]["left"] @ bm.left_hand_components[:24],
                    right_hand_pose=truth["pca"]["right"] @ bm.right_hand_components[:24],
                    transl=truth["transl"]).vertices
-    cfg = GraspPoseConfig(steps=(60, 300, 300), collision=False, contact=False, ground=False, polish=(0, 0.0))
+    cfg = GraspPoseConfig(steps=(60, 300, 300), collision=False, contact=False, ground=False, polish=(0, 0.0),
+                          free_joints=())                                    # Alg. 1: the prior's latent alone
     plain, free = GraspPoseOpt(bm, prior, cfg), GraspPoseOpt(bm, prior, replace(cfg, free_joints=("right_wrist",)))
     p = {**_params_of(free, truth), "joint6d": torch.zeros(B, 1, 6)}
     torch.testing.assert_close(free.rotmats(p), plain.rotmats(_params_of(plain, truth)))
@@ -278,6 +282,7 @@ def test_free_joints_reach_a_wrist_the_prior_cannot(bm, prior):
     with pytest.raises(ValueError, match="free_joints"):
         plain.with_config(free_joints=("right_wrist", "right_wrist"))
     assert expand_free_joints(["neck", "arms"]) == ("neck",) + ARM_JOINTS        # the command line's shorthand
+    assert expand_free_joints(["none"]) == () and GraspPoseConfig().free_joints == ARM_JOINTS   # the default
     # weights.limits: the free joints' degrees past the human range, as metrics.joint_limit_violation counts them
     lim = GraspPoseOpt(bm, prior, replace(cfg, free_joints=("right_wrist", "right_collar"),
                                           weights=GraspPoseWeights(limits=0.05)))

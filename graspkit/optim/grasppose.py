@@ -40,11 +40,14 @@ graspkit's choices where the paper is silent (all in `GraspPoseWeights` / `Grasp
   0.008 the fingers jitter by millimetres across the surface and the last step decides contact or penetration.
   Chosen on the validation and training objects (docs/saga.md); `polish=(0, 0.0)` is Alg. 1's schedule.
 - Energies are summed over the samples of a batch (the samples are independent; Adam's steps are per parameter).
-- `GraspPoseConfig.free_joints` (off, as Alg. 1): named body joints get a 6D rotation on top of the prior's decoded
-  pose, optimised with theta_b in stages 2-3 (penalised by `weights.free_joints`, and by `weights.limits` per degree
-  past the human range of metrics.joint_limit_excess). Our prior is narrower than VPoser
-  and holds the hands up to 0.8 cm off ground-truth markers; with the arm joints free (`ARM_JOINTS`) ground-truth
-  refits come back to the meshes' penetration, at the cost of arm rotations outside the prior (docs/saga.md).
+- The free arm joints (`GraspPoseConfig.free_joints`, default `ARM_JOINTS`; `()` is Alg. 1): both collars,
+  shoulders, elbows and wrists get a 6D rotation on top of the prior's decoded pose, optimised with theta_b in stages
+  2-3, penalised by `weights.free_joints` (5e-4 = alpha_theta) on the 6D offsets and by `weights.limits` (0.5 per
+  degree) past the human range of metrics.joint_limit_excess. Our prior is narrower than VPoser: through theta_b
+  alone, ground-truth markers are refitted with the hands up to 0.8 cm off and 2.40 cm3 of penetration (E_fit + E_g)
+  where the ground-truth meshes have 0.41; with the arms free 0.40. Chosen on the training objects (2 placements x 5
+  samples of nine objects: mean volume 2.77 -> 1.41 cm3, arm joints past the range 0.1 %, none by more than 0.05
+  deg); the limits weight there too (0.05/deg: 0.7 % of arm joints past the range, up to 7 deg); docs/saga.md.
 Frames: everything in the object frame of WholeGrasp-VAE (object centre at 0, z up, floor at z = -t_O).
 """
 from __future__ import annotations
@@ -82,7 +85,7 @@ class GraspPoseWeights:
     sigma_b: float = 0.0          # m: hinge floor of E^B_colli (penetration allowed for free)
     sigma_o: float = 0.0          # m: hinge floor of E^O_colli
     free_joints: float = 5e-4     # on the 6D offsets of GraspPoseConfig.free_joints (graspkit's; = alpha_theta)
-    limits: float = 0.0           # per degree a free joint turns past the human range (metrics.joint_limit_excess)
+    limits: float = 0.5           # per degree a free joint turns past the human range (metrics.joint_limit_excess)
     ground: float = 1.0           # alpha_g (not in the paper)
     heuristic: float = 15.0       # alpha^h_cont of S.3 (not in the paper)
     heuristic_prior: float = 0.7  # S.3: hand vertices with prior contact probability above this ...
@@ -91,7 +94,7 @@ class GraspPoseWeights:
 
 PARAMS = ("transl", "orient6d", "betas", "z", "left_pca", "right_pca", "eyes", "joint6d")
 STAGE3_FREE = ("z", "left_pca", "right_pca", "eyes")
-# the arm chains, for GraspPoseConfig.free_joints (an experiment of docs/saga.md, not Alg. 1)
+# the arm chains, GraspPoseConfig.free_joints' default (graspkit's; Alg. 1 has none: docs/saga.md)
 ARM_JOINTS = ("left_collar", "right_collar", "left_shoulder", "right_shoulder", "left_elbow", "right_elbow",
               "left_wrist", "right_wrist")
 
@@ -115,8 +118,8 @@ class GraspPoseConfig:
     stage3_free: tuple[str, ...] = STAGE3_FREE     # Alg. 1's stage-3 variables (an experiment may add t, R: docs/saga.md)
     polish: tuple[int, float] = (100, 1e-3)  # stage 3 goes on polish[0] steps at lr polish[1] (graspkit's; docs)
     # body joints (SMPL-X names) given a free rotation on top of the prior's decoded pose, optimised with theta_b in
-    # stages 2-3, penalised by weights.free_joints (graspkit's experiment, off in Alg. 1: docs/saga.md)
-    free_joints: tuple[str, ...] = ()
+    # stages 2-3, penalised by weights.free_joints and weights.limits (graspkit's; () is Alg. 1: docs/saga.md)
+    free_joints: tuple[str, ...] = ARM_JOINTS
     weights: GraspPoseWeights = field(default_factory=GraspPoseWeights)
 
 
@@ -183,8 +186,9 @@ _EYE6 = matrix_to_rot6d(torch.eye(3))
 
 
 def expand_free_joints(names: list[str] | tuple[str, ...]) -> tuple[str, ...]:
-    """Command-line joint names -> GraspPoseConfig.free_joints: 'arms' stands for ARM_JOINTS, others pass as given."""
-    return tuple(j for name in names for j in (ARM_JOINTS if name == "arms" else (name,)))
+    """Command-line joint names -> GraspPoseConfig.free_joints: 'arms' stands for ARM_JOINTS, 'none' for no joint
+    (Alg. 1), others pass as given."""
+    return tuple(j for name in names if name != "none" for j in (ARM_JOINTS if name == "arms" else (name,)))
 
 
 def _body_joint_ids(names: tuple[str, ...]) -> Tensor:

@@ -252,6 +252,11 @@ fig.tight_layout()
 # surface and the last step decides which side they end on. $S(b, O)$ is read from the object's signed-distance grid
 # with cells of at most 2 mm: a coarser grid misses most points just inside thin walls (a wine glass, a frying pan).
 # Together they bring the validation objects' contact ratio from 0.96 to 0.99 and depth from 0.05 to 0.04 cm.
+# One more deviation, measured in `docs/saga.md`: our prior knows fewer arm poses than VPoser, and through $\theta_b$
+# alone even ground-truth markers are refitted with the hand up to 8 mm off and inside the object. So the **arm joints**
+# (collars, shoulders, elbows, wrists) get a free rotation on top of the prior's pose in stages 2–3, penalised like
+# $\theta$ ($\alpha_\theta$ on the 6D offsets) and by 0.5 per degree that a joint turns past the human range
+# (`GraspPoseConfig.free_joints`; `free_joints=()` is Alg. 1 as printed).
 # The paper runs 300 + 400 + 500 Adam steps; **this lesson runs 100 + 150 + 150 (+ 30 polish) on two samples** to
 # stay within a minute (the evaluation below uses the paper's schedule and the full polish).
 
@@ -326,13 +331,15 @@ print()
 print(table2(result))
 
 # %% [markdown]
-# Reading it (details in `docs/saga.md`): after GraspPose-Opt the contact ratio (1.00 ≥ 0.90) and the depth (0.16 ≤
-# 0.2 cm) hold, and the optimisation removes most of the samples' penetration (16 → 3.6 cm³), but the mean volume stays
-# far above the paper's 0.48 cm³. That mean is a tail: the median body is below 0.1 cm³, and a few hands sunk into the
-# binoculars decide it (stage 3 may not move $t$ and $R$); on the validation objects, apple and toothbrush, all three
-# targets hold. $E_{colli}$ alone does not collapse the contact ratio as in the paper (0.89 → 0.91 for the samples: a
-# hand may rest on the surface, inside the 2 mm threshold); with $E_{cont}$ it ends at 1.00, and, as in the paper, the
-# multi-task model ends with more contact than WholeGrasp-single with its heuristic (1.00 vs 0.88).
+# Reading it (details in `docs/saga.md`): after GraspPose-Opt the contact ratio (0.98 ≥ 0.90) and the depth (0.12 ≤
+# 0.2 cm) hold, and the optimisation removes most of the samples' penetration (17 → 2.5 cm³), but the mean volume stays
+# far above the paper's 0.48 cm³. That mean is a tail: a few hands sunk into the binoculars decide it (6.6 cm³ there,
+# 1.6 on the other five objects) — WholeGrasp-VAE put them there, and stage 3 cannot pull a hand off a wall that runs
+# through it; on the validation objects, apple and toothbrush, all three targets hold. With the arm joints free the
+# ground-truth markers are refitted at the ground truth's own penetration (0.40 against 0.41 cm³; through $\theta_b$
+# alone 2.40). As in the paper, $E_{colli}$ alone lowers the contact ratio (0.90 → 0.84 for the samples; far less
+# than the paper's 0.25, since a hand may rest on the surface, inside the 2 mm threshold) and $E_{cont}$ restores it
+# (0.98); the multi-task model ends with more contact than WholeGrasp-single with its heuristic (0.98 vs 0.80).
 
 # %% [markdown]
 # ## 8 · Walk the latent space
@@ -353,10 +360,11 @@ walk.widget()
 # 2. Refit the two samples above with `GraspPoseConfig(collision=True, contact=False)` (Tab. 2's "+ E_colli" row) and
 #    compare the contact and penetration with the full energy. Which term keeps the hand on the mug?
 # 3. Change $\sigma_b$ (`GraspPoseConfig().weights.sigma_b`) from 0 to 1 mm and to 5 mm: how do depth and contact move?
-# 4. Our pose prior knows fewer poses than VPoser. Refit with `GraspPoseConfig(free_joints=ARM_JOINTS)`
-#    (`from graspkit.optim.grasppose import ARM_JOINTS`: the arm joints get a free rotation on top of $\theta_b$) and
-#    compare the hand-marker error and the penetration; then look at how far the wrists turned away from the prior
-#    (`result.state["joint6d"]`). docs/saga.md measures both on the test objects.
+# 4. Our pose prior knows fewer poses than VPoser, so the arm joints are free by default (section 6). Refit the two
+#    samples with `GraspPoseConfig(free_joints=())` (Alg. 1: the prior's latent alone) and compare the hand-marker
+#    error and the penetration; then look at how far the wrists turned away from the prior in the default fit
+#    (`res.state["joint6d"]`: 6D offsets, `graspkit.rotations.rot6d_to_matrix`). docs/saga.md measures both on the
+#    test objects.
 
 # %%
 # NBVAL_IGNORE_OUTPUT
