@@ -16,8 +16,9 @@ sampled markers with E_fit + E^g_cont (the paper's footnote says E_fit only, but
 figures for "w/o opt." and "E_fit + E^g_cont", so that is what was run). Tab. 2 rows: stage 3 with E_fit + E^g_cont,
 + E_colli, + E^o_cont on the ground-truth markers (with the ground-truth contact labels) and on sampled markers, and
 the ground-truth meshes. Stages 1-2 of Alg. 1 are run once per marker set and shared by its stage-3 variants.
-GraspPose-Opt runs with its defaults, the arm joints free on top of the pose prior (`--free-joints none`: Alg. 1's
-prior latent alone; docs/saga.md).
+GraspPose-Opt runs with its defaults: the arm joints free on top of the pose prior (`--free-joints none`: Alg. 1's
+prior latent alone) and stage 3 run twice, the second time with E^O_colli gated while a hand is sunk, each sample
+keeping the lower full energy (where E_colli is on; docs/saga.md).
 
     python -m graspkit.eval_saga --data ~/.cache/graspkit/grasps/grasp        # prints both tables, writes JSON
 """
@@ -75,6 +76,7 @@ class EvalConfig:
     seed: int = 0
     threads: int = 1
     free_joints: tuple[str, ...] = ARM_JOINTS   # GraspPoseConfig.free_joints (graspkit's; () is Alg. 1: docs/saga.md)
+    restart_sunk: float | None = 0.005  # GraspPoseConfig.restart_sunk (graspkit's; None is Alg. 1's single stage 3)
 
 
 @dataclass
@@ -228,7 +230,7 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
         print(f"checkpoints: no {' or '.join(missing)} in {ck} (`graspkit train wholegrasp_single` / "
               "`graspkit train grabnet_smplx` make them): their rows are left out")
     pca = HandPCA(bm)
-    base_cfg = GraspPoseConfig(steps=cfg.steps, free_joints=tuple(cfg.free_joints))
+    base_cfg = GraspPoseConfig(steps=cfg.steps, free_joints=tuple(cfg.free_joints), restart_sunk=cfg.restart_sunk)
     opt = GraspPoseOpt(bm, prior, base_cfg)
     ch = None if single_state is None else single_state.get("hand_contact_prior")
     opt_h = GraspPoseOpt(bm, prior, base_cfg, hand_contact_prior=None if ch is None else ch.float()[opt.hand_ids])
@@ -414,6 +416,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--free-joints", nargs="*", default=["arms"], metavar="JOINT",
                     help="body joints given a free rotation on top of the pose prior in stages 2-3 ('arms', the "
                          "default: the collars, shoulders, elbows and wrists; 'none': Alg. 1's prior latent alone)")
+    ap.add_argument("--no-restart", action="store_true",
+                    help="stage 3 once, as Alg. 1 (default: a second, gated run per sample, the lower energy kept)")
     ap.add_argument("--finish", type=Path, default=None, help="only turn this .partial.json into --out and print it")
     args = ap.parse_args(argv)
     if args.finish is not None:
@@ -425,7 +429,8 @@ def main(argv: list[str] | None = None) -> int:
     from graspkit.optim.grasppose import expand_free_joints
 
     cfg = EvalConfig(placements=args.placements, samples=args.samples, gt_grasps=args.gt, steps=tuple(args.steps),
-                     free_joints=expand_free_joints(args.free_joints))
+                     free_joints=expand_free_joints(args.free_joints),
+                     restart_sunk=None if args.no_restart else EvalConfig.restart_sunk)
     if args.objects:
         cfg = replace(cfg, objects=tuple(args.objects))
     res = evaluate(args.data, cfg, out=args.out, checkpoints=args.checkpoints)

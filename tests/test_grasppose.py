@@ -295,3 +295,40 @@ def test_free_joints_reach_a_wrist_the_prior_cannot(bm, prior):
     assert want.min() > 10.0
     np.testing.assert_allclose(e["limits"].detach().numpy(), 0.05 * want, rtol=1e-3)
     GraspPoseOpt(bm, prior, GraspPoseConfig(free_joints=expand_free_joints(["arms"])))   # every arm joint is valid
+
+
+def test_restart_keeps_the_lower_energy_run_per_sample(bm, prior):
+    """restart_sunk: stage 3 also runs with E^O_colli gated while the hand is sunk; each sample keeps whichever of
+    the two separately-run fits has the lower full energy, and for a hand swallowed by a ball that is the gated run,
+    which lifts the hand out (less E^B_colli)."""
+    verts, truth = _truth(bm, prior, B=2, seed=3)
+    hand = hand_vertex_ids(bm, ("right",))
+    ball = trimesh.creation.icosphere(3, 0.04)
+    ball.apply_translation(verts[0, hand].mean(0).double().numpy())          # swallows sample 0's right hand only
+    pts_np, face = trimesh.sample.sample_surface_even(ball, 800, seed=0)
+    obj = GraspObject(torch.tensor(pts_np, dtype=torch.float32), torch.tensor(ball.face_normals[face]).float(),
+                      height=1.0, sdf=SDFGrid.from_mesh(ball, resolution=32, padding=0.02))
+    cfg = GraspPoseConfig(steps=(0, 0, 40), contact=False, ground=False, polish=(0, 0.0), restart_sunk=0.005)
+    opt = GraspPoseOpt(bm, prior, cfg)
+    init = _params_of(opt, truth)
+    markers = verts[:, opt.marker_ids]
+
+    def run(o):
+        return o.fit(markers, obj, init={k: v.clone() for k, v in init.items()}, stages=(3,), progress=False)
+
+    both = run(opt)
+    plain = run(opt.with_config(restart_sunk=None))
+    gated = run(opt.with_config(sunk_depth=0.005, restart_sunk=None))
+    cache = opt._stage3_cache({k: v.clone() for k, v in init.items()}, obj, None)
+    with torch.no_grad():
+        e = {n: sum(opt.energy(r.state, markers, obj, 3, None, None, cache).values()) for n, r in
+             (("plain", plain), ("gated", gated), ("both", both))}
+    want = e["gated"] < e["plain"]
+    assert torch.equal(both.energies[0]["restarted"], want)
+    torch.testing.assert_close(e["both"], torch.minimum(e["plain"], e["gated"]), rtol=1e-5, atol=1e-6)
+    assert bool(want[0]), e                                                 # the sunk hand: the gated run wins ...
+    assert float(gated.energies[0]["after"]["colli_body"][0]) < float(plain.energies[0]["after"]["colli_body"][0])
+    for k in ("transl", "z", "right_pca"):                                  # ... and its state is kept as it was
+        torch.testing.assert_close(both.state[k][0], gated.state[k][0])
+    with pytest.raises(ValueError, match="restart_sunk"):
+        run(opt.with_config(restart_sunk=-1.0))

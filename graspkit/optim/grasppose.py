@@ -48,6 +48,12 @@ graspkit's choices where the paper is silent (all in `GraspPoseWeights` / `Grasp
   where the ground-truth meshes have 0.41; with the arms free 0.40. Chosen on the training objects (2 placements x 5
   samples of nine objects: mean volume 2.77 -> 1.41 cm3, arm joints past the range 0.1 %, none by more than 0.05
   deg); the limits weight there too (0.05/deg: 0.7 % of arm joints past the range, up to 7 deg); docs/saga.md.
+- The restart (`GraspPoseConfig.restart_sunk`, graspkit's, default 5 mm; None is Alg. 1's single run): stage 3 runs
+  a second time from the same stage-2 state with E^O_colli off for a sample while one of its hand vertices is more
+  than 5 mm inside the object (`sunk_depth`), and each sample keeps the run with the lower full (ungated) energy.
+  A sunk hand is pushed deeper by E^O_colli (its object points leave the hand fastest through the back of the hand);
+  the gate lets E^B_colli lift it, but alone it lets thin objects through hands that were not sunk, which the full
+  energy tells apart. Chosen on the training objects (mean volume 1.41 -> 1.04 cm3; docs/saga.md).
 Frames: everything in the object frame of WholeGrasp-VAE (object centre at 0, z up, floor at z = -t_O).
 """
 from __future__ import annotations
@@ -115,6 +121,9 @@ class GraspPoseConfig:
     log_every: int = 10
     nn_every: int = 10            # stage 3: nearest-neighbour pairs recomputed every this many steps (held between)
     sunk_depth: float | None = None  # m: E^O_colli off for a sample while a hand vertex is deeper inside (docs/saga.md)
+    # m: stage 3 runs a second time from the same start with sunk_depth = this, and each sample keeps the run with the
+    # lower full (ungated) energy (graspkit's; None: Alg. 1's single run; only with collision and sunk_depth None)
+    restart_sunk: float | None = 0.005
     stage3_free: tuple[str, ...] = STAGE3_FREE     # Alg. 1's stage-3 variables (an experiment may add t, R: docs/saga.md)
     polish: tuple[int, float] = (100, 1e-3)  # stage 3 goes on polish[0] steps at lr polish[1] (graspkit's; docs)
     # body joints (SMPL-X names) given a free rotation on top of the prior's decoded pose, optimised with theta_b in
@@ -171,7 +180,8 @@ class GraspPoseResult:
     params: dict[str, Tensor]                     # betas, global_orient, body_pose, *_hand_pose (absolute), ...
     vertices: Tensor                              # (B, V, 3)
     markers: Tensor                               # (B, 143, 3)
-    energies: list[dict[str, dict[str, Tensor]]]  # per stage: {'before': {term: (B,)}, 'after': {...}}
+    energies: list[dict[str, Any]]                # per stage: {'before': {term: (B,)}, 'after': {...}} (+ stage 3's
+                                                  # 'restarted' (B,) bool: the sample kept the gated run)
     log: list[dict[str, float]]                   # every log_every steps: step, stage, each term (batch sum)
     state: dict[str, Tensor] = field(default_factory=dict)  # the optimised variables (init= of another fit)
 
@@ -412,12 +422,15 @@ class GraspPoseOpt:
         energies: list[dict[str, dict[str, Tensor]]] = []
         log: list[dict[str, float]] = []
         cache: dict[str, Tensor] = {}
+        restart = 3 in stages and self._restarts()
         total = sum(self.cfg.steps[s - 1] for s in stages) + (n_polish if 3 in stages else 0)
+        total += (self.cfg.steps[2] + n_polish) if restart else 0
         bar = tqdm(total=total, desc="GraspPose-Opt", disable=not progress)
         step = 0
         for stage in stages:
             if stage == 3:
                 cache = self._stage3_cache(p, obj, object_contact)
+                start = {k: v.detach().clone() for k, v in p.items()}
             names = free[stage]
             for k in p:
                 p[k].requires_grad_(k in names)
@@ -438,9 +451,40 @@ class GraspPoseOpt:
             with torch.no_grad():
                 after = {k: v.detach() for k, v in self.energy(p, target, obj, stage, marker_contact,
                                                                object_contact, cache).items()}
-            energies.append({"stage": stage, "before": before, "after": after})
+            entry = {"stage": stage, "before": before, "after": after}
+            if stage == 3 and restart:
+                p, entry["after"], entry["restarted"] = self._restart(p, after, start, target, obj, marker_contact,
+                                                                      object_contact, cache, bar)
+            energies.append(entry)
         bar.close()
         return self._result(p, energies, log)
+
+    def _restarts(self) -> bool:
+        """Whether stage 3 runs twice (cfg.restart_sunk; only where E^O_colli is on and not already gated)."""
+        r = self.cfg.restart_sunk
+        if r is not None and r <= 0:
+            raise ValueError(f"restart_sunk: expected a depth in metres > 0 or None, got {r}")
+        return r is not None and self.cfg.collision and self.cfg.sunk_depth is None
+
+    def _restart(self, p: dict[str, Tensor], after: dict[str, Tensor], start: dict[str, Tensor], target: Tensor,
+                 obj: GraspObject, marker_contact: Tensor | None, object_contact: Tensor | None,
+                 cache: dict[str, Tensor], bar: Any) -> tuple[dict[str, Tensor], dict[str, Tensor], Tensor]:
+        """Stage 3 again from `start` with E^O_colli gated by cfg.restart_sunk; per sample, the run with the lower
+        full stage-3 energy. -> (parameters, their energies {term: (B,)}, restarted (B,) bool).
+
+        Why: a hand sunk into the object is pushed deeper by E^O_colli (its object points leave the hand fastest
+        through the back of the hand) and stays; gated, E^B_colli lifts it out, but a thin object can then pass
+        through a hand that was not sunk. The full energy, E^O included, tells which run is the better fit."""
+        gated = self.with_config(sunk_depth=self.cfg.restart_sunk, restart_sunk=None)
+        other = gated.fit(target, obj, marker_contact, object_contact, progress=False,
+                          init={k: v.clone() for k, v in start.items()}, stages=(3,)).state
+        bar.update(self.cfg.steps[2] + self.cfg.polish[0])
+        with torch.no_grad():
+            e_other = self.energy(other, target, obj, 3, marker_contact, object_contact, cache)
+            pick = sum(e_other.values()) < sum(after.values())
+            merged = {k: torch.where(pick.view(-1, *[1] * (v.dim() - 1)), other[k], v.detach()) for k, v in p.items()}
+            e = self.energy(merged, target, obj, 3, marker_contact, object_contact, cache)
+        return merged, {k: v.detach() for k, v in e.items()}, pick
 
     def _stage3_cache(self, p: dict[str, Tensor], obj: GraspObject, object_contact: Tensor | None
                       ) -> dict[str, Tensor]:
