@@ -328,7 +328,7 @@ def test_restart_keeps_the_lower_energy_run_per_sample(bm, prior):
     torch.testing.assert_close(e["both"], torch.minimum(e["plain"], e["gated"]), rtol=1e-5, atol=1e-6)
     assert bool(want[0]), e                                                 # the sunk hand: the gated run wins ...
     assert float(gated.energies[0]["after"]["colli_body"][0]) < float(plain.energies[0]["after"]["colli_body"][0])
-    for k in ("transl", "z", "right_pca"):                                  # ... and its state is kept as it was
+    for k in ("z", "right_pca", "joint6d"):                                 # ... and its state is kept as it was
         torch.testing.assert_close(both.state[k][0], gated.state[k][0])
     with pytest.raises(ValueError, match="restart_sunk"):
         run(opt.with_config(restart_sunk=-1.0))

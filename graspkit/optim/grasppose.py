@@ -419,7 +419,7 @@ class GraspPoseOpt:
         extra = ("joint6d",) if len(self.free_ids) else ()
         free = {1: ("transl", "orient6d"), 2: ("transl", "orient6d", "betas", "z") + extra,
                 3: tuple(dict.fromkeys(tuple(self.cfg.stage3_free) + extra))}
-        energies: list[dict[str, dict[str, Tensor]]] = []
+        energies: list[dict[str, Any]] = []
         log: list[dict[str, float]] = []
         cache: dict[str, Tensor] = {}
         restart = 3 in stages and self._restarts()
