@@ -483,8 +483,8 @@ class GraspPoseOpt:
             e_other = self.energy(other, target, obj, 3, marker_contact, object_contact, cache)
             pick = sum(e_other.values()) < sum(after.values())
             merged = {k: torch.where(pick.view(-1, *[1] * (v.dim() - 1)), other[k], v.detach()) for k, v in p.items()}
-            e = self.energy(merged, target, obj, 3, marker_contact, object_contact, cache)
-        return merged, {k: v.detach() for k, v in e.items()}, pick
+            e = {k: torch.where(pick, e_other[k], after[k]) for k in after}   # samples are independent
+        return merged, e, pick
 
     def _stage3_cache(self, p: dict[str, Tensor], obj: GraspObject, object_contact: Tensor | None
                       ) -> dict[str, Tensor]:
