@@ -77,6 +77,7 @@ class EvalConfig:
     threads: int = 1
     free_joints: tuple[str, ...] = ARM_JOINTS   # GraspPoseConfig.free_joints (graspkit's; () is Alg. 1: docs/saga.md)
     restart_sunk: float | None = 0.005  # GraspPoseConfig.restart_sunk (graspkit's; None is Alg. 1's single stage 3)
+    stage2_collision: bool = True  # GraspPoseConfig.stage2_collision (graspkit's; False is Alg. 1's E_fit-only stage 2)
 
 
 @dataclass
@@ -185,13 +186,20 @@ def _object_subset(obj, idx: Tensor) -> Any:
 
 def fit_variants(opt, markers: Tensor, obj, mc: Tensor | None, oc: Tensor | None, variants: list[str],
                  progress: bool = False) -> dict[str, Any]:
-    """Alg. 1 stages 1-2 once, then stage 3 for each variant from the same state: {variant: GraspPoseResult}."""
-    base = opt.fit(markers, obj, mc, oc, progress=progress, stages=(1, 2))
+    """Alg. 1 stage 1 once, stage 2 once per collision setting (E^B_colli enters stage 2 where the variant has E_colli),
+    then stage 3 for each variant from its stage-2 state: {variant: GraspPoseResult}."""
+    s1 = opt.fit(markers, obj, mc, oc, progress=progress, stages=(1,))
+    bases: dict[bool, Any] = {}
     out = {}
     for v in variants:
+        c = VARIANTS[v]["collision"]
+        if c not in bases:
+            bases[c] = opt.with_config(collision=c).fit(markers, obj, mc, oc, progress=progress, init=s1.state,
+                                                        stages=(2,))
+        base = bases[c]
         out[v] = opt.with_config(**VARIANTS[v]).fit(markers, obj, mc, oc, progress=progress, init=base.state,
                                                     stages=(3,))
-        out[v].energies = base.energies + out[v].energies
+        out[v].energies = s1.energies + base.energies + out[v].energies
     return out
 
 
@@ -230,7 +238,8 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
         print(f"checkpoints: no {' or '.join(missing)} in {ck} (`graspkit train wholegrasp_single` / "
               "`graspkit train grabnet_smplx` make them): their rows are left out")
     pca = HandPCA(bm)
-    base_cfg = GraspPoseConfig(steps=cfg.steps, free_joints=tuple(cfg.free_joints), restart_sunk=cfg.restart_sunk)
+    base_cfg = GraspPoseConfig(steps=cfg.steps, free_joints=tuple(cfg.free_joints), restart_sunk=cfg.restart_sunk,
+                               stage2_collision=cfg.stage2_collision)
     opt = GraspPoseOpt(bm, prior, base_cfg)
     ch = None if single_state is None else single_state.get("hand_contact_prior")
     opt_h = GraspPoseOpt(bm, prior, base_cfg, hand_contact_prior=None if ch is None else ch.float()[opt.hand_ids])
@@ -267,10 +276,15 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
         iw, i1, ig = torch.arange(nw), torch.arange(nw, nw + n1), torch.arange(nw + n1, B)
         obj = _object_batch(places, 1, sdf)
         markers = torch.cat([mk, mk1, torch.stack([p.markers for p in gts])])
-        base = opt.fit(markers, obj, progress=False, stages=(1, 2))
+        # stage 2 twice from one stage 1: without E_colli (the rows without it) and with (GraspPoseConfig's
+        # stage2_collision: the rows with E_colli in stage 3 have it in stage 2 too)
+        s1 = opt.fit(markers, obj, progress=False, stages=(1,))
+        bases = {c: opt.with_config(collision=c).fit(markers, obj, progress=False, init=s1.state, stages=(2,))
+                 for c in ((False, True) if opt.cfg.stage2_collision else (False,))}
 
         def stage3(o, idx: Tensor, variant: str, cm: Tensor | None = None, co: Tensor | None = None):
             """Stage 3 of one variant for the bodies idx of the batch, from the shared stages 1-2."""
+            base = bases[VARIANTS[variant]["collision"] and opt.cfg.stage2_collision]
             return o.with_config(**VARIANTS[variant]).fit(
                 markers[idx], _object_subset(obj, idx), cm, co, progress=False,
                 init={k: v[idx] for k, v in base.state.items()}, stages=(3,))
@@ -418,6 +432,8 @@ def main(argv: list[str] | None = None) -> int:
                          "default: the collars, shoulders, elbows and wrists; 'none': Alg. 1's prior latent alone)")
     ap.add_argument("--no-restart", action="store_true",
                     help="stage 3 once, as Alg. 1 (default: a second, gated run per sample, the lower energy kept)")
+    ap.add_argument("--no-stage2-collision", action="store_true",
+                    help="stage 2 with E_fit alone, as Alg. 1 (default: E^B_colli too where stage 3 has E_colli)")
     ap.add_argument("--finish", type=Path, default=None, help="only turn this .partial.json into --out and print it")
     args = ap.parse_args(argv)
     if args.finish is not None:
@@ -430,7 +446,8 @@ def main(argv: list[str] | None = None) -> int:
 
     cfg = EvalConfig(placements=args.placements, samples=args.samples, gt_grasps=args.gt, steps=tuple(args.steps),
                      free_joints=expand_free_joints(args.free_joints),
-                     restart_sunk=None if args.no_restart else EvalConfig.restart_sunk)
+                     restart_sunk=None if args.no_restart else EvalConfig.restart_sunk,
+                     stage2_collision=not args.no_stage2_collision)
     if args.objects:
         cfg = replace(cfg, objects=tuple(args.objects))
     res = evaluate(args.data, cfg, out=args.out, checkpoints=args.checkpoints)

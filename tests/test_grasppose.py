@@ -14,7 +14,7 @@ from graspkit.metrics import joint_limit_violation
 from graspkit.models.pose_prior import load_pose_prior
 from graspkit.objects.sdf import SDFGrid, signed_distance
 from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, GraspPoseConfig, GraspPoseOpt, GraspPoseWeights,
-                                      expand_free_joints, hand_vertex_ids, kabsch)
+                                      expand_free_joints, forearm_vertex_ids, hand_vertex_ids, kabsch)
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d
 
 
@@ -99,7 +99,9 @@ def test_energy_terms_against_independent_computations(bm, prior):
     nrm = torch.tensor(box.face_normals[face], dtype=torch.float32)
     height = 0.7
     obj = GraspObject(pts, nrm, height=height, sdf=SDFGrid.from_mesh(box, resolution=40, padding=0.02))
-    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(contact_points=800, collision_points=800))
+    # E^B_colli on the hand vertices alone (Alg. 1's points; the extra points are checked below)
+    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(contact_points=800, collision_points=800, inner_depths=(),
+                                                  forearms=False))
     p = _params_of(opt, truth)
     cm = torch.zeros(1, 143)
     cm[0, 100] = 1.0
@@ -131,6 +133,25 @@ def test_energy_terms_against_independent_computations(bm, prior):
     floored = opt.with_config(weights=replace(w, sigma_b=3e-3)).energy(p, target, obj, 3, cm, co, cache)
     want3 = w.colli_body * np.maximum(-sd - 3e-3, 0).sum()
     assert 0 < want3 < want and floored["colli_body"].item() == pytest.approx(want3, rel=0.05)
+    # graspkit's extra E^B points (the defaults): the hand vertices moved 5 and 10 mm inward along the normals of
+    # the hand surface (here trimesh's, of the hand's own faces), and the forearm vertices
+    full = opt.with_config(inner_depths=(0.005, 0.01), forearms=True).energy(p, target, obj, 3, cm, co, cache)
+    f = bm.faces.numpy()
+    pos = np.full(len(v), -1)
+    pos[both] = np.arange(len(both))
+    hf = pos[f][(pos[f] >= 0).all(1)]
+    n = trimesh.Trimesh(v[both], hf, process=False).vertex_normals
+    arm = forearm_vertex_ids(bm)
+    q = np.concatenate([v[both] - 0.005 * n, v[both] - 0.01 * n, v[arm]])
+    extra = w.colli_body * np.maximum(-signed_distance(torch.tensor(q), box).numpy(), 0).sum()
+    assert extra > 0.5 * want                                               # the inner points are deeper still
+    assert full["colli_body"].item() == pytest.approx(want + extra, rel=0.05)
+    # stage 2 has the same points when stage2_collision (and nothing else of stage 3)
+    e2 = opt.with_config(inner_depths=(0.005, 0.01), forearms=True).energy(p, target, obj, 2, cm, co, cache)
+    assert set(e2) == {"fit", "prior", "colli_body", "limits"}
+    assert e2["colli_body"].item() == pytest.approx(want + extra, rel=0.05)
+    assert "colli_body" not in opt.with_config(stage2_collision=False).energy(p, target, obj, 2, cm, co, cache)
+    assert "colli_body" not in opt.with_config(collision=False).energy(p, target, obj, 2, cm, co, cache)
     # sunk_depth: E^O is switched off exactly while some hand vertex is deeper than it inside the box
     deepest = float(-sd.min())
     for depth, on in ((deepest + 2e-3, True), (deepest - 2e-3, False)):
@@ -308,7 +329,9 @@ def test_restart_keeps_the_lower_energy_run_per_sample(bm, prior):
     pts_np, face = trimesh.sample.sample_surface_even(ball, 800, seed=0)
     obj = GraspObject(torch.tensor(pts_np, dtype=torch.float32), torch.tensor(ball.face_normals[face]).float(),
                       height=1.0, sdf=SDFGrid.from_mesh(ball, resolution=32, padding=0.02))
-    cfg = GraspPoseConfig(steps=(0, 0, 40), contact=False, ground=False, polish=(0, 0.0), restart_sunk=0.005)
+    # E^B_colli on the hand vertices alone (Alg. 1's): with the inner points the single run lifts this hand out too
+    cfg = GraspPoseConfig(steps=(0, 0, 40), contact=False, ground=False, polish=(0, 0.0), restart_sunk=0.005,
+                          inner_depths=(), forearms=False)
     opt = GraspPoseOpt(bm, prior, cfg)
     init = _params_of(opt, truth)
     markers = verts[:, opt.marker_ids]
@@ -332,3 +355,37 @@ def test_restart_keeps_the_lower_energy_run_per_sample(bm, prior):
         torch.testing.assert_close(both.state[k][0], gated.state[k][0])
     with pytest.raises(ValueError, match="restart_sunk"):
         run(opt.with_config(restart_sunk=-1.0))
+
+
+def test_forearm_vertices_lie_between_elbow_and_wrist(bm):
+    """forearm_vertex_ids: the vertices skinned mostly to the elbows, on the elbow-wrist segment, apart from the hands."""
+    arm, hands = forearm_vertex_ids(bm), hand_vertex_ids(bm)
+    assert len(arm) > 400 and not set(arm) & set(hands)
+    with torch.no_grad():
+        out = bm(betas=torch.zeros(1, 10))
+    J, v = out.joints[0].double().numpy(), out.vertices[0].double().numpy()
+    for side, (e, w) in (("left", (18, 20)), ("right", (19, 21))):             # SMPL-X elbow, wrist joints
+        ids = arm[(v[arm, 0] > 0) == (side == "left")]                         # the left arm is at +x at rest
+        a, b = J[e], J[w]
+        t = (v[ids] - a) @ (b - a) / np.dot(b - a, b - a)
+        assert len(ids) > 200 and t.min() > -0.25 and t.max() < 1.25, (side, t.min(), t.max())
+
+
+def test_stage2_collision_keeps_the_hand_out_of_an_object_the_markers_are_in(bm, prior):
+    """stage2_collision: where the markers put the hand inside the object, E_fit alone follows them in during
+    stage 2; with E^B_colli in stage 2 the body reaches them from outside and the hand stays (nearly) out."""
+    verts, truth = _truth(bm, prior, B=1, seed=3)
+    hand = hand_vertex_ids(bm, ("right",))
+    ball = trimesh.creation.icosphere(3, 0.03)
+    ball.apply_translation(verts[0, hand].mean(0).double().numpy())          # the ball swallows the right palm
+    pts_np, face = trimesh.sample.sample_surface_even(ball, 800, seed=0)
+    obj = GraspObject(torch.tensor(pts_np, dtype=torch.float32), torch.tensor(ball.face_normals[face]).float(),
+                      height=1.0, sdf=SDFGrid.from_mesh(ball, resolution=32, padding=0.02))
+    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(100, 250, 0)))
+    markers = verts[:, opt.marker_ids]
+    depth = lambda r: max(0.0, -signed_distance(r.vertices[0, hand].double(), ball).min().item())  # noqa: E731
+    plain = opt.with_config(stage2_collision=False).fit(markers, obj, stages=(1, 2), progress=False)
+    kept = opt.fit(markers, obj, stages=(1, 2), progress=False)
+    assert depth(plain) > 0.015                                              # E_fit alone: into the ball
+    assert depth(kept) < 0.003, depth(kept)
+    assert "colli_body" in kept.energies[1]["after"] and "colli_body" not in plain.energies[1]["after"]

