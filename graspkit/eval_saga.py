@@ -192,7 +192,7 @@ def fit_variants(opt, markers: Tensor, obj, mc: Tensor | None, oc: Tensor | None
     bases: dict[bool, Any] = {}
     out = {}
     for v in variants:
-        c = VARIANTS[v]["collision"]
+        c = VARIANTS[v]["collision"] and opt.cfg.stage2_collision
         if c not in bases:
             bases[c] = opt.with_config(collision=c).fit(markers, obj, mc, oc, progress=progress, init=s1.state,
                                                         stages=(2,))

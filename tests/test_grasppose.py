@@ -355,6 +355,8 @@ def test_restart_keeps_the_lower_energy_run_per_sample(bm, prior):
         torch.testing.assert_close(both.state[k][0], gated.state[k][0])
     with pytest.raises(ValueError, match="restart_sunk"):
         run(opt.with_config(restart_sunk=-1.0))
+    with pytest.raises(ValueError, match="inner_depths"):
+        run(opt.with_config(inner_depths=(0.005, -0.01)))
 
 
 def test_forearm_vertices_lie_between_elbow_and_wrist(bm):

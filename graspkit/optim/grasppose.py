@@ -373,7 +373,7 @@ class GraspPoseOpt:
                 e["limits"] = w.limits * joint_limit_excess(aa)[:, j].sum(-1)
         if stage < 3:
             if stage == 2 and cfg.collision and cfg.stage2_collision:
-                e["colli_body"] = w.colli_body * self._extra_inside(v, obj, hands=True)
+                e["colli_body"] = w.colli_body * self._extra_inside(v, obj, hands=True)   # no other E^B here
             return e
         pts, nrm, height = obj.batch(B)
 
@@ -400,8 +400,8 @@ class GraspPoseOpt:
             else:
                 sd, cache["nn_colli_body"] = _signed_to_cloud(hands, pts, nrm, None if refresh else
                                                               cache.get("nn_colli_body"))
-            e["colli_body"] = w.colli_body * (torch.relu(-sd - w.sigma_b).sum(-1) + self._extra_inside(v, obj))
             hn = vertex_normals(hands, self.hand_faces)
+            e["colli_body"] = w.colli_body * (torch.relu(-sd - w.sigma_b).sum(-1) + self._extra_inside(v, obj, hn))
             cp = torch.gather(pts, 1, cache["collision_idx"].unsqueeze(-1).expand(-1, -1, 3))
             so, cache["nn_colli_object"] = _signed_to_cloud(cp, hands, hn, None if refresh else
                                                             cache.get("nn_colli_object"))
@@ -413,15 +413,15 @@ class GraspPoseOpt:
             e["colli_object"] = w.colli_object * pen
         return e
 
-    def _extra_inside(self, v: Tensor, obj: GraspObject, hands: bool = False) -> Tensor:
+    def _extra_inside(self, v: Tensor, obj: GraspObject, normals: Tensor | None = None, hands: bool = False) -> Tensor:
         """Summed depth past sigma_b (B,) inside the object of E^B_colli's points beyond the hand vertices, for the
-        sparse body v (B,n,3): the hand vertices moved cfg.inner_depths inward along their normals and the forearm
-        vertices (and the hand vertices themselves if `hands`, as stage 2 has no other E^B)."""
+        sparse body v (B,n,3): the hand vertices moved cfg.inner_depths inward along their normals (B,n_h,3; computed
+        if not given) and the forearm vertices (and the hand vertices themselves if `hands`)."""
         cfg, w = self.cfg, self.cfg.weights
         h = v[:, self.sl_hands]
         q = [h] if hands else []
         if cfg.inner_depths:
-            n = vertex_normals(h, self.hand_faces)
+            n = vertex_normals(h, self.hand_faces) if normals is None else normals
             q += [h - d * n for d in cfg.inner_depths]
         if cfg.forearms:
             q.append(v[:, self.sl_arms])
@@ -458,6 +458,8 @@ class GraspPoseOpt:
         n_polish, lr_polish = self.cfg.polish
         if n_polish < 0 or (n_polish > 0 and lr_polish <= 0):
             raise ValueError(f"polish: expected (steps >= 0, learning rate > 0), got {self.cfg.polish}")
+        if any(not (0 < d < 0.05) for d in self.cfg.inner_depths):
+            raise ValueError(f"inner_depths: expected depths in metres in (0, 0.05), got {self.cfg.inner_depths}")
         if not self.cfg.stage3_free or set(self.cfg.stage3_free) - set(PARAMS):
             raise ValueError(f"stage3_free: expected a non-empty subset of {PARAMS}, got {self.cfg.stage3_free}")
         target = markers.detach().float()
