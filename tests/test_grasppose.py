@@ -46,6 +46,17 @@ def _dummy_object() -> GraspObject:
     return GraspObject(pts, torch.nn.functional.normalize(pts, dim=-1), height=1.0)
 
 
+def _ball(centre, radius: float, n: int = 800):
+    """An icosphere (trimesh) of `radius` at `centre` (3,) and its GraspObject: n surface points with normals and a
+    32-node signed-distance grid."""
+    ball = trimesh.creation.icosphere(3, radius)
+    ball.apply_translation(torch.as_tensor(centre).double().numpy())
+    pts_np, face = trimesh.sample.sample_surface_even(ball, n, seed=0)
+    obj = GraspObject(torch.tensor(pts_np, dtype=torch.float32), torch.tensor(ball.face_normals[face]).float(),
+                      height=1.0, sdf=SDFGrid.from_mesh(ball, resolution=32, padding=0.02))
+    return ball, obj
+
+
 def test_kabsch_recovers_a_rigid_motion():
     g = torch.Generator().manual_seed(0)
     x = torch.randn(3, 40, 3, generator=g)
@@ -168,11 +179,7 @@ def test_collision_stage_pushes_the_hand_out_of_the_object(bm, prior):
     out = verts[0, palm].mean(0) - verts[0, hand].mean(0)
     out = out / out.norm()
     r = 0.04
-    ball = trimesh.creation.icosphere(3, r)
-    ball.apply_translation((verts[0, palm].mean(0) + out * (r - 0.01)).double().numpy())
-    pts_np, face = trimesh.sample.sample_surface_even(ball, 1000, seed=0)
-    obj = GraspObject(torch.tensor(pts_np, dtype=torch.float32), torch.tensor(ball.face_normals[face]).float(),
-                      height=1.0, sdf=SDFGrid.from_mesh(ball, resolution=32, padding=0.02))
+    ball, obj = _ball(verts[0, palm].mean(0) + out * (r - 0.01), r, 1000)
     opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(0, 0, 60), contact=False, ground=False))
     markers = verts[:, opt.marker_ids]
     res = opt.fit(markers, obj, init=_params_of(opt, truth), stages=(3,), progress=False)
@@ -187,11 +194,7 @@ def test_stage3_moves_only_its_variables(bm, prior):
     """Alg. 1's stage 3 frees the pose latent, hand PCA and eyes only; `stage3_free` adds the global translation."""
     verts, truth = _truth(bm, prior, B=1, seed=3)
     hand = hand_vertex_ids(bm, ("right",))
-    ball = trimesh.creation.icosphere(3, 0.04)
-    ball.apply_translation(verts[0, hand].mean(0).double().numpy())          # the ball swallows the right hand
-    pts_np, face = trimesh.sample.sample_surface_even(ball, 800, seed=0)
-    obj = GraspObject(torch.tensor(pts_np, dtype=torch.float32), torch.tensor(ball.face_normals[face]).float(),
-                      height=1.0, sdf=SDFGrid.from_mesh(ball, resolution=32, padding=0.02))
+    _, obj = _ball(verts[0, hand].mean(0), 0.04)                        # the ball swallows the right hand
     cfg = GraspPoseConfig(steps=(0, 0, 20), contact=False, ground=False)
     opt = GraspPoseOpt(bm, prior, cfg)
     init = _params_of(opt, truth)
@@ -246,11 +249,7 @@ def test_polish_continues_stage3_at_its_learning_rate(bm, prior):
     markers (the object far away), stage 3 at 0.008 only jitters: the polish at 1e-3 ends with a lower energy than
     as many more steps at 0.008; at a vanishing lr the result is stage 3's own; bad values are named."""
     verts, truth = _truth(bm, prior, B=1, seed=3)
-    ball = trimesh.creation.icosphere(3, 0.04)
-    ball.apply_translation((verts[0].mean(0) + torch.tensor([2.0, 0.0, 0.0])).double().numpy())
-    pts_np, face = trimesh.sample.sample_surface_even(ball, 400, seed=0)
-    obj = GraspObject(torch.tensor(pts_np, dtype=torch.float32), torch.tensor(ball.face_normals[face]).float(),
-                      height=1.0, sdf=SDFGrid.from_mesh(ball, resolution=32, padding=0.02))
+    _, obj = _ball(verts[0].mean(0) + torch.tensor([2.0, 0.0, 0.0]), 0.04, 400)
     cfg = GraspPoseConfig(steps=(0, 0, 40), contact=False, ground=False, polish=(0, 0.0))
     opt = GraspPoseOpt(bm, prior, cfg)
     markers = verts[:, opt.marker_ids]
@@ -324,11 +323,7 @@ def test_restart_keeps_the_lower_energy_run_per_sample(bm, prior):
     which lifts the hand out (less E^B_colli)."""
     verts, truth = _truth(bm, prior, B=2, seed=3)
     hand = hand_vertex_ids(bm, ("right",))
-    ball = trimesh.creation.icosphere(3, 0.04)
-    ball.apply_translation(verts[0, hand].mean(0).double().numpy())          # swallows sample 0's right hand only
-    pts_np, face = trimesh.sample.sample_surface_even(ball, 800, seed=0)
-    obj = GraspObject(torch.tensor(pts_np, dtype=torch.float32), torch.tensor(ball.face_normals[face]).float(),
-                      height=1.0, sdf=SDFGrid.from_mesh(ball, resolution=32, padding=0.02))
+    _, obj = _ball(verts[0, hand].mean(0), 0.04)                        # swallows sample 0's right hand only
     # E^B_colli on the hand vertices alone (Alg. 1's): with the inner points the single run lifts this hand out too
     cfg = GraspPoseConfig(steps=(0, 0, 40), contact=False, ground=False, polish=(0, 0.0), restart_sunk=0.005,
                           inner_depths=(), forearms=False)
@@ -378,11 +373,7 @@ def test_stage2_collision_keeps_the_hand_out_of_an_object_the_markers_are_in(bm,
     stage 2; with E^B_colli in stage 2 the body reaches them from outside and the hand stays (nearly) out."""
     verts, truth = _truth(bm, prior, B=1, seed=3)
     hand = hand_vertex_ids(bm, ("right",))
-    ball = trimesh.creation.icosphere(3, 0.03)
-    ball.apply_translation(verts[0, hand].mean(0).double().numpy())          # the ball swallows the right palm
-    pts_np, face = trimesh.sample.sample_surface_even(ball, 800, seed=0)
-    obj = GraspObject(torch.tensor(pts_np, dtype=torch.float32), torch.tensor(ball.face_normals[face]).float(),
-                      height=1.0, sdf=SDFGrid.from_mesh(ball, resolution=32, padding=0.02))
+    ball, obj = _ball(verts[0, hand].mean(0), 0.03)                        # the ball swallows the right palm
     opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(100, 250, 0)))
     markers = verts[:, opt.marker_ids]
     depth = lambda r: max(0.0, -signed_distance(r.vertices[0, hand].double(), ball).min().item())  # noqa: E731
