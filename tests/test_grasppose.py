@@ -10,6 +10,7 @@ from scipy.spatial import cKDTree
 
 from graspkit.body import BodyModel
 from graspkit.body.markers import foot_vertices, palm_vertices
+from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.metrics import joint_limit_violation
 from graspkit.models.pose_prior import load_pose_prior
 from graspkit.objects.sdf import SDFGrid, signed_distance
@@ -361,9 +362,9 @@ def test_forearm_vertices_lie_between_elbow_and_wrist(bm):
     with torch.no_grad():
         out = bm(betas=torch.zeros(1, 10))
     J, v = out.joints[0].double().numpy(), out.vertices[0].double().numpy()
-    for side, (e, w) in (("left", (18, 20)), ("right", (19, 21))):             # SMPL-X elbow, wrist joints
+    for side in ("left", "right"):
         ids = arm[(v[arm, 0] > 0) == (side == "left")]                         # the left arm is at +x at rest
-        a, b = J[e], J[w]
+        a, b = J[JOINT_INDEX[f"{side}_elbow"]], J[JOINT_INDEX[f"{side}_wrist"]]
         t = (v[ids] - a) @ (b - a) / np.dot(b - a, b - a)
         assert len(ids) > 200 and t.min() > -0.25 and t.max() < 1.25, (side, t.min(), t.max())
 
