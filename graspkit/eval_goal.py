@@ -35,6 +35,7 @@ PAPER_TAB2 = {  # GOAL Tab. 2: V2V (mm) body, hand, feet
     "MNet-Pose": (22.0, 30.2, 10.4), "MNet-Marker [67]": (21.1, 30.1, 9.8), "MNet-w/o-IAA": (21.0, 29.1, 10.5),
     "MNet": (19.7, 28.0, 9.9), "1 output frame": (26.7, 35.7, 17.9), "10 output frames": (19.7, 28.0, 9.9)}
 PAPER_SLIDING = {"GOAL": 0.137, "GRAB (GT)": 0.067}
+PEN_ROW = "GNet + E_pen (graspkit)"   # Tab. 1's extra row: the refinement with graspkit's penetration term
 
 
 def part_vertex_ids(bm, joints: tuple[str, ...]) -> np.ndarray:
@@ -400,11 +401,25 @@ def _grasp_row(bm, rot6d: Tensor, transl: Tensor, betas: Tensor, meshes: list) -
     return rows
 
 
-def gnet_table(gnet, baseline, seqs: list, seed: int = 0, refine_weights=None) -> dict:
+def posed_sdfs(seqs: list, frames: list[int], R: Tensor, o: Tensor):
+    """GraspRefiner's PosedSDF for sequences' objects at `frames` in GNet's frames (x' = R (x - o); R (B,3,3), o (B,3)),
+    from each object's collision grid (graspkit.data.grasp_io.collision_sdf_grid, cached on disk)."""
+    from graspkit.data.grasp_io import collision_sdf_grid
+    from graspkit.optim.goal_refine import PosedSDF
+
+    grids = {n: collision_sdf_grid(n) for n in sorted({s.object_name for s in seqs})}
+    Ro = torch.stack([torch.as_tensor(s.object_rotation()[f]) for s, f in zip(seqs, frames)]).float()
+    to = torch.stack([torch.as_tensor(np.asarray(s.object_transl[f])) for s, f in zip(seqs, frames)]).float()
+    return PosedSDF([grids[s.object_name] for s in seqs], R.float() @ Ro, ((to - o.float())[:, None] @ R.float().transpose(1, 2))[:, 0])
+
+
+def gnet_table(gnet, baseline, seqs: list, seed: int = 0, refine_weights=None, penetration: bool = False,
+               pen_weights=None) -> dict:
     """GOAL Tab. 1 on grasps `seqs` (one GNet sample per ground-truth grasp, same object pose, start and body shape),
     in GNet's frame: {row: {'volume_cm3', 'contact_ratio', 'depth_cm', 'feet_cm', 'n'}}, per-grasp metrics and bodies
-    under 'samples', the refinement's energies under 'refine_history'."""
-    from graspkit.optim.goal_refine import GraspRefiner
+    under 'samples', the refinement's energies under 'refine_history'. With `penetration`, also the row PEN_ROW:
+    the same samples refined with graspkit's E_pen (`pen_weights`, default goal_refine.PEN_WEIGHTS)."""
+    from graspkit.optim.goal_refine import PEN_WEIGHTS, GraspRefiner
 
     bm, gv, _ = _body()
     gt = gnet_samples(seqs, accepted_only=False)
@@ -419,9 +434,14 @@ def gnet_table(gnet, baseline, seqs: list, seed: int = 0, refine_weights=None) -
         meshes.append(m)
     z = torch.randn(len(seqs), gnet.cfg.latent, generator=torch.Generator().manual_seed(seed))
     hat = gnet.sample(gt["bps"], gt["obj_transl"], gt["betas"], z=z)
-    refined = GraspRefiner(bm, gv)(hat, gt["betas"], gt["points"], refine_weights)
-    bodies = {"GNet w/o opt": (hat["rot6d"], hat["transl"]), "GNet": (refined.rot6d, refined.transl),
-              "synthetic GT": (gt["rot6d"], gt["transl"])}
+    refiner = GraspRefiner(bm, gv)
+    refined = refiner(hat, gt["betas"], gt["points"], refine_weights)
+    bodies = {"GNet w/o opt": (hat["rot6d"], hat["transl"]), "GNet": (refined.rot6d, refined.transl)}
+    if penetration:
+        pen = refiner(hat, gt["betas"], gt["points"], pen_weights or PEN_WEIGHTS,
+                      sdf=posed_sdfs(seqs, frames, gt["R"], gt["o"]))
+        bodies[PEN_ROW] = (pen.rot6d, pen.transl)
+    bodies["synthetic GT"] = (gt["rot6d"], gt["transl"])
     if baseline is not None:
         b = baseline.sample(gt["bps"], gt["obj_transl"], gt["betas"], z=z)
         bodies = {"GrabNet-SMPL-X": (b["rot6d"], b["transl"]), **bodies}
@@ -437,6 +457,9 @@ def gnet_table(gnet, baseline, seqs: list, seed: int = 0, refine_weights=None) -
                        "feet_cm": float(np.mean([abs(r["feet_cm"]) for r in rows])), "n": len(rows)}
     ref, raw = (np.array([r["volume_cm3"] for r in samples[k]["rows"]]) for k in ("GNet", "GNet w/o opt"))
     paired = {"refined_lower": int((ref < raw).sum()), "refined_higher": int((ref > raw).sum()), "n": len(ref)}
+    if penetration:
+        p = np.array([r["volume_cm3"] for r in samples[PEN_ROW]["rows"]])
+        paired.update(pen_lower=int((p < raw).sum()), pen_higher=int((p > raw).sum()))
     return {"table": table, "samples": samples, "refine_history": refined.history, "hat": hat, "gt": gt,
             "meshes": meshes, "paired": paired}
 
@@ -603,7 +626,7 @@ def evaluate(folders=None, stubs=None, n_grasps: int = 60, n_rollouts: int = 24,
     return res
 
 
-def tab1_results(folders, stubs, n_grasps: int = 60, seed: int = 0) -> dict:
+def tab1_results(folders, stubs, n_grasps: int = 60, seed: int = 0, penetration: bool = True) -> dict:
     """Tab. 1 with the checkpoints in `stubs`: one sample per accepted test grasp of `folders` (n_grasps of them drawn
     with `seed`; 0: every one). {'tab1', 'tab1_paired', 'tab1_refine_energy', 'tab1_seconds'}."""
     import time
@@ -620,20 +643,22 @@ def tab1_results(folders, stubs, n_grasps: int = 60, seed: int = 0) -> dict:
     pick = sorted(np.random.default_rng(seed).permutation(len(tests))[:n].tolist())
     gnet = load_gnet(Path(stubs) / "gnet.pt")
     base = load_gnet(Path(stubs) / "gnet_smplx.pt") if (Path(stubs) / "gnet_smplx.pt").is_file() else None
-    tab1 = gnet_table(gnet, base, [tests[i] for i in pick], seed=seed)
+    tab1 = gnet_table(gnet, base, [tests[i] for i in pick], seed=seed, penetration=penetration)
     return {"tab1": tab1["table"], "tab1_paired": tab1["paired"], "tab1_refine_energy": tab1["refine_history"],
             "tab1_seconds": time.perf_counter() - t0}
 
 
 def gnet_goal(gnet, start: tuple[Tensor, Tensor], betas: Tensor, object_points: Tensor, obj_centre: Tensor,
-              z: Tensor | None = None, generator: torch.Generator | None = None, refine_weights=None
-              ) -> tuple[Tensor, Tensor, dict]:
+              z: Tensor | None = None, generator: torch.Generator | None = None, refine_weights=None,
+              sdf: tuple | None = None) -> tuple[Tensor, Tensor, dict]:
     """GOAL's first stage for one start pose (rot6d (55,6), transl (3,)) and object (points (P,3), centre (3,)) in the
     world: GNet's frame from the start pelvis to the object, a sample, the refinement (Eq. 4-8), back to the world.
+    With `sdf` = (SDFGrid in the mesh's frame, the object's world rotation (3,3), translation (3,)) the refinement
+    adds graspkit's E_pen (weights default goal_refine.PEN_WEIGHTS).
     Returns the goal grasp's rot6d (55,6), transl (3,) and {'hat', 'refined', 'R', 'o'} (GNet's frame)."""
     from graspkit.models.mnet import _invert, rest_root, transform_params, transform_points
     from graspkit.objects.bps import bps_basis
-    from graspkit.optim.goal_refine import GraspRefiner
+    from graspkit.optim.goal_refine import PEN_WEIGHTS, GraspRefiner, PosedSDF
 
     bm, gv, _ = _body()
     b = betas.reshape(1, -1).float()
@@ -642,7 +667,13 @@ def gnet_goal(gnet, start: tuple[Tensor, Tensor], betas: Tensor, object_points: 
     pts = transform_points(object_points.reshape(1, -1, 3).float(), R, o)
     c = transform_points(obj_centre.reshape(1, 1, 3).float(), R, o)[:, 0]
     hat = gnet.sample(kd_bps(pts - c[:, None], bps_basis()), c, b, generator=generator, z=z)
-    ref = GraspRefiner(bm, gv)(hat, b, pts, refine_weights)
+    posed = None
+    if sdf is not None:
+        grid, Ro, to = sdf
+        Ro, to = torch.as_tensor(Ro).float().reshape(3, 3), torch.as_tensor(to).float().reshape(3)
+        posed = PosedSDF([grid], R @ Ro, ((to - o[0]) @ R[0].T)[None])
+        refine_weights = refine_weights or PEN_WEIGHTS
+    ref = GraspRefiner(bm, gv)(hat, b, pts, refine_weights, sdf=posed)
     Ri, oi = _invert(R, o)
     r6, t = transform_params(ref.rot6d, ref.transl, root, Ri, oi)
     return r6[0], t[0], {"hat": hat, "refined": ref, "R": R, "o": o}

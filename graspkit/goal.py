@@ -47,9 +47,10 @@ def default_start(centre: np.ndarray, distance: float, yaw_offset: float = 0.0) 
 
 def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, start: Start | None = None,
                seed: int = 0, start_distance: float = 1.0, max_frames: int = 150,
-               checkpoints: str | Path = CHECKPOINTS) -> GoalResult:
+               checkpoints: str | Path = CHECKPOINTS, penetration: bool = True) -> GoalResult:
     """GOAL for object `name` (a catalogue name, a mesh file or a trimesh.Trimesh, closed and in metres): one
-    refined GNet grasp and MNet's approach into it from a standing start, seeded."""
+    refined GNet grasp and MNet's approach into it from a standing start, seeded. `penetration`: the refinement
+    adds graspkit's E_pen on the object's collision grid (False: GOAL's Eq. 4-8 alone; docs/goal.md)."""
     from graspkit.data.reaching import plan_reach
     from graspkit.eval_goal import _body, gnet_goal, sliding
     from graspkit.metrics import grasp_and_end_figures
@@ -61,6 +62,10 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     from graspkit.objects.user import as_object
     from graspkit.rotations import axis_angle_to_rot6d, matrix_to_axis_angle, rot6d_to_matrix
 
+    from graspkit.data.grasp_io import collision_sdf_grid
+    from graspkit.objects.catalogue import list_objects
+
+    grid_key = name if isinstance(name, str) and name in list_objects() else None   # catalogue grids are cached
     name, obj_mesh = as_object(name, "name")
     if not 0 < start_distance <= 5.0:
         raise ValueError(f"start_distance: expected metres in (0, 5], got {start_distance}")
@@ -85,7 +90,8 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     s = (axis_angle_to_rot6d(torch.as_tensor(first.poses[0], dtype=torch.float64)).float(),
          torch.as_tensor(first.trans[0]).float())
     g = torch.Generator().manual_seed(seed)
-    goal = gnet_goal(load_gnet(ck / "gnet.pt"), s, betas, pts, c, generator=g)[:2]
+    sdf = (collision_sdf_grid(grid_key or obj_mesh), pose.rotation, pose.translation) if penetration else None
+    goal = gnet_goal(load_gnet(ck / "gnet.pt"), s, betas, pts, c, generator=g, sdf=sdf)[:2]
     r = rollout(load_mnet(ck / "mnet.pt"), body, s, goal, betas, pts, c, bps_basis(), max_frames=max_frames)
 
     to_motion = lambda r6, t: Motion(matrix_to_axis_angle(rot6d_to_matrix(r6.double())).numpy(),  # noqa: E731

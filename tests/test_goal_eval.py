@@ -119,7 +119,7 @@ def test_tab1_only_recomputes_table_1_and_keeps_the_rest(tmp_path):
 
     import pytest
 
-    from graspkit.eval_goal import _all_files, gnet_table, main, tab1_results
+    from graspkit.eval_goal import PEN_ROW, _all_files, gnet_table, main, tab1_results
     from graspkit.models.gnet import load_gnet
 
     for k in range(3):                                                  # the mug is a test object
@@ -131,8 +131,9 @@ def test_tab1_only_recomputes_table_1_and_keeps_the_rest(tmp_path):
     out.write_text(json.dumps({"tab2": {"MNet": {"body": 1.0}}, "tab1": {"old": {}}}))
     assert main(args) == 0
     r = json.loads(out.read_text())
-    assert r["tab2"] == {"MNet": {"body": 1.0}} and set(r["tab1"]) == {"GNet w/o opt", "GNet", "synthetic GT"}
-    t = gnet_table(load_gnet(DATA_STUBS / "checkpoints" / "gnet.pt"), None, _all_files([tmp_path], "approach", "test"))
+    assert r["tab2"] == {"MNet": {"body": 1.0}} and set(r["tab1"]) == {"GNet w/o opt", "GNet", PEN_ROW, "synthetic GT"}
+    t = gnet_table(load_gnet(DATA_STUBS / "checkpoints" / "gnet.pt"), None, _all_files([tmp_path], "approach", "test"),
+                   penetration=True)
     for name, rows in t["samples"].items():
         v = np.array([x["volume_cm3"] for x in rows["rows"]])
         row = r["tab1"][name]
@@ -140,6 +141,8 @@ def test_tab1_only_recomputes_table_1_and_keeps_the_rest(tmp_path):
         assert row["volume_median_cm3"] == pytest.approx(np.median(v), abs=1e-9)
         assert row["volume_p90_cm3"] == pytest.approx(np.percentile(v, 90), abs=1e-9)
     ref, raw = (np.array([x["volume_cm3"] for x in t["samples"][k]["rows"]]) for k in ("GNet", "GNet w/o opt"))
-    assert r["tab1_paired"] == {"refined_lower": int((ref < raw).sum()), "refined_higher": int((ref > raw).sum()), "n": 3}
+    pen = np.array([x["volume_cm3"] for x in t["samples"][PEN_ROW]["rows"]])
+    assert r["tab1_paired"] == {"refined_lower": int((ref < raw).sum()), "refined_higher": int((ref > raw).sum()), "n": 3,
+                                "pen_lower": int((pen < raw).sum()), "pen_higher": int((pen > raw).sum())}
     with pytest.raises(ValueError, match="folders"):
         tab1_results([tmp_path / "empty"], DATA_STUBS / "checkpoints")

@@ -113,3 +113,121 @@ def test_motion_frame_refinement_meets_the_hand_targets(setup):
     before = (hand_body(pose_rotmats(axis_angle_to_rot6d(wrong).float()), betas, transl)[0] - target).norm(dim=-1).mean()
     after = (hand_body(pose_rotmats(r6), betas, t)[0] - target).norm(dim=-1).mean()
     assert before > 0.015 and after < 0.003
+
+
+# ------------------------------------------------------------------------------- graspkit's E_pen (not in GOAL)
+
+def _ball_grid(radius: float):
+    """An icosphere of `radius` at the origin and its signed-distance grid (cells of ~2 mm)."""
+    import trimesh
+
+    from graspkit.objects.sdf import SDFGrid
+
+    ball = trimesh.creation.icosphere(4, radius)
+    return ball, SDFGrid.from_mesh(ball, resolution=int(2 * (radius + 0.03) / 0.002) + 1)
+
+
+def test_posed_sdf_matches_trimesh_for_two_posed_objects():
+    """Each sample's object placed by its own R, t: the grid lookup of a point equals trimesh's exact signed distance
+    of the mesh moved there (within the grid's interpolation error), and the gradient reaches the points."""
+    import trimesh
+    from scipy.spatial.transform import Rotation
+
+    from graspkit.objects.sdf import SDFGrid
+    from graspkit.optim.goal_refine import PosedSDF
+
+    box = trimesh.creation.box((0.10, 0.06, 0.04))
+    _, ball_grid = _ball_grid(0.04)
+    ball = trimesh.creation.icosphere(4, 0.04)
+    box_grid = SDFGrid.from_mesh(box, resolution=96)
+    R = torch.tensor(Rotation.from_euler("zyx", [[0.7, 0.2, -0.3], [-1.2, 0.0, 0.5]]).as_matrix()).float()
+    t = torch.tensor([[0.3, -0.2, 0.9], [-0.5, 0.4, 1.1]])
+    sdf = PosedSDF([box_grid, ball_grid], R, t)
+    g = torch.Generator().manual_seed(0)
+    x = (t[:, None] + 0.06 * torch.randn(2, 400, 3, generator=g)).requires_grad_(True)
+    got = sdf(x)
+    for b, mesh in enumerate((box, ball)):
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R[b].double().numpy(), t[b].double().numpy()
+        m = mesh.copy()
+        m.apply_transform(T)
+        want = -trimesh.proximity.signed_distance(m, x[b].detach().double().numpy())   # trimesh: positive inside
+        near = np.abs(want) < 0.02
+        np.testing.assert_allclose(got[b].detach().numpy()[near], want[near], atol=1.5e-3)
+        assert (np.sign(got[b].detach().numpy()) == np.sign(want))[np.abs(want) > 3e-3].all()
+    got.sum().backward()
+    assert torch.isfinite(x.grad).all() and x.grad.abs().sum() > 0
+    with pytest.raises(ValueError, match="x: expected shape"):
+        sdf(torch.zeros(3, 5, 3))
+    with pytest.raises(ValueError, match="grids, R, t"):
+        PosedSDF([box_grid], R, t)
+
+
+def test_pen_term_is_the_summed_depth_of_hands_inner_points_and_forearms(setup):
+    """E_pen at a hand sunk into a ball equals the depth past the ball's surface, computed here from the full mesh
+    (hand and forearm vertices by their dominant joint, vertex normals by trimesh over the hand's own faces) and the
+    ball's closed-form distance |x - c| - r."""
+    import trimesh
+
+    from graspkit.optim.goal_refine import PosedSDF
+    from graspkit.optim.grasppose import forearm_vertex_ids, hand_vertex_ids
+
+    bm, gv, ref = setup
+    rot6d, betas, transl = axis_angle_to_rot6d(_grasp_pose()).float(), torch.zeros(1, 10), torch.zeros(1, 3)
+    full = bm.forward_rotmats(pose_rotmats(rot6d), betas=betas, transl=transl).vertices[0].double()
+    hands, arms = hand_vertex_ids(bm), forearm_vertex_ids(bm)
+    r = 0.04
+    right = hand_vertex_ids(bm, ("right",))
+    c = full[right].mean(0) + torch.tensor([0.0, 0.0, -0.03], dtype=torch.float64)    # the ball through the palm
+    _, grid = _ball_grid(r)
+    sdf = PosedSDF([grid], torch.eye(3)[None], c[None].float())
+    e = ref.energy(rot6d, transl, betas, {"rot6d": rot6d, "transl": transl, "head_dir": torch.zeros(1, 3),
+                                          "hand_offsets": torch.zeros(1, 99, 3)}, c[None, None].float(), sdf=sdf)
+    pos = -np.ones(len(full), dtype=np.int64)
+    pos[hands] = np.arange(len(hands))
+    f = pos[bm.faces.numpy()]
+    normals = trimesh.Trimesh(full[hands].numpy(), f[(f >= 0).all(1)], process=False).vertex_normals
+    h = full[hands].numpy()
+    pts = np.concatenate([h, h - 0.005 * normals, h - 0.01 * normals, full[arms].numpy()])
+    want = np.maximum(r - np.linalg.norm(pts - c.numpy(), axis=1), 0).sum()
+    assert want > 0.5                                                           # metres summed: well inside
+    assert float(e["pen"][0]) == pytest.approx(want, rel=0.02)
+    assert "pen" not in ref.energy(rot6d, transl, betas, {"rot6d": rot6d, "transl": transl,
+                                   "head_dir": torch.zeros(1, 3), "hand_offsets": torch.zeros(1, 99, 3)},
+                                   c[None, None].float())
+
+
+def test_pen_term_keeps_the_hand_out_of_the_ball_the_offsets_pull_it_into(setup):
+    """GNet's offsets put the hand 2 cm into a ball under the palm. Eq. 4-8 pull it in; with E_pen (PEN_WEIGHTS) the
+    hand stops at the surface and still touches it (closed-form ball distance of the full mesh's hand vertices)."""
+    from graspkit.optim.goal_refine import PEN_WEIGHTS, PosedSDF, replace_weights
+    from graspkit.optim.grasppose import hand_vertex_ids
+
+    bm, gv, ref = setup
+    aa, betas = _grasp_pose(), torch.zeros(1, 10)
+    rot6d, transl = axis_angle_to_rot6d(aa).float(), torch.zeros(1, 3)
+    transl[0, 2] -= ref.vertices(rot6d, transl, betas)[0, :, 2].min()
+    v = ref.vertices(rot6d, transl, betas)
+    r = 0.045
+    c = v[0, :99].mean(0) + torch.tensor([0.0, 0.0, -r - 0.005])                 # the palm 5 mm above the ball
+    obj = _sphere(c, r)
+    sunk = v[:, :99] - torch.tensor([0.0, 0.0, 0.02])                            # where the offsets put the hand
+    q = torch.nn.functional.normalize(v[:, 401] - v[:, 400], dim=-1)
+    hat = {"rot6d": rot6d, "transl": transl, "head_dir": q, "hand_offsets": hand_object_offsets(sunk, obj[None])}
+    _, grid = _ball_grid(r)
+    hands = hand_vertex_ids(bm)
+
+    def depth_and_gap(out):
+        full = bm.forward_rotmats(pose_rotmats(out.rot6d), betas=betas, transl=out.transl).vertices[0, hands]
+        d = (full - c).norm(dim=-1) - r
+        return float(-d.min()), float(d.abs().min())
+
+    plain = depth_and_gap(ref(hat, betas, obj, replace_weights(PEN_WEIGHTS, pen=0.0)))
+    pen = depth_and_gap(ref(hat, betas, obj, PEN_WEIGHTS, sdf=PosedSDF([grid], torch.eye(3)[None], c[None])))
+    assert plain[0] > 0.008                                                     # Eq. 4-8: the hand sinks in
+    assert pen[0] < 0.4 * plain[0] and pen[1] < 0.002                            # E_pen: out, and touching
+    with pytest.raises(ValueError, match="inner_depths"):
+        ref(hat, betas, obj, replace_weights(PEN_WEIGHTS, inner_depths=(-0.01,)),
+            sdf=PosedSDF([grid], torch.eye(3)[None], c[None]))
+    with pytest.raises(ValueError, match="sdf: expected one object per sample"):
+        ref(hat, betas, obj, PEN_WEIGHTS, sdf=PosedSDF([grid, grid], torch.eye(3).expand(2, 3, 3), c.expand(2, 3)))

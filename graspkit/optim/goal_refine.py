@@ -13,6 +13,15 @@ GNet refinement, E_GNet = λ_d E_d + λ_θ E_θ + λ_γ E_γ + λ_q E_q + λ_f E
 All terms are means over their elements (metres for E_d, E_γ, E_f), per sample; the batch sums them, so every
 sample is refined independently.
 
+graspkit's addition, E_pen (not in GOAL; on only when the refiner is given the object's signed distance, `PosedSDF`,
+and `GraspRefineWeights.pen` > 0): λ_pen Σ_x max(−S(x, O), 0) over the vertices of both hands, the same moved 5 and
+10 mm inward along the hand's vertex normals, and the forearm vertices — SAGA's E^B_colli with the points
+GraspPose-Opt uses (docs/saga.md). Why: Eq. 4–8 have no penetration term, and E_d pulls each of the 99 hand
+vertices to the object point closest to it *now*, which is on the far side of a thin wall as often as on the near
+one once a hand is inside; GNet's offsets are off by ~1.5 cm per coordinate, so the refinement pulls some hands into
+the object as it pulls others out (docs/goal.md). The inner points see a wall that passes between the hand's
+vertices. GOAL's Eq. 4–8 alone: `pen=0` or no `sdf`.
+
 MNet refinement (Eq. 12–13), once the hand is within 10 cm of the goal hand: each hand vertex is moved towards its
 goal position along the straight line at MNet's average predicted hand speed, v_{t+1} = v_t + ‖v̇_t‖ l (Eq. 12;
 graspkit stops at the goal instead of overshooting it), and the frame's θ, γ are fitted to those hand vertices with
@@ -20,15 +29,17 @@ E_MNet = λ_Θ E_Θ + λ_v^h E_v^h (Eq. 13): E_Θ couples to MNet's Θ̂ (square
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import torch
 from torch import Tensor
 
+from graspkit.body.markers import vertex_normals
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.models.gnet import SparseBody, pose_rotmats
 from graspkit.objects.distance import nearest_neighbours
+from graspkit.objects.sdf import SDFGrid
 
 FEET_PARTS = ("left_ankle", "right_ankle", "left_foot", "right_foot")
 GOAL_HAND_RADIUS = 0.10   # m: MNet's refinement starts when the hand is this close to the goal hand (§3.4)
@@ -58,8 +69,49 @@ class GraspRefineWeights:
     gamma: float = 0.02
     q: float = 0.05
     f: float = 1.0
+    pen: float = 0.0          # graspkit's E_pen (module docstring); used only with a PosedSDF
+    inner_depths: tuple[float, ...] = (0.005, 0.01)   # m: E_pen also at the hand vertices moved this far inward
+    pen_floor: float = 0.0    # m: E_pen's hinge floor, max(-S - floor, 0) (depth allowed for free)
     steps: int = 200
     lr: float = 3e-3
+
+
+# graspkit's refinement with E_pen (module docstring): λ_d 3 and λ_pen 0.1, chosen on the validation objects (apple,
+# toothbrush; 96 grasps: contact 1.00, volume 2.65 -> 0.14 cm³; docs/goal.md). Eq. 4–8 alone: GraspRefineWeights().
+PEN_WEIGHTS = GraspRefineWeights(d=3.0, pen=0.1)
+
+
+def replace_weights(w: GraspRefineWeights, **changes) -> GraspRefineWeights:
+    """A copy of `w` with some fields changed (dataclasses.replace)."""
+    return replace(w, **changes)
+
+
+class PosedSDF:
+    """Signed distance S(x, O) (B,N) for a batch of posed objects: sample b's object is grids[b] (an SDFGrid in the
+    mesh's own frame) placed by x = R[b] x_mesh + t[b]; samples that share a grid object are looked up together."""
+
+    def __init__(self, grids: list[SDFGrid], R: Tensor, t: Tensor) -> None:
+        if R.dim() != 3 or R.shape[1:] != (3, 3) or t.shape != (R.shape[0], 3) or len(grids) != R.shape[0]:
+            raise ValueError(f"grids, R, t: expected B grids, R (B,3,3), t (B,3); got {len(grids)}, "
+                             f"{tuple(R.shape)}, {tuple(t.shape)}")
+        self.grids, self.R, self.t = grids, R.float(), t.float()
+        groups: dict[int, list[int]] = {}
+        for b, g in enumerate(grids):
+            groups.setdefault(id(g), []).append(b)
+        self.groups = [(grids[ix[0]], torch.as_tensor(ix)) for ix in groups.values()]
+
+    def __len__(self) -> int:
+        return len(self.grids)
+
+    def __call__(self, x: Tensor) -> Tensor:
+        """x (B,N,3) in the posed frame -> signed distances (B,N), negative inside; differentiable in x."""
+        if x.dim() != 3 or x.shape[0] != len(self):
+            raise ValueError(f"x: expected shape ({len(self)}, N, 3), got {tuple(x.shape)}")
+        local = (x - self.t[:, None].to(x.dtype)) @ self.R.to(x.dtype)       # row vectors: R^T (x - t)
+        out = x.new_zeros(x.shape[:2])
+        for grid, ix in self.groups:
+            out = out.index_put((ix,), grid(local[ix]))
+        return out
 
 
 @dataclass
@@ -75,45 +127,75 @@ class GraspRefiner:
     """Eq. 4–8 on one body model: the sampled vertices (hand first), the head pair and the feet, evaluated sparsely."""
 
     def __init__(self, bm, gv, n_hand: int = 99) -> None:
-        self.n_hand, self.n_sampled = n_hand, len(gv.vertex_ids)
-        ids = np.concatenate([gv.vertex_ids, [gv.head_back, gv.head_front], feet_vertex_ids(bm)])
-        self.body = SparseBody(bm, torch.as_tensor(ids))
+        from graspkit.optim.grasppose import forearm_vertex_ids, hand_vertex_ids
 
-    def vertices(self, rot6d: Tensor, transl: Tensor, betas: Tensor) -> Tensor:
-        """Sparse vertices (B, 400 + 2 + feet, 3): sampled (hand first), head back, nose, feet."""
-        return self.body(pose_rotmats(rot6d), betas, transl)[0]
+        self.n_hand, self.n_sampled = n_hand, len(gv.vertex_ids)
+        base = np.concatenate([gv.vertex_ids, [gv.head_back, gv.head_front], feet_vertex_ids(bm)])
+        self.body = SparseBody(bm, torch.as_tensor(base))
+        hands, arms = hand_vertex_ids(bm), forearm_vertex_ids(bm)
+        self.pen_body = SparseBody(bm, torch.as_tensor(np.concatenate([base, hands, arms])))   # E_pen's points too
+        n0, nh = len(base), len(hands)
+        self.sl_hands, self.sl_arms = slice(n0, n0 + nh), slice(n0 + nh, None)
+        pos = torch.full((bm.num_vertices,), -1, dtype=torch.long)   # hand faces re-indexed into the hand slice
+        pos[torch.as_tensor(hands)] = torch.arange(nh)
+        f = pos[bm.faces.long()]
+        self.hand_faces = f[(f >= 0).all(1)]
+
+    def vertices(self, rot6d: Tensor, transl: Tensor, betas: Tensor, pen: bool = False) -> Tensor:
+        """Sparse vertices (B, 400 + 2 + feet [+ hands + forearms], 3): sampled (hand first), head back, nose, feet
+        (and, if `pen`, E_pen's hand and forearm vertices)."""
+        return (self.pen_body if pen else self.body)(pose_rotmats(rot6d), betas, transl)[0]
+
+    def pen_points(self, v: Tensor, inner_depths: tuple[float, ...]) -> Tensor:
+        """E_pen's points (B,M,3) of `vertices(..., pen=True)`: hand vertices, the same moved inward, forearms."""
+        h = v[:, self.sl_hands]
+        n = vertex_normals(h, self.hand_faces)
+        return torch.cat([h] + [h - d * n for d in inner_depths] + [v[:, self.sl_arms]], 1)
 
     def energy(self, rot6d: Tensor, transl: Tensor, betas: Tensor, hat: dict[str, Tensor], object_points: Tensor,
-               ground: float = 0.0) -> dict[str, Tensor]:
-        """Per-sample terms (B,) of Eq. 4–7 at (rot6d, transl) against GNet's `hat` (rot6d, transl, head_dir, hand_offsets)."""
-        v = self.vertices(rot6d, transl, betas)
+               ground: float = 0.0, sdf: PosedSDF | None = None,
+               inner_depths: tuple[float, ...] = (0.005, 0.01), pen_floor: float = 0.0) -> dict[str, Tensor]:
+        """Per-sample terms (B,) of Eq. 4–7 at (rot6d, transl) against GNet's `hat` (rot6d, transl, head_dir,
+        hand_offsets), and E_pen (summed depth, m) when `sdf` is given."""
+        v = self.vertices(rot6d, transl, betas, pen=sdf is not None)
         hand = v[:, :self.n_hand]
         d = hand_object_offsets(hand, object_points)
         back, front = v[:, self.n_sampled], v[:, self.n_sampled + 1]
         q = torch.nn.functional.normalize(front - back, dim=-1)
-        return {"d": (d - hat["hand_offsets"]).abs().mean((1, 2)),
-                "theta": (rot6d - hat["rot6d"]).pow(2).mean((1, 2)),
-                "gamma": (transl - hat["transl"]).abs().mean(1),
-                "q": (q - hat["head_dir"]).abs().mean(1),
-                "f": (v[..., 2].min(1).values - ground).abs()}
+        low = v[:, :self.sl_hands.start, 2] if sdf is not None else v[..., 2]
+        e = {"d": (d - hat["hand_offsets"]).abs().mean((1, 2)),
+             "theta": (rot6d - hat["rot6d"]).pow(2).mean((1, 2)),
+             "gamma": (transl - hat["transl"]).abs().mean(1),
+             "q": (q - hat["head_dir"]).abs().mean(1),
+             "f": (low.min(1).values - ground).abs()}
+        if sdf is not None:
+            e["pen"] = torch.relu(-sdf(self.pen_points(v, inner_depths)) - pen_floor).sum(-1)
+        return e
 
     def __call__(self, hat: dict[str, Tensor], betas: Tensor, object_points: Tensor,
-                 weights: GraspRefineWeights | None = None, ground: float = 0.0) -> RefinedGrasp:
+                 weights: GraspRefineWeights | None = None, ground: float = 0.0,
+                 sdf: PosedSDF | None = None) -> RefinedGrasp:
         """Refine GNet's outputs `hat` {rot6d (B,55,6), transl (B,3), head_dir (B,3), hand_offsets (B,99,3)}
-        for bodies `betas` (B,10) and object points (B,P,3)|(P,3), world frame, z up."""
+        for bodies `betas` (B,10) and object points (B,P,3)|(P,3), world frame, z up; with `sdf` (the objects'
+        signed distance in this frame) and weights.pen > 0, graspkit's E_pen as well."""
         for k, shape in (("rot6d", (55, 6)), ("transl", (3,)), ("head_dir", (3,)), ("hand_offsets", (self.n_hand, 3))):
             if k not in hat or tuple(hat[k].shape[1:]) != shape:
                 raise ValueError(f"hat[{k!r}]: expected shape (B, {', '.join(map(str, shape))}), "
                                  f"got {None if k not in hat else tuple(hat[k].shape)}")
         w = weights or GraspRefineWeights()
-        lam = {"d": w.d, "theta": w.theta, "gamma": w.gamma, "q": w.q, "f": w.f}
+        if any(not 0 <= x < 0.05 for x in w.inner_depths):
+            raise ValueError(f"weights.inner_depths: expected depths in [0, 0.05) m, got {w.inner_depths}")
+        if sdf is not None and len(sdf) != hat["rot6d"].shape[0]:
+            raise ValueError(f"sdf: expected one object per sample ({hat['rot6d'].shape[0]}), got {len(sdf)}")
+        sdf = sdf if w.pen > 0 else None
+        lam = {"d": w.d, "theta": w.theta, "gamma": w.gamma, "q": w.q, "f": w.f, "pen": w.pen}
         hat = {k: t.detach() for k, t in hat.items()}
         rot6d = hat["rot6d"].clone().requires_grad_(True)
         transl = hat["transl"].clone().requires_grad_(True)
         opt = torch.optim.Adam([rot6d, transl], lr=w.lr)
         history = []
         for step in range(w.steps + 1):
-            terms = self.energy(rot6d, transl, betas, hat, object_points, ground)
+            terms = self.energy(rot6d, transl, betas, hat, object_points, ground, sdf, w.inner_depths, w.pen_floor)
             total = sum(lam[k] * t for k, t in terms.items())
             if step in (0, w.steps):
                 history.append({"step": step, "E": float(total.detach().mean()),
