@@ -149,14 +149,16 @@ def saga_rows(res: dict) -> list[Row]:
 
 
 def goal_rows(res: dict) -> list[Row]:
-    """GOAL's Tab. 1 row (GNet + refinement) and its motions' sliding (GNet + MNet) from a graspkit.eval_goal result."""
+    """GOAL's Tab. 1 rows (GNet + refinement: Eq. 4-8, and with graspkit's E_pen) and its motions' sliding (GNet + MNet)
+    from a graspkit.eval_goal result."""
     rows = []
-    for key, r in res.get("tab1", {}).items():
-        if key.startswith("GNet") and "w/o" not in key:
-            rows.append(Row("grasp", "GOAL (GNet + refinement)", "graspkit",
+    names = {"GNet": "GOAL (GNet + refinement)", "GNet + E_pen (graspkit)": "GOAL (GNet + refinement + E_pen, graspkit's)"}
+    for key, name in names.items():
+        r = res.get("tab1", {}).get(key)
+        if r:
+            rows.append(Row("grasp", name, "graspkit",
                             {k: float(r[k]) for k in ("contact_ratio", "volume_cm3", "depth_cm") if k in r},
                             f"{r.get('n', '?')} grasps"))
-            break
     for key, v in res.get("sliding", {}).items():
         if key.startswith("GOAL"):
             rows.append(Row("motion", "GOAL (GNet + MNet)", "graspkit", {"slide_goal": 100 * float(v)},
