@@ -410,7 +410,7 @@ def posed_sdfs(seqs: list, frames: list[int], R: Tensor, o: Tensor):
     grids = {n: collision_sdf_grid(n) for n in sorted({s.object_name for s in seqs})}
     Ro = torch.stack([torch.as_tensor(s.object_rotation()[f]) for s, f in zip(seqs, frames)]).float()
     to = torch.stack([torch.as_tensor(np.asarray(s.object_transl[f])) for s, f in zip(seqs, frames)]).float()
-    return PosedSDF([grids[s.object_name] for s in seqs], R.float() @ Ro, ((to - o.float())[:, None] @ R.float().transpose(1, 2))[:, 0])
+    return PosedSDF.in_frame([grids[s.object_name] for s in seqs], Ro, to, R, o)
 
 
 def gnet_table(gnet, baseline, seqs: list, seed: int = 0, refine_weights=None, penetration: bool = False,
@@ -670,8 +670,7 @@ def gnet_goal(gnet, start: tuple[Tensor, Tensor], betas: Tensor, object_points: 
     posed = None
     if sdf is not None:
         grid, Ro, to = sdf
-        Ro, to = torch.as_tensor(Ro).float().reshape(3, 3), torch.as_tensor(to).float().reshape(3)
-        posed = PosedSDF([grid], R @ Ro, ((to - o[0]) @ R[0].T)[None])
+        posed = PosedSDF.in_frame([grid], torch.as_tensor(Ro).reshape(1, 3, 3), torch.as_tensor(to).reshape(1, 3), R, o)
         refine_weights = refine_weights or PEN_WEIGHTS
     ref = GraspRefiner(bm, gv)(hat, b, pts, refine_weights, sdf=posed)
     Ri, oi = _invert(R, o)

@@ -51,19 +51,18 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     """GOAL for object `name` (a catalogue name, a mesh file or a trimesh.Trimesh, closed and in metres): one
     refined GNet grasp and MNet's approach into it from a standing start, seeded. `penetration`: the refinement
     adds graspkit's E_pen on the object's collision grid (False: GOAL's Eq. 4-8 alone; docs/goal.md)."""
+    from graspkit.data.grasp_io import collision_sdf_grid
     from graspkit.data.reaching import plan_reach
     from graspkit.eval_goal import _body, gnet_goal, sliding
     from graspkit.metrics import grasp_and_end_figures
     from graspkit.models.gnet import load_gnet
     from graspkit.models.mnet import load_mnet, rollout
     from graspkit.objects.bps import bps_basis
+    from graspkit.objects.catalogue import list_objects
     from graspkit.objects.placement import apply_pose, within_reach_pose
     from graspkit.objects.sampling import sample_surface
     from graspkit.objects.user import as_object
     from graspkit.rotations import axis_angle_to_rot6d, matrix_to_axis_angle, rot6d_to_matrix
-
-    from graspkit.data.grasp_io import collision_sdf_grid
-    from graspkit.objects.catalogue import list_objects
 
     grid_key = name if isinstance(name, str) and name in list_objects() else None   # catalogue grids are cached
     name, obj_mesh = as_object(name, "name")

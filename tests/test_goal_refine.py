@@ -200,7 +200,9 @@ def test_pen_term_is_the_summed_depth_of_hands_inner_points_and_forearms(setup):
 def test_pen_term_keeps_the_hand_out_of_the_ball_the_offsets_pull_it_into(setup):
     """GNet's offsets put the hand 2 cm into a ball under the palm. Eq. 4-8 pull it in; with E_pen (PEN_WEIGHTS) the
     hand stops at the surface and still touches it (closed-form ball distance of the full mesh's hand vertices)."""
-    from graspkit.optim.goal_refine import PEN_WEIGHTS, PosedSDF, replace_weights
+    from dataclasses import replace
+
+    from graspkit.optim.goal_refine import PEN_WEIGHTS, PosedSDF
     from graspkit.optim.grasppose import hand_vertex_ids
 
     bm, gv, ref = setup
@@ -222,12 +224,12 @@ def test_pen_term_keeps_the_hand_out_of_the_ball_the_offsets_pull_it_into(setup)
         d = (full - c).norm(dim=-1) - r
         return float(-d.min()), float(d.abs().min())
 
-    plain = depth_and_gap(ref(hat, betas, obj, replace_weights(PEN_WEIGHTS, pen=0.0)))
+    plain = depth_and_gap(ref(hat, betas, obj, replace(PEN_WEIGHTS, pen=0.0)))
     pen = depth_and_gap(ref(hat, betas, obj, PEN_WEIGHTS, sdf=PosedSDF([grid], torch.eye(3)[None], c[None])))
     assert plain[0] > 0.008                                                     # Eq. 4-8: the hand sinks in
     assert pen[0] < 0.4 * plain[0] and pen[1] < 0.002                            # E_pen: out, and touching
     with pytest.raises(ValueError, match="inner_depths"):
-        ref(hat, betas, obj, replace_weights(PEN_WEIGHTS, inner_depths=(-0.01,)),
+        ref(hat, betas, obj, replace(PEN_WEIGHTS, inner_depths=(-0.01,)),
             sdf=PosedSDF([grid], torch.eye(3)[None], c[None]))
     with pytest.raises(ValueError, match="sdf: expected one object per sample"):
         ref(hat, betas, obj, PEN_WEIGHTS, sdf=PosedSDF([grid, grid], torch.eye(3).expand(2, 3, 3), c.expand(2, 3)))

@@ -29,7 +29,7 @@ E_MNet = λ_Θ E_Θ + λ_v^h E_v^h (Eq. 13): E_Θ couples to MNet's Θ̂ (square
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -81,11 +81,6 @@ class GraspRefineWeights:
 PEN_WEIGHTS = GraspRefineWeights(d=3.0, pen=0.1)
 
 
-def replace_weights(w: GraspRefineWeights, **changes) -> GraspRefineWeights:
-    """A copy of `w` with some fields changed (dataclasses.replace)."""
-    return replace(w, **changes)
-
-
 class PosedSDF:
     """Signed distance S(x, O) (B,N) for a batch of posed objects: sample b's object is grids[b] (an SDFGrid in the
     mesh's own frame) placed by x = R[b] x_mesh + t[b]; samples that share a grid object are looked up together."""
@@ -99,6 +94,13 @@ class PosedSDF:
         for b, g in enumerate(grids):
             groups.setdefault(id(g), []).append(b)
         self.groups = [(grids[ix[0]], torch.as_tensor(ix)) for ix in groups.values()]
+
+    @classmethod
+    def in_frame(cls, grids: list[SDFGrid], R_obj: Tensor, t_obj: Tensor, R: Tensor, o: Tensor) -> "PosedSDF":
+        """Objects posed in the world by x_w = R_obj x_mesh + t_obj ((B,3,3), (B,3)), seen in the frame
+        x' = R (x_w - o) ((B,3,3), (B,3)): R' = R R_obj, t' = R (t_obj - o)."""
+        R, o = R.float(), o.float()
+        return cls(grids, R @ R_obj.float(), ((t_obj.float() - o)[:, None] @ R.transpose(1, 2))[:, 0])
 
     def __len__(self) -> int:
         return len(self.grids)
@@ -127,7 +129,7 @@ class GraspRefiner:
     """Eq. 4–8 on one body model: the sampled vertices (hand first), the head pair and the feet, evaluated sparsely."""
 
     def __init__(self, bm, gv, n_hand: int = 99) -> None:
-        from graspkit.optim.grasppose import forearm_vertex_ids, hand_vertex_ids
+        from graspkit.optim.grasppose import forearm_vertex_ids, hand_faces, hand_vertex_ids
 
         self.n_hand, self.n_sampled = n_hand, len(gv.vertex_ids)
         base = np.concatenate([gv.vertex_ids, [gv.head_back, gv.head_front], feet_vertex_ids(bm)])
@@ -136,10 +138,7 @@ class GraspRefiner:
         self.pen_body = SparseBody(bm, torch.as_tensor(np.concatenate([base, hands, arms])))   # E_pen's points too
         n0, nh = len(base), len(hands)
         self.sl_hands, self.sl_arms = slice(n0, n0 + nh), slice(n0 + nh, None)
-        pos = torch.full((bm.num_vertices,), -1, dtype=torch.long)   # hand faces re-indexed into the hand slice
-        pos[torch.as_tensor(hands)] = torch.arange(nh)
-        f = pos[bm.faces.long()]
-        self.hand_faces = f[(f >= 0).all(1)]
+        self.hand_faces = hand_faces(bm, torch.as_tensor(hands))
 
     def vertices(self, rot6d: Tensor, transl: Tensor, betas: Tensor, pen: bool = False) -> Tensor:
         """Sparse vertices (B, 400 + 2 + feet [+ hands + forearms], 3): sampled (hand first), head back, nose, feet

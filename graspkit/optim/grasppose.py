@@ -233,6 +233,14 @@ def hand_vertex_ids(bm, sides: tuple[str, ...] = ("left", "right")) -> np.ndarra
     return np.flatnonzero(np.isin(bm.lbs_weights.argmax(1).numpy(), parts))
 
 
+def hand_faces(bm, hands: Tensor) -> Tensor:
+    """The body's faces whose three vertices are all hand vertices (ids `hands` (n,)), re-indexed into 0..n-1 (F,3)."""
+    pos = torch.full((bm.num_vertices,), -1, dtype=torch.long)
+    pos[hands] = torch.arange(len(hands))
+    f = pos[bm.faces.long()]
+    return f[(f >= 0).all(1)]
+
+
 def forearm_vertex_ids(bm) -> np.ndarray:
     """Vertex ids (sorted) dominated by the elbows' joints (the forearms)."""
     parts = [JOINT_INDEX[f"{s}_elbow"] for s in ("left", "right")]
@@ -292,11 +300,7 @@ class GraspPoseOpt:
         n_m, n_h, n_f = len(self.marker_ids), len(hands), len(feet)
         self.sl_markers, self.sl_hands = slice(0, n_m), slice(n_m, n_m + n_h)
         self.sl_feet, self.sl_arms = slice(n_m + n_h, n_m + n_h + n_f), slice(n_m + n_h + n_f, None)
-        # hand faces re-indexed into the hand slice (for vertex normals of the hand surface)
-        pos = torch.full((bm.num_vertices,), -1, dtype=torch.long)
-        pos[hands] = torch.arange(n_h)
-        f = pos[bm.faces.long()]
-        self.hand_faces = f[(f >= 0).all(1)]
+        self.hand_faces = hand_faces(bm, hands)      # into the hand slice, for vertex normals of the hand surface
         self.hand_ids = hands
         k = self.cfg.n_pca
         self.pca = {s: getattr(bm, f"{s}_hand_components")[:k].float() for s in ("left", "right")}

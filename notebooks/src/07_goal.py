@@ -189,10 +189,10 @@ from graspkit.data.grasp_io import collision_sdf_grid
 from graspkit.metrics import grasp_metrics
 from graspkit.optim.goal_refine import PEN_WEIGHTS, PosedSDF
 
-f = clip.goal_frame
-R_mug = scene["R"][0] @ torch.as_tensor(seq.object_rotation()[f]).float()          # mug frame -> GNet's frame
-t_mug = scene["R"][0] @ (torch.as_tensor(seq.object_transl[f]).float() - scene["o"][0])
-sdf = PosedSDF([collision_sdf_grid("mug")] * K, R_mug.expand(K, 3, 3), t_mug.expand(K, 3))
+f = clip.goal_frame                                             # the mug's pose in the world, seen in GNet's frame
+R_mug, t_mug = torch.as_tensor(seq.object_rotation()[f])[None], torch.as_tensor(seq.object_transl[f])[None]
+sdf = PosedSDF.in_frame([collision_sdf_grid("mug")] * K, R_mug.expand(K, 3, 3), t_mug.expand(K, 3),
+                        scene["R"].expand(K, 3, 3), scene["o"].expand(K, 3))
 pen = refiner(hat, cond["betas"], scene["points"].expand(K, -1, -1), PEN_WEIGHTS, sdf=sdf)
 V_pen = grasp_bodies(pen.rot6d, pen.transl, cond["betas"])
 print("per sample: volume (cm³) / depth (cm) / contact     GNet's sample  |     Eq. 4-8      |     + E_pen")
