@@ -151,8 +151,10 @@ def saga_rows(res: dict) -> list[Row]:
 def goal_rows(res: dict) -> list[Row]:
     """GOAL's Tab. 1 rows (GNet + refinement: Eq. 4-8, and with graspkit's E_pen) and its motions' sliding (GNet + MNet)
     from a graspkit.eval_goal result."""
+    from graspkit.eval_goal import PEN_ROW
+
     rows = []
-    names = {"GNet": "GOAL (GNet + refinement)", "GNet + E_pen (graspkit)": "GOAL (GNet + refinement + E_pen, graspkit's)"}
+    names = {"GNet": "GOAL (GNet + refinement)", PEN_ROW: "GOAL (GNet + refinement + E_pen, graspkit's)"}
     for key, name in names.items():
         r = res.get("tab1", {}).get(key)
         if r:

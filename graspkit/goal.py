@@ -51,20 +51,19 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     """GOAL for object `name` (a catalogue name, a mesh file or a trimesh.Trimesh, closed and in metres): one
     refined GNet grasp and MNet's approach into it from a standing start, seeded. `penetration`: the refinement
     adds graspkit's E_pen on the object's collision grid (False: GOAL's Eq. 4-8 alone; docs/goal.md)."""
-    from graspkit.data.grasp_io import collision_sdf_grid
+    from graspkit.data.grasp_io import object_collision_grid
     from graspkit.data.reaching import plan_reach
     from graspkit.eval_goal import _body, gnet_goal, sliding
     from graspkit.metrics import grasp_and_end_figures
     from graspkit.models.gnet import load_gnet
     from graspkit.models.mnet import load_mnet, rollout
     from graspkit.objects.bps import bps_basis
-    from graspkit.objects.catalogue import list_objects
     from graspkit.objects.placement import apply_pose, within_reach_pose
     from graspkit.objects.sampling import sample_surface
     from graspkit.objects.user import as_object
     from graspkit.rotations import axis_angle_to_rot6d, matrix_to_axis_angle, rot6d_to_matrix
 
-    grid_key = name if isinstance(name, str) and name in list_objects() else None   # catalogue grids are cached
+    given = name                     # as the caller gave it: a catalogue name keeps its cached grid
     name, obj_mesh = as_object(name, "name")
     if not 0 < start_distance <= 5.0:
         raise ValueError(f"start_distance: expected metres in (0, 5], got {start_distance}")
@@ -89,7 +88,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     s = (axis_angle_to_rot6d(torch.as_tensor(first.poses[0], dtype=torch.float64)).float(),
          torch.as_tensor(first.trans[0]).float())
     g = torch.Generator().manual_seed(seed)
-    sdf = (collision_sdf_grid(grid_key or obj_mesh), pose.rotation, pose.translation) if penetration else None
+    sdf = (object_collision_grid(given, obj_mesh), pose.rotation, pose.translation) if penetration else None
     goal = gnet_goal(load_gnet(ck / "gnet.pt"), s, betas, pts, c, generator=g, sdf=sdf)[:2]
     r = rollout(load_mnet(ck / "mnet.pt"), body, s, goal, betas, pts, c, bps_basis(), max_frames=max_frames)
 

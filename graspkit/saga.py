@@ -84,14 +84,13 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     prior latent alone; docs/saga.md).
     """
     from graspkit.body import BodyModel
-    from graspkit.data.grasp_io import collision_sdf_grid
+    from graspkit.data.grasp_io import object_collision_grid
     from graspkit.data.motion import canonicalize
     from graspkit.data.motionfill_dataset import make_windows
     from graspkit.eval_motionfill import heel_columns, interp, load_motionfill, skating
     from graspkit.metrics import grasp_and_end_figures
     from graspkit.models.pose_prior import load_pose_prior
     from graspkit.models.wholegrasp import load_wholegrasp
-    from graspkit.objects.catalogue import list_objects
     from graspkit.objects.placement import apply_pose, within_reach_pose
     from graspkit.objects.sampling import sample_surface
     from graspkit.objects.user import as_object
@@ -99,7 +98,7 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     from graspkit.optim.grasppose import GraspObject, GraspPoseConfig, GraspPoseOpt
     from graspkit.paths import default_model_path
 
-    grid_key = name if isinstance(name, str) and name in list_objects() else None   # catalogue grids are shipped
+    given = name                     # as the caller gave it: a catalogue name keeps its cached grid
     name, obj_mesh = as_object(name, "name")
     if start_distance <= 0:
         raise ValueError(f"start_distance: expected a positive distance in metres, got {start_distance}")
@@ -121,7 +120,7 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     s = wg.sample(P, N, float(centre[2]), 1, g, centre=torch.zeros(3))
     gcfg = GraspPoseConfig(steps=grasp_steps)
     opt = GraspPoseOpt(bm, prior, gcfg if free_joints is None else replace(gcfg, free_joints=tuple(free_joints)))
-    grid = collision_sdf_grid(grid_key or obj_mesh)
+    grid = object_collision_grid(given, obj_mesh)
     res = opt.fit(s.markers, GraspObject(P, N, float(centre[2]), grid, R_t), s.marker_contact, s.object_contact,
                   progress=progress).to_world(torch.as_tensor(centre).float())
     mesh = apply_pose(pose, obj_mesh)

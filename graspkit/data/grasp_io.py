@@ -86,6 +86,15 @@ def collision_sdf_grid(name: str | trimesh.Trimesh, folder: Path | None = None) 
     return cached_sdf_grid(name, resolution_for(name, COLLISION_CELL), folder)
 
 
+def object_collision_grid(obj: object, mesh: trimesh.Trimesh) -> SDFGrid:
+    """The collision grid for an object as a user gave it (`obj`: what objects.user.as_object took, `mesh`: the mesh
+    it returned): a catalogue name keeps its name's grid (cached, or shipped in data_stubs/sdf), anything else the
+    mesh's own."""
+    from graspkit.objects.catalogue import list_objects
+
+    return collision_sdf_grid(obj if isinstance(obj, str) and obj in list_objects() else mesh)
+
+
 def ship_sdf_grid(name: str, resolution: int, folder: Path = DATA_STUBS / "sdf") -> Path:
     """Write object `name`'s grid at `resolution` into `folder` with float16 values (within 0.03 mm of float32) for
     shipping in data_stubs/sdf, e.g. `ship_sdf_grid("mug", resolution_for("mug", COLLISION_CELL))` (lesson 05)."""

@@ -35,7 +35,6 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from graspkit.body.markers import vertex_normals
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.models.gnet import SparseBody, pose_rotmats
 from graspkit.objects.distance import nearest_neighbours
@@ -146,10 +145,11 @@ class GraspRefiner:
         return (self.pen_body if pen else self.body)(pose_rotmats(rot6d), betas, transl)[0]
 
     def pen_points(self, v: Tensor, inner_depths: tuple[float, ...]) -> Tensor:
-        """E_pen's points (B,M,3) of `vertices(..., pen=True)`: hand vertices, the same moved inward, forearms."""
-        h = v[:, self.sl_hands]
-        n = vertex_normals(h, self.hand_faces)
-        return torch.cat([h] + [h - d * n for d in inner_depths] + [v[:, self.sl_arms]], 1)
+        """E_pen's points (B,M,3) of `vertices(..., pen=True)`: hand vertices, the same moved inward, forearms
+        (GraspPose-Opt's E^B_colli points, grasppose.collision_points)."""
+        from graspkit.optim.grasppose import collision_points
+
+        return collision_points(v[:, self.sl_hands], self.hand_faces, inner_depths, v[:, self.sl_arms])
 
     def energy(self, rot6d: Tensor, transl: Tensor, betas: Tensor, hat: dict[str, Tensor], object_points: Tensor,
                ground: float = 0.0, sdf: PosedSDF | None = None,
@@ -182,8 +182,8 @@ class GraspRefiner:
                 raise ValueError(f"hat[{k!r}]: expected shape (B, {', '.join(map(str, shape))}), "
                                  f"got {None if k not in hat else tuple(hat[k].shape)}")
         w = weights or GraspRefineWeights()
-        if any(not 0 <= x < 0.05 for x in w.inner_depths):
-            raise ValueError(f"weights.inner_depths: expected depths in [0, 0.05) m, got {w.inner_depths}")
+        if any(not 0 < x < 0.05 for x in w.inner_depths):
+            raise ValueError(f"weights.inner_depths: expected depths in metres in (0, 0.05), got {w.inner_depths}")
         if sdf is not None and len(sdf) != hat["rot6d"].shape[0]:
             raise ValueError(f"sdf: expected one object per sample ({hat['rot6d'].shape[0]}), got {len(sdf)}")
         sdf = sdf if w.pen > 0 else None

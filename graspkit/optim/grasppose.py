@@ -241,6 +241,20 @@ def hand_faces(bm, hands: Tensor) -> Tensor:
     return f[(f >= 0).all(1)]
 
 
+def collision_points(hands: Tensor, faces: Tensor, inner_depths: tuple[float, ...], arms: Tensor | None = None,
+                     with_hands: bool = True, normals: Tensor | None = None) -> Tensor:
+    """E^B_colli's query points (B,M,3) beyond Alg. 1's: the hand vertices (B,n_h,3) (if `with_hands`), the same moved
+    each of `inner_depths` inward along the hand's vertex normals (of `faces`; computed unless `normals` is given),
+    and the forearm vertices `arms` (B,n_a,3) if given. M may be 0."""
+    q = [hands] if with_hands else []
+    if inner_depths:
+        n = vertex_normals(hands, faces) if normals is None else normals
+        q += [hands - d * n for d in inner_depths]
+    if arms is not None:
+        q.append(arms)
+    return torch.cat(q, 1) if q else hands[:, :0]
+
+
 def forearm_vertex_ids(bm) -> np.ndarray:
     """Vertex ids (sorted) dominated by the elbows' joints (the forearms)."""
     parts = [JOINT_INDEX[f"{s}_elbow"] for s in ("left", "right")]
@@ -422,16 +436,10 @@ class GraspPoseOpt:
         sparse body v (B,n,3): the hand vertices moved cfg.inner_depths inward along their normals (B,n_h,3; computed
         if not given) and the forearm vertices (and the hand vertices themselves if `hands`)."""
         cfg, w = self.cfg, self.cfg.weights
-        h = v[:, self.sl_hands]
-        q = [h] if hands else []
-        if cfg.inner_depths:
-            n = vertex_normals(h, self.hand_faces) if normals is None else normals
-            q += [h - d * n for d in cfg.inner_depths]
-        if cfg.forearms:
-            q.append(v[:, self.sl_arms])
-        if not q:
+        q = collision_points(v[:, self.sl_hands], self.hand_faces, cfg.inner_depths,
+                             v[:, self.sl_arms] if cfg.forearms else None, with_hands=hands, normals=normals)
+        if q.shape[1] == 0:
             return torch.zeros(v.shape[0], dtype=v.dtype)
-        q = torch.cat(q, 1)
         if obj.sdf is not None:
             sd = obj.signed_distance(q)
         else:
