@@ -233,3 +233,49 @@ def test_pen_term_keeps_the_hand_out_of_the_ball_the_offsets_pull_it_into(setup)
             sdf=PosedSDF([grid], torch.eye(3)[None], c[None]))
     with pytest.raises(ValueError, match="sdf: expected one object per sample"):
         ref(hat, betas, obj, PEN_WEIGHTS, sdf=PosedSDF([grid, grid], torch.eye(3).expand(2, 3, 3), c.expand(2, 3)))
+
+
+def _hand_surface(bm, ref, rot6d, betas, transl):
+    """Both hands' vertices (N,3) as the refiner poses them and their trimesh vertex normals over the hands' own
+    faces of the full mesh."""
+    import trimesh
+
+    from graspkit.optim.grasppose import hand_vertex_ids
+
+    hands = hand_vertex_ids(bm)
+    pos = -np.ones(bm.lbs_weights.shape[0], dtype=np.int64)
+    pos[hands] = np.arange(len(hands))
+    f = pos[bm.faces.numpy()]
+    h = ref.vertices(rot6d, transl, betas, pen=True)[0, ref.sl_hands].double().numpy()
+    return h, trimesh.Trimesh(h, f[(f >= 0).all(1)], process=False).vertex_normals
+
+
+def test_pen_object_term_is_the_summed_depth_of_object_points_inside_the_hands(setup):
+    """E_pen's other way: object points 1 mm inside the hands (moved along trimesh's normals) count their distance to
+    the nearest hand vertex (a k-d tree), points 2 mm outside count nothing; near_object_points are the k points
+    nearest the hands (the k-d tree again)."""
+    from graspkit.optim.goal_refine import PosedSDF
+
+    bm, gv, ref = setup
+    rot6d, betas, transl = axis_angle_to_rot6d(_grasp_pose()).float(), torch.zeros(1, 10), torch.zeros(1, 3)
+    h, n = _hand_surface(bm, ref, rot6d, betas, transl)
+    pick = np.random.default_rng(0).choice(len(h), 300, replace=False)
+    inside, outside = h[pick[:200]] - 0.001 * n[pick[:200]], h[pick[200:]] + 0.002 * n[pick[200:]]
+    pts = torch.tensor(np.concatenate([inside, outside]))[None].float()
+    _, grid = _ball_grid(0.02)
+    far = PosedSDF([grid], torch.eye(3)[None], torch.tensor([[5.0, 5.0, 5.0]]))   # an object E^B_colli does not see
+    hat = {"rot6d": rot6d, "transl": transl, "head_dir": torch.zeros(1, 3), "hand_offsets": torch.zeros(1, 99, 3)}
+    near = torch.arange(300)[None]
+    e = ref.energy(rot6d, transl, betas, hat, pts, sdf=far, near=near)
+    want = cKDTree(h).query(inside)[0].sum()
+    assert want == pytest.approx(0.2, rel=0.1)                                   # about 1 mm each
+    assert float(e["pen_object"][0]) == pytest.approx(want, rel=0.01)
+    assert float(e["pen"][0]) == 0.0
+    only_out = ref.energy(rot6d, transl, betas, hat, pts, sdf=far, near=near[:, 200:])
+    assert float(only_out["pen_object"][0]) == 0.0
+    assert "pen_object" not in ref.energy(rot6d, transl, betas, hat, pts, sdf=far)
+    v = ref.vertices(rot6d, transl, betas, pen=True)
+    cloud = torch.tensor(h.mean(0) + 0.08 * np.random.default_rng(1).standard_normal((400, 3)))[None].float()
+    got = ref.near_object_points(v, cloud, 50)[0].numpy()
+    d = cKDTree(h).query(cloud[0].numpy())[0]
+    assert set(got.tolist()) == set(np.argsort(d)[:50].tolist())

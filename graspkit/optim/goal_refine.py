@@ -14,13 +14,18 @@ All terms are means over their elements (metres for E_d, E_γ, E_f), per sample;
 sample is refined independently.
 
 graspkit's addition, E_pen (not in GOAL; on only when the refiner is given the object's signed distance, `PosedSDF`,
-and `GraspRefineWeights.pen` > 0): λ_pen Σ_x max(−S(x, O), 0) over the vertices of both hands, the same moved 5 and
-10 mm inward along the hand's vertex normals, and the forearm vertices — SAGA's E^B_colli with the points
-GraspPose-Opt uses (docs/saga.md). Why: Eq. 4–8 have no penetration term, and E_d pulls each of the 99 hand
-vertices to the object point closest to it *now*, which is on the far side of a thin wall as often as on the near
-one once a hand is inside; GNet's offsets are off by ~1.5 cm per coordinate, so the refinement pulls some hands into
-the object as it pulls others out (docs/goal.md). The inner points see a wall that passes between the hand's
-vertices. GOAL's Eq. 4–8 alone: `pen=0` or no `sdf`.
+and `GraspRefineWeights.pen` > 0) — SAGA's E_colli (Eq. 7) both ways, with the points GraspPose-Opt uses
+(docs/saga.md):
+    λ_pen Σ_x max(−S(x, O), 0)      x: the vertices of both hands, the same moved 5 and 10 mm inward along the hand's
+                                    vertex normals, and the forearm vertices (E^B_colli)
+  + λ_pen^O Σ_o max(−S(o, V^h), 0)  o: the `object_near` object points nearest the hands (re-chosen every `refresh`
+                                    steps), S(o, V^h) signed by the normal of the nearest hand vertex (E^O_colli)
+Why: Eq. 4–8 have no penetration term, and E_d pulls each of the 99 hand vertices to the object point closest to it
+*now*, which is on the far side of a thin wall as often as on the near one once a hand is inside; GNet's offsets are
+off by ~1.5 cm per coordinate, so the refinement pulls some hands into the object as it pulls others out
+(docs/goal.md). The inner points see a wall that passes between the hand's vertices; the second sum sees an edge of
+the object (a mug's rim or handle) cutting into the palm between vertices, which no hand point sees. GOAL's Eq. 4–8
+alone: `pen=0` or no `sdf`.
 
 MNet refinement (Eq. 12–13), once the hand is within 10 cm of the goal hand: each hand vertex is moved towards its
 goal position along the straight line at MNet's average predicted hand speed, v_{t+1} = v_t + ‖v̇_t‖ l (Eq. 12;
@@ -71,13 +76,17 @@ class GraspRefineWeights:
     pen: float = 0.0          # graspkit's E_pen (module docstring); used only with a PosedSDF
     inner_depths: tuple[float, ...] = (0.005, 0.01)   # m: E_pen also at the hand vertices moved this far inward
     pen_floor: float = 0.0    # m: E_pen's hinge floor, max(-S - floor, 0) (depth allowed for free)
+    pen_object: float = 0.0   # λ_pen^O: E_pen's other way, object points inside the hands (only with pen > 0)
+    object_near: int = 512    # object points (nearest the hands) that the other way looks at
+    refresh: int = 10         # steps between choosing them again
     steps: int = 200
     lr: float = 3e-3
 
 
-# graspkit's refinement with E_pen (module docstring): λ_d 3 and λ_pen 0.1, chosen on the validation objects (apple,
-# toothbrush; 96 grasps: contact 1.00, volume 2.65 -> 0.14 cm³; docs/goal.md). Eq. 4–8 alone: GraspRefineWeights().
-PEN_WEIGHTS = GraspRefineWeights(d=3.0, pen=0.1)
+# graspkit's refinement with E_pen (module docstring): λ_d 3, λ_pen 0.1 and λ_pen^O PEN_OBJECT, chosen on the
+# validation objects (apple, toothbrush; docs/goal.md). Eq. 4–8 alone: GraspRefineWeights().
+PEN_OBJECT = 0.03
+PEN_WEIGHTS = GraspRefineWeights(d=3.0, pen=0.1, pen_object=PEN_OBJECT)
 
 
 class PosedSDF:
@@ -151,11 +160,21 @@ class GraspRefiner:
 
         return collision_points(v[:, self.sl_hands], self.hand_faces, inner_depths, v[:, self.sl_arms])
 
+    def near_object_points(self, v: Tensor, object_points: Tensor, k: int) -> Tensor:
+        """Indices (B,k) of the object points (B,P,3) nearest the hands of `vertices(..., pen=True)` (B,V,3)."""
+        with torch.no_grad():
+            hands = v[:, self.sl_hands].detach()
+            obj = object_points.expand(len(v), -1, -1).to(hands.dtype)
+            d = torch.stack([torch.cdist(o[None], h[None])[0].min(-1).values for o, h in zip(obj, hands)])
+            return d.topk(min(k, obj.shape[1]), -1, largest=False).indices
+
     def energy(self, rot6d: Tensor, transl: Tensor, betas: Tensor, hat: dict[str, Tensor], object_points: Tensor,
                ground: float = 0.0, sdf: PosedSDF | None = None,
-               inner_depths: tuple[float, ...] = (0.005, 0.01), pen_floor: float = 0.0) -> dict[str, Tensor]:
+               inner_depths: tuple[float, ...] = (0.005, 0.01), pen_floor: float = 0.0,
+               near: Tensor | None = None) -> dict[str, Tensor]:
         """Per-sample terms (B,) of Eq. 4–7 at (rot6d, transl) against GNet's `hat` (rot6d, transl, head_dir,
-        hand_offsets), and E_pen (summed depth, m) when `sdf` is given."""
+        hand_offsets), and E_pen (summed depth, m) when `sdf` is given: 'pen' the hand points inside the object, and
+        with `near` (B,K) (indices of object points) 'pen_object' those object points inside the hands."""
         v = self.vertices(rot6d, transl, betas, pen=sdf is not None)
         hand = v[:, :self.n_hand]
         d = hand_object_offsets(hand, object_points)
@@ -169,6 +188,14 @@ class GraspRefiner:
              "f": (low.min(1).values - ground).abs()}
         if sdf is not None:
             e["pen"] = torch.relu(-sdf(self.pen_points(v, inner_depths)) - pen_floor).sum(-1)
+            if near is not None:
+                from graspkit.body.markers import vertex_normals
+                from graspkit.optim.grasppose import _signed_to_cloud
+
+                hands = v[:, self.sl_hands]
+                obj = object_points.expand(len(v), -1, -1).to(hands.dtype)
+                o = torch.gather(obj, 1, near[..., None].expand(-1, -1, 3))
+                e["pen_object"] = torch.relu(-_signed_to_cloud(o, hands, vertex_normals(hands, self.hand_faces))[0]).sum(-1)
         return e
 
     def __call__(self, hat: dict[str, Tensor], betas: Tensor, object_points: Tensor,
@@ -187,14 +214,23 @@ class GraspRefiner:
         if sdf is not None and len(sdf) != hat["rot6d"].shape[0]:
             raise ValueError(f"sdf: expected one object per sample ({hat['rot6d'].shape[0]}), got {len(sdf)}")
         sdf = sdf if w.pen > 0 else None
-        lam = {"d": w.d, "theta": w.theta, "gamma": w.gamma, "q": w.q, "f": w.f, "pen": w.pen}
+        if w.object_near < 1 or w.refresh < 1:
+            raise ValueError(f"weights.object_near, weights.refresh: expected >= 1, got {w.object_near}, {w.refresh}")
+        lam = {"d": w.d, "theta": w.theta, "gamma": w.gamma, "q": w.q, "f": w.f, "pen": w.pen,
+               "pen_object": w.pen_object}
+        object_points = object_points if object_points.dim() == 3 else object_points[None]
+        near = None
         hat = {k: t.detach() for k, t in hat.items()}
         rot6d = hat["rot6d"].clone().requires_grad_(True)
         transl = hat["transl"].clone().requires_grad_(True)
         opt = torch.optim.Adam([rot6d, transl], lr=w.lr)
         history = []
         for step in range(w.steps + 1):
-            terms = self.energy(rot6d, transl, betas, hat, object_points, ground, sdf, w.inner_depths, w.pen_floor)
+            if sdf is not None and w.pen_object > 0 and step % w.refresh == 0:
+                near = self.near_object_points(self.vertices(rot6d, transl, betas, pen=True), object_points,
+                                               w.object_near)
+            terms = self.energy(rot6d, transl, betas, hat, object_points, ground, sdf, w.inner_depths, w.pen_floor,
+                                near)
             total = sum(lam[k] * t for k, t in terms.items())
             if step in (0, w.steps):
                 history.append({"step": step, "E": float(total.detach().mean()),

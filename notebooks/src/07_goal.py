@@ -174,13 +174,16 @@ plt.show()
 # Eq. 4–8 have no term that keeps the hand out of the object. $E_d$ pulls each hand vertex to the object point closest
 # to it *now*, and GNet's offsets are about 1.5 cm off per coordinate here, so the refinement pulls some hands into
 # the mug as it pulls others out (section 6: over all test grasps it lowers the penetration of only about half).
-# graspkit therefore adds, as SAGA's GraspPose-Opt does (lesson 05),
+# graspkit therefore adds SAGA's collision term both ways, as GraspPose-Opt has it (lesson 05, Eq. 7):
 #
-# $$E_{pen} = \lambda_{pen}\sum_{x}\max(-S(x, O), 0)$$
+# $$E_{pen} = \lambda_{pen}\sum_{x}\max(-S(x, O), 0) + \lambda^O_{pen}\sum_{o}\max(-S(o, V^h), 0)$$
 #
-# over both hands' vertices, the same moved 5 and 10 mm inward along the hand's normals (they see a wall that passes
-# between the vertices) and the forearm vertices, $S$ the object's signed distance from its grid; with $\lambda_d = 3$,
-# $\lambda_{pen} = 0.1$ (`PEN_WEIGHTS`, chosen on the validation objects). It is not GOAL's: Tab. 1 below shows both.
+# The first sum runs over both hands' vertices, the same moved 5 and 10 mm inward along the hand's normals (they see a
+# wall that passes between the vertices) and the forearm vertices, $S(\cdot, O)$ the object's signed distance from
+# its grid. The second runs over the 512 object points nearest the hands, $S(o, V^h)$ signed by the normal of the
+# nearest hand vertex: it sees an edge of the object — the mug's rim or handle — cutting into the palm between the
+# hand's vertices, where no hand point is inside the object. $\lambda_d = 3$, $\lambda_{pen} = 0.1$,
+# $\lambda^O_{pen} = 0.03$ (`PEN_WEIGHTS`, chosen on the validation objects). It is not GOAL's: Tab. 1 below shows both.
 
 # %%
 # NBVAL_IGNORE_OUTPUT
@@ -201,7 +204,8 @@ for i in range(K):
     row = [grasp_metrics(torch.as_tensor(v[i]).double(), bm.faces, mesh) for v in (V, V_ref, V_pen)]
     depth.append([r["depth_cm"] for r in row])
     print(f"  sample {i}: " + " | ".join(f"{r['volume_cm3']:5.2f} / {r['depth_cm']:.2f} / {int(r['contact'])}" for r in row))
-print("E_pen (summed depth of its points, m) before / after:", [round(h["pen"], 4) for h in pen.history])
+print("E_pen (summed depth, m) before / after: hand points in the mug", [round(h["pen"], 4) for h in pen.history],
+      "| mug points in the hands", [round(h["pen_object"], 4) for h in pen.history])
 
 # %% [markdown]
 # ## 4 · Interaction-aware attention (§3.2, Eq. 1; GOAL Fig. 4)
