@@ -165,6 +165,7 @@ class GraspRefiner:
         with torch.no_grad():
             hands = v[:, self.sl_hands].detach()
             obj = object_points.expand(len(v), -1, -1).to(hands.dtype)
+            # one sample at a time: a batch of hundreds of grasps would hold B x P x V distances at once (GBs)
             d = torch.stack([torch.cdist(o[None], h[None])[0].min(-1).values for o, h in zip(obj, hands)])
             return d.topk(min(k, obj.shape[1]), -1, largest=False).indices
 
@@ -195,7 +196,8 @@ class GraspRefiner:
                 hands = v[:, self.sl_hands]
                 obj = object_points.expand(len(v), -1, -1).to(hands.dtype)
                 o = torch.gather(obj, 1, near[..., None].expand(-1, -1, 3))
-                e["pen_object"] = torch.relu(-_signed_to_cloud(o, hands, vertex_normals(hands, self.hand_faces))[0]).sum(-1)
+                so, _ = _signed_to_cloud(o, hands, vertex_normals(hands, self.hand_faces))
+                e["pen_object"] = torch.relu(-so).sum(-1)
         return e
 
     def __call__(self, hat: dict[str, Tensor], betas: Tensor, object_points: Tensor,
