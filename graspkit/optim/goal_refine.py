@@ -162,12 +162,10 @@ class GraspRefiner:
 
     def near_object_points(self, v: Tensor, object_points: Tensor, k: int) -> Tensor:
         """Indices (B,k) of the object points (B,P,3) nearest the hands of `vertices(..., pen=True)` (B,V,3)."""
-        with torch.no_grad():
-            hands = v[:, self.sl_hands].detach()
-            obj = object_points.expand(len(v), -1, -1).to(hands.dtype)
-            # one sample at a time: a batch of hundreds of grasps would hold B x P x V distances at once (GBs)
-            d = torch.stack([torch.cdist(o[None], h[None])[0].min(-1).values for o, h in zip(obj, hands)])
-            return d.topk(min(k, obj.shape[1]), -1, largest=False).indices
+        from graspkit.optim.grasppose import nearest_points
+
+        hands = v[:, self.sl_hands]
+        return nearest_points(object_points.expand(len(v), -1, -1).to(hands.dtype), hands, k)
 
     def energy(self, rot6d: Tensor, transl: Tensor, betas: Tensor, hat: dict[str, Tensor], object_points: Tensor,
                ground: float = 0.0, sdf: PosedSDF | None = None,

@@ -282,6 +282,14 @@ def _nearest(q: Tensor, t: Tensor, idx: Tensor | None = None) -> tuple[Tensor, T
     return (q - near).pow(2).sum(-1), idx
 
 
+def nearest_points(points: Tensor, targets: Tensor, k: int) -> Tensor:
+    """Indices (B,k) of the rows of points (B,P,3) nearest any of targets (B,N,3), one sample at a time (a batch of
+    hundreds would hold B x P x N distances at once)."""
+    with torch.no_grad():
+        d2 = torch.cat([_nearest(p[None], t[None])[0] for p, t in zip(points.detach(), targets.detach())])
+        return d2.topk(min(k, points.shape[1]), -1, largest=False).indices
+
+
 def _signed_to_cloud(q: Tensor, cloud: Tensor, normals: Tensor, idx: Tensor | None = None
                      ) -> tuple[Tensor, Tensor]:
     """Signed distance (B,N) from q to a cloud with outward normals (negative inside), as SAGA's S(x, Y); and the
@@ -555,8 +563,7 @@ class GraspPoseOpt:
         P = obj.num_points
         with torch.no_grad():
             hands = self.body(p)[:, self.sl_hands]
-            d2, _ = _nearest(obj.batch(B)[0].contiguous(), hands)
-            cache = {"collision_idx": d2.topk(min(self.cfg.collision_points, P), -1, largest=False).indices}
+            cache = {"collision_idx": nearest_points(obj.batch(B)[0], hands, self.cfg.collision_points)}
             if object_contact is not None:
                 cache["contact_idx"] = object_contact.topk(min(self.cfg.contact_points, P), -1).indices
         return cache
