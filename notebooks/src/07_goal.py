@@ -183,7 +183,8 @@ plt.show()
 # its grid. The second runs over the 512 object points nearest the hands, $S(o, V^h)$ signed by the normal of the
 # nearest hand vertex: it sees an edge of the object — the mug's rim or handle — cutting into the palm between the
 # hand's vertices, where no hand point is inside the object. $\lambda_d = 3$, $\lambda_{pen} = 0.1$,
-# $\lambda^O_{pen} = 0.03$ (`PEN_WEIGHTS`, chosen on the validation objects). It is not GOAL's: Tab. 1 below shows both.
+# $\lambda^O_{pen} = 0.03$ and 400 Adam steps (`PEN_WEIGHTS`, chosen on the validation and training objects). It is
+# not GOAL's: Tab. 1 below shows both.
 
 # %%
 # NBVAL_IGNORE_OUTPUT
@@ -327,7 +328,7 @@ print(f"rollouts ({r['clips']} test clips): reached the true goal {100 * r['to_t
 # also differ: it lowers it for only about half of the grasps (GNet's latent is collapsed, so a sample is its mean
 # grasp, whose predicted offsets are ~1.5 cm off, and meeting them pulls some hands into the object as it pulls
 # others out; even the ground truth's own offsets leave ~2 cm³), GOAL's refinement stays about twenty times above the
-# synthetic ground truth (graspkit's penetration term, both ways, brings it to about one and a half times, with one
+# synthetic ground truth (graspkit's penetration term, both ways, brings it to about 1.2 times, with one
 # grasp losing contact), the ground truth does not slide its feet at all, and about half of the rollouts stop short of
 # the goal (section 5).
 #
