@@ -84,8 +84,8 @@ class GraspRefineWeights:
 
 
 # graspkit's refinement with E_pen (module docstring): λ_d 3, λ_pen 0.1 and λ_pen^O PEN_OBJECT, chosen on the
-# validation objects (apple, toothbrush), and 400 steps (200 leave the deepest hands half pushed out), chosen on the
-# validation and training objects (docs/goal.md). Eq. 4–8 alone: GraspRefineWeights().
+# validation objects (apple, toothbrush); 400 steps (at 200 the deepest hands were still being pushed out), chosen on
+# the validation and training objects (docs/goal.md). Eq. 4–8 alone: GraspRefineWeights().
 PEN_OBJECT = 0.03
 PEN_WEIGHTS = GraspRefineWeights(d=3.0, pen=0.1, pen_object=PEN_OBJECT, steps=400)
 
