@@ -81,6 +81,24 @@ def test_batches_hold_the_clip_frames_and_real_goals(clips):
         assert not b["hindsight"][k]
 
 
+def test_goal_frame_hold_labels_the_end_of_the_hold(clips, bm):
+    ds = W.WindowDataset(clips, max_steps=3)
+    reach = (clips.kind[ds.items[:, 0]] == 1).nonzero()[:, 0]
+    items = ds.items[reach[::7]]
+    b = W.make_batch(clips, items, steps=3, goal_frame="hold")
+    files = {f"{f.parent.name}/{f.name}": f for f in W.list_clips(STUBS)}
+    for k, (c, i) in enumerate(items.tolist()):
+        T, g = int(clips.lengths[c]), int(clips.goal_frame[c])
+        assert b["t_goal"][k] == T - 1 - i and T - 1 > g                  # the clip's last frame, after its reach
+        assert torch.equal(b["goal"][k], clips.goal[c])
+        m = load_motion(files[clips.names[c]])
+        held = np.linalg.norm(m.joint_positions(bm)[g:, 21] - m.goal, axis=-1)
+        assert held.max() < 1e-3                                          # the wrist stays on the goal until then
+        assert b["goal_heading"][k].item() == pytest.approx(float(heading_of(m.poses[T - 1, 0])), abs=1e-5)
+    with pytest.raises(ValueError, match="goal_frame"):
+        W.make_batch(clips, items, steps=3, goal_frame="arrival")
+
+
 def test_hindsight_goal_is_the_future_right_wrist(clips, bm):
     ds = W.WindowDataset(clips, max_steps=4)
     loco = (clips.kind[ds.items[:, 0]] == 0).nonzero()[:, 0]

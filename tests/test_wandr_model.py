@@ -219,3 +219,19 @@ def test_latent_optimisation_pulls_the_wrist_to_the_goal_and_the_pelvis_over_a_w
     assert all(q.requires_grad for q in model.parameters())
     with pytest.raises(ValueError, match="waypoints"):
         optimise_latents(model, starts[1], goal, t_goal=10, waypoints=[(50, (0, 0))])
+
+
+def test_goal_frame_hold_changes_only_the_reaching_windows(clips, stats):
+    """goal_frame="hold" moves t_G of the reaching clips to the end of their hold: locomotion windows (hindsight
+    goals) keep their losses, reaching windows get a different intention and so a different loss."""
+    ds = W.WindowDataset(clips, max_steps=2)
+    for kind, changes in ((0, False), (1, True)):
+        items = ds.items[(clips.kind[ds.items[:, 0]] == kind).nonzero()[::25, 0]]
+        out = []
+        for mode in ("reach", "hold"):
+            torch.manual_seed(0)
+            out.append(M.training_losses(_model(stats, goal_frame=mode), clips, items, 2,
+                                         generator=torch.Generator().manual_seed(0))["loss"])
+        assert torch.equal(out[0], out[1]) != changes
+    with pytest.raises(ValueError, match="goal_frame"):
+        M.WandrConfig(goal_frame="arrival")

@@ -46,6 +46,7 @@ KINDS = ("locomotion", "reach")
 FOLDERS = {"locomotion": "locomotion", "reach": "reach", "reach_far": "reach"}   # clip folder -> kind (reach_far:
                                                                                 # room-scale CIRCLE-style tasks)
 STD_FLOOR = 1e-3
+GOAL_FRAMES = ("reach", "hold")  # t_G of a reaching clip: the frame the hand arrives, or the end of the hold after it
 
 
 @dataclass
@@ -220,10 +221,14 @@ class WindowDataset(Dataset):
 
 
 def make_batch(clips: ClipSet, items: Tensor, steps: int, generator: torch.Generator | None = None,
-               horizon: int = HINDSIGHT_HORIZON) -> dict[str, Tensor]:
+               horizon: int = HINDSIGHT_HORIZON, goal_frame: str = "reach") -> dict[str, Tensor]:
     """Training windows for items (B, 2) = (clip, frame i): poses p (B, steps+3, 135) of frames i-1 .. i+1+steps,
     rest (B, 22, 3), goal (B, 3), the goal frame relative to i `t_goal` (B,) (frames), the heading at t_G `goal_heading`
-    (B,), and `hindsight` (B,) bool. Goal-less clips draw t_G from `generator` (see the module docstring)."""
+    (B,), and `hindsight` (B,) bool. Goal-less clips draw t_G from `generator` (see the module docstring).
+    goal_frame: t_G of a reaching clip, "reach" (its stored goal frame: the hand arrives) or "hold" (its last frame:
+    the end of the hold that follows, so the clip reads "be at the goal by t_G and stay")."""
+    if goal_frame not in GOAL_FRAMES:
+        raise ValueError(f"goal_frame: expected one of {GOAL_FRAMES}, got {goal_frame!r}")
     items = torch.as_tensor(items, dtype=torch.long).reshape(-1, 2)
     c, i = items[:, 0], items[:, 1]
     start = clips.offsets[c]
@@ -239,7 +244,8 @@ def make_batch(clips: ClipSet, items: Tensor, steps: int, generator: torch.Gener
     hi = torch.minimum(torch.full_like(i, horizon), T - 1 - i)
     u = torch.rand(len(i), generator=generator)
     offset = lo + (u * (hi - lo + 1).float()).long().clamp(max=(hi - lo).clamp(min=0))
-    tg_abs = torch.where(labelled, clips.goal_frame[c], i + offset)
+    labelled_tg = clips.goal_frame[c] if goal_frame == "reach" else T - 1
+    tg_abs = torch.where(labelled, labelled_tg, i + offset)
     p_goal = clips.p[start + tg_abs]
     with torch.no_grad():
         wrist = I.body_joints(p_goal, rest)[:, I.WRIST]

@@ -32,7 +32,7 @@ import torch
 from torch import Tensor, nn
 
 from graspkit import intention as I
-from graspkit.data.wandr_dataset import ClipSet, WindowDataset, make_batch, window_condition
+from graspkit.data.wandr_dataset import GOAL_FRAMES, ClipSet, WindowDataset, make_batch, window_condition
 from graspkit.models.blocks import GaussianHead, kl_standard_normal
 from graspkit.train import TrainConfig, fit, load_checkpoint, save_checkpoint
 
@@ -54,6 +54,7 @@ class WandrConfig:
     max_steps: int = 10
     ramp_epochs: int = 4
     rollout_latent: str = "prior"                      # "prior" (Sup. B.2) or "posterior" (encoder on the truth)
+    goal_frame: str = "reach"                          # reaching clips' t_G: "reach" (arrival) or "hold" (its end)
 
     def __post_init__(self) -> None:
         self.intention = tuple(self.intention)
@@ -62,6 +63,8 @@ class WandrConfig:
             raise ValueError(f"intention: unknown parts {bad}; expected a subset of {tuple(I.INTENTION_PARTS)}")
         if self.rollout_latent not in ("prior", "posterior"):
             raise ValueError(f"rollout_latent: expected 'prior' or 'posterior', got {self.rollout_latent!r}")
+        if self.goal_frame not in GOAL_FRAMES:
+            raise ValueError(f"goal_frame: expected one of {GOAL_FRAMES}, got {self.goal_frame!r}")
 
     def rollout_steps(self, epoch: int) -> int:
         """s at `epoch` (0-based): linear from 0 to max_steps over ramp_epochs, then max_steps."""
@@ -127,7 +130,7 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
                     generator: torch.Generator | None = None) -> dict[str, Tensor]:
     """§3.4 losses over a batch of windows (items (B, 2)) with `steps` rollout steps (Sup. B.2)."""
     cfg = model.cfg
-    b = make_batch(clips, items, steps, generator=generator)
+    b = make_batch(clips, items, steps, generator=generator, goal_frame=cfg.goal_frame)
     p, rest, goal, t_goal, gh = b["p"], b["rest"], b["goal"], b["t_goal"], b["goal_heading"]
     d_gt = I.poses_to_deltas(p)                                  # (B, steps+2, 135): d_i .. d_{i+1+steps}
     with torch.no_grad():
