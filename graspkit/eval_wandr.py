@@ -471,6 +471,7 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     """`graspkit train wandr` and `graspkit eval wandr`."""
     from pathlib import Path
 
+    from graspkit.data.wandr_dataset import GOAL_FRAMES
     from graspkit.paths import cache_dir
 
     t = train_sub.add_parser("wandr", help="train WANDR (or a Tab. 1 / Tab. 2 ablation) on the procedural clips")
@@ -489,7 +490,7 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     t.add_argument("--rollout-latent", choices=("prior", "posterior"), default="prior",
                    help="z for the rollout steps: the prior (default, Sup. B.2) or the encoder on the truth")
     t.add_argument("--alpha-kl", type=float, default=1e-2, help="the KL weight (paper: 1e-2)")
-    t.add_argument("--goal-frame", choices=("reach", "hold"), default="reach",
+    t.add_argument("--goal-frame", choices=GOAL_FRAMES, default="reach",
                    help="t_G of a reaching clip: the frame the hand arrives, or the end of the hold after it")
     t.add_argument("--reach-far", action="store_true",
                    help="also train on <data>/reach_far (room-scale reaching clips, as the shipped checkpoint; docs/wandr.md)")
