@@ -279,3 +279,48 @@ def test_pen_object_term_is_the_summed_depth_of_object_points_inside_the_hands(s
     got = ref.near_object_points(v, cloud, 50)[0].numpy()
     d = cKDTree(h).query(cloud[0].numpy())[0]
     assert set(got.tolist()) == set(np.argsort(d)[:50].tolist())
+
+
+def test_restart_frees_a_hand_that_one_run_leaves_in_a_power_drill_handle(setup):
+    """tests/data/goal_restart_case.npz (tools/goal_restart_case.py): a GNet grasp of the power drill whose hand one
+    run with E_pen leaves > 2 cm inside the handle. With restart_sunk the sample is run again from a shifted start
+    and keeps that run, whose full energy is lower; its hand is out of the drill (trimesh's signed distance of the
+    full mesh's hand vertices) and still touching it."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    import trimesh
+
+    from graspkit.objects.catalogue import make_object
+    from graspkit.objects.sdf import SDFGrid
+    from graspkit.optim.goal_refine import PEN_WEIGHTS, PosedSDF
+    from graspkit.optim.grasppose import hand_vertex_ids
+
+    bm, gv, ref = setup
+    case = np.load(Path(__file__).parent / "data" / "goal_restart_case.npz", allow_pickle=False)
+    hat = {k[4:]: torch.as_tensor(case[k])[None] for k in case.files if k.startswith("hat_")}
+    betas, points = torch.as_tensor(case["betas"])[None], torch.as_tensor(case["points"])[None]
+    R, t = torch.as_tensor(case["R"]), torch.as_tensor(case["t"])
+    mesh = make_object(str(case["object_name"]))
+    sdf = PosedSDF([SDFGrid.from_mesh(mesh, resolution=96)], R[None], t[None])
+    posed = mesh.copy()
+    posed.apply_transform(np.block([[R.double().numpy(), t.double().numpy()[:, None]], [np.zeros((1, 3)), 1.0]]))
+    hands = hand_vertex_ids(bm)
+
+    def hand_depth(out) -> tuple[float, float]:
+        """Deepest hand vertex inside the drill and the nearest one's distance to it (m; trimesh, full mesh)."""
+        v = bm.forward_rotmats(pose_rotmats(out.rot6d), betas=betas, transl=out.transl).vertices[0, hands]
+        s = trimesh.proximity.signed_distance(posed, v.double().numpy())        # positive inside
+        return float(s.max()), float(np.abs(s).min())
+
+    one = ref(hat, betas, points, replace(PEN_WEIGHTS, restart_sunk=None), sdf=sdf)
+    two = ref(hat, betas, points, replace(PEN_WEIGHTS, restart_sunk=0.002), sdf=sdf)
+    e_one = ref.full_energy(one.rot6d, one.transl, betas, hat, points, PEN_WEIGHTS, 0.0, sdf)[0]
+    e_two = ref.full_energy(two.rot6d, two.transl, betas, hat, points, PEN_WEIGHTS, 0.0, sdf)[0]
+    assert one.restarted is None and two.restarted.tolist() == [True]
+    assert hand_depth(one)[0] > 0.02                                             # one run: stuck in the handle
+    depth, gap = hand_depth(two)
+    assert depth < 0.003 and gap < 0.002                                         # restart: out, and touching
+    assert float(e_two) < 0.5 * float(e_one)
+    with pytest.raises(ValueError, match="restart_sunk"):
+        ref(hat, betas, points, replace(PEN_WEIGHTS, restart_sunk=0.0), sdf=sdf)

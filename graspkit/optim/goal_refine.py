@@ -27,6 +27,13 @@ off by ~1.5 cm per coordinate, so the refinement pulls some hands into the objec
 the object (a mug's rim or handle) cutting into the palm between vertices, which no hand point sees. GOAL's Eq. 4–8
 alone: `pen=0` or no `sdf`.
 
+The restart (graspkit's, with E_pen only; `GraspRefineWeights.restart_sunk`): a hand that starts with the object
+through it (a handle through the palm) can stay there, as E_pen's pushes on the two sides of the handle cancel. After
+the run, a sample with an E_pen point deeper than `restart_sunk` is refined a second time from GNet's θ̂ with γ̂
+moved rigidly by the one of `RESTART_SHIFTS` (0, and 2–8 cm along each axis) that has the lowest full energy there,
+and keeps the run with the lower full energy (E_pen's both sums included) — SAGA's restart (docs/saga.md) with a
+different second start.
+
 MNet refinement (Eq. 12–13), once the hand is within 10 cm of the goal hand: each hand vertex is moved towards its
 goal position along the straight line at MNet's average predicted hand speed, v_{t+1} = v_t + ‖v̇_t‖ l (Eq. 12;
 graspkit stops at the goal instead of overshooting it), and the frame's θ, γ are fitted to those hand vertices with
@@ -79,15 +86,22 @@ class GraspRefineWeights:
     pen_object: float = 0.0   # λ_pen^O: E_pen's other way, object points inside the hands (only with pen > 0)
     object_near: int = 512    # object points (nearest the hands) that the other way looks at
     refresh: int = 10         # steps between choosing them again
+    restart_sunk: float | None = None   # m: a second run, from a shifted start, for samples with an E_pen point
+                                        # deeper than this after the first (module docstring; None: one run)
     steps: int = 200
     lr: float = 3e-3
 
 
+# The restart's candidate starts: γ̂ + each of these (m); 0 first, then 2, 4, 6, 8 cm along ±x, ±y, ±z.
+RESTART_SHIFTS = torch.cat([torch.zeros(1, 3)] + [s * torch.cat([torch.eye(3), -torch.eye(3)])
+                                                   for s in (0.02, 0.04, 0.06, 0.08)])
+
 # graspkit's refinement with E_pen (module docstring): λ_d 3, λ_pen 0.1 and λ_pen^O PEN_OBJECT, chosen on the
-# validation objects (apple, toothbrush); 400 steps (at 200 the deepest hands were still being pushed out), chosen on
-# the validation and training objects (docs/goal.md). Eq. 4–8 alone: GraspRefineWeights().
+# validation objects (apple, toothbrush); 400 steps (at 200 the deepest hands were still being pushed out) and the
+# restart for hands left more than 1 mm inside, chosen on the validation and training objects (docs/goal.md).
+# Eq. 4–8 alone: GraspRefineWeights().
 PEN_OBJECT = 0.03
-PEN_WEIGHTS = GraspRefineWeights(d=3.0, pen=0.1, pen_object=PEN_OBJECT, steps=400)
+PEN_WEIGHTS = GraspRefineWeights(d=3.0, pen=0.1, pen_object=PEN_OBJECT, steps=400, restart_sunk=0.001)
 
 
 class PosedSDF:
@@ -114,6 +128,10 @@ class PosedSDF:
     def __len__(self) -> int:
         return len(self.grids)
 
+    def subset(self, ix: Tensor) -> "PosedSDF":
+        """The posed objects of samples `ix` (K,) (long)."""
+        return PosedSDF([self.grids[int(i)] for i in ix], self.R[ix], self.t[ix])
+
     def __call__(self, x: Tensor) -> Tensor:
         """x (B,N,3) in the posed frame -> signed distances (B,N), negative inside; differentiable in x."""
         if x.dim() != 3 or x.shape[0] != len(self):
@@ -127,11 +145,13 @@ class PosedSDF:
 
 @dataclass
 class RefinedGrasp:
-    """The refined Θ: rot6d (B,55,6), transl (B,3); energy terms per step (batch means), first and last."""
+    """The refined Θ: rot6d (B,55,6), transl (B,3); energy terms (batch means) at the first and last step of the
+    first run."""
 
     rot6d: Tensor
     transl: Tensor
     history: list[dict[str, float]] = field(default_factory=list)
+    restarted: Tensor | None = None     # (B,) bool: the sample kept the restart's run (None: no restart was asked)
 
 
 class GraspRefiner:
@@ -204,7 +224,8 @@ class GraspRefiner:
                  sdf: PosedSDF | None = None) -> RefinedGrasp:
         """Refine GNet's outputs `hat` {rot6d (B,55,6), transl (B,3), head_dir (B,3), hand_offsets (B,99,3)}
         for bodies `betas` (B,10) and object points (B,P,3)|(P,3), world frame, z up; with `sdf` (the objects'
-        signed distance in this frame) and weights.pen > 0, graspkit's E_pen as well."""
+        signed distance in this frame) and weights.pen > 0, graspkit's E_pen as well (and, with
+        weights.restart_sunk, the restart of the module docstring)."""
         for k, shape in (("rot6d", (55, 6)), ("transl", (3,)), ("head_dir", (3,)), ("hand_offsets", (self.n_hand, 3))):
             if k not in hat or tuple(hat[k].shape[1:]) != shape:
                 raise ValueError(f"hat[{k!r}]: expected shape (B, {', '.join(map(str, shape))}), "
@@ -217,13 +238,38 @@ class GraspRefiner:
         sdf = sdf if w.pen > 0 else None
         if w.object_near < 1 or w.refresh < 1:
             raise ValueError(f"weights.object_near, weights.refresh: expected >= 1, got {w.object_near}, {w.refresh}")
+        if w.restart_sunk is not None and not w.restart_sunk > 0:
+            raise ValueError(f"weights.restart_sunk: expected a depth in metres > 0 or None, got {w.restart_sunk}")
+        object_points = object_points if object_points.dim() == 3 else object_points[None]
+        hat = {k: t.detach() for k, t in hat.items()}
+        rot6d, transl, history = self._descend(hat, betas, object_points, w, ground, sdf, hat["transl"])
+        if sdf is None or w.restart_sunk is None:
+            return RefinedGrasp(rot6d, transl, history)
+        restarted = torch.zeros(len(rot6d), dtype=torch.bool)
+        energy, depth = self.full_energy(rot6d, transl, betas, hat, object_points, w, ground, sdf)
+        ix = torch.nonzero(depth > w.restart_sunk)[:, 0]
+        if len(ix):
+            sub = {k: t[ix] for k, t in hat.items()}
+            pts = object_points[ix] if len(object_points) > 1 else object_points
+            args = (betas[ix], sub, pts, w, ground, sdf.subset(ix))
+            with torch.no_grad():
+                e0 = torch.stack([self.full_energy(sub["rot6d"], sub["transl"] + d, *args)[0] for d in RESTART_SHIFTS])
+            r2, t2, _ = self._descend(sub, betas[ix], pts, w, ground, sdf.subset(ix),
+                                      sub["transl"] + RESTART_SHIFTS[e0.argmin(0)])
+            better = self.full_energy(r2, t2, *args)[0] < energy[ix]
+            keep = ix[better]
+            rot6d[keep], transl[keep], restarted[keep] = r2[better], t2[better], True
+        return RefinedGrasp(rot6d, transl, history, restarted)
+
+    def _descend(self, hat: dict[str, Tensor], betas: Tensor, object_points: Tensor, w: GraspRefineWeights,
+                 ground: float, sdf: PosedSDF | None, transl0: Tensor) -> tuple[Tensor, Tensor, list[dict[str, float]]]:
+        """Adam on (θ, γ) from (θ̂, transl0 (B,3)) for w.steps -> rot6d (B,55,6), transl (B,3), the energies (batch
+        means) at the first and last step."""
         lam = {"d": w.d, "theta": w.theta, "gamma": w.gamma, "q": w.q, "f": w.f, "pen": w.pen,
                "pen_object": w.pen_object}
-        object_points = object_points if object_points.dim() == 3 else object_points[None]
         near = None
-        hat = {k: t.detach() for k, t in hat.items()}
         rot6d = hat["rot6d"].clone().requires_grad_(True)
-        transl = hat["transl"].clone().requires_grad_(True)
+        transl = transl0.detach().clone().requires_grad_(True)
         opt = torch.optim.Adam([rot6d, transl], lr=w.lr)
         history = []
         for step in range(w.steps + 1):
@@ -241,7 +287,21 @@ class GraspRefiner:
             opt.zero_grad()
             total.sum().backward()
             opt.step()
-        return RefinedGrasp(rot6d.detach(), transl.detach(), history)
+        return rot6d.detach(), transl.detach(), history
+
+    def full_energy(self, rot6d: Tensor, transl: Tensor, betas: Tensor, hat: dict[str, Tensor], object_points: Tensor,
+                    w: GraspRefineWeights, ground: float, sdf: PosedSDF) -> tuple[Tensor, Tensor]:
+        """Per sample (B,): E_GNet + E_pen (both sums, the object points nearest the hands chosen here) at
+        (rot6d, transl), and the depth (m) of the deepest E_pen point inside the object (negative: all outside)."""
+        lam = {"d": w.d, "theta": w.theta, "gamma": w.gamma, "q": w.q, "f": w.f, "pen": w.pen,
+               "pen_object": w.pen_object}
+        with torch.no_grad():
+            v = self.vertices(rot6d, transl, betas, pen=True)
+            near = self.near_object_points(v, object_points, w.object_near) if w.pen_object > 0 else None
+            terms = self.energy(rot6d, transl, betas, hat, object_points, ground, sdf, w.inner_depths, w.pen_floor,
+                                near)
+            depth = (-sdf(self.pen_points(v, w.inner_depths))).max(1).values
+        return sum(lam[k] * t for k, t in terms.items()), depth
 
 
 # ------------------------------------------------------------------------------------------- MNet (Eq. 12-13)
