@@ -91,6 +91,11 @@ class GraspRefineWeights:
     steps: int = 200
     lr: float = 3e-3
 
+    def lambdas(self) -> dict[str, float]:
+        """λ of each energy term, by the term's name in GraspRefiner.energy."""
+        return {"d": self.d, "theta": self.theta, "gamma": self.gamma, "q": self.q, "f": self.f, "pen": self.pen,
+                "pen_object": self.pen_object}
+
 
 # The restart's candidate starts: γ̂ + each of these (m); 0 first, then 2, 4, 6, 8 cm along ±x, ±y, ±z.
 RESTART_SHIFTS = torch.cat([torch.zeros(1, 3)] + [s * torch.cat([torch.eye(3), -torch.eye(3)])
@@ -252,10 +257,9 @@ class GraspRefiner:
             sub = {k: t[ix] for k, t in hat.items()}
             pts = object_points[ix] if len(object_points) > 1 else object_points
             args = (betas[ix], sub, pts, w, ground, sdf.subset(ix))
-            with torch.no_grad():
-                e0 = torch.stack([self.full_energy(sub["rot6d"], sub["transl"] + d, *args)[0] for d in RESTART_SHIFTS])
-            r2, t2, _ = self._descend(sub, betas[ix], pts, w, ground, sdf.subset(ix),
-                                      sub["transl"] + RESTART_SHIFTS[e0.argmin(0)])
+            e0 = torch.stack([self.full_energy(sub["rot6d"], sub["transl"] + d, *args)[0] for d in RESTART_SHIFTS])
+            start = sub["transl"] + RESTART_SHIFTS[e0.argmin(0)]
+            r2, t2, _ = self._descend(sub, args[0], pts, w, ground, args[-1], start)
             better = self.full_energy(r2, t2, *args)[0] < energy[ix]
             keep = ix[better]
             rot6d[keep], transl[keep], restarted[keep] = r2[better], t2[better], True
@@ -265,8 +269,7 @@ class GraspRefiner:
                  ground: float, sdf: PosedSDF | None, transl0: Tensor) -> tuple[Tensor, Tensor, list[dict[str, float]]]:
         """Adam on (θ, γ) from (θ̂, transl0 (B,3)) for w.steps -> rot6d (B,55,6), transl (B,3), the energies (batch
         means) at the first and last step."""
-        lam = {"d": w.d, "theta": w.theta, "gamma": w.gamma, "q": w.q, "f": w.f, "pen": w.pen,
-               "pen_object": w.pen_object}
+        lam = w.lambdas()
         near = None
         rot6d = hat["rot6d"].clone().requires_grad_(True)
         transl = transl0.detach().clone().requires_grad_(True)
@@ -293,8 +296,7 @@ class GraspRefiner:
                     w: GraspRefineWeights, ground: float, sdf: PosedSDF) -> tuple[Tensor, Tensor]:
         """Per sample (B,): E_GNet + E_pen (both sums, the object points nearest the hands chosen here) at
         (rot6d, transl), and the depth (m) of the deepest E_pen point inside the object (negative: all outside)."""
-        lam = {"d": w.d, "theta": w.theta, "gamma": w.gamma, "q": w.q, "f": w.f, "pen": w.pen,
-               "pen_object": w.pen_object}
+        lam = w.lambdas()
         with torch.no_grad():
             v = self.vertices(rot6d, transl, betas, pen=True)
             near = self.near_object_points(v, object_points, w.object_near) if w.pen_object > 0 else None
