@@ -332,8 +332,8 @@ print(f"rollouts ({r['clips']} test clips): reached the true goal {100 * r['to_t
 # grasp, whose predicted offsets are ~1.5 cm off, and meeting them pulls some hands into the object as it pulls
 # others out; even the ground truth's own offsets leave ~2 cm³), GOAL's refinement stays about twenty times above the
 # synthetic ground truth (graspkit's penetration term, both ways, with its restart, brings it to the ground truth's
-# level, 0.97 times, with three grasps of 684 not touching the object), the ground truth does not slide its feet at all, and about half of the rollouts stop short of
-# the goal (section 5).
+# level, 0.97 times, with three grasps of 684 not touching the object), the ground truth does not slide its feet at
+# all, and about half of the rollouts stop short of the goal (section 5).
 #
 # ## Exercise
 #
