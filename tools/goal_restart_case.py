@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import io
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     sdf = eg.posed_sdfs(seqs, frames, gt["R"][ix], gt["o"][ix])
     bm, gv, _ = eg._body()
     ref = GraspRefiner(bm, gv)
-    one = ref(hat, betas, points, PEN_WEIGHTS, sdf=sdf)
+    one = ref(hat, betas, points, replace(PEN_WEIGHTS, restart_sunk=None), sdf=sdf)     # one run, no restart
     _, depth = ref.full_energy(one.rot6d, one.transl, betas, hat, points, PEN_WEIGHTS, 0.0, sdf)
     b = int(depth.argmax())
     print(f"{a.object}: {len(ix)} grasps, deepest E_pen point after one run {100 * float(depth[b]):.2f} cm (grasp {b})")
