@@ -163,6 +163,11 @@ def _start_xy(seq) -> np.ndarray:
     return (rest_root(bm, torch.as_tensor(seq.betas[None, :10]).float())[0].double().numpy() + seq.trans[0])[:2]
 
 
+def grasp_frames(seqs: list) -> list[int]:
+    """The frame of each sequence's grasp: an approach clip's goal frame, a grasp file's grasp frame (else 0)."""
+    return [int(s.extras.get("grasp.goal_frame", s.extras.get("grasp.frame", np.array(0)))) for s in seqs]
+
+
 def gnet_samples(seqs: list, accepted_only: bool = True) -> dict[str, Tensor]:
     """GNet's tensors (see GNet.features) from GRAB-style grasp or approach sequences at their grasp frame, in GNet's
     frame (`gnet_frame`); the labels are recomputed from the stored parameters and object (`goal_labels`), so they
@@ -175,7 +180,7 @@ def gnet_samples(seqs: list, accepted_only: bool = True) -> dict[str, Tensor]:
     if not seqs:
         raise ValueError("seqs: no (accepted) sequences")
     bm, _, _ = _body()
-    frames = [int(s.extras.get("grasp.goal_frame", s.extras.get("grasp.frame", np.array(0)))) for s in seqs]
+    frames = grasp_frames(seqs)
     rot6d = torch.stack([axis_angle_to_rot6d(torch.as_tensor(s.poses[f], dtype=torch.float64)).float()
                          for s, f in zip(seqs, frames)])
     transl = torch.stack([torch.as_tensor(np.array(s.trans[f])) for s, f in zip(seqs, frames)]).float()
@@ -423,7 +428,7 @@ def gnet_table(gnet, baseline, seqs: list, seed: int = 0, refine_weights=None, p
 
     bm, gv, _ = _body()
     gt = gnet_samples(seqs, accepted_only=False)
-    frames = [int(s.extras.get("grasp.goal_frame", s.extras.get("grasp.frame", np.array(0)))) for s in seqs]
+    frames = grasp_frames(seqs)
     meshes = []
     for b, (s, f) in enumerate(zip(seqs, frames)):
         m = object_mesh_world(s, f)

@@ -254,12 +254,12 @@ class GraspRefiner:
         energy, depth = self.full_energy(rot6d, transl, betas, hat, object_points, w, ground, sdf)
         ix = torch.nonzero(depth > w.restart_sunk)[:, 0]
         if len(ix):
-            sub = {k: t[ix] for k, t in hat.items()}
+            sub, b_ix, sdf_ix = {k: t[ix] for k, t in hat.items()}, betas[ix], sdf.subset(ix)
             pts = object_points[ix] if len(object_points) > 1 else object_points
-            args = (betas[ix], sub, pts, w, ground, sdf.subset(ix))
+            args = (b_ix, sub, pts, w, ground, sdf_ix)
             e0 = torch.stack([self.full_energy(sub["rot6d"], sub["transl"] + d, *args)[0] for d in RESTART_SHIFTS])
             start = sub["transl"] + RESTART_SHIFTS[e0.argmin(0)]
-            r2, t2, _ = self._descend(sub, args[0], pts, w, ground, args[-1], start)
+            r2, t2, _ = self._descend(sub, b_ix, pts, w, ground, sdf_ix, start)
             better = self.full_energy(r2, t2, *args)[0] < energy[ix]
             keep = ix[better]
             rot6d[keep], transl[keep], restarted[keep] = r2[better], t2[better], True
