@@ -66,6 +66,30 @@ def test_losses_are_the_papers_terms(clips, stats):
     assert cfg.alpha_kl == 1e-2 and out["steps"] == 3
 
 
+def test_true_deltas_give_zero_joint_and_foot_terms(clips, stats):
+    """A decoder that returns the data's next delta reproduces the clip: the joint loss and the foot-velocity term
+    (w_foot, not in the paper) vanish over a rollout; a decoder that slides the root makes the feet's term grow as
+    the square of the slide (a constant 5 mm/frame: 25 mm², four foot joints at the same step)."""
+    items = W.WindowDataset(clips, max_steps=3).items[::40]
+    b = W.make_batch(clips, items, 3, generator=torch.Generator().manual_seed(0))
+    d_gt = I.poses_to_deltas(b["p"])
+    for slide, want in ((0.0, 0.0), (0.005, 25.0)):
+        model = _model(stats, w_foot=1.0)
+        calls = iter(range(4))
+
+        def decode(z, cond, model=model, slide=slide):
+            d = d_gt[:, next(calls) + 1].clone()
+            d[:, 0] += slide                    # translation delta, in the previous frame's heading frame
+            return d
+        model.decode = decode
+        out = M.training_losses(model, clips, items, 3, generator=torch.Generator().manual_seed(0))
+        assert out["foot_mm2"].item() == pytest.approx(want, abs=1e-2)
+        if slide == 0.0:
+            assert out["joint_cm2"].item() == pytest.approx(0.0, abs=1e-6)
+            assert out["rec"].item() == pytest.approx(0.0, abs=1e-6)
+    assert "foot_mm2" not in M.training_losses(_model(stats), clips, items, 1, generator=torch.Generator().manual_seed(0))
+
+
 def test_posterior_rollout_latents_change_only_the_rollout_steps(clips, stats):
     """rollout_latent="posterior" draws the rollout steps' z from the encoder: the same losses without rollout steps,
     different reconstruction and KL with them."""

@@ -37,6 +37,7 @@ from graspkit.models.blocks import GaussianHead, kl_standard_normal
 from graspkit.train import TrainConfig, fit, load_checkpoint, save_checkpoint
 
 FULL_INTENTION = ("wrist", "orientation", "pelvis")
+FEET = [I.JOINT_INDEX[k] for k in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
 
 
 @dataclass
@@ -51,6 +52,7 @@ class WandrConfig:
     intention: tuple[str, ...] = FULL_INTENTION        # Tab. 2 ablations: ("wrist",), ("wrist", "pelvis"), ...
     alpha_kl: float = 1e-2
     w_joint: float = 1.0
+    w_foot: float = 0.0                                # not in the paper: foot-joint velocity term (docs/wandr.md)
     max_steps: int = 10
     ramp_epochs: int = 4
     rollout_latent: str = "prior"                      # "prior" (Sup. B.2) or "posterior" (encoder on the truth)
@@ -134,11 +136,11 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
     p, rest, goal, t_goal, gh = b["p"], b["rest"], b["goal"], b["t_goal"], b["goal_heading"]
     d_gt = I.poses_to_deltas(p)                                  # (B, steps+2, 135): d_i .. d_{i+1+steps}
     with torch.no_grad():
-        J_gt = I.body_joints(p[:, 2:], rest[:, None])             # (B, steps+1, 22, 3)
+        J_gt = I.body_joints(p[:, 1:], rest[:, None])             # (B, steps+2, 22, 3): frames i .. i+1+steps
     cur_p, cur_d = p[:, 1], d_gt[:, 0]
     t, R = I.pose_rotmats(cur_p)
     J = I.fk_rotmats(t, R, rest)[1]
-    rec = joint = kl = torch.zeros((), dtype=p.dtype)
+    rec = joint = kl = foot = torch.zeros((), dtype=p.dtype)
     for k in range(steps + 1):
         state = I.state_features(cur_p, cur_d, root=R[:, 0])
         inten = I.intention(J[:, I.WRIST], J[:, I.PELVIS], I.yaw_of(R[:, 0]), goal, (t_goal - k).to(p.dtype) / I.FPS, gh)
@@ -152,15 +154,19 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
             z = torch.randn(len(cur_p), cfg.latent, generator=generator)
         d_hat = model.decode(z, cond)
         t, R = I.integrate_rotmats(t, R, d_hat)
-        cur_p, cur_d = I.pose_from_rotmats(t, R), d_hat
+        cur_p, cur_d, J_prev = I.pose_from_rotmats(t, R), d_hat, J
         J = I.fk_rotmats(t, R, rest)[1]
         rec = rec + (model.normalise_delta(d_hat) - model.normalise_delta(target)).pow(2).sum(-1).mean()
-        joint = joint + (100 * (J - J_gt[:, k])).pow(2).sum(-1).mean()
+        joint = joint + (100 * (J - J_gt[:, k + 1])).pow(2).sum(-1).mean()
+        if cfg.w_foot:      # the feet's horizontal step against the data's (mm per frame): a planted foot stays put
+            v, v_gt = J[:, FEET, :2] - J_prev[:, FEET, :2], J_gt[:, k + 1, FEET, :2] - J_gt[:, k, FEET, :2]
+            foot = foot + (1000 * (v - v_gt)).pow(2).sum(-1).mean()
     n = steps + 1
     n_kl = n if cfg.rollout_latent == "posterior" else 1
-    rec, joint, kl = rec / n, joint / n, kl / n_kl
-    loss = rec + cfg.alpha_kl * kl + cfg.w_joint * joint
+    rec, joint, kl, foot = rec / n, joint / n, kl / n_kl, foot / n
+    loss = rec + cfg.alpha_kl * kl + cfg.w_joint * joint + cfg.w_foot * foot
     return {"loss": loss, "rec": rec.detach(), "kl": kl.detach(), "joint_cm2": joint.detach(),
+            **({"foot_mm2": foot.detach()} if cfg.w_foot else {}),
             "steps": torch.tensor(float(steps))}
 
 
