@@ -77,7 +77,7 @@ def test_true_deltas_give_zero_joint_and_foot_terms(clips, stats):
         model = _model(stats, w_foot=1.0)
         calls = iter(range(4))
 
-        def decode(z, cond, model=model, slide=slide):
+        def decode(z, cond, slide=slide):
             d = d_gt[:, next(calls) + 1].clone()
             d[:, 0] += slide                    # translation delta, in the previous frame's heading frame
             return d

@@ -14,7 +14,9 @@ the 135 values, mean over the batch), L_KL the KL of q(z | .) from N(0, I) (summ
 batch), L_J the squared distance of the 22 body joints after integrating d̂ and forward kinematics, in cm² (mean
 over joints and batch). The paper does not say how its MSEs are reduced; with means over the 135 values, α = 1e-2
 made the posterior collapse here (KL ≈ 0.003 nats: the decoder ignored z and predicted means), so the sums keep
-z informative, and centimetres put L_J on the scale of L_rec. No goal-reaching loss.
+z informative, and centimetres put L_J on the scale of L_rec. No goal-reaching loss. An optional term that is not in
+the paper, w_foot (default 0) times the squared error of the foot joints' horizontal step per frame (mm²), was tried
+against foot skating and is off in the shipped model (docs/wandr.md).
 
 Rollout schedule (Sup. B.2): after the reconstruction step, the model runs s more steps on its own output: each step
 integrates the predicted delta, recomputes state and intention from the generated pose, samples z from the prior and
@@ -32,12 +34,13 @@ import torch
 from torch import Tensor, nn
 
 from graspkit import intention as I
+from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.data.wandr_dataset import GOAL_FRAMES, ClipSet, WindowDataset, make_batch, window_condition
 from graspkit.models.blocks import GaussianHead, kl_standard_normal
 from graspkit.train import TrainConfig, fit, load_checkpoint, save_checkpoint
 
 FULL_INTENTION = ("wrist", "orientation", "pelvis")
-FEET = [I.JOINT_INDEX[k] for k in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
+FEET = [JOINT_INDEX[k] for k in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
 
 
 @dataclass
