@@ -38,7 +38,7 @@ from graspkit.data.trajectory import RootPlan, heading_profile, ramp, straight_w
 from graspkit.body.skeleton import JOINT_INDEX
 
 REACH_RHO = 0.86           # shoulder-to-wrist distance at the goal, as a fraction of the arm length
-FAR_MIN_SPEED = 0.45      # m/s: the slowest walk of a room-scale clip (it fills the time to its goal frame)
+FAR_MIN_SPEED = 0.25      # m/s: the slowest walk of a room-scale clip (it fills the time to its goal frame)
 FAR_HEIGHTS = (0.0, 1.9)   # room-scale goal heights (m), uniform: the grid's 0-1.8 m evenly, a little above
 FLOOR_WRIST = 0.07         # the wrist stays this high (m) above the floor: the hand lies flat below it
 LEVELS = np.linspace(-1.0, 1.0, 41)
@@ -255,7 +255,7 @@ def sample_reach_task(rng: np.random.Generator, far: bool = False) -> ReachTask:
     in any direction (a turn first when it is behind), heights uniform over FAR_HEIGHTS (0-1.9 m: WANDR's Fig. 5 finds
     reaching weakest where data are scarce, at the floor and overhead), and the goal frame drawn uniformly between
     the natural time (turn, walk at ~0.8 m/s, reach, a short pause first: 0.2-0.8 s; at most 9 s) and 9 s; the
-    clip (generate_reach) walks slower, down to 0.45 m/s, to arrive then."""
+    clip (generate_reach) walks slower, down to FAR_MIN_SPEED (0.25 m/s), to arrive then."""
     betas = sample_betas(rng)
     h0 = rng.uniform(-np.pi, np.pi)
     if far:
@@ -299,7 +299,7 @@ def generate_reach(seed: int, bm, betas: np.ndarray | None = None, far: bool = F
     task = sample_reach_task(rng, far=far)
     style, gait = sample_style(rng), sample_gait_style(rng)
     plan_seed, v_pref = int(rng.integers(2**31)), float(rng.uniform(0.7, 1.1))  # this order: the default clips as before
-    # room-scale: walk as slowly as 0.45 m/s to arrive at the goal frame (plan_reach walks at v_pref when it can and
+    # room-scale: walk as slowly as FAR_MIN_SPEED to arrive at the goal frame (plan_reach walks at v_pref when it can and
     # stands first with the time left over; a long stand at full intention teaches a per-frame model to stand)
     m = plan_reach(task.start, task.goal, task.goal_frame, betas=task.betas if betas is None else betas,
                    seed=plan_seed, bm=bm, hold_frames=task.hold_frames, style=style, gait=gait,

@@ -199,8 +199,8 @@ fig.tight_layout()
 # trained on 10-step rollouts drifts to a stand when it is fed its own output for 8 s, and the longer rollouts are what
 # made it walk to the goals (`docs/wandr.md` has the measurements). A few optimisation steps on the sample clips, with a
 # small network, to watch the three terms (the shipped model was trained with `graspkit train wandr --kinds reach --reach-far
-# --max-steps 60 --stride-scale 2 --epochs 10 --batch-size 256 --threads 1` on 2,000 reaching and 2,000 room-scale
-# reaching clips, 54 minutes on one CPU thread; the locomotion clips lowered its success rate, `docs/wandr.md`).
+# --max-steps 60 --stride-scale 2 --epochs 10 --batch-size 256 --threads 2` on 2,000 reaching and 2,000 room-scale
+# reaching clips, 50 minutes on two CPU threads; the locomotion clips lowered its success rate, `docs/wandr.md`).
 
 # %%
 # NBVAL_IGNORE_OUTPUT
