@@ -43,6 +43,27 @@ PAPER = {
 }
 
 
+def validation_goals(n: int = 250, seed: int = 123) -> tuple[Tensor, np.ndarray]:
+    """n goals (n, 3) drawn uniformly on the grid's cylinder (any angle, height 0-1.8 m, distance 0.5-5 m), not on its
+    125 points, and their (angle deg, height m, distance m) rows (n, 3): model selection's goals."""
+    rng = np.random.default_rng(seed)
+    ang, hgt = rng.uniform(0.0, 2 * np.pi, n), rng.uniform(EVAL_HEIGHTS[0], EVAL_HEIGHTS[-1], n)
+    dist = rng.uniform(EVAL_DISTANCES[0], EVAL_DISTANCES[-1], n)
+    goals = torch.as_tensor(np.stack([dist * np.cos(ang), dist * np.sin(ang), hgt], 1), dtype=torch.float32)
+    return goals, np.stack([np.degrees(ang), hgt, dist], 1)
+
+
+def validation_score(model, starts: Sequence[I.StartPose], bm, seed: int = 1) -> dict[str, float]:
+    """SR / FS / DTG of one rollout per validation start and validation goal (8 s): the score that picks the epoch
+    of `graspkit train wandr --select-val` (validation-split starts, goals off the grid; the test grid is not used)."""
+    goals, cells = validation_goals()
+    was_training = model.training
+    model.eval()
+    s = summary(evaluate_grid(model, starts, bm, n=1, seed=seed, goals=goals, cells=cells))
+    model.train(was_training)
+    return {k: float(s[k]) for k in ("SR", "FS", "DTG")}
+
+
 def grid_goals() -> tuple[Tensor, np.ndarray]:
     """The 125 goals (125, 3) around a canonical start (pelvis above the origin, facing +x) and their (angle deg,
     height m, distance m) rows (125, 3)."""
@@ -319,7 +340,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
                     lr: float = 1e-3, progress: bool = True, max_steps: int = 10, ramp_epochs: int = 4,
                     stride_scale: int = 1, reach_far: bool = False, rollout_latent: str = "prior",
                     alpha_kl: float = 1e-2, kinds: Sequence[str] | None = None, goal_frame: str = "reach",
-                    foot_weight: float = 0.0) -> dict[str, Any]:
+                    foot_weight: float = 0.0, select_val: bool = False) -> dict[str, Any]:
     """Train one variant on the clips under `folder` (default <cache>/motion) and write a small checkpoint (with the
     normalisation statistics, the held-out start poses of the test split, and the measured times) to `out`.
     max_steps / ramp_epochs: the rollout schedule (Sup. B.2); stride_scale multiplies the window strides (fewer
@@ -327,7 +348,9 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     shipped checkpoint uses them, docs/wandr.md); rollout_latent: where the rollout steps draw z ("prior": Sup. B.2
     read as sampling the prior; "posterior": the encoder on the true delta, see docs/wandr.md); alpha_kl: the KL
     weight α (§3.4: 1e-2); kinds: the clip kinds to train on instead of the variant's (e.g. ("reach",): the reaching
-    and room-scale clips only, as the shipped checkpoint, docs/wandr.md).
+    and room-scale clips only, as the shipped checkpoint, docs/wandr.md); select_val: after every epoch score the
+    model on the validation task (`validation_score`: six validation-split starts, 250 goals off the grid) and ship
+    the best epoch's weights instead of the last (model selection; the scores go into meta["val"]).
     The resumable training state lives in <cache>/wandr, named by every setting."""
     import hashlib
     import resource
@@ -379,13 +402,18 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
         + ([(f" --alpha-kl {alpha_kl:g}", f"_a{alpha_kl:g}")] if alpha_kl != 1e-2 else []) \
         + ([(f" --goal-frame {goal_frame}", f"_g{goal_frame}")] if goal_frame != "reach" else []) \
         + ([(f" --foot-weight {foot_weight:g}", f"_f{foot_weight:g}")] if foot_weight else []) \
+        + ([(" --select-val", "_val")] if select_val else []) \
         + ([(f" --kinds {','.join(v['kinds'])}", f"_k{''.join(k[0] for k in v['kinds'])}")]
            if v["kinds"] != VARIANTS[variant]["kinds"] else [])
     tag = (f"e{epochs}_b{batch_size}_lr{lr:g}_m{max_steps}_r{ramp_epochs}_x{stride_scale}_d{data_key}"
            + "".join(t for _, t in flags))
     ck = cache_dir() / "wandr" / f"train_{variant}_s{seed}_{tag}.pt"
     cpu0, t1 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
-    history = train_wandr(model, train, cfg, checkpoint=ck, stride=stride, progress=progress, time_limit_s=time_limit)
+    if select_val:
+        history, val = _train_selecting(model, train, cfg, ck, stride, progress, folder, bm)
+    else:
+        history, val = train_wandr(model, train, cfg, checkpoint=ck, stride=stride, progress=progress,
+                                   time_limit_s=time_limit), None
     cpu1 = resource.getrusage(resource.RUSAGE_SELF)
     meta = {"variant": variant, "row": v["row"], "kinds": list(v["kinds"]), "train_clips": len(train),
             "train_frames": int(train.lengths.sum()), "epochs": len(history), "train_wall_s": time.perf_counter() - t1,
@@ -394,7 +422,8 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
             "command": f"graspkit train wandr --variant {variant} --epochs {epochs} --batch-size {batch_size} "
                        f"--lr {lr:g} --max-steps {max_steps} --ramp-epochs {ramp_epochs} --stride-scale {stride_scale} "
                        f"--seed {seed}" + "".join(c for c, _ in flags),
-            "load_avg_end": float(__import__("os").getloadavg()[0]), "starts": starts_to_meta(starts)}
+            "load_avg_end": float(__import__("os").getloadavg()[0]), "starts": starts_to_meta(starts),
+            **({"val": val["scores"], "selected_epoch": val["best"]} if val else {})}
     save_wandr(out, model, history, meta)
     return {"out": out, **{k: meta[k] for k in ("epochs", "train_wall_s", "train_cpu_s")}, "history": history}
 
@@ -437,13 +466,51 @@ def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = F
     return out
 
 
+def _train_selecting(model, train, cfg, ck, stride, progress, folder, bm) -> tuple[list[dict], dict[str, Any]]:
+    """Train one epoch at a time (train_wandr's stop_at: the same weights as one run), score each epoch with
+    validation_score and keep the best (SR, then DTG); the scores and the best weights sit beside the training
+    state (<ck>.val.pt, atomic), so a killed run resumes. Returns the history and {'scores', 'best'}; `model` ends
+    with the best weights."""
+    from graspkit.data import load_motion
+    from graspkit.data.wandr_dataset import held_out_starts, test_start_names
+    from graspkit.models.wandr import train_wandr
+    from graspkit.train import load_checkpoint, save_checkpoint
+
+    names = test_start_names(folder, n=6, split="val")
+    starts = held_out_starts([load_motion(folder / n) for n in names], names, bm, n=len(names))
+    rec_path = ck.with_suffix(".val.pt")
+    rec = load_checkpoint(rec_path) if rec_path.is_file() else {"scores": [], "best": 0, "model": None}
+    history: list[dict] = []
+    for epoch in range(1, cfg.epochs + 1):
+        if epoch <= len(rec["scores"]):
+            continue
+        history = train_wandr(model, train, cfg, checkpoint=ck, stride=stride, progress=progress, stop_at=epoch)
+        if len(history) != epoch:
+            raise RuntimeError(f"{ck}: the training state is at epoch {len(history)}, its validation record at "
+                               f"{len(rec['scores'])}; remove both to start over")
+        score = {"epoch": len(history), **validation_score(model, starts, bm)}
+        best = rec["scores"][rec["best"] - 1] if rec["best"] else None
+        if best is None or (score["SR"], -score["DTG"]) > (best["SR"], -best["DTG"]):
+            rec["best"], rec["model"] = score["epoch"], {k: v.clone() for k, v in model.state_dict().items()}
+        rec["scores"].append(score)
+        save_checkpoint(rec_path, rec)
+        if progress:
+            print(f"epoch {score['epoch']}: validation SR {score['SR']:.1f} %, FS {score['FS']:.1f} %, "
+                  f"DTG {score['DTG']:.1f} cm (best: epoch {rec['best']})", flush=True)
+    if not history:                         # everything was done before: the history is in the training state
+        history = list(load_checkpoint(ck)["history"])
+    model.load_state_dict(rec["model"])
+    model.eval()
+    return history, {"scores": rec["scores"], "best": rec["best"]}
+
+
 def _cmd_train(args) -> int:
     """`graspkit train wandr`."""
     info = run_train_wandr(args.variant, args.data, args.out, args.epochs, args.time_limit, args.seed, args.threads,
                            args.batch_size, args.lr, max_steps=args.max_steps, ramp_epochs=args.ramp_epochs,
                            stride_scale=args.stride_scale, reach_far=args.reach_far,
                            rollout_latent=args.rollout_latent, alpha_kl=args.alpha_kl, goal_frame=args.goal_frame,
-                           foot_weight=args.foot_weight,
+                           foot_weight=args.foot_weight, select_val=args.select_val,
                            kinds=tuple(args.kinds.split(",")) if args.kinds else None)
     print(f"wrote {info['out']}: {info['epochs']} epochs in {info['train_wall_s']:.0f} s wall "
           f"({info['train_cpu_s']:.0f} s CPU); last loss {info['history'][-1]['loss']:.4f}")
@@ -497,6 +564,8 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
                    help="t_G of a reaching clip: the frame the hand arrives, or the end of the hold after it")
     t.add_argument("--foot-weight", type=float, default=0.0,
                    help="weight of the foot-joint velocity term (not in the paper; mm^2 per frame; docs/wandr.md)")
+    t.add_argument("--select-val", action="store_true",
+                   help="score every epoch on validation-split starts and goals off the grid; keep the best epoch")
     t.add_argument("--reach-far", action="store_true",
                    help="also train on <data>/reach_far (room-scale reaching clips, as the shipped checkpoint; docs/wandr.md)")
     t.add_argument("--kinds", default=None,

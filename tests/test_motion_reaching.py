@@ -98,6 +98,32 @@ def test_a_slow_preferred_speed_fills_the_time_with_walking_not_standing(bm):
     assert top_slow < 0.85 * top_fast
 
 
+def test_hurried_room_scale_tasks_walk_fast_with_real_steps(bm):
+    # a share FAR_HURRY of the room-scale tasks is due at a fast walk: the goal frame comes before the leisurely
+    # natural time (walking at ~0.8 m/s), and the planned clip gets there stepping, not sliding
+    from graspkit.data.reaching import FAR_HURRY, FAR_HURRY_SPEED, sample_reach_task
+
+    def leisurely(t):    # the earliest goal time of an unhurried task: turn, walk at 0.8 m/s, reach, 0.2 s pause
+        d = t.goal[:2] - np.array([t.start.x, t.start.y])
+        rel = abs((np.arctan2(d[1], d[0]) - t.start.heading + np.pi) % (2 * np.pi) - np.pi)
+        r = float(np.hypot(*d))
+        turn = rel / 2.2 + 0.35 if rel > 0.3 else 0.0
+        walk = max(r - 0.55, 0.0) / 0.8 + (0.6 if r > 0.55 else 0.0)
+        return min(turn + walk + 0.9 + 0.5 * max(0.9 - t.goal[2], 0.0) + 0.2, 9.0), r
+
+    tasks = [sample_reach_task(np.random.default_rng(s), far=True) for s in range(600)]
+    hurried = [t for t in tasks if t.goal_frame / 30 < leisurely(t)[0] - 0.1 and leisurely(t)[1] > 1.5]
+    far = [t for t in tasks if leisurely(t)[1] > 1.5]
+    assert hurried and stats.binomtest(len(hurried), len(far), FAR_HURRY).pvalue > 1e-3
+    t = max(hurried, key=lambda t: leisurely(t)[1])              # the longest hurried walk
+    m = plan_reach(t.start, t.goal, t.goal_frame, betas=t.betas, seed=0, bm=bm, hold_frames=0, v_pref=0.25)
+    pel = m.joint_positions(bm)[:, 0, :2]
+    speed = np.linalg.norm(np.diff(pel, axis=0), axis=1) * 30
+    assert np.percentile(speed, 90) > 0.9 * FAR_HURRY_SPEED[0]   # walks at a hurried pace for a good part
+    v = m.vertices(bm)
+    assert float(np.mean(M.foot_skating_wandr(v))) < 0.01       # and steps: the lowest vertex stands still
+
+
 def test_evaluation_grid_is_wandrs():
     g = evaluation_goals(Start(1.0, 2.0, 0.5))
     assert g.shape == (125, 5)

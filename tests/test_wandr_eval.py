@@ -174,3 +174,49 @@ def test_evaluate_clips_times_goals_as_the_data_does(bm):
     assert late["SR"] < 50 and late["DTG"] > 20
     with pytest.raises(ValueError, match="clips"):
         E.evaluate_clips(_Replay(None), load_clips(list_clips(DATA_STUBS / "motion", kinds=("locomotion",)), bm))
+
+
+def test_validation_goals_lie_on_the_grids_cylinder_but_off_its_points():
+    goals, cells = E.validation_goals()
+    g, _ = E.grid_goals()
+    assert goals.shape == (250, 3) and cells.shape == (250, 3)
+    assert torch.allclose(goals[:, :2].norm(dim=1), torch.as_tensor(cells[:, 2], dtype=torch.float32), atol=1e-5)
+    assert float(goals[:, 2].min()) >= 0.0 and float(goals[:, 2].max()) <= 1.8
+    assert float(torch.cdist(goals, g).min()) > 0.01                 # none is a grid goal
+    assert torch.equal(E.validation_goals()[0], goals)               # fixed by its seed
+
+
+def test_select_val_keeps_the_best_epochs_weights_and_resumes(bm, tmp_path, monkeypatch):
+    # the selection logic with a scripted validation score: epoch 2 is best; a second call (a resumed run) trains
+    # nothing and gives the same weights
+    from graspkit.data import load_motion
+    from graspkit.data import wandr_dataset as W
+    from graspkit.models import wandr as M
+    from graspkit.paths import DATA_STUBS
+    from graspkit.train import TrainConfig, load_checkpoint
+
+    stubs = DATA_STUBS / "motion"
+    clips = W.load_clips(W.list_clips(stubs, limit=3), bm)
+    stats = W.compute_stats(clips, samples=500)
+    tiny = dict(latent=4, hidden=32, enc_layers=1, dec_layers=2, dropout=0.0, max_steps=1, ramp_epochs=1)
+    names = ["locomotion/locomotion_000000.npz", "reach/reach_000001.npz"]
+    monkeypatch.setattr(W, "test_start_names", lambda folder, n=6, seed=0, split="test": names)
+    script = iter([{"SR": 10.0, "FS": 1.0, "DTG": 30.0}, {"SR": 50.0, "FS": 1.0, "DTG": 20.0},
+                   {"SR": 50.0, "FS": 1.0, "DTG": 25.0}])
+    monkeypatch.setattr(E, "validation_score", lambda model, starts, bm: next(script))
+    cfg = TrainConfig(epochs=3, batch_size=256, lr=1e-3, seed=0)
+    kw = dict(stride={"locomotion": 8, "reach": 8}, progress=False)
+    torch.manual_seed(0)
+    model = M.WandrCVAE(M.WandrConfig(**tiny), stats)
+    hist, val = E._train_selecting(model, clips, cfg, tmp_path / "ck.pt", kw["stride"], False, stubs, bm)
+    assert len(hist) == 3 and val["best"] == 2 and [v["epoch"] for v in val["scores"]] == [1, 2, 3]
+    torch.manual_seed(0)
+    ref = M.WandrCVAE(M.WandrConfig(**tiny), stats)
+    M.train_wandr(ref, clips, cfg, checkpoint=tmp_path / "ref.pt", stop_at=2, **kw)   # epoch 2 of the same run
+    assert all(torch.equal(a, b) for a, b in zip(ref.state_dict().values(), model.state_dict().values()))
+    assert load_checkpoint(tmp_path / "ck.pt")["epoch"] == 3                        # trained to the end
+    torch.manual_seed(1)
+    again = M.WandrCVAE(M.WandrConfig(**tiny), stats)
+    hist2, val2 = E._train_selecting(again, clips, cfg, tmp_path / "ck.pt", kw["stride"], False, stubs, bm)
+    assert val2 == val and len(hist2) == 3
+    assert all(torch.equal(a, b) for a, b in zip(again.state_dict().values(), model.state_dict().values()))

@@ -230,6 +230,22 @@ def test_train_wandr_writes_a_resumable_checkpoint(clips, stats, tmp_path):
     assert all(torch.equal(a, b) for a, b in zip(again.state_dict().values(), model.state_dict().values()))
 
 
+def test_training_one_epoch_at_a_time_gives_the_weights_of_one_run(clips, stats, tmp_path):
+    # `graspkit train wandr --select-val` scores every epoch by stopping and resuming (stop_at): it must not change
+    # what is trained
+    from graspkit.train import TrainConfig
+
+    cfg = TrainConfig(epochs=3, batch_size=256, lr=1e-3, seed=0)
+    kw = dict(stride={"locomotion": 8, "reach": 8}, progress=False)
+    straight = _model(stats, max_steps=1, ramp_epochs=2)
+    M.train_wandr(straight, clips, cfg, checkpoint=tmp_path / "a.pt", **kw)
+    stepped = _model(stats, max_steps=1, ramp_epochs=2)
+    for e in (1, 2, 3):
+        hist = M.train_wandr(stepped, clips, cfg, checkpoint=tmp_path / "b.pt", stop_at=e, **kw)
+        assert len(hist) == e
+    assert all(torch.equal(a, b) for a, b in zip(straight.state_dict().values(), stepped.state_dict().values()))
+
+
 def test_latent_optimisation_pulls_the_wrist_to_the_goal_and_the_pelvis_over_a_waypoint(stats, starts):
     model = _model(stats)
     goal = torch.tensor([0.8, 0.3, 1.0])

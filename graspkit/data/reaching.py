@@ -40,6 +40,8 @@ from graspkit.body.skeleton import JOINT_INDEX
 REACH_RHO = 0.86           # shoulder-to-wrist distance at the goal, as a fraction of the arm length
 FAR_MIN_SPEED = 0.25      # m/s: the slowest walk of a room-scale clip (it fills the time to its goal frame)
 FAR_HEIGHTS = (0.0, 1.9)   # room-scale goal heights (m), uniform: the grid's 0-1.8 m evenly, a little above
+FAR_HURRY = 0.4            # share of room-scale tasks due at a fast walk (FAR_HURRY_SPEED) rather than at leisure
+FAR_HURRY_SPEED = (1.0, 1.5)   # m/s: their walking speed (WANDR's late rollouts skate when |I^w| is above 0.7 m/s)
 FLOOR_WRIST = 0.07         # the wrist stays this high (m) above the floor: the hand lies flat below it
 LEVELS = np.linspace(-1.0, 1.0, 41)
 EVAL_ANGLES_DEG = (0.0, 72.0, 144.0, 216.0, 288.0)        # WANDR Sec. 4.2: 5 angles 72 deg apart
@@ -255,7 +257,8 @@ def sample_reach_task(rng: np.random.Generator, far: bool = False) -> ReachTask:
     in any direction (a turn first when it is behind), heights uniform over FAR_HEIGHTS (0-1.9 m: WANDR's Fig. 5 finds
     reaching weakest where data are scarce, at the floor and overhead), and the goal frame drawn uniformly between
     the natural time (turn, walk at ~0.8 m/s, reach, a short pause first: 0.2-0.8 s; at most 9 s) and 9 s; the
-    clip (generate_reach) walks slower, down to FAR_MIN_SPEED (0.25 m/s), to arrive then."""
+    clip (generate_reach) walks slower, down to FAR_MIN_SPEED (0.25 m/s), to arrive then. A share FAR_HURRY of them
+    is due sooner instead: turn, walk at FAR_HURRY_SPEED (1.0-1.5 m/s), reach, 0.2 s of slack."""
     betas = sample_betas(rng)
     h0 = rng.uniform(-np.pi, np.pi)
     if far:
@@ -288,6 +291,10 @@ def _far_task(rng: np.random.Generator, betas: np.ndarray, h0: float, z: float) 
     turn = abs(rel) / 2.2 + 0.35 if abs(rel) > 0.3 else 0.0
     t_nat = min(turn + _natural_time(r, z) + rng.uniform(0.2, 0.8), 9.0)
     t_goal = rng.uniform(t_nat, 9.0)            # the slack goes into a slower walk (generate_reach), not a longer pause
+    hurry, v = rng.random(), rng.uniform(*FAR_HURRY_SPEED)
+    if hurry < FAR_HURRY:                       # a hurried walk: the data's high wrist intentions, with real steps
+        walk = max(r - 0.55, 0.0) / v + (0.6 if r > 0.55 else 0.0)
+        t_goal = min(t_nat, turn + walk + 0.9 + 0.5 * max(0.9 - z, 0.0) + 0.2)
     return ReachTask(Start(float(xy0[0]), float(xy0[1]), float(h0)), goal, int(round(t_goal * 30)),
                      int(rng.integers(9, 31)), betas)
 

@@ -306,15 +306,16 @@ def held_out_starts(motions: Sequence[Motion], names: Sequence[str], bm, n: int 
             for m, nm in zip(motions[:n], names[:n])]
 
 
-def test_start_names(clips_folder: str | Path, n: int = 6, seed: int = 0) -> list[str]:
-    """Names '<kind>/<file>' of the n start clips: test-split clips of the folder, alternating locomotion and reach."""
+def test_start_names(clips_folder: str | Path, n: int = 6, seed: int = 0, split: str = "test") -> list[str]:
+    """Names '<kind>/<file>' of the n start clips: `split` clips of the folder (test: the grid's; val: model
+    selection's), alternating locomotion and reach."""
     per_kind = []
     for kind in KINDS:
         files = sorted(Path(clips_folder, kind).glob("*.npz"))
-        per_kind.append([f"{kind}/{f.name}" for f in files if split_of(f"{kind}/{f.name}", seed) == "test"])
+        per_kind.append([f"{kind}/{f.name}" for f in files if split_of(f"{kind}/{f.name}", seed) == split])
     out = [nm for pair in zip(*per_kind) for nm in pair][:n]
     if len(out) < n:
-        raise ValueError(f"clips_folder: only {len(out)} test-split start clips under {clips_folder}")
+        raise ValueError(f"clips_folder: only {len(out)} {split}-split start clips under {clips_folder}")
     return out
 
 

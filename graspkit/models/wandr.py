@@ -174,10 +174,11 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
 
 
 def train_wandr(model: WandrCVAE, clips: ClipSet, cfg: TrainConfig, checkpoint: str | Path | None = None,
-                stride: dict[str, int] | None = None, progress: bool = True, time_limit_s: float | None = None
-                ) -> list[dict[str, float]]:
+                stride: dict[str, int] | None = None, progress: bool = True, time_limit_s: float | None = None,
+                stop_at: int | None = None) -> list[dict[str, float]]:
     """Train with graspkit's loop (seeded, resumable): every epoch one pass over the windows (frame strides per kind,
-    e.g. {'locomotion': 4, 'reach': 2}, keep epochs short); the stats and the model config go into the checkpoint."""
+    e.g. {'locomotion': 4, 'reach': 2}, keep epochs short); the stats and the model config go into the checkpoint;
+    `stop_at` stops after that epoch (the same command resumes: one epoch at a time gives the same weights)."""
     ds = WindowDataset(clips, max_steps=model.cfg.max_steps)
     if stride:
         keep = torch.ones(len(ds), dtype=torch.bool)
@@ -193,7 +194,8 @@ def train_wandr(model: WandrCVAE, clips: ClipSet, cfg: TrainConfig, checkpoint: 
         return training_losses(net, clips, items, model.cfg.rollout_steps(epoch))
 
     extra = {"wandr_config": asdict(model.cfg)}
-    return fit(model, step, ds, cfg, checkpoint=checkpoint, extra=extra, progress=progress, time_limit_s=time_limit_s)
+    return fit(model, step, ds, cfg, checkpoint=checkpoint, extra=extra, progress=progress, time_limit_s=time_limit_s,
+               stop_at=stop_at)
 
 
 def save_wandr(path: str | Path, model: WandrCVAE, history: Sequence[dict] = (), meta: dict[str, Any] | None = None,

@@ -44,11 +44,12 @@ print("held-out start poses:", ", ".join(s.source for s in starts))
 # distance (cm). The full grid runs in `benchmarks/wandr_grid.py` (one batch, FS computed on the fly from the foot
 # vertices); here two of the starts, one sample per goal (250 motions), to stay fast.
 #
-# **What to expect.** The shipped model is trained for 50 minutes on two CPU threads (the paper: 900 epochs on
-# AMASS + CIRCLE), on graspkit's reaching and room-scale reaching clips. On the full grid it puts the wrist within
-# 10 cm in about three motions in five (61.5 %; the paper: 32 %), at 0.45 and 0.9 m in more than eight in ten, at
-# 1.35 m in four in five, at the floor in about one in three and at 1.8 m in one in eight, and skates as much as the
-# paper's (15.9 % against 16 %).
+# **What to expect.** The shipped model is trained for about 40 minutes on two CPU threads (the paper: 900 epochs on
+# AMASS + CIRCLE), on graspkit's reaching and room-scale reaching clips, and kept at the epoch with the best
+# *validation* score (other starts, goals off the grid: this grid chose nothing). On the full grid it puts the wrist
+# within 10 cm in more than four motions in five (85.6 %; the paper: 32 %), at 0.9 and 1.35 m in more than nine in
+# ten, at the floor and at 0.45 m in about six in seven, at 1.8 m in two in three, and skates a little less than the
+# paper's model (14.4 % against 16 %).
 # `docs/wandr.md` has the full grid beside the paper's Tab. 1. The point of
 # this section is the *measurement*, which is the paper's in full.
 
@@ -185,13 +186,13 @@ print(f"pelvis paths over 4 s: other latents differ by at most {gap(plain, other
       f"{gap(plain, zero):.1f} cm")
 
 # %% [markdown]
-# Under a centimetre over a walk of nearly two metres: the c-VAE has become an almost deterministic regressor of
+# A few centimetres over a walk of nearly two metres: the c-VAE has become an almost deterministic regressor of
 # the next delta. Sup. B.2's rollout steps decode a $z$ drawn from the *prior* against the true next delta, and that
 # rewards a decoder that ignores $z$. `docs/wandr.md` measures both sides: training the rollout steps on the
 # encoder's $z$ instead (`--rollout-latent posterior`) makes $z$ matter (40 iterations bring the pelvis from 94 to
 # 40 cm of this waypoint) but the model then reaches 2 % of the grid; the shipped model needs latents far outside
-# $\mathcal N(0, I)$ to follow: 40 iterations with learning rate 0.5 and $w_{norm}$ = 0.001 bring the pelvis from 96 to
-# 55 cm of the waypoint, with mean $z^2$ ≈ 16 where the prior's is 1.
+# $\mathcal N(0, I)$ to follow: 40 iterations with learning rate 0.5 and $w_{norm}$ = 0.001 bring the pelvis from 89 to
+# 33 cm of the waypoint, with mean $z^2$ ≈ 16 where the prior's is 1.
 
 # %% [markdown]
 # ## 6 · Place a goal yourself
