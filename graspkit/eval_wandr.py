@@ -369,6 +369,8 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
         raise ValueError(f"variant: expected one of {list(VARIANTS)}, got {variant!r}")
     if stride_scale < 1:
         raise ValueError(f"stride_scale: expected >= 1, got {stride_scale}")
+    if select_val and time_limit is not None:
+        raise ValueError("time_limit: not supported with select_val (every epoch is trained and scored)")
     v = dict(VARIANTS[variant])
     if kinds is not None:
         chosen = tuple(k for k in KINDS if k in kinds)

@@ -136,8 +136,10 @@ def test_train_command_parses_the_schedule_flags():
     assert a.func is E._cmd_train
     with pytest.raises(ValueError, match="stride_scale"):
         E.run_train_wandr(stride_scale=0, folder="/nonexistent")
-    a = ap.parse_args(["train", "wandr", "--kinds", "reach", "--reach-far"])
-    assert (a.kinds, a.reach_far) == ("reach", True)
+    a = ap.parse_args(["train", "wandr", "--kinds", "reach", "--reach-far", "--select-val"])
+    assert (a.kinds, a.reach_far, a.select_val) == ("reach", True, True)
+    with pytest.raises(ValueError, match="time_limit"):
+        E.run_train_wandr(select_val=True, time_limit=60.0, folder="/nonexistent")
     for bad in ((), ("walk",), ("reach", "walk")):
         with pytest.raises(ValueError, match="kinds"):
             E.run_train_wandr(kinds=bad, folder="/nonexistent")
