@@ -90,6 +90,36 @@ def test_true_deltas_give_zero_joint_and_foot_terms(clips, stats):
     assert "foot_mm2" not in M.training_losses(_model(stats), clips, items, 1, generator=torch.Generator().manual_seed(0))
 
 
+def test_contact_term_holds_planted_feet_only(clips, stats):
+    """The planted-foot term (w_contact, not in the paper): with the data's deltas the model's feet step as the data's,
+    so the term is the data's own planted steps squared (< 1 mm², the swing foot free); sliding the root 5 mm a frame
+    moves every planted joint by 5 ± 1 mm, so the term (a mean over windows, steps and the four foot joints) lies
+    within 16-36 mm² times the share of planted joints, counted here from the data's joints."""
+    items = W.WindowDataset(clips, max_steps=3).items[::40]
+    b = W.make_batch(clips, items, 3, generator=torch.Generator().manual_seed(0))
+    d_gt = I.poses_to_deltas(b["p"])
+    J = I.body_joints(b["p"][:, 1:], b["rest"][:, None])[..., M.FEET, :2]          # (B, 5, 4, 2): frames i .. i+4
+    planted = ((J[:, 1:] - J[:, :-1]).norm(dim=-1) < 1e-3).float().mean().item()      # share of planted joints
+    assert 0.1 < planted < 1.0
+    for slide in (0.0, 0.005):
+        model = _model(stats, w_contact=1.0)
+        calls = iter(range(4))
+
+        def decode(z, cond, slide=slide):
+            d = d_gt[:, next(calls) + 1].clone()
+            d[:, 0] += slide
+            return d
+        model.decode = decode
+        out = M.training_losses(model, clips, items, 3, generator=torch.Generator().manual_seed(0))
+        if slide == 0.0:
+            assert 0.0 <= out["contact_mm2"].item() < 1.0
+        else:
+            assert 16.0 * planted <= out["contact_mm2"].item() <= 36.0 * planted
+            assert out["loss"].item() == pytest.approx((out["rec"] + 1e-2 * out["kl"] + out["joint_cm2"]
+                                                        + out["contact_mm2"]).item(), rel=1e-5)
+    assert "contact_mm2" not in M.training_losses(_model(stats), clips, items, 1, generator=torch.Generator().manual_seed(0))
+
+
 def test_posterior_rollout_latents_change_only_the_rollout_steps(clips, stats):
     """rollout_latent="posterior" draws the rollout steps' z from the encoder: the same losses without rollout steps,
     different reconstruction and KL with them."""

@@ -16,7 +16,9 @@ over joints and batch). The paper does not say how its MSEs are reduced; with me
 made the posterior collapse here (KL ≈ 0.003 nats: the decoder ignored z and predicted means), so the sums keep
 z informative, and centimetres put L_J on the scale of L_rec. No goal-reaching loss. An optional term that is not in
 the paper, w_foot (default 0) times the squared error of the foot joints' horizontal step per frame (mm²), was tried
-against foot skating and is off in the shipped model (docs/wandr.md).
+against foot skating and is off in the shipped model (docs/wandr.md); so is w_contact (default 0), a foot-contact
+term: the squared horizontal step (mm²) of each foot joint that is planted in the data at that frame (it moves
+less than 1 mm there), so only standing feet are held, never the swing foot.
 
 Rollout schedule (Sup. B.2): after the reconstruction step, the model runs s more steps on its own output: each step
 integrates the predicted delta, recomputes state and intention from the generated pose, samples z from the prior and
@@ -41,6 +43,7 @@ from graspkit.train import TrainConfig, fit, load_checkpoint, save_checkpoint
 
 FULL_INTENTION = ("wrist", "orientation", "pelvis")
 FEET = [JOINT_INDEX[k] for k in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
+PLANTED_STEP = 1e-3          # m per frame: a foot joint the data moves less than this is planted (w_contact)
 
 
 @dataclass
@@ -56,6 +59,7 @@ class WandrConfig:
     alpha_kl: float = 1e-2
     w_joint: float = 1.0
     w_foot: float = 0.0                                # not in the paper: foot-joint velocity term (docs/wandr.md)
+    w_contact: float = 0.0                             # not in the paper: planted feet held in place (docs/wandr.md)
     max_steps: int = 10
     ramp_epochs: int = 4
     rollout_latent: str = "prior"                      # "prior" (Sup. B.2) or "posterior" (encoder on the truth)
@@ -143,7 +147,7 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
     cur_p, cur_d = p[:, 1], d_gt[:, 0]
     t, R = I.pose_rotmats(cur_p)
     J = I.fk_rotmats(t, R, rest)[1]
-    rec = joint = kl = foot = torch.zeros((), dtype=p.dtype)
+    rec = joint = kl = foot = contact = torch.zeros((), dtype=p.dtype)
     for k in range(steps + 1):
         state = I.state_features(cur_p, cur_d, root=R[:, 0])
         inten = I.intention(J[:, I.WRIST], J[:, I.PELVIS], I.yaw_of(R[:, 0]), goal, (t_goal - k).to(p.dtype) / I.FPS, gh)
@@ -164,12 +168,17 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
         if cfg.w_foot:      # the feet's horizontal step against the data's (mm per frame): a planted foot stays put
             v, v_gt = J[:, FEET, :2] - J_prev[:, FEET, :2], J_gt[:, k + 1, FEET, :2] - J_gt[:, k, FEET, :2]
             foot = foot + (1000 * (v - v_gt)).pow(2).sum(-1).mean()
+        if cfg.w_contact:   # a foot joint planted in the data (it moves < 1 mm there) should not move here (mm²)
+            planted = (J_gt[:, k + 1, FEET, :2] - J_gt[:, k, FEET, :2]).norm(dim=-1) < PLANTED_STEP
+            step = J[:, FEET, :2] - J_prev[:, FEET, :2]
+            contact = contact + (planted * (1000 * step).pow(2).sum(-1)).mean()
     n = steps + 1
     n_kl = n if cfg.rollout_latent == "posterior" else 1
-    rec, joint, kl, foot = rec / n, joint / n, kl / n_kl, foot / n
-    loss = rec + cfg.alpha_kl * kl + cfg.w_joint * joint + cfg.w_foot * foot
+    rec, joint, kl, foot, contact = rec / n, joint / n, kl / n_kl, foot / n, contact / n
+    loss = rec + cfg.alpha_kl * kl + cfg.w_joint * joint + cfg.w_foot * foot + cfg.w_contact * contact
     return {"loss": loss, "rec": rec.detach(), "kl": kl.detach(), "joint_cm2": joint.detach(),
             **({"foot_mm2": foot.detach()} if cfg.w_foot else {}),
+            **({"contact_mm2": contact.detach()} if cfg.w_contact else {}),
             "steps": torch.tensor(float(steps))}
 
 
