@@ -165,13 +165,11 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
         J = I.fk_rotmats(t, R, rest)[1]
         rec = rec + (model.normalise_delta(d_hat) - model.normalise_delta(target)).pow(2).sum(-1).mean()
         joint = joint + (100 * (J - J_gt[:, k + 1])).pow(2).sum(-1).mean()
-        if cfg.w_foot:      # the feet's horizontal step against the data's (mm per frame): a planted foot stays put
+        if cfg.w_foot or cfg.w_contact:     # the foot joints' horizontal step here and in the data (B, 4, 2)
             v, v_gt = J[:, FEET, :2] - J_prev[:, FEET, :2], J_gt[:, k + 1, FEET, :2] - J_gt[:, k, FEET, :2]
-            foot = foot + (1000 * (v - v_gt)).pow(2).sum(-1).mean()
-        if cfg.w_contact:   # a foot joint planted in the data (it moves < 1 mm there) should not move here (mm²)
-            planted = (J_gt[:, k + 1, FEET, :2] - J_gt[:, k, FEET, :2]).norm(dim=-1) < PLANTED_STEP
-            step = J[:, FEET, :2] - J_prev[:, FEET, :2]
-            contact = contact + (planted * (1000 * step).pow(2).sum(-1)).mean()
+            foot = foot + (1000 * (v - v_gt)).pow(2).sum(-1).mean()           # every foot joint as the data (mm²)
+            planted = v_gt.norm(dim=-1) < PLANTED_STEP                         # still in the data: held still here
+            contact = contact + (planted * (1000 * v).pow(2).sum(-1)).mean()
     n = steps + 1
     n_kl = n if cfg.rollout_latent == "posterior" else 1
     rec, joint, kl, foot, contact = rec / n, joint / n, kl / n_kl, foot / n, contact / n
