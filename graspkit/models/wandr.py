@@ -16,9 +16,9 @@ over joints and batch). The paper does not say how its MSEs are reduced; with me
 made the posterior collapse here (KL ≈ 0.003 nats: the decoder ignored z and predicted means), so the sums keep
 z informative, and centimetres put L_J on the scale of L_rec. No goal-reaching loss. An optional term that is not in
 the paper, w_foot (default 0) times the squared error of the foot joints' horizontal step per frame (mm²), was tried
-against foot skating and is off in the shipped model (docs/wandr.md); so is w_contact (default 0), a foot-contact
-term: the squared horizontal step (mm²) of each foot joint that is planted in the data at that frame (it moves
-less than 1 mm there), so only standing feet are held, never the swing foot.
+against foot skating and is off in the shipped model (docs/wandr.md). w_contact (default 0; 1 in the shipped model) is a
+foot-contact term: the squared horizontal step (mm²) of each foot joint that is planted in the data at that frame (it
+moves less than 1 mm there), so only standing feet are held, never the swing foot.
 
 Rollout schedule (Sup. B.2): after the reconstruction step, the model runs s more steps on its own output: each step
 integrates the predicted delta, recomputes state and intention from the generated pose, samples z from the prior and

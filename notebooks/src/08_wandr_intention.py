@@ -197,9 +197,10 @@ fig.tight_layout()
 # %% [markdown]
 # The shipped model runs the schedule to **60** steps, not 10: with minutes of training instead of 900 epochs, a model
 # trained on 10-step rollouts drifts to a stand when it is fed its own output for 8 s, and the longer rollouts are what
-# made it walk to the goals (`docs/wandr.md` has the measurements). It also adds one term the paper does not have,
-# $w \sum \lVert \Delta x^{xy}_{foot} \rVert^2$ over the foot joints that are *planted* in the data at that frame (they
-# move less than 1 mm there; mm², `--contact-weight`, shipped at $w = 1$): it lowers foot skating on the grid from
+# made it walk to the goals (`docs/wandr.md` has the measurements). It also adds one term the paper does not have:
+# $w$ times the squared horizontal step $\lVert \Delta x^{xy}_{foot} \rVert^2$ (mm²) of the four foot joints, averaged,
+# counted only where that joint is *planted* in the data at that frame (it moves less than 1 mm there;
+# `--contact-weight`, shipped at $w = 1$): it lowers foot skating on the grid from
 # 14.4 to 9.3 % and costs some reaching (`docs/wandr.md`, "A planted-foot term"). A few optimisation steps on the sample
 # clips, with a small network, to watch the paper's three terms (the shipped model was trained with `graspkit train
 # wandr --kinds reach --reach-far --max-steps 60 --stride-scale 2 --epochs 10 --batch-size 256 --threads 2 --select-val
