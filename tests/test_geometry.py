@@ -128,6 +128,23 @@ def test_point_mesh_distance_is_exact(name):
     torch.testing.assert_close(res.distance, torch.linalg.vector_norm(torch.tensor(pts) - res.closest, dim=-1))
 
 
+def test_point_mesh_distance_grouped_in_cells_is_exact_on_a_grid():
+    """An SDF-style lattice around a mesh (several cells of the search): every node's distance equals the brute force
+    over all (point, face) pairs, and the reported face is the nearest."""
+    from graspkit.objects.distance import _cells
+
+    mesh = make_object("mug")
+    lo, hi = mesh.bounds
+    axes = [np.linspace(a - 0.04, b + 0.04, 13) for a, b in zip(lo, hi)]
+    pts = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    assert len(_cells(pts)[1]) - 1 >= 4
+    res = point_mesh_distance(pts, mesh)
+    want = _brute_force_distance(mesh, pts)
+    np.testing.assert_allclose(res.distance.numpy(), want, atol=1e-12)
+    on_face = trimesh.triangles.closest_point(mesh.triangles[res.face.numpy()], pts)
+    np.testing.assert_allclose(np.linalg.norm(pts - on_face, axis=1), want, atol=1e-9)
+
+
 def test_point_mesh_distance_batched_vertices_and_points():
     mesh = make_object("can")
     poses = [sample_object_pose(s) for s in range(3)]

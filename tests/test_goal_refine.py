@@ -1,4 +1,5 @@
 """GOAL's refinements (Eq. 4-8 for GNet, Eq. 12-13 for MNet) on cases with a known answer."""
+import functools
 import math
 
 import numpy as np
@@ -117,8 +118,9 @@ def test_motion_frame_refinement_meets_the_hand_targets(setup):
 
 # ------------------------------------------------------------------------------- graspkit's E_pen (not in GOAL)
 
+@functools.lru_cache(maxsize=None)
 def _ball_grid(radius: float):
-    """An icosphere of `radius` at the origin and its signed-distance grid (cells of ~2 mm)."""
+    """An icosphere of `radius` at the origin and its signed-distance grid (cells of ~2 mm); built once per radius."""
     import trimesh
 
     from graspkit.objects.sdf import SDFGrid
