@@ -145,6 +145,26 @@ def test_point_mesh_distance_grouped_in_cells_is_exact_on_a_grid():
     np.testing.assert_allclose(np.linalg.norm(pts - on_face, axis=1), want, atol=1e-9)
 
 
+def test_search_cells_stay_few_for_points_on_a_plane_or_a_line():
+    """A figure's slice (points on a plane) or a line would make thousands of near-empty cells from the box volume; the
+    cells grow until there are at most 2N/512, and the slice's distances stay the brute force's."""
+    from graspkit.objects.distance import CELL_POINTS, _cells
+
+    x, y = np.meshgrid(np.linspace(-0.2, 0.2, 150), np.linspace(-0.2, 0.2, 150))
+    plane = np.stack([x.ravel(), y.ravel(), np.full(x.size, 0.05)], 1)
+    line = np.repeat(np.linspace(-1.0, 1.0, 4000)[:, None], 3, 1)
+    for pts in (plane, line, plane[:1]):
+        order, starts = _cells(pts)
+        assert 1 <= len(starts) - 1 <= max(1, 2 * len(pts) // CELL_POINTS)
+        assert np.array_equal(np.sort(order), np.arange(len(pts))) and starts[0] == 0 and starts[-1] == len(pts)
+    mesh = make_object("camera")
+    lo, hi = mesh.bounds
+    a, b = np.meshgrid(np.linspace(lo[0] - 0.03, hi[0] + 0.03, 40), np.linspace(lo[1] - 0.03, hi[1] + 0.03, 40))
+    cut = np.stack([a.ravel(), b.ravel(), np.full(a.size, (lo[2] + hi[2]) / 2)], 1)   # a slice through the middle
+    np.testing.assert_allclose(point_mesh_distance(cut, mesh).distance.numpy(), _brute_force_distance(mesh, cut),
+                               atol=1e-12)
+
+
 def test_point_mesh_distance_batched_vertices_and_points():
     mesh = make_object("can")
     poses = [sample_object_pose(s) for s in range(3)]

@@ -179,15 +179,20 @@ def closest_point_on_triangle(p: Tensor, a: Tensor, b: Tensor, c: Tensor) -> tup
 
 
 def _cells(points: np.ndarray, size: int = CELL_POINTS) -> tuple[np.ndarray, np.ndarray]:
-    """Group points (N,3) into cubic cells holding ~`size` points when the points fill their box: an order (N,) that
-    puts each cell's points together and the cells' starts in that order (G+1,)."""
+    """Group points (N,3) into cubic cells of ~`size` points: an order (N,) that puts each cell's points together and
+    the cells' starts in that order (G+1,). The side starts from points filling their box and doubles while the
+    cells are too many (points on a plane or a line), so a cell never holds only a handful of them."""
     lo, hi = points.min(0), points.max(0)
     side = max(float(np.prod(np.maximum(hi - lo, 1e-9)) * size / len(points)) ** (1 / 3), 1e-9)
-    cell = np.floor((points - lo) / side).astype(np.int64)
-    n = cell.max(0) + 1
-    key = (cell[:, 0] * n[1] + cell[:, 1]) * n[2] + cell[:, 2]
-    order = np.argsort(key, kind="stable")
-    return order, np.flatnonzero(np.r_[True, np.diff(key[order]) != 0, True])
+    while True:
+        cell = np.floor((points - lo) / side).astype(np.int64)
+        n = cell.max(0) + 1
+        key = (cell[:, 0] * n[1] + cell[:, 1]) * n[2] + cell[:, 2]
+        order = np.argsort(key, kind="stable")
+        starts = np.flatnonzero(np.r_[True, np.diff(key[order]) != 0, True])
+        if len(starts) - 1 <= max(1, 2 * len(points) // size):
+            return order, starts
+        side *= 2
 
 
 def _nearest_among(p: Tensor, up: Tensor, cand: Tensor, tri: Tensor, cent: Tensor, rad: Tensor, box_lo: Tensor,
