@@ -15,8 +15,8 @@ than u(p) if |p - c_t| - r_t <= u(p), where c_t, r_t are its bounding-sphere cen
 exact point-triangle distance (Ericson, Real-Time Collision Detection, Sec. 5.1.5) is evaluated for
 those candidate pairs only, in chunks that bound memory. The queries are first grouped into cubic
 cells; a cell tests only the faces whose bounding box comes within its largest u(p) of the cell's
-box, so a point never meets the far side of a large mesh (same answer, 3-8x faster on grids and
-bodies than testing every face).
+box, so a point never meets the far side of a large mesh (same answer; measured about 3x faster on
+a 2 mm SDF grid of a 5,120-face ball and 7x on points near a body than testing every face).
 """
 from __future__ import annotations
 
