@@ -52,7 +52,8 @@ print("held-out start poses:", ", ".join(s.source for s in starts))
 # in about five in six, at the floor in only a third, and its feet skate in 9.3 % of the frame pairs (the paper's
 # model: 16 %). That is one training seed: the same command with two other seeds reaches 46.9 and 64.5 % (FS 9.5 and
 # 8.5 %, DTG 12.7 and 9.5 cm), and without the foot term seeds 0 and 1 gave 85.6 and 65.2 % with FS 14.4 and 13.8 % —
-# the term trades reaching for planted feet (`docs/wandr.md`). Here two of the six starts with one sample each, so expect a few points either way.
+# the term trades reaching for planted feet (`docs/wandr.md`). Here two of the six starts with one sample each, so
+# expect a few points either way.
 # `docs/wandr.md` has the full grid beside the paper's Tab. 1. The point of
 # this section is the *measurement*, which is the paper's in full.
 
