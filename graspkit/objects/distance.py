@@ -228,19 +228,14 @@ def _nearest_faces(points: np.ndarray, verts: np.ndarray, faces: np.ndarray) -> 
     p_t, up_t = torch.from_numpy(points[order]), torch.from_numpy(upper[order] * (1 + slack) + slack)
     tri_t, cent_t, rad_t = torch.from_numpy(tri), torch.from_numpy(cent), torch.from_numpy(rad)
     box_lo, box_hi = tri_t.min(1).values, tri_t.max(1).values
-    # each cell's box and largest bound: a face is a candidate there only if its box comes that close to the cell's
-    cell = torch.repeat_interleave(torch.arange(len(starts) - 1), torch.from_numpy(np.diff(starts)))
-    idx = cell[:, None].expand(-1, 3)
-    c_lo = torch.full((len(starts) - 1, 3), torch.inf, dtype=torch.float64).scatter_reduce(0, idx, p_t, "amin")
-    c_hi = torch.full((len(starts) - 1, 3), -torch.inf, dtype=torch.float64).scatter_reduce(0, idx, p_t, "amax")
-    c_up = torch.zeros(len(starts) - 1, dtype=torch.float64).scatter_reduce(0, cell, up_t, "amax")
     best = torch.empty(len(points), dtype=torch.int64)
-    for g in range(len(starts) - 1):
-        gap = torch.maximum(box_lo - c_hi[g], c_lo[g] - box_hi).clamp_min(0.0)
-        cand = torch.nonzero((gap * gap).sum(-1) <= c_up[g] ** 2, as_tuple=True)[0]
+    for a, b in zip(starts[:-1].tolist(), starts[1:].tolist()):
+        # a face is a candidate for the cell only if its box comes within the cell's largest bound of the cell's box
+        gap = torch.maximum(box_lo - p_t[a:b].max(0).values, p_t[a:b].min(0).values - box_hi).clamp_min(0.0)
+        cand = torch.nonzero((gap * gap).sum(-1) <= up_t[a:b].max() ** 2, as_tuple=True)[0]
         rows = max(1, PAIR_BUDGET // len(cand))
-        for s in range(int(starts[g]), int(starts[g + 1]), rows):
-            e = min(s + rows, int(starts[g + 1]))
+        for s in range(a, b, rows):
+            e = min(s + rows, b)
             best[s:e] = _nearest_among(p_t[s:e], up_t[s:e], cand, tri_t, cent_t, rad_t, box_lo, box_hi)
     out = np.empty(len(points), dtype=np.int64)
     out[order] = best.numpy()
