@@ -223,6 +223,24 @@ def test_smplx_poses_the_file_like_a_plain_numpy_lbs(shipped):
     assert np.abs(out.vertices[0].detach().numpy() - ours).max() < 1e-5
 
 
+def _contour(model, yaw_deg: float) -> np.ndarray:
+    """smplx's 17 jaw-contour landmarks (17, 3) with the head turned by yaw_deg about the vertical (canonical y)."""
+    return model(body_pose=_pose(head=(0, np.deg2rad(yaw_deg), 0))).joints[0, -17:].detach().numpy()
+
+
+def test_smplx_face_contour_reads_the_yaw_bins_in_smplx_order():
+    """smplx (lbs.find_dynamic_lmk_idx_and_bcoords) reads the 79 contour bins as yaw 0, +1..+39, -1..-39: at rest it
+    must pick a jaw line symmetric about the face (right ear -> chin -> left ear mirrors onto itself, x -> -x), and
+    a head turned left and right by the same angle must give mirror images."""
+    model = _smplx(use_face_contour=True)
+    mirror = lambda c: c[::-1] * np.array([-1.0, 1.0, 1.0])  # noqa: E731
+    rest = _contour(model, 0)
+    assert abs(rest[8, 0]) < 3e-3                              # the chin on the midline
+    assert np.abs(rest - mirror(rest)).max() < 4e-3
+    for yaw in (10, 25):
+        assert np.abs(_contour(model, yaw) - mirror(_contour(model, -yaw))).max() < 4e-3
+
+
 @pytest.mark.parametrize("joint, aa", [("left_elbow", (0, -np.pi / 2, 0)), ("right_elbow", (0, np.pi / 2, 0)),
                                        ("left_knee", (np.pi / 2, 0, 0)), ("right_knee", (np.pi / 2, 0, 0))])
 def test_90_degree_elbow_and_knee_keep_volume_without_folding(shipped, joint, aa):

@@ -145,10 +145,18 @@ def face_landmark_targets() -> np.ndarray:
     return np.asarray(pts, float)
 
 
+def contour_yaws() -> np.ndarray:
+    """The yaw (degrees) of each of the 79 dynamic-contour bins (79,), in SMPL-X's order: bin 0 is 0°, bins 1..39
+    are +1..+39°, bins 40..78 are -1..-39° (smplx's `find_dynamic_lmk_idx_and_bcoords` reads the bins this way, the
+    yaw being minus the neck chain's rotation about the vertical axis)."""
+    return np.concatenate([np.arange(0, 40), -np.arange(1, 40)]).astype(float)
+
+
 def contour_targets() -> np.ndarray:
-    """Jaw-line contour targets (79, 17, 3): one row of 17 points (right ear -> chin -> left ear) per yaw bin."""
+    """Jaw-line contour targets (79, 17, 3): one row of 17 points (right ear -> chin -> left ear) per yaw bin, bins
+    ordered as `contour_yaws`."""
     out = np.zeros((79, 17, 3))
-    for i, yaw in enumerate(np.linspace(-39, 39, 79)):
+    for i, yaw in enumerate(contour_yaws()):
         phi = np.deg2rad(np.linspace(-80, 80, 17) * (1 - abs(yaw) / 200) + 0.5 * yaw)
         y = 0.255 - 0.075 * np.cos(phi) ** 1.5
         out[i] = np.stack([0.07 * np.sin(phi), y, 0.02 + 0.07 * np.cos(phi)], 1)
