@@ -101,11 +101,26 @@ def test_forward_rotmats_matches_axis_angle_forward():
     (dict(transl=torch.zeros(3)), "transl"),
     (dict(jaw_pose=torch.tensor([[0.0, float("nan"), 0.0]])), "jaw_pose"),
     (dict(body_pose=torch.zeros(2, 63), transl=torch.zeros(3, 3)), "batch sizes"),
+    (dict(global_orient=torch.zeros(3), body_pose=torch.zeros(63)),
+     r"global_orient: expected a batch .*global_orient\[None\]"),
+    (dict(body_pose=torch.zeros(0, 63)), r"body_pose: expected a batch of at least one body"),
 ])
 def test_bad_arguments_name_the_argument(kwargs, name):
     bm = BodyModel(random_smplx_arrays(num_vertices=50, num_faces=20, seed=6))
     with pytest.raises(ValueError, match=name):
         bm(**kwargs)
+
+
+def test_one_joint_arguments_as_b_1_3_match_smplx(random_model_dir):
+    """global_orient / jaw / eyes / transl given as (B, 1, 3), as smplx accepts them, pose the same body."""
+    p = _params(3, 45, torch.float64)
+    kw = dict(use_pca=False, flat_hand_mean=True, dtype=torch.float64)
+    ref = smplx.create(str(random_model_dir), model_type="smplx", gender="neutral", ext="npz", **kw)
+    ours = BodyModel.from_file(random_model_dir / "smplx" / "SMPLX_NEUTRAL.npz", **kw)
+    q = {k: (v[:, None] if k in ("global_orient", "jaw_pose", "leye_pose", "reye_pose") else v) for k, v in p.items()}
+    with torch.no_grad():
+        assert (ours(**q).vertices - ref(**q).vertices).abs().max() < 1e-7
+        assert torch.equal(ours(**q).vertices, ours(**p).vertices)
 
 
 def test_pca_hand_pose_expects_num_pca_comps():

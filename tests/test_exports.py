@@ -43,13 +43,33 @@ def test_npz_in_smplx_gives_graspkit_vertices(exported):
     assert T == m.num_frames and (ours - out.vertices).abs().max() < 1e-4
 
 
+def test_npz_per_part_keys_pose_the_same_body_in_smplx(exported):
+    """A loader that reads AMASS's per-part keys (root_orient, pose_body, pose_jaw, pose_eye, pose_hand) instead of
+    `poses` gets the same vertices from smplx as graspkit's own; the keys carry the file's length and shape size."""
+    m, bm, _, paths = exported
+    with np.load(paths["npz"], allow_pickle=False) as z:
+        k = {n: torch.as_tensor(z[n], dtype=torch.float64) for n in
+             ("root_orient", "pose_body", "pose_jaw", "pose_eye", "pose_hand", "trans", "betas")}
+        assert int(z["num_betas"]) == 10 and abs(float(z["mocap_time_length"]) - m.num_frames / m.fps) < 1e-9
+    T = len(k["trans"])
+    ref = smplx.create(str(PROCEDURAL_MODEL.parents[1]), model_type="smplx", gender="neutral", ext="npz", use_pca=False,
+                       flat_hand_mean=True, num_betas=10, batch_size=T, dtype=torch.float64)
+    out = ref(betas=k["betas"][None].expand(T, -1), global_orient=k["root_orient"], body_pose=k["pose_body"],
+              jaw_pose=k["pose_jaw"], leye_pose=k["pose_eye"][:, :3], reye_pose=k["pose_eye"][:, 3:],
+              left_hand_pose=k["pose_hand"][:, :45], right_hand_pose=k["pose_hand"][:, 45:], transl=k["trans"],
+              expression=torch.zeros(T, 10, dtype=torch.float64))
+    assert (m.vertices(bm).double() - out.vertices).abs().max() < 1e-4
+    assert load_motion(paths["npz"]).num_frames == m.num_frames          # the reader still takes the file
+
+
 def test_glb_files_read_back_with_trimesh(exported):
     m, bm, box, paths = exported
     v = m.vertices(bm).numpy()
     frames, faces, times = load_sequence_glb(paths["glb"])
     assert np.array_equal(faces, bm.faces.numpy())
-    assert len(frames) == len(range(0, m.num_frames, 5)) and np.abs(frames - v[::5]).max() < 1e-4
-    assert np.allclose(times, np.arange(len(frames)) * 5 / m.fps)
+    kept = sorted(set(range(0, m.num_frames, 5)) | {m.num_frames - 1})     # every 5th frame and the last
+    assert len(frames) == len(kept) and np.abs(frames - v[kept]).max() < 1e-4
+    assert np.allclose(times, np.array(kept) / m.fps)
     scene = trimesh.load(paths["final_glb"])
     geoms = dict(scene.geometry)
     assert set(geoms) == {"body", "box"}

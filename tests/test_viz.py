@@ -272,4 +272,7 @@ def test_export_sequence_glb_round_trip(body, ball, tmp_path):
     assert len(loaded.geometry["body"].vertices) == len(body.vertices)
     np.testing.assert_allclose(loaded.geometry["body"].vertices @ Z_UP_TO_Y_UP, frames[0], atol=1e-5)
     half = export_sequence_glb(frames, body.faces, tmp_path / "half.glb", stride=2)
-    assert len(load_sequence_glb(half)[0]) == 4
+    assert len(load_sequence_glb(half)[0]) == 4                  # frames 0, 2, 4, 6
+    third = load_sequence_glb(export_sequence_glb(frames, body.faces, tmp_path / "third.glb", stride=4))
+    np.testing.assert_allclose(third[0], frames[[0, 4, 6]], atol=1e-5)   # the last frame always kept
+    np.testing.assert_allclose(third[2], np.array([0, 4, 6]) / 30, atol=1e-6)

@@ -217,6 +217,8 @@ class BodyModel(nn.Module):
             raise TypeError(f"{name}: expected a torch.Tensor, got {type(x).__name__}")
         if x.dim() == len(sizes) + 1 and tuple(x.shape[1:]) == sizes:
             x = x.reshape(x.shape[0], n)
+        elif x.dim() == 3 and sizes[-1] == 3 and x.shape[2] == 3 and 3 * x.shape[1] == n:
+            x = x.reshape(x.shape[0], n)                       # (B, 1, 3) for one joint, as smplx accepts
         if x.dim() != 2 or x.shape[1] != n:
             want = f"(B, {n})" + (f" or (B, {', '.join(map(str, sizes))})" if len(sizes) > 1 else "")
             raise ValueError(f"{name}: expected shape {want}, got {tuple(x.shape)}")
@@ -240,7 +242,13 @@ class BodyModel(nn.Module):
     @staticmethod
     def _batch_size(named: dict[str, Tensor | None]) -> int:
         """Common batch size of the given arguments (size 1 broadcasts); error names the odd one."""
-        sizes = {k: v.shape[0] for k, v in named.items() if isinstance(v, Tensor) and v.dim() > 0}
+        for k, v in named.items():
+            if isinstance(v, Tensor) and v.dim() < 2:
+                raise ValueError(f"{k}: expected a batch (B, ...) with a leading batch dimension, got shape "
+                                 f"{tuple(v.shape)} (for one body: {k}[None])")
+            if isinstance(v, Tensor) and v.shape[0] == 0:
+                raise ValueError(f"{k}: expected a batch of at least one body, got shape {tuple(v.shape)}")
+        sizes = {k: v.shape[0] for k, v in named.items() if isinstance(v, Tensor)}
         big = {s for s in sizes.values() if s != 1}
         if len(big) > 1:
             raise ValueError(f"batch sizes differ: {sizes}")

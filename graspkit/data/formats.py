@@ -2,7 +2,9 @@
 
 Written keys (AMASS SMPL-X layout): `poses` (T,165) axis-angle in SMPL-X joint order (root, 21 body joints,
 jaw, eyes, 15 + 15 hand joints; absolute rotations, the hand mean not added), `trans` (T,3), `betas` (10,),
-`gender`, `mocap_frame_rate`, `surface_model_type` ('smplx'); graspkit adds `contacts` (T,4)
+`gender`, `mocap_frame_rate`, `surface_model_type` ('smplx'), and with `amass_keys` (the exports for other tools)
+AMASS's per-part copies `root_orient`, `pose_body`, `pose_jaw`, `pose_eye`, `pose_hand`, `num_betas`,
+`mocap_time_length`; graspkit adds `contacts` (T,4)
 [left heel, left toe, right heel, right toe] and, for reaching clips, `goal` (3,), `goal_frame`, `hand`.
 Arrays are float32; strings are plain numpy unicode scalars, so every file loads with allow_pickle=False.
 
@@ -33,8 +35,19 @@ class SequenceFileError(ValueError):
     """A sequence file that is missing, pickled, or has a missing or malformed key."""
 
 
-def save_motion(path: str | os.PathLike, motion: Motion) -> Path:
-    """Write a Motion as an AMASS-style .npz (plus goal keys for reaching clips), atomically; returns the path."""
+def amass_split_keys(poses: np.ndarray, fps: float, num_betas: int = NUM_BETAS) -> dict[str, np.ndarray]:
+    """The per-part keys of AMASS's SMPL-X files from poses (T,165): root_orient (T,3), pose_body (T,63), pose_jaw
+    (T,3), pose_eye (T,6), pose_hand (T,90), plus num_betas and mocap_time_length (s), for loaders that read those
+    instead of `poses`."""
+    T = len(poses)
+    p = poses.reshape(T, 165)
+    return {"root_orient": p[:, :3], "pose_body": p[:, 3:66], "pose_jaw": p[:, 66:69], "pose_eye": p[:, 69:75],
+            "pose_hand": p[:, 75:], "num_betas": np.array(num_betas), "mocap_time_length": np.array(T / fps)}
+
+
+def save_motion(path: str | os.PathLike, motion: Motion, amass_keys: bool = False) -> Path:
+    """Write a Motion as an AMASS-style .npz (plus goal keys for reaching clips), atomically; returns the path.
+    amass_keys: also write AMASS's per-part keys (`amass_split_keys`; the exports for other tools do)."""
     path = Path(path)
     arrays: dict[str, np.ndarray] = {
         "poses": motion.poses.reshape(motion.num_frames, -1).astype(np.float32),
@@ -44,6 +57,8 @@ def save_motion(path: str | os.PathLike, motion: Motion) -> Path:
         "mocap_frame_rate": np.array(float(motion.fps)),
         "surface_model_type": np.array("smplx"),
     }
+    if amass_keys:
+        arrays.update(amass_split_keys(arrays["poses"], float(motion.fps)))
     if motion.contacts is not None:
         arrays["contacts"] = motion.contacts.astype(np.uint8)
     if motion.goal is not None:

@@ -178,13 +178,16 @@ def export_sequence_glb(vertices: Any, faces: Any, path: str | os.PathLike, fps:
                         name: str = "body") -> Path:
     """An animated GLB of a body sequence vertices (T,V,3) with faces (F,3) at fps, plus static objects
     {name: (vertices, faces)}. Frame 0 is the mesh, frames 1..T-1 are morph targets (offsets from frame 0),
-    and an animation drives their weights with LINEAR interpolation at t = k * stride / fps, so viewers
-    (Blender: shape keys; three.js, gltf viewers) play it. Size ~ 12 * T * V bytes (10k vertices, 300
-    frames: 36 MB): use stride. trimesh loads the file as the static frame 0. Returns the path."""
-    verts = as_array(vertices, "vertices", (None, None, 3))[::stride]
+    and an animation drives their weights with LINEAR interpolation at t = k / fps for the kept frames k (every
+    `stride`-th, and always the last, so the clip ends where the motion ends), so viewers (Blender: shape keys;
+    three.js, gltf viewers) play it. Size ~ 12 * T * V bytes (10k vertices, 300 frames: 36 MB): use stride.
+    trimesh loads the file as the static frame 0. Returns the path."""
+    verts = as_array(vertices, "vertices", (None, None, 3))
     f = as_array(faces, "faces", (None, 3), dtype=np.int64)
     if stride < 1 or len(verts) == 0:
         raise ValueError(f"vertices: need at least one frame (and stride >= 1), got {len(verts)} frames")
+    kept = np.unique(np.append(np.arange(0, len(verts), stride), len(verts) - 1))
+    verts = verts[kept]
     if f.size and (f.min() < 0 or f.max() >= verts.shape[1]):
         raise ValueError(f"faces: indices must lie in [0, {verts.shape[1]}), got [{f.min()}, {f.max()}]")
     rot = Z_UP_TO_Y_UP if y_up else np.eye(3)
@@ -196,7 +199,7 @@ def export_sequence_glb(vertices: Any, faces: Any, path: str | os.PathLike, fps:
         glb.mesh_node(oname, ov @ rot.T, of, (colors or {}).get(oname, _default_color(oname, k + 1)))
     if len(verts) > 1:
         n = len(verts)
-        times = (np.arange(n) * stride / fps).astype(np.float32)
+        times = (kept / fps).astype(np.float32)
         weights = np.zeros((n, n - 1), np.float32)
         weights[np.arange(1, n), np.arange(n - 1)] = 1.0  # frame k shows target k - 1 fully; frame 0 shows none
         sampler = {"input": glb.accessor(times, "SCALAR"), "output": glb.accessor(weights.reshape(-1), "SCALAR"),
@@ -249,8 +252,8 @@ def load_sequence_glb(path: str | os.PathLike, name: str = "body",
 
 def export_motion(motion: Any, bm: Any, folder: str | os.PathLike, name: str,
                   objects: Mapping[str, Any] | None = None, stride: int = 2) -> dict[str, Path]:
-    """A whole sequence (graspkit.data.Motion) for other tools: `<name>.npz` (AMASS-style SMPL-X parameters, loads
-    in the smplx package), `<name>.glb` (animated: morph targets every `stride` frames) and `<name>_final.glb`
+    """A whole sequence (graspkit.data.Motion) for other tools: `<name>.npz` (AMASS-style SMPL-X parameters with
+    AMASS's per-part keys too, loads in the smplx package), `<name>.glb` (animated: morph targets every `stride` frames) and `<name>_final.glb`
     (the last frame with the static `objects` {name: (vertices, faces) or Trimesh}, through trimesh). Returns
     {'npz', 'glb', 'final_glb'} paths; every file is written atomically."""
     from graspkit.data.formats import save_motion
@@ -260,7 +263,7 @@ def export_motion(motion: Any, bm: Any, folder: str | os.PathLike, name: str,
         raise ValueError(f"name: expected a plain file stem, got {name!r}")
     v = motion_vertices(motion, bm)
     faces = np.asarray(bm.faces, np.int64)
-    out = {"npz": save_motion(folder / f"{name}.npz", motion),
+    out = {"npz": save_motion(folder / f"{name}.npz", motion, amass_keys=True),
            "glb": export_sequence_glb(v, faces, folder / f"{name}.glb", fps=motion.fps, objects=objects,
                                       stride=stride),
            "final_glb": export_scene({"body": (v[-1], faces), **dict(objects or {})}, folder / f"{name}_final.glb")}
