@@ -49,20 +49,32 @@ JOINT_LIMITS_DEG: dict[str, float] = {
 
 
 def _t(x: Any) -> torch.Tensor:
-    """A float tensor view of an array or tensor."""
-    return x if isinstance(x, torch.Tensor) else torch.as_tensor(np.asarray(x))
+    """A float tensor of an array, list or tensor (detached: metrics are measurements; integers become float64)."""
+    t = x.detach() if isinstance(x, torch.Tensor) else torch.as_tensor(np.asarray(x))
+    return t if t.is_floating_point() else t.to(torch.float64)
 
 
 def _shaped(x: Any, name: str, shape: str, min_frames: int = 1) -> torch.Tensor:
-    """`x` as a tensor after checking it against `shape` (comma-separated: a digit is a fixed size, a letter any
-    size, e.g. 'T,V,3'); a ValueError names the argument otherwise. `min_frames` is the least T."""
+    """`x` as a float tensor after checking it against `shape` (comma-separated: a digit is a fixed size, a letter
+    any non-zero size, e.g. 'T,V,3') and that it is finite; a ValueError names the argument otherwise. `min_frames`
+    is the least T."""
     t = _t(x)
     dims = shape.split(",")
-    ok = t.dim() == len(dims) and all(not d.isdigit() or t.shape[i] == int(d) for i, d in enumerate(dims))
+    ok = t.dim() == len(dims) and all(t.shape[i] == int(d) if d.isdigit() else t.shape[i] > 0
+                                      for i, d in enumerate(dims))
     if not ok or (dims[0] == "T" and t.shape[0] < min_frames):
         need = f" with T >= {min_frames}" if min_frames > 1 else ""
-        raise ValueError(f"{name}: expected shape ({shape}){need}, got {tuple(t.shape)}")
+        raise ValueError(f"{name}: expected shape ({shape}){need}, no size zero, got {tuple(t.shape)}")
+    if not torch.isfinite(t).all():
+        raise ValueError(f"{name}: contains NaN or Inf")
     return t
+
+
+def _positive(x: float, name: str) -> float:
+    """x as a float after checking it is a positive finite number (a frame rate, a threshold)."""
+    if not (np.isfinite(x) and x > 0):
+        raise ValueError(f"{name}: expected a positive number, got {x}")
+    return float(x)
 
 
 def lowest_vertex_motion(vertices: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -89,7 +101,7 @@ def foot_skating_saga(heels: Any, fps: float = 30.0, height: float = SAGA_SKATE_
     """SAGA's skating per frame (T-1,) bool from heel positions (T,2,3) [left, right]: both heels within `height`
     of the ground and both faster than `speed` m/s (speed from frame t to t+1): no foot is planted."""
     h = _shaped(heels, "heels", "T,2,3", min_frames=2).double()
-    v = (h[1:] - h[:-1]).norm(dim=-1) * fps                      # (T-1, 2)
+    v = (h[1:] - h[:-1]).norm(dim=-1) * _positive(fps, "fps")                     # (T-1, 2)
     return ((h[:-1, :, 2] < height) & (v > speed)).all(1).numpy()
 
 
@@ -117,14 +129,14 @@ def non_collision_score(vertices: Any, floor: float = 0.0) -> np.ndarray:
 def joint_speed(joints: Any, fps: float = 30.0) -> np.ndarray:
     """Speeds (T-1,J) of joints (T,J,3) in m/s."""
     j = _shaped(joints, "joints", "T,J,3", min_frames=2).double()
-    return ((j[1:] - j[:-1]).norm(dim=-1) * fps).numpy()
+    return ((j[1:] - j[:-1]).norm(dim=-1) * _positive(fps, "fps")).numpy()
 
 
 def joint_jerk(joints: Any, fps: float = 30.0) -> np.ndarray:
     """Jerk magnitudes (T-3,J) in m/s^3: third finite differences of joints (T,J,3)."""
     j = _shaped(joints, "joints", "T,J,3", min_frames=4).double()
     d3 = j[3:] - 3 * j[2:-1] + 3 * j[1:-2] - j[:-3]
-    return (d3.norm(dim=-1) * fps**3).numpy()
+    return (d3.norm(dim=-1) * _positive(fps, "fps") ** 3).numpy()
 
 
 def joint_limit_violation(poses: Any) -> np.ndarray:
@@ -222,18 +234,30 @@ GRASP_CONTACT_THRESHOLD = 0.002      # m: "minimal contact" (the papers give no 
 def grasp_contact_distance(vertices: Any, obj: Any, margin: float = 0.05) -> float:
     """Smallest signed distance (m, < 0 inside) from body vertices (V,3) to an object mesh (Trimesh or (verts, faces)).
 
-    Only vertices within `margin` of the object's bounding box are measured (the rest cannot be closer)."""
+    Exact, with a shortcut: the vertices within `margin` of the object's bounding box are measured first; a vertex
+    outside that padded box is more than `margin` from the object, so when the nearest measured one is within
+    `margin` it is the answer. Otherwise every vertex whose distance to the box (a lower bound) is below the best
+    distance found so far is measured too."""
     from graspkit.objects.distance import mesh_arrays
     from graspkit.objects.sdf import signed_distance
 
     v = _t(vertices).double().reshape(-1, 3)
+    if len(v) == 0 or not torch.isfinite(v).all():
+        raise ValueError(f"vertices: expected finite (V, 3) positions with V > 0, got shape {tuple(v.shape)}")
     ov, of = mesh_arrays(obj, "obj")
-    lo, hi = ov.min(0).values - margin, ov.max(0).values + margin
-    near = ((v >= lo) & (v <= hi)).all(1)
-    if not near.any():
-        box = torch.maximum(torch.maximum(lo - v, v - hi), torch.zeros_like(v))
-        return float(box.norm(dim=1).min()) + margin
-    return float(signed_distance(v[near], (ov, of), check=False).min())
+    ov = ov.double()
+    lo, hi = ov.min(0).values, ov.max(0).values
+    box = torch.maximum(torch.maximum(lo - v, v - hi), torch.zeros_like(v)).norm(dim=1)   # <= the true distance
+    near = box <= margin
+    best = float(signed_distance(v[near], (ov, of), check=False).min()) if near.any() else float("inf")
+    if best <= margin:
+        return best
+    if not near.any():                      # seed the bound with the vertex nearest to the box
+        best = float(signed_distance(v[box.argmin()][None], (ov, of), check=False).min())
+    rest = ~near & (box < best)
+    if rest.any():
+        best = min(best, float(signed_distance(v[rest], (ov, of), check=False).min()))
+    return best
 
 
 def grasp_metrics(vertices: Any, faces: Any, obj: Any, threshold: float = GRASP_CONTACT_THRESHOLD) -> dict[str, float]:
@@ -248,6 +272,8 @@ def grasp_metrics(vertices: Any, faces: Any, obj: Any, threshold: float = GRASP_
 def contact_ratio(min_distances: Any, threshold: float = GRASP_CONTACT_THRESHOLD) -> float:
     """Fraction of grasps in contact: min body-object signed distances (N,) <= threshold."""
     d = np.asarray(min_distances, np.float64).reshape(-1)
+    if not np.isfinite(d).all():
+        raise ValueError("min_distances: contains NaN or Inf")
     return float((d <= threshold).mean()) if d.size else float("nan")
 
 
@@ -256,11 +282,13 @@ def apd(samples: Any) -> float:
     x = _t(samples).double()
     if x.dim() < 1 or x.numel() == 0:
         raise ValueError(f"samples: expected (K, ...) with non-empty samples, got shape {tuple(x.shape)}")
+    if not torch.isfinite(x).all():
+        raise ValueError("samples: contains NaN or Inf")
     x = x.reshape(len(x), -1)
     K = x.shape[0]
     if K < 2:
         raise ValueError(f"samples: APD needs at least 2 samples, got {K}")
-    d = torch.cdist(x, x)
+    d = torch.cdist(x, x, compute_mode="donot_use_mm_for_euclid_dist")      # exact differences, not |a|²+|b|²-2ab
     return float(d.sum() / (K * (K - 1)))
 
 

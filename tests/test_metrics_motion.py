@@ -118,7 +118,40 @@ def test_non_collision_score_counts_vertices_above_the_ground():
     (lambda: M.distance_to_goal(np.zeros((3, 3)), [0, 1]), r"goal: expected shape \(3\)"),
     (lambda: M.joint_jerk(np.zeros((3, 22, 3))), r"joints: .*T >= 4"),
     (lambda: M.apd(np.zeros((0, 3))), r"samples: expected"),
+    (lambda: M.apd(np.array([[0.0, np.nan], [1.0, 1.0]])), r"samples: contains NaN"),
+    (lambda: M.ground_penetration(np.full((2, 4, 3), np.nan)), r"vertices: contains NaN"),
+    (lambda: M.distance_to_goal(np.zeros((3, 3)), [0, np.inf, 1]), r"goal: contains NaN or Inf"),
+    (lambda: M.foot_skating_wandr(np.zeros((4, 0, 3))), r"vertices: expected shape \(T,V,3\).*no size zero"),
+    (lambda: M.joint_speed(np.zeros((3, 22, 3)), fps=0), r"fps: expected a positive number"),
+    (lambda: M.contact_ratio([np.nan, 0.0]), r"min_distances: contains NaN"),
 ])
 def test_bad_shapes_name_the_argument(call, message):
     with pytest.raises(ValueError, match=message):
         call()
+
+
+def test_tensors_that_require_grad_and_integer_arrays_are_measured_as_plain_numbers():
+    """smplx returns vertices that require grad, and a user may pass integer grids: the metrics measure them as the
+    same float values (a detached copy), never raising."""
+    import torch
+
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(6, 20, 3))
+    t = torch.tensor(v, requires_grad=True)
+    for f in (M.foot_skating_wandr, M.foot_sliding_goal, M.ground_penetration, M.non_collision_score,
+              M.joint_speed, M.joint_jerk):
+        assert np.array_equal(f(t), f(v))
+    step = np.zeros((3, 1, 3), np.int64)
+    step[1:, 0, 0] = 1                                           # the one vertex moves 1 m in the first pair only
+    assert M.foot_skating_wandr(step).tolist() == [True, False]
+    assert M.distance_to_goal(np.array([[0, 0, 0], [3, 4, 0]]), [3, 4, 0]) == 0.0
+
+
+def test_apd_of_equal_samples_is_zero_and_matches_scipy():
+    """APD is the mean of scipy's pairwise distances; equal samples (K > 25, where cdist's matrix-product shortcut
+    would round) give exactly 0."""
+    from scipy.spatial.distance import pdist
+
+    assert M.apd(np.full((30, 67, 3), 1.3)) == 0.0
+    x = np.random.default_rng(1).normal(size=(31, 12, 3)) + 500.0
+    assert M.apd(x) == pytest.approx(pdist(x.reshape(31, -1)).mean(), rel=1e-12)
