@@ -365,14 +365,47 @@ def test_penetration_edge_cases_and_inputs():
     assert abs(penetration_depth(hand, mug) * 100 - a.depth_cm) < 1e-12
 
 
+def _box(size, centre) -> trimesh.Trimesh:
+    b = trimesh.creation.box(size)
+    b.apply_translation(centre)
+    return b
+
+
+def test_a_self_overlapping_body_counts_its_overlap_once():
+    """Two boxes 10 cm wide, overlapping by 5 cm in x, as one mesh (a body pressed into itself): a 4 cm box in the
+    overlap lies inside the body, all 64 cm³ of it (the parity rule would see it outside: two surfaces crossed)."""
+    two = trimesh.util.concatenate([_box((0.1, 0.1, 0.1), (0, 0, 0)), _box((0.1, 0.1, 0.1), (0.05, 0, 0))])
+    inner = _box((0.04, 0.04, 0.04), (0.025, 0, 0))
+    assert interpenetration(two, inner).volume_cm3 == pytest.approx(64.0, rel=1e-6)
+    edge = _box((0.04, 0.04, 0.04), (0.11, 0, 0))            # x 9-13 cm: 1 cm of it inside the second box
+    assert interpenetration(two, edge).volume_cm3 == pytest.approx(16.0, rel=1e-6)
+
+
+def test_a_body_with_holes_is_measured_away_from_them():
+    """A body box missing its top face (a hole over every column) measures nothing; missing a side face (no vertical
+    ray passes through it) it measures what the closed box does. The object must stay closed."""
+    closed = _box((0.1, 0.1, 0.1), (0, 0, 0))
+    obj = _box((0.04, 0.04, 0.04), (0.05, 0.0, -0.03))       # 2 x 4 x 4 cm inside the body: 32 cm³
+    side = closed.faces[~np.isclose(closed.triangles_center[:, 0], 0.05)]      # the +x wall removed
+    top = closed.faces[~np.isclose(closed.triangles_center[:, 2], 0.05)]       # the lid removed
+    assert interpenetration(closed, obj).volume_cm3 == pytest.approx(32.0, rel=1e-6)
+    assert interpenetration((closed.vertices, side), obj).volume_cm3 == pytest.approx(32.0, rel=1e-6)
+    assert interpenetration((closed.vertices, top), obj).volume_cm3 == 0.0
+    corner = _box((0.04, 0.04, 0.04), (0.05, 0.05, -0.05))  # around the body's corner vertex: 8 cm³, 2 cm deep
+    for faces in (closed.faces, side):
+        pen = interpenetration((closed.vertices, faces), corner)
+        assert pen.volume_cm3 == pytest.approx(8.0, rel=1e-6) and pen.depth_cm == pytest.approx(2.0, abs=1e-9)
+
+
 # ---------------------------------------------------------------------------------------------- errors
 
 def test_non_watertight_or_inverted_mesh_is_rejected():
     bad = _open_mesh()
     with pytest.raises(ValueError, match="mesh: .*watertight"):
         signed_distance(np.zeros((1, 3)), bad)
-    with pytest.raises(ValueError, match="body: .*watertight"):
-        interpenetration(bad, _sphere(0.05))
+    flipped = trimesh.Trimesh(bad.vertices, np.vstack([bad.faces[:1, ::-1], bad.faces[1:]]), process=False)
+    with pytest.raises(ValueError, match="body: .*inconsistent winding"):
+        interpenetration(flipped, _sphere(0.05))            # a body may have holes, never inconsistent winding
     with pytest.raises(ValueError, match="obj: .*watertight"):
         interpenetration(_sphere(0.05), bad)
     with pytest.raises(ValueError, match="mesh: .*watertight"):

@@ -101,11 +101,12 @@ def edge_ids(faces: Tensor) -> np.ndarray:
     return _topology(f.tobytes(), len(f))[0]
 
 
-def require_closed(verts: Tensor, faces: Tensor, name: str) -> None:
-    """Raise ValueError naming `name` unless the mesh is watertight, consistently wound and outward-oriented."""
+def require_closed(verts: Tensor, faces: Tensor, name: str, allow_holes: bool = False) -> None:
+    """Raise ValueError naming `name` unless the mesh is watertight, consistently wound and outward-oriented
+    (`allow_holes`: edges that border one face are accepted, e.g. a real SMPL-X body's open eye sockets)."""
     f = np.ascontiguousarray(faces.cpu().numpy(), dtype=np.int64)
     problem = _topology(f.tobytes(), len(f))[1]
-    if problem:
+    if problem and not (allow_holes and problem.endswith("(holes)")):
         raise ValueError(f"{name}: the mesh must be watertight and consistently oriented; {problem}")
     tri = verts.detach()[..., faces, :].to(torch.float64)
     volume = (tri[..., 0, :] * torch.linalg.cross(tri[..., 1, :], tri[..., 2, :])).sum((-1, -2)) / 6.0

@@ -2,11 +2,17 @@
 
 Volume: the intersection of two closed meshes is integrated along vertical rays. A regular grid of
 columns (spacing h, default 1 mm) covers the xy-overlap of the two bounding boxes; each column is
-intersected exactly with every triangle above it, the crossings of each mesh sorted along z give its
-inside intervals by parity (valid for watertight meshes), and the length of the intersection of the
-two interval sets times h^2 is that column's volume. This is exact along z and a midpoint rule in x, y
-(error O(h^2) for smooth shapes): two overlapping spheres match the analytic lens volume to ~0.1 %
-(tests/test_geometry.py, docs/objects.md).
+intersected exactly with every triangle above it, and each crossing counts +1 where the ray enters a mesh
+(outward normal pointing down) and -1 where it leaves. Along the column, a point is inside a mesh where
+that mesh's running count (its winding number) is positive: for a closed mesh without self-intersections
+this is the parity rule, and where a body overlaps itself (fingers pressed together) the overlap is inside
+once, not cancelled. The length of the intersection of the two meshes' inside intervals times h^2 is the
+column's volume. A column whose counts do not return to zero (a ray through an edge or a vertex, or
+through a hole of an open body mesh) is cast again at another sub-cell offset, and counts as empty if it
+stays so. This is exact along z and a midpoint rule in x, y: two overlapping spheres match the meshes' exact
+intersection to 0.02 % (docs/objects.md), but a contact thinner than h through a side wall is rounded to whole
+columns (a 0.4 mm slab through a vertical face: 0 or 1 mm of it), so a shallow sideways penetration can read
+0 or up to a column's width too deep; pass a smaller `spacing` to resolve it.
 
 Depth: the largest distance from a body vertex inside the object to the object surface (exact signed
 distance), 0 when no vertex is inside.
@@ -35,18 +41,20 @@ class Penetration:
     depth_cm: float
 
 
-def _closed_numpy(mesh: MeshLike, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """A single closed mesh as float64 (V,3) and int64 (F,3) arrays; ValueError naming `name` otherwise."""
+def _closed_numpy(mesh: MeshLike, name: str, allow_holes: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """A single closed mesh (`allow_holes`: or one with holes) as float64 (V,3) and int64 (F,3) arrays;
+    ValueError naming `name` otherwise."""
     verts, faces = mesh_arrays(mesh, name)
     if verts.dim() != 2:
         raise ValueError(f"{name}: expected one mesh with vertices (V, 3), got {tuple(verts.shape)}")
-    require_closed(verts, faces, name)
+    require_closed(verts, faces, name, allow_holes=allow_holes)
     return verts.detach().cpu().to(torch.float64).numpy(), faces.cpu().numpy()
 
 
 def _column_crossings(tri: np.ndarray, x0: float, y0: float, h: float, nx: int, ny: int,
-                      budget: int = 4_000_000) -> tuple[np.ndarray, np.ndarray]:
-    """Crossings of vertical rays at (x0 + i h, y0 + j h) with triangles (F,3,3): column ids i*ny + j and z."""
+                      budget: int = 4_000_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Crossings of vertical rays at (x0 + i h, y0 + j h) with triangles (F,3,3): column ids i*ny + j, z, and the
+    sign (+1 entering: the outward normal points down; -1 leaving)."""
     xy = tri[..., :2]
     i0 = np.clip(np.ceil((xy[..., 0].min(1) - x0) / h), 0, nx).astype(np.int64)
     i1 = np.clip(np.floor((xy[..., 0].max(1) - x0) / h), -1, nx - 1).astype(np.int64)
@@ -54,7 +62,7 @@ def _column_crossings(tri: np.ndarray, x0: float, y0: float, h: float, nx: int, 
     j1 = np.clip(np.floor((xy[..., 1].max(1) - y0) / h), -1, ny - 1).astype(np.int64)
     ni, nj = np.maximum(i1 - i0 + 1, 0), np.maximum(j1 - j0 + 1, 0)
     count = ni * nj
-    cols, zs = [], []
+    cols, zs, signs = [], [], []
     csum = np.cumsum(count)
     start = 0
     while start < len(tri):  # groups of triangles whose (triangle, column) candidate pairs fit the budget
@@ -77,22 +85,24 @@ def _column_crossings(tri: np.ndarray, x0: float, y0: float, h: float, nx: int, 
         z = (e_bc * a[:, 2] + e_ca * b[:, 2] + e_ab * c[:, 2])[hit] / area[hit]
         cols.append(((i0[face] + k // nj[face]) * ny + j0[face] + k % nj[face])[hit])
         zs.append(z)
+        signs.append(np.where(area[hit] < 0, 1, -1).astype(np.int64))    # area = 2 x the normal's z component
     if not cols:
-        return np.zeros(0, dtype=np.int64), np.zeros(0)
-    return np.concatenate(cols), np.concatenate(zs)
+        return np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0, dtype=np.int64)
+    return np.concatenate(cols), np.concatenate(zs), np.concatenate(signs)
 
 
-def _overlap_lengths(col_a: np.ndarray, z_a: np.ndarray, col_b: np.ndarray, z_b: np.ndarray,
-                     ncols: int) -> np.ndarray:
-    """Per column, the length along z inside both meshes, given each mesh's (even) crossings."""
+def _overlap_lengths(col_a: np.ndarray, z_a: np.ndarray, s_a: np.ndarray, col_b: np.ndarray, z_b: np.ndarray,
+                     s_b: np.ndarray, ncols: int) -> np.ndarray:
+    """Per column, the length along z inside both meshes, given each mesh's balanced signed crossings."""
     col = np.concatenate([col_a, col_b])
     z = np.concatenate([z_a, z_b])
-    is_a = np.concatenate([np.ones(len(z_a), bool), np.zeros(len(z_b), bool)])
+    w_a = np.concatenate([s_a, np.zeros(len(z_b), np.int64)])
+    w_b = np.concatenate([np.zeros(len(z_a), np.int64), s_b])
     order = np.lexsort((z, col))
-    col, z, is_a = col[order], z[order], is_a[order]
-    # every column holds an even number of crossings of each mesh, so the global parity restarts per column
-    in_a = np.cumsum(is_a) % 2 == 1
-    in_b = np.cumsum(~is_a) % 2 == 1
+    col, z = col[order], z[order]
+    # every column's signs of each mesh sum to zero, so the running winding numbers restart at 0 per column
+    in_a = np.cumsum(w_a[order]) > 0
+    in_b = np.cumsum(w_b[order]) > 0
     seg = (col[:-1] == col[1:]) & in_a[:-1] & in_b[:-1]
     return np.bincount(col[:-1][seg], weights=(z[1:] - z[:-1])[seg], minlength=ncols)
 
@@ -100,6 +110,11 @@ def _overlap_lengths(col_a: np.ndarray, z_a: np.ndarray, col_b: np.ndarray, z_b:
 def intersection_volume(mesh_a: MeshLike, mesh_b: MeshLike, spacing: float = 1e-3) -> float:
     """Volume (m^3) of the intersection of two closed meshes, by exact vertical ray casting on an xy grid."""
     return _volume(*_closed_numpy(mesh_a, "mesh_a"), *_closed_numpy(mesh_b, "mesh_b"), spacing)
+
+
+def _unbalanced(col: np.ndarray, sign: np.ndarray, ncols: int) -> np.ndarray:
+    """Columns (ncols,) bool whose crossings do not close: an odd count, or entries and exits that do not cancel."""
+    return (np.bincount(col, minlength=ncols) % 2 == 1) | (np.bincount(col, weights=sign, minlength=ncols) != 0)
 
 
 def _volume(va: np.ndarray, fa: np.ndarray, vb: np.ndarray, fb: np.ndarray, spacing: float) -> float:
@@ -125,23 +140,23 @@ def _volume(va: np.ndarray, fa: np.ndarray, vb: np.ndarray, fb: np.ndarray, spac
     todo = np.ones(nx * ny, dtype=bool)
     for ox, oy in _OFFSETS:
         x0, y0 = lo[0] + (0.5 + ox * 1e-3) * h, lo[1] + (0.5 + oy * 1e-3) * h
-        ca, za = _column_crossings(tri_a, x0, y0, h, nx, ny)
-        cb, zb = _column_crossings(tri_b, x0, y0, h, nx, ny)
-        odd = (np.bincount(ca, minlength=nx * ny) % 2 == 1) | (np.bincount(cb, minlength=nx * ny) % 2 == 1)
+        ca, za, sa = _column_crossings(tri_a, x0, y0, h, nx, ny)
+        cb, zb, sb = _column_crossings(tri_b, x0, y0, h, nx, ny)
+        odd = _unbalanced(ca, sa, nx * ny) | _unbalanced(cb, sb, nx * ny)
         ok_a, ok_b = ~odd[ca], ~odd[cb]
-        part = _overlap_lengths(ca[ok_a], za[ok_a], cb[ok_b], zb[ok_b], nx * ny)
+        part = _overlap_lengths(ca[ok_a], za[ok_a], sa[ok_a], cb[ok_b], zb[ok_b], sb[ok_b], nx * ny)
         done = todo & ~odd
         length[done] = part[done]
         todo &= odd
         if not todo.any():
             break
-    # columns still ambiguous after every offset (a ray through a vertex each time) count as empty
+    # columns still ambiguous after every offset (a ray through a vertex each time, or through a hole) count as empty
     return float(length.sum() * h * h)
 
 
 def penetration_depth(body: MeshLike, obj: MeshLike) -> float:
     """Maximum distance (m) from a body vertex inside the object to the object surface; 0 if none is inside."""
-    vb, _ = _closed_numpy(body, "body")
+    vb, _ = _closed_numpy(body, "body", allow_holes=True)
     return _depth(vb, *_closed_numpy(obj, "obj"))
 
 
@@ -155,7 +170,8 @@ def _depth(vb: np.ndarray, vo: np.ndarray, fo: np.ndarray) -> float:
 
 
 def interpenetration(body: MeshLike, obj: MeshLike, spacing: float = 1e-3) -> Penetration:
-    """SAGA / GOAL interpenetration of a body mesh and an object mesh: volume (cm^3) and depth (cm)."""
-    vb, fb = _closed_numpy(body, "body")
+    """SAGA / GOAL interpenetration of a body mesh and an object mesh: volume (cm^3) and depth (cm). The object must
+    be closed; the body may have holes (a real SMPL-X mesh's eye sockets): columns through a hole count as empty."""
+    vb, fb = _closed_numpy(body, "body", allow_holes=True)
     vo, fo = _closed_numpy(obj, "obj")
     return Penetration(volume_cm3=_volume(vb, fb, vo, fo, spacing) * 1e6, depth_cm=_depth(vb, vo, fo) * 100.0)
