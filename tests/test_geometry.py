@@ -115,6 +115,25 @@ def test_nearest_neighbours_matches_kdtree_batched():
     torch.testing.assert_close(d_single, d[1])
 
 
+def test_nearest_neighbours_and_bps_far_from_the_origin_match_kdtree():
+    """Basis points 1 km from the origin (world coordinates), each with two candidate points 1 mm away that differ
+    by 0.2 µm: the nearer one is found, as by a k-d tree (cdist's |a|² + |b|² - 2ab rounds at ~1e-9 m² there)."""
+    rng = np.random.default_rng(0)
+    basis = rng.normal(size=(200, 3)) * 0.01 + np.array([1000.0, -700.0, 20.0])
+    u, w = (x / np.linalg.norm(x, axis=1, keepdims=True) for x in rng.normal(size=(2, 200, 3)))
+    cloud = np.concatenate([basis + 1e-3 * u, basis + (1e-3 - 2e-7) * w])
+    dist, delta = bps_encode(torch.tensor(cloud), torch.tensor(basis), return_deltas=True)
+    ref, idx = cKDTree(cloud).query(basis)
+    assert (idx >= 200).all()                                   # the k-d tree's answer: always the nearer point
+    np.testing.assert_allclose(dist.numpy(), ref, rtol=0, atol=1e-12)
+    np.testing.assert_allclose((torch.tensor(basis) + delta).numpy(), cloud[idx], rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match=r"query: expected points of shape"):
+        nearest_neighbours(torch.zeros(2, 2, 5, 3), torch.zeros(4, 3))
+    mug = make_object("mug")
+    with pytest.raises(ValueError, match="mesh: face indices must be integers"):
+        signed_distance(np.zeros((1, 3)), (mug.vertices, mug.faces + 0.5))
+
+
 @pytest.mark.parametrize("name", TEST_OBJECTS)
 def test_point_mesh_distance_is_exact(name):
     mesh = make_object(name)

@@ -67,6 +67,8 @@ def mesh_arrays(mesh: MeshLike, name: str) -> tuple[Tensor, Tensor]:
         raise ValueError(f"{name}: expected a trimesh.Trimesh or a (vertices, faces) pair, got {type(mesh).__name__}")
     verts = as_points(verts, f"{name} vertices")
     faces = np.ascontiguousarray(faces.cpu() if isinstance(faces, Tensor) else faces)
+    if faces.dtype.kind == "f" and not (np.isfinite(faces).all() and (faces == np.round(faces)).all()):
+        raise ValueError(f"{name}: face indices must be integers, got non-integer {faces.dtype} values")
     faces = torch.as_tensor(faces, dtype=torch.int64)
     if faces.dim() != 2 or faces.shape[1] != 3 or len(faces) == 0:
         raise ValueError(f"{name}: expected faces of shape (F, 3) with F > 0, got {tuple(faces.shape)}")
@@ -124,6 +126,9 @@ def nearest_neighbours(query, target, squared: bool = False) -> tuple[Tensor, Te
     dimension is dropped when both inputs are unbatched.
     """
     q, t = as_points(query, "query"), as_points(target, "target")
+    for x, n in ((q, "query"), (t, "target")):
+        if x.dim() > 3:
+            raise ValueError(f"{n}: expected points of shape (N, 3) or (B, N, 3), got {tuple(x.shape)}")
     unbatched = q.dim() == 2 and t.dim() == 2
     q3, t3 = (q if q.dim() == 3 else q[None]), (t if t.dim() == 3 else t[None])
     if len(q3) != len(t3) and 1 not in (len(q3), len(t3)):
@@ -134,6 +139,8 @@ def nearest_neighbours(query, target, squared: bool = False) -> tuple[Tensor, Te
     rows = max(1, PAIR_BUDGET // (batch * t3.shape[1]))
     with torch.no_grad():
         qd, td = q3.detach().to(torch.float64), t3.detach().to(torch.float64)
+        centre = td.mean(1, keepdim=True)          # cdist's |a|² + |b|² - 2ab rounds far from the origin: centre first
+        qd, td = qd - centre, td - centre
         for s in range(0, q3.shape[1], rows):
             idx[:, s:s + rows] = torch.cdist(qd[:, s:s + rows], td).argmin(-1)
     nearest = torch.gather(t3, 1, idx[..., None].expand(-1, -1, 3))
