@@ -258,6 +258,11 @@ def test_object_sdf_grid_is_cached_and_movable():
     assert g64.values.dtype == torch.float64 and grid.values.dtype == torch.float32
     x = torch.tensor([[0.0, 0.0, 0.0], [0.0, 0.0, 0.2]], dtype=torch.float64)
     torch.testing.assert_close(g64(x), grid(x.float()).double(), atol=1e-6, rtol=0)
+    # numpy and list queries of any (..., 3) shape, one point included, as tensors are taken
+    assert float(g64(np.array([0.0, 0.0, 0.2]))) == float(g64(x)[1])
+    torch.testing.assert_close(g64([[0.0, 0.0, 0.0], [0.0, 0.0, 0.2]]), g64(x))
+    with pytest.raises(ValueError, match="points: expected finite"):
+        g64(np.array([0.0, np.nan, 0.0]))
 
 
 def test_sdf_grid_gradient_is_unit_and_points_away_from_surface():

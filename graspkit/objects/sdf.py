@@ -22,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor
@@ -172,7 +173,7 @@ class SDFGrid:
 
     def __call__(self, points) -> Tensor:
         """Interpolated signed distance (...,) at points (..., 3); differentiable w.r.t. the points."""
-        p = _check_tensor(points if isinstance(points, Tensor) else as_points(points, "points"))
+        p = _check_tensor(points if isinstance(points, Tensor) else torch.as_tensor(np.asarray(points, np.float64)))
         dtype = p.dtype
         lo, hi = self.lower.to(dtype=dtype, device=p.device), self.upper.to(dtype=dtype, device=p.device)
         inside = torch.maximum(torch.minimum(p, hi), lo)
