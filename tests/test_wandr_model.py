@@ -212,6 +212,11 @@ def test_goal_schedule_switches_goals_after_each_goal_frame():
     assert tg[0] == 10 and tg[11] == 20 and tg[35] == 30
     with pytest.raises(ValueError, match="t_goals"):
         M.goal_schedule(torch.zeros(2, 3), [20, 10], 30)
+    with pytest.raises(ValueError, match="strictly increasing"):       # goal 2 would get no frame
+        M.goal_schedule(torch.zeros(3, 3), [10, 10, 30], 35)
+    with pytest.raises(ValueError, match="before frame 35"):           # goal 3 would never start
+        M.goal_schedule(torch.zeros(3, 3), [10, 40, 50], 35)
+    assert M.goal_schedule(torch.zeros(2, 3), [10, 50], 35)[1][-1] == 50   # the last goal may lie past the clip
 
 
 def test_rollout_errors_name_the_argument(stats, starts):
@@ -230,6 +235,11 @@ def test_rollout_errors_name_the_argument(stats, starts):
     for bad_t in (0, -3, 2.5, torch.tensor([5, 6])):
         with pytest.raises(ValueError, match="t_goal"):
             M.generate(model, s, goal, bad_t)
+    for bad_n in (2.5, True, 0):
+        with pytest.raises(ValueError, match="n: expected"):
+            M.generate(model, s, goal, 5, n=bad_n)
+    with pytest.raises(ValueError, match="start: expected"):
+        M.generate(model, [], goal, 5)
 
 
 def test_checkpoint_round_trip_is_weights_only(stats, starts, tmp_path):

@@ -32,6 +32,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
+import numpy as np
 import torch
 from torch import Tensor, nn
 
@@ -311,6 +312,10 @@ def expand_starts(starts: I.StartPose | Sequence[I.StartPose], goals: Tensor, n:
     """Batch every (start, goal, sample) combination, start-major: p_prev, p0 (B, 135), rest (B, 22, 3), goal (B, 3),
     and the index table (B, 3) = (start, goal, sample); B = S * G * n."""
     starts = [starts] if isinstance(starts, I.StartPose) else list(starts)
+    if not starts or not all(isinstance(s, I.StartPose) for s in starts):
+        raise ValueError(f"start: expected a StartPose or a non-empty sequence of them, got {len(starts)} items")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
+        raise ValueError(f"n: expected a whole number of samples, got {n!r}")
     goals = torch.as_tensor(goals, dtype=torch.float32)
     if goals.dim() not in (1, 2) or goals.shape[-1] != 3 or goals.numel() == 0:
         raise ValueError(f"goal: expected (3,) or (G, 3) positions in metres, got shape {tuple(goals.shape)}")
@@ -355,8 +360,12 @@ def goal_schedule(goals: Tensor, t_goals: Sequence[int], frames: int) -> tuple[T
     """Several goals in a row (Sup. C.2, Fig. S.2): goal k is active from t_{k-1} + 1 to its frame t_k. Returns the goal
     (frames+1, 3) and goal frame (frames+1,) per frame, for `rollout` (expand to (B, T, ...))."""
     goals = torch.as_tensor(goals, dtype=torch.float32).reshape(-1, 3)
-    if len(t_goals) != len(goals) or list(t_goals) != sorted(t_goals) or t_goals[0] < 1:
-        raise ValueError(f"t_goals: expected {len(goals)} increasing frames >= 1, got {list(t_goals)}")
+    t = list(t_goals)
+    if len(t) != len(goals) or not t or t[0] < 1 or any(b <= a for a, b in zip(t, t[1:])):
+        raise ValueError(f"t_goals: expected {len(goals)} strictly increasing frames >= 1, got {t}")
+    if len(t) > 1 and t[-2] >= frames:
+        raise ValueError(f"t_goals: every goal but the last must fall before frame {frames} (the next one gets the "
+                         f"frames after it), got {t}")
     g = torch.empty(frames + 1, 3)
     tg = torch.empty(frames + 1, dtype=torch.long)
     lo = 0
