@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -80,6 +81,28 @@ def _cmd_goal(args: argparse.Namespace) -> int:
     return 0
 
 
+WANDR_MAX_SECONDS = 8.0       # the goal grid's horizon (§4.2): what the shipped model is trained and measured for
+WANDR_MAX_SPEED = 1.5         # m/s: the fastest walk of the training clips (the hurried room-scale tasks, docs/data.md)
+
+
+def wandr_range_notes(goal, seconds: float) -> list[str]:
+    """Warnings when a goal (start frame: the pelvis above the origin) and time to it leave the range the shipped
+    WANDR model was trained and evaluated on: beyond 8 s, faster than 1.5 m/s on the ground, or below the floor."""
+    import math
+
+    x, y, z = (float(v) for v in goal)
+    notes = []
+    if seconds > WANDR_MAX_SECONDS:
+        notes.append(f"{seconds:g} s is past the {WANDR_MAX_SECONDS:g} s the model was trained and evaluated for; "
+                     "past it the body tends to drift and lift off the floor (docs/wandr.md)")
+    if math.hypot(x, y) / seconds > WANDR_MAX_SPEED:
+        notes.append(f"the goal is {math.hypot(x, y):.1f} m away: {math.hypot(x, y) / seconds:.1f} m/s on average, "
+                     f"faster than the {WANDR_MAX_SPEED:g} m/s walks of the training clips; expect a poor motion")
+    if z < 0:
+        notes.append(f"the goal is {-z:.2f} m below the floor; the wrist cannot reach it")
+    return notes
+
+
 def _cmd_wandr(args: argparse.Namespace) -> int:
     """`graspkit wandr --goal X Y Z`: WANDR from its held-out start pose to a goal (start frame) in --seconds."""
     import numpy as np
@@ -91,21 +114,26 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
     from graspkit.viz.scene import sphere
 
     if not 0 < args.seconds <= 30:
-        raise ValueError(f"seconds: expected a time to the goal in (0, 30] s, got {args.seconds}")
+        raise ValueError(f"--seconds: expected a time to the goal in (0, 30] s, got {args.seconds}")
+    frames = int(round(args.seconds * 30.0))
+    if frames < 1:
+        raise ValueError(f"--seconds: expected at least one frame (1/30 s), got {args.seconds}")
     if not args.checkpoint.is_file():
         raise FileNotFoundError(f"checkpoint: {args.checkpoint} is missing (see docs/wandr.md)")
     goal = torch.tensor(args.goal, dtype=torch.float32)
-    motion = wandr_motions(args.checkpoint, goal[None], int(round(args.seconds * 30.0)), seed=args.seed)[0]
+    for note in wandr_range_notes(args.goal, frames / 30.0):
+        print(f"graspkit: note: {note}", file=sys.stderr)
+    motion = wandr_motions(args.checkpoint, goal[None], frames, seed=args.seed)[0]
     bm = load_or_build_body(args.model)
     sv, sf = sphere(goal.numpy(), 0.05)
     args.out.mkdir(parents=True, exist_ok=True)
     paths, _ = _write_clip(bm, motion, args.out, f"wandr_s{args.seed}",
                            {"goal": trimesh.Trimesh(sv, sf, process=False)},
-                           f"WANDR: reach the goal in {args.seconds:g} s", goals=goal[None].numpy())
+                           f"WANDR: reach the goal in {frames / 30.0:.2f} s", goals=goal[None].numpy())
     wrist = motion.joint_positions(bm)[:, 21]                   # SMPL-X joint 21: the right wrist
     d = np.linalg.norm(wrist - goal.numpy(), axis=-1)
     print(f"closest right-wrist distance to the goal {d.min() * 100:.1f} cm at {d.argmin() / 30.0:.2f} s "
-          f"(t_G {args.seconds:g} s)")
+          f"(t_G {frames / 30.0:.2f} s, frame {frames})")
     for path in paths:
         print(f"wrote {path}")
     return 0
@@ -145,7 +173,7 @@ def build_parser() -> argparse.ArgumentParser:
     b = body.add_parser("build", help="build the procedural SMPL-X-format humanoid")
     b.add_argument("--seed", type=int, default=0)
     b.add_argument("--out", type=Path, default=default_model_path())
-    b.set_defaults(func=_cmd_body_build)
+    b.set_defaults(func=_cmd_body_build, out_is_file=True)
     i = body.add_parser("info", help="describe a body-model file")
     i.add_argument("--model", type=Path, default=default_model_path())
     i.set_defaults(func=_cmd_body_info)
@@ -223,12 +251,39 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+FILE_SUFFIXES = (".npz", ".pt", ".json", ".csv")      # an --out with one of these names a file, otherwise a folder
+
+
+def check_out(path: Path, is_file: bool | None = None, flag: str = "--out") -> None:
+    """Before any work: `path` (a file when is_file, a folder when not; None: a file if its suffix is in
+    FILE_SUFFIXES) can be written, i.e. it is not the other kind of thing and its nearest existing ancestor is a
+    writable folder; ValueError naming `flag`."""
+    path = Path(path)
+    is_file = path.suffix in FILE_SUFFIXES if is_file is None else is_file
+    if is_file and path.is_dir():
+        raise ValueError(f"{flag}: {path} is a folder; expected a file path" + (f" ending in {path.suffix}"
+                                                                                 if path.suffix else ""))
+    if not is_file and path.exists() and not path.is_dir():
+        raise ValueError(f"{flag}: {path} is a file; expected a folder")
+    for p in (path.parent if is_file else path, *(path.parent if is_file else path).parents):
+        if p.exists():
+            if not p.is_dir():
+                raise ValueError(f"{flag}: {p} is a file, so {path} cannot be written")
+            if not os.access(p, os.W_OK | os.X_OK):
+                raise ValueError(f"{flag}: {p} is not writable")
+            return
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the `graspkit` console command."""
     args = build_parser().parse_args(argv)
     try:
+        if getattr(args, "seed", None) is not None and args.seed < 0:
+            raise ValueError(f"--seed: expected a non-negative integer, got {args.seed}")
+        if getattr(args, "out", None) is not None:
+            check_out(args.out, getattr(args, "out_is_file", None))
         return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError) as e:
+    except (ValueError, OSError) as e:      # OSError: FileNotFoundError, a folder that cannot be written, ...
         print(f"graspkit: error: {e}", file=sys.stderr)
         return 2
 

@@ -354,6 +354,7 @@ def add_goal_train_commands(train_sub) -> None:
                        help="folder with grasp_*.npz / approach_*.npz (repeatable; default: the data-make cache)")
         p.add_argument("--variant", choices=variants, default=variants[0])
         p.add_argument("--out", type=Path, default=None, help=f"shipped weights (default data_stubs/checkpoints/{name}.pt)")
+        p.set_defaults(out_is_file=True)
         p.add_argument("--epochs", type=int, default=default_epochs)
         p.add_argument("--time-limit", type=float, default=600.0, help="seconds; stops after the epoch that crosses it")
         p.add_argument("--seed", type=int, default=0)

@@ -292,6 +292,7 @@ def add_motionfill_train_commands(train_sub) -> None:
     b.add_argument("--model", choices=list(BASELINE_DATA), required=True)
     b.add_argument("--epochs", type=int, default=30)
     b.add_argument("--out", type=Path, default=None, help="default data_stubs/checkpoints/motionfill_<model>.pt")
+    b.set_defaults(out_is_file=True)
     b.add_argument("--data", type=Path, default=None, help="folder of the approach clips (default: the cache's)")
     b.add_argument("--clips", type=int, default=None, help="approach clips (default 144)")
     b.add_argument("--lr", type=float, default=1e-3)

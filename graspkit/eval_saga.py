@@ -475,6 +475,7 @@ def add_saga_train_commands(train_sub) -> None:
         p = train_sub.add_parser(name, help=f"train {text}")
         p.add_argument("--data", type=Path, default=default, help=f"folder of grasp_*.npz (default {default})")
         p.add_argument("--out", type=Path, default=None, help="weights (default data_stubs/checkpoints/<name>.pt)")
+        p.set_defaults(out_is_file=True)
         p.add_argument("--epochs", type=int, default=30 if name == "pose_prior" else 12)
         p.add_argument("--time-limit", type=float, default=600.0, help="seconds; stops after the epoch that crosses it")
         p.add_argument("--seed", type=int, default=0)

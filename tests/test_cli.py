@@ -70,3 +70,28 @@ def test_demo_refuses_unknown_stages(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path), "--stages", "body,saga2"]) == 2
     err = capsys.readouterr().err
     assert "stages" in err and "saga2" in err and not list(tmp_path.iterdir())
+
+
+def test_out_paths_that_cannot_be_written_and_bad_seeds_fail_before_any_work(tmp_path):
+    """A file where a folder is wanted (or the reverse), a path under a file, a negative seed and a time shorter than
+    a frame are named in one line, exit code 2, no traceback."""
+    (tmp_path / "f").write_text("x")
+    for args, message in ((("wandr", "--goal", "1", "0", "1", "--out", str(tmp_path / "f")), "is a file; expected a folder"),
+                          (("wandr", "--goal", "1", "0", "1", "--out", str(tmp_path / "f" / "sub")), "is a file, so"),
+                          (("body", "build", "--out", str(tmp_path)), "is a folder; expected a file path"),
+                          (("data", "make", "--kind", "reach", "--n", "1", "--seed", "-1", "--out", str(tmp_path / "d")),
+                           "--seed: expected a non-negative integer"),
+                          (("wandr", "--goal", "1", "0", "1", "--seconds", "0.01", "--out", str(tmp_path / "w")),
+                           "--seconds: expected at least one frame")):
+        r = _run(*args)
+        assert r.returncode == 2 and message in r.stderr and "Traceback" not in r.stderr, (args, r.stderr)
+    assert not (tmp_path / "d").exists() and not (tmp_path / "w").exists()
+
+
+def test_wandr_notes_say_when_a_goal_leaves_the_trained_range():
+    from graspkit.cli import wandr_range_notes
+
+    assert wandr_range_notes((1.5, 0.5, 1.0), 3.0) == []                       # 1.6 m in 3 s: a walk
+    assert any("past the 8 s" in n for n in wandr_range_notes((1.5, 0.5, 1.0), 10.0))
+    assert any("8.0 m away: 2.0 m/s" in n for n in wandr_range_notes((8.0, 0.0, 1.0), 4.0))
+    assert any("below the floor" in n for n in wandr_range_notes((1.0, 0.0, -0.5), 4.0))

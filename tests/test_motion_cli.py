@@ -18,6 +18,26 @@ def test_make_resume_and_determinism(tmp_path):
     assert clip_seed(7, "reach", 2) != clip_seed(7, "locomotion", 2) != clip_seed(8, "reach", 2)
 
 
+def test_a_folder_takes_only_files_of_its_own_run(tmp_path):
+    """Clips of another seed or body model are refused in a folder that holds a run's clips (a resumed or extended
+    run must be the same run); the default body named by its path is the same run."""
+    import json
+
+    import pytest
+
+    from graspkit.paths import default_model_path
+
+    make_dataset("reach", 1, 7, tmp_path, workers=1, progress=False)
+    assert json.loads((tmp_path / "graspkit_make_reach.json").read_text()) == {"kind": "reach", "model": None, "seed": 7}
+    with pytest.raises(ValueError, match=r"--out: .*\(seed: 7 there, 8 now\)"):
+        make_dataset("reach", 2, 8, tmp_path, workers=1, progress=False)
+    assert not (tmp_path / "reach_000001.npz").exists()
+    make_dataset("reach", 2, 7, tmp_path, workers=1, progress=False, model=str(default_model_path()))
+    assert (tmp_path / "reach_000001.npz").exists()
+    with pytest.raises(ValueError, match="nope.npz: no such body-model file"):      # before any worker starts
+        make_dataset("reach", 3, 7, tmp_path, workers=2, progress=False, model=str(tmp_path / "nope.npz"))
+
+
 def test_cli_with_two_workers_writes_the_same_bytes(tmp_path):
     r = subprocess.run([sys.executable, "-m", "graspkit", "data", "make", "--kind", "locomotion", "--n", "2",
                         "--seed", "4", "--out", str(tmp_path / "p"), "--workers", "2"],

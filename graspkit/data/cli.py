@@ -20,6 +20,41 @@ DEFAULT_N = {"locomotion": 2000, "reach": 2000, "reach_far": 2000, "grasp": 1700
 _BM = None
 
 
+def claim_folder(out: Path, kind: str, settings: dict) -> None:
+    """Record the settings that shape a folder's `kind` files (<out>/graspkit_make_<kind>.json) on its first run, and
+    refuse to add files made with other settings (another seed, body model, chunk or object list) to it: a resumed or
+    extended run must be the same run. A folder of files made before this record existed is taken as it is."""
+    import json
+
+    from graspkit.viz.export import write_atomic
+
+    from graspkit.paths import default_model_path
+
+    record = Path(out) / f"graspkit_make_{kind}.json"
+    settings = dict(settings)
+    if settings.get("model") is not None:           # the default body given by its path is the default body
+        m = Path(settings["model"]).resolve()
+        settings["model"] = None if m == Path(default_model_path()).resolve() else str(m)
+    want = {"kind": kind, **settings}
+    if record.is_file():
+        have = json.loads(record.read_text())
+        if have != want:
+            diff = "; ".join(f"{k}: {have.get(k)!r} there, {want.get(k)!r} now"
+                             for k in sorted(set(have) | set(want)) if have.get(k) != want.get(k))
+            raise ValueError(f"--out: {out} holds {kind} files made with other settings ({diff}); "
+                             "use another --out or remove its files")
+    else:
+        write_atomic(record, json.dumps(want, sort_keys=True))
+
+
+def check_model(model: str | None) -> None:
+    """Load the body-model file once here, so a bad --model fails with its own error before any worker starts."""
+    if model is not None:
+        from graspkit.body import BodyModel
+
+        BodyModel.from_file(model)
+
+
 def clip_seed(seed: int, kind: str, index: int) -> int:
     """The seed of clip `index` of a set: derived from (seed, kind, index) by numpy's SeedSequence."""
     return int(np.random.SeedSequence([seed, KINDS.index(kind), index]).generate_state(1)[0])
@@ -63,7 +98,9 @@ def make_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2, mode
     if n < 0 or workers < 1:
         raise ValueError(f"n / workers: expected n >= 0 and workers >= 1, got {n} / {workers}")
     out = Path(out)
+    check_model(model)
     out.mkdir(parents=True, exist_ok=True)
+    claim_folder(out, kind, {"seed": seed, "model": model})
     todo = [i for i in range(n) if not clip_path(out, kind, i).exists()]
     bar = tqdm(total=n, initial=n - len(todo), desc=f"{kind} clips", unit="clip", disable=not progress)
     if workers == 1:

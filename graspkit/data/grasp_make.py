@@ -287,7 +287,11 @@ def make_grasp_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2
     if n < 0 or workers < 1 or chunk < 1:
         raise ValueError(f"n / workers / chunk: expected n >= 0, workers >= 1, chunk >= 1, got {n} / {workers} / {chunk}")
     out = Path(out)
+    from graspkit.data.cli import check_model, claim_folder
+
+    check_model(model)
     out.mkdir(parents=True, exist_ok=True)
+    claim_folder(out, kind, {"seed": seed, "model": model, "chunk": chunk, "objects": list(objects)})
     missing = [i for i in range(n) if not file_path(out, kind, i).exists()]
     chunks = sorted({i // chunk for i in missing})
     done = n - len(missing)

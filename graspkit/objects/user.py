@@ -41,6 +41,8 @@ def as_object(obj: str | Path | trimesh.Trimesh, argument: str = "obj") -> tuple
             if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
                 raise ValueError(f"{argument}: {path} holds no triangle mesh")
             return path.stem, _checked(mesh, f"{argument} ({path})")
+        if path.suffix or len(path.parts) > 1:
+            raise ValueError(f"{argument}: no such mesh file {str(path)!r} (nor a catalogue name {list_objects()})")
         raise ValueError(f"{argument}: unknown object {str(obj)!r}; expected a catalogue name {list_objects()}, "
                          "a mesh file, or a trimesh.Trimesh")
     raise ValueError(f"{argument}: expected a catalogue name, a mesh file or a trimesh.Trimesh, "
@@ -59,8 +61,11 @@ def _checked(mesh: trimesh.Trimesh, argument: str) -> trimesh.Trimesh:
                          "its normals must point outward (trimesh's invert())")
     side = float((mesh.bounds[1] - mesh.bounds[0]).max())
     if not MIN_SIDE <= side <= MAX_SIDE:
+        hint = ("; in metres that is larger than a hand-held object: a mesh in millimetres needs apply_scale(0.001), "
+                "one in centimetres apply_scale(0.01)" if side > MAX_SIDE else
+                "; in metres that is smaller than a hand-held object")
         raise ValueError(f"{argument}: expected a hand-held object in metres (largest side {MIN_SIDE}-{MAX_SIDE} m), "
-                         f"got {side:.4g}; a mesh in millimetres needs apply_scale(0.001)")
+                         f"got {side:.4g}{hint}")
     mesh.apply_translation(-(mesh.bounds[0] + mesh.bounds[1]) / 2.0)
     return mesh
 
