@@ -17,6 +17,11 @@ FS is computed on the fly, frame by frame, without building meshes: the lowest v
 vertices (the 524 vertices skinned mostly to ankles and feet), which are posed exactly by linear blend skinning from
 the knee, ankle and foot transforms (they carry no pose correctives). `fs_agreement` measures, on full meshes, how often
 the lowest vertex of the whole body is one of them.
+
+Two extra columns, not the paper's (`summary`'s SR_grounded and floating): SR counts a wrist on the goal however the
+body got there, including with both feet off the floor, which the procedural clips never show (their lowest vertex
+stays within 3 mm of it). SR_grounded counts only the frames where a foot is within 5 cm of the floor (the lowest foot
+vertex; SAGA §4.3's contact height), and floating is the share of frames where none is.
 """
 from __future__ import annotations
 
@@ -30,7 +35,9 @@ from torch import Tensor
 from graspkit import intention as I
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.data.reaching import EVAL_ANGLES_DEG, EVAL_DISTANCES, EVAL_FRAMES, EVAL_HEIGHTS, Start, evaluation_goals
-from graspkit.metrics import WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS
+from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS
+
+FOOT_ON_FLOOR = SAGA_SKATE_HEEL_HEIGHT   # m: a foot within 5 cm of the floor touches it (SAGA §4.3's contact height)
 
 T_GOAL = EVAL_FRAMES - 1          # frame 239: 8 s after the start frame
 
@@ -140,6 +147,8 @@ class GridResult:
     fs: np.ndarray
     error_at_goal: np.ndarray
     info: dict[str, Any] = field(default_factory=dict)
+    grounded: np.ndarray | None = None      # (B,) bool: within 10 cm at a frame with a foot on the floor (not the paper's)
+    floating: np.ndarray | None = None      # (B,) share of frames with both feet off the floor (lowest foot vertex > 5 cm)
 
     @property
     def success(self) -> np.ndarray:
@@ -159,6 +168,9 @@ class GridMeter:
         self.skate = torch.zeros(B)
         self.pairs = 0
         self.err = torch.full((B,), float("nan"))
+        self.grounded = torch.zeros(B, dtype=torch.bool)
+        self.floating = torch.zeros(B)
+        self.frames = 0
         self._lowest: Tensor | None = None
         self._at = torch.zeros(B, 3)
 
@@ -177,8 +189,12 @@ class GridMeter:
                 move = (now[:, :2] - self._at[:, :2]).norm(dim=-1)
                 self.skate += (move > WANDR_SKATE_THRESHOLD).float()
                 self.pairs += 1
-            self._lowest = self.feet.heights(Rg, pos, self.body).argmin(1)
+            low, self._lowest = self.feet.heights(Rg, pos, self.body).min(1)
             self._at = self.feet.points(Rg, pos, self.body, self._lowest)
+            on_floor = low <= FOOT_ON_FLOOR
+            self.grounded |= (d <= WANDR_SUCCESS_RADIUS) & on_floor
+            self.floating += (~on_floor).float()
+            self.frames += 1
 
 
 def evaluate_grid(model, starts: Sequence[I.StartPose], bm, n: int = 5, seed: int = 0, goals: Tensor | None = None,
@@ -206,7 +222,8 @@ def _result(meter: GridMeter, idx: Tensor, cells: np.ndarray) -> GridResult:
     gi = idx[:, 1].numpy()
     return GridResult(idx[:, 0].numpy(), gi, idx[:, 2].numpy(), cells[gi], meter.dtg.double().numpy(),
                       meter.reach.numpy(), (meter.skate / max(meter.pairs, 1)).double().numpy(),
-                      meter.err.double().numpy())
+                      meter.err.double().numpy(), grounded=meter.grounded.numpy(),
+                      floating=(meter.floating / max(meter.frames, 1)).double().numpy())
 
 
 def evaluate_motions(p: Tensor, rest: Tensor, goals: Tensor, betas: Tensor, bm, t_goal: int = T_GOAL,
@@ -274,9 +291,12 @@ def summary(res: GridResult) -> dict[str, float]:
     first frame within 10 cm, mean over successful motions; nan when none) and the rollout count."""
     hit = res.reach_frame >= 0
     ttg = float(res.reach_frame[hit].mean()) / I.FPS if hit.any() else float("nan")
-    return {"SR": 100 * float(res.success.mean()), "FS": 100 * float(res.fs.mean()), "DTG": 100 * float(res.dtg.mean()),
-            "DTG_median": 100 * float(np.median(res.dtg)), "error_at_goal": 100 * float(np.nanmean(res.error_at_goal)),
-            "time_to_goal_s": ttg, "rollouts": int(len(res.dtg))}
+    out = {"SR": 100 * float(res.success.mean()), "FS": 100 * float(res.fs.mean()), "DTG": 100 * float(res.dtg.mean()),
+           "DTG_median": 100 * float(np.median(res.dtg)), "error_at_goal": 100 * float(np.nanmean(res.error_at_goal)),
+           "time_to_goal_s": ttg, "rollouts": int(len(res.dtg))}
+    if res.grounded is not None and res.floating is not None:     # graspkit's extra columns (not the paper's)
+        out.update(SR_grounded=100 * float(res.grounded.mean()), floating=100 * float(res.floating.mean()))
+    return out
 
 
 def breakdown(res: GridResult, by: str) -> dict[float, float]:
@@ -531,6 +551,9 @@ def _cmd_eval(args) -> int:
         rows[r["row"]] = r["summary"]
         print(f"{ck}: {r['row']}: SR {r['summary']['SR']:.1f} %, FS {r['summary']['FS']:.1f} %, "
               f"DTG {r['summary']['DTG']:.1f} cm ({r['summary']['rollouts']} rollouts, {r['seconds']:.0f} s)")
+        if "SR_grounded" in r["summary"]:
+            print(f"  not the paper's: SR with a foot on the floor {r['summary']['SR_grounded']:.1f} %, frames with "
+                  f"both feet off it {r['summary']['floating']:.1f} %")
         for b, vals in r["breakdown"].items():
             print(f"  SR by {b}: " + ", ".join(f"{k:g}: {x:.0f} %" for k, x in vals.items()))
         for sub, c in r.get("clips", {}).items():
@@ -553,6 +576,7 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     t.add_argument("--variant", choices=list(VARIANTS), default="wandr")
     t.add_argument("--data", type=Path, default=None, help="folder with locomotion/ and reach/ clips (default: cache)")
     t.add_argument("--out", type=Path, default=None, help="weights (default data_stubs/checkpoints/<variant>.pt)")
+    t.set_defaults(out_is_file=True)
     t.add_argument("--epochs", type=int, default=6)
     t.add_argument("--time-limit", type=float, default=None, help="seconds; stops after the epoch that crosses it")
     t.add_argument("--seed", type=int, default=0)

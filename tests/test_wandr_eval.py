@@ -72,6 +72,24 @@ def test_success_and_distance_to_goal_on_a_hand_made_motion(bm):
     assert res.error_at_goal[0] == pytest.approx(0.05, abs=1e-5)
 
 
+def test_a_wrist_reached_with_both_feet_off_the_floor_is_not_a_grounded_success(bm):
+    """The same clip lifted 20 cm from frame 30 on (full meshes: its lowest vertex then 20 cm up): the goal at frame
+    40's wrist is reached (SR) but not with a foot on the floor (SR_grounded); the floating share is the lifted frames'
+    share, and the clip as made (on the floor throughout) floats in none."""
+    m, p, rest = _clip(bm, "reach/reach_000002.npz")
+    lifted = p.clone()
+    lifted[30:, 2] += 0.20
+    goal = torch.stack([I.body_joints(q, rest)[40, I.WRIST] for q in (p, lifted)])     # each clip's wrist at 40
+    res = E.evaluate_motions(torch.stack([p, lifted]), rest[None].expand(2, -1, -1), goal,
+                             torch.as_tensor(m.betas)[None].expand(2, -1), bm, t_goal=40)
+    low = m.vertices(bm)[..., 2].min(-1).values                # the clip's full meshes: on the floor throughout
+    assert float(low.max()) < 0.01 and float(low[30:].min()) + 0.20 > 0.15   # lifted: both feet 19+ cm up
+    assert res.success.tolist() == [True, True] and res.grounded.tolist() == [True, False]
+    assert res.floating[0] == 0.0 and res.floating[1] == pytest.approx((len(p) - 30) / len(p))
+    s = E.summary(res)
+    assert s["SR"] == 100.0 and s["SR_grounded"] == 50.0
+
+
 def test_summary_and_breakdown():
     cells = np.array([[0, 0.0, 0.5], [72, 0.0, 5.0], [0, 1.8, 0.5], [72, 1.8, 5.0]])
     r = E.GridResult(np.zeros(4, int), np.arange(4), np.zeros(4, int), cells, np.array([0.05, 0.5, 0.09, 0.2]),
