@@ -26,9 +26,8 @@ def claim_folder(out: Path, kind: str, settings: dict) -> None:
     extended run must be the same run. A folder of files made before this record existed is taken as it is."""
     import json
 
-    from graspkit.viz.export import write_atomic
-
     from graspkit.paths import default_model_path
+    from graspkit.viz.export import write_atomic
 
     record = Path(out) / f"graspkit_make_{kind}.json"
     settings = dict(settings)

@@ -105,7 +105,7 @@ def edge_ids(faces: Tensor) -> np.ndarray:
 
 def require_closed(verts: Tensor, faces: Tensor, name: str, allow_holes: bool = False) -> None:
     """Raise ValueError naming `name` unless the mesh is watertight, consistently wound and outward-oriented
-    (`allow_holes`: edges that border one face are accepted, e.g. a real SMPL-X body's open eye sockets)."""
+    (`allow_holes`: edges that border one face are accepted, e.g. for a body mesh that is not closed)."""
     f = np.ascontiguousarray(faces.cpu().numpy(), dtype=np.int64)
     problem = _topology(f.tobytes(), len(f))[1]
     if problem and not (allow_holes and problem.endswith("(holes)")):

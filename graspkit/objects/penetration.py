@@ -171,7 +171,7 @@ def _depth(vb: np.ndarray, vo: np.ndarray, fo: np.ndarray) -> float:
 
 def interpenetration(body: MeshLike, obj: MeshLike, spacing: float = 1e-3) -> Penetration:
     """SAGA / GOAL interpenetration of a body mesh and an object mesh: volume (cm^3) and depth (cm). The object must
-    be closed; the body may have holes (a real SMPL-X mesh's eye sockets): columns through a hole count as empty."""
+    be closed; the body may have holes (a body mesh that is not watertight): columns through a hole count as empty."""
     vb, fb = _closed_numpy(body, "body", allow_holes=True)
     vo, fo = _closed_numpy(obj, "obj")
     return Penetration(volume_cm3=_volume(vb, fb, vo, fo, spacing) * 1e6, depth_cm=_depth(vb, vo, fo) * 100.0)

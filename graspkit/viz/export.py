@@ -253,7 +253,8 @@ def load_sequence_glb(path: str | os.PathLike, name: str = "body",
 def export_motion(motion: Any, bm: Any, folder: str | os.PathLike, name: str,
                   objects: Mapping[str, Any] | None = None, stride: int = 2) -> dict[str, Path]:
     """A whole sequence (graspkit.data.Motion) for other tools: `<name>.npz` (AMASS-style SMPL-X parameters with
-    AMASS's per-part keys too, loads in the smplx package), `<name>.glb` (animated: morph targets every `stride` frames) and `<name>_final.glb`
+    AMASS's per-part keys too, loads in the smplx package), `<name>.glb` (animated: morph targets every `stride`
+    frames and the last) and `<name>_final.glb`
     (the last frame with the static `objects` {name: (vertices, faces) or Trimesh}, through trimesh). Returns
     {'npz', 'glb', 'final_glb'} paths; every file is written atomically."""
     from graspkit.data.formats import save_motion
