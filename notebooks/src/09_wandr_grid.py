@@ -57,8 +57,8 @@ print("held-out start poses:", ", ".join(s.source for s in starts))
 # `docs/wandr.md` has the full grid beside the paper's Tab. 1. The point of
 # this section is the *measurement*, which is the paper's in full.
 #
-# **What SR does not see.** SR asks only where the wrist is, not how the body got it there. The procedural clips
-# never lift both feet off the floor (their lowest vertex stays within 3 mm of it), but the shipped model often does
+# **What SR does not see.** SR asks only where the wrist is, not how the body got it there. The room-scale training
+# clips do not lift both feet off the floor (60 of them measured: their lowest vertex within 3 mm of it), but the shipped model often does
 # as the clock runs out: in 7.1 % of the grid's frames no foot is within 5 cm of the floor (SAGA's contact height),
 # mostly in the last three seconds and for the high goals. Counting only reaches made with a foot on the floor
 # (`SR_grounded`, graspkit's extra column, not the paper's) the full grid gives 47.8 % instead of 80.0 %: the 1.35 and
