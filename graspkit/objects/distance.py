@@ -79,6 +79,9 @@ def mesh_arrays(mesh: MeshLike, name: str) -> tuple[Tensor, Tensor]:
     return verts, faces.to(verts.device)
 
 
+HOLES = "(holes)"        # how _topology's reason ends when the only problem is boundary edges (require_closed checks it)
+
+
 @lru_cache(maxsize=16)
 def _topology(faces_bytes: bytes, num_faces: int) -> tuple[np.ndarray, str]:
     """Edge ids (F,3) for edges ab, bc, ca of each face, and '' or the reason the mesh is not closed and oriented."""
@@ -93,7 +96,7 @@ def _topology(faces_bytes: bytes, num_faces: int) -> tuple[np.ndarray, str]:
     if (counts > 1).any():
         problem = f"{int((counts > 1).sum())} directed edges are used by more than one face (inconsistent winding)"
     elif not np.isin(dst * n + src, uniq).all():
-        problem = f"{int((~np.isin(dst * n + src, uniq)).sum())} edges border only one face (holes)"
+        problem = f"{int((~np.isin(dst * n + src, uniq)).sum())} edges border only one face {HOLES}"
     return edge_ids.reshape(num_faces, 3), problem
 
 
@@ -108,7 +111,7 @@ def require_closed(verts: Tensor, faces: Tensor, name: str, allow_holes: bool = 
     (`allow_holes`: edges that border one face are accepted, e.g. for a body mesh that is not closed)."""
     f = np.ascontiguousarray(faces.cpu().numpy(), dtype=np.int64)
     problem = _topology(f.tobytes(), len(f))[1]
-    if problem and not (allow_holes and problem.endswith("(holes)")):
+    if problem and not (allow_holes and problem.endswith(HOLES)):
         raise ValueError(f"{name}: the mesh must be watertight and consistently oriented; {problem}")
     tri = verts.detach()[..., faces, :].to(torch.float64)
     volume = (tri[..., 0, :] * torch.linalg.cross(tri[..., 1, :], tri[..., 2, :])).sum((-1, -2)) / 6.0
