@@ -360,8 +360,8 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
                     lr: float = 1e-3, progress: bool = True, max_steps: int = 10, ramp_epochs: int = 4,
                     stride_scale: int = 1, reach_far: bool = False, rollout_latent: str = "prior",
                     alpha_kl: float = 1e-2, kinds: Sequence[str] | None = None, goal_frame: str = "reach",
-                    foot_weight: float = 0.0, select_val: bool = False, contact_weight: float = 0.0
-                    ) -> dict[str, Any]:
+                    foot_weight: float = 0.0, select_val: bool = False, contact_weight: float = 0.0,
+                    floor_weight: float = 0.0) -> dict[str, Any]:
     """Train one variant on the clips under `folder` (default <cache>/motion) and write a small checkpoint (with the
     normalisation statistics, the held-out start poses of the test split, and the measured times) to `out`.
     max_steps / ramp_epochs: the rollout schedule (Sup. B.2); stride_scale multiplies the window strides (fewer
@@ -414,7 +414,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     torch.manual_seed(seed)
     model = WandrCVAE(WandrConfig(intention=v["intention"], max_steps=max_steps, ramp_epochs=ramp_epochs,
                                    rollout_latent=rollout_latent, alpha_kl=alpha_kl, goal_frame=goal_frame,
-                                   w_foot=foot_weight, w_contact=contact_weight), stats)
+                                   w_foot=foot_weight, w_contact=contact_weight, w_floor=floor_weight), stats)
     stride = {k: stride_scale * (s // 2 if len(v["kinds"]) == 1 else s) for k, s in STRIDE.items()}   # one kind: same epoch size
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, num_threads=threads)
     data_key = hashlib.blake2b(f"{train.names}:{int(train.lengths.sum())}:{float(train.p.sum()):.6e}".encode(),
@@ -426,6 +426,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
         + ([(f" --goal-frame {goal_frame}", f"_g{goal_frame}")] if goal_frame != "reach" else []) \
         + ([(f" --foot-weight {foot_weight:g}", f"_f{foot_weight:g}")] if foot_weight else []) \
         + ([(f" --contact-weight {contact_weight:g}", f"_c{contact_weight:g}")] if contact_weight else []) \
+        + ([(f" --floor-weight {floor_weight:g}", f"_h{floor_weight:g}")] if floor_weight else []) \
         + ([(" --select-val", "_val")] if select_val else []) \
         + ([(f" --kinds {','.join(v['kinds'])}", f"_k{''.join(k[0] for k in v['kinds'])}")]
            if v["kinds"] != VARIANTS[variant]["kinds"] else [])
@@ -535,7 +536,7 @@ def _cmd_train(args) -> int:
                            stride_scale=args.stride_scale, reach_far=args.reach_far,
                            rollout_latent=args.rollout_latent, alpha_kl=args.alpha_kl, goal_frame=args.goal_frame,
                            foot_weight=args.foot_weight, select_val=args.select_val,
-                           contact_weight=args.contact_weight,
+                           contact_weight=args.contact_weight, floor_weight=args.floor_weight,
                            kinds=tuple(args.kinds.split(",")) if args.kinds else None)
     print(f"wrote {info['out']}: {info['epochs']} epochs in {info['train_wall_s']:.0f} s wall "
           f"({info['train_cpu_s']:.0f} s CPU); last loss {info['history'][-1]['loss']:.4f}")
@@ -595,6 +596,9 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
                    help="weight of the foot-joint velocity term (not in the paper; mm^2 per frame; docs/wandr.md)")
     t.add_argument("--contact-weight", type=float, default=0.0,
                    help="weight of the planted-foot term (not in the paper; mm^2 per frame; docs/wandr.md)")
+    t.add_argument("--floor-weight", type=float, default=0.0,
+                   help="weight of the floor term: the lowest foot joint's height against the data's (not in the "
+                        "paper; cm^2 per frame; docs/wandr.md)")
     t.add_argument("--select-val", action="store_true",
                    help="score every epoch on validation-split starts and goals off the grid; keep the best epoch")
     t.add_argument("--reach-far", action="store_true",

@@ -120,6 +120,29 @@ def test_contact_term_holds_planted_feet_only(clips, stats):
     assert "contact_mm2" not in M.training_losses(_model(stats), clips, items, 1, generator=torch.Generator().manual_seed(0))
 
 
+def test_floor_term_is_the_lowest_foot_joints_height_error(clips, stats):
+    """The floor term (w_floor, not in the paper): with the data's deltas it is 0; a body that rises 1 cm more each
+    frame (z of the translation delta, which the yaw frame leaves alone) is (k + 1) cm high at step k, so over four
+    steps the term is (1 + 4 + 9 + 16) / 4 = 7.5 cm², whatever the feet's phase; it enters the loss times its weight."""
+    items = W.WindowDataset(clips, max_steps=3).items[::40]
+    b = W.make_batch(clips, items, 3, generator=torch.Generator().manual_seed(0))
+    d_gt = I.poses_to_deltas(b["p"])
+    for rise in (0.0, 0.01):
+        model = _model(stats, w_floor=2.0)
+        calls = iter(range(4))
+
+        def decode(z, cond, rise=rise):
+            d = d_gt[:, next(calls) + 1].clone()
+            d[:, 2] += rise
+            return d
+        model.decode = decode
+        out = M.training_losses(model, clips, items, 3, generator=torch.Generator().manual_seed(0))
+        assert out["floor_cm2"].item() == pytest.approx(7.5 if rise else 0.0, abs=1e-3)
+        assert out["loss"].item() == pytest.approx((out["rec"] + 1e-2 * out["kl"] + out["joint_cm2"]
+                                                    + 2.0 * out["floor_cm2"]).item(), rel=1e-5)
+    assert "floor_cm2" not in M.training_losses(_model(stats), clips, items, 1, generator=torch.Generator().manual_seed(0))
+
+
 def test_posterior_rollout_latents_change_only_the_rollout_steps(clips, stats):
     """rollout_latent="posterior" draws the rollout steps' z from the encoder: the same losses without rollout steps,
     different reconstruction and KL with them."""

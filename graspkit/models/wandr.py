@@ -18,7 +18,10 @@ z informative, and centimetres put L_J on the scale of L_rec. No goal-reaching l
 the paper, w_foot (default 0) times the squared error of the foot joints' horizontal step per frame (mm²), was tried
 against foot skating and is off in the shipped model (docs/wandr.md). w_contact (default 0; 1 in the shipped model) is a
 foot-contact term: the squared horizontal step (mm²) of each foot joint that is planted in the data at that frame (it
-moves less than 1 mm there), so only standing feet are held, never the swing foot.
+moves less than 1 mm there), so only standing feet are held, never the swing foot. w_floor (default 0) is a floor
+term, not in the paper either: the squared difference (cm²) between the height of the lowest foot joint and the
+data's at that frame, against a body that rises off the floor as the rollout goes on (docs/wandr.md, "Feet off the
+floor"); it does not depend on the gait's phase, unlike the per-joint L_J.
 
 Rollout schedule (Sup. B.2): after the reconstruction step, the model runs s more steps on its own output: each step
 integrates the predicted delta, recomputes state and intention from the generated pose, samples z from the prior and
@@ -61,6 +64,7 @@ class WandrConfig:
     w_joint: float = 1.0
     w_foot: float = 0.0                                # not in the paper: foot-joint velocity term (docs/wandr.md)
     w_contact: float = 0.0                             # not in the paper: planted feet held in place (docs/wandr.md)
+    w_floor: float = 0.0                               # not in the paper: the lowest foot joint's height (docs/wandr.md)
     max_steps: int = 10
     ramp_epochs: int = 4
     rollout_latent: str = "prior"                      # "prior" (Sup. B.2) or "posterior" (encoder on the truth)
@@ -148,7 +152,7 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
     cur_p, cur_d = p[:, 1], d_gt[:, 0]
     t, R = I.pose_rotmats(cur_p)
     J = I.fk_rotmats(t, R, rest)[1]
-    rec = joint = kl = foot = contact = torch.zeros((), dtype=p.dtype)
+    rec = joint = kl = foot = contact = floor = torch.zeros((), dtype=p.dtype)
     for k in range(steps + 1):
         state = I.state_features(cur_p, cur_d, root=R[:, 0])
         inten = I.intention(J[:, I.WRIST], J[:, I.PELVIS], I.yaw_of(R[:, 0]), goal, (t_goal - k).to(p.dtype) / I.FPS, gh)
@@ -171,13 +175,18 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
             foot = foot + (1000 * (v - v_gt)).pow(2).sum(-1).mean()           # every foot joint as the data (mm²)
             planted = v_gt.norm(dim=-1) < PLANTED_STEP                         # still in the data: held still here
             contact = contact + (planted * (1000 * v).pow(2).sum(-1)).mean()
+        if cfg.w_floor:                     # the lowest foot joint's height here and in the data (B,), cm²
+            low, low_gt = J[:, FEET, 2].amin(-1), J_gt[:, k + 1, FEET, 2].amin(-1)
+            floor = floor + (100 * (low - low_gt)).pow(2).mean()
     n = steps + 1
     n_kl = n if cfg.rollout_latent == "posterior" else 1
-    rec, joint, kl, foot, contact = rec / n, joint / n, kl / n_kl, foot / n, contact / n
-    loss = rec + cfg.alpha_kl * kl + cfg.w_joint * joint + cfg.w_foot * foot + cfg.w_contact * contact
+    rec, joint, kl, foot, contact, floor = rec / n, joint / n, kl / n_kl, foot / n, contact / n, floor / n
+    loss = (rec + cfg.alpha_kl * kl + cfg.w_joint * joint + cfg.w_foot * foot + cfg.w_contact * contact
+            + cfg.w_floor * floor)
     return {"loss": loss, "rec": rec.detach(), "kl": kl.detach(), "joint_cm2": joint.detach(),
             **({"foot_mm2": foot.detach()} if cfg.w_foot else {}),
             **({"contact_mm2": contact.detach()} if cfg.w_contact else {}),
+            **({"floor_cm2": floor.detach()} if cfg.w_floor else {}),
             "steps": torch.tensor(float(steps))}
 
 
