@@ -64,6 +64,9 @@ print("held-out start poses:", ", ".join(s.source for s in starts))
 # (`SR_grounded`, graspkit's extra column, not the paper's) the full grid gives 47.8 % instead of 80.0 %: the 1.35 and
 # 1.8 m goals are mostly reached by floating up to them. An earlier checkpoint that walked slowly and never hurried
 # (`docs/wandr.md`) reached less (61.5 %) but almost only with its feet down (60.2 %, floating 0.5 %).
+# A loss term that holds the lowest foot joint at the data's height during training (`--floor-weight`, not in the
+# paper) does not help: it holds the feet down within the 2 s training rollouts, but the rising starts after 4 s,
+# past what those rollouts supervise (floating 6.2–9.3 % of the frames, SR lower; measured in `docs/wandr.md`).
 
 # %%
 goals, cells = E.grid_goals()
