@@ -66,23 +66,33 @@ def test_losses_are_the_papers_terms(clips, stats):
     assert cfg.alpha_kl == 1e-2 and out["steps"] == 3
 
 
+def _windows(clips):
+    """Every 40th window of the sample clips (3 rollout steps), its batch and the data's deltas (B, 5, 135)."""
+    items = W.WindowDataset(clips, max_steps=3).items[::40]
+    b = W.make_batch(clips, items, 3, generator=torch.Generator().manual_seed(0))
+    return items, b, I.poses_to_deltas(b["p"])
+
+
+def _replayed_losses(model, clips, items, d_gt, axis: int = 0, shift: float = 0.0):
+    """training_losses over 3 rollout steps with a decoder that returns the data's next delta, `shift` (m) added to
+    translation component `axis` (in the previous frame's heading frame) at every step."""
+    calls = iter(range(4))
+
+    def decode(z, cond):
+        d = d_gt[:, next(calls) + 1].clone()
+        d[:, axis] += shift
+        return d
+    model.decode = decode
+    return M.training_losses(model, clips, items, 3, generator=torch.Generator().manual_seed(0))
+
+
 def test_true_deltas_give_zero_joint_and_foot_terms(clips, stats):
     """A decoder that returns the data's next delta reproduces the clip: the joint loss and the foot-velocity term
     (w_foot, not in the paper) vanish over a rollout; a decoder that slides the root makes the feet's term grow as
     the square of the slide (a constant 5 mm/frame: 25 mm², four foot joints at the same step)."""
-    items = W.WindowDataset(clips, max_steps=3).items[::40]
-    b = W.make_batch(clips, items, 3, generator=torch.Generator().manual_seed(0))
-    d_gt = I.poses_to_deltas(b["p"])
+    items, _, d_gt = _windows(clips)
     for slide, want in ((0.0, 0.0), (0.005, 25.0)):
-        model = _model(stats, w_foot=1.0)
-        calls = iter(range(4))
-
-        def decode(z, cond, slide=slide):
-            d = d_gt[:, next(calls) + 1].clone()
-            d[:, 0] += slide                    # translation delta, in the previous frame's heading frame
-            return d
-        model.decode = decode
-        out = M.training_losses(model, clips, items, 3, generator=torch.Generator().manual_seed(0))
+        out = _replayed_losses(_model(stats, w_foot=1.0), clips, items, d_gt, axis=0, shift=slide)
         assert out["foot_mm2"].item() == pytest.approx(want, abs=1e-2)
         if slide == 0.0:
             assert out["joint_cm2"].item() == pytest.approx(0.0, abs=1e-6)
@@ -95,22 +105,12 @@ def test_contact_term_holds_planted_feet_only(clips, stats):
     so the term is the data's own planted steps squared (< 1 mm², the swing foot free); sliding the root 5 mm a frame
     moves every planted joint by 5 ± 1 mm, so the term (a mean over windows, steps and the four foot joints) lies
     within 16-36 mm² times the share of planted joints, counted here from the data's joints."""
-    items = W.WindowDataset(clips, max_steps=3).items[::40]
-    b = W.make_batch(clips, items, 3, generator=torch.Generator().manual_seed(0))
-    d_gt = I.poses_to_deltas(b["p"])
+    items, b, d_gt = _windows(clips)
     J = I.body_joints(b["p"][:, 1:], b["rest"][:, None])[..., M.FEET, :2]          # (B, 5, 4, 2): frames i .. i+4
     planted = ((J[:, 1:] - J[:, :-1]).norm(dim=-1) < 1e-3).float().mean().item()      # share of planted joints
     assert 0.1 < planted < 1.0
     for slide in (0.0, 0.005):
-        model = _model(stats, w_contact=1.0)
-        calls = iter(range(4))
-
-        def decode(z, cond, slide=slide):
-            d = d_gt[:, next(calls) + 1].clone()
-            d[:, 0] += slide
-            return d
-        model.decode = decode
-        out = M.training_losses(model, clips, items, 3, generator=torch.Generator().manual_seed(0))
+        out = _replayed_losses(_model(stats, w_contact=1.0), clips, items, d_gt, axis=0, shift=slide)
         if slide == 0.0:
             assert 0.0 <= out["contact_mm2"].item() < 1.0
         else:
@@ -124,19 +124,9 @@ def test_floor_term_is_the_lowest_foot_joints_height_error(clips, stats):
     """The floor term (w_floor, not in the paper): with the data's deltas it is 0; a body that rises 1 cm more each
     frame (z of the translation delta, which the yaw frame leaves alone) is (k + 1) cm high at step k, so over four
     steps the term is (1 + 4 + 9 + 16) / 4 = 7.5 cm², whatever the feet's phase; it enters the loss times its weight."""
-    items = W.WindowDataset(clips, max_steps=3).items[::40]
-    b = W.make_batch(clips, items, 3, generator=torch.Generator().manual_seed(0))
-    d_gt = I.poses_to_deltas(b["p"])
+    items, _, d_gt = _windows(clips)
     for rise in (0.0, 0.01):
-        model = _model(stats, w_floor=2.0)
-        calls = iter(range(4))
-
-        def decode(z, cond, rise=rise):
-            d = d_gt[:, next(calls) + 1].clone()
-            d[:, 2] += rise
-            return d
-        model.decode = decode
-        out = M.training_losses(model, clips, items, 3, generator=torch.Generator().manual_seed(0))
+        out = _replayed_losses(_model(stats, w_floor=2.0), clips, items, d_gt, axis=2, shift=rise)
         assert out["floor_cm2"].item() == pytest.approx(7.5 if rise else 0.0, abs=1e-3)
         assert out["loss"].item() == pytest.approx((out["rec"] + 1e-2 * out["kl"] + out["joint_cm2"]
                                                     + 2.0 * out["floor_cm2"]).item(), rel=1e-5)
