@@ -198,9 +198,11 @@ class GridMeter:
 
 
 def evaluate_grid(model, starts: Sequence[I.StartPose], bm, n: int = 5, seed: int = 0, goals: Tensor | None = None,
-                  cells: np.ndarray | None = None, t_goal: int = T_GOAL, frames: int | None = None) -> GridResult:
+                  cells: np.ndarray | None = None, t_goal: int = T_GOAL, frames: int | None = None,
+                  floor: float | None = None) -> GridResult:
     """Roll the model out on the grid (or `goals` (G, 3) with their `cells` rows) from every start, n samples each,
-    all in one batch (torch.Generator seeded with `seed`), measuring on the fly."""
+    all in one batch (torch.Generator seeded with `seed`), measuring on the fly; floor: `rollout`'s floor constraint
+    (None: off, the paper's rollout)."""
     from graspkit.models.wandr import expand_starts, rollout
 
     if goals is None:
@@ -213,7 +215,7 @@ def evaluate_grid(model, starts: Sequence[I.StartPose], bm, n: int = 5, seed: in
     model.eval()
     with torch.no_grad():
         rollout(model, pp, p0, rest, g, t_goal, frames if frames is not None else t_goal, generator=gen, keep=False,
-                on_frame=meter)
+                on_frame=meter, floor=floor)
     return _result(meter, idx, cells)
 
 
@@ -454,9 +456,10 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
 
 
 def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = False, threads: int = 2,
-                   clips_folder: str | None = None) -> dict[str, Any]:
+                   clips_folder: str | None = None, floor: float | None = None) -> dict[str, Any]:
     """Evaluate a checkpoint on the full grid from its held-out starts; SR / FS / DTG and the Fig. 5 breakdowns; with
-    clips_folder, also `evaluate_clips` on the test-split reaching clips there (reach/, and reach_far/ if present)."""
+    clips_folder, also `evaluate_clips` on the test-split reaching clips there (reach/, and reach_far/ if present);
+    floor: `rollout`'s floor constraint (m; None: off, the paper's rollout)."""
     import time
 
     from graspkit.body import BodyModel
@@ -468,12 +471,17 @@ def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = F
     model = load_wandr(checkpoint)
     starts = starts_from_meta(model.meta)
     t0 = time.perf_counter()
+    row = model.meta.get("row", "WANDR")
+    if floor is not None:
+        if not model.cfg.intention:
+            raise ValueError("floor: not supported for VAE + opt (its latents are optimised without the constraint)")
+        row = f"{row} + floor constraint {100 * floor:g} cm (not the paper's)"
     if model.cfg.intention:
-        res = evaluate_grid(model, starts, bm, n=n, seed=seed)
+        res = evaluate_grid(model, starts, bm, n=n, seed=seed, floor=floor)
     else:                                  # "VAE + opt": no intention to steer, latents optimised per goal
         from graspkit.optim.latent import evaluate_vae_opt
         res = evaluate_vae_opt(model, starts, bm, seed=seed)
-    out = {"row": model.meta.get("row", "WANDR"), "summary": summary(res), "seconds": time.perf_counter() - t0,
+    out = {"row": row, "summary": summary(res), "seconds": time.perf_counter() - t0,
            "breakdown": {b: breakdown(res, b) for b in ("height", "angle", "distance")}}
     if planner:
         out["planner"] = summary(evaluate_planner(starts, bm))
@@ -548,7 +556,7 @@ def _cmd_eval(args) -> int:
     rows, extra = {}, {}
     for ck in args.checkpoint:
         r = run_eval_wandr(ck, args.n, args.seed, planner=args.planner and not extra, threads=args.threads,
-                           clips_folder=args.clips)
+                           clips_folder=args.clips, floor=args.floor)
         rows[r["row"]] = r["summary"]
         print(f"{ck}: {r['row']}: SR {r['summary']['SR']:.1f} %, FS {r['summary']['FS']:.1f} %, "
               f"DTG {r['summary']['DTG']:.1f} cm ({r['summary']['rollouts']} rollouts, {r['seconds']:.0f} s)")
@@ -612,6 +620,9 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     e.add_argument("--n", type=int, default=5, help="samples per start and goal")
     e.add_argument("--seed", type=int, default=0)
     e.add_argument("--planner", action="store_true", help="add the procedural planner's row")
+    e.add_argument("--floor", type=float, default=None,
+                   help="metres: hold the lowest foot joint at most this far above its start height while generating "
+                        "(a floor constraint, not in the paper; docs/wandr.md)")
     e.add_argument("--threads", type=int, default=2)
     e.add_argument("--clips", type=Path, nargs="?", const=cache_dir() / "motion", default=None,
                    help="also roll out towards the test-split reaching clips' own goals, at their own goal frames "
@@ -650,8 +661,9 @@ class GoalReacher:
                "seconds": (1.0, 8.0, 0.5)}
 
     def __init__(self, model, start: I.StartPose, seed: int = 0, angle: float = 45.0, distance: float = 2.0,
-                 height: float = 1.0, seconds: float = 4.0) -> None:
-        self.model, self.start, self.seed = model, start, seed
+                 height: float = 1.0, seconds: float = 4.0, floor: float | None = None) -> None:
+        """floor: `rollout`'s floor constraint (m; None: off, the paper's rollout)."""
+        self.model, self.start, self.seed, self.floor = model, start, seed, floor
         self.values = {"angle": angle, "distance": distance, "height": height, "seconds": seconds}
         self.motion: Tensor | None = None
         self.joints: Tensor | None = None
@@ -678,16 +690,19 @@ class GoalReacher:
         return self.run()
 
     def run(self) -> dict[str, float]:
-        """Generate the motion for the current goal (one sample, fixed seed) and measure it."""
-        from graspkit.models.wandr import generate
+        """Generate the motion for the current goal (one sample, fixed seed) and measure it: closest wrist distance
+        and its frame, the error at t_G, and how far the lowest foot joint rose above its start height (lift_cm)."""
+        from graspkit.models.wandr import FEET, generate
 
         out = generate(self.model, self.start, self.goal[None], self.t_goal, n=1,
-                       generator=torch.Generator().manual_seed(self.seed))
+                       generator=torch.Generator().manual_seed(self.seed), floor=self.floor)
         self.motion, self.joints = out.p[0], out.joints[0]
         d = (self.joints[:, I.WRIST] - self.goal).norm(dim=-1)
+        low = self.joints[:, FEET, 2].amin(-1)
         k = int(d.argmin())
         return {"dtg_cm": 100 * float(d.min()), "closest_frame": k, "closest_s": k / I.FPS,
-                "error_at_goal_cm": 100 * float(d[-1]), "reached": bool(d.min() <= WANDR_SUCCESS_RADIUS)}
+                "error_at_goal_cm": 100 * float(d[-1]), "reached": bool(d.min() <= WANDR_SUCCESS_RADIUS),
+                "lift_cm": 100 * float((low - low[0]).max())}
 
     def figure(self, readout: dict[str, float] | None = None):
         """Top view of the pelvis and wrist paths with the goal, and the wrist's distance to the goal over time."""
@@ -734,7 +749,7 @@ class GoalReacher:
 
         def show(r: dict[str, float]) -> None:
             text.value = (f"closest {r['dtg_cm']:.1f} cm at {r['closest_s']:.1f} s; at t_G {r['error_at_goal_cm']:.1f} cm; "
-                          f"{'reached' if r['reached'] else 'not reached'}")
+                          f"{'reached' if r['reached'] else 'not reached'}; feet lifted up to {r['lift_cm']:.1f} cm")
             image.value = self.png()
 
         sliders = []

@@ -133,6 +133,13 @@ def test_goal_reacher_callback(bm):
     d = (ref.joints[0, :, I.WRIST] - r.goal).norm(dim=-1)
     assert out["dtg_cm"] == pytest.approx(100 * float(d.min()), abs=1e-4)
     assert out["closest_frame"] == int(d.argmin()) and out["reached"] == bool(d.min() <= 0.1)
+    low = I.body_joints(ref.p[0], start.rest)[:, [7, 8, 10, 11], 2].amin(-1)     # ankles and feet
+    assert out["lift_cm"] == pytest.approx(100 * float((low - low[0]).max()), abs=1e-4)
+    with torch.no_grad():                       # the floor constraint reaches the generation
+        model.decoder[-1].bias[2] += 0.02 / model.delta_std[2]
+    lifted = E.GoalReacher(model, start, seed=3, seconds=1.0).run()["lift_cm"]
+    held = E.GoalReacher(model, start, seed=3, seconds=1.0, floor=0.01).run()["lift_cm"]
+    assert lifted > 20 and held == pytest.approx(1.0, abs=1e-3)
     assert r.update("seconds", 2.0) and r.t_goal == 60 and len(r.joints) == 61
     assert r.png()[:8] == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(ValueError, match="height"):

@@ -218,6 +218,47 @@ def test_frame_hook_sees_every_frame_without_storing(stats, starts):
     assert all(torch.equal(p, kept.p[:, k]) for k, p in seen)
 
 
+def _rising(model, rise: float = 0.01):
+    """The model with its decoder's output bias shifted so that every delta lifts the body `rise` m more."""
+    with torch.no_grad():
+        model.decoder[-1].bias[2] += rise / model.delta_std[2]
+    return model
+
+
+def _lowest_foot(p, rest):
+    return I.body_joints(p, rest)[..., M.FEET, 2].amin(-1)
+
+
+def test_floor_constraint_holds_the_lowest_foot_joint_at_its_start_height(stats, starts):
+    s = starts[0]
+    goal = torch.tensor([[2.0, -1.0, 0.8]])
+    z = torch.randn(1, 12, 4, generator=torch.Generator().manual_seed(3))
+    with torch.no_grad():
+        free = M.rollout(_rising(_model(stats), 0.02), s.p_prev[None], s.p[None], s.rest[None], goal, 12, 12, z=z)
+        low0 = _lowest_foot(s.p, s.rest)
+        assert float(_lowest_foot(free.p[0, -1], s.rest) - low0) > 0.15           # the model lifts the body
+        for floor in (0.0, 0.03):
+            model = _rising(_model(stats), 0.02)
+            out = M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], goal, 12, 12, z=z, floor=floor)
+            rise = _lowest_foot(out.p[0], s.rest) - low0
+            assert float(rise.max()) <= floor + 1e-5 and float(rise[-1]) >= floor - 1e-5
+            assert torch.allclose(out.joints[0], I.body_joints(out.p[0], s.rest), atol=1e-5)
+            # every frame: the decoded delta integrated, then the body lowered straight down by what lifts its lowest
+            # foot joint above the tolerance; the next state's dynamics is that delta, lowered alike
+            d_prev = I.pose_to_delta(s.p_prev, s.p)[None]
+            for k in range(12):
+                p = out.p[:, k]
+                inten = I.intention_from_pose(p, s.rest[None], goal, torch.tensor([(12 - k) / 30.0]))
+                d = model.decode(z[:, k], model.condition(I.state_features(p, d_prev), inten))
+                q = I.integrate_delta(p, d)
+                down = torch.tensor([0, 0, 1.0]) * (_lowest_foot(q, s.rest[None]) - low0 - floor).clamp(min=0)
+                assert torch.allclose(out.p[:, k + 1, 3:], q[:, 3:], atol=1e-5)
+                assert torch.allclose(out.p[:, k + 1, :3], q[:, :3] - down, atol=1e-5)
+                d_prev = torch.cat([d[:, :3] - down, d[:, 3:]], -1)
+    with pytest.raises(ValueError, match="floor"):
+        M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], goal, 5, 5, floor=-0.01)
+
+
 def test_goal_schedule_switches_goals_after_each_goal_frame():
     g, tg = M.goal_schedule(torch.tensor([[1.0, 0, 1], [2.0, 0, 1], [3.0, 0, 1]]), [10, 20, 30], 35)
     assert g.shape == (36, 3) and tg.shape == (36,)
