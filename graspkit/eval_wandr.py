@@ -363,7 +363,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
                     stride_scale: int = 1, reach_far: bool = False, rollout_latent: str = "prior",
                     alpha_kl: float = 1e-2, kinds: Sequence[str] | None = None, goal_frame: str = "reach",
                     foot_weight: float = 0.0, select_val: bool = False, contact_weight: float = 0.0,
-                    floor_weight: float = 0.0) -> dict[str, Any]:
+                    floor_weight: float = 0.0, init: str | None = None) -> dict[str, Any]:
     """Train one variant on the clips under `folder` (default <cache>/motion) and write a small checkpoint (with the
     normalisation statistics, the held-out start poses of the test split, and the measured times) to `out`.
     max_steps / ramp_epochs: the rollout schedule (Sup. B.2); stride_scale multiplies the window strides (fewer
@@ -373,7 +373,9 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     weight α (§3.4: 1e-2); kinds: the clip kinds to train on instead of the variant's (e.g. ("reach",): the reaching
     and room-scale clips only, as the shipped checkpoint, docs/wandr.md); select_val: after every epoch score the
     model on the validation task (`validation_score`: six validation-split starts, 250 goals off the grid) and ship
-    the best epoch's weights instead of the last (model selection; the scores go into meta["val"]).
+    the best epoch's weights instead of the last (model selection; the scores go into meta["val"]); init: a WANDR
+    checkpoint (save_wandr's file) to start from, weights and normalisation statistics, instead of a fresh model
+    (continue training with another schedule, e.g. longer rollouts; the network's shape and intention must match).
     The resumable training state lives in <cache>/wandr, named by every setting."""
     import hashlib
     import resource
@@ -384,9 +386,9 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     from graspkit.data import load_motion
     from graspkit.data.wandr_dataset import (FOLDERS, KINDS, cached_clips, compute_stats, held_out_starts,
                                              split_clips, test_start_names)
-    from graspkit.models.wandr import WandrConfig, WandrCVAE, save_wandr, train_wandr
+    from graspkit.models.wandr import WandrConfig, WandrCVAE, load_wandr, save_wandr, train_wandr
     from graspkit.paths import DATA_STUBS, cache_dir, default_model_path
-    from graspkit.train import TrainConfig
+    from graspkit.train import TrainConfig, file_key
 
     if variant not in VARIANTS:
         raise ValueError(f"variant: expected one of {list(VARIANTS)}, got {variant!r}")
@@ -417,6 +419,14 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     model = WandrCVAE(WandrConfig(intention=v["intention"], max_steps=max_steps, ramp_epochs=ramp_epochs,
                                    rollout_latent=rollout_latent, alpha_kl=alpha_kl, goal_frame=goal_frame,
                                    w_foot=foot_weight, w_contact=contact_weight, w_floor=floor_weight), stats)
+    if init is not None:
+        init_model = load_wandr(init)
+        same = ("latent", "hidden", "enc_layers", "dec_layers", "intention")
+        if any(getattr(init_model.cfg, k) != getattr(model.cfg, k) for k in same):
+            raise ValueError(f"init: {init} has another network ("
+                             + ", ".join(f"{k}={getattr(init_model.cfg, k)}" for k in same) + ") than this command's ("
+                             + ", ".join(f"{k}={getattr(model.cfg, k)}" for k in same) + ")")
+        model.load_state_dict(init_model.state_dict())        # weights and the statistics it was trained with
     stride = {k: stride_scale * (s // 2 if len(v["kinds"]) == 1 else s) for k, s in STRIDE.items()}   # one kind: same epoch size
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, num_threads=threads)
     data_key = hashlib.blake2b(f"{train.names}:{int(train.lengths.sum())}:{float(train.p.sum()):.6e}".encode(),
@@ -430,6 +440,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
         + ([(f" --contact-weight {contact_weight:g}", f"_c{contact_weight:g}")] if contact_weight else []) \
         + ([(f" --floor-weight {floor_weight:g}", f"_h{floor_weight:g}")] if floor_weight else []) \
         + ([(" --select-val", "_val")] if select_val else []) \
+        + ([(f" --init {init}", f"_i{file_key(init)}")] if init is not None else []) \
         + ([(f" --kinds {','.join(v['kinds'])}", f"_k{''.join(k[0] for k in v['kinds'])}")]
            if v["kinds"] != VARIANTS[variant]["kinds"] else [])
     tag = (f"e{epochs}_b{batch_size}_lr{lr:g}_m{max_steps}_r{ramp_epochs}_x{stride_scale}_d{data_key}"
@@ -450,6 +461,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
                        f"--lr {lr:g} --max-steps {max_steps} --ramp-epochs {ramp_epochs} --stride-scale {stride_scale} "
                        f"--seed {seed}" + "".join(c for c, _ in flags),
             "load_avg_end": float(__import__("os").getloadavg()[0]), "starts": starts_to_meta(starts),
+            **({"init": str(init), "init_command": init_model.meta.get("command", "")} if init is not None else {}),
             **({"val": val["scores"], "selected_epoch": val["best"]} if val else {})}
     save_wandr(out, model, history, meta)
     return {"out": out, **{k: meta[k] for k in ("epochs", "train_wall_s", "train_cpu_s")}, "history": history}
@@ -545,7 +557,7 @@ def _cmd_train(args) -> int:
                            rollout_latent=args.rollout_latent, alpha_kl=args.alpha_kl, goal_frame=args.goal_frame,
                            foot_weight=args.foot_weight, select_val=args.select_val,
                            contact_weight=args.contact_weight, floor_weight=args.floor_weight,
-                           kinds=tuple(args.kinds.split(",")) if args.kinds else None)
+                           kinds=tuple(args.kinds.split(",")) if args.kinds else None, init=args.init)
     print(f"wrote {info['out']}: {info['epochs']} epochs in {info['train_wall_s']:.0f} s wall "
           f"({info['train_cpu_s']:.0f} s CPU); last loss {info['history'][-1]['loss']:.4f}")
     return 0
@@ -607,6 +619,9 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     t.add_argument("--floor-weight", type=float, default=0.0,
                    help="weight of the floor term: the lowest foot joint's height against the data's (not in the "
                         "paper; cm^2 per frame; docs/wandr.md)")
+    t.add_argument("--init", type=Path, default=None,
+                   help="start from this WANDR checkpoint's weights and statistics (e.g. longer rollouts after the "
+                        "first schedule: the shipped checkpoint's second command, docs/wandr.md)")
     t.add_argument("--select-val", action="store_true",
                    help="score every epoch on validation-split starts and goals off the grid; keep the best epoch")
     t.add_argument("--reach-far", action="store_true",

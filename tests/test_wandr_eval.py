@@ -247,3 +247,24 @@ def test_select_val_keeps_the_best_epochs_weights_and_resumes(bm, tmp_path, monk
     hist2, val2 = E._train_selecting(again, clips, cfg, tmp_path / "ck.pt", kw["stride"], False, stubs, bm)
     assert val2 == val and len(hist2) == 3
     assert all(torch.equal(a, b) for a, b in zip(again.state_dict().values(), model.state_dict().values()))
+
+
+def test_train_from_init_starts_from_its_weights_and_statistics(bm, tmp_path, monkeypatch):
+    # at learning rate 0 a run from --init gives back the init's weights exactly (both float16 on disk); a fresh run
+    # does not; a checkpoint of another network is refused by name
+    from graspkit.data import wandr_dataset as W
+    from graspkit.train import load_checkpoint
+
+    names = ["locomotion/locomotion_000000.npz", "reach/reach_000001.npz"] * 3
+    monkeypatch.setattr(W, "test_start_names", lambda folder, n=6, seed=0, split="test": names)
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
+    kw = dict(folder=str(DATA_STUBS / "motion"), epochs=1, threads=1, max_steps=1, ramp_epochs=1, progress=False)
+    E.run_train_wandr(out=str(tmp_path / "a.pt"), lr=1e-3, **kw)
+    E.run_train_wandr(out=str(tmp_path / "b.pt"), lr=0.0, init=str(tmp_path / "a.pt"), **kw)
+    E.run_train_wandr(out=str(tmp_path / "c.pt"), lr=0.0, seed=1, **kw)
+    a, b, c = (load_checkpoint(tmp_path / f"{x}.pt") for x in "abc")
+    assert all(torch.equal(a["model"][k], b["model"][k]) for k in a["model"])
+    assert not torch.equal(a["model"]["decoder.0.weight"], c["model"]["decoder.0.weight"])
+    assert b["meta"]["init_command"] == a["meta"]["command"] and "--init" in b["meta"]["command"]
+    with pytest.raises(ValueError, match="init: .* another network"):
+        E.run_train_wandr("wandr_iw", out=str(tmp_path / "d.pt"), init=str(tmp_path / "a.pt"), **kw)
