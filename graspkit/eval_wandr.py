@@ -363,11 +363,13 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
                     stride_scale: int = 1, reach_far: bool = False, rollout_latent: str = "prior",
                     alpha_kl: float = 1e-2, kinds: Sequence[str] | None = None, goal_frame: str = "reach",
                     foot_weight: float = 0.0, select_val: bool = False, contact_weight: float = 0.0,
-                    floor_weight: float = 0.0, init: str | None = None) -> dict[str, Any]:
+                    floor_weight: float = 0.0, init: str | None = None, window_stride: int | None = None
+                    ) -> dict[str, Any]:
     """Train one variant on the clips under `folder` (default <cache>/motion) and write a small checkpoint (with the
     normalisation statistics, the held-out start poses of the test split, and the measured times) to `out`.
     max_steps / ramp_epochs: the rollout schedule (Sup. B.2); stride_scale multiplies the window strides (fewer
-    windows per epoch); reach_far adds the room-scale reaching clips of <folder>/reach_far (docs/data.md; the
+    windows per epoch); window_stride sets the frames between windows directly, for every kind (instead of the scaled
+    defaults; long rollouts leave few windows, 1 keeps them all); reach_far adds the room-scale reaching clips of <folder>/reach_far (docs/data.md; the
     shipped checkpoint uses them, docs/wandr.md); rollout_latent: where the rollout steps draw z ("prior": Sup. B.2
     read as sampling the prior; "posterior": the encoder on the true delta, see docs/wandr.md); alpha_kl: the KL
     weight α (§3.4: 1e-2); kinds: the clip kinds to train on instead of the variant's (e.g. ("reach",): the reaching
@@ -394,6 +396,8 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
         raise ValueError(f"variant: expected one of {list(VARIANTS)}, got {variant!r}")
     if stride_scale < 1:
         raise ValueError(f"stride_scale: expected >= 1, got {stride_scale}")
+    if window_stride is not None and window_stride < 1:
+        raise ValueError(f"window_stride: expected >= 1, got {window_stride}")
     if select_val and time_limit is not None:
         raise ValueError("time_limit: not supported with select_val (every epoch is trained and scored)")
     v = dict(VARIANTS[variant])
@@ -428,6 +432,8 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
                              + ", ".join(f"{k}={getattr(model.cfg, k)}" for k in same) + ")")
         model.load_state_dict(init_model.state_dict())        # weights and the statistics it was trained with
     stride = {k: stride_scale * (s // 2 if len(v["kinds"]) == 1 else s) for k, s in STRIDE.items()}   # one kind: same epoch size
+    if window_stride is not None:
+        stride = {k: window_stride for k in STRIDE}
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, num_threads=threads)
     data_key = hashlib.blake2b(f"{train.names}:{int(train.lengths.sum())}:{float(train.p.sum()):.6e}".encode(),
                                digest_size=4).hexdigest()       # other clips never resume this run
@@ -441,6 +447,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
         + ([(f" --floor-weight {floor_weight:g}", f"_h{floor_weight:g}")] if floor_weight else []) \
         + ([(" --select-val", "_val")] if select_val else []) \
         + ([(f" --init {init}", f"_i{file_key(init)}")] if init is not None else []) \
+        + ([(f" --window-stride {window_stride}", f"_w{window_stride}")] if window_stride is not None else []) \
         + ([(f" --kinds {','.join(v['kinds'])}", f"_k{''.join(k[0] for k in v['kinds'])}")]
            if v["kinds"] != VARIANTS[variant]["kinds"] else [])
     tag = (f"e{epochs}_b{batch_size}_lr{lr:g}_m{max_steps}_r{ramp_epochs}_x{stride_scale}_d{data_key}"
@@ -459,7 +466,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
             "threads": threads, "batch_size": batch_size, "lr": lr, "stride": stride, "seed": seed,
             "command": f"graspkit train wandr --variant {variant} --epochs {epochs} --batch-size {batch_size} "
                        f"--lr {lr:g} --max-steps {max_steps} --ramp-epochs {ramp_epochs} --stride-scale {stride_scale} "
-                       f"--seed {seed}" + "".join(c for c, _ in flags),
+                       f"--seed {seed} --threads {threads}" + "".join(c for c, _ in flags),
             "load_avg_end": float(__import__("os").getloadavg()[0]), "starts": starts_to_meta(starts),
             **({"init": str(init), "init_command": init_model.meta.get("command", "")} if init is not None else {}),
             **({"val": val["scores"], "selected_epoch": val["best"]} if val else {})}
@@ -557,7 +564,8 @@ def _cmd_train(args) -> int:
                            rollout_latent=args.rollout_latent, alpha_kl=args.alpha_kl, goal_frame=args.goal_frame,
                            foot_weight=args.foot_weight, select_val=args.select_val,
                            contact_weight=args.contact_weight, floor_weight=args.floor_weight,
-                           kinds=tuple(args.kinds.split(",")) if args.kinds else None, init=args.init)
+                           kinds=tuple(args.kinds.split(",")) if args.kinds else None, init=args.init,
+                           window_stride=args.window_stride)
     print(f"wrote {info['out']}: {info['epochs']} epochs in {info['train_wall_s']:.0f} s wall "
           f"({info['train_cpu_s']:.0f} s CPU); last loss {info['history'][-1]['loss']:.4f}")
     return 0
@@ -607,6 +615,8 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     t.add_argument("--max-steps", type=int, default=10, help="rollout steps at the end of the ramp (Sup. B.2)")
     t.add_argument("--ramp-epochs", type=int, default=4, help="epochs over which the rollout grows from 0")
     t.add_argument("--stride-scale", type=int, default=1, help="multiply the window strides (shorter epochs)")
+    t.add_argument("--window-stride", type=int, default=None,
+                   help="frames between training windows, every kind (instead of the scaled defaults; 1: every frame)")
     t.add_argument("--rollout-latent", choices=("prior", "posterior"), default="prior",
                    help="z for the rollout steps: the prior (default, Sup. B.2) or the encoder on the truth")
     t.add_argument("--alpha-kl", type=float, default=1e-2, help="the KL weight (paper: 1e-2)")

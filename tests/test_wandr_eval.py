@@ -162,7 +162,11 @@ def test_train_command_parses_the_schedule_flags():
     with pytest.raises(ValueError, match="stride_scale"):
         E.run_train_wandr(stride_scale=0, folder="/nonexistent")
     a = ap.parse_args(["train", "wandr", "--kinds", "reach", "--reach-far", "--select-val"])
-    assert (a.kinds, a.reach_far, a.select_val) == ("reach", True, True)
+    assert (a.kinds, a.reach_far, a.select_val, a.window_stride, a.init) == ("reach", True, True, None, None)
+    a = ap.parse_args(["train", "wandr", "--window-stride", "1", "--init", "x.pt"])
+    assert (a.window_stride, str(a.init)) == (1, "x.pt")
+    with pytest.raises(ValueError, match="window_stride"):
+        E.run_train_wandr(window_stride=0, folder="/nonexistent")
     with pytest.raises(ValueError, match="time_limit"):
         E.run_train_wandr(select_val=True, time_limit=60.0, folder="/nonexistent")
     for bad in ((), ("walk",), ("reach", "walk")):
