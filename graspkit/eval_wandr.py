@@ -470,8 +470,18 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
             "load_avg_end": float(__import__("os").getloadavg()[0]), "starts": starts_to_meta(starts),
             **({"init": str(init), "init_command": init_model.meta.get("command", "")} if init is not None else {}),
             **({"val": val["scores"], "selected_epoch": val["best"]} if val else {})}
+    earlier = [] if init is None else (init_model.meta.get("stages")
+                                       or [_stage_record(init_model.meta, init_model.history, init_model.cfg.max_steps)])
+    meta["stages"] = earlier + [_stage_record(meta, history, max_steps)]
     save_wandr(out, model, history, meta)
     return {"out": out, **{k: meta[k] for k in ("epochs", "train_wall_s", "train_cpu_s")}, "history": history}
+
+
+def _stage_record(meta: dict[str, Any], history: Sequence[dict], max_steps: int) -> dict[str, Any]:
+    """One training command of a checkpoint's chain (`--init`): its command, times, rollout length, per-epoch losses
+    and validation scores, so the last checkpoint carries the whole chain (meta["stages"])."""
+    keys = ("command", "epochs", "train_wall_s", "train_cpu_s", "threads", "val", "selected_epoch")
+    return {**{k: meta[k] for k in keys if k in meta}, "max_steps": int(max_steps), "history": list(history)}
 
 
 def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = False, threads: int = 2,

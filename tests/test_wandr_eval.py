@@ -257,7 +257,7 @@ def test_train_from_init_starts_from_its_weights_and_statistics(bm, tmp_path, mo
     # at learning rate 0 a run from --init gives back the init's weights exactly (both float16 on disk); a fresh run
     # does not; a checkpoint of another network is refused by name
     from graspkit.data import wandr_dataset as W
-    from graspkit.train import load_checkpoint
+    from graspkit.train import load_checkpoint, save_checkpoint
 
     names = ["locomotion/locomotion_000000.npz", "reach/reach_000001.npz"] * 3
     monkeypatch.setattr(W, "test_start_names", lambda folder, n=6, seed=0, split="test": names)
@@ -270,5 +270,14 @@ def test_train_from_init_starts_from_its_weights_and_statistics(bm, tmp_path, mo
     assert all(torch.equal(a["model"][k], b["model"][k]) for k in a["model"])
     assert not torch.equal(a["model"]["decoder.0.weight"], c["model"]["decoder.0.weight"])
     assert b["meta"]["init_command"] == a["meta"]["command"] and "--init" in b["meta"]["command"]
+    assert [st["command"] for st in b["meta"]["stages"]] == [a["meta"]["command"], b["meta"]["command"]]
+    assert b["meta"]["stages"][0]["history"] == a["history"] and b["meta"]["stages"][1]["history"] == b["history"]
+    E.run_train_wandr(out=str(tmp_path / "b2.pt"), lr=0.0, init=str(tmp_path / "b.pt"), **kw)   # a third stage
+    assert len(load_checkpoint(tmp_path / "b2.pt")["meta"]["stages"]) == 3
+    old = dict(a, meta={k: v for k, v in a["meta"].items() if k != "stages"})      # a file from before the chain
+    save_checkpoint(tmp_path / "old.pt", old)
+    E.run_train_wandr(out=str(tmp_path / "b3.pt"), lr=0.0, init=str(tmp_path / "old.pt"), **kw)
+    first = load_checkpoint(tmp_path / "b3.pt")["meta"]["stages"][0]
+    assert first["command"] == a["meta"]["command"] and first["history"] == a["history"]
     with pytest.raises(ValueError, match="init: .* another network"):
         E.run_train_wandr("wandr_iw", out=str(tmp_path / "d.pt"), init=str(tmp_path / "a.pt"), **kw)
