@@ -147,6 +147,19 @@ def test_point_mesh_distance_is_exact(name):
     torch.testing.assert_close(res.distance, torch.linalg.vector_norm(torch.tensor(pts) - res.closest, dim=-1))
 
 
+def test_point_mesh_distance_ignores_vertices_no_face_uses():
+    """A mesh given as all of a body's vertices and only some of its faces (the faces near an object): the vertices
+    no face uses lie nearer the points than any kept face, and must not bound the search (they once emptied it)."""
+    mesh = make_object("mug")
+    stray = _box_points(mesh, 400, seed=3, pad=0.0)                     # unused vertices amid the points
+    verts = np.concatenate([mesh.vertices, stray])
+    keep = np.asarray(mesh.faces)[: len(mesh.faces) // 3]               # a third of the faces
+    pts = _box_points(mesh, 120, seed=4, pad=0.03)
+    res = point_mesh_distance(pts, (torch.tensor(verts), torch.tensor(keep)))
+    want = _brute_force_distance(trimesh.Trimesh(verts, keep, process=False), pts)
+    np.testing.assert_allclose(res.distance.numpy(), want, atol=1e-12)
+
+
 def test_point_mesh_distance_grouped_in_cells_is_exact_on_a_grid():
     """An SDF-style lattice around a mesh (several cells of the search): every node's distance equals the brute force
     over all (point, face) pairs, and the reported face is the nearest."""

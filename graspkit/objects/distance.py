@@ -233,7 +233,8 @@ def _nearest_faces(points: np.ndarray, verts: np.ndarray, faces: np.ndarray) -> 
     tri = verts[faces]
     cent = tri.mean(1)
     rad = np.linalg.norm(tri - cent[:, None], axis=-1).max(1)
-    upper = cKDTree(np.concatenate([verts, cent])).query(points)[0]
+    used = verts[np.unique(faces)]      # a vertex no face uses bounds nothing (a body's faces near an object, say)
+    upper = cKDTree(np.concatenate([used, cent])).query(points)[0]
     slack = 1e-9  # relative and absolute round-off allowance: extra candidates are harmless, missing ones are not
     order, starts = _cells(points)
     p_t, up_t = torch.from_numpy(points[order]), torch.from_numpy(upper[order] * (1 + slack) + slack)
