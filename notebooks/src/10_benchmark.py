@@ -135,8 +135,10 @@ fig.tight_layout()
 #   compound (GOAL reports 13.7 % sliding against GRAB's 6.7 %).
 # - **WANDR** (lessons 08–09) needs no object at all: an intention feature steers a CVAE towards a wrist goal at a
 #   chosen time, from any start, over any distance. It does not grasp; its strength is reaching in space and time.
-#   Its SR does not ask how the wrist got there: the shipped model reaches many high goals with both feet off the
-#   floor (SR 80 %, with a foot on the floor 48 %: `docs/wandr.md`, "Feet off the floor").
+#   Its SR does not ask how the wrist got there: trained only on 2-s rollouts, the model reached many high goals
+#   with both feet off the floor (SR 80 %, with a foot on the floor 48 %); the shipped model's later training stages,
+#   on 4- and 8-s rollouts, keep the feet down (88 %, with a foot on the floor 85 %: `docs/wandr.md`, "Feet off the
+#   floor").
 # - **The procedural planner** (lessons 03–04) is the synthetic ground truth: clean by construction, but it only
 #   knows the motions it was programmed with.
 #
