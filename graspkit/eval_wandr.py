@@ -369,8 +369,8 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     normalisation statistics, the held-out start poses of the test split, and the measured times) to `out`.
     max_steps / ramp_epochs: the rollout schedule (Sup. B.2); stride_scale multiplies the window strides (fewer
     windows per epoch); window_stride sets the frames between windows directly, for every kind (instead of the scaled
-    defaults; long rollouts leave few windows, 1 keeps them all); reach_far adds the room-scale reaching clips of <folder>/reach_far (docs/data.md; the
-    shipped checkpoint uses them, docs/wandr.md); rollout_latent: where the rollout steps draw z ("prior": Sup. B.2
+    defaults; long rollouts leave few windows, 1 keeps them all); reach_far adds the room-scale reaching clips of
+    <folder>/reach_far (docs/data.md; the shipped checkpoint uses them, docs/wandr.md); rollout_latent: where the rollout steps draw z ("prior": Sup. B.2
     read as sampling the prior; "posterior": the encoder on the true delta, see docs/wandr.md); alpha_kl: the KL
     weight α (§3.4: 1e-2); kinds: the clip kinds to train on instead of the variant's (e.g. ("reach",): the reaching
     and room-scale clips only, as the shipped checkpoint, docs/wandr.md); select_val: after every epoch score the
