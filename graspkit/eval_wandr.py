@@ -425,11 +425,11 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
                                    w_foot=foot_weight, w_contact=contact_weight, w_floor=floor_weight), stats)
     if init is not None:
         init_model = load_wandr(init)
-        same = ("latent", "hidden", "enc_layers", "dec_layers", "intention")
-        if any(getattr(init_model.cfg, k) != getattr(model.cfg, k) for k in same):
-            raise ValueError(f"init: {init} has another network ("
-                             + ", ".join(f"{k}={getattr(init_model.cfg, k)}" for k in same) + ") than this command's ("
-                             + ", ".join(f"{k}={getattr(model.cfg, k)}" for k in same) + ")")
+        keys = ("latent", "hidden", "enc_layers", "dec_layers", "intention")
+        shape = lambda c: {k: getattr(c, k) for k in keys}     # noqa: E731 - the network's shape of a config
+        if shape(init_model.cfg) != shape(model.cfg):
+            raise ValueError(f"init: {init} has another network ({shape(init_model.cfg)}) than this command's "
+                             f"({shape(model.cfg)})")
         model.load_state_dict(init_model.state_dict())        # weights and the statistics it was trained with
     stride = {k: stride_scale * (s // 2 if len(v["kinds"]) == 1 else s) for k, s in STRIDE.items()}   # one kind: same epoch size
     if window_stride is not None:
@@ -727,13 +727,14 @@ class GoalReacher:
     def run(self) -> dict[str, float]:
         """Generate the motion for the current goal (one sample, fixed seed) and measure it: closest wrist distance
         and its frame, the error at t_G, and how far the lowest foot joint rose above its start height (lift_cm)."""
-        from graspkit.models.wandr import FEET, generate
+        from graspkit.data.wandr_dataset import lowest_foot
+        from graspkit.models.wandr import generate
 
         out = generate(self.model, self.start, self.goal[None], self.t_goal, n=1,
                        generator=torch.Generator().manual_seed(self.seed), floor=self.floor)
         self.motion, self.joints = out.p[0], out.joints[0]
         d = (self.joints[:, I.WRIST] - self.goal).norm(dim=-1)
-        low = self.joints[:, FEET, 2].amin(-1)
+        low = lowest_foot(self.joints)
         k = int(d.argmin())
         return {"dtg_cm": 100 * float(d.min()), "closest_frame": k, "closest_s": k / I.FPS,
                 "error_at_goal_cm": 100 * float(d[-1]), "reached": bool(d.min() <= WANDR_SUCCESS_RADIUS),

@@ -124,10 +124,15 @@ def rest_joints(bm, betas: np.ndarray | Tensor) -> Tensor:
         return bm.shaped(coeffs)[1][:, :I.NUM_BODY].float()
 
 
+def lowest_foot(joints: Tensor) -> Tensor:
+    """Height (...) of the lowest ankle / foot joint of body joints (..., 22, 3)."""
+    return joints[..., FOOT_JOINTS, 2].amin(-1)
+
+
 def feet_height(p: Tensor, rest: Tensor) -> Tensor:
     """Per frame (T,) the height of the lowest ankle / foot joint, for poses (T, 135) and rest joints (22, 3)."""
     with torch.no_grad():
-        return I.body_joints(p, rest)[:, FOOT_JOINTS, 2].min(-1).values
+        return lowest_foot(I.body_joints(p, rest))
 
 
 def motion_kind(m: Motion) -> str:

@@ -40,13 +40,13 @@ import torch
 from torch import Tensor, nn
 
 from graspkit import intention as I
-from graspkit.body.skeleton import JOINT_INDEX
-from graspkit.data.wandr_dataset import GOAL_FRAMES, ClipSet, WindowDataset, make_batch, window_condition
+from graspkit.data.wandr_dataset import (FOOT_JOINTS, GOAL_FRAMES, ClipSet, WindowDataset, lowest_foot, make_batch,
+                                         window_condition)
 from graspkit.models.blocks import GaussianHead, kl_standard_normal
 from graspkit.train import TrainConfig, fit, load_checkpoint, save_checkpoint
 
 FULL_INTENTION = ("wrist", "orientation", "pelvis")
-FEET = [JOINT_INDEX[k] for k in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
+FEET = FOOT_JOINTS                                   # ankles and feet: the foot-velocity, contact and floor terms
 PLANTED_STEP = 1e-3          # m per frame: a foot joint the data moves less than this is planted (w_contact)
 
 
@@ -176,7 +176,7 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
             planted = v_gt.norm(dim=-1) < PLANTED_STEP                         # still in the data: held still here
             contact = contact + (planted * (1000 * v).pow(2).sum(-1)).mean()
         if cfg.w_floor:                     # the lowest foot joint's height here and in the data (B,), cm²
-            low, low_gt = J[:, FEET, 2].amin(-1), J_gt[:, k + 1, FEET, 2].amin(-1)
+            low, low_gt = lowest_foot(J), lowest_foot(J_gt[:, k + 1])
             floor = floor + (100 * (low - low_gt)).pow(2).mean()
     n = steps + 1
     n_kl = n if cfg.rollout_latent == "posterior" else 1
@@ -306,7 +306,7 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
     for k in range(T):
         Rg, J = I.fk_rotmats(t, R, rest)
         if floor is not None:
-            low = J[:, FEET, 2].amin(-1)
+            low = lowest_foot(J)
             if low0 is None:
                 low0 = low
             else:                   # lower the body onto the floor: translation, joints and the last delta alike
