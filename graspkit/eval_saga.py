@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -37,7 +36,7 @@ import torch
 from torch import Tensor
 
 from graspkit.optim.grasppose import ARM_JOINTS
-from graspkit.paths import DATA_STUBS
+from graspkit.paths import DATA_STUBS, write_atomic
 
 RESULTS_PATH = DATA_STUBS / "checkpoints" / "wholegrasp_eval.json"
 
@@ -366,12 +365,7 @@ def _absolute_rotmats(fullpose: Tensor) -> Tensor:
 
 def _write_json(path: str | Path, obj: Any) -> Path:
     """Atomic JSON write (temporary file, then rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(obj, indent=1))
-    os.replace(tmp, path)
-    return path
+    return write_atomic(path, json.dumps(obj, indent=1))
 
 
 def load_results(path: str | Path = RESULTS_PATH) -> dict[str, Any]:

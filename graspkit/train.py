@@ -30,6 +30,8 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 from tqdm.auto import tqdm
 
+from graspkit.paths import publish, temp_beside, write_atomic
+
 StepFn = Callable[[torch.nn.Module, Any, int], dict[str, torch.Tensor]]
 
 
@@ -51,11 +53,13 @@ class TrainConfig:
 def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
     """Write a checkpoint atomically (temporary file, then rename); returns the path."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(state, tmp)
-    os.replace(tmp, path)
-    return path
+    tmp = temp_beside(path)
+    try:
+        torch.save(state, tmp)
+        return publish(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def run_path(name: str, seed: int, run_dir: str | Path | None = None, **settings: Any) -> Path:
@@ -147,11 +151,8 @@ def write_history_csv(path: str | Path, history: list[dict[str, float]]) -> Path
     """Per-epoch logs (train and val_ columns) to a CSV file, written atomically."""
     path = Path(path)
     keys = list(dict.fromkeys(k for h in history for k in h))
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(",".join(keys) + "\n" + "".join(",".join(f"{h.get(k, float('nan')):.6g}" for k in keys) + "\n"
-                                                    for h in history))
-    os.replace(tmp, path)
-    return path
+    return write_atomic(path, ",".join(keys) + "\n" + "".join(",".join(f"{h.get(k, float('nan')):.6g}" for k in keys)
+                                                              + "\n" for h in history))
 
 
 def plot_history(history: list[dict[str, float]], keys: list[str] | None = None, ax: Any = None) -> Any:

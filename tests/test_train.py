@@ -6,7 +6,7 @@ import torch
 from torch.utils.data import TensorDataset
 
 from graspkit.models.blocks import ResBlock, kl_standard_normal, mlp, reparameterize, robust_kl
-from graspkit.train import TrainConfig, fit, load_checkpoint
+from graspkit.train import TrainConfig, fit, load_checkpoint, save_checkpoint
 
 
 def _problem():
@@ -55,6 +55,22 @@ def test_load_checkpoint_names_a_missing_or_pickled_file(tmp_path):
     torch.save({"obj": object()}, bad)
     with pytest.raises(ValueError, match="bad.pt"):
         load_checkpoint(bad)
+
+
+def test_save_checkpoint_keeps_the_old_file_on_failure_and_concurrent_writers_apart(tmp_path):
+    from concurrent.futures import ThreadPoolExecutor
+
+    ck = tmp_path / "c.pt"
+    save_checkpoint(ck, {"w": torch.ones(3)})
+    with pytest.raises(Exception):
+        save_checkpoint(ck, {"w": torch.zeros(3), "bad": lambda: 0})     # unpicklable: fails half-way
+    torch.testing.assert_close(load_checkpoint(ck)["w"], torch.ones(3))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.pt"]
+    with ThreadPoolExecutor(4) as ex:                                    # writers of one path share no temporary file
+        list(ex.map(lambda k: save_checkpoint(ck, {"w": torch.full((50_000,), float(k))}), range(8)))
+    w = load_checkpoint(ck)["w"]
+    assert float(w[0]) in range(8) and bool((w == w[0]).all())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c.pt"]
 
 
 def test_kl_matches_torch_distributions_and_robust_kl_is_psi_of_it():

@@ -15,7 +15,6 @@ from __future__ import annotations
 import json
 import os
 import struct
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -26,40 +25,12 @@ from matplotlib.colors import to_rgba
 from trimesh.visual import TextureVisuals
 from trimesh.visual.material import PBRMaterial
 
+from graspkit.paths import publish, temp_beside, write_atomic  # noqa: F401 (re-exported: callers import them here)
 from graspkit.viz.scene import as_array, as_mesh
 from graspkit.viz.style import OBJECT, SEQUENCE, SKIN
 
 FORMATS = (".glb", ".obj", ".ply")
 Z_UP_TO_Y_UP = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # rotation of -90 deg about x: (x, y, z) -> (x, z, -y)
-
-
-def temp_beside(path: Path, suffix: str = ".tmp") -> Path:
-    """An empty temporary file in path's folder (created), for writing before `publish`."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
-    os.close(fd)
-    return Path(tmp)
-
-
-def publish(tmp: Path, path: Path) -> Path:
-    """Give tmp the usual permissions (mkstemp makes it owner-only) and rename it onto path atomically."""
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
-    os.replace(tmp, path)
-    return path
-
-
-def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
-    """Write data to path through a temporary file in the same folder and os.replace; returns the path."""
-    path = Path(path)
-    tmp = temp_beside(path)
-    try:
-        tmp.write_bytes(data.encode() if isinstance(data, str) else data)
-        return publish(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def _default_color(name: str, k: int) -> Any:
