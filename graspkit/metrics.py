@@ -117,7 +117,7 @@ def grasp_and_end_figures(grasp_vertices: Any, end_vertices: Any, faces: Any, ob
 
 def ground_penetration(vertices: Any) -> np.ndarray:
     """Depth (T,) of the lowest vertex below the ground z = 0 (0 when above)."""
-    return torch.clamp(-_shaped(vertices, "vertices", "T,V,3")[:, :, 2].min(1).values, min=0).double().numpy()
+    return (torch.clamp(-_shaped(vertices, "vertices", "T,V,3")[:, :, 2].min(1).values, min=0) + 0.0).double().numpy()
 
 
 def non_collision_score(vertices: Any, floor: float = 0.0) -> np.ndarray:
@@ -165,8 +165,10 @@ def joint_limit_excess(poses: torch.Tensor) -> torch.Tensor:
 
 
 def distance_to_goal(wrist: Any, goal: Any) -> float:
-    """WANDR's DTG: closest distance (m) of the wrist track (T,3) to the goal (3,)."""
-    w, g = _shaped(wrist, "wrist", "T,3").double(), _shaped(goal, "goal", "3").double()
+    """WANDR's DTG: closest distance (m) of the wrist track (T,3) to the goal (3,) or (1,3)."""
+    g = _t(goal)
+    g = g.reshape(3) if g.shape == (1, 3) else g
+    w, g = _shaped(wrist, "wrist", "T,3").double(), _shaped(g, "goal", "3").double()
     return float((w - g).norm(dim=-1).min())
 
 
@@ -195,19 +197,21 @@ def motion_quality(bm, motions, chunk: int = 96) -> dict[str, Any]:
     for k, m in enumerate(motions):
         clips += 1
         for start, v in m.iter_vertices(bm, chunk=chunk, overlap=1):   # chunks share one frame: every pair once
-            fs += int(foot_skating_wandr(v).sum())
-            sl += int(foot_sliding_goal(v).sum())
-            sk += int(foot_skating_saga(v[:, [hl, hr]], m.fps).sum())
-            pairs += len(v) - 1
+            if len(v) >= 2:                                              # a one-frame clip has no frame pair
+                fs += int(foot_skating_wandr(v).sum())
+                sl += int(foot_sliding_goal(v).sum())
+                sk += int(foot_skating_saga(v[:, [hl, hr]], m.fps).sum())
+                pairs += len(v) - 1
             pen = ground_penetration(v if start == 0 else v[1:])
             pen_max, pen_sum, frames = max(pen_max, float(pen.max(initial=0))), pen_sum + float(pen.sum()), frames + len(pen)
         j = m.joint_positions(bm)[:, BODY_JOINTS]
-        sp = joint_speed(j, m.fps)
+        sp = joint_speed(j, m.fps) if len(j) >= 2 else np.zeros((0, 0))
         if sp.size and sp.max() > vmax:
             t, jj = np.unravel_index(np.argmax(sp), sp.shape)
             vmax, vmax_at = float(sp.max()), f"clip {k} frame {t} {JOINT_NAMES[jj]}"
-        jk = joint_jerk(j, m.fps)
-        jerk_sum, jerk_n = jerk_sum + float(jk.sum()), jerk_n + jk.size
+        if len(j) >= 4:                                                  # jerk needs four frames; shorter clips add none
+            jk = joint_jerk(j, m.fps)
+            jerk_sum, jerk_n = jerk_sum + float(jk.sum()), jerk_n + jk.size
         lim = joint_limit_violation(m.poses)
         if lim.max() > lim_max:
             t, jj = np.unravel_index(np.argmax(lim), lim.shape)

@@ -57,6 +57,9 @@ def test_saga_needs_both_heels_low_and_fast():
 def test_penetration_speed_and_jerk_known_values():
     v = _cloud(5, lift=-0.02)
     assert np.allclose(M.ground_penetration(v), 0.02, atol=1e-6)
+    on = _cloud(5, lift=0.0)
+    on[:, :, 2] -= on[:, :, 2].min()                                     # lowest vertex exactly on the ground: +0, not -0
+    assert not np.signbit(M.ground_penetration(on)).any()
     fps = 30.0
     t = np.arange(40) / fps
     acc = np.stack([0.5 * 2.0 * t**2, 0 * t, 0 * t], 1)[:, None]       # constant acceleration: no jerk
@@ -99,6 +102,9 @@ def test_distance_to_goal_and_success():
     w = np.stack([np.linspace(0, 1, 11), np.zeros(11), np.ones(11)], 1)
     assert np.isclose(M.distance_to_goal(w, [1.0, 0.05, 1.0]), 0.05)
     assert M.goal_reached(w, [1.0, 0.09, 1.0]) and not M.goal_reached(w, [1.0, 0.11, 1.0])
+    assert M.distance_to_goal(w, [[1.0, 0.05, 1.0]]) == M.distance_to_goal(w, [1.0, 0.05, 1.0])   # a (1, 3) goal
+    with pytest.raises(ValueError, match="goal"):
+        M.distance_to_goal(w, [[1.0, 0.05, 1.0], [0.0, 0.0, 0.0]])
 
 
 def test_non_collision_score_counts_vertices_above_the_ground():

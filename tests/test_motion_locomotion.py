@@ -96,6 +96,17 @@ def test_chunked_quality_equals_whole_clip_quality(bm):
     assert a["fs_wandr"] == pytest.approx(M.foot_skating_wandr(v).mean())
 
 
+def test_clips_too_short_for_a_metric_add_frames_but_nothing_else(bm):
+    m = generate_locomotion(5, bm, num_frames=40, kind="walk")
+    alone = M.motion_quality(bm, [m])
+    for n in (1, 2, 3):                                  # no frame pair / no jerk (needs 4 frames) in these clips
+        q = M.motion_quality(bm, [m.slice(0, n), m], chunk=16)
+        assert q["clips"] == 2 and q["frames"] == alone["frames"] + n
+        pairs = 39 + n - 1
+        assert q["fs_wandr"] == pytest.approx(alone["fs_wandr"] * 39 / pairs)
+        assert q["mean_jerk"] == pytest.approx(alone["mean_jerk"]) and alone["mean_jerk"] > 0
+
+
 def test_saga_canonical_frame_of_a_clip(bm):
     from graspkit.data.motion import canonicalize
     from graspkit.data.ik import axis_angle_matrix
