@@ -22,7 +22,8 @@ case "${1:-}" in
   demo) setup; shift; "$VENV/bin/graspkit" demo --out outputs/demo "$@" ;;
   test) setup; shift
         export MPLBACKEND=Agg
-        "$VENV/bin/python" -m pytest -q tests notebooks --nbval --nbval-current-env \
+        # two workers (the machine's two cores), each test module and each notebook whole on one of them
+        "$VENV/bin/python" -m pytest -q -n "${GRASPKIT_TEST_WORKERS:-2}" --dist loadscope tests notebooks --nbval --nbval-current-env \
           --nbval-sanitize-with notebooks/sanitize.cfg --nbval-cell-timeout 600 "$@" ;;
   *) echo "usage: bash workbook.sh {demo|test} [extra args]" >&2; exit 2 ;;
 esac

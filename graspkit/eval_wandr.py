@@ -13,10 +13,12 @@ Metrics (§4.3): SR, the share of motions whose right wrist comes within 10 cm o
 the share of frame pairs whose lowest mesh vertex moves more than 0.66 cm horizontally to the next frame, averaged
 over motions; DTG, the closest the wrist gets to the goal (cm), averaged.
 
-FS is computed on the fly, frame by frame, without building meshes: the lowest vertex is searched among the foot
-vertices (the 524 vertices skinned mostly to ankles and feet), which are posed exactly by linear blend skinning from
-the knee, ankle and foot transforms (they carry no pose correctives). `fs_agreement` measures, on full meshes, how often
-the lowest vertex of the whole body is one of them.
+FS is computed on the fly, frame by frame, without building meshes (`LowVertices`): the lowest vertex is searched
+among the foot and hand vertices (those skinned mostly to ankles and feet, or to a wrist and its fingers), posed
+exactly by linear blend skinning from the body joints' transforms (they carry no pose correctives; the fingers keep
+the start's pose), a hand only where it can be lower than the feet. On the shipped model's grid rollouts the whole
+mesh's lowest vertex is always one of them (a foot in 99.3 % of the frames, a right-hand fingertip at some floor
+goals), and the FS equals the full-mesh FS (tests/test_wandr_eval.py checks both on floor goals).
 
 Two extra columns, not the paper's (`summary`'s SR_grounded and floating): SR counts a wrist on the goal however the
 body got there, including with both feet off the floor, which the procedural clips never show (their lowest vertex
@@ -79,58 +81,162 @@ def grid_goals() -> tuple[Tensor, np.ndarray]:
     return goals, rows[:, :3]
 
 
-class FootVertices:
-    """The foot vertices of one or more bodies (betas (S, 10)), posed by LBS from body-joint transforms."""
+FOOT_PARTS = tuple(JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot"))
+HAND_PARTS = (JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]) + tuple(range(25, 55))   # wrists and fingers
 
-    def __init__(self, bm, betas: Tensor) -> None:
-        weights = bm.lbs_weights.float()                                  # (V, 55)
-        feet = [JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
-        self.ids = torch.isin(weights.argmax(1), torch.tensor(feet)).nonzero()[:, 0]
-        w = weights[self.ids]
+
+class Skinned:
+    """A few vertices `ids` of bodies with rest vertices v (S, V, 3) and joints J (S, 55, 3), posed by LBS from the
+    global rotations Rg (B, J', 3, 3) and world positions pos (B, J', 3) of the joints they are skinned to (exact when
+    they carry no pose correctives)."""
+
+    def __init__(self, weights: Tensor, ids: Tensor, v: Tensor, J: Tensor) -> None:
+        self.ids = ids
+        w = weights[ids]
         self.joints = (w.sum(0) > 0).nonzero()[:, 0]
-        if int(self.joints.max()) >= I.NUM_BODY:
-            raise ValueError("bm: foot vertices skinned to joints outside the body chain")
-        if bm.has_posedirs and bm.posedirs.view(bm.posedirs.shape[0], 3, -1)[:, :, self.ids].abs().max() > 0:
-            raise ValueError("bm: foot vertices carry pose correctives; the fast FS would not be exact")
-        self.w = w[:, self.joints]                                        # (Vf, K)
-        betas = torch.as_tensor(betas).reshape(len(betas), -1).to(bm.dtype)
-        coeffs = torch.zeros(len(betas), bm.num_betas + bm.num_expression, dtype=bm.dtype)
-        k = min(bm.num_betas, betas.shape[1])
-        coeffs[:, :k] = betas[:, :k]
-        with torch.no_grad():
-            v, J = bm.shaped(coeffs)
-        self.rest_v = v[:, self.ids].float()                             # (S, Vf, 3)
-        self.rest_j = J[:, self.joints].float()                          # (S, K, 3)
-        self.xw = (self.w[None, :, :, None] * self.rest_v[:, :, None, :]).flatten(2)   # (S, Vf, 3K): w_vk x_v
+        self.w = w[:, self.joints]                                                      # (n, K)
+        self.rest_v = v[:, ids].float()                                                 # (S, n, 3)
+        self.rest_j = J[:, self.joints].float()                                         # (S, K, 3)
+        self.xw = (self.w[None, :, :, None] * self.rest_v[:, :, None, :]).flatten(2)   # (S, n, 3K): w_vk x_v
 
     def _affine(self, Rg: Tensor, pos: Tensor, body: Tensor) -> tuple[Tensor, Tensor]:
-        """Skinning transforms x -> R_k x + t_k (B, K, 3, 3), (B, K, 3) of the K joints the feet are skinned to."""
+        """Skinning transforms x -> R_k x + t_k (B, K, 3, 3), (B, K, 3) of the K joints, for bodies `body` (B,)."""
         R = Rg[:, self.joints]
         t = pos[:, self.joints] - (R @ self.rest_j[body].unsqueeze(-1)).squeeze(-1)
         return R, t
 
     def heights(self, Rg: Tensor, pos: Tensor, body: Tensor) -> Tensor:
-        """Heights (B, Vf) of the foot vertices of poses with global rotations Rg (B, 22, 3, 3) and world joint
-        positions pos (B, 22, 3), for bodies `body` (B,) (indices into betas): z_v = sum_k w_vk (R_k[2] . x_v + t_k^z),
-        one small matrix product per body."""
+        """Heights (B, n) of the vertices of bodies `body` (B,) (indices into betas): z_v = sum_k w_vk (R_k[2] . x_v
+        + t_k^z), one small matrix product per body."""
         R, t = self._affine(Rg, pos, body)
         Rz, tz = R[:, :, 2, :].flatten(1), t[:, :, 2]                                  # (B, 3K), (B, K)
-        z = tz @ self.w.T                                                               # (B, Vf)
+        z = tz @ self.w.T                                                               # (B, n)
         for s in body.unique().tolist():
             rows = (body == s).nonzero()[:, 0]
             z[rows] += Rz[rows] @ self.xw[s].T
         return z
 
     def points(self, Rg: Tensor, pos: Tensor, body: Tensor, vertex: Tensor | None = None) -> Tensor:
-        """World positions of foot vertices: all (B, Vf, 3), or one per pose (B, 3) (indices into the foot ids)."""
+        """World positions of the vertices: all (B, n, 3), or one per pose (B, 3) (`vertex` (B,): indices into ids)."""
         R, t = self._affine(Rg, pos, body)
         if vertex is None:
-            x, w = self.rest_v[body], self.w                                            # (B, Vf, 3), (Vf, K)
-            moved = torch.einsum("bkij,bvj->bvki", R, x) + t[:, None]                  # (B, Vf, K, 3)
+            x, w = self.rest_v[body], self.w                                            # (B, n, 3), (n, K)
+            moved = torch.einsum("bkij,bvj->bvki", R, x) + t[:, None]                  # (B, n, K, 3)
             return (moved * w[None, :, :, None]).sum(2)
         x, w = self.rest_v[body, vertex], self.w[vertex]                                # (B, 3), (B, K)
         moved = (R @ x[:, None, :, None]).squeeze(-1) + t                               # (B, K, 3)
         return (moved * w[..., None]).sum(1)
+
+
+FOOT_PARTS = tuple(JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot"))
+WRISTS = (JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"])
+HAND_PARTS = ((WRISTS[0],) + tuple(range(25, 40)), (WRISTS[1],) + tuple(range(40, 55)))     # wrist + its fingers
+
+
+class LowVertices:
+    """The vertices that can be a standing or reaching body's lowest — its feet and its hands (the vertices skinned
+    mostly to ankles and feet, or to a wrist and its fingers) — of bodies with betas (S, 10) and finger poses
+    (full_pose (S, 55, 3) or (55, 3), local axis-angle as `Motion.poses`, hand mean not added; None: zeros), posed
+    exactly by LBS from the 22 body joints' transforms: the generated poses hold those joints only, the fingers keep
+    the start's pose (as `body_vertices`), so their transforms follow from the wrist's. A hand is posed only for the
+    poses where it can be lower than the feet: its vertices lie within `reach` (S,) of its wrist (a bound from the
+    rest shape: vertex-to-joint distances plus bone lengths along the tree)."""
+
+    def __init__(self, bm, betas: Tensor, full_pose: Tensor | None = None) -> None:
+        from graspkit.rotations import axis_angle_to_matrix
+
+        weights = bm.lbs_weights.float()                                  # (V, 55)
+        part = weights.argmax(1)
+        ids = [torch.isin(part, torch.tensor(js)).nonzero()[:, 0] for js in (FOOT_PARTS,) + HAND_PARTS]
+        every = torch.cat(ids)
+        if bool((weights[every][:, 22:25] > 0).any()):
+            raise ValueError("bm: foot or hand vertices skinned to the jaw or the eyes")
+        if bm.has_posedirs and bm.posedirs.view(bm.posedirs.shape[0], 3, -1)[:, :, every].abs().max() > 0:
+            raise ValueError("bm: foot or hand vertices carry pose correctives; the fast FS would not be exact")
+        betas = torch.as_tensor(betas).reshape(len(betas), -1).to(bm.dtype)
+        coeffs = torch.zeros(len(betas), bm.num_betas + bm.num_expression, dtype=bm.dtype)
+        k = min(bm.num_betas, betas.shape[1])
+        coeffs[:, :k] = betas[:, :k]
+        with torch.no_grad():
+            v, J = bm.shaped(coeffs)
+        self.feet, *self.hands = (Skinned(weights, i, v, J) for i in ids)
+        self.ids = every                                                  # feet, left hand, right hand
+        self.offsets = [0, len(ids[0]), len(ids[0]) + len(ids[1]), len(every)]
+        self.parents = torch.as_tensor(bm.parents)
+        depth: dict[int, int] = {}
+        for j in range(25, 55):                               # parents come before children in the SMPL-X order
+            depth[j] = 1 + depth.get(int(self.parents[j]), 0)
+        self.levels = [torch.tensor([j for j in depth if depth[j] == d]) for d in sorted(set(depth.values()))]
+        pose = torch.zeros(55, 3) if full_pose is None else torch.as_tensor(full_pose).float()
+        pose = pose.reshape(-1, 55, 3).expand(len(betas), -1, -1)
+        self.finger_rot = axis_angle_to_matrix(pose.double()).float()                            # (S, 55, 3, 3)
+        self.bone = (J - J[:, self.parents.clamp(min=0)]).float()                                # (S, 55, 3)
+        self.reach = [self._reach(h, w, v, J) for h, w in zip(self.hands, WRISTS)]
+
+    def _reach(self, hand: Skinned, wrist: int, v: Tensor, J: Tensor) -> Tensor:
+        """(S,) a bound on how far a hand vertex lies from its wrist in any pose: |x_v - pos_w| <= sum_k w_vk
+        (|x_v - J_k| + the tree path from joint k to the wrist), bones keeping their rest lengths."""
+        length = (J - J[:, self.parents.clamp(min=0)]).norm(dim=-1)                              # (S, 55)
+        length[:, 0] = 0.0
+
+        def up(j: int) -> list[int]:
+            chain = [j]
+            while chain[-1] > 0:
+                chain.append(int(self.parents[chain[-1]]))
+            return chain
+
+        path = []
+        for k in hand.joints.tolist():
+            a, b = up(k), up(wrist)
+            common = next(j for j in a if j in b)
+            path.append(length[:, a[:a.index(common)]].sum(1) + length[:, b[:b.index(common)]].sum(1))
+        path = torch.stack(path, 1)                                                              # (S, K)
+        to_joint = (v[:, hand.ids, None] - J[:, None, hand.joints]).norm(dim=-1)                # (S, n, K)
+        return (hand.w[None].double() * (to_joint + path[:, None])).sum(-1).amax(1).float()
+
+    def with_fingers(self, Rg: Tensor, pos: Tensor, body: Tensor) -> tuple[Tensor, Tensor]:
+        """Global rotations (B, 55, 3, 3) and world positions (B, 55, 3) of the body joints (B, 22, ...) and the
+        fingers below them: R_j = R_parent r_j, t_j = t_parent + R_parent (J_j - J_parent) (jaw and eyes left zero)."""
+        B = len(Rg)
+        Rg = torch.cat([Rg, Rg.new_zeros(B, 33, 3, 3)], 1)
+        pos = torch.cat([pos, pos.new_zeros(B, 33, 3)], 1)
+        for lv in self.levels:
+            Rp, tp = Rg[:, self.parents[lv]], pos[:, self.parents[lv]]
+            pos[:, lv] = tp + (Rp @ self.bone[body[:, None], lv].unsqueeze(-1)).squeeze(-1)
+            Rg[:, lv] = Rp @ self.finger_rot[body[:, None], lv]
+        return Rg, pos
+
+    def lowest(self, Rg: Tensor, pos: Tensor, body: Tensor, previous: Tensor | None = None
+               ) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
+        """For poses with body-joint rotations Rg (B, 22, 3, 3) and positions pos (B, 22, 3): the lowest of the
+        vertices (B,) (an index into ids), its position (B, 3), the lowest foot vertex's height (B,), and where the
+        vertices `previous` (B,) (indices into ids, e.g. the last frame's lowest) are now (B, 3)."""
+        z = self.feet.heights(Rg, pos, body)
+        low, best = z.min(1)
+        foot_low = low.clone()
+        at = self.feet.points(Rg, pos, body, best)
+        was = None
+        if previous is not None:
+            was = torch.zeros(len(body), 3)
+            feet = previous < self.offsets[1]
+            was[feet] = self.feet.points(Rg[feet], pos[feet], body[feet], previous[feet])
+        for h, (hand, wrist) in enumerate(zip(self.hands, WRISTS)):
+            a, b = self.offsets[h + 1], self.offsets[h + 2]
+            maybe = pos[:, wrist, 2] - self.reach[h][body] <= low + 1e-4
+            mine = (previous >= a) & (previous < b) if previous is not None else torch.zeros_like(maybe)
+            rows = (maybe | mine).nonzero()[:, 0]
+            if not len(rows):
+                continue
+            RgF, posF = self.with_fingers(Rg[rows], pos[rows], body[rows])
+            zh, ih = hand.heights(RgF, posF, body[rows]).min(1)
+            lower = zh < low[rows]
+            r = rows[lower]
+            low[r], best[r] = zh[lower], ih[lower] + a
+            at[r] = hand.points(RgF[lower], posF[lower], body[r], ih[lower])
+            if previous is not None:
+                m = mine[rows]
+                was[rows[m]] = hand.points(RgF[m], posF[m], body[rows[m]], previous[rows[m]] - a)
+        return best, at, foot_low, was
 
 
 @dataclass
@@ -159,8 +265,8 @@ class GridResult:
 class GridMeter:
     """A `rollout` frame hook that accumulates SR / DTG / FS per sequence without storing the motion."""
 
-    def __init__(self, feet: FootVertices, body: Tensor, rest: Tensor, goals: Tensor, t_goal: int) -> None:
-        """feet for bodies `body` (B,) (indices into its betas), rest joints (B, 22, 3), goals (B, 3), t_G frame."""
+    def __init__(self, feet: LowVertices, body: Tensor, rest: Tensor, goals: Tensor, t_goal: int) -> None:
+        """feet (the feet and hands) for bodies `body` (B,) (indices into its betas), rest joints (B, 22, 3), goals (B, 3), t_G frame."""
         self.feet, self.body, self.rest, self.goals, self.t_goal = feet, body, rest, goals, t_goal
         B = len(body)
         self.dtg = torch.full((B,), float("inf"))
@@ -183,15 +289,13 @@ class GridMeter:
             self.reach[hit] = k
             if k == self.t_goal:
                 self.err = d.clone()
-            pos = joints
-            if self._lowest is not None:       # the vertex lowest at the previous frame: its horizontal move
-                now = self.feet.points(Rg, pos, self.body, self._lowest)
+            lowest, at, foot_low, now = self.feet.lowest(Rg, joints, self.body, self._lowest)
+            if now is not None:                # the vertex lowest at the previous frame: its horizontal move
                 move = (now[:, :2] - self._at[:, :2]).norm(dim=-1)
                 self.skate += (move > WANDR_SKATE_THRESHOLD).float()
                 self.pairs += 1
-            low, self._lowest = self.feet.heights(Rg, pos, self.body).min(1)
-            self._at = self.feet.points(Rg, pos, self.body, self._lowest)
-            on_floor = low <= FOOT_ON_FLOOR
+            self._lowest, self._at = lowest, at
+            on_floor = foot_low <= FOOT_ON_FLOOR
             self.grounded |= (d <= WANDR_SUCCESS_RADIUS) & on_floor
             self.floating += (~on_floor).float()
             self.frames += 1
@@ -209,7 +313,7 @@ def evaluate_grid(model, starts: Sequence[I.StartPose], bm, n: int = 5, seed: in
         goals, cells = grid_goals()
     cells = np.zeros((len(goals), 3)) if cells is None else np.asarray(cells)
     pp, p0, rest, g, idx = expand_starts(starts, goals, n)
-    feet = FootVertices(bm, torch.stack([s.betas for s in starts]))
+    feet = LowVertices(bm, torch.stack([s.betas for s in starts]), torch.stack([s.full_pose for s in starts]))
     meter = GridMeter(feet, idx[:, 0], rest, g, t_goal)
     gen = torch.Generator().manual_seed(seed)
     model.eval()
@@ -229,10 +333,12 @@ def _result(meter: GridMeter, idx: Tensor, cells: np.ndarray) -> GridResult:
 
 
 def evaluate_motions(p: Tensor, rest: Tensor, goals: Tensor, betas: Tensor, bm, t_goal: int = T_GOAL,
-                     cells: np.ndarray | None = None, index: Tensor | None = None) -> GridResult:
-    """Score given motions p (B, T, 135) with rest joints (B, 22, 3), goals (B, 3) and betas (B, 10) the same way."""
+                     cells: np.ndarray | None = None, index: Tensor | None = None,
+                     full_pose: Tensor | None = None) -> GridResult:
+    """Score given motions p (B, T, 135) with rest joints (B, 22, 3), goals (B, 3) and betas (B, 10) the same way;
+    full_pose (B, 55, 3) or (55, 3): the fingers' local pose (as `StartPose.full_pose`; None: zeros)."""
     B, T = p.shape[:2]
-    feet = FootVertices(bm, betas)
+    feet = LowVertices(bm, betas, full_pose)
     meter = GridMeter(feet, torch.arange(B), rest, goals, t_goal)
     with torch.no_grad():
         for k in range(T):
@@ -249,7 +355,7 @@ def evaluate_planner(starts: Sequence[I.StartPose], bm, t_goal: int = T_GOAL, se
     from graspkit.data import plan_reach
 
     goals, cells = grid_goals()
-    ps, rests, gs, bs, idx = [], [], [], [], []
+    ps, rests, gs, bs, idx, hands = [], [], [], [], [], []
     for s_i, s in enumerate(starts):
         for g_i, goal in enumerate(goals):
             m = plan_reach(Start(0.0, 0.0, 0.0), goal.numpy(), t_goal, betas=s.betas.numpy(), seed=seed + g_i, bm=bm,
@@ -259,8 +365,9 @@ def evaluate_planner(starts: Sequence[I.StartPose], bm, t_goal: int = T_GOAL, se
             gs.append(goal)
             bs.append(s.betas)
             idx.append((s_i, g_i, 0))
+            hands.append(torch.as_tensor(m.poses[0], dtype=torch.float32))   # the planner holds its fingers still
     res = evaluate_motions(torch.stack(ps), torch.stack(rests), torch.stack(gs), torch.stack(bs), bm, t_goal,
-                           cells[[i[1] for i in idx]], torch.tensor(idx))
+                           cells[[i[1] for i in idx]], torch.tensor(idx), torch.stack(hands))
     res.cell = cells[res.goal_index]
     return res
 

@@ -28,18 +28,53 @@ def test_the_grid_is_the_papers():
     assert E.T_GOAL == 239 and 5 * 5 * 5 * 6 * 5 == 3750
 
 
-def test_foot_vertices_are_posed_exactly_as_the_body_model_does(bm):
-    m, p, rest = _clip(bm)
-    feet = E.FootVertices(bm, torch.as_tensor(m.betas)[None])
+def test_foot_and_hand_vertices_are_posed_exactly_as_the_body_model_does(bm):
+    m, p, rest = _clip(bm, "reach/reach_000002.npz")
     frames = slice(30, 60)
+    # one "body" per frame, each with that frame's finger pose
+    low = E.LowVertices(bm, torch.as_tensor(m.betas)[None].expand(30, -1), torch.as_tensor(m.poses[frames]))
     Rg, pos = I.body_transforms(p[frames], rest)
-    body = torch.zeros(30, dtype=torch.long)
-    full = m.vertices(bm, 30, 60)[:, feet.ids]
-    assert torch.allclose(feet.points(Rg, pos, body), full, atol=1e-5)
-    assert torch.allclose(feet.heights(Rg, pos, body), full[..., 2], atol=1e-5)
-    one = torch.randint(len(feet.ids), (30,), generator=torch.Generator().manual_seed(0))
-    assert torch.allclose(feet.points(Rg, pos, body, one), full[torch.arange(30), one], atol=1e-5)
-    assert len(feet.ids) > 400 and set(feet.joints.tolist()) <= {4, 5, 7, 8, 10, 11}
+    body = torch.arange(30)
+    full = m.vertices(bm, 30, 60)
+    assert torch.allclose(low.feet.points(Rg, pos, body), full[:, low.feet.ids], atol=1e-5)
+    assert torch.allclose(low.feet.heights(Rg, pos, body), full[:, low.feet.ids, 2], atol=1e-5)
+    one = torch.randint(len(low.feet.ids), (30,), generator=torch.Generator().manual_seed(0))
+    assert torch.allclose(low.feet.points(Rg, pos, body, one), full[torch.arange(30), low.feet.ids[one]], atol=1e-5)
+    RgF, posF = low.with_fingers(Rg, pos, body)
+    for hand, wrist, reach in zip(low.hands, E.WRISTS, low.reach):
+        x = hand.points(RgF, posF, body)
+        assert torch.allclose(x, full[:, hand.ids], atol=1e-5)
+        assert torch.allclose(hand.heights(RgF, posF, body), full[:, hand.ids, 2], atol=1e-5)
+        assert ((x - pos[:, None, wrist]).norm(dim=-1).amax(1) <= reach).all()      # the bound holds
+    assert len(low.feet.ids) > 400 and set(low.feet.joints.tolist()) <= {4, 5, 7, 8, 10, 11}
+    assert min(len(h.ids) for h in low.hands) > 300
+
+
+def test_the_lowest_vertex_is_the_whole_meshs_also_when_a_hand_reaches_the_floor(bm):
+    from graspkit.models.wandr import generate, load_wandr
+
+    model = load_wandr(DATA_STUBS / "checkpoints" / "wandr.pt")
+    start = E.starts_from_meta(model.meta)[0]
+    goals = torch.stack([E.goal_from_cylinder(a, d, 0.0) for a, d in ((0, 0.5), (72, 1.625), (288, 0.5))])
+    out = generate(model, start, goals, t_goal=90, n=2, generator=torch.Generator().manual_seed(0), frames=120)
+    B, T = out.p.shape[:2]
+    low = E.LowVertices(bm, start.betas[None], start.full_pose)
+    hand_frames = 0
+    previous = None
+    for k in range(T):
+        Rg, pos = I.body_transforms(out.p[:, k], out.rest)
+        lowest, at, _, _ = low.lowest(Rg, pos, torch.zeros(B, dtype=torch.long), previous)
+        full = torch.stack([E.body_vertices(bm, out.p[b, k:k + 1], start)[0] for b in range(B)])
+        truth = full[..., 2].argmin(1)
+        assert torch.equal(low.ids[lowest], truth)
+        assert torch.allclose(at, full[torch.arange(B), truth], atol=1e-5)
+        hand_frames += int((lowest >= low.offsets[1]).sum())
+        previous = lowest
+    assert hand_frames > 0                                  # a hand was the lowest vertex in some frames
+    res = E.evaluate_motions(out.p, out.rest, out.goal[:, 0], start.betas[None].expand(B, -1), bm,
+                             full_pose=start.full_pose)
+    truth = [metrics.foot_skating_wandr(E.body_vertices(bm, out.p[b], start)).mean() for b in range(B)]
+    assert res.fs == pytest.approx(truth, abs=1e-6)
 
 
 @pytest.mark.parametrize("name", ["locomotion/locomotion_000003.npz", "locomotion/locomotion_000007.npz",

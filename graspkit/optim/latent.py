@@ -117,7 +117,7 @@ def evaluate_vae_opt(model: WandrCVAE, starts: Sequence[I.StartPose], bm, seed: 
             idx = res.motion.info["index"].clone()
             idx[:, 0], idx[:, 1] = s_i, idx[:, 1] + lo
             parts.append(evaluate_motions(m.p, m.rest, m.goal[:, 0], s.betas[None].expand(len(idx), -1), bm, T_GOAL,
-                                          cells[idx[:, 1].numpy()], idx))
+                                          cells[idx[:, 1].numpy()], idx, s.full_pose))
     cat = lambda k: np.concatenate([getattr(p, k) for p in parts])  # noqa: E731
     return GridResult(cat("start"), cat("goal_index"), cat("sample"), cat("cell"), cat("dtg"), cat("reach_frame"),
                       cat("fs"), cat("error_at_goal"), {"iters": iters, "starts": n_starts})
