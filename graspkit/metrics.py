@@ -50,7 +50,7 @@ JOINT_LIMITS_DEG: dict[str, float] = {
 
 def _t(x: Any) -> torch.Tensor:
     """A float tensor of an array, list or tensor (detached: metrics are measurements; integers become float64)."""
-    t = x.detach() if isinstance(x, torch.Tensor) else torch.as_tensor(np.asarray(x))
+    t = x.detach() if isinstance(x, torch.Tensor) else torch.as_tensor(np.ascontiguousarray(x))   # any strides
     return t if t.is_floating_point() else t.to(torch.float64)
 
 
@@ -245,9 +245,10 @@ def grasp_contact_distance(vertices: Any, obj: Any, margin: float = 0.05) -> flo
     from graspkit.objects.distance import mesh_arrays
     from graspkit.objects.sdf import signed_distance
 
-    v = _t(vertices).double().reshape(-1, 3)
-    if len(v) == 0 or not torch.isfinite(v).all():
-        raise ValueError(f"vertices: expected finite (V, 3) positions with V > 0, got shape {tuple(v.shape)}")
+    v = _t(vertices).double()
+    if v.dim() != 2 or v.shape[1] != 3 or len(v) == 0 or not torch.isfinite(v).all():
+        raise ValueError(f"vertices: expected finite (V, 3) positions of one body with V > 0, got shape "
+                         f"{tuple(v.shape)}")
     ov, of = mesh_arrays(obj, "obj")
     ov = ov.double()
     lo, hi = ov.min(0).values, ov.max(0).values

@@ -35,3 +35,7 @@ def test_contact_distance_rejects_empty_or_nan_vertices():
         M.grasp_contact_distance(np.zeros((0, 3)), mug)
     with pytest.raises(ValueError, match="vertices"):
         M.grasp_contact_distance(np.full((2, 3), np.nan), mug)
+    with pytest.raises(ValueError, match="one body"):                   # a batch of bodies is not one point set
+        M.grasp_contact_distance(np.zeros((2, 5, 3)), mug)
+    with pytest.raises(ValueError, match="vertices"):
+        M.grasp_contact_distance(np.zeros((6, 2)), mug)                 # (V, 2) would reshape into 4 points

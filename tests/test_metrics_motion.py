@@ -161,3 +161,6 @@ def test_apd_of_equal_samples_is_zero_and_matches_scipy():
     assert M.apd(np.full((30, 67, 3), 1.3)) == 0.0
     x = np.random.default_rng(1).normal(size=(31, 12, 3)) + 500.0
     assert M.apd(x) == pytest.approx(pdist(x.reshape(31, -1)).mean(), rel=1e-12)
+    assert M.apd(x[::-1]) == pytest.approx(M.apd(x), rel=1e-12)          # a view with negative strides
+    j = x[:, :4]
+    assert np.allclose(M.joint_speed(j[::-1])[::-1], M.joint_speed(j))
