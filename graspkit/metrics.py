@@ -265,12 +265,14 @@ def grasp_contact_distance(vertices: Any, obj: Any, margin: float = 0.05) -> flo
     return best
 
 
-def grasp_metrics(vertices: Any, faces: Any, obj: Any, threshold: float = GRASP_CONTACT_THRESHOLD) -> dict[str, float]:
-    """Contact, interpenetration volume (cm^3) and depth (cm) of one body mesh (V,3)+(F,3) and one object mesh."""
-    from graspkit.objects.penetration import interpenetration
+def grasp_metrics(vertices: Any, faces: Any, obj: Any, threshold: float = GRASP_CONTACT_THRESHOLD,
+                  refine: int | None = None) -> dict[str, float]:
+    """Contact, interpenetration volume (cm^3) and depth (cm) of one body mesh (V,3)+(F,3) and one object mesh;
+    refine: `interpenetration`'s rays per cell side along walls (None: its default)."""
+    from graspkit.objects.penetration import REFINE, interpenetration
 
     d = grasp_contact_distance(vertices, obj)
-    pen = interpenetration((_t(vertices).double(), _t(faces).long()), obj)
+    pen = interpenetration((_t(vertices).double(), _t(faces).long()), obj, refine=REFINE if refine is None else refine)
     return {"min_distance": d, "contact": float(d <= threshold), "volume_cm3": pen.volume_cm3, "depth_cm": pen.depth_cm}
 
 

@@ -386,6 +386,23 @@ def test_sphere_lens_volume_and_depth(r1, r2, d):
     assert abs(intersection_volume(body, obj) - exact) <= 2e-3 * exact
 
 
+@pytest.mark.parametrize("yaw_deg, slab_mm, one_ray_off, refined_tol", [(45, 3.0, 0.05, 0.01), (0, 1.4, 0.2, 0.08),
+                                                                         (45, 1.0, 0.3, 0.08)])
+def test_shallow_sideways_overlap_is_refined_along_vertical_walls(yaw_deg, slab_mm, one_ray_off, refined_tol):
+    """Two 10 cm cubes overlapping by a slab through their vertical faces (exact volume 100 t cm^3 for t cm):
+    one ray per 1 mm column rounds the slab to whole columns, the refined cells resolve it."""
+    box = trimesh.creation.box((0.1, 0.1, 0.1))
+    R = trimesh.transformations.rotation_matrix(np.radians(yaw_deg), [0, 0, 1])[:3, :3]
+    a, b = box.vertices @ R.T, (box.vertices + [0.1 - slab_mm / 1000, 0.0, 0.0]) @ R.T
+    exact = 100 * slab_mm / 10
+    one = interpenetration((a, box.faces), (b, box.faces), refine=1).volume_cm3
+    refined = interpenetration((a, box.faces), (b, box.faces)).volume_cm3
+    assert abs(one / exact - 1) > one_ray_off
+    assert abs(refined / exact - 1) < refined_tol
+    with pytest.raises(ValueError, match="refine"):
+        interpenetration((a, box.faces), (b, box.faces), refine=0)
+
+
 def test_penetration_edge_cases_and_inputs():
     body = _sphere(0.05)
     far = _sphere(0.05, centre=(0.2, 0.0, 0.0))

@@ -583,7 +583,7 @@ class GraspFitter:
         mesh = make_object(results[0].task.object_name)
         for b, r in enumerate(results):
             obj = apply_pose(r.task.object_pose, mesh)
-            q = M.grasp_metrics(V[b], faces, obj)
+            q = M.grasp_metrics(V[b], faces, obj, refine=1)    # one ray per column: the shipped sets were made so
             q["feet_cm"] = 100.0 * max(abs(float(V[b, ids, 2].min())) for ids in feet)
             ids = np.concatenate([self.hm.palm_ids] + [self.hm.pad_ids[f] for f in REGION_DIGITS])
             d = signed_distance(V[b, ids], obj, check=False).numpy()
