@@ -81,10 +81,6 @@ def grid_goals() -> tuple[Tensor, np.ndarray]:
     return goals, rows[:, :3]
 
 
-FOOT_PARTS = tuple(JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot"))
-HAND_PARTS = (JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"]) + tuple(range(25, 55))   # wrists and fingers
-
-
 class Skinned:
     """A few vertices `ids` of bodies with rest vertices v (S, V, 3) and joints J (S, 55, 3), posed by LBS from the
     global rotations Rg (B, J', 3, 3) and world positions pos (B, J', 3) of the joints they are skinned to (exact when
@@ -176,8 +172,7 @@ class LowVertices:
     def _reach(self, hand: Skinned, wrist: int, v: Tensor, J: Tensor) -> Tensor:
         """(S,) a bound on how far a hand vertex lies from its wrist in any pose: |x_v - pos_w| <= sum_k w_vk
         (|x_v - J_k| + the tree path from joint k to the wrist), bones keeping their rest lengths."""
-        length = (J - J[:, self.parents.clamp(min=0)]).norm(dim=-1)                              # (S, 55)
-        length[:, 0] = 0.0
+        length = self.bone.double().norm(dim=-1)                             # (S, 55) bone lengths (the root's: 0)
 
         def up(j: int) -> list[int]:
             chain = [j]
@@ -265,9 +260,10 @@ class GridResult:
 class GridMeter:
     """A `rollout` frame hook that accumulates SR / DTG / FS per sequence without storing the motion."""
 
-    def __init__(self, feet: LowVertices, body: Tensor, rest: Tensor, goals: Tensor, t_goal: int) -> None:
-        """feet (the feet and hands) for bodies `body` (B,) (indices into its betas), rest joints (B, 22, 3), goals (B, 3), t_G frame."""
-        self.feet, self.body, self.rest, self.goals, self.t_goal = feet, body, rest, goals, t_goal
+    def __init__(self, low: LowVertices, body: Tensor, rest: Tensor, goals: Tensor, t_goal: int) -> None:
+        """The feet and hands `low` of bodies `body` (B,) (indices into its betas), rest joints (B, 22, 3), goals
+        (B, 3), t_G frame."""
+        self.low, self.body, self.rest, self.goals, self.t_goal = low, body, rest, goals, t_goal
         B = len(body)
         self.dtg = torch.full((B,), float("inf"))
         self.reach = torch.full((B,), -1, dtype=torch.long)
@@ -289,7 +285,7 @@ class GridMeter:
             self.reach[hit] = k
             if k == self.t_goal:
                 self.err = d.clone()
-            lowest, at, foot_low, now = self.feet.lowest(Rg, joints, self.body, self._lowest)
+            lowest, at, foot_low, now = self.low.lowest(Rg, joints, self.body, self._lowest)
             if now is not None:                # the vertex lowest at the previous frame: its horizontal move
                 move = (now[:, :2] - self._at[:, :2]).norm(dim=-1)
                 self.skate += (move > WANDR_SKATE_THRESHOLD).float()
@@ -313,8 +309,8 @@ def evaluate_grid(model, starts: Sequence[I.StartPose], bm, n: int = 5, seed: in
         goals, cells = grid_goals()
     cells = np.zeros((len(goals), 3)) if cells is None else np.asarray(cells)
     pp, p0, rest, g, idx = expand_starts(starts, goals, n)
-    feet = LowVertices(bm, torch.stack([s.betas for s in starts]), torch.stack([s.full_pose for s in starts]))
-    meter = GridMeter(feet, idx[:, 0], rest, g, t_goal)
+    low = LowVertices(bm, torch.stack([s.betas for s in starts]), torch.stack([s.full_pose for s in starts]))
+    meter = GridMeter(low, idx[:, 0], rest, g, t_goal)
     gen = torch.Generator().manual_seed(seed)
     model.eval()
     with torch.no_grad():
@@ -338,8 +334,7 @@ def evaluate_motions(p: Tensor, rest: Tensor, goals: Tensor, betas: Tensor, bm, 
     """Score given motions p (B, T, 135) with rest joints (B, 22, 3), goals (B, 3) and betas (B, 10) the same way;
     full_pose (B, 55, 3) or (55, 3): the fingers' local pose (as `StartPose.full_pose`; None: zeros)."""
     B, T = p.shape[:2]
-    feet = LowVertices(bm, betas, full_pose)
-    meter = GridMeter(feet, torch.arange(B), rest, goals, t_goal)
+    meter = GridMeter(LowVertices(bm, betas, full_pose), torch.arange(B), rest, goals, t_goal)
     with torch.no_grad():
         for k in range(T):
             Rg, J = I.body_transforms(p[:, k], rest)

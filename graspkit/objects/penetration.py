@@ -56,6 +56,20 @@ def _closed_numpy(mesh: MeshLike, name: str, allow_holes: bool = False) -> tuple
     return verts.detach().cpu().to(torch.float64).numpy(), faces.cpu().numpy()
 
 
+def _ray_hits(tri: np.ndarray, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertical rays at (px, py) (n,) against one triangle each (n,3,3): hit (n,) bool, and for the hits the height
+    z and the sign (+1 entering: the outward normal points down; -1 leaving)."""
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    # 2D edge functions: the ray at (px, py) crosses the triangle iff all three have the sign of its area
+    e_bc = (c[:, 0] - b[:, 0]) * (py - b[:, 1]) - (c[:, 1] - b[:, 1]) * (px - b[:, 0])
+    e_ca = (a[:, 0] - c[:, 0]) * (py - c[:, 1]) - (a[:, 1] - c[:, 1]) * (px - c[:, 0])
+    e_ab = (b[:, 0] - a[:, 0]) * (py - a[:, 1]) - (b[:, 1] - a[:, 1]) * (px - a[:, 0])
+    area = e_bc + e_ca + e_ab
+    hit = (((e_bc > 0) & (e_ca > 0) & (e_ab > 0)) | ((e_bc < 0) & (e_ca < 0) & (e_ab < 0))) & (area != 0)
+    z = (e_bc * a[:, 2] + e_ca * b[:, 2] + e_ab * c[:, 2])[hit] / area[hit]
+    return hit, z, np.where(area[hit] < 0, 1, -1).astype(np.int64)    # area = 2 x the normal's z component
+
+
 def _column_crossings(tri: np.ndarray, x0: float, y0: float, h: float, nx: int, ny: int,
                       budget: int = 4_000_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Crossings of vertical rays at (x0 + i h, y0 + j h) with triangles (F,3,3): column ids i*ny + j, z, and the
@@ -80,17 +94,10 @@ def _column_crossings(tri: np.ndarray, x0: float, y0: float, h: float, nx: int, 
         k = np.arange(len(face)) - np.repeat(np.cumsum(count[sel]) - count[sel], count[sel])
         px = x0 + (i0[face] + k // nj[face]) * h
         py = y0 + (j0[face] + k % nj[face]) * h
-        a, b, c = tri[face, 0], tri[face, 1], tri[face, 2]
-        # 2D edge functions: the ray at (px, py) crosses the triangle iff all three have the sign of its area
-        e_bc = (c[:, 0] - b[:, 0]) * (py - b[:, 1]) - (c[:, 1] - b[:, 1]) * (px - b[:, 0])
-        e_ca = (a[:, 0] - c[:, 0]) * (py - c[:, 1]) - (a[:, 1] - c[:, 1]) * (px - c[:, 0])
-        e_ab = (b[:, 0] - a[:, 0]) * (py - a[:, 1]) - (b[:, 1] - a[:, 1]) * (px - a[:, 0])
-        area = e_bc + e_ca + e_ab
-        hit = (((e_bc > 0) & (e_ca > 0) & (e_ab > 0)) | ((e_bc < 0) & (e_ca < 0) & (e_ab < 0))) & (area != 0)
-        z = (e_bc * a[:, 2] + e_ca * b[:, 2] + e_ab * c[:, 2])[hit] / area[hit]
+        hit, z, sign = _ray_hits(tri[face], px, py)
         cols.append(((i0[face] + k // nj[face]) * ny + j0[face] + k % nj[face])[hit])
         zs.append(z)
-        signs.append(np.where(area[hit] < 0, 1, -1).astype(np.int64))    # area = 2 x the normal's z component
+        signs.append(sign)
     if not cols:
         return np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0, dtype=np.int64)
     return np.concatenate(cols), np.concatenate(zs), np.concatenate(signs)
@@ -117,14 +124,8 @@ def _subcolumn_crossings(tri: np.ndarray, x0: float, y0: float, h: float, nx: in
     sub = np.tile(sub, len(cell) // (k * k)) if len(cell) else sub[:0]
     px = x0 + (ci - 0.5 + (sub // k + 0.5 + off[0]) / k) * h
     py = y0 + (cj - 0.5 + (sub % k + 0.5 + off[1]) / k) * h
-    a, b, c = tri[face, 0], tri[face, 1], tri[face, 2]
-    e_bc = (c[:, 0] - b[:, 0]) * (py - b[:, 1]) - (c[:, 1] - b[:, 1]) * (px - b[:, 0])
-    e_ca = (a[:, 0] - c[:, 0]) * (py - c[:, 1]) - (a[:, 1] - c[:, 1]) * (px - c[:, 0])
-    e_ab = (b[:, 0] - a[:, 0]) * (py - a[:, 1]) - (b[:, 1] - a[:, 1]) * (px - a[:, 0])
-    area = e_bc + e_ca + e_ab
-    hit = (((e_bc > 0) & (e_ca > 0) & (e_ab > 0)) | ((e_bc < 0) & (e_ca < 0) & (e_ab < 0))) & (area != 0)
-    z = (e_bc * a[:, 2] + e_ca * b[:, 2] + e_ab * c[:, 2])[hit] / area[hit]
-    return (cell * k * k + sub)[hit], z, np.where(area[hit] < 0, 1, -1).astype(np.int64)
+    hit, z, sign = _ray_hits(tri[face], px, py)
+    return (cell * k * k + sub)[hit], z, sign
 
 
 def _edge_cells(length: np.ndarray, cov_a: np.ndarray, cov_b: np.ndarray, nx: int, ny: int) -> np.ndarray:
