@@ -15,8 +15,9 @@ over motions; DTG, the closest the wrist gets to the goal (cm), averaged.
 
 FS is computed on the fly, frame by frame, without building meshes (`LowVertices`): the lowest vertex is searched
 among the foot and hand vertices (those skinned mostly to ankles and feet, or to a wrist and its fingers), posed
-exactly by linear blend skinning from the body joints' transforms (they carry no pose correctives; the fingers keep
-the start's pose), a hand only where it can be lower than the feet. On the shipped model's grid rollouts the whole
+exactly by linear blend skinning from the body joints' transforms (the fingers keep the start's pose; on a body model
+whose feet or hands carry pose correctives, as a real SMPL-X file's do, the correctives are added from the pose's
+features), a hand only where it can be lower than the feet. On the shipped model's grid rollouts the whole
 mesh's lowest vertex is always one of them (a foot in 99.3 % of the frames, a right-hand fingertip at some floor
 goals), and the FS equals the full-mesh FS (tests/test_wandr_eval.py checks both on floor goals).
 
@@ -81,19 +82,44 @@ def grid_goals() -> tuple[Tensor, np.ndarray]:
     return goals, rows[:, :3]
 
 
+FOOT_PARTS = tuple(JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot"))
+WRISTS = (JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"])
+BODY_FEATURES = 9 * (I.NUM_BODY - 1)            # the pose features of joints 1-21: rows 0-188 of posedirs
+HAND_PARTS = ((WRISTS[0],) + tuple(range(25, 40)), (WRISTS[1],) + tuple(range(40, 55)))     # wrist + its fingers
+
+
 class Skinned:
     """A few vertices `ids` of bodies with rest vertices v (S, V, 3) and joints J (S, 55, 3), posed by LBS from the
     global rotations Rg (B, J', 3, 3) and world positions pos (B, J', 3) of the joints they are skinned to (exact when
     they carry no pose correctives)."""
 
-    def __init__(self, weights: Tensor, ids: Tensor, v: Tensor, J: Tensor) -> None:
+    def __init__(self, weights: Tensor, ids: Tensor, v: Tensor, J: Tensor, posedirs: Tensor | None = None,
+                 pose_feature: Tensor | None = None) -> None:
+        """posedirs (486, 3, V) and the bodies' constant pose features (S, 486) (jaw, eyes and fingers; the 189 of
+        the body joints come with each pose): the vertices' pose correctives, None when they carry none."""
         self.ids = ids
         w = weights[ids]
         self.joints = (w.sum(0) > 0).nonzero()[:, 0]
         self.w = w[:, self.joints]                                                      # (n, K)
         self.rest_v = v[:, ids].float()                                                 # (S, n, 3)
         self.rest_j = J[:, self.joints].float()                                         # (S, K, 3)
+        self.pd = None
+        if posedirs is not None and bool(posedirs[:, :, ids].abs().max() > 0):
+            pd = posedirs[:, :, ids].float()                                            # (486, 3, n)
+            self.pd = pd[:BODY_FEATURES]                                                # (189, 3, n): body joints
+            self.rest_v = self.rest_v + torch.einsum("sp,pcn->snc", pose_feature[:, BODY_FEATURES:].float(),
+                                                     pd[BODY_FEATURES:])               # + the constant part
+            self.bound = 2.0 * self.pd.norm(dim=1).sum(0)                              # (n,) |delta_v| (|R - I| <= 2)
         self.xw = (self.w[None, :, :, None] * self.rest_v[:, :, None, :]).flatten(2)   # (S, n, 3K): w_vk x_v
+
+    def delta(self, feature: Tensor | None, vertex: Tensor | None = None) -> Tensor | None:
+        """Corrective offsets of the body joints' pose features (B, 189): (B, n, 3), or (B, 3) of one vertex per pose
+        (`vertex` (B,)); None when the vertices carry no correctives."""
+        if self.pd is None:
+            return None
+        if vertex is None:
+            return torch.einsum("bp,pcn->bnc", feature, self.pd)
+        return torch.einsum("bp,pcb->bc", feature, self.pd[:, :, vertex])
 
     def _affine(self, Rg: Tensor, pos: Tensor, body: Tensor) -> tuple[Tensor, Tensor]:
         """Skinning transforms x -> R_k x + t_k (B, K, 3, 3), (B, K, 3) of the K joints, for bodies `body` (B,)."""
@@ -101,32 +127,37 @@ class Skinned:
         t = pos[:, self.joints] - (R @ self.rest_j[body].unsqueeze(-1)).squeeze(-1)
         return R, t
 
-    def heights(self, Rg: Tensor, pos: Tensor, body: Tensor) -> Tensor:
-        """Heights (B, n) of the vertices of bodies `body` (B,) (indices into betas): z_v = sum_k w_vk (R_k[2] . x_v
-        + t_k^z), one small matrix product per body."""
+    def heights(self, Rg: Tensor, pos: Tensor, body: Tensor, feature: Tensor | None = None) -> Tensor:
+        """Heights (B, n) of the vertices of bodies `body` (B,) (indices into betas): z_v = sum_k w_vk (R_k[2] .
+        (x_v + delta_v) + t_k^z), one small matrix product per body; feature (B, 189): the body joints' pose
+        features, for the correctives delta_v (needed when the vertices carry them)."""
         R, t = self._affine(Rg, pos, body)
         Rz, tz = R[:, :, 2, :].flatten(1), t[:, :, 2]                                  # (B, 3K), (B, K)
         z = tz @ self.w.T                                                               # (B, n)
         for s in body.unique().tolist():
             rows = (body == s).nonzero()[:, 0]
             z[rows] += Rz[rows] @ self.xw[s].T
+        d = self.delta(feature)
+        if d is not None:
+            z += ((self.w @ R[:, :, 2, :]) * d).sum(-1)                                 # sum_k w_vk R_k[2] . delta_v
         return z
 
-    def points(self, Rg: Tensor, pos: Tensor, body: Tensor, vertex: Tensor | None = None) -> Tensor:
-        """World positions of the vertices: all (B, n, 3), or one per pose (B, 3) (`vertex` (B,): indices into ids)."""
+    def points(self, Rg: Tensor, pos: Tensor, body: Tensor, vertex: Tensor | None = None,
+               feature: Tensor | None = None) -> Tensor:
+        """World positions of the vertices: all (B, n, 3), or one per pose (B, 3) (`vertex` (B,): indices into ids);
+        feature as `heights`."""
         R, t = self._affine(Rg, pos, body)
         if vertex is None:
             x, w = self.rest_v[body], self.w                                            # (B, n, 3), (n, K)
+            d = self.delta(feature)
+            x = x if d is None else x + d
             moved = torch.einsum("bkij,bvj->bvki", R, x) + t[:, None]                  # (B, n, K, 3)
             return (moved * w[None, :, :, None]).sum(2)
         x, w = self.rest_v[body, vertex], self.w[vertex]                                # (B, 3), (B, K)
+        d = self.delta(feature, vertex)
+        x = x if d is None else x + d
         moved = (R @ x[:, None, :, None]).squeeze(-1) + t                               # (B, K, 3)
         return (moved * w[..., None]).sum(1)
-
-
-FOOT_PARTS = tuple(JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot"))
-WRISTS = (JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"])
-HAND_PARTS = ((WRISTS[0],) + tuple(range(25, 40)), (WRISTS[1],) + tuple(range(40, 55)))     # wrist + its fingers
 
 
 class LowVertices:
@@ -147,15 +178,19 @@ class LowVertices:
         every = torch.cat(ids)
         if bool((weights[every][:, 22:25] > 0).any()):
             raise ValueError("bm: foot or hand vertices skinned to the jaw or the eyes")
-        if bm.has_posedirs and bm.posedirs.view(bm.posedirs.shape[0], 3, -1)[:, :, every].abs().max() > 0:
-            raise ValueError("bm: foot or hand vertices carry pose correctives; the fast FS would not be exact")
         betas = torch.as_tensor(betas).reshape(len(betas), -1).to(bm.dtype)
         coeffs = torch.zeros(len(betas), bm.num_betas + bm.num_expression, dtype=bm.dtype)
         k = min(bm.num_betas, betas.shape[1])
         coeffs[:, :k] = betas[:, :k]
         with torch.no_grad():
             v, J = bm.shaped(coeffs)
-        self.feet, *self.hands = (Skinned(weights, i, v, J) for i in ids)
+        pose = torch.zeros(55, 3) if full_pose is None else torch.as_tensor(full_pose).float()
+        pose = pose.reshape(-1, 55, 3).expand(len(betas), -1, -1)
+        self.finger_rot = axis_angle_to_matrix(pose.double()).float()                            # (S, 55, 3, 3)
+        posedirs = bm.posedirs.view(-1, 3, bm.num_vertices) if bm.has_posedirs else None
+        feature = (self.finger_rot[:, 1:] - torch.eye(3)).flatten(1)                             # (S, 486)
+        self.feet, *self.hands = (Skinned(weights, i, v, J, posedirs, feature) for i in ids)
+        self.correctives = any(p.pd is not None for p in (self.feet, *self.hands))
         self.ids = every                                                  # feet, left hand, right hand
         self.offsets = [0, len(ids[0]), len(ids[0]) + len(ids[1]), len(every)]
         self.parents = torch.as_tensor(bm.parents)
@@ -163,15 +198,13 @@ class LowVertices:
         for j in range(25, 55):                               # parents come before children in the SMPL-X order
             depth[j] = 1 + depth.get(int(self.parents[j]), 0)
         self.levels = [torch.tensor([j for j in depth if depth[j] == d]) for d in sorted(set(depth.values()))]
-        pose = torch.zeros(55, 3) if full_pose is None else torch.as_tensor(full_pose).float()
-        pose = pose.reshape(-1, 55, 3).expand(len(betas), -1, -1)
-        self.finger_rot = axis_angle_to_matrix(pose.double()).float()                            # (S, 55, 3, 3)
         self.bone = (J - J[:, self.parents.clamp(min=0)]).float()                                # (S, 55, 3)
-        self.reach = [self._reach(h, w, v, J) for h, w in zip(self.hands, WRISTS)]
+        self.reach = [self._reach(h, w, J) for h, w in zip(self.hands, WRISTS)]
 
-    def _reach(self, hand: Skinned, wrist: int, v: Tensor, J: Tensor) -> Tensor:
+    def _reach(self, hand: Skinned, wrist: int, J: Tensor) -> Tensor:
         """(S,) a bound on how far a hand vertex lies from its wrist in any pose: |x_v - pos_w| <= sum_k w_vk
-        (|x_v - J_k| + the tree path from joint k to the wrist), bones keeping their rest lengths."""
+        (|x_v - J_k| + the tree path from joint k to the wrist) + |delta_v|, bones keeping their rest lengths (x_v the
+        rest vertex, delta_v its pose corrective)."""
         length = self.bone.double().norm(dim=-1)                             # (S, 55) bone lengths (the root's: 0)
 
         def up(j: int) -> list[int]:
@@ -186,8 +219,9 @@ class LowVertices:
             common = next(j for j in a if j in b)
             path.append(length[:, a[:a.index(common)]].sum(1) + length[:, b[:b.index(common)]].sum(1))
         path = torch.stack(path, 1)                                                              # (S, K)
-        to_joint = (v[:, hand.ids, None] - J[:, None, hand.joints]).norm(dim=-1)                # (S, n, K)
-        return (hand.w[None].double() * (to_joint + path[:, None])).sum(-1).amax(1).float()
+        to_joint = (hand.rest_v[:, :, None].double() - J[:, None, hand.joints]).norm(dim=-1)    # (S, n, K)
+        r = (hand.w[None].double() * (to_joint + path[:, None])).sum(-1)                        # (S, n)
+        return (r if hand.pd is None else r + hand.bound.double()).amax(1).float()
 
     def with_fingers(self, Rg: Tensor, pos: Tensor, body: Tensor) -> tuple[Tensor, Tensor]:
         """Global rotations (B, 55, 3, 3) and world positions (B, 55, 3) of the body joints (B, 22, ...) and the
@@ -201,20 +235,30 @@ class LowVertices:
             Rg[:, lv] = Rp @ self.finger_rot[body[:, None], lv]
         return Rg, pos
 
-    def lowest(self, Rg: Tensor, pos: Tensor, body: Tensor, previous: Tensor | None = None
-               ) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
+    def feature(self, local: Tensor) -> Tensor | None:
+        """The body joints' pose features (B, 189) of local rotations (B, 22, 3, 3), None without correctives."""
+        return (local[:, 1:] - torch.eye(3)).flatten(1) if self.correctives else None
+
+    def lowest(self, Rg: Tensor, pos: Tensor, body: Tensor, previous: Tensor | None = None,
+               local: Tensor | None = None) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
         """For poses with body-joint rotations Rg (B, 22, 3, 3) and positions pos (B, 22, 3): the lowest of the
         vertices (B,) (an index into ids), its position (B, 3), the lowest foot vertex's height (B,), and where the
-        vertices `previous` (B,) (indices into ids, e.g. the last frame's lowest) are now (B, 3)."""
-        z = self.feet.heights(Rg, pos, body)
+        vertices `previous` (B,) (indices into ids, e.g. the last frame's lowest) are now (B, 3). local: the local
+        rotations (B, 22, 3, 3), needed for a body model whose feet or hands carry pose correctives."""
+        if self.correctives and local is None:
+            raise ValueError("local: the body model's feet or hands carry pose correctives; pass the local rotations")
+        f = self.feature(local) if local is not None else None
+        RgA, posA = self.with_fingers(Rg, pos, body) if bool((self.feet.joints >= I.NUM_BODY).any()) else (Rg, pos)
+        z = self.feet.heights(RgA, posA, body, f)
         low, best = z.min(1)
         foot_low = low.clone()
-        at = self.feet.points(Rg, pos, body, best)
+        at = self.feet.points(RgA, posA, body, best, f)
         was = None
         if previous is not None:
             was = torch.zeros(len(body), 3)
             feet = previous < self.offsets[1]
-            was[feet] = self.feet.points(Rg[feet], pos[feet], body[feet], previous[feet])
+            was[feet] = self.feet.points(RgA[feet], posA[feet], body[feet], previous[feet],
+                                         None if f is None else f[feet])
         for h, (hand, wrist) in enumerate(zip(self.hands, WRISTS)):
             a, b = self.offsets[h + 1], self.offsets[h + 2]
             maybe = pos[:, wrist, 2] - self.reach[h][body] <= low + 1e-4
@@ -223,14 +267,16 @@ class LowVertices:
             if not len(rows):
                 continue
             RgF, posF = self.with_fingers(Rg[rows], pos[rows], body[rows])
-            zh, ih = hand.heights(RgF, posF, body[rows]).min(1)
+            fr = None if f is None else f[rows]
+            zh, ih = hand.heights(RgF, posF, body[rows], fr).min(1)
             lower = zh < low[rows]
             r = rows[lower]
             low[r], best[r] = zh[lower], ih[lower] + a
-            at[r] = hand.points(RgF[lower], posF[lower], body[r], ih[lower])
+            at[r] = hand.points(RgF[lower], posF[lower], body[r], ih[lower], None if fr is None else fr[lower])
             if previous is not None:
                 m = mine[rows]
-                was[rows[m]] = hand.points(RgF[m], posF[m], body[rows[m]], previous[rows[m]] - a)
+                was[rows[m]] = hand.points(RgF[m], posF[m], body[rows[m]], previous[rows[m]] - a,
+                                           None if fr is None else fr[m])
         return best, at, foot_low, was
 
 
@@ -285,7 +331,8 @@ class GridMeter:
             self.reach[hit] = k
             if k == self.t_goal:
                 self.err = d.clone()
-            lowest, at, foot_low, now = self.low.lowest(Rg, joints, self.body, self._lowest)
+            local = I.pose_rotmats(p)[1] if self.low.correctives else None
+            lowest, at, foot_low, now = self.low.lowest(Rg, joints, self.body, self._lowest, local)
             if now is not None:                # the vertex lowest at the previous frame: its horizontal move
                 move = (now[:, :2] - self._at[:, :2]).norm(dim=-1)
                 self.skate += (move > WANDR_SKATE_THRESHOLD).float()

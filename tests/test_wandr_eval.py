@@ -50,6 +50,44 @@ def test_foot_and_hand_vertices_are_posed_exactly_as_the_body_model_does(bm):
     assert min(len(h.ids) for h in low.hands) > 300
 
 
+def test_feet_and_hands_with_pose_correctives_are_posed_exactly(tmp_path):
+    """A body model whose every vertex carries pose correctives (the shipped one's arrays with random posedirs, as a
+    real SMPL-X file has them): the feet and hands, their lowest vertex and the FS still match the full mesh."""
+    from graspkit.body import BodyModel
+    from graspkit.paths import default_model_path
+
+    with np.load(default_model_path(), allow_pickle=False) as f:
+        arrays = {k: f[k] for k in f.files}
+    arrays["posedirs"] = np.random.default_rng(3).normal(0, 2e-3, arrays["posedirs"].shape)
+    np.savez(tmp_path / "SMPLX_NEUTRAL.npz", **arrays)
+    bmc = BodyModel.from_file(tmp_path / "SMPLX_NEUTRAL.npz")
+    m, p, rest = _clip(bmc, "reach/reach_000002.npz")
+    frames = slice(20, 80)
+    low = E.LowVertices(bmc, torch.as_tensor(m.betas)[None], torch.as_tensor(m.poses[50]))
+    assert low.correctives
+    q = p[frames]
+    start = I.StartPose(p[49], p[50], rest, torch.as_tensor(m.betas), torch.as_tensor(m.poses[50]))
+    full = E.body_vertices(bmc, q, start)                                       # every vertex, correctives included
+    Rg, pos = I.body_transforms(q, rest)
+    body = torch.zeros(len(q), dtype=torch.long)
+    local = I.pose_rotmats(q)[1]
+    f = low.feature(local)
+    RgF, posF = low.with_fingers(Rg, pos, body)
+    assert torch.allclose(low.feet.points(Rg, pos, body, feature=f), full[:, low.feet.ids], atol=1e-5)
+    for hand, wrist, reach in zip(low.hands, E.WRISTS, low.reach):
+        x = full[:, hand.ids]
+        assert torch.allclose(hand.heights(RgF, posF, body, f), x[..., 2], atol=1e-5)
+        assert ((x - pos[:, None, wrist]).norm(dim=-1).amax(1) <= reach).all()
+    lowest, at, _, _ = low.lowest(Rg, pos, body, local=local)
+    inside = torch.isin(full[..., 2].argmin(1), low.ids)                          # frames whose lowest is a foot's
+    assert inside.any() and torch.equal(low.ids[lowest][inside], full[..., 2].argmin(1)[inside])
+    with pytest.raises(ValueError, match="local"):
+        low.lowest(Rg, pos, body)
+    res = E.evaluate_motions(q[None], rest[None], torch.zeros(1, 3), torch.as_tensor(m.betas)[None], bmc,
+                             full_pose=torch.as_tensor(m.poses[50]))
+    assert res.fs[0] == pytest.approx(metrics.foot_skating_wandr(full).mean(), abs=1e-6)
+
+
 def test_the_lowest_vertex_is_the_whole_meshs_also_when_a_hand_reaches_the_floor(bm):
     from graspkit.models.wandr import generate, load_wandr
 
