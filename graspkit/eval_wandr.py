@@ -89,9 +89,9 @@ HAND_PARTS = ((WRISTS[0],) + tuple(range(25, 40)), (WRISTS[1],) + tuple(range(40
 
 
 class Skinned:
-    """A few vertices `ids` of bodies with rest vertices v (S, V, 3) and joints J (S, 55, 3), posed by LBS from the
-    global rotations Rg (B, J', 3, 3) and world positions pos (B, J', 3) of the joints they are skinned to (exact when
-    they carry no pose correctives)."""
+    """A few vertices `ids` of bodies with rest vertices v (S, V, 3) and joints J (S, 55, 3), posed exactly by LBS
+    from the global rotations Rg (B, J', 3, 3) and world positions pos (B, J', 3) of the joints they are skinned to,
+    their pose correctives (if any) added from the pose's features."""
 
     def __init__(self, weights: Tensor, ids: Tensor, v: Tensor, J: Tensor, posedirs: Tensor | None = None,
                  pose_feature: Tensor | None = None) -> None:
