@@ -17,8 +17,8 @@ FS is computed on the fly, frame by frame, without building meshes (`LowVertices
 among the foot and hand vertices (those skinned mostly to ankles and feet, or to a wrist and its fingers), posed
 exactly by linear blend skinning from the body joints' transforms (the fingers keep the start's pose; on a body model
 whose feet or hands carry pose correctives, as a real SMPL-X file's do, the correctives are added from the pose's
-features), a hand only where it can be lower than the feet. On the shipped model's grid rollouts the whole
-mesh's lowest vertex is always one of them (a foot in 99.3 % of the frames, a right-hand fingertip at some floor
+features), a hand only where it can be lower than the feet. On 750 of the shipped model's grid rollouts the whole
+mesh's lowest vertex was always one of them (a foot in 99.3 % of the frames, a right-hand fingertip at some floor
 goals), and the FS equals the full-mesh FS (tests/test_wandr_eval.py checks both on floor goals).
 
 Two extra columns, not the paper's (`summary`'s SR_grounded and floating): SR counts a wrist on the goal however the
