@@ -38,6 +38,7 @@ from torch import Tensor
 from graspkit import intention as I
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.data.reaching import EVAL_ANGLES_DEG, EVAL_DISTANCES, EVAL_FRAMES, EVAL_HEIGHTS, Start, evaluation_goals
+from graspkit.data.wandr_dataset import FOOT_JOINTS, shaped_rest
 from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS
 
 FOOT_ON_FLOOR = SAGA_SKATE_HEEL_HEIGHT   # m: a foot within 5 cm of the floor touches it (SAGA §4.3's contact height)
@@ -82,7 +83,7 @@ def grid_goals() -> tuple[Tensor, np.ndarray]:
     return goals, rows[:, :3]
 
 
-FOOT_PARTS = tuple(JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot"))
+FOOT_PARTS = tuple(FOOT_JOINTS)                 # ankles and feet: the vertices skinned mostly to them are the feet
 WRISTS = (JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"])
 BODY_FEATURES = 9 * (I.NUM_BODY - 1)            # the pose features of joints 1-21: rows 0-188 of posedirs
 HAND_PARTS = ((WRISTS[0],) + tuple(range(25, 40)), (WRISTS[1],) + tuple(range(40, 55)))     # wrist + its fingers
@@ -178,12 +179,8 @@ class LowVertices:
         every = torch.cat(ids)
         if bool((weights[every][:, 22:25] > 0).any()):
             raise ValueError("bm: foot or hand vertices skinned to the jaw or the eyes")
-        betas = torch.as_tensor(betas).reshape(len(betas), -1).to(bm.dtype)
-        coeffs = torch.zeros(len(betas), bm.num_betas + bm.num_expression, dtype=bm.dtype)
-        k = min(bm.num_betas, betas.shape[1])
-        coeffs[:, :k] = betas[:, :k]
-        with torch.no_grad():
-            v, J = bm.shaped(coeffs)
+        betas = torch.as_tensor(betas).reshape(len(betas), -1)
+        v, J = shaped_rest(bm, betas)
         pose = torch.zeros(55, 3) if full_pose is None else torch.as_tensor(full_pose).float()
         pose = pose.reshape(-1, 55, 3).expand(len(betas), -1, -1)
         self.finger_rot = axis_angle_to_matrix(pose.double()).float()                            # (S, 55, 3, 3)
@@ -519,8 +516,8 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     max_steps / ramp_epochs: the rollout schedule (Sup. B.2); stride_scale multiplies the window strides (fewer
     windows per epoch); window_stride sets the frames between windows directly, for every kind (instead of the scaled
     defaults; long rollouts leave few windows, 1 keeps them all); reach_far adds the room-scale reaching clips of
-    <folder>/reach_far (docs/data.md; the shipped checkpoint uses them, docs/wandr.md); rollout_latent: where the rollout steps draw z ("prior": Sup. B.2
-    read as sampling the prior; "posterior": the encoder on the true delta, see docs/wandr.md); alpha_kl: the KL
+    <folder>/reach_far (docs/data.md; the shipped checkpoint uses them, docs/wandr.md); rollout_latent: where the
+    rollout steps draw z ("prior": Sup. B.2 read as sampling the prior; "posterior": the encoder on the true delta, see docs/wandr.md); alpha_kl: the KL
     weight α (§3.4: 1e-2); kinds: the clip kinds to train on instead of the variant's (e.g. ("reach",): the reaching
     and room-scale clips only, as the shipped checkpoint, docs/wandr.md); select_val: after every epoch score the
     model on the validation task (`validation_score`: six validation-split starts, 250 goals off the grid) and ship

@@ -114,14 +114,19 @@ def list_clips(folder: str | Path, kinds: Sequence[str] = KINDS, limit: int | No
     return out
 
 
-def rest_joints(bm, betas: np.ndarray | Tensor) -> Tensor:
-    """Shaped rest joints (B, 22, 3) float32 of the body joints for betas (B, k)."""
+def shaped_rest(bm, betas: np.ndarray | Tensor) -> tuple[Tensor, Tensor]:
+    """Shaped rest vertices (B, V, 3) and joints (B, 55, 3), in bm's dtype, for betas (B, k) (no expression)."""
     b = torch.as_tensor(np.asarray(betas), dtype=bm.dtype).reshape(len(betas), -1)
     coeffs = torch.zeros(len(b), bm.num_betas + bm.num_expression, dtype=bm.dtype)
     k = min(bm.num_betas, b.shape[1])
     coeffs[:, :k] = b[:, :k]
     with torch.no_grad():
-        return bm.shaped(coeffs)[1][:, :I.NUM_BODY].float()
+        return bm.shaped(coeffs)
+
+
+def rest_joints(bm, betas: np.ndarray | Tensor) -> Tensor:
+    """Shaped rest joints (B, 22, 3) float32 of the body joints for betas (B, k)."""
+    return shaped_rest(bm, betas)[1][:, :I.NUM_BODY].float()
 
 
 def lowest_foot(joints: Tensor) -> Tensor:

@@ -70,6 +70,31 @@ def _ray_hits(tri: np.ndarray, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarr
     return hit, z, np.where(area[hit] < 0, 1, -1).astype(np.int64)    # area = 2 x the normal's z component
 
 
+def _pairs(i0: np.ndarray, i1: np.ndarray, j0: np.ndarray, j1: np.ndarray, budget: int):
+    """(triangle, i, j) candidate pairs of each triangle's index box [i0, i1] x [j0, j1] (F,), in groups of triangles
+    whose pairs fit the budget (one triangle at least): yields face, i, j arrays."""
+    ni, nj = np.maximum(i1 - i0 + 1, 0), np.maximum(j1 - j0 + 1, 0)
+    count = ni * nj
+    csum = np.cumsum(count)
+    start = 0
+    while start < len(i0):
+        stop = max(start + 1, int(np.searchsorted(csum, csum[start] - count[start] + budget, side="right")))
+        sel = np.arange(start, min(stop, len(i0)))
+        sel, start = sel[count[sel] > 0], stop
+        if len(sel) == 0:
+            continue
+        face = np.repeat(sel, count[sel])
+        k = np.arange(len(face)) - np.repeat(np.cumsum(count[sel]) - count[sel], count[sel])
+        yield face, i0[face] + k // nj[face], j0[face] + k % nj[face]
+
+
+def _joined(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Concatenated (column ids, z, sign) of several groups."""
+    if not parts:
+        return np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0, dtype=np.int64)
+    return tuple(np.concatenate(x) for x in zip(*parts))
+
+
 def _column_crossings(tri: np.ndarray, x0: float, y0: float, h: float, nx: int, ny: int,
                       budget: int = 4_000_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Crossings of vertical rays at (x0 + i h, y0 + j h) with triangles (F,3,3): column ids i*ny + j, z, and the
@@ -79,32 +104,16 @@ def _column_crossings(tri: np.ndarray, x0: float, y0: float, h: float, nx: int, 
     i1 = np.clip(np.floor((xy[..., 0].max(1) - x0) / h), -1, nx - 1).astype(np.int64)
     j0 = np.clip(np.ceil((xy[..., 1].min(1) - y0) / h), 0, ny).astype(np.int64)
     j1 = np.clip(np.floor((xy[..., 1].max(1) - y0) / h), -1, ny - 1).astype(np.int64)
-    ni, nj = np.maximum(i1 - i0 + 1, 0), np.maximum(j1 - j0 + 1, 0)
-    count = ni * nj
-    cols, zs, signs = [], [], []
-    csum = np.cumsum(count)
-    start = 0
-    while start < len(tri):  # groups of triangles whose (triangle, column) candidate pairs fit the budget
-        stop = max(start + 1, int(np.searchsorted(csum, csum[start] - count[start] + budget, side="right")))
-        sel = np.arange(start, min(stop, len(tri)))
-        sel, start = sel[count[sel] > 0], stop
-        if len(sel) == 0:
-            continue
-        face = np.repeat(sel, count[sel])
-        k = np.arange(len(face)) - np.repeat(np.cumsum(count[sel]) - count[sel], count[sel])
-        px = x0 + (i0[face] + k // nj[face]) * h
-        py = y0 + (j0[face] + k % nj[face]) * h
-        hit, z, sign = _ray_hits(tri[face], px, py)
-        cols.append(((i0[face] + k // nj[face]) * ny + j0[face] + k % nj[face])[hit])
-        zs.append(z)
-        signs.append(sign)
-    if not cols:
-        return np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0, dtype=np.int64)
-    return np.concatenate(cols), np.concatenate(zs), np.concatenate(signs)
+    out = []
+    for face, i, j in _pairs(i0, i1, j0, j1, budget):
+        hit, z, sign = _ray_hits(tri[face], x0 + i * h, y0 + j * h)
+        out.append(((i * ny + j)[hit], z, sign))
+    return _joined(out)
 
 
 def _subcolumn_crossings(tri: np.ndarray, x0: float, y0: float, h: float, nx: int, ny: int, cells: np.ndarray,
-                         k: int, off: tuple[float, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                         k: int, off: tuple[float, float], budget: int = 4_000_000
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Crossings of k x k vertical rays inside each marked cell (cells (nx*ny,) bool; cell (i, j) spans x0 + (i -
     1/2 .. i + 1/2) h): column ids cell*k*k + a*k + b, z and sign, as `_column_crossings`."""
     xy = tri[..., :2]
@@ -112,42 +121,34 @@ def _subcolumn_crossings(tri: np.ndarray, x0: float, y0: float, h: float, nx: in
     i1 = np.clip(np.floor((xy[..., 0].max(1) - x0) / h + 0.5), -1, nx - 1).astype(np.int64)
     j0 = np.clip(np.floor((xy[..., 1].min(1) - y0) / h + 0.5), 0, ny).astype(np.int64)
     j1 = np.clip(np.floor((xy[..., 1].max(1) - y0) / h + 0.5), -1, ny - 1).astype(np.int64)
-    ni, nj = np.maximum(i1 - i0 + 1, 0), np.maximum(j1 - j0 + 1, 0)
-    face = np.repeat(np.arange(len(tri)), ni * nj)                       # (triangle, cell) pairs of the bounding boxes
-    kk = np.arange(len(face)) - np.repeat(np.cumsum(ni * nj) - ni * nj, ni * nj)
-    ci, cj = i0[face] + kk // nj[face], j0[face] + kk % nj[face]
-    cell = ci * ny + cj
-    keep = cells[cell]
-    face, ci, cj, cell = face[keep], ci[keep], cj[keep], cell[keep]
-    sub = np.arange(k * k)
-    face, ci, cj, cell = (np.repeat(a, k * k) for a in (face, ci, cj, cell))
-    sub = np.tile(sub, len(cell) // (k * k)) if len(cell) else sub[:0]
-    px = x0 + (ci - 0.5 + (sub // k + 0.5 + off[0]) / k) * h
-    py = y0 + (cj - 0.5 + (sub % k + 0.5 + off[1]) / k) * h
-    hit, z, sign = _ray_hits(tri[face], px, py)
-    return (cell * k * k + sub)[hit], z, sign
+    out = []
+    for face, i, j in _pairs(i0, i1, j0, j1, max(budget // (k * k), 1)):
+        keep = cells[i * ny + j]                                      # the marked cells only, k x k rays each
+        face, i, j = (np.repeat(x[keep], k * k) for x in (face, i, j))
+        sub = np.tile(np.arange(k * k), len(face) // (k * k))
+        px = x0 + (i - 0.5 + (sub // k + 0.5 + off[0]) / k) * h
+        py = y0 + (j - 0.5 + (sub % k + 0.5 + off[1]) / k) * h
+        hit, z, sign = _ray_hits(tri[face], px, py)
+        out.append((((i * ny + j) * k * k + sub)[hit], z, sign))
+    return _joined(out)
 
 
 def _edge_cells(length: np.ndarray, cov_a: np.ndarray, cov_b: np.ndarray, nx: int, ny: int) -> np.ndarray:
     """Cells (nx*ny,) bool next to an edge along which a column's answer can change within a cell: where the overlap
     starts or stops, where one mesh's outline from above crosses the other mesh (a vertical wall), and along the
     overlap box's border."""
-    def differs(m: np.ndarray) -> np.ndarray:
-        g = np.pad(m.reshape(nx, ny), 1, mode="edge")
-        c = g[1:-1, 1:-1]
-        out = np.zeros_like(c)
-        for di in (-1, 0, 1):
-            for dj in (-1, 0, 1):
-                out |= g[1 + di:1 + di + nx, 1 + dj:1 + dj + ny] != c
-        return out.reshape(-1)
-
     def around(m: np.ndarray) -> np.ndarray:
+        """Cells with a marked cell among their 3 x 3 neighbours (none outside the grid)."""
         g = np.pad(m.reshape(nx, ny), 1)
         out = np.zeros((nx, ny), dtype=bool)
         for di in (-1, 0, 1):
             for dj in (-1, 0, 1):
                 out |= g[1 + di:1 + di + nx, 1 + dj:1 + dj + ny]
         return out.reshape(-1)
+
+    def differs(m: np.ndarray) -> np.ndarray:
+        """Cells with a neighbour of the other value."""
+        return (m & around(~m)) | (~m & around(m))
 
     border = np.ones((nx, ny), dtype=bool)
     border[1:-1, 1:-1] = False                      # the overlap box's edge: the grid may have missed a thin overlap
@@ -223,7 +224,7 @@ def _volume(va: np.ndarray, fa: np.ndarray, vb: np.ndarray, fb: np.ndarray, spac
     if refine > 1:
         x0, y0 = lo[0] + 0.5 * h, lo[1] + 0.5 * h
         cells = _edge_cells(length, cov_a, cov_b, nx, ny)
-        off = (0.1234567e-3, 0.3141593e-3)
+        off = (_OFFSETS[0][0] * 1e-3, _OFFSETS[0][1] * 1e-3)      # off the sub-rays' regular positions, as above
         m = refine * refine
         ca, za, sa = _subcolumn_crossings(tri_a, x0, y0, h, nx, ny, cells, refine, off)
         cb, zb, sb = _subcolumn_crossings(tri_b, x0, y0, h, nx, ny, cells, refine, off)
