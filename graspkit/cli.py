@@ -40,6 +40,15 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_object(obj: str) -> None:
+    """Check --object (a catalogue name or a mesh file) before a pipeline starts, so that an error names the option."""
+    from graspkit.objects.catalogue import list_objects
+    from graspkit.objects.user import as_object
+
+    if obj not in list_objects():
+        as_object(obj, "--object")
+
+
 def _cmd_saga(args: argparse.Namespace) -> int:
     """`graspkit saga --object NAME|MESH`: SAGA end to end (object -> grasp -> motion) with the shipped checkpoints."""
     import numpy as np
@@ -49,6 +58,7 @@ def _cmd_saga(args: argparse.Namespace) -> int:
     from graspkit.optim.grasppose import expand_free_joints
     from graspkit.saga import synthesize
 
+    _check_object(args.object)
     pose = None if args.at is None else ObjectPose.from_yaw(np.deg2rad(args.at[3]), np.array(args.at[:3]))
     bm = load_or_build_body(args.model)
     r = synthesize(args.object, bm, object_pose=pose, seed=args.seed, free_joints=expand_free_joints(args.free_joints))
@@ -69,6 +79,7 @@ def _cmd_goal(args: argparse.Namespace) -> int:
     from graspkit.goal import synthesize
     from graspkit.objects.placement import ObjectPose
 
+    _check_object(args.object)
     pose = None if args.at is None else ObjectPose.from_yaw(np.deg2rad(args.at[3]), np.array(args.at[:3]))
     r = synthesize(args.object, object_pose=pose, seed=args.seed, max_frames=args.max_frames)
     bm = load_or_build_body(args.model)

@@ -3,6 +3,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from graspkit import __version__
 from graspkit.body.random_model import random_smplx_arrays
@@ -86,6 +87,18 @@ def test_out_paths_that_cannot_be_written_and_bad_seeds_fail_before_any_work(tmp
         r = _run(*args)
         assert r.returncode == 2 and message in r.stderr and "Traceback" not in r.stderr, (args, r.stderr)
     assert not (tmp_path / "d").exists() and not (tmp_path / "w").exists()
+
+
+@pytest.mark.parametrize("command", ["saga", "goal"])
+def test_a_bad_object_file_is_named_as_the_option(tmp_path, capsys, command):
+    from graspkit.cli import main
+
+    (tmp_path / "cup.obj").write_text("not a mesh\n")
+    for obj, message in ((tmp_path / "nope.obj", "no such mesh file"), (tmp_path / "cup.obj", "cup.obj")):
+        assert main([command, "--object", str(obj), "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("--object") >= 1 and message in err and "name:" not in err, err
+    assert not (tmp_path / "o").exists()
 
 
 def test_wandr_notes_say_when_a_goal_leaves_the_trained_range():

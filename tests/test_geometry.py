@@ -503,3 +503,19 @@ def test_signed_distance_to_point_cloud_saga_eq7():
     assert gap.min() > -1e-4 and gap.max() < 2.5e-3
     batched = signed_distance_to_points(torch.tensor(pts)[None].expand(2, -1, -1), cloud, normals)
     torch.testing.assert_close(batched[1], torch.tensor(sd))
+
+
+@pytest.mark.parametrize("tri", [
+    [[0, 0, 0], [0, 0, 0], [1, 0, 0]], [[1, 0, 0], [0, 0, 0], [0, 0, 0]], [[0, 0, 0], [0.3, 0, 0], [1, 0, 0]],
+    [[0.2, 0.1, 0], [0.2, 0.1, 0], [0.2, 0.1, 0]],
+])
+def test_closest_point_on_a_triangle_without_area_is_on_its_nearest_edge(tri):
+    from graspkit.objects.distance import closest_point_on_triangle
+
+    a, b, c = torch.tensor(tri, dtype=torch.float64)
+    p = torch.as_tensor(np.random.default_rng(3).normal(size=(500, 3)))
+    got, _ = closest_point_on_triangle(p, a, b, c)
+    s = torch.linspace(0, 1, 20001, dtype=torch.float64)[:, None]                # dense points along the three edges
+    edge_pts = torch.cat([u + (v - u) * s for u, v in ((a, b), (b, c), (c, a))])
+    truth = torch.cdist(p, edge_pts).min(1).values
+    torch.testing.assert_close((p - got).norm(dim=-1), truth, atol=1e-4, rtol=0)

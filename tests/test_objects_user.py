@@ -93,3 +93,86 @@ def test_the_collision_grid_of_a_mesh_matches_trimesh_and_is_cached(tmp_path):
     again = collision_sdf_grid(m, tmp_path)                                      # read back, not rebuilt
     torch.testing.assert_close(again.values, grid.values)
     assert list(tmp_path.glob("mesh_r*.npz")) == files
+
+
+
+def _box_with_sliver() -> trimesh.Trimesh:
+    """The box with one face split at the midpoint m of its edge a-b and the T-junction closed by the zero-area face
+    (a, b, m), as CAD exports make them: trimesh calls it watertight, consistently wound and of positive volume."""
+    m = _box()
+    v, f = np.array(m.vertices), [list(x) for x in m.faces]
+    a, b, c = f[0]
+    v = np.vstack([v, (v[a] + v[b]) / 2])
+    mid = len(v) - 1
+    f[0:1] = [[a, mid, c], [mid, b, c], [a, b, mid]]
+    return trimesh.Trimesh(v, np.array(f), process=False)
+
+
+def _overlapping_bars() -> trimesh.Trimesh:
+    """Two crossing bars, one mesh of two closed parts that overlap (a plus sign, not a union)."""
+    return trimesh.util.concatenate([trimesh.creation.box((0.12, 0.03, 0.03)), trimesh.creation.box((0.03, 0.12, 0.03))])
+
+
+def _one_part_inverted() -> trimesh.Trimesh:
+    """A ball and, beside it, a smaller ball turned inside out: the total volume is still positive."""
+    big, small = trimesh.creation.icosphere(3, 0.04), trimesh.creation.icosphere(3, 0.02)
+    small.apply_translation((0.1, 0, 0))
+    small.invert()
+    return trimesh.util.concatenate([big, small])
+
+
+def _nan_vertex() -> trimesh.Trimesh:
+    m = _box()
+    v = np.array(m.vertices)
+    v[0, 0] = np.nan
+    return trimesh.Trimesh(v, m.faces, process=False)
+
+
+def _unmerged() -> trimesh.Trimesh:
+    m = _box()
+    return trimesh.Trimesh(m.vertices[m.faces].reshape(-1, 3), np.arange(3 * len(m.faces)).reshape(-1, 3), process=False)
+
+
+@pytest.mark.parametrize("make, message", [
+    (_box_with_sliver, "1 faces have zero area"), (_overlapping_bars, "overlap"), (_one_part_inverted, "inside out"),
+    (_nan_vertex, "NaN"), (_unmerged, "merge_vertices"),
+])
+def test_meshes_that_pass_trimesh_checks_but_give_wrong_signs_are_refused(make, message):
+    mesh = make()
+    if make in (_box_with_sliver, _overlapping_bars, _one_part_inverted):     # what the old checks let through
+        assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+    with pytest.raises(ValueError, match=f"obj: .*{message}"):
+        as_object(mesh)
+
+
+def test_a_zero_area_face_is_refused_by_the_signed_distance_too():
+    from graspkit.objects.sdf import signed_distance
+
+    with pytest.raises(ValueError, match="mesh: 1 faces have zero area"):
+        signed_distance(np.zeros((1, 3)), _box_with_sliver())
+
+
+def test_a_cavity_is_one_solid_and_its_signs_match_trimesh():
+    outer, inner = trimesh.creation.icosphere(3, 0.04), trimesh.creation.icosphere(3, 0.02)
+    inner.invert()                                         # the cavity's wall faces into the cavity
+    _, m = as_object(trimesh.util.concatenate([outer, inner]))
+    from graspkit.objects.sdf import signed_distance
+
+    p = np.random.default_rng(1).uniform(-0.05, 0.05, (3000, 3))
+    truth = -trimesh.proximity.signed_distance(m, p)
+    got = signed_distance(p, m).numpy()
+    far = np.abs(truth) > 1e-4
+    assert far.sum() > 2500 and (np.sign(got[far]) == np.sign(truth[far])).all()
+    assert got[np.linalg.norm(p, axis=1) < 0.015].min() > 0                     # the cavity is outside the solid
+
+
+def test_vertices_no_face_uses_do_not_stretch_the_collision_grid(tmp_path):
+    m = _box()
+    stray = trimesh.Trimesh(np.vstack([m.vertices, [[5.0, 5.0, 5.0]]]), m.faces, process=False)
+    _, checked = as_object(stray)
+    assert len(checked.vertices) == len(m.vertices)
+    assert float(collision_sdf_grid(checked, tmp_path).cell.max()) <= COLLISION_CELL + 1e-9
+    from graspkit.objects.sdf import SDFGrid
+
+    grid = SDFGrid.from_mesh(stray, resolution=16, padding=0.01)               # the library's grid alone, too
+    np.testing.assert_allclose(grid.lower.numpy(), stray.bounds[0] - 0.01, atol=1e-6)

@@ -79,6 +79,7 @@ def mesh_arrays(mesh: MeshLike, name: str) -> tuple[Tensor, Tensor]:
     return verts, faces.to(verts.device)
 
 
+ZERO_AREA = 1e-10         # twice a face's area over its longest edge squared at or below which it has no normal
 HOLES = "(holes)"        # how _topology's reason ends when the only problem is boundary edges (require_closed checks it)
 
 
@@ -118,6 +119,23 @@ def require_closed(verts: Tensor, faces: Tensor, name: str, allow_holes: bool = 
     if (volume <= 0).any():
         raise ValueError(f"{name}: the mesh encloses a non-positive volume ({volume.min().item():.3g} m^3): "
                          "its faces point inwards (flip them) or it is degenerate")
+    flat = zero_area_faces(tri)
+    if flat.any():
+        raise ValueError(f"{name}: {int(flat.sum())} faces have zero area (slivers or repeated corners, e.g. face "
+                         f"{int(flat.nonzero()[0, -1])}); the sign of a signed distance comes from face normals, which "
+                         "such faces do not have: remove them (trimesh's update_faces(nondegenerate_faces())) and "
+                         "close the surface again")
+
+
+def zero_area_faces(tri: Tensor) -> Tensor:
+    """Faces (..., F, 3, 3) whose area is zero to rounding (twice the area <= ZERO_AREA x the longest edge squared)
+    -> bool (F,) (any over a batch): a sliver, three corners on a line, or a repeated corner."""
+    tri = tri.to(torch.float64)
+    edges = tri[..., [1, 2, 0], :] - tri
+    longest = (edges * edges).sum(-1).amax(-1)
+    area2 = torch.linalg.vector_norm(torch.linalg.cross(edges[..., 0, :], -edges[..., 2, :]), dim=-1)
+    flat = area2 <= ZERO_AREA * longest
+    return flat.reshape(-1, flat.shape[-1]).any(0)
 
 
 # ---------------------------------------------------------------------------------------------- point <-> point
@@ -159,8 +177,35 @@ def closest_point_on_triangle(p: Tensor, a: Tensor, b: Tensor, c: Tensor) -> tup
 
     Ericson's Voronoi-region test (RTCD Sec. 5.1.5) evaluated for every region and selected with
     torch.where; denominators are squared edge lengths / twice-area squared, clamped so that the
-    unselected branches never produce NaN gradients.
+    unselected branches never produce NaN gradients. A triangle without area (corners on a line or
+    repeated) has no Voronoi regions: there the nearest point of its three edges.
     """
+    out, region = _closest_point_regions(p, a, b, c)
+    ab, ac = b - a, c - a
+    n = torch.linalg.cross(ab, ac)       # |n|^2 directly: Ericson's va + vb + vc rounds away from 0 when flat
+    flat = (n * n).sum(-1) <= ZERO_AREA**2 * torch.maximum((ab * ab).sum(-1), (ac * ac).sum(-1)) ** 2
+    if not flat.any():
+        return out, region
+    tiny = torch.finfo(p.dtype).tiny
+    best = None
+    for e, (u, v) in enumerate(((a, b), (b, c), (c, a))):
+        uv = v - u
+        s = (((p - u) * uv).sum(-1) / (uv * uv).sum(-1).clamp_min(tiny)).clamp(0.0, 1.0)
+        q = u + uv * s[..., None]
+        d = ((p - q) ** 2).sum(-1)
+        code = torch.where(s <= 0, VERT_A + e, torch.where(s >= 1, VERT_A + (e + 1) % 3, EDGE_AB + e))
+        if best is None:
+            best = (d, q, code)
+        else:
+            nearer = d < best[0]
+            best = (torch.where(nearer, d, best[0]), torch.where(nearer[..., None], q, best[1]),
+                    torch.where(nearer, code, best[2]))
+    return torch.where(flat[..., None], best[1], out), torch.where(flat, best[2], region)
+
+
+def _closest_point_regions(p: Tensor, a: Tensor, b: Tensor, c: Tensor) -> tuple[Tensor, Tensor]:
+    """closest_point_on_triangle for triangles with area (the mesh search's: a zero-area face's points are its
+    neighbours' too, so the nearest face found is never it alone)."""
     ab, ac, ap = b - a, c - a, p - a
     bp, cp = p - b, p - c
     d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
@@ -220,7 +265,7 @@ def _nearest_among(p: Tensor, up: Tensor, cand: Tensor, tri: Tensor, cent: Tenso
     sq = torch.empty(len(qi), dtype=torch.float64)
     for k in range(0, len(qi), PAIR_BUDGET):
         qk, t = qi[k:k + PAIR_BUDGET], tri[fi[k:k + PAIR_BUDGET]]
-        cp, _ = closest_point_on_triangle(p[qk], t[:, 0], t[:, 1], t[:, 2])
+        cp, _ = _closest_point_regions(p[qk], t[:, 0], t[:, 1], t[:, 2])
         sq[k:k + PAIR_BUDGET] = ((p[qk] - cp) ** 2).sum(-1)
     low = torch.full((len(p),), torch.inf, dtype=torch.float64).scatter_reduce(0, qi, sq, "amin")
     winner = torch.full((len(p),), -1, dtype=torch.int64)
@@ -289,7 +334,7 @@ def point_mesh_distance(points, mesh: MeshLike) -> MeshDistance:
     face = face.to(pts.device)
     corners = faces[face]  # (B,N,3) vertex indices of the chosen faces
     tri = torch.gather(v3, 1, corners.reshape(batch, -1, 1).expand(-1, -1, 3)).reshape(batch, -1, 3, 3)
-    closest, region = closest_point_on_triangle(p3, tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
+    closest, region = _closest_point_regions(p3, tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
     dist = torch.linalg.vector_norm(p3 - closest, dim=-1)
     out = MeshDistance(dist, closest, face, region)
     if unbatched:

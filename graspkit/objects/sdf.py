@@ -157,7 +157,8 @@ class SDFGrid:
             raise ValueError(f"resolution, padding: need resolution >= 2 and padding >= 0, got {resolution}, {padding}")
         require_closed(verts, faces, "mesh")
         v = verts.detach().to(torch.float64)
-        lo, hi = v.min(0).values - padding, v.max(0).values + padding
+        used = v[torch.unique(faces)]                  # the surface's own box: vertices no face uses do not count
+        lo, hi = used.min(0).values - padding, used.max(0).values + padding
         h = (hi - lo).max() / (resolution - 1)
         n = torch.clamp(torch.ceil((hi - lo) / h - 1e-6).long() + 1, min=2)
         hi = lo + (n - 1) * h  # cubic cells: stretch the box to whole cells

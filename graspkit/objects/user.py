@@ -3,21 +3,31 @@
 The methods see an object the way they see a catalogue object: a closed, outward-oriented triangle mesh in metres
 whose frame has its origin at the bounding-box centre, z up (`make_object`'s convention). `as_object` checks a mesh
 against that and moves it there, so that `graspkit.saga.synthesize`, the samplers and the SDF caches take it like
-any catalogue name. A mesh that is not closed, is inside out, or whose size says millimetres gets an error naming the
-argument and what was expected, never a silent fix.
+any catalogue name. A mesh that is not closed, is inside out, has faces without area, is made of overlapping parts or
+has a part turned inside out, or whose size says millimetres gets an error naming the argument and what was expected,
+never a silent fix (vertices that no face uses are dropped: they are not part of the surface).
 """
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+import torch
 import trimesh
 
 from graspkit.objects.catalogue import list_objects, make_object
+from graspkit.objects.distance import zero_area_faces
+from graspkit.objects.sampling import sample_surface
+from graspkit.objects.sdf import winding_number
 
 # m: the largest side a hand-held object may have. The grasp models were trained on objects of 8-41 cm (the
 # catalogue); 0.6 m leaves room for larger ones and still tells metres from millimetres or centimetres.
 MAX_SIDE = 0.6
 MIN_SIDE = 0.01
+SOLID_SAMPLES = 512      # surface points of the one-solid check (solid_problem)
+SOLID_OFFSET = 1e-5      # how far behind / in front of the surface it looks, as a share of the largest side
+MIN_BAD = 2              # samples that must disagree before a mesh is refused
+SOLID_PAIRS = 10_000_000  # at most this many (sample, face) pairs: fewer samples on meshes of over 20,000 faces
 
 
 def as_object(obj: str | Path | trimesh.Trimesh, argument: str = "obj") -> tuple[str, trimesh.Trimesh]:
@@ -50,12 +60,25 @@ def as_object(obj: str | Path | trimesh.Trimesh, argument: str = "obj") -> tuple
 
 
 def _checked(mesh: trimesh.Trimesh, argument: str) -> trimesh.Trimesh:
-    """The mesh checked (closed, outward, metres) and moved to its bounding-box centre."""
+    """The mesh checked (finite, closed, outward, no zero-area faces, one solid, metres) and moved to its
+    bounding-box centre; vertices no face uses are dropped (they do not change the surface)."""
+    if not np.isfinite(mesh.vertices).all():
+        raise ValueError(f"{argument}: the mesh has NaN or infinite vertex coordinates")
+    mesh.remove_unreferenced_vertices()
     if not mesh.is_watertight:
+        merged = mesh.copy()
+        merged.merge_vertices()
+        hint = ("its faces do not share vertices where they meet: trimesh's merge_vertices() joins them" if
+                merged.is_watertight else "trimesh's fill_holes() or a remesh may fix it")
         raise ValueError(f"{argument}: the mesh is not closed (watertight); signed distances, contact and "
-                         "penetration need a closed surface (trimesh's fill_holes() or a remesh may fix it)")
+                         f"penetration need a closed surface ({hint})")
     if not mesh.is_winding_consistent:
         raise ValueError(f"{argument}: the mesh's faces are not consistently wound (trimesh's fix_winding())")
+    flat = zero_area_faces(torch.as_tensor(mesh.vertices[mesh.faces]))
+    if flat.any():
+        raise ValueError(f"{argument}: {int(flat.sum())} faces have zero area (slivers or repeated corners); signed "
+                         "distances take their sign from face normals, which such faces do not have (remove them "
+                         "with trimesh's update_faces(nondegenerate_faces()) and close the surface again)")
     if not mesh.volume > 0:
         raise ValueError(f"{argument}: the mesh is inside out (negative volume {mesh.volume:.3g}); "
                          "its normals must point outward (trimesh's invert())")
@@ -66,8 +89,33 @@ def _checked(mesh: trimesh.Trimesh, argument: str) -> trimesh.Trimesh:
                 "; in metres that is smaller than a hand-held object")
         raise ValueError(f"{argument}: expected a hand-held object in metres (largest side {MIN_SIDE}-{MAX_SIDE} m), "
                          f"got {side:.4g}{hint}")
+    problem = solid_problem(mesh)
+    if problem:
+        raise ValueError(f"{argument}: {problem}")
     mesh.apply_translation(-(mesh.bounds[0] + mesh.bounds[1]) / 2.0)
     return mesh
 
 
-__all__ = ["MAX_SIDE", "MIN_SIDE", "as_object"]
+def solid_problem(mesh: trimesh.Trimesh, samples: int = SOLID_SAMPLES) -> str:
+    """'' if the closed mesh bounds one solid, else what is wrong: the generalized winding number just behind and
+    just in front of `samples` surface points (area-uniform, seed 0) must be 1 and 0. Parts that overlap (2 behind
+    the surface) or a part turned inside out (-1 in front) pass the closed-and-outward checks (the total volume is
+    positive) but give signed distances of the wrong sign; a cavity (an inner surface facing inwards) is fine."""
+    samples = min(samples, max(64, SOLID_PAIRS // len(mesh.faces)))      # bounded time on large meshes
+    pts, nrm = sample_surface(mesh, samples, seed=0)
+    eps = SOLID_OFFSET * float((mesh.bounds[1] - mesh.bounds[0]).max())
+    w = winding_number(np.concatenate([pts - eps * nrm, pts + eps * nrm]), mesh).numpy()
+    behind, front = w[:samples], w[samples:]
+    overlap, inverted = behind > 1.5, (behind < 0.5) | (front < -0.5)
+    if (overlap.sum() < MIN_BAD) and (inverted.sum() < MIN_BAD):   # a lone sample at a sharp edge is not a part
+        return ""
+    share = lambda m: f"{100 * m.mean():.1f} % of the surface"   # noqa: E731
+    if overlap.sum() >= MIN_BAD:
+        return (f"parts of the mesh overlap or intersect themselves ({share(overlap)} lies inside another part); "
+                "signed distances and volumes need one closed surface around the solid: a boolean union of the "
+                "parts (trimesh.boolean.union, manifold3d) makes one")
+    return (f"a part of the mesh is inside out ({share(inverted)} faces inwards with no solid behind it); "
+            "its normals must point outward (that part's invert())")
+
+
+__all__ = ["MAX_SIDE", "MIN_SIDE", "as_object", "solid_problem"]
