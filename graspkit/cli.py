@@ -194,7 +194,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
     d.add_argument("--stages", default="body,planner,saga,saga_motion,goal,wandr",
                    help="comma-separated subset of body, planner, saga, saga_motion, goal, wandr")
-    d.set_defaults(func=_cmd_demo)
+    d.set_defaults(func=_cmd_demo, out_is_file=False)
     for method, cmd, what in (("saga", _cmd_saga, "SAGA end to end for one object: grasp, then the approach "
                                "motion into it"),
                               ("goal", _cmd_goal, "GOAL end to end for one object: GNet's grasp, then MNet's "
@@ -214,7 +214,7 @@ def build_parser() -> argparse.ArgumentParser:
                                  "the default: collars, shoulders, elbows, wrists; 'none': Alg. 1; docs/saga.md)")
         if method == "goal":
             sg.add_argument("--max-frames", type=int, default=150, help="MNet's rollout stops here if not at the grasp")
-        sg.set_defaults(func=cmd)
+        sg.set_defaults(func=cmd, out_is_file=False)
     from graspkit.paths import DATA_STUBS
     wa = sub.add_parser("wandr", help="WANDR from its held-out start pose to one goal in a given time")
     wa.add_argument("--goal", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"),
@@ -225,7 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
     wa.add_argument("--out", type=Path, default=Path("outputs/wandr"))
     wa.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz for the pictures (default: the "
                     "procedural humanoid)")
-    wa.set_defaults(func=_cmd_wandr)
+    wa.set_defaults(func=_cmd_wandr, out_is_file=False)
     from graspkit.data.cli import add_data_commands
     add_data_commands(sub)
 
@@ -289,8 +289,11 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the `graspkit` console command."""
     args = build_parser().parse_args(argv)
     try:
-        if getattr(args, "seed", None) is not None and args.seed < 0:
-            raise ValueError(f"--seed: expected a non-negative integer, got {args.seed}")
+        if getattr(args, "seed", None) is not None and not 0 <= args.seed < 2**63:
+            raise ValueError(f"--seed: expected a non-negative integer below 2^63, got {args.seed}")
+        for flag in ("threads", "epochs", "batch_size", "workers"):
+            if getattr(args, flag, None) is not None and getattr(args, flag) < 1:
+                raise ValueError(f"--{flag.replace('_', '-')}: expected an integer >= 1, got {getattr(args, flag)}")
         if getattr(args, "out", None) is not None:
             check_out(args.out, getattr(args, "out_is_file", None))
         return int(args.func(args) or 0)

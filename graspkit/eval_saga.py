@@ -515,6 +515,9 @@ def grasp_body_poses(root: str | Path, split: str = "train") -> np.ndarray:
     from graspkit.data.grasp_datasets import grasp_files
 
     files = grasp_files(root, "grasp", split=split)
+    if not files:
+        raise ValueError(f"--data: no grasp files of the {split} split in {root} (expected grasp_*.npz, made by "
+                         "`graspkit data make --kind grasp`)")
     return np.stack([read_arrays(p)["body.params.body_pose"][0].reshape(21, 3) for p in files]).astype(np.float32)
 
 

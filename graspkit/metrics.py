@@ -88,12 +88,12 @@ def lowest_vertex_motion(vertices: Any) -> tuple[np.ndarray, np.ndarray]:
 
 def foot_skating_wandr(vertices: Any, threshold: float = WANDR_SKATE_THRESHOLD) -> np.ndarray:
     """WANDR's FS per frame (T-1,) bool: the lowest vertex moves more than `threshold` m horizontally to the next frame."""
-    return lowest_vertex_motion(vertices)[0] > threshold
+    return lowest_vertex_motion(vertices)[0] > _positive(threshold, "threshold")
 
 
 def foot_sliding_goal(vertices: Any, threshold: float = GOAL_SLIDE_THRESHOLD) -> np.ndarray:
     """GOAL's foot sliding per frame (T-1,) bool: the vertex closest to the ground moves more than `threshold` m."""
-    return lowest_vertex_motion(vertices)[1] > threshold
+    return lowest_vertex_motion(vertices)[1] > _positive(threshold, "threshold")
 
 
 def foot_skating_saga(heels: Any, fps: float = 30.0, height: float = SAGA_SKATE_HEEL_HEIGHT,
@@ -142,7 +142,7 @@ def joint_jerk(joints: Any, fps: float = 30.0) -> np.ndarray:
 def joint_limit_violation(poses: Any) -> np.ndarray:
     """Degrees beyond the human range (T,55) of local rotations poses (T,55,3) axis-angle; 0 inside the range."""
     with torch.no_grad():
-        return joint_limit_excess(_t(poses).double()).numpy()
+        return joint_limit_excess(_shaped(poses, "poses", f"T,{NUM_JOINTS},3").double()).numpy()
 
 
 def joint_limit_excess(poses: torch.Tensor) -> torch.Tensor:
@@ -279,9 +279,13 @@ def grasp_metrics(vertices: Any, faces: Any, obj: Any, threshold: float = GRASP_
 def contact_ratio(min_distances: Any, threshold: float = GRASP_CONTACT_THRESHOLD) -> float:
     """Fraction of grasps in contact: min body-object signed distances (N,) <= threshold."""
     d = np.asarray(min_distances, np.float64).reshape(-1)
+    if not d.size:
+        raise ValueError("min_distances: expected at least one grasp, got none")
     if not np.isfinite(d).all():
         raise ValueError("min_distances: contains NaN or Inf")
-    return float((d <= threshold).mean()) if d.size else float("nan")
+    if not np.isfinite(threshold):
+        raise ValueError(f"threshold: expected a finite distance in metres, got {threshold}")
+    return float((d <= threshold).mean())
 
 
 def apd(samples: Any) -> float:

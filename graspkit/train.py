@@ -26,6 +26,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset
 from tqdm.auto import tqdm
@@ -48,6 +49,14 @@ class TrainConfig:
     seed: int = 0
     num_threads: int | None = None      # torch threads (None: leave as is)
     extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in ("epochs", "batch_size", "seed") + (("num_threads",) if self.num_threads is not None else ()):
+            v, low = getattr(self, name), 0 if name == "seed" else 1
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
+                raise ValueError(f"{name}: expected an integer >= {low}, got {v!r}")
+        if not (np.isfinite(self.lr) and self.lr >= 0):        # 0: a run that leaves the weights as they are
+            raise ValueError(f"lr: expected a learning rate >= 0, got {self.lr!r}")
 
 
 def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
@@ -91,9 +100,13 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint: no file at {path}")
     try:
-        return torch.load(path, map_location="cpu", weights_only=True)
+        state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # noqa: BLE001 - re-raised with the file named
         raise ValueError(f"checkpoint {path}: not a graspkit checkpoint readable with weights_only=True ({e})") from e
+    if not isinstance(state, dict):
+        raise ValueError(f"checkpoint {path}: expected a graspkit checkpoint (a dict of weights and settings), "
+                         f"got a {type(state).__name__}")
+    return state
 
 
 def init_distributed() -> bool:

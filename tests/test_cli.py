@@ -89,6 +89,27 @@ def test_out_paths_that_cannot_be_written_and_bad_seeds_fail_before_any_work(tmp
     assert not (tmp_path / "d").exists() and not (tmp_path / "w").exists()
 
 
+def test_bad_counts_seeds_and_folder_outs_are_named_before_any_work(tmp_path, capsys):
+    """Thread, epoch and batch counts below one, a seed past 2^63 and an --out that is a file where a command writes
+    a folder: exit code 2 and the option named, nothing written (a training run with --epochs 0 used to write an
+    untrained checkpoint over --out)."""
+    from graspkit.cli import main
+
+    (tmp_path / "clip.pt").write_text("x")
+    for args, message in ((("wandr", "--goal", "1", "0", "1", "--seed", str(10**23), "--out", str(tmp_path / "w")),
+                           "--seed: expected a non-negative integer below 2^63"),
+                          (("eval", "wandr", "--checkpoint", "x.pt", "--threads", "0"), "--threads: expected an integer >= 1"),
+                          (("train", "wandr", "--epochs", "0", "--out", str(tmp_path / "w.pt")),
+                           "--epochs: expected an integer >= 1"),
+                          (("train", "wandr", "--batch-size", "0", "--out", str(tmp_path / "w.pt")),
+                           "--batch-size: expected an integer >= 1"),
+                          (("wandr", "--goal", "1", "0", "1", "--out", str(tmp_path / "clip.pt")),
+                           "clip.pt is a file; expected a folder")):
+        assert main(list(args)) == 2, args
+        assert message in capsys.readouterr().err, args
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["clip.pt"]
+
+
 @pytest.mark.parametrize("command", ["saga", "goal"])
 def test_a_bad_object_file_is_named_as_the_option(tmp_path, capsys, command):
     from graspkit.cli import main

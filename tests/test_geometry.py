@@ -386,8 +386,8 @@ def test_sphere_lens_volume_and_depth(r1, r2, d):
     assert abs(intersection_volume(body, obj) - exact) <= 2e-3 * exact
 
 
-@pytest.mark.parametrize("yaw_deg, slab_mm, one_ray_off, refined_tol", [(45, 3.0, 0.05, 0.01), (0, 1.4, 0.2, 0.08),
-                                                                         (45, 1.0, 0.3, 0.08)])
+@pytest.mark.parametrize("yaw_deg, slab_mm, one_ray_off, refined_tol", [(45, 3.0, 0.05, 0.01), (0, 1.4, 0.2, 1e-9),
+                                                                         (0, 0.8, 0.2, 1e-9)])
 def test_shallow_sideways_overlap_is_refined_along_vertical_walls(yaw_deg, slab_mm, one_ray_off, refined_tol):
     """Two 10 cm cubes overlapping by a slab through their vertical faces (exact volume 100 t cm^3 for t cm):
     one ray per 1 mm column rounds the slab to whole columns, the refined cells resolve it."""
@@ -519,3 +519,32 @@ def test_closest_point_on_a_triangle_without_area_is_on_its_nearest_edge(tri):
     edge_pts = torch.cat([u + (v - u) * s for u, v in ((a, b), (b, c), (c, a))])
     truth = torch.cdist(p, edge_pts).min(1).values
     torch.testing.assert_close((p - got).norm(dim=-1), truth, atol=1e-4, rtol=0)
+
+
+def test_walls_on_both_sides_of_the_overlap_box_are_exact():
+    """Two 10 cm cubes offset by (9.57, 1.37, 2.1) cm overlap in a 4.3 x 86.3 x 79 mm box (analytic volume) bounded
+    by faces of the cubes on both sides: the refined cells tile the box, so its far walls lie on cell borders as its
+    near ones do (the first rule, square 1 mm cells from the near corner, read 1.2 % low)."""
+    box = trimesh.creation.box((0.1, 0.1, 0.1))
+    a, b = box.vertices, box.vertices + [0.0957, 0.0137, 0.021]
+    exact = 4.3 * 86.3 * 79.0 / 1000                                       # cm^3
+    assert abs(interpenetration((a, box.faces), (b, box.faces)).volume_cm3 / exact - 1) < 1e-9
+
+
+def test_refined_slabs_through_yawed_walls_over_a_sweep():
+    """Slabs 0.5-3 mm thick through the faces of two 10 cm cubes (offset 3 mm sideways) yawed 10-77 degrees (42 cases,
+    analytic volumes): the refined cells average 0.15 % off, 1.6 % at worst (square cells from the near corner:
+    0.79 and 10 %; one ray per column: 3.4 and 42 %); a 45-degree wall against the 0.25 mm rays can alias
+    (docs/objects.md)."""
+    box = trimesh.creation.box((0.1, 0.1, 0.1))
+    errs, ones = [], []
+    for yaw in (10, 22.5, 30, 45, 60, 77):
+        R = trimesh.transformations.rotation_matrix(np.radians(yaw), [0, 0, 1])[:3, :3]
+        for slab in (0.5, 0.8, 1.0, 1.4, 2.0, 3.0, 4.0):
+            a, b = box.vertices @ R.T, (box.vertices + [0.1 - slab / 1000, 0.003, 0.0]) @ R.T
+            exact = slab * 9.7                                           # cm^3: slab (cm) x 9.7 x 10 cm
+            errs.append(interpenetration((a, box.faces), (b, box.faces)).volume_cm3 / exact - 1)
+            ones.append(interpenetration((a, box.faces), (b, box.faces), refine=1).volume_cm3 / exact - 1)
+    errs, ones = np.abs(errs), np.abs(ones)
+    assert errs.mean() < 0.003 and errs.max() < 0.02
+    assert ones.mean() > 5 * errs.mean()

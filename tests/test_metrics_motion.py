@@ -130,6 +130,12 @@ def test_non_collision_score_counts_vertices_above_the_ground():
     (lambda: M.foot_skating_wandr(np.zeros((4, 0, 3))), r"vertices: expected shape \(T,V,3\).*no size zero"),
     (lambda: M.joint_speed(np.zeros((3, 22, 3)), fps=0), r"fps: expected a positive number"),
     (lambda: M.contact_ratio([np.nan, 0.0]), r"min_distances: contains NaN"),
+    (lambda: M.contact_ratio([]), r"min_distances: expected at least one grasp"),
+    (lambda: M.contact_ratio([0.0], threshold=np.nan), r"threshold: expected a finite"),
+    (lambda: M.foot_skating_wandr(np.zeros((4, 10, 3)), threshold=np.nan), r"threshold: expected a positive"),
+    (lambda: M.foot_sliding_goal(np.zeros((4, 10, 3)), threshold=-1.0), r"threshold: expected a positive"),
+    (lambda: M.joint_limit_violation(np.zeros((3, 22, 3))), r"poses: expected shape \(T,55,3\)"),
+    (lambda: M.joint_limit_violation(np.full((3, 55, 3), np.nan)), r"poses: contains NaN"),
 ])
 def test_bad_shapes_name_the_argument(call, message):
     with pytest.raises(ValueError, match=message):

@@ -46,7 +46,8 @@ def _pose(**joints: tuple[float, float, float]) -> torch.Tensor:
 
 # ----------------------------------------------------------------------------- the file
 def test_shipped_file_is_the_fresh_build_of_seed_0(shipped, fresh):
-    """Same keys, dtypes and shapes; byte-identical where the machine computes as the one that built the file.
+    """Same keys, dtypes and shapes; byte-identical where the machine computes as the one that built the file (the
+    hand components within 1e-12: their LAPACK sums change with the thread count).
 
     The quadric decimation follows floating-point ties, which differ between CPUs (numpy picks SIMD kernels at run
     time), so on another machine the rebuild may triangulate differently: then the body must still be the same
@@ -55,8 +56,11 @@ def test_shipped_file_is_the_fresh_build_of_seed_0(shipped, fresh):
     for k in fresh:
         assert shipped[k].dtype == fresh[k].dtype and shipped[k].shape == fresh[k].shape, k
     if np.array_equal(shipped["f"], fresh["f"]):
-        for k in fresh:
-            assert np.array_equal(shipped[k], fresh[k]), f"{k} differs from a fresh build"
+        for k in fresh:      # the hand PCA's LAPACK sums depend on the thread count: 1e-16 apart on one thread
+            if fresh[k].dtype.kind == "f" and k.startswith("hands_components"):
+                np.testing.assert_allclose(shipped[k], fresh[k], rtol=0, atol=1e-12, err_msg=k)
+            else:
+                assert np.array_equal(shipped[k], fresh[k]), f"{k} differs from a fresh build"
         return
     js, jf = (d["J_regressor"] @ d["v_template"] for d in (shipped, fresh))
     np.testing.assert_allclose(js, jf, atol=1e-4)

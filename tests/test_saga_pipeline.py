@@ -58,7 +58,7 @@ def test_saga_command_names_a_bad_object(capsys):
     from graspkit.cli import main
 
     assert main(["saga", "--object", "teapot", "--out", "unused"]) == 2
-    assert "name: unknown object 'teapot'" in capsys.readouterr().err
+    assert "--object: unknown object 'teapot'" in capsys.readouterr().err
 
 
 def test_one_call_for_an_object_of_ones_own(bm, tmp_path, monkeypatch):

@@ -108,3 +108,20 @@ def test_file_key_follows_a_files_content(tmp_path):
     assert file_key(f) == k1
     f.write_bytes(b"two")
     assert file_key(f) != k1 and file_key(tmp_path / "missing.pt") == "none" and file_key(None) == "none"
+
+
+
+@pytest.mark.parametrize("kwargs, message", [({"epochs": 0}, "epochs: expected an integer >= 1"),
+                                             ({"batch_size": -2}, "batch_size"), ({"seed": -1}, "seed"),
+                                             ({"lr": -1e-3}, "lr: expected a learning rate >= 0"), ({"lr": float("nan")}, "lr"), ({"num_threads": 0}, "num_threads"),
+                                             ({"epochs": 2.5}, "epochs")])
+def test_a_bad_training_setting_is_refused_before_any_work(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        TrainConfig(**kwargs)
+
+
+def test_a_file_that_holds_no_checkpoint_dict_is_named(tmp_path):
+    path = tmp_path / "bare.pt"
+    torch.save(torch.zeros(3), path)
+    with pytest.raises(ValueError, match="bare.pt: expected a graspkit checkpoint"):
+        load_checkpoint(path)

@@ -56,6 +56,10 @@ def load_model_arrays(path: str | os.PathLike, allow_pickle: bool = False) -> di
     path = Path(path)
     if not path.is_file():
         raise ModelFileError(f"{path}: no such body-model file (expected an SMPL-X-format .npz)")
+    with open(path, "rb") as fh:
+        head = fh.read(6)
+    if not allow_pickle and head[:1] != b"\x80" and not head.startswith((b"PK\x03\x04", b"PK\x05\x06", b"\x93NUMPY")):
+        raise ModelFileError(f"{path}: not an .npz body model (expected an SMPL-X-format .npz archive of arrays)")
     try:
         npz = np.load(path, allow_pickle=allow_pickle)
     except ValueError as e:  # numpy refuses a pickled file when allow_pickle=False
@@ -140,6 +144,11 @@ class BodyModel(nn.Module):
                  dtype: torch.dtype = torch.float32, source: str = "<arrays>") -> None:
         super().__init__()
         validate_model_arrays(arrays, source)
+        for name, v in (("num_betas", num_betas), ("num_expression", num_expression), ("num_pca_comps", num_pca_comps)):
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+                raise TypeError(f"{name}: expected an int, got {v!r}")
+        if not isinstance(dtype, torch.dtype) or not dtype.is_floating_point:
+            raise TypeError(f"dtype: expected a floating-point torch dtype such as torch.float32, got {dtype!r}")
         if use_pca and not 1 <= num_pca_comps <= 45:
             raise ValueError(f"num_pca_comps: expected 1..45, got {num_pca_comps}")
         self.source, self.use_pca, self.flat_hand_mean = source, use_pca, flat_hand_mean
@@ -277,21 +286,37 @@ class BodyModel(nn.Module):
         coeffs = torch.cat([self._coeffs(betas, "betas", self.num_betas, B),
                             self._coeffs(expression, "expression", self.num_expression, B)], dim=1)
         t = self._arg(transl, "transl", (3,), B)
-        if not (torch.isfinite(pose).all() and torch.isfinite(coeffs).all() and torch.isfinite(t).all()):
-            bad = [k for k, v in named.items() if isinstance(v, Tensor) and not torch.isfinite(v).all()]
-            raise ValueError(f"{', '.join(bad)}: contains NaN or Inf")
+        self._check_finite(named, pose, coeffs, t)
         rot = axis_angle_to_matrix(pose.view(B, NUM_JOINTS, 3))
         return self.lbs(coeffs, rot, t)
 
     def forward_rotmats(self, rot_mats: Tensor, betas: Tensor | None = None,
                         expression: Tensor | None = None, transl: Tensor | None = None) -> BodyOutput:
         """Forward from rotation matrices (B,55,3,3) of all joints (hand mean NOT added): for networks."""
+        if not isinstance(rot_mats, Tensor):
+            raise TypeError(f"rot_mats: expected a torch.Tensor, got {type(rot_mats).__name__}")
         if rot_mats.dim() != 4 or tuple(rot_mats.shape[1:]) != (NUM_JOINTS, 3, 3):
             raise ValueError(f"rot_mats: expected shape (B, 55, 3, 3), got {tuple(rot_mats.shape)}")
-        B = rot_mats.shape[0]
+        if rot_mats.device != self.v_template.device:
+            raise ValueError(f"rot_mats: on {rot_mats.device}, but the model is on {self.v_template.device}")
+        named = dict(rot_mats=rot_mats, betas=betas, expression=expression, transl=transl)
+        B = self._batch_size(named)
         coeffs = torch.cat([self._coeffs(betas, "betas", self.num_betas, B),
                             self._coeffs(expression, "expression", self.num_expression, B)], dim=1)
-        return self.lbs(coeffs, rot_mats.to(self.dtype), self._arg(transl, "transl", (3,), B))
+        rot = rot_mats.to(self.dtype) if len(rot_mats) == B else rot_mats.to(self.dtype).expand(B, -1, -1, -1)
+        t = self._arg(transl, "transl", (3,), B)
+        self._check_finite(named, rot, coeffs, t)
+        return self.lbs(coeffs, rot, t)
+
+    @staticmethod
+    def _check_finite(named: dict[str, Tensor | None], *converted: Tensor) -> None:
+        """ValueError naming the arguments with NaN or Inf unless the `converted` inputs are all finite."""
+        if all(torch.isfinite(x).all() for x in converted):
+            return
+        bad = [k for k, v in named.items() if isinstance(v, Tensor) and not torch.isfinite(v).all()]
+        if not bad:    # finite as given, but too large for the model's dtype
+            raise ValueError(f"inputs: overflow to Inf in {converted[0].dtype}")
+        raise ValueError(f"{', '.join(bad)}: contains NaN or Inf")
 
     def shaped(self, coeffs: Tensor) -> tuple[Tensor, Tensor]:
         """Rest-pose vertices (B,V,3) and joints (B,55,3) for stacked [betas, expression] coeffs (B,S+E)."""

@@ -153,4 +153,4 @@ def add_data_commands(subparsers) -> None:
     m.add_argument("--quiet", action="store_true", help="no progress bar")
     m.add_argument("--chunk", type=int, default=16, help="grasp/approach: grasps fitted together (files depend on it)")
     m.add_argument("--objects", default=None, help="grasp/approach: comma-separated objects (default: all 17)")
-    m.set_defaults(func=_cmd_make)
+    m.set_defaults(func=_cmd_make, out_is_file=False)

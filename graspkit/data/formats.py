@@ -49,16 +49,19 @@ def save_motion(path: str | os.PathLike, motion: Motion, amass_keys: bool = Fals
     """Write a Motion as an AMASS-style .npz (plus goal keys for reaching clips), atomically; returns the path.
     amass_keys: also write AMASS's per-part keys (`amass_split_keys`; the exports for other tools do)."""
     path = Path(path)
+    check_motion(motion)
+    betas = np.zeros(NUM_BETAS, np.float32)   # fewer than 10 betas: zero-padded, as load_motion reads them
+    betas[:min(NUM_BETAS, len(motion.betas))] = motion.betas[:NUM_BETAS]
     arrays: dict[str, np.ndarray] = {
         "poses": motion.poses.reshape(motion.num_frames, -1).astype(np.float32),
         "trans": motion.trans.astype(np.float32),
-        "betas": motion.betas[:NUM_BETAS].astype(np.float32),
+        "betas": betas,
         "gender": np.array(motion.gender),
         "mocap_frame_rate": np.array(float(motion.fps)),
         "surface_model_type": np.array("smplx"),
     }
     if amass_keys:
-        arrays.update(amass_split_keys(arrays["poses"], float(motion.fps)))
+        arrays.update(amass_split_keys(arrays["poses"], float(motion.fps), len(betas)))
     if motion.contacts is not None:
         arrays["contacts"] = motion.contacts.astype(np.uint8)
     if motion.goal is not None:
@@ -66,6 +69,20 @@ def save_motion(path: str | os.PathLike, motion: Motion, amass_keys: bool = Fals
                       hand=np.array(motion.hand))
     write_npz_atomic(path, arrays)
     return path
+
+
+def check_motion(motion: Motion) -> None:
+    """ValueError naming the field unless a Motion can be written: at least one frame, finite values, fps > 0."""
+    if not isinstance(motion, Motion):
+        raise TypeError(f"motion: expected a graspkit.data.Motion, got {type(motion).__name__}")
+    if motion.num_frames == 0:
+        raise ValueError("motion: has no frames, expected at least one")
+    if not (np.isfinite(motion.fps) and motion.fps > 0):
+        raise ValueError(f"motion.fps: expected a finite positive frame rate, got {motion.fps}")
+    for key in ("poses", "trans", "betas", "goal"):
+        a = getattr(motion, key)
+        if a is not None and not np.isfinite(a).all():
+            raise ValueError(f"motion.{key}: contains NaN or Inf")
 
 
 def write_npz_atomic(path: Path, arrays: dict[str, np.ndarray]) -> None:
@@ -120,6 +137,9 @@ def to_smplx_poses(poses: np.ndarray, path: Path | str = "<array>") -> np.ndarra
 def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
     """Read an AMASS-style (graspkit, AMASS SMPL-X or SMPL-H) or CIRCLE-style .npz; resample to `fps` (None: keep)."""
     path = Path(path)
+    if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating))
+                            or not (np.isfinite(fps) and fps > 0)):
+        raise ValueError(f"fps: expected a finite positive frame rate or None to read {path}, got {fps!r}")
     if not path.is_file():
         raise SequenceFileError(f"{path}: no such sequence file")
     try:

@@ -93,6 +93,9 @@ def to_arrays(seq: GraspSequence, model: str = "graspkit procedural SMPLX_NEUTRA
     a["object.params.transl"] = seq.object_transl.astype(np.float32)
     a["object.params.global_orient"] = seq.object_orient.astype(np.float32)
     a["object.object_mesh"] = np.array(seq.object_mesh)
+    if (seq.object_points is None) != (seq.object_normals is None):
+        raise ValueError("object_points, object_normals: give both (P,3) arrays or neither, got only "
+                         + ("object_points" if seq.object_normals is None else "object_normals"))
     if seq.object_points is not None:
         a["object.points"] = np.asarray(seq.object_points, np.float32)
         a["object.normals"] = np.asarray(seq.object_normals, np.float32)
@@ -110,7 +113,14 @@ def to_arrays(seq: GraspSequence, model: str = "graspkit procedural SMPLX_NEUTRA
 def save_grasp_sequence(path: str | os.PathLike, seq: GraspSequence) -> Path:
     """Write a GraspSequence as a GRAB-style .npz without pickle, atomically (equal content gives equal bytes)."""
     path = Path(path)
-    write_npz_atomic(path, to_arrays(seq))
+    if not (np.isfinite(seq.fps) and seq.fps > 0):
+        raise ValueError(f"seq.fps: expected a finite positive frame rate, got {seq.fps}")
+    a = to_arrays(seq)
+    for key in ("body.params.fullpose", "body.params.transl", "body.betas", "object.params.transl",
+                "object.params.global_orient", "object.points", "object.normals"):
+        if key in a and not np.isfinite(a[key]).all():
+            raise ValueError(f"seq: {key!r} contains NaN or Inf")
+    write_npz_atomic(path, a)
     return path
 
 
@@ -132,6 +142,8 @@ def read_arrays(path: str | os.PathLike, allow_pickle: bool = False) -> dict[str
         npz = np.load(path, allow_pickle=allow_pickle)
     except Exception as e:
         raise SequenceFileError(f"{path}: not a readable .npz file ({e})") from None
+    if not isinstance(npz, np.lib.npyio.NpzFile):
+        raise SequenceFileError(f"{path}: expected an .npz archive of arrays, got a single array")
     out: dict[str, np.ndarray] = {}
     with npz:
         for key in npz.files:
@@ -163,12 +175,21 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
     hands_mean (90,): added to the hand poses of files that store them relative to the hand mean (real GRAB;
     graspkit's own files say `body.flat_hand_mean` = True and are never changed)."""
     path = Path(path)
+    if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating))
+                            or not (np.isfinite(fps) and fps > 0)):
+        raise ValueError(f"fps: expected a finite positive frame rate or None, got {fps!r}")
     a = read_arrays(path, allow_pickle)
 
     def get(key: str) -> np.ndarray:
         if key not in a:
             raise SequenceFileError(f"{path}: missing key {key!r}")
         return a[key]
+
+    def per_frame(key: str, width: int) -> np.ndarray:
+        v = np.asarray(get(key), np.float64)
+        if len(v.shape) == 0 or v.shape[0] != T or v.size != T * width:
+            raise SequenceFileError(f"{path}: key {key!r} has shape {v.shape}, expected ({T}, {width})")
+        return v.reshape(T, width)
 
     if "body.params.fullpose" in a:
         full = np.asarray(get("body.params.fullpose"), np.float64)
@@ -179,6 +200,10 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
         parts = []
         for name, lo, hi in BODY_PARTS:
             p = np.asarray(get(f"body.params.{name}"), np.float64)
+            if p.ndim != 2 or (parts and len(p) != len(parts[0])):
+                n = len(parts[0]) if parts else "T"
+                raise SequenceFileError(f"{path}: key 'body.params.{name}' has shape {p.shape}, "
+                                        f"expected ({n}, {3 * (hi - lo)})")
             if p.shape[-1] != 3 * (hi - lo):
                 raise SequenceFileError(f"{path}: key 'body.params.{name}' has {p.shape[-1]} values per frame, "
                                         f"expected {3 * (hi - lo)} (PCA hand poses need 'body.params.fullpose')")
@@ -187,22 +212,38 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
     T = len(poses)
     flat = bool(a["body.flat_hand_mean"]) if "body.flat_hand_mean" in a else False
     if hands_mean is not None and not flat:
-        hm = np.asarray(hands_mean, np.float64).reshape(90)
+        hm = np.asarray(hands_mean, np.float64)
+        if hm.size != 90 or not np.isfinite(hm).all():
+            raise ValueError(f"hands_mean: expected 90 finite values (left then right hand), got shape {hm.shape}")
         poses = poses.copy()
         poses[:, 25:55] += hm.reshape(30, 3)
-    trans = np.asarray(get("body.params.transl"), np.float64).reshape(T, 3)
+    trans = per_frame("body.params.transl", 3)
     betas = np.zeros(10)
     if "body.betas" in a:
-        b = np.asarray(a["body.betas"], np.float64).reshape(-1)[:10]
-        betas[:len(b)] = b
-    src = float(np.asarray(a.get("framerate", np.array(30.0))).reshape(-1)[0])
-    o_t = np.asarray(get("object.params.transl"), np.float64).reshape(T, 3)
-    o_r = np.asarray(get("object.params.global_orient"), np.float64).reshape(T, 3)
+        b = np.asarray(a["body.betas"], np.float64).reshape(-1)
+        if not np.isfinite(b).all():
+            raise SequenceFileError(f"{path}: key 'body.betas' contains NaN or Inf")
+        betas[:min(10, len(b))] = b[:10]
+    rate = np.asarray(a.get("framerate", np.array(30.0)))
+    src = float(rate.reshape(-1)[0]) if rate.size == 1 and rate.dtype.kind in "iuf" else float("nan")
+    if not (np.isfinite(src) and src > 0):
+        shown = src if rate.size == 1 and rate.dtype.kind in "iuf" else f"of shape {rate.shape} ({rate.dtype})"
+        raise SequenceFileError(f"{path}: key 'framerate' is {shown}, expected a finite positive frame rate")
+    o_t = per_frame("object.params.transl", 3)
+    o_r = per_frame("object.params.global_orient", 3)
     contacts = {k[len("contact."):]: np.asarray(v) for k, v in a.items() if k.startswith("contact.")}
     for k, c in contacts.items():
         if len(c) != T:
             raise SequenceFileError(f"{path}: key 'contact.{k}' has {len(c)} frames, expected {T}")
-    for key, arr in (("poses", poses), ("body.params.transl", trans), ("object.params.transl", o_t)):
+    for key in ("object.points", "object.normals"):
+        if key in a and (a[key].dtype.kind not in "iuf" or a[key].ndim != 2 or a[key].shape[1] != 3):
+            raise SequenceFileError(f"{path}: key {key!r} has shape {a[key].shape} ({a[key].dtype}), expected (P, 3)")
+    if ("object.points" in a) != ("object.normals" in a):
+        raise SequenceFileError(f"{path}: has only one of 'object.points' and 'object.normals', expected both or neither")
+    numeric = [(f"contact.{k}", c) for k, c in contacts.items() if c.dtype.kind == "f"]
+    numeric += [(k, a[k]) for k in ("object.points", "object.normals") if k in a]
+    for key, arr in (("poses", poses), ("body.params.transl", trans), ("object.params.transl", o_t),
+                     ("object.params.global_orient", o_r), *numeric):
         if not np.isfinite(arr).all():
             raise SequenceFileError(f"{path}: key {key!r} contains NaN or Inf")
     if fps is not None and abs(src - fps) > 1e-6 and T > 1:

@@ -39,6 +39,11 @@ class Motion:
         self.trans = np.asarray(self.trans, np.float32).reshape(-1, 3)
         self.betas = np.asarray(self.betas, np.float32).reshape(-1)
         T = len(self.poses)
+        if isinstance(self.fps, bool) or not isinstance(self.fps, (int, float, np.integer, np.floating)):
+            raise TypeError(f"fps: expected a number (frames per second), got {type(self.fps).__name__}")
+        if not (np.isfinite(self.fps) and self.fps > 0):
+            raise ValueError(f"fps: expected a finite positive frame rate, got {self.fps}")
+        self.fps = float(self.fps)
         if len(self.trans) != T:
             raise ValueError(f"trans: {len(self.trans)} frames, poses has {T}")
         if self.contacts is not None:
@@ -97,6 +102,17 @@ class Motion:
 
     def iter_vertices(self, bm, chunk: int = 64, overlap: int = 0) -> Iterator[tuple[int, torch.Tensor]]:
         """(first frame, vertices (n,V,3)) for consecutive chunks of frames; chunks share `overlap` frames."""
+        for name, value in (("chunk", chunk), ("overlap", overlap)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise TypeError(f"{name}: expected an integer, got {type(value).__name__}")
+        if overlap < 0:
+            raise ValueError(f"overlap: expected an integer >= 0, got {overlap}")
+        if chunk <= overlap:
+            raise ValueError(f"chunk: expected an integer > overlap ({overlap}), got {chunk}")
+        return self._chunks(bm, int(chunk), int(overlap))
+
+    def _chunks(self, bm, chunk: int, overlap: int) -> Iterator[tuple[int, torch.Tensor]]:
+        """The generator behind iter_vertices (arguments checked)."""
         start = 0
         while start < self.num_frames:
             stop = min(start + chunk, self.num_frames)

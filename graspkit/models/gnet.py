@@ -27,7 +27,7 @@ outputs Θ only (no offsets to refine with, no head direction), trained with the
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import torch
@@ -239,10 +239,11 @@ class GNet(nn.Module):
                z: Tensor | None = None) -> dict[str, Tensor]:
         """Inference (§3.3): skip the encoder, z ~ N(0, I) from `generator` (or given), decode: (B,...) -> outputs."""
         cfg = self.cfg
-        for name, x, width in (("bps", bps, cfg.n_bps), ("obj_transl", obj_transl, 3), ("betas", betas, cfg.n_betas)):
-            if not isinstance(x, Tensor) or x.dim() != 2 or x.shape[1] != width or len(x) != len(bps):
-                got = tuple(x.shape) if isinstance(x, Tensor) else type(x).__name__
-                raise ValueError(f"{name}: expected a tensor of shape ({len(bps)}, {width}), got {got}")
+        B = len(bps) if isinstance(bps, Tensor) and bps.dim() == 2 else "B"
+        bps, obj_transl, betas = (self._sample_input(name, x, (B, width)) for name, x, width in
+                                  (("bps", bps, cfg.n_bps), ("obj_transl", obj_transl, 3), ("betas", betas, cfg.n_betas)))
+        if z is not None:
+            z = self._sample_input("z", z, (B, cfg.latent))
         was = self.training
         self.eval()
         if z is None:
@@ -250,6 +251,18 @@ class GNet(nn.Module):
         out = self.decode(z, bps, obj_transl, betas)
         self.train(was)
         return out
+
+    def _sample_input(self, name: str, x: Tensor, shape: tuple[int | str, int]) -> Tensor:
+        """`sample`'s check of one input: a finite floating tensor of `shape`, returned in the model's dtype."""
+        if not isinstance(x, Tensor) or x.dim() != 2 or x.shape[1] != shape[1] or \
+                (isinstance(shape[0], int) and len(x) != shape[0]):
+            got = tuple(x.shape) if isinstance(x, Tensor) else type(x).__name__
+            raise ValueError(f"{name}: expected a tensor of shape ({shape[0]}, {shape[1]}) (batch first), got {got}")
+        if not x.is_floating_point():
+            raise TypeError(f"{name}: expected a floating-point tensor, got {x.dtype}")
+        if not torch.isfinite(x).all():
+            raise ValueError(f"{name}: contains NaN or Inf")
+        return x.to(self.out.weight.dtype)
 
     def config_dict(self) -> dict:
         """The config as plain values (for checkpoints)."""
@@ -297,6 +310,8 @@ def load_weights(path: str | Path, kind: str) -> tuple[dict[str, Tensor], dict]:
     from graspkit.train import load_checkpoint
 
     ck = load_checkpoint(path)
+    if not isinstance(ck, dict) or not isinstance(ck.get("model"), dict):
+        raise ValueError(f"{path}: not a {kind} checkpoint (expected a dict with 'model' weights written by graspkit)")
     if "kind" in ck and ck["kind"] != kind:
         raise ValueError(f"{path}: a {ck['kind']!r} checkpoint, expected {kind!r}")
     config = ck.get("config") if "kind" in ck else ck.get("extra", {}).get(f"{kind}_config")
@@ -309,6 +324,10 @@ def load_weights(path: str | Path, kind: str) -> tuple[dict[str, Tensor], dict]:
 def load_gnet(path: str | Path) -> GNet:
     """A GNet from a shipped (or training) checkpoint, in float32 and eval mode."""
     state, config = load_weights(path, "gnet")
+    known = {f.name for f in fields(GNetConfig)}
+    if not isinstance(config, dict) or not set(config) <= known:
+        odd = sorted(set(config) - known) if isinstance(config, dict) else type(config).__name__
+        raise ValueError(f"{path}: not a gnet checkpoint (config entries {odd} are not GNetConfig's)")
     net = GNet(GNetConfig(**config))
     net.load_state_dict(state)
     return net.eval()

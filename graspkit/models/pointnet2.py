@@ -33,7 +33,7 @@ def farthest_point_sample(xyz: Tensor, n: int, generator: torch.Generator | None
     _check_points(xyz)
     B, N, _ = xyz.shape
     if not 1 <= n <= N:
-        raise ValueError(f"n: expected 1..{N} samples, got {n}")
+        raise ValueError(f"n: expected 1..{N} samples (xyz has {N} points), got {n}")
     idx = torch.empty(B, n, dtype=torch.long, device=xyz.device)
     if generator is None:
         far = torch.zeros(B, dtype=torch.long, device=xyz.device)
@@ -237,6 +237,10 @@ class PointNet2Encoder(nn.Module):
     def group(self, xyz: Tensor) -> list[Grouping | None]:
         """All levels' groupings for xyz (B,N,3): they depend on the geometry only, so two encoders can share them."""
         _check_points(xyz)
+        least = self.sa[0].npoint or 1
+        if xyz.shape[1] < least:
+            raise ValueError(f"xyz: expected at least {least} points (the first set-abstraction level samples "
+                             f"{least} centres), got {xyz.shape[1]}")
         out, cur = [], xyz
         for sa in self.sa:
             g = sa.group(cur)

@@ -339,6 +339,14 @@ def expand_starts(starts: I.StartPose | Sequence[I.StartPose], goals: Tensor, n:
     starts = [starts] if isinstance(starts, I.StartPose) else list(starts)
     if not starts or not all(isinstance(s, I.StartPose) for s in starts):
         raise ValueError(f"start: expected a StartPose or a non-empty sequence of them, got {len(starts)} items")
+    for k, s in enumerate(starts):
+        for name, shape in (("p_prev", (I.POSE_DIM,)), ("p", (I.POSE_DIM,)), ("rest", (I.NUM_BODY, 3))):
+            x = getattr(s, name)
+            if not isinstance(x, Tensor) or tuple(x.shape) != shape or not x.is_floating_point():
+                got = f"{x.dtype} {tuple(x.shape)}" if isinstance(x, Tensor) else type(x).__name__
+                raise ValueError(f"start: expected {name} a float tensor of shape {shape}, got {got} (start {k})")
+            if not torch.isfinite(x).all():
+                raise ValueError(f"start: {name} contains NaN or Inf (start {k})")
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
         raise ValueError(f"n: expected a whole number of samples, got {n!r}")
     goals = torch.as_tensor(goals, dtype=torch.float32)
@@ -351,9 +359,9 @@ def expand_starts(starts: I.StartPose | Sequence[I.StartPose], goals: Tensor, n:
         raise ValueError(f"n: expected >= 1, got {n}")
     S, G = len(starts), len(goals)
     idx = torch.stack(torch.meshgrid(torch.arange(S), torch.arange(G), torch.arange(n), indexing="ij"), -1).reshape(-1, 3)
-    pp = torch.stack([s.p_prev for s in starts])[idx[:, 0]]
-    p0 = torch.stack([s.p for s in starts])[idx[:, 0]]
-    rest = torch.stack([s.rest for s in starts])[idx[:, 0]]
+    pp = torch.stack([s.p_prev for s in starts]).float()[idx[:, 0]]        # float32, as the model and the goals
+    p0 = torch.stack([s.p for s in starts]).float()[idx[:, 0]]
+    rest = torch.stack([s.rest for s in starts]).float()[idx[:, 0]]
     return pp, p0, rest, goals[idx[:, 1]], idx
 
 

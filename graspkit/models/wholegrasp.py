@@ -41,7 +41,7 @@ object-centred standardisation (checkpoints written before this option load with
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -330,6 +330,16 @@ class WholeGraspVAE(nn.Module):
         """
         self._check("object_points", object_points, (None, 3))
         self._check("object_normals", object_normals, tuple(object_points.shape))
+        least = self.obj_dec.sa[0].npoint
+        if len(object_points) < least:
+            raise ValueError(f"object_points: expected at least {least} points (PointNet++'s first level samples "
+                             f"{least} centres), got {len(object_points)}")
+        for name, x in (("object_points", object_points), ("object_normals", object_normals),
+                        ("object_height", object_height), ("centre", centre)):
+            if x is not None and not torch.isfinite(torch.as_tensor(x, dtype=torch.float32)).all():
+                raise ValueError(f"{name}: contains NaN or Inf")
+        if isinstance(n, bool) or not isinstance(n, int):
+            raise TypeError(f"n: expected an int number of samples, got {n!r}")
         if n < 1:
             raise ValueError(f"n: expected at least one sample, got {n}")
         was = self.training
@@ -360,6 +370,9 @@ class WholeGraspVAE(nn.Module):
             cfg = state["extra"]["model_config"]
         if cfg is None or "latent" not in cfg:
             raise ValueError("state: no WholeGrasp config in it (expected key 'config' or extra['model_config'])")
+        unknown = sorted(set(cfg) - {f.name for f in fields(WholeGraspConfig)})
+        if unknown:
+            raise ValueError(f"state: config entries {unknown} are not WholeGraspConfig's (another model's config?)")
         # older checkpoints: object-centred markers, Eq. 3 as printed
         model = cls(WholeGraspConfig(**{"height_slope": False, "consistency": "paper", **cfg}))
         weights = dequantize_state(state["model"])
@@ -545,8 +558,15 @@ def load_wholegrasp(path: str | Path | None = None, multitask: bool = True) -> W
     """A trained WholeGrasp-VAE (default: the shipped checkpoint; multitask=False: WholeGrasp-single), eval mode."""
     from graspkit.train import load_checkpoint
 
-    state = load_checkpoint(path or (WHOLEGRASP_PATH if multitask else WHOLEGRASP_SINGLE_PATH))
-    return WholeGraspVAE.from_state(state)
+    path = path or (WHOLEGRASP_PATH if multitask else WHOLEGRASP_SINGLE_PATH)
+    state = load_checkpoint(path)
+    if not isinstance(state, dict) or "model" not in state or "kind" in state:
+        what = f"a {state['kind']!r} checkpoint" if isinstance(state, dict) and "kind" in state else "no weights"
+        raise ValueError(f"{path}: not a WholeGrasp-VAE checkpoint ({what}; expected what train_wholegrasp writes)")
+    try:
+        return WholeGraspVAE.from_state(state)
+    except (ValueError, RuntimeError) as e:     # another model's config or weights
+        raise ValueError(f"{path}: not a WholeGrasp-VAE checkpoint ({e})") from None
 
 
 # ------------------------------------------------------------------------------------------------ GrabNet-SMPLX

@@ -95,39 +95,40 @@ def _joined(parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]]) -> tuple[np.
     return tuple(np.concatenate(x) for x in zip(*parts))
 
 
-def _column_crossings(tri: np.ndarray, x0: float, y0: float, h: float, nx: int, ny: int,
+def _column_crossings(tri: np.ndarray, x0: float, y0: float, hx: float, hy: float, nx: int, ny: int,
                       budget: int = 4_000_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Crossings of vertical rays at (x0 + i h, y0 + j h) with triangles (F,3,3): column ids i*ny + j, z, and the
+    """Crossings of vertical rays at (x0 + i hx, y0 + j hy) with triangles (F,3,3): column ids i*ny + j, z, and the
     sign (+1 entering: the outward normal points down; -1 leaving)."""
     xy = tri[..., :2]
-    i0 = np.clip(np.ceil((xy[..., 0].min(1) - x0) / h), 0, nx).astype(np.int64)
-    i1 = np.clip(np.floor((xy[..., 0].max(1) - x0) / h), -1, nx - 1).astype(np.int64)
-    j0 = np.clip(np.ceil((xy[..., 1].min(1) - y0) / h), 0, ny).astype(np.int64)
-    j1 = np.clip(np.floor((xy[..., 1].max(1) - y0) / h), -1, ny - 1).astype(np.int64)
+    i0 = np.clip(np.ceil((xy[..., 0].min(1) - x0) / hx), 0, nx).astype(np.int64)
+    i1 = np.clip(np.floor((xy[..., 0].max(1) - x0) / hx), -1, nx - 1).astype(np.int64)
+    j0 = np.clip(np.ceil((xy[..., 1].min(1) - y0) / hy), 0, ny).astype(np.int64)
+    j1 = np.clip(np.floor((xy[..., 1].max(1) - y0) / hy), -1, ny - 1).astype(np.int64)
     out = []
     for face, i, j in _pairs(i0, i1, j0, j1, budget):
-        hit, z, sign = _ray_hits(tri[face], x0 + i * h, y0 + j * h)
+        hit, z, sign = _ray_hits(tri[face], x0 + i * hx, y0 + j * hy)
         out.append(((i * ny + j)[hit], z, sign))
     return _joined(out)
 
 
-def _subcolumn_crossings(tri: np.ndarray, x0: float, y0: float, h: float, nx: int, ny: int, cells: np.ndarray,
+def _subcolumn_crossings(tri: np.ndarray, x0: float, y0: float, hx: float, hy: float, nx: int, ny: int,
+                         cells: np.ndarray,
                          k: int, off: tuple[float, float], budget: int = 4_000_000
                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Crossings of k x k vertical rays inside each marked cell (cells (nx*ny,) bool; cell (i, j) spans x0 + (i -
-    1/2 .. i + 1/2) h): column ids cell*k*k + a*k + b, z and sign, as `_column_crossings`."""
+    1/2 .. i + 1/2) hx, likewise in y): column ids cell*k*k + a*k + b, z and sign, as `_column_crossings`."""
     xy = tri[..., :2]
-    i0 = np.clip(np.floor((xy[..., 0].min(1) - x0) / h + 0.5), 0, nx).astype(np.int64)
-    i1 = np.clip(np.floor((xy[..., 0].max(1) - x0) / h + 0.5), -1, nx - 1).astype(np.int64)
-    j0 = np.clip(np.floor((xy[..., 1].min(1) - y0) / h + 0.5), 0, ny).astype(np.int64)
-    j1 = np.clip(np.floor((xy[..., 1].max(1) - y0) / h + 0.5), -1, ny - 1).astype(np.int64)
+    i0 = np.clip(np.floor((xy[..., 0].min(1) - x0) / hx + 0.5), 0, nx).astype(np.int64)
+    i1 = np.clip(np.floor((xy[..., 0].max(1) - x0) / hx + 0.5), -1, nx - 1).astype(np.int64)
+    j0 = np.clip(np.floor((xy[..., 1].min(1) - y0) / hy + 0.5), 0, ny).astype(np.int64)
+    j1 = np.clip(np.floor((xy[..., 1].max(1) - y0) / hy + 0.5), -1, ny - 1).astype(np.int64)
     out = []
     for face, i, j in _pairs(i0, i1, j0, j1, max(budget // (k * k), 1)):
         keep = cells[i * ny + j]                                      # the marked cells only, k x k rays each
         face, i, j = (np.repeat(x[keep], k * k) for x in (face, i, j))
         sub = np.tile(np.arange(k * k), len(face) // (k * k))
-        px = x0 + (i - 0.5 + (sub // k + 0.5 + off[0]) / k) * h
-        py = y0 + (j - 0.5 + (sub % k + 0.5 + off[1]) / k) * h
+        px = x0 + (i - 0.5 + (sub // k + 0.5 + off[0]) / k) * hx
+        py = y0 + (j - 0.5 + (sub % k + 0.5 + off[1]) / k) * hy
         hit, z, sign = _ray_hits(tri[face], px, py)
         out.append((((i * ny + j) * k * k + sub)[hit], z, sign))
     return _joined(out)
@@ -193,6 +194,10 @@ def _volume(va: np.ndarray, fa: np.ndarray, vb: np.ndarray, fb: np.ndarray, spac
         return 0.0
     h = max(spacing, float(np.sqrt((hi[0] - lo[0]) * (hi[1] - lo[1]) / MAX_COLUMNS)))
     nx, ny = int(np.ceil((hi[0] - lo[0]) / h)), int(np.ceil((hi[1] - lo[1]) / h))
+    if refine > 1:      # cells that tile the overlap box: a wall on its far side lies on a cell border, as on its near
+        hx, hy = (hi[0] - lo[0]) / nx, (hi[1] - lo[1]) / ny     # side (one in the last column read 1.9 % low)
+    else:               # the first rule, square cells from the near corner (grasp data generation reproduces with it)
+        hx = hy = h
 
     def near(v: np.ndarray, f: np.ndarray) -> np.ndarray:
         """Triangles whose xy-box meets the overlap rectangle (all of a column's crossings are among them)."""
@@ -207,9 +212,9 @@ def _volume(va: np.ndarray, fa: np.ndarray, vb: np.ndarray, fb: np.ndarray, spac
     cov_a, cov_b = np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
     todo = np.ones(n, dtype=bool)
     for ox, oy in _OFFSETS:
-        x0, y0 = lo[0] + (0.5 + ox * 1e-3) * h, lo[1] + (0.5 + oy * 1e-3) * h
-        ca, za, sa = _column_crossings(tri_a, x0, y0, h, nx, ny)
-        cb, zb, sb = _column_crossings(tri_b, x0, y0, h, nx, ny)
+        x0, y0 = lo[0] + (0.5 + ox * 1e-3) * hx, lo[1] + (0.5 + oy * 1e-3) * hy
+        ca, za, sa = _column_crossings(tri_a, x0, y0, hx, hy, nx, ny)
+        cb, zb, sb = _column_crossings(tri_b, x0, y0, hx, hy, nx, ny)
         odd = _unbalanced(ca, sa, n) | _unbalanced(cb, sb, n)
         ok_a, ok_b = ~odd[ca], ~odd[cb]
         part = _overlap_lengths(ca[ok_a], za[ok_a], sa[ok_a], cb[ok_b], zb[ok_b], sb[ok_b], n)
@@ -222,18 +227,18 @@ def _volume(va: np.ndarray, fa: np.ndarray, vb: np.ndarray, fb: np.ndarray, spac
             break
     # columns still ambiguous after every offset (a ray through a vertex each time, or through a hole) count as empty
     if refine > 1:
-        x0, y0 = lo[0] + 0.5 * h, lo[1] + 0.5 * h
+        x0, y0 = lo[0] + 0.5 * hx, lo[1] + 0.5 * hy
         cells = _edge_cells(length, cov_a, cov_b, nx, ny)
         off = (_OFFSETS[0][0] * 1e-3, _OFFSETS[0][1] * 1e-3)      # off the sub-rays' regular positions, as above
         m = refine * refine
-        ca, za, sa = _subcolumn_crossings(tri_a, x0, y0, h, nx, ny, cells, refine, off)
-        cb, zb, sb = _subcolumn_crossings(tri_b, x0, y0, h, nx, ny, cells, refine, off)
+        ca, za, sa = _subcolumn_crossings(tri_a, x0, y0, hx, hy, nx, ny, cells, refine, off)
+        cb, zb, sb = _subcolumn_crossings(tri_b, x0, y0, hx, hy, nx, ny, cells, refine, off)
         odd = _unbalanced(ca, sa, n * m) | _unbalanced(cb, sb, n * m)
         ok_a, ok_b = ~odd[ca], ~odd[cb]
         fine = _overlap_lengths(ca[ok_a], za[ok_a], sa[ok_a], cb[ok_b], zb[ok_b], sb[ok_b], n * m).reshape(n, m)
         good = cells & ~odd.reshape(n, m).any(1)           # a cell with an ambiguous sub-ray keeps its one column
         length[good] = fine[good].mean(1)
-    return float(length.sum() * h * h)
+    return float(length.sum() * hx * hy)
 
 
 def penetration_depth(body: MeshLike, obj: MeshLike) -> float:

@@ -43,11 +43,37 @@ def _default_color(name: str, k: int) -> Any:
 def _as_trimesh(item: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (V,3), faces (F,3)) from a (vertices, faces) pair or a trimesh.Trimesh."""
     if isinstance(item, trimesh.Trimesh):
-        return np.asarray(item.vertices, float), np.asarray(item.faces, np.int64)
-    if not isinstance(item, (tuple, list)) or len(item) != 2:
+        v, f = np.asarray(item.vertices, float), np.asarray(item.faces, np.int64)
+    elif not isinstance(item, (tuple, list)) or len(item) != 2:
         raise ValueError(f"meshes[{name!r}]: expected (vertices, faces) or a trimesh.Trimesh, "
                          f"got {type(item).__name__}")
-    return as_mesh(item[0], item[1], f"meshes[{name!r}]")
+    else:
+        v, f = as_mesh(item[0], item[1], f"meshes[{name!r}]")
+    if not np.isfinite(v).all():
+        raise ValueError(f"meshes[{name!r}] vertices: contain NaN or Inf")
+    return v, f
+
+
+def _check_objects(objects: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Validated static objects {name: (vertices, faces) or Trimesh} (None: none) as {name: (V,3), (F,3)}."""
+    if objects is None:
+        return {}
+    if not isinstance(objects, Mapping):
+        raise TypeError(f"objects: expected a mapping {{name: (vertices, faces) or Trimesh}}, "
+                        f"got {type(objects).__name__}")
+    return {str(k): _as_trimesh(item, str(k)) for k, item in objects.items()}
+
+
+def _check_stride_fps(stride: Any, fps: Any) -> None:
+    """ValueError / TypeError unless stride is an integer >= 1 and fps a finite number > 0."""
+    if isinstance(stride, bool) or not isinstance(stride, (int, np.integer)):
+        raise TypeError(f"stride: expected an integer >= 1, got {type(stride).__name__}")
+    if stride < 1:
+        raise ValueError(f"stride: expected an integer >= 1, got {stride}")
+    if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)):
+        raise TypeError(f"fps: expected a number, got {type(fps).__name__}")
+    if not (np.isfinite(fps) and fps > 0):
+        raise ValueError(f"fps: expected a finite frame rate > 0, got {fps}")
 
 
 def export_scene(meshes: Mapping[str, Any], path: str | os.PathLike, colors: Mapping[str, Any] | None = None,
@@ -155,8 +181,12 @@ def export_sequence_glb(vertices: Any, faces: Any, path: str | os.PathLike, fps:
     trimesh loads the file as the static frame 0. Returns the path."""
     verts = as_array(vertices, "vertices", (None, None, 3))
     f = as_array(faces, "faces", (None, 3), dtype=np.int64)
-    if stride < 1 or len(verts) == 0:
-        raise ValueError(f"vertices: need at least one frame (and stride >= 1), got {len(verts)} frames")
+    _check_stride_fps(stride, fps)
+    if len(verts) == 0:
+        raise ValueError("vertices: need at least one frame, got 0")
+    if not np.isfinite(verts).all():
+        raise ValueError("vertices: contain NaN or Inf")
+    objs = _check_objects(objects)
     kept = np.unique(np.append(np.arange(0, len(verts), stride), len(verts) - 1))
     verts = verts[kept]
     if f.size and (f.min() < 0 or f.max() >= verts.shape[1]):
@@ -165,8 +195,7 @@ def export_sequence_glb(vertices: Any, faces: Any, path: str | os.PathLike, fps:
     verts = verts @ rot.T
     glb = _GLBBuilder()
     mesh = glb.mesh_node(name, verts[0], f, color, verts[1:] - verts[0])
-    for k, (oname, item) in enumerate((objects or {}).items()):
-        ov, of = _as_trimesh(item, oname)
+    for k, (oname, (ov, of)) in enumerate(objs.items()):
         glb.mesh_node(oname, ov @ rot.T, of, (colors or {}).get(oname, _default_color(oname, k + 1)))
     if len(verts) > 1:
         n = len(verts)
@@ -228,12 +257,17 @@ def export_motion(motion: Any, bm: Any, folder: str | os.PathLike, name: str,
     frames and the last) and `<name>_final.glb`
     (the last frame with the static `objects` {name: (vertices, faces) or Trimesh}, through trimesh). Returns
     {'npz', 'glb', 'final_glb'} paths; every file is written atomically."""
-    from graspkit.data.formats import save_motion
+    from graspkit.data.formats import check_motion, save_motion
 
     folder = Path(folder)
-    if not name or Path(name).name != name:
+    if not isinstance(name, str) or not name or Path(name).name != name:
         raise ValueError(f"name: expected a plain file stem, got {name!r}")
+    check_motion(motion)                     # everything is checked before the first file is written
+    _check_stride_fps(stride, motion.fps)
+    _check_objects(objects)
     v = motion_vertices(motion, bm)
+    if not np.isfinite(v).all():
+        raise ValueError("motion: its mesh vertices on bm contain NaN or Inf")
     faces = np.asarray(bm.faces, np.int64)
     out = {"npz": save_motion(folder / f"{name}.npz", motion, amass_keys=True),
            "glb": export_sequence_glb(v, faces, folder / f"{name}.glb", fps=motion.fps, objects=objects,
@@ -244,4 +278,6 @@ def export_motion(motion: Any, bm: Any, folder: str | os.PathLike, name: str,
 
 def motion_vertices(motion: Any, bm: Any, chunk: int = 64) -> np.ndarray:
     """Mesh vertices (T,V,3) of a Motion on body model bm as a float32 numpy array."""
+    if motion.num_frames == 0:
+        raise ValueError("motion: has no frames, expected at least one")
     return np.concatenate([v.numpy().astype(np.float32) for _, v in motion.iter_vertices(bm, chunk=chunk)])

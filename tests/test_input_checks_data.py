@@ -1,0 +1,173 @@
+"""Bad input to the sequence readers, writers and exports gives a clear error naming the argument, key or file, and
+nothing is written half-way."""
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+import trimesh
+
+from graspkit import metrics
+from graspkit.data import Motion, load_motion, save_motion
+from graspkit.data.formats import SequenceFileError
+from graspkit.data.grab import GraspSequence, load_grasp_sequence, save_grasp_sequence
+from graspkit.viz.export import export_motion, export_sequence_glb
+
+CLIP = sorted((Path(__file__).resolve().parents[1] / "data_stubs" / "motion" / "reach").glob("*.npz"))[0]
+
+
+@pytest.fixture(scope="module")
+def clip() -> Motion:
+    return load_motion(CLIP).slice(0, 4)
+
+
+def _grasp(T: int = 4, points: bool = True) -> GraspSequence:
+    rng = np.random.default_rng(0)
+    pts = rng.normal(size=(16, 3)) if points else None
+    return GraspSequence(rng.normal(scale=0.3, size=(T, 55, 3)), rng.normal(size=(T, 3)), rng.normal(size=10), 30.0,
+                         "mug", rng.normal(size=(T, 3)), rng.normal(size=(T, 3)), object_points=pts,
+                         object_normals=pts)
+
+
+def _grasp_file(tmp_path: Path, name: str, **replace) -> Path:
+    """A saved grasp sequence with some keys replaced."""
+    good = save_grasp_sequence(tmp_path / "good.npz", _grasp())
+    with np.load(good) as z:
+        arrays = {**dict(z), **replace}
+    np.savez(tmp_path / name, **arrays)
+    return tmp_path / name
+
+
+# ---- Motion.iter_vertices / metrics.motion_quality
+
+@pytest.mark.parametrize("chunk, overlap", [(1, 1), (0, 0), (2, 3)])
+def test_iter_vertices_needs_chunk_above_overlap(bm, clip, chunk, overlap):
+    with pytest.raises(ValueError, match="chunk"):
+        clip.iter_vertices(bm, chunk=chunk, overlap=overlap)
+
+
+def test_motion_quality_chunk_1_is_an_error_not_a_hang(bm, clip):
+    with pytest.raises(ValueError, match="chunk"):
+        metrics.motion_quality(bm, [clip], chunk=1)
+
+
+# ---- GRAB-style grasp files
+
+@pytest.mark.parametrize("rate", [0.0, -30.0, np.nan])
+def test_grasp_file_framerate_must_be_positive(tmp_path, rate):
+    p = _grasp_file(tmp_path, "rate.npz", framerate=np.array(rate))
+    with pytest.raises(SequenceFileError, match=r"rate\.npz: key 'framerate'"):
+        load_grasp_sequence(p)
+
+
+def test_grasp_file_wrong_frame_count_names_key_and_shape(tmp_path):
+    p = _grasp_file(tmp_path, "short.npz", **{"object.params.transl": np.zeros((2, 3), np.float32)})
+    with pytest.raises(SequenceFileError, match=r"short\.npz: key 'object.params.transl' has shape \(2, 3\), "
+                                                r"expected \(4, 3\)"):
+        load_grasp_sequence(p)
+
+
+def test_grasp_file_npy_is_a_clear_error(tmp_path):
+    np.save(tmp_path / "one.npy", np.zeros(3))
+    with pytest.raises(SequenceFileError, match=r"one\.npy: expected an \.npz"):
+        load_grasp_sequence(tmp_path / "one.npy")
+
+
+@pytest.mark.parametrize("key, value", [("object.params.global_orient", np.full((4, 3), np.inf, np.float32)),
+                                        ("body.betas", np.full(10, np.nan, np.float32)),
+                                        ("object.points", np.full((16, 3), np.nan, np.float32))])
+def test_grasp_file_non_finite_values_are_refused(tmp_path, key, value):
+    p = _grasp_file(tmp_path, "nan.npz", **{key: value})
+    with pytest.raises(SequenceFileError, match=rf"nan\.npz: key '{key}' contains NaN"):
+        load_grasp_sequence(p)
+
+
+def test_save_grasp_points_without_normals_writes_nothing(tmp_path):
+    s = _grasp()
+    s.object_normals = None
+    with pytest.raises(ValueError, match="object_normals"):
+        save_grasp_sequence(tmp_path / "pts.npz", s)
+    assert not list(tmp_path.iterdir())
+
+
+# ---- exports and AMASS-style sequence files
+
+def test_export_nan_pose_writes_nothing(bm, clip, tmp_path):
+    bad = Motion(clip.poses.copy(), clip.trans, clip.betas)
+    bad.poses[1, 3, 0] = np.nan
+    with pytest.raises(ValueError, match="poses"):
+        export_motion(bad, bm, tmp_path / "out", "nan", stride=1)
+    with pytest.raises(ValueError, match="poses"):
+        save_motion(tmp_path / "nan.npz", bad)
+    assert not list(tmp_path.rglob("*"))
+
+
+def test_export_sequence_glb_needs_positive_fps_and_stride(tmp_path):
+    v, f = np.zeros((3, 4, 3)), [[0, 1, 2]]
+    with pytest.raises(ValueError, match="fps"):
+        export_sequence_glb(v, f, tmp_path / "f0.glb", fps=0)
+    with pytest.raises(ValueError, match="stride"):
+        export_sequence_glb(v, f, tmp_path / "s0.glb", stride=0)
+    v[1, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="vertices"):
+        export_sequence_glb(v, f, tmp_path / "nan.glb")
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("kwargs, error, message", [
+    (dict(stride=0), ValueError, "stride"),
+    (dict(objects=[np.zeros((3, 3))]), TypeError, "objects"),
+    (dict(objects={"box": "not a mesh"}), ValueError, "box"),
+    (dict(objects={"box": trimesh.Trimesh(np.full((3, 3), np.nan), [[0, 1, 2]], process=False)}), ValueError, "box"),
+])
+def test_export_motion_checks_arguments_before_writing(bm, clip, tmp_path, kwargs, error, message):
+    with pytest.raises(error, match=message):
+        export_motion(clip, bm, tmp_path, "clip", **kwargs)
+    assert not list(tmp_path.iterdir())
+
+
+def test_export_motion_zero_frames_is_a_clear_error(bm, clip, tmp_path):
+    with pytest.raises(ValueError, match="no frames"):
+        export_motion(clip.slice(0, 0), bm, tmp_path, "empty")
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("fps", [0.0, -30.0, np.nan, np.inf])
+def test_motion_and_load_motion_need_positive_fps(clip, fps):
+    with pytest.raises(ValueError, match="fps"):
+        Motion(clip.poses, clip.trans, clip.betas, fps=fps)
+    with pytest.raises(ValueError, match=rf"fps: .*{CLIP.name}"):
+        load_motion(CLIP, fps=fps)
+
+
+def test_file_with_zero_frame_rate_names_the_file(clip, tmp_path):
+    p = save_motion(tmp_path / "m.npz", clip)
+    with np.load(p) as z:
+        np.savez(tmp_path / "rate0.npz", **{**dict(z), "mocap_frame_rate": np.array(0.0)})
+    with pytest.raises(SequenceFileError, match=r"rate0\.npz: key 'mocap_frame_rate'"):
+        load_motion(tmp_path / "rate0.npz")
+
+
+def test_betas_count_matches_num_betas(clip, tmp_path):
+    few = save_motion(tmp_path / "b5.npz", Motion(clip.poses, clip.trans, np.arange(1, 6)), amass_keys=True)
+    many = save_motion(tmp_path / "b16.npz", Motion(clip.poses, clip.trans, np.arange(1, 17)), amass_keys=True)
+    for p, want in ((few, [1, 2, 3, 4, 5, 0, 0, 0, 0, 0]), (many, list(range(1, 11)))):
+        with np.load(p) as z:
+            assert z["betas"].tolist() == want and int(z["num_betas"]) == len(z["betas"]) == 10
+    assert np.array_equal(load_motion(few).betas[:5], np.arange(1, 6))
+
+
+# ---- demo figures
+
+def test_demo_figures_are_saved_atomically(tmp_path, monkeypatch):
+    from graspkit.demo import save_figure
+
+    path = tmp_path / "fig.png"
+    path.write_bytes(b"old")
+    fig = plt.figure()
+    monkeypatch.setattr(fig, "savefig", lambda *a, **k: (_ for _ in ()).throw(RuntimeError("render failed")))
+    with pytest.raises(RuntimeError, match="render failed"):
+        save_figure(fig, path, dpi=50)
+    assert path.read_bytes() == b"old" and [q.name for q in tmp_path.iterdir()] == ["fig.png"]
+    assert save_figure(plt.figure(figsize=(1, 1)), path, dpi=20) == path
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and [q.name for q in tmp_path.iterdir()] == ["fig.png"]

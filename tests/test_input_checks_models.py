@@ -1,0 +1,164 @@
+"""Bad inputs to the model loaders and samplers (GNet, WholeGrasp-VAE, PointNet++, WANDR) and to BodyModel give a
+clear ValueError / TypeError naming the argument or the file, never a deep torch error or a silent NaN answer."""
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from graspkit.body import BodyModel
+from graspkit.body.model import ModelFileError
+from graspkit.eval_wandr import starts_from_meta
+from graspkit.models.gnet import GNet, load_gnet
+from graspkit.models.pointnet2 import PointNet2Encoder
+from graspkit.models.wandr import generate, load_wandr
+from graspkit.models.wholegrasp import WholeGraspVAE, load_wholegrasp
+from graspkit.paths import default_model_path
+
+CK = Path(__file__).resolve().parents[1] / "data_stubs" / "checkpoints"
+NAN = float("nan")
+
+
+# ------------------------------------------------------------------------------------------------ loaders
+def test_load_wholegrasp_names_the_file_of_another_models_checkpoint():
+    with pytest.raises(ValueError, match=r"gnet\.pt: not a WholeGrasp-VAE checkpoint"):
+        load_wholegrasp(CK / "gnet.pt")
+
+
+def test_load_gnet_names_the_file_of_a_foreign_config_or_missing_weights(tmp_path):
+    odd = tmp_path / "odd.pt"
+    torch.save({"kind": "gnet", "config": {"enc_width": 3}, "model": {}}, odd)
+    with pytest.raises(ValueError, match=r"odd\.pt: not a gnet checkpoint.*enc_width"):
+        load_gnet(odd)
+    bare = tmp_path / "bare.pt"
+    torch.save({"kind": "gnet", "config": {}}, bare)
+    with pytest.raises(ValueError, match=r"bare\.pt: not a gnet checkpoint"):
+        load_gnet(bare)
+
+
+# ------------------------------------------------------------------------------------------------ GNet.sample
+@pytest.fixture(scope="module")
+def gnet():
+    torch.manual_seed(0)
+    return GNet().eval()
+
+
+def _gnet_inputs():
+    g = torch.Generator().manual_seed(3)
+    return torch.rand(2, 1024, generator=g), torch.rand(2, 3, generator=g), torch.rand(2, 10, generator=g)
+
+
+def test_gnet_sample_converts_float64_to_the_models_dtype(gnet):
+    bps, ot, be = _gnet_inputs()
+    a = gnet.sample(bps, ot, be, generator=torch.Generator().manual_seed(1))
+    b = gnet.sample(bps.double(), ot.double(), be.double(), generator=torch.Generator().manual_seed(1))
+    for k in a:
+        assert b[k].dtype == torch.float32 and torch.equal(a[k], b[k])
+
+
+def test_gnet_sample_rejects_nan_bad_z_and_unbatched_inputs(gnet):
+    bps, ot, be = _gnet_inputs()
+    with pytest.raises(ValueError, match="bps: contains NaN"):
+        gnet.sample(bps * NAN, ot, be)
+    with pytest.raises(ValueError, match="betas: contains NaN"):
+        gnet.sample(bps, ot, be * NAN)
+    with pytest.raises(ValueError, match=r"z: expected a tensor of shape \(2, 16\)"):
+        gnet.sample(bps, ot, be, z=torch.zeros(2, 8))
+    with pytest.raises(TypeError, match="z: expected a floating-point tensor"):
+        gnet.sample(bps, ot, be, z=torch.zeros(2, 16, dtype=torch.long))
+    with pytest.raises(ValueError, match=r"bps: expected a tensor of shape \(B, 1024\)"):
+        gnet.sample(bps[0], ot[0], be[0])
+
+
+# ------------------------------------------------------------------------------------------------ WholeGrasp-VAE
+@pytest.fixture(scope="module")
+def wholegrasp():
+    torch.manual_seed(0)
+    return WholeGraspVAE().eval()
+
+
+def _cloud(n: int):
+    g = torch.Generator().manual_seed(0)
+    return torch.rand(n, 3, generator=g) * 0.1, torch.nn.functional.normalize(torch.randn(n, 3, generator=g), dim=-1)
+
+
+def test_wholegrasp_sample_rejects_nan_and_too_few_points(wholegrasp):
+    pts, nrm = _cloud(300)
+    bad = pts.clone()
+    bad[5, 1] = NAN
+    with pytest.raises(ValueError, match="object_points: contains NaN"):
+        wholegrasp.sample(bad, nrm)
+    with pytest.raises(ValueError, match="object_normals: contains NaN"):
+        wholegrasp.sample(pts, nrm * NAN)
+    with pytest.raises(ValueError, match="object_height: contains NaN"):
+        wholegrasp.sample(pts, nrm, object_height=NAN)
+    for k in (100, 0):
+        with pytest.raises(ValueError, match=f"object_points: expected at least 256 points.*got {k}"):
+            wholegrasp.sample(pts[:k], nrm[:k])
+
+
+def test_wholegrasp_sample_requires_an_int_n(wholegrasp):
+    pts, nrm = _cloud(300)
+    with pytest.raises(TypeError, match="n: expected an int"):
+        wholegrasp.sample(pts, nrm, n=2.0)
+
+
+def test_pointnet2_group_names_the_minimum_number_of_points():
+    with pytest.raises(ValueError, match="xyz: expected at least 256 points"):
+        PointNet2Encoder(3, norm=False).group(torch.rand(1, 100, 3))
+
+
+# ------------------------------------------------------------------------------------------------ WANDR
+@pytest.fixture(scope="module")
+def wandr():
+    model = load_wandr(CK / "wandr.pt")
+    return model, starts_from_meta(model.meta)[0]
+
+
+def test_wandr_generate_rejects_a_nan_start(wandr):
+    model, st = wandr
+    bad = dataclasses.replace(st, p=st.p.clone())
+    bad.p[5] = NAN
+    with pytest.raises(ValueError, match="start: p contains NaN"):
+        generate(model, bad, torch.tensor([1.0, 0, 1]), 3)
+
+
+def test_wandr_generate_converts_a_float64_start(wandr):
+    model, st = wandr
+    st64 = dataclasses.replace(st, p=st.p.double(), p_prev=st.p_prev.double(), rest=st.rest.double())
+    a = generate(model, st, torch.tensor([1.0, 0, 1]), 3, generator=torch.Generator().manual_seed(0))
+    b = generate(model, st64, torch.tensor([1.0, 0, 1]), 3, generator=torch.Generator().manual_seed(0))
+    assert b.p.dtype == torch.float32 and torch.equal(a.p, b.p)
+
+
+# ------------------------------------------------------------------------------------------------ BodyModel
+@pytest.fixture(scope="module")
+def body():
+    return BodyModel.from_file(default_model_path())
+
+
+def test_forward_rotmats_has_the_checks_of_forward(body):
+    with pytest.raises(ValueError, match="rot_mats: contains NaN"):
+        body.forward_rotmats(torch.full((1, 55, 3, 3), NAN))
+    with pytest.raises(TypeError, match="rot_mats: expected a torch.Tensor"):
+        body.forward_rotmats(np.zeros((1, 55, 3, 3)))
+    with pytest.raises(ValueError, match="rot_mats: expected a batch of at least one body"):
+        body.forward_rotmats(torch.zeros(0, 55, 3, 3))
+    eye = torch.eye(3).expand(1, 55, 3, 3)
+    with pytest.raises(ValueError, match="betas: contains NaN"):
+        body.forward_rotmats(eye, betas=torch.full((1, 10), NAN))
+
+
+def test_from_file_checks_dtype_and_num_betas():
+    with pytest.raises(TypeError, match="dtype: expected a floating-point torch dtype"):
+        BodyModel.from_file(default_model_path(), dtype=torch.int32)
+    with pytest.raises(TypeError, match="num_betas: expected an int"):
+        BodyModel.from_file(default_model_path(), num_betas="10")
+
+
+def test_from_file_names_a_text_file_that_is_not_an_npz(tmp_path):
+    text = tmp_path / "notes.npz"
+    text.write_text("hello\n")
+    with pytest.raises(ModelFileError, match=r"notes\.npz: not an \.npz body model"):
+        BodyModel.from_file(text)
