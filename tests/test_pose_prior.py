@@ -66,3 +66,24 @@ def test_untrained_and_bad_inputs():
     again = PosePrior.from_state(prior.state())
     z = torch.randn(3, 32)
     torch.testing.assert_close(again.decode(z), prior.eval().decode(z))
+
+
+def test_a_changed_seed_or_epoch_count_starts_a_new_run(tmp_path, monkeypatch):
+    """The resumable run is named by every setting and the data (train.run_path), not by --out: training again to the
+    same file with another seed or epoch count gives what a fresh run gives (it used to resume the old run)."""
+    from graspkit.models.pose_prior import train_pose_prior
+    from graspkit.train import load_checkpoint
+
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
+    poses = (0.3 * np.random.default_rng(0).standard_normal((300, 21, 3))).astype(np.float32)
+    weights = lambda p: load_checkpoint(p)["model"]                                 # noqa: E731
+    kw = dict(poses=poses, batch_size=64, progress=False)
+    train_pose_prior(tmp_path / "x.pt", epochs=1, seed=0, **kw)
+    train_pose_prior(tmp_path / "y.pt", epochs=1, seed=1, **kw)
+    train_pose_prior(tmp_path / "x.pt", epochs=1, seed=1, **kw)                     # same --out, another seed
+    a, b = weights(tmp_path / "x.pt"), weights(tmp_path / "y.pt")
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    train_pose_prior(tmp_path / "z.pt", epochs=2, seed=1, **kw)
+    train_pose_prior(tmp_path / "x.pt", epochs=2, seed=1, **kw)                     # more epochs: a fresh 2-epoch run
+    a, c = weights(tmp_path / "x.pt"), weights(tmp_path / "z.pt")
+    assert all(torch.equal(a[k], c[k]) for k in a)

@@ -173,10 +173,13 @@ def train_pose_prior(out: str | Path = POSE_PRIOR_PATH, poses: np.ndarray | None
                      val_fraction: float = 0.05, progress: bool = True, half: bool = True,
                      config: PosePriorConfig | None = None) -> list[dict[str, float]]:
     """Train the prior on `poses` (n, 21, 3) (default: `pose_training_set(n_clips, seed)`) with graspkit.train.fit;
-    the final weights go to `out` (float16 when `half`, a weights-only checkpoint), the run to `out`.run.pt/.csv."""
+    the final weights go to `out` (float16 when `half`, a weights-only checkpoint), the resumable run to
+    graspkit.train.run_path's file (named by every setting and the data, so a changed command starts afresh)."""
     from torch.utils.data import TensorDataset
 
-    from graspkit.train import TrainConfig, fit, save_checkpoint
+    import hashlib
+
+    from graspkit.train import TrainConfig, fit, run_path, save_checkpoint
 
     poses = pose_training_set(n_clips, seed, progress=progress) if poses is None else np.asarray(poses, np.float32)
     x = torch.as_tensor(poses.reshape(-1, 63))
@@ -186,7 +189,8 @@ def train_pose_prior(out: str | Path = POSE_PRIOR_PATH, poses: np.ndarray | None
     torch.manual_seed(seed)
     model = PosePrior(config)
     out = Path(out)
-    run = out.with_name(out.stem + ".run.pt")
+    run = run_path("pose_prior", seed, epochs=epochs, batch_size=batch_size, lr=lr, val_fraction=val_fraction,
+                   config=asdict(model.cfg), data=hashlib.blake2b(x.numpy().tobytes(), digest_size=6).hexdigest())
 
     def step(m: nn.Module, batch: list[Tensor], epoch: int) -> dict[str, Tensor]:
         """One batch of the beta-VAE objective."""

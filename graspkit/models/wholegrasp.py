@@ -510,14 +510,15 @@ def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask:
                      threads: int | None = 1, progress: bool = True, half: bool = True,
                      augment_yaw: bool = False, consistency: str = "paper") -> dict[str, Any]:
     """Train WholeGrasp-VAE (or WholeGrasp-single) on `<root>/grasp_*.npz` (train split; the val split logged)
-    with graspkit.train.fit; write weights-only `out` (compact when `half`: `quantize_state`) and `out`.run.pt/.csv.
+    with graspkit.train.fit; write weights-only `out` (compact when `half`: `quantize_state`); the resumable run is
+    graspkit.train.run_path's file (named by every setting and the data).
     Returns {'history', 'seconds', 'val': reconstruction_metrics on the val split, 'out'}.
 
     As in SAGA (GRAB), the data keep the world orientation: people come to the object from the side they start
     on, so grasps are not spread evenly around it; `augment_yaw` would spread them (not SAGA's setting)."""
     import time
 
-    from graspkit.train import TrainConfig, fit, save_checkpoint
+    from graspkit.train import TrainConfig, fit, run_path, save_checkpoint
 
     if threads:
         torch.set_num_threads(threads)
@@ -537,7 +538,8 @@ def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask:
         return m.loss(batch, m(batch), epoch, epochs)
 
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
-    run = out.with_name(out.stem + ".run.pt")
+    run = run_path("wholegrasp" if multitask else "wholegrasp_single", seed, epochs=epochs, batch_size=batch_size,
+                   lr=lr, config=asdict(model.cfg), augment_yaw=augment_yaw, data=_data_key(root))
     hist = fit(model, step, train, cfg, checkpoint=run, extra={"model_config": asdict(model.cfg)},
                val_dataset=val, progress=progress, time_limit_s=None if time_limit_s is None
                else max(time_limit_s - prep, 0.0))
@@ -552,6 +554,12 @@ def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask:
         state["hand_contact_prior"] = hand_contact_prior(root).half()
     save_checkpoint(out, state)
     return {"history": hist, "seconds": seconds, "val": metrics, "out": out}
+
+
+def _data_key(root: str | Path) -> dict[str, Any]:
+    """What a training run's data are, for its run_path: the folder and its grasp files' names and sizes."""
+    files = sorted(Path(root).glob("grasp_*.npz"))
+    return {"root": str(Path(root).resolve()), "files": [(f.name, f.stat().st_size) for f in files]}
 
 
 def load_wholegrasp(path: str | Path | None = None, multitask: bool = True) -> WholeGraspVAE:
@@ -773,7 +781,7 @@ def train_grabnet_smplx(root: str | Path, out: str | Path | None = None, epochs:
     from graspkit.body import BodyModel
     from graspkit.models.gnet import SparseBody
     from graspkit.paths import default_model_path
-    from graspkit.train import TrainConfig, fit, save_checkpoint
+    from graspkit.train import TrainConfig, fit, run_path, save_checkpoint
     from graspkit.body.markers import saga_markers
 
     if threads:
@@ -799,7 +807,9 @@ def train_grabnet_smplx(root: str | Path, out: str | Path | None = None, epochs:
         return m.loss(batch, m(batch), body, pca, epoch, epochs)
 
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
-    hist = fit(model, step, train, cfg, checkpoint=out.with_name(out.stem + ".run.pt"),
+    run = run_path("grabnet_smplx", seed, epochs=epochs, batch_size=batch_size, lr=lr, config=dict(model.hparams),
+                   augment_yaw=augment_yaw, data=_data_key(root))
+    hist = fit(model, step, train, cfg, checkpoint=run,
                extra={"model_config": dict(model.hparams)}, val_dataset=val, progress=progress,
                time_limit_s=None if time_limit_s is None else max(time_limit_s - (time.perf_counter() - t0), 0.0))
     state = model.state()

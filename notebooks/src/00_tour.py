@@ -36,7 +36,7 @@ fig = pipeline_diagram()
 # | 08, 09 | WANDR: intention features, the CVAE and its rollout; the goal-grid evaluation, time control, waypoints |
 # | 10 | one benchmark for all methods |
 #
-# Conventions used everywhere (see `DESIGN.md`-level notes in `docs/`): the world is **z up, in metres, at 30 fps**;
+# Conventions used everywhere (the design notes are in `docs/`): the world is **z up, in metres, at 30 fps**;
 # the body model's own space is SMPL-X's (y up, facing +z), and the root orientation turns it into the world, as in AMASS.
 
 # %% [markdown]

@@ -262,3 +262,15 @@ t = M.grasp_quality_table(rows)
 print(f"{t['grasps']} grasps: contact ratio {t['contact_ratio']:.2f}, volume mean {t['volume_mean_cm3']:.2f} cm3 "
       f"(max {t['volume_max_cm3']:.2f}), depth mean {t['depth_mean_cm']:.2f} cm (max {t['depth_max_cm']:.2f}), "
       f"feet within 1 cm {100 * t['feet_within_1cm']:.0f} %")
+
+# %% [markdown]
+# ## Exercise
+# 1. The papers give no contact threshold; graspkit uses 2 mm (`GRASP_CONTACT_THRESHOLD`). Recompute the table of
+#    section 7 with `M.grasp_metrics(vb, faces, ob, threshold=...)` at 0.5, 1, 5 and 10 mm: at which threshold does the
+#    contact ratio stop changing, and what does that say about how tightly the synthetic hands close on the object?
+# 2. Each grasp's volume comes from the hand sinking into the object between its vertices. Take the grasp with the
+#    largest volume and draw the body vertices inside the object (`graspkit.objects.signed_distance(vb, ob) < 0`):
+#    which fingers are they on, and would one more millimetre of finger flexion remove them?
+# 3. GOAL Tab. 1 reports GRAB's captured grasps at 1.95 cm³ and SAGA Tab. 2 at 2.04 cm³; the synthetic grasps are
+#    far shallower. Which of the two methods' penetration targets ("≤ 1.15× the ground truth" in graspkit's GOAL
+#    lesson) becomes harder to meet because of that?

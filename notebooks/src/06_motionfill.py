@@ -166,8 +166,11 @@ viz.show_animation(anim)
 # On 96 approach windows of GRAB's six test objects (min of 10 samples for ADE). The baselines are the paper's,
 # rebuilt on our representation and trained for minutes like ours (`graspkit.models.motionfill_baselines`): CNN-AE and
 # PoseNet infill the local motion on the true trajectory, Route+PoseNet predicts the trajectory first; linear
-# interpolation is our extra. Ours is below every baseline on ADE (the best of 10 samples) and on PSKL in both
-# directions. It got there with three measured changes (`docs/saga_motion.md`): LocalMotionFill reads each frame of
+# interpolation is our extra. Compared like for like on ADE (the best of 10 samples), Ours-Local (true trajectory)
+# is below CNN-AE and PoseNet, which also infill on the true trajectory, and Ours below Route+PoseNet, which predicts
+# its own (Ours, with its predicted trajectory, is above PoseNet's true-trajectory figure); on PSKL both of ours are
+# below every paper baseline in both directions (the local linear interpolation, our extra, is lower still on
+# PSKL (P, GT), 0.355, and far higher on PSKL (GT, P), 5.881). It got there with three measured changes (`docs/saga_motion.md`): LocalMotionFill reads each frame of
 # the motion image whole and convolves over time only (LEMO's 3 × 3 kernels slide across neighbouring marker
 # coordinates, and generalised to these held-out objects worse than PoseNet's LSTM); the losses are averaged as in the
 # authors' code; and both decoders give smooth outputs (TrajFill's in its 16 lowest DCT frequencies), which is what

@@ -90,7 +90,7 @@ print(f"codes differ by {100 * float((codes[0] - codes[1]).abs().mean()):.1f} cm
 # and the 99 right-hand-to-object offsets d̂. At test time only the decoder runs, with z ~ N(0, I). The mug is one
 # of the held-out test objects: GNet never saw it during training.
 #
-# An honest caveat: graspkit's GNet was trained with a strong KL weight (λ_KL = 0.3, `docs/goal.md`) on ~2,000
+# An honest caveat: graspkit's GNet was trained with a strong KL weight (λ_KL = 0.3, `docs/goal.md`) on 1,039
 # synthetic grasps, and its latent is nearly collapsed — the samples below differ by millimetres, where GOAL's
 # differ visibly. With weaker KL weights the samples spread out, but then most of them miss the object.
 
@@ -321,7 +321,7 @@ print(f"rollouts ({r['clips']} test clips): reached the true goal {100 * r['to_t
 
 # %% [markdown]
 # **Reading the numbers honestly.** graspkit's networks are tiny (about 0.5 M and 0.6 M parameters against
-# GOAL's ~117 M for MNet), trained for minutes on one CPU thread on a few hundred synthetic clips and ~2,000
+# GOAL's ~117 M for MNet), trained for minutes on one CPU thread on a few hundred synthetic clips and 1,039
 # synthetic grasps of a procedural body (`docs/goal.md` has the commands). The protocols are GOAL's; the figures
 # are not comparable with the paper's in absolute terms, only in how the rows relate to each other. They relate
 # partly as GOAL's: the refinement brings the contact ratio to 1 and the feet onto the floor, and MNet beats its
