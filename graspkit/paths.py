@@ -49,3 +49,17 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def exit_with_parent(parent: int) -> None:
+    """In a worker process: exit as soon as the process `parent` is gone (a parent killed with kill -9 cannot close its
+    pool, whose idle workers would otherwise wait for work forever)."""
+    import threading
+    import time
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="exit-with-parent").start()

@@ -69,3 +69,57 @@ def test_shipped_samples_are_what_the_cli_makes_with_seed_0():
         assert m.num_frames == ref.num_frames and np.array_equal(m.betas, ref.betas.astype(np.float32))
         assert np.abs(m.joint_positions(bm) - ref.joint_positions(bm)).max() < 0.01
         assert (m.goal is not None) == (kind == "reach")
+
+
+def _children(pid: int) -> list[int]:
+    """Live processes whose parent is `pid` (Linux /proc)."""
+    from pathlib import Path
+
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid and fields[0] != "Z":
+            out.append(int(stat.parent.name))
+    return out
+
+
+def test_workers_exit_when_make_is_killed(tmp_path):
+    """kill -9 of `data make` cannot close its process pool; its workers used to wait for work forever."""
+    import os
+    import signal
+    import time
+
+    import pytest
+
+    if not os.path.isdir("/proc/self"):
+        pytest.skip("needs Linux /proc")
+    p = subprocess.Popen([sys.executable, "-m", "graspkit", "data", "make", "--kind", "locomotion", "--n", "40",
+                          "--seed", "4", "--out", str(tmp_path / "k"), "--workers", "2"],
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    workers: list[int] = []
+    for _ in range(120):                                 # until the pool's two workers are up
+        time.sleep(0.25)
+        workers = _children(p.pid)
+        if len(workers) >= 2 and list((tmp_path / "k").glob("*.npz")):
+            break
+    assert len(workers) >= 2
+    os.kill(p.pid, signal.SIGKILL)
+    p.wait()
+
+    def running(w: int) -> bool:             # exited workers may stay as zombies where nothing reaps orphans
+        try:
+            return open(f"/proc/{w}/stat").read().rsplit(")", 1)[1].split()[0] != "Z"
+        except OSError:
+            return False
+
+    for _ in range(40):
+        time.sleep(0.25)
+        if not any(running(w) for w in workers):
+            break
+    alive = [w for w in workers if running(w)]
+    for w in alive:                                      # leave nothing behind if the check fails
+        os.kill(w, signal.SIGKILL)
+    assert not alive

@@ -9,6 +9,7 @@ same command writes the same files whatever the number of workers or interruptio
 from __future__ import annotations
 
 import argparse
+import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
@@ -64,8 +65,13 @@ def clip_path(out: Path, kind: str, index: int) -> Path:
     return out / f"{kind}_{index:06d}.npz"
 
 
-def _init_worker(model: str | None) -> None:
-    """Load the body model once per worker process (and keep torch to one thread per process)."""
+def _init_worker(model: str | None, parent: int | None = None) -> None:
+    """Load the body model once per worker process (and keep torch to one thread per process); a pool's worker
+    (`parent`: the pool's process) exits when that process is gone."""
+    if parent is not None:
+        from graspkit.paths import exit_with_parent
+
+        exit_with_parent(parent)
     import torch
 
     from graspkit.body import BodyModel
@@ -108,7 +114,8 @@ def make_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2, mode
             make_clip(kind, seed, i, str(out))
             bar.update()
     elif todo:
-        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(model,)) as ex:
+        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
+                                 initargs=(model, os.getpid())) as ex:
             futures = [ex.submit(make_clip, kind, seed, i, str(out)) for i in todo]
             for f in as_completed(futures):
                 f.result()

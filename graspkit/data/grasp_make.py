@@ -17,6 +17,7 @@ kept and its file says whether it passed (`grasp.accepted`).
 """
 from __future__ import annotations
 
+import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from functools import lru_cache
 from pathlib import Path
@@ -255,8 +256,13 @@ def write_chunk(fitter: GraspFitter, kind: str, seed: int, chunk: int, out: Path
 _FITTER: GraspFitter | None = None
 
 
-def _init_worker(model: str | None) -> None:
-    """One torch thread per worker; load the body model and the fitter once."""
+def _init_worker(model: str | None, parent: int | None = None) -> None:
+    """One torch thread per worker; load the body model and the fitter once; a pool's worker (`parent`: the pool's
+    process) exits when that process is gone."""
+    if parent is not None:
+        from graspkit.paths import exit_with_parent
+
+        exit_with_parent(parent)
     from graspkit.body import BodyModel
     from graspkit.paths import default_model_path
 
@@ -301,7 +307,8 @@ def make_grasp_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2
         for c in chunks:
             bar.update(_run(kind, seed, c, str(out), n, chunk, objects))
     elif chunks:
-        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker, initargs=(model,)) as ex:
+        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
+                                 initargs=(model, os.getpid())) as ex:
             futures = [ex.submit(_run, kind, seed, c, str(out), n, chunk, objects) for c in chunks]
             for f in as_completed(futures):
                 bar.update(f.result())
