@@ -519,19 +519,13 @@ def figure(rows: list[Row]):
 
 def write_report(rows: list[Row], out_dir: str | Path) -> list[Path]:
     """benchmark.md, benchmark.csv and benchmark.png in out_dir (each written atomically); returns the paths."""
-    import matplotlib.pyplot as plt
-
-    from graspkit.viz.export import write_atomic
+    from graspkit.viz.export import save_png, write_atomic
 
     out = Path(out_dir)
     title = "# graspkit: every method on the same objects and goals\n\n"
     md = write_atomic(out / "benchmark.md", title + markdown(rows))
     cs = write_atomic(out / "benchmark.csv", to_csv(rows))
-    fig = figure(rows)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    png = write_atomic(out / "benchmark.png", buf.getvalue())
+    png = save_png(figure(rows), out / "benchmark.png", dpi=110)
     return [md, cs, png]
 
 

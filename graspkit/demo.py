@@ -12,7 +12,6 @@ A method whose shipped checkpoint is missing is skipped with a message naming th
 """
 from __future__ import annotations
 
-import io
 from functools import lru_cache
 from pathlib import Path
 
@@ -26,7 +25,8 @@ from tqdm import tqdm  # noqa: E402
 
 from graspkit.body import BodyModel  # noqa: E402
 from graspkit.body.poses import body_pose, y_up_to_z_up  # noqa: E402
-from graspkit.paths import DATA_STUBS, default_model_path, write_atomic  # noqa: E402
+from graspkit.paths import DATA_STUBS, default_model_path  # noqa: E402
+from graspkit.viz.export import save_png  # noqa: E402
 from graspkit.viz.style import OBJECT  # noqa: E402
 
 STAGES = ("body", "planner", "saga", "saga_motion", "goal", "wandr")
@@ -34,16 +34,6 @@ CHECKPOINTS = DATA_STUBS / "checkpoints"
 
 DEMO_BODIES = [("t_pose", 0.0), ("a_pose", 0.0), ("walk", 0.0), ("reach_high", 0.0), ("squat", 0.0),
                ("bend_pick", 0.0), ("a_pose", -2.0), ("a_pose", 2.0)]
-
-
-def save_figure(fig: plt.Figure, path: Path, dpi: int) -> Path:
-    """Save fig as a PNG at path atomically (rendered in memory, then a temporary file renamed) and close it."""
-    buf = io.BytesIO()
-    try:
-        fig.savefig(buf, format="png", dpi=dpi)
-    finally:
-        plt.close(fig)
-    return write_atomic(path, buf.getvalue())
 
 
 def load_or_build_body(model_path: Path | None = None) -> BodyModel:
@@ -100,7 +90,7 @@ def _write_clip(bm: BodyModel, motion, out_dir: Path, name: str, objects: dict, 
     anim = animate(v, faces, objects=objs, goals=goals, title=title, max_frames=45, size=2.6)
     paths = [save_animation(anim, out_dir / f"{name}.gif", progress=False)]
     fig = show_scene(meshes=[(v[-1], faces)] + [(ov, of, OBJECT) for ov, of in objs], title=f"{title}: last frame")
-    paths.append(save_figure(fig, out_dir / f"{name}.png", dpi=90))
+    paths.append(save_png(fig, out_dir / f"{name}.png", dpi=90))
     paths += list(export_motion(motion, bm, out_dir, name, objects=objects, stride=3).values())
     return paths, (title, v[-1], objs, goals)
 
@@ -246,7 +236,7 @@ def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, .
         steps.set_postfix_str(stage)
         if stage == "body":
             fig, verts = body_gallery(bm)
-            path = save_figure(fig, out_dir / "body_poses_shapes.png", dpi=110)
+            path = save_png(fig, out_dir / "body_poses_shapes.png", dpi=110)
             faces = bm.faces.numpy()
             scene = {f"body_{k}": (verts[k].numpy(), faces) for k in range(len(verts))}
             written += [path, export_scene(scene, out_dir / "body_poses_shapes.glb")]
@@ -261,5 +251,5 @@ def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, .
         panels.append(panel)
     if panels:
         fig = overview(panels, bm.faces.numpy())
-        written.append(save_figure(fig, out_dir / "pipeline_overview.png", dpi=100))
+        written.append(save_png(fig, out_dir / "pipeline_overview.png", dpi=100))
     return written

@@ -913,15 +913,9 @@ class GoalReacher:
 
     def png(self, dpi: float = 72.0) -> bytes:
         """The figure as PNG bytes."""
-        import io
+        from graspkit.viz.export import png_bytes
 
-        import matplotlib.pyplot as plt
-
-        fig = self.figure()
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=dpi)
-        plt.close(fig)
-        return buf.getvalue()
+        return png_bytes(self.figure(), dpi)
 
     def widget(self) -> Any:  # pragma: no cover - UI only; update / png are tested
         """Sliders for angle, distance, height and time to the goal; the figure in an Image widget; a readout."""

@@ -159,15 +159,15 @@ def test_betas_count_matches_num_betas(clip, tmp_path):
 
 # ---- demo figures
 
-def test_demo_figures_are_saved_atomically(tmp_path, monkeypatch):
-    from graspkit.demo import save_figure
+def test_figures_are_saved_atomically(tmp_path, monkeypatch):
+    from graspkit.viz.export import save_png
 
     path = tmp_path / "fig.png"
     path.write_bytes(b"old")
     fig = plt.figure()
     monkeypatch.setattr(fig, "savefig", lambda *a, **k: (_ for _ in ()).throw(RuntimeError("render failed")))
     with pytest.raises(RuntimeError, match="render failed"):
-        save_figure(fig, path, dpi=50)
+        save_png(fig, path, dpi=50)
     assert path.read_bytes() == b"old" and [q.name for q in tmp_path.iterdir()] == ["fig.png"]
-    assert save_figure(plt.figure(figsize=(1, 1)), path, dpi=20) == path
+    assert save_png(plt.figure(figsize=(1, 1)), path, dpi=20) == path
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and [q.name for q in tmp_path.iterdir()] == ["fig.png"]

@@ -95,17 +95,15 @@ class BodyExplorer:
 
     def widget(self, betas_shown: int = 3, dpi: float = 72.0):  # pragma: no cover - needs a browser; logic is tested
         """An ipywidgets box: sliders for the first betas and the exposed joints, and the redrawn front/side view."""
-        import io
-
         import ipywidgets as w
+
+        from graspkit.viz.export import png_bytes
 
         # an Image widget (PNG bytes) rather than an Output widget: no stray display leaks into the notebook cell
         image = w.Image(format="png")
 
         def redraw() -> None:
-            buf = io.BytesIO()
-            self.figure().savefig(buf, format="png", dpi=dpi)
-            image.value = buf.getvalue()
+            image.value = png_bytes(self.figure(), dpi)
 
         sliders = [w.FloatSlider(value=0, min=-2, max=2, step=0.25, description=f"beta{i}", continuous_update=False)
                    for i in range(betas_shown)]

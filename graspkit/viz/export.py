@@ -76,6 +76,25 @@ def _check_stride_fps(stride: Any, fps: Any) -> None:
         raise ValueError(f"fps: expected a finite frame rate > 0, got {fps}")
 
 
+def png_bytes(fig: Any, dpi: float | None = None) -> bytes:
+    """A matplotlib figure as PNG bytes; the figure is closed (widgets and reports draw a fresh one each time)."""
+    import io
+
+    import matplotlib.pyplot as plt
+
+    buf = io.BytesIO()
+    try:
+        fig.savefig(buf, format="png", dpi=dpi)
+    finally:
+        plt.close(fig)
+    return buf.getvalue()
+
+
+def save_png(fig: Any, path: str | os.PathLike, dpi: float | None = None) -> Path:
+    """Write a matplotlib figure as a PNG atomically (rendered in memory, then a temporary file renamed); closes it."""
+    return write_atomic(Path(path), png_bytes(fig, dpi))
+
+
 def export_scene(meshes: Mapping[str, Any], path: str | os.PathLike, colors: Mapping[str, Any] | None = None,
                  y_up: bool | None = None) -> Path:
     """Write named meshes {name: (vertices (V,3), faces (F,3)) or trimesh.Trimesh} (z-up world) to path

@@ -192,11 +192,10 @@ class HandObjectExplorer:
 
     def widget(self, step: float = 0.005, span: float = 0.1, dpi: float = 72.0) -> Any:  # pragma: no cover - UI only
         """An ipywidgets box: object dropdown, x/y/z sliders (±span m), a yaw slider, the figure and the readout."""
-        import io
-
         import ipywidgets as w
 
         from graspkit.objects import list_objects
+        from graspkit.viz.export import png_bytes
 
         # the figure goes into an Image widget (PNG bytes), not an Output widget: it then shows the same in every
         # front end and executor, and no stray display leaks into the notebook cell
@@ -204,9 +203,7 @@ class HandObjectExplorer:
 
         def redraw(numbers: dict[str, float]) -> None:
             readout.value = f"<b>{self.name}</b>: {self.describe(numbers)}"
-            buf = io.BytesIO()
-            self.figure().savefig(buf, format="png", dpi=dpi)
-            image.value = buf.getvalue()
+            image.value = png_bytes(self.figure(), dpi)
 
         controls: list[Any] = [w.Dropdown(options=list_objects(), value=self.name, description="object")]
         controls += [w.FloatSlider(value=float(self.offset[i]), min=-span, max=span, step=step, description=f"{a} (m)",

@@ -7,7 +7,6 @@ PNG in an ipywidgets Image (as graspkit.viz.object_explorer).
 """
 from __future__ import annotations
 
-import io
 from typing import Any
 
 import numpy as np
@@ -151,9 +150,9 @@ class LatentWalk:
 
     def png(self) -> bytes:
         """The current figure as PNG bytes."""
-        buf = io.BytesIO()
-        self.figure().savefig(buf, format="png")
-        return buf.getvalue()
+        from graspkit.viz.export import png_bytes
+
+        return png_bytes(self.figure())
 
     def widget(self) -> Any:  # pragma: no cover - UI only
         """Sliders for z0..z{dims-1} and the seed, an Image with the figure and a caption."""
