@@ -34,7 +34,7 @@ class GoalResult:
     grasp: Motion                    # the refined GNet grasp (1 frame)
     motion: Motion                   # MNet's rollout from the start to the grasp (up to max_frames)
     reached: bool                    # the rollout met the goal grasp's hand before max_frames
-    metrics: dict[str, float]        # grasp figures of the goal grasp and of the motion's last frame, foot sliding
+    metrics: dict[str, float]        # grasp figures of the goal grasp and of the motion's last frame, sliding, floor
 
 
 def default_start(centre: np.ndarray, distance: float, yaw_offset: float = 0.0) -> Start:
@@ -54,7 +54,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     from graspkit.data.grasp_io import object_collision_grid
     from graspkit.data.reaching import plan_reach
     from graspkit.eval_goal import _body, gnet_goal, sliding
-    from graspkit.metrics import grasp_and_end_figures
+    from graspkit.metrics import floor_figures, grasp_and_end_figures
     from graspkit.models.gnet import load_gnet
     from graspkit.models.mnet import load_mnet, rollout
     from graspkit.objects.bps import bps_basis
@@ -97,5 +97,6 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     grasp, motion = to_motion(goal[0][None], goal[1][None]), to_motion(r.rot6d, r.transl)
     gv, lv = grasp.vertices(bm)[0], motion.vertices(bm)
     slid, pairs = sliding(lv)
-    metrics = {**grasp_and_end_figures(gv, lv[-1], bm.faces, mesh), "frames": float(motion.num_frames), "sliding": slid / max(pairs, 1)}
+    metrics = {**grasp_and_end_figures(gv, lv[-1], bm.faces, mesh), "frames": float(motion.num_frames),
+               "sliding": slid / max(pairs, 1), **floor_figures(lv)}
     return GoalResult(name, pose, mesh, grasp, motion, bool(r.reached), metrics)

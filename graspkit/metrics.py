@@ -120,6 +120,14 @@ def ground_penetration(vertices: Any) -> np.ndarray:
     return (torch.clamp(-_shaped(vertices, "vertices", "T,V,3")[:, :, 2].min(1).values, min=0) + 0.0).double().numpy()
 
 
+def floor_figures(vertices: Any) -> dict[str, float]:
+    """A motion's body against the floor z = 0, vertices (T,V,3): the deepest any vertex goes below it over the clip
+    and the lowest vertex's height at the last frame, in cm (the one-call pipelines report them)."""
+    v = _shaped(vertices, "vertices", "T,V,3")
+    return {"floor_deepest_cm": 100 * float(ground_penetration(v).max()),
+            "end_floor_cm": 100 * float(v[-1, :, 2].min())}
+
+
 def non_collision_score(vertices: Any, floor: float = 0.0) -> np.ndarray:
     """SAGA's non-collision score per frame (T,): the share of the mesh vertices (T,V,3) at or above the ground
     z = floor (SAGA Sec. 4.2: "the number of body mesh vertices above the ground divided by the total")."""

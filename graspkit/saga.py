@@ -38,7 +38,7 @@ class SagaResult:
     start: Motion                    # the start body (1 frame)
     markers: torch.Tensor            # MotionFill's sampled markers (61, 79, 3), world
     foot_contact: torch.Tensor       # MotionFill's foot-contact probabilities (61, 4)
-    metrics: dict[str, float]        # grasp figures of the grasp body and of the motion's last frame, skating
+    metrics: dict[str, float]        # grasp figures of the grasp body and of the motion's last frame, skating, floor
 
 
 def rigid_params(poses: np.ndarray, transl: np.ndarray, betas: np.ndarray, R: np.ndarray, o: np.ndarray, bm
@@ -88,7 +88,7 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     from graspkit.data.motion import canonicalize
     from graspkit.data.motionfill_dataset import make_windows
     from graspkit.eval_motionfill import heel_columns, interp, load_motionfill, skating
-    from graspkit.metrics import grasp_and_end_figures
+    from graspkit.metrics import floor_figures, grasp_and_end_figures
     from graspkit.models.pose_prior import load_pose_prior
     from graspkit.models.wholegrasp import load_wholegrasp
     from graspkit.objects.placement import apply_pose, within_reach_pose
@@ -173,5 +173,5 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     heels = heel_columns()
     metrics = {**grasp_and_end_figures(res.vertices[0], last, bm.faces, mesh),
                "skating_sample": skating(markers_w.double().numpy()[None], np.zeros(1), heels),
-               "skating_opt": skating(fitted[None], np.zeros(1), heels)}
+               "skating_opt": skating(fitted[None], np.zeros(1), heels), **floor_figures(motion.vertices(bm))}
     return SagaResult(name, pose, mesh, res, motion, st, markers_w, smp["contacts"][0], metrics)

@@ -38,6 +38,9 @@ def test_one_call_from_an_object_of_ones_own_to_a_grasp_and_an_approach():
     assert abs(np.hypot(*(pelvis[0, :2] - pose.translation[:2])) - 1.0) < 0.15   # starts 1 m away
     v = r.motion.vertices(bm)
     assert float(v[0, :, 2].min()) == pytest.approx(0.0, abs=0.03)            # standing on the floor
+    low = v[:, :, 2].min(1).values                                                # the floor figures it reports
+    assert r.metrics["end_floor_cm"] == pytest.approx(100 * float(low[-1]), abs=1e-4)
+    assert r.metrics["floor_deepest_cm"] == pytest.approx(100 * max(0.0, -float(low.min())), abs=1e-4)
     assert r.reached and r.motion.num_frames < 120
     hand_end = v[-1].double().numpy()
     assert np.abs(np.linalg.norm(hand_end - gv, axis=-1)).min() < 0.01         # the motion ends in the grasp

@@ -170,3 +170,12 @@ def test_apd_of_equal_samples_is_zero_and_matches_scipy():
     assert M.apd(x[::-1]) == pytest.approx(M.apd(x), rel=1e-12)          # a view with negative strides
     j = x[:, :4]
     assert np.allclose(M.joint_speed(j[::-1])[::-1], M.joint_speed(j))
+
+
+def test_floor_figures_of_a_body_that_sinks_then_rises():
+    """Three frames of a two-vertex body whose lowest vertex is at +1, -2.5 and -0.4 cm: deepest 2.5 cm, end -0.4 cm."""
+    v = np.zeros((3, 2, 3))
+    v[:, 0, 2], v[:, 1, 2] = [0.01, -0.025, -0.004], 0.5
+    f = M.floor_figures(v)
+    assert f["floor_deepest_cm"] == pytest.approx(2.5) and f["end_floor_cm"] == pytest.approx(-0.4)
+    assert M.floor_figures(v[:1])["floor_deepest_cm"] == 0.0                   # never below: 0

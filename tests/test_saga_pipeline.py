@@ -48,6 +48,7 @@ def test_one_call_from_a_new_object_to_a_motion_that_ends_in_the_grasp(bm):
     feet = v[:, :, 2].min(1).values
     assert feet.abs().max() < 0.08                                    # the body stays on the floor (z = 0)
     assert set(r.metrics) >= {"grasp_contact", "end_contact", "end_volume_cm3", "skating_opt"}
+    assert r.metrics["floor_deepest_cm"] == pytest.approx(100 * max(0.0, -float(feet.min())), abs=1e-4)   # reported
     again = synthesize("camera", bm, **kw)
     np.testing.assert_array_equal(again.motion.poses, r.motion.poses)
     with pytest.raises(ValueError, match="name"):
