@@ -60,7 +60,7 @@ def as_object(obj: str | Path | trimesh.Trimesh, argument: str = "obj") -> tuple
 
 
 def _checked(mesh: trimesh.Trimesh, argument: str) -> trimesh.Trimesh:
-    """The mesh checked (finite, closed, outward, no zero-area faces, one solid, metres) and moved to its
+    """The mesh checked (finite, closed, outward, no zero-area faces, solids that do not overlap, metres) and moved to its
     bounding-box centre; vertices no face uses are dropped (they do not change the surface)."""
     if not np.isfinite(mesh.vertices).all():
         raise ValueError(f"{argument}: the mesh has NaN or infinite vertex coordinates")
@@ -97,10 +97,11 @@ def _checked(mesh: trimesh.Trimesh, argument: str) -> trimesh.Trimesh:
 
 
 def solid_problem(mesh: trimesh.Trimesh, samples: int = SOLID_SAMPLES) -> str:
-    """'' if the closed mesh bounds one solid, else what is wrong: the generalized winding number just behind and
-    just in front of `samples` surface points (area-uniform, seed 0) must be 1 and 0. Parts that overlap (2 behind
-    the surface) or a part turned inside out (-1 in front) pass the closed-and-outward checks (the total volume is
-    positive) but give signed distances of the wrong sign; a cavity (an inner surface facing inwards) is fine."""
+    """'' if the closed mesh bounds solids that do not overlap (separate pieces are fine), else what is wrong: the
+    generalized winding number just behind and just in front of `samples` surface points (area-uniform, seed 0)
+    must be 1 and 0. Parts that overlap (2 behind the surface) or a part turned inside out (-1 in front) pass the
+    closed-and-outward checks (the total volume is positive) but give signed distances of the wrong sign; a cavity
+    (an inner surface facing inwards) is fine."""
     samples = min(samples, max(64, SOLID_PAIRS // len(mesh.faces)))      # bounded time on large meshes
     pts, nrm = sample_surface(mesh, samples, seed=0)
     eps = SOLID_OFFSET * float((mesh.bounds[1] - mesh.bounds[0]).max())
