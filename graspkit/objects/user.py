@@ -16,7 +16,7 @@ import torch
 import trimesh
 
 from graspkit.objects.catalogue import list_objects, make_object
-from graspkit.objects.distance import zero_area_faces
+from graspkit.objects.distance import require_closed
 from graspkit.objects.sampling import sample_surface
 from graspkit.objects.sdf import winding_number
 
@@ -74,14 +74,10 @@ def _checked(mesh: trimesh.Trimesh, argument: str) -> trimesh.Trimesh:
                          f"penetration need a closed surface ({hint})")
     if not mesh.is_winding_consistent:
         raise ValueError(f"{argument}: the mesh's faces are not consistently wound (trimesh's fix_winding())")
-    flat = zero_area_faces(torch.as_tensor(mesh.vertices[mesh.faces]))
-    if flat.any():
-        raise ValueError(f"{argument}: {int(flat.sum())} faces have zero area (slivers or repeated corners); signed "
-                         "distances take their sign from face normals, which such faces do not have (remove them "
-                         "with trimesh's update_faces(nondegenerate_faces()) and close the surface again)")
     if not mesh.volume > 0:
         raise ValueError(f"{argument}: the mesh is inside out (negative volume {mesh.volume:.3g}); "
                          "its normals must point outward (trimesh's invert())")
+    require_closed(torch.as_tensor(mesh.vertices), torch.as_tensor(mesh.faces), argument)   # and no zero-area faces
     side = float((mesh.bounds[1] - mesh.bounds[0]).max())
     if not MIN_SIDE <= side <= MAX_SIDE:
         hint = ("; in metres that is larger than a hand-held object: a mesh in millimetres needs apply_scale(0.001), "
