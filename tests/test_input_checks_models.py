@@ -1,5 +1,6 @@
 """Bad inputs to the model loaders and samplers (GNet, WholeGrasp-VAE, PointNet++, WANDR) and to BodyModel give a
 clear ValueError / TypeError naming the argument or the file, never a deep torch error or a silent NaN answer."""
+import copy
 import dataclasses
 from pathlib import Path
 
@@ -130,6 +131,10 @@ def test_wandr_generate_converts_a_float64_start(wandr):
     a = generate(model, st, torch.tensor([1.0, 0, 1]), 3, generator=torch.Generator().manual_seed(0))
     b = generate(model, st64, torch.tensor([1.0, 0, 1]), 3, generator=torch.Generator().manual_seed(0))
     assert b.p.dtype == torch.float32 and torch.equal(a.p, b.p)
+    m64 = copy.deepcopy(model).double()                    # a model the caller converted: rolls out in float64
+    c = generate(m64, st64, torch.tensor([1.0, 0, 1]), 3, generator=torch.Generator().manual_seed(0))
+    assert c.p.dtype == torch.float64 and torch.isfinite(c.p).all()      # (its z draws are float64 ones: other
+    assert torch.equal(c.p[:, 0], st64.p[None])                               #  samples than a's; the same start)
 
 
 # ------------------------------------------------------------------------------------------------ BodyModel

@@ -374,6 +374,8 @@ def generate(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal:
     frames + 1 poses, the start included); floor: `rollout`'s floor constraint (None: off, as the paper)."""
     model.eval()
     pp, p0, rest, g, idx = expand_starts(start, goal, n)
+    dtype = model.decoder[0].weight.dtype                  # float32 unless the caller converted the model
+    pp, p0, rest, g = (x.to(dtype) for x in (pp, p0, rest, g))
     tg = torch.as_tensor(t_goal)
     if tg.dim() > 1 or (tg.dim() == 1 and len(tg) != int(idx[:, 1].max()) + 1):
         raise ValueError(f"t_goal: expected a frame or one per goal, got shape {tuple(tg.shape)}")
