@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from graspkit.data.motion import HANDS, Motion
+from graspkit.data.motion import HANDS, Motion, check_fps
 from graspkit.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
 
 FPS = 30.0
@@ -77,8 +77,7 @@ def check_motion(motion: Motion) -> None:
         raise TypeError(f"motion: expected a graspkit.data.Motion, got {type(motion).__name__}")
     if motion.num_frames == 0:
         raise ValueError("motion: has no frames, expected at least one")
-    if not (np.isfinite(motion.fps) and motion.fps > 0):
-        raise ValueError(f"motion.fps: expected a finite positive frame rate, got {motion.fps}")
+    check_fps(motion.fps, "motion.fps")
     for key in ("poses", "trans", "betas", "goal"):
         a = getattr(motion, key)
         if a is not None and not np.isfinite(a).all():
@@ -137,9 +136,8 @@ def to_smplx_poses(poses: np.ndarray, path: Path | str = "<array>") -> np.ndarra
 def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
     """Read an AMASS-style (graspkit, AMASS SMPL-X or SMPL-H) or CIRCLE-style .npz; resample to `fps` (None: keep)."""
     path = Path(path)
-    if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating))
-                            or not (np.isfinite(fps) and fps > 0)):
-        raise ValueError(f"fps: expected a finite positive frame rate or None to read {path}, got {fps!r}")
+    if fps is not None:
+        check_fps(fps, where=f" (or None) to read {path}")
     if not path.is_file():
         raise SequenceFileError(f"{path}: no such sequence file")
     try:

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from graspkit.data.formats import SequenceFileError, resample, write_npz_atomic
+from graspkit.data.motion import check_fps
 
 BODY_PARTS = (("global_orient", 0, 1), ("body_pose", 1, 22), ("jaw_pose", 22, 23), ("leye_pose", 23, 24),
               ("reye_pose", 24, 25), ("left_hand_pose", 25, 40), ("right_hand_pose", 40, 55))
@@ -113,8 +114,7 @@ def to_arrays(seq: GraspSequence, model: str = "graspkit procedural SMPLX_NEUTRA
 def save_grasp_sequence(path: str | os.PathLike, seq: GraspSequence) -> Path:
     """Write a GraspSequence as a GRAB-style .npz without pickle, atomically (equal content gives equal bytes)."""
     path = Path(path)
-    if not (np.isfinite(seq.fps) and seq.fps > 0):
-        raise ValueError(f"seq.fps: expected a finite positive frame rate, got {seq.fps}")
+    check_fps(seq.fps, "seq.fps")
     a = to_arrays(seq)
     for key in ("body.params.fullpose", "body.params.transl", "body.betas", "object.params.transl",
                 "object.params.global_orient", "object.points", "object.normals"):
@@ -175,9 +175,8 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
     hands_mean (90,): added to the hand poses of files that store them relative to the hand mean (real GRAB;
     graspkit's own files say `body.flat_hand_mean` = True and are never changed)."""
     path = Path(path)
-    if fps is not None and (isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating))
-                            or not (np.isfinite(fps) and fps > 0)):
-        raise ValueError(f"fps: expected a finite positive frame rate or None, got {fps!r}")
+    if fps is not None:
+        check_fps(fps, where=" (or None)")
     a = read_arrays(path, allow_pickle)
 
     def get(key: str) -> np.ndarray:

@@ -19,6 +19,16 @@ CONTACT_NAMES = ("left_heel", "left_toe", "right_heel", "right_toe")
 HANDS = ("right", "left")
 
 
+def check_fps(fps: object, name: str = "fps", where: str = "") -> float:
+    """fps as a float after checking it is a finite frame rate > 0 (TypeError / ValueError naming `name`; `where`
+    ends the message, e.g. ' to read <file>')."""
+    if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name}: expected a number (frames per second){where}, got {type(fps).__name__}")
+    if not (np.isfinite(fps) and fps > 0):
+        raise ValueError(f"{name}: expected a finite positive frame rate{where}, got {fps!r}")
+    return float(fps)
+
+
 @dataclass
 class Motion:
     """poses (T,55,3) axis-angle, trans (T,3), betas (10,), fps; contacts (T,4) bool [l heel, l toe, r heel, r toe];
@@ -39,11 +49,7 @@ class Motion:
         self.trans = np.asarray(self.trans, np.float32).reshape(-1, 3)
         self.betas = np.asarray(self.betas, np.float32).reshape(-1)
         T = len(self.poses)
-        if isinstance(self.fps, bool) or not isinstance(self.fps, (int, float, np.integer, np.floating)):
-            raise TypeError(f"fps: expected a number (frames per second), got {type(self.fps).__name__}")
-        if not (np.isfinite(self.fps) and self.fps > 0):
-            raise ValueError(f"fps: expected a finite positive frame rate, got {self.fps}")
-        self.fps = float(self.fps)
+        self.fps = check_fps(self.fps)
         if len(self.trans) != T:
             raise ValueError(f"trans: {len(self.trans)} frames, poses has {T}")
         if self.contacts is not None:

@@ -70,10 +70,9 @@ def _check_stride_fps(stride: Any, fps: Any) -> None:
         raise TypeError(f"stride: expected an integer >= 1, got {type(stride).__name__}")
     if stride < 1:
         raise ValueError(f"stride: expected an integer >= 1, got {stride}")
-    if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)):
-        raise TypeError(f"fps: expected a number, got {type(fps).__name__}")
-    if not (np.isfinite(fps) and fps > 0):
-        raise ValueError(f"fps: expected a finite frame rate > 0, got {fps}")
+    from graspkit.data.motion import check_fps
+
+    check_fps(fps)
 
 
 def png_bytes(fig: Any, dpi: float | None = None) -> bytes:
