@@ -105,6 +105,25 @@ def test_wholegrasp_sample_requires_an_int_n(wholegrasp):
         wholegrasp.sample(pts, nrm, n=2.0)
 
 
+def test_grabnet_smplx_sample_checks_its_inputs_and_samples_a_good_cloud():
+    from graspkit.models.wholegrasp import GrabNetSMPLX
+    torch.manual_seed(0)
+    model = GrabNetSMPLX().eval()
+    pts, nrm = _cloud(300)
+    out = model.sample(pts, nrm, 0.8, n=3, generator=torch.Generator().manual_seed(0))
+    assert out.shape == (3, GrabNetSMPLX.n_params) and torch.isfinite(out).all()
+    with pytest.raises(ValueError, match="points: contains NaN"):
+        model.sample(pts * NAN, nrm, 0.8, n=1)
+    with pytest.raises(ValueError, match="height: contains NaN"):
+        model.sample(pts, nrm, NAN, n=1)
+    with pytest.raises(ValueError, match=r"normals: expected shape \(300, 3\)"):
+        model.sample(pts, nrm[:, :2], 0.8, n=1)
+    with pytest.raises(ValueError, match="points: expected at least 256 points.*got 10"):
+        model.sample(pts[:10], nrm[:10], 0.8, n=1)
+    with pytest.raises(ValueError, match="n: expected at least one sample, got 0"):
+        model.sample(pts, nrm, 0.8, n=0)
+
+
 def test_pointnet2_group_names_the_minimum_number_of_points():
     with pytest.raises(ValueError, match="xyz: expected at least 256 points"):
         PointNet2Encoder(3, norm=False).group(torch.rand(1, 100, 3))

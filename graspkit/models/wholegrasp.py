@@ -328,20 +328,8 @@ class WholeGraspVAE(nn.Module):
         The object frame is the world translated to the object centre (default: the centre of the points'
         bounding box, SAGA A.3); `object_height` defaults to the centre's height. z ~ N(0, I) from `generator`.
         """
-        self._check("object_points", object_points, (None, 3))
-        self._check("object_normals", object_normals, tuple(object_points.shape))
-        least = self.obj_dec.sa[0].npoint
-        if len(object_points) < least:
-            raise ValueError(f"object_points: expected at least {least} points (PointNet++'s first level samples "
-                             f"{least} centres), got {len(object_points)}")
-        for name, x in (("object_points", object_points), ("object_normals", object_normals),
-                        ("object_height", object_height), ("centre", centre)):
-            if x is not None and not torch.isfinite(torch.as_tensor(x, dtype=torch.float32)).all():
-                raise ValueError(f"{name}: contains NaN or Inf")
-        if isinstance(n, bool) or not isinstance(n, int):
-            raise TypeError(f"n: expected an int number of samples, got {n!r}")
-        if n < 1:
-            raise ValueError(f"n: expected at least one sample, got {n}")
+        check_sample_inputs(object_points, object_normals, n, self.obj_dec.sa[0].npoint,
+                            object_height=object_height, centre=centre)
         was = self.training
         self.eval()
         dev = self.out_markers.weight.device
@@ -600,6 +588,24 @@ class HandPCA:
         return coeffs @ self.comps[side] + self.mean[side]
 
 
+def check_sample_inputs(points: Tensor, normals: Tensor, n: int, least: int, names: tuple[str, str] =
+                        ("object_points", "object_normals"), **extra: Any) -> None:
+    """ValueError/TypeError naming the argument unless points, normals are (P>=least, 3) finite tensors, n a
+    positive int and each `extra` value (a float, a tensor or None) finite."""
+    WholeGraspVAE._check(names[0], points, (None, 3))
+    WholeGraspVAE._check(names[1], normals, tuple(points.shape))
+    if len(points) < least:
+        raise ValueError(f"{names[0]}: expected at least {least} points (PointNet++'s first level samples "
+                         f"{least} centres), got {len(points)}")
+    for name, x in ((names[0], points), (names[1], normals), *extra.items()):
+        if x is not None and not torch.isfinite(torch.as_tensor(x, dtype=torch.float32)).all():
+            raise ValueError(f"{name}: contains NaN or Inf")
+    if isinstance(n, bool) or not isinstance(n, int):
+        raise TypeError(f"n: expected an int number of samples, got {n!r}")
+    if n < 1:
+        raise ValueError(f"n: expected at least one sample, got {n}")
+
+
 def params_to_rotmats(x: Tensor, pca: HandPCA) -> tuple[Tensor, Tensor, Tensor]:
     """GrabNet-SMPLX's parameter vector (B, 193) = [transl 3, root 6D, betas 10, body 21x6D, left 24, right 24]
     -> rotation matrices (B, 55, 3, 3), betas (B, 10), transl (B, 3) (jaw and eyes at rest)."""
@@ -681,6 +687,7 @@ class GrabNetSMPLX(nn.Module):
     def sample(self, points: Tensor, normals: Tensor, height: float, n: int,
                generator: torch.Generator | None = None) -> Tensor:
         """n parameter vectors (n, 193) for one object (points, normals (P,3) in the object frame)."""
+        check_sample_inputs(points, normals, n, self.obj_dec.sa[0].npoint, ("points", "normals"), height=height)
         was = self.training
         self.eval()
         z = torch.randn(n, self.hparams["latent"], generator=generator)
