@@ -199,3 +199,8 @@ def test_errors_name_the_argument():
         I.intention(torch.zeros(3), torch.zeros(3), torch.tensor(0.0), torch.zeros(2), torch.tensor(1.0))
     with pytest.raises(ValueError, match="rest"):
         I.body_joints(torch.zeros(135), torch.zeros(21, 3))
+
+
+def test_a_nan_time_left_is_refused_not_read_as_goal_time_passed():
+    with pytest.raises(ValueError, match="time_left: contains NaN"):
+        _I([0.0, 0.0, 1.0], [0.0, 0.0, 0.9], 0.0, [2.0, 1.0, 1.0], float("nan"))
