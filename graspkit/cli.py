@@ -291,7 +291,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if getattr(args, "seed", None) is not None and not 0 <= args.seed < 2**63:
             raise ValueError(f"--seed: expected a non-negative integer below 2^63, got {args.seed}")
-        for flag in ("threads", "epochs", "batch_size", "workers"):
+        for flag in ("threads", "epochs", "batch_size", "workers", "n", "chunk"):
             if getattr(args, flag, None) is not None and getattr(args, flag) < 1:
                 raise ValueError(f"--{flag.replace('_', '-')}: expected an integer >= 1, got {getattr(args, flag)}")
         if getattr(args, "out", None) is not None:
@@ -300,6 +300,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, OSError) as e:      # OSError: FileNotFoundError, a folder that cannot be written, ...
         print(f"graspkit: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("graspkit: interrupted (data make and train pick up where they stopped when run again)", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -90,7 +90,7 @@ def test_out_paths_that_cannot_be_written_and_bad_seeds_fail_before_any_work(tmp
 
 
 def test_bad_counts_seeds_and_folder_outs_are_named_before_any_work(tmp_path, capsys):
-    """Thread, epoch and batch counts below one, a seed past 2^63 and an --out that is a file where a command writes
+    """Thread, epoch, batch, clip and chunk counts below one, a bad body-model file, a seed past 2^63 and an --out that is a file where a command writes
     a folder: exit code 2 and the option named, nothing written (a training run with --epochs 0 used to write an
     untrained checkpoint over --out)."""
     from graspkit.cli import main
@@ -104,7 +104,13 @@ def test_bad_counts_seeds_and_folder_outs_are_named_before_any_work(tmp_path, ca
                           (("train", "wandr", "--batch-size", "0", "--out", str(tmp_path / "w.pt")),
                            "--batch-size: expected an integer >= 1"),
                           (("wandr", "--goal", "1", "0", "1", "--out", str(tmp_path / "clip.pt")),
-                           "clip.pt is a file; expected a folder")):
+                           "clip.pt is a file; expected a folder"),
+                          (("data", "make", "--kind", "reach", "--n", "0", "--out", str(tmp_path / "d")),
+                           "--n: expected an integer >= 1"),
+                          (("data", "make", "--kind", "grasp", "--chunk", "0", "--out", str(tmp_path / "d")),
+                           "--chunk: expected an integer >= 1"),
+                          (("data", "make", "--kind", "reach", "--model", str(tmp_path / "clip.pt"), "--out",
+                            str(tmp_path / "d")), "--model: ")):
         assert main(list(args)) == 2, args
         assert message in capsys.readouterr().err, args
     assert sorted(p.name for p in tmp_path.iterdir()) == ["clip.pt"]

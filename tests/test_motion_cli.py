@@ -123,3 +123,26 @@ def test_workers_exit_when_make_is_killed(tmp_path):
     for w in alive:                                      # leave nothing behind if the check fails
         os.kill(w, signal.SIGKILL)
     assert not alive
+
+
+def test_ctrl_c_stops_make_with_workers_at_once(tmp_path):
+    """Ctrl-C (SIGINT to the process group, as a terminal sends it) used to let the pool run every queued clip."""
+    import os
+    import signal
+    import time
+
+    out = tmp_path / "c"
+    p = subprocess.Popen([sys.executable, "-m", "graspkit", "data", "make", "--kind", "locomotion", "--n", "400",
+                          "--seed", "4", "--out", str(out), "--workers", "2", "--quiet"],
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+    for _ in range(240):                                 # until the pool has written a few clips
+        time.sleep(0.25)
+        if len(list(out.glob("*.npz"))) >= 2:
+            break
+    os.killpg(p.pid, signal.SIGINT)
+    err = p.communicate(timeout=60)[1].decode()
+    n = len(list(out.glob("*.npz")))
+    assert p.returncode == 130 and "interrupted" in err, err
+    assert 2 <= n < 100, n                               # the queued clips were cancelled, not run
+    for f in out.glob("*.npz"):                          # and what is there loads
+        load_motion(f)

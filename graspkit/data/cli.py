@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import argparse
 import os
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import numpy as np
+
+from graspkit.paths import pool_results
 
 KINDS = ("locomotion", "reach", "reach_far")   # reach_far: room-scale CIRCLE-style tasks (WANDR's grid)
 GRASP_KINDS = ("grasp", "approach")          # graspkit.data.grasp_make (chunked, batched grasp fitting)
@@ -51,8 +52,12 @@ def check_model(model: str | None) -> None:
     """Load the body-model file once here, so a bad --model fails with its own error before any worker starts."""
     if model is not None:
         from graspkit.body import BodyModel
+        from graspkit.body.model import ModelFileError
 
-        BodyModel.from_file(model)
+        try:
+            BodyModel.from_file(model)
+        except ModelFileError as e:
+            raise ValueError(f"--model: {e}") from None
 
 
 def clip_seed(seed: int, kind: str, index: int) -> int:
@@ -100,8 +105,10 @@ def make_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2, mode
 
     if kind not in KINDS:
         raise ValueError(f"kind: expected one of {KINDS}, got {kind!r}")
-    if n < 0 or workers < 1:
-        raise ValueError(f"n / workers: expected n >= 0 and workers >= 1, got {n} / {workers}")
+    if n < 0:
+        raise ValueError(f"n: expected a number of clips >= 0, got {n}")
+    if workers < 1:
+        raise ValueError(f"workers: expected at least one worker process, got {workers}")
     out = Path(out)
     check_model(model)
     out.mkdir(parents=True, exist_ok=True)
@@ -114,12 +121,9 @@ def make_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2, mode
             make_clip(kind, seed, i, str(out))
             bar.update()
     elif todo:
-        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
-                                 initargs=(model, os.getpid())) as ex:
-            futures = [ex.submit(make_clip, kind, seed, i, str(out)) for i in todo]
-            for f in as_completed(futures):
-                f.result()
-                bar.update()
+        for _ in pool_results([(make_clip, (kind, seed, i, str(out))) for i in todo], workers, _init_worker,
+                              (model, os.getpid())):
+            bar.update()
     bar.close()
     return [clip_path(out, kind, i) for i in range(n)]
 

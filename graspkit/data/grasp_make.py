@@ -18,7 +18,6 @@ kept and its file says whether it passed (`grasp.accepted`).
 from __future__ import annotations
 
 import os
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from functools import lru_cache
 from pathlib import Path
 
@@ -35,6 +34,7 @@ from graspkit.objects.catalogue import make_object
 from graspkit.objects.contact import OBJECT_CONTACT_THRESHOLD, marker_contact
 from graspkit.objects.distance import nearest_neighbours, point_mesh_distance
 from graspkit.objects.placement import ObjectPose, apply_pose
+from graspkit.paths import pool_results
 from graspkit.rotations import axis_angle_to_matrix
 
 KINDS = ("grasp", "approach")
@@ -290,8 +290,9 @@ def make_grasp_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2
 
     if kind not in KINDS:
         raise ValueError(f"kind: expected one of {KINDS}, got {kind!r}")
-    if n < 0 or workers < 1 or chunk < 1:
-        raise ValueError(f"n / workers / chunk: expected n >= 0, workers >= 1, chunk >= 1, got {n} / {workers} / {chunk}")
+    for name, value, least in (("n", n, 0), ("workers", workers, 1), ("chunk", chunk, 1)):
+        if value < least:
+            raise ValueError(f"{name}: expected an integer >= {least}, got {value}")
     out = Path(out)
     from graspkit.data.cli import check_model, claim_folder
 
@@ -307,10 +308,8 @@ def make_grasp_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2
         for c in chunks:
             bar.update(_run(kind, seed, c, str(out), n, chunk, objects))
     elif chunks:
-        with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
-                                 initargs=(model, os.getpid())) as ex:
-            futures = [ex.submit(_run, kind, seed, c, str(out), n, chunk, objects) for c in chunks]
-            for f in as_completed(futures):
-                bar.update(f.result())
+        for k in pool_results([(_run, (kind, seed, c, str(out), n, chunk, objects)) for c in chunks], workers,
+                              _init_worker, (model, os.getpid())):
+            bar.update(k)
     bar.close()
     return [file_path(out, kind, i) for i in range(n)]

@@ -32,7 +32,8 @@ def check_fps(fps: object, name: str = "fps", where: str = "") -> float:
 @dataclass
 class Motion:
     """poses (T,55,3) axis-angle, trans (T,3), betas (10,), fps; contacts (T,4) bool [l heel, l toe, r heel, r toe];
-    for reaching clips the goal (3,) (world, m), the frame goal_frame at which `hand`'s wrist is on it."""
+    for reaching clips the goal (3,) (world, m), the frame goal_frame at which `hand`'s wrist is on it
+    (a floor goal: the wrist FLOOR_WRIST, scaled with the body, above it)."""
 
     poses: np.ndarray
     trans: np.ndarray

@@ -312,7 +312,8 @@ def generate_reach(seed: int, bm, betas: np.ndarray | None = None, far: bool = F
                    seed=plan_seed, bm=bm, hold_frames=task.hold_frames, style=style, gait=gait,
                    v_pref=FAR_MIN_SPEED if far else v_pref)
     # a goal this body cannot reach (too high for a short person, too low for a stiff one) becomes the point the
-    # wrist did reach: the stored goal is always where the hand is at the goal frame
+    # wrist did reach: the stored goal is where the hand is at the goal frame (a floor goal stays on the floor, the wrist
+    # FLOOR_WRIST, scaled, above it)
     wrist = m.joint_positions(bm)[m.goal_frame, JOINT_INDEX["right_wrist"]]
     target = np.array([m.goal[0], m.goal[1], max(m.goal[2], FLOOR_WRIST * build_rig(bm, m.betas).scale)])
     if np.linalg.norm(wrist - target) > 0.01:
