@@ -105,10 +105,9 @@ def make_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2, mode
 
     if kind not in KINDS:
         raise ValueError(f"kind: expected one of {KINDS}, got {kind!r}")
-    if n < 0:
-        raise ValueError(f"n: expected a number of clips >= 0, got {n}")
-    if workers < 1:
-        raise ValueError(f"workers: expected at least one worker process, got {workers}")
+    for name, value, least in (("n", n, 0), ("workers", workers, 1)):
+        if value < least:
+            raise ValueError(f"{name}: expected an integer >= {least}, got {value}")
     out = Path(out)
     check_model(model)
     out.mkdir(parents=True, exist_ok=True)
