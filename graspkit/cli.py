@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -124,6 +125,8 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
     from graspkit.demo import _write_clip, load_or_build_body
     from graspkit.viz.scene import sphere
 
+    if not all(math.isfinite(v) for v in args.goal):
+        raise ValueError(f"--goal: expected three finite numbers X Y Z (m), got {' '.join(map(str, args.goal))}")
     if not 0 < args.seconds <= 30:
         raise ValueError(f"--seconds: expected a time to the goal in (0, 30] s, got {args.seconds}")
     frames = int(round(args.seconds * 30.0))

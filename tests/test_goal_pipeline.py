@@ -66,5 +66,7 @@ def test_goal_and_wandr_commands_name_bad_arguments(tmp_path, capsys):
     assert "unknown object 'teapot'" in capsys.readouterr().err
     assert main(["wandr", "--goal", "1", "0", "1", "--seconds", "0", "--out", str(tmp_path)]) == 2
     assert "seconds" in capsys.readouterr().err
+    assert main(["wandr", "--goal", "1", "nan", "1", "--out", str(tmp_path)]) == 2
+    assert "--goal: expected three finite numbers X Y Z (m), got 1.0 nan 1.0" in capsys.readouterr().err
     assert main(["wandr", "--goal", "1", "0", "1", "--checkpoint", str(tmp_path / "none.pt")]) == 2
     assert "checkpoint" in capsys.readouterr().err
