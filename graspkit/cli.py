@@ -50,19 +50,40 @@ def _check_object(obj: str) -> None:
         as_object(obj, "--object")
 
 
-def _cmd_saga(args: argparse.Namespace) -> int:
-    """`graspkit saga --object NAME|MESH`: SAGA end to end (object -> grasp -> motion) with the shipped checkpoints."""
+def _object_pose(at: list[float] | None):
+    """--at X Y Z YAW_DEG -> an ObjectPose (None stays None: drawn from --seed); ValueError naming --at."""
     import numpy as np
 
-    from graspkit.demo import _write_clip, load_or_build_body
     from graspkit.objects.placement import ObjectPose
+
+    if at is None:
+        return None
+    if not all(math.isfinite(v) for v in at):
+        raise ValueError(f"--at: expected four finite numbers X Y Z YAW_DEG, got {' '.join(map(str, at))}")
+    return ObjectPose.from_yaw(np.deg2rad(at[3]), np.array(at[:3]))
+
+
+def _free_joints(names: list[str]) -> tuple[str, ...]:
+    """--free-joints -> GraspPoseConfig.free_joints, checked before any work; ValueError naming the option."""
+    from graspkit.body.skeleton import JOINT_NAMES
     from graspkit.optim.grasppose import expand_free_joints
+
+    joints, body = expand_free_joints(names), JOINT_NAMES[1:22]
+    if any(n not in body for n in joints) or len(set(joints)) != len(joints):
+        raise ValueError(f"--free-joints: expected 'arms', 'none' or distinct body-joint names of {body}, "
+                         f"got {' '.join(names)}")
+    return joints
+
+
+def _cmd_saga(args: argparse.Namespace) -> int:
+    """`graspkit saga --object NAME|MESH`: SAGA end to end (object -> grasp -> motion) with the shipped checkpoints."""
+    from graspkit.demo import _write_clip, load_or_build_body
     from graspkit.saga import synthesize
 
     _check_object(args.object)
-    pose = None if args.at is None else ObjectPose.from_yaw(np.deg2rad(args.at[3]), np.array(args.at[:3]))
+    pose, free_joints = _object_pose(args.at), _free_joints(args.free_joints)
     bm = load_or_build_body(args.model)
-    r = synthesize(args.object, bm, object_pose=pose, seed=args.seed, free_joints=expand_free_joints(args.free_joints))
+    r = synthesize(args.object, bm, object_pose=pose, seed=args.seed, free_joints=free_joints)
     args.out.mkdir(parents=True, exist_ok=True)
     paths, _ = _write_clip(bm, r.motion, args.out, f"saga_{r.name}_s{args.seed}", {r.name: r.mesh},
                            f"SAGA: {r.name}")
@@ -74,14 +95,11 @@ def _cmd_saga(args: argparse.Namespace) -> int:
 
 def _cmd_goal(args: argparse.Namespace) -> int:
     """`graspkit goal --object NAME|MESH`: GOAL end to end (GNet grasp + refinement, MNet approach)."""
-    import numpy as np
-
     from graspkit.demo import _write_clip, load_or_build_body
     from graspkit.goal import synthesize
-    from graspkit.objects.placement import ObjectPose
 
     _check_object(args.object)
-    pose = None if args.at is None else ObjectPose.from_yaw(np.deg2rad(args.at[3]), np.array(args.at[:3]))
+    pose = _object_pose(args.at)
     r = synthesize(args.object, object_pose=pose, seed=args.seed, max_frames=args.max_frames)
     bm = load_or_build_body(args.model)
     args.out.mkdir(parents=True, exist_ok=True)

@@ -68,5 +68,12 @@ def test_goal_and_wandr_commands_name_bad_arguments(tmp_path, capsys):
     assert "seconds" in capsys.readouterr().err
     assert main(["wandr", "--goal", "1", "nan", "1", "--out", str(tmp_path)]) == 2
     assert "--goal: expected three finite numbers X Y Z (m), got 1.0 nan 1.0" in capsys.readouterr().err
+    for cmd, extra, message in (("saga", ["--at", "1", "0", "nan", "0"], "--at: expected four finite numbers"),
+                                ("goal", ["--at", "1", "0", "inf", "0"], "--at: expected four finite numbers"),
+                                ("saga", ["--free-joints", "knee"], "--free-joints: expected 'arms', 'none' or distinct"),
+                                ("saga", ["--free-joints", "arms", "left_elbow"], "got arms left_elbow")):
+        assert main([cmd, "--object", "mug", *extra, "--out", str(tmp_path / "x")]) == 2
+        assert message in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
     assert main(["wandr", "--goal", "1", "0", "1", "--checkpoint", str(tmp_path / "none.pt")]) == 2
     assert "checkpoint" in capsys.readouterr().err
