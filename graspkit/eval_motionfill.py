@@ -32,6 +32,7 @@ import torch
 from graspkit.data.motionfill_dataset import (MotionFillDataset, MotionFillStats, load_windows, make_windows,
                                               save_windows, split_clips)
 from graspkit.models.motionfill import MotionFillConfig, MotionFillVAE
+from graspkit.train import load_checkpoint
 
 CHECKPOINT = Path(__file__).resolve().parent.parent / "data_stubs" / "checkpoints" / "motionfill.pt"
 STAGES = {"local": ("locomotion", ("local",), "truth"), "traj": ("approach", ("traj",), "truth"),
@@ -126,7 +127,7 @@ def load_motionfill(path: str | Path = CHECKPOINT) -> MotionFillVAE:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"path: no MotionFill checkpoint at {path} (graspkit train motionfill)")
-    return MotionFillVAE.from_state(torch.load(path, weights_only=True, map_location="cpu"))
+    return MotionFillVAE.from_state(load_checkpoint(path))
 
 
 def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, seed: int = 0,
@@ -259,7 +260,7 @@ def load_baselines(folder: str | Path = BASELINE_DIR) -> dict[str, Any]:
     for name in BASELINES:
         path = baseline_path(name, folder)
         if path.is_file():
-            out[name] = baseline_from_state(torch.load(path, weights_only=True, map_location="cpu"))
+            out[name] = baseline_from_state(load_checkpoint(path))
     return out
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import os
 import time
+import zipfile
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -102,7 +103,13 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # noqa: BLE001 - re-raised with the file named
-        raise ValueError(f"checkpoint {path}: not a graspkit checkpoint readable with weights_only=True ({e})") from e
+        if not zipfile.is_zipfile(path):
+            raise ValueError(f"checkpoint {path}: not a torch checkpoint (expected the zip archive torch.save "
+                             f"writes)") from e
+        # torch's message suggests weights_only=False; graspkit never unpickles, so keep only what the file holds
+        detail = (str(e).split("WeightsUnpickler error:", 1)[-1].strip() or type(e).__name__).splitlines()[0]
+        raise ValueError(f"checkpoint {path}: holds more than tensors, numbers, strings and plain containers, "
+                         f"so it cannot be read without pickle ({detail})") from e
     if not isinstance(state, dict):
         raise ValueError(f"checkpoint {path}: expected a graspkit checkpoint (a dict of weights and settings), "
                          f"got a {type(state).__name__}")

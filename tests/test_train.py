@@ -53,8 +53,13 @@ def test_load_checkpoint_names_a_missing_or_pickled_file(tmp_path):
         load_checkpoint(tmp_path / "nope.pt")
     bad = tmp_path / "bad.pt"
     torch.save({"obj": object()}, bad)
-    with pytest.raises(ValueError, match="bad.pt"):
+    with pytest.raises(ValueError, match="bad.pt: holds more than tensors.*cannot be read without pickle") as err:
         load_checkpoint(bad)
+    assert "weights_only` set to `False`" not in str(err.value)      # torch's advice to unpickle is not passed on
+    text = tmp_path / "notes.pt"
+    text.write_text("x")
+    with pytest.raises(ValueError, match="notes.pt: not a torch checkpoint"):
+        load_checkpoint(text)
 
 
 def test_save_checkpoint_keeps_the_old_file_on_failure_and_concurrent_writers_apart(tmp_path):

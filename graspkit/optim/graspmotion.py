@@ -81,6 +81,7 @@ from graspkit.models.gnet import SparseBody
 from graspkit.optim.grasppose import GraspObject, _nearest, hand_vertex_ids, kabsch
 from graspkit.optim.step import energy_step
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
+from graspkit.train import load_checkpoint
 
 SMOOTH_AE_PATH = Path(__file__).resolve().parents[2] / "data_stubs" / "checkpoints" / "motionfill_smooth_ae.pt"
 FOOT_PARTS = ("left_heel", "left_toe", "right_heel", "right_toe")
@@ -155,7 +156,7 @@ def load_smooth_ae(path: str | Path = SMOOTH_AE_PATH) -> MarkerDiffAE:
     if not Path(path).is_file():
         raise FileNotFoundError(f"path: no marker-difference autoencoder at {path} (graspkit train motionfill "
                                 "--stage smooth_ae)")
-    return MarkerDiffAE.from_state(torch.load(path, weights_only=True, map_location="cpu"))
+    return MarkerDiffAE.from_state(load_checkpoint(path))
 
 
 def in_box(x: Tensor, lo: Tensor, hi: Tensor, margin: float) -> Tensor:
