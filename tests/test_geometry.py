@@ -67,6 +67,11 @@ def test_sampling_is_deterministic_and_area_weighted():
     assert abs(on_large.mean() - share) < 5 * np.sqrt(share * (1 - share) / 4000)
     with pytest.raises(ValueError, match="n"):
         sample_surface(mesh, 0)
+    for seed in (-1, 1.5, "0"):
+        with pytest.raises(ValueError, match="seed: expected a non-negative integer"):
+            sample_surface(mesh, 10, seed=seed)
+    g1, g2 = np.random.default_rng(7), np.random.default_rng(7)                 # a Generator is used as given
+    np.testing.assert_array_equal(sample_surface(mesh, 10, seed=g1)[0], sample_surface(mesh, 10, seed=g2)[0])
 
 
 # ---------------------------------------------------------------------------------------------- BPS
@@ -349,6 +354,11 @@ def test_marker_and_object_contact_thresholds():
     np.testing.assert_array_equal(object_contact(pts, torch.tensor(body.vertices)).numpy(), [1, 1, 0, 0, 0])
     batched = object_contact(pts[None].expand(2, -1, -1), torch.tensor(body.vertices)[None].expand(2, -1, -1))
     assert batched.shape == (2, 5)
+    for bad in (float("nan"), -0.01, float("inf"), "1cm"):
+        with pytest.raises(ValueError, match="threshold: expected a finite distance"):
+            marker_contact(markers, box, threshold=bad)
+        with pytest.raises(ValueError, match="threshold: expected a finite distance"):
+            object_contact(pts, body, threshold=bad)
 
 
 def test_interaction_attention_is_goal_eq1():
@@ -359,8 +369,11 @@ def test_interaction_attention_is_goal_eq1():
     verts = torch.tensor([[0.0, 0.03, 0.0], [0.0, 0.23, 0.0], [0.0, 0.0, 0.0]], dtype=torch.float64)
     att = body_object_attention(verts, box)
     np.testing.assert_allclose(att.numpy(), [1.0, np.exp(-1.0), np.exp(-5 * 0.03)], atol=1e-9)
-    with pytest.raises(ValueError, match="w"):
-        interaction_attention(d, w=0.0)
+    for w in (0.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="w: GOAL's weight"):
+            interaction_attention(d, w=w)
+    with pytest.raises(ValueError, match="distance: expected distances >= 0"):       # a signed distance inside
+        interaction_attention(torch.tensor([0.1, -0.01]))
 
 
 # ---------------------------------------------------------------------------------------------- interpenetration

@@ -14,6 +14,8 @@ the object (GOAL Sec. 3.2).
 """
 from __future__ import annotations
 
+import math
+
 import torch
 import trimesh
 from torch import Tensor
@@ -23,6 +25,13 @@ from graspkit.objects.distance import MeshLike, as_points, nearest_neighbours, p
 MARKER_CONTACT_THRESHOLD = 0.02  # m
 OBJECT_CONTACT_THRESHOLD = 0.01  # m
 IAA_WEIGHT = 5.0  # GOAL Eq. 1, w
+
+
+def _check_threshold(threshold: float) -> None:
+    """A contact threshold must be a finite distance >= 0 in metres; ValueError naming `threshold` otherwise."""
+    if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or not math.isfinite(threshold) \
+            or threshold < 0:
+        raise ValueError(f"threshold: expected a finite distance >= 0 in metres, got {threshold!r}")
 
 
 def distance_to(points, target: MeshLike | Tensor) -> Tensor:
@@ -36,6 +45,7 @@ def distance_to(points, target: MeshLike | Tensor) -> Tensor:
 def marker_contact(markers, obj: MeshLike | Tensor, threshold: float = MARKER_CONTACT_THRESHOLD) -> Tensor:
     """SAGA's C_M: 1.0 where a marker (N,3)|(B,N,3) is within `threshold` m of the object, else 0.0."""
     markers = as_points(markers, "markers")
+    _check_threshold(threshold)
     return (distance_to(markers, obj) <= threshold).to(markers.dtype)
 
 
@@ -45,15 +55,19 @@ def object_contact(object_points, body: MeshLike | Tensor, threshold: float = OB
     `body` is a body mesh (Trimesh or (vertices (V,3)|(B,V,3), faces)) or just its vertices.
     """
     object_points = as_points(object_points, "object_points")
+    _check_threshold(threshold)
     return (distance_to(object_points, body) <= threshold).to(object_points.dtype)
 
 
 def interaction_attention(distance: Tensor, w: float = IAA_WEIGHT) -> Tensor:
     """GOAL Eq. 1: I_w(d) = exp(-w d), elementwise, for body-to-object distances d >= 0 in metres."""
-    if w <= 0:
-        raise ValueError(f"w: GOAL's weight must be positive, got {w}")
+    if not math.isfinite(w) or w <= 0:
+        raise ValueError(f"w: GOAL's weight must be a finite positive number, got {w}")
     if not torch.isfinite(distance).all():
         raise ValueError("distance: contains NaN or infinite values")
+    if (distance < 0).any():
+        raise ValueError(f"distance: expected distances >= 0 (unsigned, GOAL Eq. 1), got a minimum of "
+                         f"{distance.min().item():.4g}")
     return torch.exp(-w * distance)
 
 

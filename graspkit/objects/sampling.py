@@ -26,6 +26,9 @@ def sample_surface(mesh: MeshLike, n: int = 2048, seed: int | np.random.Generato
     area2 = np.linalg.norm(cross, axis=1)
     if area2.sum() <= 0:
         raise ValueError("mesh: the surface has zero area")
+    if not (seed is None or isinstance(seed, np.random.Generator)
+            or (isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and seed >= 0)):
+        raise ValueError(f"seed: expected a non-negative integer, a numpy Generator or None, got {seed!r}")
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     face = rng.choice(len(tri), size=n, p=area2 / area2.sum())
     # uniform barycentrics by the square-root warp (Osada et al. 2002, Eq. 1)
