@@ -5,7 +5,7 @@
 
 `synthesize("mug")` runs it for any catalogue object with the shipped `gnet.pt` and `mnet.pt`, and
 `synthesize(mesh)` for an object of one's own (a trimesh.Trimesh or a mesh file: closed, metres, z up;
-`graspkit.objects.user.as_object`). The object is placed by `sample_object_pose(seed)` unless a pose is given; the
+`graspkit.objects.user.as_object`). The object is placed by `within_reach_pose(seed)` unless a pose is given; the
 start is a standing body (the procedural planner's first frame) `start_distance` m from the object centre on the
 ground, facing it (GOAL's protocol: 0.5-1.5 m, facing it within ±10°), unless a `Start` is given. World frame, z up.
 """

@@ -8,7 +8,7 @@ Motion metrics (this section) take world vertices / joints in the z-up frame, me
 | foot skating | SAGA Sec. 4.3 (after LEMO) | both heels are within 5 cm of the ground and both move faster than 75 mm/s (no foot planted) |
 | foot sliding | GOAL Sec. 4.2 | the vertex closest to the ground moves more than 1 cm per frame (GRAB's captured motion: 6.7 %) |
 | success rate (SR), distance to goal (DTG) | WANDR Sec. 4.3 | the right wrist comes within 10 cm of the goal; DTG its closest distance |
-| ground penetration | SAGA Sec. 4.3 (non-collision), GOAL Sec. 3.4 | depth of the lowest vertex below the ground plane z = 0 |
+| ground penetration | SAGA Sec. 4.3 (non-collision), GOAL Sec. 3.3 (Eq. 7's lowest vertex) | depth of the lowest vertex below the ground plane z = 0 |
 | non-collision score | SAGA Sec. 4.2 | share of body mesh vertices above the ground (GRAB 0.9771, SAGA 0.9743), per frame |
 | joint speed, jerk | smoothness | finite differences of joint positions (body joints 0..21) |
 | joint limits | human range of motion | rotation of each joint beyond the ranges in `JOINT_LIMITS_DEG` |
@@ -92,7 +92,10 @@ def foot_skating_wandr(vertices: Any, threshold: float = WANDR_SKATE_THRESHOLD) 
 
 
 def foot_sliding_goal(vertices: Any, threshold: float = GOAL_SLIDE_THRESHOLD) -> np.ndarray:
-    """GOAL's foot sliding per frame (T-1,) bool: the vertex closest to the ground moves more than `threshold` m."""
+    """GOAL's foot sliding per frame (T-1,) bool: the vertex closest to the ground moves more than `threshold` m.
+
+    graspkit takes the lowest vertex (argmin z, as GOAL's Eq. 7 finds it): the closest to the ground whenever the body
+    is on or above the floor; for a body sunk below it, the deepest vertex rather than one crossing z = 0."""
     return lowest_vertex_motion(vertices)[1] > _positive(threshold, "threshold")
 
 

@@ -138,7 +138,8 @@ class GNetConfig:
 
 @dataclass
 class GNetLossWeights:
-    """λ of Eq. 3 (vertex and offset terms are mean absolute errors in metres, Θ and q mean squared errors)."""
+    """λ of Eq. 3 (vertex and offset terms: mean absolute errors in metres; Θ: mean squared error over its entries;
+    q: the squared length ‖q − q̂‖² averaged over the batch)."""
 
     v: float = 10.0
     v_hand: float = 10.0
