@@ -5,10 +5,10 @@ Motion metrics (this section) take world vertices / joints in the z-up frame, me
 | metric | paper | definition |
 |---|---|---|
 | foot skating (FS) | WANDR Sec. 4.3 | a frame skates if the mesh's lowest vertex moves more than 0.66 cm horizontally to the next frame |
-| foot skating | SAGA Sec. 4.3 (after LEMO) | both heels are within 5 cm of the ground and both move faster than 75 mm/s (no foot planted) |
+| foot skating | SAGA Sec. 4.2 (following MOJO, its ref. [65]) | both heels are within 5 cm of the ground and both move faster than 75 mm/s (no foot planted) |
 | foot sliding | GOAL Sec. 4.2 | the vertex closest to the ground moves more than 1 cm per frame (GRAB's captured motion: 6.7 %) |
 | success rate (SR), distance to goal (DTG) | WANDR Sec. 4.3 | the right wrist comes within 10 cm of the goal; DTG its closest distance |
-| ground penetration | SAGA Sec. 4.3 (non-collision), GOAL Sec. 3.3 (Eq. 7's lowest vertex) | depth of the lowest vertex below the ground plane z = 0 |
+| ground penetration | SAGA Sec. 4.2 (non-collision), GOAL Sec. 3.3 (Eq. 7's lowest vertex) | depth of the lowest vertex below the ground plane z = 0 |
 | non-collision score | SAGA Sec. 4.2 | share of body mesh vertices above the ground (GRAB 0.9771, SAGA 0.9743), per frame |
 | joint speed, jerk | smoothness | finite differences of joint positions (body joints 0..21) |
 | joint limits | human range of motion | rotation of each joint beyond the ranges in `JOINT_LIMITS_DEG` |
@@ -26,8 +26,8 @@ from graspkit.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 
 # ----------------------------------------------------------------------------- motion: thresholds
 WANDR_SKATE_THRESHOLD = 0.0066       # m per frame at 30 fps (WANDR Sec. 4.3, CIRCLE's 1 cm adjusted to 30 fps)
-SAGA_SKATE_HEEL_HEIGHT = 0.05        # m (SAGA Sec. 4.3, following LEMO)
-SAGA_SKATE_HEEL_SPEED = 0.075        # m/s, both heels (SAGA Sec. 4.3)
+SAGA_SKATE_HEEL_HEIGHT = 0.05        # m (SAGA Sec. 4.2, following MOJO)
+SAGA_SKATE_HEEL_SPEED = 0.075        # m/s, both heels (SAGA Sec. 4.2)
 GOAL_SLIDE_THRESHOLD = 0.01          # m per frame (GOAL Sec. 4.2)
 GOAL_GRAB_SLIDING = 0.067            # fraction of GRAB's captured frames that "slide" (GOAL Sec. 4.2)
 WANDR_SUCCESS_RADIUS = 0.10          # m, right wrist to goal (WANDR Sec. 4.3, as CIRCLE)

@@ -64,9 +64,10 @@ def _reduce(err: Tensor, reduction: str) -> Tensor:
 @dataclass
 class MotionFillConfig:
     """Sizes and loss weights (A.2, A.4). The defaults are the shipped model: A.2's TrajFill (512-D latent, encoder
-    blocks as wide as their input, decoder blocks 8T and 4T) with graspkit's 16-frequency output layer, the temporal
-    LocalMotionFill (96 maps, 64-D latent): 3.58 M weights, 7.2 MB in float16. `paper()` keeps A.2's TrajFill as
-    printed (a per-frame output layer) with the image network at LEMO-like widths (3.8 M weights)."""
+    blocks as wide as their input; decoder blocks 8T and 4T read with T = 60, 480 and 240, where A.2's T = 62 and the
+    authors' code give 496 and 248 and no output layer) with graspkit's 16-frequency output layer, the temporal
+    LocalMotionFill (96 maps, 64-D latent): 3.58 M weights, 7.2 MB in float16. `paper()` keeps that TrajFill with a
+    per-frame output layer (the nearest to A.2) and the image network at LEMO-like widths (3.8 M weights)."""
 
     traj_latent: int = 512                # A.2
     traj_enc: int = 2 * NUM_ROOT * 4      # encoder block width (A.2: as wide as its input, 2 * 62 * 4 = 496)
@@ -85,8 +86,9 @@ class MotionFillConfig:
 
     @classmethod
     def paper(cls) -> "MotionFillConfig":
-        """SAGA A.2 as printed: the defaults' TrajFill sizes with a per-frame output layer, and the image network
-        (LEMO's layout; its widths and 128-D latent are graspkit's, LEMO-like)."""
+        """SAGA A.2's layout: the defaults' TrajFill sizes with a per-frame output layer (decoder 480/240 + a linear
+        layer, against A.2's 496/248 alone), and the image network (LEMO's layout; its widths and 128-D latent are
+        graspkit's, LEMO-like)."""
         return cls(traj_basis=0, motion_latent=128, local_arch="image", channels=(16, 32, 64, 64, 64))
 
 
