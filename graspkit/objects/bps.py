@@ -1,9 +1,10 @@
 """Basis Point Set encoding (Prokudin, Lassner & Romero, ICCV 2019), as GOAL uses it (Sec. 3.3, Eq. 2 and 9).
 
-A fixed set of K basis points sampled uniformly in a ball (GOAL: K = 1024, radius 0.15 m around the
-object centre) encodes a point cloud by, for each basis point, the distance to its nearest cloud point
-(and optionally the offset vector to it). GOAL encodes the object (b^o) and the goal-frame hand (b_g^h)
-with the SAME basis, so the two codes share one frame: express both clouds in the object frame first.
+A fixed set of K basis points sampled uniformly in a ball (GOAL: K = 1024; the radius is graspkit's, 0.15 m
+around the object centre, as the paper gives none) encodes a point cloud by, for each basis point, the distance
+to its nearest cloud point (and optionally the offset vector to it). GOAL encodes the object (b^o) and the
+goal-frame hand (b_g^h) with the SAME basis, so the two codes share one frame: express both clouds in the object
+frame first.
 """
 from __future__ import annotations
 
