@@ -178,7 +178,8 @@ def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, se
                    config=model.state()["model_config"])
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
     history = fit(model, step, train, cfg, checkpoint=run, val_dataset=val if len(val) else None, progress=progress,
-                  time_limit_s=time_limit_s, extra={"model_config": model.state()["model_config"]})
+                  time_limit_s=time_limit_s, extra={"model_config": model.state()["model_config"]},
+                  ddp=False)                                                       # the step calls net.loss
     for p in model.parameters():
         p.requires_grad_(True)
     from graspkit.train import save_checkpoint
@@ -243,7 +244,8 @@ def train_baseline(name: str, epochs: int, out: Path | None = None, seed: int = 
                    stats=file_key(stats_from), config=model.config())
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
     history = fit(model, step, train, cfg, checkpoint=run, val_dataset=val if len(val) else None, progress=progress,
-                  time_limit_s=time_limit_s, extra={"model_config": model.config(), "kind": name})
+                  time_limit_s=time_limit_s, extra={"model_config": model.config(), "kind": name},
+                  ddp=False)                                                       # the step calls net.loss
     st = model.eval().state()
     st["model"] = {k: v.half() if v.is_floating_point() and "mean" not in k and "std" not in k else v
                    for k, v in st["model"].items()}

@@ -561,7 +561,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     clips = cached_clips(folder, bm, kinds=("locomotion", "reach") + (("reach_far",) if reach_far else ()))
     names = split_clips(clips.names, seed=0)["train"]
     train = clips.subset([n for n in names if FOLDERS.get(n.split("/")[0]) in v["kinds"]])
-    stats = compute_stats(train, seed=seed)
+    stats = compute_stats(train, seed=seed, goal_frame=goal_frame)
     prep_s = time.perf_counter() - t0
     start_names = test_start_names(folder, n=6)
     starts = held_out_starts([load_motion(folder / n) for n in start_names], start_names, bm)

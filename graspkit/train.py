@@ -14,7 +14,9 @@ data order of each epoch comes from `seed + epoch`, and the RNG state is saved.
 DDP: when `torch.distributed` is initialised (`init_distributed()` under `torchrun --nproc_per_node=2 ...`), `fit`
 wraps the model in DistributedDataParallel, shards every epoch with a DistributedSampler and lets rank 0 alone
 write checkpoints. The step function then receives the DDP wrapper and must run the model through its `forward`
-(gradients are averaged across ranks in backward), so every rank keeps identical weights.
+(gradients are averaged across ranks in backward), so every rank keeps identical weights. GNet's and MNet's steps
+do; WholeGrasp, the pose prior, MotionFill and WANDR call other methods (`loss`, `encode` / `decode`), pass
+`ddp=False` and train in one process.
 """
 from __future__ import annotations
 
@@ -197,20 +199,25 @@ def plot_history(history: list[dict[str, float]], keys: list[str] | None = None,
 def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig,
         checkpoint: str | Path | None = None, extra: dict[str, Any] | None = None,
         val_dataset: Dataset | None = None,
-        progress: bool = True, time_limit_s: float | None = None, stop_at: int | None = None
-        ) -> list[dict[str, float]]:
+        progress: bool = True, time_limit_s: float | None = None, stop_at: int | None = None,
+        ddp: bool = True) -> list[dict[str, float]]:
     """Train `model` with `step(model, batch, epoch) -> {'loss': ..}`; returns per-epoch mean logs.
 
     With `checkpoint`, an existing file is resumed from and the file is rewritten after every epoch (with
     `extra`, e.g. normalisation statistics). `time_limit_s` stops after the epoch that crosses the limit,
     `stop_at` after that epoch (both leave a checkpoint to resume from). With `val_dataset`, each epoch also logs
-    `val_<term>`; the history goes to `<checkpoint>.csv` beside the checkpoint.
+    `val_<term>`; the history goes to `<checkpoint>.csv` beside the checkpoint. `ddp=False` marks a step that calls
+    model methods other than `forward` (DDP synchronises only what runs through it): such a model is refused under
+    an initialised process group instead of training out of step.
     """
     if len(dataset) == 0:
         raise ValueError("dataset: empty")
     if cfg.num_threads:
         torch.set_num_threads(cfg.num_threads)
     world = _distributed()
+    if world[0] and not ddp:
+        raise RuntimeError(f"fit: {type(model).__name__}'s training step calls methods other than forward, which "
+                           "DistributedDataParallel does not synchronise; train it in one process (without torchrun)")
     torch.manual_seed(cfg.seed)
     net = torch.nn.parallel.DistributedDataParallel(model) if world[0] else model
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)

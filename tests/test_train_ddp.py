@@ -40,3 +40,24 @@ def test_two_ranks_train_to_identical_weights(tmp_path):
     torch.manual_seed(0)
     fresh = torch.nn.Sequential(torch.nn.Linear(4, 8), torch.nn.Tanh(), torch.nn.Linear(8, 1))
     assert not torch.equal(fresh[0].weight, a["0.weight"])      # it trained
+
+
+def test_a_step_that_bypasses_forward_is_refused_under_a_process_group(tmp_path):
+    """fit(ddp=False) (WholeGrasp, the pose prior, MotionFill, WANDR: steps that call loss / encode / decode) refuses
+    an initialised process group instead of training ranks out of step; ddp=True trains."""
+    import pytest
+    from torch.utils.data import TensorDataset
+
+    from graspkit.train import TrainConfig, fit
+
+    torch.distributed.init_process_group("gloo", init_method=f"file://{tmp_path / 'store'}", rank=0, world_size=1)
+    try:
+        model = torch.nn.Linear(2, 1)
+        data = TensorDataset(torch.randn(8, 2), torch.randn(8, 1))
+        step = lambda m, b, e: {"loss": (m(b[0]) - b[1]).pow(2).mean()}      # noqa: E731
+        cfg = TrainConfig(epochs=1, batch_size=4, num_threads=1)
+        with pytest.raises(RuntimeError, match="Linear's training step calls methods other than forward"):
+            fit(model, step, data, cfg, progress=False, ddp=False)
+        assert len(fit(model, step, data, cfg, progress=False)) == 1
+    finally:
+        torch.distributed.destroy_process_group()

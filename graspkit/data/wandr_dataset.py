@@ -12,8 +12,9 @@ goals, normalisation statistics, deterministic splits and the held-out start pos
 - Poses p_i (135) and deltas d_i (135, yaw removed) as `graspkit.intention` defines them (§3.2-3.3).
 - Goals (§3.2, Fig. 3): CIRCLE-style clips carry a goal and its frame t_G; for goal-less (AMASS-style) clips a future
   frame is drawn as t_G and the right wrist there becomes the goal (hindsight, after Andrychowicz et al. 2017). The
-  horizon is uniform over [steps + 1, min(240, frames left)] frames, so the 8 s test horizon is covered; t_G never
-  falls inside the window, so a goal-less walk is never taught "the goal time has passed, stand still". Frames at or
+  horizon is uniform over [steps + 1, min(240, frames left)] frames, so the 8 s test horizon is covered; t_G falls at
+  the window's last frame at the earliest (a loss target, never a conditioned frame), so a goal-less walk is never
+  taught "the goal time has passed, stand still". Frames at or
   after a real t_G get the zero intention (the reaching clips hold the pose there).
 - The orientation intention in training uses the body's heading at t_G (§3.2).
 - Filter (§4.1): clips whose feet (the lowest of the ankle and foot joints) are ever more than 20 cm above the ground
@@ -273,9 +274,10 @@ def window_condition(p: Tensor, d_prev: Tensor, rest: Tensor, goal: Tensor, fram
 
 
 # ----------------------------------------------------------------------------------------------------- statistics
-def compute_stats(clips: ClipSet, samples: int = 20000, seed: int = 0) -> dict[str, Tensor]:
+def compute_stats(clips: ClipSet, samples: int = 20000, seed: int = 0, goal_frame: str = "reach") -> dict[str, Tensor]:
     """Normalisation statistics of the training split: mean and std (floored at 1e-3) of the deltas (135,), the states
-    (268,) over every frame, and of the intentions (7,) over `samples` windows (goals drawn as in training)."""
+    (268,) over every frame, and of the intentions (7,) over `samples` windows (goals drawn as in training, with the
+    run's `goal_frame` rule for t_G: `make_batch`)."""
     if len(clips) == 0:
         raise ValueError("clips: empty")
     # every frame i with a frame before and after it in its clip: delta d_{i+1} and state (p_i, d_i), in chunks
@@ -293,7 +295,7 @@ def compute_stats(clips: ClipSet, samples: int = 20000, seed: int = 0) -> dict[s
     ds = WindowDataset(clips, max_steps=0)
     g = torch.Generator().manual_seed(seed)
     pick = torch.randint(len(ds), (min(samples, len(ds)),), generator=g)
-    b = make_batch(clips, ds.items[pick], steps=0, generator=g)
+    b = make_batch(clips, ds.items[pick], steps=0, generator=g, goal_frame=goal_frame)
     p1, p0 = b["p"][:, 1], b["p"][:, 0]
     _, inten = window_condition(p1, I.pose_to_delta(p0, p1), b["rest"], b["goal"], b["t_goal"], b["goal_heading"])
     inten = inten.double()

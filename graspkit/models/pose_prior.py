@@ -198,7 +198,7 @@ def train_pose_prior(out: str | Path = POSE_PRIOR_PATH, poses: np.ndarray | None
 
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
     hist = fit(model, step, train, cfg, checkpoint=run, extra={"model_config": asdict(model.cfg)},
-               val_dataset=val, progress=progress)
+               val_dataset=val, progress=progress, ddp=False)                    # the step calls m.loss
     state = model.state()
     if half:
         state["model"] = {k: v.half() if v.is_floating_point() else v for k, v in state["model"].items()}

@@ -212,7 +212,7 @@ def train_wandr(model: WandrCVAE, clips: ClipSet, cfg: TrainConfig, checkpoint: 
 
     extra = {"wandr_config": asdict(model.cfg)}
     return fit(model, step, ds, cfg, checkpoint=checkpoint, extra=extra, progress=progress, time_limit_s=time_limit_s,
-               stop_at=stop_at)
+               stop_at=stop_at, ddp=False)           # training_losses calls encode / decode, not forward
 
 
 def save_wandr(path: str | Path, model: WandrCVAE, history: Sequence[dict] = (), meta: dict[str, Any] | None = None,

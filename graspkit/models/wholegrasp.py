@@ -530,7 +530,7 @@ def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask:
                    lr=lr, config=asdict(model.cfg), augment_yaw=augment_yaw, data=_data_key(root))
     hist = fit(model, step, train, cfg, checkpoint=run, extra={"model_config": asdict(model.cfg)},
                val_dataset=val, progress=progress, time_limit_s=None if time_limit_s is None
-               else max(time_limit_s - prep, 0.0))
+               else max(time_limit_s - prep, 0.0), ddp=False)                   # the step calls m.loss
     seconds = time.perf_counter() - t0
     metrics = reconstruction_metrics(model, val)
     state = model.state()
@@ -818,7 +818,8 @@ def train_grabnet_smplx(root: str | Path, out: str | Path | None = None, epochs:
                    augment_yaw=augment_yaw, data=_data_key(root))
     hist = fit(model, step, train, cfg, checkpoint=run,
                extra={"model_config": dict(model.hparams)}, val_dataset=val, progress=progress,
-               time_limit_s=None if time_limit_s is None else max(time_limit_s - (time.perf_counter() - t0), 0.0))
+               time_limit_s=None if time_limit_s is None else max(time_limit_s - (time.perf_counter() - t0), 0.0),
+               ddp=False)                                                          # the step calls m.loss
     state = model.state()
     if half:
         state["model"] = {k: v.half() if v.is_floating_point() else v for k, v in state["model"].items()}
