@@ -8,7 +8,8 @@ the object mesh in that pose with `graspkit.metrics`:
   placement (SAGA after DLow), averaged over placements;
 - contact ratio: share of bodies within GRASP_CONTACT_THRESHOLD = 2 mm of the object (exact signed distance of the
   body vertices; touching or penetrating counts);
-- interpenetration volume (cm^3, exact vertical ray casting on a 1 mm grid) and depth (cm, deepest body vertex).
+- interpenetration volume (cm^3, exact vertical ray casting on a 1 mm grid, the cells along walls refined;
+  `--refine 1`: one ray per column, as docs/saga.md's tables) and depth (cm, deepest body vertex).
 
 Tab. 1 rows: GrabNet-SMPLX (SMPL-X parameters sampled directly, no optimisation), WholeGrasp-single without and with
 the heuristic optimisation of S.3/S.4, WholeGrasp without and with GraspPose-Opt. "w/o opt." is the fit of the
@@ -77,6 +78,7 @@ class EvalConfig:
     free_joints: tuple[str, ...] = ARM_JOINTS   # GraspPoseConfig.free_joints (graspkit's; () is Alg. 1: docs/saga.md)
     restart_sunk: float | None = 0.005  # GraspPoseConfig.restart_sunk (graspkit's; None is Alg. 1's single stage 3)
     stage2_collision: bool = True  # GraspPoseConfig.stage2_collision (graspkit's; False is Alg. 1's E_fit-only stage 2)
+    refine: int | None = None     # the volume's rays per cell side along walls (None: the default; 1: docs/saga.md's tables)
 
 
 @dataclass
@@ -132,8 +134,11 @@ def hand_contact_prior(root: str | Path, split: str = "train") -> Tensor:
     return torch.as_tensor(np.mean([read_arrays(p)["contact.body"][0] for p in files], 0)).float()
 
 
-def body_rows(bm, vertices: Tensor, placements: list[Placement], per: int) -> list[dict[str, float]]:
-    """graspkit.metrics.grasp_metrics of bodies (B,V,3) (object frame), `per` consecutive bodies per placement."""
+def body_rows(bm, vertices: Tensor, placements: list[Placement], per: int,
+              refine: int | None = None) -> list[dict[str, float]]:
+    """graspkit.metrics.grasp_metrics of bodies (B,V,3) (object frame), `per` consecutive bodies per placement;
+    `refine`: the volume's rays per cell side along walls (None: graspkit.metrics' default; 1: the tables of
+    docs/saga.md)."""
     from graspkit.metrics import grasp_metrics
     from graspkit.objects import make_object
 
@@ -142,7 +147,7 @@ def body_rows(bm, vertices: Tensor, placements: list[Placement], per: int) -> li
         pl = placements[i // per]
         mesh = make_object(pl.name)
         mesh.apply_transform(np.block([[pl.rotation.double().numpy(), np.zeros((3, 1))], [np.zeros((1, 3)), 1.0]]))
-        rows.append(grasp_metrics(vertices[i], bm.faces, mesh))
+        rows.append(grasp_metrics(vertices[i], bm.faces, mesh, refine=refine))
     return rows
 
 
@@ -293,7 +298,8 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
         co = torch.cat([oc, torch.stack([p.object_contact for p in gts])])
         res = {"fit_g": stage3(opt, torch.arange(B), "fit_g"), "fit_g_colli": stage3(opt, wg_gt, "fit_g_colli"),
                "full": stage3(opt, wg_gt, "full", cm, co)}
-        rows = {v: body_rows(bm, r.vertices, [places[i] for i in (range(B) if v == "fit_g" else wg_gt)], 1)
+        rows = {v: body_rows(bm, r.vertices, [places[i] for i in (range(B) if v == "fit_g" else wg_gt)], 1,
+                           cfg.refine)
                 for v, r in res.items()}
         for v, key in (("fit_g", "WholeGrasp w/o opt."), ("fit_g_colli", "samples + E_colli"),
                        ("full", "WholeGrasp w/ opt. (Ours)")):
@@ -303,18 +309,19 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
             add("WholeGrasp-single w/o opt.", rows["fit_g"][nw:nw + n1], res["fit_g"].markers[nw:nw + n1], n)
         if n1 and ch is not None:
             r = stage3(opt_h, i1, "heuristic")
-            add("WholeGrasp-single w/ heuristic opt.", body_rows(bm, r.vertices, places[nw:nw + n1], 1), r.markers, n)
+            add("WholeGrasp-single w/ heuristic opt.", body_rows(bm, r.vertices, places[nw:nw + n1], 1, cfg.refine),
+                r.markers, n)
         if x is not None:                                  # GrabNet-SMPLX: parameters sampled directly
             rot, betas, transl = params_to_rotmats(x, pca)
             with torch.no_grad():
                 v = bm.forward_rotmats(rot, betas=betas, transl=transl).vertices
-            add("GrabNet-SMPLX", body_rows(bm, v, pls, n), v[:, ids], n)
+            add("GrabNet-SMPLX", body_rows(bm, v, pls, n, cfg.refine), v[:, ids], n)
         # ground truth: meshes, and its markers fitted with the three stage-3 variants (ground-truth contacts)
         fp = torch.stack([p.body["fullpose"] for p in gts])
         with torch.no_grad():
             vg = bm.forward_rotmats(_absolute_rotmats(fp), betas=torch.stack([p.body["betas"] for p in gts]),
                                     transl=torch.stack([p.body["transl"] for p in gts])).vertices
-        add("GT mesh", body_rows(bm, vg, gts, 1))
+        add("GT mesh", body_rows(bm, vg, gts, 1, cfg.refine))
         add("GT + E_fit + E_g", rows["fit_g"][nw + n1:])
         add("GT + E_colli", rows["fit_g_colli"][nw:])
         add("GT + E_cont", rows["full"][nw:])
@@ -426,6 +433,8 @@ def main(argv: list[str] | None = None) -> int:
                          "default: the collars, shoulders, elbows and wrists; 'none': Alg. 1's prior latent alone)")
     ap.add_argument("--no-restart", action="store_true",
                     help="stage 3 once, as Alg. 1 (default: a second, gated run per sample, the lower energy kept)")
+    ap.add_argument("--refine", type=int, default=None,
+                    help="the volume's rays per cell side along walls (default: graspkit.metrics'; 1: the docs' tables)")
     ap.add_argument("--no-stage2-collision", action="store_true",
                     help="stage 2 with E_fit alone, as Alg. 1 (default: E^B_colli too where stage 3 has E_colli)")
     ap.add_argument("--finish", type=Path, default=None, help="only turn this .partial.json into --out and print it")
@@ -441,7 +450,7 @@ def main(argv: list[str] | None = None) -> int:
     cfg = EvalConfig(placements=args.placements, samples=args.samples, gt_grasps=args.gt, steps=tuple(args.steps),
                      free_joints=expand_free_joints(args.free_joints),
                      restart_sunk=None if args.no_restart else EvalConfig.restart_sunk,
-                     stage2_collision=not args.no_stage2_collision)
+                     stage2_collision=not args.no_stage2_collision, refine=args.refine)
     if args.objects:
         cfg = replace(cfg, objects=tuple(args.objects))
     res = evaluate(args.data, cfg, out=args.out, checkpoints=args.checkpoints)

@@ -6,8 +6,9 @@ SAGA App. A.2 encodes the object (2,048 surface points, xyz + normal) with
 where SA(npoint, radius, mlp) is a set-abstraction level: pick `npoint` centres by farthest-point sampling, gather
 up to `nsample` neighbours within `radius` of each (ball query), run a shared MLP on (neighbour - centre, neighbour
 features) and max-pool over the neighbours; the last level groups all points into one global feature. The paper does
-not give `nsample`; graspkit uses 16 (PointNet++ uses 32-64 on 10k-point scenes; 16 keeps training on two CPU
-cores within budget). Per-point outputs (SAGA's object contact map) come from feature propagation: inverse-distance
+not give `nsample`; `PointNet2Encoder` defaults to 16 and WholeGrasp and GrabNet-SMPLX use 8
+(`WholeGraspConfig.nsample`; PointNet++ uses 32-64 on 10k-point scenes; few neighbours keep training on two CPU cores
+within budget). Per-point outputs (SAGA's object contact map) come from feature propagation: inverse-distance
 interpolation from the 3 nearest coarser points, concatenated with the finer level's features, then a shared MLP.
 """
 from __future__ import annotations

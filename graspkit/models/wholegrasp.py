@@ -5,11 +5,11 @@ Data (SAGA §3 "Preliminaries", A.1, A.3): the 143 markers M (49 body, 14 face, 
 contacts C_M in {0,1}^143, the object as 2,048 surface points O (xyz + normal), its contacts C_O in {0,1}^2048 and
 its height t_O (the height of its centre above the floor); object and markers are centred at the object's centre.
 
-    encoder  q(z | M, C_M, C_O, t_O, O):  body branch  [M, C_M] -> ResBlocks -> F_B
+    encoder  q(z | M, C_M, C_O, t_O, O):  body branch  [M, C_M] -> Linear + ResBlock -> F_B
                                           object branch PointNet++(xyz; normal, C_O) -> F_O   (C_O in the encoder only)
-                                          [F_B, F_O, t_O] -> ResBlock -> Gaussian over z (16-D)
+                                          [F_B, F_O, t_O] -> Linear + LeakyReLU -> Gaussian over z (16-D)
     decoder  p(M, C_M, C_O | z, t_O, O): PointNet++(xyz; normal) -> F'_O and its levels
-                                          [z, F'_O, t_O] -> ResBlocks -> markers (143x3), sigmoid C_M (143)
+                                          [z, F'_O, t_O] -> Linear + ResBlock -> markers (143x3), sigmoid C_M (143)
                                           per-point sigmoid C_O by feature propagation of [z-conditioned feature]
                                           down the PointNet++ levels to the 2,048 points
 
