@@ -150,7 +150,7 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     T = 60
     clip = Motion(np.concatenate([st.poses[:1], np.repeat(gpose[None], T, 0)]),
                   np.concatenate([st.trans[:1], np.repeat(gtransl[None], T, 0)]), betas, 30.0)
-    win = make_windows([clip], bm, align_end=True, progress=False)
+    win = make_windows([clip], bm, align_end=True, progress=False, start_at_rest=True)   # frame 0 stands; 0 -> 1 is a jump
     j = clip.joint_positions(bm)
     R_c, o_c = canonicalize(np.concatenate([j, j[-1:]]))
     mf = load_motionfill(ck / "motionfill.pt")

@@ -116,6 +116,10 @@ def test_geometric_contacts_on_a_planted_and_a_lifted_foot():
     foot = np.stack([planted, planted, swing, swing], 1)
     c = mf.geometric_contacts(foot)
     assert c[:, :2].all() and not c[10:, 2:].any()
+    # a standing start joined to a pose 1 m away (graspkit.saga.synthesize's window): the jump is not a motion
+    jump = np.concatenate([np.full((1, 4, 3), [0, 0, 0.03]), np.full((5, 4, 3), [1.0, 0, 0.03])])
+    moving, at_rest = mf.geometric_contacts(jump), mf.geometric_contacts(jump, first_at_rest=True)
+    assert not moving[0].any() and at_rest[0].all() and np.array_equal(moving[1:], at_rest[1:])
 
 
 def test_files_round_trip_and_bad_file_is_named(tmp_path, windows):

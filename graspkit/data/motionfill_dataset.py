@@ -38,7 +38,7 @@ from graspkit.data.motion import Motion, canonicalize
 T = 60                          # in-between span: frames 0..T
 NUM_FRAMES = T + 1              # local motion frames
 NUM_ROOT = T + 2                # root states Γ_{0:T+1}
-CONTACT_HEIGHT = 0.05           # m above the clip's lowest foot marker (SAGA's heel-height threshold, Sec. 4.3)
+CONTACT_HEIGHT = 0.05           # m above the clip's lowest foot marker (SAGA's heel-height threshold, Sec. 4.2)
 CONTACT_SPEED = 0.2             # m/s
 FOOT_MARKERS = ("LHEE", "LTOE", "RHEE", "RTOE")   # in CONTACT_NAMES order
 
@@ -85,19 +85,23 @@ def global_motion(local: np.ndarray, traj: np.ndarray) -> np.ndarray:
     return out
 
 
-def geometric_contacts(foot: np.ndarray, fps: float = 30.0) -> np.ndarray:
-    """Contacts (n, 4) bool from foot markers (n, 4, 3): near the clip's lowest foot height and slow."""
+def geometric_contacts(foot: np.ndarray, fps: float = 30.0, first_at_rest: bool = False) -> np.ndarray:
+    """Contacts (n, 4) bool from foot markers (n, 4, 3): near the clip's lowest foot height and slow.
+
+    Frame 0 takes the speed of frame 0 -> 1; `first_at_rest` gives it speed 0 instead, for a window that joins a
+    start pose at rest to a later pose (`graspkit.saga.synthesize`: the jump between them is not a motion)."""
     low = foot[..., 2] < foot[..., 2].min() + CONTACT_HEIGHT
     v = np.linalg.norm(np.diff(foot, axis=0), axis=-1) * fps
-    v = np.concatenate([v[:1], v], 0)
+    v = np.concatenate([np.zeros_like(v[:1]) if first_at_rest else v[:1], v], 0)
     return low & (v < CONTACT_SPEED)
 
 
 def make_windows(motions: list[Motion], bm, stride: int | None = 30, align_end: bool = False,
-                 progress: bool = True) -> dict[str, np.ndarray]:
+                 progress: bool = True, start_at_rest: bool = False) -> dict[str, np.ndarray]:
     """Canonical 62-frame windows of many clips -> arrays {traj (N,62,4), markers (N,61,79,3), local, vel (N,61,3),
     contacts (N,61,4), clip (N,)}. `align_end`: one window per clip ending at its last frame (approach clips, whose
-    last frames hold the grasp); otherwise windows every `stride` frames."""
+    last frames hold the grasp); otherwise windows every `stride` frames. `start_at_rest`: clips without contact
+    labels get geometric ones with their first frame at rest (`geometric_contacts`' first_at_rest)."""
     mk = saga_sparse_markers(bm)
     foot_cols = [mk.names.index(n) for n in FOOT_MARKERS]
     out: dict[str, list[np.ndarray]] = {k: [] for k in ("traj", "markers", "local", "vel", "contacts", "clip")}
@@ -106,7 +110,7 @@ def make_windows(motions: list[Motion], bm, stride: int | None = 30, align_end: 
             raise ValueError(f"motions[{ci}]: expected 30 fps, got {m.fps} (resample with data.load_motion)")
         joints = m.joint_positions(bm)
         mark = mk.select(m.vertices(bm)).numpy().astype(np.float64)
-        contacts = m.contacts if m.contacts is not None else geometric_contacts(mark[:, foot_cols], m.fps)
+        contacts = m.contacts if m.contacts is not None else geometric_contacts(mark[:, foot_cols], m.fps, start_at_rest)
         n = m.num_frames
         if n < NUM_ROOT:                                         # pad the front with the first frame (A.3)
             pad = NUM_ROOT - n
