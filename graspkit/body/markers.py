@@ -3,8 +3,9 @@
 SAGA (App. A.1, Fig. S1) follows GRAB's mocap layout: 49 body, 14 face, 6 hand and 30 finger markers,
 plus 44 palm markers (143 in all, stage 1); stage 2 uses a sparse hand: 49 + 14 + 6 + 10 fingertips (79).
 GOAL (Sec. 3.2) samples N_b = 400 body vertices and N_h = 99 for each hand, and uses a head direction q;
-graspkit's 400 hold 99 on the right (grasping) hand and 40 on the left (`GOAL_BUDGET`). The papers give these as vertex ids of the licensed SMPL-X mesh; graspkit instead *places*
-them by rules on whatever model it is given (procedural or real), so the ids always match the mesh:
+graspkit's 400 hold 99 on the right (grasping) hand and 40 on the left (`GOAL_BUDGET`). The papers give these
+as vertex ids of the licensed SMPL-X mesh; graspkit instead *places* them by rules on whatever model it is
+given (procedural or real), so the ids always match the mesh:
 
 - a marker = (anchor on a bone: joint a -> joint b at fraction t, a direction in the canonical rest
   frame (y up, +z forward, +x = body's left), the parts it may lie on); it goes on the vertex of those

@@ -110,7 +110,10 @@ def make_windows(motions: list[Motion], bm, stride: int | None = 30, align_end: 
             raise ValueError(f"motions[{ci}]: expected 30 fps, got {m.fps} (resample with data.load_motion)")
         joints = m.joint_positions(bm)
         mark = mk.select(m.vertices(bm)).numpy().astype(np.float64)
-        contacts = m.contacts if m.contacts is not None else geometric_contacts(mark[:, foot_cols], m.fps, start_at_rest)
+        if m.contacts is not None:
+            contacts = m.contacts
+        else:
+            contacts = geometric_contacts(mark[:, foot_cols], m.fps, first_at_rest=start_at_rest)
         n = m.num_frames
         if n < NUM_ROOT:                                         # pad the front with the first frame (A.3)
             pad = NUM_ROOT - n

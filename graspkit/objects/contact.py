@@ -15,6 +15,7 @@ the object (GOAL Sec. 3.2).
 from __future__ import annotations
 
 import math
+import numbers
 
 import torch
 import trimesh
@@ -29,7 +30,7 @@ IAA_WEIGHT = 5.0  # GOAL Eq. 1, w
 
 def _check_threshold(threshold: float) -> None:
     """A contact threshold must be a finite distance >= 0 in metres; ValueError naming `threshold` otherwise."""
-    if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or not math.isfinite(threshold) \
+    if isinstance(threshold, (bool, str)) or not isinstance(threshold, numbers.Real) or not math.isfinite(threshold) \
             or threshold < 0:
         raise ValueError(f"threshold: expected a finite distance >= 0 in metres, got {threshold!r}")
 
