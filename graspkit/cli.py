@@ -65,12 +65,11 @@ def _object_pose(at: list[float] | None):
 
 def _free_joints(names: list[str]) -> tuple[str, ...]:
     """--free-joints -> GraspPoseConfig.free_joints, checked before any work; ValueError naming the option."""
-    from graspkit.body.skeleton import JOINT_NAMES
-    from graspkit.optim.grasppose import expand_free_joints
+    from graspkit.optim.grasppose import BODY_JOINTS, expand_free_joints, valid_body_joints
 
-    joints, body = expand_free_joints(names), JOINT_NAMES[1:22]
-    if any(n not in body for n in joints) or len(set(joints)) != len(joints):
-        raise ValueError(f"--free-joints: expected 'arms', 'none' or distinct body-joint names of {body}, "
+    joints = expand_free_joints(names)
+    if not valid_body_joints(joints):
+        raise ValueError(f"--free-joints: expected 'arms', 'none' or distinct body-joint names of {BODY_JOINTS}, "
                          f"got {' '.join(names)}")
     return joints
 

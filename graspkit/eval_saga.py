@@ -136,9 +136,9 @@ def hand_contact_prior(root: str | Path, split: str = "train") -> Tensor:
 
 def body_rows(bm, vertices: Tensor, placements: list[Placement], per: int,
               refine: int | None = None) -> list[dict[str, float]]:
-    """graspkit.metrics.grasp_metrics of bodies (B,V,3) (object frame), `per` consecutive bodies per placement;
-    `refine`: the volume's rays per cell side along walls (None: graspkit.metrics' default; 1: the tables of
-    docs/saga.md)."""
+    """graspkit.metrics.grasp_metrics of bodies (B,V,3) (object frame), `per` consecutive bodies per placement, and
+    floor_cm, the lowest vertex's height above the floor z = -t_O (cm; negative below it); `refine`: the volume's
+    rays per cell side along walls (None: graspkit.metrics' default; 1: the tables of docs/saga.md)."""
     from graspkit.metrics import grasp_metrics
     from graspkit.objects import make_object
 
@@ -147,17 +147,22 @@ def body_rows(bm, vertices: Tensor, placements: list[Placement], per: int,
         pl = placements[i // per]
         mesh = make_object(pl.name)
         mesh.apply_transform(np.block([[pl.rotation.double().numpy(), np.zeros((3, 1))], [np.zeros((1, 3)), 1.0]]))
-        rows.append(grasp_metrics(vertices[i], bm.faces, mesh, refine=refine))
+        floor = 100 * (float(vertices[i, :, 2].min()) + pl.height)
+        rows.append({**grasp_metrics(vertices[i], bm.faces, mesh, refine=refine), "floor_cm": floor})
     return rows
 
 
 def summarise(rows: list[dict[str, float]], markers: Tensor | None = None, per: int = 1) -> dict[str, float]:
-    """Mean contact ratio, volume, depth of metric rows; APD over each run of `per` marker sets (B,143,3)."""
+    """Mean contact ratio, volume, depth of metric rows, the mean and largest distance of the lowest vertex from
+    the floor (cm); APD over each run of `per` marker sets (B,143,3)."""
     from graspkit.metrics import apd
 
     out = {"n": len(rows), "contact_ratio": float(np.mean([r["contact"] for r in rows])),
            "volume_cm3": float(np.mean([r["volume_cm3"] for r in rows])),
            "depth_cm": float(np.mean([r["depth_cm"] for r in rows]))}
+    if all("floor_cm" in r for r in rows):
+        off = np.abs([r["floor_cm"] for r in rows])
+        out.update(floor_abs_cm=float(off.mean()), floor_max_cm=float(off.max()))
     if markers is not None and per > 1:
         out["apd"] = float(np.mean([apd(markers[i:i + per]) for i in range(0, len(markers), per)]))
     return out
@@ -346,7 +351,10 @@ def rows_from_objects(per_object: dict[str, dict[str, dict[str, float]]]) -> dic
         parts = [o[k] for o in per_object.values() if k in o]
         n = sum(r["n"] for r in parts)
         rows[k] = {"n": n, **{m: float(sum(r[m] * r["n"] for r in parts) / n)
-                              for m in ("contact_ratio", "volume_cm3", "depth_cm")}}
+                              for m in ("contact_ratio", "volume_cm3", "depth_cm", "floor_abs_cm")
+                              if all(m in r for r in parts)}}
+        if all("floor_max_cm" in r for r in parts):
+            rows[k]["floor_max_cm"] = max(r["floor_max_cm"] for r in parts)
         apds = [r["apd"] for r in parts if "apd" in r]
         if apds:
             rows[k]["apd"] = float(np.mean(apds))

@@ -10,13 +10,14 @@ from graspkit.eval_saga import (PAPER_TAB1, EvalConfig, evaluate, finish_partial
 from graspkit.paths import DATA_STUBS
 
 
-def _rows(contacts, volumes, depths):
-    return [{"contact": c, "volume_cm3": v, "depth_cm": d} for c, v, d in zip(contacts, volumes, depths)]
+def _rows(contacts, volumes, depths, floors=None):
+    rows = [{"contact": c, "volume_cm3": v, "depth_cm": d} for c, v, d in zip(contacts, volumes, depths)]
+    return rows if floors is None else [{**r, "floor_cm": f} for r, f in zip(rows, floors)]
 
 
 def test_rows_from_objects_pools_bodies_and_averages_apd_over_objects():
-    a = _rows([1, 0, 1], [0.5, 0.0, 1.0], [0.1, 0.0, 0.2])
-    b = _rows([1], [3.0], [0.4])
+    a = _rows([1, 0, 1], [0.5, 0.0, 1.0], [0.1, 0.0, 0.2], [-1.0, 0.5, 2.0])
+    b = _rows([1], [3.0], [0.4], [-6.0])
     per = {"mug": {"x": {**summarise(a), "apd": 2.0}}, "camera": {"x": {**summarise(b), "apd": 4.0}}}
     r = rows_from_objects(per)["x"]
     everything = a + b                                             # the pooled mean over all four bodies
@@ -25,6 +26,9 @@ def test_rows_from_objects_pools_bodies_and_averages_apd_over_objects():
     assert r["volume_cm3"] == pytest.approx(np.mean([x["volume_cm3"] for x in everything]))
     assert r["depth_cm"] == pytest.approx(np.mean([x["depth_cm"] for x in everything]))
     assert r["apd"] == pytest.approx(3.0)
+    # the lowest vertex's distance from the floor, whichever side: pooled mean and the largest
+    assert r["floor_abs_cm"] == pytest.approx(np.mean([1.0, 0.5, 2.0, 6.0])) and r["floor_max_cm"] == 6.0
+    assert "floor_abs_cm" not in rows_from_objects({"mug": {"x": summarise(_rows([1], [0.0], [0.0]))}})["x"]
 
 
 def test_finish_partial_writes_a_table_with_the_objects_done(tmp_path):
@@ -61,3 +65,5 @@ def test_evaluation_without_the_unshipped_baselines_leaves_their_rows_out(tmp_pa
     assert not any(k.startswith(("WholeGrasp-single", "GrabNet")) for k in rows)
     assert rows["WholeGrasp w/ opt. (Ours)"]["n"] == 2 and rows["GT + E_cont"]["n"] == 1 and rows["GT mesh"]["n"] == 1
     assert "GrabNet-SMPLX" not in table1(r) and "WholeGrasp w/ opt. (Ours)" in table1(r)
+    # the synthetic ground truth stands on the floor z = -t_O of the object frame (its soles within a few mm)
+    assert rows["GT mesh"]["floor_abs_cm"] < 0.5, rows["GT mesh"]

@@ -15,7 +15,8 @@ from graspkit.metrics import joint_limit_violation
 from graspkit.models.pose_prior import load_pose_prior
 from graspkit.objects.sdf import SDFGrid, signed_distance
 from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, GraspPoseConfig, GraspPoseOpt, GraspPoseWeights,
-                                      expand_free_joints, forearm_vertex_ids, hand_vertex_ids, kabsch)
+                                      body_joint_ids, expand_free_joints, forearm_vertex_ids, hand_vertex_ids,
+                                      kabsch, valid_body_joints)
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d
 
 
@@ -158,10 +159,13 @@ def test_energy_terms_against_independent_computations(bm, prior):
     extra = w.colli_body * np.maximum(-signed_distance(torch.tensor(q), box).numpy(), 0).sum()
     assert extra > 0.5 * want                                               # the inner points are deeper still
     assert full["colli_body"].item() == pytest.approx(want + extra, rel=0.05)
-    # stage 2 has the same points when stage2_collision (and nothing else of stage 3)
+    # stage 2 has the same points when stage2_collision, and the ground term when stage2_ground (nothing else)
     e2 = opt.with_config(inner_depths=(0.005, 0.01), forearms=True).energy(p, target, obj, 2, cm, co, cache)
-    assert set(e2) == {"fit", "prior", "colli_body", "limits"}
+    assert set(e2) == {"fit", "prior", "colli_body", "limits", "ground"}
     assert e2["colli_body"].item() == pytest.approx(want + extra, rel=0.05)
+    assert e2["ground"].item() == pytest.approx(w.ground * np.abs(v[feet, 2] + height).sum(), rel=1e-3)
+    assert "ground" not in opt.with_config(stage2_ground=False).energy(p, target, obj, 2, cm, co, cache)
+    assert "ground" not in opt.with_config(ground=False).energy(p, target, obj, 2, cm, co, cache)
     assert "colli_body" not in opt.with_config(stage2_collision=False).energy(p, target, obj, 2, cm, co, cache)
     assert "colli_body" not in opt.with_config(collision=False).energy(p, target, obj, 2, cm, co, cache)
     # sunk_depth: E^O is switched off exactly while some hand vertex is deeper than it inside the box
@@ -304,6 +308,11 @@ def test_free_joints_reach_a_wrist_the_prior_cannot(bm, prior):
         plain.with_config(free_joints=("right_wrist", "right_wrist"))
     assert expand_free_joints(["neck", "arms"]) == ("neck",) + ARM_JOINTS        # the command line's shorthand
     assert expand_free_joints(["none"]) == () and GraspPoseConfig().free_joints == ARM_JOINTS   # the default
+    # the rule the command line checks too: distinct SMPL-X body joints (indices into the 21 after the pelvis)
+    assert body_joint_ids(("left_knee", "right_wrist")).tolist() == [JOINT_INDEX["left_knee"] - 1,
+                                                                     JOINT_INDEX["right_wrist"] - 1]
+    assert valid_body_joints(("left_knee", "head")) and not valid_body_joints(("jaw",))
+    assert not valid_body_joints(("pelvis",)) and not valid_body_joints(("neck", "neck"))
     # weights.limits: the free joints' degrees past the human range, as metrics.joint_limit_violation counts them
     lim = GraspPoseOpt(bm, prior, replace(cfg, free_joints=("right_wrist", "right_collar"),
                                           weights=GraspPoseWeights(limits=0.05)))
@@ -383,3 +392,21 @@ def test_stage2_collision_keeps_the_hand_out_of_an_object_the_markers_are_in(bm,
     assert depth(plain) > 0.015                                              # E_fit alone: into the ball
     assert depth(kept) < 0.003, depth(kept)
     assert "colli_body" in kept.energies[1]["after"] and "colli_body" not in plain.energies[1]["after"]
+
+
+def test_stage2_ground_brings_the_soles_to_the_floor_with_the_markers_above_it(bm, prior):
+    """stage2_ground: E_g acts in stage 2, where t is free. Markers of a body standing 3 cm above the floor: with
+    E_g (202 sole vertices at weight 1 against E_fit's 143 L1 markers) stage 2 sets the soles on the floor; without
+    it, stage 2 follows the markers and the soles stay 3 cm up."""
+    verts, truth = _truth(bm, prior, B=1, seed=3)
+    feet = torch.as_tensor(np.concatenate(list(foot_vertices(bm).values())))
+    obj = _dummy_object()
+    obj.height = 0.03 - float(verts[0, feet, 2].mean())           # the floor z = -height, 3 cm under the true soles
+    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(100, 250, 0)))
+    markers = verts[:, opt.marker_ids]
+    off = lambda r: float((r.vertices[0, feet, 2] + obj.height).mean())  # noqa: E731  mean sole height, m
+    held = opt.fit(markers, obj, stages=(1, 2), progress=False)
+    free = opt.with_config(stage2_ground=False).fit(markers, obj, stages=(1, 2), progress=False)
+    assert "ground" in held.energies[1]["after"] and "ground" not in free.energies[1]["after"]
+    assert abs(off(held)) < 0.005, off(held)
+    assert off(free) > 0.025, off(free)

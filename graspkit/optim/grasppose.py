@@ -138,6 +138,8 @@ class GraspPoseConfig:
     restart_sunk: float | None = 0.005
     # E^B_colli in stage 2 too where `collision` (graspkit's; False: Alg. 1's E_fit-only stage 2; docs/saga.md)
     stage2_collision: bool = True
+    # E^g_cont in stage 2 too where `ground` (graspkit's; False: Alg. 1's E_fit-only stage 2; docs/saga.md)
+    stage2_ground: bool = True
     inner_depths: tuple[float, ...] = (0.005, 0.01)  # m: E^B_colli also at the hand vertices moved this far inward
     forearms: bool = True          # E^B_colli also on the forearm vertices (graspkit's; with inner_depths=(): Alg. 1)
     stage3_free: tuple[str, ...] = STAGE3_FREE     # Alg. 1's stage-3 variables (an experiment may add t, R: docs/saga.md)
@@ -217,13 +219,19 @@ def expand_free_joints(names: list[str] | tuple[str, ...]) -> tuple[str, ...]:
     return tuple(j for name in names if name != "none" for j in (ARM_JOINTS if name == "arms" else (name,)))
 
 
-def _body_joint_ids(names: tuple[str, ...]) -> Tensor:
-    """Indices (k,) into the 21 body joints of SMPL-X joint names; ValueError naming free_joints otherwise."""
-    body = JOINT_NAMES[1:22]
-    bad = [n for n in names if n not in body]
-    if bad or len(set(names)) != len(names):
-        raise ValueError(f"free_joints: expected distinct body-joint names of {body}, got {tuple(names)}")
-    return torch.tensor([body.index(n) for n in names], dtype=torch.long)
+BODY_JOINTS = JOINT_NAMES[1:22]   # the 21 SMPL-X body joints (pelvis, jaw, eyes and fingers left out)
+
+
+def valid_body_joints(names: tuple[str, ...] | list[str]) -> bool:
+    """Whether `names` are distinct names of BODY_JOINTS (GraspPoseConfig.free_joints' rule, also the CLI's)."""
+    return all(n in BODY_JOINTS for n in names) and len(set(names)) == len(names)
+
+
+def body_joint_ids(names: tuple[str, ...]) -> Tensor:
+    """Indices (k,) into BODY_JOINTS of distinct joint names; ValueError naming free_joints otherwise."""
+    if not valid_body_joints(names):
+        raise ValueError(f"free_joints: expected distinct body-joint names of {BODY_JOINTS}, got {tuple(names)}")
+    return torch.tensor([BODY_JOINTS.index(n) for n in names], dtype=torch.long)
 
 
 def hand_vertex_ids(bm, sides: tuple[str, ...] = ("left", "right")) -> np.ndarray:
@@ -310,7 +318,7 @@ class GraspPoseOpt:
         for p in self.prior.parameters():
             p.requires_grad_(False)
         self.cfg = config or GraspPoseConfig()
-        self.free_ids = _body_joint_ids(self.cfg.free_joints)
+        self.free_ids = body_joint_ids(self.cfg.free_joints)
         ms = saga_markers(bm)
         self.marker_ids = torch.as_tensor(ms.vertex_ids)
         self.body_face = torch.arange(ms.groups["face"][1])              # body + face markers for Kabsch
@@ -338,7 +346,7 @@ class GraspPoseOpt:
         """A copy that shares the body, prior and vertex sets, with some GraspPoseConfig fields changed."""
         other = copy.copy(self)
         other.cfg = replace(self.cfg, **changes)
-        other.free_ids = _body_joint_ids(other.cfg.free_joints)
+        other.free_ids = body_joint_ids(other.cfg.free_joints)
         return other
 
     # ------------------------------------------------------------------ the body
@@ -397,11 +405,13 @@ class GraspPoseOpt:
                 j = 1 + self.free_ids                                    # the free joints among the 55
                 aa = torch.zeros(B, rot.shape[1], 3, dtype=rot.dtype).index_copy(1, j, matrix_to_axis_angle(rot[:, j]))
                 e["limits"] = w.limits * joint_limit_excess(aa)[:, j].sum(-1)
+        pts, nrm, height = obj.batch(B)
         if stage < 3:
             if stage == 2 and cfg.collision and cfg.stage2_collision:
                 e["colli_body"] = w.colli_body * self._extra_inside(v, obj, hands=True)   # no other E^B here
+            if stage == 2 and cfg.ground and cfg.stage2_ground:
+                e["ground"] = w.ground * (feet[..., 2] + height).abs().sum(-1)
             return e
-        pts, nrm, height = obj.batch(B)
 
         def nn(name: str, q: Tensor, t: Tensor) -> Tensor:
             d2, cache[name] = _nearest(q, t, None if refresh or name not in cache else cache[name])
