@@ -66,6 +66,14 @@ graspkit's choices where the paper is silent (all in `GraspPoseWeights` / `Grasp
   training objects (2 placements x 5 samples of nine objects, the same draws): mean volume 1.56 -> 0.29 cm3,
   contact 1.00 -> 1.00, depth 0.05 -> 0.02 cm; without the forearms 0.35 (one forearm through the cracker box,
   14 cm3); with the extra points in stage 2 but not stage 3, 0.93 (docs/saga.md).
+- Stage-2 ground (`GraspPoseConfig.stage2_ground`, graspkit's, on by default; False is Alg. 1): E^g_cont is on in
+  stage 2 as well (where `ground` is), where t is free. Why: when a hand brushes into the object during stage 2,
+  E^B_colli's gradient is hundreds of times E_fit's, and Adam carries that kick on for ten-odd steps (momentum) and
+  then scales E_fit's steps down for hundreds (its second moment): t and R jump and stay off, and stage 3, which
+  cannot move them, fits the pose to the markers from there. Whole bodies ended 5 cm under or 13 cm above the
+  floor (the lowest vertex; E_fit after stage 2 up to 65 against 2-3 without the stage-2 collision). The soles'
+  202 vertices at alpha_g = 1 outweigh E_fit's 143 markers in height, so the body stands on the floor through
+  stage 2 (docs/saga.md).
 Frames: everything in the object frame of WholeGrasp-VAE (object centre at 0, z up, floor at z = -t_O).
 """
 from __future__ import annotations

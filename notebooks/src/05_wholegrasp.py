@@ -265,6 +265,10 @@ fig.tight_layout()
 # the hand vertices, the same 5 and 10 mm inside the hand (a wall through the palm has no hand vertex in it) and the
 # forearms: the body comes to the markers from outside and the hand stops at the surface
 # (`GraspPoseConfig.stage2_collision`, `inner_depths`, `forearms`; on the training objects 1.56 → 0.29 cm³).
+# That push has a side effect on Adam: one brush of the hand against the object gives a gradient hundreds of times
+# $E_{fit}$'s, and Adam's momentum carries the body on for ten-odd steps while its second moment slows $E_{fit}$'s
+# steps for hundreds; whole bodies ended up to 5 cm under or 13 cm above the floor. So $E^g_{cont}$ is on in stage 2
+# too, where $t$ is free: the soles hold the body's height (`GraspPoseConfig.stage2_ground`; `docs/saga.md`).
 # The paper runs 300 + 400 + 500 Adam steps; **this lesson runs 100 + 150 + 150 (+ 30 polish) on two samples** to
 # stay within a minute (the evaluation below uses the paper's schedule and the full polish).
 
@@ -294,7 +298,7 @@ for k in terms:
 for b in np.cumsum(opt.cfg.steps)[:-1]:
     ax.axvline(b, color="0.7", ls="--")
 ax.set_yscale("log"); ax.set_xlabel("Adam step"); ax.set_ylabel("energy (sum over 2 samples)")
-ax.legend(fontsize=7, ncol=4); ax.set_title("stage 1: t, R | stage 2: + beta, pose latent; E_fit, E^B | stage 3: pose latent, hands, eyes; all terms",
+ax.legend(fontsize=7, ncol=4); ax.set_title("stage 1: t, R | stage 2: + beta, pose latent; E_fit, E^B, E_g | stage 3: pose latent, hands, eyes; all terms",
              fontsize=9)
 fig.tight_layout()
 
