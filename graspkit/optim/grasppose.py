@@ -414,19 +414,17 @@ class GraspPoseOpt:
                 aa = torch.zeros(B, rot.shape[1], 3, dtype=rot.dtype).index_copy(1, j, matrix_to_axis_angle(rot[:, j]))
                 e["limits"] = w.limits * joint_limit_excess(aa)[:, j].sum(-1)
         pts, nrm, height = obj.batch(B)
+        if stage == 2 and cfg.collision and cfg.stage2_collision:
+            e["colli_body"] = w.colli_body * self._extra_inside(v, obj, hands=True)   # no other E^B in stage 2
+        if cfg.ground and (stage == 3 or (stage == 2 and cfg.stage2_ground)):
+            e["ground"] = w.ground * (feet[..., 2] + height).abs().sum(-1)
         if stage < 3:
-            if stage == 2 and cfg.collision and cfg.stage2_collision:
-                e["colli_body"] = w.colli_body * self._extra_inside(v, obj, hands=True)   # no other E^B here
-            if stage == 2 and cfg.ground and cfg.stage2_ground:
-                e["ground"] = w.ground * (feet[..., 2] + height).abs().sum(-1)
             return e
 
         def nn(name: str, q: Tensor, t: Tensor) -> Tensor:
             d2, cache[name] = _nearest(q, t, None if refresh or name not in cache else cache[name])
             return d2
 
-        if cfg.ground:
-            e["ground"] = w.ground * (feet[..., 2] + height).abs().sum(-1)
         if cfg.contact and object_contact is not None and marker_contact is not None:
             co_idx = cache["contact_idx"]
             po = torch.gather(pts, 1, co_idx.unsqueeze(-1).expand(-1, -1, 3))
