@@ -79,6 +79,7 @@ class EvalConfig:
     restart_sunk: float | None = 0.005  # GraspPoseConfig.restart_sunk (graspkit's; None is Alg. 1's single stage 3)
     stage2_collision: bool = True  # GraspPoseConfig.stage2_collision (graspkit's; False is Alg. 1's E_fit-only stage 2)
     stage2_ground: bool = True     # GraspPoseConfig.stage2_ground (graspkit's; False is Alg. 1's stage 2)
+    ground_rest: bool = True       # GraspPoseConfig.ground_rest (graspkit's; False is the paper's |h(v)|)
     refine: int | None = None     # the volume's rays per cell side along walls (None: the default; 1: docs/saga.md's tables)
 
 
@@ -249,7 +250,8 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
               "`graspkit train grabnet_smplx` make them): their rows are left out")
     pca = HandPCA(bm)
     base_cfg = GraspPoseConfig(steps=cfg.steps, free_joints=tuple(cfg.free_joints), restart_sunk=cfg.restart_sunk,
-                               stage2_collision=cfg.stage2_collision, stage2_ground=cfg.stage2_ground)
+                               stage2_collision=cfg.stage2_collision, stage2_ground=cfg.stage2_ground,
+                               ground_rest=cfg.ground_rest)
     opt = GraspPoseOpt(bm, prior, base_cfg)
     ch = None if single_state is None else single_state.get("hand_contact_prior")
     opt_h = GraspPoseOpt(bm, prior, base_cfg, hand_contact_prior=None if ch is None else ch.float()[opt.hand_ids])
@@ -448,6 +450,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="stage 2 without E^B_colli, as Alg. 1 (default: E^B_colli too where stage 3 has E_colli)")
     ap.add_argument("--no-stage2-ground", action="store_true",
                     help="stage 2 without E_g, as Alg. 1 (default: E_g too, the feet held to the floor)")
+    ap.add_argument("--no-ground-rest", action="store_true",
+                    help="E_g as the paper's |h(v)| (default: each sole vertex's height less its height at rest)")
     ap.add_argument("--finish", type=Path, default=None, help="only turn this .partial.json into --out and print it")
     args = ap.parse_args(argv)
     if args.finish is not None:
@@ -462,6 +466,7 @@ def main(argv: list[str] | None = None) -> int:
                      free_joints=expand_free_joints(args.free_joints),
                      restart_sunk=None if args.no_restart else EvalConfig.restart_sunk,
                      stage2_collision=not args.no_stage2_collision, stage2_ground=not args.no_stage2_ground,
+                     ground_rest=not args.no_ground_rest,
                      refine=args.refine)
     if args.objects:
         cfg = replace(cfg, objects=tuple(args.objects))

@@ -126,9 +126,17 @@ def test_energy_terms_against_independent_computations(bm, prior):
     v = verts[0].double().numpy()
     # E_fit at the truth is the prior term only
     assert e["fit"].item() < 1e-3
-    # ground: alpha_g sum |z + t_O| over the sole vertices
-    feet = np.concatenate(list(foot_vertices(bm).values()))
-    assert e["ground"].item() == pytest.approx(w.ground * np.abs(v[feet, 2] + height).sum(), rel=1e-3)
+    # ground: alpha_g sum |z + t_O - h0| over the sole vertices, h0 each one's height above its foot's lowest vertex
+    # in the rest mesh (y up there); ground_rest=False: the paper's |z + t_O|
+    f = foot_vertices(bm)
+    feet = np.concatenate(list(f.values()))
+    with torch.no_grad():
+        rest_y = bm().vertices[0, :, 1].double().numpy()
+    h0 = np.concatenate([rest_y[f[k]] - rest_y[np.concatenate([f[s + "_heel"], f[s + "_toe"]])].min()
+                         for s in ("left", "right") for k in (s + "_heel", s + "_toe")])
+    assert e["ground"].item() == pytest.approx(w.ground * np.abs(v[feet, 2] + height - h0).sum(), rel=1e-3)
+    paper = opt.with_config(ground_rest=False).energy(p, target, obj, 3, cm, co, cache)
+    assert paper["ground"].item() == pytest.approx(w.ground * np.abs(v[feet, 2] + height).sum(), rel=1e-3)
     # marker contact: 15 * squared distance of marker 100 to its nearest object point
     d, _ = cKDTree(pts_np).query(v[opt.marker_ids[100]])
     assert e["contact_marker"].item() == pytest.approx(w.contact_marker * d ** 2, rel=1e-3)
@@ -163,7 +171,7 @@ def test_energy_terms_against_independent_computations(bm, prior):
     e2 = opt.with_config(inner_depths=(0.005, 0.01), forearms=True).energy(p, target, obj, 2, cm, co, cache)
     assert set(e2) == {"fit", "prior", "colli_body", "limits", "ground"}
     assert e2["colli_body"].item() == pytest.approx(want + extra, rel=0.05)
-    assert e2["ground"].item() == pytest.approx(w.ground * np.abs(v[feet, 2] + height).sum(), rel=1e-3)
+    assert e2["ground"].item() == pytest.approx(w.ground * np.abs(v[feet, 2] + height - h0).sum(), rel=1e-3)
     assert "ground" not in opt.with_config(stage2_ground=False).energy(p, target, obj, 2, cm, co, cache)
     assert "ground" not in opt.with_config(ground=False).energy(p, target, obj, 2, cm, co, cache)
     assert "colli_body" not in opt.with_config(stage2_collision=False).energy(p, target, obj, 2, cm, co, cache)
@@ -400,13 +408,33 @@ def test_stage2_ground_brings_the_soles_to_the_floor_with_the_markers_above_it(b
     it, stage 2 follows the markers and the soles stay 3 cm up."""
     verts, truth = _truth(bm, prior, B=1, seed=3)
     feet = torch.as_tensor(np.concatenate(list(foot_vertices(bm).values())))
-    obj = _dummy_object()
-    obj.height = 0.03 - float(verts[0, feet, 2].mean())           # the floor z = -height, 3 cm under the true soles
     opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(100, 250, 0)))
+    obj = _dummy_object()
+    # the floor z = -height, 3 cm under where E_g would put the true soles (each at its rest height h0 above it)
+    obj.height = 0.03 - float((verts[0, feet, 2] - opt.sole_rest).mean())
     markers = verts[:, opt.marker_ids]
-    off = lambda r: float((r.vertices[0, feet, 2] + obj.height).mean())  # noqa: E731  mean sole height, m
+    off = lambda r: float((r.vertices[0, feet, 2] + obj.height - opt.sole_rest).mean())  # noqa: E731  m
     held = opt.fit(markers, obj, stages=(1, 2), progress=False)
     free = opt.with_config(stage2_ground=False).fit(markers, obj, stages=(1, 2), progress=False)
     assert "ground" in held.energies[1]["after"] and "ground" not in free.energies[1]["after"]
     assert abs(off(held)) < 0.005, off(held)
     assert off(free) > 0.025, off(free)
+
+
+def test_ground_from_the_rest_heights_stands_a_flat_footed_body_on_the_floor(bm, prior):
+    """ground_rest: markers of a body in the rest pose (feet flat) whose lowest vertex is on the floor. E_g from
+    each sole vertex's rest height keeps the lowest vertex on the floor; the paper's |h| (an L1 over each foot's
+    lowest 2 cm, median 0.8 cm above the sole's bottom) sinks it under."""
+    up = axis_angle_to_matrix(torch.tensor([np.pi / 2, 0.0, 0.0]))
+    with torch.no_grad():
+        verts = bm(global_orient=matrix_to_axis_angle(up)[None]).vertices
+    feet = torch.as_tensor(np.concatenate(list(foot_vertices(bm).values())))
+    obj = _dummy_object()
+    obj.height = -float(verts[0, :, 2].min())                      # the lowest vertex on the floor
+    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(100, 150, 0)))
+    markers = verts[:, opt.marker_ids]
+    low = lambda r: float(r.vertices[0, feet, 2].min() + obj.height)  # noqa: E731  lowest sole vertex, m
+    rest = opt.fit(markers, obj, stages=(1, 2), progress=False)
+    paper = opt.with_config(ground_rest=False).fit(markers, obj, stages=(1, 2), progress=False)
+    assert abs(low(rest)) < 0.002, low(rest)
+    assert low(paper) < -0.004, low(paper)

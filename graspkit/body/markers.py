@@ -291,6 +291,17 @@ def foot_vertices(bm, height: float = 0.02) -> dict[str, np.ndarray]:
     return out
 
 
+def sole_rest_heights(bm, height: float = 0.02) -> np.ndarray:
+    """Each sole vertex's height (m) above its foot's lowest vertex at rest: (N,), foot_vertices' ids concatenated."""
+    r = _Rest(bm)
+    f = foot_vertices(bm, height)
+    out = []
+    for s in ("left", "right"):
+        ids = np.concatenate([f[f"{s}_heel"], f[f"{s}_toe"]])
+        out.append(r.v[ids, 1] - r.v[ids, 1].min())
+    return np.concatenate(out)
+
+
 def palm_vertices(bm, min_cos: float = 0.7) -> dict[str, np.ndarray]:
     """Palm-side vertex ids of each hand: {'left', 'right'}: wrist-dominated vertices whose normal faces the palm (-y at rest)."""
     r = _Rest(bm)

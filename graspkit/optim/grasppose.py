@@ -74,6 +74,11 @@ graspkit's choices where the paper is silent (all in `GraspPoseWeights` / `Grasp
   floor (the lowest vertex; E_fit after stage 2 up to 65 against 2-3 without the stage-2 collision). The soles'
   202 vertices at alpha_g = 1 outweigh E_fit's 143 markers in height, so the body stands on the floor through
   stage 2 (docs/saga.md).
+- Ground from the rest shape (`GraspPoseConfig.ground_rest`, graspkit's, on by default; False is the paper's
+  |h(v)|): E^g_cont is alpha_g sum |h(v) - h0(v)|, h0(v) the sole vertex's height above its foot's lowest vertex at
+  rest (mean shape; 0 to 2 cm, median 0.8 cm). V^f_B is each foot's lowest 2 cm, so the paper's |h| (an L1, which
+  sets the median on the floor) sinks each foot's lowest vertices about 1 cm under it; with h0 a foot flat as at
+  rest reads 0 with its lowest vertex on the floor (docs/saga.md).
 Frames: everything in the object frame of WholeGrasp-VAE (object centre at 0, z up, floor at z = -t_O).
 """
 from __future__ import annotations
@@ -87,7 +92,7 @@ import torch
 from torch import Tensor
 from tqdm.auto import tqdm
 
-from graspkit.body.markers import foot_vertices, saga_markers, vertex_normals
+from graspkit.body.markers import foot_vertices, saga_markers, sole_rest_heights, vertex_normals
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX, JOINT_NAMES
 from graspkit.metrics import joint_limit_excess
 from graspkit.models.gnet import SparseBody
@@ -148,6 +153,9 @@ class GraspPoseConfig:
     stage2_collision: bool = True
     # E^g_cont in stage 2 too where `ground` (graspkit's; False: Alg. 1's E_fit-only stage 2; docs/saga.md)
     stage2_ground: bool = True
+    # E^g_cont measures each sole vertex's height from its own height above its foot's lowest vertex at rest
+    # (graspkit's; False: the paper's |h(v)|, which sets the soles' median on the floor and the rest under it)
+    ground_rest: bool = True
     inner_depths: tuple[float, ...] = (0.005, 0.01)  # m: E^B_colli also at the hand vertices moved this far inward
     forearms: bool = True          # E^B_colli also on the forearm vertices (graspkit's; with inner_depths=(): Alg. 1)
     stage3_free: tuple[str, ...] = STAGE3_FREE     # Alg. 1's stage-3 variables (an experiment may add t, R: docs/saga.md)
@@ -338,6 +346,7 @@ class GraspPoseOpt:
         n_m, n_h, n_f = len(self.marker_ids), len(hands), len(feet)
         self.sl_markers, self.sl_hands = slice(0, n_m), slice(n_m, n_m + n_h)
         self.sl_feet, self.sl_arms = slice(n_m + n_h, n_m + n_h + n_f), slice(n_m + n_h + n_f, None)
+        self.sole_rest = torch.as_tensor(sole_rest_heights(bm), dtype=torch.float32)   # (n_f,) m, mean shape
         self.hand_faces = hand_faces(bm, hands)      # into the hand slice, for vertex normals of the hand surface
         self.hand_ids = hands
         k = self.cfg.n_pca
@@ -417,7 +426,8 @@ class GraspPoseOpt:
         if stage == 2 and cfg.collision and cfg.stage2_collision:
             e["colli_body"] = w.colli_body * self._extra_inside(v, obj, hands=True)   # no other E^B in stage 2
         if cfg.ground and (stage == 3 or (stage == 2 and cfg.stage2_ground)):
-            e["ground"] = w.ground * (feet[..., 2] + height).abs().sum(-1)
+            rest = self.sole_rest if cfg.ground_rest else torch.zeros_like(self.sole_rest)
+            e["ground"] = w.ground * (feet[..., 2] + height - rest).abs().sum(-1)
         if stage < 3:
             return e
 
