@@ -213,7 +213,7 @@ from graspkit.objects.placement import ObjectPose
 from graspkit.saga import synthesize
 
 r = synthesize("wine_glass", bm, object_pose=ObjectPose.from_yaw(0.5, np.array([0.2, -0.7, 0.95])), seed=1,
-               grasp_steps=(100, 120, 150), motion_steps=(50, 80), progress=False)
+               grasp_steps=(150, 200, 250), motion_steps=(50, 80), progress=False)
 print({k: round(v, 3) for k, v in r.metrics.items()})
 v = r.motion.vertices(bm).numpy()
 print(f"lowest vertex over the motion: {v[..., 2].min() * 100:.1f} cm; pelvis travels "
