@@ -291,15 +291,13 @@ def foot_vertices(bm, height: float = 0.02) -> dict[str, np.ndarray]:
     return out
 
 
-def sole_rest_heights(bm, height: float = 0.02) -> np.ndarray:
-    """Each sole vertex's height (m) above its foot's lowest vertex at rest: (N,), foot_vertices' ids concatenated."""
+def sole_rest_heights(bm, feet: dict[str, np.ndarray] | None = None) -> np.ndarray:
+    """Each sole vertex's height (m) above its foot's lowest vertex at rest: (N,), in the order of `feet` (default
+    foot_vertices(bm)) concatenated."""
     r = _Rest(bm)
-    f = foot_vertices(bm, height)
-    out = []
-    for s in ("left", "right"):
-        ids = np.concatenate([f[f"{s}_heel"], f[f"{s}_toe"]])
-        out.append(r.v[ids, 1] - r.v[ids, 1].min())
-    return np.concatenate(out)
+    f = foot_vertices(bm) if feet is None else feet
+    lowest = {s: min(r.v[ids, 1].min() for k, ids in f.items() if k.startswith(s)) for s in ("left", "right")}
+    return np.concatenate([r.v[ids, 1] - lowest[k.split("_")[0]] for k, ids in f.items()])
 
 
 def palm_vertices(bm, min_cos: float = 0.7) -> dict[str, np.ndarray]:

@@ -339,14 +339,15 @@ class GraspPoseOpt:
         self.marker_ids = torch.as_tensor(ms.vertex_ids)
         self.body_face = torch.arange(ms.groups["face"][1])              # body + face markers for Kabsch
         hands = torch.as_tensor(hand_vertex_ids(bm))
-        feet = torch.as_tensor(np.concatenate(list(foot_vertices(bm).values())))
+        sole = foot_vertices(bm)
+        feet = torch.as_tensor(np.concatenate(list(sole.values())))
         arms = torch.as_tensor(forearm_vertex_ids(bm))
         ids = torch.cat([self.marker_ids, hands, feet, arms])
         self.sparse = SparseBody(bm, ids)
         n_m, n_h, n_f = len(self.marker_ids), len(hands), len(feet)
         self.sl_markers, self.sl_hands = slice(0, n_m), slice(n_m, n_m + n_h)
         self.sl_feet, self.sl_arms = slice(n_m + n_h, n_m + n_h + n_f), slice(n_m + n_h + n_f, None)
-        self.sole_rest = torch.as_tensor(sole_rest_heights(bm), dtype=torch.float32)   # (n_f,) m, mean shape
+        self.sole_rest = torch.as_tensor(sole_rest_heights(bm, sole), dtype=torch.float32)  # (n_f,) m, mean shape
         self.hand_faces = hand_faces(bm, hands)      # into the hand slice, for vertex normals of the hand surface
         self.hand_ids = hands
         k = self.cfg.n_pca
