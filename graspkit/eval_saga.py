@@ -215,18 +215,18 @@ def fit_variants(opt, markers: Tensor, obj, mc: Tensor | None, oc: Tensor | None
 
 
 def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = True,
-             out: str | Path | None = RESULTS_PATH, checkpoints: str | Path = DATA_STUBS / "checkpoints"
-             ) -> dict[str, Any]:
+             out: str | Path | None = RESULTS_PATH, checkpoints: str | Path = DATA_STUBS / "checkpoints",
+             grabnet_only: bool = False) -> dict[str, Any]:
     """Run the whole protocol with the models in `checkpoints` (wholegrasp.pt, wholegrasp_single.pt,
-    wholegrasp_grabnet_smplx.pt, pose_prior.pt); returns (and writes atomically to `out`, JSON) the summaries."""
+    wholegrasp_grabnet_smplx.pt, pose_prior.pt); returns (and writes atomically to `out`, JSON) the summaries.
+    `grabnet_only`: only the GrabNet-SMPLX row (no optimisation; the same draws as the full run)."""
     from tqdm.auto import tqdm
 
     from graspkit.body import BodyModel
     from graspkit.body.markers import saga_markers
     from graspkit.data.grasp_io import collision_sdf_grid
     from graspkit.models.pose_prior import load_pose_prior
-    from graspkit.models.wholegrasp import (GRABNET_SMPLX_PATH, GrabNetSMPLX, HandPCA, WholeGraspVAE,
-                                            load_wholegrasp, params_to_rotmats)
+    from graspkit.models.wholegrasp import GRABNET_SMPLX_PATH, GrabNetSMPLX, HandPCA, WholeGraspVAE, load_wholegrasp
     from graspkit.optim.grasppose import GraspPoseConfig, GraspPoseOpt
     from graspkit.paths import default_model_path
     from graspkit.train import load_checkpoint
@@ -245,6 +245,8 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
     single = None if single_state is None else WholeGraspVAE.from_state(single_state)
     grabnet = GrabNetSMPLX.from_state(load_checkpoint(grabnet_path)) if grabnet_path.is_file() else None
     missing = [q.name for q, m in ((single_path, single), (grabnet_path, grabnet)) if m is None]
+    if grabnet_only and grabnet is None:
+        raise FileNotFoundError(f"checkpoints: no {grabnet_path.name} in {ck} (`graspkit train grabnet_smplx`)")
     if missing:
         print(f"checkpoints: no {' or '.join(missing)} in {ck} (`graspkit train wholegrasp_single` / "
               "`graspkit train grabnet_smplx` make them): their rows are left out")
@@ -278,6 +280,9 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
         mk1 = mk[:0] if single is None else torch.cat(
             [single.sample(p.points, p.normals, p.height, n, g, centre=torch.zeros(3)).markers for p in pls])
         x = None if grabnet is None else torch.cat([grabnet.sample(p.points, p.normals, p.height, n, g) for p in pls])
+        if grabnet_only:
+            add("GrabNet-SMPLX", *_grabnet_rows(bm, grabnet, x, pca, pls, n, ids, cfg.refine), n)
+            continue
         # one batch per object: WholeGrasp samples | WholeGrasp-single samples | ground-truth markers. The samples
         # are independent (Adam is per parameter), so Alg. 1's stages 1-2 run once for all of them, and each stage-3
         # variant once for the marker sets it applies to (2,700 steps per object instead of 6,100)
@@ -320,10 +325,7 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
             add("WholeGrasp-single w/ heuristic opt.", body_rows(bm, r.vertices, places[nw:nw + n1], 1, cfg.refine),
                 r.markers, n)
         if x is not None:                                  # GrabNet-SMPLX: parameters sampled directly
-            rot, betas, transl = params_to_rotmats(x, pca)
-            with torch.no_grad():
-                v = bm.forward_rotmats(rot, betas=betas, transl=transl).vertices
-            add("GrabNet-SMPLX", body_rows(bm, v, pls, n, cfg.refine), v[:, ids], n)
+            add("GrabNet-SMPLX", *_grabnet_rows(bm, grabnet, x, pca, pls, n, ids, cfg.refine), n)
         # ground truth: meshes, and its markers fitted with the three stage-3 variants (ground-truth contacts)
         fp = torch.stack([p.body["fullpose"] for p in gts])
         with torch.no_grad():
@@ -343,6 +345,15 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
     if out is not None:
         _write_json(out, result)
     return result
+
+
+def _grabnet_rows(bm, grabnet, x: Tensor, pca, pls: list[Placement], n: int, ids: Tensor,
+                  refine: int | None) -> tuple[list[dict[str, float]], Tensor]:
+    """Metric rows and markers (B,143,3) of GrabNet-SMPLX's parameter samples x (B, n_params), n per placement."""
+    rot, betas, transl = grabnet.to_rotmats(x, pca)
+    with torch.no_grad():
+        v = bm.forward_rotmats(rot, betas=betas, transl=transl).vertices
+    return body_rows(bm, v, pls, n, refine), v[:, ids]
 
 
 def rows_from_objects(per_object: dict[str, dict[str, dict[str, float]]]) -> dict[str, dict[str, float]]:
@@ -452,6 +463,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="stage 2 without E_g, as Alg. 1 (default: E_g too, the feet held to the floor)")
     ap.add_argument("--no-ground-rest", action="store_true",
                     help="E_g as the paper's |h(v)| (default: each sole vertex's height less its height at rest)")
+    ap.add_argument("--grabnet-only", action="store_true",
+                    help="only the GrabNet-SMPLX row (no optimisation; the same draws as the full run)")
     ap.add_argument("--finish", type=Path, default=None, help="only turn this .partial.json into --out and print it")
     args = ap.parse_args(argv)
     if args.finish is not None:
@@ -470,7 +483,7 @@ def main(argv: list[str] | None = None) -> int:
                      refine=args.refine)
     if args.objects:
         cfg = replace(cfg, objects=tuple(args.objects))
-    res = evaluate(args.data, cfg, out=args.out, checkpoints=args.checkpoints)
+    res = evaluate(args.data, cfg, out=args.out, checkpoints=args.checkpoints, grabnet_only=args.grabnet_only)
     print(table1(res))
     print()
     print(table2(res))
@@ -503,6 +516,9 @@ def add_saga_train_commands(train_sub) -> None:
         if name == "wholegrasp":
             p.add_argument("--consistency", choices=("paper", "signed"), default="paper",
                            help="Eq. 3's distances: as printed (default) or signed Euclidean (the authors' code)")
+        if name == "grabnet_smplx":
+            p.add_argument("--body-space", choices=("prior", "rot6d"), default="prior",
+                           help="the body pose as the pose prior's 32-D latent (SAGA's theta_b, default) or 21 x 6D")
         p.set_defaults(func=lambda a, name=name: _cmd_train(a, name))
 
 
@@ -525,7 +541,7 @@ def _cmd_train(args: argparse.Namespace, name: str) -> int:
         return 0
     if name == "grabnet_smplx":
         info = W.train_grabnet_smplx(args.data, args.out, epochs=args.epochs, seed=args.seed,
-                                     time_limit_s=args.time_limit, threads=args.threads)
+                                     time_limit_s=args.time_limit, threads=args.threads, body_space=args.body_space)
     else:
         info = W.train_wholegrasp(args.data, args.out, multitask=name == "wholegrasp", epochs=args.epochs,
                                   seed=args.seed, time_limit_s=args.time_limit, threads=args.threads,

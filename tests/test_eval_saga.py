@@ -67,3 +67,26 @@ def test_evaluation_without_the_unshipped_baselines_leaves_their_rows_out(tmp_pa
     assert "GrabNet-SMPLX" not in table1(r) and "WholeGrasp w/ opt. (Ours)" in table1(r)
     # the synthetic ground truth stands on the floor z = -t_O of the object frame (its soles within a few mm)
     assert rows["GT mesh"]["floor_abs_cm"] < 0.5, rows["GT mesh"]
+
+
+def test_grabnet_only_gives_the_full_runs_grabnet_row(tmp_path):
+    """`grabnet_only` draws what the full run draws: its GrabNet-SMPLX row equals the full run's (no optimiser
+    touches that row), and without the baseline's weights it says which file is missing."""
+    import torch
+
+    from graspkit.models.wholegrasp import GRABNET_SMPLX_PATH, GrabNetSMPLX
+    from graspkit.train import save_checkpoint
+
+    shutil.copy(DATA_STUBS / "checkpoints" / "wholegrasp.pt", tmp_path / "wholegrasp.pt")
+    cfg = EvalConfig(objects=("mug",), placements=1, samples=3, gt_grasps=1, steps=(2, 2, 2))
+    with pytest.raises(FileNotFoundError, match=GRABNET_SMPLX_PATH.name):
+        evaluate(DATA_STUBS / "grasps", cfg, progress=False, out=None, checkpoints=tmp_path, grabnet_only=True)
+    torch.manual_seed(0)
+    model = GrabNetSMPLX()
+    torch.nn.init.normal_(model.dec[-1].weight, std=0.05)       # samples that differ (the zero init gives one body)
+    save_checkpoint(tmp_path / GRABNET_SMPLX_PATH.name, model.state())
+    full = evaluate(DATA_STUBS / "grasps", cfg, progress=False, out=None, checkpoints=tmp_path)
+    only = evaluate(DATA_STUBS / "grasps", cfg, progress=False, out=None, checkpoints=tmp_path, grabnet_only=True)
+    assert list(only["rows"]) == ["GrabNet-SMPLX"]
+    assert only["rows"]["GrabNet-SMPLX"] == full["rows"]["GrabNet-SMPLX"]
+    assert only["rows"]["GrabNet-SMPLX"]["apd"] > 0.01

@@ -111,7 +111,7 @@ def test_grabnet_smplx_sample_checks_its_inputs_and_samples_a_good_cloud():
     model = GrabNetSMPLX().eval()
     pts, nrm = _cloud(300)
     out = model.sample(pts, nrm, 0.8, n=3, generator=torch.Generator().manual_seed(0))
-    assert out.shape == (3, GrabNetSMPLX.n_params) and torch.isfinite(out).all()
+    assert out.shape == (3, model.n_params) and torch.isfinite(out).all()
     with pytest.raises(ValueError, match="points: contains NaN"):
         model.sample(pts * NAN, nrm, 0.8, n=1)
     with pytest.raises(ValueError, match="height: contains NaN"):

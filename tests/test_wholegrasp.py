@@ -182,24 +182,84 @@ def test_training_set_precomputes_and_yaw_augmentation_keeps_the_geometry():
                                model.loss(b, model(b), 0, 10)["consistency"], atol=1e-6, rtol=1e-4)
 
 
-def test_grabnet_parameters_turn_with_the_body():
+@pytest.mark.parametrize("space", ["rot6d", "prior"])
+def test_grabnet_parameters_turn_with_the_body(space):
     from graspkit.body import BodyModel
     from graspkit.body.markers import saga_markers
     from graspkit.models.gnet import SparseBody
+    from graspkit.models.pose_prior import load_pose_prior
     from graspkit.models.wholegrasp import HandPCA, grasp_params, params_to_rotmats, rest_root_joint, turn_params
     from graspkit.paths import default_model_path
     from graspkit.rotations import axis_angle_to_matrix
     bm = BodyModel.from_file(default_model_path())
     body, pca = SparseBody(bm, saga_markers(bm).vertex_ids), HandPCA(bm)
+    prior = load_pose_prior() if space == "prior" else None
     g = torch.Generator().manual_seed(0)
     fp = torch.randn(3, 55, 3, generator=g) * 0.2
     fp[:, 25:] = pca.decode(torch.randn(6, 24, generator=g) * 0.5, "left").view(3, 2, 15, 3).reshape(3, 30, 3)
     betas = torch.randn(3, 10, generator=g)
-    x = grasp_params(fp, torch.randn(3, 3, generator=g), betas, torch.zeros(3, 3), pca)
+    x = grasp_params(fp, torch.randn(3, 3, generator=g), betas, torch.zeros(3, 3), pca, prior)
+    assert x.shape == (3, 193 if prior is None else 99)
     Q = axis_angle_to_matrix(torch.tensor([0.0, 0.0, 1.1]))
-    m0 = body(*params_to_rotmats(x, pca))[0]
-    m1 = body(*params_to_rotmats(turn_params(x, rest_root_joint(bm, betas), Q), pca))[0]
+    m0 = body(*params_to_rotmats(x, pca, prior))[0]
+    m1 = body(*params_to_rotmats(turn_params(x, rest_root_joint(bm, betas), Q), pca, prior))[0]
     torch.testing.assert_close(m1, m0 @ Q.T, atol=1e-5, rtol=0)
+
+
+def test_grabnet_prior_space_poses_the_body_the_pose_prior_decodes():
+    """A 99-number vector (body as the pose prior's latent) poses the same markers as the 193-number vector that
+    carries the prior's decoded joints as 6D rotations, and a grasp's own body pose comes back within the prior's
+    reconstruction error."""
+    from graspkit.body import BodyModel
+    from graspkit.body.markers import saga_markers
+    from graspkit.models.gnet import SparseBody
+    from graspkit.models.pose_prior import load_pose_prior
+    from graspkit.models.wholegrasp import HandPCA, grasp_params, params_to_rotmats
+    from graspkit.paths import default_model_path
+    from graspkit.rotations import matrix_to_rot6d
+    bm = BodyModel.from_file(default_model_path())
+    body, pca, prior = SparseBody(bm, saga_markers(bm).vertex_ids), HandPCA(bm), load_pose_prior()
+    g = torch.Generator().manual_seed(1)
+    x = torch.cat([torch.randn(4, 3, generator=g) * 0.3, torch.randn(4, 6, generator=g),   # any 6 numbers: a rotation
+                   torch.randn(4, 10, generator=g), torch.randn(4, 32, generator=g), torch.randn(4, 48, generator=g)], 1)
+    rot, betas, transl = params_to_rotmats(x, pca, prior)
+    x6 = torch.cat([x[:, :19], matrix_to_rot6d(prior.decode_rotmats(x[:, 19:51])).reshape(4, 126), x[:, 51:]], 1)
+    rot6, _, _ = params_to_rotmats(x6, pca)
+    torch.testing.assert_close(body(rot, betas, transl)[0], body(rot6, betas, transl)[0], atol=1e-5, rtol=0)
+    with pytest.raises(ValueError, match=r"x: expected \(B, 99\)"):
+        params_to_rotmats(x6, pca, prior)
+    with pytest.raises(ValueError, match=r"x: expected \(B, 193\)"):
+        params_to_rotmats(x, pca)
+    # a pose the prior was trained on (the prior decodes its own latent): the round trip keeps it
+    fp = torch.zeros(4, 55, 3)
+    fp[:, 1:22] = prior.decode(torch.randn(4, 32, generator=g) * 0.5).view(4, 21, 3)
+    fp[:, 25:40], fp[:, 40:55] = pca.mean["left"].view(15, 3), pca.mean["right"].view(15, 3)
+    y = grasp_params(fp, torch.zeros(4, 3), torch.zeros(4, 10), torch.zeros(4, 3), pca, prior)
+    back = prior.decode(y[:, 19:51]).view(4, 21, 3)
+    assert (back - fp[:, 1:22]).norm(dim=-1).mean() < 0.05      # rad, mean over joints
+
+
+def test_grabnet_state_round_trip_keeps_the_body_space_and_the_samples():
+    from graspkit.models.wholegrasp import GrabNetSMPLX
+    g = torch.Generator().manual_seed(0)
+    pts = torch.nn.functional.normalize(torch.randn(300, 3, generator=g), dim=-1) * 0.05   # a 5 cm sphere
+    nrm = pts / 0.05
+    for space in ("prior", "rot6d"):
+        torch.manual_seed(0)
+        model = GrabNetSMPLX(body_space=space)
+        for p in model.dec[-1].parameters():      # a decoder that is not the zero init
+            torch.nn.init.normal_(p, std=0.01, generator=torch.Generator().manual_seed(2))
+        again = GrabNetSMPLX.from_state(model.state())
+        assert again.hparams["body_space"] == space and again.n_params == (99 if space == "prior" else 193)
+        a = model.sample(pts, nrm, 0.8, 3, torch.Generator().manual_seed(3))
+        b = again.sample(pts, nrm, 0.8, 3, torch.Generator().manual_seed(3))
+        torch.testing.assert_close(a, b)
+    old = GrabNetSMPLX(body_space="rot6d").state()    # a checkpoint made before body_space existed
+    for k in ("body_space", "prior_config"):
+        old["model_config"].pop(k)
+    assert GrabNetSMPLX.from_state(old).n_params == 193
+    with pytest.raises(ValueError, match="body_space: expected"):
+        GrabNetSMPLX(body_space="vposer")
 
 
 def test_int8_storage_round_trip_error_is_within_half_a_step_and_the_model_reloads(tmp_path):

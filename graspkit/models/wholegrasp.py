@@ -606,34 +606,53 @@ def check_sample_inputs(points: Tensor, normals: Tensor, n: int, least: int, nam
         raise ValueError(f"n: expected at least one sample, got {n}")
 
 
-def params_to_rotmats(x: Tensor, pca: HandPCA) -> tuple[Tensor, Tensor, Tensor]:
-    """GrabNet-SMPLX's parameter vector (B, 193) = [transl 3, root 6D, betas 10, body 21x6D, left 24, right 24]
-    -> rotation matrices (B, 55, 3, 3), betas (B, 10), transl (B, 3) (jaw and eyes at rest)."""
+def params_to_rotmats(x: Tensor, pca: HandPCA, prior=None) -> tuple[Tensor, Tensor, Tensor]:
+    """GrabNet-SMPLX's parameter vector -> rotation matrices (B, 55, 3, 3), betas (B, 10), transl (B, 3) (jaw and
+    eyes at rest). x (B, 99) = [transl 3, root 6D, betas 10, body latent 32, left 24, right 24] with `prior` (the
+    pose prior whose latent the body pose is in), or (B, 193) with the 21 body joints as 6D rotations (prior None)."""
     from graspkit.rotations import axis_angle_to_matrix, rot6d_to_matrix
 
-    B = x.shape[0]
-    transl, root, betas, body = x[:, :3], x[:, 3:9], x[:, 9:19], x[:, 19:145]
-    hands = [axis_angle_to_matrix(pca.decode(x[:, 145 + 24 * k:169 + 24 * k], s).view(B, 15, 3))
+    B, nb = x.shape[0], x.shape[1] - 67
+    if (prior is None) != (nb == 126) or (prior is not None and nb != prior.cfg.latent):
+        want = 193 if prior is None else 67 + prior.cfg.latent
+        raise ValueError(f"x: expected (B, {want}) parameter vectors, got {tuple(x.shape)}")
+    transl, root, betas, body = x[:, :3], x[:, 3:9], x[:, 9:19], x[:, 19:19 + nb]
+    body_rot = rot6d_to_matrix(body.view(B, 21, 6)) if prior is None else prior.decode_rotmats(body)
+    hands = [axis_angle_to_matrix(pca.decode(x[:, 19 + nb + 24 * k:43 + nb + 24 * k], s).view(B, 15, 3))
              for k, s in enumerate(("left", "right"))]
-    rot = torch.cat([rot6d_to_matrix(root).unsqueeze(1), rot6d_to_matrix(body.view(B, 21, 6)),
+    rot = torch.cat([rot6d_to_matrix(root).unsqueeze(1), body_rot,
                      torch.eye(3).expand(B, 3, 3, 3), hands[0], hands[1]], 1)
     return rot, betas, transl
 
 
 class GrabNetSMPLX(nn.Module):
     """SAGA's GrabNet-SMPLX baseline (§4.1, App. B.1, Fig. S3a): a CVAE that generates SMPL-X parameters directly
-    (t, R, beta, body pose, 24+24 hand PCA; 193 numbers, object frame) for an object encoded by the same PointNet++.
+    for an object encoded by the same PointNet++, in the object frame: t, R (6D), beta, the body pose theta_b and
+    24 + 24 hand PCA coefficients. `body_space="prior"` (default) is SAGA's Theta (§3.1): theta_b in the 32-D latent
+    space of a pose prior (VPoser there; graspkit's PosePrior, held frozen inside the model), 99 numbers;
+    "rot6d" generates the 21 joints as 6D rotations (193 numbers). The eyes stay at rest (SAGA's theta_e is not
+    generated).
 
     Loss (GrabNet-style): L1 of the markers the parameters pose (143, summed, as WholeGrasp's) + L1 of the
     parameters (mean) + lambda_KL KL, lambda_KL rising linearly to 0.2 as WholeGrasp's."""
 
-    n_params = 193
-
     def __init__(self, hidden: int = 256, latent: int = 16, nsample: int = 8, object_feature: int = 128,
-                 kl_final: float = 0.2) -> None:
+                 kl_final: float = 0.2, body_space: str = "prior", prior: Any = None,
+                 prior_config: dict[str, Any] | None = None) -> None:
         super().__init__()
+        from graspkit.models.pose_prior import PosePrior, PosePriorConfig, load_pose_prior
+
+        if body_space not in ("prior", "rot6d"):
+            raise ValueError(f"body_space: expected 'prior' or 'rot6d', got {body_space!r}")
+        self.prior: PosePrior | None = None
+        if body_space == "prior":          # frozen: its weights travel in this model's state dict
+            self.prior = prior if prior is not None else (
+                PosePrior(PosePriorConfig(**prior_config)) if prior_config else load_pose_prior())
+            self.prior.eval().requires_grad_(False)
         self.hparams = dict(hidden=hidden, latent=latent, nsample=nsample, object_feature=object_feature,
-                            kl_final=kl_final)
+                            kl_final=kl_final, body_space=body_space,
+                            prior_config=None if self.prior is None else asdict(self.prior.cfg))
+        self.n_params = 67 + (126 if self.prior is None else self.prior.cfg.latent)
         act = nn.LeakyReLU(0.2)
         self.obj_enc = PointNet2Encoder(3, nsample=nsample, norm=False)
         self.obj_dec = PointNet2Encoder(3, nsample=nsample, norm=False)
@@ -649,19 +668,36 @@ class GrabNetSMPLX(nn.Module):
         nn.init.zeros_(self.dec[-1].weight)                                 # training starts from the mean grasp
         nn.init.zeros_(self.dec[-1].bias)
 
+    def train(self, mode: bool = True) -> "GrabNetSMPLX":
+        """As nn.Module.train; the pose prior stays in eval mode."""
+        super().train(mode)
+        if self.prior is not None:
+            self.prior.eval()
+        return self
+
+    def to_rotmats(self, x: Tensor, pca: HandPCA) -> tuple[Tensor, Tensor, Tensor]:
+        """Parameter vectors (B, n_params) -> rotation matrices (B,55,3,3), betas (B,10), transl (B,3)."""
+        return params_to_rotmats(x, pca, self.prior)
+
+    def params_of(self, fullpose: Tensor, transl: Tensor, betas: Tensor, object_transl: Tensor,
+                  pca: HandPCA) -> Tensor:
+        """This model's parameter vectors (B, n_params) of grasps (see grasp_params)."""
+        return grasp_params(fullpose, transl, betas, object_transl, pca, self.prior)
+
     def fit_normalisation(self, params: Tensor) -> None:
-        """Set the parameter statistics from training parameter vectors (B, 193)."""
+        """Set the parameter statistics from training parameter vectors (B, n_params)."""
         self.param_mean.copy_(params.mean(0))
         self.param_std.copy_(params.std(0).clamp_min(1e-2))
 
     def decode(self, z: Tensor, points: Tensor, normals: Tensor, height: Tensor,
                groupings: list[Grouping | None] | None = None) -> Tensor:
-        """z (B, latent) -> parameter vector (B, 193)."""
+        """z (B, latent) -> parameter vector (B, n_params)."""
         f = self.dec_proj(self.obj_dec(points, normals, groupings).global_feature)
         return self.dec(torch.cat([z, f, height], -1)) * self.param_std + self.param_mean
 
     def forward(self, batch: dict[str, Tensor], generator: torch.Generator | None = None) -> dict[str, Tensor]:
-        """Reconstruction: {'params' (B,193), 'mu', 'logvar'} for a batch with params, points, normals, height."""
+        """Reconstruction: {'params' (B,n_params), 'mu', 'logvar'} for a batch with params, points, normals,
+        height."""
         g = groupings_from_tensors(batch, len(self.obj_dec.sa)) or self.obj_dec.group(batch["points"])
         f = self.enc_proj(self.obj_enc(batch["points"], batch["normals"], g).global_feature)
         x = (batch["params"] - self.param_mean) / self.param_std
@@ -673,7 +709,7 @@ class GrabNetSMPLX(nn.Module):
     def loss(self, batch: dict[str, Tensor], out: dict[str, Tensor], body, pca: HandPCA, epoch: int,
              epochs: int) -> dict[str, Tensor]:
         """Marker L1 through `body` (SparseBody at the 143 markers) + parameter L1 + annealed KL."""
-        rot, betas, transl = params_to_rotmats(out["params"], pca)
+        rot, betas, transl = self.to_rotmats(out["params"], pca)
         markers = body(rot, betas, transl)[0]
         logs = {"rec_markers": (markers - batch["markers"]).abs().sum((1, 2)).mean(),
                 "rec_params": ((out["params"] - batch["params"]) / self.param_std).abs().mean(),
@@ -686,7 +722,7 @@ class GrabNetSMPLX(nn.Module):
     @torch.no_grad()
     def sample(self, points: Tensor, normals: Tensor, height: float, n: int,
                generator: torch.Generator | None = None) -> Tensor:
-        """n parameter vectors (n, 193) for one object (points, normals (P,3) in the object frame)."""
+        """n parameter vectors (n, n_params) for one object (points, normals (P,3) in the object frame)."""
         check_sample_inputs(points, normals, n, self.obj_dec.sa[0].npoint, ("points", "normals"), height=height)
         was = self.training
         self.eval()
@@ -703,7 +739,8 @@ class GrabNetSMPLX(nn.Module):
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> "GrabNetSMPLX":
         """Rebuild from `state()` (or a fit checkpoint whose extra holds model_config)."""
-        cfg = state.get("model_config") or state.get("extra", {}).get("model_config")
+        cfg = dict(state.get("model_config") or state.get("extra", {}).get("model_config"))
+        cfg.setdefault("body_space", "rot6d")     # checkpoints made before the pose-prior space
         model = cls(**cfg)
         model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state["model"].items()})
         return model.eval()
@@ -716,14 +753,20 @@ def rest_root_joint(bm, betas: Tensor) -> Tensor:
         return (bm.J_template[0] + (coeffs @ bm.J_basis).view(-1, 55, 3)[:, 0]).float()
 
 
-def grasp_params(fullpose: Tensor, transl: Tensor, betas: Tensor, object_transl: Tensor, pca: HandPCA) -> Tensor:
-    """GrabNet-SMPLX parameter vectors (B, 193) of grasps: fullpose (B,55,3) absolute, world transl (B,3),
-    betas (B,10), the object translation (B,3) (the object frame's origin)."""
+def grasp_params(fullpose: Tensor, transl: Tensor, betas: Tensor, object_transl: Tensor, pca: HandPCA,
+                 prior=None) -> Tensor:
+    """GrabNet-SMPLX parameter vectors of grasps: fullpose (B,55,3) absolute, world transl (B,3), betas (B,10), the
+    object translation (B,3) (the object frame's origin); the body pose as `prior`'s posterior mean (B, 99) or,
+    prior None, as 6D rotations (B, 193)."""
     from graspkit.rotations import axis_angle_to_rot6d
 
     B = fullpose.shape[0]
-    return torch.cat([transl - object_transl, axis_angle_to_rot6d(fullpose[:, 0]), betas,
-                      axis_angle_to_rot6d(fullpose[:, 1:22]).reshape(B, 126),
+    if prior is None:
+        body = axis_angle_to_rot6d(fullpose[:, 1:22]).reshape(B, 126)
+    else:
+        with torch.no_grad():
+            body = prior.encode(fullpose[:, 1:22].reshape(B, 63))
+    return torch.cat([transl - object_transl, axis_angle_to_rot6d(fullpose[:, 0]), betas, body,
                       pca.encode(fullpose[:, 25:40].reshape(B, 45), "left"),
                       pca.encode(fullpose[:, 40:55].reshape(B, 45), "right")], -1).float()
 
@@ -738,7 +781,7 @@ class GrabNetTrainingSet(torch.utils.data.Dataset):
         wg, gn = WholeGraspDataset(root, split=split), GNetDataset(root, split=split)
         pca = HandPCA(bm)
         d = gn.data
-        self.data = {"params": grasp_params(d["fullpose"], d["transl"], d["betas"], d["object_transl"], pca),
+        self.data = {"params": model.params_of(d["fullpose"], d["transl"], d["betas"], d["object_transl"], pca),
                      "markers": wg.data["markers"], "points": wg.data["object_points"],
                      "normals": wg.data["object_normals"], "height": wg.data["object_height"].reshape(-1, 1)}
         self.data["root_joint"] = rest_root_joint(bm, d["betas"])
@@ -769,7 +812,7 @@ def _yaw(a: float) -> Tensor:
 
 
 def turn_params(params: Tensor, root_joint: Tensor, Q: Tensor) -> Tensor:
-    """GrabNet-SMPLX parameters (B,193) of bodies turned by Q (3,3) about the origin: R -> Q R and
+    """GrabNet-SMPLX parameters (B, n_params) of bodies turned by Q (3,3) about the origin: R -> Q R and
     t -> Q (J0 + t) - J0, J0 (B,3) the rest root joint (SMPL-X turns the body about it)."""
     from graspkit.rotations import matrix_to_rot6d, rot6d_to_matrix
 
@@ -781,8 +824,10 @@ def turn_params(params: Tensor, root_joint: Tensor, Q: Tensor) -> Tensor:
 
 def train_grabnet_smplx(root: str | Path, out: str | Path | None = None, epochs: int = 12, batch_size: int = 32,
                         lr: float = 1e-3, seed: int = 0, time_limit_s: float | None = 600.0, threads: int | None = 1,
-                        progress: bool = True, half: bool = True, augment_yaw: bool = False) -> dict[str, Any]:
-    """Train the GrabNet-SMPLX baseline like `train_wholegrasp`; returns {'history', 'seconds', 'out'}."""
+                        progress: bool = True, half: bool = True, augment_yaw: bool = False,
+                        body_space: str = "prior") -> dict[str, Any]:
+    """Train the GrabNet-SMPLX baseline like `train_wholegrasp` (body_space: see GrabNetSMPLX; "prior" uses the
+    shipped pose prior); returns {'history', 'seconds', 'out'}."""
     import time
 
     from graspkit.body import BodyModel
@@ -797,7 +842,7 @@ def train_grabnet_smplx(root: str | Path, out: str | Path | None = None, epochs:
     torch.manual_seed(seed)
     bm = BodyModel.from_file(default_model_path())
     body, pca = SparseBody(bm, saga_markers(bm).vertex_ids), HandPCA(bm)
-    model = GrabNetSMPLX()
+    model = GrabNetSMPLX(body_space=body_space)
     t0 = time.perf_counter()
     train = GrabNetTrainingSet(root, "train", bm, model, augment_yaw=augment_yaw)
     val = GrabNetTrainingSet(root, "val", bm, model)

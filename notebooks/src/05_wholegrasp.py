@@ -358,6 +358,9 @@ print(table2(result))
 # contact ratio (0.91 → 0.76 for the samples; less than the paper's 0.24, since a hand may rest on the surface,
 # inside the 2 mm threshold) and $E_{cont}$ restores it (0.99); the multi-task model ends with more contact than
 # WholeGrasp-single with its heuristic (0.99 vs 0.81), which penetrates less (0.05 cm³), as in the paper.
+# GrabNet-SMPLX, which samples SAGA's parameters (θ_b in the pose prior's latent, App. B.1), gives the worst bodies
+# (29 cm³, contact 0.87) but not the paper's far lower APD (1.64 against our 1.46; the paper's 0.33 looks like a
+# collapsed latent, ours keeps ~13 nats in use): one paper direction this workbook does not reproduce.
 
 # %% [markdown]
 # ## 8 · Walk the latent space
