@@ -131,10 +131,17 @@ def test_ctrl_c_stops_make_with_workers_at_once(tmp_path):
     import signal
     import time
 
+    def as_from_a_terminal() -> None:
+        """In the child: SIGINT at its default, as a terminal's foreground job has it. A test run started in the
+        background (`cmd &` in a script) inherits SIGINT ignored, and Python then keeps ignoring it."""
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        signal.signal(signal.SIGINT, signal.SIG_DFL)
+
     out = tmp_path / "c"
     p = subprocess.Popen([sys.executable, "-m", "graspkit", "data", "make", "--kind", "locomotion", "--n", "400",
                           "--seed", "4", "--out", str(out), "--workers", "2", "--quiet"],
-                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
+                         preexec_fn=as_from_a_terminal)
     for _ in range(240):                                 # until the pool has written a few clips
         time.sleep(0.25)
         if len(list(out.glob("*.npz"))) >= 2:
