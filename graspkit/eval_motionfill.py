@@ -471,8 +471,9 @@ def table(rows: dict[str, dict[str, float]]) -> str:
 def approach_scene(path: str | Path, bm) -> dict[str, Any]:
     """One approach clip as MotionFill sees it (the window ending at the goal frame, canonical frame A.3) and its
     object in that frame: markers (61,79,3), traj (62,4), local, vel, contacts, betas, floor height, object points,
-    normals (P,3), contact map C_O at the grasp (P,), the object's mesh (trimesh), name, file name and the clip's
-    last 61 frames (a Motion in the world)."""
+    normals (P,3), contact map C_O at the grasp (P,), the object's mesh (trimesh) and the pose of its catalogue mesh
+    there (mesh_rotation (3,3), mesh_origin (3,): x = R x_mesh + origin), name, file name and the clip's last 61
+    frames (a Motion in the world)."""
     from graspkit.data.motion import Motion, canonicalize
     from graspkit.objects.catalogue import make_object
     from graspkit.rotations import axis_angle_to_matrix
@@ -498,16 +499,19 @@ def approach_scene(path: str | Path, bm) -> dict[str, Any]:
     mesh.vertices = to_c(mesh.vertices @ R_o.T + t_o)
     return {**{k: v[0] for k, v in arr.items()}, "betas": m.betas[:10], "floor": float(-o[2]), "name": name,
             "file": Path(path).name, "points": to_c(pts @ R_o.T + t_o), "normals": nrm @ R_o.T @ R.T,
-            "object_contact": c_o, "mesh": mesh, "motion": m.slice(max(m.num_frames - 61, 0))}
+            "object_contact": c_o, "mesh": mesh, "mesh_rotation": R @ R_o, "mesh_origin": to_c(t_o),
+            "motion": m.slice(max(m.num_frames - 61, 0))}
 
 
 def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, steps: tuple[int, int] = (100, 300),
-                     progress: bool = True, weights: Any = None) -> dict[str, Any]:
+                     progress: bool = True, weights: Any = None, sdf: bool = True) -> dict[str, Any]:
     """One MotionFill-VAE sample per approach clip, then GraspMotion-Opt (batched): skating (SAGA) of the ground truth,
     the sample and the fitted bodies; the last frame's contact, penetration volume and depth of the fitted bodies;
     SAGA's non-collision score (§4.2) of the fitted and the ground-truth meshes over the window. Returns rows and the
-    arrays for plots."""
+    arrays for plots. `sdf`: E^o_colli's hand-in-object depth from each object's collision grid (GraspPose-Opt's;
+    False: from the point cloud's normals)."""
     from graspkit.body import BodyModel
+    from graspkit.data.grasp_io import collision_sdf_grid
     from graspkit.metrics import grasp_metrics, non_collision_score
     from graspkit.models.pose_prior import load_pose_prior
     from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, load_smooth_ae
@@ -524,7 +528,10 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
     contacts = torch.cat([s["contacts"] for s in samples])
     P = min(len(s["points"]) for s in scenes)
     obj = GraspObject(torch.as_tensor(np.stack([s["points"][:P] for s in scenes])).float(),
-                      torch.as_tensor(np.stack([s["normals"][:P] for s in scenes])).float(), 0.0)
+                      torch.as_tensor(np.stack([s["normals"][:P] for s in scenes])).float(), 0.0,
+                      [collision_sdf_grid(s["name"]) for s in scenes] if sdf else None,
+                      torch.as_tensor(np.stack([s["mesh_rotation"] for s in scenes])).float(),
+                      torch.as_tensor(np.stack([s["mesh_origin"] for s in scenes])).float())
     c_o = torch.as_tensor(np.stack([s["object_contact"][:P] for s in scenes])).float()
     cfg = GraspMotionConfig(steps=steps) if weights is None else GraspMotionConfig(steps=steps, weights=weights)
     opt = GraspMotionOpt(bm, load_pose_prior(), load_smooth_ae(), cfg)

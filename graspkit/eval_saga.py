@@ -191,8 +191,10 @@ def _object_subset(obj, idx: Tensor) -> Any:
     from graspkit.optim.grasppose import GraspObject
 
     h = torch.as_tensor(obj.height).reshape(-1)
-    return GraspObject(obj.points[idx], obj.normals[idx], h[idx] if h.numel() > 1 else obj.height, obj.sdf,
-                       None if obj.rotation is None else obj.rotation[idx])
+    return GraspObject(obj.points[idx], obj.normals[idx], h[idx] if h.numel() > 1 else obj.height,
+                       [obj.sdf[i] for i in idx.tolist()] if isinstance(obj.sdf, list) else obj.sdf,
+                       None if obj.rotation is None else obj.rotation[idx],
+                       None if obj.origin is None or obj.origin.dim() == 1 else obj.origin[idx])
 
 
 def fit_variants(opt, markers: Tensor, obj, mc: Tensor | None, oc: Tensor | None, variants: list[str],

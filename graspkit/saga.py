@@ -158,7 +158,8 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
                     torch.as_tensor(win["contacts"][0]).float(), 1, g)
     to_c = lambda x: (np.asarray(x, np.float64) - o_c) @ R_c.T  # noqa: E731
     obj = GraspObject(torch.as_tensor(to_c(P.double().numpy() + centre)).float()[None],
-                      torch.as_tensor(N.double().numpy() @ R_c.T).float()[None], 0.0)
+                      torch.as_tensor(N.double().numpy() @ R_c.T).float()[None], 0.0, grid,
+                      torch.as_tensor(R_c @ R_o).float(), torch.as_tensor(to_c(centre)).float())
     mopt = GraspMotionOpt(bm, prior, load_smooth_ae(ck / "motionfill_smooth_ae.pt"), GraspMotionConfig(steps=motion_steps))
     mres = mopt.fit(smp["markers"], torch.as_tensor(betas[None, :10]).float(), smp["contacts"], obj,
                     s.object_contact.float(), progress=progress, floor=torch.tensor([to_c(np.zeros(3))[2]]).float())

@@ -156,6 +156,64 @@ def test_cloud_collision_hinge_is_analytic_inside_a_sphere_and_zero_outside_its_
     assert _signed_to_cloud(q[:, 3:], r * n, flipped)[0].item() < -0.02   # what the sign alone would say
 
 
+def test_object_in_hand_hinge_measures_points_pushed_into_the_palm_and_ignores_points_outside(bm):
+    """Eq. 7's second sum in GraspMotion-Opt: object points 4 mm inside the palm (along trimesh's vertex normals of
+    the full body mesh) are 2-4 mm deep less sigma_o (the nearest hand vertex decides); points 4 mm outside and a
+    point far from the hand's box are 0."""
+    import trimesh
+
+    from graspkit.body.markers import palm_vertices
+
+    opt = GraspMotionOpt(bm, load_pose_prior())
+    p = {"transl": torch.zeros(1, 3), "orient6d": torch.tensor([[1.0, 0, 0, 0, 1, 0]]), "z": torch.zeros(1, 32),
+         "left_pca": torch.zeros(1, 24), "right_pca": torch.zeros(1, 24)}             # the prior's mean pose
+    with torch.no_grad():
+        full = bm.forward_rotmats(opt.rotmats(p), betas=torch.zeros(1, 10), transl=p["transl"]).vertices[0].double()
+        hands = opt.body(p, torch.zeros(1, 10))[0][:, opt.sl_h].float()
+    mesh = trimesh.Trimesh(full.numpy(), bm.faces.numpy(), process=False)
+    ids = palm_vertices(bm)["right"]
+    n = torch.as_tensor(mesh.vertex_normals[ids]).float()
+    base = full[ids].float()
+    d, sig = 0.004, opt.cfg.weights.sigma_o
+    far = hands.max(1).values + 0.03
+    pts = torch.cat([base - d * n, base + d * n, far])[None]
+    pen = opt.object_in_hand(hands, pts)[0]
+    k = len(ids)
+    inside, outside = pen[:k], pen[k:2 * k]
+    assert (inside > 0).float().mean() > 0.9 and (outside == 0).float().mean() > 0.9, (inside, outside)
+    assert inside.max() <= d - sig + 1e-4 and abs(inside.median() - (d - sig)) < 5e-4
+    assert pen[-1] == 0
+
+
+def test_approach_scene_poses_the_collision_grid_where_its_mesh_is(bm):
+    """The object of an approach clip in MotionFill's canonical frame: the catalogue collision grid read through
+    GraspObject's rotation and origin gives trimesh's signed distance to the scene's mesh (opposite sign), also as a
+    one-grid-per-sample list."""
+    import trimesh
+
+    from graspkit.data.grasp_io import collision_sdf_grid
+    from graspkit.eval_motionfill import approach_scene
+    from graspkit.optim.grasppose import GraspObject
+
+    s = approach_scene(DATA_STUBS / "approach" / "approach_000000.npz", bm)
+    pts = torch.as_tensor(s["points"]).float()
+    obj = GraspObject(pts[None], torch.as_tensor(s["normals"]).float()[None], 0.0, [collision_sdf_grid(s["name"])],
+                      torch.as_tensor(s["mesh_rotation"]).float()[None], torch.as_tensor(s["mesh_origin"]).float()[None])
+    g = torch.Generator().manual_seed(0)
+    q = pts[torch.randint(len(pts), (300,), generator=g)] + 0.01 * torch.randn(300, 3, generator=g)
+    want = -trimesh.proximity.signed_distance(s["mesh"], q.double().numpy())        # trimesh: positive inside
+    got = obj.signed_distance(q[None])[0].numpy()
+    assert np.abs(got - want).max() < 1.5e-3 and (want < -1e-3).sum() > 30, np.abs(got - want).max()
+    with pytest.raises(ValueError, match="sdf: 1 grids for a batch of 2"):
+        obj.signed_distance(q[None].expand(2, -1, -1))
+    # an object no frame comes near: both collision sums are 0 (the grid is not asked about zero points)
+    opt = GraspMotionOpt(bm, load_pose_prior())
+    p = _sliding(opt, 3, torch.zeros(3, 3))
+    far = GraspObject(pts[None] + 10.0, obj.normals, 0.0, obj.sdf, obj.rotation, obj.origin + 10.0)
+    e = opt.energy(p, torch.zeros(1, 3, 79, 3), torch.zeros(3, 10), 2, None, far, None)
+    assert e["colli"].item() == 0.0
+
+
 def test_palm_term_is_small_for_a_palm_facing_a_wall_and_large_for_a_wall_behind_it(bm):
     """Eq. 11 with the rest hand (palm facing -y) and a plane of points 3 mm below the palm (cos gamma ~ 1) or 3 mm
     past its highest palm vertex (the vector to the plane points against the palm normal: cos gamma ~ -1)."""

@@ -169,14 +169,16 @@ class GraspPoseConfig:
 @dataclass
 class GraspObject:
     """The object in WholeGrasp-VAE's frame: points and normals (P,3) (or (B,P,3), one object pose per sample), its
-    height t_O (float or (B,)), optionally its signed-distance grid in the mesh's own frame and the rotation (3,3) or
-    (B,3,3) from that frame into this one (x = R x_mesh)."""
+    height t_O (float or (B,)), optionally its signed-distance grid in the mesh's own frame (or a list of B grids, one
+    per sample), the rotation (3,3) or (B,3,3) from that frame into this one and the mesh origin's place here (3,) or
+    (B,3) (x = R x_mesh + origin; default 0: the frame is centred at the object)."""
 
     points: Tensor
     normals: Tensor
     height: float | Tensor
-    sdf: SDFGrid | None = None
+    sdf: SDFGrid | list[SDFGrid] | None = None
     rotation: Tensor | None = None
+    origin: Tensor | None = None
 
     def __post_init__(self) -> None:
         for name in ("points", "normals"):
@@ -189,6 +191,8 @@ class GraspObject:
                              f"got {tuple(self.normals.shape)}")
         if self.rotation is not None and tuple(self.rotation.shape[-2:]) != (3, 3):
             raise ValueError(f"rotation: expected shape (3, 3) or (B, 3, 3), got {tuple(self.rotation.shape)}")
+        if self.origin is not None and (self.origin.dim() not in (1, 2) or self.origin.shape[-1] != 3):
+            raise ValueError(f"origin: expected shape (3,) or (B, 3), got {tuple(self.origin.shape)}")
         self.points, self.normals = self.points.float(), self.normals.float()
 
     @property
@@ -202,8 +206,15 @@ class GraspObject:
 
     def signed_distance(self, x: Tensor) -> Tensor:
         """S(x, O) (B,N) from the grid for x (B,N,3) (negative inside); the grid must be set."""
+        if self.origin is not None:
+            o = self.origin.to(x.dtype)
+            x = x - (o if o.dim() == 1 else o[:, None])
         if self.rotation is not None:
             x = x @ self.rotation.to(x.dtype)            # row vectors: R^T x
+        if isinstance(self.sdf, (list, tuple)):
+            if len(self.sdf) != len(x):
+                raise ValueError(f"sdf: {len(self.sdf)} grids for a batch of {len(x)}")
+            return torch.cat([g(x[i:i + 1]) for i, g in enumerate(self.sdf)])
         return self.sdf(x)
 
 
