@@ -171,6 +171,21 @@ def in_box(x: Tensor, lo: Tensor, hi: Tensor, margin: float) -> Tensor:
     return ((x > lo - margin) & (x < hi + margin)).all(-1)
 
 
+def _boxed_hinge(q: Tensor, inside: Tensor, cloud: Tensor, normals: Tensor, sigma: float) -> Tensor:
+    """(S(q, cloud) below -sigma)_+ (B, N) for queries q (B, N, 3), computed only where `inside` (B, N) and 0
+    elsewhere; S from the nearest cloud point (B, P, 3) and its outward normal (SAGA's S(x, Y))."""
+    from graspkit.optim.grasppose import _signed_to_cloud
+
+    B, N, _ = q.shape
+    k = int(inside.sum(1).max())
+    if k == 0:
+        return q.new_zeros(B, N)
+    idx = inside.to(q.dtype).topk(k, dim=1).indices          # each row's inside queries first, padded with others
+    sd, _ = _signed_to_cloud(torch.gather(q, 1, idx.unsqueeze(-1).expand(-1, -1, 3)), cloud, normals)
+    val = torch.relu(-sd - sigma) * torch.gather(inside, 1, idx).to(q.dtype)
+    return q.new_zeros(B, N).scatter(1, idx, val)
+
+
 # ------------------------------------------------------------------------------------------------ the optimiser
 @dataclass
 class GraspMotionWeights:
@@ -356,37 +371,19 @@ class GraspMotionOpt:
         """E^o_colli's hinge (S(q, O) below -sigma_b)_+ per query (B, N) against a point cloud with normals (B, P, 3),
         computed only for the queries inside the cloud's box [lo, hi] (B, 1, 3) widened by 5 mm (elsewhere the
         object's signed distance is positive and the hinge 0): most hand vertices of a near frame are outside it."""
-        from graspkit.optim.grasppose import _signed_to_cloud
-
-        B, N, _ = q.shape
-        inside = in_box(q, lo, hi, 0.005)                                                           # (B, N)
-        k = int(inside.sum(1).max())
-        if k == 0:
-            return q.new_zeros(B, N)
-        idx = inside.to(q.dtype).topk(k, dim=1).indices          # each row's inside queries first, padded with others
-        sd, _ = _signed_to_cloud(torch.gather(q, 1, idx.unsqueeze(-1).expand(-1, -1, 3)), pts, nrm)
-        val = torch.relu(-sd - self.cfg.weights.sigma_b) * torch.gather(inside, 1, idx).to(q.dtype)
-        return q.new_zeros(B, N).scatter(1, idx, val)
+        return _boxed_hinge(q, in_box(q, lo, hi, 0.005), pts, nrm, self.cfg.weights.sigma_b)
 
     def object_in_hand(self, hands: Tensor, pts: Tensor) -> Tensor:
         """Eq. 7's second hinge (S(o, V^h_B) below -sigma_o)_+ (N, P) of object points pts (N, P, 3) against the hand
         vertices (N, H, 3) of N frames, the sign from the hand's vertex normals; only points inside the hand's box
         widened by 5 mm are measured (no other point can be inside the hand)."""
         from graspkit.body.markers import vertex_normals
-        from graspkit.optim.grasppose import _signed_to_cloud
 
-        N, P, _ = pts.shape
         with torch.no_grad():
-            lo, hi = hands.min(1, keepdim=True).values, hands.max(1, keepdim=True).values
-            inside = in_box(pts, lo, hi, 0.005)                                                      # (N, P)
-        k = int(inside.sum(1).max())
-        if k == 0:
-            return pts.new_zeros(N, P)
-        idx = inside.to(pts.dtype).topk(k, dim=1).indices
-        hn = vertex_normals(hands, self.hand_faces)
-        so, _ = _signed_to_cloud(torch.gather(pts, 1, idx.unsqueeze(-1).expand(-1, -1, 3)), hands, hn)
-        val = torch.relu(-so - self.cfg.weights.sigma_o) * torch.gather(inside, 1, idx).to(pts.dtype)
-        return pts.new_zeros(N, P).scatter(1, idx, val)
+            inside = in_box(pts, hands.min(1, keepdim=True).values, hands.max(1, keepdim=True).values, 0.005)
+        if not inside.any():                  # the hand's normals are not needed
+            return pts.new_zeros(pts.shape[:2])
+        return _boxed_hinge(pts, inside, hands, vertex_normals(hands, self.hand_faces), self.cfg.weights.sigma_o)
 
     def palm_term(self, hands: Tensor, pts: Tensor, frames: Tensor | None = None, total: int | None = None) -> Tensor:
         """Eq. 11 per sequence (B,): alpha_t 1(d < sigma) (cos gamma - 1)^2 over the palm vertices of every frame;
