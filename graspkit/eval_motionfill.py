@@ -527,9 +527,10 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
     markers = torch.cat([s["markers"] for s in samples])
     contacts = torch.cat([s["contacts"] for s in samples])
     P = min(len(s["points"]) for s in scenes)
+    grids = {n: collision_sdf_grid(n) for n in {s["name"] for s in scenes}} if sdf else {}   # one load per object
     obj = GraspObject(torch.as_tensor(np.stack([s["points"][:P] for s in scenes])).float(),
                       torch.as_tensor(np.stack([s["normals"][:P] for s in scenes])).float(), 0.0,
-                      [collision_sdf_grid(s["name"]) for s in scenes] if sdf else None,
+                      [grids[s["name"]] for s in scenes] if sdf else None,
                       torch.as_tensor(np.stack([s["mesh_rotation"] for s in scenes])).float(),
                       torch.as_tensor(np.stack([s["mesh_origin"] for s in scenes])).float())
     c_o = torch.as_tensor(np.stack([s["object_contact"][:P] for s in scenes])).float()

@@ -187,7 +187,7 @@ def _object_batch(placements: list[Placement], per: int, sdf) -> Any:
 
 
 def _object_subset(obj, idx: Tensor) -> Any:
-    """The bodies idx of a batched GraspObject (points, normals, heights and rotations per body)."""
+    """The bodies idx of a batched GraspObject (points, normals, heights, rotations, origins and grids per body)."""
     from graspkit.optim.grasppose import GraspObject
 
     h = torch.as_tensor(obj.height).reshape(-1)

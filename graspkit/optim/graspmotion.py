@@ -332,7 +332,7 @@ class GraspMotionOpt:
                 e["colli"] = w.colli * pen.sum(-1)
                 if w.colli_object > 0 and len(near):
                     K = len(near)
-                    inner = self.object_in_hand(hands[:, near].reshape(B * K, -1, 3), pts.repeat_interleave(K, 0))
+                    inner = self.object_in_hand(hf.reshape(B * K, -1, 3), pts.repeat_interleave(K, 0))
                     e["colli"] = e["colli"] + w.colli_object * inner.view(B, -1).sum(-1)
             if "contact" in terms and object_contact is not None:
                 last = hands[:, -cfg.contact_frames:]
