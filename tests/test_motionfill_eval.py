@@ -110,3 +110,23 @@ def test_held_out_clips_are_each_test_objects_first_accepted_clips(tmp_path):
         held_out_clips(empty)
     with pytest.raises(SystemExit):
         main(["nothing"])
+
+
+def test_graspmotion_eval_measures_the_last_frame_against_the_clips_posed_mesh():
+    """GraspMotion-Opt on a shipped approach clip (few steps, with the posed collision grid): the row's end-grasp
+    distance is trimesh's signed distance of the last fitted frame to the scene's mesh (the deepest vertex inside,
+    negative, or the gap)."""
+    import trimesh
+
+    from graspkit.eval_motionfill import graspmotion_eval, load_motionfill
+    from graspkit.optim.graspmotion import GraspMotionOpt
+    from graspkit.models.pose_prior import load_pose_prior
+
+    bm = BodyModel.from_file(default_model_path())
+    ev = graspmotion_eval(load_motionfill(), [DATA_STUBS / "approach" / "approach_000000.npz"], steps=(10, 10),
+                          progress=False)
+    s, row = ev["scenes"][0], ev["rows"][0]
+    v = GraspMotionOpt(bm, load_pose_prior()).vertices(ev["result"], 0)[-1].double().numpy()
+    sd = trimesh.proximity.signed_distance(s["mesh"], v)                     # positive inside
+    want = -sd.max() if sd.max() > 0 else np.abs(sd).min()                   # deepest inside, else the gap
+    assert row["contact_mm"] == pytest.approx(1000 * want, abs=0.5)
