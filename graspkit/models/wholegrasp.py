@@ -668,13 +668,6 @@ class GrabNetSMPLX(nn.Module):
         nn.init.zeros_(self.dec[-1].weight)                                 # training starts from the mean grasp
         nn.init.zeros_(self.dec[-1].bias)
 
-    def train(self, mode: bool = True) -> "GrabNetSMPLX":
-        """As nn.Module.train; the pose prior stays in eval mode."""
-        super().train(mode)
-        if self.prior is not None:
-            self.prior.eval()
-        return self
-
     def to_rotmats(self, x: Tensor, pca: HandPCA) -> tuple[Tensor, Tensor, Tensor]:
         """Parameter vectors (B, n_params) -> rotation matrices (B,55,3,3), betas (B,10), transl (B,3)."""
         return params_to_rotmats(x, pca, self.prior)
