@@ -111,12 +111,14 @@ def _cmd_goal(args: argparse.Namespace) -> int:
 
 
 WANDR_MAX_SECONDS = 8.0       # the goal grid's horizon (§4.2): what the shipped model is trained and measured for
+WANDR_MAX_HEIGHT = 1.9        # m: the highest goals of the training clips (room-scale, docs/data.md); the grid's: 1.8
 WANDR_MAX_SPEED = 1.5         # m/s: the fastest walk of the training clips (the hurried room-scale tasks, docs/data.md)
 
 
 def wandr_range_notes(goal, seconds: float) -> list[str]:
     """Warnings when a goal (start frame: the pelvis above the origin) and time to it leave the range the shipped
-    WANDR model was trained and evaluated on: beyond 8 s, faster than 1.5 m/s on the ground, or below the floor."""
+    WANDR model was trained and evaluated on: beyond 8 s, faster than 1.5 m/s on the ground, below the floor or above
+    the highest training goals (1.9 m)."""
     import math
 
     x, y, z = (float(v) for v in goal)
@@ -129,6 +131,10 @@ def wandr_range_notes(goal, seconds: float) -> list[str]:
                      f"faster than the {WANDR_MAX_SPEED:g} m/s walks of the training clips; expect a poor motion")
     if z < 0:
         notes.append(f"the goal is {-z:.2f} m below the floor; the wrist cannot reach it")
+    elif z > WANDR_MAX_HEIGHT:
+        notes.append(f"the goal is {z:.2f} m high, above the {WANDR_MAX_HEIGHT:g} m of the highest training goals "
+                     "(the evaluation grid's highest: 1.8 m); expect the wrist to fall short and the feet to leave "
+                     "the floor")
     return notes
 
 

@@ -374,15 +374,33 @@ def _result(meter: GridMeter, idx: Tensor, cells: np.ndarray) -> GridResult:
 
 def evaluate_motions(p: Tensor, rest: Tensor, goals: Tensor, betas: Tensor, bm, t_goal: int = T_GOAL,
                      cells: np.ndarray | None = None, index: Tensor | None = None,
-                     full_pose: Tensor | None = None) -> GridResult:
+                     full_pose: Tensor | None = None, full_mesh: bool = False) -> GridResult:
     """Score given motions p (B, T, 135) with rest joints (B, 22, 3), goals (B, 3) and betas (B, 10) the same way;
-    full_pose (B, 55, 3) or (55, 3): the fingers' local pose (as `StartPose.full_pose`; None: zeros)."""
+    full_pose (B, 55, 3) or (55, 3): the fingers' local pose (as `StartPose.full_pose`; None: zeros).
+
+    FS follows the lowest of the feet and hands vertices, as the grid does: exact for standing, walking and reaching
+    bodies, not for one that lies, sits or kneels; full_mesh=True measures FS on every vertex of the posed mesh
+    (`graspkit.metrics.foot_skating_wandr`; slower) for such motions."""
+    if p.dim() != 3 or p.shape[-1] != I.POSE_DIM or p.shape[1] < 2:
+        raise ValueError(f"p: expected (B, T >= 2, 135) poses (FS needs a frame pair), got {tuple(p.shape)}")
     B, T = p.shape[:2]
     meter = GridMeter(LowVertices(bm, betas, full_pose), torch.arange(B), rest, goals, t_goal)
     with torch.no_grad():
         for k in range(T):
             Rg, J = I.body_transforms(p[:, k], rest)
             meter(k, p[:, k], J, Rg)
+    if full_mesh:
+        from graspkit.metrics import foot_skating_wandr
+        from graspkit.rotations import axis_angle_to_matrix
+
+        fp = torch.zeros(55, 3) if full_pose is None else torch.as_tensor(full_pose).float()
+        other = axis_angle_to_matrix(fp.reshape(-1, 55, 3).expand(B, -1, -1)[:, I.NUM_BODY:].to(bm.dtype))
+        for b in range(B):
+            t, R = I.pose_rotmats(p[b].to(bm.dtype))
+            with torch.no_grad():
+                v = bm.forward_rotmats(torch.cat([R, other[b].expand(T, -1, -1, -1)], 1),
+                                       betas=torch.as_tensor(betas)[b:b + 1].to(bm.dtype), transl=t).vertices
+            meter.skate[b] = float(foot_skating_wandr(v).sum())
     idx = index if index is not None else torch.stack([torch.zeros(B, dtype=torch.long), torch.arange(B),
                                                        torch.zeros(B, dtype=torch.long)], 1)
     return _result(meter, idx, cells if cells is not None else np.zeros((B, 3)))
@@ -509,8 +527,8 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
                     stride_scale: int = 1, reach_far: bool = False, rollout_latent: str = "prior",
                     alpha_kl: float = 1e-2, kinds: Sequence[str] | None = None, goal_frame: str = "reach",
                     foot_weight: float = 0.0, select_val: bool = False, contact_weight: float = 0.0,
-                    floor_weight: float = 0.0, init: str | None = None, window_stride: int | None = None
-                    ) -> dict[str, Any]:
+                    floor_weight: float = 0.0, init: str | None = None, window_stride: int | None = None,
+                    rollout_grad: str = "through", step_stride: int = 1) -> dict[str, Any]:
     """Train one variant on the clips under `folder` (default <cache>/motion) and write a small checkpoint (with the
     normalisation statistics, the held-out start poses of the test split, and the measured times) to `out`.
     max_steps / ramp_epochs: the rollout schedule (Sup. B.2); stride_scale multiplies the window strides (fewer
@@ -568,7 +586,8 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     torch.manual_seed(seed)
     model = WandrCVAE(WandrConfig(intention=v["intention"], max_steps=max_steps, ramp_epochs=ramp_epochs,
                                    rollout_latent=rollout_latent, alpha_kl=alpha_kl, goal_frame=goal_frame,
-                                   w_foot=foot_weight, w_contact=contact_weight, w_floor=floor_weight), stats)
+                                   w_foot=foot_weight, w_contact=contact_weight, w_floor=floor_weight,
+                                   rollout_grad=rollout_grad, step_stride=step_stride), stats)
     if init is not None:
         init_model = load_wandr(init)
         keys = ("latent", "hidden", "enc_layers", "dec_layers", "intention")
@@ -587,6 +606,8 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     flags = ([(" --reach-far", "")] if reach_far else []) \
         + ([(f" --rollout-latent {rollout_latent}", "_zpost")] if rollout_latent != "prior" else []) \
         + ([(f" --alpha-kl {alpha_kl:g}", f"_a{alpha_kl:g}")] if alpha_kl != 1e-2 else []) \
+        + ([(f" --rollout-grad {rollout_grad}", f"_rg{rollout_grad}")] if rollout_grad != "through" else []) \
+        + ([(f" --step-stride {step_stride}", f"_ss{step_stride}")] if step_stride != 1 else []) \
         + ([(f" --goal-frame {goal_frame}", f"_g{goal_frame}")] if goal_frame != "reach" else []) \
         + ([(f" --foot-weight {foot_weight:g}", f"_f{foot_weight:g}")] if foot_weight else []) \
         + ([(f" --contact-weight {contact_weight:g}", f"_c{contact_weight:g}")] if contact_weight else []) \
@@ -721,7 +742,8 @@ def _cmd_train(args) -> int:
                            foot_weight=args.foot_weight, select_val=args.select_val,
                            contact_weight=args.contact_weight, floor_weight=args.floor_weight,
                            kinds=tuple(args.kinds.split(",")) if args.kinds else None, init=args.init,
-                           window_stride=args.window_stride)
+                           window_stride=args.window_stride, rollout_grad=args.rollout_grad,
+                           step_stride=args.step_stride)
     print(f"wrote {info['out']}: {info['epochs']} epochs in {info['train_wall_s']:.0f} s wall "
           f"({info['train_cpu_s']:.0f} s CPU); last loss {info['history'][-1]['loss']:.4f}")
     return 0
@@ -775,6 +797,11 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
                    help="frames between training windows, every kind (instead of the scaled defaults; 1: every frame)")
     t.add_argument("--rollout-latent", choices=("prior", "posterior"), default="prior",
                    help="z for the rollout steps: the prior (default, Sup. B.2) or the encoder on the truth")
+    t.add_argument("--rollout-grad", choices=("through", "step"), default="through",
+                   help="through: backpropagate through the rollout (default); step: roll out without gradient, "
+                        "then one batched step with gradient from every visited state (not in the paper; faster)")
+    t.add_argument("--step-stride", type=int, default=1,
+                   help="with --rollout-grad step: recompute every n-th rollout step with gradient (default 1: all)")
     t.add_argument("--alpha-kl", type=float, default=1e-2, help="the KL weight (paper: 1e-2)")
     t.add_argument("--goal-frame", choices=GOAL_FRAMES, default="reach",
                    help="t_G of a reaching clip: the frame the hand arrives, or the end of the hold after it")

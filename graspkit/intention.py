@@ -190,6 +190,8 @@ def intention(wrist: Tensor, pelvis: Tensor, psi: Tensor, goal: Tensor, time_lef
         _check(x, 3, n)
     shape = (wrist[..., 0] + pelvis[..., 0] + psi + goal[..., 0] + time_left).shape     # the broadcast shape
     dtype = wrist.dtype
+    if not bool(torch.isfinite(goal).all()):     # a NaN goal would make I^r silently 0 (NaN > eps is False)
+        raise ValueError("goal: contains NaN or Inf (expected world positions in metres)")
     if torch.isnan(time_left).any():        # NaN > 0 is False: it would read as "goal time passed", silently
         raise ValueError("time_left: contains NaN (expected seconds to the goal frame; <= 0 once it has passed)")
     time_left = time_left.to(dtype).expand(shape)

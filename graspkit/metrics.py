@@ -72,8 +72,11 @@ def _shaped(x: Any, name: str, shape: str, min_frames: int = 1) -> torch.Tensor:
 
 def _positive(x: float, name: str) -> float:
     """x as a float after checking it is a positive finite number (a frame rate, a threshold)."""
-    if not (np.isfinite(x) and x > 0):
-        raise ValueError(f"{name}: expected a positive number, got {x}")
+    if isinstance(x, (torch.Tensor, np.ndarray)) and tuple(x.shape) == ():
+        x = x.item()                                         # a 0-d tensor or array: its number
+    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)) \
+            or not (np.isfinite(x) and x > 0):
+        raise ValueError(f"{name}: expected a positive number, got {x!r}")
     return float(x)
 
 
@@ -185,7 +188,7 @@ def distance_to_goal(wrist: Any, goal: Any) -> float:
 
 def goal_reached(wrist: Any, goal: Any, radius: float = WANDR_SUCCESS_RADIUS) -> bool:
     """WANDR's success: the wrist comes within `radius` m of the goal."""
-    return distance_to_goal(wrist, goal) <= radius
+    return distance_to_goal(wrist, goal) <= _positive(radius, "radius")
 
 
 def heel_vertex_ids() -> tuple[int, int]:
@@ -283,13 +286,19 @@ def grasp_metrics(vertices: Any, faces: Any, obj: Any, threshold: float = GRASP_
     from graspkit.objects.penetration import REFINE, interpenetration
 
     d = grasp_contact_distance(vertices, obj)
-    pen = interpenetration((_t(vertices).double(), _t(faces).long()), obj, refine=REFINE if refine is None else refine)
+    f = _t(faces)
+    if f.is_floating_point() and not bool((f == f.round()).all()):    # .long() would truncate them silently
+        raise ValueError("faces: expected integer vertex indices, got fractional values")
+    pen = interpenetration((_t(vertices).double(), f.long()), obj, refine=REFINE if refine is None else refine)
     return {"min_distance": d, "contact": float(d <= threshold), "volume_cm3": pen.volume_cm3, "depth_cm": pen.depth_cm}
 
 
 def contact_ratio(min_distances: Any, threshold: float = GRASP_CONTACT_THRESHOLD) -> float:
     """Fraction of grasps in contact: min body-object signed distances (N,) <= threshold."""
-    d = np.asarray(min_distances, np.float64).reshape(-1)
+    try:
+        d = np.asarray(min_distances, np.float64).reshape(-1)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"min_distances: expected numbers (metres), got {type(min_distances).__name__}: {e}") from None
     if not d.size:
         raise ValueError("min_distances: expected at least one grasp, got none")
     if not np.isfinite(d).all():

@@ -75,6 +75,22 @@ def test_transl_and_batch_broadcast():
     np.testing.assert_allclose((b.joints - a.joints).numpy(), np.broadcast_to([1.0, 2.0, 3.0], (3, 55, 3)))
 
 
+def test_float32_translation_far_from_the_origin_matches_smplx():
+    """smplx adds transl after skinning; inside the float32 weight blend it would round with the weights (2e-5 m at
+    100 m before the fix; float32 itself spaces numbers 7.6e-6 apart there)."""
+    from graspkit.paths import default_model_path
+
+    kw = dict(use_pca=False, flat_hand_mean=False, dtype=torch.float32)
+    ref = smplx.create(str(default_model_path().parents[1]), model_type="smplx", gender="neutral", ext="npz", **kw)
+    ours = BodyModel.from_file(default_model_path(), **kw)
+    p = _params(2, 45, torch.float32, seed=5)
+    p["transl"] = torch.tensor([[100.0, -100.0, 100.0], [-70.0, 25.0, 3.0]])     # float32 spacing at 100: 7.6e-6
+    with torch.no_grad():
+        a, b = ref(**p), ours(**p)
+    assert (a.vertices - b.vertices).abs().max().item() <= 1e-5
+    assert (a.joints[:, :55] - b.joints).abs().max().item() <= 1e-5
+
+
 def test_gradcheck_through_pose_and_shape():
     bm = BodyModel(random_smplx_arrays(num_vertices=40, num_faces=20, seed=4), dtype=torch.float64)
     g = torch.Generator().manual_seed(1)

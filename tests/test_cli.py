@@ -135,3 +135,5 @@ def test_wandr_notes_say_when_a_goal_leaves_the_trained_range():
     assert any("past the 8 s" in n for n in wandr_range_notes((1.5, 0.5, 1.0), 10.0))
     assert any("8.0 m away: 2.0 m/s" in n for n in wandr_range_notes((8.0, 0.0, 1.0), 4.0))
     assert any("below the floor" in n for n in wandr_range_notes((1.0, 0.0, -0.5), 4.0))
+    assert any("4.50 m high" in n for n in wandr_range_notes((0.3, 0.0, 4.5), 4.0))    # above every training goal
+    assert wandr_range_notes((0.3, 0.0, 1.9), 4.0) == []                        # the highest training goals

@@ -204,3 +204,5 @@ def test_errors_name_the_argument():
 def test_a_nan_time_left_is_refused_not_read_as_goal_time_passed():
     with pytest.raises(ValueError, match="time_left: contains NaN"):
         _I([0.0, 0.0, 1.0], [0.0, 0.0, 0.9], 0.0, [2.0, 1.0, 1.0], float("nan"))
+    with pytest.raises(ValueError, match="goal: contains NaN"):     # I^r would read a NaN goal as "straight above"
+        _I([0.0, 0.0, 1.0], [0.0, 0.0, 0.9], 0.0, [float("nan"), 1.0, 1.0], 1.0)

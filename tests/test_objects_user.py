@@ -1,5 +1,7 @@
 """Objects of one's own (graspkit.objects.user): a trimesh or a mesh file checked and moved to the object frame, its
 collision grid against trimesh's exact signed distance, the errors a bad mesh gets, and SAGA end to end on it."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -71,6 +73,22 @@ def _millimetres() -> trimesh.Trimesh:
 def test_a_bad_object_names_the_argument_and_what_was_expected(make, message):
     with pytest.raises(ValueError, match=f"obj: .*{message}"):
         as_object(make())
+
+
+def test_a_nan_vertex_in_a_file_is_named_not_dropped(tmp_path):
+    path = tmp_path / "corrupt.obj"
+    _box().export(path)
+    lines = path.read_text().splitlines()
+    k = next(i for i, line in enumerate(lines) if line.startswith("v "))
+    lines[k] = "v nan 0 0"                       # trimesh's processing would drop it and its faces: "not closed"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ValueError, match="corrupt.obj.*NaN or infinite"):
+        as_object(path)
+
+
+def test_a_catalogue_name_may_come_as_a_path():
+    name, m = as_object(Path("mug"))
+    assert name == "mug" and np.array_equal(m.vertices, make_object("mug").vertices)
 
 
 def test_an_unreadable_file_is_named(tmp_path):

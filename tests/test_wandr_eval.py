@@ -354,3 +354,30 @@ def test_train_from_init_starts_from_its_weights_and_statistics(bm, tmp_path, mo
     assert first["command"] == a["meta"]["command"] and first["history"] == a["history"]
     with pytest.raises(ValueError, match="init: .* another network"):
         E.run_train_wandr("wandr_iw", out=str(tmp_path / "d.pt"), init=str(tmp_path / "a.pt"), **kw)
+
+
+def test_full_mesh_fs_scores_a_body_that_is_not_upright(bm):
+    """A body in the rest pose lying on its back (root rotation 0 in the z-up world) and turning 1° a frame about
+    the pelvis's vertical: its lowest vertex (the buttock) barely moves, while a heel swings round; full_mesh=True
+    follows the whole mesh, the default only the feet and hands."""
+    from graspkit.rotations import axis_angle_to_matrix
+
+    m, _, rest = _clip(bm)
+    T = 40
+    Rs = torch.eye(3).expand(T, I.NUM_BODY, 3, 3).clone()
+    Rs[:, 0] = axis_angle_to_matrix(torch.stack([torch.zeros(T), torch.zeros(T), torch.arange(T) * np.pi / 180], 1))
+    ts = torch.tensor([0.3, -0.2, 0.1]).expand(T, 3)
+    q = I.pose_from_rotmats(ts, Rs)
+    betas = torch.as_tensor(m.betas)[None]
+    verts = bm.forward_rotmats(torch.cat([Rs, torch.eye(3).expand(T, 33, 3, 3)], 1), betas=betas,
+                               transl=ts).vertices.numpy()
+    low = verts[..., 2].argmin(1)                                                     # numpy: the lowest vertex's move
+    move = np.linalg.norm(verts[np.arange(1, T), low[:-1], :2] - verts[np.arange(T - 1), low[:-1], :2], axis=1)
+    truth = float((move > 0.0066).mean())
+    assert not np.isin(low, E.LowVertices(bm, betas).ids.numpy()).any()               # neither a foot nor a hand
+    full = E.evaluate_motions(q[None], rest[None], torch.zeros(1, 3), betas, bm, full_mesh=True)
+    assert full.fs[0] == pytest.approx(truth, abs=1e-6) and truth < 0.5
+    part = E.evaluate_motions(q[None], rest[None], torch.zeros(1, 3), betas, bm)
+    assert part.fs[0] > truth + 0.5                               # the default follows a heel round the turn
+    with pytest.raises(ValueError, match="T >= 2"):
+        E.evaluate_motions(q[None, :1], rest[None], torch.zeros(1, 3), betas, bm)

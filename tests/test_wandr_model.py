@@ -66,6 +66,29 @@ def test_losses_are_the_papers_terms(clips, stats):
     assert cfg.alpha_kl == 1e-2 and out["steps"] == 3
 
 
+def test_step_gradient_mode_has_the_rollouts_losses_and_stops_the_gradient_at_each_state(clips, stats):
+    """rollout_grad="step" (not in the paper) recomputes the rollout's steps from the states it visited with its
+    noise: without dropout the losses equal "through"'s to rounding; its gradient differs (no backpropagation
+    through time); step_stride keeps the reconstruction step and every n-th rollout step."""
+    items = W.WindowDataset(clips, max_steps=6).items[::40]
+    outs, grads = {}, {}
+    for mode in ("through", "step"):
+        model = _model(stats, w_contact=1.0, w_floor=1.0, w_foot=0.5, rollout_grad=mode).train()
+        out = M.training_losses(model, clips, items, 6, generator=torch.Generator().manual_seed(3))
+        out["loss"].backward()
+        outs[mode], grads[mode] = out, model.decoder[0].weight.grad.clone()
+    for k in ("loss", "rec", "kl", "joint_cm2", "contact_mm2", "floor_cm2", "foot_mm2"):
+        assert outs["step"][k].item() == pytest.approx(outs["through"][k].item(), rel=1e-4), k
+    assert not torch.allclose(grads["step"], grads["through"], rtol=1e-3)
+    model = _model(stats, rollout_grad="step", step_stride=3).train()
+    seen = []
+    model.decode = (lambda f: (lambda z, c: seen.append(len(z)) or f(z, c)))(model.decode)
+    M.training_losses(model, clips, items, 6, generator=torch.Generator().manual_seed(3))
+    assert seen[:6] == [len(items)] * 6 and seen[6] == 3 * len(items)   # 6 rollout steps, then 0 + 2 of the 6
+    with pytest.raises(ValueError, match="rollout_grad"):
+        M.WandrConfig(rollout_grad="none")
+
+
 def _windows(clips):
     """Every 40th window of the sample clips (3 rollout steps), its batch and the data's deltas (B, 5, 135)."""
     items = W.WindowDataset(clips, max_steps=3).items[::40]
@@ -271,6 +294,8 @@ def test_goal_schedule_switches_goals_after_each_goal_frame():
     with pytest.raises(ValueError, match="before frame 35"):           # goal 3 would never start
         M.goal_schedule(torch.zeros(3, 3), [10, 40, 50], 35)
     assert M.goal_schedule(torch.zeros(2, 3), [10, 50], 35)[1][-1] == 50   # the last goal may lie past the clip
+    with pytest.raises(ValueError, match="goals: contains NaN"):
+        M.goal_schedule(torch.tensor([[1.0, 0, 1], [float("nan"), 0, 1]]), [10, 20], 35)
 
 
 def test_rollout_errors_name_the_argument(stats, starts):
@@ -282,6 +307,10 @@ def test_rollout_errors_name_the_argument(stats, starts):
         M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], torch.zeros(2, 2), 5, 5)
     with pytest.raises(ValueError, match="z"):
         M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], torch.zeros(3), 5, 5, z=torch.zeros(1, 4, 4))
+    with pytest.raises(ValueError, match="goal: contains NaN"):     # below generate's checks, NaN poses otherwise
+        M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], torch.tensor([[float("nan"), 0, 1]]), 5, 5)
+    with pytest.raises(ValueError, match="t_goal: expected goal frames >= 1"):
+        M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], torch.zeros(3), 0, 5)
     goal = torch.tensor([[1.0, 0.5, 1.0]])
     for bad_goal in (torch.tensor([[1.0, 0.5]]), torch.tensor([[float("nan"), 0.5, 1.0]]), torch.zeros(0, 3)):
         with pytest.raises(ValueError, match="goal"):

@@ -342,11 +342,13 @@ class BodyModel(nn.Module):
             v = torch.addmm(v.view(B, -1), feat, self._posedirs_used).view(B, 3, -1)
         Rg, tg = self.global_transforms(rot, J)                       # (B,55,3,3), (B,55,3)
         # skinning transform of joint k: x -> Rg_k (x - J_k) + tg_k; rows of A: columns of Rg, then the offset
-        offset = (tg + transl.unsqueeze(1)) - (Rg @ J.unsqueeze(-1)).squeeze(-1)
+        offset = tg - (Rg @ J.unsqueeze(-1)).squeeze(-1)
         A = torch.cat([Rg.transpose(2, 3), offset.unsqueeze(2)], dim=2)                # (B,55,4,3)
         A = A.reshape(B, NUM_JOINTS, 12).transpose(1, 2).reshape(B * 12, NUM_JOINTS)
         T = torch.mm(A, self._weights_t).view(B, 4, 3, -1)            # one GEMM for the batch: (B,4,3,V)
         verts = T[:, 3] + T[:, 0] * v[:, 0:1] + T[:, 1] * v[:, 1:2] + T[:, 2] * v[:, 2:3]      # (B,3,V)
+        # the translation after the blend, as smplx adds it: inside it, float32 would round it with the weights
+        verts = verts + transl.unsqueeze(2)
         return BodyOutput(verts.transpose(1, 2).contiguous(), tg + transl.unsqueeze(1), self.faces, rot)
 
     def global_transforms(self, rot: Tensor, J: Tensor) -> tuple[Tensor, Tensor]:

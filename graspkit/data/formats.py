@@ -103,6 +103,33 @@ def write_npz_atomic(path: Path, arrays: dict[str, np.ndarray]) -> None:
         raise
 
 
+def open_npz(path: str | os.PathLike, what: str = "an .npz file") -> np.lib.npyio.NpzFile:
+    """An .npz archive opened without pickle (use it in a `with`); a ValueError naming the file when it is missing,
+    unreadable or a single array rather than an archive."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: no such file (expected {what})")
+    try:
+        npz = np.load(path, allow_pickle=False)
+    except Exception as e:              # empty, truncated, not a zip, a pickle: numpy raises several kinds
+        raise ValueError(f"{path}: not a readable .npz file, expected {what} ({type(e).__name__}: {e})") from None
+    if not isinstance(npz, np.lib.npyio.NpzFile):
+        raise ValueError(f"{path}: a single array, expected {what} (an .npz archive)")
+    return npz
+
+
+def npz_arrays(npz: np.lib.npyio.NpzFile, keys, path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """The arrays `keys` of an open archive; a ValueError naming the file for one that is corrupt or needs pickle."""
+    out = {}
+    for k in keys:
+        try:
+            out[k] = npz[k]
+        except Exception as e:
+            raise ValueError(f"{path}: key {k!r} cannot be read without pickle or is corrupt "
+                             f"({type(e).__name__}: {e})") from None
+    return out
+
+
 def _get(npz, key: str, path: Path) -> np.ndarray:
     """One array of an open npz; clear errors for a missing key or an object array."""
     if key not in npz.files:

@@ -17,6 +17,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from graspkit.data.formats import npz_arrays, open_npz
 from graspkit.data.grab import read_arrays
 from graspkit.data.grasp import SPLITS, split_of
 from graspkit.rotations import axis_angle_to_matrix, axis_angle_to_rot6d
@@ -34,9 +35,12 @@ def grasp_files(root: str | os.PathLike, kind: str = "grasp", split: str | None 
         raise FileNotFoundError(f"root: no such folder {root} (make the data with `graspkit data make --kind {kind}`)")
     out = []
     for p in sorted(root.glob(f"{kind}_*.npz")):
-        with np.load(p, allow_pickle=False) as z:
-            name = str(z["obj_name"])
-            ok = bool(z["grasp.accepted"]) if "grasp.accepted" in z.files else True
+        with open_npz(p, f"a {kind} file (graspkit data make --kind {kind})") as z:
+            if "obj_name" not in z.files:
+                raise ValueError(f"{p}: missing key 'obj_name' (expected a {kind} file of graspkit data make)")
+            a = npz_arrays(z, ["obj_name"] + (["grasp.accepted"] if "grasp.accepted" in z.files else []), p)
+            name = str(a["obj_name"])
+            ok = bool(a["grasp.accepted"]) if "grasp.accepted" in a else True
         if (split is None or split_of(name) == split) and (ok or not accepted_only):
             out.append(p)
     return out

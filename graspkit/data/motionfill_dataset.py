@@ -231,8 +231,10 @@ def save_windows(path: str | Path, arrays: dict[str, np.ndarray]) -> Path:
 
 def load_windows(path: str | Path) -> dict[str, np.ndarray]:
     """Windows back from `save_windows` (no pickle); a missing key gives an error naming the file."""
-    with np.load(path, allow_pickle=False) as z:
+    from graspkit.data.formats import npz_arrays, open_npz
+
+    with open_npz(path, "a MotionFill windows file (save_windows)") as z:
         missing = {"traj", "markers", "local", "vel", "contacts", "clip"} - set(z.files)
         if missing:
             raise ValueError(f"{path}: not a MotionFill windows file, missing {sorted(missing)}")
-        return {k: z[k] for k in z.files}
+        return npz_arrays(z, z.files, path)

@@ -348,15 +348,18 @@ def save_clipset(path: str | Path, clips: ClipSet) -> Path:
 
 def load_clipset(path: str | Path) -> ClipSet:
     """Read save_clipset's file (allow_pickle=False)."""
+    from graspkit.data.formats import npz_arrays, open_npz
+
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"path: no clip set at {path}")
-    with np.load(path, allow_pickle=False) as z:
+    with open_npz(path, "a clip set (save_clipset)") as z:
         missing = [k for k in _CLIPSET_KEYS + ("names",) if k not in z.files]
         if missing:
             raise ValueError(f"{path}: missing keys {missing}")
-        t = {k: torch.from_numpy(z[k].copy()) for k in _CLIPSET_KEYS}
-        return ClipSet(names=[str(n) for n in z["names"]], **t)
+        a = npz_arrays(z, _CLIPSET_KEYS + ("names",), path)
+        t = {k: torch.from_numpy(a[k].copy()) for k in _CLIPSET_KEYS}
+        return ClipSet(names=[str(n) for n in a["names"]], **t)
 
 
 def cached_clips(folder: str | Path, bm, limit: int | None = None, cache: str | Path | None = None,

@@ -68,6 +68,9 @@ class WandrConfig:
     max_steps: int = 10
     ramp_epochs: int = 4
     rollout_latent: str = "prior"                      # "prior" (Sup. B.2) or "posterior" (encoder on the truth)
+    rollout_grad: str = "through"                      # "through": backpropagate through the rollout; "step": roll out
+                                                       # without gradient, then one batched step from every state
+    step_stride: int = 1                               # rollout_grad="step": recompute every n-th step (random phase)
     goal_frame: str = "reach"                          # reaching clips' t_G: "reach" (arrival) or "hold" (its end)
 
     def __post_init__(self) -> None:
@@ -77,6 +80,10 @@ class WandrConfig:
             raise ValueError(f"intention: unknown parts {bad}; expected a subset of {tuple(I.INTENTION_PARTS)}")
         if self.rollout_latent not in ("prior", "posterior"):
             raise ValueError(f"rollout_latent: expected 'prior' or 'posterior', got {self.rollout_latent!r}")
+        if self.rollout_grad not in ("through", "step"):
+            raise ValueError(f"rollout_grad: expected 'through' or 'step', got {self.rollout_grad!r}")
+        if self.step_stride < 1:
+            raise ValueError(f"step_stride: expected >= 1, got {self.step_stride}")
         if self.goal_frame not in GOAL_FRAMES:
             raise ValueError(f"goal_frame: expected one of {GOAL_FRAMES}, got {self.goal_frame!r}")
 
@@ -153,6 +160,8 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
     t, R = I.pose_rotmats(cur_p)
     J = I.fk_rotmats(t, R, rest)[1]
     rec = joint = kl = foot = contact = floor = torch.zeros((), dtype=p.dtype)
+    if cfg.rollout_grad == "step" and steps > 0 and cfg.rollout_latent == "prior":
+        return _step_losses(model, b, d_gt, J_gt, steps, generator)
     for k in range(steps + 1):
         state = I.state_features(cur_p, cur_d, root=R[:, 0])
         inten = I.intention(J[:, I.WRIST], J[:, I.PELVIS], I.yaw_of(R[:, 0]), goal, (t_goal - k).to(p.dtype) / I.FPS, gh)
@@ -188,6 +197,80 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
             **({"contact_mm2": contact.detach()} if cfg.w_contact else {}),
             **({"floor_cm2": floor.detach()} if cfg.w_floor else {}),
             "steps": torch.tensor(float(steps))}
+
+
+def _step_losses(model: WandrCVAE, b: dict[str, Tensor], d_gt: Tensor, J_gt: Tensor, steps: int,
+                 generator: torch.Generator | None) -> dict[str, Tensor]:
+    """`training_losses` with rollout_grad="step" (not in the paper): the rollout (frames i+1 .. i+steps) runs without
+    gradient and in eval mode (no dropout: the states the model visits when it generates), then its steps are
+    recomputed with gradient in one batch, each from the state the rollout visited and with the noise it drew: the
+    reconstruction step (with its KL) and every `step_stride`-th rollout step (a random phase per batch). The
+    gradient stops at each step's input state (no backpropagation through time); the terms and weights are
+    `training_losses`'s, averaged over the recomputed steps."""
+    cfg = model.cfg
+    p, rest, goal, t_goal, gh = b["p"], b["rest"], b["goal"], b["t_goal"], b["goal_heading"]
+    B = len(p)
+    t, R = I.pose_rotmats(p[:, 1])
+    cur_p, cur_d = p[:, 1], d_gt[:, 0]
+    ts, Rs, ds, noise = [t], [R], [cur_d], []
+    was_training = model.training
+    model.eval()
+    with torch.no_grad():                                           # the states the model itself visits
+        for k in range(steps):
+            J = I.fk_rotmats(t, R, rest)[1]
+            cond = model.condition(I.state_features(cur_p, cur_d, root=R[:, 0]),
+                                   I.intention(J[:, I.WRIST], J[:, I.PELVIS], I.yaw_of(R[:, 0]), goal,
+                                               (t_goal - k).to(p.dtype) / I.FPS, gh))
+            if k == 0:                                              # the reconstruction step: z from q(z | d, c)
+                mu, logvar = model.encode(d_gt[:, 1], cond)
+                eps = torch.randn(mu.shape, generator=generator)
+                z = mu + torch.exp(0.5 * logvar) * eps
+                noise.append(eps)
+            else:
+                z = torch.randn(B, cfg.latent, generator=generator)
+                noise.append(z)
+            cur_d = model.decode(z, cond)
+            t, R = I.integrate_rotmats(t, R, cur_d)
+            cur_p = I.pose_from_rotmats(t, R)
+            ts.append(t), Rs.append(R), ds.append(cur_d)
+        noise.append(torch.randn(B, cfg.latent, generator=generator))   # the last step's, as "through" draws it
+    model.train(was_training)
+    phase = int(torch.randint(cfg.step_stride, (1,), generator=generator)) if cfg.step_stride > 1 else 0
+    keep = [0] + [k for k in range(1, steps + 1) if k % cfg.step_stride == phase]
+    n = len(keep)
+    # the kept steps again with gradient, from the visited states (rows block-major: block j = step keep[j])
+    t0, R0, d0 = (torch.cat([x[k] for k in keep]) for x in (ts, Rs, ds))
+    ks = torch.tensor(keep)
+    rest_n = rest.repeat(n, 1, 1)
+    k_of = ks.repeat_interleave(B)
+    J0 = I.fk_rotmats(t0, R0, rest_n)[1]
+    cond = model.condition(I.state_features(I.pose_from_rotmats(t0, R0), d0, root=R0[:, 0]),
+                           I.intention(J0[:, I.WRIST], J0[:, I.PELVIS], I.yaw_of(R0[:, 0]), goal.repeat(n, 1),
+                                       (t_goal.repeat(n) - k_of).to(p.dtype) / I.FPS, gh.repeat(n)))
+    target = d_gt[:, ks + 1].transpose(0, 1).reshape(n * B, -1)
+    mu, logvar = model.encode(target[:B], cond[:B])
+    z = torch.cat([mu + torch.exp(0.5 * logvar) * noise[0]] + [noise[k] for k in keep[1:]])
+    d_hat = model.decode(z, cond)
+    t1, R1 = I.integrate_rotmats(t0, R0, d_hat)
+    J1 = I.fk_rotmats(t1, R1, rest_n)[1]
+    Jt = J_gt[:, ks + 1].transpose(0, 1).reshape(n * B, I.NUM_BODY, 3)
+    rec = (model.normalise_delta(d_hat) - model.normalise_delta(target)).pow(2).sum(-1).mean()
+    joint = (100 * (J1 - Jt)).pow(2).sum(-1).mean()
+    kl = kl_standard_normal(mu, logvar)
+    loss = rec + cfg.alpha_kl * kl + cfg.w_joint * joint
+    out = {"rec": rec.detach(), "kl": kl.detach(), "joint_cm2": joint.detach()}
+    if cfg.w_foot or cfg.w_contact:     # the foot joints' horizontal step here and in the data
+        v = J1[:, FEET, :2] - J0[:, FEET, :2]
+        v_gt = Jt[:, FEET, :2] - J_gt[:, ks].transpose(0, 1).reshape(n * B, I.NUM_BODY, 3)[:, FEET, :2]
+        foot = (1000 * (v - v_gt)).pow(2).sum(-1).mean()
+        contact = ((v_gt.norm(dim=-1) < PLANTED_STEP) * (1000 * v).pow(2).sum(-1)).mean()
+        loss = loss + cfg.w_foot * foot + cfg.w_contact * contact
+        out.update({"foot_mm2": foot.detach()} if cfg.w_foot else {})
+        out.update({"contact_mm2": contact.detach()} if cfg.w_contact else {})
+    if cfg.w_floor:
+        floor = (100 * (lowest_foot(J1) - lowest_foot(Jt))).pow(2).mean()
+        loss, out["floor_cm2"] = loss + cfg.w_floor * floor, floor.detach()
+    return {"loss": loss, **out, "steps": torch.tensor(float(steps))}
 
 
 def train_wandr(model: WandrCVAE, clips: ClipSet, cfg: TrainConfig, checkpoint: str | Path | None = None,
@@ -299,6 +382,11 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
         raise ValueError(f"floor: expected None or a tolerance >= 0 in metres, got {floor!r}")
     goals = _per_frame(goal, B, T, 3, "goal").to(p0.dtype)
     tg = _per_frame(torch.as_tensor(t_goal), B, T, None, "t_goal")
+    if not bool(torch.isfinite(goals).all()):
+        raise ValueError("goal: contains NaN or Inf (expected world positions in metres)")
+    if not bool((tg >= 1).all()):       # NaN fails this too
+        raise ValueError(f"t_goal: expected goal frames >= 1 (counted from the start, frame 0), got min "
+                         f"{float(tg.min()) if tg.numel() else tg}")
     cur_p, cur_d = p0, I.pose_to_delta(p_prev, p0)
     t, R = I.pose_rotmats(p0)
     ps, js = [], []
@@ -371,7 +459,9 @@ def generate(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal:
              on_frame: FrameHook | None = None, floor: float | None = None) -> Rollout:
     """Reach goals (G, 3) from one or more starts, n samples each, all in one batched rollout (B = S * G * n,
     start-major). t_goal: the goal frame (int or (G,)); frames: how many to generate (default max t_goal: the clip has
-    frames + 1 poses, the start included); floor: `rollout`'s floor constraint (None: off, as the paper)."""
+    frames + 1 poses, the start included); floor: `rollout`'s floor constraint (None: off, as the paper).
+    Every frame draws z for the whole batch from `generator`, so a sequence's draws depend on the batch it is in:
+    the same seed gives the same motions for the same starts, goals and n, not for one goal taken out of them."""
     model.eval()
     pp, p0, rest, g, idx = expand_starts(start, goal, n)
     dtype = model.decoder[0].weight.dtype                  # float32 unless the caller converted the model
@@ -395,6 +485,8 @@ def goal_schedule(goals: Tensor, t_goals: Sequence[int], frames: int) -> tuple[T
     """Several goals in a row (Sup. C.2, Fig. S.2): goal k is active from t_{k-1} + 1 to its frame t_k. Returns the goal
     (frames+1, 3) and goal frame (frames+1,) per frame, for `rollout` (expand to (B, T, ...))."""
     goals = torch.as_tensor(goals, dtype=torch.float32).reshape(-1, 3)
+    if not bool(torch.isfinite(goals).all()):
+        raise ValueError("goals: contains NaN or Inf (expected world positions in metres)")
     t = list(t_goals)
     if len(t) != len(goals) or not t or t[0] < 1 or any(b <= a for a, b in zip(t, t[1:])):
         raise ValueError(f"t_goals: expected {len(goals)} strictly increasing frames >= 1, got {t}")

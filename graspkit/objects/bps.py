@@ -17,8 +17,10 @@ from graspkit.objects.distance import as_points, nearest_neighbours
 
 def bps_basis(n: int = 1024, radius: float = 0.15, seed: int = 0, dtype: torch.dtype = torch.float32) -> Tensor:
     """n basis points (n,3) uniform in the ball of `radius` metres about the origin; same seed -> same points."""
-    if n <= 0 or radius <= 0:
-        raise ValueError(f"n, radius: expected positive values, got n={n}, radius={radius}")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n <= 0:
+        raise ValueError(f"n: expected a positive whole number of basis points, got {n!r}")
+    if not (isinstance(radius, (int, float, np.number)) and np.isfinite(radius) and radius > 0):
+        raise ValueError(f"radius: expected a positive finite radius in metres, got {radius!r}")
     rng = np.random.default_rng(seed)
     direction = rng.standard_normal((n, 3))
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)

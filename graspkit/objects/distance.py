@@ -316,6 +316,8 @@ def point_mesh_distance(points, mesh: MeshLike) -> MeshDistance:
     the points and the vertices; the nearest-face search itself runs without gradient in float64.
     """
     pts = as_points(points, "points")
+    if pts.dim() > 3:
+        raise ValueError(f"points: expected (N, 3) or (B, N, 3), got {tuple(pts.shape)}")
     verts, faces = mesh_arrays(mesh, "mesh")
     unbatched = pts.dim() == 2 and verts.dim() == 2
     dtype = torch.promote_types(pts.dtype, verts.dtype)

@@ -153,8 +153,10 @@ class SDFGrid:
         verts, faces = mesh_arrays(mesh, "mesh")
         if verts.dim() != 2:
             raise ValueError("mesh: SDFGrid.from_mesh takes one mesh with vertices (V, 3)")
-        if resolution < 2 or padding < 0:
-            raise ValueError(f"resolution, padding: need resolution >= 2 and padding >= 0, got {resolution}, {padding}")
+        if isinstance(resolution, bool) or not isinstance(resolution, (int, np.integer)) or resolution < 2:
+            raise ValueError(f"resolution: expected a whole number of grid nodes >= 2, got {resolution!r}")
+        if not (isinstance(padding, (int, float, np.number)) and np.isfinite(padding) and padding >= 0):
+            raise ValueError(f"padding: expected a finite margin >= 0 in metres, got {padding!r}")
         require_closed(verts, faces, "mesh")
         v = verts.detach().to(torch.float64)
         used = v[torch.unique(faces)]                  # the surface's own box: vertices no face uses do not count

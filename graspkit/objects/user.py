@@ -40,16 +40,19 @@ def as_object(obj: str | Path | trimesh.Trimesh, argument: str = "obj") -> tuple
     if isinstance(obj, trimesh.Trimesh):
         return str(obj.metadata.get("name") or "object"), _checked(obj.copy(), argument)
     if isinstance(obj, (str, Path)):
-        if isinstance(obj, str) and obj in list_objects():
-            return obj, make_object(obj)
         path = Path(obj)
+        if str(obj) in list_objects() and not path.is_file():
+            return str(obj), make_object(str(obj))
         if path.is_file():
-            try:
-                mesh = trimesh.load(path, force="mesh", process=True)
+            try:            # unprocessed first: processing would drop NaN vertices and their faces without a word
+                mesh = trimesh.load(path, force="mesh", process=False)
             except Exception as e:   # trimesh raises many kinds for unreadable files
                 raise ValueError(f"{argument}: could not read a mesh from {path}: {e}") from e
             if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
                 raise ValueError(f"{argument}: {path} holds no triangle mesh")
+            if not np.isfinite(mesh.vertices).all():
+                raise ValueError(f"{argument} ({path}): the mesh has NaN or infinite vertex coordinates")
+            mesh.process()
             return path.stem, _checked(mesh, f"{argument} ({path})")
         if path.suffix or len(path.parts) > 1:
             raise ValueError(f"{argument}: no such mesh file {str(path)!r} (nor a catalogue name {list_objects()})")
