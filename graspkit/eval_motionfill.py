@@ -127,7 +127,10 @@ def load_motionfill(path: str | Path = CHECKPOINT) -> MotionFillVAE:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"path: no MotionFill checkpoint at {path} (graspkit train motionfill)")
-    return MotionFillVAE.from_state(load_checkpoint(path))
+    try:
+        return MotionFillVAE.from_state(load_checkpoint(path))
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from None
 
 
 def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, seed: int = 0,

@@ -508,11 +508,17 @@ def add_saga_train_commands(train_sub) -> None:
              "pose_prior": "the body-pose prior GraspPose-Opt uses in place of VPoser"}
     for name, text in helps.items():
         p = train_sub.add_parser(name, help=f"train {text}")
-        p.add_argument("--data", type=Path, default=default, help=f"folder of grasp_*.npz (default {default})")
+        if name == "pose_prior":
+            p.add_argument("--data", type=Path, default=None,
+                           help="folder of grasp_*.npz whose training poses join the clips' (default: none)")
+        else:
+            p.add_argument("--data", type=Path, default=default, help=f"folder of grasp_*.npz (default {default})")
         p.add_argument("--out", type=Path, default=None, help="weights (default data_stubs/checkpoints/<name>.pt)")
         p.set_defaults(out_is_file=True)
         p.add_argument("--epochs", type=int, default=30 if name == "pose_prior" else 12)
-        p.add_argument("--time-limit", type=float, default=600.0, help="seconds; stops after the epoch that crosses it")
+        p.add_argument("--time-limit", type=float, default=None if name == "pose_prior" else 600.0,
+                       help="seconds; stops after the epoch that crosses it"
+                            + (" (default: none)" if name == "pose_prior" else " (default 600)"))
         p.add_argument("--seed", type=int, default=0)
         p.add_argument("--threads", type=int, default=1)
         if name == "wholegrasp":
@@ -533,11 +539,13 @@ def _cmd_train(args: argparse.Namespace, name: str) -> int:
         from graspkit.models.pose_prior import POSE_PRIOR_PATH, train_pose_prior, pose_training_set
 
         extra = None
-        if args.data and Path(args.data).is_dir():   # grasp poses, repeated 4x: ~900 grasps beside ~15k clip frames
+        if args.data:                                # grasp poses, repeated 4x: ~900 grasps beside ~15k clip frames
+            if not Path(args.data).is_dir():
+                raise ValueError(f"--data: no such folder {args.data} (grasps of `graspkit data make --kind grasp`)")
             extra = np.tile(grasp_body_poses(args.data, split="train"), (4, 1, 1))
         t0 = time.perf_counter()
         hist = train_pose_prior(args.out or POSE_PRIOR_PATH, pose_training_set(200, args.seed, extra=extra),
-                                epochs=args.epochs, seed=args.seed)
+                                epochs=args.epochs, seed=args.seed, time_limit_s=args.time_limit)
         print(f"wrote {args.out or POSE_PRIOR_PATH}: {len(hist)} epochs in {time.perf_counter() - t0:.0f} s; "
               f"val joint angle error {hist[-1]['val_angle_error_deg']:.2f} deg")
         return 0

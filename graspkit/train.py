@@ -39,6 +39,9 @@ from graspkit.paths import publish, temp_beside, write_atomic
 StepFn = Callable[[torch.nn.Module, Any, int], dict[str, torch.Tensor]]
 
 
+STALE_TMP_S = 600.0          # s: a checkpoint's temporary file older than this was left by a killed run
+
+
 @dataclass
 class TrainConfig:
     """Optimisation settings: epochs, batch size, Adam learning rate (cosine-decayed to lr * lr_min_ratio), seed."""
@@ -58,8 +61,14 @@ class TrainConfig:
             v, low = getattr(self, name), 0 if name == "seed" else 1
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
                 raise ValueError(f"{name}: expected an integer >= {low}, got {v!r}")
-        if not (np.isfinite(self.lr) and self.lr >= 0):        # 0: a run that leaves the weights as they are
-            raise ValueError(f"lr: expected a learning rate >= 0, got {self.lr!r}")
+        for name, low, high in (("lr", 0.0, math.inf), ("weight_decay", 0.0, math.inf), ("lr_min_ratio", 0.0, 1.0)):
+            v = getattr(self, name)          # lr 0: a run that leaves the weights as they are
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.number)) or not (low <= v <= high) \
+                    or not np.isfinite(v):
+                raise ValueError(f"{name}: expected a finite number in [{low:g}, {high:g}], got {v!r}")
+        if self.grad_clip is not None and (isinstance(self.grad_clip, bool) or not isinstance(
+                self.grad_clip, (int, float, np.number)) or not (np.isfinite(self.grad_clip) and self.grad_clip > 0)):
+            raise ValueError(f"grad_clip: expected None or a positive norm, got {self.grad_clip!r}")
 
 
 def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
@@ -68,10 +77,18 @@ def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
     tmp = temp_beside(path)
     try:
         torch.save(state, tmp)
-        return publish(tmp, path)
+        publish(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    now = time.time()
+    for stale in path.parent.glob(f".{path.name}.*.tmp"):   # left by a run killed while writing (kill -9); a
+        try:                                                # writer of this path at work now is not touched
+            if now - stale.stat().st_mtime > STALE_TMP_S:
+                stale.unlink()
+        except FileNotFoundError:
+            pass
+    return path
 
 
 def run_path(name: str, seed: int, run_dir: str | Path | None = None, **settings: Any) -> Path:
@@ -102,6 +119,14 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint: no file at {path}")
+    if zipfile.is_zipfile(path):             # torch.load does not check the archive's CRCs: bytes changed in place
+        try:
+            with zipfile.ZipFile(path) as zf:
+                bad = zf.testzip()
+        except Exception as e:  # noqa: BLE001 - a broken entry header
+            bad = f"? ({e})"
+        if bad is not None:
+            raise ValueError(f"checkpoint {path}: damaged (its entry {bad} fails its checksum)")
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # noqa: BLE001 - re-raised with the file named
@@ -196,6 +221,19 @@ def plot_history(history: list[dict[str, float]], keys: list[str] | None = None,
     return ax
 
 
+def write_history_plot(path: str | Path, history: list[dict[str, float]]) -> Path:
+    """`plot_history` of the loss (train and val) to a PNG, written atomically (beside a run's CSV)."""
+    import io
+
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(5, 3), layout="constrained")
+    plot_history(history, ["loss"], ax=fig.add_subplot())
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    return write_atomic(path, buf.getvalue())
+
+
 def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig,
         checkpoint: str | Path | None = None, extra: dict[str, Any] | None = None,
         val_dataset: Dataset | None = None,
@@ -206,12 +244,15 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
     With `checkpoint`, an existing file is resumed from and the file is rewritten after every epoch (with
     `extra`, e.g. normalisation statistics). `time_limit_s` stops after the epoch that crosses the limit,
     `stop_at` after that epoch (both leave a checkpoint to resume from). With `val_dataset`, each epoch also logs
-    `val_<term>`; the history goes to `<checkpoint>.csv` beside the checkpoint. `ddp=False` marks a step that calls
+    `val_<term>`; the history goes to `<checkpoint>.csv` beside the checkpoint (every epoch) and its loss curves to
+    `<checkpoint>.png` (at the end). Resuming refuses a file of another network or of other settings. `ddp=False` marks a step that calls
     model methods other than `forward` (DDP synchronises only what runs through it): such a model is refused under
     an initialised process group instead of training out of step.
     """
     if len(dataset) == 0:
         raise ValueError("dataset: empty")
+    if time_limit_s is not None and not (isinstance(time_limit_s, (int, float)) and time_limit_s > 0):
+        raise ValueError(f"time_limit_s: expected None or a positive number of seconds, got {time_limit_s!r}")
     if cfg.num_threads:
         torch.set_num_threads(cfg.num_threads)
     world = _distributed()
@@ -227,6 +268,21 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
     start = 0
     if checkpoint is not None and Path(checkpoint).is_file():
         state = load_checkpoint(checkpoint)
+        if not all(k in state for k in ("model", "optimizer", "scheduler", "history", "epoch", "rng")):
+            raise ValueError(f"checkpoint {checkpoint}: not a training state of graspkit.train.fit (a weights file?); "
+                             "pass another path to train anew")
+        ours = {k: tuple(v.shape) for k, v in model.state_dict().items()}
+        theirs = {k: tuple(v.shape) for k, v in state["model"].items()}
+        if ours != theirs:
+            raise ValueError(f"checkpoint {checkpoint}: holds another network than {type(model).__name__} (its weights "
+                             f"differ in {sorted(set(ours.items()) ^ set(theirs.items()))[:3]}...); pass another "
+                             "path to train anew")
+        saved = {k: v for k, v in state.get("config", {}).items() if k not in ("num_threads", "extra")}
+        now = {k: v for k, v in asdict(cfg).items() if k not in ("num_threads", "extra")}
+        if saved and saved != now:
+            raise ValueError(f"checkpoint {checkpoint}: a run with other settings ("
+                             + ", ".join(f"{k} {saved.get(k)!r} there, {now.get(k)!r} here" for k in now
+                                         if saved.get(k) != now[k]) + "); pass another path to train anew")
         model.load_state_dict(state["model"])
         opt.load_state_dict(state["optimizer"])
         sched.load_state_dict(state["scheduler"])
@@ -264,6 +320,8 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
             stop = _agree(stop)
         if stop:
             break
+    if checkpoint is not None and world[1] == 0 and history:
+        write_history_plot(Path(checkpoint).with_suffix(".png"), history)
     if world[0]:
         torch.distributed.barrier()      # no rank leaves (and tears down gloo) while rank 0 still writes
     model.eval()

@@ -118,7 +118,9 @@ def test_file_key_follows_a_files_content(tmp_path):
 
 @pytest.mark.parametrize("kwargs, message", [({"epochs": 0}, "epochs: expected an integer >= 1"),
                                              ({"batch_size": -2}, "batch_size"), ({"seed": -1}, "seed"),
-                                             ({"lr": -1e-3}, "lr: expected a learning rate >= 0"), ({"lr": float("nan")}, "lr"), ({"num_threads": 0}, "num_threads"),
+                                             ({"lr": -1e-3}, "lr: expected a finite number in \\[0, inf\\]"),
+                                             ({"lr": "0.1"}, "lr"), ({"lr_min_ratio": -5}, "lr_min_ratio"),
+                                             ({"weight_decay": -1}, "weight_decay"), ({"grad_clip": -1}, "grad_clip"), ({"lr": float("nan")}, "lr"), ({"num_threads": 0}, "num_threads"),
                                              ({"epochs": 2.5}, "epochs")])
 def test_a_bad_training_setting_is_refused_before_any_work(kwargs, message):
     with pytest.raises(ValueError, match=message):
@@ -130,3 +132,45 @@ def test_a_file_that_holds_no_checkpoint_dict_is_named(tmp_path):
     torch.save(torch.zeros(3), path)
     with pytest.raises(ValueError, match="bare.pt: expected a graspkit checkpoint"):
         load_checkpoint(path)
+
+
+def test_resuming_refuses_another_network_other_settings_or_a_damaged_file(tmp_path):
+    cfg = TrainConfig(epochs=4, batch_size=16, lr=1e-2, seed=3)
+    ck = tmp_path / "run.pt"
+    fit(torch.nn.Linear(4, 1), _step, _problem(), cfg, checkpoint=ck, progress=False, stop_at=2)
+    with pytest.raises(ValueError, match="run.pt: holds another network than Sequential"):
+        fit(torch.nn.Sequential(torch.nn.Linear(4, 3), torch.nn.Linear(3, 1)), _step, _problem(), cfg,
+            checkpoint=ck, progress=False)
+    with pytest.raises(ValueError, match="run.pt: a run with other settings \\(lr 0.01 there, 0.5 here"):
+        fit(torch.nn.Linear(4, 1), _step, _problem(), TrainConfig(epochs=4, batch_size=16, lr=0.5, seed=3),
+            checkpoint=ck, progress=False)
+    weights = tmp_path / "weights.pt"
+    save_checkpoint(weights, {"model": torch.nn.Linear(4, 1).state_dict()})
+    with pytest.raises(ValueError, match="weights.pt: not a training state"):
+        fit(torch.nn.Linear(4, 1), _step, _problem(), cfg, checkpoint=weights, progress=False)
+    data = bytearray(ck.read_bytes())                       # bytes changed in place: torch.load alone accepts it
+    at = data.index(b"data/0") + 200
+    data[at:at + 16] = b"\xff" * 16
+    ck.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match="run.pt: damaged"):
+        load_checkpoint(ck)
+    with pytest.raises(ValueError, match="time_limit_s"):
+        fit(torch.nn.Linear(4, 1), _step, _problem(), cfg, progress=False, time_limit_s=-5)
+
+
+def test_a_run_writes_its_loss_curve_and_clears_a_killed_runs_temporary_files(tmp_path):
+    import os
+    import time
+
+    from graspkit.train import STALE_TMP_S
+
+    ck = tmp_path / "run.pt"
+    stale, fresh = tmp_path / ".run.pt.abc.tmp", tmp_path / ".run.pt.def.tmp"
+    for f, age in ((stale, STALE_TMP_S + 60), (fresh, 1)):
+        f.write_bytes(b"half")
+        os.utime(f, (time.time() - age, time.time() - age))
+    hist = fit(torch.nn.Linear(4, 1), _step, _problem(), TrainConfig(epochs=2, batch_size=16), checkpoint=ck,
+               progress=False)
+    png = (tmp_path / "run.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(hist) == 2
+    assert not stale.exists() and fresh.exists()           # a writer at work now is left alone

@@ -437,10 +437,16 @@ class MotionFillVAE(nn.Module):
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> "MotionFillVAE":
         """Rebuild from `state()` (or a fit checkpoint whose extra holds model_config)."""
-        cfg = dict(state.get("model_config") or state.get("extra", {}).get("model_config"))
+        cfg = state.get("model_config") or state.get("extra", {}).get("model_config")
+        if not isinstance(cfg, dict) or "traj_widths" not in cfg or not isinstance(state.get("model"), dict):
+            raise ValueError("state: not a MotionFill-VAE checkpoint (no MotionFill model_config and weights in it)")
+        cfg = dict(cfg)
         cfg["channels"], cfg["traj_widths"] = tuple(cfg["channels"]), tuple(cfg["traj_widths"])
         cfg.setdefault("traj_basis", 0)                 # checkpoints from before these options
         cfg.setdefault("local_arch", "image")
-        model = cls(MotionFillConfig(**cfg))
-        model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state["model"].items()})
+        try:
+            model = cls(MotionFillConfig(**cfg))
+            model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state["model"].items()})
+        except (TypeError, RuntimeError) as e:          # another model's config keys or weights
+            raise ValueError(f"state: not a MotionFill-VAE checkpoint of this version ({e})") from None
         return model.eval()

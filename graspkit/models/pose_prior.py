@@ -112,10 +112,13 @@ class PosePrior(nn.Module):
     def from_state(cls, state: dict[str, Any]) -> "PosePrior":
         """Rebuild from `state()` or a checkpoint of graspkit.train.fit whose extra holds model_config."""
         cfg = state.get("model_config") or state.get("extra", {}).get("model_config")
-        if cfg is None:
-            raise ValueError("state: no pose-prior config in it (expected 'model_config')")
-        model = cls(PosePriorConfig(**cfg))
-        model.load_state_dict({k: v.float() for k, v in state["model"].items()})
+        if not isinstance(cfg, dict) or not isinstance(state.get("model"), dict):
+            raise ValueError("state: no pose-prior config and weights in it (expected 'model_config' and 'model')")
+        try:
+            model = cls(PosePriorConfig(**cfg))
+            model.load_state_dict({k: v.float() for k, v in state["model"].items()})
+        except (TypeError, RuntimeError) as e:          # another model's config keys or weights
+            raise ValueError(f"state: not a pose-prior checkpoint ({e})") from None
         model.eval()
         return model
 
@@ -124,7 +127,11 @@ def load_pose_prior(path: str | Path | None = None) -> PosePrior:
     """The pose prior of a checkpoint (default: the shipped one), in eval mode, weights loaded without pickle."""
     from graspkit.train import load_checkpoint
 
-    return PosePrior.from_state(load_checkpoint(path or POSE_PRIOR_PATH))
+    path = path or POSE_PRIOR_PATH
+    try:
+        return PosePrior.from_state(load_checkpoint(path))
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from None
 
 
 # ------------------------------------------------------------------------------------------------ training data
@@ -171,7 +178,8 @@ def pose_training_set(n_clips: int = 300, seed: int = 0, extra: np.ndarray | Non
 def train_pose_prior(out: str | Path = POSE_PRIOR_PATH, poses: np.ndarray | None = None, epochs: int = 30,
                      batch_size: int = 256, lr: float = 2e-3, seed: int = 0, n_clips: int = 200,
                      val_fraction: float = 0.05, progress: bool = True, half: bool = True,
-                     config: PosePriorConfig | None = None) -> list[dict[str, float]]:
+                     config: PosePriorConfig | None = None, time_limit_s: float | None = None
+                     ) -> list[dict[str, float]]:
     """Train the prior on `poses` (n, 21, 3) (default: `pose_training_set(n_clips, seed)`) with graspkit.train.fit;
     the final weights go to `out` (float16 when `half`, a weights-only checkpoint), the resumable run to
     graspkit.train.run_path's file (named by every setting and the data, so a changed command starts afresh)."""
@@ -198,7 +206,7 @@ def train_pose_prior(out: str | Path = POSE_PRIOR_PATH, poses: np.ndarray | None
 
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
     hist = fit(model, step, train, cfg, checkpoint=run, extra={"model_config": asdict(model.cfg)},
-               val_dataset=val, progress=progress, ddp=False)                    # the step calls m.loss
+               val_dataset=val, progress=progress, ddp=False, time_limit_s=time_limit_s)   # the step calls m.loss
     state = model.state()
     if half:
         state["model"] = {k: v.half() if v.is_floating_point() else v for k, v in state["model"].items()}
