@@ -263,6 +263,8 @@ def make_object(name: str, seed: int | None = None) -> trimesh.Trimesh:
     """
     if name not in SPECS:
         raise ValueError(f"name: unknown object {name!r}; valid names are {list_objects()}")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
+        raise ValueError(f"seed: expected None or an integer >= 0, got {seed!r}")
     mesh = _canonical(name).copy()
     if seed is not None:
         sxy, sz = np.random.default_rng(seed).uniform(1.0 - VARIATION, 1.0 + VARIATION, size=2)

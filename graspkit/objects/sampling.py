@@ -16,7 +16,7 @@ def sample_surface(mesh: MeshLike, n: int = 2048, seed: int | np.random.Generato
 
     Normals point outward for a consistently outward-oriented mesh (every catalogue object).
     """
-    if not isinstance(n, (int, np.integer)) or n <= 0:
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n <= 0:
         raise ValueError(f"n: expected a positive number of points, got {n!r}")
     verts, faces = mesh_arrays(mesh, "mesh")
     if verts.dim() != 2:

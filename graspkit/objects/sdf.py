@@ -53,7 +53,9 @@ def signed_distance(points, mesh: MeshLike, check: bool = True) -> Tensor:
     """Exact signed distance (N,)|(B,N) from points (N,3)|(B,N,3) to a closed mesh; negative inside.
 
     Differentiable w.r.t. the points and the mesh vertices (the sign is locally constant). `check`
-    verifies that the mesh is watertight, consistently wound and outward-facing (ValueError otherwise).
+    verifies that the mesh is watertight, consistently wound and outward-facing (ValueError otherwise); it does
+    not find solids that overlap inside one mesh (two boxes merged without a union), where the sign is wrong in
+    the overlap's neighbourhood: `graspkit.objects.user.as_object` refuses those.
     """
     verts, faces = mesh_arrays(mesh, "mesh")
     if check:
