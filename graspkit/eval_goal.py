@@ -239,16 +239,16 @@ def default_data_folders() -> list:
     return [cache_dir() / "grasps" / "grasp", cache_dir() / "grasps" / "approach"]
 
 
-@lru_cache(maxsize=1)
-def _body():
-    """The default body model (hand mean not added: the files store absolute poses), GOAL's vertex sampler and a
-    SparseBody over its 400 vertices (built once)."""
+@lru_cache(maxsize=2)
+def _body(model: str | Path | None = None):
+    """The body model (default: graspkit's; hand mean not added: the files store absolute poses), GOAL's vertex
+    sampler and a SparseBody over its 400 vertices (built once per model)."""
     from graspkit.body import BodyModel
     from graspkit.body.markers import goal_vertices
     from graspkit.models.gnet import SparseBody
     from graspkit.paths import default_model_path
 
-    bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    bm = BodyModel.from_file(model or default_model_path(), flat_hand_mean=True)
     gv = goal_vertices(bm)
     return bm, gv, SparseBody(bm, torch.as_tensor(gv.vertex_ids))
 

@@ -47,10 +47,12 @@ def default_start(centre: np.ndarray, distance: float, yaw_offset: float = 0.0) 
 
 def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, start: Start | None = None,
                seed: int = 0, start_distance: float = 1.0, max_frames: int = 150,
-               checkpoints: str | Path = CHECKPOINTS, penetration: bool = True) -> GoalResult:
+               checkpoints: str | Path = CHECKPOINTS, penetration: bool = True,
+               model: str | Path | None = None) -> GoalResult:
     """GOAL for object `name` (a catalogue name, a mesh file or a trimesh.Trimesh, closed and in metres): one
     refined GNet grasp and MNet's approach into it from a standing start, seeded. `penetration`: the refinement
-    adds graspkit's E_pen on the object's collision grid (False: GOAL's Eq. 4-8 alone; docs/goal.md)."""
+    adds graspkit's E_pen on the object's collision grid (False: GOAL's Eq. 4-8 alone; docs/goal.md); `model`: an
+    SMPL-X .npz for the body (default: graspkit's procedural one, which the networks were trained on)."""
     from graspkit.data.grasp_io import object_collision_grid
     from graspkit.data.reaching import plan_reach
     from graspkit.eval_goal import _body, gnet_goal, sliding
@@ -81,7 +83,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     pts = torch.as_tensor(apply_pose(pose, sample_surface(obj_mesh, 2048, seed=0)[0])).float()
     c = torch.as_tensor(centre).float()
 
-    bm, _, body = _body()                        # flat hand mean: poses are absolute, as in the data files
+    bm, _, body = _body(model)                   # flat hand mean: poses are absolute, as in the data files
     st = start if start is not None else default_start(centre, start_distance)
     first = plan_reach(st, centre, 60, seed=seed, bm=bm).slice(0, 1)
     betas = torch.as_tensor(first.betas[:10]).float()
