@@ -799,7 +799,8 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
                    help="z for the rollout steps: the prior (default, Sup. B.2) or the encoder on the truth")
     t.add_argument("--rollout-grad", choices=("through", "step"), default="through",
                    help="through: backpropagate through the rollout (default); step: roll out without gradient, "
-                        "then one batched step with gradient from every visited state (not in the paper; faster)")
+                        "then one batched step with gradient from the visited states (not in the paper; measured: "
+                        "faster steps, far lower SR, docs/wandr.md)")
     t.add_argument("--step-stride", type=int, default=1,
                    help="with --rollout-grad step: recompute every n-th rollout step with gradient (default 1: all)")
     t.add_argument("--alpha-kl", type=float, default=1e-2, help="the KL weight (paper: 1e-2)")

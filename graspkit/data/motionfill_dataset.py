@@ -33,6 +33,7 @@ from tqdm.auto import tqdm
 
 from graspkit.body.markers import saga_sparse_markers
 from graspkit.body.skeleton import JOINT_INDEX
+from graspkit.data.formats import npz_arrays, open_npz
 from graspkit.data.motion import Motion, canonicalize
 
 T = 60                          # in-between span: frames 0..T
@@ -231,8 +232,6 @@ def save_windows(path: str | Path, arrays: dict[str, np.ndarray]) -> Path:
 
 def load_windows(path: str | Path) -> dict[str, np.ndarray]:
     """Windows back from `save_windows` (no pickle); a missing key gives an error naming the file."""
-    from graspkit.data.formats import npz_arrays, open_npz
-
     with open_npz(path, "a MotionFill windows file (save_windows)") as z:
         missing = {"traj", "markers", "local", "vel", "contacts", "clip"} - set(z.files)
         if missing:

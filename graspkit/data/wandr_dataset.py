@@ -36,7 +36,7 @@ from torch.utils.data import Dataset
 
 from graspkit import intention as I
 from graspkit.body.skeleton import JOINT_INDEX
-from graspkit.data.formats import load_motion
+from graspkit.data.formats import load_motion, npz_arrays, open_npz
 from graspkit.data.motion import Motion
 
 MAX_FOOT_HEIGHT = 0.20          # m (WANDR §4.1)
@@ -348,8 +348,6 @@ def save_clipset(path: str | Path, clips: ClipSet) -> Path:
 
 def load_clipset(path: str | Path) -> ClipSet:
     """Read save_clipset's file (allow_pickle=False)."""
-    from graspkit.data.formats import npz_arrays, open_npz
-
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"path: no clip set at {path}")

@@ -84,6 +84,9 @@ class WandrConfig:
             raise ValueError(f"rollout_grad: expected 'through' or 'step', got {self.rollout_grad!r}")
         if self.step_stride < 1:
             raise ValueError(f"step_stride: expected >= 1, got {self.step_stride}")
+        if self.rollout_grad == "step" and self.rollout_latent != "prior":
+            raise ValueError("rollout_grad: 'step' draws the rollout's z from the prior; it does not combine with "
+                             f"rollout_latent={self.rollout_latent!r}")
         if self.goal_frame not in GOAL_FRAMES:
             raise ValueError(f"goal_frame: expected one of {GOAL_FRAMES}, got {self.goal_frame!r}")
 
@@ -157,11 +160,11 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
     with torch.no_grad():
         J_gt = I.body_joints(p[:, 1:], rest[:, None])             # (B, steps+2, 22, 3): frames i .. i+1+steps
     cur_p, cur_d = p[:, 1], d_gt[:, 0]
+    if cfg.rollout_grad == "step" and steps > 0:
+        return _step_losses(model, b, d_gt, J_gt, steps, generator)
     t, R = I.pose_rotmats(cur_p)
     J = I.fk_rotmats(t, R, rest)[1]
     rec = joint = kl = foot = contact = floor = torch.zeros((), dtype=p.dtype)
-    if cfg.rollout_grad == "step" and steps > 0 and cfg.rollout_latent == "prior":
-        return _step_losses(model, b, d_gt, J_gt, steps, generator)
     for k in range(steps + 1):
         state = I.state_features(cur_p, cur_d, root=R[:, 0])
         inten = I.intention(J[:, I.WRIST], J[:, I.PELVIS], I.yaw_of(R[:, 0]), goal, (t_goal - k).to(p.dtype) / I.FPS, gh)
