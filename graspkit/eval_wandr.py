@@ -391,15 +391,10 @@ def evaluate_motions(p: Tensor, rest: Tensor, goals: Tensor, betas: Tensor, bm, 
             meter(k, p[:, k], J, Rg)
     if full_mesh:
         from graspkit.metrics import foot_skating_wandr
-        from graspkit.rotations import axis_angle_to_matrix
 
-        fp = torch.zeros(55, 3) if full_pose is None else torch.as_tensor(full_pose).float()
-        other = axis_angle_to_matrix(fp.reshape(-1, 55, 3).expand(B, -1, -1)[:, I.NUM_BODY:].to(bm.dtype))
+        fp = (torch.zeros(55, 3) if full_pose is None else torch.as_tensor(full_pose).float()).reshape(-1, 55, 3)
         for b in range(B):
-            t, R = I.pose_rotmats(p[b].to(bm.dtype))
-            with torch.no_grad():
-                v = bm.forward_rotmats(torch.cat([R, other[b].expand(T, -1, -1, -1)], 1),
-                                       betas=torch.as_tensor(betas)[b:b + 1].to(bm.dtype), transl=t).vertices
+            v = _pose_vertices(bm, p[b], torch.as_tensor(betas)[b], fp[b if len(fp) > 1 else 0])
             meter.skate[b] = float(foot_skating_wandr(v).sum())
     idx = index if index is not None else torch.stack([torch.zeros(B, dtype=torch.long), torch.arange(B),
                                                        torch.zeros(B, dtype=torch.long)], 1)
@@ -843,15 +838,20 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
 def body_vertices(bm, p: Tensor, start: I.StartPose, chunk: int = 64) -> Tensor:
     """Mesh vertices (T, V, 3) of generated poses p (T, 135) on the start's body; jaw, eyes and hands keep the start's
     pose (WANDR generates the 22 body joints only)."""
+    return _pose_vertices(bm, p, start.betas, start.full_pose, chunk)
+
+
+def _pose_vertices(bm, p: Tensor, betas: Tensor, full_pose: Tensor, chunk: int = 64) -> Tensor:
+    """Mesh vertices (T, V, 3) of poses p (T, 135) on a body of betas (10,); joints 22-54 from full_pose (55, 3)."""
     from graspkit.rotations import axis_angle_to_matrix
 
-    other = axis_angle_to_matrix(start.full_pose[I.NUM_BODY:].to(bm.dtype))
+    other = axis_angle_to_matrix(torch.as_tensor(full_pose)[I.NUM_BODY:].to(bm.dtype))
     out = []
     with torch.no_grad():
         for a in range(0, len(p), chunk):
             t, R = I.pose_rotmats(p[a:a + chunk].to(bm.dtype))
             rot = torch.cat([R, other.expand(len(R), -1, -1, -1)], 1)
-            out.append(bm.forward_rotmats(rot, betas=start.betas[None].to(bm.dtype), transl=t).vertices)
+            out.append(bm.forward_rotmats(rot, betas=torch.as_tensor(betas)[None].to(bm.dtype), transl=t).vertices)
     return torch.cat(out)
 
 

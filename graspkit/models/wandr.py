@@ -180,22 +180,42 @@ def training_losses(model: WandrCVAE, clips: ClipSet, items: Tensor, steps: int,
         t, R = I.integrate_rotmats(t, R, d_hat)
         cur_p, cur_d, J_prev = I.pose_from_rotmats(t, R), d_hat, J
         J = I.fk_rotmats(t, R, rest)[1]
-        rec = rec + (model.normalise_delta(d_hat) - model.normalise_delta(target)).pow(2).sum(-1).mean()
-        joint = joint + (100 * (J - J_gt[:, k + 1])).pow(2).sum(-1).mean()
-        if cfg.w_foot or cfg.w_contact:     # the foot joints' horizontal step here and in the data (B, 4, 2)
-            v, v_gt = J[:, FEET, :2] - J_prev[:, FEET, :2], J_gt[:, k + 1, FEET, :2] - J_gt[:, k, FEET, :2]
-            foot = foot + (1000 * (v - v_gt)).pow(2).sum(-1).mean()           # every foot joint as the data (mm²)
-            planted = v_gt.norm(dim=-1) < PLANTED_STEP                         # still in the data: held still here
-            contact = contact + (planted * (1000 * v).pow(2).sum(-1)).mean()
-        if cfg.w_floor:                     # the lowest foot joint's height here and in the data (B,), cm²
-            low, low_gt = lowest_foot(J), lowest_foot(J_gt[:, k + 1])
-            floor = floor + (100 * (low - low_gt)).pow(2).mean()
+        e = _step_terms(model, d_hat, target, J, J_prev, J_gt[:, k + 1], J_gt[:, k])
+        rec, joint = rec + e["rec"], joint + e["joint"]
+        if cfg.w_foot or cfg.w_contact:
+            foot, contact = foot + e["foot"], contact + e["contact"]
+        if cfg.w_floor:
+            floor = floor + e["floor"]
     n = steps + 1
     n_kl = n if cfg.rollout_latent == "posterior" else 1
-    rec, joint, kl, foot, contact, floor = rec / n, joint / n, kl / n_kl, foot / n, contact / n, floor / n
-    loss = (rec + cfg.alpha_kl * kl + cfg.w_joint * joint + cfg.w_foot * foot + cfg.w_contact * contact
+    return _total(cfg, {"rec": rec / n, "joint": joint / n, "foot": foot / n, "contact": contact / n,
+                        "floor": floor / n}, kl / n_kl, steps)
+
+
+def _step_terms(model: WandrCVAE, d_hat: Tensor, target: Tensor, J: Tensor, J_prev: Tensor, J_true: Tensor,
+                J_true_prev: Tensor) -> dict[str, Tensor]:
+    """§3.4's terms of one decoded step, means over its rows: decoded / data delta (R, 135), the joints (R, 22, 3)
+    after and before the step, and the data's at the same frames; plus the optional foot, contact and floor terms."""
+    cfg = model.cfg
+    e = {"rec": (model.normalise_delta(d_hat) - model.normalise_delta(target)).pow(2).sum(-1).mean(),
+         "joint": (100 * (J - J_true)).pow(2).sum(-1).mean()}
+    if cfg.w_foot or cfg.w_contact:     # the foot joints' horizontal step here and in the data (R, 4, 2)
+        v, v_gt = J[:, FEET, :2] - J_prev[:, FEET, :2], J_true[:, FEET, :2] - J_true_prev[:, FEET, :2]
+        e["foot"] = (1000 * (v - v_gt)).pow(2).sum(-1).mean()                 # every foot joint as the data (mm²)
+        planted = v_gt.norm(dim=-1) < PLANTED_STEP                             # still in the data: held still here
+        e["contact"] = (planted * (1000 * v).pow(2).sum(-1)).mean()
+    if cfg.w_floor:                     # the lowest foot joint's height here and in the data (R,), cm²
+        e["floor"] = (100 * (lowest_foot(J) - lowest_foot(J_true))).pow(2).mean()
+    return e
+
+
+def _total(cfg: WandrConfig, e: dict[str, Tensor], kl: Tensor, steps: int) -> dict[str, Tensor]:
+    """The weighted loss of the step-averaged terms `e` and the KL, and the logged terms."""
+    zero = torch.zeros(())
+    foot, contact, floor = (e.get(k, zero) for k in ("foot", "contact", "floor"))
+    loss = (e["rec"] + cfg.alpha_kl * kl + cfg.w_joint * e["joint"] + cfg.w_foot * foot + cfg.w_contact * contact
             + cfg.w_floor * floor)
-    return {"loss": loss, "rec": rec.detach(), "kl": kl.detach(), "joint_cm2": joint.detach(),
+    return {"loss": loss, "rec": e["rec"].detach(), "kl": kl.detach(), "joint_cm2": e["joint"].detach(),
             **({"foot_mm2": foot.detach()} if cfg.w_foot else {}),
             **({"contact_mm2": contact.detach()} if cfg.w_contact else {}),
             **({"floor_cm2": floor.detach()} if cfg.w_floor else {}),
@@ -256,24 +276,9 @@ def _step_losses(model: WandrCVAE, b: dict[str, Tensor], d_gt: Tensor, J_gt: Ten
     d_hat = model.decode(z, cond)
     t1, R1 = I.integrate_rotmats(t0, R0, d_hat)
     J1 = I.fk_rotmats(t1, R1, rest_n)[1]
-    Jt = J_gt[:, ks + 1].transpose(0, 1).reshape(n * B, I.NUM_BODY, 3)
-    rec = (model.normalise_delta(d_hat) - model.normalise_delta(target)).pow(2).sum(-1).mean()
-    joint = (100 * (J1 - Jt)).pow(2).sum(-1).mean()
-    kl = kl_standard_normal(mu, logvar)
-    loss = rec + cfg.alpha_kl * kl + cfg.w_joint * joint
-    out = {"rec": rec.detach(), "kl": kl.detach(), "joint_cm2": joint.detach()}
-    if cfg.w_foot or cfg.w_contact:     # the foot joints' horizontal step here and in the data
-        v = J1[:, FEET, :2] - J0[:, FEET, :2]
-        v_gt = Jt[:, FEET, :2] - J_gt[:, ks].transpose(0, 1).reshape(n * B, I.NUM_BODY, 3)[:, FEET, :2]
-        foot = (1000 * (v - v_gt)).pow(2).sum(-1).mean()
-        contact = ((v_gt.norm(dim=-1) < PLANTED_STEP) * (1000 * v).pow(2).sum(-1)).mean()
-        loss = loss + cfg.w_foot * foot + cfg.w_contact * contact
-        out.update({"foot_mm2": foot.detach()} if cfg.w_foot else {})
-        out.update({"contact_mm2": contact.detach()} if cfg.w_contact else {})
-    if cfg.w_floor:
-        floor = (100 * (lowest_foot(J1) - lowest_foot(Jt))).pow(2).mean()
-        loss, out["floor_cm2"] = loss + cfg.w_floor * floor, floor.detach()
-    return {"loss": loss, **out, "steps": torch.tensor(float(steps))}
+    rows = lambda x: x.transpose(0, 1).reshape(n * B, I.NUM_BODY, 3)      # noqa: E731 - (B, n, 22, 3) -> (nB, ...)
+    e = _step_terms(model, d_hat, target, J1, J0, rows(J_gt[:, ks + 1]), rows(J_gt[:, ks]))
+    return _total(cfg, e, kl_standard_normal(mu, logvar), steps)
 
 
 def train_wandr(model: WandrCVAE, clips: ClipSet, cfg: TrainConfig, checkpoint: str | Path | None = None,
