@@ -74,7 +74,8 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
                start: Start | Motion | None = None, seed: int = 0, start_distance: float = 0.4,
                grasp_steps: tuple[int, int, int] = (300, 400, 500),
                motion_steps: tuple[int, int] = (100, 300), checkpoints: str | Path = CHECKPOINTS,
-               progress: bool = True, free_joints: tuple[str, ...] | None = None) -> SagaResult:
+               progress: bool = True, free_joints: tuple[str, ...] | None = None,
+               polish_steps: tuple[int, int] | None = None) -> SagaResult:
     """SAGA for object `name` (a catalogue name, a mesh file or a trimesh.Trimesh, closed and in metres): one grasp
     and one 2-s approach motion into it (Fig. 2), seeded.
 
@@ -82,6 +83,8 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     start: a Start (x, y, heading: a standing body there) or a one-frame Motion (any body) or None (see module doc).
     free_joints: GraspPose-Opt's `GraspPoseConfig.free_joints` (None: its default, the arm chains; () is Alg. 1's
     prior latent alone; docs/saga.md).
+    polish_steps: the polish steps of GraspPose-Opt and of GraspMotion-Opt (None: their configs' 100 each; a lesson
+    with fewer steps throughout passes fewer).
     """
     from graspkit.body import BodyModel
     from graspkit.data.grasp_io import object_collision_grid
@@ -102,6 +105,8 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     name, obj_mesh = as_object(name, "name")
     if start_distance <= 0:
         raise ValueError(f"start_distance: expected a positive distance in metres, got {start_distance}")
+    if polish_steps is not None and (len(polish_steps) != 2 or min(polish_steps) < 0):
+        raise ValueError(f"polish_steps: expected two step counts >= 0, got {polish_steps}")
     ck = Path(checkpoints)
     for f in ("wholegrasp.pt", "pose_prior.pt", "motionfill.pt", "motionfill_smooth_ae.pt"):
         if not (ck / f).is_file():
@@ -119,6 +124,10 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     prior = load_pose_prior(ck / "pose_prior.pt")
     s = wg.sample(P, N, float(centre[2]), 1, g, centre=torch.zeros(3))
     gcfg = GraspPoseConfig(steps=grasp_steps)
+    mcfg = GraspMotionConfig(steps=motion_steps)
+    if polish_steps is not None:
+        gcfg = replace(gcfg, polish=(int(polish_steps[0]), gcfg.polish[1]))
+        mcfg = replace(mcfg, polish=(int(polish_steps[1]), mcfg.polish[1]))
     opt = GraspPoseOpt(bm, prior, gcfg if free_joints is None else replace(gcfg, free_joints=tuple(free_joints)))
     grid = object_collision_grid(given, obj_mesh)
     res = opt.fit(s.markers, GraspObject(P, N, float(centre[2]), grid, R_t), s.marker_contact, s.object_contact,
@@ -160,7 +169,7 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     obj = GraspObject(torch.as_tensor(to_c(P.double().numpy() + centre)).float()[None],
                       torch.as_tensor(N.double().numpy() @ R_c.T).float()[None], 0.0, grid,
                       torch.as_tensor(R_c @ R_o).float(), torch.as_tensor(to_c(centre)).float())
-    mopt = GraspMotionOpt(bm, prior, load_smooth_ae(ck / "motionfill_smooth_ae.pt"), GraspMotionConfig(steps=motion_steps))
+    mopt = GraspMotionOpt(bm, prior, load_smooth_ae(ck / "motionfill_smooth_ae.pt"), mcfg)
     mres = mopt.fit(smp["markers"], torch.as_tensor(betas[None, :10]).float(), smp["contacts"], obj,
                     s.object_contact.float(), progress=progress, floor=torch.tensor([to_c(np.zeros(3))[2]]).float())
     poses_w, transl_w = rigid_params(mres.params["poses"][0].view(-1, 55, 3).double().numpy(),

@@ -27,7 +27,7 @@ def test_rigid_params_equals_moving_every_vertex(bm):
 def test_one_call_from_a_new_object_to_a_motion_that_ends_in_the_grasp(bm):
     """synthesize(): WholeGrasp-VAE -> GraspPose-Opt -> MotionFill-VAE -> GraspMotion-Opt for a held-out object at a
     placement of our choosing; the motion starts at the start body, ends with the right hand on the object (trimesh
-    distance), stays on the floor, and the same seed gives the same motion."""
+    distance) and stays on the floor."""
     import trimesh
 
     from graspkit.objects.placement import ObjectPose
@@ -49,10 +49,23 @@ def test_one_call_from_a_new_object_to_a_motion_that_ends_in_the_grasp(bm):
     assert feet.abs().max() < 0.08                                    # the body stays on the floor (z = 0)
     assert set(r.metrics) >= {"grasp_contact", "end_contact", "end_volume_cm3", "skating_opt"}
     assert r.metrics["floor_deepest_cm"] == pytest.approx(100 * max(0.0, -float(feet.min())), abs=1e-4)   # reported
-    again = synthesize("camera", bm, **kw)
-    np.testing.assert_array_equal(again.motion.poses, r.motion.poses)
     with pytest.raises(ValueError, match="name"):
         synthesize("teapot", bm)
+
+
+def test_the_same_seed_gives_the_same_motion_and_polish_steps_are_checked(bm):
+    """Two calls with one seed give bit-identical grasps and motions (a few steps of each stage, no polish); a third
+    seed another motion; polish_steps takes two counts >= 0."""
+    from graspkit.objects.placement import ObjectPose
+
+    kw = dict(object_pose=ObjectPose.from_yaw(0.8, np.array([0.3, -0.6, 0.85])), grasp_steps=(5, 5, 5),
+              motion_steps=(5, 5), polish_steps=(0, 0), progress=False)
+    a, b, c = (synthesize("camera", bm, seed=s, **kw) for s in (3, 3, 4))
+    np.testing.assert_array_equal(a.motion.poses, b.motion.poses)
+    np.testing.assert_array_equal(a.grasp.vertices.numpy(), b.grasp.vertices.numpy())
+    assert np.abs(a.motion.poses - c.motion.poses).max() > 1e-3
+    with pytest.raises(ValueError, match="polish_steps"):
+        synthesize("camera", bm, polish_steps=(10, -1))
 
 
 def test_saga_command_names_a_bad_object(capsys):
