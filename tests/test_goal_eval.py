@@ -112,15 +112,16 @@ def test_saga_sliding_starts_from_the_sequence_and_counts_goals_sliding_frames()
     assert abs(out["sliding"] - float((step > 0.01).mean())) < 1e-9
 
 
-def test_tab1_only_recomputes_table_1_and_keeps_the_rest(tmp_path):
+def test_tab1_only_recomputes_table_1_and_keeps_the_rest(tmp_path, monkeypatch):
     """`python -m graspkit.eval_goal --tab1-only`: Tab. 1 over every test grasp (n_grasps 0), its medians, 90th
-    percentiles and paired counts the numpy statistics of the per-grasp rows of `gnet_table`; the rest of the JSON kept."""
+    percentiles and paired counts the numpy statistics of the per-grasp rows of the `gnet_table` call it makes (caught
+    on the way); the rest of the JSON kept."""
     import json
 
     import pytest
 
-    from graspkit.eval_goal import PEN_ROW, _all_files, gnet_table, main, tab1_results
-    from graspkit.models.gnet import load_gnet
+    import graspkit.eval_goal as eg
+    from graspkit.eval_goal import PEN_ROW, main, tab1_results
 
     for k in range(3):                                                  # the mug is a test object
         save_grasp_sequence(tmp_path / f"approach_{k:06d}.npz", _sequence(k, "mug"))
@@ -129,11 +130,18 @@ def test_tab1_only_recomputes_table_1_and_keeps_the_rest(tmp_path):
     with pytest.raises(FileNotFoundError, match="--out"):
         main(args)
     out.write_text(json.dumps({"tab2": {"MNet": {"body": 1.0}}, "tab1": {"old": {}}}))
+    real, calls = eg.gnet_table, []
+
+    def caught(*a, **k):
+        calls.append(real(*a, **k))
+        return calls[-1]
+
+    monkeypatch.setattr(eg, "gnet_table", caught)
     assert main(args) == 0
     r = json.loads(out.read_text())
     assert r["tab2"] == {"MNet": {"body": 1.0}} and set(r["tab1"]) == {"GNet w/o opt", "GNet", PEN_ROW, "synthetic GT"}
-    t = gnet_table(load_gnet(DATA_STUBS / "checkpoints" / "gnet.pt"), None, _all_files([tmp_path], "approach", "test"),
-                   penetration=True)
+    assert len(calls) == 1
+    t = calls[0]
     for name, rows in t["samples"].items():
         v = np.array([x["volume_cm3"] for x in rows["rows"]])
         row = r["tab1"][name]
