@@ -208,7 +208,7 @@ print("| mean | " + " | ".join(f"{np.mean([r[k] for r in ev['graspmotion']['rows
 # seconds between them and GraspMotion-Opt fits the bodies, all moved back into the world. With the paper's step counts
 # it takes about 100 s on one core (`graspkit saga --object mug` writes GIF, npz and GLB); here, to keep the lesson
 # short, with about a third of the steps (and of the polish), which leaves more skating after the fit than the full
-# schedule does (`docs/saga_motion.md`: 0.00–0.03 on the test objects). The mug is a test object, so the models have
+# schedule does (`docs/saga_motion.md`: 0.000 on its twelve test clips). The mug is a test object, so the models have
 # not seen it; its 2 mm collision grid ships with graspkit (any other object's is built once into the cache, ~20 s).
 # The grasp itself is GraspPose-Opt's and touches the object; the motion's last frame is GraspMotion-Opt's fit to
 # MotionFill's last markers, and it does not always keep the touch: on the twelve test clips of `docs/saga_motion.md`
