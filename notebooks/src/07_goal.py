@@ -106,7 +106,7 @@ T = np.eye(4)
 T[:3, :3] = scene["R"][0].double().numpy()
 T[:3, 3] = -T[:3, :3] @ scene["o"][0].double().numpy()
 mesh.apply_transform(T)
-K = 3
+K = 2                                             # samples, each refined on its own (two keep the lesson short)
 cond = {k: scene[k].expand(K, *scene[k].shape[1:]) for k in ("bps", "obj_transl", "betas")}
 hat = gnet.sample(cond["bps"], cond["obj_transl"], cond["betas"], generator=torch.Generator().manual_seed(0))
 V = grasp_bodies(hat["rot6d"], hat["transl"], cond["betas"])
@@ -337,7 +337,7 @@ print(f"rollouts ({r['clips']} test clips): reached the true goal {100 * r['to_t
 #
 # ## Exercise
 #
-# 1. Refine the same three samples with `GraspRefineWeights(d=0)` (no offset term). What happens to the contact and
+# 1. Refine the same two samples with `GraspRefineWeights(d=0)` (no offset term). What happens to the contact and
 #    the hand's distance to the mug? Which term of Eq. 8 did the work?
 # 2. Change the attention weight `w` of `interaction_attention` to 1 and to 20 in section 4. Which body parts light
 #    up? Why does GOAL pick a kernel that is still ~0.6 at 10 cm?
