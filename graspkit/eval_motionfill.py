@@ -510,7 +510,8 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
                      progress: bool = True, weights: Any = None, sdf: bool = True) -> dict[str, Any]:
     """One MotionFill-VAE sample per approach clip, then GraspMotion-Opt (batched): skating (SAGA) of the ground truth,
     the sample and the fitted bodies; the last frame's contact, penetration volume and depth of the fitted bodies;
-    SAGA's non-collision score (§4.2) of the fitted and the ground-truth meshes over the window. Returns rows and the
+    SAGA's non-collision score (§4.2) of the fitted and the ground-truth meshes over the window, and how far the fitted
+    mesh's lowest vertex goes below the floor (cm: the mean over frames and the deepest). Returns rows and the
     arrays for plots. `sdf`: E^o_colli's hand-in-object depth from each object's collision grid (GraspPose-Opt's;
     False: from the point cloud's normals)."""
     from graspkit.body import BodyModel
@@ -546,6 +547,7 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
         floor = np.array(s["floor"])
         v = opt.vertices(res, i)
         fit = grasp_metrics(v[-1], bm.faces, s["mesh"])
+        dip = torch.relu(s["floor"] - v[..., 2].amin(-1)).double()           # (T+1,) each frame's lowest vertex
         rows.append({"object": s["name"], "clip": s["file"],
                      "skating_gt": skating(s["markers"][None].astype(np.float64), floor[None], heels),
                      "skating_sample": skating(markers[i:i + 1].double().numpy(), floor[None], heels),
@@ -554,6 +556,7 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
                      "contact_mm": fit["min_distance"] * 1000, "volume_cm3": fit["volume_cm3"], "depth_cm": fit["depth_cm"],
                      "noncollision_opt": float(non_collision_score(v, s["floor"]).mean()),
                      "noncollision_gt": float(non_collision_score(s["motion"].vertices(bm)).mean()),
+                     "below_floor_mean_cm": 100 * float(dip.mean()), "below_floor_max_cm": 100 * float(dip.max()),
                      **{f"{k}_{tag}": x for tag, seq in (("gt", s["markers"]), ("opt", res.markers[i].numpy()))
                         for k, x in heel_jerkiness(seq, heels).items()}})
     return {"rows": rows, "result": res, "markers": markers, "contacts": contacts, "scenes": scenes}
@@ -672,7 +675,7 @@ def main(argv: list[str] | None = None) -> int:
                                        "polish": list(cfg.polish), "seed": args.seed,
                                        "seconds": round(secs, 1), "threads": args.threads})
     keys = ("skating_gt", "skating_sample", "skating_opt", "contact_mm", "volume_cm3", "depth_cm", "heel_acc_p99_gt",
-            "heel_acc_p99_opt")
+            "heel_acc_p99_opt", "noncollision_opt", "below_floor_mean_cm", "below_floor_max_cm")
     for r in ev["rows"]:
         print(f"{r['object']:12s} " + " ".join(f"{k} {r[k]:.3f}" for k in keys))
     print("mean         " + " ".join(f"{k} {np.mean([r[k] for r in ev['rows']]):.3f}" for k in keys)

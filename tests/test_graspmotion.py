@@ -123,6 +123,43 @@ def test_planted_heel_term_is_analytic_and_off_when_a_heel_is_lifted(bm):
     assert opt.energy(still, target, torch.zeros(F, 10), 2, None, None, None, on_floor)["heel"].item() < 1e-3
 
 
+def test_floor_term_is_the_sole_vertices_depth_below_a_given_floor_and_off_without_one(bm):
+    """graspkit's floor term: w_floor times the summed depth below the floor given to `fit` of each frame's lowest sole
+    vertex (`foot_vertices`), read here off the full mesh of the same parameters; 0 with the floor below the feet, and
+    absent when no floor is given (the heel markers' default floor is not the ground)."""
+    from graspkit.body.markers import foot_vertices
+
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("floor",)))
+    F, w = 3, opt.cfg.weights
+    p = _sliding(opt, F, torch.arange(F, dtype=torch.float32)[:, None] * torch.tensor([0.0, 0.0, -0.01]))
+    with torch.no_grad():
+        v = bm.forward_rotmats(opt.rotmats(p), betas=torch.zeros(F, 10), transl=p["transl"]).vertices
+    sole = v[:, np.concatenate(list(foot_vertices(bm).values())), 2]             # (F, n) heights
+    args = (torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, None, None, None)
+    floor = sole.min() + 0.015                              # the first frame's lowest soles under it, later frames deeper
+    e = opt.energy(p, *args, floor.reshape(1))["floor"].item()
+    assert e == pytest.approx(w.floor * float(torch.relu(floor - sole.amin(1)).sum()), rel=1e-4) and e > 0
+    assert opt.energy(p, *args, (sole.min() - 0.001).reshape(1))["floor"].item() == 0.0
+    assert "floor" not in opt.energy(p, *args, None)
+
+
+def test_fit_with_the_floor_keeps_the_body_on_it_where_the_markers_sink(bm, clip):
+    """Markers of a walking clip lowered 2 cm into the floor z = 0: fitted without the floor term the soles follow
+    them under it; with it (the floor given to `fit`) the lowest vertex of every frame's full mesh stays within
+    2 mm of the floor, and the markers are fitted within the 2 cm they sank (plus 5 mm) of the fit without it."""
+    markers, _, betas, _ = clip
+    sunk = (markers - torch.tensor([0.0, 0.0, 0.02]))[None]
+    low, err = {}, {}
+    for terms in (("smooth",), ("smooth", "floor")):
+        opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(steps=(60, 120), polish=(40, 1e-3),
+                                                                            terms=terms))
+        res = opt.fit(sunk, betas[None, :10], progress=False, floor=torch.zeros(1))
+        low[terms[-1]] = float(opt.vertices(res)[..., 2].amin(-1).min())
+        err[terms[-1]] = float((res.markers[0] - sunk[0]).norm(dim=-1).mean())
+    assert low["smooth"] < -0.012 and low["floor"] > -0.002, low
+    assert err["floor"] < err["smooth"] + 0.025, err
+
+
 def test_foot_acceleration_term_is_zero_at_constant_velocity_and_analytic_at_constant_acceleration(bm):
     """The foot term graspkit adds beside S.2: sum over frames of the mean squared second difference of the foot
     vertices; a body at constant velocity gives 0, one at constant acceleration a (m/frame^2) gives w a^2 (F - 2)."""

@@ -130,3 +130,8 @@ def test_graspmotion_eval_measures_the_last_frame_against_the_clips_posed_mesh()
     sd = trimesh.proximity.signed_distance(s["mesh"], v)                     # positive inside
     want = -sd.max() if sd.max() > 0 else np.abs(sd).min()                   # deepest inside, else the gap
     assert row["contact_mm"] == pytest.approx(1000 * want, abs=0.5)
+    # the floor columns from every frame's full mesh against the scene's floor height (numpy, not the row's code)
+    low = GraspMotionOpt(bm, load_pose_prior()).vertices(ev["result"], 0).double().numpy()[..., 2].min(-1)
+    dip = np.maximum(s["floor"] - low, 0.0)
+    assert row["below_floor_max_cm"] == pytest.approx(100 * dip.max(), abs=1e-3)
+    assert row["below_floor_mean_cm"] == pytest.approx(100 * dip.mean(), abs=1e-3)

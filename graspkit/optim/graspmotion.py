@@ -56,6 +56,17 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   heel acceleration p99 m/s^2 / fitted vs sampled cm): S.2 alone 0.105 / 56 / 7.02; + heel 3e3 0.044 / 87 / 7.04;
   + heel 3e3 and acc 1e4 0.044 / 43; 1e5: 0.065 / 19; heel 1e4 and acc 1e5 (shipped) 0.005 / 23 / 7.21; heel 3e4
   0.000 / 27 / 7.14. Ground truth: 0.021 / 11.
+- A floor term (graspkit's, since 2026-12-01; Eq. 10 has no ground term, SAGA only measures the non-collision score):
+  a_floor sum_t (floor - min_{v in soles} v_z,t)_+, a_floor = 1000 per metre, on each frame's lowest sole vertex
+  (`foot_vertices`), in stage 2 and only when `fit` is given the floor (the heel markers' default is not the ground).
+  MotionFill's markers and the grasp body they end at put the feet up to 3.3 cm under the floor. Measured with
+  `saga.synthesize` (default steps, one thread) on a capsule, a box and a torus no model saw, seeds 0 and 1: the
+  deepest vertex over the clip 1.2, 0.8 / 3.3, 2.4 / 1.0, 1.5 cm without the term and at most 0.12 mm with it;
+  last-frame contact, volume and skating as before (the box's seed 0 even ends in contact, which it missed). The
+  weight matters because Adam divides each step by the root of its running squared gradient: a_floor = 100 left
+  0.4-2.7 cm (it loses to the marker fit and the hand's contact), and on markers sunk 2 cm into the floor a_floor =
+  3000 threw the body 2 cm above it, where the fit's small gradients then barely move it (1000: every frame between
+  0.1 mm under and 4.7 mm above; tests/test_graspmotion.py). A sum over all sole vertices overshot the same way.
 - Initialisation: the prior's mean pose, rigidly aligned per frame (Kabsch on the body and face markers).
 - E^o_colli and E_g are evaluated on the frames where a hand vertex is within 2 cm of the object's bounding box
   (chosen without gradient each step; elsewhere both are 0 by definition: no vertex can be inside or within 1 cm),
@@ -206,6 +217,7 @@ class GraspMotionWeights:
     heel: float = 1e4              # graspkit's planted heel: the slower heel marker's speed above skate_sigma
     heel_height: float = 0.06      # m above the floor: with both heels this low, one of them should stand still
     foot_acc: float = 1e5          # graspkit's: squared foot-vertex acceleration (m/frame^2), mean over vertices
+    floor: float = 1000.0          # graspkit's: each frame's lowest sole vertex below the floor (m), when fit gets it
 
 
 @dataclass
@@ -218,7 +230,7 @@ class GraspMotionConfig:
     contact_frames: int = 5        # Eq. 10: object contact on the last 5 frames
     point_stride: int = 4          # E^o_colli and E_g use every 4th object point (512 of SAGA's 2048)
     log_every: int = 10
-    terms: tuple[str, ...] = ("colli", "contact", "palm", "smooth", "skate", "heel")
+    terms: tuple[str, ...] = ("colli", "contact", "palm", "smooth", "skate", "heel", "floor")
     one_foot_down: bool = True     # T_c also holds each frame's most probable foot part (a foot is always planted)
     weights: GraspMotionWeights = field(default_factory=GraspMotionWeights)
 
@@ -358,6 +370,8 @@ class GraspMotionOpt:
             e["skate"] = w.skate * (on * torch.relu(speed - w.skate_sigma)).sum((1, 2))
         if "skate" in terms and w.foot_acc > 0:
             e["foot_acc"] = w.foot_acc * (feet[:, 2:] - 2 * feet[:, 1:-1] + feet[:, :-2]).pow(2).sum(-1).mean(-1).sum(1)
+        if "floor" in terms and w.floor > 0 and floor is not None:    # only a floor given: the heel markers' is not it
+            e["floor"] = w.floor * torch.relu(floor[:, None] - feet[..., 2].amin(-1)).sum(1)    # each frame's lowest
         if "heel" in terms and w.heel > 0:
             if floor is None:                   # the lowest heel marker of the target sequence
                 floor = target[:, :, self.heels, 2].amin((1, 2))
