@@ -295,5 +295,8 @@ def test_errors_name_the_argument(bm):
         opt.fit(torch.zeros(1, 5, 80, 3), torch.zeros(1, 10))
     with pytest.raises(ValueError, match="foot_contact"):
         opt.fit(torch.zeros(1, 5, 79, 3), torch.zeros(1, 10), foot_contact=torch.zeros(1, 5, 2))
+    for bad in (torch.tensor(0.0), torch.zeros(2), torch.tensor([float("nan")]), 0.0):
+        with pytest.raises(ValueError, match="floor"):
+            opt.fit(torch.zeros(1, 5, 79, 3), torch.zeros(1, 10), floor=bad)
     with pytest.raises(ValueError, match="flat_hand_mean"):
         GraspMotionOpt(BodyModel.from_file(default_model_path(), flat_hand_mean=True), load_pose_prior())
