@@ -491,9 +491,12 @@ def sliding(vertices: Tensor) -> tuple[int, int]:
     return int(s.sum()), int(len(s))
 
 
-def rollout_eval(mnet, clips: list, goals: list | None = None, max_frames: int = 300, refine: bool = True) -> dict:
+def rollout_eval(mnet, clips: list, goals: list | None = None, max_frames: int = 300, refine: bool = True,
+                 floor: float | None = 0.0) -> dict:
     """MNet rollouts from each clip's first frame to its goal grasp (or to `goals[i]` = (rot6d, transl)): per clip the
-    frames, whether the goal was reached, the final mean hand-to-goal distance and GOAL's foot sliding."""
+    frames, whether the goal was reached, the final mean hand-to-goal distance, GOAL's foot sliding and how deep the
+    lowest vertex goes under the floor z = 0 (cm). `floor`: `mnet.rollout`'s floor step (graspkit's; None: GOAL's
+    rollout as the paper has it)."""
     from graspkit.models.mnet import rollout
     from graspkit.objects.bps import bps_basis
 
@@ -504,11 +507,13 @@ def rollout_eval(mnet, clips: list, goals: list | None = None, max_frames: int =
     for i, c in enumerate(clips):
         goal = goals[i] if goals is not None else (c.rot6d[c.goal_frame], c.transl[c.goal_frame])
         r = rollout(mnet, body, (c.rot6d[0], c.transl[0]), goal, c.betas, c.object_points, c.obj_centre, basis,
-                    max_frames=max_frames, refine=refine)
-        s, n = sliding(full_vertices(bm, r.rot6d, r.transl, c.betas))
+                    max_frames=max_frames, refine=refine, floor=floor)
+        v = full_vertices(bm, r.rot6d, r.transl, c.betas)
+        s, n = sliding(v)
         slide, pairs = slide + s, pairs + n
         per.append({"frames": len(r.rot6d), "reached": r.reached, "final_hand_cm": 100 * float(r.hand_dist[-1]),
-                    "first_refined": r.first_refined, "gt_frames": c.goal_frame + 1, "sliding": s / max(n, 1)})
+                    "first_refined": r.first_refined, "gt_frames": c.goal_frame + 1, "sliding": s / max(n, 1),
+                    "below_floor_max_cm": 100 * float(torch.relu(-v[..., 2].amin(-1)).max())})
         rolls.append(r)
     return {"clips": per, "rollouts": rolls, "sliding": slide / max(pairs, 1),
             "reached": float(np.mean([p["reached"] for p in per])),
@@ -612,24 +617,35 @@ def evaluate(folders=None, stubs=None, n_grasps: int = 60, n_rollouts: int = 24,
         res["tab2"][name] = {"body": e.body, "hand": e.hand, "feet": e.feet}
     res["tab2_windows"] = len(idx)
     res["tab2_seconds"] = time.perf_counter() - t1
-    # rollouts: from the test clips' starts (0.5-1.5 m from the object) to the true goal grasp and to GNet's grasp
-    t2 = time.perf_counter()
     seqs = rollout_sequences(folders, n_rollouts)
-    clips = approach_clips(seqs)
-    mnet = load_mnet(stubs / "mnet.pt")
-    to_gt = rollout_eval(mnet, clips)
-    goals = _gnet_goals(gnet, clips, seed)
-    full = rollout_eval(mnet, clips, goals)
-    res["rollouts"] = {"clips": len(clips), "to_true_goal": {k: to_gt[k] for k in ("sliding", "reached", "final_hand_cm")},
-                       "goal_pipeline": {k: full[k] for k in ("sliding", "reached", "final_hand_cm")},
-                       "per_clip_true_goal": to_gt["clips"], "per_clip_pipeline": full["clips"]}
-    res["sliding"] = {"GOAL (GNet + MNet, ours)": full["sliding"], "MNet to the true goal": to_gt["sliding"],
-                      "synthetic GT (approach frames)": clip_sliding(clips)}
-    res["rollout_seconds"] = time.perf_counter() - t2
+    res.update(rollout_results(seqs, stubs, gnet, seed))
     out = Path(out or stubs / "goal_eval.json")
     write_atomic(out, json.dumps(res, indent=1, default=float))      # GOAL's tables first: SAGA's row takes minutes
     write_atomic(out, json.dumps(add_saga_rows(res, seqs, seed), indent=1, default=float))
     return res
+
+
+def rollout_results(seqs: list, stubs, gnet, seed: int = 0) -> dict:
+    """The rollout part of the evaluation on `rollout_sequences`: MNet (stubs/mnet.pt) from each test clip's start
+    (0.5-1.5 m from the object) to the true goal grasp and to GNet's grasp, with the floor step of `rollout_eval`.
+    {'rollouts', 'sliding' (GOAL's rows and the ground truth's), 'rollout_seconds'}."""
+    import time
+    from pathlib import Path
+
+    from graspkit.models.mnet import load_mnet
+
+    t0 = time.perf_counter()
+    clips = approach_clips(seqs)
+    mnet = load_mnet(Path(stubs) / "mnet.pt")
+    to_gt = rollout_eval(mnet, clips)
+    full = rollout_eval(mnet, clips, _gnet_goals(gnet, clips, seed))
+    keys = ("sliding", "reached", "final_hand_cm")
+    return {"rollouts": {"clips": len(clips), "to_true_goal": {k: to_gt[k] for k in keys},
+                         "goal_pipeline": {k: full[k] for k in keys},
+                         "per_clip_true_goal": to_gt["clips"], "per_clip_pipeline": full["clips"]},
+            "sliding": {"GOAL (GNet + MNet, ours)": full["sliding"], "MNet to the true goal": to_gt["sliding"],
+                        "synthetic GT (approach frames)": clip_sliding(clips)},
+            "rollout_seconds": time.perf_counter() - t0}
 
 
 def tab1_results(folders, stubs, n_grasps: int = 60, seed: int = 0, penetration: bool = True) -> dict:
@@ -722,21 +738,30 @@ def main(argv: list[str] | None = None) -> int:
                       help="recompute only Tab. 1 in an existing JSON (--n-grasps 0: every test grasp)")
     only.add_argument("--saga-only", action="store_true",
                       help="add only SAGA's foot-sliding row to an existing JSON (the same rollout sequences)")
+    only.add_argument("--rollouts-only", action="store_true",
+                      help="recompute only the MNet rollouts and GOAL's sliding rows in an existing JSON (SAGA's kept)")
     a = p.parse_args(argv)
     torch.set_num_threads(a.threads)
-    if a.tab1_only or a.saga_only:                  # update one part of an existing evaluation
+    if a.tab1_only or a.saga_only or a.rollouts_only:          # update one part of an existing evaluation
         from graspkit.paths import DATA_STUBS
         from graspkit.viz.export import write_atomic
 
         stubs = Path(a.checkpoints or DATA_STUBS / "checkpoints")
         out = Path(a.out or stubs / "goal_eval.json")
-        flag = "--tab1-only" if a.tab1_only else "--saga-only"
+        flag = "--tab1-only" if a.tab1_only else "--saga-only" if a.saga_only else "--rollouts-only"
         if not out.is_file():
             raise FileNotFoundError(f"--out: no evaluation at {out} to update (run without {flag})")
         folders, r = a.data or default_data_folders(), json.loads(out.read_text())
         if a.tab1_only:
             r.update(tab1_results(folders, stubs, a.n_grasps, a.seed))
             shown = {k: r[k] for k in ("tab1", "tab1_paired")}
+        elif a.rollouts_only:
+            from graspkit.models.gnet import load_gnet
+
+            new = rollout_results(rollout_sequences(folders, a.n_rollouts), stubs, load_gnet(stubs / "gnet.pt"), a.seed)
+            new["sliding"].update({k: v for k, v in r.get("sliding", {}).items() if k not in new["sliding"]})
+            r.update(new)
+            shown = {"sliding": r["sliding"], **{k: r["rollouts"][k] for k in ("to_true_goal", "goal_pipeline")}}
         else:
             r = add_saga_rows(r, rollout_sequences(folders, a.n_rollouts), a.seed)
             shown = {"sliding": r["sliding"], "saga_end_contact": r["saga"]["end_contact"]}

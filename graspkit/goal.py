@@ -1,7 +1,8 @@
 """GOAL end to end (`../shared/papers/GOAL.txt` §3, Fig. 2): an object in, a grasp and the approach motion into it out.
 
     object -> GNet sample (§3.3, Eq. 2) -> refinement towards its offsets (Eq. 4-8) -> the goal grasp
-    start body + goal grasp -> MNet, 10 frames a step, re-canonicalised, refined near the goal (§3.4, Eq. 9-13)
+    start body + goal grasp -> MNet, 10 frames a step, re-canonicalised, refined near the goal (§3.4, Eq. 9-13),
+    each frame raised onto the floor z = 0 where its soles sink below it (graspkit's floor step, not GOAL's)
 
 `synthesize("mug")` runs it for any catalogue object with the shipped `gnet.pt` and `mnet.pt`, and
 `synthesize(mesh)` for an object of one's own (a trimesh.Trimesh or a mesh file: closed, metres, z up;
@@ -92,7 +93,8 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     g = torch.Generator().manual_seed(seed)
     sdf = (object_collision_grid(given, obj_mesh), pose.rotation, pose.translation) if penetration else None
     goal = gnet_goal(load_gnet(ck / "gnet.pt"), s, betas, pts, c, generator=g, sdf=sdf)[:2]
-    r = rollout(load_mnet(ck / "mnet.pt"), body, s, goal, betas, pts, c, bps_basis(), max_frames=max_frames)
+    r = rollout(load_mnet(ck / "mnet.pt"), body, s, goal, betas, pts, c, bps_basis(), max_frames=max_frames,
+                floor=0.0)                   # graspkit's floor step (not GOAL's): MNet's frames otherwise sink
 
     to_motion = lambda r6, t: Motion(matrix_to_axis_angle(rot6d_to_matrix(r6.double())).numpy(),  # noqa: E731
                                      t.detach().double().numpy(), betas.double().numpy(), 30.0)

@@ -159,6 +159,27 @@ def test_rollout_far_from_the_goal_runs_to_the_maximum(setup):
     torch.testing.assert_close(out.hand_dist, torch.full((35,), 1.0), atol=1e-4, rtol=0)   # standing still, 1 m away
 
 
+def test_rollout_floor_step_raises_sinking_frames_onto_the_floor_and_leaves_others(setup):
+    """graspkit's floor step (not GOAL's): an untrained MNet keeps the body where it stands; with a floor 3 cm above
+    its soles every generated frame is raised until its lowest vertex (the full mesh, read here with the body model)
+    is on that floor, and a floor below the soles changes nothing."""
+    bm, gv, body = setup
+    aa = torch.zeros(55, 3)
+    aa[0] = torch.tensor([math.pi / 2, 0, 0])
+    start = (axis_angle_to_rot6d(aa), torch.zeros(3))
+    goal = (start[0], torch.tensor([0.0, -1.0, 0.0]))
+    obj = torch.randn(50, 3, generator=torch.Generator().manual_seed(0)) * 0.05
+    low0 = float(bm.forward_rotmats(pose_rotmats(start[0][None]), betas=torch.zeros(1, 10)).vertices[0, :, 2].min())
+    args = (MNet(), body, start, goal, torch.zeros(10), obj, torch.zeros(3), bps_basis())
+    free = rollout(*args, max_frames=12)
+    up = rollout(*args, max_frames=12, floor=low0 + 0.03)
+    low = bm.forward_rotmats(pose_rotmats(up.rot6d), betas=torch.zeros(12, 10), transl=up.transl).vertices[..., 2].amin(-1)
+    torch.testing.assert_close(low[1:], torch.full((11,), low0 + 0.03), atol=2e-4, rtol=0)   # frame 0 is the start
+    torch.testing.assert_close(up.transl[1:, :2], free.transl[1:, :2])
+    below = rollout(*args, max_frames=12, floor=low0 - 0.03)
+    torch.testing.assert_close(below.transl, free.transl)
+
+
 def _reach_clips(n=2):
     """Reaching clips from data_stubs as approach clips: a 4 cm ball of points at the reaching goal."""
     from pathlib import Path

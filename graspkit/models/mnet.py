@@ -333,13 +333,16 @@ def predict_horizon(mnet: MNet, body, s: MNetState, object_points: Tensor, basis
 @torch.no_grad()
 def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, Tensor], betas: Tensor,
             object_points: Tensor, obj_centre: Tensor, basis: Tensor, max_frames: int = 300, refine: bool = True,
-            reach_tol: float = 0.01, min_speed: float = 0.003, refine_weights=None) -> Rollout:
+            reach_tol: float = 0.01, min_speed: float = 0.003, refine_weights=None,
+            floor: float | None = None) -> Rollout:
     """GOAL's autoregressive inference (§3.4) for one body: from `start` (rot6d (55,6), transl (3,)) to the grasp
     `goal` (same), re-canonicalised at every step; 10 frames per step while far, one frame per step once the hand is
     within 10 cm of the goal hand, each then refined by Eq. 12–13 (`min_speed` m/frame floors Eq. 12's step so that a
     hand MNet slows early still arrives). Stops when the mean hand-to-goal distance is below `reach_tol` m or at
     `max_frames`. `body` is a SparseBody over the 400 sampled vertices (hand first); object points (P,3) and the
-    object centre (3,) (the BPS basis centre) in the world."""
+    object centre (3,) (the BPS basis centre) in the world. `floor` (m; None: off, GOAL's rollout) is graspkit's floor
+    step, not in the paper: a frame whose lowest sole vertex is below this height is raised onto it before it is
+    kept (MNet's frames sink up to 3 cm: docs/goal.md)."""
     from graspkit.optim.goal_refine import (GOAL_HAND_RADIUS, MotionRefineWeights, hand_object_offsets,
                                             hand_step_targets, refine_frame)
     from graspkit.models.gnet import SparseBody, pose_rotmats
@@ -354,6 +357,18 @@ def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, 
 
     def verts(r6, t):
         return body(pose_rotmats(r6), betas.expand(len(r6), -1), t)[0].float()
+
+    if floor is not None:
+        from graspkit.body.markers import foot_vertices
+
+        soles = SparseBody(body.bm, torch.as_tensor(np.concatenate(list(foot_vertices(body.bm).values()))))
+
+    def on_floor(r6, t):
+        """t (1,3) raised so that the lowest sole vertex of (r6, t) is not below `floor`."""
+        if floor is None:
+            return t
+        low = soles(pose_rotmats(r6), betas, t)[0][..., 2].amin(-1)
+        return t + torch.stack([torch.zeros_like(low), torch.zeros_like(low), torch.relu(floor - low)], -1).to(t.dtype)
 
     goal_hand = verts(goal[0][None].float(), goal[1][None].float())[:, :c.n_hand]
     rs, ts = [start[0].float()], [start[1].float()]
@@ -379,6 +394,7 @@ def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, 
                 target = hand_step_targets(vs[-1][None, :c.n_hand], goal_hand, speed.clamp_min(min_speed))
                 with torch.enable_grad():
                     r, t = refine_frame(hand_body, r, t, betas, target, refine_weights or MotionRefineWeights())
+            t = on_floor(r, t)
             rs.append(r[0])
             ts.append(t[0])
             vs.append(verts(r, t)[0])
