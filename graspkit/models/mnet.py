@@ -342,7 +342,7 @@ def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, 
     `max_frames`. `body` is a SparseBody over the 400 sampled vertices (hand first); object points (P,3) and the
     object centre (3,) (the BPS basis centre) in the world. `floor` (m; None: off, GOAL's rollout) is graspkit's floor
     step, not in the paper: a frame whose lowest sole vertex is below this height is raised onto it before it is
-    kept (MNet's frames sink up to 3 cm: docs/goal.md)."""
+    kept (MNet's frames sank up to 4.4 cm on the evaluation's rollouts: docs/goal.md)."""
     from graspkit.optim.goal_refine import (GOAL_HAND_RADIUS, MotionRefineWeights, hand_object_offsets,
                                             hand_step_targets, refine_frame)
     from graspkit.models.gnet import SparseBody, pose_rotmats
