@@ -497,6 +497,7 @@ def rollout_eval(mnet, clips: list, goals: list | None = None, max_frames: int =
     frames, whether the goal was reached, the final mean hand-to-goal distance, GOAL's foot sliding and how deep the
     lowest vertex goes under the floor z = 0 (cm). `floor`: `mnet.rollout`'s floor step (graspkit's; None: GOAL's
     rollout as the paper has it)."""
+    from graspkit.metrics import ground_penetration
     from graspkit.models.mnet import rollout
     from graspkit.objects.bps import bps_basis
 
@@ -513,7 +514,7 @@ def rollout_eval(mnet, clips: list, goals: list | None = None, max_frames: int =
         slide, pairs = slide + s, pairs + n
         per.append({"frames": len(r.rot6d), "reached": r.reached, "final_hand_cm": 100 * float(r.hand_dist[-1]),
                     "first_refined": r.first_refined, "gt_frames": c.goal_frame + 1, "sliding": s / max(n, 1),
-                    "below_floor_max_cm": 100 * float(torch.relu(-v[..., 2].amin(-1)).max())})
+                    "below_floor_max_cm": 100 * float(ground_penetration(v).max())})
         rolls.append(r)
     return {"clips": per, "rollouts": rolls, "sliding": slide / max(pairs, 1),
             "reached": float(np.mean([p["reached"] for p in per])),

@@ -516,7 +516,7 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
     False: from the point cloud's normals)."""
     from graspkit.body import BodyModel
     from graspkit.data.grasp_io import collision_sdf_grid
-    from graspkit.metrics import grasp_metrics, non_collision_score
+    from graspkit.metrics import grasp_metrics, ground_penetration, non_collision_score
     from graspkit.models.pose_prior import load_pose_prior
     from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, load_smooth_ae
     from graspkit.optim.grasppose import GraspObject
@@ -547,7 +547,7 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
         floor = np.array(s["floor"])
         v = opt.vertices(res, i)
         fit = grasp_metrics(v[-1], bm.faces, s["mesh"])
-        dip = torch.relu(s["floor"] - v[..., 2].amin(-1)).double()           # (T+1,) each frame's lowest vertex
+        dip = ground_penetration(v - torch.tensor([0.0, 0.0, s["floor"]]))    # (T+1,) under the scene's floor
         rows.append({"object": s["name"], "clip": s["file"],
                      "skating_gt": skating(s["markers"][None].astype(np.float64), floor[None], heels),
                      "skating_sample": skating(markers[i:i + 1].double().numpy(), floor[None], heels),
