@@ -36,7 +36,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from graspkit.optim.grasppose import ARM_JOINTS
+from graspkit.optim.grasppose import ARM_JOINTS, GraspPoseConfig
 from graspkit.paths import DATA_STUBS, write_atomic
 
 RESULTS_PATH = DATA_STUBS / "checkpoints" / "wholegrasp_eval.json"
@@ -80,6 +80,7 @@ class EvalConfig:
     stage2_collision: bool = True  # GraspPoseConfig.stage2_collision (graspkit's; False is Alg. 1's E_fit-only stage 2)
     stage2_ground: bool = True     # GraspPoseConfig.stage2_ground (graspkit's; False is Alg. 1's stage 2)
     ground_rest: bool = True       # GraspPoseConfig.ground_rest (graspkit's; False is the paper's |h(v)|)
+    polish: tuple[int, float] = GraspPoseConfig.polish   # GraspPoseConfig.polish (graspkit's; (0, 0.0) is Alg. 1's)
     refine: int | None = None     # the volume's rays per cell side along walls (None: the default; 1: docs/saga.md's tables)
 
 
@@ -255,7 +256,7 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
     pca = HandPCA(bm)
     base_cfg = GraspPoseConfig(steps=cfg.steps, free_joints=tuple(cfg.free_joints), restart_sunk=cfg.restart_sunk,
                                stage2_collision=cfg.stage2_collision, stage2_ground=cfg.stage2_ground,
-                               ground_rest=cfg.ground_rest)
+                               ground_rest=cfg.ground_rest, polish=tuple(cfg.polish))
     opt = GraspPoseOpt(bm, prior, base_cfg)
     ch = None if single_state is None else single_state.get("hand_contact_prior")
     opt_h = GraspPoseOpt(bm, prior, base_cfg, hand_contact_prior=None if ch is None else ch.float()[opt.hand_ids])

@@ -58,7 +58,8 @@ def test_evaluation_without_the_unshipped_baselines_leaves_their_rows_out(tmp_pa
     """The baselines' weights are not shipped: a run with only WholeGrasp-VAE evaluates it and the ground truth and
     says which rows are missing and how to make them."""
     shutil.copy(DATA_STUBS / "checkpoints" / "wholegrasp.pt", tmp_path / "wholegrasp.pt")
-    cfg = EvalConfig(objects=("mug",), placements=1, samples=2, gt_grasps=1, steps=(2, 2, 2))
+    cfg = EvalConfig(objects=("mug",), placements=1, samples=2, gt_grasps=1, steps=(2, 2, 2),
+                     polish=(0, 0.0))
     r = evaluate(DATA_STUBS / "grasps", cfg, progress=False, out=None, checkpoints=tmp_path)
     assert "graspkit train wholegrasp_single" in capsys.readouterr().out
     rows = r["rows"]
@@ -78,7 +79,8 @@ def test_grabnet_only_gives_the_full_runs_grabnet_row(tmp_path):
     from graspkit.train import save_checkpoint
 
     shutil.copy(DATA_STUBS / "checkpoints" / "wholegrasp.pt", tmp_path / "wholegrasp.pt")
-    cfg = EvalConfig(objects=("mug",), placements=1, samples=3, gt_grasps=1, steps=(2, 2, 2))
+    cfg = EvalConfig(objects=("mug",), placements=1, samples=3, gt_grasps=1, steps=(2, 2, 2),
+                     polish=(0, 0.0))
     with pytest.raises(FileNotFoundError, match=GRABNET_SMPLX_PATH.name):
         evaluate(DATA_STUBS / "grasps", cfg, progress=False, out=None, checkpoints=tmp_path, grabnet_only=True)
     torch.manual_seed(0)
