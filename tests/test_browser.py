@@ -20,7 +20,9 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 TOKEN = "graspkit-test"
-LESSONS = ["01", "09"]      # lesson prefixes: the body explorer, the goal-placing widget
+# lesson prefixes: the body explorer. Lesson 09's GoalReacher works the same way (sliders, PNG bytes in an Image
+# widget; its update is tested in Python); running it in the browser as well cost ~50 s of the suite's 15 minutes.
+LESSONS = ["01"]
 
 
 def _missing() -> str | None:
