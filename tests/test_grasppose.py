@@ -395,11 +395,12 @@ def test_stage2_collision_keeps_the_hand_out_of_an_object_the_markers_are_in(bm,
     opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(100, 250, 0)))
     markers = verts[:, opt.marker_ids]
     depth = lambda r: max(0.0, -signed_distance(r.vertices[0, hand].double(), ball).min().item())  # noqa: E731
-    plain = opt.with_config(stage2_collision=False).fit(markers, obj, stages=(1, 2), progress=False)
-    kept = opt.fit(markers, obj, stages=(1, 2), progress=False)
+    s1 = opt.fit(markers, obj, stages=(1,), progress=False).state            # stage 1 is the same for both
+    plain = opt.with_config(stage2_collision=False).fit(markers, obj, stages=(2,), init=s1, progress=False)
+    kept = opt.fit(markers, obj, stages=(2,), init=s1, progress=False)
     assert depth(plain) > 0.015                                              # E_fit alone: into the ball
     assert depth(kept) < 0.003, depth(kept)
-    assert "colli_body" in kept.energies[1]["after"] and "colli_body" not in plain.energies[1]["after"]
+    assert "colli_body" in kept.energies[0]["after"] and "colli_body" not in plain.energies[0]["after"]
 
 
 def test_stage2_ground_brings_the_soles_to_the_floor_with_the_markers_above_it(bm, prior):
@@ -414,9 +415,10 @@ def test_stage2_ground_brings_the_soles_to_the_floor_with_the_markers_above_it(b
     obj.height = 0.03 - float((verts[0, feet, 2] - opt.sole_rest).mean())
     markers = verts[:, opt.marker_ids]
     off = lambda r: float((r.vertices[0, feet, 2] + obj.height - opt.sole_rest).mean())  # noqa: E731  m
-    held = opt.fit(markers, obj, stages=(1, 2), progress=False)
-    free = opt.with_config(stage2_ground=False).fit(markers, obj, stages=(1, 2), progress=False)
-    assert "ground" in held.energies[1]["after"] and "ground" not in free.energies[1]["after"]
+    s1 = opt.fit(markers, obj, stages=(1,), progress=False).state            # stage 1 is the same for both
+    held = opt.fit(markers, obj, stages=(2,), init=s1, progress=False)
+    free = opt.with_config(stage2_ground=False).fit(markers, obj, stages=(2,), init=s1, progress=False)
+    assert "ground" in held.energies[0]["after"] and "ground" not in free.energies[0]["after"]
     assert abs(off(held)) < 0.005, off(held)
     assert off(free) > 0.025, off(free)
 
@@ -434,7 +436,8 @@ def test_ground_from_the_rest_heights_stands_a_flat_footed_body_on_the_floor(bm,
     opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(100, 150, 0)))
     markers = verts[:, opt.marker_ids]
     low = lambda r: float(r.vertices[0, feet, 2].min() + obj.height)  # noqa: E731  lowest sole vertex, m
-    rest = opt.fit(markers, obj, stages=(1, 2), progress=False)
-    paper = opt.with_config(ground_rest=False).fit(markers, obj, stages=(1, 2), progress=False)
+    s1 = opt.fit(markers, obj, stages=(1,), progress=False).state            # stage 1 has no E_g: the same for both
+    rest = opt.fit(markers, obj, stages=(2,), init=s1, progress=False)
+    paper = opt.with_config(ground_rest=False).fit(markers, obj, stages=(2,), init=s1, progress=False)
     assert abs(low(rest)) < 0.002, low(rest)
     assert low(paper) < -0.004, low(paper)
