@@ -98,7 +98,7 @@ def test_saga_sliding_starts_from_the_sequence_and_counts_goals_sliding_frames()
     from graspkit.eval_goal import saga_sliding
 
     seq = _sequence(0, "mug")
-    out = saga_sliding([seq], grasp_steps=(3, 3, 3), motion_steps=(3, 3))
+    out = saga_sliding([seq], grasp_steps=(3, 3, 3), motion_steps=(3, 3), polish_steps=(0, 0))
     r = out["results"][0]
     bm, _, _ = _body()
     m = r.motion
