@@ -117,10 +117,9 @@ def test_tab1_only_recomputes_table_1_and_keeps_the_rest(tmp_path, monkeypatch):
     percentiles and paired counts the numpy statistics of the per-grasp rows of the `gnet_table` call it makes (caught
     on the way); the rest of the JSON kept."""
     import json
+    from dataclasses import replace
 
     import pytest
-
-    from dataclasses import replace
 
     import graspkit.eval_goal as eg
     from graspkit.eval_goal import PEN_ROW, main, tab1_results

@@ -205,8 +205,9 @@ def test_pen_term_is_the_summed_depth_of_hands_inner_points_and_forearms(setup):
 
 
 def test_pen_term_keeps_the_hand_out_of_the_ball_the_offsets_pull_it_into(setup):
-    """GNet's offsets put the hand 2 cm into a ball under the palm. Eq. 4-8 pull it in; with E_pen (PEN_WEIGHTS) the
-    hand stops at the surface and still touches it (closed-form ball distance of the full mesh's hand vertices)."""
+    """GNet's offsets put the hand 2 cm into a ball under the palm. Eq. 4-8 pull it in; with E_pen (PEN_WEIGHTS, 150
+    of its 400 steps) the hand stops at the surface and still touches it (closed-form ball distance of the full
+    mesh's hand vertices)."""
     from dataclasses import replace
 
     from graspkit.optim.goal_refine import PEN_WEIGHTS, PosedSDF

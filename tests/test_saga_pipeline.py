@@ -52,7 +52,7 @@ def test_one_call_for_an_object_of_ones_own(bm, tmp_path, monkeypatch):
     """synthesize(): WholeGrasp-VAE -> GraspPose-Opt -> MotionFill-VAE -> GraspMotion-Opt for a mesh the catalogue does
     not have (a box, given as a file) at a placement of our choosing: the grasp body touches it, the motion starts at
     the start body, ends with the right hand on the box (trimesh's exact distance) and stays on the floor; the grid is
-    built in a fresh cache. (Fewer steps than Alg. 1-2; a catalogue name goes the same way, tested below.)"""
+    built in a fresh cache. (Fewer steps than Alg. 1-2; a catalogue name goes the same way: the seeded test above.)"""
     import trimesh
 
     from graspkit.body.markers import palm_vertices
@@ -77,10 +77,9 @@ def test_one_call_for_an_object_of_ones_own(bm, tmp_path, monkeypatch):
     # the grasp's right palm is at the box (its fingers touch it); the motion ends with the right hand on the box and
     # no vertex more than 3 mm inside it (trimesh: positive inside)
     assert near(r.grasp.vertices[0], palm) < 0.03
-    end = r.motion.vertices(bm)[-1]
-    assert near(end, hand) < 0.005 and q.signed_distance(end.double().numpy()).max() < 0.003
-    assert r.motion.num_frames == 61 and r.markers.shape == (61, 79, 3) and r.foot_contact.shape == (61, 4)
     v = r.motion.vertices(bm)
+    assert near(v[-1], hand) < 0.005 and q.signed_distance(v[-1].double().numpy()).max() < 0.003
+    assert r.motion.num_frames == 61 and r.markers.shape == (61, 79, 3) and r.foot_contact.shape == (61, 4)
     assert float((v[0] - r.start.vertices(bm)[0]).norm(dim=-1).mean()) < 0.12   # starts at the start body
     feet = v[:, :, 2].min(1).values
     assert feet.abs().max() < 0.08                                                  # on the floor (z = 0)
