@@ -422,7 +422,8 @@ class GraspMotionOpt:
             ) -> GraspMotionResult:
         """Alg. 2 on a batch: markers (B, T+1, 79, 3), betas (B, 10), foot contacts (B, T+1, 4) probabilities, the
         object in the markers' frame, its contact map (B, P), the floor's height (B,) for the floor term and the
-        planted-heel term (default: no floor term, and each target's lowest heel marker for the heel) -> GraspMotionResult."""
+        planted-heel term (default: no floor term, and each target's lowest heel marker for the heel)
+        -> GraspMotionResult."""
         if not isinstance(markers, Tensor) or markers.dim() != 4 or tuple(markers.shape[2:]) != (self.n_markers, 3):
             got = tuple(markers.shape) if isinstance(markers, Tensor) else type(markers).__name__
             raise ValueError(f"markers: expected shape (B, T+1, {self.n_markers}, 3), got {got}")
@@ -436,7 +437,8 @@ class GraspMotionOpt:
         if floor is not None and (not isinstance(floor, Tensor) or tuple(floor.shape) != (B,)
                                   or not bool(torch.isfinite(floor).all())):
             got = tuple(floor.shape) if isinstance(floor, Tensor) else type(floor).__name__
-            raise ValueError(f"floor: expected a finite tensor of shape ({B},) (each sequence's floor height, m), got {got}")
+            raise ValueError(f"floor: expected a finite tensor of shape ({B},) (each sequence's floor height, m), "
+                             f"got {got}")
         target = markers.detach().float()
         bet = betas.float().repeat_interleave(F, 0)
         p0 = self.init_params(target.flatten(0, 1), bet)
