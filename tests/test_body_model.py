@@ -166,3 +166,26 @@ def test_file_errors_name_file_and_key(tmp_path):
         BodyModel.from_file(tmp_path / "obj.npz")
     with pytest.raises(ModelFileError, match="no such body-model file"):
         BodyModel.from_file(tmp_path / "nope.npz")
+    with pytest.raises(ModelFileError, match=r"is a directory.*missing.npz"):
+        BodyModel.from_file(tmp_path)
+
+
+def test_pickled_model_is_read_only_behind_the_opt_in(tmp_path):
+    """An official-style .pkl (latin1 pickle, sparse regressor) loads with allow_pickle=True to the same body."""
+    import scipy.sparse
+
+    arr = random_smplx_arrays(num_vertices=50, num_faces=20, seed=9)
+    with open(tmp_path / "SMPLX_NEUTRAL.pkl", "wb") as fh:
+        pickle.dump(dict(arr, J_regressor=scipy.sparse.csc_matrix(arr["J_regressor"])), fh, protocol=2)
+    np.savez(tmp_path / "SMPLX_NEUTRAL.npz", **arr)
+    with pytest.raises(ModelFileError, match="SMPLX_NEUTRAL.pkl.*allow_pickle=True"):
+        BodyModel.from_file(tmp_path / "SMPLX_NEUTRAL.pkl")
+    pose = torch.randn(3, 63, generator=torch.Generator().manual_seed(0)) * 0.3
+    a = BodyModel.from_file(tmp_path / "SMPLX_NEUTRAL.pkl", allow_pickle=True)(body_pose=pose)
+    b = BodyModel.from_file(tmp_path / "SMPLX_NEUTRAL.npz")(body_pose=pose)
+    torch.testing.assert_close(a.vertices, b.vertices, rtol=0, atol=0)
+    torch.testing.assert_close(a.joints, b.joints, rtol=0, atol=0)
+    with open(tmp_path / "list.pkl", "wb") as fh:
+        pickle.dump([1, 2], fh)
+    with pytest.raises(ModelFileError, match="list.pkl: expected a pickled dict"):
+        BodyModel.from_file(tmp_path / "list.pkl", allow_pickle=True)

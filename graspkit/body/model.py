@@ -51,38 +51,66 @@ def _expected_shapes(V: int) -> dict[str, tuple[int | None, ...]]:
     }
 
 
+def _read_pickled_model(path: Path) -> dict[str, object]:
+    """The dict of an official SMPL-X .pkl (Python-2 pickle; only ever read behind allow_pickle=True)."""
+    import pickle  # only here: the explicit opt-in for real third-party files
+
+    with open(path, "rb") as fh:
+        try:
+            data = pickle.load(fh, encoding="latin1")
+        except Exception as e:
+            raise ModelFileError(f"{path}: not a readable pickled body model ({e})") from None
+    if not isinstance(data, dict):
+        raise ModelFileError(f"{path}: expected a pickled dict of SMPL-X arrays, got {type(data).__name__}")
+    # SMPL(-X) .pkl files may hold the regressor as a scipy sparse matrix
+    return {k: (v.toarray() if hasattr(v, "toarray") else v) for k, v in data.items()}
+
+
 def load_model_arrays(path: str | os.PathLike, allow_pickle: bool = False) -> dict[str, np.ndarray]:
-    """Read and validate the arrays of an SMPL-X-format .npz; errors name the file, key and expectation."""
+    """Read and validate the arrays of an SMPL-X-format .npz (or, with allow_pickle=True, an official .pkl).
+
+    Errors name the file, key and expectation."""
     path = Path(path)
+    if path.is_dir():
+        found = sorted(p.name for p in path.glob("*.npz"))
+        raise ModelFileError(f"{path}: is a directory; pass the body-model file itself (expected an SMPL-X-format "
+                             f".npz such as SMPLX_NEUTRAL.npz; .npz files here: {found or 'none'})")
     if not path.is_file():
         raise ModelFileError(f"{path}: no such body-model file (expected an SMPL-X-format .npz)")
     with open(path, "rb") as fh:
         head = fh.read(6)
-    if not allow_pickle and head[:1] != b"\x80" and not head.startswith((b"PK\x03\x04", b"PK\x05\x06", b"\x93NUMPY")):
+    pickled = head[:1] == b"\x80"
+    if not pickled and not head.startswith((b"PK\x03\x04", b"PK\x05\x06", b"\x93NUMPY")):
         raise ModelFileError(f"{path}: not an .npz body model (expected an SMPL-X-format .npz archive of arrays)")
+    if pickled and not allow_pickle:
+        raise ModelFileError(f"{path}: a pickled file; graspkit reads plain .npz files only "
+                             "(pass allow_pickle=True explicitly for a trusted third-party file)")
+    if pickled:
+        source: Mapping[str, object] = _read_pickled_model(path)
+        keys = set(source)
+    else:
+        try:
+            npz = np.load(path, allow_pickle=allow_pickle)
+        except Exception as e:
+            raise ModelFileError(f"{path}: not a readable .npz file ({e})") from None
+        if not isinstance(npz, np.lib.npyio.NpzFile):
+            raise ModelFileError(f"{path}: expected an .npz archive of arrays, got a single array")
+        source, keys = npz, set(npz.files)
     try:
-        npz = np.load(path, allow_pickle=allow_pickle)
-    except ValueError as e:  # numpy refuses a pickled file when allow_pickle=False
-        raise ModelFileError(f"{path}: {e}; graspkit reads plain .npz files only "
-                             "(pass allow_pickle=True explicitly for a trusted third-party file)") from None
-    except Exception as e:
-        raise ModelFileError(f"{path}: not a readable .npz file ({e})") from None
-    if not isinstance(npz, np.lib.npyio.NpzFile):
-        raise ModelFileError(f"{path}: expected an .npz archive of arrays, got a single array")
-    with npz:
-        if "v_template" not in npz.files:
+        if "v_template" not in keys:
             raise ModelFileError(f"{path}: missing key 'v_template' (an SMPL-X .npz has {sorted(_expected_shapes(0))})")
         arrays: dict[str, np.ndarray] = {}
-        for key in list(_expected_shapes(0)):
-            if key not in npz.files:
+        optional = [k for k in ("procedural",) if k in keys]
+        for key in [*_expected_shapes(0), *optional]:
+            if key not in keys:
                 raise ModelFileError(f"{path}: missing key {key!r}")
             try:
-                arrays[key] = np.asarray(npz[key])
+                arrays[key] = np.asarray(source[key])
             except ValueError as e:
                 raise ModelFileError(f"{path}: key {key!r} cannot be read without pickle ({e})") from None
-        for opt in ("procedural",):
-            if opt in npz.files:
-                arrays[opt] = np.asarray(npz[opt])
+    finally:
+        if isinstance(source, np.lib.npyio.NpzFile):
+            source.close()
     validate_model_arrays(arrays, source=str(path))
     return arrays
 
