@@ -4,16 +4,23 @@ Motion metrics (this section) take world vertices / joints in the z-up frame, me
 
 | metric | paper | definition |
 |---|---|---|
-| foot skating (FS) | WANDR Sec. 4.3 | a frame skates if the mesh's lowest vertex moves more than 0.66 cm horizontally to the next frame |
+| foot skating (FS) | WANDR Sec. 4.3 | a frame skates if the mesh's lowest vertex moves more than 0.66 cm (at 30 fps) to the next frame; graspkit measures the horizontal move (see below) |
 | foot skating | SAGA Sec. 4.2 (following MOJO, its ref. [65]) | both heels are within 5 cm of the ground and both move faster than 75 mm/s (no foot planted) |
-| foot sliding | GOAL Sec. 4.2 | the vertex closest to the ground moves more than 1 cm per frame (GRAB's captured motion: 6.7 %) |
+| foot sliding | GOAL Sec. 4.2 | the vertex closest to the ground moves more than 1 cm per frame at 30 fps (GRAB's captured motion: 6.7 %) |
 | success rate (SR), distance to goal (DTG) | WANDR Sec. 4.3 | the right wrist comes within 10 cm of the goal; DTG its closest distance |
 | ground penetration | SAGA Sec. 4.2 (non-collision), GOAL Sec. 3.3 (Eq. 7's lowest vertex) | depth of the lowest vertex below the ground plane z = 0 |
 | non-collision score | SAGA Sec. 4.2 | share of body mesh vertices above the ground (GRAB 0.9771, SAGA 0.9743), per frame |
 | joint speed, jerk | smoothness | finite differences of joint positions (body joints 0..21) |
 | joint limits | human range of motion | rotation of each joint beyond the ranges in `JOINT_LIMITS_DEG` |
 
-"The lowest vertex moves" is measured on the same vertex from frame t to t+1 (the vertex that is lowest at t).
+Two readings are graspkit's, where the papers leave room:
+- "The lowest vertex moves" is measured on the same vertex from frame t to t+1 (the vertex that is lowest at t). Taking
+  the lowest vertex of each frame instead (a different vertex as the foot rolls) reads 9-31 % skating on clean
+  locomotion clips, so it would not measure sliding.
+- WANDR says only "moves more than 0.66cm"; graspkit counts the horizontal move, as the authors' evaluation code does
+  (docs/wandr.md: a foot lifting or setting down is not skating); GOAL's sliding counts the 3D move.
+Both per-frame thresholds are the papers' at 30 fps (their evaluation rate); for a clip at another `fps` they scale by
+30 / fps, the same speed (0.198 m/s for WANDR, 0.30 m/s for GOAL), so a clip reads the same resampled or not.
 """
 from __future__ import annotations
 
@@ -26,9 +33,10 @@ from graspkit.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 
 # ----------------------------------------------------------------------------- motion: thresholds
 WANDR_SKATE_THRESHOLD = 0.0066       # m per frame at 30 fps (WANDR Sec. 4.3, CIRCLE's 1 cm adjusted to 30 fps)
+METRIC_FPS = 30.0                    # the frame rate the papers' per-frame thresholds are given at
 SAGA_SKATE_HEEL_HEIGHT = 0.05        # m (SAGA Sec. 4.2, following MOJO)
 SAGA_SKATE_HEEL_SPEED = 0.075        # m/s, both heels (SAGA Sec. 4.2)
-GOAL_SLIDE_THRESHOLD = 0.01          # m per frame (GOAL Sec. 4.2)
+GOAL_SLIDE_THRESHOLD = 0.01          # m per frame at 30 fps (GOAL Sec. 4.2)
 GOAL_GRAB_SLIDING = 0.067            # fraction of GRAB's captured frames that "slide" (GOAL Sec. 4.2)
 WANDR_SUCCESS_RADIUS = 0.10          # m, right wrist to goal (WANDR Sec. 4.3, as CIRCLE)
 BODY_JOINTS = slice(0, 22)           # pelvis .. right wrist: speed and jerk are reported on these
@@ -80,6 +88,15 @@ def _positive(x: float, name: str) -> float:
     return float(x)
 
 
+def _finite(x: Any, name: str) -> float:
+    """x as a float after checking it is a finite number (a signed distance threshold, metres)."""
+    if isinstance(x, (torch.Tensor, np.ndarray)) and tuple(x.shape) == ():
+        x = x.item()
+    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)) or not np.isfinite(x):
+        raise ValueError(f"{name}: expected a finite distance in metres, got {x!r}")
+    return float(x)
+
+
 def lowest_vertex_motion(vertices: Any) -> tuple[np.ndarray, np.ndarray]:
     """Horizontal and 3D displacement (T-1,) from frame t to t+1 of the vertex lowest at frame t; vertices (T,V,3)."""
     v = _shaped(vertices, "vertices", "T,V,3", min_frames=2)
@@ -89,17 +106,24 @@ def lowest_vertex_motion(vertices: Any) -> tuple[np.ndarray, np.ndarray]:
     return d[:, :2].norm(dim=-1).double().numpy(), d.norm(dim=-1).double().numpy()
 
 
-def foot_skating_wandr(vertices: Any, threshold: float = WANDR_SKATE_THRESHOLD) -> np.ndarray:
-    """WANDR's FS per frame (T-1,) bool: the lowest vertex moves more than `threshold` m horizontally to the next frame."""
-    return lowest_vertex_motion(vertices)[0] > _positive(threshold, "threshold")
+def per_frame_threshold(threshold: float, fps: float) -> float:
+    """A per-frame distance threshold given at 30 fps (METRIC_FPS) as the same speed at `fps`: threshold * 30 / fps."""
+    return _positive(threshold, "threshold") * METRIC_FPS / _positive(fps, "fps")
 
 
-def foot_sliding_goal(vertices: Any, threshold: float = GOAL_SLIDE_THRESHOLD) -> np.ndarray:
-    """GOAL's foot sliding per frame (T-1,) bool: the vertex closest to the ground moves more than `threshold` m.
+def foot_skating_wandr(vertices: Any, threshold: float = WANDR_SKATE_THRESHOLD, fps: float = METRIC_FPS) -> np.ndarray:
+    """WANDR's FS per frame (T-1,) bool: the lowest vertex moves more than `threshold` m (per frame at 30 fps, scaled
+    to `fps`) horizontally to the next frame; vertices (T,V,3)."""
+    return lowest_vertex_motion(vertices)[0] > per_frame_threshold(threshold, fps)
+
+
+def foot_sliding_goal(vertices: Any, threshold: float = GOAL_SLIDE_THRESHOLD, fps: float = METRIC_FPS) -> np.ndarray:
+    """GOAL's foot sliding per frame (T-1,) bool: the vertex closest to the ground moves more than `threshold` m (per
+    frame at 30 fps, scaled to `fps`); vertices (T,V,3).
 
     graspkit takes the lowest vertex (argmin z, as GOAL's Eq. 7 finds it): the closest to the ground whenever the body
     is on or above the floor; for a body sunk below it, the deepest vertex rather than one crossing z = 0."""
-    return lowest_vertex_motion(vertices)[1] > _positive(threshold, "threshold")
+    return lowest_vertex_motion(vertices)[1] > per_frame_threshold(threshold, fps)
 
 
 def foot_skating_saga(heels: Any, fps: float = 30.0, height: float = SAGA_SKATE_HEEL_HEIGHT,
@@ -212,8 +236,8 @@ def motion_quality(bm, motions, chunk: int = 96) -> dict[str, Any]:
         clips += 1
         for start, v in m.iter_vertices(bm, chunk=chunk, overlap=1):   # chunks share one frame: every pair once
             if len(v) >= 2:                                              # a one-frame clip has no frame pair
-                fs += int(foot_skating_wandr(v).sum())
-                sl += int(foot_sliding_goal(v).sum())
+                fs += int(foot_skating_wandr(v, fps=m.fps).sum())
+                sl += int(foot_sliding_goal(v, fps=m.fps).sum())
                 sk += int(foot_skating_saga(v[:, [hl, hr]], m.fps).sum())
                 pairs += len(v) - 1
             pen = ground_penetration(v if start == 0 else v[1:])
@@ -241,7 +265,8 @@ def motion_quality(bm, motions, chunk: int = 96) -> dict[str, Any]:
 # |---|---|---|
 # | contact ratio | SAGA Sec. 4.1 ("ratio of body meshes in minimal contact with the object"), GOAL Tab. 1 (after PSI [68]) |
 # |   | | fraction of grasps whose body mesh comes within GRASP_CONTACT_THRESHOLD of the object surface (signed distance of
-# |   | | the body vertices, so touching or penetrating counts) |
+# |   | | the body vertices, so touching counts) or overlaps it (interpenetration volume > 0: an object poking through
+# |   | | between body vertices, or wholly inside the body, is in contact too) |
 # | interpenetration volume | SAGA Tab. 1-2, GOAL Tab. 1 | cm^3 inside both the body mesh and the object mesh (exact ray casting,
 # |   | | graspkit.objects.interpenetration) |
 # | interpenetration depth | SAGA Tab. 1-2 | cm, deepest body vertex inside the object |
@@ -260,9 +285,10 @@ def grasp_contact_distance(vertices: Any, obj: Any, margin: float = 0.05) -> flo
     from graspkit.objects.sdf import signed_distance
 
     v = _t(vertices).double()
-    if v.dim() != 2 or v.shape[1] != 3 or len(v) == 0 or not torch.isfinite(v).all():
-        raise ValueError(f"vertices: expected finite (V, 3) positions of one body with V > 0, got shape "
-                         f"{tuple(v.shape)}")
+    if v.dim() != 2 or v.shape[1] != 3 or len(v) == 0:
+        raise ValueError(f"vertices: expected (V, 3) positions of one body with V > 0, got shape {tuple(v.shape)}")
+    if not torch.isfinite(v).all():
+        raise ValueError("vertices: contains NaN or Inf")
     ov, of = mesh_arrays(obj, "obj")
     ov = ov.double()
     lo, hi = ov.min(0).values, ov.max(0).values
@@ -281,16 +307,20 @@ def grasp_contact_distance(vertices: Any, obj: Any, margin: float = 0.05) -> flo
 
 def grasp_metrics(vertices: Any, faces: Any, obj: Any, threshold: float = GRASP_CONTACT_THRESHOLD,
                   refine: int | None = None) -> dict[str, float]:
-    """Contact, interpenetration volume (cm^3) and depth (cm) of one body mesh (V,3)+(F,3) and one object mesh;
-    refine: `interpenetration`'s rays per cell side along walls (None: its default)."""
+    """Contact, interpenetration volume (cm^3) and depth (cm) of one body mesh (V,3)+(F,3) and one object mesh, and
+    min_distance (m), the body vertices' smallest signed distance to the object. In contact: min_distance <= threshold
+    or a volume inside both meshes (the vertices alone miss an object between them). refine: `interpenetration`'s rays
+    per cell side along walls (None: its default)."""
     from graspkit.objects.penetration import REFINE, interpenetration
 
+    threshold = _finite(threshold, "threshold")
     d = grasp_contact_distance(vertices, obj)
     f = _t(faces)
     if f.is_floating_point() and not bool((f == f.round()).all()):    # .long() would truncate them silently
         raise ValueError("faces: expected integer vertex indices, got fractional values")
     pen = interpenetration((_t(vertices).double(), f.long()), obj, refine=REFINE if refine is None else refine)
-    return {"min_distance": d, "contact": float(d <= threshold), "volume_cm3": pen.volume_cm3, "depth_cm": pen.depth_cm}
+    return {"min_distance": d, "contact": float(d <= threshold or pen.volume_cm3 > 0), "volume_cm3": pen.volume_cm3,
+            "depth_cm": pen.depth_cm}
 
 
 def contact_ratio(min_distances: Any, threshold: float = GRASP_CONTACT_THRESHOLD) -> float:
@@ -303,9 +333,7 @@ def contact_ratio(min_distances: Any, threshold: float = GRASP_CONTACT_THRESHOLD
         raise ValueError("min_distances: expected at least one grasp, got none")
     if not np.isfinite(d).all():
         raise ValueError("min_distances: contains NaN or Inf")
-    if not np.isfinite(threshold):
-        raise ValueError(f"threshold: expected a finite distance in metres, got {threshold}")
-    return float((d <= threshold).mean())
+    return float((d <= _finite(threshold, "threshold")).mean())
 
 
 def apd(samples: Any) -> float:
@@ -328,6 +356,12 @@ def grasp_quality_table(rows: list[dict[str, float]]) -> dict[str, float]:
     cm): contact ratio, penetration volume mean / median / max, depth mean / max, share with feet within 1 cm."""
     if not rows:
         raise ValueError("rows: no grasps to summarise")
+    for k in ("contact", "volume_cm3", "depth_cm") + (("feet_cm",) if all("feet_cm" in r for r in rows) else ()):
+        if any(k not in r for r in rows):
+            raise ValueError(f"rows: every row needs '{k}' (a grasp_metrics dict)")
+        x = np.array([r[k] for r in rows], np.float64)
+        if not np.isfinite(x).all():
+            raise ValueError(f"rows: '{k}' contains NaN or Inf (row {int(np.argmin(np.isfinite(x)))})")
     vol = np.array([r["volume_cm3"] for r in rows])
     dep = np.array([r["depth_cm"] for r in rows])
     out = {"grasps": len(rows), "contact_ratio": float(np.mean([r["contact"] for r in rows])),

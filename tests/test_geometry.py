@@ -374,6 +374,8 @@ def test_interaction_attention_is_goal_eq1():
             interaction_attention(d, w=w)
     with pytest.raises(ValueError, match="distance: expected distances >= 0"):       # a signed distance inside
         interaction_attention(torch.tensor([0.1, -0.01]))
+    with pytest.raises(TypeError, match="distance: expected a torch tensor"):
+        interaction_attention(d.numpy())
 
 
 # ---------------------------------------------------------------------------------------------- interpenetration

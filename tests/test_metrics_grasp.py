@@ -39,3 +39,38 @@ def test_contact_distance_rejects_empty_or_nan_vertices():
         M.grasp_contact_distance(np.zeros((2, 5, 3)), mug)
     with pytest.raises(ValueError, match="vertices"):
         M.grasp_contact_distance(np.zeros((6, 2)), mug)                 # (V, 2) would reshape into 4 points
+
+
+def _box_body(size: float) -> tuple[np.ndarray, np.ndarray]:
+    """A closed coarse 'body' mesh: a box of `size` m centred at the origin, 8 vertices, 12 triangles."""
+    b = trimesh.creation.box(extents=[size] * 3)
+    return np.asarray(b.vertices), np.asarray(b.faces)
+
+
+def test_an_object_inside_the_body_or_through_it_between_vertices_is_in_contact():
+    """The vertices' distance misses an object that lies between them: a 2 cm cube wholly inside a 20 cm box body,
+    and a rod of radius 5 mm through its middle. Both overlap the body (volume: the cube's 8 cm^3, the rod's
+    a third of its 60 cm inside the box, ~1.57 cm^3), so both are in contact, though every body vertex is > 8 cm away."""
+    v, f = _box_body(0.2)
+    cube = trimesh.creation.box(extents=[0.02] * 3)
+    rod = trimesh.creation.cylinder(0.005, segment=[[-0.3, 0, 0], [0.3, 0, 0]], sections=64)
+    far = trimesh.creation.box(extents=[0.02] * 3, transform=trimesh.transformations.translation_matrix([0.5, 0, 0]))
+    for obj, vol in ((cube, 8.0), (rod, 1e6 * rod.volume / 3)):
+        m = M.grasp_metrics(v, f, obj)
+        assert m["min_distance"] == pytest.approx(_truth(v, obj), abs=1e-6) and m["min_distance"] > 0.08
+        assert m["volume_cm3"] == pytest.approx(vol, rel=0.03)
+        assert m["contact"] == 1.0
+    m = M.grasp_metrics(v, f, far)                       # beside the body, 39 cm from its nearest vertex: no contact
+    assert m["contact"] == 0.0 and m["volume_cm3"] == 0.0
+
+
+def test_grasp_metrics_contact_threshold_is_checked_and_applied():
+    v, f = _box_body(0.2)
+    near = trimesh.creation.box(extents=[0.02] * 3, transform=trimesh.transformations.translation_matrix([0.115, 0.1, 0.1]))
+    d = _truth(v, near)                                   # the body's corner (0.1, 0.1, 0.1) is 5 mm off the cube's face
+    assert d == pytest.approx(0.005, abs=1e-9) and M.grasp_metrics(v, f, near)["contact"] == 0.0   # default 2 mm
+    assert M.grasp_metrics(v, f, near, threshold=d + 1e-4)["contact"] == 1.0
+    assert M.grasp_metrics(v, f, near, threshold=d - 1e-4)["contact"] == 0.0
+    for bad in (np.nan, np.inf, "2mm", None):
+        with pytest.raises(ValueError, match="threshold: expected a finite distance"):
+            M.grasp_metrics(v, f, near, threshold=bad)

@@ -37,6 +37,17 @@ def test_a_foot_dragged_at_known_speed(per_frame, wandr, goal):
     assert np.allclose(h, per_frame, atol=1e-6) and np.allclose(d3, per_frame, atol=1e-6)
 
 
+@pytest.mark.parametrize("speed,wandr,goal", [(0.15, False, False), (0.25, True, False), (0.35, True, True)])
+def test_per_frame_thresholds_are_a_speed_at_other_frame_rates(speed, wandr, goal):
+    """The papers' per-frame thresholds hold at 30 fps: 0.66 cm and 1 cm per frame are 0.198 and 0.30 m/s. A sole
+    dragged at `speed` m/s reads the same at 30, 60 and 120 fps (at 120 fps it moves a quarter as far per frame)."""
+    for fps in (30, 60, 120):
+        v = _cloud(int(fps), motion=(speed / fps, 0.0, 0.0))
+        assert M.foot_skating_wandr(v, fps=fps).all() == wandr and M.foot_skating_wandr(v, fps=fps).any() == wandr
+        assert M.foot_sliding_goal(v, fps=fps).all() == goal and M.foot_sliding_goal(v, fps=fps).any() == goal
+    assert M.per_frame_threshold(M.WANDR_SKATE_THRESHOLD, 120) == pytest.approx(0.0066 / 4)
+
+
 def test_wandr_counts_horizontal_motion_goal_counts_all_motion():
     v = _cloud(10, motion=(0.0, 0.0, -0.012), lift=0.2)   # the lowest point sinks 1.2 cm per frame, straight down
     assert not M.foot_skating_wandr(v).any() and M.foot_sliding_goal(v).all()
@@ -132,6 +143,10 @@ def test_non_collision_score_counts_vertices_above_the_ground():
     (lambda: M.contact_ratio([np.nan, 0.0]), r"min_distances: contains NaN"),
     (lambda: M.contact_ratio([]), r"min_distances: expected at least one grasp"),
     (lambda: M.contact_ratio([0.0], threshold=np.nan), r"threshold: expected a finite"),
+    (lambda: M.contact_ratio([0.0], threshold="x"), r"threshold: expected a finite"),
+    (lambda: M.foot_skating_wandr(np.zeros((4, 10, 3)), fps=0), r"fps: expected a positive"),
+    (lambda: M.grasp_quality_table([{"contact": 1.0, "volume_cm3": np.nan, "depth_cm": 0.0}]), r"rows: 'volume_cm3'"),
+    (lambda: M.grasp_quality_table([{"contact": 1.0, "depth_cm": 0.0}]), r"rows: every row needs 'volume_cm3'"),
     (lambda: M.foot_skating_wandr(np.zeros((4, 10, 3)), threshold=np.nan), r"threshold: expected a positive"),
     (lambda: M.foot_sliding_goal(np.zeros((4, 10, 3)), threshold=-1.0), r"threshold: expected a positive"),
     (lambda: M.joint_limit_violation(np.zeros((3, 22, 3))), r"poses: expected shape \(T,55,3\)"),

@@ -96,6 +96,21 @@ def test_chunked_quality_equals_whole_clip_quality(bm):
     assert a["fs_wandr"] == pytest.approx(M.foot_skating_wandr(v).mean())
 
 
+def test_motion_quality_reads_a_clip_the_same_at_120_and_30_fps(bm):
+    """A standing body glides at 0.25 m/s (0.83 cm per frame at 30 fps, 0.21 cm at 120 fps): WANDR's FS (0.66 cm per
+    frame at 30 fps) counts every pair at both rates, GOAL's sliding (1 cm) none; a 0.1 m/s glide skates at neither."""
+    from graspkit.data.motion import Motion
+
+    for speed, fs in ((0.25, 1.0), (0.1, 0.0)):
+        for fps in (30.0, 120.0):
+            T = int(fps // 2)
+            trans = np.zeros((T, 3), np.float32)
+            trans[:, 0] = speed * np.arange(T) / fps
+            m = Motion(np.zeros((T, 55, 3), np.float32), trans, np.zeros(10, np.float32), fps)
+            q = M.motion_quality(bm, [m])
+            assert q["fs_wandr"] == fs and q["slide_goal"] == 0.0, (speed, fps)
+
+
 def test_clips_too_short_for_a_metric_add_frames_but_nothing_else(bm):
     m = generate_locomotion(5, bm, num_frames=40, kind="walk")
     alone = M.motion_quality(bm, [m])

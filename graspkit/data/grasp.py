@@ -584,6 +584,8 @@ class GraspFitter:
         for b, r in enumerate(results):
             obj = apply_pose(r.task.object_pose, mesh)
             q = M.grasp_metrics(V[b], faces, obj, refine=1)    # one ray per column: the shipped sets were made so
+            # the shipped sets were accepted on the vertices' distance alone (grasp_metrics also counts an overlap)
+            q["contact"] = float(q["min_distance"] <= M.GRASP_CONTACT_THRESHOLD)
             q["feet_cm"] = 100.0 * max(abs(float(V[b, ids, 2].min())) for ids in feet)
             ids = np.concatenate([self.hm.palm_ids] + [self.hm.pad_ids[f] for f in REGION_DIGITS])
             d = signed_distance(V[b, ids], obj, check=False).numpy()

@@ -61,8 +61,10 @@ def object_contact(object_points, body: MeshLike | Tensor, threshold: float = OB
 
 
 def interaction_attention(distance: Tensor, w: float = IAA_WEIGHT) -> Tensor:
-    """GOAL Eq. 1: I_w(d) = exp(-w d), elementwise, for body-to-object distances d >= 0 in metres."""
-    if not math.isfinite(w) or w <= 0:
+    """GOAL Eq. 1: I_w(d) = exp(-w d), elementwise, for body-to-object distances d >= 0 in metres (a tensor)."""
+    if not isinstance(distance, Tensor):
+        raise TypeError(f"distance: expected a torch tensor of distances in metres, got {type(distance).__name__}")
+    if isinstance(w, bool) or not isinstance(w, numbers.Real) or not math.isfinite(w) or w <= 0:
         raise ValueError(f"w: GOAL's weight must be a finite positive number, got {w}")
     if not torch.isfinite(distance).all():
         raise ValueError("distance: contains NaN or infinite values")
