@@ -78,22 +78,15 @@ def _shaped(x: Any, name: str, shape: str, min_frames: int = 1) -> torch.Tensor:
     return t
 
 
-def _positive(x: float, name: str) -> float:
-    """x as a float after checking it is a positive finite number (a frame rate, a threshold)."""
-    if isinstance(x, (torch.Tensor, np.ndarray)) and tuple(x.shape) == ():
-        x = x.item()                                         # a 0-d tensor or array: its number
-    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)) \
-            or not (np.isfinite(x) and x > 0):
-        raise ValueError(f"{name}: expected a positive number, got {x!r}")
-    return float(x)
-
-
-def _finite(x: Any, name: str) -> float:
-    """x as a float after checking it is a finite number (a signed distance threshold, metres)."""
+def _number(x: Any, name: str, positive: bool = True) -> float:
+    """x as a float after checking it is a finite number, > 0 if `positive` (a frame rate, a threshold); a 0-d tensor
+    or array gives its number."""
     if isinstance(x, (torch.Tensor, np.ndarray)) and tuple(x.shape) == ():
         x = x.item()
-    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)) or not np.isfinite(x):
-        raise ValueError(f"{name}: expected a finite distance in metres, got {x!r}")
+    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, float, np.integer, np.floating)) \
+            or not (np.isfinite(x) and (x > 0 or not positive)):
+        raise ValueError(f"{name}: expected {'a positive number' if positive else 'a finite distance in metres'}, "
+                         f"got {x!r}")
     return float(x)
 
 
@@ -108,7 +101,7 @@ def lowest_vertex_motion(vertices: Any) -> tuple[np.ndarray, np.ndarray]:
 
 def per_frame_threshold(threshold: float, fps: float) -> float:
     """A per-frame distance threshold given at 30 fps (METRIC_FPS) as the same speed at `fps`: threshold * 30 / fps."""
-    return _positive(threshold, "threshold") * METRIC_FPS / _positive(fps, "fps")
+    return _number(threshold, "threshold") * METRIC_FPS / _number(fps, "fps")
 
 
 def foot_skating_wandr(vertices: Any, threshold: float = WANDR_SKATE_THRESHOLD, fps: float = METRIC_FPS) -> np.ndarray:
@@ -131,7 +124,7 @@ def foot_skating_saga(heels: Any, fps: float = 30.0, height: float = SAGA_SKATE_
     """SAGA's skating per frame (T-1,) bool from heel positions (T,2,3) [left, right]: both heels within `height`
     of the ground and both faster than `speed` m/s (speed from frame t to t+1): no foot is planted."""
     h = _shaped(heels, "heels", "T,2,3", min_frames=2).double()
-    v = (h[1:] - h[:-1]).norm(dim=-1) * _positive(fps, "fps")                     # (T-1, 2)
+    v = (h[1:] - h[:-1]).norm(dim=-1) * _number(fps, "fps")                     # (T-1, 2)
     return ((h[:-1, :, 2] < height) & (v > speed)).all(1).numpy()
 
 
@@ -167,14 +160,14 @@ def non_collision_score(vertices: Any, floor: float = 0.0) -> np.ndarray:
 def joint_speed(joints: Any, fps: float = 30.0) -> np.ndarray:
     """Speeds (T-1,J) of joints (T,J,3) in m/s."""
     j = _shaped(joints, "joints", "T,J,3", min_frames=2).double()
-    return ((j[1:] - j[:-1]).norm(dim=-1) * _positive(fps, "fps")).numpy()
+    return ((j[1:] - j[:-1]).norm(dim=-1) * _number(fps, "fps")).numpy()
 
 
 def joint_jerk(joints: Any, fps: float = 30.0) -> np.ndarray:
     """Jerk magnitudes (T-3,J) in m/s^3: third finite differences of joints (T,J,3)."""
     j = _shaped(joints, "joints", "T,J,3", min_frames=4).double()
     d3 = j[3:] - 3 * j[2:-1] + 3 * j[1:-2] - j[:-3]
-    return (d3.norm(dim=-1) * _positive(fps, "fps") ** 3).numpy()
+    return (d3.norm(dim=-1) * _number(fps, "fps") ** 3).numpy()
 
 
 def joint_limit_violation(poses: Any) -> np.ndarray:
@@ -212,7 +205,7 @@ def distance_to_goal(wrist: Any, goal: Any) -> float:
 
 def goal_reached(wrist: Any, goal: Any, radius: float = WANDR_SUCCESS_RADIUS) -> bool:
     """WANDR's success: the wrist comes within `radius` m of the goal."""
-    return distance_to_goal(wrist, goal) <= _positive(radius, "radius")
+    return distance_to_goal(wrist, goal) <= _number(radius, "radius")
 
 
 def heel_vertex_ids() -> tuple[int, int]:
@@ -313,7 +306,7 @@ def grasp_metrics(vertices: Any, faces: Any, obj: Any, threshold: float = GRASP_
     per cell side along walls (None: its default)."""
     from graspkit.objects.penetration import REFINE, interpenetration
 
-    threshold = _finite(threshold, "threshold")
+    threshold = _number(threshold, "threshold", positive=False)
     d = grasp_contact_distance(vertices, obj)
     f = _t(faces)
     if f.is_floating_point() and not bool((f == f.round()).all()):    # .long() would truncate them silently
@@ -333,7 +326,7 @@ def contact_ratio(min_distances: Any, threshold: float = GRASP_CONTACT_THRESHOLD
         raise ValueError("min_distances: expected at least one grasp, got none")
     if not np.isfinite(d).all():
         raise ValueError("min_distances: contains NaN or Inf")
-    return float((d <= _finite(threshold, "threshold")).mean())
+    return float((d <= _number(threshold, "threshold", positive=False)).mean())
 
 
 def apd(samples: Any) -> float:
