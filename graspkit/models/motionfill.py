@@ -381,8 +381,8 @@ class MotionFillVAE(nn.Module):
             if trajectory == "predicted":      # detached: the local terms would pull TrajFill off the data
                 vel = traj_velocity(traj_hat).detach()
         if "local" in parts:
-            img, cond = self.image(batch["local"], batch["contacts"], vel)
-            target, _ = self.image(batch["local"], batch["contacts"], batch["vel"])
+            _, cond = self.image(batch["local"], batch["contacts"], vel)             # the condition: vel as chosen
+            target, _ = self.image(batch["local"], batch["contacts"], batch["vel"])   # the encoder sees the truth
             ch0, mu, logvar = self.local(target, cond)
             x, c = ch0[..., :-4], ch0[..., -4:]
             xt, ct = target[:, 0, :, :-4], target[:, 0, :, -4:]
