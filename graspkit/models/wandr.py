@@ -491,7 +491,10 @@ def generate(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal:
 
 def goal_schedule(goals: Tensor, t_goals: Sequence[int], frames: int) -> tuple[Tensor, Tensor]:
     """Several goals in a row (Sup. C.2, Fig. S.2): goal k is active from t_{k-1} + 1 to its frame t_k. Returns the goal
-    (frames+1, 3) and goal frame (frames+1,) per frame, for `rollout` (expand to (B, T, ...))."""
+    (frames+1, 3) and goal frame (frames+1,) per frame, for `rollout` (expand to (B, T, ...)).
+
+    At frame t_k the time left is 0, so that one frame's intention is zero (as after t_G in training); switching at
+    t_k instead moved the wrist's closest approach by at most 2 cm (docs/wandr.md)."""
     goals = torch.as_tensor(goals, dtype=torch.float32).reshape(-1, 3)
     if not bool(torch.isfinite(goals).all()):
         raise ValueError("goals: contains NaN or Inf (expected world positions in metres)")
