@@ -172,8 +172,9 @@ plt.show()
 # ### graspkit's addition: a penetration term
 #
 # Eq. 4–8 have no term that keeps the hand out of the object. $E_d$ pulls each hand vertex to the object point closest
-# to it *now*, and GNet's offsets are about 1.5 cm off per coordinate here, so the refinement pulls some hands into
-# the mug as it pulls others out (section 6: over all test grasps it lowers the penetration of only about half).
+# to it *now*, and GNet's offsets are about 1.4 cm off per coordinate here (1.5 cm on average over the test grasps),
+# so the refinement pulls some hands into the mug as it pulls others out (section 6: over all test grasps it lowers the
+# penetration of only about half).
 # graspkit therefore adds SAGA's collision term both ways, as GraspPose-Opt has it (lesson 05, Eq. 7):
 #
 # $$E_{pen} = \lambda_{pen}\sum_{x}\max(-S(x, O), 0) + \lambda^O_{pen}\sum_{o}\max(-S(o, V^h), 0)$$

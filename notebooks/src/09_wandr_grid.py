@@ -49,7 +49,7 @@ print("held-out start poses:", ", ".join(s.source for s in starts))
 # frames, kept at the epoch with the best *validation* score (other starts, goals off the grid: this grid chose
 # nothing), then one epoch each with 120- and 240-frame rollouts; with one loss term the paper does not have (it holds
 # still the feet that are planted in the data, `--contact-weight 1`). On the full grid it puts the wrist within 10 cm
-# in 88.0 % of the motions (the paper: 32 %), at 0.45–1.35 m in nearly all, at the floor in 87 %, at 1.8 m in about
+# in 87.9 % of the motions (the paper: 32 %), at 0.45–1.35 m in nearly all, at the floor in 87 %, at 1.8 m in about
 # half, and its feet skate in 5.0 % of the frame pairs (the paper's model: 16 %). That is one training run: the first
 # stage alone moves by tens of points with its seed (`docs/wandr.md`). Here two of the six starts with one sample each,
 # so expect a few points either way. `docs/wandr.md` has the full grid beside the paper's Tab. 1. The point of this
