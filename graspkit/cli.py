@@ -2,9 +2,11 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from graspkit import __version__
@@ -36,6 +38,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     from graspkit.demo import run_demo
 
     stages = tuple(s for s in args.stages.split(",") if s)
+    if not stages:
+        raise ValueError("--stages: expected one or more stage names separated by commas, got none")
     for path in run_demo(Path(args.out), model_path=args.model, stages=stages):
         print(f"wrote {path}")
     return 0
@@ -320,6 +324,29 @@ def check_out(path: Path, is_file: bool | None = None, flag: str = "--out") -> N
             if not os.access(p, os.W_OK | os.X_OK):
                 raise ValueError(f"{flag}: {p} is not writable")
             return
+
+
+def check_counts(args: argparse.Namespace, **least: int) -> None:
+    """ValueError naming the flag unless each parsed count args.<name> (when given) is at least `least[name]`."""
+    for name, low in least.items():
+        v = getattr(args, name, None)
+        if v is not None and v < low:
+            raise ValueError(f"--{name.replace('_', '-')}: expected an integer >= {low}, got {v}")
+
+
+def reports_errors(prog: str) -> Callable[[Callable[..., int]], Callable[..., int]]:
+    """Decorate a module's `main(argv)` so that a bad input (ValueError, OSError) ends as the graspkit command's do:
+    `<prog>: error: <message>` on stderr and exit status 2, no traceback."""
+    def wrap(main: Callable[..., int]) -> Callable[..., int]:
+        @functools.wraps(main)
+        def run(argv: list[str] | None = None) -> int:
+            try:
+                return int(main(argv) or 0)
+            except (ValueError, OSError) as e:
+                print(f"{prog}: error: {e}", file=sys.stderr)
+                return 2
+        return run
+    return wrap
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -24,6 +24,7 @@ import torch
 from scipy.spatial import cKDTree
 from torch import Tensor
 
+from graspkit.cli import check_counts, reports_errors
 from graspkit.models.gnet import pose_rotmats
 from graspkit.models.mnet import MNet, MNetWindows, predict_horizon
 from graspkit.rotations import rotation_about_z
@@ -719,6 +720,7 @@ def _gnet_goals(gnet, clips: list, seed: int) -> list:
             for c in clips]
 
 
+@reports_errors("python -m graspkit.eval_goal")
 def main(argv: list[str] | None = None) -> int:
     """`python -m graspkit.eval_goal [--data DIR ...] [--checkpoints DIR] [--out FILE] [--n-grasps N] [--n-rollouts N]`."""
     import argparse
@@ -729,7 +731,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--data", type=Path, action="append", default=None, help="grasp/approach folders (repeatable)")
     p.add_argument("--checkpoints", type=Path, default=None, help="gnet.pt, gnet_smplx.pt, mnet[_variant].pt")
     p.add_argument("--out", type=Path, default=None, help="JSON (default <checkpoints>/goal_eval.json)")
-    p.add_argument("--n-grasps", type=int, default=60)
+    p.add_argument("--n-grasps", type=int, default=60, help="test grasps for Tab. 1 (0: every one)")
     p.add_argument("--n-rollouts", type=int, default=24)
     p.add_argument("--window-stride", type=int, default=5)
     p.add_argument("--seed", type=int, default=0)
@@ -742,6 +744,10 @@ def main(argv: list[str] | None = None) -> int:
     only.add_argument("--rollouts-only", action="store_true",
                       help="recompute only the MNet rollouts and GOAL's sliding rows in an existing JSON (SAGA's kept)")
     a = p.parse_args(argv)
+    check_counts(a, n_grasps=0, n_rollouts=1, window_stride=1, threads=1, seed=0)
+    missing = [str(d) for d in a.data or () if not d.is_dir()]
+    if missing:
+        raise FileNotFoundError(f"--data: no folder {', '.join(missing)} (expected folders of grasp_*/approach_*.npz)")
     torch.set_num_threads(a.threads)
     if a.tab1_only or a.saga_only or a.rollouts_only:          # update one part of an existing evaluation
         from graspkit.paths import DATA_STUBS

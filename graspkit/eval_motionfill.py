@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from graspkit.cli import check_counts, reports_errors
 from graspkit.data.motionfill_dataset import (MotionFillDataset, MotionFillStats, load_windows, make_windows,
                                               save_windows, split_clips)
 from graspkit.models.motionfill import MotionFillConfig, MotionFillVAE
@@ -67,8 +68,12 @@ def windows_source(kind: str, n: int, data: Path | None = None) -> tuple[Path, P
 
     if kind not in ("locomotion", "reach", "approach"):
         raise ValueError(f"kind: expected 'locomotion', 'reach' or 'approach', got {kind!r}")
+    if n < 1:
+        raise ValueError(f"n: expected a number of clips >= 1, got {n!r}")
     sub = ("grasps", "approach") if kind == "approach" else ("motion", kind)
     root = Path(data) if data else cache_dir().joinpath(*sub)
+    if not root.is_dir():
+        raise FileNotFoundError(f"data: no folder {root} (graspkit data make --kind {kind} --out {root})")
     files = sorted(root.glob(f"{kind}_*.npz"))[:n]
     if len(files) < n:
         raise FileNotFoundError(f"data: {root} holds {len(files)} {kind} clips, {n} wanted "
@@ -310,11 +315,12 @@ def add_motionfill_train_commands(train_sub) -> None:
 
 def _cmd_train_baseline(args: argparse.Namespace) -> int:
     """Train one Tab. 3 baseline and print the last epoch's figures."""
+    check_counts(args, clips=1)
     torch.set_num_threads(args.threads)
     t0 = time.perf_counter()
     out = args.out or baseline_path(args.model)
     _, hist = train_baseline(args.model, args.epochs, out, seed=args.seed, time_limit_s=args.time_limit, lr=args.lr,
-                             data=args.data, clips={"approach": args.clips} if args.clips else None)
+                             data=args.data, clips=None if args.clips is None else {"approach": args.clips})
     print(f"motionfill_baseline {args.model}: {len(hist)} epochs in {time.perf_counter() - t0:.0f} s -> {out}")
     print("  " + ", ".join(f"{k} {v:.3f}" for k, v in hist[-1].items() if k != "epoch"))
     return 0
@@ -322,6 +328,7 @@ def _cmd_train_baseline(args: argparse.Namespace) -> int:
 
 def _cmd_train(args: argparse.Namespace) -> int:
     """Run one stage and print the last epoch's figures."""
+    check_counts(args, clips=1)
     torch.set_num_threads(args.threads)
     t0 = time.perf_counter()
     if args.stage == "smooth_ae":
@@ -338,7 +345,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
         return 0
     kind = STAGES[args.stage][0]
     _, hist = train_stage(args.stage, args.epochs, args.out, init=args.init, seed=args.seed,
-                          time_limit_s=args.time_limit, clips={kind: args.clips} if args.clips else None, lr=args.lr,
+                          time_limit_s=args.time_limit, lr=args.lr,
+                          clips=None if args.clips is None else {kind: args.clips},
                           data=args.data, reduction=args.reduction, local_arch=args.local_arch)
     last = hist[-1]
     print(f"motionfill {args.stage}: {len(hist)} epochs in {time.perf_counter() - t0:.0f} s -> {args.out}")
@@ -624,6 +632,7 @@ def update_json(path: Path, **sections: Any) -> dict[str, Any]:
     return doc
 
 
+@reports_errors("python -m graspkit.eval_motionfill")
 def main(argv: list[str] | None = None) -> int:
     """`python -m graspkit.eval_motionfill tab3`: Tab. 3 on the test-object windows, written into
     motionfill_eval.json's rows; `... graspmotion`: GraspMotion-Opt on the first two (--per-object) approach clips
@@ -643,6 +652,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--per-object", type=int, default=2, help="graspmotion: accepted clips per test object")
     p.add_argument("--threads", type=int, default=1)
     args = p.parse_args(argv)
+    check_counts(args, clips=1, per_object=1, threads=1, seed=0)
     torch.set_num_threads(args.threads)
     data = args.data or cache_dir() / "grasps" / "approach"
     if args.part == "tab3":

@@ -36,6 +36,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from graspkit.cli import check_counts, reports_errors
 from graspkit.optim.grasppose import ARM_JOINTS, GraspPoseConfig
 from graspkit.paths import DATA_STUBS, write_atomic
 
@@ -380,7 +381,16 @@ def rows_from_objects(per_object: dict[str, dict[str, dict[str, float]]]) -> dic
 
 def finish_partial(partial: str | Path, out: str | Path = RESULTS_PATH) -> dict[str, Any]:
     """The result of an interrupted `evaluate` from its .partial.json (config narrowed to the objects done)."""
-    part = json.loads(Path(partial).read_text())
+    partial = Path(partial)
+    if not partial.is_file():
+        raise FileNotFoundError(f"partial: no file {partial} (expected the .partial.json an interrupted run leaves)")
+    try:
+        part = json.loads(partial.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ValueError(f"partial: {partial} is not JSON ({e})") from None
+    if not isinstance(part, dict) or not {"config", "per_object"} <= set(part):
+        raise ValueError(f"partial: {partial} has no 'config' and 'per_object' (expected an interrupted run's "
+                         ".partial.json)")
     cfg = dict(part["config"], objects=list(part["per_object"]))
     result = {"config": cfg, "seconds": part.get("seconds", float("nan")), "rows": rows_from_objects(part["per_object"]),
               "per_object": part["per_object"], "interrupted": True}
@@ -442,6 +452,7 @@ def table2(result: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+@reports_errors("python -m graspkit.eval_saga")
 def main(argv: list[str] | None = None) -> int:
     """Command line: run the evaluation and print both tables."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -470,12 +481,17 @@ def main(argv: list[str] | None = None) -> int:
                     help="only the GrabNet-SMPLX row (no optimisation; the same draws as the full run)")
     ap.add_argument("--finish", type=Path, default=None, help="only turn this .partial.json into --out and print it")
     args = ap.parse_args(argv)
+    check_counts(args, placements=1, samples=1, gt=1, refine=1)
+    if any(s < 0 for s in args.steps):
+        raise ValueError(f"--steps: expected three step counts >= 0, got {args.steps}")
     if args.finish is not None:
         res = finish_partial(args.finish, args.out)
         print(table1(res), table2(res), sep="\n\n")
         return 0
     if args.data is None:
         ap.error("--data: the folder of grasp_*.npz is required (unless --finish)")
+    if not args.data.is_dir():
+        raise FileNotFoundError(f"--data: no folder {args.data} (graspkit data make --kind grasp --out {args.data})")
     from graspkit.optim.grasppose import expand_free_joints
 
     cfg = EvalConfig(placements=args.placements, samples=args.samples, gt_grasps=args.gt, steps=tuple(args.steps),

@@ -652,11 +652,15 @@ def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = F
     clips_folder, also `evaluate_clips` on the test-split reaching clips there (reach/, and reach_far/ if present);
     floor: `rollout`'s floor constraint (m; None: off, the paper's rollout)."""
     import time
+    from pathlib import Path
 
     from graspkit.body import BodyModel
     from graspkit.models.wandr import load_wandr
     from graspkit.paths import default_model_path
 
+    if clips_folder is not None and not any(any(Path(clips_folder, s).glob("*.npz")) for s in ("reach", "reach_far")):
+        raise FileNotFoundError(f"clips_folder: no reaching clips in {clips_folder}/reach or reach_far "
+                                f"(graspkit data make --kind reach --out {clips_folder}/reach)")
     torch.set_num_threads(threads)
     bm = BodyModel.from_file(default_model_path())
     model = load_wandr(checkpoint)
@@ -677,8 +681,6 @@ def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = F
     if planner:
         out["planner"] = summary(evaluate_planner(starts, bm))
     if clips_folder is not None:
-        from pathlib import Path
-
         from graspkit.data.wandr_dataset import cached_clips, split_clips
 
         out["clips"] = {}

@@ -140,7 +140,26 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     if not isinstance(state, dict):
         raise ValueError(f"checkpoint {path}: expected a graspkit checkpoint (a dict of weights and settings), "
                          f"got a {type(state).__name__}")
+    weights = state.get("model")
+    if isinstance(weights, dict):   # a diverged run's weights would load silently and make NaN bodies
+        bad = [k for k, v in weights.items() if torch.is_tensor(v) and v.is_floating_point()
+               and not torch.isfinite(v).all()]
+        if bad:
+            raise ValueError(f"checkpoint {path}: {len(bad)} weight tensors hold NaN or infinite values "
+                             f"({', '.join(bad[:3])}{', ...' if len(bad) > 3 else ''}; a diverged training run?)")
     return state
+
+
+def load_into(model: torch.nn.Module, weights: dict[str, Any], path: str | Path, what: str) -> torch.nn.Module:
+    """`model` with `weights` (a state dict read from checkpoint `path`) loaded; a ValueError naming the file and
+    `what` it should hold when the weights are another model's or another size's."""
+    try:
+        model.load_state_dict(weights)
+    except RuntimeError as e:
+        lines = [s.strip() for s in str(e).splitlines() if s.strip()]
+        detail = lines[1] if len(lines) > 1 else lines[0]      # the first only says "Error(s) in loading state_dict"
+        raise ValueError(f"checkpoint {path}: not {what} of this configuration ({detail})") from None
+    return model
 
 
 def init_distributed() -> bool:

@@ -51,10 +51,23 @@ def _rot(aa: np.ndarray) -> np.ndarray:
     return axis_angle_to_matrix(torch.as_tensor(np.asarray(aa, np.float64))).numpy()
 
 
+def check_arrays(a: dict[str, np.ndarray], keys: tuple[str, ...], path: Path) -> None:
+    """ValueError naming `path` when one of `keys` is missing from a file's arrays `a` or holds a NaN or an inf (a
+    model trained on it would learn NaN weights without any other sign)."""
+    for k in keys:
+        if k not in a:
+            raise ValueError(f"{path}: missing key {k!r} (expected a file of `graspkit data make`)")
+        v = a[k]
+        if v.dtype.kind in "fc" and not np.isfinite(v).all():
+            raise ValueError(f"{path}: key {k!r} holds {int((~np.isfinite(v)).sum())} NaN or infinite values")
+
+
 class _Files(Dataset):
-    """Common part: the file list, the object names and their indices in graspkit.objects.list_objects()."""
+    """Common part: the file list, the object names and their indices in graspkit.objects.list_objects(); every
+    file's `keys` are checked present and finite."""
 
     kind = "grasp"
+    keys: tuple[str, ...] = ()
 
     def __init__(self, root: str | os.PathLike, split: str | None = "train", accepted_only: bool = True) -> None:
         from graspkit.objects.catalogue import list_objects
@@ -64,8 +77,13 @@ class _Files(Dataset):
             raise ValueError(f"root: no {self.kind} files of split {split!r} in {root}")
         self.split = split
         self.arrays = [read_arrays(p) for p in self.files]
+        for p, a in zip(self.files, self.arrays):
+            check_arrays(a, self.keys, p)
         self.object_names = [str(a["obj_name"]) for a in self.arrays]
         names = list_objects()
+        for p, n in zip(self.files, self.object_names):
+            if n not in names:
+                raise ValueError(f"{p}: key 'obj_name' is {n!r}, not an object of the catalogue ({', '.join(names)})")
         self.object_ids = torch.tensor([names.index(n) for n in self.object_names])
 
     def __len__(self) -> int:
@@ -78,6 +96,9 @@ class WholeGraspDataset(_Files):
     Keys: markers (143,3), marker_contacts (143,) C_M, object_points (2048,3), object_normals (2048,3),
     object_contacts (2048,) C_O, object_height () t_O, betas (10,), object_id () (index in list_objects()).
     Positions are world-oriented (z up) minus the object translation; the object is rotated by its pose."""
+
+    keys = ("object.params.transl", "object.params.global_orient", "saga.markers", "contact.markers", "object.points",
+            "object.normals", "contact.object", "object.height", "body.betas")
 
     def __init__(self, root: str | os.PathLike, split: str | None = "train", accepted_only: bool = True) -> None:
         super().__init__(root, split, accepted_only)
@@ -108,6 +129,10 @@ class GNetDataset(_Files):
     verts (400,3) sampled vertices, offsets (400,3) vertex -> closest object point, hand_offsets (99,3) (the right-hand
     rows of offsets), head_dir (3,) q, object_transl (3,), object_orient (3,) axis-angle, bps_object (1024,),
     bps_hand (1024,) the hand's BPS with the same basis, object_height (), object_id ()."""
+
+    keys = ("body.params.fullpose", "body.params.transl", "body.betas", "goal.vertices", "goal.offsets",
+            "goal.hand_offsets", "goal.head_direction", "object.params.transl", "object.params.global_orient",
+            "goal.bps_object", "goal.bps_hand", "object.height", "goal.right_hand", "goal.vertex_ids")
 
     def __init__(self, root: str | os.PathLike, split: str | None = "train", accepted_only: bool = True) -> None:
         super().__init__(root, split, accepted_only)
@@ -142,6 +167,9 @@ class ApproachDataset(_Files):
     vertex minus current), markers (T,79,3) (SAGA's stage-2 markers)."""
 
     kind = "approach"
+    keys = ("body.params.fullpose", "body.params.transl", "body.betas", "grasp.goal_frame", "contact.feet",
+            "object.params.transl", "object.params.global_orient", "goal.bps_object", "goal.bps_hand",
+            "goal.vertex_ids", "goal.vertices", "goal.right_hand")
 
     def __init__(self, root: str | os.PathLike, split: str | None = "train", window: int | None = SAGA_CLIP_FRAMES,
                  bm=None, accepted_only: bool = True) -> None:
@@ -149,12 +177,14 @@ class ApproachDataset(_Files):
         if window is not None and window < 2:
             raise ValueError(f"window: expected None or >= 2 frames, got {window}")
         self.window = window
-        self.items = [self._item(a, bm) for a in self.arrays]
+        self.items = [self._item(a, bm, p) for p, a in zip(self.files, self.arrays)]
 
-    def _item(self, a: dict[str, np.ndarray], bm) -> dict[str, torch.Tensor]:
-        """One clip's tensors (windowed and padded as configured)."""
+    def _item(self, a: dict[str, np.ndarray], bm, path: Path) -> dict[str, torch.Tensor]:
+        """One clip's tensors (windowed and padded as configured) from file `path`'s arrays `a`."""
         pose = np.asarray(a["body.params.fullpose"], np.float32).reshape(-1, 55, 3)
         T, g = len(pose), int(a["grasp.goal_frame"])
+        if not 0 <= g < T:
+            raise ValueError(f"{path}: key 'grasp.goal_frame' is {g}, expected a frame in [0, {T - 1}]")
         raw = np.arange(T) if self.window is None else np.arange(T - self.window, T)
         valid, sel, first = raw >= 0, np.maximum(raw, 0), int(raw[0])
         item = {"fullpose": torch.as_tensor(pose[sel]), "transl": torch.as_tensor(a["body.params.transl"][sel]),

@@ -329,9 +329,9 @@ def load_gnet(path: str | Path) -> GNet:
     if not isinstance(config, dict) or not set(config) <= known:
         odd = sorted(set(config) - known) if isinstance(config, dict) else type(config).__name__
         raise ValueError(f"{path}: not a gnet checkpoint (config entries {odd} are not GNetConfig's)")
-    net = GNet(GNetConfig(**config))
-    net.load_state_dict(state)
-    return net.eval()
+    from graspkit.train import load_into
+
+    return load_into(GNet(GNetConfig(**config)), state, path, "a GNet checkpoint").eval()
 
 
 def train_gnet(train: dict[str, Tensor], val: dict[str, Tensor] | None, body: SparseBody,

@@ -26,7 +26,7 @@ decoder), so that it trains on two CPU cores in minutes and ships as a ~1.3 MB c
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 import torch
@@ -550,8 +550,11 @@ def train_mnet(train: MNetWindows, val: MNetWindows | None, cfg: MNetConfig | No
 def load_mnet(path) -> MNet:
     """An MNet from a shipped (or training) checkpoint, in float32 and eval mode."""
     from graspkit.models.gnet import load_weights
+    from graspkit.train import load_into
 
     state, config = load_weights(path, "mnet")
-    net = MNet(MNetConfig(**config))
-    net.load_state_dict(state)
-    return net.eval()
+    known = {f.name for f in fields(MNetConfig)}
+    if not isinstance(config, dict) or not set(config) <= known:
+        odd = sorted(set(config) - known) if isinstance(config, dict) else type(config).__name__
+        raise ValueError(f"{path}: not an mnet checkpoint (config entries {odd} are not MNetConfig's)")
+    return load_into(MNet(MNetConfig(**config)), state, path, "an MNet checkpoint").eval()

@@ -174,7 +174,15 @@ def load_smooth_ae(path: str | Path = SMOOTH_AE_PATH) -> MarkerDiffAE:
     if not Path(path).is_file():
         raise FileNotFoundError(f"path: no marker-difference autoencoder at {path} (graspkit train motionfill "
                                 "--stage smooth_ae)")
-    return MarkerDiffAE.from_state(load_checkpoint(path))
+    state = load_checkpoint(path)
+    if not isinstance(state.get("sizes"), (list, tuple)) or not isinstance(state.get("model"), dict):
+        raise ValueError(f"checkpoint {path}: not a marker-difference autoencoder (no 'sizes' / 'model'; expected "
+                         "what train_smooth_ae writes)")
+    try:
+        return MarkerDiffAE.from_state(state)
+    except (RuntimeError, TypeError, ValueError) as e:
+        raise ValueError(f"checkpoint {path}: not a marker-difference autoencoder of these sizes "
+                         f"({str(e).splitlines()[0]})") from None
 
 
 def in_box(x: Tensor, lo: Tensor, hi: Tensor, margin: float) -> Tensor:

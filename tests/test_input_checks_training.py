@@ -1,0 +1,147 @@
+"""Bad training data, checkpoints and command-line counts give a clear error naming the file, key or flag (exit 2 on
+the command line), and nothing is trained or written from them."""
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from graspkit.data.grasp_datasets import ApproachDataset, GNetDataset, WholeGraspDataset
+from graspkit.train import load_checkpoint
+
+STUBS = Path(__file__).resolve().parents[1] / "data_stubs"
+CK = STUBS / "checkpoints"
+
+
+def _copy_with(tmp_path: Path, kind: str, first: int = 0, **replace) -> Path:
+    """A folder holding two shipped `kind` files from number `first` on, the first one's arrays updated with
+    `replace` (a value None drops the key)."""
+    src = sorted((STUBS / ("grasps" if kind == "grasp" else "approach")).glob(f"{kind}_*.npz"))[first:first + 2]
+    for p in src:
+        shutil.copy(p, tmp_path / p.name)
+    with np.load(src[0], allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    for k, v in replace.items():
+        if v is None:
+            arrays.pop(k)
+        else:
+            arrays[k] = v
+    np.savez(tmp_path / src[0].name, **arrays)
+    return tmp_path
+
+
+def _nan_at(kind: str, key: str) -> np.ndarray:
+    """The first shipped `kind` file's array `key` with one NaN in it."""
+    p = sorted((STUBS / ("grasps" if kind == "grasp" else "approach")).glob(f"{kind}_*.npz"))[0]
+    with np.load(p, allow_pickle=False) as z:
+        a = z[key].astype(np.float32).copy()
+    a.reshape(-1)[a.size // 2] = np.nan
+    return a
+
+
+# ------------------------------------------------------------------------------------------------ datasets
+@pytest.mark.parametrize("dataset, kind, key", [(WholeGraspDataset, "grasp", "saga.markers"),
+                                                (WholeGraspDataset, "grasp", "contact.object"),
+                                                (GNetDataset, "grasp", "goal.bps_object"),
+                                                (ApproachDataset, "approach", "body.params.fullpose")])
+def test_a_nan_in_the_data_is_refused_naming_file_and_key(tmp_path, dataset, kind, key):
+    root = _copy_with(tmp_path, kind, **{key: _nan_at(kind, key)})
+    with pytest.raises(ValueError, match=rf"{kind}_000000\.npz: key '{key}' holds 1 NaN or infinite values"):
+        dataset(root, split=None)
+    _copy_with(tmp_path, kind)                                              # the same files without the NaN load
+    assert len(dataset(root, split=None)) == 2
+
+
+@pytest.mark.parametrize("dataset, kind, key", [(WholeGraspDataset, "grasp", "saga.markers"),
+                                                (GNetDataset, "grasp", "goal.vertex_ids"),
+                                                (ApproachDataset, "approach", "grasp.goal_frame")])
+def test_a_missing_key_is_named_with_its_file(tmp_path, dataset, kind, key):
+    root = _copy_with(tmp_path, kind, **{key: None})
+    with pytest.raises(ValueError, match=rf"{kind}_000000\.npz: missing key '{key}'"):
+        dataset(root, split=None)
+
+
+def test_an_unknown_object_and_a_goal_frame_outside_the_clip_are_named(tmp_path):
+    (tmp_path / "a").mkdir()
+    root = _copy_with(tmp_path / "a", "grasp", obj_name=np.array("spaceship"))
+    with pytest.raises(ValueError, match=r"grasp_000000\.npz: key 'obj_name' is 'spaceship', not an object"):
+        WholeGraspDataset(root, split=None)
+    (tmp_path / "b").mkdir()
+    root = _copy_with(tmp_path / "b", "approach", **{"grasp.goal_frame": np.array(-3)})
+    with pytest.raises(ValueError, match=r"approach_000000\.npz: key 'grasp.goal_frame' is -3, expected a frame"):
+        ApproachDataset(root, split=None)
+
+
+def test_training_on_nan_data_exits_2_and_writes_no_weights(tmp_path, capsys):
+    from graspkit.cli import main
+
+    root = _copy_with(tmp_path, "grasp", 8, **{"saga.markers": _nan_at("grasp", "saga.markers")})   # pitcher: train
+    out = tmp_path / "out" / "wholegrasp.pt"
+    code = main(["train", "wholegrasp", "--data", str(root), "--epochs", "1", "--out", str(out)])
+    assert code == 2 and not out.exists()
+    assert "grasp_000008.npz: key 'saga.markers' holds 1 NaN" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------------------------ checkpoints
+def test_a_checkpoint_with_nan_weights_is_refused(tmp_path):
+    state = torch.load(CK / "gnet.pt", weights_only=True)
+    name = next(k for k, v in state["model"].items() if v.is_floating_point())
+    state["model"][name] = state["model"][name].clone()
+    state["model"][name].view(-1)[0] = float("inf")
+    torch.save(state, tmp_path / "diverged.pt")
+    with pytest.raises(ValueError, match=rf"diverged\.pt: 1 weight tensors hold NaN or infinite values \({name}"):
+        load_checkpoint(tmp_path / "diverged.pt")
+
+
+def test_each_loader_names_the_file_of_weights_of_another_size(tmp_path):
+    from graspkit.models.gnet import load_gnet
+    from graspkit.models.mnet import load_mnet
+    from graspkit.models.wandr import load_wandr
+    from graspkit.optim.graspmotion import load_smooth_ae
+
+    for name, load in (("gnet", load_gnet), ("mnet", load_mnet), ("wandr", load_wandr),
+                       ("motionfill_smooth_ae", load_smooth_ae)):
+        state = torch.load(CK / f"{name}.pt", weights_only=True)
+        key = next(k for k, v in state["model"].items() if v.ndim >= 1 and v.is_floating_point())
+        state["model"][key] = state["model"][key][:-1].clone()               # one row short
+        torch.save(state, tmp_path / f"short_{name}.pt")
+        with pytest.raises(ValueError, match=rf"short_{name}\.pt: not .*(size|shape)"):
+            load(tmp_path / f"short_{name}.pt")
+        load(CK / f"{name}.pt")                                               # the shipped file still loads
+    with pytest.raises(ValueError, match=r"mnet\.pt: not a marker-difference autoencoder \(no 'sizes'"):
+        load_smooth_ae(CK / "mnet.pt")
+
+
+# ------------------------------------------------------------------------------------------------ command lines
+@pytest.mark.parametrize("module, argv, message", [
+    ("eval_saga", ["--finish", "{tmp}/none.partial.json"], "partial: no file"),
+    ("eval_saga", ["--finish", str(STUBS.parent / "README.md")], "README.md is not JSON"),
+    ("eval_saga", ["--data", "{tmp}/nosuchdir"], "--data: no folder"),
+    ("eval_saga", ["--data", "{tmp}", "--placements", "0"], "--placements: expected an integer >= 1, got 0"),
+    ("eval_goal", ["--n-grasps", "-1"], "--n-grasps: expected an integer >= 0, got -1"),
+    ("eval_goal", ["--tab1-only", "--out", "{tmp}/none.json"], "--out: no evaluation at"),
+    ("eval_motionfill", ["tab3", "--clips", "-3"], "--clips: expected an integer >= 1, got -3"),
+    ("eval_motionfill", ["tab3", "--data", "{tmp}/nosuchdir"], "data: no folder"),
+])
+def test_module_commands_report_bad_input_without_a_traceback(tmp_path, capsys, module, argv, message):
+    import importlib
+
+    main = importlib.import_module(f"graspkit.{module}").main
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"python -m graspkit.{module}: error: ") and message in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["train", "motionfill", "--stage", "local", "--clips", "-2"], "--clips: expected an integer >= 1, got -2"),
+    (["train", "motionfill_baseline", "--model", "cnn_ae", "--clips", "0"], "--clips: expected an integer >= 1"),
+    (["demo", "--stages", ",", "--out", "{tmp}/demo"], "--stages: expected one or more stage names"),
+    (["eval", "wandr", "--checkpoint", str(CK / "wandr.pt"), "--clips", "{tmp}/nosuchdir"], "no reaching clips in"),
+])
+def test_graspkit_counts_and_folders_are_checked_before_work(tmp_path, capsys, argv, message):
+    from graspkit.cli import main
+
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "demo").exists()
