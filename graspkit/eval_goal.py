@@ -18,6 +18,7 @@ import math
 from dataclasses import asdict, dataclass
 from functools import lru_cache
 from itertools import zip_longest
+from pathlib import Path
 
 import numpy as np
 import torch

@@ -921,7 +921,7 @@ class GoalReacher:
         import matplotlib.pyplot as plt
 
         if self.joints is None:
-            readout = self.run()
+            self.run()
         J, g = self.joints.numpy(), self.goal.numpy()
         fig, (ax, bx) = plt.subplots(1, 2, figsize=(8.5, 3.4), dpi=72)
         ax.plot(J[:, 0, 0], J[:, 0, 1], color="#6a3d9a", label="pelvis")

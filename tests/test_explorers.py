@@ -1,7 +1,6 @@
 """The body explorer's callback logic (the ipywidgets layer only wires sliders to it)."""
 import numpy as np
 import pytest
-import torch
 
 from graspkit.body import BodyModel
 from graspkit.body.skeleton import JOINT_INDEX

@@ -2,7 +2,6 @@
 and MNet's approach into it, checked with trimesh; the `graspkit goal` and `graspkit wandr` commands' errors."""
 import numpy as np
 import pytest
-import torch
 import trimesh
 
 from graspkit.goal import default_start, synthesize

@@ -1,5 +1,4 @@
 """`graspkit data make --kind grasp`: files, resumability, atomic writes, the same bytes with two workers."""
-import os
 import subprocess
 import sys
 

@@ -8,7 +8,6 @@ import torch
 import trimesh
 from scipy.spatial import cKDTree
 
-from graspkit.body import BodyModel
 from graspkit.body.markers import foot_vertices, palm_vertices
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.metrics import joint_limit_violation

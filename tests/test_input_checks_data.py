@@ -148,6 +148,19 @@ def test_file_with_zero_frame_rate_names_the_file(clip, tmp_path):
         load_motion(tmp_path / "rate0.npz")
 
 
+@pytest.mark.parametrize("change, message", [
+    ({"poses": np.zeros((0, 165), np.float32), "trans": np.zeros((0, 3), np.float32)}, "key 'poses' has 0 frames"),
+    ({"goal": np.array([0.3, np.nan, 1.0], np.float32)}, "key 'goal' contains NaN"),
+])
+def test_a_file_with_no_frames_or_a_nan_goal_names_the_file(tmp_path, change, message):
+    m = load_motion(CLIP)                                    # a reaching clip: it has a goal
+    with np.load(save_motion(tmp_path / "m.npz", m)) as z:
+        np.savez(tmp_path / "odd.npz", **{**dict(z), **change})
+    with pytest.raises(SequenceFileError, match=rf"odd\.npz: {message}"):
+        load_motion(tmp_path / "odd.npz")
+    load_motion(tmp_path / "m.npz")                          # the file it was made from loads
+
+
 def test_betas_count_matches_num_betas(clip, tmp_path):
     few = save_motion(tmp_path / "b5.npz", Motion(clip.poses, clip.trans, np.arange(1, 6)), amass_keys=True)
     many = save_motion(tmp_path / "b16.npz", Motion(clip.poses, clip.trans, np.arange(1, 17)), amass_keys=True)

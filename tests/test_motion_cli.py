@@ -36,6 +36,12 @@ def test_a_folder_takes_only_files_of_its_own_run(tmp_path):
     assert (tmp_path / "reach_000001.npz").exists()
     with pytest.raises(ValueError, match="nope.npz: no such body-model file"):      # before any worker starts
         make_dataset("reach", 3, 7, tmp_path, workers=2, progress=False, model=str(tmp_path / "nope.npz"))
+    record = tmp_path / "graspkit_make_reach.json"
+    for damaged, message in (('{"kind": "re', "is damaged"), ("[1, 2]", "holds a list")):
+        record.write_text(damaged)
+        with pytest.raises(ValueError, match=rf"--out: .*graspkit_make_reach\.json {message}"):
+            make_dataset("reach", 3, 7, tmp_path, workers=1, progress=False)
+        assert not (tmp_path / "reach_000002.npz").exists()
 
 
 def test_cli_with_two_workers_writes_the_same_bytes(tmp_path):

@@ -293,7 +293,6 @@ def test_validation_goals_lie_on_the_grids_cylinder_but_off_its_points():
 def test_select_val_keeps_the_best_epochs_weights_and_resumes(bm, tmp_path, monkeypatch):
     # the selection logic with a scripted validation score: epoch 2 is best; a second call (a resumed run) trains
     # nothing and gives the same weights
-    from graspkit.data import load_motion
     from graspkit.data import wandr_dataset as W
     from graspkit.models import wandr as M
     from graspkit.paths import DATA_STUBS

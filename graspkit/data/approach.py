@@ -151,7 +151,6 @@ def _approach_arm(R: np.ndarray, Rg: np.ndarray, trans: np.ndarray, g: int, fps:
     from graspkit.data.ik import normalize, two_bone_ik
     from graspkit.data.posing import forward_kinematics
 
-    T = len(R)
     t0 = max(0, g - int(round((APPROACH_S + ARM_BLEND_S) * fps)))
     win = np.arange(t0, g + 1)
     tt = (win - g) / fps                                                     # <= 0

@@ -38,7 +38,13 @@ def claim_folder(out: Path, kind: str, settings: dict) -> None:
         settings["model"] = None if m == Path(default_model_path()).resolve() else str(m)
     want = {"kind": kind, **settings}
     if record.is_file():
-        have = json.loads(record.read_text())
+        try:
+            have = json.loads(record.read_text())
+        except (UnicodeDecodeError, json.JSONDecodeError) as e:
+            raise ValueError(f"--out: {record} is damaged ({e}); remove it only if the folder's files were made "
+                             "with the settings given now") from None
+        if not isinstance(have, dict):
+            raise ValueError(f"--out: {record} holds a {type(have).__name__}, expected the settings of a run")
         if have != want:
             diff = "; ".join(f"{k}: {have.get(k)!r} there, {want.get(k)!r} now"
                              for k in sorted(set(have) | set(want)) if have.get(k) != want.get(k))

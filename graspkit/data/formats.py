@@ -175,6 +175,8 @@ def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
         raise SequenceFileError(f"{path}: expected an .npz archive of arrays, got a single array")
     with npz:
         poses = to_smplx_poses(np.asarray(_get(npz, "poses", path), np.float64), path)
+        if len(poses) == 0:
+            raise SequenceFileError(f"{path}: key 'poses' has 0 frames, expected at least one")
         trans = np.asarray(_get(npz, "trans", path), np.float64)
         if trans.shape != (len(poses), 3):
             raise SequenceFileError(f"{path}: key 'trans' has shape {trans.shape}, expected ({len(poses)}, 3)")
@@ -197,8 +199,8 @@ def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
                 raise SequenceFileError(f"{path}: key 'goal' has shape {goal.shape}, expected (3,)")
             if hand not in HANDS:
                 raise SequenceFileError(f"{path}: key 'hand' is {hand!r}, expected one of {HANDS}")
-    for key, a in (("poses", poses), ("trans", trans), ("betas", betas)):
-        if not np.isfinite(a).all():
+    for key, a in (("poses", poses), ("trans", trans), ("betas", betas), ("goal", goal)):
+        if a is not None and not np.isfinite(a).all():
             raise SequenceFileError(f"{path}: key {key!r} contains NaN or Inf")
     if contacts is not None and contacts.shape != (len(poses), 4):
         raise SequenceFileError(f"{path}: key 'contacts' has shape {contacts.shape}, expected ({len(poses)}, 4)")

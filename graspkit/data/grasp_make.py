@@ -35,7 +35,6 @@ from graspkit.objects.contact import OBJECT_CONTACT_THRESHOLD, marker_contact
 from graspkit.objects.distance import nearest_neighbours, point_mesh_distance
 from graspkit.objects.placement import ObjectPose, apply_pose
 from graspkit.paths import pool_results
-from graspkit.rotations import axis_angle_to_matrix
 
 KINDS = ("grasp", "approach")
 KIND_IDS = {"grasp": 11, "approach": 12}

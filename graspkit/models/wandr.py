@@ -40,8 +40,7 @@ import torch
 from torch import Tensor, nn
 
 from graspkit import intention as I
-from graspkit.data.wandr_dataset import (FOOT_JOINTS, GOAL_FRAMES, ClipSet, WindowDataset, lowest_foot, make_batch,
-                                         window_condition)
+from graspkit.data.wandr_dataset import FOOT_JOINTS, GOAL_FRAMES, ClipSet, WindowDataset, lowest_foot, make_batch
 from graspkit.models.blocks import GaussianHead, kl_standard_normal
 from graspkit.train import TrainConfig, fit, load_checkpoint, load_into, save_checkpoint
 

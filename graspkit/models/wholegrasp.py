@@ -47,7 +47,6 @@ from typing import Any
 
 import torch
 from torch import Tensor, nn
-from torch.nn import functional as F
 
 from graspkit.objects.distance import nearest_neighbours
 from graspkit.objects.sdf import signed_distance_to_points
