@@ -35,12 +35,17 @@ def _cmd_body_info(args: argparse.Namespace) -> int:
 
 def _cmd_demo(args: argparse.Namespace) -> int:
     """Run the main job: everything the workbook can show so far, written to --out."""
+    from graspkit.body.model import ModelFileError
     from graspkit.demo import run_demo
 
     stages = tuple(s for s in args.stages.split(",") if s)
     if not stages:
         raise ValueError("--stages: expected one or more stage names separated by commas, got none")
-    for path in run_demo(Path(args.out), model_path=args.model, stages=stages):
+    try:
+        written = run_demo(Path(args.out), model_path=args.model, stages=stages)
+    except ModelFileError as e:
+        raise ValueError(f"--model: {e}") from None
+    for path in written:
         print(f"wrote {path}")
     return 0
 
@@ -168,7 +173,8 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
     if frames < 1:
         raise ValueError(f"--seconds: expected at least one frame (1/30 s), got {args.seconds}")
     if not args.checkpoint.is_file():
-        raise FileNotFoundError(f"checkpoint: {args.checkpoint} is missing (see docs/wandr.md)")
+        what = "is a folder, expected a checkpoint file" if args.checkpoint.is_dir() else "is missing"
+        raise FileNotFoundError(f"--checkpoint: {args.checkpoint} {what} (see docs/wandr.md)")
     goal = torch.tensor(args.goal, dtype=torch.float32)
     for note in wandr_range_notes(args.goal, frames / 30.0):
         print(f"graspkit: note: {note}", file=sys.stderr)
@@ -358,6 +364,11 @@ def main(argv: list[str] | None = None) -> int:
         for flag in ("threads", "epochs", "batch_size", "workers", "n", "chunk"):
             if getattr(args, flag, None) is not None and getattr(args, flag) < 1:
                 raise ValueError(f"--{flag.replace('_', '-')}: expected an integer >= 1, got {getattr(args, flag)}")
+        data = getattr(args, "data", None)           # every command's --data names a folder (or several)
+        for d in data if isinstance(data, list) else [] if data is None else [data]:
+            if not Path(d).is_dir():
+                what = "is a file, expected a folder" if Path(d).exists() else "no such folder"
+                raise FileNotFoundError(f"--data: {d}: {what} (make the data with `graspkit data make`, docs/data.md)")
         if getattr(args, "out", None) is not None:
             check_out(args.out, getattr(args, "out_is_file", None))
         return int(args.func(args) or 0)

@@ -227,8 +227,8 @@ def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, .
     bad = [s for s in stages if s not in STAGES]
     if bad:
         raise ValueError(f"stages: unknown {bad}; expected some of {list(STAGES)}")
+    bm = load_or_build_body(model_path)                 # before the folder: a bad model file leaves nothing behind
     out_dir.mkdir(parents=True, exist_ok=True)
-    bm = load_or_build_body(model_path)
     written: list[Path] = []
     panels: list[Panel] = []
     steps = tqdm(list(stages), desc="demo", unit="stage")

@@ -117,6 +117,8 @@ def file_key(path: str | Path | None) -> str:
 def load_checkpoint(path: str | Path) -> dict[str, Any]:
     """Read a checkpoint without pickle (weights_only); a missing or foreign file gives an error naming it."""
     path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(f"checkpoint: {path} is a folder, expected a checkpoint file (.pt)")
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint: no file at {path}")
     if zipfile.is_zipfile(path):             # torch.load does not check the archive's CRCs: bytes changed in place

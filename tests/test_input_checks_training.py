@@ -137,7 +137,12 @@ def test_module_commands_report_bad_input_without_a_traceback(tmp_path, capsys, 
     (["train", "motionfill", "--stage", "local", "--clips", "-2"], "--clips: expected an integer >= 1, got -2"),
     (["train", "motionfill_baseline", "--model", "cnn_ae", "--clips", "0"], "--clips: expected an integer >= 1"),
     (["demo", "--stages", ",", "--out", "{tmp}/demo"], "--stages: expected one or more stage names"),
+    (["demo", "--out", "{tmp}/demo", "--model", "{tmp}/none.npz"], "--model: "),
     (["eval", "wandr", "--checkpoint", str(CK / "wandr.pt"), "--clips", "{tmp}/nosuchdir"], "no reaching clips in"),
+    (["train", "wholegrasp", "--data", "{tmp}/nosuchdir", "--out", "{tmp}/demo/w.pt"], "nosuchdir: no such folder"),
+    (["train", "gnet", "--data", str(STUBS / "grasps"), "--data", str(CK / "gnet.pt")], "gnet.pt: is a file"),
+    (["eval", "wandr", "--checkpoint", "{tmp}"], "is a folder, expected a checkpoint file"),
+    (["wandr", "--goal", "1", "0", "1", "--checkpoint", "{tmp}", "--out", "{tmp}/demo"], "--checkpoint: "),
 ])
 def test_graspkit_counts_and_folders_are_checked_before_work(tmp_path, capsys, argv, message):
     from graspkit.cli import main
