@@ -355,7 +355,8 @@ def add_goal_train_commands(train_sub) -> None:
         p.add_argument("--data", type=Path, action="append", default=None,
                        help="folder with grasp_*.npz / approach_*.npz (repeatable; default: the data-make cache)")
         p.add_argument("--variant", choices=variants, default=variants[0])
-        p.add_argument("--out", type=Path, default=None, help=f"shipped weights (default data_stubs/checkpoints/{name}.pt)")
+        p.add_argument("--out", type=Path, default=None, help=f"shipped weights (default data_stubs/checkpoints/"
+                       f"{name}.pt, {name}_<variant>.pt for another --variant)")
         p.set_defaults(out_is_file=True)
         p.add_argument("--epochs", type=int, default=default_epochs)
         p.add_argument("--time-limit", type=float, default=600.0, help="seconds; stops after the epoch that crosses it")

@@ -455,7 +455,7 @@ def table2(result: dict[str, Any]) -> str:
 @reports_errors("python -m graspkit.eval_saga")
 def main(argv: list[str] | None = None) -> int:
     """Command line: run the evaluation and print both tables."""
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m graspkit.eval_saga", description=__doc__.split("\n")[0])
     ap.add_argument("--data", type=Path, default=None, help="folder with grasp_*.npz (graspkit data make --kind grasp)")
     ap.add_argument("--out", type=Path, default=RESULTS_PATH)
     ap.add_argument("--placements", type=int, default=EvalConfig.placements)
@@ -530,7 +530,8 @@ def add_saga_train_commands(train_sub) -> None:
                            help="folder of grasp_*.npz whose training poses join the clips' (default: none)")
         else:
             p.add_argument("--data", type=Path, default=default, help=f"folder of grasp_*.npz (default {default})")
-        p.add_argument("--out", type=Path, default=None, help="weights (default data_stubs/checkpoints/<name>.pt)")
+        out = "wholegrasp_grabnet_smplx.pt" if name == "grabnet_smplx" else f"{name}.pt"
+        p.add_argument("--out", type=Path, default=None, help=f"weights (default data_stubs/checkpoints/{out})")
         p.set_defaults(out_is_file=True)
         p.add_argument("--epochs", type=int, default=30 if name == "pose_prior" else 12)
         p.add_argument("--time-limit", type=float, default=None if name == "pose_prior" else 600.0,

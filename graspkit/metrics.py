@@ -24,6 +24,7 @@ Both per-frame thresholds are the papers' at 30 fps (their evaluation rate); for
 """
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -123,6 +124,7 @@ def foot_skating_saga(heels: Any, fps: float = 30.0, height: float = SAGA_SKATE_
                       speed: float = SAGA_SKATE_HEEL_SPEED) -> np.ndarray:
     """SAGA's skating per frame (T-1,) bool from heel positions (T,2,3) [left, right]: both heels within `height`
     of the ground and both faster than `speed` m/s (speed from frame t to t+1): no foot is planted."""
+    height, speed = _number(height, "height"), _number(speed, "speed")
     h = _shaped(heels, "heels", "T,2,3", min_frames=2).double()
     v = (h[1:] - h[:-1]).norm(dim=-1) * _number(fps, "fps")                     # (T-1, 2)
     return ((h[:-1, :, 2] < height) & (v > speed)).all(1).numpy()
@@ -154,6 +156,7 @@ def floor_figures(vertices: Any) -> dict[str, float]:
 def non_collision_score(vertices: Any, floor: float = 0.0) -> np.ndarray:
     """SAGA's non-collision score per frame (T,): the share of the mesh vertices (T,V,3) at or above the ground
     z = floor (SAGA Sec. 4.2: "the number of body mesh vertices above the ground divided by the total")."""
+    floor = _number(floor, "floor", positive=False)
     return (_shaped(vertices, "vertices", "T,V,3")[..., 2] >= floor).double().mean(-1).numpy()
 
 
@@ -176,9 +179,20 @@ def joint_limit_violation(poses: Any) -> np.ndarray:
         return joint_limit_excess(_shaped(poses, "poses", f"T,{NUM_JOINTS},3").double()).numpy()
 
 
+def shortest_axis_angle(p: torch.Tensor) -> torch.Tensor:
+    """Axis-angle vectors (...,3) with every angle above 180 deg rewritten as the same rotation the short way round
+    (angle 2*pi*k - theta about the opposite axis, at most 180 deg); vectors within 180 deg keep their values and
+    their gradients bit for bit."""
+    th = p.norm(dim=-1, keepdim=True)
+    k = torch.round(th / (2 * math.pi))
+    return torch.where(th > math.pi, p * (1 - 2 * math.pi * k / th.clamp_min(1e-12)), p)
+
+
 def joint_limit_excess(poses: torch.Tensor) -> torch.Tensor:
-    """joint_limit_violation as a differentiable tensor (T,55) in the dtype of poses (T,55,3) (an energy term)."""
-    p = poses.reshape(-1, NUM_JOINTS, 3)
+    """joint_limit_violation as a differentiable tensor (T,55) in the dtype of poses (T,55,3) (an energy term). An
+    angle above 180 deg is read as the same rotation the short way round (shortest_axis_angle): a knee flexed 160 deg
+    written as -200 deg is 160 deg of flexion."""
+    p = shortest_axis_angle(poses.reshape(-1, NUM_JOINTS, 3))
     ang = torch.rad2deg(p.norm(dim=-1))
     out = torch.zeros_like(ang)
     for name, lim in JOINT_LIMITS_DEG.items():
@@ -186,7 +200,7 @@ def joint_limit_excess(poses: torch.Tensor) -> torch.Tensor:
         out[:, j] = torch.clamp(ang[:, j] - lim, min=0)
     for name, (axis, lo, hi, off) in HINGES.items():
         j = JOINT_INDEX[name]
-        a = torch.tensor(axis, dtype=p.dtype)
+        a = torch.tensor(axis, dtype=p.dtype, device=p.device)
         flex = torch.rad2deg(p[:, j] @ a)
         rest = torch.rad2deg((p[:, j] - (p[:, j] @ a)[:, None] * a).norm(dim=-1))
         out[:, j] = torch.clamp(lo - flex, min=0) + torch.clamp(flex - hi, min=0) + torch.clamp(rest - off, min=0)
@@ -274,7 +288,7 @@ def grasp_contact_distance(vertices: Any, obj: Any, margin: float = 0.05) -> flo
     outside that padded box is more than `margin` from the object, so when the nearest measured one is within
     `margin` it is the answer. Otherwise every vertex whose distance to the box (a lower bound) is below the best
     distance found so far is measured too."""
-    from graspkit.objects.distance import mesh_arrays
+    from graspkit.objects.distance import mesh_arrays, require_closed
     from graspkit.objects.sdf import signed_distance
 
     v = _t(vertices).double()
@@ -284,6 +298,7 @@ def grasp_contact_distance(vertices: Any, obj: Any, margin: float = 0.05) -> flo
         raise ValueError("vertices: contains NaN or Inf")
     ov, of = mesh_arrays(obj, "obj")
     ov = ov.double()
+    require_closed(ov, of, "obj")            # the sign needs a closed, outward-wound surface (checked once here)
     lo, hi = ov.min(0).values, ov.max(0).values
     box = torch.maximum(torch.maximum(lo - v, v - hi), torch.zeros_like(v)).norm(dim=1)   # <= the true distance
     near = box <= margin
@@ -319,7 +334,7 @@ def grasp_metrics(vertices: Any, faces: Any, obj: Any, threshold: float = GRASP_
 def contact_ratio(min_distances: Any, threshold: float = GRASP_CONTACT_THRESHOLD) -> float:
     """Fraction of grasps in contact: min body-object signed distances (N,) <= threshold."""
     try:
-        d = np.asarray(min_distances, np.float64).reshape(-1)
+        d = _t(min_distances).double().numpy().reshape(-1)
     except (TypeError, ValueError) as e:
         raise ValueError(f"min_distances: expected numbers (metres), got {type(min_distances).__name__}: {e}") from None
     if not d.size:

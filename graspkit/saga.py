@@ -5,7 +5,7 @@
 
 `synthesize("mug")` runs it for any catalogue object with the shipped checkpoints, and `synthesize(mesh)` for an object
 of one's own (a trimesh.Trimesh or a mesh file: closed, metres, z up; `graspkit.objects.user.as_object`). The object
-is placed as the grasp generator places it (`graspkit.objects.placement.sample_object_pose`, seeded) unless a pose is
+is placed within reach of the start (`graspkit.objects.placement.within_reach_pose`, seeded) unless a pose is
 given; the start is a standing body (the procedural planner's first frame) `start_distance` metres from the grasp,
 facing the object, unless a `Start` is given. Everything is returned in the world frame (z up, floor z = 0).
 """
@@ -79,7 +79,7 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     """SAGA for object `name` (a catalogue name, a mesh file or a trimesh.Trimesh, closed and in metres): one grasp
     and one 2-s approach motion into it (Fig. 2), seeded.
 
-    object_pose: where the object is (default: drawn by `sample_object_pose(seed)` in front of the origin);
+    object_pose: where the object is (default: drawn by `within_reach_pose(seed)` in front of the origin);
     start: a Start (x, y, heading: a standing body there) or a one-frame Motion (any body) or None (see module doc).
     free_joints: GraspPose-Opt's `GraspPoseConfig.free_joints` (None: its default, the arm chains; () is Alg. 1's
     prior latent alone; docs/saga.md).

@@ -64,6 +64,18 @@ def test_an_object_inside_the_body_or_through_it_between_vertices_is_in_contact(
     assert m["contact"] == 0.0 and m["volume_cm3"] == 0.0
 
 
+def test_contact_distance_refuses_a_mesh_whose_sign_would_be_wrong():
+    """Inside an inward-wound sphere the signed distance would read +5 cm (outside): refused, as an open mesh is."""
+    s = trimesh.creation.icosphere(3, radius=0.05)
+    assert M.grasp_contact_distance(np.zeros((1, 3)), s) == pytest.approx(-0.05, abs=2e-3)   # the inscribed facets
+    inverted, open_ = s.copy(), s.copy()
+    inverted.invert()
+    open_.update_faces(np.arange(len(s.faces)) > 0)
+    for bad in (inverted, open_):
+        with pytest.raises(ValueError, match="obj: "):
+            M.grasp_contact_distance(np.zeros((1, 3)), bad)
+
+
 def test_grasp_metrics_contact_threshold_is_checked_and_applied():
     v, f = _box_body(0.2)
     near = trimesh.creation.box(extents=[0.02] * 3, transform=trimesh.transformations.translation_matrix([0.115, 0.1, 0.1]))

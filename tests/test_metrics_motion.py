@@ -109,6 +109,25 @@ def test_joint_limit_excess_is_the_metric_with_a_gradient_along_the_turn():
     assert float(poses.grad.abs().sum() - poses.grad[1, 21].abs().sum()) == 0.0
 
 
+def test_joint_limits_read_the_rotation_not_its_axis_angle_writing():
+    """An angle above 180 deg is the same rotation as a shorter one (scipy's as_rotvec gives it): the limits read the
+    rotation, so 240 deg at the hip (120 deg the other way), 2 pi at the wrist (none) and -200 deg at the knee (160 deg
+    of flexion, 5 past its 155) read as their short forms do; optimisers can write any of them."""
+    import torch
+    from scipy.spatial.transform import Rotation
+
+    cases = {1: [np.deg2rad(240.0), 0, 0], 4: [np.deg2rad(-200.0), 0, 0], 20: [0, 2 * np.pi, 0],
+             0: [np.deg2rad(400.0), 0, 0], 21: 5.5 * np.pi * np.array([0.6, 0.0, 0.8])}
+    long, short = np.zeros((1, 55, 3)), np.zeros((1, 55, 3))
+    for j, aa in cases.items():
+        long[0, j], short[0, j] = aa, Rotation.from_rotvec(aa).as_rotvec()
+    np.testing.assert_allclose(M.joint_limit_violation(long), M.joint_limit_violation(short), atol=1e-9)
+    assert np.isclose(M.joint_limit_violation(long)[0, 4], 5.0) and M.joint_limit_violation(long)[0, 20] < 1e-9
+    p = torch.tensor(long, requires_grad=True)                  # still differentiable, finite gradients
+    M.joint_limit_excess(p).sum().backward()
+    assert torch.isfinite(p.grad).all()
+
+
 def test_distance_to_goal_and_success():
     w = np.stack([np.linspace(0, 1, 11), np.zeros(11), np.ones(11)], 1)
     assert np.isclose(M.distance_to_goal(w, [1.0, 0.05, 1.0]), 0.05)
@@ -151,6 +170,9 @@ def test_non_collision_score_counts_vertices_above_the_ground():
     (lambda: M.foot_sliding_goal(np.zeros((4, 10, 3)), threshold=-1.0), r"threshold: expected a positive"),
     (lambda: M.joint_limit_violation(np.zeros((3, 22, 3))), r"poses: expected shape \(T,55,3\)"),
     (lambda: M.joint_limit_violation(np.full((3, 55, 3), np.nan)), r"poses: contains NaN"),
+    (lambda: M.non_collision_score(np.zeros((2, 4, 3)), floor=np.nan), r"floor: expected a finite distance"),
+    (lambda: M.foot_skating_saga(np.zeros((3, 2, 3)), height=None), r"height: expected a positive number"),
+    (lambda: M.foot_skating_saga(np.zeros((3, 2, 3)), speed=-1.0), r"speed: expected a positive number"),
 ])
 def test_bad_shapes_name_the_argument(call, message):
     with pytest.raises(ValueError, match=message):
@@ -172,6 +194,8 @@ def test_tensors_that_require_grad_and_integer_arrays_are_measured_as_plain_numb
     step[1:, 0, 0] = 1                                           # the one vertex moves 1 m in the first pair only
     assert M.foot_skating_wandr(step).tolist() == [True, False]
     assert M.distance_to_goal(np.array([[0, 0, 0], [3, 4, 0]]), [3, 4, 0]) == 0.0
+    d = torch.tensor([0.001, 0.003], requires_grad=True)
+    assert M.contact_ratio(d) == M.contact_ratio([0.001, 0.003]) == 0.5
 
 
 def test_apd_of_equal_samples_is_zero_and_matches_scipy():

@@ -37,7 +37,7 @@ class PosePriorConfig:
 
     latent: int = 32             # as VPoser (SAGA: theta_b in R^32)
     hidden: int = 256
-    kl_weight: float = 5e-3      # beta of the beta-VAE objective (per-sample sum of squared 6D errors + beta KL)
+    kl_weight: float = 5e-3      # beta of the beta-VAE objective (squared rotation-matrix errors + beta KL)
 
 
 def _mlp(sizes: list[int]) -> nn.Sequential:

@@ -72,8 +72,8 @@ def sample_object_pose(
     """A random object pose in front of a person standing at `start` (x, y) and facing `facing_deg` (SAGA Sec. 4.3).
 
     The object centre is at horizontal distance U(distance_range) from `start`, in the direction
-    facing + U(bearing_range) degrees (measured from +x towards +y), at height U(height_range); the
-    object is rotated by U(yaw_range) degrees about z. The default facing, -y (-90 deg), is where
+    facing + U(bearing_range_deg) degrees (measured from +x towards +y), at height U(height_range); the
+    object is rotated by U(yaw_range_deg) degrees about z. The default facing, -y (-90 deg), is where
     SMPL-X's forward (+z) points under the root rotation R_x(+90 deg) that takes the y-up body into the
     z-up world (R_x(90) maps y -> z and z -> -y); pass the person's actual heading. The bearing spread
     ("in front of") is our choice: the paper does not give one.

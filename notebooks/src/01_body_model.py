@@ -88,8 +88,8 @@ print("children of the right wrist:", [JOINT_NAMES[c] for c, p in enumerate(PARE
 # %% [markdown]
 # ## 4. Pose correctives $B_P(\theta) = \sum_k (R_k(\theta) - I)\,P_k$
 # SMPL-X learns 486 corrective directions (9 entries of each of 54 joint rotations minus the identity) that fix
-# skinning artefacts such as a collapsing elbow. The procedural humanoid computes its own: for elbows, knees,
-# shoulders and hips, graspkit poses the body's *implicit* (signed-distance) anatomy, fits the offset between
+# skinning artefacts such as a collapsing elbow. The procedural humanoid computes its own: for elbows, knees
+# and hips, graspkit poses the body's *implicit* (signed-distance) anatomy, fits the offset between
 # where LBS puts each vertex and where the posed anatomy's surface is, and stores it as the linear corrective basis
 # (`docs/body_model.md`). The term is one matrix product; switching it off shows what it does:
 
