@@ -188,8 +188,10 @@ def intention(wrist: Tensor, pelvis: Tensor, psi: Tensor, goal: Tensor, time_lef
     """
     for x, n in ((wrist, "wrist"), (pelvis, "pelvis"), (goal, "goal")):
         _check(x, 3, n)
-    shape = (wrist[..., 0] + pelvis[..., 0] + psi + goal[..., 0] + time_left).shape     # the broadcast shape
     dtype = wrist.dtype
+    psi, time_left = (x if isinstance(x, Tensor) else torch.as_tensor(x, dtype=dtype, device=wrist.device)
+                      for x in (psi, time_left))                      # a plain number is one for every body
+    shape = (wrist[..., 0] + pelvis[..., 0] + psi + goal[..., 0] + time_left).shape     # the broadcast shape
     if not bool(torch.isfinite(goal).all()):     # a NaN goal would make I^r silently 0 (NaN > eps is False)
         raise ValueError("goal: contains NaN or Inf (expected world positions in metres)")
     if torch.isnan(time_left).any():        # NaN > 0 is False: it would read as "goal time passed", silently

@@ -145,7 +145,8 @@ def rot6d_to_axis_angle(d6: Tensor) -> Tensor:
 
 
 def rotation_about_z(angle: Tensor) -> Tensor:
-    """Rotations about the world's vertical z axis: angles (...) in radians -> (..., 3, 3)."""
+    """Rotations about the world's vertical z axis: angles (...) in radians (a tensor, or a number) -> (..., 3, 3)."""
+    angle = angle if isinstance(angle, Tensor) else torch.as_tensor(angle, dtype=torch.get_default_dtype())
     c, s = torch.cos(angle), torch.sin(angle)
     o, i = torch.zeros_like(angle), torch.ones_like(angle)
     return torch.stack([c, -s, o, s, c, o, o, o, i], dim=-1).reshape(angle.shape + (3, 3))

@@ -536,6 +536,24 @@ def test_closest_point_on_a_triangle_without_area_is_on_its_nearest_edge(tri):
     torch.testing.assert_close((p - got).norm(dim=-1), truth, atol=1e-4, rtol=0)
 
 
+def test_closest_point_on_sliver_triangles_in_float32_matches_float64():
+    """Triangles a few micro- to nanometres wide per metre (near-collinear corners): float32 gives the float64
+    distance of the same float32 inputs to 1e-5 m (the regions' products lost the area to rounding: 1.29 m for 0.63)."""
+    from graspkit.objects.distance import closest_point_on_triangle
+
+    g = torch.Generator().manual_seed(0)
+    N = 5000
+    a, b, p = (torch.randn(N, 3, generator=g, dtype=torch.float64) for _ in range(3))
+    t = torch.rand(N, 1, generator=g, dtype=torch.float64)
+    width = 10 ** (-4 - 5 * torch.rand(N, 1, generator=g, dtype=torch.float64))
+    c = a + t * (b - a) + torch.randn(N, 3, generator=g, dtype=torch.float64) * width
+    a, b, c, p = (x.float() for x in (a, b, c, p))
+    q32, _ = closest_point_on_triangle(p, a, b, c)
+    q64, _ = closest_point_on_triangle(*(x.double() for x in (p, a, b, c)))
+    d32, d64 = (q32.double() - p.double()).norm(dim=-1), (q64 - p.double()).norm(dim=-1)
+    assert float((d32 - d64).abs().max()) < 1e-5
+
+
 def test_walls_on_both_sides_of_the_overlap_box_are_exact():
     """Two 10 cm cubes offset by (9.57, 1.37, 2.1) cm overlap in a 4.3 x 86.3 x 79 mm box (analytic volume) bounded
     by faces of the cubes on both sides: the refined cells tile the box, so its far walls lie on cell borders as its

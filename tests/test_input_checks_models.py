@@ -181,6 +181,15 @@ def test_from_file_checks_dtype_and_num_betas():
         BodyModel.from_file(default_model_path(), num_betas="10")
 
 
+def test_a_model_without_shape_or_expression_coefficients_is_the_mean_shape():
+    """num_betas=0 and num_expression=0 are allowed: the body is the one with all coefficients zero."""
+    pose = torch.full((2, 63), 0.1)
+    none = BodyModel.from_file(default_model_path(), num_betas=0, num_expression=0)(body_pose=pose)
+    zero = BodyModel.from_file(default_model_path())(body_pose=pose)
+    torch.testing.assert_close(none.vertices, zero.vertices, rtol=0, atol=1e-6)
+    torch.testing.assert_close(none.joints, zero.joints, rtol=0, atol=1e-6)
+
+
 def test_from_file_names_a_text_file_that_is_not_an_npz(tmp_path):
     text = tmp_path / "notes.npz"
     text.write_text("hello\n")

@@ -122,6 +122,16 @@ def test_goal_behind_and_to_the_left_of_a_turned_body():
     assert torch.allclose(left[3:5], torch.tensor([-1.0, 1.0], dtype=torch.float64), atol=1e-12)
 
 
+def test_heading_and_time_left_may_be_plain_numbers():
+    """A number for psi or time_left is the same for every body: the result is the tensor call's, and
+    rotation_about_z takes a number as scipy's rotation about z."""
+    t = lambda x: torch.tensor(x, dtype=torch.float64)  # noqa: E731
+    w, p, g = t([[0.2, -0.2, 1.0], [0.0, 0.3, 1.1]]), t([[0.0, 0.0, 0.9], [0.1, 0.0, 0.9]]), t([2.0, 0.5, 1.0])
+    want = I.intention(w, p, t([0.5, 0.5]), g, t([1.5, 1.5]))
+    assert torch.equal(I.intention(w, p, 0.5, g, 1.5), want)
+    np.testing.assert_allclose(rotation_about_z(0.5).numpy(), Rotation.from_euler("z", 0.5).as_matrix(), atol=1e-7)
+
+
 def test_goal_straight_above_the_pelvis():
     out = _I([0.1, 0.0, 1.0], [0.0, 0.0, 0.9], 0.4, [0.0, 0.0, 1.8], 0.5)
     assert torch.isfinite(out).all()

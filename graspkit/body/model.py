@@ -193,9 +193,10 @@ class BodyModel(nn.Module):
         # vertex quantities are kept coordinate-major, (3, V), so that skinning works on contiguous slabs
         self.register_buffer("v_template", t(v_template))
         self.register_buffer("_v_template_cm", t(v_template.T.reshape(1, 3 * V)))
-        self.register_buffer("shape_basis", t(basis.transpose(2, 1, 0).reshape(-1, 3 * V)))   # (S+E, 3V)
+        S = basis.shape[2]                                                   # 0 with no betas and no expression
+        self.register_buffer("shape_basis", t(basis.transpose(2, 1, 0).reshape(S, 3 * V)))    # (S+E, 3V)
         self.register_buffer("J_template", t(J_reg @ v_template))                          # (55, 3)
-        self.register_buffer("J_basis", t(np.einsum("jv,vkc->cjk", J_reg, basis).reshape(basis.shape[2], -1)))
+        self.register_buffer("J_basis", t(np.einsum("jv,vkc->cjk", J_reg, basis).reshape(S, 3 * NUM_JOINTS)))
         self.register_buffer("J_regressor", t(J_reg))
         posedirs = np.asarray(arrays["posedirs"], np.float64).transpose(2, 1, 0).reshape(NUM_POSE_BASIS, 3 * V)
         # only the rows of the 486 that are not zero take part (the procedural humanoid corrects a few joints;
