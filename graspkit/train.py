@@ -158,10 +158,15 @@ def load_into(model: torch.nn.Module, weights: dict[str, Any], path: str | Path,
     try:
         model.load_state_dict(weights)
     except RuntimeError as e:
-        lines = [s.strip() for s in str(e).splitlines() if s.strip()]
-        detail = lines[1] if len(lines) > 1 else lines[0]      # the first only says "Error(s) in loading state_dict"
-        raise ValueError(f"checkpoint {path}: not {what} of this configuration ({detail})") from None
+        raise ValueError(f"checkpoint {path}: not {what} of this configuration ({state_dict_problem(e)})") from None
     return model
+
+
+def state_dict_problem(e: Exception) -> str:
+    """The line of load_state_dict's error that says which key or size differs (its first line only says
+    "Error(s) in loading state_dict")."""
+    lines = [s.strip() for s in str(e).splitlines() if s.strip()] or [type(e).__name__]
+    return lines[1] if len(lines) > 1 else lines[0]
 
 
 def init_distributed() -> bool:

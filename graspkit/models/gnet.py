@@ -306,8 +306,9 @@ def save_weights(path: str | Path, model: nn.Module, kind: str, extra: dict | No
     return save_checkpoint(path, {"kind": kind, "config": model.config_dict(), "model": state, "extra": extra or {}})
 
 
-def load_weights(path: str | Path, kind: str) -> tuple[dict[str, Tensor], dict]:
-    """(float32 state dict, config) from a shipped checkpoint or a training checkpoint of graspkit.train.fit."""
+def load_weights(path: str | Path, kind: str, config_cls: type | None = None) -> tuple[dict[str, Tensor], dict]:
+    """(float32 state dict, config) from a shipped checkpoint or a training checkpoint of graspkit.train.fit; with
+    `config_cls` (a dataclass) the config's entries must be its fields."""
     from graspkit.train import load_checkpoint
 
     ck = load_checkpoint(path)
@@ -318,19 +319,19 @@ def load_weights(path: str | Path, kind: str) -> tuple[dict[str, Tensor], dict]:
     config = ck.get("config") if "kind" in ck else ck.get("extra", {}).get(f"{kind}_config")
     if config is None:
         raise ValueError(f"{path}: no {kind} config inside (expected a checkpoint written by graspkit)")
+    known = {f.name for f in fields(config_cls)} if config_cls is not None else None
+    if known is not None and (not isinstance(config, dict) or not set(config) <= known):
+        odd = sorted(set(config) - known) if isinstance(config, dict) else type(config).__name__
+        raise ValueError(f"{path}: not a {kind} checkpoint (config entries {odd} are not {config_cls.__name__}'s)")
     state = {k: v.float() if v.is_floating_point() else v for k, v in ck["model"].items()}
     return state, config
 
 
 def load_gnet(path: str | Path) -> GNet:
     """A GNet from a shipped (or training) checkpoint, in float32 and eval mode."""
-    state, config = load_weights(path, "gnet")
-    known = {f.name for f in fields(GNetConfig)}
-    if not isinstance(config, dict) or not set(config) <= known:
-        odd = sorted(set(config) - known) if isinstance(config, dict) else type(config).__name__
-        raise ValueError(f"{path}: not a gnet checkpoint (config entries {odd} are not GNetConfig's)")
     from graspkit.train import load_into
 
+    state, config = load_weights(path, "gnet", GNetConfig)
     return load_into(GNet(GNetConfig(**config)), state, path, "a GNet checkpoint").eval()
 
 

@@ -26,7 +26,7 @@ decoder), so that it trains on two CPU cores in minutes and ships as a ~1.3 MB c
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 
 import numpy as np
 import torch
@@ -552,9 +552,5 @@ def load_mnet(path) -> MNet:
     from graspkit.models.gnet import load_weights
     from graspkit.train import load_into
 
-    state, config = load_weights(path, "mnet")
-    known = {f.name for f in fields(MNetConfig)}
-    if not isinstance(config, dict) or not set(config) <= known:
-        odd = sorted(set(config) - known) if isinstance(config, dict) else type(config).__name__
-        raise ValueError(f"{path}: not an mnet checkpoint (config entries {odd} are not MNetConfig's)")
+    state, config = load_weights(path, "mnet", MNetConfig)
     return load_into(MNet(MNetConfig(**config)), state, path, "an MNet checkpoint").eval()

@@ -99,7 +99,7 @@ from graspkit.models.gnet import SparseBody
 from graspkit.optim.grasppose import GraspObject, _nearest, hand_vertex_ids, kabsch
 from graspkit.optim.step import energy_step
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
-from graspkit.train import load_checkpoint
+from graspkit.train import load_checkpoint, state_dict_problem
 
 SMOOTH_AE_PATH = Path(__file__).resolve().parents[2] / "data_stubs" / "checkpoints" / "motionfill_smooth_ae.pt"
 FOOT_PARTS = ("left_heel", "left_toe", "right_heel", "right_toe")
@@ -182,7 +182,7 @@ def load_smooth_ae(path: str | Path = SMOOTH_AE_PATH) -> MarkerDiffAE:
         return MarkerDiffAE.from_state(state)
     except (RuntimeError, TypeError, ValueError) as e:
         raise ValueError(f"checkpoint {path}: not a marker-difference autoencoder of these sizes "
-                         f"({str(e).splitlines()[0]})") from None
+                         f"({state_dict_problem(e)})") from None
 
 
 def in_box(x: Tensor, lo: Tensor, hi: Tensor, margin: float) -> Tensor:
