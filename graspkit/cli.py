@@ -340,6 +340,14 @@ def check_counts(args: argparse.Namespace, **least: int) -> None:
             raise ValueError(f"--{name.replace('_', '-')}: expected an integer >= {low}, got {v}")
 
 
+def check_folders(paths: Path | list[Path] | None, flag: str = "--data") -> None:
+    """FileNotFoundError naming `flag` unless each of `paths` (one, a list, or None: nothing to check) is a folder."""
+    for d in paths if isinstance(paths, list) else [] if paths is None else [paths]:
+        if not Path(d).is_dir():
+            what = "is a file, expected a folder" if Path(d).exists() else "no such folder"
+            raise FileNotFoundError(f"{flag}: {d}: {what} (make the data with `graspkit data make`, docs/data.md)")
+
+
 def reports_errors(prog: str) -> Callable[[Callable[..., int]], Callable[..., int]]:
     """Decorate a module's `main(argv)` so that a bad input (ValueError, OSError) ends as the graspkit command's do:
     `<prog>: error: <message>` on stderr and exit status 2, no traceback."""
@@ -361,14 +369,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if getattr(args, "seed", None) is not None and not 0 <= args.seed < 2**63:
             raise ValueError(f"--seed: expected a non-negative integer below 2^63, got {args.seed}")
-        for flag in ("threads", "epochs", "batch_size", "workers", "n", "chunk"):
-            if getattr(args, flag, None) is not None and getattr(args, flag) < 1:
-                raise ValueError(f"--{flag.replace('_', '-')}: expected an integer >= 1, got {getattr(args, flag)}")
-        data = getattr(args, "data", None)           # every command's --data names a folder (or several)
-        for d in data if isinstance(data, list) else [] if data is None else [data]:
-            if not Path(d).is_dir():
-                what = "is a file, expected a folder" if Path(d).exists() else "no such folder"
-                raise FileNotFoundError(f"--data: {d}: {what} (make the data with `graspkit data make`, docs/data.md)")
+        check_counts(args, **dict.fromkeys(("threads", "epochs", "batch_size", "workers", "n", "chunk"), 1))
+        check_folders(getattr(args, "data", None))   # every command's --data names a folder (or several)
         if getattr(args, "out", None) is not None:
             check_out(args.out, getattr(args, "out_is_file", None))
         return int(args.func(args) or 0)

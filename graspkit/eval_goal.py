@@ -25,7 +25,7 @@ import torch
 from scipy.spatial import cKDTree
 from torch import Tensor
 
-from graspkit.cli import check_counts, reports_errors
+from graspkit.cli import check_counts, check_folders, reports_errors
 from graspkit.models.gnet import pose_rotmats
 from graspkit.models.mnet import MNet, MNetWindows, predict_horizon
 from graspkit.rotations import rotation_about_z
@@ -747,9 +747,7 @@ def main(argv: list[str] | None = None) -> int:
                       help="recompute only the MNet rollouts and GOAL's sliding rows in an existing JSON (SAGA's kept)")
     a = p.parse_args(argv)
     check_counts(a, n_grasps=0, n_rollouts=1, window_stride=1, threads=1, seed=0)
-    missing = [str(d) for d in a.data or () if not d.is_dir()]
-    if missing:
-        raise FileNotFoundError(f"--data: no folder {', '.join(missing)} (expected folders of grasp_*/approach_*.npz)")
+    check_folders(a.data)
     torch.set_num_threads(a.threads)
     if a.tab1_only or a.saga_only or a.rollouts_only:          # update one part of an existing evaluation
         from graspkit.paths import DATA_STUBS

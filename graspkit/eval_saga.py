@@ -36,7 +36,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from graspkit.cli import check_counts, reports_errors
+from graspkit.cli import check_counts, check_folders, reports_errors
 from graspkit.optim.grasppose import ARM_JOINTS, GraspPoseConfig
 from graspkit.paths import DATA_STUBS, write_atomic
 
@@ -490,8 +490,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.data is None:
         ap.error("--data: the folder of grasp_*.npz is required (unless --finish)")
-    if not args.data.is_dir():
-        raise FileNotFoundError(f"--data: no folder {args.data} (graspkit data make --kind grasp --out {args.data})")
+    check_folders(args.data)
     from graspkit.optim.grasppose import expand_free_joints
 
     cfg = EvalConfig(placements=args.placements, samples=args.samples, gt_grasps=args.gt, steps=tuple(args.steps),

@@ -8,8 +8,7 @@ from graspkit import metrics as M
 from graspkit.body import BodyModel
 from graspkit.body.skeleton import JOINT_INDEX as J
 from graspkit.data.approach import approach_motion
-from graspkit.data.grasp import (GRASP_PARTS, SPLITS, GraspFitter, grasp_candidates, grasp_types,
-                                 split_of)
+from graspkit.data.grasp import GRASP_PARTS, SPLITS, GraspFitter, grasp_candidates, grasp_types, split_of
 from graspkit.data.grasp_make import accepted, fit_chunk
 from graspkit.data.rig import build_rig
 from graspkit.objects import TEST_OBJECTS, apply_pose, list_objects, make_object, signed_distance
