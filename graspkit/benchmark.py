@@ -273,7 +273,7 @@ def goal_motions(seqs: list, checkpoints: Path, seed: int = 0, max_frames: int =
     from graspkit.data.motion import Motion
     from graspkit.eval_goal import _body, approach_clips, gnet_goal
     from graspkit.models.gnet import load_gnet
-    from graspkit.models.mnet import load_mnet, rollout
+    from graspkit.models.mnet import STALL_FRAMES, load_mnet, rollout
     from graspkit.objects.bps import bps_basis
     from graspkit.rotations import matrix_to_axis_angle, rot6d_to_matrix
 
@@ -284,7 +284,7 @@ def goal_motions(seqs: list, checkpoints: Path, seed: int = 0, max_frames: int =
         start = (clip.rot6d[0], clip.transl[0])
         goal = gnet_goal(gnet, start, clip.betas, clip.object_points, clip.obj_centre, generator=g)[:2]
         r = rollout(mnet, body, start, goal, clip.betas, clip.object_points, clip.obj_centre, bps_basis(),
-                    max_frames=max_frames, floor=0.0)
+                    max_frames=max_frames, floor=0.0, stall=STALL_FRAMES)
         aa = matrix_to_axis_angle(rot6d_to_matrix(r.rot6d.double())).float()
         out.append(Motion(aa.numpy(), r.transl.detach().numpy(), clip.betas.reshape(-1)[:10].numpy(), 30.0))
     return out

@@ -27,7 +27,7 @@ from torch import Tensor
 
 from graspkit.cli import check_counts, check_folders, reports_errors
 from graspkit.models.gnet import pose_rotmats
-from graspkit.models.mnet import MNet, MNetWindows, predict_horizon
+from graspkit.models.mnet import STALL_FRAMES, MNet, MNetWindows, predict_horizon
 from graspkit.rotations import rotation_about_z
 
 PAPER_TAB1 = {  # GOAL Tab. 1: penetration volume (cm^3), contact ratio
@@ -495,11 +495,11 @@ def sliding(vertices: Tensor) -> tuple[int, int]:
 
 
 def rollout_eval(mnet, clips: list, goals: list | None = None, max_frames: int = 300, refine: bool = True,
-                 floor: float | None = 0.0) -> dict:
+                 floor: float | None = 0.0, stall: int | None = STALL_FRAMES) -> dict:
     """MNet rollouts from each clip's first frame to its goal grasp (or to `goals[i]` = (rot6d, transl)): per clip the
     frames, whether the goal was reached, the final mean hand-to-goal distance, GOAL's foot sliding and how deep the
-    lowest vertex goes under the floor z = 0 (cm). `floor`: `mnet.rollout`'s floor step (graspkit's; None: GOAL's
-    rollout as the paper has it)."""
+    lowest vertex goes under the floor z = 0 (cm). `floor` and `stall`: `mnet.rollout`'s floor step and stall rule
+    (graspkit's; None: GOAL's rollout as the paper has it)."""
     from graspkit.metrics import ground_penetration
     from graspkit.models.mnet import rollout
     from graspkit.objects.bps import bps_basis
@@ -511,7 +511,7 @@ def rollout_eval(mnet, clips: list, goals: list | None = None, max_frames: int =
     for i, c in enumerate(clips):
         goal = goals[i] if goals is not None else (c.rot6d[c.goal_frame], c.transl[c.goal_frame])
         r = rollout(mnet, body, (c.rot6d[0], c.transl[0]), goal, c.betas, c.object_points, c.obj_centre, basis,
-                    max_frames=max_frames, refine=refine, floor=floor)
+                    max_frames=max_frames, refine=refine, floor=floor, stall=stall)
         v = full_vertices(bm, r.rot6d, r.transl, c.betas)
         s, n = sliding(v)
         slide, pairs = slide + s, pairs + n

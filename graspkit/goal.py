@@ -59,7 +59,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     from graspkit.eval_goal import _body, gnet_goal, sliding
     from graspkit.metrics import floor_figures, grasp_and_end_figures
     from graspkit.models.gnet import load_gnet
-    from graspkit.models.mnet import load_mnet, rollout
+    from graspkit.models.mnet import STALL_FRAMES, load_mnet, rollout
     from graspkit.objects.bps import bps_basis
     from graspkit.objects.placement import apply_pose, within_reach_pose
     from graspkit.objects.sampling import sample_surface
@@ -94,7 +94,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     sdf = (object_collision_grid(given, obj_mesh), pose.rotation, pose.translation) if penetration else None
     goal = gnet_goal(load_gnet(ck / "gnet.pt"), s, betas, pts, c, generator=g, sdf=sdf)[:2]
     r = rollout(load_mnet(ck / "mnet.pt"), body, s, goal, betas, pts, c, bps_basis(), max_frames=max_frames,
-                floor=0.0)                   # graspkit's floor step (not GOAL's): MNet's frames otherwise sink
+                floor=0.0, stall=STALL_FRAMES)   # graspkit's floor step and stall rule (not GOAL's): docs/goal.md
 
     to_motion = lambda r6, t: Motion(matrix_to_axis_angle(rot6d_to_matrix(r6.double())).numpy(),  # noqa: E731
                                      t.detach().double().numpy(), betas.double().numpy(), 30.0)

@@ -147,16 +147,40 @@ def test_rollout_reaches_a_nearby_goal_by_the_refinement_alone(setup):
     torch.testing.assert_close(out.transl[:, :2], torch.zeros(len(out.transl), 2), atol=5e-3, rtol=0)  # body stays
 
 
+def test_rollout_stall_rule_refines_a_hand_stopped_beyond_10_cm(setup):
+    """graspkit's stall rule (not GOAL's): an untrained MNet stands still with the hand ~15 cm from the goal hand,
+    outside Eq. 12-13's 10 cm; without the rule the rollout runs to its maximum there, with it the refinement starts
+    once `stall` frames have brought no progress and carries the hand to the goal, the feet where they stand."""
+    bm, gv, body = setup
+    aa = torch.zeros(55, 3)
+    aa[0] = torch.tensor([math.pi / 2, 0, 0])
+    aa[J["right_shoulder"]] = torch.tensor([0, 0, 0.9])
+    goal = (axis_angle_to_rot6d(aa), torch.zeros(3))
+    aa2 = aa.clone()
+    aa2[J["right_elbow"]] += torch.tensor([0.0, 0.5, 0.0])
+    start = (axis_angle_to_rot6d(aa2), torch.zeros(3))
+    obj = body(pose_rotmats(goal[0][None]), torch.zeros(1, 10), goal[1][None])[0][0, :99] + 0.02
+    args = (MNet(), body, start, goal, torch.zeros(10), obj, obj.mean(0), bps_basis())
+    paper = rollout(*args, max_frames=80, min_speed=0.004)
+    assert 0.12 < float(paper.hand_dist[0]) < 0.2 and not paper.reached and paper.first_refined is None
+    assert len(paper.rot6d) == 80
+    ours = rollout(*args, max_frames=150, min_speed=0.004, stall=10)
+    assert ours.first_refined == 11 and ours.reached                   # frames 1-10 stand still, then the refinement
+    assert float(ours.hand_dist[-1]) <= 0.01
+    assert float(ours.transl[:, :2].norm(dim=-1).max()) < 0.01         # the arm reaches; the body moves < 1 cm
+
+
 def test_rollout_far_from_the_goal_runs_to_the_maximum(setup):
     bm, gv, body = setup
     aa = torch.zeros(55, 3)
     aa[0] = torch.tensor([math.pi / 2, 0, 0])
     start = (axis_angle_to_rot6d(aa), torch.zeros(3))
     goal = (axis_angle_to_rot6d(aa), torch.tensor([0.0, -1.0, 0.0]))
-    out = rollout(MNet(), body, start, goal, torch.zeros(10), torch.randn(50, 3) * 0.05, torch.zeros(3),
-                  bps_basis(), max_frames=35)
-    assert len(out.rot6d) == 35 and not out.reached and out.first_refined is None
-    torch.testing.assert_close(out.hand_dist, torch.full((35,), 1.0), atol=1e-4, rtol=0)   # standing still, 1 m away
+    for stall in (None, 10):               # the stall rule leaves a hand 1 m off alone: it is a start, not a stall
+        out = rollout(MNet(), body, start, goal, torch.zeros(10), torch.randn(50, 3) * 0.05, torch.zeros(3),
+                      bps_basis(), max_frames=35, stall=stall)
+        assert len(out.rot6d) == 35 and not out.reached and out.first_refined is None
+        torch.testing.assert_close(out.hand_dist, torch.full((35,), 1.0), atol=1e-4, rtol=0)  # standing still, 1 m away
 
 
 def test_rollout_floor_step_raises_sinking_frames_onto_the_floor_and_leaves_others(setup):

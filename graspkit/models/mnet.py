@@ -330,11 +330,16 @@ def predict_horizon(mnet: MNet, body, s: MNetState, object_points: Tensor, basis
     return torch.stack(fr[:horizon], 1), torch.stack(ft[:horizon], 1)
 
 
+STALL_GAIN = 0.005   # m: `rollout`'s stall rule (graspkit's): less progress than this over its window is a stall
+STALL_RADIUS = 0.25  # m: ... and only for a hand this close to the goal hand (not a body still standing at its start)
+STALL_FRAMES = 10    # frames: the window graspkit's pipelines give `rollout`'s stall rule (one MNet step)
+
+
 @torch.no_grad()
 def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, Tensor], betas: Tensor,
             object_points: Tensor, obj_centre: Tensor, basis: Tensor, max_frames: int = 300, refine: bool = True,
             reach_tol: float = 0.01, min_speed: float = 0.003, refine_weights=None,
-            floor: float | None = None) -> Rollout:
+            floor: float | None = None, stall: int | None = None) -> Rollout:
     """GOAL's autoregressive inference (§3.4) for one body: from `start` (rot6d (55,6), transl (3,)) to the grasp
     `goal` (same), re-canonicalised at every step; 10 frames per step while far, one frame per step once the hand is
     within 10 cm of the goal hand, each then refined by Eq. 12–13 (`min_speed` m/frame floors Eq. 12's step so that a
@@ -342,7 +347,10 @@ def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, 
     `max_frames`. `body` is a SparseBody over the 400 sampled vertices (hand first); object points (P,3) and the
     object centre (3,) (the BPS basis centre) in the world. `floor` (m; None: off, GOAL's rollout) is graspkit's floor
     step, not in the paper: a frame whose lowest sole vertex is below this height is raised onto it before it is
-    kept (MNet's frames sank up to 4.4 cm on the evaluation's rollouts: docs/goal.md)."""
+    kept (MNet's frames sank up to 4.4 cm on the evaluation's rollouts: docs/goal.md). `stall` (frames; None: off,
+    GOAL's rollout) is graspkit's stall rule, not in the paper: a hand within `STALL_RADIUS` m of the goal hand that
+    has come no closer than `STALL_GAIN` m over the last `stall` frames starts Eq. 12–13's refinement there (MNet's
+    hand can stop 10–25 cm short and stay there: docs/goal.md)."""
     from graspkit.optim.goal_refine import (GOAL_HAND_RADIUS, MotionRefineWeights, hand_object_offsets,
                                             hand_step_targets, refine_frame)
     from graspkit.models.gnet import SparseBody, pose_rotmats
@@ -381,7 +389,9 @@ def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, 
                       vs[-1][None], vs[max(len(vs) - 2, 0)][None], goal_hand, centre,
                       hand_object_offsets(vs[-1][None], obj), root)
         r_w, t_w, out = mnet_step(mnet, s, basis)                                    # (1,F,55,6), (1,F,3) world
-        near = refine and dist[-1] < GOAL_HAND_RADIUS
+        stalled = (stall is not None and dist[-1] < STALL_RADIUS and len(dist) > stall
+                   and dist[-1] > min(dist[-stall - 1:-1]) - STALL_GAIN)
+        near = refine and (dist[-1] < GOAL_HAND_RADIUS or stalled)
         for k in range(1 if near else c.n_future):
             r, t = r_w[:, k], t_w[:, k]
             if near:
