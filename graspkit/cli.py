@@ -110,12 +110,15 @@ def _cmd_goal(args: argparse.Namespace) -> int:
 
     from graspkit.demo import _write_clip, load_or_build_body
     from graspkit.goal import synthesize
+    from graspkit.models.mnet import STALL_FRAMES
 
     _check_object(args.object)
     pose = _object_pose(args.at)
     torch.set_num_threads(args.threads)
+    check_counts(args, stall=0)
     r = synthesize(args.object, object_pose=pose, seed=args.seed, max_frames=args.max_frames,
-                   model=str(args.model) if args.model else None)
+                   model=str(args.model) if args.model else None,
+                   stall=STALL_FRAMES if args.stall is None else args.stall or None)
     bm = load_or_build_body(args.model)
     args.out.mkdir(parents=True, exist_ok=True)
     paths, _ = _write_clip(bm, r.motion, args.out, f"goal_{r.name}_s{args.seed}", {r.name: r.mesh}, f"GOAL: {r.name}")
@@ -261,6 +264,9 @@ def build_parser() -> argparse.ArgumentParser:
                                  "the default: collars, shoulders, elbows, wrists; 'none': Alg. 1; docs/saga.md)")
         if method == "goal":
             sg.add_argument("--max-frames", type=int, default=150, help="MNet's rollout stops here if not at the grasp")
+            sg.add_argument("--stall", type=int, default=None, metavar="FRAMES",
+                            help="graspkit's stall rule: a hand within 25 cm of the goal hand that gains < 5 mm in this "
+                                 "many frames starts the refinement (default 10; 0: off, GOAL's rollout; docs/goal.md)")
         sg.set_defaults(func=cmd, out_is_file=False)
     from graspkit.paths import DATA_STUBS
     wa = sub.add_parser("wandr", help="WANDR from its held-out start pose to one goal in a given time")

@@ -2,7 +2,8 @@
 
     object -> GNet sample (§3.3, Eq. 2) -> refinement towards its offsets (Eq. 4-8) -> the goal grasp
     start body + goal grasp -> MNet, 10 frames a step, re-canonicalised, refined near the goal (§3.4, Eq. 9-13),
-    each frame raised onto the floor z = 0 where its soles sink below it (graspkit's floor step, not GOAL's)
+    each frame raised onto the floor z = 0 where its soles sink below it (graspkit's floor step, not GOAL's),
+    the refinement started early for a hand that stalls within 25 cm of the goal hand (graspkit's stall rule)
 
 `synthesize("mug")` runs it for any catalogue object with the shipped `gnet.pt` and `mnet.pt`, and
 `synthesize(mesh)` for an object of one's own (a trimesh.Trimesh or a mesh file: closed, metres, z up;
@@ -21,6 +22,7 @@ import torch
 
 from graspkit.data.motion import Motion
 from graspkit.data.reaching import Start
+from graspkit.models.mnet import STALL_FRAMES, check_stall
 from graspkit.objects.placement import ObjectPose
 from graspkit.saga import CHECKPOINTS
 
@@ -49,17 +51,18 @@ def default_start(centre: np.ndarray, distance: float, yaw_offset: float = 0.0) 
 def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, start: Start | None = None,
                seed: int = 0, start_distance: float = 1.0, max_frames: int = 150,
                checkpoints: str | Path = CHECKPOINTS, penetration: bool = True,
-               model: str | Path | None = None) -> GoalResult:
+               model: str | Path | None = None, stall: int | None = STALL_FRAMES) -> GoalResult:
     """GOAL for object `name` (a catalogue name, a mesh file or a trimesh.Trimesh, closed and in metres): one
     refined GNet grasp and MNet's approach into it from a standing start, seeded. `penetration`: the refinement
     adds graspkit's E_pen on the object's collision grid (False: GOAL's Eq. 4-8 alone; docs/goal.md); `model`: an
-    SMPL-X .npz for the body (default: graspkit's procedural one, which the networks were trained on)."""
+    SMPL-X .npz for the body (default: graspkit's procedural one, which the networks were trained on); `stall`: MNet's
+    stall window in frames (`mnet.rollout`; None: GOAL's rollout, which may stop with the hand 10-25 cm short)."""
     from graspkit.data.grasp_io import object_collision_grid
     from graspkit.data.reaching import plan_reach
     from graspkit.eval_goal import _body, gnet_goal, sliding
     from graspkit.metrics import floor_figures, grasp_and_end_figures
     from graspkit.models.gnet import load_gnet
-    from graspkit.models.mnet import STALL_FRAMES, load_mnet, rollout
+    from graspkit.models.mnet import load_mnet, rollout
     from graspkit.objects.bps import bps_basis
     from graspkit.objects.placement import apply_pose, within_reach_pose
     from graspkit.objects.sampling import sample_surface
@@ -72,6 +75,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
         raise ValueError(f"start_distance: expected metres in (0, 5], got {start_distance}")
     if max_frames < 2:
         raise ValueError(f"max_frames: expected at least 2 frames, got {max_frames}")
+    check_stall(stall)
     if start is not None and not isinstance(start, Start):
         raise ValueError(f"start: expected a graspkit.data.reaching.Start or None, got {type(start).__name__}")
     ck = Path(checkpoints)
@@ -94,7 +98,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     sdf = (object_collision_grid(given, obj_mesh), pose.rotation, pose.translation) if penetration else None
     goal = gnet_goal(load_gnet(ck / "gnet.pt"), s, betas, pts, c, generator=g, sdf=sdf)[:2]
     r = rollout(load_mnet(ck / "mnet.pt"), body, s, goal, betas, pts, c, bps_basis(), max_frames=max_frames,
-                floor=0.0, stall=STALL_FRAMES)   # graspkit's floor step and stall rule (not GOAL's): docs/goal.md
+                floor=0.0, stall=stall)      # graspkit's floor step and stall rule (not GOAL's): docs/goal.md
 
     to_motion = lambda r6, t: Motion(matrix_to_axis_angle(rot6d_to_matrix(r6.double())).numpy(),  # noqa: E731
                                      t.detach().double().numpy(), betas.double().numpy(), 30.0)

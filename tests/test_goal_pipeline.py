@@ -53,6 +53,7 @@ def test_one_call_from_an_object_of_ones_own_to_a_grasp_and_an_approach():
     (dict(name="teapot"), "name: unknown object 'teapot'"),
     (dict(name="mug", start_distance=0.0), "start_distance"),
     (dict(name="mug", max_frames=1), "max_frames"),
+    (dict(name="mug", stall=0), "stall: expected a whole number of frames >= 1"),
     (dict(name="mug", start=(0.0, 0.0, 0.0)), "start: expected"),
 ])
 def test_goal_names_a_bad_argument(kwargs, message):
@@ -71,6 +72,7 @@ def test_goal_and_wandr_commands_name_bad_arguments(tmp_path, capsys):
     assert "--goal: expected three finite numbers X Y Z (m), got 1.0 nan 1.0" in capsys.readouterr().err
     for cmd, extra, message in (("saga", ["--at", "1", "0", "nan", "0"], "--at: expected four finite numbers"),
                                 ("goal", ["--at", "1", "0", "inf", "0"], "--at: expected four finite numbers"),
+                                ("goal", ["--stall", "-1"], "--stall: expected an integer >= 0, got -1"),
                                 ("saga", ["--free-joints", "knee"], "--free-joints: expected 'arms', 'none' or distinct"),
                                 ("saga", ["--free-joints", "arms", "left_elbow"], "got arms left_elbow")):
         assert main([cmd, "--object", "mug", *extra, "--out", str(tmp_path / "x")]) == 2

@@ -148,9 +148,10 @@ def test_rollout_reaches_a_nearby_goal_by_the_refinement_alone(setup):
 
 
 def test_rollout_stall_rule_refines_a_hand_stopped_beyond_10_cm(setup):
-    """graspkit's stall rule (not GOAL's): an untrained MNet stands still with the hand ~15 cm from the goal hand,
+    """graspkit's stall rule (not GOAL's): an untrained MNet stands still with the hand 12-20 cm from the goal hand,
     outside Eq. 12-13's 10 cm; without the rule the rollout runs to its maximum there, with it the refinement starts
-    once `stall` frames have brought no progress and carries the hand to the goal, the feet where they stand."""
+    once `stall` frames have brought no progress and carries the hand to the goal, the body within 1 cm of where it
+    stood. A stall window that is not a whole number of frames >= 1 is refused by name."""
     bm, gv, body = setup
     aa = torch.zeros(55, 3)
     aa[0] = torch.tensor([math.pi / 2, 0, 0])
@@ -168,6 +169,9 @@ def test_rollout_stall_rule_refines_a_hand_stopped_beyond_10_cm(setup):
     assert ours.first_refined == 11 and ours.reached                   # frames 1-10 stand still, then the refinement
     assert float(ours.hand_dist[-1]) <= 0.01
     assert float(ours.transl[:, :2].norm(dim=-1).max()) < 0.01         # the arm reaches; the body moves < 1 cm
+    for bad in (0, -3, 2.5, True):
+        with pytest.raises(ValueError, match="stall"):
+            rollout(*args, max_frames=20, stall=bad)
 
 
 def test_rollout_far_from_the_goal_runs_to_the_maximum(setup):

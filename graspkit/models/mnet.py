@@ -335,6 +335,12 @@ STALL_RADIUS = 0.25  # m: ... and only for a hand this close to the goal hand (n
 STALL_FRAMES = 10    # frames: the window graspkit's pipelines give `rollout`'s stall rule (one MNet step)
 
 
+def check_stall(stall) -> None:
+    """ValueError naming `stall` unless it is None (off) or a whole number of frames >= 1."""
+    if stall is not None and (isinstance(stall, bool) or not isinstance(stall, int) or stall < 1):
+        raise ValueError(f"stall: expected a whole number of frames >= 1, or None (off), got {stall!r}")
+
+
 @torch.no_grad()
 def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, Tensor], betas: Tensor,
             object_points: Tensor, obj_centre: Tensor, basis: Tensor, max_frames: int = 300, refine: bool = True,
@@ -355,6 +361,7 @@ def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, 
                                             hand_step_targets, refine_frame)
     from graspkit.models.gnet import SparseBody, pose_rotmats
 
+    check_stall(stall)
     mnet.eval()
     c = mnet.cfg
     betas = betas.reshape(1, -1).float()
