@@ -72,6 +72,20 @@ def _object_pose(at: list[float] | None):
     return ObjectPose.from_yaw(np.deg2rad(at[3]), np.array(at[:3]))
 
 
+def object_range_notes(pose) -> list[str]:
+    """Warnings when an object placed with --at (an ObjectPose, or None: drawn in range) has its centre outside the
+    0.5-1.7 m heights of the grasp and approach data the SAGA and GOAL networks were trained on."""
+    from graspkit.objects.placement import GRASP_HEIGHTS
+
+    if pose is None:
+        return []
+    z, (lo, hi) = float(pose.translation[2]), GRASP_HEIGHTS
+    if lo <= z <= hi:
+        return []
+    return [f"the object's centre is {z:.2f} m high, {'below' if z < lo else 'above'} the {lo:g}-{hi:g} m of the "
+            "training grasps and approach clips (docs/grasps.md); expect the grasp or the motion to fall short"]
+
+
 def _free_joints(names: list[str]) -> tuple[str, ...]:
     """--free-joints -> GraspPoseConfig.free_joints, checked before any work; ValueError naming the option."""
     from graspkit.optim.grasppose import BODY_JOINTS, expand_free_joints, valid_body_joints
@@ -92,6 +106,8 @@ def _cmd_saga(args: argparse.Namespace) -> int:
 
     _check_object(args.object)
     pose, free_joints = _object_pose(args.at), _free_joints(args.free_joints)
+    for note in object_range_notes(pose):
+        print(f"graspkit: note: {note}", file=sys.stderr)
     bm = load_or_build_body(args.model)
     torch.set_num_threads(args.threads)
     r = synthesize(args.object, bm, object_pose=pose, seed=args.seed, free_joints=free_joints)
@@ -114,6 +130,8 @@ def _cmd_goal(args: argparse.Namespace) -> int:
 
     _check_object(args.object)
     pose = _object_pose(args.at)
+    for note in object_range_notes(pose):
+        print(f"graspkit: note: {note}", file=sys.stderr)
     torch.set_num_threads(args.threads)
     check_counts(args, stall=0)
     r = synthesize(args.object, object_pose=pose, seed=args.seed, max_frames=args.max_frames,

@@ -128,6 +128,21 @@ def test_a_bad_object_file_is_named_as_the_option(tmp_path, capsys, command):
     assert not (tmp_path / "o").exists()
 
 
+def test_object_notes_say_when_an_object_is_placed_outside_the_training_heights():
+    """--at heights against the range the grasp and approach data draw from (sample_object_pose's default)."""
+    import inspect
+
+    from graspkit.cli import _object_pose, object_range_notes
+    from graspkit.objects.placement import sample_object_pose
+
+    lo, hi = inspect.signature(sample_object_pose).parameters["height_range"].default
+    assert (lo, hi) == (0.5, 1.7)
+    assert object_range_notes(None) == [] and object_range_notes(_object_pose([0, 0.6, 0.9, 0])) == []
+    assert object_range_notes(_object_pose([0, 0.6, 0.5, 0])) == [] == object_range_notes(_object_pose([0, 0.6, 1.7, 0]))
+    assert "0.25 m high, below the 0.5-1.7 m" in object_range_notes(_object_pose([0.3, 0.5, 0.25, -60]))[0]
+    assert "1.90 m high, above" in object_range_notes(_object_pose([0, 0.6, 1.9, 0]))[0]
+
+
 def test_wandr_notes_say_when_a_goal_leaves_the_trained_range():
     from graspkit.cli import wandr_range_notes
 

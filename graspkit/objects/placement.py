@@ -60,9 +60,12 @@ class ObjectPose:
         return ObjectPose(self.rotation @ other.translation + self.translation, self.rotation @ other.rotation)
 
 
+GRASP_HEIGHTS = (0.5, 1.7)   # m: object-centre heights of graspkit's grasp and approach data (sample_object_pose)
+
+
 def sample_object_pose(
     rng: np.random.Generator | int,
-    height_range: tuple[float, float] = (0.5, 1.7),
+    height_range: tuple[float, float] = GRASP_HEIGHTS,
     yaw_range_deg: tuple[float, float] = (0.0, 360.0),
     distance_range: tuple[float, float] = (0.05, 1.1),
     bearing_range_deg: tuple[float, float] = (-30.0, 30.0),
