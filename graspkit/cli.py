@@ -129,11 +129,11 @@ def _cmd_goal(args: argparse.Namespace) -> int:
     from graspkit.models.mnet import STALL_FRAMES
 
     _check_object(args.object)
+    check_counts(args, stall=0)
     pose = _object_pose(args.at)
     for note in object_range_notes(pose):
         print(f"graspkit: note: {note}", file=sys.stderr)
     torch.set_num_threads(args.threads)
-    check_counts(args, stall=0)
     r = synthesize(args.object, object_pose=pose, seed=args.seed, max_frames=args.max_frames,
                    model=str(args.model) if args.model else None,
                    stall=STALL_FRAMES if args.stall is None else args.stall or None)
