@@ -162,6 +162,17 @@ def load_into(model: torch.nn.Module, weights: dict[str, Any], path: str | Path,
     return model
 
 
+def check_config(config: Any, config_cls: type, path: str | Path, what: str) -> None:
+    """ValueError naming checkpoint `path` unless `config` is a dict whose entries are fields of dataclass
+    `config_cls` (a checkpoint of another model would otherwise fail inside the constructor, unnamed)."""
+    from dataclasses import fields
+
+    known = {f.name for f in fields(config_cls)}
+    if not isinstance(config, dict) or not set(config) <= known:
+        odd = sorted(set(config) - known) if isinstance(config, dict) else type(config).__name__
+        raise ValueError(f"checkpoint {path}: not {what} (config entries {odd} are not {config_cls.__name__}'s)")
+
+
 def state_dict_problem(e: Exception) -> str:
     """The line of load_state_dict's error that says which key or size differs (its first line only says
     "Error(s) in loading state_dict")."""

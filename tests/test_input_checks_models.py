@@ -36,6 +36,11 @@ def test_load_gnet_names_the_file_of_a_foreign_config_or_missing_weights(tmp_pat
     torch.save({"kind": "gnet", "config": {}}, bare)
     with pytest.raises(ValueError, match=r"bare\.pt: not a gnet checkpoint"):
         load_gnet(bare)
+    state = torch.load(CK / "wandr.pt", weights_only=True)            # the same check in load_wandr
+    state["wandr_config"] = {**state["wandr_config"], "enc_width": 3}
+    torch.save(state, odd)
+    with pytest.raises(ValueError, match=r"odd\.pt: not a WANDR checkpoint.*enc_width.*WandrConfig"):
+        load_wandr(odd)
 
 
 # ------------------------------------------------------------------------------------------------ GNet.sample

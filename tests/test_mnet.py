@@ -128,19 +128,23 @@ def test_feet_mask_selects_low_foot_vertices():
     assert m.tolist() == [[[0.0, 0.0, 1.0, 0.0]]]
 
 
-def test_rollout_reaches_a_nearby_goal_by_the_refinement_alone(setup):
-    """An untrained MNet predicts no change (the body stands still); Eq. 12-13 must carry the hand to the goal."""
-    bm, gv, body = setup
+def _bent_elbow_args(body, elbow: float) -> tuple:
+    """`rollout`'s positional arguments for an untrained MNet (it predicts no change: the body stands still) whose
+    goal is a standing body with the right arm raised and whose start is the same body with the right elbow bent
+    `elbow` rad more; the object is a cloud 2 cm beside the goal hand."""
     aa = torch.zeros(55, 3)
     aa[0] = torch.tensor([math.pi / 2, 0, 0])
     aa[J["right_shoulder"]] = torch.tensor([0, 0, 0.9])
     goal = (axis_angle_to_rot6d(aa), torch.zeros(3))
     aa2 = aa.clone()
-    aa2[J["right_elbow"]] += torch.tensor([0.0, 0.25, 0.0])           # the hand starts ~5 cm from the goal hand
-    net = MNet()
+    aa2[J["right_elbow"]] += torch.tensor([0.0, elbow, 0.0])
     obj = body(pose_rotmats(goal[0][None]), torch.zeros(1, 10), goal[1][None])[0][0, :99] + 0.02
-    out = rollout(net, body, (axis_angle_to_rot6d(aa2), torch.zeros(3)), goal, torch.zeros(10), obj, obj.mean(0), bps_basis(),
-                  max_frames=60, reach_tol=0.01, min_speed=0.004)
+    return MNet(), body, (axis_angle_to_rot6d(aa2), torch.zeros(3)), goal, torch.zeros(10), obj, obj.mean(0), bps_basis()
+
+
+def test_rollout_reaches_a_nearby_goal_by_the_refinement_alone(setup):
+    """An untrained MNet predicts no change (the body stands still); Eq. 12-13 must carry the hand to the goal."""
+    out = rollout(*_bent_elbow_args(setup[2], 0.25), max_frames=60, reach_tol=0.01, min_speed=0.004)  # ~5 cm off
     assert out.first_refined == 1 and out.reached
     assert 0.03 < float(out.hand_dist[0]) < 0.1 and float(out.hand_dist[-1]) <= 0.01
     assert len(out.rot6d) < 25                                     # ~4 mm per frame: about 10-15 frames
@@ -152,16 +156,7 @@ def test_rollout_stall_rule_refines_a_hand_stopped_beyond_10_cm(setup):
     outside Eq. 12-13's 10 cm; without the rule the rollout runs to its maximum there, with it the refinement starts
     once `stall` frames have brought no progress and carries the hand to the goal, the body within 1 cm of where it
     stood. A stall window that is not a whole number of frames >= 1 is refused by name."""
-    bm, gv, body = setup
-    aa = torch.zeros(55, 3)
-    aa[0] = torch.tensor([math.pi / 2, 0, 0])
-    aa[J["right_shoulder"]] = torch.tensor([0, 0, 0.9])
-    goal = (axis_angle_to_rot6d(aa), torch.zeros(3))
-    aa2 = aa.clone()
-    aa2[J["right_elbow"]] += torch.tensor([0.0, 0.5, 0.0])
-    start = (axis_angle_to_rot6d(aa2), torch.zeros(3))
-    obj = body(pose_rotmats(goal[0][None]), torch.zeros(1, 10), goal[1][None])[0][0, :99] + 0.02
-    args = (MNet(), body, start, goal, torch.zeros(10), obj, obj.mean(0), bps_basis())
+    args = _bent_elbow_args(setup[2], 0.5)
     paper = rollout(*args, max_frames=80, min_speed=0.004)
     assert 0.12 < float(paper.hand_dist[0]) < 0.2 and not paper.reached and paper.first_refined is None
     assert len(paper.rot6d) == 80

@@ -27,7 +27,7 @@ outputs Θ only (no offsets to refine with, no head direction), trained with the
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import torch
@@ -309,7 +309,7 @@ def save_weights(path: str | Path, model: nn.Module, kind: str, extra: dict | No
 def load_weights(path: str | Path, kind: str, config_cls: type | None = None) -> tuple[dict[str, Tensor], dict]:
     """(float32 state dict, config) from a shipped checkpoint or a training checkpoint of graspkit.train.fit; with
     `config_cls` (a dataclass) the config's entries must be its fields."""
-    from graspkit.train import load_checkpoint
+    from graspkit.train import check_config, load_checkpoint
 
     ck = load_checkpoint(path)
     if not isinstance(ck, dict) or not isinstance(ck.get("model"), dict):
@@ -319,10 +319,8 @@ def load_weights(path: str | Path, kind: str, config_cls: type | None = None) ->
     config = ck.get("config") if "kind" in ck else ck.get("extra", {}).get(f"{kind}_config")
     if config is None:
         raise ValueError(f"{path}: no {kind} config inside (expected a checkpoint written by graspkit)")
-    known = {f.name for f in fields(config_cls)} if config_cls is not None else None
-    if known is not None and (not isinstance(config, dict) or not set(config) <= known):
-        odd = sorted(set(config) - known) if isinstance(config, dict) else type(config).__name__
-        raise ValueError(f"{path}: not a {kind} checkpoint (config entries {odd} are not {config_cls.__name__}'s)")
+    if config_cls is not None:
+        check_config(config, config_cls, path, f"a {kind} checkpoint")
     state = {k: v.float() if v.is_floating_point() else v for k, v in ck["model"].items()}
     return state, config
 

@@ -31,7 +31,7 @@ over `ramp_epochs`, then stays.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -42,7 +42,7 @@ from torch import Tensor, nn
 from graspkit import intention as I
 from graspkit.data.wandr_dataset import FOOT_JOINTS, GOAL_FRAMES, ClipSet, WindowDataset, lowest_foot, make_batch
 from graspkit.models.blocks import GaussianHead, kl_standard_normal
-from graspkit.train import TrainConfig, fit, load_checkpoint, load_into, save_checkpoint
+from graspkit.train import TrainConfig, check_config, fit, load_checkpoint, load_into, save_checkpoint
 
 FULL_INTENTION = ("wrist", "orientation", "pelvis")
 FEET = FOOT_JOINTS                                   # ankles and feet: the foot-velocity, contact and floor terms
@@ -324,9 +324,7 @@ def load_wandr(path: str | Path) -> WandrCVAE:
     cfg = state.get("wandr_config") or state.get("extra", {}).get("wandr_config")
     if not isinstance(cfg, dict) or not isinstance(state.get("model"), dict):
         raise ValueError(f"checkpoint {path}: not a WANDR checkpoint (no 'wandr_config' / 'model')")
-    unknown = sorted(set(cfg) - {f.name for f in fields(WandrConfig)})
-    if unknown:
-        raise ValueError(f"checkpoint {path}: not a WANDR checkpoint (config entries {unknown} are not WandrConfig's)")
+    check_config(cfg, WandrConfig, path, "a WANDR checkpoint")
     weights = {k: v.float() if v.is_floating_point() else v for k, v in state["model"].items()}
     model = load_into(WandrCVAE(WandrConfig(**cfg)), weights, path, "a WANDR checkpoint")
     model.meta = state.get("meta", {})
