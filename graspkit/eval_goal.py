@@ -591,8 +591,9 @@ def start_distance(clip) -> float:
 
 
 def evaluate(folders=None, stubs=None, n_grasps: int = 60, n_rollouts: int = 24, window_stride: int = 5,
-             seed: int = 0, out=None) -> dict:
-    """GOAL Tab. 1, Tab. 2 and foot sliding on the test objects with the shipped checkpoints; written as JSON."""
+             seed: int = 0, out=None, max_frames: int = 300) -> dict:
+    """GOAL Tab. 1, Tab. 2 and foot sliding on the test objects with the shipped checkpoints (MNet's rollouts up to
+    `max_frames` each); written as JSON."""
     import json
     import time
     from pathlib import Path
@@ -622,17 +623,18 @@ def evaluate(folders=None, stubs=None, n_grasps: int = 60, n_rollouts: int = 24,
     res["tab2_windows"] = len(idx)
     res["tab2_seconds"] = time.perf_counter() - t1
     seqs = rollout_sequences(folders, n_rollouts)
-    res.update(rollout_results(seqs, stubs, gnet, seed))
+    res.update(rollout_results(seqs, stubs, gnet, seed, max_frames))
     out = Path(out or stubs / "goal_eval.json")
     write_atomic(out, json.dumps(res, indent=1, default=float))      # GOAL's tables first: SAGA's row takes minutes
     write_atomic(out, json.dumps(add_saga_rows(res, seqs, seed), indent=1, default=float))
     return res
 
 
-def rollout_results(seqs: list, stubs, gnet, seed: int = 0) -> dict:
+def rollout_results(seqs: list, stubs, gnet, seed: int = 0, max_frames: int = 300) -> dict:
     """The rollout part of the evaluation on `rollout_sequences`: MNet (stubs/mnet.pt) from each test clip's start
-    (0.5-1.5 m from the object) to the true goal grasp and to GNet's grasp, with the floor step of `rollout_eval`.
-    {'rollouts', 'sliding' (GOAL's rows and the ground truth's), 'rollout_seconds'}."""
+    (0.5-1.5 m from the object) to the true goal grasp and to GNet's grasp, up to `max_frames` each, with the floor
+    step and stall rule of `rollout_eval`. {'rollouts', 'sliding' (GOAL's rows and the ground truth's),
+    'rollout_seconds'}."""
     import time
     from pathlib import Path
 
@@ -641,10 +643,10 @@ def rollout_results(seqs: list, stubs, gnet, seed: int = 0) -> dict:
     t0 = time.perf_counter()
     clips = approach_clips(seqs)
     mnet = load_mnet(Path(stubs) / "mnet.pt")
-    to_gt = rollout_eval(mnet, clips)
-    full = rollout_eval(mnet, clips, _gnet_goals(gnet, clips, seed))
+    to_gt = rollout_eval(mnet, clips, max_frames=max_frames)
+    full = rollout_eval(mnet, clips, _gnet_goals(gnet, clips, seed), max_frames=max_frames)
     keys = ("sliding", "reached", "final_hand_cm")
-    return {"rollouts": {"clips": len(clips), "to_true_goal": {k: to_gt[k] for k in keys},
+    return {"rollouts": {"clips": len(clips), "max_frames": max_frames, "to_true_goal": {k: to_gt[k] for k in keys},
                          "goal_pipeline": {k: full[k] for k in keys},
                          "per_clip_true_goal": to_gt["clips"], "per_clip_pipeline": full["clips"]},
             "sliding": {"GOAL (GNet + MNet, ours)": full["sliding"], "MNet to the true goal": to_gt["sliding"],
@@ -735,6 +737,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, default=None, help="JSON (default <checkpoints>/goal_eval.json)")
     p.add_argument("--n-grasps", type=int, default=60, help="test grasps for Tab. 1 (0: every one)")
     p.add_argument("--n-rollouts", type=int, default=24)
+    p.add_argument("--max-frames", type=int, default=300, help="the longest MNet rollout (frames, 30 fps)")
     p.add_argument("--window-stride", type=int, default=5)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=2)
@@ -746,7 +749,7 @@ def main(argv: list[str] | None = None) -> int:
     only.add_argument("--rollouts-only", action="store_true",
                       help="recompute only the MNet rollouts and GOAL's sliding rows in an existing JSON (SAGA's kept)")
     a = p.parse_args(argv)
-    check_counts(a, n_grasps=0, n_rollouts=1, window_stride=1, threads=1, seed=0)
+    check_counts(a, n_grasps=0, n_rollouts=1, max_frames=2, window_stride=1, threads=1, seed=0)
     check_folders(a.data)
     torch.set_num_threads(a.threads)
     if a.tab1_only or a.saga_only or a.rollouts_only:          # update one part of an existing evaluation
@@ -765,7 +768,8 @@ def main(argv: list[str] | None = None) -> int:
         elif a.rollouts_only:
             from graspkit.models.gnet import load_gnet
 
-            new = rollout_results(rollout_sequences(folders, a.n_rollouts), stubs, load_gnet(stubs / "gnet.pt"), a.seed)
+            new = rollout_results(rollout_sequences(folders, a.n_rollouts), stubs, load_gnet(stubs / "gnet.pt"), a.seed,
+                                  a.max_frames)
             new["sliding"].update({k: v for k, v in r.get("sliding", {}).items() if k not in new["sliding"]})
             r.update(new)
             shown = {"sliding": r["sliding"], **{k: r["rollouts"][k] for k in ("to_true_goal", "goal_pipeline")}}
@@ -775,7 +779,7 @@ def main(argv: list[str] | None = None) -> int:
         write_atomic(out, json.dumps(r, indent=1, default=float))
         print(json.dumps(shown, indent=1))
         return 0
-    r = evaluate(a.data, a.checkpoints, a.n_grasps, a.n_rollouts, a.window_stride, a.seed, a.out)
+    r = evaluate(a.data, a.checkpoints, a.n_grasps, a.n_rollouts, a.window_stride, a.seed, a.out, a.max_frames)
     print(json.dumps({k: r[k] for k in ("tab1", "tab2", "sliding")}, indent=1, default=float))
     return 0
 

@@ -37,7 +37,7 @@ import torch
 from torch import Tensor
 
 from graspkit.cli import check_counts, check_folders, reports_errors
-from graspkit.optim.grasppose import ARM_JOINTS, GraspPoseConfig
+from graspkit.optim.grasppose import ARM_JOINTS, GraspPoseConfig, GraspPoseWeights
 from graspkit.paths import DATA_STUBS, write_atomic
 
 RESULTS_PATH = DATA_STUBS / "checkpoints" / "wholegrasp_eval.json"
@@ -81,6 +81,7 @@ class EvalConfig:
     stage2_collision: bool = True  # GraspPoseConfig.stage2_collision (graspkit's; False is Alg. 1's E_fit-only stage 2)
     stage2_ground: bool = True     # GraspPoseConfig.stage2_ground (graspkit's; False is Alg. 1's stage 2)
     ground_rest: bool = True       # GraspPoseConfig.ground_rest (graspkit's; False is the paper's |h(v)|)
+    floor: float = GraspPoseWeights.floor  # GraspPoseWeights.floor (graspkit's; 0: none, as the paper)
     polish: tuple[int, float] = GraspPoseConfig.polish   # GraspPoseConfig.polish (graspkit's; (0, 0.0) is Alg. 1's)
     refine: int | None = None     # the volume's rays per cell side along walls (None: the default; 1: docs/saga.md's tables)
 
@@ -257,7 +258,8 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
     pca = HandPCA(bm)
     base_cfg = GraspPoseConfig(steps=cfg.steps, free_joints=tuple(cfg.free_joints), restart_sunk=cfg.restart_sunk,
                                stage2_collision=cfg.stage2_collision, stage2_ground=cfg.stage2_ground,
-                               ground_rest=cfg.ground_rest, polish=tuple(cfg.polish))
+                               ground_rest=cfg.ground_rest, polish=tuple(cfg.polish),
+                               weights=GraspPoseWeights(floor=cfg.floor))
     opt = GraspPoseOpt(bm, prior, base_cfg)
     ch = None if single_state is None else single_state.get("hand_contact_prior")
     opt_h = GraspPoseOpt(bm, prior, base_cfg, hand_contact_prior=None if ch is None else ch.float()[opt.hand_ids])
@@ -477,6 +479,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="stage 2 without E_g, as Alg. 1 (default: E_g too, the feet held to the floor)")
     ap.add_argument("--no-ground-rest", action="store_true",
                     help="E_g as the paper's |h(v)| (default: each sole vertex's height less its height at rest)")
+    ap.add_argument("--no-floor", action="store_true",
+                    help="no floor term (default: the lowest sole vertex held above the floor, graspkit's)")
     ap.add_argument("--grabnet-only", action="store_true",
                     help="only the GrabNet-SMPLX row (no optimisation; the same draws as the full run)")
     ap.add_argument("--finish", type=Path, default=None, help="only turn this .partial.json into --out and print it")
@@ -497,7 +501,7 @@ def main(argv: list[str] | None = None) -> int:
                      free_joints=expand_free_joints(args.free_joints),
                      restart_sunk=None if args.no_restart else EvalConfig.restart_sunk,
                      stage2_collision=not args.no_stage2_collision, stage2_ground=not args.no_stage2_ground,
-                     ground_rest=not args.no_ground_rest,
+                     ground_rest=not args.no_ground_rest, floor=0.0 if args.no_floor else EvalConfig.floor,
                      refine=args.refine)
     if args.objects:
         cfg = replace(cfg, objects=tuple(args.objects))

@@ -38,7 +38,8 @@ class SagaResult:
     start: Motion                    # the start body (1 frame)
     markers: torch.Tensor            # MotionFill's sampled markers (61, 79, 3), world
     foot_contact: torch.Tensor       # MotionFill's foot-contact probabilities (61, 4)
-    metrics: dict[str, float]        # grasp figures of the grasp body and of the motion's last frame, skating, floor
+    metrics: dict[str, float]        # grasp figures of the grasp body (its lowest vertex too) and of the motion's
+                                     # last frame, skating, floor
 
 
 def rigid_params(poses: np.ndarray, transl: np.ndarray, betas: np.ndarray, R: np.ndarray, o: np.ndarray, bm
@@ -182,6 +183,7 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     fitted = mres.markers[0].double().numpy() @ R_c + o_c
     heels = heel_columns()
     metrics = {**grasp_and_end_figures(res.vertices[0], last, bm.faces, mesh),
+               "grasp_floor_cm": 100 * float(res.vertices[0, :, 2].min()),      # the grasp body's lowest vertex
                "skating_sample": skating(markers_w.double().numpy()[None], np.zeros(1), heels),
                "skating_opt": skating(fitted[None], np.zeros(1), heels), **floor_figures(motion.vertices(bm))}
     return SagaResult(name, pose, mesh, res, motion, st, markers_w, smp["contacts"][0], metrics)

@@ -2,6 +2,7 @@
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
@@ -119,7 +120,6 @@ def test_tab1_only_recomputes_table_1_and_keeps_the_rest(tmp_path, monkeypatch, 
     import json
     from dataclasses import replace
 
-    import pytest
 
     import graspkit.eval_goal as eg
     from graspkit.eval_goal import PEN_ROW, main, tab1_results
@@ -158,7 +158,7 @@ def test_tab1_only_recomputes_table_1_and_keeps_the_rest(tmp_path, monkeypatch, 
         tab1_results([tmp_path / "empty"], DATA_STUBS / "checkpoints")
 
 
-def test_rollouts_only_recomputes_the_rollouts_on_the_floor_and_keeps_sagas_row(tmp_path):
+def test_rollouts_only_recomputes_the_rollouts_on_the_floor_and_keeps_sagas_row(tmp_path, capsys):
     """`python -m graspkit.eval_goal --rollouts-only`: MNet's rollouts (to the true goal and to GNet's) and GOAL's
     sliding rows recomputed with the floor step, so that no frame's full mesh is under the floor z = 0; SAGA's sliding
     row and the other parts of the JSON kept."""
@@ -171,9 +171,14 @@ def test_rollouts_only_recomputes_the_rollouts_on_the_floor_and_keeps_sagas_row(
     out = tmp_path / "goal_eval.json"
     saga = "SAGA (WholeGrasp + MotionFill, ours)"
     out.write_text(json.dumps({"tab2": {"MNet": {"body": 1.0}}, "sliding": {saga: 0.5, "GOAL (GNet + MNet, ours)": 9.0}}))
-    assert main(["--rollouts-only", "--data", str(tmp_path), "--n-rollouts", "2", "--out", str(out), "--threads", "1"]) == 0
+    assert main(["--rollouts-only", "--data", str(tmp_path), "--n-rollouts", "2", "--out", str(out), "--threads", "1",
+                 "--max-frames", "60"]) == 0
     r = json.loads(out.read_text())
+    assert r["rollouts"]["max_frames"] == 60
     assert r["tab2"] == {"MNet": {"body": 1.0}} and r["sliding"][saga] == 0.5
     assert r["rollouts"]["clips"] >= 1 and 0.0 <= r["sliding"]["GOAL (GNet + MNet, ours)"] <= 1.0
     rows = r["rollouts"]["per_clip_true_goal"] + r["rollouts"]["per_clip_pipeline"]
     assert len(rows) == 2 * r["rollouts"]["clips"] and all(x["below_floor_max_cm"] < 0.01 for x in rows)
+    assert all(x["frames"] <= 60 for x in rows)
+    assert main(["--rollouts-only", "--data", str(tmp_path), "--out", str(out), "--max-frames", "1"]) == 2
+    assert "--max-frames: expected an integer >= 2, got 1" in capsys.readouterr().err

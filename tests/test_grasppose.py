@@ -133,9 +133,17 @@ def test_energy_terms_against_independent_computations(bm, prior):
         rest_y = bm().vertices[0, :, 1].double().numpy()
     h0 = np.concatenate([rest_y[f[k]] - rest_y[np.concatenate([f[s + "_heel"], f[s + "_toe"]])].min()
                          for s in ("left", "right") for k in (s + "_heel", s + "_toe")])
-    assert e["ground"].item() == pytest.approx(w.ground * np.abs(v[feet, 2] + height - h0).sum(), rel=1e-3)
+    # + the floor term: a_floor times how far the lowest sole vertex is under the floor (0 when on or above it)
+    under = max(0.0, -(v[feet, 2].min() + height))
+    assert under > 0.01                                           # this body's soles are under the floor z = -t_O
+    assert e["ground"].item() == pytest.approx(w.ground * np.abs(v[feet, 2] + height - h0).sum() + w.floor * under,
+                                               rel=1e-3)
     paper = opt.with_config(ground_rest=False).energy(p, target, obj, 3, cm, co, cache)
-    assert paper["ground"].item() == pytest.approx(w.ground * np.abs(v[feet, 2] + height).sum(), rel=1e-3)
+    assert paper["ground"].item() == pytest.approx(w.ground * np.abs(v[feet, 2] + height).sum() + w.floor * under,
+                                                   rel=1e-3)
+    lifted = replace(obj, height=height + 1.0)                    # a metre lower floor: no floor term
+    assert opt.energy(p, target, lifted, 3, cm, co, cache)["ground"].item() == pytest.approx(
+        w.ground * np.abs(v[feet, 2] + height + 1.0 - h0).sum(), rel=1e-3)
     # marker contact: 15 * squared distance of marker 100 to its nearest object point
     d, _ = cKDTree(pts_np).query(v[opt.marker_ids[100]])
     assert e["contact_marker"].item() == pytest.approx(w.contact_marker * d ** 2, rel=1e-3)
@@ -170,7 +178,8 @@ def test_energy_terms_against_independent_computations(bm, prior):
     e2 = opt.with_config(inner_depths=(0.005, 0.01), forearms=True).energy(p, target, obj, 2, cm, co, cache)
     assert set(e2) == {"fit", "prior", "colli_body", "limits", "ground"}
     assert e2["colli_body"].item() == pytest.approx(want + extra, rel=0.05)
-    assert e2["ground"].item() == pytest.approx(w.ground * np.abs(v[feet, 2] + height - h0).sum(), rel=1e-3)
+    assert e2["ground"].item() == pytest.approx(w.ground * np.abs(v[feet, 2] + height - h0).sum() + w.floor * under,
+                                              rel=1e-3)
     assert "ground" not in opt.with_config(stage2_ground=False).energy(p, target, obj, 2, cm, co, cache)
     assert "ground" not in opt.with_config(ground=False).energy(p, target, obj, 2, cm, co, cache)
     assert "colli_body" not in opt.with_config(stage2_collision=False).energy(p, target, obj, 2, cm, co, cache)
@@ -422,17 +431,42 @@ def test_stage2_ground_brings_the_soles_to_the_floor_with_the_markers_above_it(b
     assert off(free) > 0.025, off(free)
 
 
+def test_floor_term_holds_the_lowest_sole_vertex_on_the_floor_under_sunk_markers(bm, prior):
+    """weights.floor (graspkit's): markers of a rest body sunk 2 cm into the floor, E_g's L1 off (alpha_g = 0) so
+    that only the one-sided floor term holds the body up: without it the lowest sole vertex follows the markers under
+    the floor; with it (the default weight) it ends on the floor or just above, and the markers are still met within 2.5 cm."""
+    up = axis_angle_to_matrix(torch.tensor([np.pi / 2, 0.0, 0.0]))
+    with torch.no_grad():
+        verts = bm(global_orient=matrix_to_axis_angle(up)[None]).vertices
+    feet = torch.as_tensor(np.concatenate(list(foot_vertices(bm).values())))
+    obj = _dummy_object()
+    obj.height = -float(verts[0, :, 2].min()) - 0.02                 # the lowest vertex 2 cm under the floor
+    default = GraspPoseWeights().floor
+    assert default > 0
+    low = {}
+    for w in (0.0, default):
+        opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(100, 150, 0), weights=GraspPoseWeights(ground=0.0, floor=w)))
+        markers = verts[:, opt.marker_ids]
+        r = opt.fit(markers, obj, progress=False)
+        low[w] = float(r.vertices[0, feet, 2].min() + obj.height)
+        err = float((r.markers - markers).norm(dim=-1).mean())
+    assert low[0.0] < -0.015, low
+    assert -0.001 < low[default] < 0.01, low            # one-sided: it may lift a little (Adam), not sink
+    assert err < 0.025, err
+
+
 def test_ground_from_the_rest_heights_stands_a_flat_footed_body_on_the_floor(bm, prior):
     """ground_rest: markers of a body in the rest pose (feet flat) whose lowest vertex is on the floor. E_g from
     each sole vertex's rest height keeps the lowest vertex on the floor; the paper's |h| (an L1 over each foot's
-    lowest 2 cm, median 0.8 cm above the sole's bottom) sinks it under."""
+    lowest 2 cm, median 0.8 cm above the sole's bottom) sinks it under (both without the floor term, which would hold
+    the paper's up as well: checked last)."""
     up = axis_angle_to_matrix(torch.tensor([np.pi / 2, 0.0, 0.0]))
     with torch.no_grad():
         verts = bm(global_orient=matrix_to_axis_angle(up)[None]).vertices
     feet = torch.as_tensor(np.concatenate(list(foot_vertices(bm).values())))
     obj = _dummy_object()
     obj.height = -float(verts[0, :, 2].min())                      # the lowest vertex on the floor
-    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(100, 150, 0)))
+    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(100, 150, 0), weights=GraspPoseWeights(floor=0.0)))
     markers = verts[:, opt.marker_ids]
     low = lambda r: float(r.vertices[0, feet, 2].min() + obj.height)  # noqa: E731  lowest sole vertex, m
     s1 = opt.fit(markers, obj, stages=(1,), progress=False).state            # stage 1 has no E_g: the same for both
@@ -440,3 +474,6 @@ def test_ground_from_the_rest_heights_stands_a_flat_footed_body_on_the_floor(bm,
     paper = opt.with_config(ground_rest=False).fit(markers, obj, stages=(2,), init=s1, progress=False)
     assert abs(low(rest)) < 0.002, low(rest)
     assert low(paper) < -0.004, low(paper)
+    floored = opt.with_config(ground_rest=False, weights=GraspPoseWeights()).fit(markers, obj, stages=(2,), init=s1,
+                                                                                 progress=False)
+    assert low(floored) > -0.001, low(floored)

@@ -85,6 +85,8 @@ def test_one_call_for_an_object_of_ones_own(bm, tmp_path, monkeypatch):
     assert feet.abs().max() < 0.08                                                  # on the floor (z = 0)
     assert set(r.metrics) >= {"grasp_contact", "end_contact", "end_volume_cm3", "skating_opt"}
     assert r.metrics["floor_deepest_cm"] == pytest.approx(100 * max(0.0, -float(feet.min())), abs=1e-4)   # reported
+    low = float(r.grasp.vertices[0, :, 2].min())                    # the grasp body on the floor too (its floor term)
+    assert r.metrics["grasp_floor_cm"] == pytest.approx(100 * low, abs=1e-4) and -0.002 < low < 0.02
 
 
 def test_saga_command_names_a_bad_mesh_file(tmp_path, capsys):

@@ -79,6 +79,12 @@ graspkit's choices where the paper is silent (all in `GraspPoseWeights` / `Grasp
   rest (mean shape; 0 to 2 cm, median 0.8 cm). V^f_B is each foot's lowest 2 cm, so the paper's |h| (an L1, which
   sets the median on the floor) sinks each foot's lowest vertices about 1 cm under it; with h0 a foot flat as at
   rest reads 0 with its lowest vertex on the floor (docs/saga.md).
+- A floor term (`GraspPoseWeights.floor`, graspkit's, since 2026-12-02; 0 turns it off): with E^g_cont, in the same
+  stages, a_floor (-min_{v in V^f_B} h(v))_+ with a_floor = 1000 per metre, GraspMotion-Opt's term and weight
+  (graspkit.optim.graspmotion). Why: a foot turned from its rest shape (the sampled markers turn it) has its toes
+  under the floor and its heels above, and E^g_cont's L1 balances the two ends, so grasp bodies stood up to 2.5 cm
+  into the floor with their toes. It is one-sided: a foot may lift (Adam carries a correction a few mm on), not sink
+  (docs/saga.md, "The floor").
 Frames: everything in the object frame of WholeGrasp-VAE (object centre at 0, z up, floor at z = -t_O).
 """
 from __future__ import annotations
@@ -118,6 +124,7 @@ class GraspPoseWeights:
     free_joints: float = 5e-4     # on the 6D offsets of GraspPoseConfig.free_joints (graspkit's; = alpha_theta)
     limits: float = 0.5           # per degree a free joint turns past the human range (metrics.joint_limit_excess)
     ground: float = 1.0           # alpha_g (not in the paper)
+    floor: float = 1000.0         # per metre the lowest sole vertex is under the floor (graspkit's; 0: none)
     heuristic: float = 15.0       # alpha^h_cont of S.3 (not in the paper)
     heuristic_prior: float = 0.7  # S.3: hand vertices with prior contact probability above this ...
     heuristic_radius: float = 0.02  # ... and closer than this (m) are pulled to the object
@@ -440,6 +447,8 @@ class GraspPoseOpt:
         if cfg.ground and (stage == 3 or (stage == 2 and cfg.stage2_ground)):
             rest = self.sole_rest if cfg.ground_rest else torch.zeros_like(self.sole_rest)
             e["ground"] = w.ground * (feet[..., 2] + height - rest).abs().sum(-1)
+            if w.floor > 0:
+                e["ground"] = e["ground"] + w.floor * torch.relu(-(feet[..., 2].min(-1).values + height[:, 0]))
         if stage < 3:
             return e
 
