@@ -289,6 +289,41 @@ def test_smoothness_autoencoder_trains_and_round_trips_its_checkpoint(tmp_path):
     assert isinstance(again, MarkerDiffAE)
 
 
+def test_free_arm_joints_fit_a_wrist_the_prior_cannot_and_are_the_prior_at_zero(bm, clip):
+    """GraspMotionConfig.free_joints (graspkit's, GraspPose-Opt's arm joints): at zero offsets the bodies are the
+    prior's; a walking clip with its right wrist turned 50 degrees in every frame is refitted far closer on the
+    right hand's markers with the arms free than through Alg. 2's prior latent alone."""
+    from dataclasses import replace
+
+    from scipy.spatial.transform import Rotation
+
+    from graspkit.body.skeleton import JOINT_INDEX
+    from graspkit.data.motion import Motion
+    from graspkit.optim.grasppose import ARM_JOINTS, hand_vertex_ids
+
+    _, _, betas, m = clip
+    poses = m.poses.copy()
+    w = JOINT_INDEX["right_wrist"]
+    poses[:, w] = (Rotation.from_rotvec(poses[:, w]) * Rotation.from_rotvec([0.0, 0.0, 0.87])).as_rotvec()
+    flat = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    ms = saga_sparse_markers(bm)
+    markers = ms.select(Motion(poses, m.trans, m.betas, m.fps).vertices(flat)).float()
+    cfg = GraspMotionConfig(terms=("smooth",), steps=(100, 150), polish=(0, 0.0))
+    assert GraspMotionConfig().free_joints == ARM_JOINTS                                   # the arms by default
+    plain, free = (GraspMotionOpt(bm, load_pose_prior(), None, replace(cfg, free_joints=j)) for j in ((), ARM_JOINTS))
+    p = plain.init_params(markers, betas[None, :10].expand(len(markers), -1))
+    q = {**p, "joint6d": torch.zeros(len(markers), len(ARM_JOINTS), 6)}
+    torch.testing.assert_close(free.rotmats(q), plain.rotmats(p))
+    right = torch.as_tensor(np.isin(ms.vertex_ids, hand_vertex_ids(bm, ("right",))))
+    assert right.sum() >= 3
+    err = {}
+    for name, opt in (("plain", plain), ("free", free)):
+        res = opt.fit(markers[None], betas[None, :10], progress=False)
+        err[name] = float((res.markers[0] - markers)[:, right].norm(dim=-1).mean())
+        assert "limits" in res.energies["stage2"] if name == "free" else "limits" not in res.energies["stage2"]
+    assert err["free"] < 0.5 * err["plain"], err
+
+
 def test_errors_name_the_argument(bm):
     opt = GraspMotionOpt(bm, load_pose_prior())
     with pytest.raises(ValueError, match="markers"):

@@ -67,6 +67,14 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   0.4-2.7 cm (it loses to the marker fit and the hand's contact), and on markers sunk 2 cm into the floor a_floor =
   3000 threw the body 2 cm above it, where the fit's small gradients then barely move it (1000: every frame between
   0.1 mm under and 4.7 mm above; tests/test_graspmotion.py). A sum over all sole vertices overshot the same way.
+- Free arm joints (`GraspMotionConfig.free_joints`, graspkit's, since 2026-12-02; () is Alg. 2's prior latent
+  alone): per frame, the collar, shoulder, elbow and wrist joints get a free rotation on top of the prior's decoded
+  pose (6D offsets from the identity, weight 5e-4 as alpha_theta, and 0.5 per degree past the human range:
+  `GraspMotionWeights.free_joints`, `limits`), as GraspPose-Opt's arms (graspkit.optim.grasppose). Why: through
+  the 32-D latent alone the fitted bodies stayed 6.3 cm (mean over markers and frames) from MotionFill's markers on
+  the twelve test clips, and two of them ended with the hand short of the object (7 and 25 mm); with `synthesize`
+  on two shapes no model saw, the last frame was 3.0-3.3 cm from MotionFill's last markers, which were 3 mm from the
+  grasp's. With the arms free: 3.1 cm, 12 of 12 clips end in contact, last-frame volume 1.92 -> 1.20 cm3 (docs).
 - Initialisation: the prior's mean pose, rigidly aligned per frame (Kabsch on the body and face markers).
 - E^o_colli and E_g are evaluated on the frames where a hand vertex is within 2 cm of the object's bounding box
   (chosen without gradient each step; elsewhere both are 0 by definition: no vertex can be inside or within 1 cm),
@@ -96,7 +104,9 @@ from tqdm.auto import tqdm
 
 from graspkit.body.markers import foot_vertices, palm_vertices, saga_sparse_markers, vertex_normals
 from graspkit.models.gnet import SparseBody
-from graspkit.optim.grasppose import GraspObject, _nearest, hand_vertex_ids, kabsch
+from graspkit.metrics import joint_limit_excess
+from graspkit.optim.grasppose import (_EYE6, ARM_JOINTS, GraspObject, _nearest, body_joint_ids, hand_vertex_ids,
+                                     kabsch)
 from graspkit.optim.step import energy_step
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
 from graspkit.train import load_checkpoint, state_dict_problem
@@ -226,6 +236,8 @@ class GraspMotionWeights:
     heel_height: float = 0.06      # m above the floor: with both heels this low, one of them should stand still
     foot_acc: float = 1e5          # graspkit's: squared foot-vertex acceleration (m/frame^2), mean over vertices
     floor: float = 1000.0          # graspkit's: each frame's lowest sole vertex below the floor (m), when fit gets it
+    free_joints: float = 5e-4      # on the 6D offsets of GraspMotionConfig.free_joints (graspkit's; = alpha_theta)
+    limits: float = 0.5            # per degree a free joint turns past the human range (metrics.joint_limit_excess)
 
 
 @dataclass
@@ -240,6 +252,9 @@ class GraspMotionConfig:
     log_every: int = 10
     terms: tuple[str, ...] = ("colli", "contact", "palm", "smooth", "skate", "heel", "floor")
     one_foot_down: bool = True     # T_c also holds each frame's most probable foot part (a foot is always planted)
+    # body joints (SMPL-X names) given a free rotation per frame on top of the prior's decoded pose, penalised by
+    # weights.free_joints and weights.limits (graspkit's, as GraspPose-Opt's; () is Alg. 2's prior latent alone)
+    free_joints: tuple[str, ...] = ARM_JOINTS
     weights: GraspMotionWeights = field(default_factory=GraspMotionWeights)
 
     def __post_init__(self) -> None:
@@ -272,6 +287,7 @@ class GraspMotionOpt:
                 for p in m.parameters():
                     p.requires_grad_(False)
         self.cfg = config or GraspMotionConfig()
+        self.free_ids = body_joint_ids(self.cfg.free_joints)
         ms = saga_sparse_markers(bm)
         self.n_markers = len(ms)
         self.heels = [ms.names.index("LHEE"), ms.names.index("RHEE")]
@@ -295,13 +311,17 @@ class GraspMotionOpt:
 
     # ------------------------------------------------------------------ the body
     def rotmats(self, p: dict[str, Tensor]) -> Tensor:
-        """All 55 joint rotations (N,55,3,3) of frame parameters (N, ...) (hand mean added, jaw and eyes zero)."""
+        """All 55 joint rotations (N,55,3,3) of frame parameters (N, ...) (hand mean added, jaw and eyes zero; the
+        free joints' 6D offsets `joint6d` (N, n_free * 6) on top of the prior's pose where given)."""
         N = p["transl"].shape[0]
         eye = torch.eye(3).expand(N, 3, 3, 3)
         hands = [axis_angle_to_matrix((p[f"{s}_pca"] @ self.pca[s] + self.hand_mean[s]).view(N, 15, 3))
                  for s in ("left", "right")]
-        return torch.cat([rot6d_to_matrix(p["orient6d"]).unsqueeze(1), self.prior.decode_rotmats(p["z"]), eye,
-                          hands[0], hands[1]], 1)
+        body = self.prior.decode_rotmats(p["z"])
+        if len(self.free_ids) and "joint6d" in p:     # (parameters without the offsets: the prior's pose)
+            body = body.clone()
+            body[:, self.free_ids] = body[:, self.free_ids] @ rot6d_to_matrix(p["joint6d"].view(N, -1, 6) + _EYE6)
+        return torch.cat([rot6d_to_matrix(p["orient6d"]).unsqueeze(1), body, eye, hands[0], hands[1]], 1)
 
     def body(self, p: dict[str, Tensor], betas: Tensor) -> tuple[Tensor, Tensor]:
         """Markers, hand and foot vertices (N, n, 3) and joints (N, 55, 3) of frame parameters."""
@@ -313,6 +333,8 @@ class GraspMotionOpt:
         p = {"transl": torch.zeros(N, 3), "orient6d": matrix_to_rot6d(torch.eye(3).expand(N, 3, 3)).clone(),
              "z": torch.zeros(N, self.prior.cfg.latent), "left_pca": torch.zeros(N, self.cfg.n_pca),
              "right_pca": torch.zeros(N, self.cfg.n_pca)}
+        if len(self.free_ids):
+            p["joint6d"] = torch.zeros(N, len(self.free_ids), 6)
         with torch.no_grad():
             v, J = self.body(p, betas)
             R, c = kabsch(v[:, self.sl_m][:, self.body_face].float(), markers[:, self.body_face])
@@ -334,6 +356,12 @@ class GraspMotionOpt:
         e = {"fit": (m - target).abs().sum((1, 2, 3)),
              "prior": w.prior * (p["z"].pow(2).sum(-1) + p["left_pca"].pow(2).sum(-1)
                                  + p["right_pca"].pow(2).sum(-1)).view(B, F).sum(1)}
+        if len(self.free_ids) and "joint6d" in p:   # the free joints' offsets and how far they turn past the human range
+            e["prior"] = e["prior"] + w.free_joints * p["joint6d"].pow(2).view(B, F, -1).sum((1, 2))
+            if w.limits > 0:
+                rot, j = self.rotmats(p), 1 + self.free_ids
+                aa = torch.zeros(rot.shape[0], 55, 3).index_copy(1, j, matrix_to_axis_angle(rot[:, j]))
+                e["limits"] = w.limits * joint_limit_excess(aa)[:, j].sum(-1).view(B, F).sum(1)
         if stage < 2:
             return e
         terms = cfg.terms
