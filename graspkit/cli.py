@@ -87,7 +87,8 @@ def object_range_notes(pose) -> list[str]:
 
 
 def _free_joints(names: list[str]) -> tuple[str, ...]:
-    """--free-joints -> GraspPoseConfig.free_joints, checked before any work; ValueError naming the option."""
+    """--free-joints -> GraspPoseConfig.free_joints (and GraspMotionConfig's), checked before any work; ValueError
+    naming the option."""
     from graspkit.optim.grasppose import BODY_JOINTS, expand_free_joints, valid_body_joints
 
     joints = expand_free_joints(names)
@@ -278,8 +279,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "run to run)")
         if method == "saga":
             sg.add_argument("--free-joints", nargs="*", default=["arms"], metavar="JOINT",
-                            help="GraspPose-Opt: body joints given a free rotation on top of the pose prior ('arms', "
-                                 "the default: collars, shoulders, elbows, wrists; 'none': Alg. 1; docs/saga.md)")
+                            help="GraspPose-Opt and GraspMotion-Opt: body joints given a free rotation on top of the "
+                                 "pose prior ('arms', the default: collars, shoulders, elbows, wrists; 'none': Alg. 1 "
+                                 "and 2; docs/saga.md)")
         if method == "goal":
             sg.add_argument("--max-frames", type=int, default=150, help="MNet's rollout stops here if not at the grasp")
             sg.add_argument("--stall", type=int, default=None, metavar="FRAMES",

@@ -82,8 +82,9 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
 
     object_pose: where the object is (default: drawn by `within_reach_pose(seed)` in front of the origin);
     start: a Start (x, y, heading: a standing body there) or a one-frame Motion (any body) or None (see module doc).
-    free_joints: GraspPose-Opt's `GraspPoseConfig.free_joints` (None: its default, the arm chains; () is Alg. 1's
-    prior latent alone; docs/saga.md).
+    free_joints: the body joints freed on top of the pose prior in GraspPose-Opt and GraspMotion-Opt
+    (`GraspPoseConfig.free_joints`, `GraspMotionConfig.free_joints`; None: their default, the arm chains; () is
+    Alg. 1's and Alg. 2's prior latent alone; docs/saga.md, docs/saga_motion.md).
     polish_steps: the polish steps of GraspPose-Opt and of GraspMotion-Opt (None: their configs' 100 each; a lesson
     with fewer steps throughout passes fewer).
     """
@@ -126,6 +127,8 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     s = wg.sample(P, N, float(centre[2]), 1, g, centre=torch.zeros(3))
     gcfg = GraspPoseConfig(steps=grasp_steps)
     mcfg = GraspMotionConfig(steps=motion_steps)
+    if free_joints is not None:
+        mcfg = replace(mcfg, free_joints=tuple(free_joints))
     if polish_steps is not None:
         gcfg = replace(gcfg, polish=(int(polish_steps[0]), gcfg.polish[1]))
         mcfg = replace(mcfg, polish=(int(polish_steps[1]), mcfg.polish[1]))

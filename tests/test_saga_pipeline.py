@@ -24,10 +24,18 @@ def test_rigid_params_equals_moving_every_vertex(bm):
     np.testing.assert_allclose(v2, v1 @ R.T + o, atol=1e-4)
 
 
-def test_the_same_seed_gives_the_same_motion_and_polish_steps_are_checked(bm):
+def test_the_same_seed_gives_the_same_motion_and_polish_steps_are_checked(bm, monkeypatch):
     """Two calls with one seed give bit-identical grasps and motions (a few steps of each stage, no polish); a third
-    seed another motion; polish_steps takes two counts >= 0."""
+    seed another motion; polish_steps takes two counts >= 0; free_joints reaches both optimisers."""
     from graspkit.objects.placement import ObjectPose
+    from graspkit.optim import grasppose, graspmotion
+
+    seen = []
+    for cls in (grasppose.GraspPoseOpt, graspmotion.GraspMotionOpt):
+        def init(self, *a, _orig=cls.__init__, **k):
+            _orig(self, *a, **k)
+            seen.append((type(self).__name__, self.cfg.free_joints))
+        monkeypatch.setattr(cls, "__init__", init)
 
     kw = dict(object_pose=ObjectPose.from_yaw(0.8, np.array([0.3, -0.6, 0.85])), grasp_steps=(5, 5, 5),
               motion_steps=(5, 5), polish_steps=(0, 0), progress=False)
@@ -35,6 +43,11 @@ def test_the_same_seed_gives_the_same_motion_and_polish_steps_are_checked(bm):
     np.testing.assert_array_equal(a.motion.poses, b.motion.poses)
     np.testing.assert_array_equal(a.grasp.vertices.numpy(), b.grasp.vertices.numpy())
     assert np.abs(a.motion.poses - c.motion.poses).max() > 1e-3
+    assert set(seen) == {("GraspPoseOpt", grasppose.ARM_JOINTS), ("GraspMotionOpt", grasppose.ARM_JOINTS)}
+    seen.clear()
+    d = synthesize("camera", bm, seed=3, free_joints=(), **kw)          # Alg. 1 and Alg. 2: the prior latent alone
+    assert seen == [("GraspPoseOpt", ()), ("GraspMotionOpt", ())]
+    assert np.abs(a.motion.poses - d.motion.poses).max() > 1e-3
     with pytest.raises(ValueError, match="polish_steps"):
         synthesize("camera", bm, polish_steps=(10, -1))
     with pytest.raises(ValueError, match="name"):
