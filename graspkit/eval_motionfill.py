@@ -682,7 +682,8 @@ def main(argv: list[str] | None = None) -> int:
     cfg = GraspMotionConfig()                       # what graspmotion_eval ran
     update_json(args.out, graspmotion={"rows": ev["rows"], "files": [f"{f.parent.name}/{f.name}" for f in files],
                                        "per_object": args.per_object, "steps": list(cfg.steps),
-                                       "polish": list(cfg.polish), "seed": args.seed,
+                                       "polish": list(cfg.polish), "free_joints": list(cfg.free_joints),
+                                       "seed": args.seed,
                                        "seconds": round(secs, 1), "threads": args.threads})
     keys = ("skating_gt", "skating_sample", "skating_opt", "contact_mm", "volume_cm3", "depth_cm", "heel_acc_p99_gt",
             "heel_acc_p99_opt", "noncollision_opt", "below_floor_mean_cm", "below_floor_max_cm")

@@ -350,8 +350,8 @@ class GraspMotionOpt:
         """Each term per sequence (B,) for frame parameters (B*(T+1), ...) and target markers (B, T+1, M, 3)."""
         cfg, w = self.cfg, self.cfg.weights
         B, F = target.shape[:2]
-        v, _ = self.body(p, betas)
-        v = v.float().view(B, F, -1, 3)
+        rot = self.rotmats(p)
+        v = self.sparse(rot, betas, p["transl"])[0].float().view(B, F, -1, 3)
         m, hands, feet = v[:, :, self.sl_m], v[:, :, self.sl_h], v[:, :, self.sl_f]
         e = {"fit": (m - target).abs().sum((1, 2, 3)),
              "prior": w.prior * (p["z"].pow(2).sum(-1) + p["left_pca"].pow(2).sum(-1)
@@ -359,7 +359,7 @@ class GraspMotionOpt:
         if len(self.free_ids) and "joint6d" in p:   # the free joints' offsets and how far they turn past the human range
             e["prior"] = e["prior"] + w.free_joints * p["joint6d"].pow(2).view(B, F, -1).sum((1, 2))
             if w.limits > 0:
-                rot, j = self.rotmats(p), 1 + self.free_ids
+                j = 1 + self.free_ids
                 aa = torch.zeros(rot.shape[0], 55, 3).index_copy(1, j, matrix_to_axis_angle(rot[:, j]))
                 e["limits"] = w.limits * joint_limit_excess(aa)[:, j].sum(-1).view(B, F).sum(1)
         if stage < 2:
