@@ -86,6 +86,12 @@ def object_range_notes(pose) -> list[str]:
             "training grasps and approach clips (docs/grasps.md); expect the grasp or the motion to fall short"]
 
 
+def _print_notes(notes: list[str]) -> None:
+    """Each note on stderr as `graspkit: note: ...` (the run goes on)."""
+    for note in notes:
+        print(f"graspkit: note: {note}", file=sys.stderr)
+
+
 def _free_joints(names: list[str]) -> tuple[str, ...]:
     """--free-joints -> GraspPoseConfig.free_joints (and GraspMotionConfig's), checked before any work; ValueError
     naming the option."""
@@ -107,8 +113,7 @@ def _cmd_saga(args: argparse.Namespace) -> int:
 
     _check_object(args.object)
     pose, free_joints = _object_pose(args.at), _free_joints(args.free_joints)
-    for note in object_range_notes(pose):
-        print(f"graspkit: note: {note}", file=sys.stderr)
+    _print_notes(object_range_notes(pose))
     bm = load_or_build_body(args.model)
     torch.set_num_threads(args.threads)
     r = synthesize(args.object, bm, object_pose=pose, seed=args.seed, free_joints=free_joints)
@@ -132,8 +137,7 @@ def _cmd_goal(args: argparse.Namespace) -> int:
     _check_object(args.object)
     check_counts(args, stall=0)
     pose = _object_pose(args.at)
-    for note in object_range_notes(pose):
-        print(f"graspkit: note: {note}", file=sys.stderr)
+    _print_notes(object_range_notes(pose))
     torch.set_num_threads(args.threads)
     r = synthesize(args.object, object_pose=pose, seed=args.seed, max_frames=args.max_frames,
                    model=str(args.model) if args.model else None,
@@ -198,8 +202,7 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
         what = "is a folder, expected a checkpoint file" if args.checkpoint.is_dir() else "is missing"
         raise FileNotFoundError(f"--checkpoint: {args.checkpoint} {what} (see docs/wandr.md)")
     goal = torch.tensor(args.goal, dtype=torch.float32)
-    for note in wandr_range_notes(args.goal, frames / 30.0):
-        print(f"graspkit: note: {note}", file=sys.stderr)
+    _print_notes(wandr_range_notes(args.goal, frames / 30.0))
     motion = wandr_motions(args.checkpoint, goal[None], frames, seed=args.seed)[0]
     bm = load_or_build_body(args.model)
     sv, sf = sphere(goal.numpy(), 0.05)

@@ -104,9 +104,8 @@ from tqdm.auto import tqdm
 
 from graspkit.body.markers import foot_vertices, palm_vertices, saga_sparse_markers, vertex_normals
 from graspkit.models.gnet import SparseBody
-from graspkit.metrics import joint_limit_excess
-from graspkit.optim.grasppose import (_EYE6, ARM_JOINTS, GraspObject, _nearest, body_joint_ids, hand_vertex_ids,
-                                     kabsch)
+from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, _nearest, body_joint_ids, free_joint_excess,
+                                     hand_vertex_ids, kabsch, with_free_joints)
 from graspkit.optim.step import energy_step
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
 from graspkit.train import load_checkpoint, state_dict_problem
@@ -319,8 +318,7 @@ class GraspMotionOpt:
                  for s in ("left", "right")]
         body = self.prior.decode_rotmats(p["z"])
         if len(self.free_ids) and "joint6d" in p:     # (parameters without the offsets: the prior's pose)
-            body = body.clone()
-            body[:, self.free_ids] = body[:, self.free_ids] @ rot6d_to_matrix(p["joint6d"].view(N, -1, 6) + _EYE6)
+            body = with_free_joints(body, p["joint6d"].view(N, -1, 6), self.free_ids)
         return torch.cat([rot6d_to_matrix(p["orient6d"]).unsqueeze(1), body, eye, hands[0], hands[1]], 1)
 
     def body(self, p: dict[str, Tensor], betas: Tensor) -> tuple[Tensor, Tensor]:
@@ -359,9 +357,7 @@ class GraspMotionOpt:
         if len(self.free_ids) and "joint6d" in p:   # the free joints' offsets and how far they turn past the human range
             e["prior"] = e["prior"] + w.free_joints * p["joint6d"].pow(2).view(B, F, -1).sum((1, 2))
             if w.limits > 0:
-                j = 1 + self.free_ids
-                aa = torch.zeros(rot.shape[0], 55, 3).index_copy(1, j, matrix_to_axis_angle(rot[:, j]))
-                e["limits"] = w.limits * joint_limit_excess(aa)[:, j].sum(-1).view(B, F).sum(1)
+                e["limits"] = w.limits * free_joint_excess(rot, self.free_ids).view(B, F).sum(1)
         if stage < 2:
             return e
         terms = cfg.terms

@@ -247,6 +247,22 @@ class GraspPoseResult:
 _EYE6 = matrix_to_rot6d(torch.eye(3))
 
 
+def with_free_joints(body: Tensor, joint6d: Tensor, free_ids: Tensor) -> Tensor:
+    """The 21 body rotations (N,21,3,3) with each free joint's 6D offset from the identity (N, n_free, 6) composed
+    on (GraspPose-Opt's and GraspMotion-Opt's free joints; zero offsets give `body` back)."""
+    body = body.clone()
+    body[:, free_ids] = body[:, free_ids] @ rot6d_to_matrix(joint6d + _EYE6)
+    return body
+
+
+def free_joint_excess(rot: Tensor, free_ids: Tensor) -> Tensor:
+    """Degrees (N,) the free joints of 55 joint rotations (N,55,3,3) turn past the human range, summed
+    (metrics.joint_limit_excess; differentiable)."""
+    j = 1 + free_ids                                                     # the free joints among the 55
+    aa = torch.zeros(rot.shape[0], rot.shape[1], 3, dtype=rot.dtype).index_copy(1, j, matrix_to_axis_angle(rot[:, j]))
+    return joint_limit_excess(aa)[:, j].sum(-1)
+
+
 def expand_free_joints(names: list[str] | tuple[str, ...]) -> tuple[str, ...]:
     """Command-line joint names -> GraspPoseConfig.free_joints: 'arms' stands for ARM_JOINTS, 'none' for no joint
     (Alg. 1), others pass as given."""
@@ -394,8 +410,7 @@ class GraspPoseOpt:
                  for s in ("left", "right")]
         body = self.prior.decode_rotmats(p["z"])
         if len(self.free_ids):
-            body = body.clone()
-            body[:, self.free_ids] = body[:, self.free_ids] @ rot6d_to_matrix(p["joint6d"] + _EYE6)
+            body = with_free_joints(body, p["joint6d"], self.free_ids)
         return torch.cat([rot6d_to_matrix(p["orient6d"]).unsqueeze(1), body, eye,
                           axis_angle_to_matrix(p["eyes"].view(B, 2, 3)), hands[0], hands[1]], 1)
 
@@ -438,9 +453,7 @@ class GraspPoseOpt:
         if len(self.free_ids):
             e["prior"] = e["prior"] + w.free_joints * p["joint6d"].pow(2).sum((1, 2))
             if w.limits > 0:
-                j = 1 + self.free_ids                                    # the free joints among the 55
-                aa = torch.zeros(B, rot.shape[1], 3, dtype=rot.dtype).index_copy(1, j, matrix_to_axis_angle(rot[:, j]))
-                e["limits"] = w.limits * joint_limit_excess(aa)[:, j].sum(-1)
+                e["limits"] = w.limits * free_joint_excess(rot, self.free_ids)
         pts, nrm, height = obj.batch(B)
         if stage == 2 and cfg.collision and cfg.stage2_collision:
             e["colli_body"] = w.colli_body * self._extra_inside(v, obj, hands=True)   # no other E^B in stage 2
