@@ -120,7 +120,6 @@ def test_tab1_only_recomputes_table_1_and_keeps_the_rest(tmp_path, monkeypatch, 
     import json
     from dataclasses import replace
 
-
     import graspkit.eval_goal as eg
     from graspkit.eval_goal import PEN_ROW, main, tab1_results
     from graspkit.optim.goal_refine import PEN_WEIGHTS, GraspRefineWeights
