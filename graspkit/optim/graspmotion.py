@@ -311,13 +311,13 @@ class GraspMotionOpt:
     # ------------------------------------------------------------------ the body
     def rotmats(self, p: dict[str, Tensor]) -> Tensor:
         """All 55 joint rotations (N,55,3,3) of frame parameters (N, ...) (hand mean added, jaw and eyes zero; the
-        free joints' 6D offsets `joint6d` (N, n_free * 6) on top of the prior's pose)."""
+        free joints' 6D offsets `joint6d` (N, n_free * 6) on top of the prior's pose where given)."""
         N = p["transl"].shape[0]
         eye = torch.eye(3).expand(N, 3, 3, 3)
         hands = [axis_angle_to_matrix((p[f"{s}_pca"] @ self.pca[s] + self.hand_mean[s]).view(N, 15, 3))
                  for s in ("left", "right")]
         body = self.prior.decode_rotmats(p["z"])
-        if len(self.free_ids):
+        if len(self.free_ids) and "joint6d" in p:     # (parameters without the offsets: the prior's pose)
             body = with_free_joints(body, p["joint6d"].view(N, -1, 6), self.free_ids)
         return torch.cat([rot6d_to_matrix(p["orient6d"]).unsqueeze(1), body, eye, hands[0], hands[1]], 1)
 
@@ -354,7 +354,7 @@ class GraspMotionOpt:
         e = {"fit": (m - target).abs().sum((1, 2, 3)),
              "prior": w.prior * (p["z"].pow(2).sum(-1) + p["left_pca"].pow(2).sum(-1)
                                  + p["right_pca"].pow(2).sum(-1)).view(B, F).sum(1)}
-        if len(self.free_ids):                      # the free joints' offsets and how far they turn past the human range
+        if len(self.free_ids) and "joint6d" in p:   # the free joints' offsets and how far they turn past the human range
             e["prior"] = e["prior"] + w.free_joints * p["joint6d"].pow(2).view(B, F, -1).sum((1, 2))
             if w.limits > 0:
                 e["limits"] = w.limits * free_joint_excess(rot, self.free_ids).view(B, F).sum(1)
