@@ -482,9 +482,9 @@ def table(rows: dict[str, dict[str, float]]) -> str:
 def approach_scene(path: str | Path, bm) -> dict[str, Any]:
     """One approach clip as MotionFill sees it (the window ending at the goal frame, canonical frame A.3) and its
     object in that frame: markers (61,79,3), traj (62,4), local, vel, contacts, betas, floor height, object points,
-    normals (P,3), contact map C_O at the grasp (P,), the object's mesh (trimesh) and the pose of its catalogue mesh
-    there (mesh_rotation (3,3), mesh_origin (3,): x = R x_mesh + origin), name, file name and the clip's last 61
-    frames (a Motion in the world)."""
+    normals (P,3), contact maps C_O (P,) and C_M (143,) at the grasp, the object's mesh (trimesh) and the pose of its
+    catalogue mesh there (mesh_rotation (3,3), mesh_origin (3,): x = R x_mesh + origin), name, file name and the
+    clip's last 61 frames (a Motion in the world)."""
     from graspkit.data.motion import Motion, canonicalize
     from graspkit.objects.catalogue import make_object
     from graspkit.rotations import axis_angle_to_matrix
@@ -497,6 +497,7 @@ def approach_scene(path: str | Path, bm) -> dict[str, Any]:
         t_o = a["object.params.transl"][g].astype(np.float64)
         pts, nrm = a["object.points"].astype(np.float64), a["object.normals"].astype(np.float64)
         c_o = a["contact.object"][g].astype(np.float32) if "contact.object" in a.files else None
+        c_m = a["contact.markers"][g].astype(np.float32) if "contact.markers" in a.files else None
         name = str(a["obj_name"])
     arr = make_windows([m], bm, align_end=True, progress=False)
     joints = m.joint_positions(bm)
@@ -510,7 +511,7 @@ def approach_scene(path: str | Path, bm) -> dict[str, Any]:
     mesh.vertices = to_c(mesh.vertices @ R_o.T + t_o)
     return {**{k: v[0] for k, v in arr.items()}, "betas": m.betas[:10], "floor": float(-o[2]), "name": name,
             "file": Path(path).name, "points": to_c(pts @ R_o.T + t_o), "normals": nrm @ R_o.T @ R.T,
-            "object_contact": c_o, "mesh": mesh, "mesh_rotation": R @ R_o, "mesh_origin": to_c(t_o),
+            "object_contact": c_o, "marker_contact": c_m, "mesh": mesh, "mesh_rotation": R @ R_o, "mesh_origin": to_c(t_o),
             "motion": m.slice(max(m.num_frames - 61, 0))}
 
 
@@ -520,7 +521,8 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
     the sample and the fitted bodies; the last frame's contact, penetration volume and depth of the fitted bodies;
     SAGA's non-collision score (§4.2) of the fitted and the ground-truth meshes over the window, and how far the fitted
     mesh's lowest vertex goes below the floor (cm: the mean over frames and the deepest). Returns rows and the
-    arrays for plots. `sdf`: E^o_colli's hand-in-object depth from each object's collision grid (GraspPose-Opt's;
+    arrays for plots. E^o_cont gets the data's contact maps at the grasp frame (C_O and C_M, standing in for
+    WholeGrasp-VAE's). `sdf`: E^o_colli's hand-in-object depth from each object's collision grid (GraspPose-Opt's;
     False: from the point cloud's normals)."""
     from graspkit.body import BodyModel
     from graspkit.data.grasp_io import collision_sdf_grid
@@ -546,10 +548,11 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
                       torch.as_tensor(np.stack([s["mesh_rotation"] for s in scenes])).float(),
                       torch.as_tensor(np.stack([s["mesh_origin"] for s in scenes])).float())
     c_o = torch.as_tensor(np.stack([s["object_contact"][:P] for s in scenes])).float()
+    c_m = torch.as_tensor(np.stack([s["marker_contact"] for s in scenes])).float()
     cfg = GraspMotionConfig(steps=steps) if weights is None else GraspMotionConfig(steps=steps, weights=weights)
     opt = GraspMotionOpt(bm, load_pose_prior(), load_smooth_ae(), cfg)
     res = opt.fit(markers, torch.as_tensor(np.stack([s["betas"] for s in scenes])).float(), contacts, obj, c_o,
-                  progress=progress, floor=torch.tensor([s["floor"] for s in scenes]).float())
+                  progress=progress, floor=torch.tensor([s["floor"] for s in scenes]).float(), marker_contact=c_m)
     rows = []
     for i, s in enumerate(scenes):
         floor = np.array(s["floor"])

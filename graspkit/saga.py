@@ -175,7 +175,8 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
                       torch.as_tensor(R_c @ R_o).float(), torch.as_tensor(to_c(centre)).float())
     mopt = GraspMotionOpt(bm, prior, load_smooth_ae(ck / "motionfill_smooth_ae.pt"), mcfg)
     mres = mopt.fit(smp["markers"], torch.as_tensor(betas[None, :10]).float(), smp["contacts"], obj,
-                    s.object_contact.float(), progress=progress, floor=torch.tensor([to_c(np.zeros(3))[2]]).float())
+                    s.object_contact.float(), progress=progress, floor=torch.tensor([to_c(np.zeros(3))[2]]).float(),
+                    marker_contact=s.marker_contact.float())
     poses_w, transl_w = rigid_params(mres.params["poses"][0].view(-1, 55, 3).double().numpy(),
                                      mres.params["transl"][0].double().numpy(), betas, R_c.T, o_c, bm)
     motion = Motion(poses_w, transl_w, betas, 30.0)

@@ -335,3 +335,67 @@ def test_errors_name_the_argument(bm):
             opt.fit(torch.zeros(1, 5, 79, 3), torch.zeros(1, 10), floor=bad)
     with pytest.raises(ValueError, match="flat_hand_mean"):
         GraspMotionOpt(BodyModel.from_file(default_model_path(), flat_hand_mean=True), load_pose_prior())
+
+
+def test_marker_contact_term_is_eq6s_marker_side_on_the_last_five_frames(bm):
+    """E^o_cont's marker side (Eq. 6 in Eq. 10): w_m sum over the last 5 frames and the 143 SAGA markers of C^_M times
+    the squared distance to the nearest object point, the markers read off the full mesh and the distances from
+    scipy's KD-tree; frames before the last five do not count, and C^_M = 0 gives 0."""
+    from scipy.spatial import cKDTree
+
+    from graspkit.body.markers import saga_markers
+    from graspkit.optim.grasppose import GraspObject
+
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("contact",)))
+    F, w = 7, opt.cfg.weights
+    p = _sliding(opt, F, torch.arange(F, dtype=torch.float32)[:, None] * torch.tensor([0.05, 0.0, 0.0]))
+    g = torch.Generator().manual_seed(0)
+    with torch.no_grad():
+        full = bm.forward_rotmats(opt.rotmats(p), betas=torch.zeros(F, 10), transl=p["transl"]).vertices.double()
+    pts = full[-1, 5000] + 0.05 * torch.nn.functional.normalize(torch.randn(500, 3, generator=g, dtype=torch.float64))
+    obj = GraspObject(pts.float()[None], torch.zeros(1, 500, 3), 0.0)
+    c_m = torch.rand(1, 143, generator=g)
+    args = (torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, None, obj, None)
+    e = opt.energy(p, *args, None, c_m)["contact"].item()
+    d, _ = cKDTree(pts.numpy()).query(full[-5:, saga_markers(bm).vertex_ids].reshape(-1, 3).numpy())
+    want = w.contact_marker * float((c_m.double().repeat(5, 1).reshape(-1) * torch.as_tensor(d) ** 2).sum())
+    assert e == pytest.approx(want, rel=1e-3) and e > 0
+    assert opt.energy(p, *args, None, torch.zeros(1, 143))["contact"].item() == 0.0
+    assert "contact" not in opt.energy(p, *args, None, None)
+    with pytest.raises(ValueError, match=r"marker_contact: expected shape \(1, 143\)"):
+        opt.fit(torch.zeros(1, F, 79, 3), torch.zeros(1, 10), obj=obj, marker_contact=torch.zeros(1, 79),
+                progress=False)
+
+
+def test_marker_contact_brings_the_contact_markers_onto_an_object_the_markers_miss(bm, clip):
+    """A walking clip's markers and a ball 2 cm past the right hand's palm markers at the last frame: fitted with
+    C^_M = 1 on those markers (0 elsewhere) they end at least 5 mm closer to the ball (scipy's KD-tree on its points)
+    than fitted without it, which leaves them where the markers put them, over 2 cm off. (The L1 marker fit holds
+    them back: the squared distance's pull is 2 w_m d, 0.6 per marker at 2 cm.)"""
+    from scipy.spatial import cKDTree
+
+    from graspkit.body.markers import saga_markers
+    from graspkit.optim.grasppose import GraspObject
+
+    markers, _, betas, m = clip
+    ms = saga_markers(bm)
+    flat = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    palm = [i for i, n in enumerate(ms.names) if i >= ms.groups["palm"][0] and n.startswith("R")]
+    hand = torch.as_tensor(m.vertices(flat)[-1][ms.vertex_ids[palm]]).float()            # (k, 3)
+    centre = hand.mean(0)
+    out = torch.nn.functional.normalize(centre - torch.as_tensor(m.joint_positions(flat)[-1, 0]).float(), dim=0)
+    g = torch.Generator().manual_seed(0)
+    ball = torch.nn.functional.normalize(torch.randn(800, 3, generator=g), dim=-1)
+    r = 0.04
+    pts = centre + (r + 0.02) * out + r * ball
+    obj = GraspObject(pts[None], ball[None], 0.0)
+    c_m = torch.zeros(1, 143)
+    c_m[0, palm] = 1.0
+    cfg = GraspMotionConfig(steps=(40, 100), polish=(0, 1e-3), terms=("contact",))
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, cfg)
+    gap = {}
+    for name, c in (("without", None), ("with", c_m)):
+        res = opt.fit(markers[None], betas[None, :10], obj=obj, progress=False, marker_contact=c)
+        v = opt.vertices(res)[-1].double().numpy()
+        gap[name] = float(cKDTree(pts.numpy()).query(v[ms.vertex_ids[palm]])[0].mean())
+    assert gap["without"] > 0.02 and gap["with"] < gap["without"] - 0.005, gap

@@ -32,11 +32,13 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   GraspPose-Opt: the hand vertices inside the object (from the object's collision grid when the GraspObject has one,
   `graspkit.data.grasp_io.collision_sdf_grid`, posed by its rotation and origin; else from the point cloud's
   normals) and the object points inside the hand (`object_in_hand`: the sign from the hand's vertex normals,
-  alpha^O_colli = 100, sigma_o = 1 mm; since 2026-11-30). E^o_cont uses the object contact map C^_O (the 143-marker
-  contact map of stage 1 has no sparse-marker counterpart). On the twelve test clips of docs/saga_motion.md (one
-  thread) the last frame's penetration was 6.81 cm³ with the cloud's hand-in-object term alone, 3.23 with the grid,
-  2.05 with the grid and the object points (the mug's handle through the hand 18.3 -> 6.5 -> 0.04 cm³), in 542 /
-  422 / 691 s.
+  alpha^O_colli = 100, sigma_o = 1 mm; since 2026-11-30). E^o_cont has both sides of Eq. 6: the object points with
+  the highest C^_O pulled to the hand vertices, and, when `fit` gets stage 1's 143-marker map C^_M, those markers
+  read off the fitted mesh pulled to the object (alpha^m_cont = 15 as GraspPose-Opt; since 2026-12-02: the SAGA
+  sequences of GOAL's evaluation end in contact 8 -> 11 of 12, docs/saga_motion.md). On the twelve test clips of
+  docs/saga_motion.md (one thread) the last frame's penetration was 6.81 cm³ with the cloud's hand-in-object term
+  alone, 3.23 with the grid, 2.05 with the grid and the object points (the mug's handle through the hand 18.3 ->
+  6.5 -> 0.04 cm³), in 542 / 422 / 691 s.
 - The polish after Alg. 2's stage 2: Adam moves every parameter by about its learning rate per step however small
   the gradient, so at the paper's final lr 0.005 each frame's translation jitters by millimetres between steps, and
   neighbouring frames independently: up to 5 mm per frame is 0.15 m/s, twice the 75 mm/s of SAGA's skating metric.
@@ -102,7 +104,7 @@ import torch
 from torch import Tensor, nn
 from tqdm.auto import tqdm
 
-from graspkit.body.markers import foot_vertices, palm_vertices, saga_sparse_markers, vertex_normals
+from graspkit.body.markers import foot_vertices, palm_vertices, saga_markers, saga_sparse_markers, vertex_normals
 from graspkit.models.gnet import SparseBody
 from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, _nearest, body_joint_ids, free_joint_excess,
                                      hand_vertex_ids, kabsch, with_free_joints)
@@ -225,6 +227,7 @@ class GraspMotionWeights:
     colli_object: float = 100.0    # alpha^O_colli: object points inside the hand (Eq. 7's second sum; as GraspPose-Opt)
     sigma_o: float = 1e-3          # m
     contact: float = 15.0          # alpha^o_cont
+    contact_marker: float = 15.0   # alpha^m_cont: Eq. 6's marker side, when fit gets C^_M (as GraspPose-Opt)
     palm: float = 10.0             # E_g's weight
     palm_sigma: float = 0.01       # m (Eq. 11)
     smooth_latent: float = 1.0     # a^B_s
@@ -289,16 +292,19 @@ class GraspMotionOpt:
         self.free_ids = body_joint_ids(self.cfg.free_joints)
         ms = saga_sparse_markers(bm)
         self.n_markers = len(ms)
+        contact_ids = saga_markers(bm).vertex_ids               # the 143 markers of C^_M (Eq. 6's marker side)
         self.heels = [ms.names.index("LHEE"), ms.names.index("RHEE")]
         self.body_face = torch.arange(ms.groups["face"][1])
         hands = np.union1d(hand_vertex_ids(bm, ("right",)), palm_vertices(bm)["right"])
         feet = foot_vertices(bm)
         foot_ids = np.concatenate([feet[k] for k in FOOT_PARTS])
         self.foot_part = torch.as_tensor(np.concatenate([np.full(len(feet[k]), i) for i, k in enumerate(FOOT_PARTS)]))
-        ids = np.concatenate([ms.vertex_ids, hands, foot_ids])
+        ids = np.concatenate([ms.vertex_ids, hands, foot_ids, contact_ids])
         self.sparse = SparseBody(bm, torch.as_tensor(ids))
-        n_m, n_h = len(ms.vertex_ids), len(hands)
-        self.sl_m, self.sl_h, self.sl_f = slice(0, n_m), slice(n_m, n_m + n_h), slice(n_m + n_h, None)
+        n_m, n_h, n_f = len(ms.vertex_ids), len(hands), len(foot_ids)
+        self.sl_m, self.sl_h = slice(0, n_m), slice(n_m, n_m + n_h)
+        self.sl_f, self.sl_c = slice(n_m + n_h, n_m + n_h + n_f), slice(n_m + n_h + n_f, None)
+        self.n_contact_markers = len(contact_ids)
         pos = torch.full((bm.num_vertices,), -1, dtype=torch.long)
         pos[torch.as_tensor(hands)] = torch.arange(n_h)
         f = pos[bm.faces.long()]
@@ -343,8 +349,8 @@ class GraspMotionOpt:
 
     # ------------------------------------------------------------------ the energy
     def energy(self, p: dict[str, Tensor], target: Tensor, betas: Tensor, stage: int, foot_contact: Tensor | None,
-               obj: GraspObject | None, object_contact: Tensor | None, floor: Tensor | None = None
-               ) -> dict[str, Tensor]:
+               obj: GraspObject | None, object_contact: Tensor | None, floor: Tensor | None = None,
+               marker_contact: Tensor | None = None) -> dict[str, Tensor]:
         """Each term per sequence (B,) for frame parameters (B*(T+1), ...) and target markers (B, T+1, M, 3)."""
         cfg, w = self.cfg, self.cfg.weights
         B, F = target.shape[:2]
@@ -384,6 +390,11 @@ class GraspMotionOpt:
                 po = torch.gather(obj.batch(B)[0], 1, idx.unsqueeze(-1).expand(-1, -1, 3))
                 d2 = torch.stack([_nearest(po, last[:, k])[0] for k in range(last.shape[1])], 1)   # (B, 5, 256)
                 e["contact"] = w.contact * (torch.gather(object_contact, 1, idx)[:, None] * d2).sum((1, 2))
+            if "contact" in terms and marker_contact is not None:     # Eq. 6's other side: C^_M markers to the object
+                cm = v[:, -cfg.contact_frames:, self.sl_c]                                   # (B, 5, 143, 3)
+                whole = obj.batch(B)[0]
+                d2 = torch.stack([_nearest(cm[:, k], whole)[0] for k in range(cm.shape[1])], 1)    # (B, 5, 143)
+                e["contact"] = e.get("contact", 0) + w.contact_marker * (marker_contact[:, None] * d2).sum((1, 2))
             if "palm" in terms:
                 e["palm"] = w.palm * self.palm_term(hands[:, near], pts, near, F)
         if "smooth" in terms:
@@ -450,12 +461,12 @@ class GraspMotionOpt:
 
     # ------------------------------------------------------------------ Alg. 2
     def fit(self, markers: Tensor, betas: Tensor, foot_contact: Tensor | None = None, obj: GraspObject | None = None,
-            object_contact: Tensor | None = None, progress: bool = True, floor: Tensor | None = None
-            ) -> GraspMotionResult:
+            object_contact: Tensor | None = None, progress: bool = True, floor: Tensor | None = None,
+            marker_contact: Tensor | None = None) -> GraspMotionResult:
         """Alg. 2 on a batch: markers (B, T+1, 79, 3), betas (B, 10), foot contacts (B, T+1, 4) probabilities, the
         object in the markers' frame, its contact map (B, P), the floor's height (B,) for the floor term and the
-        planted-heel term (default: no floor term, and each target's lowest heel marker for the heel)
-        -> GraspMotionResult."""
+        planted-heel term (default: no floor term, and each target's lowest heel marker for the heel), the grasp's
+        143-marker contacts C^_M (B, 143) for E^o_cont's marker side (default: left out) -> GraspMotionResult."""
         if not isinstance(markers, Tensor) or markers.dim() != 4 or tuple(markers.shape[2:]) != (self.n_markers, 3):
             got = tuple(markers.shape) if isinstance(markers, Tensor) else type(markers).__name__
             raise ValueError(f"markers: expected shape (B, T+1, {self.n_markers}, 3), got {got}")
@@ -466,12 +477,18 @@ class GraspMotionOpt:
             raise ValueError(f"foot_contact: expected shape ({B}, {F}, 4), got {tuple(foot_contact.shape)}")
         if object_contact is not None and (obj is None or tuple(object_contact.shape) != (B, obj.num_points)):
             raise ValueError(f"object_contact: expected shape ({B}, P) with an object of P points")
+        if marker_contact is not None:
+            got = tuple(marker_contact.shape) if isinstance(marker_contact, Tensor) else type(marker_contact).__name__
+            if obj is None or got != (B, self.n_contact_markers):
+                raise ValueError(f"marker_contact: expected shape ({B}, {self.n_contact_markers}) (the grasp's SAGA "
+                                 f"marker contacts) and an object, got {got} and obj={'given' if obj else None}")
         if floor is not None and (not isinstance(floor, Tensor) or tuple(floor.shape) != (B,)
                                   or not bool(torch.isfinite(floor).all())):
             got = tuple(floor.shape) if isinstance(floor, Tensor) else type(floor).__name__
             raise ValueError(f"floor: expected a finite tensor of shape ({B},) (each sequence's floor height, m), "
                              f"got {got}")
         target = markers.detach().float()
+        mc = None if marker_contact is None else marker_contact.detach().float()
         bet = betas.float().repeat_interleave(F, 0)
         p0 = self.init_params(target.flatten(0, 1), bet)
         first = {k: v.view(B, F, -1)[:, :1].clone().requires_grad_(True) for k, v in p0.items()}
@@ -495,13 +512,13 @@ class GraspMotionOpt:
                 if stage == 2 and i in (150, self.cfg.steps[1]):      # the paper's decay, then the polish
                     for g in opt.param_groups:
                         g["lr"] = lr_polish if i >= self.cfg.steps[1] else 0.005
-                e = self.energy(params(), target, bet, stage, foot_contact, obj, object_contact, floor)
+                e = self.energy(params(), target, bet, stage, foot_contact, obj, object_contact, floor, mc)
                 energy_step(opt, e, log, i, step, stage, self.cfg.log_every)
                 step += 1
                 bar.update(1)
             with torch.no_grad():
                 energies[f"stage{stage}"] = {k: t.detach() for k, t in self.energy(
-                    params(), target, bet, 2, foot_contact, obj, object_contact, floor).items()}
+                    params(), target, bet, 2, foot_contact, obj, object_contact, floor, mc).items()}
         bar.close()
         with torch.no_grad():
             p = params()

@@ -97,7 +97,10 @@ print(f"sample spread at mid-motion: {float(s['traj'][:, 30, :2].std(0).norm()):
 # lowest sole vertex held at or above the floor: Eq. 10 has none, and MotionFill's markers put the feet up to 3 cm
 # under it; `docs/saga_motion.md`). And the arm joints are free on top of the pose prior's decoded pose, as in
 # GraspPose-Opt (lesson 05): through the latent alone the bodies stayed 6.3 cm from the sampled markers on the twelve
-# test clips and two hands ended off their object; with the arms free 3.1 cm and all twelve in contact. Below:
+# test clips and two hands ended off their object; with the arms free 3.1 cm and all twelve in contact. On the last
+# five frames E^o_cont pulls both ways, as Eq. 6 does in GraspPose-Opt: the object points with the highest Ĉ_O to
+# the hand, and the 143 markers with their grasp contacts Ĉ_M to the object (in `synthesize`, three more of the
+# twelve SAGA motions of lesson 07 end on their object with the marker side). Below:
 # the energies along the run, then the heels' speed of the sampled markers and of the fitted bodies on the frames
 # MotionFill predicts in contact (skating: both heels low and faster than 75 mm/s).
 
