@@ -511,8 +511,8 @@ def approach_scene(path: str | Path, bm) -> dict[str, Any]:
     mesh.vertices = to_c(mesh.vertices @ R_o.T + t_o)
     return {**{k: v[0] for k, v in arr.items()}, "betas": m.betas[:10], "floor": float(-o[2]), "name": name,
             "file": Path(path).name, "points": to_c(pts @ R_o.T + t_o), "normals": nrm @ R_o.T @ R.T,
-            "object_contact": c_o, "marker_contact": c_m, "mesh": mesh, "mesh_rotation": R @ R_o, "mesh_origin": to_c(t_o),
-            "motion": m.slice(max(m.num_frames - 61, 0))}
+            "object_contact": c_o, "marker_contact": c_m, "mesh": mesh, "mesh_rotation": R @ R_o,
+            "mesh_origin": to_c(t_o), "motion": m.slice(max(m.num_frames - 61, 0))}
 
 
 def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, steps: tuple[int, int] = (100, 300),
