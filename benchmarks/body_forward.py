@@ -66,7 +66,7 @@ def main() -> None:
         np.savez(dense / "SMPLX_NEUTRAL.npz", **random_smplx_arrays(seed=0))
         files = {"procedural": default_model_path(), "dense random (pose correctives)": dense / "SMPLX_NEUTRAL.npz"}
         print(f"torch {torch.__version__}, {args.threads} threads; bodies/s, higher is better\n")
-        print(f"| model file | B | pass | graspkit | smplx | ratio |\n|---|---|---|---|---|---|")
+        print("| model file | B | pass | graspkit | smplx | ratio |\n|---|---|---|---|---|---|")
         for label, path in files.items():
             ours = BodyModel.from_file(path)
             ref = smplx.create(str(path.parents[1]), model_type="smplx", gender="neutral", ext="npz", use_pca=False)

@@ -124,7 +124,7 @@ def motion(bm, folder: Path) -> None:
             d = min(M.grasp_contact_distance(v, obj) for v in m.vertices(bm)[:g])
         depth.append(max(0.0, -d))
     n = len(clips)
-    print(f"| data | clips | frames | FS WANDR | SAGA skating | GOAL sliding (GRAB 6.7 %) | ground penetration max / mean (cm) "
+    print("| data | clips | frames | FS WANDR | SAGA skating | GOAL sliding (GRAB 6.7 %) | ground penetration max / mean (cm) "
           "| max joint speed (m/s) | mean jerk (m/s^3) |")
     print("|---|---|---|---|---|---|---|---|---|")
     sets = {"approach clips": clips,

@@ -51,7 +51,7 @@ def throughput(bm, n: int) -> None:
 
 def quality(bm, n: int) -> None:
     """The motion-quality table over n clips of each kind, measured on the meshes."""
-    print(f"| data | clips | frames | FS WANDR (<= 5 %) | SAGA skating | GOAL sliding (<= 3 %; GRAB 6.7 %) | "
+    print("| data | clips | frames | FS WANDR (<= 5 %) | SAGA skating | GOAL sliding (<= 3 %; GRAB 6.7 %) | "
           "penetration max / mean (cm) | max joint speed (m/s) | mean jerk (m/s^3) | joint limits (deg beyond) |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for kind, gen in GENERATORS.items():
