@@ -422,13 +422,22 @@ def posed_sdfs(seqs: list, frames: list[int], R: Tensor, o: Tensor):
     return PosedSDF.in_frame([grids[s.object_name] for s in seqs], Ro, to, R, o)
 
 
+TAB1_ROWS = ("GrabNet-SMPL-X", "GNet w/o opt", "GNet", PEN_ROW, "synthetic GT")
+
+
 def gnet_table(gnet, baseline, seqs: list, seed: int = 0, refine_weights=None, penetration: bool = False,
-               pen_weights=None) -> dict:
+               pen_weights=None, rows: tuple[str, ...] | None = None) -> dict:
     """GOAL Tab. 1 on grasps `seqs` (one GNet sample per ground-truth grasp, same object pose, start and body shape),
     in GNet's frame: {row: {'volume_cm3', 'contact_ratio', 'depth_cm', 'feet_cm', 'n'}}, per-grasp metrics and bodies
     under 'samples', the refinement's energies under 'refine_history'. With `penetration`, also the row PEN_ROW:
-    the same samples refined with graspkit's E_pen (`pen_weights`, default goal_refine.PEN_WEIGHTS)."""
+    the same samples refined with graspkit's E_pen (`pen_weights`, default goal_refine.PEN_WEIGHTS). `rows` (names
+    in TAB1_ROWS; None: all) measures only those, and always 'GNet w/o opt', the paired counts' reference."""
     from graspkit.optim.goal_refine import PEN_WEIGHTS, GraspRefiner
+
+    bad = sorted(set(rows or ()) - set(TAB1_ROWS))
+    if bad:
+        raise ValueError(f"rows: expected names in {TAB1_ROWS}, got {bad}")
+    want = set(TAB1_ROWS if rows is None else rows) | {"GNet w/o opt"}
 
     bm, gv, _ = _body()
     gt = gnet_samples(seqs, accepted_only=False)
@@ -444,14 +453,17 @@ def gnet_table(gnet, baseline, seqs: list, seed: int = 0, refine_weights=None, p
     z = torch.randn(len(seqs), gnet.cfg.latent, generator=torch.Generator().manual_seed(seed))
     hat = gnet.sample(gt["bps"], gt["obj_transl"], gt["betas"], z=z)
     refiner = GraspRefiner(bm, gv)
-    refined = refiner(hat, gt["betas"], gt["points"], refine_weights)
-    bodies = {"GNet w/o opt": (hat["rot6d"], hat["transl"]), "GNet": (refined.rot6d, refined.transl)}
-    if penetration:
+    bodies, history = {"GNet w/o opt": (hat["rot6d"], hat["transl"])}, []
+    if "GNet" in want:
+        refined = refiner(hat, gt["betas"], gt["points"], refine_weights)
+        bodies["GNet"], history = (refined.rot6d, refined.transl), refined.history
+    if penetration and PEN_ROW in want:
         pen = refiner(hat, gt["betas"], gt["points"], pen_weights or PEN_WEIGHTS,
                       sdf=posed_sdfs(seqs, frames, gt["R"], gt["o"]))
         bodies[PEN_ROW] = (pen.rot6d, pen.transl)
-    bodies["synthetic GT"] = (gt["rot6d"], gt["transl"])
-    if baseline is not None:
+    if "synthetic GT" in want:
+        bodies["synthetic GT"] = (gt["rot6d"], gt["transl"])
+    if baseline is not None and "GrabNet-SMPL-X" in want:
         b = baseline.sample(gt["bps"], gt["obj_transl"], gt["betas"], z=z)
         bodies = {"GrabNet-SMPL-X": (b["rot6d"], b["transl"]), **bodies}
     table, samples = {}, {}
@@ -464,12 +476,14 @@ def gnet_table(gnet, baseline, seqs: list, seed: int = 0, refine_weights=None, p
                        "contact_ratio": float(np.mean([r["contact"] for r in rows])),
                        "depth_cm": float(np.mean([r["depth_cm"] for r in rows])),
                        "feet_cm": float(np.mean([abs(r["feet_cm"]) for r in rows])), "n": len(rows)}
-    ref, raw = (np.array([r["volume_cm3"] for r in samples[k]["rows"]]) for k in ("GNet", "GNet w/o opt"))
-    paired = {"refined_lower": int((ref < raw).sum()), "refined_higher": int((ref > raw).sum()), "n": len(ref)}
-    if penetration:
-        p = np.array([r["volume_cm3"] for r in samples[PEN_ROW]["rows"]])
-        paired.update(pen_lower=int((p < raw).sum()), pen_higher=int((p > raw).sum()))
-    return {"table": table, "samples": samples, "refine_history": refined.history, "hat": hat, "gt": gt,
+    raw = np.array([r["volume_cm3"] for r in samples["GNet w/o opt"]["rows"]])
+    paired: dict[str, int] = {}
+    for name, key in (("GNet", "refined"), (PEN_ROW, "pen")):
+        if name in samples:
+            v = np.array([r["volume_cm3"] for r in samples[name]["rows"]])
+            paired.update({f"{key}_lower": int((v < raw).sum()), f"{key}_higher": int((v > raw).sum())})
+    paired["n"] = len(raw)
+    return {"table": table, "samples": samples, "refine_history": history, "hat": hat, "gt": gt,
             "meshes": meshes, "paired": paired}
 
 
@@ -654,9 +668,11 @@ def rollout_results(seqs: list, stubs, gnet, seed: int = 0, max_frames: int = 30
             "rollout_seconds": time.perf_counter() - t0}
 
 
-def tab1_results(folders, stubs, n_grasps: int = 60, seed: int = 0, penetration: bool = True) -> dict:
+def tab1_results(folders, stubs, n_grasps: int = 60, seed: int = 0, penetration: bool = True,
+                 rows: tuple[str, ...] | None = None) -> dict:
     """Tab. 1 with the checkpoints in `stubs`: one sample per accepted test grasp of `folders` (n_grasps of them drawn
-    with `seed`; 0: every one). {'tab1', 'tab1_paired', 'tab1_refine_energy', 'tab1_seconds'}."""
+    with `seed`; 0: every one); `rows` as gnet_table. {'tab1', 'tab1_paired', 'tab1_refine_energy', 'tab1_seconds'}
+    ('tab1_refine_energy' only when the row 'GNet' was measured)."""
     import time
     from pathlib import Path
 
@@ -671,9 +687,11 @@ def tab1_results(folders, stubs, n_grasps: int = 60, seed: int = 0, penetration:
     pick = sorted(np.random.default_rng(seed).permutation(len(tests))[:n].tolist())
     gnet = load_gnet(Path(stubs) / "gnet.pt")
     base = load_gnet(Path(stubs) / "gnet_smplx.pt") if (Path(stubs) / "gnet_smplx.pt").is_file() else None
-    tab1 = gnet_table(gnet, base, [tests[i] for i in pick], seed=seed, penetration=penetration)
-    return {"tab1": tab1["table"], "tab1_paired": tab1["paired"], "tab1_refine_energy": tab1["refine_history"],
-            "tab1_seconds": time.perf_counter() - t0}
+    tab1 = gnet_table(gnet, base, [tests[i] for i in pick], seed=seed, penetration=penetration, rows=rows)
+    out = {"tab1": tab1["table"], "tab1_paired": tab1["paired"], "tab1_seconds": time.perf_counter() - t0}
+    if "GNet" in tab1["table"]:
+        out["tab1_refine_energy"] = tab1["refine_history"]
+    return out
 
 
 def gnet_goal(gnet, start: tuple[Tensor, Tensor], betas: Tensor, object_points: Tensor, obj_centre: Tensor,
@@ -741,6 +759,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--window-stride", type=int, default=5)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--tab1-row", action="append", default=None, choices=TAB1_ROWS, metavar="ROW",
+                   help=f"with --tab1-only: recompute only this row of Tab. 1 (repeatable; one of {TAB1_ROWS}); "
+                        "'GNet w/o opt' is always measured, the others are kept")
     only = p.add_mutually_exclusive_group()
     only.add_argument("--tab1-only", action="store_true",
                       help="recompute only Tab. 1 in an existing JSON (--n-grasps 0: every test grasp)")
@@ -749,6 +770,8 @@ def main(argv: list[str] | None = None) -> int:
     only.add_argument("--rollouts-only", action="store_true",
                       help="recompute only the MNet rollouts and GOAL's sliding rows in an existing JSON (SAGA's kept)")
     a = p.parse_args(argv)
+    if a.tab1_row and not a.tab1_only:
+        raise ValueError("--tab1-row: only with --tab1-only (it names a row of Tab. 1 to measure again)")
     check_counts(a, n_grasps=0, n_rollouts=1, max_frames=2, window_stride=1, threads=1, seed=0)
     check_folders(a.data)
     torch.set_num_threads(a.threads)
@@ -763,7 +786,12 @@ def main(argv: list[str] | None = None) -> int:
             raise FileNotFoundError(f"--out: no evaluation at {out} to update (run without {flag})")
         folders, r = a.data or default_data_folders(), json.loads(out.read_text())
         if a.tab1_only:
-            r.update(tab1_results(folders, stubs, a.n_grasps, a.seed))
+            new = tab1_results(folders, stubs, a.n_grasps, a.seed, rows=tuple(a.tab1_row) if a.tab1_row else None)
+            if a.tab1_row:                                      # merge into the table and paired counts kept
+                for k in ("tab1", "tab1_paired"):
+                    new[k] = {**r.get(k, {}), **new[k]}
+                new["tab1_seconds_rows"] = new.pop("tab1_seconds")
+            r.update(new)
             shown = {k: r[k] for k in ("tab1", "tab1_paired")}
         elif a.rollouts_only:
             from graspkit.models.gnet import load_gnet

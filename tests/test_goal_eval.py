@@ -116,7 +116,7 @@ def test_saga_sliding_starts_from_the_sequence_and_counts_goals_sliding_frames()
 def test_tab1_only_recomputes_table_1_and_keeps_the_rest(tmp_path, monkeypatch, capsys):
     """`python -m graspkit.eval_goal --tab1-only`: Tab. 1 over every test grasp (n_grasps 0), its medians, 90th
     percentiles and paired counts the numpy statistics of the per-grasp rows of the `gnet_table` call it makes (caught
-    on the way); the rest of the JSON kept."""
+    on the way); the rest of the JSON kept; with --tab1-row, that row alone again."""
     import json
     from dataclasses import replace
 
@@ -153,6 +153,23 @@ def test_tab1_only_recomputes_table_1_and_keeps_the_rest(tmp_path, monkeypatch, 
     pen = np.array([x["volume_cm3"] for x in t["samples"][PEN_ROW]["rows"]])
     assert r["tab1_paired"] == {"refined_lower": int((ref < raw).sum()), "refined_higher": int((ref > raw).sum()), "n": 3,
                                 "pen_lower": int((pen < raw).sum()), "pen_higher": int((pen > raw).sum())}
+    # --tab1-row: only that row (and the paired counts' reference) measured again, the same numbers for the same seed;
+    # the other rows, paired counts and refinement energies kept as they are in the file
+    r["tab1"]["GNet"]["volume_cm3"], r["tab1_paired"]["refined_lower"] = -1.0, -1
+    out.write_text(json.dumps(r))
+    assert main(args + ["--tab1-row", PEN_ROW]) == 0
+    r2 = json.loads(out.read_text())
+    assert len(calls) == 2 and set(calls[1]["samples"]) == {"GNet w/o opt", PEN_ROW}
+    assert r2["tab1"][PEN_ROW] == r["tab1"][PEN_ROW] and r2["tab1"]["GNet w/o opt"] == r["tab1"]["GNet w/o opt"]
+    assert r2["tab1"]["GNet"]["volume_cm3"] == -1.0 and r2["tab1_paired"]["refined_lower"] == -1
+    assert r2["tab1_paired"]["pen_lower"] == r["tab1_paired"]["pen_lower"]
+    assert r2["tab1_refine_energy"] == r["tab1_refine_energy"] and r2["tab1_seconds"] == r["tab1_seconds"]
+    assert main(["--tab1-row", PEN_ROW, "--out", str(out)]) == 2 and "only with --tab1-only" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(args + ["--tab1-row", "GNet + nothing"])
+    assert "invalid choice" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="rows: expected names in"):
+        eg.gnet_table(None, None, [], rows=("GNet + nothing",))
     with pytest.raises(ValueError, match="folders"):
         tab1_results([tmp_path / "empty"], DATA_STUBS / "checkpoints")
 
