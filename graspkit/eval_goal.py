@@ -38,6 +38,7 @@ PAPER_TAB2 = {  # GOAL Tab. 2: V2V (mm) body, hand, feet
     "MNet": (19.7, 28.0, 9.9), "1 output frame": (26.7, 35.7, 17.9), "10 output frames": (19.7, 28.0, 9.9)}
 PAPER_SLIDING = {"GOAL": 0.137, "GRAB (GT)": 0.067}
 PEN_ROW = "GNet + E_pen (graspkit)"   # Tab. 1's extra row: the refinement with graspkit's penetration term
+TAB1_ROWS = ("GrabNet-SMPL-X", "GNet w/o opt", "GNet", PEN_ROW, "synthetic GT")   # Tab. 1's rows, in order
 
 
 def part_vertex_ids(bm, joints: tuple[str, ...]) -> np.ndarray:
@@ -420,9 +421,6 @@ def posed_sdfs(seqs: list, frames: list[int], R: Tensor, o: Tensor):
     Ro = torch.stack([torch.as_tensor(s.object_rotation()[f]) for s, f in zip(seqs, frames)]).float()
     to = torch.stack([torch.as_tensor(np.asarray(s.object_transl[f])) for s, f in zip(seqs, frames)]).float()
     return PosedSDF.in_frame([grids[s.object_name] for s in seqs], Ro, to, R, o)
-
-
-TAB1_ROWS = ("GrabNet-SMPL-X", "GNet w/o opt", "GNet", PEN_ROW, "synthetic GT")
 
 
 def gnet_table(gnet, baseline, seqs: list, seed: int = 0, refine_weights=None, penetration: bool = False,
