@@ -7,8 +7,12 @@ import pytest
 import torch
 import trimesh
 
-from graspkit.data.grasp_io import COLLISION_CELL, collision_sdf_grid
+from graspkit.data import grasp_io
+from graspkit.data.formats import write_npz_atomic
+from graspkit.data.grasp_io import COLLISION_CELL, cached_sdf_grid, collision_sdf_grid
 from graspkit.objects import make_object
+from graspkit.objects.sdf import SDFGrid
+from graspkit.paths import DATA_STUBS
 from graspkit.objects.user import as_object
 
 
@@ -111,6 +115,36 @@ def test_the_collision_grid_of_a_mesh_matches_trimesh_and_is_cached(tmp_path):
     again = collision_sdf_grid(m, tmp_path)                                      # read back, not rebuilt
     torch.testing.assert_close(again.values, grid.values)
     assert list(tmp_path.glob("mesh_r*.npz")) == files
+
+
+def test_a_grid_cached_by_another_grid_version_is_not_read(tmp_path, monkeypatch):
+    """A cache file written by another SDF_VERSION (a stale algorithm) is neither found nor overwritten: the grid is
+    built again, under its own name."""
+    _, m = as_object(_box())
+    grid = cached_sdf_grid(m, 16, tmp_path)
+    (old,) = tmp_path.glob("mesh_r16_*.npz")
+    with np.load(old) as z:                                                      # poison the cached values
+        write_npz_atomic(old, {"values": z["values"] + 1.0, "lower": z["lower"], "upper": z["upper"]})
+    assert float(cached_sdf_grid(m, 16, tmp_path).values.min()) == pytest.approx(float(grid.values.min()) + 1.0)
+    monkeypatch.setattr(grasp_io, "SDF_VERSION", grasp_io.SDF_VERSION + 1)
+    fresh = cached_sdf_grid(m, 16, tmp_path)
+    torch.testing.assert_close(fresh.values, SDFGrid.from_mesh(m, 16, grasp_io.SDF_PADDING).values)
+    assert len(list(tmp_path.glob("mesh_r16_*.npz"))) == 2
+
+
+def test_the_shipped_grids_are_what_this_grid_version_builds():
+    """Each grid in data_stubs/sdf has the current file name of its object and resolution and its values (float16
+    within 0.05 mm) — a stale shipped grid would otherwise be read in place of a rebuild."""
+    files = sorted((DATA_STUBS / "sdf").glob("*.npz"))
+    assert files
+    for f in files:
+        name, res, _ = f.name.rsplit("_", 2)
+        assert f.name == grasp_io._grid_filename(name, int(res[1:]))
+    f = min(files, key=lambda f: f.stat().st_size)                             # one rebuilt: seconds
+    name, res, _ = f.name.rsplit("_", 2)
+    built = SDFGrid.from_mesh(make_object(name), int(res[1:]), grasp_io.SDF_PADDING)
+    with np.load(f, allow_pickle=False) as z:
+        assert np.abs(z["values"].astype(np.float64) - built.values.numpy()).max() < 5e-5
 
 
 

@@ -16,6 +16,9 @@ from graspkit.paths import DATA_STUBS
 from graspkit.objects.sdf import SDFGrid
 
 SDF_PADDING = 0.03
+# The grid algorithm's version, part of every cached grid's file name: raise it whenever SDFGrid.from_mesh or
+# signed_distance would give other values for the same mesh, so that no cache built by an earlier version is read.
+SDF_VERSION = 1
 # m: the largest cell of the grids the optimisers' collision terms use (GraspPose-Opt's E_colli). A fixed 64 nodes
 # gives cells of 2.9-7.5 mm on the larger objects and misses most points 1-2 mm inside their thin walls (frying pan,
 # wine glass, pitcher): E_colli cannot see a finger there. Measured in docs/objects.md.
@@ -28,11 +31,12 @@ def _mesh(obj: str | trimesh.Trimesh) -> trimesh.Trimesh:
 
 
 def mesh_digest(obj: str | trimesh.Trimesh) -> str:
-    """A short hash of catalogue object `obj`'s canonical mesh, or of a given mesh (a cached grid is rebuilt when the
-    mesh changes)."""
+    """A short hash of catalogue object `obj`'s canonical mesh, or of a given mesh, with the grid's padding and
+    SDF_VERSION (a cached grid is rebuilt when the mesh, the padding or the grid algorithm changes)."""
     m = _mesh(obj)
     h = hashlib.sha256(np.ascontiguousarray(m.vertices, np.float64).tobytes())
     h.update(np.ascontiguousarray(m.faces, np.int64).tobytes())
+    h.update(f"padding={SDF_PADDING!r};version={SDF_VERSION}".encode())
     return h.hexdigest()[:12]
 
 
@@ -58,7 +62,8 @@ def cached_sdf_grid(name: str | trimesh.Trimesh, resolution: int = 64, folder: P
 
 
 def _grid_filename(name: str | trimesh.Trimesh, resolution: int) -> str:
-    """The cache (and data_stubs/sdf) file name of object `name`'s grid: resolution and mesh hash in it."""
+    """The cache (and data_stubs/sdf) file name of object `name`'s grid: resolution and the hash of mesh, padding and
+    SDF_VERSION in it."""
     return f"{name if isinstance(name, str) else 'mesh'}_r{resolution}_{mesh_digest(name)}.npz"
 
 
