@@ -22,6 +22,7 @@ with the model. The shipped checkpoint (`data_stubs/checkpoints/motionfill.pt`) 
 from __future__ import annotations
 
 import argparse
+import functools
 import time
 from pathlib import Path
 from typing import Any
@@ -59,9 +60,25 @@ def approach_motions(root: str | Path, n: int | None = None) -> tuple[list, list
     return motions, names
 
 
-def windows_source(kind: str, n: int, data: Path | None = None) -> tuple[Path, Path, list[Path]]:
+# The window code's version, part of every cached window set's name: raise it when make_windows (or what `windows`
+# does with the clips) would give other arrays for the same clips and body.
+WINDOWS_VERSION = 1
+
+
+@functools.lru_cache(maxsize=1)
+def default_body_digest() -> str:
+    """BodyModel.digest() of graspkit's default body model (loaded once per process)."""
+    from graspkit.body import BodyModel
+    from graspkit.paths import default_model_path
+
+    return BodyModel.from_file(default_model_path()).digest()
+
+
+def windows_source(kind: str, n: int, data: Path | None = None, body: str | None = None
+                   ) -> tuple[Path, Path, list[Path]]:
     """(cache file, clip folder, the first `n` clip files) of a window set; the cache file is named by the clips'
-    names and sizes, so remade or other clips never read another set's windows."""
+    names and sizes, the body model's digest (`body`, BodyModel.digest(); None: the default model's) and
+    WINDOWS_VERSION, so remade or other clips, another body or another window code never read another set's windows."""
     import hashlib
 
     from graspkit.paths import cache_dir
@@ -78,7 +95,9 @@ def windows_source(kind: str, n: int, data: Path | None = None) -> tuple[Path, P
     if len(files) < n:
         raise FileNotFoundError(f"data: {root} holds {len(files)} {kind} clips, {n} wanted "
                                 f"(graspkit data make --kind {kind} --n {n})")
-    key = hashlib.blake2b("\n".join(f"{f.name}:{f.stat().st_size}" for f in files).encode(), digest_size=5).hexdigest()
+    listing = "\n".join(f"{f.name}:{f.stat().st_size}" for f in files)
+    stamp = f"\nbody={body or default_body_digest()};version={WINDOWS_VERSION}"
+    key = hashlib.blake2b((listing + stamp).encode(), digest_size=5).hexdigest()
     return cache_dir() / "motionfill" / f"{kind}_{n}_{key}.npz", root, files
 
 
@@ -87,14 +106,14 @@ def windows(kind: str, n: int, bm=None, data: Path | None = None, progress: bool
     per clip, ending at its goal frame: the wrist on the target, as an approach clip ends at the grasp)."""
     from graspkit.data import load_motion
 
-    out, root, files = windows_source(kind, n, data)
-    if out.is_file():
-        return load_windows(out)
     if bm is None:
         from graspkit.body import BodyModel
         from graspkit.paths import default_model_path
 
         bm = BodyModel.from_file(default_model_path())
+    out, root, files = windows_source(kind, n, data, bm.digest())
+    if out.is_file():
+        return load_windows(out)
     names = None
     if kind == "approach":
         motions, names = approach_motions(root, n)

@@ -189,3 +189,15 @@ def test_pickled_model_is_read_only_behind_the_opt_in(tmp_path):
         pickle.dump([1, 2], fh)
     with pytest.raises(ModelFileError, match="list.pkl: expected a pickled dict"):
         BodyModel.from_file(tmp_path / "list.pkl", allow_pickle=True)
+
+
+def test_digest_names_the_model_arrays_and_dtype():
+    """Two loads of one file share a digest; one changed template vertex, another body or another dtype do not."""
+    arrays = random_smplx_arrays(num_vertices=300, num_faces=500, seed=3)
+    a, b = BodyModel(arrays), BodyModel(dict(arrays))
+    assert a.digest() == b.digest() and len(a.digest()) == 12
+    moved = dict(arrays, v_template=arrays["v_template"].copy())
+    moved["v_template"][7, 2] += 1e-6
+    assert BodyModel(moved).digest() != a.digest()
+    assert BodyModel(random_smplx_arrays(num_vertices=300, num_faces=500, seed=4)).digest() != a.digest()
+    assert BodyModel(arrays, dtype=torch.float64).digest() != a.digest()

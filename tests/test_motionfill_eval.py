@@ -135,3 +135,34 @@ def test_graspmotion_eval_measures_the_last_frame_against_the_clips_posed_mesh()
     dip = np.maximum(s["floor"] - low, 0.0)
     assert row["below_floor_max_cm"] == pytest.approx(100 * dip.max(), abs=1e-3)
     assert row["below_floor_mean_cm"] == pytest.approx(100 * dip.mean(), abs=1e-3)
+
+
+def test_window_cache_is_keyed_by_the_body_and_the_window_version(tmp_path, monkeypatch):
+    """`windows` reads back its own set, and builds another (never reads across) for another body model or another
+    WINDOWS_VERSION: a body 5 cm taller in its template gives windows of its own, as make_windows makes them."""
+    from graspkit import eval_motionfill as E
+    from graspkit.body.model import load_model_arrays
+    from graspkit.data import load_motion
+    from graspkit.data.motionfill_dataset import make_windows
+
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
+    data = DATA_STUBS / "motion" / "reach"
+    bm = BodyModel.from_file(default_model_path())
+    arrays = dict(load_model_arrays(default_model_path()))
+    arrays["v_template"] = arrays["v_template"] + np.array([0.0, 0.0, 0.05], arrays["v_template"].dtype)
+    tall = BodyModel(arrays)
+    a = E.windows("reach", 2, bm, data=data, progress=False)
+    for k, v in E.windows("reach", 2, bm, data=data, progress=False).items():
+        np.testing.assert_array_equal(v, a[k])
+    b = E.windows("reach", 2, tall, data=data, progress=False)
+    motions = [m.slice(0, m.goal_frame + 1) for m in (load_motion(f) for f in sorted(data.glob("reach_*.npz"))[:2])]
+    truth = make_windows(motions, tall, stride=30, align_end=True, progress=False)
+    assert set(b) == set(truth) and any(not np.array_equal(b[k], a[k]) for k in a)
+    for k in truth:
+        np.testing.assert_allclose(b[k], truth[k], atol=1e-6)
+    cache = tmp_path / "cache" / "motionfill"
+    assert len(list(cache.glob("reach_2_*.npz"))) == 2
+    monkeypatch.setattr(E, "WINDOWS_VERSION", E.WINDOWS_VERSION + 1)
+    E.windows("reach", 2, bm, data=data, progress=False)
+    assert len(list(cache.glob("reach_2_*.npz"))) == 3
+    assert E.windows_source("reach", 2, data)[0] != E.windows_source("reach", 2, data, tall.digest())[0]

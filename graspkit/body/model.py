@@ -245,6 +245,17 @@ class BodyModel(nn.Module):
     def num_vertices(self) -> int:
         return self.v_template.shape[0]
 
+    def digest(self) -> str:
+        """A short hash of every array of the model (template, bases, regressor, weights, faces, pose correctives)
+        and their dtype: caches of what a body model computed (motion windows, WANDR clip sets) are keyed by it."""
+        import hashlib
+
+        h = hashlib.blake2b(digest_size=6)
+        for name, b in sorted(self.state_dict().items()):
+            h.update(f"{name}:{b.dtype}:{tuple(b.shape)};".encode())
+            h.update(b.detach().cpu().contiguous().numpy().tobytes())
+        return h.hexdigest()
+
     # ------------------------------------------------------------------ inputs
     def _arg(self, x: Tensor | None, name: str, sizes: tuple[int, ...], B: int) -> Tensor:
         """Check one argument: (B, *sizes) or (B, prod(sizes)); None -> zeros; returns (B, prod(sizes))."""

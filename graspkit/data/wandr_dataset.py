@@ -360,12 +360,19 @@ def load_clipset(path: str | Path) -> ClipSet:
         return ClipSet(names=[str(n) for n in a["names"]], **t)
 
 
+# The clip code's version, part of every cached ClipSet's name: raise it when load_clips would give other arrays for
+# the same files and body.
+CLIPSET_VERSION = 1
+
+
 def cached_clips(folder: str | Path, bm, limit: int | None = None, cache: str | Path | None = None,
                  kinds: Sequence[str] = KINDS) -> ClipSet:
     """All clips under `folder` (<kind>/*.npz for the sub-folders `kinds`, at most `limit` per kind) as a ClipSet, read
-    from / written to a cache file named after the folder's file list (so new clips rebuild it)."""
+    from / written to a cache file named after the folder's file list, the body model (`bm.digest()`) and
+    CLIPSET_VERSION (so new clips, another body or another clip code rebuild it)."""
     files = list_clips(folder, kinds=kinds, limit=limit)
-    key = hashlib.blake2b("\n".join(f"{f.parent.name}/{f.name}:{f.stat().st_size}" for f in files).encode(),
+    listing = "\n".join(f"{f.parent.name}/{f.name}:{f.stat().st_size}" for f in files)
+    key = hashlib.blake2b(f"{listing}\nbody={bm.digest()};version={CLIPSET_VERSION}".encode(),
                           digest_size=6).hexdigest()
     if cache is None:
         from graspkit.paths import cache_dir
