@@ -290,8 +290,9 @@ def goal_motions(seqs: list, checkpoints: Path, seed: int = 0, max_frames: int =
     return out
 
 
-def wandr_motions(checkpoint: Path, goals: torch.Tensor, t_goal: int, seed: int = 0) -> list:
-    """WANDR from its first held-out start pose (canonical) to each goal (G,3) at frame t_goal, one batch; Motions."""
+def wandr_motions(checkpoint: Path, goals: torch.Tensor, t_goal: int, seed: int = 0, lift: bool = False) -> list:
+    """WANDR from its first held-out start pose (canonical) to each goal (G,3) at frame t_goal, one batch; Motions
+    (lift: `rollout`'s guard against sinking into the floor, not in the paper)."""
     import graspkit.intention as I
     from graspkit.data.motion import Motion
     from graspkit.eval_wandr import starts_from_meta
@@ -299,7 +300,7 @@ def wandr_motions(checkpoint: Path, goals: torch.Tensor, t_goal: int, seed: int 
 
     model = load_wandr(checkpoint)
     start = starts_from_meta(model.meta)[0].canonical()
-    out = generate(model, start, goals, t_goal, n=1, generator=torch.Generator().manual_seed(seed))
+    out = generate(model, start, goals, t_goal, n=1, generator=torch.Generator().manual_seed(seed), lift=lift)
     motions = []
     for b, goal in enumerate(goals):
         trans, aa = I.pose_to_axis_angle(out.p[b], start.full_pose)

@@ -203,17 +203,26 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
         raise FileNotFoundError(f"--checkpoint: {args.checkpoint} {what} (see docs/wandr.md)")
     goal = torch.tensor(args.goal, dtype=torch.float32)
     _print_notes(wandr_range_notes(args.goal, frames / 30.0))
-    motion = wandr_motions(args.checkpoint, goal[None], frames, seed=args.seed)[0]
+    motion = wandr_motions(args.checkpoint, goal[None], frames, seed=args.seed, lift=args.lift)[0]
     bm = load_or_build_body(args.model)
     sv, sf = sphere(goal.numpy(), 0.05)
     args.out.mkdir(parents=True, exist_ok=True)
     paths, _ = _write_clip(bm, motion, args.out, f"wandr_s{args.seed}",
                            {"goal": trimesh.Trimesh(sv, sf, process=False)},
                            f"WANDR: reach the goal in {frames / 30.0:.2f} s", goals=goal[None].numpy())
+    from graspkit.metrics import floor_figures, foot_skating_wandr
+
     wrist = motion.joint_positions(bm)[:, 21]                   # SMPL-X joint 21: the right wrist
     d = np.linalg.norm(wrist - goal.numpy(), axis=-1)
     print(f"closest right-wrist distance to the goal {d.min() * 100:.1f} cm at {d.argmin() / 30.0:.2f} s "
           f"(t_G {frames / 30.0:.2f} s, frame {frames})")
+    v = motion.vertices(bm)
+    floor = floor_figures(v)
+    sunk = float((v[:, :, 2].amin(1) < -0.01).double().mean())
+    print(f"foot skating (WANDR's FS: the lowest vertex moves > 0.66 cm horizontally) in "
+          f"{100 * foot_skating_wandr(v).mean():.1f} % of the frame pairs; the body {floor['floor_deepest_cm']:.1f} cm "
+          f"below the floor at the deepest, {100 * sunk:.0f} % of the frames more than 1 cm below it"
+          + ("" if args.lift or sunk == 0 else " (--lift holds the feet at the floor)"))
     for path in paths:
         print(f"wrote {path}")
     return 0
@@ -297,6 +306,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the goal (m) in the start's frame: pelvis above the origin, facing +x, floor z = 0")
     wa.add_argument("--seconds", type=float, default=4.0, help="time to the goal, t_G (default 4)")
     wa.add_argument("--seed", type=int, default=0)
+    wa.add_argument("--lift", action="store_true", help="raise the body back to the floor whenever its lowest foot "
+                    "joint sinks below its start height (not in the paper: WANDR's rollout otherwise; docs/wandr.md)")
     wa.add_argument("--checkpoint", type=Path, default=DATA_STUBS / "checkpoints" / "wandr.pt")
     wa.add_argument("--out", type=Path, default=Path("outputs/wandr"))
     wa.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz for the pictures (default: the "

@@ -21,10 +21,12 @@ features), a hand only where it can be lower than the feet. On 750 of the shippe
 mesh's lowest vertex was always one of them (a foot in 99.3 % of the frames, a right-hand fingertip at some floor
 goals), and the FS equals the full-mesh FS (tests/test_wandr_eval.py checks both on floor goals).
 
-Two extra columns, not the paper's (`summary`'s SR_grounded and floating): SR counts a wrist on the goal however the
-body got there, including with both feet off the floor, which the procedural clips never show (their lowest vertex
-stays within 3 mm of it). SR_grounded counts only the frames where a foot is within 5 cm of the floor (the lowest foot
-vertex; SAGA §4.3's contact height), and floating is the share of frames where none is.
+Four extra columns, not the paper's (`summary`'s SR_grounded, floating, sunk and SR_not_sunk): SR counts a wrist on
+the goal however the body got there, including with both feet off the floor or sunk into it, which the procedural
+clips never show (their lowest vertex stays within 3 mm of it). SR_grounded counts only the frames where a foot is
+within 5 cm of the floor (the lowest foot vertex; SAGA §4.3's contact height), floating is the share of frames where
+none is, sunk the share where the lowest foot vertex is more than 1 cm below the floor, and SR_not_sunk counts only
+the frames where it is not.
 """
 from __future__ import annotations
 
@@ -42,6 +44,7 @@ from graspkit.data.wandr_dataset import FOOT_JOINTS, shaped_rest
 from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS
 
 FOOT_ON_FLOOR = SAGA_SKATE_HEEL_HEIGHT   # m: a foot within 5 cm of the floor touches it (SAGA §4.3's contact height)
+SUNK_DEPTH = 0.01                         # m: a lowest foot vertex more than 1 cm below the floor: the body has sunk
 
 T_GOAL = EVAL_FRAMES - 1          # frame 239: 8 s after the start frame
 
@@ -293,6 +296,8 @@ class GridResult:
     info: dict[str, Any] = field(default_factory=dict)
     grounded: np.ndarray | None = None      # (B,) bool: within 10 cm at a frame with a foot on the floor (not the paper's)
     floating: np.ndarray | None = None      # (B,) share of frames with both feet off the floor (lowest foot vertex > 5 cm)
+    sunk: np.ndarray | None = None          # (B,) share of frames with the lowest foot vertex > 1 cm below the floor
+    unsunk: np.ndarray | None = None        # (B,) bool: within 10 cm at a frame with no foot > 1 cm below the floor
 
     @property
     def success(self) -> np.ndarray:
@@ -315,6 +320,8 @@ class GridMeter:
         self.err = torch.full((B,), float("nan"))
         self.grounded = torch.zeros(B, dtype=torch.bool)
         self.floating = torch.zeros(B)
+        self.sunk = torch.zeros(B)
+        self.unsunk = torch.zeros(B, dtype=torch.bool)
         self.frames = 0
         self._lowest: Tensor | None = None
         self._at = torch.zeros(B, 3)
@@ -338,15 +345,17 @@ class GridMeter:
             on_floor = foot_low <= FOOT_ON_FLOOR
             self.grounded |= (d <= WANDR_SUCCESS_RADIUS) & on_floor
             self.floating += (~on_floor).float()
+            self.sunk += (foot_low < -SUNK_DEPTH).float()
+            self.unsunk |= (d <= WANDR_SUCCESS_RADIUS) & (foot_low >= -SUNK_DEPTH)
             self.frames += 1
 
 
 def evaluate_grid(model, starts: Sequence[I.StartPose], bm, n: int = 5, seed: int = 0, goals: Tensor | None = None,
                   cells: np.ndarray | None = None, t_goal: int = T_GOAL, frames: int | None = None,
-                  floor: float | None = None) -> GridResult:
+                  floor: float | None = None, lift: bool = False) -> GridResult:
     """Roll the model out on the grid (or `goals` (G, 3) with their `cells` rows) from every start, n samples each,
-    all in one batch (torch.Generator seeded with `seed`), measuring on the fly; floor: `rollout`'s floor constraint
-    (None: off, the paper's rollout)."""
+    all in one batch (torch.Generator seeded with `seed`), measuring on the fly; floor, lift: `rollout`'s floor
+    constraints (off: the paper's rollout)."""
     from graspkit.models.wandr import expand_starts, rollout
 
     if goals is None:
@@ -359,7 +368,7 @@ def evaluate_grid(model, starts: Sequence[I.StartPose], bm, n: int = 5, seed: in
     model.eval()
     with torch.no_grad():
         rollout(model, pp, p0, rest, g, t_goal, frames if frames is not None else t_goal, generator=gen, keep=False,
-                on_frame=meter, floor=floor)
+                on_frame=meter, floor=floor, lift=lift)
     return _result(meter, idx, cells)
 
 
@@ -369,7 +378,8 @@ def _result(meter: GridMeter, idx: Tensor, cells: np.ndarray) -> GridResult:
     return GridResult(idx[:, 0].numpy(), gi, idx[:, 2].numpy(), cells[gi], meter.dtg.double().numpy(),
                       meter.reach.numpy(), (meter.skate / max(meter.pairs, 1)).double().numpy(),
                       meter.err.double().numpy(), grounded=meter.grounded.numpy(),
-                      floating=(meter.floating / max(meter.frames, 1)).double().numpy())
+                      floating=(meter.floating / max(meter.frames, 1)).double().numpy(),
+                      sunk=(meter.sunk / max(meter.frames, 1)).double().numpy(), unsunk=meter.unsunk.numpy())
 
 
 def evaluate_motions(p: Tensor, rest: Tensor, goals: Tensor, betas: Tensor, bm, t_goal: int = T_GOAL,
@@ -449,7 +459,9 @@ def evaluate_clips(model, clips, seed: int = 0, after_s: float = 1.0) -> dict[st
 
 def summary(res: GridResult) -> dict[str, float]:
     """SR (%), FS (%), DTG (cm, mean), the median DTG (cm), the mean wrist error at t_G (cm), the time to goal (s: the
-    first frame within 10 cm, mean over successful motions; nan when none) and the rollout count."""
+    first frame within 10 cm, mean over successful motions; nan when none) and the rollout count; graspkit's extra
+    columns where measured (% : SR_grounded, floating, sunk (the frames with a foot more than 1 cm under the floor) and
+    SR_not_sunk (reached at a frame with no foot more than 1 cm under it))."""
     hit = res.reach_frame >= 0
     ttg = float(res.reach_frame[hit].mean()) / I.FPS if hit.any() else float("nan")
     out = {"SR": 100 * float(res.success.mean()), "FS": 100 * float(res.fs.mean()), "DTG": 100 * float(res.dtg.mean()),
@@ -457,6 +469,8 @@ def summary(res: GridResult) -> dict[str, float]:
            "time_to_goal_s": ttg, "rollouts": int(len(res.dtg))}
     if res.grounded is not None and res.floating is not None:     # graspkit's extra columns (not the paper's)
         out.update(SR_grounded=100 * float(res.grounded.mean()), floating=100 * float(res.floating.mean()))
+    if res.sunk is not None and res.unsunk is not None:
+        out.update(sunk=100 * float(res.sunk.mean()), SR_not_sunk=100 * float(res.unsunk.mean()))
     return out
 
 
@@ -647,10 +661,10 @@ def _stage_record(meta: dict[str, Any], history: Sequence[dict], max_steps: int)
 
 
 def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = False, threads: int = 2,
-                   clips_folder: str | None = None, floor: float | None = None) -> dict[str, Any]:
+                   clips_folder: str | None = None, floor: float | None = None, lift: bool = False) -> dict[str, Any]:
     """Evaluate a checkpoint on the full grid from its held-out starts; SR / FS / DTG and the Fig. 5 breakdowns; with
     clips_folder, also `evaluate_clips` on the test-split reaching clips there (reach/, and reach_far/ if present);
-    floor: `rollout`'s floor constraint (m; None: off, the paper's rollout)."""
+    floor, lift: `rollout`'s floor constraints (off: the paper's rollout)."""
     import time
     from pathlib import Path
 
@@ -671,8 +685,12 @@ def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = F
         if not model.cfg.intention:
             raise ValueError("floor: not supported for VAE + opt (its latents are optimised without the constraint)")
         row = f"{row} + floor constraint {100 * floor:g} cm (not the paper's)"
+    if lift:
+        if not model.cfg.intention:
+            raise ValueError("lift: not supported for VAE + opt (its latents are optimised without the constraint)")
+        row = f"{row} + lift (not the paper's)"
     if model.cfg.intention:
-        res = evaluate_grid(model, starts, bm, n=n, seed=seed, floor=floor)
+        res = evaluate_grid(model, starts, bm, n=n, seed=seed, floor=floor, lift=lift)
     else:                                  # "VAE + opt": no intention to steer, latents optimised per goal
         from graspkit.optim.latent import evaluate_vae_opt
         res = evaluate_vae_opt(model, starts, bm, seed=seed)
@@ -751,13 +769,15 @@ def _cmd_eval(args) -> int:
     rows, extra = {}, {}
     for ck in args.checkpoint:
         r = run_eval_wandr(ck, args.n, args.seed, planner=args.planner and not extra, threads=args.threads,
-                           clips_folder=args.clips, floor=args.floor)
+                           clips_folder=args.clips, floor=args.floor, lift=args.lift)
         rows[r["row"]] = r["summary"]
         print(f"{ck}: {r['row']}: SR {r['summary']['SR']:.1f} %, FS {r['summary']['FS']:.1f} %, "
               f"DTG {r['summary']['DTG']:.1f} cm ({r['summary']['rollouts']} rollouts, {r['seconds']:.0f} s)")
         if "SR_grounded" in r["summary"]:
             print(f"  not the paper's: SR with a foot on the floor {r['summary']['SR_grounded']:.1f} %, frames with "
-                  f"both feet off it {r['summary']['floating']:.1f} %")
+                  f"both feet off it {r['summary']['floating']:.1f} %"
+                  + (f", with a foot more than 1 cm under it {r['summary']['sunk']:.1f} %; SR with no foot that deep "
+                     f"{r['summary']['SR_not_sunk']:.1f} %" if "sunk" in r["summary"] else ""))
         for b, vals in r["breakdown"].items():
             print(f"  SR by {b}: " + ", ".join(f"{k:g}: {x:.0f} %" for k, x in vals.items()))
         for sub, c in r.get("clips", {}).items():
@@ -829,6 +849,9 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     e.add_argument("--floor", type=float, default=None,
                    help="metres: hold the lowest foot joint at most this far above its start height while generating "
                         "(a floor constraint, not in the paper; docs/wandr.md)")
+    e.add_argument("--lift", action="store_true",
+                   help="raise a body whose lowest foot joint is below its start height back to it while generating "
+                        "(against sinking into the floor; not in the paper; docs/wandr.md)")
     e.add_argument("--threads", type=int, default=2)
     e.add_argument("--clips", type=Path, nargs="?", const=cache_dir() / "motion", default=None,
                    help="also roll out towards the test-split reaching clips' own goals, at their own goal frames "

@@ -152,3 +152,43 @@ def test_wandr_notes_say_when_a_goal_leaves_the_trained_range():
     assert any("below the floor" in n for n in wandr_range_notes((1.0, 0.0, -0.5), 4.0))
     assert any("4.50 m high" in n for n in wandr_range_notes((0.3, 0.0, 4.5), 4.0))    # above every training goal
     assert wandr_range_notes((0.3, 0.0, 1.9), 4.0) == []                        # the highest training goals
+
+
+def test_wandr_command_reports_what_smplx_measures_on_its_file(tmp_path, capsys):
+    """`graspkit wandr` (with and without --lift): the closest wrist distance and the floor figures it prints are those
+    of the .npz it writes, read back through the smplx package (flat_hand_mean=True: absolute hand poses); --lift keeps
+    the body out of the floor (a foot at most 1 cm under it)."""
+    import re
+
+    import smplx
+    import torch
+
+    from graspkit.cli import main
+    from conftest import PROCEDURAL_MODEL
+
+    goal = np.array([1.1, -0.9, 0.45])
+    ref = None
+    for lift in (False, True):
+        out = tmp_path / ("lift" if lift else "paper")
+        assert main(["wandr", "--goal", *map(str, goal), "--seconds", "2", "--out", str(out)]
+                    + (["--lift"] if lift else [])) == 0
+        text = capsys.readouterr().out
+        with np.load(out / "wandr_s0.npz", allow_pickle=False) as z:
+            poses, trans, betas = (torch.as_tensor(z[k], dtype=torch.float64) for k in ("poses", "trans", "betas"))
+        T = len(poses)
+        if ref is None:
+            ref = smplx.create(str(PROCEDURAL_MODEL.parents[1]), model_type="smplx", gender="neutral", ext="npz",
+                               use_pca=False, flat_hand_mean=True, num_betas=10, batch_size=T, dtype=torch.float64)
+        body = ref(betas=betas[None].expand(T, -1), global_orient=poses[:, :3], body_pose=poses[:, 3:66],
+                   jaw_pose=poses[:, 66:69], leye_pose=poses[:, 69:72], reye_pose=poses[:, 72:75],
+                   left_hand_pose=poses[:, 75:120], right_hand_pose=poses[:, 120:165], transl=trans,
+                   expression=torch.zeros(T, 10, dtype=torch.float64))
+        d = (body.joints[:, 21].numpy() - goal)                            # smplx joint 21: the right wrist
+        closest = float(re.search(r"goal ([\d.]+) cm at", text).group(1))
+        assert closest == pytest.approx(100 * np.linalg.norm(d, axis=1).min(), abs=0.06)
+        low = body.vertices[:, :, 2].amin(1).numpy()
+        deepest, share = (float(x) for x in re.search(r"the body ([\d.]+) cm below .*, (\d+) % of the frames", text).groups())
+        assert deepest == pytest.approx(100 * max(0.0, -low.min()), abs=0.06)
+        assert share == pytest.approx(100 * np.mean(low < -0.01), abs=0.6)
+        if lift:
+            assert low.min() > -0.01 and "--lift" not in text

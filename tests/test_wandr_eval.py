@@ -163,6 +163,26 @@ def test_a_wrist_reached_with_both_feet_off_the_floor_is_not_a_grounded_success(
     assert s["SR"] == 100.0 and s["SR_grounded"] == 50.0
 
 
+def test_a_body_sunk_into_the_floor_counts_its_sunk_frames(bm):
+    """The same clip lowered 3 cm from frame 30 on: the frames after it count as sunk (lowest foot vertex > 1 cm
+    below the floor, from the full meshes: 2+ cm under it), the clip as made none; a foot there still touches
+    (SR_grounded), but its wrist, on the goal only at frame 40 (and a few frames around), is not reached unsunk."""
+    m, p, rest = _clip(bm, "reach/reach_000002.npz")
+    sunk = p.clone()
+    sunk[30:, 2] -= 0.03
+    goal = torch.stack([I.body_joints(q, rest)[40, I.WRIST] for q in (p, sunk)])
+    res = E.evaluate_motions(torch.stack([p, sunk]), rest[None].expand(2, -1, -1), goal,
+                             torch.as_tensor(m.betas)[None].expand(2, -1), bm, t_goal=40)
+    low = m.vertices(bm)[..., 2].min(-1).values
+    truth = [float(((low - d) < -E.SUNK_DEPTH).double().mean()) for d in (torch.zeros(len(p)),
+                                                                        torch.tensor([0.0] * 30 + [0.03] * (len(p) - 30)))]
+    assert truth[0] == 0.0 and truth[1] == pytest.approx((len(p) - 30) / len(p))
+    assert res.sunk.tolist() == pytest.approx(truth)
+    assert res.grounded.tolist() == [True, True] and res.unsunk.tolist() == [True, False]   # reached at 40: sunk
+    s = E.summary(res)
+    assert s["sunk"] == pytest.approx(50 * truth[1]) and s["SR"] == 100.0 and s["SR_not_sunk"] == 50.0
+
+
 def test_summary_and_breakdown():
     cells = np.array([[0, 0.0, 0.5], [72, 0.0, 5.0], [0, 1.8, 0.5], [72, 1.8, 5.0]])
     r = E.GridResult(np.zeros(4, int), np.arange(4), np.zeros(4, int), cells, np.array([0.05, 0.5, 0.09, 0.2]),

@@ -282,6 +282,44 @@ def test_floor_constraint_holds_the_lowest_foot_joint_at_its_start_height(stats,
         M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], goal, 5, 5, floor=-0.01)
 
 
+def test_lift_holds_a_sinking_body_at_its_start_height(stats, starts):
+    """lift (not in the paper): a model whose every delta sinks the body 2 cm goes 20+ cm down without it; with it the
+    lowest foot joint never goes below its start height and the rest of each pose is the decoded one; with floor=0
+    as well the joint is pinned there, and lift leaves a rising body alone."""
+    s = starts[0]
+    goal = torch.tensor([[2.0, -1.0, 0.8]])
+    z = torch.randn(1, 12, 4, generator=torch.Generator().manual_seed(3))
+    low0 = _lowest_foot(s.p, s.rest)
+    with torch.no_grad():
+        free = M.rollout(_rising(_model(stats), -0.02), s.p_prev[None], s.p[None], s.rest[None], goal, 12, 12, z=z)
+        assert float(_lowest_foot(free.p[0, -1], s.rest) - low0) < -0.2
+        model = _rising(_model(stats), -0.02)
+        out = M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], goal, 12, 12, z=z, lift=True)
+        drop = _lowest_foot(out.p[0], s.rest) - low0
+        assert float(drop.min()) >= -1e-5 and float(drop[1:].max()) <= 1e-5             # held at the start height
+        assert torch.allclose(out.joints[0], I.body_joints(out.p[0], s.rest), atol=1e-5)
+        d_prev = I.pose_to_delta(s.p_prev, s.p)[None]
+        for k in range(12):                   # every frame: the decoded delta integrated, then raised straight up
+            p = out.p[:, k]
+            inten = I.intention_from_pose(p, s.rest[None], goal, torch.tensor([(12 - k) / 30.0]))
+            d = model.decode(z[:, k], model.condition(I.state_features(p, d_prev), inten))
+            q = I.integrate_delta(p, d)
+            up = torch.tensor([0, 0, 1.0]) * (low0 - _lowest_foot(q, s.rest[None])).clamp(min=0)
+            assert torch.allclose(out.p[:, k + 1, 3:], q[:, 3:], atol=1e-5)
+            assert torch.allclose(out.p[:, k + 1, :3], q[:, :3] + up, atol=1e-5)
+            d_prev = torch.cat([d[:, :3] + up, d[:, 3:]], -1)
+        rising = _rising(_model(stats), 0.02)
+        a = M.rollout(rising, s.p_prev[None], s.p[None], s.rest[None], goal, 12, 12, z=z, lift=True)
+        b = M.rollout(rising, s.p_prev[None], s.p[None], s.rest[None], goal, 12, 12, z=z)
+        assert torch.equal(a.p, b.p)
+        for sign in (-0.02, 0.02):
+            pinned = M.rollout(_rising(_model(stats), sign), s.p_prev[None], s.p[None], s.rest[None], goal, 12, 12,
+                               z=z, lift=True, floor=0.0)
+            assert float((_lowest_foot(pinned.p[0], s.rest) - low0).abs().max()) <= 1e-5
+    with pytest.raises(ValueError, match="lift"):
+        M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], goal, 5, 5, lift=1)
+
+
 def test_goal_schedule_switches_goals_after_each_goal_frame():
     g, tg = M.goal_schedule(torch.tensor([[1.0, 0, 1], [2.0, 0, 1], [3.0, 0, 1]]), [10, 20, 30], 35)
     assert g.shape == (36, 3) and tg.shape == (36,)

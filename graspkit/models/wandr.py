@@ -365,7 +365,7 @@ def _per_frame(x: Tensor | int, B: int, T: int, width: int | None, name: str) ->
 def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Tensor, t_goal: Tensor | int,
             frames: int, z: Tensor | None = None, generator: torch.Generator | None = None,
             keep: bool = True, on_frame: FrameHook | None = None, goal_heading: Tensor | None = None,
-            floor: float | None = None) -> Rollout:
+            floor: float | None = None, lift: bool = False) -> Rollout:
     """WANDR §3.5: from starts p_prev, p0 (B, 135) with rest joints (B, 22, 3), generate `frames` more frames.
 
     goal (B, 3) or per frame (B, frames+1, 3); t_goal the goal frame (int, (B,) or per frame (B, frames+1)) counted
@@ -376,7 +376,9 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
     at the goal) instead of the direction from the pelvis to the goal. floor (m; None: off, the paper's rollout) is a
     floor constraint that is not in the paper: after every generated frame the body is lowered so that its lowest
     foot joint is at most `floor` above its height at the start (the training clips hold it there to 0.1 mm), and the
-    frame's delta is the one that lowered pose had (docs/wandr.md, "Feet off the floor").
+    frame's delta is the one that lowered pose had (docs/wandr.md, "Feet off the floor"). lift (not in the paper
+    either): a body whose lowest foot joint is below its height at the start is raised to it, the same way (against
+    the body sinking into the floor; both together pin that joint at its start height).
     """
     B = p0.shape[0]
     T = frames + 1
@@ -388,6 +390,8 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
         raise ValueError(f"z: expected shape ({B}, {frames}, {model.cfg.latent}), got {tuple(z.shape)}")
     if floor is not None and not (isinstance(floor, (int, float)) and floor >= 0):
         raise ValueError(f"floor: expected None or a tolerance >= 0 in metres, got {floor!r}")
+    if not isinstance(lift, bool):
+        raise ValueError(f"lift: expected True or False, got {lift!r}")
     goals = _per_frame(goal, B, T, 3, "goal").to(p0.dtype)
     tg = _per_frame(torch.as_tensor(t_goal), B, T, None, "t_goal")
     if not bool(torch.isfinite(goals).all()):
@@ -401,13 +405,16 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
     low0 = None
     for k in range(T):
         Rg, J = I.fk_rotmats(t, R, rest)
-        if floor is not None:
+        if floor is not None or lift:
             low = lowest_foot(J)
             if low0 is None:
                 low0 = low
-            else:                   # lower the body onto the floor: translation, joints and the last delta alike
+            else:                   # move the body onto the floor: translation, joints and the last delta alike
                 dz = torch.zeros_like(t)
-                dz[:, 2] = (low - low0 - floor).clamp(min=0)
+                if floor is not None:
+                    dz[:, 2] = (low - low0 - floor).clamp(min=0)
+                if lift:
+                    dz[:, 2] = dz[:, 2] + (low - low0).clamp(max=0)
                 t, J, cur_d = t - dz, J - dz[:, None], torch.cat([cur_d[:, :3] - dz, cur_d[:, 3:]], -1)
                 cur_p = torch.cat([t, cur_p[:, 3:]], -1)
         if keep:
@@ -464,10 +471,10 @@ def expand_starts(starts: I.StartPose | Sequence[I.StartPose], goals: Tensor, n:
 @torch.no_grad()
 def generate(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal: Tensor, t_goal: int | Tensor,
              n: int = 1, generator: torch.Generator | None = None, frames: int | None = None, keep: bool = True,
-             on_frame: FrameHook | None = None, floor: float | None = None) -> Rollout:
+             on_frame: FrameHook | None = None, floor: float | None = None, lift: bool = False) -> Rollout:
     """Reach goals (G, 3) from one or more starts, n samples each, all in one batched rollout (B = S * G * n,
     start-major). t_goal: the goal frame (int or (G,)); frames: how many to generate (default max t_goal: the clip has
-    frames + 1 poses, the start included); floor: `rollout`'s floor constraint (None: off, as the paper).
+    frames + 1 poses, the start included); floor, lift: `rollout`'s floor constraints (off, as the paper).
     Every frame draws z for the whole batch from `generator`, so a sequence's draws depend on the batch it is in:
     the same seed gives the same motions for the same starts, goals and n, not for one goal taken out of them."""
     model.eval()
@@ -484,7 +491,8 @@ def generate(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal:
     frames = int(tg.max()) if frames is None else frames
     if frames < 1:
         raise ValueError(f"frames: expected >= 1, got {frames}")
-    out = rollout(model, pp, p0, rest, g, tg, frames, generator=generator, keep=keep, on_frame=on_frame, floor=floor)
+    out = rollout(model, pp, p0, rest, g, tg, frames, generator=generator, keep=keep, on_frame=on_frame, floor=floor,
+                  lift=lift)
     out.info["index"] = idx
     return out
 
