@@ -209,7 +209,8 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     paths, _ = _write_clip(bm, motion, args.out, f"wandr_s{args.seed}",
                            {"goal": trimesh.Trimesh(sv, sf, process=False)},
-                           f"WANDR: reach the goal in {frames / 30.0:.2f} s", goals=goal[None].numpy())
+                           f"WANDR{' (+ lift)' if args.lift else ''}: reach the goal in {frames / 30.0:.2f} s",
+                           goals=goal[None].numpy())
     from graspkit.metrics import floor_figures, foot_skating_wandr
 
     wrist = motion.joint_positions(bm)[:, 21]                   # SMPL-X joint 21: the right wrist
@@ -222,7 +223,7 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
     print(f"foot skating (WANDR's FS: the lowest vertex moves > 0.66 cm horizontally) in "
           f"{100 * foot_skating_wandr(v).mean():.1f} % of the frame pairs; the body {floor['floor_deepest_cm']:.1f} cm "
           f"below the floor at the deepest, {100 * sunk:.0f} % of the frames more than 1 cm below it"
-          + ("" if args.lift or sunk == 0 else " (--lift holds the feet at the floor)"))
+          + ("" if args.lift or sunk == 0 else " (without --no-lift the feet are held at the floor)"))
     for path in paths:
         print(f"wrote {path}")
     return 0
@@ -306,8 +307,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the goal (m) in the start's frame: pelvis above the origin, facing +x, floor z = 0")
     wa.add_argument("--seconds", type=float, default=4.0, help="time to the goal, t_G (default 4)")
     wa.add_argument("--seed", type=int, default=0)
-    wa.add_argument("--lift", action="store_true", help="raise the body back to the floor whenever its lowest foot "
-                    "joint sinks below its start height (not in the paper: WANDR's rollout otherwise; docs/wandr.md)")
+    wa.add_argument("--lift", action=argparse.BooleanOptionalAction, default=True,
+                    help="raise the body back to the floor whenever its lowest foot joint sinks below its start height "
+                         "(graspkit's, on by default; --no-lift: WANDR's own rollout, which sinks; docs/wandr.md)")
     wa.add_argument("--checkpoint", type=Path, default=DATA_STUBS / "checkpoints" / "wandr.pt")
     wa.add_argument("--out", type=Path, default=Path("outputs/wandr"))
     wa.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz for the pictures (default: the "

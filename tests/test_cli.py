@@ -155,7 +155,7 @@ def test_wandr_notes_say_when_a_goal_leaves_the_trained_range():
 
 
 def test_wandr_command_reports_what_smplx_measures_on_its_file(tmp_path, capsys):
-    """`graspkit wandr` (with and without --lift): the closest wrist distance and the floor figures it prints are those
+    """`graspkit wandr` (with its default lift and with --no-lift): the closest wrist distance and the floor figures it prints are those
     of the .npz it writes, read back through the smplx package (flat_hand_mean=True: absolute hand poses); --lift keeps
     the body out of the floor (a foot at most 1 cm under it)."""
     import re
@@ -171,7 +171,7 @@ def test_wandr_command_reports_what_smplx_measures_on_its_file(tmp_path, capsys)
     for lift in (False, True):
         out = tmp_path / ("lift" if lift else "paper")
         assert main(["wandr", "--goal", *map(str, goal), "--seconds", "2", "--out", str(out)]
-                    + (["--lift"] if lift else [])) == 0
+                    + ([] if lift else ["--no-lift"])) == 0                 # lift is the command's default
         text = capsys.readouterr().out
         with np.load(out / "wandr_s0.npz", allow_pickle=False) as z:
             poses, trans, betas = (torch.as_tensor(z[k], dtype=torch.float64) for k in ("poses", "trans", "betas"))
@@ -191,4 +191,4 @@ def test_wandr_command_reports_what_smplx_measures_on_its_file(tmp_path, capsys)
         assert deepest == pytest.approx(100 * max(0.0, -low.min()), abs=0.06)
         assert share == pytest.approx(100 * np.mean(low < -0.01), abs=0.6)
         if lift:
-            assert low.min() > -0.01 and "--lift" not in text
+            assert low.min() > -0.01 and "--no-lift" not in text

@@ -138,7 +138,9 @@ fig.tight_layout()
 #   Its SR does not ask how the wrist got there: trained only on 2-s rollouts, the model reached many high goals
 #   with both feet off the floor (SR 80 %, with a foot on the floor 48 %); the shipped model's later training stages,
 #   on 4- and 8-s rollouts, keep the feet down (88 %, with a foot on the floor 85 %: `docs/wandr.md`, "Feet off the
-#   floor").
+#   floor"), but let them sink: a foot more than 1 cm under the floor in 38 % of the grid's frames, and only 56 % of
+#   the motions reach at a frame with no foot that deep (none at the floor goals). graspkit's `lift` (not the
+#   paper's) raises a sinking body back while generating: 84 % reached, 81 % with the feet out of the floor.
 # - **The procedural planner** (lessons 03–04) is the synthetic ground truth: clean by construction, but it only
 #   knows the motions it was programmed with.
 #
