@@ -189,6 +189,8 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
 
     from graspkit.benchmark import wandr_motions
     from graspkit.demo import _write_clip, load_or_build_body
+    from graspkit.eval_wandr import SUNK_DEPTH
+    from graspkit.metrics import floor_figures, foot_skating_wandr
     from graspkit.viz.scene import sphere
 
     if not all(math.isfinite(v) for v in args.goal):
@@ -211,15 +213,13 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
                            {"goal": trimesh.Trimesh(sv, sf, process=False)},
                            f"WANDR{' (+ lift)' if args.lift else ''}: reach the goal in {frames / 30.0:.2f} s",
                            goals=goal[None].numpy())
-    from graspkit.metrics import floor_figures, foot_skating_wandr
-
     wrist = motion.joint_positions(bm)[:, 21]                   # SMPL-X joint 21: the right wrist
     d = np.linalg.norm(wrist - goal.numpy(), axis=-1)
     print(f"closest right-wrist distance to the goal {d.min() * 100:.1f} cm at {d.argmin() / 30.0:.2f} s "
           f"(t_G {frames / 30.0:.2f} s, frame {frames})")
     v = motion.vertices(bm)
     floor = floor_figures(v)
-    sunk = float((v[:, :, 2].amin(1) < -0.01).double().mean())
+    sunk = float((v[:, :, 2].amin(1) < -SUNK_DEPTH).double().mean())
     print(f"foot skating (WANDR's FS: the lowest vertex moves > 0.66 cm horizontally) in "
           f"{100 * foot_skating_wandr(v).mean():.1f} % of the frame pairs; the body {floor['floor_deepest_cm']:.1f} cm "
           f"below the floor at the deepest, {100 * sunk:.0f} % of the frames more than 1 cm below it"
