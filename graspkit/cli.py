@@ -116,7 +116,8 @@ def _cmd_saga(args: argparse.Namespace) -> int:
     _print_notes(object_range_notes(pose))
     bm = load_or_build_body(args.model)
     torch.set_num_threads(args.threads)
-    r = synthesize(args.object, bm, object_pose=pose, seed=args.seed, free_joints=free_joints)
+    r = synthesize(args.object, bm, object_pose=pose, seed=args.seed, free_joints=free_joints,
+                   hold_start=args.hold_start)
     args.out.mkdir(parents=True, exist_ok=True)
     paths, _ = _write_clip(bm, r.motion, args.out, f"saga_{r.name}_s{args.seed}", {r.name: r.mesh},
                            f"SAGA: {r.name}")
@@ -295,6 +296,9 @@ def build_parser() -> argparse.ArgumentParser:
                             help="GraspPose-Opt and GraspMotion-Opt: body joints given a free rotation on top of the "
                                  "pose prior ('arms', the default: collars, shoulders, elbows, wrists; 'none': Alg. 1 "
                                  "and 2; docs/saga.md)")
+            sg.add_argument("--hold-start", action=argparse.BooleanOptionalAction, default=True,
+                            help="GraspMotion-Opt holds frame 0 at the start body (the default; --no-hold-start: "
+                                 "Alg. 2, whose planted feet drag it along the first steps; docs/saga_motion.md)")
         if method == "goal":
             sg.add_argument("--max-frames", type=int, default=150, help="MNet's rollout stops here if not at the grasp")
             sg.add_argument("--stall", type=int, default=None, metavar="FRAMES",

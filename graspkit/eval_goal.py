@@ -551,7 +551,8 @@ def saga_sliding(seqs: list, seed: int = 0, progress: bool = False, **saga_kwarg
     """SAGA's motions (graspkit.saga.synthesize: WholeGrasp + GraspPose-Opt, MotionFill + GraspMotion-Opt) for GRAB-style
     approach sequences: each sequence's object where it stands and its first frame as the start body; GOAL's foot
     sliding over the 61 frames, and the end grasp's contact. Returns the pooled sliding, per-sequence figures and the
-    SagaResults ('results'); saga_kwargs go to synthesize (e.g. fewer optimiser steps)."""
+    SagaResults ('results'); saga_kwargs go to synthesize (e.g. fewer optimiser steps; hold_start defaults to False
+    here: the shipped row is Alg. 2's fit, measured before `synthesize` held frame 0 at the start body)."""
     from graspkit.body import BodyModel
     from graspkit.data.motion import Motion
     from graspkit.objects.placement import ObjectPose
@@ -561,6 +562,7 @@ def saga_sliding(seqs: list, seed: int = 0, progress: bool = False, **saga_kwarg
 
     bm, _, _ = _body()                                   # flat hand mean: SAGA's motions carry absolute hand poses
     saga_bm = BodyModel.from_file(default_model_path())  # GraspPose-Opt's hand PCA is about the mean hand
+    saga_kwargs.setdefault("hold_start", False)
     per, results, slide, pairs = [], [], 0, 0
     for k, sq in enumerate(seqs):
         pose = ObjectPose(np.asarray(sq.object_transl[0], np.float64), np.asarray(sq.object_rotation()[0], np.float64))

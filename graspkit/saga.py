@@ -76,7 +76,7 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
                grasp_steps: tuple[int, int, int] = (300, 400, 500),
                motion_steps: tuple[int, int] = (100, 300), checkpoints: str | Path = CHECKPOINTS,
                progress: bool = True, free_joints: tuple[str, ...] | None = None,
-               polish_steps: tuple[int, int] | None = None) -> SagaResult:
+               polish_steps: tuple[int, int] | None = None, hold_start: bool = True) -> SagaResult:
     """SAGA for object `name` (a catalogue name, a mesh file or a trimesh.Trimesh, closed and in metres): one grasp
     and one 2-s approach motion into it (Fig. 2), seeded.
 
@@ -87,8 +87,12 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     Alg. 1's and Alg. 2's prior latent alone; docs/saga.md, docs/saga_motion.md).
     polish_steps: the polish steps of GraspPose-Opt and of GraspMotion-Opt (None: their configs' 100 each; a lesson
     with fewer steps throughout passes fewer).
+    hold_start: GraspMotion-Opt fits frame 0 to the start body and holds it there (graspkit's; False: Alg. 2, where
+    S.2's planted feet drag frame 0 some 8-12 cm along the sample's first steps; docs/saga_motion.md, "The start
+    frame").
     """
     from graspkit.body import BodyModel
+    from graspkit.body.markers import saga_sparse_markers
     from graspkit.data.grasp_io import object_collision_grid
     from graspkit.data.motion import canonicalize
     from graspkit.data.motionfill_dataset import make_windows
@@ -174,9 +178,11 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
                       torch.as_tensor(N.double().numpy() @ R_c.T).float()[None], 0.0, grid,
                       torch.as_tensor(R_c @ R_o).float(), torch.as_tensor(to_c(centre)).float())
     mopt = GraspMotionOpt(bm, prior, load_smooth_ae(ck / "motionfill_smooth_ae.pt"), mcfg)
+    start_markers = to_c(saga_sparse_markers(bm).select(st.vertices(bm))[0].double().numpy())
     mres = mopt.fit(smp["markers"], torch.as_tensor(betas[None, :10]).float(), smp["contacts"], obj,
                     s.object_contact.float(), progress=progress, floor=torch.tensor([to_c(np.zeros(3))[2]]).float(),
-                    marker_contact=s.marker_contact.float())
+                    marker_contact=s.marker_contact.float(),
+                    start=torch.as_tensor(start_markers).float()[None] if hold_start else None)
     poses_w, transl_w = rigid_params(mres.params["poses"][0].view(-1, 55, 3).double().numpy(),
                                      mres.params["transl"][0].double().numpy(), betas, R_c.T, o_c, bm)
     motion = Motion(poses_w, transl_w, betas, 30.0)

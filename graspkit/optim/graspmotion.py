@@ -77,6 +77,10 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   the twelve test clips, and two of them ended with the hand short of the object (7 and 25 mm); with `synthesize`
   on two shapes no model saw, the last frame was 3.0-3.3 cm from MotionFill's last markers, which were 3 mm from the
   grasp's. With the arms free: 3.1 cm, 12 of 12 clips end in contact, last-frame volume 1.92 -> 1.20 cm3 (docs).
+- The start frame (graspkit's, since 2026-12-03; `fit(start=...)`, passed by `saga.synthesize`): stage 1 fits frame 0
+  to the start body's markers and stage 2 leaves it there. Without it S.2's planted feet drag frame 0 along the
+  sample's first steps, 8-12 cm off the start body; held, it is 2-3 mm from it, at the price of the sample's first
+  shuffling steps counted as skating (docs/saga_motion.md, "The start frame").
 - Initialisation: the prior's mean pose, rigidly aligned per frame (Kabsch on the body and face markers).
 - E^o_colli and E_g are evaluated on the frames where a hand vertex is within 2 cm of the object's bounding box
   (chosen without gradient each step; elsewhere both are 0 by definition: no vertex can be inside or within 1 cm),
@@ -462,11 +466,13 @@ class GraspMotionOpt:
     # ------------------------------------------------------------------ Alg. 2
     def fit(self, markers: Tensor, betas: Tensor, foot_contact: Tensor | None = None, obj: GraspObject | None = None,
             object_contact: Tensor | None = None, progress: bool = True, floor: Tensor | None = None,
-            marker_contact: Tensor | None = None) -> GraspMotionResult:
+            marker_contact: Tensor | None = None, start: Tensor | None = None) -> GraspMotionResult:
         """Alg. 2 on a batch: markers (B, T+1, 79, 3), betas (B, 10), foot contacts (B, T+1, 4) probabilities, the
         object in the markers' frame, its contact map (B, P), the floor's height (B,) for the floor term and the
         planted-heel term (default: no floor term, and each target's lowest heel marker for the heel), the grasp's
-        143-marker contacts C^_M (B, 143) for E^o_cont's marker side (default: left out) -> GraspMotionResult."""
+        143-marker contacts C^_M (B, 143) for E^o_cont's marker side (default: left out), and the start body's
+        markers (B, 79, 3): stage 1 fits frame 0 to them and stage 2 holds frame 0 there (graspkit's; default: Alg. 2,
+        frame 0 fits the sample's first frame like any other) -> GraspMotionResult."""
         if not isinstance(markers, Tensor) or markers.dim() != 4 or tuple(markers.shape[2:]) != (self.n_markers, 3):
             got = tuple(markers.shape) if isinstance(markers, Tensor) else type(markers).__name__
             raise ValueError(f"markers: expected shape (B, T+1, {self.n_markers}, 3), got {got}")
@@ -487,7 +493,12 @@ class GraspMotionOpt:
             got = tuple(floor.shape) if isinstance(floor, Tensor) else type(floor).__name__
             raise ValueError(f"floor: expected a finite tensor of shape ({B},) (each sequence's floor height, m), "
                              f"got {got}")
+        if start is not None and (not isinstance(start, Tensor) or tuple(start.shape) != (B, self.n_markers, 3)):
+            got = tuple(start.shape) if isinstance(start, Tensor) else type(start).__name__
+            raise ValueError(f"start: expected the start body's markers, shape ({B}, {self.n_markers}, 3), got {got}")
         target = markers.detach().float()
+        if start is not None:
+            target = torch.cat([start.detach().float()[:, None], target[:, 1:]], 1)
         mc = None if marker_contact is None else marker_contact.detach().float()
         bet = betas.float().repeat_interleave(F, 0)
         p0 = self.init_params(target.flatten(0, 1), bet)
@@ -503,8 +514,12 @@ class GraspMotionOpt:
         bar = tqdm(total=sum(self.cfg.steps) + n_polish, desc="GraspMotion-Opt", disable=not progress)
         step = 0
         for stage, n in ((1, self.cfg.steps[0]), (2, self.cfg.steps[1] + n_polish)):
-            opt = torch.optim.Adam([{"params": list(first.values()), "lr": 0.1 if stage == 1 else 0.01},
-                                    {"params": list(rest.values()), "lr": 0.01}])
+            # with a start body, stage 2 leaves frame 0 where stage 1 fitted it: S.2's planted feet would otherwise
+            # drag it along the sample's first steps, 12 cm off the start (docs/saga_motion.md, "The start frame")
+            groups = [{"params": list(rest.values()), "lr": 0.01}]
+            if stage == 1 or start is None:
+                groups.insert(0, {"params": list(first.values()), "lr": 0.1 if stage == 1 else 0.01})
+            opt = torch.optim.Adam(groups)
             for i in range(n):
                 if stage == 1 and i in (60, 80):
                     for g in opt.param_groups:
