@@ -104,17 +104,28 @@ def _free_joints(names: list[str]) -> tuple[str, ...]:
     return joints
 
 
+def _body_model(path):
+    """The body model of --model (None: the shipped humanoid, built if missing); a bad file names --model."""
+    from graspkit.body.model import ModelFileError
+    from graspkit.demo import load_or_build_body
+
+    try:
+        return load_or_build_body(path)
+    except ModelFileError as e:
+        raise ValueError(f"--model: {e}") from None
+
+
 def _cmd_saga(args: argparse.Namespace) -> int:
     """`graspkit saga --object NAME|MESH`: SAGA end to end (object -> grasp -> motion) with the shipped checkpoints."""
     import torch
 
-    from graspkit.demo import _write_clip, load_or_build_body
+    from graspkit.demo import _write_clip
     from graspkit.saga import synthesize
 
     _check_object(args.object)
     pose, free_joints = _object_pose(args.at), _free_joints(args.free_joints)
     _print_notes(object_range_notes(pose))
-    bm = load_or_build_body(args.model)
+    bm = _body_model(args.model)
     torch.set_num_threads(args.threads)
     r = synthesize(args.object, bm, object_pose=pose, seed=args.seed, free_joints=free_joints,
                    hold_start=args.hold_start)
@@ -131,7 +142,7 @@ def _cmd_goal(args: argparse.Namespace) -> int:
     """`graspkit goal --object NAME|MESH`: GOAL end to end (GNet grasp + refinement, MNet approach)."""
     import torch
 
-    from graspkit.demo import _write_clip, load_or_build_body
+    from graspkit.demo import _write_clip
     from graspkit.goal import synthesize
     from graspkit.models.mnet import STALL_FRAMES
 
@@ -139,11 +150,11 @@ def _cmd_goal(args: argparse.Namespace) -> int:
     check_counts(args, stall=0)
     pose = _object_pose(args.at)
     _print_notes(object_range_notes(pose))
+    bm = _body_model(args.model)                      # a bad --model fails here, before any work
     torch.set_num_threads(args.threads)
     r = synthesize(args.object, object_pose=pose, seed=args.seed, max_frames=args.max_frames,
                    model=str(args.model) if args.model else None,
                    stall=STALL_FRAMES if args.stall is None else args.stall or None)
-    bm = load_or_build_body(args.model)
     args.out.mkdir(parents=True, exist_ok=True)
     paths, _ = _write_clip(bm, r.motion, args.out, f"goal_{r.name}_s{args.seed}", {r.name: r.mesh}, f"GOAL: {r.name}")
     print(f"goal grasp {'reached' if r.reached else 'not reached'} (hand vertices within 1 cm of the goal hand's "
@@ -189,7 +200,7 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
     import trimesh
 
     from graspkit.benchmark import wandr_motions
-    from graspkit.demo import _write_clip, load_or_build_body
+    from graspkit.demo import _write_clip
     from graspkit.eval_wandr import SUNK_DEPTH
     from graspkit.metrics import floor_figures, foot_skating_wandr
     from graspkit.viz.scene import sphere
@@ -207,7 +218,7 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
     goal = torch.tensor(args.goal, dtype=torch.float32)
     _print_notes(wandr_range_notes(args.goal, frames / 30.0))
     motion = wandr_motions(args.checkpoint, goal[None], frames, seed=args.seed, lift=args.lift)[0]
-    bm = load_or_build_body(args.model)
+    bm = _body_model(args.model)
     sv, sf = sphere(goal.numpy(), 0.05)
     args.out.mkdir(parents=True, exist_ok=True)
     paths, _ = _write_clip(bm, motion, args.out, f"wandr_s{args.seed}",

@@ -142,11 +142,17 @@ def _cmd_make(args: argparse.Namespace) -> int:
 
         out = cache_dir() / ("grasps" if args.kind in GRASP_KINDS else "motion") / args.kind
     if args.kind in GRASP_KINDS:
-        from graspkit.data.grasp_make import make_grasp_dataset
+        from graspkit.data.grasp_make import OBJECT_ORDER, make_grasp_dataset
 
+        objects = None
+        if args.objects is not None:
+            objects = tuple(o for o in args.objects.split(",") if o)
+            bad = [o for o in objects if o not in OBJECT_ORDER]
+            if not objects or bad:
+                raise ValueError(f"--objects: expected object names of {list(OBJECT_ORDER)} separated by commas, got "
+                                 f"{args.objects!r}")
         make_grasp_dataset(args.kind, n, args.seed, out, args.workers, str(args.model) if args.model else None,
-                           progress=not args.quiet, chunk=args.chunk,
-                           objects=tuple(args.objects.split(",")) if args.objects else None)
+                           progress=not args.quiet, chunk=args.chunk, objects=objects)
         print(f"{n} {args.kind} files in {out}")
         return 0
     make_dataset(args.kind, n, args.seed, out, args.workers, str(args.model) if args.model else None,
