@@ -104,7 +104,7 @@ def _free_joints(names: list[str]) -> tuple[str, ...]:
     return joints
 
 
-def _body_model(path):
+def _body_model(path: Path | None):
     """The body model of --model (None: the shipped humanoid, built if missing); a bad file names --model."""
     from graspkit.body.model import ModelFileError
     from graspkit.demo import load_or_build_body

@@ -516,8 +516,11 @@ class GraspMotionOpt:
         for stage, n in ((1, self.cfg.steps[0]), (2, self.cfg.steps[1] + n_polish)):
             # with a start body, stage 2 leaves frame 0 where stage 1 fitted it: S.2's planted feet would otherwise
             # drag it along the sample's first steps, 12 cm off the start (docs/saga_motion.md, "The start frame")
+            fit_first = stage == 1 or start is None
+            for t in first.values():
+                t.requires_grad_(fit_first)
             groups = [{"params": list(rest.values()), "lr": 0.01}]
-            if stage == 1 or start is None:
+            if fit_first:
                 groups.insert(0, {"params": list(first.values()), "lr": 0.1 if stage == 1 else 0.01})
             opt = torch.optim.Adam(groups)
             for i in range(n):
