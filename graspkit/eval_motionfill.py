@@ -535,14 +535,17 @@ def approach_scene(path: str | Path, bm) -> dict[str, Any]:
 
 
 def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, steps: tuple[int, int] = (100, 300),
-                     progress: bool = True, weights: Any = None, sdf: bool = True) -> dict[str, Any]:
+                     progress: bool = True, weights: Any = None, sdf: bool = True, hold_start: bool = False
+                     ) -> dict[str, Any]:
     """One MotionFill-VAE sample per approach clip, then GraspMotion-Opt (batched): skating (SAGA) of the ground truth,
     the sample and the fitted bodies; the last frame's contact, penetration volume and depth of the fitted bodies;
     SAGA's non-collision score (§4.2) of the fitted and the ground-truth meshes over the window, and how far the fitted
     mesh's lowest vertex goes below the floor (cm: the mean over frames and the deepest). Returns rows and the
     arrays for plots. E^o_cont gets the data's contact maps at the grasp frame (C_O and C_M, standing in for
     WholeGrasp-VAE's). `sdf`: E^o_colli's hand-in-object depth from each object's collision grid (GraspPose-Opt's;
-    False: from the point cloud's normals)."""
+    False: from the point cloud's normals). `hold_start`: frame 0 fitted to the clip's first frame and held there
+    (`GraspMotionOpt.fit(start=...)`, as `saga.synthesize`; False: Alg. 2). `start_cm`: the fitted frame 0's markers
+    from the clip's first frame (mean, cm)."""
     from graspkit.body import BodyModel
     from graspkit.data.grasp_io import collision_sdf_grid
     from graspkit.metrics import grasp_metrics, ground_penetration, non_collision_score
@@ -571,7 +574,8 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
     cfg = GraspMotionConfig(steps=steps) if weights is None else GraspMotionConfig(steps=steps, weights=weights)
     opt = GraspMotionOpt(bm, load_pose_prior(), load_smooth_ae(), cfg)
     res = opt.fit(markers, torch.as_tensor(np.stack([s["betas"] for s in scenes])).float(), contacts, obj, c_o,
-                  progress=progress, floor=torch.tensor([s["floor"] for s in scenes]).float(), marker_contact=c_m)
+                  progress=progress, floor=torch.tensor([s["floor"] for s in scenes]).float(), marker_contact=c_m,
+                  start=torch.as_tensor(np.stack([s["markers"][0] for s in scenes])).float() if hold_start else None)
     rows = []
     for i, s in enumerate(scenes):
         floor = np.array(s["floor"])
@@ -583,6 +587,7 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
                      "skating_sample": skating(markers[i:i + 1].double().numpy(), floor[None], heels),
                      "skating_opt": skating(res.markers[i:i + 1].double().numpy(), floor[None], heels),
                      "fit_cm": float((res.markers[i] - markers[i]).norm(dim=-1).mean() * 100),
+                     "start_cm": 100 * float((res.markers[i, 0] - torch.as_tensor(s["markers"][0])).norm(dim=-1).mean()),
                      "contact_mm": fit["min_distance"] * 1000, "volume_cm3": fit["volume_cm3"], "depth_cm": fit["depth_cm"],
                      "noncollision_opt": float(non_collision_score(v, s["floor"]).mean()),
                      "noncollision_gt": float(non_collision_score(s["motion"].vertices(bm)).mean()),

@@ -135,6 +135,12 @@ def test_graspmotion_eval_measures_the_last_frame_against_the_clips_posed_mesh()
     dip = np.maximum(s["floor"] - low, 0.0)
     assert row["below_floor_max_cm"] == pytest.approx(100 * dip.max(), abs=1e-3)
     assert row["below_floor_mean_cm"] == pytest.approx(100 * dip.mean(), abs=1e-3)
+    # start_cm: the fitted frame 0's markers, read off its full mesh, from the clip's first frame
+    from graspkit.body.markers import saga_sparse_markers
+
+    frame0 = GraspMotionOpt(bm, load_pose_prior()).vertices(ev["result"], 0)[0]
+    first = saga_sparse_markers(bm).select(frame0).double().numpy()
+    assert row["start_cm"] == pytest.approx(100 * np.linalg.norm(first - s["markers"][0], axis=-1).mean(), abs=1e-3)
 
 
 def test_window_cache_is_keyed_by_the_body_and_the_window_version(tmp_path, monkeypatch):
