@@ -178,11 +178,13 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
                       torch.as_tensor(N.double().numpy() @ R_c.T).float()[None], 0.0, grid,
                       torch.as_tensor(R_c @ R_o).float(), torch.as_tensor(to_c(centre)).float())
     mopt = GraspMotionOpt(bm, prior, load_smooth_ae(ck / "motionfill_smooth_ae.pt"), mcfg)
-    start_markers = to_c(saga_sparse_markers(bm).select(st.vertices(bm))[0].double().numpy())
+    start_markers = None                             # frame 0's target: the start body's markers in the sample's frame
+    if hold_start:
+        start_markers = torch.as_tensor(to_c(saga_sparse_markers(bm).select(st.vertices(bm))[0].double().numpy()))
     mres = mopt.fit(smp["markers"], torch.as_tensor(betas[None, :10]).float(), smp["contacts"], obj,
                     s.object_contact.float(), progress=progress, floor=torch.tensor([to_c(np.zeros(3))[2]]).float(),
                     marker_contact=s.marker_contact.float(),
-                    start=torch.as_tensor(start_markers).float()[None] if hold_start else None)
+                    start=None if start_markers is None else start_markers.float()[None])
     poses_w, transl_w = rigid_params(mres.params["poses"][0].view(-1, 55, 3).double().numpy(),
                                      mres.params["transl"][0].double().numpy(), betas, R_c.T, o_c, bm)
     motion = Motion(poses_w, transl_w, betas, 30.0)
