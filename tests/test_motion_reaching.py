@@ -130,3 +130,42 @@ def test_evaluation_grid_is_wandrs():
     assert sorted(set(np.round(g[:, 0]))) == [0, 72, 144, 216, 288]
     assert np.allclose(sorted(set(g[:, 1])), np.linspace(0, 1.8, 5))
     assert np.allclose(np.hypot(g[:, 3] - 1.0, g[:, 4] - 2.0), g[:, 2])
+
+
+def test_two_reaches_in_a_row_hold_the_first_then_turn_round_for_the_second(bm):
+    from graspkit.data.motion import heading_of
+    from graspkit.data.reaching import plan_reach_chain
+
+    g1, g2 = np.array([1.0, -0.3, 1.2]), np.array([-1.2, 1.0, 0.6])          # the second behind the first reach
+    m, f_rel = plan_reach_chain(Start(0, 0, 0), np.stack([g1, g2]), (90, 240), (15, 10), seed=0, bm=bm)
+    assert (m.num_frames, f_rel, m.goal_frame) == (251, 105, 240) and np.allclose(m.goal, g2)
+    j = m.joint_positions(bm)
+    d1, d2 = (np.linalg.norm(j[:, WRIST] - g, axis=1) for g in (g1, g2))
+    assert d1[90:106].max() < 0.01                                       # the first goal reached and held
+    assert d1[f_rel + 30] > 0.15 and d2[240:].max() < 0.01              # let go, then the second reached and held
+    step = np.linalg.norm(np.diff(j[:, 0], axis=0), axis=1) * 30
+    assert step.max() < 2.0                                              # no jump where the legs meet (m/s)
+    acc = np.linalg.norm(np.diff(j, 2, axis=0), axis=-1).max(1) * 900
+    assert acc[f_rel - 5:f_rel + 40].max() < 1.5 * acc.max(initial=0, where=np.arange(len(acc)) < 90)
+    h = heading_of(m.poses[:, 0])
+    to_goal = np.arctan2(g2[1] - m.trans[-1, 1], g2[0] - m.trans[-1, 0])
+    assert abs(np.angle(np.exp(1j * (h[-1] - to_goal)))) < 0.8                # turned round to face it
+    with pytest.raises(ValueError, match="goal_frames"):
+        plan_reach_chain(Start(), np.stack([g1, g2]), (90, 100), (15, 10), bm=bm)
+
+
+def test_chained_room_scale_clips_start_from_a_finished_reach(bm):
+    from graspkit.data.reaching import generate_reach_chain, sample_reach_task
+    from graspkit.data.wandr_dataset import FOLDERS
+
+    for seed in range(3):
+        first = sample_reach_task(np.random.default_rng(seed), far=True)      # the clip's first draw: its first task
+        m = generate_reach_chain(seed, bm)
+        j = m.joint_positions(bm)
+        assert np.linalg.norm(j[0, WRIST] - np.maximum(first.goal, [-9, -9, FLOOR_WRIST])) < 0.01   # on the old goal
+        assert np.linalg.norm(j[m.goal_frame, WRIST] - np.maximum(m.goal, [-9, -9, FLOOR_WRIST])) < 0.02
+        assert np.linalg.norm(m.goal[:2] - j[0, 0, :2]) > 0.3 and m.goal_frame < m.num_frames
+        assert M.motion_quality(bm, [m])["penetration_max"] <= 0.02
+    a, b = generate_reach_chain(1, bm), generate_reach_chain(1, bm)
+    assert np.array_equal(a.poses, b.poses) and not np.array_equal(a.poses[:50], generate_reach_chain(2, bm).poses[:50])
+    assert FOLDERS["reach_chain"] == "reach"                                  # trained on as reaching clips (goal, t_G)

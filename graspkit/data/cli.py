@@ -16,9 +16,10 @@ import numpy as np
 
 from graspkit.paths import pool_results
 
-KINDS = ("locomotion", "reach", "reach_far")   # reach_far: room-scale CIRCLE-style tasks (WANDR's grid)
+KINDS = ("locomotion", "reach", "reach_far", "reach_chain")   # reach_far: room-scale CIRCLE-style tasks (WANDR's grid);
+                                                              # reach_chain: room-scale, starting from a finished reach
 GRASP_KINDS = ("grasp", "approach")          # graspkit.data.grasp_make (chunked, batched grasp fitting)
-DEFAULT_N = {"locomotion": 2000, "reach": 2000, "reach_far": 2000, "grasp": 1700, "approach": 510}
+DEFAULT_N = {"locomotion": 2000, "reach": 2000, "reach_far": 2000, "reach_chain": 1000, "grasp": 1700, "approach": 510}
 _BM = None
 
 
@@ -97,10 +98,11 @@ def make_clip(kind: str, seed: int, index: int, out: str) -> str:
     """Generate and write one clip (in a worker); returns its path."""
     from graspkit.data.formats import save_motion
     from graspkit.data.locomotion import generate_locomotion
-    from graspkit.data.reaching import generate_reach
+    from graspkit.data.reaching import generate_reach, generate_reach_chain
 
     s = clip_seed(seed, kind, index)
-    m = generate_locomotion(s, _BM) if kind == "locomotion" else generate_reach(s, _BM, far=kind == "reach_far")
+    m = (generate_locomotion(s, _BM) if kind == "locomotion" else generate_reach_chain(s, _BM)
+         if kind == "reach_chain" else generate_reach(s, _BM, far=kind == "reach_far"))
     return str(save_motion(clip_path(Path(out), kind, index), m))
 
 

@@ -42,6 +42,7 @@ FAR_MIN_SPEED = 0.25      # m/s: the slowest walk of a room-scale clip (it fills
 FAR_HEIGHTS = (0.0, 1.9)   # room-scale goal heights (m), uniform: the grid's 0-1.8 m evenly, a little above
 FAR_HURRY = 0.4            # share of room-scale tasks due at a fast walk (FAR_HURRY_SPEED) rather than at leisure
 FAR_HURRY_SPEED = (1.0, 1.5)   # m/s: their walking speed (WANDR's late rollouts skate when |I^w| is above 0.7 m/s)
+RELEASE_S = 0.8           # s: a chained clip lowers the arm of its first reach over this time, walking off
 FLOOR_WRIST = 0.07         # the wrist stays this high (m) above the floor: the hand lies flat below it
 LEVELS = np.linspace(-1.0, 1.0, 41)
 EVAL_ANGLES_DEG = (0.0, 72.0, 144.0, 216.0, 288.0)        # WANDR Sec. 4.2: 5 angles 72 deg apart
@@ -136,9 +137,18 @@ def plan_reach(start: Start | tuple[float, float, float], goal, t_goal_frames: i
     gait = gait or _mild(sample_gait_style(rng), GaitStyle())
     v_pref = v_pref if v_pref is not None else float(rng.uniform(1.0, 1.35))
     fps, T = 30.0, t_goal_frames + 1 + hold_frames
-    t_G = t_goal_frames / fps
+    plan, c, _ = _reach_leg(rig, style, start, goal, t_goal_frames, T, rng, v_pref, fps)
+    steps = plan_footsteps(plan, rig, gait)
+    tracks = foot_tracks(steps, plan, rig, gait)
+    aa, root, _ = pose_body(rig, plan, tracks, style, c)
+    return Motion(aa, root - rig.joints[0], betas, fps, contacts=tracks.contacts, goal=goal,
+                  goal_frame=t_goal_frames, hand="right")
 
-    # 1-2: posture and stand-off
+
+def _stand_off(rig: Rig, style: Style, start: Start, goal: np.ndarray) -> tuple[np.ndarray, float, np.ndarray,
+                                                                               np.ndarray, float]:
+    """Steps 1-2 of `plan_reach`: the wrist target (3,), posture level b, right shoulder (3,) at that level (body
+    frame), the root's stand-off point P (2,) and its heading psi_f (rad) there."""
     target = goal.copy()
     target[2] = max(target[2], FLOOR_WRIST * rig.scale)
     b, shoulder, d_h = choose_posture(posture_shoulders(rig, style), float(target[2]), rig.arm_length)
@@ -147,9 +157,18 @@ def plan_reach(start: Start | tuple[float, float, float], goal, t_goal_frames: i
     xy0 = np.array([start.x, start.y])
     to_goal = target[:2] - xy0
     theta = float(np.arctan2(to_goal[1], to_goal[0])) if np.linalg.norm(to_goal) > 1e-6 else start.heading
-    gamma = float(np.arctan2(q[1], q[0]))
-    psi_f = theta - gamma
-    P = target[:2] - _rot2(psi_f) @ q
+    psi_f = theta - float(np.arctan2(q[1], q[0]))
+    return target, b, shoulder, target[:2] - _rot2(psi_f) @ q, psi_f
+
+
+def _reach_leg(rig: Rig, style: Style, start: Start, goal: np.ndarray, t_goal_frames: int, T: int,
+               rng: np.random.Generator, v_pref: float, fps: float = 30.0) -> tuple[RootPlan, Controls, float]:
+    """One walk-and-reach of `plan_reach` over T frames: the root plan, the controls and the final heading psi_f (rad)."""
+    t_G = t_goal_frames / fps
+
+    # 1-2: posture and stand-off
+    target, b, shoulder, P, psi_f = _stand_off(rig, style, start, goal)
+    xy0 = np.array([start.x, start.y])
 
     # 3: schedule, backwards from t_G
     D = float(np.linalg.norm(P - xy0))
@@ -187,11 +206,67 @@ def plan_reach(start: Start | tuple[float, float, float], goal, t_goal_frames: i
     c.palm_dir = np.broadcast_to(palm / np.linalg.norm(palm), (T, 3)).copy()
     c.gaze = np.broadcast_to(goal, (T, 3)).copy()
     c.gaze_weight = smoothstep(t / max(min(1.0, t_rs), 0.3)) * 0.85 + 0.15 * s
+    return plan, c, psi_f
+
+
+def _blend_unit(a: np.ndarray, wa: np.ndarray, b: np.ndarray, wb: np.ndarray) -> np.ndarray:
+    """Per-frame unit directions (T,3) between a and b (T,3), weighted by wa and wb (T,) (a where both are zero)."""
+    v = wa[:, None] * a + wb[:, None] * b
+    v = np.where((wa + wb)[:, None] > 1e-9, v, a)
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
+
+
+def plan_reach_chain(start: Start, goals: np.ndarray, goal_frames: tuple[int, int], hold_frames: tuple[int, int],
+                     betas=None, seed: int = 0, bm=None, style: Style | None = None, gait: GaitStyle | None = None,
+                     v_pref: float | None = None, release_s: float = RELEASE_S) -> tuple[Motion, int]:
+    """Two reaches in a row: `plan_reach` to goals[0] (2,3) at goal_frames[0], held hold_frames[0] frames, then the arm
+    released over release_s seconds while the second walk starts, and a reach of goals[1] at goal_frames[1] (frames
+    from the clip's start), held hold_frames[1]. Returns the motion and the first frame of the second leg.
+
+    The second leg starts from where the first one stands, so the body sets off from a finished reach (WANDR's goals in
+    a row, Sup. C.2, ask for exactly that state; CIRCLE's subjects reach targets one after another).
+    """
+    g1, g2 = map(int, goal_frames)
+    h1, h2 = map(int, hold_frames)
+    if not 1 <= g1 or g2 <= g1 + h1:
+        raise ValueError(f"goal_frames: expected 1 <= first and second > first + hold_frames[0], got {goal_frames}")
+    goals = np.asarray(goals, np.float64).reshape(2, 3)
+    bm = bm if bm is not None else _default_model()
+    rng = np.random.default_rng(seed)
+    betas = np.zeros(10) if betas is None else np.asarray(betas, np.float64).reshape(-1)
+    rig = build_rig(bm, betas)
+    style = style or _mild(sample_style(rng), Style())
+    gait = gait or _mild(sample_gait_style(rng), GaitStyle())
+    v_pref = v_pref if v_pref is not None else float(rng.uniform(1.0, 1.35))
+    fps, T, f_rel = 30.0, g2 + 1 + h2, g1 + h1
+    plan1, c1, _ = _reach_leg(rig, style, start, goals[0], g1, T, rng, v_pref, fps)
+    mid = Start(float(plan1.xy[f_rel, 0]), float(plan1.xy[f_rel, 1]), float(plan1.heading[f_rel]))
+    plan2, c2, _ = _reach_leg(rig, style, mid, goals[1], g2 - f_rel, T - f_rel, rng, v_pref, fps)
+    plan = RootPlan(np.concatenate([plan1.xy[:f_rel], plan2.xy]),
+                    np.concatenate([plan1.heading[:f_rel], plan2.heading]), fps)
+    keep = 1.0 - ramp(T, f_rel / fps, f_rel / fps + release_s, fps)      # leg 1's controls, released after its hold
+    late = lambda x: np.concatenate([np.zeros((f_rel,) + x.shape[1:]), x])   # noqa: E731 - leg 2 on the clip's clock
+    c = Controls.zeros(T)
+    for k in ("pelvis_drop", "pelvis_back", "hip_flex", "spine_flex", "spine_twist", "spine_side", "collar_raise",
+              "hand_open", "support_weight", "arm_flex"):
+        setattr(c, k, keep * getattr(c1, k) + late(getattr(c2, k)))
+    w1, w2 = keep * c1.reach_weight, late(c2.reach_weight)
+    c.reach_weight = np.minimum(w1 + w2, 1.0)
+    wsum = np.maximum(w1 + w2, 1e-9)[:, None]
+    c.reach_target = np.where((w1 + w2)[:, None] > 1e-9, (w1[:, None] * c1.reach_target
+                                                          + w2[:, None] * late(c2.reach_target)) / wsum, c1.reach_target)
+    for k in ("reach_pole", "finger_dir", "palm_dir"):
+        setattr(c, k, _blend_unit(getattr(c1, k), w1, late(getattr(c2, k)), w2))
+    # the gaze lets go of the first goal with the arm, then takes up the second (a moving point would whip the head)
+    r = int(round(release_s * fps))
+    c.gaze = np.where((np.arange(T) < f_rel + r)[:, None], goals[0], goals[1])
+    w2 = np.concatenate([np.zeros(r), c2.gaze_weight])[:T - f_rel]
+    c.gaze_weight = np.concatenate([c1.gaze_weight[:f_rel], keep[f_rel:] * c1.gaze_weight[f_rel] + w2])
     steps = plan_footsteps(plan, rig, gait)
     tracks = foot_tracks(steps, plan, rig, gait)
     aa, root, _ = pose_body(rig, plan, tracks, style, c)
-    return Motion(aa, root - rig.joints[0], betas, fps, contacts=tracks.contacts, goal=goal,
-                  goal_frame=t_goal_frames, hand="right")
+    return Motion(aa, root - rig.joints[0], betas, fps, contacts=tracks.contacts, goal=goals[1],
+                  goal_frame=g2, hand="right"), f_rel
 
 
 def _mild(sampled, default):
@@ -317,6 +392,34 @@ def generate_reach(seed: int, bm, betas: np.ndarray | None = None, far: bool = F
     wrist = m.joint_positions(bm)[m.goal_frame, JOINT_INDEX["right_wrist"]]
     target = np.array([m.goal[0], m.goal[1], max(m.goal[2], FLOOR_WRIST * build_rig(bm, m.betas).scale)])
     if np.linalg.norm(wrist - target) > 0.01:
+        m.goal = wrist.astype(np.float32)
+    return m
+
+
+def generate_reach_chain(seed: int, bm, betas: np.ndarray | None = None) -> Motion:
+    """One room-scale clip that starts from a finished reach: two `sample_reach_task(far=True)` tasks in a row
+    (`plan_reach_chain`, the second drawn relative to where the first one stands), cut to start at the first goal's
+    frame or during its hold; the clip's goal is the second one. WANDR's goals in a row (Sup. C.2) set off from
+    exactly this state, which the one-goal clips never show."""
+    rng = np.random.default_rng(seed)
+    first = sample_reach_task(rng, far=True)
+    nxt = _far_task(rng, first.betas, 0.0, float(rng.uniform(*FAR_HEIGHTS)))   # body frame: root at the origin, +x
+    style, gait = sample_style(rng), sample_gait_style(rng)
+    plan_seed, cut = int(rng.integers(2**31)), int(rng.integers(0, first.hold_frames + 1))
+    betas = first.betas if betas is None else np.asarray(betas, np.float64).reshape(-1)
+    _, _, _, P, psi = _stand_off(build_rig(bm, betas), style, first.start, first.goal)
+    rel = nxt.goal - np.array([nxt.start.x, nxt.start.y, 0.0])
+    goal2 = np.array([*(P + _rot2(psi) @ rel[:2]), rel[2]])
+    g1 = first.goal_frame
+    g2 = g1 + first.hold_frames + int(round(RELEASE_S * 30)) + nxt.goal_frame
+    m, _ = plan_reach_chain(first.start, np.stack([first.goal, goal2]), (g1, g2), (first.hold_frames, nxt.hold_frames),
+                            betas=betas, seed=plan_seed, bm=bm, style=style, gait=gait, v_pref=FAR_MIN_SPEED)
+    f0 = g1 + cut
+    m = Motion(m.poses[f0:], m.trans[f0:], m.betas, m.fps, contacts=m.contacts[f0:], goal=m.goal,
+               goal_frame=g2 - f0, hand="right")
+    wrist = m.joint_positions(bm)[m.goal_frame, JOINT_INDEX["right_wrist"]]    # as generate_reach: an unreachable
+    target = np.array([m.goal[0], m.goal[1], max(m.goal[2], FLOOR_WRIST * build_rig(bm, m.betas).scale)])
+    if np.linalg.norm(wrist - target) > 0.01:                                  # goal becomes where the wrist got to
         m.goal = wrist.astype(np.float32)
     return m
 
