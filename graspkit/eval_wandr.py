@@ -457,6 +457,53 @@ def evaluate_clips(model, clips, seed: int = 0, after_s: float = 1.0) -> dict[st
             "error_at_goal": 100 * float(d[torch.arange(len(tg)), tg].mean()), "clips": len(tg)}
 
 
+def goal_row_schedules(n: int, legs: int = 3, seed: int = 0, spacing: tuple[float, float] = (0.8, 2.5),
+                       heights: tuple[float, float] = (0.3, 1.6)) -> Tensor:
+    """n random schedules of `legs` goals (n, legs, 3) around a canonical start (pelvis above the origin): each goal
+    `spacing` m (uniform) from the one before in a uniform direction (the first from the start), `heights` m high."""
+    if n < 1 or legs < 1:
+        raise ValueError(f"n, legs: expected >= 1, got {n}, {legs}")
+    rng = np.random.default_rng(seed)
+    out = np.zeros((n, legs, 3))
+    for k in range(n):
+        pos = np.zeros(2)
+        for j in range(legs):
+            a, d = rng.uniform(-np.pi, np.pi), rng.uniform(*spacing)
+            pos = pos + d * np.array([np.cos(a), np.sin(a)])
+            out[k, j] = (pos[0], pos[1], rng.uniform(*heights))
+    return torch.as_tensor(out, dtype=torch.float32)
+
+
+def evaluate_goal_rows(model, starts: Sequence[I.StartPose], per_start: int = 40, legs: int = 3, leg_frames: int = 90,
+                       seed: int = 0, lift: bool = False) -> dict[str, Any]:
+    """Several goals in a row (Sup. C.2; not a protocol of the paper): per start, `per_start` schedules of
+    `goal_row_schedules` (seeded with `seed`), goal k due at frame (k+1) * leg_frames (`goal_schedule`), one rollout
+    each, all in one batch. A goal counts as reached when the right wrist comes within 10 cm of it in its own window
+    (the frames after the previous goal's frame up to its own). Returns SR per goal (%), all reached (%), the mean
+    closest distance per goal (cm) and `closest` (B, legs) in m."""
+    from graspkit.models.wandr import goal_schedule, rollout
+
+    if len(starts) == 0:
+        raise ValueError("starts: expected at least one start pose")
+    if leg_frames < 2:
+        raise ValueError(f"leg_frames: expected >= 2, got {leg_frames}")
+    goals = goal_row_schedules(per_start * len(starts), legs, seed)
+    t_goals = [(k + 1) * leg_frames for k in range(legs)]
+    frames = t_goals[-1]
+    g, tg = map(torch.stack, zip(*[goal_schedule(row, t_goals, frames) for row in goals]))
+    st = [s for s in starts for _ in range(per_start)]
+    with torch.no_grad():
+        out = rollout(model.eval(), torch.stack([s.p_prev for s in st]), torch.stack([s.p for s in st]),
+                      torch.stack([s.rest for s in st]), g, tg, frames, generator=torch.Generator().manual_seed(seed),
+                      lift=lift)
+    d = (out.joints[:, :, I.WRIST] - g).norm(dim=-1)                   # (B, frames + 1): to the active goal
+    lo = [0] + [t + 1 for t in t_goals[:-1]]
+    closest = torch.stack([d[:, a:b + 1].min(1).values for a, b in zip(lo, t_goals)], 1)
+    ok = closest <= WANDR_SUCCESS_RADIUS
+    return {"SR_per_goal": (100 * ok.float().mean(0)).tolist(), "SR_all": 100 * float(ok.all(1).float().mean()),
+            "closest_cm": (100 * closest.mean(0)).tolist(), "rollouts": len(st), "closest": closest}
+
+
 def summary(res: GridResult) -> dict[str, float]:
     """SR (%), FS (%), DTG (cm, mean), the median DTG (cm), the mean wrist error at t_G (cm), the time to goal (s: the
     first frame within 10 cm, mean over successful motions; nan when none) and the rollout count; graspkit's extra

@@ -14,7 +14,9 @@ approach (approach-and-grasp clips).
 from graspkit.data.formats import SequenceFileError, load_motion, save_motion
 from graspkit.data.locomotion import generate_locomotion
 from graspkit.data.motion import CONTACT_NAMES, Motion, canonicalize, heading_of
-from graspkit.data.reaching import Start, evaluation_goals, generate_reach, plan_reach
+from graspkit.data.reaching import (Start, evaluation_goals, generate_reach, generate_reach_chain, plan_reach,
+                                    plan_reach_chain)
 
 __all__ = ["Motion", "CONTACT_NAMES", "canonicalize", "heading_of", "load_motion", "save_motion", "SequenceFileError",
-           "generate_locomotion", "generate_reach", "plan_reach", "Start", "evaluation_goals"]
+           "generate_locomotion", "generate_reach", "generate_reach_chain", "plan_reach", "plan_reach_chain", "Start",
+           "evaluation_goals"]

@@ -203,7 +203,9 @@ fig.tight_layout()
 # made it walk to the goals. Then two more stages, one epoch each, roll out **120** and **240** frames (4 and 8 s, the
 # length of lesson 09's motions): after 2 s of its own output the first-stage model's body drifted upwards and reached
 # high goals with both feet in the air, and training on those long rollouts is what cured it (`docs/wandr.md` has the
-# measurements). It also adds one term the paper does not have:
+# measurements). A fourth stage repeats the 240-frame epoch with clips added that start from a *finished* reach, arm
+# still out (`graspkit data make --kind reach_chain`): without them the model stood still after reaching one goal when
+# asked for the next (lesson 09, "Several goals in a row"). It also adds one term the paper does not have:
 # $w$ times the squared horizontal step $\lVert \Delta x^{xy}_{foot} \rVert^2$ (mm²) of the four foot joints, averaged,
 # counted only where that joint is *planted* in the data at that frame (it moves less than 1 mm there;
 # `--contact-weight`, shipped at $w = 1$): it lowers foot skating on the grid from
@@ -211,7 +213,8 @@ fig.tight_layout()
 # clips, with a small network, to watch the paper's three terms (the shipped model's first stage was trained with
 # `graspkit train wandr --kinds reach --reach-far --max-steps 60 --stride-scale 2 --epochs 10 --batch-size 256 --threads 2
 # --select-val --contact-weight 1` on 2,000 reaching and 2,000 room-scale reaching clips, about 45 minutes on two CPU
-# threads, and the later stages with `--init` from the stage before, `--max-steps 120` and `240`, about 12 minutes each;
+# threads, and the later stages with `--init` from the stage before, `--max-steps 120`, `240` and `240 --reach-chain`,
+# 12–16 minutes each;
 # the locomotion clips lowered its success rate, `docs/wandr.md`).
 
 # %%
@@ -241,7 +244,7 @@ assert float(out["rec"]) < first
 # stage's weights are not its last epoch's: `--select-val` scored every epoch on a *validation* task (six
 # validation-split starts, 250 goals drawn on the grid's cylinder but off its points, one rollout each) and kept the
 # best — model selection, so the test grid of lesson 09 never chose anything. At this scale the score swings from epoch
-# to epoch (right panel); the two later stages continued from the kept epoch.
+# to epoch (right panel); the three later stages continued from the kept epoch.
 
 # %%
 CHECKPOINT = DATA_STUBS / "checkpoints" / "wandr.pt"
@@ -279,10 +282,10 @@ fig.tight_layout()
 # and it is integrated (§3.5). Here a held-out start (facing +x) and a goal 1.3 m away, to the front right, at 1 m, in
 # 4 s; eight samples at once, the closest one animated.
 #
-# **Be warned:** the shipped model is trained for about 70 minutes on two CPU cores, not the paper's 900 epochs. It
+# **Be warned:** the shipped model is trained for about 85 minutes on two CPU cores, not the paper's 900 epochs. It
 # walks and turns towards the goal, and on the paper's goal grid its wrist comes within the 10 cm that count as success
-# in nearly nine motions in ten, in all of them at the middle heights and in about half at 1.8 m (lesson 09 measures
-# it; `docs/wandr.md`); its feet skate in about one frame pair in twenty.
+# in about 96 motions in a hundred, in all of them at the middle heights and in four of five at 1.8 m (lesson 09
+# measures it; `docs/wandr.md`); its feet skate in about one frame pair in fifteen.
 
 # %%
 starts = starts_from_meta(meta)
