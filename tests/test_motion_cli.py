@@ -159,3 +159,17 @@ def test_ctrl_c_stops_make_with_workers_at_once(tmp_path):
     assert 2 <= n < 100, n                               # the queued clips were cancelled, not run
     for f in out.glob("*.npz"):                          # and what is there loads
         load_motion(f)
+
+
+def test_reach_chain_clips_are_the_generators_and_leave_the_other_kinds_seeds_alone(tmp_path, bm):
+    import numpy as np
+
+    from graspkit.data import generate_reach_chain
+    from graspkit.data.cli import KINDS
+
+    assert KINDS[:3] == ("locomotion", "reach", "reach_far")    # clip seeds hash the kind's index: the old sets stay
+    files = make_dataset("reach_chain", 2, 3, tmp_path, workers=1, progress=False)
+    assert [p.name for p in files] == ["reach_chain_000000.npz", "reach_chain_000001.npz"]
+    for i, p in enumerate(files):
+        m, want = load_motion(p), generate_reach_chain(clip_seed(3, "reach_chain", i), bm)
+        assert np.allclose(m.poses, want.poses, atol=1e-6) and m.goal_frame == want.goal_frame
