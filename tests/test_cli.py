@@ -190,5 +190,7 @@ def test_wandr_command_reports_what_smplx_measures_on_its_file(tmp_path, capsys)
         deepest, share = (float(x) for x in re.search(r"the body ([\d.]+) cm below .*, (\d+) % of the frames", text).groups())
         assert deepest == pytest.approx(100 * max(0.0, -low.min()), abs=0.06)
         assert share == pytest.approx(100 * np.mean(low < -0.01), abs=0.6)
+        floating = float(re.search(r"cm of the floor \(floating\) in (\d+) % of the frames", text).group(1))
+        assert floating == pytest.approx(100 * np.mean(low > 0.05), abs=0.6)
         if lift:
             assert low.min() > -0.01 and "--no-lift" not in text

@@ -169,3 +169,21 @@ def test_chained_room_scale_clips_start_from_a_finished_reach(bm):
     a, b = generate_reach_chain(1, bm), generate_reach_chain(1, bm)
     assert np.array_equal(a.poses, b.poses) and not np.array_equal(a.poses[:50], generate_reach_chain(2, bm).poses[:50])
     assert FOLDERS["reach_chain"] == "reach"                                  # trained on as reaching clips (goal, t_G)
+
+
+@pytest.mark.parametrize("bad, match", [
+    ({"goal_frames": (90, 120)}, "goal_frames: the second goal frame must come after"),   # 90 + 10 held + 24 released
+    ({"hold_frames": (-1, 5)}, r"hold_frames\[0\]: expected an integer >= 0"),
+    ({"hold_frames": (10, -2)}, r"hold_frames\[1\]"),
+    ({"goal_frames": (90.5, 200)}, r"goal_frames\[0\]: expected an integer"),
+    ({"goals": np.zeros((3, 3))}, r"goals: expected two finite goals \(2, 3\)"),
+    ({"goals": np.array([[1.0, 0.0, np.nan], [2.0, 1.0, 1.0]])}, "NaN or Inf"),
+    ({"betas": np.zeros(5)}, "betas: expected 10 finite shape coefficients"),
+    ({"release_s": -0.1}, "release_s"),
+])
+def test_a_chain_of_reaches_refuses_bad_input_by_name(bm, bad, match):
+    from graspkit.data.reaching import plan_reach_chain
+
+    kw = {"goals": np.array([[1.0, 0.0, 1.0], [2.0, 1.0, 1.0]]), "goal_frames": (90, 200), "hold_frames": (10, 5)}
+    with pytest.raises(ValueError, match=match):
+        plan_reach_chain((0.0, 0.0, 0.0), bm=bm, **{**kw, **bad})

@@ -117,6 +117,23 @@ def _default_model():
     return BodyModel.from_file(default_model_path(), dtype=torch.float32)
 
 
+def _betas(betas, bm) -> np.ndarray:
+    """betas (k,) as float64, checked: finite, at least bm.num_betas of them (None: zeros (10,))."""
+    if betas is None:
+        return np.zeros(10)
+    b = np.asarray(betas, np.float64).reshape(-1)
+    if len(b) < bm.num_betas or not np.isfinite(b).all():
+        raise ValueError(f"betas: expected {bm.num_betas} finite shape coefficients, got shape {np.shape(betas)}")
+    return b
+
+
+def _frame(name: str, value, least: int) -> int:
+    """An integer frame count >= least (numpy integers too; floats and bools refused)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < least:
+        raise ValueError(f"{name}: expected an integer >= {least}, got {value!r}")
+    return int(value)
+
+
 def plan_reach(start: Start | tuple[float, float, float], goal, t_goal_frames: int, betas=None, seed: int = 0,
                bm=None, hold_frames: int = 15, style: Style | None = None, gait: GaitStyle | None = None,
                v_pref: float | None = None) -> Motion:
@@ -131,7 +148,7 @@ def plan_reach(start: Start | tuple[float, float, float], goal, t_goal_frames: i
     goal = np.asarray(goal, np.float64).reshape(3)
     bm = bm if bm is not None else _default_model()
     rng = np.random.default_rng(seed)
-    betas = np.zeros(10) if betas is None else np.asarray(betas, np.float64).reshape(-1)
+    betas = _betas(betas, bm)
     rig = build_rig(bm, betas)
     style = style or _mild(sample_style(rng), Style())
     gait = gait or _mild(sample_gait_style(rng), GaitStyle())
@@ -216,7 +233,7 @@ def _blend_unit(a: np.ndarray, wa: np.ndarray, b: np.ndarray, wb: np.ndarray) ->
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
 
 
-def plan_reach_chain(start: Start, goals: np.ndarray, goal_frames: tuple[int, int], hold_frames: tuple[int, int],
+def plan_reach_chain(start: Start | tuple[float, float, float], goals: np.ndarray, goal_frames: tuple[int, int], hold_frames: tuple[int, int],
                      betas=None, seed: int = 0, bm=None, style: Style | None = None, gait: GaitStyle | None = None,
                      v_pref: float | None = None, release_s: float = RELEASE_S) -> tuple[Motion, int]:
     """Two reaches in a row: `plan_reach` to goals[0] (2,3) at goal_frames[0], held hold_frames[0] frames, then the arm
@@ -226,19 +243,29 @@ def plan_reach_chain(start: Start, goals: np.ndarray, goal_frames: tuple[int, in
     The second leg starts from where the first one stands, so the body sets off from a finished reach (WANDR's goals in
     a row, Sup. C.2, ask for exactly that state; CIRCLE's subjects reach targets one after another).
     """
-    g1, g2 = map(int, goal_frames)
-    h1, h2 = map(int, hold_frames)
-    if not 1 <= g1 or g2 <= g1 + h1:
-        raise ValueError(f"goal_frames: expected 1 <= first and second > first + hold_frames[0], got {goal_frames}")
-    goals = np.asarray(goals, np.float64).reshape(2, 3)
+    start = start if isinstance(start, Start) else Start(*map(float, start))
+    if len(goal_frames) != 2 or len(hold_frames) != 2:
+        raise ValueError(f"goal_frames, hold_frames: expected two each, got {goal_frames!r}, {hold_frames!r}")
+    g1, g2 = _frame("goal_frames[0]", goal_frames[0], 1), _frame("goal_frames[1]", goal_frames[1], 1)
+    h1, h2 = _frame("hold_frames[0]", hold_frames[0], 0), _frame("hold_frames[1]", hold_frames[1], 0)
+    if not 0.0 <= release_s < 10.0:
+        raise ValueError(f"release_s: expected seconds in [0, 10), got {release_s}")
+    fps, r = 30.0, int(round(release_s * 30.0))
+    if g2 <= g1 + h1 + r:
+        raise ValueError(f"goal_frames: the second goal frame must come after the first one's hold and the arm's "
+                         f"release ({g1} + {h1} + {r} frames), got {g2}")
+    goals = np.asarray(goals, np.float64)
+    if goals.shape != (2, 3) or not np.isfinite(goals).all():
+        raise ValueError(f"goals: expected two finite goals (2, 3) in metres, got shape {goals.shape}"
+                         + ("" if goals.shape != (2, 3) else " with NaN or Inf"))
     bm = bm if bm is not None else _default_model()
     rng = np.random.default_rng(seed)
-    betas = np.zeros(10) if betas is None else np.asarray(betas, np.float64).reshape(-1)
+    betas = _betas(betas, bm)
     rig = build_rig(bm, betas)
     style = style or _mild(sample_style(rng), Style())
     gait = gait or _mild(sample_gait_style(rng), GaitStyle())
     v_pref = v_pref if v_pref is not None else float(rng.uniform(1.0, 1.35))
-    fps, T, f_rel = 30.0, g2 + 1 + h2, g1 + h1
+    T, f_rel = g2 + 1 + h2, g1 + h1
     plan1, c1, _ = _reach_leg(rig, style, start, goals[0], g1, T, rng, v_pref, fps)
     mid = Start(float(plan1.xy[f_rel, 0]), float(plan1.xy[f_rel, 1]), float(plan1.heading[f_rel]))
     plan2, c2, _ = _reach_leg(rig, style, mid, goals[1], g2 - f_rel, T - f_rel, rng, v_pref, fps)
@@ -258,7 +285,6 @@ def plan_reach_chain(start: Start, goals: np.ndarray, goal_frames: tuple[int, in
     for k in ("reach_pole", "finger_dir", "palm_dir"):
         setattr(c, k, _blend_unit(getattr(c1, k), w1, late(getattr(c2, k)), w2))
     # the gaze lets go of the first goal with the arm, then takes up the second (a moving point would whip the head)
-    r = int(round(release_s * fps))
     c.gaze = np.where((np.arange(T) < f_rel + r)[:, None], goals[0], goals[1])
     w2 = np.concatenate([np.zeros(r), c2.gaze_weight])[:T - f_rel]
     c.gaze_weight = np.concatenate([c1.gaze_weight[:f_rel], keep[f_rel:] * c1.gaze_weight[f_rel] + w2])
