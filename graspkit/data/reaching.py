@@ -412,9 +412,13 @@ def generate_reach(seed: int, bm, betas: np.ndarray | None = None, far: bool = F
     m = plan_reach(task.start, task.goal, task.goal_frame, betas=task.betas if betas is None else betas,
                    seed=plan_seed, bm=bm, hold_frames=task.hold_frames, style=style, gait=gait,
                    v_pref=FAR_MIN_SPEED if far else v_pref)
-    # a goal this body cannot reach (too high for a short person, too low for a stiff one) becomes the point the
-    # wrist did reach: the stored goal is where the hand is at the goal frame (a floor goal stays on the floor, the wrist
-    # FLOOR_WRIST, scaled, above it)
+    return _goal_as_reached(m, bm)
+
+
+def _goal_as_reached(m: Motion, bm) -> Motion:
+    """A goal this body cannot reach (too high for a short person, too low for a stiff one) becomes the point the
+    wrist did reach: the stored goal is where the hand is at the goal frame (a floor goal stays on the floor, the
+    wrist FLOOR_WRIST, scaled, above it). Changes m in place and returns it."""
     wrist = m.joint_positions(bm)[m.goal_frame, JOINT_INDEX["right_wrist"]]
     target = np.array([m.goal[0], m.goal[1], max(m.goal[2], FLOOR_WRIST * build_rig(bm, m.betas).scale)])
     if np.linalg.norm(wrist - target) > 0.01:
@@ -443,11 +447,7 @@ def generate_reach_chain(seed: int, bm, betas: np.ndarray | None = None) -> Moti
     f0 = g1 + cut
     m = Motion(m.poses[f0:], m.trans[f0:], m.betas, m.fps, contacts=m.contacts[f0:], goal=m.goal,
                goal_frame=g2 - f0, hand="right")
-    wrist = m.joint_positions(bm)[m.goal_frame, JOINT_INDEX["right_wrist"]]    # as generate_reach: an unreachable
-    target = np.array([m.goal[0], m.goal[1], max(m.goal[2], FLOOR_WRIST * build_rig(bm, m.betas).scale)])
-    if np.linalg.norm(wrist - target) > 0.01:                                  # goal becomes where the wrist got to
-        m.goal = wrist.astype(np.float32)
-    return m
+    return _goal_as_reached(m, bm)
 
 
 def evaluation_goals(start: Start = Start()) -> np.ndarray:
