@@ -134,6 +134,28 @@ def _frame(name: str, value, least: int) -> int:
     return int(value)
 
 
+def _person(seed: int, bm, betas, style: Style | None, gait: GaitStyle | None, v_pref: float | None):
+    """The body model (default if None), a generator seeded with `seed`, checked betas, their rig, and the person's
+    style, gait and preferred speed (drawn in that order unless given): the planners' common start."""
+    bm = bm if bm is not None else _default_model()
+    rng = np.random.default_rng(seed)
+    betas = _betas(betas, bm)
+    rig = build_rig(bm, betas)
+    style = style or _mild(sample_style(rng), Style())
+    gait = gait or _mild(sample_gait_style(rng), GaitStyle())
+    v_pref = v_pref if v_pref is not None else float(rng.uniform(1.0, 1.35))
+    return bm, rng, betas, rig, style, gait, v_pref
+
+
+def _pose(rig: Rig, plan: RootPlan, gait: GaitStyle, style: Style, c: Controls, betas: np.ndarray, goal: np.ndarray,
+          goal_frame: int) -> Motion:
+    """Footsteps, foot tracks and the whole-body pose for a root plan and controls: a reaching Motion (right hand)."""
+    tracks = foot_tracks(plan_footsteps(plan, rig, gait), plan, rig, gait)
+    aa, root, _ = pose_body(rig, plan, tracks, style, c)
+    return Motion(aa, root - rig.joints[0], betas, plan.fps, contacts=tracks.contacts, goal=goal,
+                  goal_frame=goal_frame, hand="right")
+
+
 def plan_reach(start: Start | tuple[float, float, float], goal, t_goal_frames: int, betas=None, seed: int = 0,
                bm=None, hold_frames: int = 15, style: Style | None = None, gait: GaitStyle | None = None,
                v_pref: float | None = None) -> Motion:
@@ -146,20 +168,10 @@ def plan_reach(start: Start | tuple[float, float, float], goal, t_goal_frames: i
         raise ValueError(f"t_goal_frames: expected >= 1, got {t_goal_frames}")
     start = start if isinstance(start, Start) else Start(*map(float, start))
     goal = np.asarray(goal, np.float64).reshape(3)
-    bm = bm if bm is not None else _default_model()
-    rng = np.random.default_rng(seed)
-    betas = _betas(betas, bm)
-    rig = build_rig(bm, betas)
-    style = style or _mild(sample_style(rng), Style())
-    gait = gait or _mild(sample_gait_style(rng), GaitStyle())
-    v_pref = v_pref if v_pref is not None else float(rng.uniform(1.0, 1.35))
+    bm, rng, betas, rig, style, gait, v_pref = _person(seed, bm, betas, style, gait, v_pref)
     fps, T = 30.0, t_goal_frames + 1 + hold_frames
-    plan, c, _ = _reach_leg(rig, style, start, goal, t_goal_frames, T, rng, v_pref, fps)
-    steps = plan_footsteps(plan, rig, gait)
-    tracks = foot_tracks(steps, plan, rig, gait)
-    aa, root, _ = pose_body(rig, plan, tracks, style, c)
-    return Motion(aa, root - rig.joints[0], betas, fps, contacts=tracks.contacts, goal=goal,
-                  goal_frame=t_goal_frames, hand="right")
+    plan, c = _reach_leg(rig, style, start, goal, t_goal_frames, T, rng, v_pref, fps)
+    return _pose(rig, plan, gait, style, c, betas, goal, t_goal_frames)
 
 
 def _stand_off(rig: Rig, style: Style, start: Start, goal: np.ndarray) -> tuple[np.ndarray, float, np.ndarray,
@@ -179,8 +191,8 @@ def _stand_off(rig: Rig, style: Style, start: Start, goal: np.ndarray) -> tuple[
 
 
 def _reach_leg(rig: Rig, style: Style, start: Start, goal: np.ndarray, t_goal_frames: int, T: int,
-               rng: np.random.Generator, v_pref: float, fps: float = 30.0) -> tuple[RootPlan, Controls, float]:
-    """One walk-and-reach of `plan_reach` over T frames: the root plan, the controls and the final heading psi_f (rad)."""
+               rng: np.random.Generator, v_pref: float, fps: float = 30.0) -> tuple[RootPlan, Controls]:
+    """One walk-and-reach of `plan_reach` over T frames: the root plan and the controls."""
     t_G = t_goal_frames / fps
 
     # 1-2: posture and stand-off
@@ -223,7 +235,7 @@ def _reach_leg(rig: Rig, style: Style, start: Start, goal: np.ndarray, t_goal_fr
     c.palm_dir = np.broadcast_to(palm / np.linalg.norm(palm), (T, 3)).copy()
     c.gaze = np.broadcast_to(goal, (T, 3)).copy()
     c.gaze_weight = smoothstep(t / max(min(1.0, t_rs), 0.3)) * 0.85 + 0.15 * s
-    return plan, c, psi_f
+    return plan, c
 
 
 def _blend_unit(a: np.ndarray, wa: np.ndarray, b: np.ndarray, wb: np.ndarray) -> np.ndarray:
@@ -258,17 +270,11 @@ def plan_reach_chain(start: Start | tuple[float, float, float], goals: np.ndarra
     if goals.shape != (2, 3) or not np.isfinite(goals).all():
         raise ValueError(f"goals: expected two finite goals (2, 3) in metres, got shape {goals.shape}"
                          + ("" if goals.shape != (2, 3) else " with NaN or Inf"))
-    bm = bm if bm is not None else _default_model()
-    rng = np.random.default_rng(seed)
-    betas = _betas(betas, bm)
-    rig = build_rig(bm, betas)
-    style = style or _mild(sample_style(rng), Style())
-    gait = gait or _mild(sample_gait_style(rng), GaitStyle())
-    v_pref = v_pref if v_pref is not None else float(rng.uniform(1.0, 1.35))
+    bm, rng, betas, rig, style, gait, v_pref = _person(seed, bm, betas, style, gait, v_pref)
     T, f_rel = g2 + 1 + h2, g1 + h1
-    plan1, c1, _ = _reach_leg(rig, style, start, goals[0], g1, T, rng, v_pref, fps)
+    plan1, c1 = _reach_leg(rig, style, start, goals[0], g1, T, rng, v_pref, fps)
     mid = Start(float(plan1.xy[f_rel, 0]), float(plan1.xy[f_rel, 1]), float(plan1.heading[f_rel]))
-    plan2, c2, _ = _reach_leg(rig, style, mid, goals[1], g2 - f_rel, T - f_rel, rng, v_pref, fps)
+    plan2, c2 = _reach_leg(rig, style, mid, goals[1], g2 - f_rel, T - f_rel, rng, v_pref, fps)
     plan = RootPlan(np.concatenate([plan1.xy[:f_rel], plan2.xy]),
                     np.concatenate([plan1.heading[:f_rel], plan2.heading]), fps)
     keep = 1.0 - ramp(T, f_rel / fps, f_rel / fps + release_s, fps)      # leg 1's controls, released after its hold
@@ -288,11 +294,7 @@ def plan_reach_chain(start: Start | tuple[float, float, float], goals: np.ndarra
     c.gaze = np.where((np.arange(T) < f_rel + r)[:, None], goals[0], goals[1])
     w2 = np.concatenate([np.zeros(r), c2.gaze_weight])[:T - f_rel]
     c.gaze_weight = np.concatenate([c1.gaze_weight[:f_rel], keep[f_rel:] * c1.gaze_weight[f_rel] + w2])
-    steps = plan_footsteps(plan, rig, gait)
-    tracks = foot_tracks(steps, plan, rig, gait)
-    aa, root, _ = pose_body(rig, plan, tracks, style, c)
-    return Motion(aa, root - rig.joints[0], betas, fps, contacts=tracks.contacts, goal=goals[1],
-                  goal_frame=g2, hand="right"), f_rel
+    return _pose(rig, plan, gait, style, c, betas, goals[1], g2), f_rel
 
 
 def _mild(sampled, default):
