@@ -580,7 +580,8 @@ def starts_from_meta(meta: dict[str, Any]) -> list[I.StartPose]:
 def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str | None = None, epochs: int = 6,
                     time_limit: float | None = None, seed: int = 0, threads: int = 2, batch_size: int = 512,
                     lr: float = 1e-3, progress: bool = True, max_steps: int = 10, ramp_epochs: int = 4,
-                    stride_scale: int = 1, reach_far: bool = False, reach_chain: bool = False, rollout_latent: str = "prior",
+                    stride_scale: int = 1, reach_far: bool = False, reach_chain: bool = False,
+                    reach_near: bool = False, rollout_latent: str = "prior",
                     alpha_kl: float = 1e-2, kinds: Sequence[str] | None = None, goal_frame: str = "reach",
                     foot_weight: float = 0.0, select_val: bool = False, contact_weight: float = 0.0,
                     floor_weight: float = 0.0, init: str | None = None, window_stride: int | None = None,
@@ -591,7 +592,8 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     windows per epoch); window_stride sets the frames between windows directly, for every kind (instead of the scaled
     defaults; long rollouts leave few windows, 1 keeps them all); reach_far adds the room-scale reaching clips of
     <folder>/reach_far (docs/data.md; the shipped checkpoint uses them, docs/wandr.md), reach_chain those of
-    <folder>/reach_chain (room-scale clips that start from a finished reach); rollout_latent: where the
+    <folder>/reach_chain (room-scale clips that start from a finished reach), reach_near those of <folder>/reach_near
+    (near goals at the floor or overhead); rollout_latent: where the
     rollout steps draw z ("prior": Sup. B.2 read as sampling the prior; "posterior": the encoder on the true delta, see docs/wandr.md); alpha_kl: the KL
     weight α (§3.4: 1e-2); kinds: the clip kinds to train on instead of the variant's (e.g. ("reach",): the reaching
     and room-scale clips only, as the shipped checkpoint, docs/wandr.md); select_val: after every epoch score the
@@ -634,7 +636,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     bm = BodyModel.from_file(default_model_path())
     t0 = time.perf_counter()
     clips = cached_clips(folder, bm, kinds=("locomotion", "reach") + (("reach_far",) if reach_far else ())
-                         + (("reach_chain",) if reach_chain else ()))
+                         + (("reach_chain",) if reach_chain else ()) + (("reach_near",) if reach_near else ()))
     names = split_clips(clips.names, seed=0)["train"]
     train = clips.subset([n for n in names if FOLDERS.get(n.split("/")[0]) in v["kinds"]])
     stats = compute_stats(train, seed=seed, goal_frame=goal_frame)
@@ -662,6 +664,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
                                digest_size=4).hexdigest()       # other clips never resume this run
     # the experiment flags away from their defaults: (command-line text, run-name part); the data key covers reach_far
     flags = ([(" --reach-far", "")] if reach_far else []) + ([(" --reach-chain", "")] if reach_chain else []) \
+        + ([(" --reach-near", "")] if reach_near else []) \
         + ([(f" --rollout-latent {rollout_latent}", "_zpost")] if rollout_latent != "prior" else []) \
         + ([(f" --alpha-kl {alpha_kl:g}", f"_a{alpha_kl:g}")] if alpha_kl != 1e-2 else []) \
         + ([(f" --rollout-grad {rollout_grad}", f"_rg{rollout_grad}")] if rollout_grad != "through" else []) \
@@ -802,7 +805,7 @@ def _cmd_train(args) -> int:
     info = run_train_wandr(args.variant, args.data, args.out, args.epochs, args.time_limit, args.seed, args.threads,
                            args.batch_size, args.lr, max_steps=args.max_steps, ramp_epochs=args.ramp_epochs,
                            stride_scale=args.stride_scale, reach_far=args.reach_far,
-                           reach_chain=args.reach_chain,
+                           reach_chain=args.reach_chain, reach_near=args.reach_near,
                            rollout_latent=args.rollout_latent, alpha_kl=args.alpha_kl, goal_frame=args.goal_frame,
                            foot_weight=args.foot_weight, select_val=args.select_val,
                            contact_weight=args.contact_weight, floor_weight=args.floor_weight,
@@ -890,6 +893,9 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     t.add_argument("--reach-chain", action="store_true",
                    help="also train on <data>/reach_chain (room-scale reaching clips that start from a finished reach: "
                         "goals in a row; docs/wandr.md)")
+    t.add_argument("--reach-near", action="store_true",
+                   help="also train on <data>/reach_near (room-scale reaching clips with a near goal at the floor or "
+                        "overhead, the grid's weakest cells; docs/wandr.md)")
     t.add_argument("--kinds", default=None,
                    help="train on these clip kinds instead of the variant's: 'reach' (reaching + room-scale clips: the "
                         "shipped checkpoint), 'locomotion' or 'locomotion,reach'")

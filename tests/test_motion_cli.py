@@ -167,9 +167,22 @@ def test_reach_chain_clips_are_the_generators_and_leave_the_other_kinds_seeds_al
     from graspkit.data import generate_reach_chain
     from graspkit.data.cli import KINDS
 
-    assert KINDS[:3] == ("locomotion", "reach", "reach_far")    # clip seeds hash the kind's index: the old sets stay
+    assert KINDS[:4] == ("locomotion", "reach", "reach_far", "reach_chain")   # clip seeds hash the kind's index: the
+                                                                              # old sets stay
     files = make_dataset("reach_chain", 2, 3, tmp_path, workers=1, progress=False)
     assert [p.name for p in files] == ["reach_chain_000000.npz", "reach_chain_000001.npz"]
     for i, p in enumerate(files):
         m, want = load_motion(p), generate_reach_chain(clip_seed(3, "reach_chain", i), bm)
+        assert np.allclose(m.poses, want.poses, atol=1e-6) and m.goal_frame == want.goal_frame
+
+
+def test_reach_near_clips_are_the_generators(tmp_path, bm):
+    import numpy as np
+
+    from graspkit.data import generate_reach
+
+    files = make_dataset("reach_near", 2, 3, tmp_path, workers=1, progress=False)
+    assert [p.name for p in files] == ["reach_near_000000.npz", "reach_near_000001.npz"]
+    for i, p in enumerate(files):
+        m, want = load_motion(p), generate_reach(clip_seed(3, "reach_near", i), bm, near=True)
         assert np.allclose(m.poses, want.poses, atol=1e-6) and m.goal_frame == want.goal_frame

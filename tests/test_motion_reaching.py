@@ -171,6 +171,32 @@ def test_chained_room_scale_clips_start_from_a_finished_reach(bm):
     assert FOLDERS["reach_chain"] == "reach"                                  # trained on as reaching clips (goal, t_G)
 
 
+def test_near_tasks_put_the_goal_close_by_at_the_floor_or_overhead_and_their_clips_reach_it(bm):
+    from graspkit.data.reaching import NEAR_DISTANCE, NEAR_HEIGHTS, sample_near_task
+    from graspkit.data.wandr_dataset import FOLDERS
+
+    tasks = [sample_near_task(np.random.default_rng(s)) for s in range(400)]
+    d = np.array([np.hypot(t.goal[0] - t.start.x, t.goal[1] - t.start.y) for t in tasks])
+    z = np.array([t.goal[2] for t in tasks])
+    rel = np.array([np.angle(np.exp(1j * (np.arctan2(t.goal[1] - t.start.y, t.goal[0] - t.start.x) - t.start.heading)))
+                    for t in tasks])
+    tg = np.array([t.goal_frame for t in tasks]) / 30.0
+    assert d.min() >= NEAR_DISTANCE[0] - 1e-9 and d.max() <= NEAR_DISTANCE[1] + 1e-9
+    low, high = (z >= NEAR_HEIGHTS[0][0]) & (z <= NEAR_HEIGHTS[0][1]), (z >= NEAR_HEIGHTS[1][0]) & (z <= NEAR_HEIGHTS[1][1])
+    assert np.all(low | high) and 0.4 < high.mean() < 0.6 and (z > 1.75).mean() > 0.05    # half each; 1.8 m covered
+    assert (np.abs(rel) > 2.5).mean() > 0.1 and tg.max() <= 9.0 and (tg > 5.0).mean() > 0.2   # behind too; long waits
+    for seed in range(2):
+        m = generate_reach(seed, bm, near=True)
+        j = m.joint_positions(bm)
+        assert np.linalg.norm(j[m.goal_frame, WRIST] - np.maximum(m.goal, [-9, -9, FLOOR_WRIST])) < 0.02
+        assert np.hypot(*(m.goal[:2] - j[0, 0, :2])) < NEAR_DISTANCE[1] + 0.3          # near the start's pelvis
+    a, b = generate_reach(1, bm, near=True), generate_reach(1, bm, near=True)
+    assert np.array_equal(a.poses, b.poses) and not np.array_equal(a.poses, generate_reach(1, bm, far=True).poses)
+    with pytest.raises(ValueError, match="far, near"):
+        generate_reach(0, bm, far=True, near=True)
+    assert FOLDERS["reach_near"] == "reach"
+
+
 @pytest.mark.parametrize("bad, match", [
     ({"goal_frames": (90, 120)}, "goal_frames: the second goal frame must come after"),   # 90 + 10 held + 24 released
     ({"hold_frames": (-1, 5)}, r"hold_frames\[0\]: expected an integer >= 0"),

@@ -257,6 +257,7 @@ def test_train_command_parses_the_schedule_flags():
     a = ap.parse_args(["train", "wandr", "--kinds", "reach", "--reach-far", "--select-val"])
     assert (a.kinds, a.reach_far, a.select_val, a.window_stride, a.init) == ("reach", True, True, None, None)
     assert not a.reach_chain and ap.parse_args(["train", "wandr", "--reach-chain"]).reach_chain
+    assert not a.reach_near and ap.parse_args(["train", "wandr", "--reach-near"]).reach_near
     a = ap.parse_args(["train", "wandr", "--window-stride", "1", "--init", "x.pt"])
     assert (a.window_stride, str(a.init)) == (1, "x.pt")
     with pytest.raises(ValueError, match="window_stride"):

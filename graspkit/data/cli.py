@@ -16,10 +16,10 @@ import numpy as np
 
 from graspkit.paths import pool_results
 
-KINDS = ("locomotion", "reach", "reach_far", "reach_chain")   # reach_far: room-scale CIRCLE-style tasks (WANDR's grid);
-                                                              # reach_chain: room-scale, starting from a finished reach
+KINDS = ("locomotion", "reach", "reach_far", "reach_chain", "reach_near")   # reach_far: room-scale CIRCLE-style tasks
+# (WANDR's grid); reach_chain: room-scale, starting from a finished reach; reach_near: near goals, floor or overhead
 GRASP_KINDS = ("grasp", "approach")          # graspkit.data.grasp_make (chunked, batched grasp fitting)
-DEFAULT_N = {"locomotion": 2000, "reach": 2000, "reach_far": 2000, "reach_chain": 1000, "grasp": 1700, "approach": 510}
+DEFAULT_N = {"locomotion": 2000, "reach": 2000, "reach_far": 2000, "reach_chain": 1000, "reach_near": 500, "grasp": 1700, "approach": 510}
 _BM = None
 
 
@@ -102,7 +102,7 @@ def make_clip(kind: str, seed: int, index: int, out: str) -> str:
 
     s = clip_seed(seed, kind, index)
     m = (generate_locomotion(s, _BM) if kind == "locomotion" else generate_reach_chain(s, _BM)
-         if kind == "reach_chain" else generate_reach(s, _BM, far=kind == "reach_far"))
+         if kind == "reach_chain" else generate_reach(s, _BM, far=kind == "reach_far", near=kind == "reach_near"))
     return str(save_motion(clip_path(Path(out), kind, index), m))
 
 

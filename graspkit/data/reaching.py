@@ -43,6 +43,8 @@ FAR_HEIGHTS = (0.0, 1.9)   # room-scale goal heights (m), uniform: the grid's 0-
 FAR_HURRY = 0.4            # share of room-scale tasks due at a fast walk (FAR_HURRY_SPEED) rather than at leisure
 FAR_HURRY_SPEED = (1.0, 1.5)   # m/s: their walking speed (WANDR's late rollouts skate when |I^w| is above 0.7 m/s)
 RELEASE_S = 0.8           # s: a chained clip lowers the arm of its first reach over this time, walking off
+NEAR_DISTANCE = (0.3, 1.0)    # m: a near clip's goal from the start (reach_near)
+NEAR_HEIGHTS = ((0.0, 0.35), (1.45, 1.9))   # m: its goal height, at the floor or overhead (half each)
 FLOOR_WRIST = 0.07         # the wrist stays this high (m) above the floor: the hand lies flat below it
 LEVELS = np.linspace(-1.0, 1.0, 41)
 EVAL_ANGLES_DEG = (0.0, 72.0, 144.0, 216.0, 288.0)        # WANDR Sec. 4.2: 5 angles 72 deg apart
@@ -385,9 +387,11 @@ def _natural_time(r: float, z: float) -> float:
     return walk + reach
 
 
-def _far_task(rng: np.random.Generator, betas: np.ndarray, h0: float, z: float) -> ReachTask:
-    """The room-scale task of sample_reach_task(far=True), given the person, start heading and goal height."""
-    r = rng.uniform(0.3, 5.0)
+def _far_task(rng: np.random.Generator, betas: np.ndarray, h0: float, z: float,
+              distance: tuple[float, float] = (0.3, 5.0)) -> ReachTask:
+    """The room-scale task of sample_reach_task(far=True), given the person, start heading, goal height and the range
+    of the goal's distance from the start (m)."""
+    r = rng.uniform(*distance)
     rel = rng.uniform(-np.pi, np.pi)                     # goal direction relative to the start heading
     xy0 = rng.uniform(-0.5, 0.5, 2)
     goal = np.array([xy0[0] + r * np.cos(h0 + rel), xy0[1] + r * np.sin(h0 + rel), z])
@@ -402,11 +406,25 @@ def _far_task(rng: np.random.Generator, betas: np.ndarray, h0: float, z: float) 
                      int(rng.integers(9, 31)), betas)
 
 
-def generate_reach(seed: int, bm, betas: np.ndarray | None = None, far: bool = False) -> Motion:
+def sample_near_task(rng: np.random.Generator) -> ReachTask:
+    """Draw a room-scale task whose goal is near (NEAR_DISTANCE, 0.3-1 m, in any direction) and at the floor or
+    overhead (NEAR_HEIGHTS): the grid's weakest cells (docs/wandr.md), scarce among the room-scale tasks (1.5 % of
+    them put a goal above 1.6 m within 0.8 m). Timed as those: due between the natural time and 9 s (a wait, then the
+    reach) or, for a share FAR_HURRY, at once."""
+    betas = sample_betas(rng)
+    h0 = rng.uniform(-np.pi, np.pi)
+    band = NEAR_HEIGHTS[int(rng.integers(len(NEAR_HEIGHTS)))]
+    return _far_task(rng, betas, h0, float(rng.uniform(*band)), distance=NEAR_DISTANCE)
+
+
+def generate_reach(seed: int, bm, betas: np.ndarray | None = None, far: bool = False, near: bool = False) -> Motion:
     """One CIRCLE-style clip (a step or two at most, then a right-hand reach; far=True: a room-scale task, see
-    `sample_reach_task`) for the task `sample_reach_task` draws."""
+    `sample_reach_task`; near=True: a near goal at the floor or overhead, `sample_near_task`) for the task drawn."""
+    if far and near:
+        raise ValueError("far, near: expected at most one of them True")
     rng = np.random.default_rng(seed)
-    task = sample_reach_task(rng, far=far)
+    task = sample_near_task(rng) if near else sample_reach_task(rng, far=far)
+    far = far or near                                  # a near task is a room-scale task: walked as slowly
     style, gait = sample_style(rng), sample_gait_style(rng)
     plan_seed, v_pref = int(rng.integers(2**31)), float(rng.uniform(0.7, 1.1))  # this order: the default clips as before
     # room-scale: walk as slowly as FAR_MIN_SPEED to arrive at the goal frame (plan_reach walks at v_pref when it can and

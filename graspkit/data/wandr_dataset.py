@@ -45,7 +45,8 @@ SPLIT_FRACTIONS = (0.8, 0.1, 0.1)
 FOOT_JOINTS = [JOINT_INDEX[n] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
 KINDS = ("locomotion", "reach")
 FOLDERS = {"locomotion": "locomotion", "reach": "reach", "reach_far": "reach",   # clip folder -> kind (reach_far:
-           "reach_chain": "reach"}             # room-scale CIRCLE-style tasks; reach_chain: those from a finished reach)
+           "reach_chain": "reach", "reach_near": "reach"}   # room-scale CIRCLE-style tasks; reach_chain: those from a
+                                                            # finished reach; reach_near: near goals, floor or overhead)
 STD_FLOOR = 1e-3
 GOAL_FRAMES = ("reach", "hold")  # t_G of a reaching clip: the frame the hand arrives, or the end of the hold after it
 
@@ -101,7 +102,7 @@ class ClipSet:
 
 def list_clips(folder: str | Path, kinds: Sequence[str] = KINDS, limit: int | None = None) -> list[Path]:
     """The clip files `<folder>/<sub>/*.npz` (sorted) of the sub-folders `kinds` (of locomotion, reach and the opt-in
-    reach_far and reach_chain; a missing one is skipped), at most `limit` per sub-folder."""
+    reach_far, reach_chain and reach_near; a missing one is skipped), at most `limit` per sub-folder."""
     folder = Path(folder)
     out: list[Path] = []
     for kind in kinds:
