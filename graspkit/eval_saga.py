@@ -169,6 +169,9 @@ def summarise(rows: list[dict[str, float]], markers: Tensor | None = None, per: 
         off = np.abs([r["floor_cm"] for r in rows])
         out.update(floor_abs_cm=float(off.mean()), floor_max_cm=float(off.max()))
     if markers is not None and per > 1:
+        if len(markers) % per:
+            raise ValueError(f"per: expected the {len(markers)} marker sets to come in whole runs of {per} samples, "
+                             f"got {len(markers) % per} left over")
         out["apd"] = float(np.mean([apd(markers[i:i + per]) for i in range(0, len(markers), per)]))
     return out
 

@@ -511,8 +511,10 @@ def summary(res: GridResult) -> dict[str, float]:
     SR_not_sunk (reached at a frame with no foot more than 1 cm under it))."""
     hit = res.reach_frame >= 0
     ttg = float(res.reach_frame[hit].mean()) / I.FPS if hit.any() else float("nan")
+    err = res.error_at_goal[np.isfinite(res.error_at_goal)]      # none when the motions end before t_G
     out = {"SR": 100 * float(res.success.mean()), "FS": 100 * float(res.fs.mean()), "DTG": 100 * float(res.dtg.mean()),
-           "DTG_median": 100 * float(np.median(res.dtg)), "error_at_goal": 100 * float(np.nanmean(res.error_at_goal)),
+           "DTG_median": 100 * float(np.median(res.dtg)),
+           "error_at_goal": 100 * float(err.mean()) if err.size else float("nan"),
            "time_to_goal_s": ttg, "rollouts": int(len(res.dtg))}
     if res.grounded is not None and res.floating is not None:     # graspkit's extra columns (not the paper's)
         out.update(SR_grounded=100 * float(res.grounded.mean()), floating=100 * float(res.floating.mean()))

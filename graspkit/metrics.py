@@ -57,17 +57,21 @@ JOINT_LIMITS_DEG: dict[str, float] = {
 }
 
 
-def _t(x: Any) -> torch.Tensor:
-    """A float tensor of an array, list or tensor (detached: metrics are measurements; integers become float64)."""
-    t = x.detach() if isinstance(x, torch.Tensor) else torch.as_tensor(np.ascontiguousarray(x))   # any strides
-    return t if t.is_floating_point() else t.to(torch.float64)
+def _t(x: Any, name: str = "input") -> torch.Tensor:
+    """A float tensor of an array, list or tensor (detached: metrics are measurements; integers become float64); a
+    ValueError naming the argument `name` for anything that is not numbers."""
+    try:
+        t = x.detach() if isinstance(x, torch.Tensor) else torch.as_tensor(np.ascontiguousarray(x))   # any strides
+        return t if t.is_floating_point() else t.to(torch.float64)
+    except (TypeError, ValueError, RuntimeError) as e:
+        raise ValueError(f"{name}: expected an array of numbers, got {type(x).__name__} ({e})") from None
 
 
 def _shaped(x: Any, name: str, shape: str, min_frames: int = 1) -> torch.Tensor:
     """`x` as a float tensor after checking it against `shape` (comma-separated: a digit is a fixed size, a letter
     any non-zero size, e.g. 'T,V,3') and that it is finite; a ValueError names the argument otherwise. `min_frames`
     is the least T."""
-    t = _t(x)
+    t = _t(x, name)
     dims = shape.split(",")
     ok = t.dim() == len(dims) and all(t.shape[i] == int(d) if d.isdigit() else t.shape[i] > 0
                                       for i, d in enumerate(dims))
@@ -211,7 +215,7 @@ def joint_limit_excess(poses: torch.Tensor) -> torch.Tensor:
 
 def distance_to_goal(wrist: Any, goal: Any) -> float:
     """WANDR's DTG: closest distance (m) of the wrist track (T,3) to the goal (3,) or (1,3)."""
-    g = _t(goal)
+    g = _t(goal, "goal")
     g = g.reshape(3) if g.shape == (1, 3) else g
     w, g = _shaped(wrist, "wrist", "T,3").double(), _shaped(g, "goal", "3").double()
     return float((w - g).norm(dim=-1).min())
@@ -291,7 +295,7 @@ def grasp_contact_distance(vertices: Any, obj: Any, margin: float = 0.05) -> flo
     from graspkit.objects.distance import mesh_arrays, require_closed
     from graspkit.objects.sdf import signed_distance
 
-    v = _t(vertices).double()
+    v = _t(vertices, "vertices").double()
     if v.dim() != 2 or v.shape[1] != 3 or len(v) == 0:
         raise ValueError(f"vertices: expected (V, 3) positions of one body with V > 0, got shape {tuple(v.shape)}")
     if not torch.isfinite(v).all():
@@ -323,10 +327,10 @@ def grasp_metrics(vertices: Any, faces: Any, obj: Any, threshold: float = GRASP_
 
     threshold = _number(threshold, "threshold", positive=False)
     d = grasp_contact_distance(vertices, obj)
-    f = _t(faces)
+    f = _t(faces, "faces")
     if f.is_floating_point() and not bool((f == f.round()).all()):    # .long() would truncate them silently
         raise ValueError("faces: expected integer vertex indices, got fractional values")
-    pen = interpenetration((_t(vertices).double(), f.long()), obj, refine=REFINE if refine is None else refine)
+    pen = interpenetration((_t(vertices, "vertices").double(), f.long()), obj, refine=REFINE if refine is None else refine)
     return {"min_distance": d, "contact": float(d <= threshold or pen.volume_cm3 > 0), "volume_cm3": pen.volume_cm3,
             "depth_cm": pen.depth_cm}
 
@@ -346,7 +350,7 @@ def contact_ratio(min_distances: Any, threshold: float = GRASP_CONTACT_THRESHOLD
 
 def apd(samples: Any) -> float:
     """Average pairwise L2 distance between K samples (K, ...) flattened (SAGA Sec. 4.1 after DLow): mean over i != j."""
-    x = _t(samples).double()
+    x = _t(samples, "samples").double()
     if x.dim() < 1 or x.numel() == 0:
         raise ValueError(f"samples: expected (K, ...) with non-empty samples, got shape {tuple(x.shape)}")
     if not torch.isfinite(x).all():

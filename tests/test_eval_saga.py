@@ -51,6 +51,8 @@ def test_summarise_apd_is_the_mean_pairwise_marker_distance_per_run():
     m[1, 0, 0] = 3.0                                               # run 1: two sets 3 apart; run 2: identical
     s = summarise(_rows([1] * 4, [0] * 4, [0] * 4), m, per=2)
     assert s["apd"] == pytest.approx((3.0 + 0.0) / 2)
+    with pytest.raises(ValueError, match="per: expected the 4 marker sets to come in whole runs of 3"):
+        summarise(_rows([1] * 4, [0] * 4, [0] * 4), m, per=3)          # a short last run is not averaged in
     assert set(PAPER_TAB1) >= {"GrabNet-SMPLX", "WholeGrasp w/ opt. (Ours)"}
 
 

@@ -503,6 +503,25 @@ def test_bad_point_sets_are_rejected_with_the_argument_name():
         point_mesh_distance(np.zeros((1, 3)), (mesh.vertices, mesh.faces + 10_000))
 
 
+def test_meshes_in_millimetres_and_non_numeric_inputs_are_refused_by_name():
+    box = _box((0.1, 0.1, 0.1), (0, 0, 0))
+    mm = box.copy()
+    mm.apply_scale(1000.0)                                    # the same box in millimetres: 1000 cm^3 of "overlap"
+    assert interpenetration(box, box.copy()).volume_cm3 == pytest.approx(1000.0, rel=1e-6)
+    with pytest.raises(ValueError, match=r"obj: largest side 100, expected .* metres.*apply_scale\(0.001\)"):
+        interpenetration(box, mm)
+    with pytest.raises(ValueError, match="body: largest side 100"):
+        interpenetration(mm, box)
+    with pytest.raises(ValueError, match="mesh: largest side 100"):
+        SDFGrid.from_mesh(mm)
+    with pytest.raises(ValueError, match="points: expected points of numbers"):
+        signed_distance("abc", box)
+    with pytest.raises(ValueError, match="points: expected an array of numbers"):
+        SDFGrid.from_mesh(box, resolution=8)("abc")
+    with pytest.raises(ValueError, match="spacing: expected a positive grid spacing"):
+        interpenetration(box, box.copy(), spacing="1mm")
+
+
 def test_signed_distance_to_point_cloud_saga_eq7():
     r = 0.05
     sphere = _sphere(r, subdivisions=5)

@@ -1,4 +1,6 @@
 """WANDR's goal-grid evaluation (§4.2-4.3): the grid, SR / DTG on hand-made motions, FS on the fly against full meshes."""
+import warnings
+
 import numpy as np
 import pytest
 import torch
@@ -195,6 +197,10 @@ def test_summary_and_breakdown():
     with pytest.raises(ValueError, match="by"):
         E.breakdown(r, "colour")
     assert "| WANDR | 50.0 | 10.0 | 21.0 | 32 | 16 | 24.8 |" in E.table({"WANDR": s})
+    r.error_at_goal = np.full(4, np.nan)                              # motions that end before t_G: no error there
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                                # and no "Mean of empty slice" either
+        assert np.isnan(E.summary(r)["error_at_goal"])
 
 
 def test_body_vertices_are_the_body_models(bm):

@@ -43,7 +43,10 @@ FACE, VERT_A, VERT_B, VERT_C, EDGE_AB, EDGE_BC, EDGE_CA = range(7)
 def as_points(x, name: str, dtype: torch.dtype | None = None) -> Tensor:
     """Validate a point set (..., N, 3): a float tensor with at least one point, all finite; numpy -> float64."""
     if not isinstance(x, Tensor):
-        x = torch.as_tensor(np.ascontiguousarray(x, dtype=np.float64))
+        try:
+            x = torch.as_tensor(np.ascontiguousarray(x, dtype=np.float64))
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"{name}: expected points of numbers (N, 3), got {type(x).__name__} ({e})") from None
     if not x.is_floating_point():
         x = x.to(torch.float64)
     if dtype is not None:
@@ -77,6 +80,20 @@ def mesh_arrays(mesh: MeshLike, name: str) -> tuple[Tensor, Tensor]:
     if faces.min() < 0 or faces.max() >= verts.shape[-2]:
         raise ValueError(f"{name}: face indices must lie in [0, {verts.shape[-2]}), got [{faces.min()}, {faces.max()}]")
     return verts, faces.to(verts.device)
+
+
+MAX_METRES = 3.0          # m: the largest side a body or object mesh may have (a hand-held object in mm is 10-600)
+
+
+def require_metres(verts: Tensor, faces: Tensor, name: str) -> None:
+    """A ValueError naming `name` when a mesh's surface (vertices (V, 3) its faces (F, 3) use) spans more than
+    MAX_METRES: graspkit measures in metres, and a mesh in millimetres or centimetres would give answers 1e3-1e9 times
+    off without a word."""
+    used = verts[torch.unique(faces)]
+    side = float((used.max(-2).values - used.min(-2).values).max())
+    if side > MAX_METRES:
+        raise ValueError(f"{name}: largest side {side:g}, expected a body or object in metres (at most {MAX_METRES:g} "
+                         "m): a mesh in millimetres needs apply_scale(0.001), one in centimetres apply_scale(0.01)")
 
 
 ZERO_AREA = 1e-10         # twice a face's area over its longest edge squared at or below which it has no normal

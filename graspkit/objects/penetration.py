@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from graspkit.objects.distance import MeshLike, mesh_arrays, require_closed
+from graspkit.objects.distance import MeshLike, mesh_arrays, require_closed, require_metres
 from graspkit.objects.sdf import signed_distance
 
 # column offsets in cells: irrational fractions keep rays off mesh vertices and edges; a ray that still
@@ -186,8 +186,8 @@ def _unbalanced(col: np.ndarray, sign: np.ndarray, ncols: int) -> np.ndarray:
 def _volume(va: np.ndarray, fa: np.ndarray, vb: np.ndarray, fb: np.ndarray, spacing: float, refine: int = REFINE
             ) -> float:
     """Intersection volume of two validated closed meshes (see the module docstring)."""
-    if not spacing > 0:
-        raise ValueError(f"spacing: expected a positive grid spacing in metres, got {spacing}")
+    if isinstance(spacing, bool) or not isinstance(spacing, (int, float, np.number)) or not spacing > 0:
+        raise ValueError(f"spacing: expected a positive grid spacing in metres, got {spacing!r}")
     lo = np.maximum(va.min(0), vb.min(0))
     hi = np.minimum(va.max(0), vb.max(0))
     if (hi <= lo).any():
@@ -262,6 +262,8 @@ def interpenetration(body: MeshLike, obj: MeshLike, spacing: float = 1e-3, refin
     refine: rays per cell side along edges and vertical walls (1: one ray per column, as before 2026-11-30)."""
     vb, fb = _closed_numpy(body, "body", allow_holes=True)
     vo, fo = _closed_numpy(obj, "obj")
+    for v, f, name in ((vb, fb, "body"), (vo, fo, "obj")):
+        require_metres(torch.from_numpy(v), torch.from_numpy(f), name)
     return Penetration(volume_cm3=_volume(vb, fb, vo, fo, spacing, _refine(refine)) * 1e6,
                        depth_cm=_depth(vb, vo, fo) * 100.0)
 

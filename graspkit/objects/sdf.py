@@ -28,7 +28,8 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from graspkit.objects.distance import (EDGE_AB, EDGE_CA, VERT_A, VERT_C, MeshLike, as_points, edge_ids, mesh_arrays,
-                                       nearest_neighbours, point_mesh_distance, require_closed)
+                                       nearest_neighbours, point_mesh_distance, require_closed,
+                                       require_metres)
 
 
 def pseudo_normals(verts: Tensor, faces: Tensor) -> tuple[Tensor, Tensor, Tensor]:
@@ -134,8 +135,9 @@ def contains(points, mesh: MeshLike) -> Tensor:
 class SDFGrid:
     """A signed-distance grid values[z, y, x] over the box [lower, upper] (metres) with trilinear lookup.
 
-    Outside the box the lookup continues as sdf(clamped point) + |point - clamped point|, an upper
-    bound of the true distance that keeps gradients pointing towards the object.
+    Outside the box the lookup continues as sdf(clamped point) + |point - clamped point|, which keeps gradients
+    pointing towards the object: an upper bound of the true distance up to the grid's own interpolation error at the
+    clamped point (an independent check found it up to 0.41 mm below the exact distance for the wine glass).
     """
 
     values: Tensor  # (D, H, W) = (nz, ny, nx)
@@ -160,6 +162,7 @@ class SDFGrid:
         if not (isinstance(padding, (int, float, np.number)) and np.isfinite(padding) and padding >= 0):
             raise ValueError(f"padding: expected a finite margin >= 0 in metres, got {padding!r}")
         require_closed(verts, faces, "mesh")
+        require_metres(verts, faces, "mesh")           # padding and the cell size are in metres
         v = verts.detach().to(torch.float64)
         used = v[torch.unique(faces)]                  # the surface's own box: vertices no face uses do not count
         lo, hi = used.min(0).values - padding, used.max(0).values + padding
@@ -178,7 +181,12 @@ class SDFGrid:
 
     def __call__(self, points) -> Tensor:
         """Interpolated signed distance (...,) at points (..., 3); differentiable w.r.t. the points."""
-        p = _check_tensor(points if isinstance(points, Tensor) else torch.as_tensor(np.asarray(points, np.float64)))
+        if not isinstance(points, Tensor):
+            try:
+                points = torch.as_tensor(np.asarray(points, np.float64))
+            except (TypeError, ValueError) as e:
+                raise ValueError(f"points: expected an array of numbers (..., 3), got {type(points).__name__} ({e})") from None
+        p = _check_tensor(points)
         dtype = p.dtype
         lo, hi = self.lower.to(dtype=dtype, device=p.device), self.upper.to(dtype=dtype, device=p.device)
         inside = torch.maximum(torch.minimum(p, hi), lo)
