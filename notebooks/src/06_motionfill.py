@@ -195,8 +195,8 @@ print(table(ev["rows"]))
 # (SAGA's target: no more than 2 points above it); the last two columns show that the heels get there without
 # jumping (99th percentile of the heel markers' acceleration, m/s²; the clips' own beside it). The end grasps keep out
 # of their objects through both sums of Eq. 7 — hand vertices inside the object, read from its 2 mm collision grid,
-# and object points inside the hand — which took the mean penetration from about 6.8 to 1.9 cm³ (a mug's handle
-# through the hand: 18 → 0.07 cm³; `docs/saga_motion.md`). graspkit's floor term keeps every fitted mesh out of the
+# and object points inside the hand — with which the mean penetration fell from about 6.8 to 1.9 cm³ (a mug's handle
+# through the hand: 18 → 0.07 cm³; `docs/saga_motion.md`; with the changes since, 1.25 in the table below). graspkit's floor term keeps every fitted mesh out of the
 # ground (non-collision 1.000, 0.998 without it; the last column: how deep the lowest vertex goes, cm).
 
 # %%
@@ -222,7 +222,7 @@ print("| mean | " + " | ".join(f"{np.mean([r[k] for r in ev['graspmotion']['rows
 # not seen it; its 2 mm collision grid ships with graspkit (any other object's is built once into the cache, ~20 s).
 # The grasp itself is GraspPose-Opt's and touches the object; the motion's last frame is GraspMotion-Opt's fit to
 # MotionFill's last markers, and it does not always keep the touch: on the twelve test clips of `docs/saga_motion.md`
-# all 12 end in contact since the arm joints are free (10 before), but through the whole pipeline 8 of the 12
+# all 12 end in contact since the arm joints are free (10 before), and through the whole pipeline 11 of the 12
 # sequences of GOAL's evaluation do (`docs/goal.md`), and a change in the last bits of the arithmetic (another CPU, another rounding) can turn a
 # touching last frame into one a few millimetres short. So the cell prints how far the last frame's body is from the
 # object and checks only that it is close (within 2 cm).

@@ -205,7 +205,8 @@ fig.tight_layout()
 # high goals with both feet in the air, and training on those long rollouts is what cured it (`docs/wandr.md` has the
 # measurements). A fourth stage repeats the 240-frame epoch with clips added that start from a *finished* reach, arm
 # still out (`graspkit data make --kind reach_chain`): without them the model stood still after reaching one goal when
-# asked for the next (lesson 09, "Several goals in a row"). It also adds one term the paper does not have:
+# asked for the next (lesson 09, "Several goals in a row"); a fifth adds clips with a near goal at the floor or
+# overhead (`--reach-near`), where the grid missed most. It also adds one term the paper does not have:
 # $w$ times the squared horizontal step $\lVert \Delta x^{xy}_{foot} \rVert^2$ (mm²) of the four foot joints, averaged,
 # counted only where that joint is *planted* in the data at that frame (it moves less than 1 mm there;
 # `--contact-weight`, shipped at $w = 1$): it lowers foot skating on the grid from
@@ -213,8 +214,8 @@ fig.tight_layout()
 # clips, with a small network, to watch the paper's three terms (the shipped model's first stage was trained with
 # `graspkit train wandr --kinds reach --reach-far --max-steps 60 --stride-scale 2 --epochs 10 --batch-size 256 --threads 2
 # --select-val --contact-weight 1` on 2,000 reaching and 2,000 room-scale reaching clips, about 45 minutes on two CPU
-# threads, and the later stages with `--init` from the stage before, `--max-steps 120`, `240` and `240 --reach-chain`,
-# 12–16 minutes each;
+# threads, and the later stages with `--init` from the stage before, `--max-steps 120`, `240`, `240 --reach-chain` and
+# `240 --reach-chain --reach-near`, 11–23 minutes each;
 # the locomotion clips lowered its success rate, `docs/wandr.md`).
 
 # %%
@@ -244,7 +245,7 @@ assert float(out["rec"]) < first
 # stage's weights are not its last epoch's: `--select-val` scored every epoch on a *validation* task (six
 # validation-split starts, 250 goals drawn on the grid's cylinder but off its points, one rollout each) and kept the
 # best — model selection, so the test grid of lesson 09 never chose anything. At this scale the score swings from epoch
-# to epoch (right panel); the three later stages continued from the kept epoch.
+# to epoch (right panel); the four later stages continued from the kept epoch.
 
 # %%
 CHECKPOINT = DATA_STUBS / "checkpoints" / "wandr.pt"

@@ -137,13 +137,21 @@ fig.tight_layout()
 #   chosen time, from any start, over any distance. It does not grasp; its strength is reaching in space and time.
 #   Its SR does not ask how the wrist got there: trained only on 2-s rollouts, the model reached many high goals
 #   with both feet off the floor (SR 80 %, with a foot on the floor 48 %); the shipped model's later training stages,
-#   on 4- and 8-s rollouts, keep the feet down (88 %, with a foot on the floor 85 %: `docs/wandr.md`, "Feet off the
-#   floor"), but let them sink: a foot more than 1 cm under the floor in 38 % of the grid's frames, and only 56 % of
-#   the motions reach at a frame with no foot that deep (none at the floor goals). graspkit's `lift` (not the
-#   paper's) raises a sinking body back while generating: 84 % reached, 81 % with the feet out of the floor.
+#   on 4- and 8-s rollouts, keep a foot down but let the feet sink into the floor. graspkit's extra columns count
+#   both (the cell after this list prints them for the shipped checkpoint), and its `lift` (not the paper's) raises
+#   a sinking body back while generating (`docs/wandr.md`, "Feet off the floor").
 # - **The procedural planner** (lessons 03–04) is the synthetic ground truth: clean by construction, but it only
 #   knows the motions it was programmed with.
-#
+
+# %%
+import json
+
+w = json.loads((DATA_STUBS / "checkpoints" / "wandr_eval.json").read_text())["summary"]
+print(f"WANDR on the full grid: SR {w['SR']:.1f} %, with a foot on the floor {w['SR_grounded']:.1f} %; a foot more than "
+      f"1 cm under the floor in {w['sunk']:.1f} % of the frames; reached at a frame with no foot that deep "
+      f"{w['SR_not_sunk']:.1f} %")
+
+# %% [markdown]
 # ## Open questions
 #
 # 1. The contact ratio counts a grasp as "in contact" if *any* vertex touches. What would a stricter measure
