@@ -330,7 +330,8 @@ def grasp_metrics(vertices: Any, faces: Any, obj: Any, threshold: float = GRASP_
     f = _t(faces, "faces")
     if f.is_floating_point() and not bool((f == f.round()).all()):    # .long() would truncate them silently
         raise ValueError("faces: expected integer vertex indices, got fractional values")
-    pen = interpenetration((_t(vertices, "vertices").double(), f.long()), obj, refine=REFINE if refine is None else refine)
+    pen = interpenetration((_t(vertices, "vertices").double(), f.long()), obj,
+                           refine=REFINE if refine is None else refine)
     return {"min_distance": d, "contact": float(d <= threshold or pen.volume_cm3 > 0), "volume_cm3": pen.volume_cm3,
             "depth_cm": pen.depth_cm}
 

@@ -19,7 +19,8 @@ from graspkit.paths import pool_results
 KINDS = ("locomotion", "reach", "reach_far", "reach_chain", "reach_near")   # reach_far: room-scale CIRCLE-style tasks
 # (WANDR's grid); reach_chain: room-scale, starting from a finished reach; reach_near: near goals, floor or overhead
 GRASP_KINDS = ("grasp", "approach")          # graspkit.data.grasp_make (chunked, batched grasp fitting)
-DEFAULT_N = {"locomotion": 2000, "reach": 2000, "reach_far": 2000, "reach_chain": 1000, "reach_near": 500, "grasp": 1700, "approach": 510}
+DEFAULT_N = {"locomotion": 2000, "reach": 2000, "reach_far": 2000, "reach_chain": 1000, "reach_near": 500,
+             "grasp": 1700, "approach": 510}
 _BM = None
 
 
