@@ -49,8 +49,8 @@ print("held-out start poses:", ", ".join(s.source for s in starts))
 # frames, kept at the epoch with the best *validation* score (other starts, goals off the grid), then one epoch with
 # 120- and three with 240-frame rollouts, the fourth stage with clips added that start from a finished reach (section
 # 4), the fifth with clips whose goal is near and at the floor or overhead (`--reach-near`: the cells this grid found
-# weakest, 1.8 m high and 0.5 m away, so here the test grid did steer the data; the validation task gained too,
-# though the same command with another seed lost on both, `docs/wandr.md`); with one loss term the paper does not have (it holds still the feet that are planted in
+# weakest, 1.8 m high and 0.5 m away, so here the test grid did steer the data; with this seed the validation task
+# gained too, with another seed the same clips lost on both, so whether they help is open, `docs/wandr.md`); with one loss term the paper does not have (it holds still the feet that are planted in
 # the data, `--contact-weight 1`). On the full grid it puts the wrist within 10 cm in 99.5 % of the motions (the
 # paper: 32 %), at 0–1.35 m in all, at 1.8 m in 97.6 %, and its feet skate in 6.5 % of the frame pairs (the
 # paper's model: 16 %). That is one training run: the first stage alone moves by tens of points with its seed
