@@ -182,7 +182,8 @@ def test_near_tasks_put_the_goal_close_by_at_the_floor_or_overhead_and_their_cli
                     for t in tasks])
     tg = np.array([t.goal_frame for t in tasks]) / 30.0
     assert d.min() >= NEAR_DISTANCE[0] - 1e-9 and d.max() <= NEAR_DISTANCE[1] + 1e-9
-    low, high = (z >= NEAR_HEIGHTS[0][0]) & (z <= NEAR_HEIGHTS[0][1]), (z >= NEAR_HEIGHTS[1][0]) & (z <= NEAR_HEIGHTS[1][1])
+    (lo0, hi0), (lo1, hi1) = NEAR_HEIGHTS
+    low, high = (z >= lo0) & (z <= hi0), (z >= lo1) & (z <= hi1)
     assert np.all(low | high) and 0.4 < high.mean() < 0.6 and (z > 1.75).mean() > 0.05    # half each; 1.8 m covered
     assert (np.abs(rel) > 2.5).mean() > 0.1 and tg.max() <= 9.0 and (tg > 5.0).mean() > 0.2   # behind too; long waits
     for seed in range(2):

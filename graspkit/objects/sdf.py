@@ -185,7 +185,8 @@ class SDFGrid:
             try:
                 points = torch.as_tensor(np.asarray(points, np.float64))
             except (TypeError, ValueError) as e:
-                raise ValueError(f"points: expected an array of numbers (..., 3), got {type(points).__name__} ({e})") from None
+                raise ValueError(f"points: expected an array of numbers (..., 3), got {type(points).__name__} "
+                                 f"({e})") from None
         p = _check_tensor(points)
         dtype = p.dtype
         lo, hi = self.lower.to(dtype=dtype, device=p.device), self.upper.to(dtype=dtype, device=p.device)
