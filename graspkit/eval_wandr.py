@@ -637,8 +637,9 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     torch.set_num_threads(threads)
     bm = BodyModel.from_file(default_model_path())
     t0 = time.perf_counter()
-    clips = cached_clips(folder, bm, kinds=("locomotion", "reach") + (("reach_far",) if reach_far else ())
-                         + (("reach_chain",) if reach_chain else ()) + (("reach_near",) if reach_near else ()))
+    extra = tuple(k for k, on in (("reach_far", reach_far), ("reach_chain", reach_chain), ("reach_near", reach_near))
+                  if on)                                        # the opt-in clip folders
+    clips = cached_clips(folder, bm, kinds=("locomotion", "reach") + extra)
     names = split_clips(clips.names, seed=0)["train"]
     train = clips.subset([n for n in names if FOLDERS.get(n.split("/")[0]) in v["kinds"]])
     stats = compute_stats(train, seed=seed, goal_frame=goal_frame)
@@ -665,8 +666,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     data_key = hashlib.blake2b(f"{train.names}:{int(train.lengths.sum())}:{float(train.p.sum()):.6e}".encode(),
                                digest_size=4).hexdigest()       # other clips never resume this run
     # the experiment flags away from their defaults: (command-line text, run-name part); the data key covers reach_far
-    flags = ([(" --reach-far", "")] if reach_far else []) + ([(" --reach-chain", "")] if reach_chain else []) \
-        + ([(" --reach-near", "")] if reach_near else []) \
+    flags = [(f" --{k.replace('_', '-')}", "") for k in extra] \
         + ([(f" --rollout-latent {rollout_latent}", "_zpost")] if rollout_latent != "prior" else []) \
         + ([(f" --alpha-kl {alpha_kl:g}", f"_a{alpha_kl:g}")] if alpha_kl != 1e-2 else []) \
         + ([(f" --rollout-grad {rollout_grad}", f"_rg{rollout_grad}")] if rollout_grad != "through" else []) \

@@ -247,9 +247,10 @@ def _blend_unit(a: np.ndarray, wa: np.ndarray, b: np.ndarray, wb: np.ndarray) ->
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
 
 
-def plan_reach_chain(start: Start | tuple[float, float, float], goals: np.ndarray, goal_frames: tuple[int, int], hold_frames: tuple[int, int],
-                     betas=None, seed: int = 0, bm=None, style: Style | None = None, gait: GaitStyle | None = None,
-                     v_pref: float | None = None, release_s: float = RELEASE_S) -> tuple[Motion, int]:
+def plan_reach_chain(start: Start | tuple[float, float, float], goals: np.ndarray, goal_frames: tuple[int, int],
+                     hold_frames: tuple[int, int], betas=None, seed: int = 0, bm=None, style: Style | None = None,
+                     gait: GaitStyle | None = None, v_pref: float | None = None, release_s: float = RELEASE_S
+                     ) -> tuple[Motion, int]:
     """Two reaches in a row: `plan_reach` to goals[0] (2,3) at goal_frames[0], held hold_frames[0] frames, then the arm
     released over release_s seconds while the second walk starts, and a reach of goals[1] at goal_frames[1] (frames
     from the clip's start), held hold_frames[1]. Returns the motion and the first frame of the second leg.
@@ -424,14 +425,14 @@ def generate_reach(seed: int, bm, betas: np.ndarray | None = None, far: bool = F
         raise ValueError("far, near: expected at most one of them True")
     rng = np.random.default_rng(seed)
     task = sample_near_task(rng) if near else sample_reach_task(rng, far=far)
-    far = far or near                                  # a near task is a room-scale task: walked as slowly
+    room_scale = far or near                           # a near task is a room-scale task: walked as slowly
     style, gait = sample_style(rng), sample_gait_style(rng)
     plan_seed, v_pref = int(rng.integers(2**31)), float(rng.uniform(0.7, 1.1))  # this order: the default clips as before
     # room-scale: walk as slowly as FAR_MIN_SPEED to arrive at the goal frame (plan_reach walks at v_pref when it can and
     # stands first with the time left over; a long stand at full intention teaches a per-frame model to stand)
     m = plan_reach(task.start, task.goal, task.goal_frame, betas=task.betas if betas is None else betas,
                    seed=plan_seed, bm=bm, hold_frames=task.hold_frames, style=style, gait=gait,
-                   v_pref=FAR_MIN_SPEED if far else v_pref)
+                   v_pref=FAR_MIN_SPEED if room_scale else v_pref)
     return _goal_as_reached(m, bm)
 
 
