@@ -498,7 +498,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.data is None:
         ap.error("--data: the folder of grasp_*.npz is required (unless --finish)")
     check_folders(args.data)
+    from graspkit.data.grasp import SPLITS
     from graspkit.optim.grasppose import expand_free_joints
+
+    odd = [o for o in args.objects or () if o not in SPLITS["test"]]
+    if odd:
+        raise ValueError(f"--objects: {odd[0]!r} is not one of the held-out test objects the evaluation reads, "
+                         f"expected some of {list(SPLITS['test'])}")
 
     cfg = EvalConfig(placements=args.placements, samples=args.samples, gt_grasps=args.gt, steps=tuple(args.steps),
                      free_joints=expand_free_joints(args.free_joints),

@@ -50,7 +50,8 @@ def axis_angle_to_matrix(aa: Tensor) -> Tensor:
 
 
 def quaternion_to_matrix(q: Tensor) -> Tensor:
-    """Unit quaternions (w, x, y, z) (..., 4) -> rotation matrices (..., 3, 3). q is normalised first."""
+    """Unit quaternions (w, x, y, z) (..., 4) -> rotation matrices (..., 3, 3). q is normalised first; a zero
+    quaternion (no rotation defined) gives the identity."""
     _check_last(q, (4,), "q")
     w, x, y, z = F.normalize(q, dim=-1).unbind(-1)
     m = [
@@ -125,7 +126,8 @@ def matrix_to_rot6d(R: Tensor) -> Tensor:
 
 
 def rot6d_to_matrix(d6: Tensor) -> Tensor:
-    """6D (..., 6) -> rotation matrices (..., 3, 3) by Gram-Schmidt (Zhou et al. 2019, Sec. 4)."""
+    """6D (..., 6) -> rotation matrices (..., 3, 3) by Gram-Schmidt (Zhou et al. 2019, Sec. 4). Undefined where the
+    two 3-vectors are parallel or zero (the result is then not a rotation); networks' outputs do not hit it exactly."""
     _check_last(d6, (6,), "d6")
     b1 = F.normalize(d6[..., :3], dim=-1)
     a2 = d6[..., 3:]

@@ -127,6 +127,18 @@ def test_bad_arguments_name_the_argument(kwargs, name):
         bm(**kwargs)
 
 
+@pytest.mark.parametrize("dtype", [torch.bool, torch.int64, torch.complex64])
+def test_non_float_arguments_are_refused_by_name(dtype):
+    """Integer, boolean or complex tensors are refused (they used to be cast, complex ones losing their imaginary part)."""
+    bm = BodyModel(random_smplx_arrays(num_vertices=50, num_faces=20, seed=6))
+    with pytest.raises(TypeError, match=f"body_pose: expected a floating-point tensor, got {dtype}"):
+        bm(body_pose=torch.zeros(1, 63, dtype=dtype))
+    with pytest.raises(TypeError, match="betas: expected a floating-point"):
+        bm(betas=torch.zeros(1, 10, dtype=dtype))
+    with pytest.raises(TypeError, match="rot_mats: expected a floating-point"):
+        bm.forward_rotmats(torch.zeros(1, 55, 3, 3, dtype=dtype))
+
+
 def test_one_joint_arguments_as_b_1_3_match_smplx(random_model_dir):
     """global_orient / jaw / eyes / transl given as (B, 1, 3), as smplx accepts them, pose the same body."""
     p = _params(3, 45, torch.float64)
@@ -156,6 +168,9 @@ def test_file_errors_name_file_and_key(tmp_path):
     np.savez(tmp_path / "wrong.npz", **wrong)
     with pytest.raises(ModelFileError, match=r"wrong.npz: key 'J_regressor' has shape \(54, 50\), expected \(55, 50\)"):
         BodyModel.from_file(tmp_path / "wrong.npz")
+    np.savez(tmp_path / "doubled.npz", **dict(arr, weights=2 * arr["weights"]))
+    with pytest.raises(ModelFileError, match=r"doubled.npz: key 'weights' row \d+ sums to 2.0000"):
+        BodyModel.from_file(tmp_path / "doubled.npz")
     with open(tmp_path / "model.pkl", "wb") as fh:
         pickle.dump(arr, fh)
     with pytest.raises(ModelFileError, match="model.pkl.*pickle"):

@@ -37,3 +37,63 @@ def test_cli_errors_name_the_argument(tmp_path):
     assert r.returncode == 2 and "objects" in r.stderr and "elephant" in r.stderr
     assert not list(tmp_path.glob("*.npz"))
     np.testing.assert_equal(len(list(tmp_path.iterdir())), 0)
+
+
+def test_a_file_names_the_body_model_it_was_made_with(tmp_path, monkeypatch):
+    """`body.model` is graspkit's name for the shipped body and the model file itself for --model (it always said the
+    shipped body's name, so a file made with another model named a body 5 cm off)."""
+    from graspkit.data.grab import DEFAULT_MODEL_NAME
+    from graspkit.paths import default_model_path
+
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
+    other = tmp_path / "other" / "SMPLX_NEUTRAL.npz"
+    other.parent.mkdir()
+    arrays = dict(np.load(default_model_path(), allow_pickle=False))
+    np.savez(other, **dict(arrays, v_template=arrays["v_template"] * 1.02))
+    for model, want in ((None, DEFAULT_MODEL_NAME), (str(other), str(other))):
+        out = tmp_path / ("own" if model else "shipped")
+        make_grasp_dataset("grasp", 1, 3, out, workers=1, progress=False, chunk=1, objects=("apple",), model=model)
+        assert str(np.load(out / "grasp_000000.npz", allow_pickle=False)["body.model"]) == want
+
+
+def test_approach_contacts_are_labelled_on_every_frame_the_body_touches(tmp_path):
+    """Per-frame body contacts of an approach clip against trimesh's distances on the smplx body: every frame before
+    the goal frame with a body vertex within 1 cm of the object is labelled, with the same vertices (this clip's hand
+    passes through the bottle 29-37 frames before the goal frame, which only the 20 frames before it used to be)."""
+    import smplx
+    import torch
+    import trimesh
+
+    from graspkit.body import BodyModel
+    from graspkit.data.grasp import GraspFitter
+    from graspkit.data.grasp_make import write_chunk
+    from graspkit.paths import default_model_path
+
+    [path, _] = write_chunk(GraspFitter(BodyModel.from_file(default_model_path())), "approach", 3, 3, tmp_path,
+                            n=8, size=2)
+    z = np.load(path, allow_pickle=False)
+    g, P = int(z["grasp.goal_frame"]), z["body.params.fullpose"].reshape(-1, 55, 3)
+    ref = smplx.create(str(default_model_path().parent.parent), model_type="smplx", gender="neutral", ext="npz",
+                       use_pca=False, flat_hand_mean=True, batch_size=g)
+    t = lambda x: torch.as_tensor(np.asarray(x[:g]), dtype=torch.float32)  # noqa: E731
+    with torch.no_grad():
+        V = ref(betas=t(np.repeat(z["body.betas"][None], g, 0)), global_orient=t(P[:, 0]), body_pose=t(P[:, 1:22]),
+                jaw_pose=t(P[:, 22]), leye_pose=t(P[:, 23]), reye_pose=t(P[:, 24]), left_hand_pose=t(P[:, 25:40]),
+                right_hand_pose=t(P[:, 40:55]), transl=t(z["body.params.transl"])).vertices.numpy()
+    mesh = trimesh.load(tmp_path / str(z["object.object_mesh"]), process=False)
+    R = trimesh.transformations.rotation_matrix(np.linalg.norm(z["object.params.global_orient"][0]),
+                                                z["object.params.global_orient"][0])
+    mesh.apply_transform(R)
+    mesh.apply_translation(z["object.params.transl"][0])
+    touching, agree, early = 0, [], 0
+    for f in range(g):
+        near = np.flatnonzero(((V[f] > mesh.bounds[0] - 0.011) & (V[f] < mesh.bounds[1] + 0.011)).all(1))
+        within = np.zeros(len(V[f]), bool)
+        if len(near):
+            within[near] = trimesh.proximity.closest_point(mesh, V[f][near])[1] <= 0.01
+        if within.any():
+            touching += 1
+            early += f < g - 20
+            assert z["contact.body"][f].any(), f"frame {f} of {g}: the body touches the object, labelled 0"
+            agree.append(np.mean(within == z["contact.body"][f].astype(bool)))
+    assert early >= 5 and touching >= early and min(agree) > 0.999

@@ -13,6 +13,7 @@ from graspkit.body import BodyModel
 from graspkit.body.skeleton import SMPLX_LANDMARK_VERTEX_IDS
 from graspkit.data.grab import load_grasp_sequence
 from graspkit.data.grasp_datasets import ApproachDataset, GNetDataset, WholeGraspDataset
+from graspkit.eval_goal import _body
 
 from conftest import PROCEDURAL_MODEL
 
@@ -68,6 +69,8 @@ def test_goal_labels_agree_with_the_body_model():
         V = bm.forward_rotmats(axis_angle_to_matrix(v), betas=torch.as_tensor(s.betas[None], dtype=torch.float64),
                                transl=torch.as_tensor(s.trans, dtype=torch.float64)).vertices[0].numpy()
         e = s.extras
+        # the files' 400 vertices are the ones GOAL's networks use (eval_goal builds a flat-hand model)
+        np.testing.assert_array_equal(e["goal.vertex_ids"], _body()[1].vertex_ids)
         verts = V[e["goal.vertex_ids"]]
         assert np.abs(verts - e["goal.vertices"]).max() < 1e-5
         pts = s.object_points.astype(np.float64) @ s.object_rotation()[0].T + s.object_transl[0]

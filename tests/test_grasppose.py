@@ -242,6 +242,11 @@ def test_bad_inputs_are_named(bm, prior):
         GraspObject(torch.zeros(10, 3), torch.zeros(9, 3), 1.0)
     with pytest.raises(ValueError, match="hand_contact_prior"):
         GraspPoseOpt(bm, prior, GraspPoseConfig(heuristic=True)).fit(torch.zeros(1, 143, 3), _dummy_object())
+    with pytest.raises(ValueError, match=r"markers: expected at least one marker set \(B >= 1\), got 0"):
+        opt.fit(torch.zeros(0, 143, 3), _dummy_object())
+    for steps in ((-1, 2, 2), (1, 2), (1, 2.5, 3), (True, 2, 2)):
+        with pytest.raises(ValueError, match=r"steps: expected three step counts >= 0"):
+            GraspPoseOpt(bm, prior, GraspPoseConfig(steps=steps)).fit(torch.zeros(1, 143, 3), _dummy_object())
 
 
 def test_rotated_object_grid_matches_the_exact_signed_distance_of_the_turned_mesh():

@@ -104,6 +104,23 @@ def test_wholegrasp_sample_rejects_nan_and_too_few_points(wholegrasp):
             wholegrasp.sample(pts[:k], nrm[:k])
 
 
+def test_wholegrasp_and_grasppose_refuse_millimetres(wholegrasp):
+    """An object in millimetres (points spanning metres, a height of 850) is refused by name: the network would
+    place markers metres away without a word."""
+    from graspkit.optim.grasppose import GraspObject
+    pts, nrm = _cloud(300)
+    with pytest.raises(ValueError, match="object_points: largest side 99.*metres"):
+        wholegrasp.sample(pts * 1000, nrm)
+    for h in (850.0, -0.2, torch.tensor([0.8, 900.0])):
+        with pytest.raises(ValueError, match="object_height: .*expected an object-centre height in metres"):
+            wholegrasp.sample(pts, nrm, object_height=h, n=2)
+    assert wholegrasp.sample(pts, nrm, object_height=0.0).markers.shape[0] == 1     # an object on the floor is fine
+    with pytest.raises(ValueError, match="points: largest side"):
+        GraspObject(pts * 1000, nrm, 0.8)
+    with pytest.raises(ValueError, match="height: 850"):
+        GraspObject(pts, nrm, 850.0)
+
+
 def test_wholegrasp_sample_requires_an_int_n(wholegrasp):
     pts, nrm = _cloud(300)
     with pytest.raises(TypeError, match="n: expected an int"):

@@ -62,6 +62,20 @@ def test_a_missing_key_is_named_with_its_file(tmp_path, dataset, kind, key):
         dataset(root, split=None)
 
 
+@pytest.mark.parametrize("dataset, kind, key, value, shown", [
+    (WholeGraspDataset, "grasp", "saga.markers", np.zeros((100, 3), np.float32), r"\(143, 3\)"),
+    (WholeGraspDataset, "grasp", "contact.markers", np.zeros((1, 5), np.uint8), r"\(1, 143\)"),
+    (GNetDataset, "grasp", "goal.vertices", np.zeros((10, 3), np.float32), r"\(400, 3\)"),
+    (ApproachDataset, "approach", "contact.feet", np.zeros((10, 4), np.uint8), r"\(\d+, 4\)"),
+    (ApproachDataset, "approach", "goal.bps_object", np.zeros(100, np.float32), r"\(1024,\)")])
+def test_a_key_of_another_shape_is_named_with_its_file(tmp_path, dataset, kind, key, value, shown):
+    """A key of the wrong shape is refused when the files are read, naming file, key and the shape expected (it used
+    to fail in numpy's stacking without either, or to load and break the batching later)."""
+    root = _copy_with(tmp_path, kind, **{key: value})
+    with pytest.raises(ValueError, match=rf"{kind}_000000\.npz: key '{key}' has shape .*, expected {shown}"):
+        dataset(root, split=None)
+
+
 def test_an_unknown_object_and_a_goal_frame_outside_the_clip_are_named(tmp_path):
     (tmp_path / "a").mkdir()
     root = _copy_with(tmp_path / "a", "grasp", obj_name=np.array("spaceship"))
@@ -119,6 +133,7 @@ def test_each_loader_names_the_file_of_weights_of_another_size(tmp_path):
     ("eval_saga", ["--finish", str(STUBS.parent / "README.md")], "README.md is not JSON"),
     ("eval_saga", ["--data", "{tmp}/nosuchdir"], "--data: {tmp}/nosuchdir: no such folder"),
     ("eval_saga", ["--data", "{tmp}", "--placements", "0"], "--placements: expected an integer >= 1, got 0"),
+    ("eval_saga", ["--data", "{tmp}", "--objects", "mugg"], "--objects: 'mugg' is not one of the held-out test objects"),
     ("eval_goal", ["--n-grasps", "-1"], "--n-grasps: expected an integer >= 0, got -1"),
     ("eval_goal", ["--tab1-only", "--out", "{tmp}/none.json"], "--out: no evaluation at"),
     ("eval_motionfill", ["tab3", "--clips", "-3"], "--clips: expected an integer >= 1, got -3"),

@@ -91,3 +91,37 @@ def test_vertex_normals_point_outwards_on_a_sphere_and_up_on_a_plane():
     quad = torch.tensor([[[0.0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]]], dtype=torch.float64)
     nq = vertex_normals(quad, torch.tensor([[0, 1, 2], [0, 2, 3]]))[0].numpy()
     np.testing.assert_allclose(nq, np.tile([0.0, 0, 1], (4, 1)), atol=1e-15)
+
+
+def test_layouts_depend_on_the_file_not_the_model_options(bm):
+    """One file, one layout: flat_hand_mean, use_pca and dtype do not move a marker (they used to: a flat-hand model
+    placed 32 SAGA markers and 132 GOAL vertices elsewhere), and GOAL's layout is the one placed on flat hands."""
+    others = [BodyModel.from_file(default_model_path(), flat_hand_mean=True),
+              BodyModel.from_file(default_model_path(), use_pca=True, num_pca_comps=12, dtype=torch.float32)]
+    for o in others:
+        for f in (saga_markers, saga_sparse_markers):
+            np.testing.assert_array_equal(f(o).vertex_ids, f(bm).vertex_ids)
+        g, h = goal_vertices(o), goal_vertices(bm)
+        np.testing.assert_array_equal(g.vertex_ids, h.vertex_ids)
+        assert (g.head_back, g.head_front) == (h.head_back, h.head_front)
+        for k, ids in palm_vertices(o).items():
+            np.testing.assert_array_equal(ids, palm_vertices(bm)[k])
+        for k, ids in foot_vertices(o).items():
+            np.testing.assert_array_equal(ids, foot_vertices(bm)[k])
+    # the rules see the hands they are documented to see: SAGA's markers the mean hand, GOAL's vertices flat hands
+    flat_rest = others[0]().vertices[0].double()
+    mean_rest = bm().vertices[0]
+    hand = saga_markers(bm).vertex_ids[saga_markers(bm).groups["finger"][0]:]
+    assert (flat_rest[hand] - mean_rest[hand]).norm(dim=-1).max() > 0.01   # the two rests differ at the fingers
+
+
+def test_the_marker_cache_does_not_keep_a_model_alive():
+    import gc
+    import weakref
+    m = BodyModel.from_file(default_model_path())
+    ids = saga_markers(m).vertex_ids
+    assert saga_markers(m) is saga_markers(m)                      # cached while the model lives
+    ref = weakref.ref(m)
+    del m
+    gc.collect()
+    assert ref() is None and len(ids) == 143

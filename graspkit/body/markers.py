@@ -14,17 +14,21 @@ given (procedural or real), so the ids always match the mesh:
 
 GOAL chose its 400 vertices with GRAB's contact heat-maps, which cannot be had here; graspkit spends the
 budget by hand on the parts that touch things (right hand 99, left hand 40, feet 40, ...) and spreads each
-part's share by farthest-point sampling. Rest pose, betas = 0; deterministic.
+part's share by farthest-point sampling. Rest pose, betas = 0; deterministic. The layout depends on the model
+file only, not on how the BodyModel was built: SAGA's markers, the palms and the feet are placed on the rest body
+with the file's mean (relaxed) hands, the pose SAGA's data and checkpoints were made at; GOAL's 400 vertices on
+the rest body with flat hands (the template's), the layout GOAL's checkpoints were trained on.
 """
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, field
-from functools import lru_cache
 
 import numpy as np
 import torch
 
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX, SMPLX_LANDMARK_VERTEX_IDS
+from graspkit.rotations import axis_angle_to_matrix
 
 F, B, U, D, L, R = (0, 0, 1), (0, 0, -1), (0, 1, 0), (0, -1, 0), (1, 0, 0), (-1, 0, 0)
 
@@ -53,11 +57,19 @@ class MarkerSet:
 
 
 class _Rest:
-    """The rest-pose mesh of a model with what the rules need: vertices, joints, dominant part per vertex."""
+    """The rest-pose mesh of a model with what the rules need: vertices, joints, dominant part per vertex.
 
-    def __init__(self, bm) -> None:
+    hands: 'mean' puts the file's mean (relaxed) hands on the rest body, 'flat' the template's flat hands; either way,
+    whatever the BodyModel's flat_hand_mean, so one file gives one layout."""
+
+    def __init__(self, bm, hands: str = "mean") -> None:
+        if hands not in ("mean", "flat"):
+            raise ValueError(f"hands: expected 'mean' or 'flat', got {hands!r}")
+        pose = torch.zeros(1, len(bm.parents), 3, dtype=bm.dtype)
+        if hands == "mean":
+            pose[0, -30:] = bm.hands_mean.view(30, 3)
         with torch.no_grad():
-            out = bm()
+            out = bm.forward_rotmats(axis_angle_to_matrix(pose))
         self.v = out.vertices[0].double().numpy()
         self.j = out.joints[0].double().numpy()
         self.part = bm.lbs_weights.argmax(1).numpy()
@@ -202,9 +214,19 @@ def _assemble(name: str, groups: list[tuple[str, list[tuple[str, int]]]]) -> Mar
     return MarkerSet(name, tuple(names), np.asarray(ids, np.int64), spans)
 
 
-@lru_cache(maxsize=8)
+_SETS: "weakref.WeakKeyDictionary[object, dict[str, MarkerSet]]" = weakref.WeakKeyDictionary()
+
+
 def _cached(bm) -> dict[str, MarkerSet]:
-    """All marker sets of one model, computed once."""
+    """All marker sets of one model, computed once while the model lives (a weak key: the cache does not keep a
+    model of ~150 MB alive)."""
+    if bm not in _SETS:
+        _SETS[bm] = _marker_sets(bm)
+    return _SETS[bm]
+
+
+def _marker_sets(bm) -> dict[str, MarkerSet]:
+    """SAGA's 143 and sparse 79 markers of one model."""
     r = _Rest(bm)
     body, face, hand = _body_markers(r), _face_markers(r), _hand_markers(r)
     return {
@@ -257,8 +279,9 @@ class GoalVertices:
 
 
 def goal_vertices(bm) -> GoalVertices:
-    """The 400 GOAL vertices (right hand 99 first), spread by farthest-point sampling within each part's budget."""
-    r = _Rest(bm)
+    """The 400 GOAL vertices (right hand 99 first), spread by farthest-point sampling within each part's budget, on
+    the rest body with flat hands (the template's; GOAL's checkpoints were trained on this layout)."""
+    r = _Rest(bm, hands="flat")
     parts = {
         "right_hand": _hand_parts("right"), "left_hand": _hand_parts("left"),
         "feet": ["left_ankle", "right_ankle", "left_foot", "right_foot"],

@@ -108,6 +108,8 @@ def load_model_arrays(path: str | os.PathLike, allow_pickle: bool = False) -> di
                 arrays[key] = np.asarray(source[key])
             except ValueError as e:
                 raise ModelFileError(f"{path}: key {key!r} cannot be read without pickle ({e})") from None
+            except Exception as e:      # a damaged member: BadZipFile (CRC), zlib.error, EOFError
+                raise ModelFileError(f"{path}: key {key!r} is corrupt ({type(e).__name__}: {e})") from None
     finally:
         if isinstance(source, np.lib.npyio.NpzFile):
             source.close()
@@ -138,6 +140,11 @@ def validate_model_arrays(arrays: Mapping[str, np.ndarray], source: str = "<arra
     if arrays["shapedirs"].shape[2] < 20:
         raise ModelFileError(f"{source}: key 'shapedirs' has {arrays['shapedirs'].shape[2]} components, "
                              "expected at least 20 (10 shape + 10 expression)")
+    sums = np.asarray(arrays["weights"], np.float64).sum(1)
+    if V and np.abs(sums - 1).max() > 1e-3:       # LBS blends rotations: weights that do not sum to 1 scale the body
+        k = int(np.abs(sums - 1).argmax())
+        raise ModelFileError(f"{source}: key 'weights' row {k} sums to {sums[k]:.4f}; expected each vertex's skinning "
+                             "weights to sum to 1")
     f = arrays["f"]
     if f.size and (f.min() < 0 or f.max() >= V):
         raise ModelFileError(f"{source}: key 'f' indexes vertices outside [0, {V})")
@@ -214,8 +221,12 @@ class BodyModel(nn.Module):
         comps = [np.asarray(arrays[f"hands_components{s}"], np.float64)[:self.num_pca_comps] for s in "lr"]
         self.register_buffer("left_hand_components", t(comps[0]))
         self.register_buffer("right_hand_components", t(comps[1]))
-        means = [np.zeros(45) if flat_hand_mean else np.asarray(arrays[f"hands_mean{s}"], np.float64) for s in "lr"]
-        self.register_buffer("pose_mean", t(np.concatenate([np.zeros(3 * 25), means[0], means[1]])))
+        hands_mean = np.concatenate([np.asarray(arrays[f"hands_mean{s}"], np.float64) for s in "lr"])
+        # the file's mean hands (90,), whatever flat_hand_mean says (marker placement uses them); not in state_dict,
+        # so digest() is unchanged by it
+        self.register_buffer("hands_mean", t(hands_mean), persistent=False)
+        hands = np.zeros(90) if flat_hand_mean else hands_mean
+        self.register_buffer("pose_mean", t(np.concatenate([np.zeros(3 * 25), hands])))
         self._build_levels(parents)
 
     def _build_levels(self, parents: list[int]) -> None:
@@ -264,6 +275,8 @@ class BodyModel(nn.Module):
             return self.v_template.new_zeros(B, n)
         if not isinstance(x, Tensor):
             raise TypeError(f"{name}: expected a torch.Tensor, got {type(x).__name__}")
+        if not x.is_floating_point():
+            raise TypeError(f"{name}: expected a floating-point tensor, got {x.dtype}")
         if x.dim() == len(sizes) + 1 and tuple(x.shape[1:]) == sizes:
             x = x.reshape(x.shape[0], n)
         elif x.dim() == 3 and sizes[-1] == 3 and x.shape[2] == 3 and 3 * x.shape[1] == n:
@@ -335,6 +348,8 @@ class BodyModel(nn.Module):
         """Forward from rotation matrices (B,55,3,3) of all joints (hand mean NOT added): for networks."""
         if not isinstance(rot_mats, Tensor):
             raise TypeError(f"rot_mats: expected a torch.Tensor, got {type(rot_mats).__name__}")
+        if not rot_mats.is_floating_point():
+            raise TypeError(f"rot_mats: expected a floating-point tensor, got {rot_mats.dtype}")
         if rot_mats.dim() != 4 or tuple(rot_mats.shape[1:]) != (NUM_JOINTS, 3, 3):
             raise ValueError(f"rot_mats: expected shape (B, 55, 3, 3), got {tuple(rot_mats.shape)}")
         if rot_mats.device != self.v_template.device:

@@ -149,7 +149,7 @@ def _cmd_make(args: argparse.Namespace) -> int:
 
         objects = None
         if args.objects is not None:
-            objects = tuple(o for o in args.objects.split(",") if o)
+            objects = tuple(o.strip() for o in args.objects.split(",") if o.strip())
             bad = [o for o in objects if o not in OBJECT_ORDER]
             if not objects or bad:
                 raise ValueError(f"--objects: expected object names of {list(OBJECT_ORDER)} separated by commas, got "

@@ -136,8 +136,9 @@ def _get(npz, key: str, path: Path) -> np.ndarray:
         raise SequenceFileError(f"{path}: missing key {key!r} (has {sorted(npz.files)})")
     try:
         return np.asarray(npz[key])
-    except ValueError as e:
-        raise SequenceFileError(f"{path}: key {key!r} cannot be read without pickle ({e})") from None
+    except Exception as e:              # an object array (ValueError), or a damaged member (BadZipFile, zlib.error)
+        raise SequenceFileError(f"{path}: key {key!r} cannot be read without pickle or is corrupt "
+                                f"({type(e).__name__}: {e})") from None
 
 
 def _string(a: np.ndarray) -> str:

@@ -79,7 +79,10 @@ class GraspSequence:
         return axis_angle_matrix(self.object_orient.astype(np.float64))
 
 
-def to_arrays(seq: GraspSequence, model: str = "graspkit procedural SMPLX_NEUTRAL.npz") -> dict[str, np.ndarray]:
+DEFAULT_MODEL_NAME = "graspkit procedural SMPLX_NEUTRAL.npz"   # body.model of files made with the shipped body
+
+
+def to_arrays(seq: GraspSequence, model: str = DEFAULT_MODEL_NAME) -> dict[str, np.ndarray]:
     """The flat dotted-key dictionary of a sequence (what save_grasp_sequence writes)."""
     T = seq.num_frames
     a: dict[str, np.ndarray] = {}
@@ -111,11 +114,12 @@ def to_arrays(seq: GraspSequence, model: str = "graspkit procedural SMPLX_NEUTRA
     return a
 
 
-def save_grasp_sequence(path: str | os.PathLike, seq: GraspSequence) -> Path:
-    """Write a GraspSequence as a GRAB-style .npz without pickle, atomically (equal content gives equal bytes)."""
+def save_grasp_sequence(path: str | os.PathLike, seq: GraspSequence, model: str = DEFAULT_MODEL_NAME) -> Path:
+    """Write a GraspSequence as a GRAB-style .npz without pickle, atomically (equal content gives equal bytes);
+    `model` names the body model the poses are for (`body.model`)."""
     path = Path(path)
     check_fps(seq.fps, "seq.fps")
-    a = to_arrays(seq)
+    a = to_arrays(seq, model)
     for key in ("body.params.fullpose", "body.params.transl", "body.betas", "object.params.transl",
                 "object.params.global_orient", "object.points", "object.normals"):
         if key in a and not np.isfinite(a[key]).all():
@@ -153,6 +157,8 @@ def read_arrays(path: str | os.PathLike, allow_pickle: bool = False) -> dict[str
                 raise SequenceFileError(
                     f"{path}: key {key!r} holds pickled Python objects (a real GRAB file?); pass allow_pickle=True "
                     "only if you trust the file") from None
+            except Exception as e:      # a damaged member: BadZipFile (CRC), zlib.error, EOFError
+                raise SequenceFileError(f"{path}: key {key!r} is corrupt ({type(e).__name__}: {e})") from None
             if a.dtype == object:
                 _flatten(key, a.item() if a.shape == () else list(a), out)
             else:

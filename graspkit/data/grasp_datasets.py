@@ -35,7 +35,7 @@ def grasp_files(root: str | os.PathLike, kind: str = "grasp", split: str | None 
         raise FileNotFoundError(f"root: no such folder {root} (make the data with `graspkit data make --kind {kind}`)")
     out = []
     for p in sorted(root.glob(f"{kind}_*.npz")):
-        with open_npz(p, f"a {kind} file (graspkit data make --kind {kind})") as z:
+        with open_npz(p, f"{'an' if kind[0] in 'aeiou' else 'a'} {kind} file (graspkit data make --kind {kind})") as z:
             if "obj_name" not in z.files:
                 raise ValueError(f"{p}: missing key 'obj_name' (expected a {kind} file of graspkit data make)")
             a = npz_arrays(z, ["obj_name"] + (["grasp.accepted"] if "grasp.accepted" in z.files else []), p)
@@ -51,15 +51,33 @@ def _rot(aa: np.ndarray) -> np.ndarray:
     return axis_angle_to_matrix(torch.as_tensor(np.asarray(aa, np.float64))).numpy()
 
 
+# the shapes of the keys the datasets read (docs/grasps.md's file table); "T": the file's frames, None: any size
+SHAPES: dict[str, tuple[int | str | None, ...]] = {
+    "body.params.fullpose": ("T", 165), "body.params.transl": ("T", 3), "body.betas": (10,),
+    "object.params.transl": ("T", 3), "object.params.global_orient": ("T", 3), "object.points": (None, 3),
+    "object.normals": (None, 3), "object.height": (), "saga.markers": (143, 3), "contact.markers": ("T", 143),
+    "contact.object": ("T", None), "contact.feet": ("T", 4), "grasp.goal_frame": (),
+    "goal.vertices": (400, 3), "goal.offsets": (400, 3), "goal.hand_offsets": (99, 3), "goal.head_direction": (3,),
+    "goal.bps_object": (1024,), "goal.bps_hand": (1024,), "goal.right_hand": (99,), "goal.vertex_ids": (400,)}
+
+
 def check_arrays(a: dict[str, np.ndarray], keys: tuple[str, ...], path: Path) -> None:
-    """ValueError naming `path` when one of `keys` is missing from a file's arrays `a` or holds a NaN or an inf (a
-    model trained on it would learn NaN weights without any other sign)."""
+    """ValueError naming `path` and the key when one of `keys` is missing from a file's arrays `a`, has another shape
+    than SHAPES gives, or holds a NaN or an inf (a model trained on it would learn NaN weights without any other
+    sign)."""
+    T = len(a["body.params.fullpose"]) if "body.params.fullpose" in a else None
     for k in keys:
         if k not in a:
             raise ValueError(f"{path}: missing key {k!r} (expected a file of `graspkit data make`)")
         v = a[k]
+        want = tuple(T if d == "T" else d for d in SHAPES.get(k, (None,) * v.ndim))
+        if v.ndim != len(want) or any(d is not None and d != n for d, n in zip(want, v.shape)):
+            shown = "(" + ", ".join("any" if d is None else str(d) for d in want) + ("," if len(want) == 1 else "") + ")"
+            raise ValueError(f"{path}: key {k!r} has shape {v.shape}, expected {shown}")
         if v.dtype.kind in "fc" and not np.isfinite(v).all():
             raise ValueError(f"{path}: key {k!r} holds {int((~np.isfinite(v)).sum())} NaN or infinite values")
+    if "goal.right_hand" in keys and not ((a["goal.right_hand"] >= 0) & (a["goal.right_hand"] < 400)).all():
+        raise ValueError(f"{path}: key 'goal.right_hand' holds positions outside [0, 400)")
 
 
 class _Files(Dataset):

@@ -26,7 +26,7 @@ import torch
 
 from graspkit.body.markers import goal_vertices, saga_markers
 from graspkit.data.approach import approach_motion
-from graspkit.data.grab import GraspSequence, export_object_ply, save_grasp_sequence
+from graspkit.data.grab import DEFAULT_MODEL_NAME, GraspSequence, export_object_ply, save_grasp_sequence
 from graspkit.data.grasp import GRASP_PARTS, GraspFitter, GraspResult, object_points, sample_grasp_task
 from graspkit.data.ik import matrix_axis_angle
 from graspkit.objects.bps import bps_basis, bps_encode
@@ -187,7 +187,7 @@ def approach_sequence(fitter: GraspFitter, r: GraspResult, vertices: torch.Tenso
     obj = apply_pose(t.object_pose, make_object(t.object_name))
     lo, hi = obj.bounds[0] - 0.05, obj.bounds[1] + 0.05
     rot = m.rotmats(bm.dtype)
-    for f in range(max(0, g - 20), g):       # frames before the grasp where the hand is near the object
+    for f in range(g):                       # frames before the grasp where the body is near the object
         with torch.no_grad():
             v = bm.forward_rotmats(rot[f:f + 1], betas=torch.as_tensor(m.betas[None]),
                                    transl=torch.as_tensor(m.trans[f:f + 1], dtype=bm.dtype)).vertices[0].double()
@@ -248,8 +248,16 @@ def write_chunk(fitter: GraspFitter, kind: str, seed: int, chunk: int, out: Path
             continue
         r, attempt, ok = best[k]
         seq = make(fitter, r, V[k], i, seed, attempt, ok, f"meshes/{name}.ply")
-        written.append(str(save_grasp_sequence(file_path(out, kind, i), seq)))
+        written.append(str(save_grasp_sequence(file_path(out, kind, i), seq, model_name(fitter.bm))))
     return written
+
+
+def model_name(bm) -> str:
+    """What a file's `body.model` says: graspkit's name for the shipped body, else the model file as given."""
+    from graspkit.paths import default_model_path
+
+    same = Path(bm.source).resolve() == default_model_path().resolve()
+    return DEFAULT_MODEL_NAME if same else str(bm.source)
 
 
 _FITTER: GraspFitter | None = None

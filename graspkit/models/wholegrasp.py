@@ -48,7 +48,8 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from graspkit.objects.distance import nearest_neighbours
+from graspkit.objects.distance import MAX_METRES, nearest_neighbours, require_points_in_metres
+from graspkit.objects.placement import GRASP_HEIGHTS
 from graspkit.objects.sdf import signed_distance_to_points
 from graspkit.paths import DATA_STUBS
 from graspkit.models.blocks import GaussianHead, ResBlock, kl_standard_normal, reparameterize, robust_kl
@@ -587,6 +588,16 @@ class HandPCA:
         return coeffs @ self.comps[side] + self.mean[side]
 
 
+def check_height(h: float | Tensor, name: str) -> None:
+    """A ValueError naming `name` unless the object height(s) t_O are in [0, MAX_METRES] m (the data's 0.5-1.7 m:
+    GRASP_HEIGHTS); a height in millimetres would give markers metres away without a word."""
+    t = torch.as_tensor(h, dtype=torch.float64)
+    if t.numel() and not ((t >= 0) & (t <= MAX_METRES)).all():
+        bad = float(t[(t < 0) | (t > MAX_METRES)].reshape(-1)[0])
+        raise ValueError(f"{name}: {bad:g}, expected an object-centre height in metres above the floor, 0 to "
+                         f"{MAX_METRES:g} (the training data's {GRASP_HEIGHTS[0]}-{GRASP_HEIGHTS[1]} m)")
+
+
 def check_sample_inputs(points: Tensor, normals: Tensor, n: int, least: int, names: tuple[str, str] =
                         ("object_points", "object_normals"), **extra: Any) -> None:
     """ValueError/TypeError naming the argument unless points, normals are (P>=least, 3) finite tensors, n a
@@ -599,6 +610,10 @@ def check_sample_inputs(points: Tensor, normals: Tensor, n: int, least: int, nam
     for name, x in ((names[0], points), (names[1], normals), *extra.items()):
         if x is not None and not torch.isfinite(torch.as_tensor(x, dtype=torch.float32)).all():
             raise ValueError(f"{name}: contains NaN or Inf")
+    require_points_in_metres(points, names[0])
+    for name, x in extra.items():
+        if name.endswith("height") and x is not None:
+            check_height(x, name)
     if isinstance(n, bool) or not isinstance(n, int):
         raise TypeError(f"n: expected an int number of samples, got {n!r}")
     if n < 1:

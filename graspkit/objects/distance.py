@@ -89,11 +89,17 @@ def require_metres(verts: Tensor, faces: Tensor, name: str) -> None:
     """A ValueError naming `name` when a mesh's surface (vertices (V, 3) its faces (F, 3) use) spans more than
     MAX_METRES: graspkit measures in metres, and a mesh in millimetres or centimetres would give answers 1e3-1e9 times
     off without a word."""
-    used = verts[torch.unique(faces)]
-    side = float((used.max(-2).values - used.min(-2).values).max())
+    require_points_in_metres(verts[torch.unique(faces)], name, "a mesh in millimetres needs apply_scale(0.001), one "
+                             "in centimetres apply_scale(0.01)")
+
+
+def require_points_in_metres(points: Tensor, name: str, hint: str = "points in millimetres need a scale of 0.001, "
+                             "in centimetres 0.01") -> None:
+    """A ValueError naming `name` when points (..., P, 3) (each batch entry on its own) span more than MAX_METRES."""
+    side = float((points.amax(-2) - points.amin(-2)).max())
     if side > MAX_METRES:
         raise ValueError(f"{name}: largest side {side:g}, expected a body or object in metres (at most {MAX_METRES:g} "
-                         "m): a mesh in millimetres needs apply_scale(0.001), one in centimetres apply_scale(0.01)")
+                         f"m): {hint}")
 
 
 ZERO_AREA = 1e-10         # twice a face's area over its longest edge squared at or below which it has no normal

@@ -102,6 +102,8 @@ from graspkit.body.markers import foot_vertices, saga_markers, sole_rest_heights
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX, JOINT_NAMES
 from graspkit.metrics import joint_limit_excess
 from graspkit.models.gnet import SparseBody
+from graspkit.models.wholegrasp import check_height
+from graspkit.objects.distance import require_points_in_metres
 from graspkit.objects.sdf import SDFGrid
 from graspkit.optim.step import energy_step
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
@@ -200,6 +202,8 @@ class GraspObject:
             raise ValueError(f"rotation: expected shape (3, 3) or (B, 3, 3), got {tuple(self.rotation.shape)}")
         if self.origin is not None and (self.origin.dim() not in (1, 2) or self.origin.shape[-1] != 3):
             raise ValueError(f"origin: expected shape (3,) or (B, 3), got {tuple(self.origin.shape)}")
+        require_points_in_metres(self.points, "points")
+        check_height(self.height, "height")
         self.points, self.normals = self.points.float(), self.normals.float()
 
     @property
@@ -527,6 +531,10 @@ class GraspPoseOpt:
             got = tuple(markers.shape) if isinstance(markers, Tensor) else type(markers).__name__
             raise ValueError(f"markers: expected shape (B, {len(self.marker_ids)}, 3), got {got}")
         B = markers.shape[0]
+        if B == 0:
+            raise ValueError("markers: expected at least one marker set (B >= 1), got 0")
+        if len(self.cfg.steps) != 3 or any(isinstance(k, bool) or not isinstance(k, int) or k < 0 for k in self.cfg.steps):
+            raise ValueError(f"steps: expected three step counts >= 0 (stages 1-3 of Alg. 1), got {self.cfg.steps}")
         if marker_contact is not None and marker_contact.shape != markers.shape[:2]:
             raise ValueError(f"marker_contact: expected shape {tuple(markers.shape[:2])}, "
                              f"got {tuple(marker_contact.shape)}")

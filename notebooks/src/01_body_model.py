@@ -112,7 +112,7 @@ print(f"at 90 deg of elbow flexion they move vertices by up to {(with_c - plain)
 part = arrays["weights"].argmax(1)
 fig, axes = viz.figure(views=("front",), size=5, title="dominant skinning joint per vertex")
 viz.draw_points(axes[0], vw, values=(part % 11) / 10, cmap="tab20", size=1.5)
-viz.set_equal(axes[0], vw)
+_ = viz.set_equal(axes[0], vw)
 
 # %%
 from graspkit.body.poses import POSES, body_pose, y_up_to_z_up
@@ -199,7 +199,9 @@ print("round trip error of 6D:", float((rot6d_to_matrix(six) - R).abs().max()))
 # SAGA represents a body by **143 markers** on its surface (App. A.1: 49 body, 14 face, 6 hand, 30 finger, 44 palm,
 # after GRAB's mocap layout); its motion stage uses a sparse hand (10 fingertips instead of fingers and palms, 79 in
 # all). GOAL samples **400 body vertices** with 99 on the right hand, and a head direction. graspkit places all of them
-# by anatomical rules (`graspkit.body.markers`), so they fit any SMPL-X-format mesh.
+# by anatomical rules (`graspkit.body.markers`), so they fit any SMPL-X-format mesh. The layout depends on the file
+# only: SAGA's markers are placed on the rest body with the mean (relaxed) hands, GOAL's vertices on flat hands, whether
+# the model was built with `flat_hand_mean` or not.
 
 # %%
 from graspkit.body.markers import goal_vertices, saga_markers

@@ -9,7 +9,7 @@
 #
 # | step | module | what happens | paper |
 # |---|---|---|---|
-# | task | `graspkit.data.grasp` | object at SAGA's placement (0.5–1.7 m high, any yaw), a person 0.05–1.5 m away facing it, a shape, a grasp type, a frame on a part | SAGA §4.3, GOAL §3 |
+# | task | `graspkit.data.grasp` | object at SAGA's placement (0.5–1.7 m high, any yaw), a person 0.05–1.5 m away (at least the object's radius + 15 cm) facing it, a shape, a grasp type, a frame on a part | SAGA §4.3, GOAL §3 |
 # | reach | `graspkit.data.plan_reach` | walk to a stand-off, wrist onto the frame's wrist target: feet on the floor, pelvis over them, gaze on the object | lesson 03 |
 # | arm | `grasp_opt.solve_arm` | two-bone IK over 24 elbow swivels, forearm twist into the elbow: the hand also *turns* to the frame | — |
 # | fingers | `grasp_opt.close_fingers` | each digit closes from the open pre-shape until it touches | "closed until contact" |
@@ -165,7 +165,7 @@ plt.show()
 # ## 4 · Diversity at one placement
 #
 # For one object placement, grasps differ in the person's shape, where they come from (the start is anywhere
-# 0.05–1.5 m away, facing the object), the grasp type and the frame. SAGA measures diversity with the **APD**
+# 0.05–1.5 m away, and at least the object's radius + 15 cm, facing the object), the grasp type and the frame. SAGA measures diversity with the **APD**
 # (average pairwise L2 distance of samples, after DLow): here over the 143 markers of five grasps of the same mug
 # at the same placement, centred at the object.
 
@@ -192,7 +192,7 @@ plt.show()
 # %% [markdown]
 # ## 5 · Approach and grasp
 #
-# The grasp is the end of a reach plan, so the approach comes with it: the person starts 0.05–1.5 m away (GRAB's
+# The grasp is the end of a reach plan, so the approach comes with it: the person starts 0.05–1.5 m away (at least the object's radius + 15 cm; GRAB's
 # T-pose or an idle stance), walks, reaches; half a second before the grasp frame the upper body turns into the
 # fitted pose, the fingers take the pre-shape and close, and the grasp is held to the end (GOAL's *goal frame* is
 # the first held frame). The lower body is the planner's, so foot contacts and skating are those of the motion
