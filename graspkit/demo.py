@@ -3,9 +3,11 @@
 Stages (each writes stills, animations (GIF), AMASS-style npz and GLB exports of its final scene):
 - body: the procedural humanoid in several poses and shapes;
 - planner: the procedural approach-and-grasp clip (the synthetic ground truth) for the mug;
-- saga: SAGA stage 1 (WholeGrasp-VAE sample + GraspPose-Opt, Sec. 3.2, Alg. 1) on the same mug placement;
-- saga_motion: SAGA end to end (graspkit.saga.synthesize): object -> WholeGrasp-VAE + GraspPose-Opt -> MotionFill-VAE
-  + GraspMotion-Opt (Sec. 3.2-3.4, Alg. 1-2), a standing start walking into the sampled grasp;
+- saga: SAGA stage 1 (WholeGrasp-VAE sample + GraspPose-Opt, Sec. 3.2, Alg. 1) on the mug at the placement of the
+  first shipped test grasp, with 100 / 150 / 200 GraspPose-Opt steps (Alg. 1: 300 / 400 / 500) to keep it short;
+- saga_motion: SAGA end to end (graspkit.saga.synthesize) for the mug where the planner's clip puts it (another
+  placement than the saga stage's, and its own grasp): object -> WholeGrasp-VAE + GraspPose-Opt (Alg. 1's steps) ->
+  MotionFill-VAE + GraspMotion-Opt (Sec. 3.2-3.4, Alg. 1-2), a standing start walking into the sampled grasp;
 - goal: GOAL (GNet grasp + refinement, then MNet's autoregressive approach, Sec. 3.1-3.5) from the clip's start;
 - wandr: WANDR reaching a goal in 4 s from a held-out start pose (Sec. 3.2-3.5).
 A method whose shipped checkpoint is missing is skipped with a message naming the file.
@@ -227,7 +229,8 @@ def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, .
 
     bad = [s for s in stages if s not in STAGES]
     if bad:
-        raise ValueError(f"stages: unknown {bad}; expected some of {list(STAGES)}")
+        raise ValueError(f"stages (--stages): unknown {bad}; expected some of {list(STAGES)}")
+    stages = tuple(dict.fromkeys(stages))                # each stage once, in the order given
     bm = load_or_build_body(model_path)                 # before the folder: a bad model file leaves nothing behind
     out_dir.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
@@ -239,7 +242,8 @@ def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, .
             fig, verts = body_gallery(bm)
             path = save_png(fig, out_dir / "body_poses_shapes.png", dpi=110)
             faces = bm.faces.numpy()
-            scene = {f"body_{k}": (verts[k].numpy(), faces) for k in range(len(verts))}
+            # side by side along x, 1 m apart, as in the picture (each body is centred above the origin)
+            scene = {f"body_{k}": (verts[k].numpy() + [1.0 * k, 0.0, 0.0], faces) for k in range(len(verts))}
             written += [path, export_scene(scene, out_dir / "body_poses_shapes.glb")]
             continue
         fn, ck = METHOD_STAGES[stage]

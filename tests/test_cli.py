@@ -44,6 +44,8 @@ def test_demo_writes_a_figure_and_a_glb_that_trimesh_reads(tmp_path):
     assert len(scene.geometry) == len(DEMO_BODIES)
     heights = sorted(float(np.ptp(g.vertices[:, 1])) for g in scene.geometry.values())
     assert 1.45 < heights[-1] < 2.0          # a standing adult; glTF is y up
+    x = sorted(float(g.bounds[:, 0].mean()) for g in scene.geometry.values())
+    np.testing.assert_allclose(np.diff(x), 1.0, atol=0.15)             # side by side, as in the picture
 
 
 def test_demo_planner_stage_writes_clip_files_that_read_back(tmp_path):
@@ -70,7 +72,7 @@ def test_demo_refuses_unknown_stages(tmp_path, capsys):
 
     assert main(["demo", "--out", str(tmp_path), "--stages", "body,saga2"]) == 2
     err = capsys.readouterr().err
-    assert "stages" in err and "saga2" in err and not list(tmp_path.iterdir())
+    assert "--stages" in err and "saga2" in err and not list(tmp_path.iterdir())
 
 
 def test_out_paths_that_cannot_be_written_and_bad_seeds_fail_before_any_work(tmp_path):

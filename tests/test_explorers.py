@@ -48,3 +48,16 @@ def test_canonical_to_world_is_a_rotation_taking_up_to_z():
     w = canonical_to_world(p)
     np.testing.assert_allclose(np.linalg.norm(w, axis=1), np.linalg.norm(p, axis=1))
     np.testing.assert_allclose(canonical_to_world(np.array([0.0, 1.0, 0.0])), [0, 0, 1])
+
+
+def test_a_non_finite_value_is_refused_and_leaves_the_state_alone(explorer):
+    """NaN, inf or text for a slider: a ValueError naming the slider, and the explorer keeps working (a stored NaN
+    used to break every later update, with an error naming body_pose)."""
+    v0, _ = explorer.mesh()
+    for bad in (float("nan"), float("inf"), "a lot"):
+        with pytest.raises(ValueError, match="left_elbow: expected a (finite )?number"):
+            explorer.update("left_elbow", bad)
+        with pytest.raises(ValueError, match="beta1: expected a (finite )?number"):
+            explorer.update("beta1", bad)
+    v1, _ = explorer.update("beta0", 0.0)
+    np.testing.assert_array_equal(v0, v1)

@@ -81,6 +81,11 @@ def test_object_swap_keeps_the_pose_and_unknown_slider_is_named(explorer):
     assert got["min_distance_cm"] == pytest.approx(truth(explorer)["min_distance_cm"], abs=1e-3)
     with pytest.raises(ValueError, match="wiggle"):
         explorer.update("wiggle", 1.0)
+    before = explorer.measure()
+    for name in ("z", "yaw"):                               # a NaN is refused by name and not stored
+        with pytest.raises(ValueError, match=f"{name}: expected a finite number"):
+            explorer.update(name, float("nan"))
+    assert explorer.update("x", 0.03) == before
 
 
 def test_open_body_reports_no_volume_but_still_depth():

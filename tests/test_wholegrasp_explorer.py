@@ -23,6 +23,11 @@ def test_update_sets_one_latent_coordinate_and_decodes_it(walk):
     torch.testing.assert_close(walk.grasp["markers"], out["markers"][0])
     assert numbers["markers_in_contact"] == int((out["marker_contact"][0] > CONTACT_LEVEL).sum())
     assert numbers["points_in_contact"] == int((out["object_contact"][0] > CONTACT_LEVEL).sum())
+    assert numbers["points_soft"] == pytest.approx(float(out["object_contact"][0].sum()), rel=1e-5)
+    assert numbers["points_max"] == pytest.approx(float(out["object_contact"][0].max()), rel=1e-6)
+    with pytest.raises(ValueError, match="z2: expected a finite number"):
+        walk.update("z2", float("nan"))
+    assert torch.isfinite(walk.z).all()
     m, p = walk.grasp["markers"].numpy(), walk.points.numpy()
     d = np.linalg.norm(m[121:143, None] - p[None], axis=-1).min()
     assert numbers["palm_to_object_cm"] == pytest.approx(100 * d, rel=1e-4)

@@ -21,6 +21,18 @@ EXPLORER_JOINTS: dict[str, tuple[float, float, float]] = {
 }
 
 
+def slider_value(name: str, value: float) -> float:
+    """`value` as a float, or a ValueError naming the slider when it is not a finite number (stored, a NaN would
+    break every later update)."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected a number, got {value!r}") from None
+    if not np.isfinite(v):
+        raise ValueError(f"{name}: expected a finite number, got {value!r}")
+    return v
+
+
 @dataclass
 class BodyExplorerState:
     """Slider values of the body explorer: shape coefficients and one bend angle (radians) per exposed joint."""
@@ -31,9 +43,9 @@ class BodyExplorerState:
     def set(self, name: str, value: float) -> None:
         """Set one slider: 'beta0'..'beta9' or a joint name from EXPLORER_JOINTS; unknown name -> ValueError."""
         if name.startswith("beta") and name[4:].isdigit() and int(name[4:]) < len(self.betas):
-            self.betas[int(name[4:])] = float(value)
+            self.betas[int(name[4:])] = slider_value(name, value)
         elif name in self.angles:
-            self.angles[name] = float(value)
+            self.angles[name] = slider_value(name, value)
         else:
             raise ValueError(f"name: unknown slider {name!r}; expected beta0..beta{len(self.betas) - 1} "
                              f"or one of {list(self.angles)}")

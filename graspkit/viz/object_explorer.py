@@ -17,6 +17,7 @@ from matplotlib.figure import Figure
 from graspkit.objects import (MARKER_CONTACT_THRESHOLD, OBJECT_CONTACT_THRESHOLD, ObjectPose, apply_pose,
                               intersection_volume, make_object, marker_contact, object_contact, sample_surface,
                               signed_distance)
+from graspkit.viz.explorers import slider_value
 
 # right arm held forward at chest height, palm down, the left arm lowered (SMPL-X canonical frame, see body/poses.py)
 REACH_FORWARD: dict[str, tuple[float, float, float]] = {
@@ -119,9 +120,9 @@ class HandObjectExplorer:
     def update(self, name: str, value: float | str) -> dict[str, float]:
         """Set one slider ('x', 'y', 'z' in m, 'yaw' in deg, or 'object' = a catalogue name), then `measure()`."""
         if name in OFFSET_SLIDERS:
-            self.offset[OFFSET_SLIDERS.index(name)] = float(value)
+            self.offset[OFFSET_SLIDERS.index(name)] = slider_value(name, value)
         elif name == YAW_SLIDER:
-            self.yaw = float(value)
+            self.yaw = slider_value(name, value)
         elif name == "object":
             self.set_object(str(value))
         else:

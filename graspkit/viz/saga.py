@@ -14,6 +14,8 @@ import torch
 from matplotlib.figure import Figure
 from torch import Tensor
 
+from graspkit.viz.explorers import slider_value
+
 _BOXES = [  # (x, y, w, h, text, colour) of the WholeGrasp-VAE diagram (SAGA Fig. 3)
     (0.0, 2.6, 1.9, 0.7, "markers M (143x3)\n+ contacts C_M", "#3b6ea8"),
     (0.0, 1.4, 1.9, 0.7, "object O (2048 pts,\nxyz + normal) + C_O", "#c0504d"),
@@ -98,20 +100,23 @@ class LatentWalk:
             self.seed = int(value)
             self.z = self._draw(self.seed)
         elif name in self.names:
-            self.z[0, int(name[1:])] = float(value)
+            self.z[0, int(name[1:])] = slider_value(name, value)
         else:
             raise ValueError(f"name: expected one of {self.names}, got {name!r}")
         self.decode()
         return self.measure()
 
     def measure(self) -> dict[str, float]:
-        """Numbers for the caption: markers and object points in contact, the right palm's distance to the object."""
+        """Numbers for the caption: markers and object points in contact (p > CONTACT_LEVEL), the object contacts'
+        soft count (the sum of C_O, what GraspPose-Opt weighs by) and largest probability, the right palm's distance
+        to the object."""
         g = self.grasp
-        m = g["markers"]
+        m, co = g["markers"], g["object_contact"]
         d = torch.cdist(m[None], self.points[None])[0].min(1).values
         palm = slice(121, 143)                                   # the right palm's 22 markers (saga_markers order)
         return {"markers_in_contact": int((g["marker_contact"] > CONTACT_LEVEL).sum()),
-                "points_in_contact": int((g["object_contact"] > CONTACT_LEVEL).sum()),
+                "points_in_contact": int((co > CONTACT_LEVEL).sum()), "points_soft": float(co.sum()),
+                "points_max": float(co.max()),
                 "palm_to_object_cm": float(d[palm].min()) * 100, "z_norm": float(self.z.norm())}
 
     def figure(self, size: float = 3.0) -> Figure:
@@ -145,8 +150,10 @@ class LatentWalk:
     @staticmethod
     def describe(numbers: dict[str, float]) -> str:
         """One caption line."""
-        return (f"{numbers['markers_in_contact']} markers and {numbers['points_in_contact']} object points in contact; "
-                f"right palm {numbers['palm_to_object_cm']:.1f} cm from the object; |z| = {numbers['z_norm']:.2f}")
+        return (f"{numbers['markers_in_contact']} markers and {numbers['points_in_contact']} object points above "
+                f"p = {CONTACT_LEVEL:g} (C_O: soft count {numbers['points_soft']:.0f} points, largest p "
+                f"{numbers['points_max']:.2f}); right palm {numbers['palm_to_object_cm']:.1f} cm from the object; "
+                f"|z| = {numbers['z_norm']:.2f}")
 
     def png(self) -> bytes:
         """The current figure as PNG bytes."""
