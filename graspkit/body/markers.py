@@ -65,14 +65,14 @@ class _Rest:
     def __init__(self, bm, hands: str = "mean") -> None:
         if hands not in ("mean", "flat"):
             raise ValueError(f"hands: expected 'mean' or 'flat', got {hands!r}")
-        pose = torch.zeros(1, len(bm.parents), 3, dtype=bm.dtype)
+        pose = torch.zeros(1, len(bm.parents), 3, dtype=bm.dtype, device=bm.v_template.device)
         if hands == "mean":
             pose[0, -30:] = bm.hands_mean.view(30, 3)
         with torch.no_grad():
             out = bm.forward_rotmats(axis_angle_to_matrix(pose))
-        self.v = out.vertices[0].double().numpy()
-        self.j = out.joints[0].double().numpy()
-        self.part = bm.lbs_weights.argmax(1).numpy()
+        self.v = out.vertices[0].double().cpu().numpy()
+        self.j = out.joints[0].double().cpu().numpy()
+        self.part = bm.lbs_weights.argmax(1).cpu().numpy()
         self.n_vertices = len(self.v)
         self.used: set[int] = set()  # ids already taken by a marker of the set being built (no duplicates)
 
@@ -326,7 +326,7 @@ def sole_rest_heights(bm, feet: dict[str, np.ndarray] | None = None) -> np.ndarr
 def palm_vertices(bm, min_cos: float = 0.7) -> dict[str, np.ndarray]:
     """Palm-side vertex ids of each hand: {'left', 'right'}: wrist-dominated vertices whose normal faces the palm (-y at rest)."""
     r = _Rest(bm)
-    n = vertex_normals(torch.as_tensor(r.v)[None], bm.faces)[0].numpy()
+    n = vertex_normals(torch.as_tensor(r.v)[None], bm.faces.cpu())[0].numpy()
     out = {}
     for s in ("left", "right"):
         ids = r.on_parts([f"{s}_wrist"] + [f"{s}_{f}1" for f in FINGERS if f != "thumb"])
