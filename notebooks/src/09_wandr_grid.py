@@ -44,7 +44,7 @@ print("held-out start poses:", ", ".join(s.source for s in starts))
 # distance (cm). The full grid runs in `benchmarks/wandr_grid.py` (one batch, FS computed on the fly from the foot
 # vertices); here two of the starts, one sample per goal (250 motions), to stay fast.
 #
-# **What to expect.** The shipped model is trained in five stages, about 100 minutes on two CPU cores (the paper: 900
+# **What to expect.** The shipped model is trained in five stages, about 110 minutes on two CPU cores (the paper: 900
 # epochs on AMASS + CIRCLE), on graspkit's reaching and room-scale reaching clips: 10 epochs with rollouts growing to 60
 # frames, kept at the epoch with the best *validation* score (other starts, goals off the grid), then one epoch with
 # 120- and three with 240-frame rollouts, the fourth stage with clips added that start from a finished reach (section
