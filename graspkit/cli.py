@@ -69,6 +69,9 @@ def _object_pose(at: list[float] | None):
         return None
     if not all(math.isfinite(v) for v in at):
         raise ValueError(f"--at: expected four finite numbers X Y Z YAW_DEG, got {' '.join(map(str, at))}")
+    if at[2] < 0:
+        raise ValueError(f"--at: the object's centre is {-at[2]:g} m below the floor (z = 0); expected Z >= 0 m "
+                         "(the training grasps hold it 0.5-1.7 m high)")
     return ObjectPose.from_yaw(np.deg2rad(at[3]), np.array(at[:3]))
 
 
@@ -147,7 +150,7 @@ def _cmd_goal(args: argparse.Namespace) -> int:
     from graspkit.models.mnet import STALL_FRAMES
 
     _check_object(args.object)
-    check_counts(args, stall=0)
+    check_counts(args, stall=0, max_frames=2)
     pose = _object_pose(args.at)
     _print_notes(object_range_notes(pose))
     bm = _body_model(args.model)                      # a bad --model fails here, before any work

@@ -73,6 +73,9 @@ def test_goal_and_wandr_commands_name_bad_arguments(tmp_path, capsys):
     for cmd, extra, message in (("saga", ["--at", "1", "0", "nan", "0"], "--at: expected four finite numbers"),
                                 ("goal", ["--at", "1", "0", "inf", "0"], "--at: expected four finite numbers"),
                                 ("goal", ["--stall", "-1"], "--stall: expected an integer >= 0, got -1"),
+                                ("goal", ["--max-frames", "1"], "--max-frames: expected an integer >= 2, got 1"),
+                                ("goal", ["--at", "0", "0.7", "-0.5", "0"], "--at: the object's centre is 0.5 m below"),
+                                ("saga", ["--at", "0", "0.7", "-0.5", "0"], "--at: the object's centre is 0.5 m below"),
                                 ("saga", ["--free-joints", "knee"], "--free-joints: expected 'arms', 'none' or distinct"),
                                 ("saga", ["--free-joints", "arms", "left_elbow"], "got arms left_elbow")):
         assert main([cmd, "--object", "mug", *extra, "--out", str(tmp_path / "x")]) == 2
