@@ -6,6 +6,7 @@ import functools
 import math
 import os
 import sys
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -392,6 +393,11 @@ def check_out(path: Path, is_file: bool | None = None, flag: str = "--out") -> N
                 raise ValueError(f"{flag}: {p} is a file, so {path} cannot be written")
             if not os.access(p, os.W_OK | os.X_OK):
                 raise ValueError(f"{flag}: {p} is not writable")
+            try:                        # os.access says yes to root everywhere, also in /proc and /sys: try it
+                with tempfile.TemporaryFile(dir=p):
+                    pass
+            except OSError as e:
+                raise ValueError(f"{flag}: {p} is not writable ({e.strerror})") from None
             return
 
 

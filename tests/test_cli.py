@@ -1,6 +1,8 @@
 """The `graspkit` console command: help, version and the body-model subcommands."""
 import subprocess
 import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -196,3 +198,15 @@ def test_wandr_command_reports_what_smplx_measures_on_its_file(tmp_path, capsys)
         assert floating == pytest.approx(100 * np.mean(low > 0.05), abs=0.6)
         if lift:
             assert low.min() > -0.01 and "--no-lift" not in text
+
+
+@pytest.mark.skipif(not Path("/proc/self").exists(), reason="needs Linux's /proc")
+def test_an_out_in_a_folder_that_takes_no_files_is_named_before_any_work():
+    """/proc takes no new files, even for root, to whom os.access says every folder is writable (the command used to
+    fail after its work with a bare OSError)."""
+    from graspkit.cli import check_out
+
+    with pytest.raises(ValueError, match="--out: /proc is not writable"):
+        check_out(Path("/proc/graspkit_x"))
+    check_out(Path(tempfile.gettempdir()) / "graspkit_x")          # a writable folder passes (nothing is created)
+    assert not (Path(tempfile.gettempdir()) / "graspkit_x").exists()
