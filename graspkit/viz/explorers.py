@@ -117,10 +117,11 @@ class BodyExplorer:
         def redraw() -> None:
             image.value = png_bytes(self.figure(), dpi)
 
-        sliders = [w.FloatSlider(value=0, min=-2, max=2, step=0.25, description=f"beta{i}", continuous_update=False)
-                   for i in range(betas_shown)]
-        sliders += [w.FloatSlider(value=0, min=-1.6, max=1.6, step=0.1, description=j, continuous_update=False)
-                    for j in EXPLORER_JOINTS]
+        # the sliders start at the explorer's current state (after any `update`), clipped to their range
+        sliders = [w.FloatSlider(value=float(np.clip(self.state.betas[i], -2, 2)), min=-2, max=2, step=0.25,
+                                 description=f"beta{i}", continuous_update=False) for i in range(betas_shown)]
+        sliders += [w.FloatSlider(value=float(np.clip(self.state.angles[j], -1.6, 1.6)), min=-1.6, max=1.6, step=0.1,
+                                  description=j, continuous_update=False) for j in EXPLORER_JOINTS]
         for s in sliders:
             s.observe(lambda ch, s=s: (self.state.set(s.description, ch["new"]), redraw()), names="value")
         redraw()
