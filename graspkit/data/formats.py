@@ -119,14 +119,15 @@ def open_npz(path: str | os.PathLike, what: str = "an .npz file") -> np.lib.npyi
 
 
 def npz_arrays(npz: np.lib.npyio.NpzFile, keys, path: str | os.PathLike) -> dict[str, np.ndarray]:
-    """The arrays `keys` of an open archive; a ValueError naming the file for one that is corrupt or needs pickle."""
+    """The arrays `keys` of an open archive; a SequenceFileError (a ValueError) naming the file for one that is corrupt
+    or needs pickle."""
     out = {}
     for k in keys:
         try:
             out[k] = npz[k]
-        except Exception as e:
-            raise ValueError(f"{path}: key {k!r} cannot be read without pickle or is corrupt "
-                             f"({type(e).__name__}: {e})") from None
+        except Exception as e:          # an object array (ValueError), or a damaged member (BadZipFile, zlib.error)
+            raise SequenceFileError(f"{path}: key {k!r} cannot be read without pickle or is corrupt "
+                                    f"({type(e).__name__}: {e})") from None
     return out
 
 
@@ -134,11 +135,7 @@ def _get(npz, key: str, path: Path) -> np.ndarray:
     """One array of an open npz; clear errors for a missing key or an object array."""
     if key not in npz.files:
         raise SequenceFileError(f"{path}: missing key {key!r} (has {sorted(npz.files)})")
-    try:
-        return np.asarray(npz[key])
-    except Exception as e:              # an object array (ValueError), or a damaged member (BadZipFile, zlib.error)
-        raise SequenceFileError(f"{path}: key {key!r} cannot be read without pickle or is corrupt "
-                                f"({type(e).__name__}: {e})") from None
+    return np.asarray(npz_arrays(npz, [key], path)[key])
 
 
 def _string(a: np.ndarray) -> str:

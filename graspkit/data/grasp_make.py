@@ -34,7 +34,7 @@ from graspkit.objects.catalogue import make_object
 from graspkit.objects.contact import OBJECT_CONTACT_THRESHOLD, marker_contact
 from graspkit.objects.distance import nearest_neighbours, point_mesh_distance
 from graspkit.objects.placement import ObjectPose, apply_pose
-from graspkit.paths import pool_results
+from graspkit.paths import default_model_path, pool_results
 
 KINDS = ("grasp", "approach")
 KIND_IDS = {"grasp": 11, "approach": 12}
@@ -254,8 +254,6 @@ def write_chunk(fitter: GraspFitter, kind: str, seed: int, chunk: int, out: Path
 
 def model_name(bm) -> str:
     """What a file's `body.model` says: graspkit's name for the shipped body, else the model file as given."""
-    from graspkit.paths import default_model_path
-
     same = Path(bm.source).resolve() == default_model_path().resolve()
     return DEFAULT_MODEL_NAME if same else str(bm.source)
 
