@@ -194,6 +194,10 @@ def intention(wrist: Tensor, pelvis: Tensor, psi: Tensor, goal: Tensor, time_lef
     shape = (wrist[..., 0] + pelvis[..., 0] + psi + goal[..., 0] + time_left).shape     # the broadcast shape
     if not bool(torch.isfinite(goal).all()):     # a NaN goal would make I^r silently 0 (NaN > eps is False)
         raise ValueError("goal: contains NaN or Inf (expected world positions in metres)")
+    for x, n, unit in ((wrist, "wrist", "a position in metres"), (pelvis, "pelvis", "a position in metres"),
+                       (psi, "psi", "a heading in radians")):     # past t_G the output is zeroed: a NaN body
+        if not bool(torch.isfinite(x).all()):                     # would pass unseen
+            raise ValueError(f"{n}: contains NaN or Inf (expected {unit})")
     if torch.isnan(time_left).any():        # NaN > 0 is False: it would read as "goal time passed", silently
         raise ValueError("time_left: contains NaN (expected seconds to the goal frame; <= 0 once it has passed)")
     time_left = time_left.to(dtype).expand(shape)

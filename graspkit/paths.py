@@ -32,17 +32,38 @@ def temp_beside(path: Path, suffix: str = ".tmp") -> Path:
     return Path(tmp)
 
 
+def sync_rename(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
+    """Flush tmp's bytes to disk, rename it onto path and flush the folder: after a power cut path holds the old
+    file or the new one, never a renamed file whose data had not reached the disk."""
+    fd = os.open(tmp, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+    os.replace(tmp, path)
+    try:                                    # the rename itself; some file systems cannot sync a folder
+        fd = os.open(Path(path).parent, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
 def publish(tmp: Path, path: Path) -> Path:
-    """Give tmp the usual permissions (mkstemp makes it owner-only) and rename it onto path atomically."""
+    """Give tmp the usual permissions (mkstemp makes it owner-only) and rename it onto path atomically (synced)."""
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o666 & ~umask)
-    os.replace(tmp, path)
+    sync_rename(tmp, path)
     return path
 
 
 def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
-    """Write data to path through a temporary file in the same folder and os.replace; returns the path."""
+    """Write data to path through a temporary file in the same folder, synced and renamed; returns the path."""
     path = Path(path)
     tmp = temp_beside(path)
     try:

@@ -211,8 +211,15 @@ def test_errors_name_the_argument():
         I.body_joints(torch.zeros(135), torch.zeros(21, 3))
 
 
-def test_a_nan_time_left_is_refused_not_read_as_goal_time_passed():
+def test_a_nan_time_left_goal_or_body_is_refused_not_read_as_goal_time_passed():
     with pytest.raises(ValueError, match="time_left: contains NaN"):
         _I([0.0, 0.0, 1.0], [0.0, 0.0, 0.9], 0.0, [2.0, 1.0, 1.0], float("nan"))
     with pytest.raises(ValueError, match="goal: contains NaN"):     # I^r would read a NaN goal as "straight above"
         _I([0.0, 0.0, 1.0], [0.0, 0.0, 0.9], 0.0, [float("nan"), 1.0, 1.0], 1.0)
+    for time_left in (1.0, -1.0):       # past t_G the intention is zero: a NaN body must not pass unseen there
+        with pytest.raises(ValueError, match="wrist: contains NaN"):
+            _I([float("nan"), 0.0, 1.0], [0.0, 0.0, 0.9], 0.0, [2.0, 1.0, 1.0], time_left)
+        with pytest.raises(ValueError, match="pelvis: contains NaN"):
+            _I([0.0, 0.0, 1.0], [0.0, float("inf"), 0.9], 0.0, [2.0, 1.0, 1.0], time_left)
+        with pytest.raises(ValueError, match="psi: contains NaN"):
+            _I([0.0, 0.0, 1.0], [0.0, 0.0, 0.9], float("nan"), [2.0, 1.0, 1.0], time_left)

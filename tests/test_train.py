@@ -174,3 +174,38 @@ def test_a_run_writes_its_loss_curve_and_clears_a_killed_runs_temporary_files(tm
     png = (tmp_path / "run.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(hist) == 2
     assert not stale.exists() and fresh.exists()           # a writer at work now is left alone
+
+
+def test_every_atomic_writer_syncs_the_file_before_renaming_it(tmp_path, monkeypatch):
+    import os
+
+    import numpy as np
+
+    from graspkit.body.procedural import save_model_npz
+    from graspkit.data.formats import write_npz_atomic
+    from graspkit.paths import write_atomic
+
+    events = []
+    real_fsync, real_replace = os.fsync, os.replace
+
+    def fsync(fd):
+        events.append(("fsync", os.readlink(f"/proc/self/fd/{fd}")))
+        return real_fsync(fd)
+
+    def replace(src, dst):
+        events.append(("rename", str(src), str(dst)))
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    monkeypatch.setattr(os, "replace", replace)
+    writers = {"a.pt": lambda p: save_checkpoint(p, {"w": torch.ones(2)}), "b.txt": lambda p: write_atomic(p, "x"),
+               "c.npz": lambda p: write_npz_atomic(p, {"x": np.ones(2)}),
+               "d.npz": lambda p: save_model_npz({"x": np.ones(2)}, p)}
+    for name, write in writers.items():
+        events.clear()
+        write(tmp_path / name)
+        renames = [e for e in events if e[0] == "rename"]
+        assert len(renames) == 1 and renames[0][2] == str(tmp_path / name), (name, events)
+        k = events.index(renames[0])
+        assert ("fsync", renames[0][1]) in events[:k], (name, events)       # the data, before the rename
+        assert ("fsync", str(tmp_path)) in events[k:], (name, events)       # the folder's entry, after it

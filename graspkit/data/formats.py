@@ -25,6 +25,7 @@ import torch
 
 from graspkit.data.motion import HANDS, Motion, check_fps
 from graspkit.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
+from graspkit.paths import sync_rename
 
 FPS = 30.0
 NUM_BETAS = 10
@@ -97,7 +98,7 @@ def write_npz_atomic(path: Path, arrays: dict[str, np.ndarray]) -> None:
                 with zf.open(info, "w", force_zip64=True) as member:
                     np.lib.format.write_array(member, np.asanyarray(a), allow_pickle=False)
         os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
+        sync_rename(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
