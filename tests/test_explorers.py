@@ -61,3 +61,18 @@ def test_a_non_finite_value_is_refused_and_leaves_the_state_alone(explorer):
             explorer.update("beta1", bad)
     v1, _ = explorer.update("beta0", 0.0)
     np.testing.assert_array_equal(v0, v1)
+
+
+def test_the_widget_sliders_show_the_state_even_outside_their_range(explorer):
+    pytest.importorskip("ipywidgets")
+    explorer.update("beta0", 3.0)                            # beyond the ±2 range: ipywidgets would clamp to 2
+    explorer.update("left_elbow", 0.5)
+    try:
+        with pytest.raises(ValueError, match="beta1: expected a number"):
+            explorer.update("beta1", True)
+        sliders = {s.description: s for s in explorer.widget(dpi=20).children[0].children}
+        assert sliders["beta0"].value == 3.0 and sliders["beta0"].max == 3.0
+        assert sliders["left_elbow"].value == 0.5 and (sliders["beta1"].min, sliders["beta1"].max) == (-2, 2)
+    finally:
+        explorer.update("beta0", 0.0)
+        explorer.update("left_elbow", 0.0)

@@ -86,6 +86,22 @@ def test_object_swap_keeps_the_pose_and_unknown_slider_is_named(explorer):
         with pytest.raises(ValueError, match=f"{name}: expected a finite number"):
             explorer.update(name, float("nan"))
     assert explorer.update("x", 0.03) == before
+    with pytest.raises(ValueError, match="x: expected a number"):      # float(True) would read as 1 m
+        explorer.update("x", True)
+    with pytest.raises(ValueError, match="object: unknown object 'nope'"):
+        explorer.update("object", "nope")
+    assert explorer.update("x", 0.03) == before
+
+
+def test_the_widget_shows_the_values_the_explorer_holds_even_outside_the_slider_range(explorer):
+    pytest.importorskip("ipywidgets")
+    explorer.update("x", 0.25)                              # beyond the ±0.1 m range: ipywidgets would clamp to 0.1
+    explorer.update("yaw", 200.0)
+    sliders = {c.description: c for c in explorer.widget(dpi=20).children[0].children[0].children}
+    assert sliders["x (m)"].value == pytest.approx(0.25) and sliders["yaw (°)"].value == pytest.approx(200.0)
+    assert sliders["y (m)"].value == 0.0 and (sliders["y (m)"].min, sliders["y (m)"].max) == (-0.1, 0.1)
+    sliders["x (m)"].value = -0.05                          # the slider still drives the explorer
+    assert explorer.offset[0] == pytest.approx(-0.05)
 
 
 def test_open_body_reports_no_volume_but_still_depth():

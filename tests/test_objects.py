@@ -87,6 +87,17 @@ def test_sample_object_pose_rejects_bad_ranges():
         sample_object_pose(0, height_range=(1.7, 0.5))
     with pytest.raises(ValueError, match="distance_range"):
         sample_object_pose(0, distance_range=(-0.1, 0.5))
+    for bad in (-3, True, 1.5, None):
+        with pytest.raises(ValueError, match="rng: expected a numpy Generator or a non-negative integer"):
+            sample_object_pose(bad)
+
+
+def test_the_bps_basis_takes_only_a_fixed_seed():
+    from graspkit.objects.bps import bps_basis
+    torch.testing.assert_close(bps_basis(seed=np.int64(4)), bps_basis(seed=4))
+    for bad in (-1, 1.5, None, True):       # None would give a new basis on every call
+        with pytest.raises(ValueError, match="seed: expected a non-negative integer"):
+            bps_basis(seed=bad)
 
 
 def test_object_pose_validates_rotation():

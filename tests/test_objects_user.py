@@ -95,6 +95,31 @@ def test_a_catalogue_name_may_come_as_a_path():
     assert name == "mug" and np.array_equal(m.vertices, make_object("mug").vertices)
 
 
+def test_a_catalogue_name_is_not_hidden_by_a_file_of_that_name(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _box().export(tmp_path / "mug", file_type="stl")      # a file called "mug" in the working folder
+    name, m = as_object("mug")                             # the name: the catalogue's mug
+    assert name == "mug" and np.array_equal(m.vertices, make_object("mug").vertices)
+    with pytest.raises(ValueError, match="could not read a mesh from mug"):
+        as_object(Path("mug"))                             # a Path: the file (trimesh needs a suffix to read it)
+
+
+def test_a_glb_file_is_read_y_up_as_gltf_specifies_and_round_trips_graspkits_export(tmp_path):
+    from scipy.spatial import cKDTree
+
+    from graspkit.viz.export import export_scene
+    mug = make_object("mug")                            # z up, handle along +x
+    path = export_scene({"mug": mug}, tmp_path / "mug_export.glb")        # written y up
+    raw = trimesh.load(path, force="mesh", process=False)
+    np.testing.assert_allclose(raw.extents, mug.extents[[0, 2, 1]], atol=1e-6)   # the file: the mug's height along y
+    name, m = as_object(path)
+    assert name == "mug_export"
+    np.testing.assert_allclose(m.extents, mug.extents, atol=1e-6)
+    d, _ = cKDTree(mug.vertices).query(m.vertices)
+    assert d.max() < 1e-6                              # the same mug, upright, not mirrored
+    assert m.volume == pytest.approx(mug.volume, rel=1e-5)
+
+
 def test_an_unreadable_file_is_named(tmp_path):
     bad = tmp_path / "broken.obj"
     bad.write_text("this is not a mesh\n")

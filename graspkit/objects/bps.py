@@ -21,6 +21,8 @@ def bps_basis(n: int = 1024, radius: float = 0.15, seed: int = 0, dtype: torch.d
         raise ValueError(f"n: expected a positive whole number of basis points, got {n!r}")
     if not (isinstance(radius, (int, float, np.number)) and np.isfinite(radius) and radius > 0):
         raise ValueError(f"radius: expected a positive finite radius in metres, got {radius!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:   # None would draw a new
+        raise ValueError(f"seed: expected a non-negative integer (the basis is fixed), got {seed!r}")  # basis per call
     rng = np.random.default_rng(seed)
     direction = rng.standard_normal((n, 3))
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)

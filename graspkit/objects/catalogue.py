@@ -7,8 +7,9 @@ solid geometry in manifold3d (revolved profiles, extrusions, convex hulls, exact
 which guarantees 2-manifold, watertight output. Sizes are realistic approximations of the real
 objects; they are listed in `SPECS` and in docs/objects.md.
 
-GRAB's six test objects (mug, camera, toothpaste, wine glass, frying pan, binoculars; SAGA Sec. 4,
-GOAL Sec. 4) are all present.
+GRAB's six test objects (mug, camera, toothpaste, wine glass, frying pan, binoculars; SAGA App. A.3,
+GrabNet's split; GOAL withholds five objects without naming them) are all present. The YCB / HO3D
+look-alikes are training objects here (graspkit.data.grasp.SPLITS); SAGA uses HO3D only for testing.
 """
 from __future__ import annotations
 

@@ -87,8 +87,9 @@ def sample_object_pose(
             raise ValueError(f"{name}: expected finite (low, high) with low <= high, got {(lo, hi)}")
     if distance_range[0] < 0:
         raise ValueError(f"distance_range: distances must be >= 0, got {distance_range}")
-    if not isinstance(rng, (np.random.Generator, int, np.integer)):
-        raise ValueError(f"rng: expected a numpy Generator or an integer seed, got {type(rng).__name__}")
+    if not (isinstance(rng, np.random.Generator)
+            or (isinstance(rng, (int, np.integer)) and not isinstance(rng, bool) and rng >= 0)):
+        raise ValueError(f"rng: expected a numpy Generator or a non-negative integer seed, got {rng!r}")
     rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
     dist = rng.uniform(*distance_range)
     bearing = np.deg2rad(facing_deg + rng.uniform(*bearing_range_deg))

@@ -5,7 +5,8 @@ whose frame has its origin at the bounding-box centre, z up (`make_object`'s con
 against that and moves it there, so that `graspkit.saga.synthesize`, the samplers and the SDF caches take it like
 any catalogue name. A mesh that is not closed, is inside out, has faces without area, is made of overlapping parts or
 has a part turned inside out, or whose size says millimetres gets an error naming the argument and what was expected,
-never a silent fix (vertices that no face uses are dropped: they are not part of the surface).
+never a silent fix (vertices that no face uses are dropped: they are not part of the surface; one with NaN
+coordinates is still refused, as a sign of a damaged file).
 """
 from __future__ import annotations
 
@@ -28,20 +29,24 @@ SOLID_SAMPLES = 512      # surface points of the one-solid check (solid_problem)
 SOLID_OFFSET = 1e-5      # how far behind / in front of the surface it looks, as a share of the largest side
 MIN_BAD = 2              # samples that must disagree before a mesh is refused
 SOLID_PAIRS = 10_000_000  # at most this many (sample, face) pairs: fewer samples on meshes of over 20,000 faces
+Y_UP_SUFFIXES = (".glb", ".gltf")   # glTF 2.0 is +y up by specification: turned to z up on reading
+Y_UP_TO_Z_UP = np.array([[1.0, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]])   # +90 deg about x: y -> z
 
 
 def as_object(obj: str | Path | trimesh.Trimesh, argument: str = "obj") -> tuple[str, trimesh.Trimesh]:
     """A catalogue name, a mesh file (.obj, .ply, .stl, .glb, ...) or a trimesh.Trimesh -> (name, mesh).
 
     The mesh comes back as a copy in the object frame: closed and outward-oriented, metres, origin at its
-    bounding-box centre (axes kept as given: z is up). The name is the catalogue name, the file's stem, or the
-    mesh's `metadata["name"]` (else "object").
+    bounding-box centre (axes kept as given: z is up; a .glb / .gltf file is y up by the glTF specification and
+    is turned +90 deg about x, so that its up becomes z, as graspkit's own GLB exports expect). The name is the catalogue name, the file's stem, or the
+    mesh's `metadata["name"]` (else "object"). A str naming a catalogue object is that object even when a file of
+    that name lies in the working folder; pass a Path (or "./mug") for the file.
     """
     if isinstance(obj, trimesh.Trimesh):
         return str(obj.metadata.get("name") or "object"), _checked(obj.copy(), argument)
     if isinstance(obj, (str, Path)):
-        path = Path(obj)
-        if str(obj) in list_objects() and not path.is_file():
+        path = Path(obj)       # a catalogue name as a str is the catalogue object, even beside a file of that name
+        if str(obj) in list_objects() and (isinstance(obj, str) or not path.is_file()):
             return str(obj), make_object(str(obj))
         if path.is_file():
             try:            # unprocessed first: processing would drop NaN vertices and their faces without a word
@@ -53,6 +58,8 @@ def as_object(obj: str | Path | trimesh.Trimesh, argument: str = "obj") -> tuple
             if not np.isfinite(mesh.vertices).all():
                 raise ValueError(f"{argument} ({path}): the mesh has NaN or infinite vertex coordinates")
             mesh.process()
+            if path.suffix.lower() in Y_UP_SUFFIXES:
+                mesh.apply_transform(Y_UP_TO_Z_UP)
             return path.stem, _checked(mesh, f"{argument} ({path})")
         if path.suffix or len(path.parts) > 1:
             raise ValueError(f"{argument}: no such mesh file {str(path)!r} (nor a catalogue name {list_objects()})")

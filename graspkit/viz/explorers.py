@@ -24,6 +24,8 @@ EXPLORER_JOINTS: dict[str, tuple[float, float, float]] = {
 def slider_value(name: str, value: float) -> float:
     """`value` as a float, or a ValueError naming the slider when it is not a finite number (stored, a NaN would
     break every later update)."""
+    if isinstance(value, (bool, np.bool_)):      # float(True) is 1.0: a flag is not a slider position
+        raise ValueError(f"{name}: expected a number, got {value!r}")
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -31,6 +33,13 @@ def slider_value(name: str, value: float) -> float:
     if not np.isfinite(v):
         raise ValueError(f"{name}: expected a finite number, got {value!r}")
     return v
+
+
+def slider_bounds(value: float, low: float, high: float) -> dict[str, float]:
+    """A slider's value, min and max: the range [low, high] widened to hold `value` (ipywidgets clamps a value
+    outside its range, and the slider would then show a number the explorer does not hold)."""
+    v = float(value)
+    return {"value": v, "min": min(low, v), "max": max(high, v)}
 
 
 @dataclass
@@ -117,11 +126,11 @@ class BodyExplorer:
         def redraw() -> None:
             image.value = png_bytes(self.figure(), dpi)
 
-        # the sliders start at the explorer's current state (after any `update`), clipped to their range
-        sliders = [w.FloatSlider(value=float(np.clip(self.state.betas[i], -2, 2)), min=-2, max=2, step=0.25,
-                                 description=f"beta{i}", continuous_update=False) for i in range(betas_shown)]
-        sliders += [w.FloatSlider(value=float(np.clip(self.state.angles[j], -1.6, 1.6)), min=-1.6, max=1.6, step=0.1,
-                                  description=j, continuous_update=False) for j in EXPLORER_JOINTS]
+        # the sliders start at the explorer's current state (after any `update`), their range widened to hold it
+        sliders = [w.FloatSlider(**slider_bounds(self.state.betas[i], -2, 2), step=0.25, description=f"beta{i}",
+                                 continuous_update=False) for i in range(betas_shown)]
+        sliders += [w.FloatSlider(**slider_bounds(self.state.angles[j], -1.6, 1.6), step=0.1, description=j,
+                                  continuous_update=False) for j in EXPLORER_JOINTS]
         for s in sliders:
             s.observe(lambda ch, s=s: (self.state.set(s.description, ch["new"]), redraw()), names="value")
         redraw()

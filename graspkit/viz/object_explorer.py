@@ -14,10 +14,10 @@ import torch
 import trimesh
 from matplotlib.figure import Figure
 
-from graspkit.objects import (MARKER_CONTACT_THRESHOLD, OBJECT_CONTACT_THRESHOLD, ObjectPose, apply_pose,
+from graspkit.objects import (MARKER_CONTACT_THRESHOLD, OBJECT_CONTACT_THRESHOLD, ObjectPose, apply_pose, list_objects,
                               intersection_volume, make_object, marker_contact, object_contact, sample_surface,
                               signed_distance)
-from graspkit.viz.explorers import slider_value
+from graspkit.viz.explorers import slider_bounds, slider_value
 
 # right arm held forward at chest height, palm down, the left arm lowered (SMPL-X canonical frame, see body/poses.py)
 REACH_FORWARD: dict[str, tuple[float, float, float]] = {
@@ -124,6 +124,8 @@ class HandObjectExplorer:
         elif name == YAW_SLIDER:
             self.yaw = slider_value(name, value)
         elif name == "object":
+            if value not in list_objects():
+                raise ValueError(f"object: unknown object {value!r}; expected one of {list_objects()}")
             self.set_object(str(value))
         else:
             names = [*OFFSET_SLIDERS, YAW_SLIDER, "object"]
@@ -195,7 +197,6 @@ class HandObjectExplorer:
         """An ipywidgets box: object dropdown, x/y/z sliders (±span m), a yaw slider, the figure and the readout."""
         import ipywidgets as w
 
-        from graspkit.objects import list_objects
         from graspkit.viz.export import png_bytes
 
         # the figure goes into an Image widget (PNG bytes), not an Output widget: it then shows the same in every
@@ -207,9 +208,9 @@ class HandObjectExplorer:
             image.value = png_bytes(self.figure(), dpi)
 
         controls: list[Any] = [w.Dropdown(options=list_objects(), value=self.name, description="object")]
-        controls += [w.FloatSlider(value=float(self.offset[i]), min=-span, max=span, step=step, description=f"{a} (m)",
+        controls += [w.FloatSlider(**slider_bounds(self.offset[i], -span, span), step=step, description=f"{a} (m)",
                                    readout_format=".3f", continuous_update=False) for i, a in enumerate(OFFSET_SLIDERS)]
-        controls.append(w.FloatSlider(value=self.yaw, min=-180, max=180, step=15, description="yaw (°)",
+        controls.append(w.FloatSlider(**slider_bounds(self.yaw, -180, 180), step=15, description="yaw (°)",
                                       continuous_update=False))
         for name, c in zip(["object", *OFFSET_SLIDERS, YAW_SLIDER], controls):
             c.observe(lambda ch, name=name: redraw(self.update(name, ch["new"])), names="value")

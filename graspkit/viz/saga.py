@@ -14,7 +14,7 @@ import torch
 from matplotlib.figure import Figure
 from torch import Tensor
 
-from graspkit.viz.explorers import slider_value
+from graspkit.viz.explorers import slider_bounds, slider_value
 
 _BOXES = [  # (x, y, w, h, text, colour) of the WholeGrasp-VAE diagram (SAGA Fig. 3)
     (0.0, 2.6, 1.9, 0.7, "markers M (143x3)\n+ contacts C_M", "#3b6ea8"),
@@ -167,16 +167,17 @@ class LatentWalk:
 
         img = w.Image(value=self.png(), format="png")
         caption = w.Label(self.describe(self.measure()))
-        sliders = [w.FloatSlider(value=float(self.z[0, i]), min=-3, max=3, step=0.1, description=f"z{i}")
+        sliders = [w.FloatSlider(**slider_bounds(self.z[0, i], -3, 3), step=0.1, description=f"z{i}")
                    for i in range(self.dims)]
-        seed = w.IntSlider(value=self.seed, min=0, max=50, description=SEED_SLIDER)
+        seed = w.IntSlider(value=self.seed, min=0, max=max(50, self.seed), description=SEED_SLIDER)
 
         def changed(change: dict, name: str) -> None:
             numbers = self.update(name, change["new"])
             if name == SEED_SLIDER:
                 for i, s in enumerate(sliders):
                     s.unobserve_all()
-                    s.value = float(self.z[0, i])
+                    b = slider_bounds(self.z[0, i], s.min, s.max)     # widen first: a value outside is clamped
+                    s.min, s.max, s.value = b["min"], b["max"], b["value"]
                     s.observe(lambda c, n=f"z{i}": changed(c, n), names="value")
             img.value, caption.value = self.png(), self.describe(numbers)
 
