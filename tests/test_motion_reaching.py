@@ -214,3 +214,27 @@ def test_a_chain_of_reaches_refuses_bad_input_by_name(bm, bad, match):
     kw = {"goals": np.array([[1.0, 0.0, 1.0], [2.0, 1.0, 1.0]]), "goal_frames": (90, 200), "hold_frames": (10, 5)}
     with pytest.raises(ValueError, match=match):
         plan_reach_chain((0.0, 0.0, 0.0), bm=bm, **{**kw, **bad})
+
+
+@pytest.mark.parametrize("kind, index", [("reach_near", 11), ("reach_near", 24), ("reach_far", 8)])
+def test_the_head_never_snaps_round_when_the_gaze_target_passes_behind_or_under_it(bm, kind, index):
+    """Clips of `--seed 0` whose head once turned 82 deg in one frame (a clipped arctan2 wrapping at pi, a blended
+    look vector through zero): the neck and head local rotations, read with scipy, turn at most a few deg per frame,
+    and the head still faces the goal at the goal frame."""
+    from scipy.spatial.transform import Rotation
+
+    from graspkit.data.cli import clip_seed
+    from graspkit.data.reaching import generate_reach
+
+    m = generate_reach(clip_seed(0, kind, index), bm, far=kind == "reach_far", near=kind == "reach_near")
+    p = m.poses.reshape(len(m.poses), -1, 3).astype(np.float64)
+    for j in (12, 15):                                      # neck, head
+        r = Rotation.from_rotvec(p[:, j])
+        assert np.degrees((r[1:] * r[:-1].inv()).magnitude()).max() < 10.0, j
+    k = int(m.goal_frame)
+    head = np.eye(3)
+    for j in (0, 3, 6, 9, 12, 15):                          # pelvis -> spine1..3 -> neck -> head
+        head = head @ Rotation.from_rotvec(p[k, j]).as_matrix()
+    to = m.goal - m.slice(k, k + 1).joint_positions(bm)[0, 15]
+    cos = head[:, 2] @ to / np.linalg.norm(to)               # SMPL-X's forward is the head's +z
+    assert cos > np.cos(np.radians(25.0))
