@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from graspkit.cli import check_counts, reports_errors
+from graspkit.cli import check_counts, check_out, reports_errors
 from graspkit.data.motionfill_dataset import (MotionFillDataset, MotionFillStats, load_windows, make_windows,
                                               save_windows, split_clips)
 from graspkit.models.motionfill import MotionFillConfig, MotionFillVAE
@@ -380,18 +380,38 @@ PAPER = {"CNN-AE (local)": (0.091, 0.245, 0.804, 0.739), "LEMO (local)": (0.083,
          "Route+PoseNet": (0.219, 0.575, 0.955, 0.884), "Ours": (0.083, 0.394, 0.772, 0.609)}
 
 
+STILL_ACCELERATION = 1e-9   # m per frame^2: an RMS acceleration below this is no motion (rounding at most)
+
+
 def pskl(pred: np.ndarray, gt: np.ndarray, eps: float = 1e-8) -> tuple[float, float]:
     """PSKL (LEMO, SAGA §4.2): KL between the normalised power spectra of the accelerations, per point and axis,
-    averaged; both directions (KL(P || GT), KL(GT || P)). pred, gt (N, T, J, 3); pred may be (N, K, T, J, 3)."""
-    def spectrum(x: np.ndarray) -> np.ndarray:
-        acc = x[..., 2:, :, :] - 2 * x[..., 1:-1, :, :] + x[..., :-2, :, :]
-        ps = np.abs(np.fft.rfft(acc, axis=-3)) ** 2
-        return ps / (ps.sum(-3, keepdims=True) + eps) + eps
+    averaged; both directions (KL(P || GT), KL(GT || P)). pred, gt (N, T, J, 3); pred may be (N, K, T, J, 3).
 
-    p, g = spectrum(pred), spectrum(gt)
+    A coordinate that does not accelerate at all (a linear blend's: RMS below STILL_ACCELERATION) has no spectrum to
+    normalise and is left out of the mean, in both directions; an eps spectrum in its place read as KL(P || GT) = 0
+    and KL(GT || P) = 16 (an independent check, 2026-12-03). `pskl_still_share` gives the share left out."""
+    (p, live_p), (g, live_g) = _spectrum(pred, eps), _spectrum(gt, eps)
     if p.ndim == g.ndim + 1:
-        g = g[:, None]
-    return float((p * np.log(p / g)).sum(-3).mean()), float((g * np.log(g / p)).sum(-3).mean())
+        g, live_g = g[:, None], live_g[:, None]
+    live = np.broadcast_to(live_p & live_g, np.broadcast_shapes(live_p.shape, live_g.shape))
+    if not live.any():
+        return float("nan"), float("nan")
+    return float((p * np.log(p / g)).sum(-3)[live].mean()), float((g * np.log(g / p)).sum(-3)[live].mean())
+
+
+def pskl_still_share(pred: np.ndarray) -> float:
+    """The share of pred's coordinates (..., T, J, 3) that `pskl` leaves out: those with no acceleration."""
+    return float(1.0 - _spectrum(pred, 1e-8)[1].mean())
+
+
+def _spectrum(x: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised power spectra (..., F, J, 3) of the accelerations of x (..., T, J, 3) along time, and which
+    coordinates (..., J, 3) move at all."""
+    acc = x[..., 2:, :, :] - 2 * x[..., 1:-1, :, :] + x[..., :-2, :, :]
+    ps = np.abs(np.fft.rfft(acc, axis=-3)) ** 2
+    total = ps.sum(-3, keepdims=True)
+    live = np.sqrt((acc ** 2).mean(-3)) > STILL_ACCELERATION
+    return ps / np.where(total > 0, total, 1.0) + eps, live
 
 
 def heel_columns() -> list[int]:
@@ -498,26 +518,41 @@ def table(rows: dict[str, dict[str, float]]) -> str:
 
 
 # ------------------------------------------------------------------------------------------------ GraspMotion-Opt
+APPROACH_KEYS = ("grasp.goal_frame", "body.params.fullpose", "body.params.transl", "body.betas", "contact.feet",
+                 "object.params.global_orient", "object.params.transl", "object.points", "object.normals", "obj_name")
+
+
 def approach_scene(path: str | Path, bm) -> dict[str, Any]:
     """One approach clip as MotionFill sees it (the window ending at the goal frame, canonical frame A.3) and its
     object in that frame: markers (61,79,3), traj (62,4), local, vel, contacts, betas, floor height, object points,
     normals (P,3), contact maps C_O (P,) and C_M (143,) at the grasp, the object's mesh (trimesh) and the pose of its
     catalogue mesh there (mesh_rotation (3,3), mesh_origin (3,): x = R x_mesh + origin), name, file name and the
     clip's last 61 frames (a Motion in the world)."""
+    import zipfile
+    import zlib
+
+    from graspkit.data.formats import open_npz
     from graspkit.data.motion import Motion, canonicalize
     from graspkit.objects.catalogue import make_object
     from graspkit.rotations import axis_angle_to_matrix
 
-    with np.load(path, allow_pickle=False) as a:
-        g = int(a["grasp.goal_frame"])
-        m = Motion(a["body.params.fullpose"][:g + 1].reshape(-1, 55, 3), a["body.params.transl"][:g + 1],
-                   a["body.betas"], 30.0, contacts=a["contact.feet"][:g + 1].astype(bool))
-        R_o = axis_angle_to_matrix(torch.as_tensor(a["object.params.global_orient"][g]).double()).numpy()
-        t_o = a["object.params.transl"][g].astype(np.float64)
-        pts, nrm = a["object.points"].astype(np.float64), a["object.normals"].astype(np.float64)
-        c_o = a["contact.object"][g].astype(np.float32) if "contact.object" in a.files else None
-        c_m = a["contact.markers"][g].astype(np.float32) if "contact.markers" in a.files else None
-        name = str(a["obj_name"])
+    with open_npz(path, "an approach clip (graspkit data make --kind approach)") as a:
+        missing = [k for k in APPROACH_KEYS if k not in a.files]
+        if missing:
+            raise ValueError(f"path: {path} is not an approach clip (graspkit data make --kind approach): "
+                             f"missing {missing}")
+        try:
+            g = int(a["grasp.goal_frame"])
+            m = Motion(a["body.params.fullpose"][:g + 1].reshape(-1, 55, 3), a["body.params.transl"][:g + 1],
+                       a["body.betas"], 30.0, contacts=a["contact.feet"][:g + 1].astype(bool))
+            R_o = axis_angle_to_matrix(torch.as_tensor(a["object.params.global_orient"][g]).double()).numpy()
+            t_o = a["object.params.transl"][g].astype(np.float64)
+            pts, nrm = a["object.points"].astype(np.float64), a["object.normals"].astype(np.float64)
+            c_o = a["contact.object"][g].astype(np.float32) if "contact.object" in a.files else None
+            c_m = a["contact.markers"][g].astype(np.float32) if "contact.markers" in a.files else None
+            name = str(a["obj_name"])
+        except (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as e:   # a damaged member, bad shapes
+            raise ValueError(f"path: {path}: could not read the approach clip ({e})") from None
     arr = make_windows([m], bm, align_end=True, progress=False)
     joints = m.joint_positions(bm)
     n = len(joints)
@@ -664,7 +699,8 @@ def main(argv: list[str] | None = None) -> int:
     """`python -m graspkit.eval_motionfill tab3`: Tab. 3 on the test-object windows, written into
     motionfill_eval.json's rows; `... graspmotion`: GraspMotion-Opt on the first two (--per-object) approach clips
     of each test object, batched, into its "graspmotion" section (the rest of the file kept); `... example`: lesson
-    06's example (the shipped mug clip batched with the first test clip) into motionfill_examples.npz/json."""
+    06's example (the shipped mug clip batched with the first test clip) into motionfill_examples.npz/json (--out: the
+    path without its suffix, or a .npz / .json path whose stem is used)."""
     from graspkit.optim.graspmotion import GraspMotionConfig
     from graspkit.paths import cache_dir
 
@@ -674,23 +710,47 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--clips", type=int, default=272, help="tab3: approach clips whose test-object windows are used")
     p.add_argument("--checkpoints", type=Path, default=CHECKPOINT.parent,
                    help="tab3: folder of motionfill.pt and the baselines' motionfill_<name>.pt")
-    p.add_argument("--out", type=Path, default=CHECKPOINT.parent / "motionfill_eval.json")
+    p.add_argument("--out", type=Path, default=None,
+                   help="tab3, graspmotion: the JSON to update (default data_stubs/checkpoints/motionfill_eval.json); "
+                        "example: the .npz/.json pair's path (default data_stubs/checkpoints/motionfill_examples)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--per-object", type=int, default=2, help="graspmotion: accepted clips per test object")
     p.add_argument("--threads", type=int, default=1)
     args = p.parse_args(argv)
     check_counts(args, clips=1, per_object=1, threads=1, seed=0)
+    if args.part == "example":
+        out = (args.out or CHECKPOINT.parent / "motionfill_examples")
+        out = out.with_suffix("") if out.suffix in (".npz", ".json") else out
+        for suffix in (".npz", ".json"):
+            check_out(out.with_name(out.name + suffix), is_file=True)
+    else:
+        args.out = args.out or CHECKPOINT.parent / "motionfill_eval.json"
+        check_out(args.out, is_file=True)
+        if args.out.is_file():                      # update_json reads it after the work: refuse a bad one now
+            import json
+            try:
+                json.loads(args.out.read_text())
+            except (UnicodeDecodeError, ValueError) as e:
+                raise ValueError(f"--out: {args.out} is not a JSON file to update ({e})") from None
     torch.set_num_threads(args.threads)
     data = args.data or cache_dir() / "grasps" / "approach"
     if args.part == "tab3":
+        from graspkit.models.motionfill_baselines import BASELINES
+
+        missing = [str(baseline_path(b, args.checkpoints)) for b in BASELINES
+                   if not baseline_path(b, args.checkpoints).is_file()]
+        if missing:                                 # the table would show them as "(paper only)" without a word
+            raise ValueError(f"--checkpoints: the Tab. 3 baselines are missing: {missing} "
+                             "(graspkit train motionfill_baseline, docs/saga_motion.md)")
         t0 = time.perf_counter()
         arr = windows("approach", args.clips, data=args.data)
         test = clip_split(arr)["test"]
         rows = evaluate(load_motionfill(args.checkpoints / "motionfill.pt"), arr, test, n=10, seed=args.seed,
                         baselines=load_baselines(args.checkpoints))
         protocol = (f"windows ending at the grasp of the six GRAB test objects among the first {args.clips} clips of "
-                    f"{data} (graspkit data make --kind approach --n 272 --seed 0); n = 10 samples, seed {args.seed}; "
-                    f"baselines from load_baselines({args.checkpoints.name})")
+                    f"{data}{' (graspkit data make --kind approach --n 272 --seed 0)' if args.data is None else ''}; "
+                    f"n = 10 samples, seed {args.seed}; baselines from load_baselines({args.checkpoints.name}); "
+                    "PSKL leaves out coordinates that never accelerate (the linear rows' z: pskl_still_share)")
         doc = update_json(args.out, rows=rows, test_windows=int(np.isin(arr["clip"], test).sum()), protocol=protocol)
         print(f"{doc['test_windows']} test windows, {time.perf_counter() - t0:.0f} s -> {args.out}")
         print(table(rows))
@@ -699,8 +759,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.part == "example":
         from graspkit.paths import DATA_STUBS
 
-        info = write_example([DATA_STUBS / "approach" / "approach_000000.npz", files[0]],
-                             CHECKPOINT.parent / "motionfill_examples", seed=args.seed)
+        info = write_example([DATA_STUBS / "approach" / "approach_000000.npz", files[0]], out, seed=args.seed)
         print({k: round(v, 3) if isinstance(v, float) else v for k, v in info["rows"][0].items()})
         return 0
     t0 = time.perf_counter()

@@ -356,6 +356,19 @@ def test_errors_name_the_argument(bm):
             opt.fit(torch.zeros(1, 5, 79, 3), torch.zeros(1, 10), floor=bad)
     with pytest.raises(ValueError, match="flat_hand_mean"):
         GraspMotionOpt(BodyModel.from_file(default_model_path(), flat_hand_mean=True), load_pose_prior())
+    nan = torch.zeros(1, 5, 79, 3)
+    nan[0, 2, 7, 0] = float("nan")                                # an SVD error deep inside, before
+    with pytest.raises(ValueError, match="markers: contains NaN"):
+        opt.fit(nan, torch.zeros(1, 10))
+    with pytest.raises(ValueError, match="betas: contains NaN"):
+        opt.fit(torch.zeros(1, 5, 79, 3), torch.full((1, 10), float("nan")))
+    with pytest.raises(ValueError, match="at least 2 frames"):
+        opt.fit(torch.zeros(1, 1, 79, 3), torch.zeros(1, 10))
+    with pytest.raises(ValueError, match="betas: expected a tensor"):
+        opt.fit(torch.zeros(1, 5, 79, 3), torch.zeros(10))
+    for steps in ((-1, 5), (1.5, 5), (5,)):                        # (-1, 5) skipped stage 1 silently
+        with pytest.raises(ValueError, match="steps: expected"):
+            GraspMotionConfig(steps=steps)
 
 
 def test_marker_contact_term_is_eq6s_marker_side_on_the_last_five_frames(bm):

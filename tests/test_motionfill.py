@@ -108,6 +108,16 @@ def test_image_round_trip_and_deterministic_sampling():
         m.sample(b["traj_interp"][0], b["local"][0, :, :78], b["contacts"][0], 2)
     with pytest.raises(ValueError, match="n: "):
         m.sample(b["traj_interp"][0], b["local"][0], b["contacts"][0], 0)
+    for n in (2.5, True):
+        with pytest.raises(ValueError, match="n: expected a whole number"):
+            m.sample(b["traj_interp"][0], b["local"][0], b["contacts"][0], n)
+    bad = b["local"][0].clone()
+    bad[3, 4, 1] = float("nan")                                   # would give all-NaN markers without a word
+    with pytest.raises(ValueError, match="local: expected finite"):
+        m.sample(b["traj_interp"][0], bad, b["contacts"][0], 2)
+    as_numpy = m.sample(b["traj_interp"][0].numpy(), b["local"][0].numpy(), b["contacts"][0].numpy(), 2,
+                        torch.Generator().manual_seed(1))              # numpy arrays: the same sample
+    torch.testing.assert_close(as_numpy["markers"], s1["markers"])
 
 
 def test_kl_terms_against_torch_distributions():

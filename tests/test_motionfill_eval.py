@@ -1,10 +1,12 @@
 """MotionFill evaluation (SAGA Tab. 3) and training command: PSKL, skating, the approach scene, `graspkit train motionfill`."""
+import re
+
 import numpy as np
 import pytest
 import torch
 
 from graspkit.body import BodyModel
-from graspkit.eval_motionfill import approach_scene, heel_columns, linear_local, pskl, skating
+from graspkit.eval_motionfill import approach_scene, heel_columns, linear_local, pskl, pskl_still_share, skating
 from graspkit.paths import DATA_STUBS, default_model_path
 
 STUB = DATA_STUBS / "approach" / "approach_000000.npz"
@@ -18,6 +20,24 @@ def test_pskl_is_zero_for_equal_motions_and_positive_otherwise():
     a, b = pskl(y, x)
     assert a > 0 and b > 0 and a != pytest.approx(b)
     assert pskl(np.stack([y, y], 1), x) == pytest.approx((a, b))   # (N, K, ...) samples against (N, ...)
+
+
+def test_pskl_matches_scipy_kl_per_coordinate_and_leaves_out_coordinates_that_never_accelerate():
+    from scipy.stats import entropy
+
+    g = np.random.default_rng(1)
+    x = np.cumsum(g.normal(0, 0.01, (3, 40, 4, 3)), 1)
+    y = np.cumsum(g.normal(0, 0.01, x.shape), 1)
+    y[..., 2] = np.linspace(0.0, 0.3, 40)[None, :, None]     # z: a straight line in time, no acceleration at all
+
+    def kl(a, b):                                           # scipy's KL of the normalised spectra, per coordinate
+        pa, pb = (np.abs(np.fft.rfft(np.diff(v, 2, axis=1), axis=1)) ** 2 for v in (a, b))
+        return np.mean([entropy(pa[n, :, j, c], pb[n, :, j, c]) for n in range(3) for j in range(4) for c in range(2)])
+
+    got = pskl(y, x)
+    assert got == pytest.approx((kl(y, x), kl(x, y)), rel=1e-5)          # x and y coordinates only
+    assert pskl(y[..., :2], x[..., :2]) == pytest.approx(got)
+    assert pskl_still_share(y) == pytest.approx(1 / 3) and pskl_still_share(x) == 0.0
 
 
 def test_skating_counts_frames_where_both_heels_slide_near_the_ground():
@@ -172,3 +192,34 @@ def test_window_cache_is_keyed_by_the_body_and_the_window_version(tmp_path, monk
     E.windows("reach", 2, bm, data=data, progress=False)
     assert len(list(cache.glob("reach_2_*.npz"))) == 3
     assert E.windows_source("reach", 2, data)[0] != E.windows_source("reach", 2, data, tall.digest())[0]
+
+
+def test_the_evaluation_command_checks_out_and_the_baselines_before_any_work(tmp_path, monkeypatch, capsys):
+    import graspkit.eval_motionfill as E
+
+    def no_work(*a, **k):
+        raise AssertionError("the work started")
+
+    monkeypatch.setattr(E, "windows", no_work)
+    monkeypatch.setattr(E, "graspmotion_eval", no_work)
+    (tmp_path / "notes.json").write_bytes(b"\x89PNG not json")
+    (tmp_path / "afile").write_text("x")
+    for argv, message in ((["tab3", "--out", str(tmp_path / "notes.json")], "--out: .*not a JSON file"),
+                          (["graspmotion", "--out", str(tmp_path / "afile" / "eval.json")], "--out: .*afile is a file"),
+                          (["example", "--out", str(tmp_path / "afile" / "ex")], "--out: .*afile is a file"),
+                          (["tab3", "--checkpoints", str(tmp_path), "--out", str(tmp_path / "e.json")],
+                           "--checkpoints: the Tab. 3 baselines are missing")):
+        assert E.main(argv) == 2
+        assert re.search(message, capsys.readouterr().err), argv
+    got = {}                                                 # example: --out is where the pair goes
+    monkeypatch.setattr(E, "held_out_clips", lambda data, per_object: [STUB])
+    monkeypatch.setattr(E, "write_example", lambda files, out, seed: got.setdefault("out", out) and {"rows": [{}]})
+    assert E.main(["example", "--out", str(tmp_path / "mine.npz")]) == 0
+    assert got["out"] == tmp_path / "mine"
+
+
+def test_approach_scene_names_a_file_that_is_not_an_approach_clip(tmp_path):
+    bm = BodyModel.from_file(default_model_path())
+    np.savez(tmp_path / "other.npz", poses=np.zeros((3, 165)))
+    with pytest.raises(ValueError, match="other.npz is not an approach clip.*missing"):
+        approach_scene(tmp_path / "other.npz", bm)

@@ -42,6 +42,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
+import numpy as np
 import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
@@ -408,11 +409,20 @@ class MotionFillVAE(nn.Module):
         shapes = {"traj_interp": (traj_interp, (NUM_ROOT, 4)), "local": (local, (NUM_FRAMES, NUM_MARKERS, 3)),
                   "contacts": (contacts, (NUM_FRAMES, 4)), "traj": (traj, (NUM_ROOT, 4))}
         for name, (x, shape) in shapes.items():
-            got = None if x is None else tuple(torch.as_tensor(x).shape)
-            if got is not None and got != shape:
-                raise ValueError(f"{name}: expected shape {shape}, got {got}")
-        if n < 1:
-            raise ValueError(f"n: expected >= 1 samples, got {n}")
+            if x is None:
+                continue
+            try:
+                x = torch.as_tensor(x)
+            except (TypeError, ValueError, RuntimeError):
+                raise ValueError(f"{name}: expected a tensor of shape {shape}, got {type(x).__name__}") from None
+            if tuple(x.shape) != shape:
+                raise ValueError(f"{name}: expected shape {shape}, got {tuple(x.shape)}")
+            if x.is_complex() or (x.is_floating_point() and not bool(torch.isfinite(x).all())):
+                raise ValueError(f"{name}: expected finite real values (no NaN or Inf)")
+        traj_interp, local, contacts = (torch.as_tensor(x) for x in (traj_interp, local, contacts))
+        traj = None if traj is None else torch.as_tensor(traj)
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f"n: expected a whole number >= 1 of samples, got {n!r}")
         was = self.training
         self.eval()
         ti = traj_interp.float().expand(n, -1, -1)

@@ -176,8 +176,10 @@ viz.show_animation(anim)
 # interpolation is our extra. Compared like for like on ADE (the best of 10 samples), Ours-Local (true trajectory)
 # is below CNN-AE and PoseNet, which also infill on the true trajectory, and Ours below Route+PoseNet, which predicts
 # its own (Ours, with its predicted trajectory, is above PoseNet's true-trajectory figure); on PSKL both of ours are
-# below every paper baseline in both directions (the local linear interpolation, our extra, is lower still on
-# PSKL (P, GT), 0.355, and far higher on PSKL (GT, P), 5.881). It got there with three measured changes (`docs/saga_motion.md`): LocalMotionFill reads each frame of
+# below every paper baseline in both directions. The local linear interpolation, our extra, is lower still in both
+# (0.53 / 0.63): on the true trajectory its accelerations are the trajectory's alone, which is the ground truth's
+# dominant spectrum; PSKL does not see that its body glides. (Its markers' z never accelerates at all; PSKL leaves
+# such coordinates out, a third of its own.) It got there with three measured changes (`docs/saga_motion.md`): LocalMotionFill reads each frame of
 # the motion image whole and convolves over time only (LEMO's 3 × 3 kernels slide across neighbouring marker
 # coordinates, and generalised to these held-out objects worse than PoseNet's LSTM); the losses are averaged as in the
 # authors' code; and both decoders give smooth outputs (TrajFill's in its 16 lowest DCT frequencies), which is what
@@ -218,7 +220,7 @@ print("| mean | " + " | ".join(f"{np.mean([r[k] for r in ev['graspmotion']['rows
 # sample's first steps; held, those shuffling steps count as skating instead; `docs/saga_motion.md`, "The start frame"). With the paper's step counts
 # it takes about 100 s on one core (`graspkit saga --object mug` writes GIF, npz and GLB); here, to keep the lesson
 # short, with about a third of the steps (and of the polish), which leaves more skating after the fit than the full
-# schedule does (`docs/saga_motion.md`: 0.001 on its twelve test clips). The mug is a test object, so the models have
+# schedule does (`docs/saga_motion.md`: 0.000 on its twelve test clips). The mug is a test object, so the models have
 # not seen it; its 2 mm collision grid ships with graspkit (any other object's is built once into the cache, ~20 s).
 # The grasp itself is GraspPose-Opt's and touches the object; the motion's last frame is GraspMotion-Opt's fit to
 # MotionFill's last markers, and it does not always keep the touch: on the twelve test clips of `docs/saga_motion.md`
