@@ -30,7 +30,7 @@ def ratio_table(rows: list[Row], table: str, reference: str) -> str:
         cells = []
         for k in cols:
             a, b = r.values.get(k), ref.values[k]
-            cells.append("—" if a is None else ("inf" if b == 0 and a else f"{a / b:.2f}×" if b else "1.00×"))
+            cells.append("—" if a is None else f"{a / b:.2f}×" if b else "= 0" if not a else f"{a:.3g} (ref 0)")
         lines.append(f"| {r.method} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

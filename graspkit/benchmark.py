@@ -9,14 +9,16 @@ procedural planner (the synthetic approach clips and the WANDR goal grid), GOAL'
 
 Every method is evaluated by its own evaluator (`graspkit.eval_saga`, `graspkit.eval_goal`, `graspkit.eval_wandr`,
 all measuring with `graspkit.metrics`); this module runs them on the same objects and the same grid, measures the
-ground truth and the planner itself, and writes one table (markdown + CSV) and figures, the papers' published
-figures beside ours in rows labelled with their source. A method whose checkpoint is missing is listed as such.
+ground truth and the planner itself, runs every motion method on the same few motions (`common_motion_rows`), and
+writes one table (markdown + CSV) and figures, the papers' published figures beside ours in rows labelled with their
+source. A row holds one protocol's figures: an evaluator's own rows and the common motions' rows ("· 4 common
+motions") are kept apart. A method whose checkpoint is missing is listed as such.
 
 Reproducibility: every draw is seeded, so a rerun on the same machine with the same number of torch threads gives
 the same table. Across thread counts the float sums run in another order, and an autoregressive rollout that stops
-at a distance threshold can end a frame earlier or later (measured: GOAL's four benchmark rollouts last 96 / 150 /
-138 / 39 frames on one thread, 96 / 150 / 137 / 39 on two), which moves the motion rows in their last digit
-(SAGA's sliding 7.5 % on one thread, 8.33 % on two). The shipped table (docs/benchmark) is made on one thread.
+at a distance threshold can end a frame earlier or later (GOAL's four common rollouts: 97 / 53 / 100 / 47 frames on
+one thread in the shipped table), which moves the motion rows in their last digit. The shipped table
+(docs/benchmark) is made on one thread.
 """
 from __future__ import annotations
 
@@ -56,6 +58,11 @@ PAPER_ROWS: list[tuple[str, str, str, dict[str, float]]] = [
 
 
 METHODS = ("gt", "saga", "saga_motion", "goal", "wandr", "motion")
+# Row-name suffixes: a row holds the figures of one protocol only (an evaluator's own, or the common motions'), so
+# that a column never mixes two (it did until 2026-12-03: WANDR's FS was the grid's 6.5 % beside the common
+# motions' sliding, and on the common motions it is 16.7 %).
+COMMON = " · 4 common motions"
+GOAL_CLIPS = " · GOAL's 12 clips"
 
 
 @dataclass
@@ -161,10 +168,14 @@ def goal_rows(res: dict) -> list[Row]:
             rows.append(Row("grasp", name, "graspkit",
                             {k: float(r[k]) for k in ("contact_ratio", "volume_cm3", "depth_cm") if k in r},
                             f"{r.get('n', '?')} grasps"))
-    for key, v in res.get("sliding", {}).items():
+    clips = res.get("rollouts", {}).get("clips", "?")
+    for key, v in res.get("sliding", {}).items():     # GOAL's Sec. 4.2 protocol: the same clips for both methods
         if key.startswith("GOAL"):
             rows.append(Row("motion", "GOAL (GNet + MNet)", "graspkit", {"slide_goal": 100 * float(v)},
-                            f"{res.get('rollouts', {}).get('clips', '?')} rollouts"))
+                            f"{clips} rollouts of GOAL's evaluation"))
+        elif key.startswith("SAGA"):
+            rows.append(Row("motion", f"SAGA (MotionFill + GraspMotion-Opt){GOAL_CLIPS}", "graspkit",
+                            {"slide_goal": 100 * float(v)}, f"the {clips} clips of GOAL's evaluation, eval_goal"))
     return rows
 
 
@@ -312,27 +323,42 @@ def wandr_motions(checkpoint: Path, goals: torch.Tensor, t_goal: int, seed: int 
 def common_motion_rows(bm, folders: list[Path], checkpoints: Path, k: int = 4) -> list[Row]:
     """graspkit.metrics.motion_quality (WANDR's FS, SAGA's skating, GOAL's sliding, jerk) on k motions of each
     method: SAGA's MotionFill + GraspMotion-Opt and GOAL's GNet + MNet from the first k test-object approach clips,
-    WANDR to k goals of its grid (2 m, 0.9 m high, k directions, 4 s). Rows named as the evaluators' (merged)."""
+    WANDR to k goals of its grid (2 m, 0.9 m high, k directions, 4 s). Rows of their own ("<method> · k common
+    motions"), never merged into the evaluators' rows, whose protocols differ."""
     from graspkit.eval_wandr import goal_from_cylinder
     from graspkit.metrics import motion_quality
 
     seqs = split_sequences(folders, "approach", "test")[:k]
     files = _approach_files(folders, k)
     made: list[tuple[str, list]] = []
-    if (checkpoints / "motionfill.pt").is_file() and files:
-        made.append(("SAGA (MotionFill, traj + local)", motionfill_motions(files, checkpoints)[0]))
-    if (checkpoints / "mnet.pt").is_file() and seqs:
-        made.append(("GOAL (GNet + MNet)", goal_motions(seqs, checkpoints)))
-    if (checkpoints / "wandr.pt").is_file():
-        goals = torch.stack([goal_from_cylinder(a, 2.0, 0.9) for a in np.linspace(0.0, 360.0, k, endpoint=False)])
-        made.append(("WANDR", wandr_motions(checkpoints / "wandr.pt", goals, 120)))
     rows = []
+    suffix = COMMON if k == 4 else f" · {k} common motion{'s' * (k != 1)}"
+    for name, weights, data in (("SAGA (MotionFill + GraspMotion-Opt)", "motionfill.pt", files),
+                                ("GOAL (GNet + MNet)", "mnet.pt", seqs), ("WANDR", "wandr.pt", True)):
+        if not (checkpoints / weights).is_file():
+            rows.append(Row("motion", name + suffix, "graspkit", {}, f"checkpoint missing: {checkpoints / weights}"))
+        elif not data:
+            rows.append(Row("motion", name + suffix, "graspkit", {}, "no test-object approach clip in the data"))
+        elif name.startswith("SAGA"):
+            made.append((name, motionfill_motions(files, checkpoints)[0]))
+        elif name.startswith("GOAL"):
+            made.append((name, goal_motions(seqs, checkpoints)))
+        else:
+            goals = torch.stack([goal_from_cylinder(a, 2.0, 0.9) for a in np.linspace(0.0, 360.0, k, endpoint=False)])
+            made.append((name, wandr_motions(checkpoints / "wandr.pt", goals, 120)))
     for name, motions in made:
         q = motion_quality(bm, motions)
-        rows.append(Row("motion", name, "graspkit", {"fs_wandr": 100 * q["fs_wandr"], "skate_saga": q["skate_saga"],
-                                                      "slide_goal": 100 * q["slide_goal"], "mean_jerk": q["mean_jerk"]},
-                        f"FS, skating, sliding, jerk on {q['clips']} motions ({q['frames']} frames)"))
+        rows.append(Row("motion", name + suffix, "graspkit", {"fs_wandr": 100 * q["fs_wandr"], "skate_saga": q["skate_saga"],
+                                                       "slide_goal": 100 * q["slide_goal"], "mean_jerk": q["mean_jerk"]},
+                        f"{q['clips']} motions ({q['frames']} frames): {_COMMON_WHAT[name]}"))
     return rows
+
+
+_COMMON_WHAT = {
+    "SAGA (MotionFill + GraspMotion-Opt)": "2 s windows ending at the grasp of the first "
+                                       "test-object approach clips",
+    "GOAL (GNet + MNet)": "GNet + MNet rollouts from the same clips' first frames",
+    "WANDR": "4 s towards goals 2 m away, 0.9 m high, no object"}
 
 
 def _approach_files(folders: list[Path], k: int) -> list[Path]:
@@ -375,6 +401,8 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     ck = Path(checkpoints) if checkpoints else DATA_STUBS / "checkpoints"
+    if not ck.is_dir():
+        raise FileNotFoundError(f"checkpoints: no folder {ck}")
     made = default_data_folders()                       # where `graspkit data make` writes by default
     folders = [Path(p) for p in data] if data else (made if any(any(p.glob("*.npz")) for p in made if p.is_dir())
                                                     else [DATA_STUBS / "grasps", DATA_STUBS / "approach"])
@@ -490,7 +518,7 @@ def to_csv(rows: list[Row]) -> str:
 
 
 def figure(rows: list[Row]):
-    """Bar charts, one panel per metric that has both ours and a paper's figure: ours solid, the papers' hatched."""
+    """Bar charts, one panel per metric that any row gives: ours solid, the papers' hatched (where they give one)."""
     import matplotlib.pyplot as plt
 
     keys = [(t, k) for t, ms in (("grasp", GRASP_METRICS), ("motion", MOTION_METRICS)) for k in ms
@@ -541,5 +569,9 @@ def read_csv(path: str | Path) -> list[Row]:
             row = rows.setdefault((line["table"], line["method"], line["source"]),
                                   Row(line["table"], line["method"], line["source"], note=line["note"]))
             if line["metric"]:
-                row.values[line["metric"]] = float(line["value"])
+                try:
+                    row.values[line["metric"]] = float(line["value"])
+                except (TypeError, ValueError):
+                    raise ValueError(f"path: {path}, line {r.line_num}: {line['metric']} is not a number "
+                                     f"({line['value']!r})") from None
     return list(rows.values())

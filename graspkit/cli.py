@@ -252,15 +252,19 @@ def _cmd_eval_all(args: argparse.Namespace) -> int:
     """`graspkit eval --all`: run the cross-method benchmark and write its report (without --all: usage)."""
     if not args.all:
         raise ValueError("eval: name a model (e.g. `graspkit eval wandr ...`) or pass --all")
-    from graspkit.benchmark import markdown, read_csv, run_all, update, write_report
+    from graspkit.benchmark import METHODS, markdown, read_csv, run_all, update, write_report
 
+    methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+    unknown = sorted(set(methods) - set(METHODS))
+    if not methods or unknown:
+        raise ValueError(f"--methods: expected a comma-separated list of {', '.join(METHODS)}, got {args.methods!r}"
+                         + (f" (unknown: {', '.join(unknown)})" if unknown else ""))
     old = None
     if args.update:
         if not (args.out / "benchmark.csv").is_file():
             raise FileNotFoundError(f"--update: no benchmark.csv in --out {args.out} to update")
         old = read_csv(args.out / "benchmark.csv")
-    rows = run_all(args.out, data=args.data, quick=args.quick, methods=tuple(m for m in args.methods.split(",") if m),
-                   reuse=args.reuse)
+    rows = run_all(args.out, data=args.data, quick=args.quick, methods=methods, reuse=args.reuse)
     if old is not None:
         rows = update(old, rows)
     print(markdown(rows))

@@ -106,8 +106,13 @@ def test_report_round_trips_and_labels_the_papers(tmp_path):
 def test_eval_cli_errors_name_what_is_wrong(tmp_path, capsys):
     assert main(["eval"]) == 2
     assert "--all" in capsys.readouterr().err
-    assert main(["eval", "--all", "--methods", "gt,nope", "--out", str(tmp_path)]) == 2
-    assert "methods" in capsys.readouterr().err
+    with pytest.raises(FileNotFoundError, match="checkpoints: no folder"):
+        from graspkit.benchmark import run_all
+        run_all(tmp_path / "o", checkpoints=tmp_path / "nowhere", methods=("goal",))
+    for methods in ("gt,nope", ",", ""):                   # "," ran nothing and wrote the papers' rows alone
+        assert main(["eval", "--all", "--methods", methods, "--out", str(tmp_path)]) == 2
+        assert "--methods: expected a comma-separated list" in capsys.readouterr().err
+    assert not (tmp_path / "benchmark.csv").exists()
     assert main(["eval", "--all", "--data", str(tmp_path / "missing"), "--out", str(tmp_path)]) == 2
     assert "data" in capsys.readouterr().err
 
@@ -200,3 +205,40 @@ def test_update_replaces_whole_rows_of_the_methods_run_and_keeps_the_others(tmp_
     assert ours["SAGA (WholeGrasp w/ opt.)"].values == {"contact_ratio": 0.5, "volume_cm3": 1.25, "depth_cm": 0.5,
                                                         "apd": 2.0}
     assert len([r for r in rows if r.source != "graspkit"]) == len(paper_rows())
+
+
+def test_a_row_holds_one_protocol_the_common_motions_and_goals_saga_clips_get_rows_of_their_own(tmp_path, bm):
+    """WANDR's own grid row keeps the grid's FS; its motion on the common goals is a row of its own, measured here
+    again with the metrics' definition (the lowest vertex's horizontal step > 0.66 cm); GOAL's evaluation gives
+    SAGA's sliding on its clips a row."""
+    import json
+    import shutil
+
+    from graspkit.benchmark import COMMON, common_motion_rows, goal_rows, run_all, wandr_motions
+    from graspkit.eval_wandr import goal_from_cylinder
+
+    ck = tmp_path / "ck"
+    ck.mkdir()
+    for name in ("wandr.pt", "wandr_eval.json", "goal_eval.json"):
+        shutil.copy(STUBS / "checkpoints" / name, ck / name)
+    common = common_motion_rows(bm, [STUBS / "approach"], ck, k=1)          # only WANDR's weights are there
+    assert [r.method for r in common if r.values] == ["WANDR · 1 common motion"]
+    missing = {r.method: r.note for r in common if not r.values}      # named, not left out without a word
+    assert missing == {f"{m} · 1 common motion": f"checkpoint missing: {ck / f}" for m, f in (
+        ("SAGA (MotionFill + GraspMotion-Opt)", "motionfill.pt"), ("GOAL (GNet + MNet)", "mnet.pt"))}
+    goal = torch.stack([goal_from_cylinder(0.0, 2.0, 0.9)])
+    (m,) = wandr_motions(ck / "wandr.pt", goal, 120)
+    v = m.vertices(bm).numpy()
+    low = v[:-1, :, 2].argmin(1)                                           # the lowest vertex at t, followed to t+1
+    step = np.linalg.norm((v[1:] - v[:-1])[np.arange(len(low)), low, :2], axis=-1)
+    (measured,) = [r for r in common if r.values]
+    assert measured.values["fs_wandr"] == pytest.approx(100 * np.mean(step > 0.0066), abs=1e-9)
+    rows = run_all(tmp_path / "out", data=[STUBS / "approach"], checkpoints=ck, methods=("wandr", "goal"), reuse=True)
+    ours = {r.method: r for r in rows if r.source == "graspkit"}
+    grid = json.loads((ck / "wandr_eval.json").read_text())["summary"]
+    assert ours["WANDR"].values["fs_wandr"] == pytest.approx(grid["FS"])
+    assert not any(COMMON in name for name in ours)
+    sliding = json.loads((ck / "goal_eval.json").read_text())["sliding"]
+    got = {r.method: r.values for r in goal_rows(json.loads((ck / "goal_eval.json").read_text())) if r.table == "motion"}
+    assert got["SAGA (MotionFill + GraspMotion-Opt) · GOAL's 12 clips"]["slide_goal"] == pytest.approx(
+        100 * sliding["SAGA (WholeGrasp + MotionFill, ours)"])

@@ -7,13 +7,21 @@
 # the same goal grid and one metrics module** (`graspkit.metrics`), and keeps the papers' published figures beside
 # ours, labelled as such, so that you can see where the workbook-scale reimplementation stands.
 #
-# The table is made by one command (it runs each method's evaluator, then measures the synthetic ground truth and
-# the procedural planner itself):
+# `graspkit eval --all --out DIR` makes the table: it runs each method's evaluator (or, with `--reuse`, reads the
+# evaluation shipped beside its checkpoint), measures the synthetic ground truth and the procedural planner itself,
+# and then runs every motion method on the same **4 common motions** (the first test-object approach clips; WANDR
+# towards goals 2 m away), measured by one function. The shipped table was made with `--reuse` on the full data sets
+# and refreshed method by method with `--update` (README, docs/history.md):
 #
 # ```bash
-# graspkit eval --all --out docs/benchmark          # add --quick for a few samples per method
+# graspkit eval --all --reuse --data <cache>/grasps/grasp --data <cache>/grasps/approach --out docs/benchmark
 # ```
 #
+# **Read a row as one protocol.** A method's own row holds its evaluator's figures (WANDR: 3,750 grid rollouts; SAGA:
+# Tab. 3's marker windows; GOAL: its 12 rollouts); its "· 4 common motions" row holds the figures of those 4
+# motions. The two disagree, sometimes a lot (WANDR's FS on its grid and on 4 long walks), and the common motions
+# are not the same task either: SAGA infills 2 s ending at a grasp, GOAL walks up to an object, WANDR walks 2 m to
+# a goal in the air. A cell is comparable with the cells of its own column only within one protocol.
 # Running it takes longer than a lesson may, so this lesson reads the shipped result (`docs/benchmark/`), then
 # re-measures the cheap rows live and looks closely at one metric.
 
@@ -36,10 +44,10 @@ print(f"{len(rows)} rows: {sum(r.source == 'graspkit' for r in rows)} measured b
 #
 # | metric | paper | definition (`graspkit.metrics`) |
 # |---|---|---|
-# | contact ratio | SAGA §4.1, GOAL Tab. 1 | share of grasps whose body mesh comes within 2 mm of the object (signed distance) |
+# | contact ratio | SAGA §4.1, GOAL Tab. 1 | share of grasps whose body mesh comes within 2 mm of the object (signed distance) or overlaps it (volume > 0) |
 # | penetration volume / depth | SAGA Tab. 1–2, GOAL Tab. 1 | cm³ inside both meshes; deepest body vertex inside the object (cm) |
 # | APD | SAGA §4.1 (after DLow) | mean L2 distance between all pairs of samples for one object placement (markers) |
-# | foot skating (WANDR) | WANDR §4.3 | share of frames whose lowest vertex moves > 0.66 cm horizontally to the next frame |
+# | foot skating (WANDR) | WANDR §4.3 | share of frames whose lowest vertex moves > 0.66 cm to the next frame: the paper says "moves"; horizontally is graspkit's reading, as the authors' evaluation code measures it (`docs/wandr.md`) |
 # | foot skating (SAGA) | SAGA §4.2 (following MOJO) | both heels within 5 cm of the ground and both faster than 75 mm/s |
 # | foot sliding (GOAL) | GOAL §4.2 | share of frames whose lowest vertex moves > 1 cm (3D) |
 # | SR, DTG | WANDR §4.3 | the right wrist comes within 10 cm of the goal; its closest distance |
@@ -163,8 +171,9 @@ print(f"WANDR on the full grid: SR {w['SR']:.1f} %, with a foot on the floor {w[
 #
 # ## Exercises
 #
-# 1. Run `graspkit eval --all --quick --out outputs/bench_quick` and compare your numbers with the shipped table:
-#    which rows move most with fewer samples, and why?
+# 1. Run `graspkit eval --all --quick --out outputs/bench_quick` (on a fresh checkout it uses the shipped samples:
+#    8 mug grasps, 2 approach clips) and compare with the shipped table, made on the full data sets: which rows move
+#    most, and which differences are the data rather than the number of samples?
 # 2. Change `GOAL_SLIDE_THRESHOLD` to 0.66 cm in the cell above (pass `threshold=` to
 #    `graspkit.metrics.foot_sliding_goal`) and see how the GOAL-style number of each motion changes.
 # 3. Add a row to the benchmark: the WANDR motion above, measured with `graspkit.metrics.motion_quality`.
