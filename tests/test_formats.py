@@ -106,3 +106,35 @@ def test_errors_name_the_file_and_key(tmp_path):
     np.savez(tmp_path / "nan.npz", poses=np.full((3, 165), np.nan), trans=np.zeros((3, 3)), mocap_frame_rate=np.array(30.0))
     with pytest.raises(SequenceFileError, match="nan.npz: key 'poses' contains NaN"):
         load_motion(tmp_path / "nan.npz")
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"poses": np.full((3, 165), "x")}, "key 'poses' holds <U1 values, expected numbers"),
+    ({"mocap_frame_rate": np.array([30.0, 30.0])}, "key 'mocap_frame_rate' has shape \\(2,\\), expected a single"),
+    ({"mocap_frame_rate": np.array("30")}, "key 'mocap_frame_rate' holds <U2 values"),
+    ({"goal_frame": np.array(1.5)}, "key 'goal_frame' is 1.5, expected a whole frame number"),
+    ({"goal_frame": np.array([1, 2])}, "key 'goal_frame' has shape \\(2,\\)"),
+    ({"contacts": np.full((3, 4), 7)}, "key 'contacts' holds int64 values other than 0 and 1"),
+])
+def test_a_damaged_key_is_named_with_its_file(tmp_path, change, message):
+    good = {"poses": np.zeros((3, 165)), "trans": np.zeros((3, 3)), "mocap_frame_rate": np.array(30.0),
+            "goal": np.zeros(3), "goal_frame": np.array(1), "contacts": np.zeros((3, 4), bool)}
+    np.savez(tmp_path / "ok.npz", **good)
+    m = load_motion(tmp_path / "ok.npz")
+    assert m.goal_frame == 1 and m.contacts.dtype == bool
+    np.savez(tmp_path / "odd.npz", **{**good, **change})
+    with pytest.raises(SequenceFileError, match="odd.npz: " + message):
+        load_motion(tmp_path / "odd.npz")
+
+
+def test_a_folder_or_a_file_without_a_frame_rate_is_named(tmp_path):
+    with pytest.raises(SequenceFileError, match="is a folder, expected a sequence .npz"):
+        load_motion(tmp_path)
+    np.savez(tmp_path / "norate.npz", poses=np.zeros((3, 165)), trans=np.zeros((3, 3)))
+    with pytest.raises(SequenceFileError, match="norate.npz: no frame rate: expected a key 'mocap_frame_rate'.*"
+                                                "'mocap_framerate'"):
+        load_motion(tmp_path / "norate.npz")
+    np.savez(tmp_path / "ints.npz", poses=np.zeros((3, 165)), trans=np.zeros((3, 3)), mocap_frame_rate=np.array(30),
+             contacts=np.ones((3, 4), np.int8))          # whole-number rate and 0/1 contacts are fine
+    m = load_motion(tmp_path / "ints.npz")
+    assert m.fps == 30.0 and m.contacts.all()

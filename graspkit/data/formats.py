@@ -164,6 +164,8 @@ def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
     path = Path(path)
     if fps is not None:
         check_fps(fps, where=f" (or None) to read {path}")
+    if path.is_dir():
+        raise SequenceFileError(f"{path}: is a folder, expected a sequence .npz file")
     if not path.is_file():
         raise SequenceFileError(f"{path}: no such sequence file")
     try:
@@ -173,26 +175,38 @@ def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
     if not isinstance(npz, np.lib.npyio.NpzFile):
         raise SequenceFileError(f"{path}: expected an .npz archive of arrays, got a single array")
     with npz:
-        poses = to_smplx_poses(np.asarray(_get(npz, "poses", path), np.float64), path)
+        poses = to_smplx_poses(_numbers(_get(npz, "poses", path), "poses", path), path)
         if len(poses) == 0:
             raise SequenceFileError(f"{path}: key 'poses' has 0 frames, expected at least one")
-        trans = np.asarray(_get(npz, "trans", path), np.float64)
+        trans = _numbers(_get(npz, "trans", path), "trans", path)
         if trans.shape != (len(poses), 3):
             raise SequenceFileError(f"{path}: key 'trans' has shape {trans.shape}, expected ({len(poses)}, 3)")
-        rate_key = "mocap_frame_rate" if "mocap_frame_rate" in npz.files else "mocap_framerate"
-        src = float(_get(npz, rate_key, path))
+        rate_keys = [k for k in ("mocap_frame_rate", "mocap_framerate") if k in npz.files]
+        if not rate_keys:
+            raise SequenceFileError(f"{path}: no frame rate: expected a key 'mocap_frame_rate' (AMASS SMPL-X, graspkit) "
+                                    "or 'mocap_framerate' (AMASS SMPL-H)")
+        src = _scalar(_get(npz, rate_keys[0], path), rate_keys[0], path)
         if not np.isfinite(src) or src <= 0:
-            raise SequenceFileError(f"{path}: key {rate_key!r} is {src}, expected a positive frame rate")
+            raise SequenceFileError(f"{path}: key {rate_keys[0]!r} is {src}, expected a positive frame rate")
         betas = np.zeros(NUM_BETAS)
         if "betas" in npz.files:
-            b = np.asarray(_get(npz, "betas", path), np.float64).reshape(-1)[:NUM_BETAS]
+            b = _numbers(_get(npz, "betas", path), "betas", path).reshape(-1)[:NUM_BETAS]
             betas[:len(b)] = b
         gender = _string(_get(npz, "gender", path)) if "gender" in npz.files else "neutral"
-        contacts = np.asarray(_get(npz, "contacts", path)).astype(bool) if "contacts" in npz.files else None
+        contacts = None
+        if "contacts" in npz.files:
+            c = np.asarray(_get(npz, "contacts", path))
+            if c.dtype != bool and (c.dtype.kind not in "iuf" or not np.isin(c, (0, 1)).all()):
+                raise SequenceFileError(f"{path}: key 'contacts' holds {c.dtype} values other than 0 and 1, expected "
+                                        "booleans (foot on the ground)")
+            contacts = c.astype(bool)
         goal = gf = hand = None
         if "goal" in npz.files:
-            goal = np.asarray(_get(npz, "goal", path), np.float64)
-            gf = int(_get(npz, "goal_frame", path))
+            goal = _numbers(_get(npz, "goal", path), "goal", path)
+            gf = _scalar(_get(npz, "goal_frame", path), "goal_frame", path)
+            if gf != int(gf):
+                raise SequenceFileError(f"{path}: key 'goal_frame' is {gf}, expected a whole frame number")
+            gf = int(gf)
             hand = _string(_get(npz, "hand", path)) if "hand" in npz.files else "right"
             if goal.shape != (3,):
                 raise SequenceFileError(f"{path}: key 'goal' has shape {goal.shape}, expected (3,)")
@@ -210,6 +224,22 @@ def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
         return Motion(poses, trans, betas, src, contacts=contacts, goal=goal, goal_frame=gf, hand=hand, gender=gender)
     except ValueError as e:
         raise SequenceFileError(f"{path}: {e}") from None
+
+
+def _numbers(a: np.ndarray, key: str, path: Path) -> np.ndarray:
+    """A stored array as float64, or a SequenceFileError naming the file and key when it does not hold numbers."""
+    a = np.asarray(a)
+    if a.dtype.kind not in "iuf":
+        raise SequenceFileError(f"{path}: key {key!r} holds {a.dtype} values, expected numbers")
+    return a.astype(np.float64)
+
+
+def _scalar(a: np.ndarray, key: str, path: Path) -> float:
+    """A stored number (any shape of size 1) as a float, or a SequenceFileError naming the file and key."""
+    a = _numbers(a, key, path)
+    if a.size != 1:
+        raise SequenceFileError(f"{path}: key {key!r} has shape {a.shape}, expected a single number")
+    return float(a.reshape(()))
 
 
 def resample(poses: np.ndarray, trans: np.ndarray, src_fps: float, fps: float, contacts: np.ndarray | None = None,
