@@ -348,15 +348,15 @@ def common_motion_rows(bm, folders: list[Path], checkpoints: Path, k: int = 4) -
             made.append((name, wandr_motions(checkpoints / "wandr.pt", goals, 120)))
     for name, motions in made:
         q = motion_quality(bm, motions)
-        rows.append(Row("motion", name + suffix, "graspkit", {"fs_wandr": 100 * q["fs_wandr"], "skate_saga": q["skate_saga"],
-                                                       "slide_goal": 100 * q["slide_goal"], "mean_jerk": q["mean_jerk"]},
+        values = {"fs_wandr": 100 * q["fs_wandr"], "skate_saga": q["skate_saga"], "slide_goal": 100 * q["slide_goal"],
+                  "mean_jerk": q["mean_jerk"]}
+        rows.append(Row("motion", name + suffix, "graspkit", values,
                         f"{q['clips']} motions ({q['frames']} frames): {_COMMON_WHAT[name]}"))
     return rows
 
 
 _COMMON_WHAT = {
-    "SAGA (MotionFill + GraspMotion-Opt)": "2 s windows ending at the grasp of the first "
-                                       "test-object approach clips",
+    "SAGA (MotionFill + GraspMotion-Opt)": "2 s windows ending at the grasp of the first test-object approach clips",
     "GOAL (GNet + MNet)": "GNet + MNet rollouts from the same clips' first frames",
     "WANDR": "4 s towards goals 2 m away, 0.9 m high, no object"}
 
