@@ -41,6 +41,8 @@ GOAL_SLIDE_THRESHOLD = 0.01          # m per frame at 30 fps (GOAL Sec. 4.2)
 GOAL_GRAB_SLIDING = 0.067            # fraction of GRAB's captured frames that "slide" (GOAL Sec. 4.2)
 WANDR_SUCCESS_RADIUS = 0.10          # m, right wrist to goal (WANDR Sec. 4.3, as CIRCLE)
 BODY_JOINTS = slice(0, 22)           # pelvis .. right wrist: speed and jerk are reported on these
+TURN_JOINTS = slice(0, 25)           # body, jaw and eyes: how fast they turn (a head turning about its own joint
+                                     # barely moves a joint position, so speed and jerk do not see it)
 
 # Human range of motion, degrees (adult norms, e.g. Soucie et al. 2011; AAOS). Hinge joints: signed flexion
 # about the hinge axis (canonical frame) and the largest rotation off that axis; other joints: the
@@ -177,6 +179,18 @@ def joint_jerk(joints: Any, fps: float = 30.0) -> np.ndarray:
     return (d3.norm(dim=-1) * _number(fps, "fps") ** 3).numpy()
 
 
+def joint_turn_speed(poses: Any, fps: float = 30.0) -> np.ndarray:
+    """How fast each joint's local rotation turns (T-1,J), deg/s: the angle of R_t^T R_t+1 for axis-angle poses
+    (T,J,3), times fps."""
+    p = _shaped(poses, "poses", "T,J,3", min_frames=2).double()
+    from graspkit.rotations import axis_angle_to_matrix
+
+    R = axis_angle_to_matrix(p)
+    rel = R[:-1].transpose(-1, -2) @ R[1:]
+    cos = ((rel.diagonal(dim1=-2, dim2=-1).sum(-1) - 1) / 2).clamp(-1.0, 1.0)
+    return (torch.rad2deg(torch.arccos(cos)) * _number(fps, "fps")).numpy()
+
+
 def joint_limit_violation(poses: Any) -> np.ndarray:
     """Degrees beyond the human range (T,55) of local rotations poses (T,55,3) axis-angle; 0 inside the range."""
     with torch.no_grad():
@@ -236,13 +250,14 @@ def motion_quality(bm, motions, chunk: int = 96) -> dict[str, Any]:
     """All motion metrics over Motion clips, measured on their meshes (chunks of `chunk` frames, nothing stored).
 
     Returns the fractions of frame pairs that skate (fs_wandr, skate_saga) or slide (slide_goal), ground
-    penetration (max and mean per-frame depth, m), the largest joint speed (m/s, body joints) and where,
-    the mean jerk (m/s^3, body joints), the largest joint-limit violation (deg) and where, and counts.
+    penetration (max and mean per-frame depth, m), the largest joint speed (m/s, body joints) and where, the largest
+    turning speed of a joint's rotation (deg/s, body, jaw and eyes: a head snapping round) and where, the mean jerk
+    (m/s^3, body joints), the largest joint-limit violation (deg) and where, and counts.
     """
     hl, hr = heel_vertex_ids()
     clips = pairs = fs = sk = sl = frames = 0
-    pen_max = pen_sum = vmax = jerk_sum = lim_max = 0.0
-    jerk_n, vmax_at, lim_at = 0, "", ""
+    pen_max = pen_sum = vmax = jerk_sum = lim_max = turn_max = 0.0
+    jerk_n, vmax_at, lim_at, turn_at = 0, "", "", ""
     for k, m in enumerate(motions):
         clips += 1
         for start, v in m.iter_vertices(bm, chunk=chunk, overlap=1):   # chunks share one frame: every pair once
@@ -258,6 +273,11 @@ def motion_quality(bm, motions, chunk: int = 96) -> dict[str, Any]:
         if sp.size and sp.max() > vmax:
             t, jj = np.unravel_index(np.argmax(sp), sp.shape)
             vmax, vmax_at = float(sp.max()), f"clip {k} frame {t} {JOINT_NAMES[jj]}"
+        if len(j) >= 2:
+            turn = joint_turn_speed(np.asarray(m.poses).reshape(len(j), -1, 3)[:, TURN_JOINTS], m.fps)
+            if turn.max() > turn_max:
+                t, jj = np.unravel_index(np.argmax(turn), turn.shape)
+                turn_max, turn_at = float(turn.max()), f"clip {k} frame {t} {JOINT_NAMES[jj]}"
         if len(j) >= 4:                                                  # jerk needs four frames; shorter clips add none
             jk = joint_jerk(j, m.fps)
             jerk_sum, jerk_n = jerk_sum + float(jk.sum()), jerk_n + jk.size
@@ -267,7 +287,8 @@ def motion_quality(bm, motions, chunk: int = 96) -> dict[str, Any]:
             lim_max, lim_at = float(lim.max()), f"clip {k} frame {t} {JOINT_NAMES[jj]}"
     return {"clips": clips, "frames": frames, "fs_wandr": fs / max(pairs, 1), "skate_saga": sk / max(pairs, 1),
             "slide_goal": sl / max(pairs, 1), "penetration_max": pen_max, "penetration_mean": pen_sum / max(frames, 1),
-            "max_joint_speed": vmax, "max_joint_speed_at": vmax_at, "mean_jerk": jerk_sum / max(jerk_n, 1),
+            "max_joint_speed": vmax, "max_joint_speed_at": vmax_at, "max_joint_turn": turn_max,
+            "max_joint_turn_at": turn_at, "mean_jerk": jerk_sum / max(jerk_n, 1),
             "joint_limit_max": lim_max, "joint_limit_at": lim_at}
 
 

@@ -221,3 +221,37 @@ def test_floor_figures_of_a_body_that_sinks_then_rises():
     f = M.floor_figures(v)
     assert f["floor_deepest_cm"] == pytest.approx(2.5) and f["end_floor_cm"] == pytest.approx(-0.4)
     assert M.floor_figures(v[:1])["floor_deepest_cm"] == 0.0                   # never below: 0
+
+
+def test_joint_turn_speed_is_the_angular_speed_of_a_joint_turning_about_any_axis():
+    from scipy.spatial.transform import Rotation
+
+    fps, w = 30.0, 90.0                                               # deg/s about a tilted axis, from a tilted start
+    axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    start = Rotation.from_rotvec([0.4, 0.2, -0.7])
+    R = [start * Rotation.from_rotvec(np.radians(w) * k / fps * axis) for k in range(20)]
+    poses = np.stack([r.as_rotvec() for r in R])[:, None]            # (T, 1, 3)
+    np.testing.assert_allclose(M.joint_turn_speed(poses, fps), w, rtol=1e-6)
+    snap = np.zeros((6, 55, 3))
+    snap[3:, 15, 1] = np.radians(82.5)                                 # a head turned 82.5 deg in one frame
+    turn = M.joint_turn_speed(snap[:, M.TURN_JOINTS], fps)
+    assert turn.max() == pytest.approx(82.5 * fps) and np.unravel_index(turn.argmax(), turn.shape) == (2, 15)
+
+
+def test_motion_quality_reports_the_fastest_turning_joint_of_a_clip(bm):
+    """On a shipped reach clip: motion_quality's max_joint_turn is scipy's largest frame-to-frame rotation angle of
+    the local rotations of joints 0-24, times the frame rate, at the joint and frame it names."""
+    from scipy.spatial.transform import Rotation
+
+    from graspkit.body.skeleton import JOINT_NAMES
+    from graspkit.data import load_motion
+    from graspkit.paths import DATA_STUBS
+
+    m = load_motion(DATA_STUBS / "motion" / "reach" / "reach_000003.npz")
+    p = m.poses.reshape(len(m.poses), -1, 3)[:, :25]
+    r = [Rotation.from_rotvec(p[:, j]) for j in range(25)]
+    deg = np.stack([np.degrees((x[:-1].inv() * x[1:]).magnitude()) for x in r], 1) * m.fps
+    q = M.motion_quality(bm, [m])
+    t, j = np.unravel_index(deg.argmax(), deg.shape)
+    assert q["max_joint_turn"] == pytest.approx(deg.max(), rel=1e-4)
+    assert q["max_joint_turn_at"] == f"clip 0 frame {t} {JOINT_NAMES[j]}"

@@ -256,7 +256,8 @@ fig.tight_layout()
 # WANDR counts a frame as foot skating when the mesh's **lowest vertex** moves more than 0.66 cm horizontally to
 # the next frame; GOAL counts "sliding" above 1 cm per frame (GRAB's captured motion: 6.7 %); SAGA counts frames where
 # both heels are within 5 cm of the ground and both move faster than 75 mm/s. The histogram shows the lowest
-# vertex's motion per frame over a few clips of each kind.
+# vertex's motion per frame over a few clips of each kind. None of these looks above the feet: graspkit also reports
+# how fast any joint's rotation turns (a head that snapped round in one frame once passed every foot metric).
 
 # %%
 clips = [generate_locomotion(s, bm) for s in range(5)] + [generate_reach(s, bm) for s in range(5)]
@@ -269,7 +270,8 @@ ax.set_yscale("log"); ax.set_xlabel("lowest vertex, horizontal motion per frame 
 fig.tight_layout()
 print(f"{q['clips']} clips, {q['frames']} frames: FS (WANDR) {100 * q['fs_wandr']:.2f} %, SAGA skating "
       f"{100 * q['skate_saga']:.2f} %, GOAL sliding {100 * q['slide_goal']:.2f} %, max penetration "
-      f"{100 * q['penetration_max']:.2f} cm, joint-limit violations {q['joint_limit_max']:.1f} deg")
+      f"{100 * q['penetration_max']:.2f} cm, joint-limit violations {q['joint_limit_max']:.1f} deg, fastest joint "
+      f"turn {q['max_joint_turn']:.0f} deg/s ({q['max_joint_turn_at']})")
 
 # %% [markdown]
 # ## 9 · Files
