@@ -52,13 +52,15 @@ def throughput(bm, n: int) -> None:
 def quality(bm, n: int) -> None:
     """The motion-quality table over n clips of each kind, measured on the meshes."""
     print("| data | clips | frames | FS WANDR (<= 5 %) | SAGA skating | GOAL sliding (<= 3 %; GRAB 6.7 %) | "
-          "penetration max / mean (cm) | max joint speed (m/s) | mean jerk (m/s^3) | joint limits (deg beyond) |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+          "penetration max / mean (cm) | max joint speed (m/s) | max joint turn (deg/s) | mean jerk (m/s^3) | "
+          "joint limits (deg beyond) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for kind, gen in GENERATORS.items():
         q = M.motion_quality(bm, (gen(clip_seed(0, kind, i), bm) for i in range(n)))
         print(f"| {kind} | {q['clips']} | {q['frames']} | {100 * q['fs_wandr']:.2f} % | {100 * q['skate_saga']:.2f} % | "
               f"{100 * q['slide_goal']:.2f} % | {100 * q['penetration_max']:.2f} / {100 * q['penetration_mean']:.3f} | "
-              f"{q['max_joint_speed']:.2f} ({q['max_joint_speed_at']}) | {q['mean_jerk']:.1f} | {q['joint_limit_max']:.1f} |")
+              f"{q['max_joint_speed']:.2f} ({q['max_joint_speed_at']}) | {q['max_joint_turn']:.0f} ({q['max_joint_turn_at']}) | "
+              f"{q['mean_jerk']:.1f} | {q['joint_limit_max']:.1f} |")
 
 
 def grid(bm) -> None:
