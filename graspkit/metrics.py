@@ -31,6 +31,7 @@ import numpy as np
 import torch
 
 from graspkit.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
+from graspkit.rotations import axis_angle_to_matrix
 
 # ----------------------------------------------------------------------------- motion: thresholds
 WANDR_SKATE_THRESHOLD = 0.0066       # m per frame at 30 fps (WANDR Sec. 4.3, CIRCLE's 1 cm adjusted to 30 fps)
@@ -182,10 +183,7 @@ def joint_jerk(joints: Any, fps: float = 30.0) -> np.ndarray:
 def joint_turn_speed(poses: Any, fps: float = 30.0) -> np.ndarray:
     """How fast each joint's local rotation turns (T-1,J), deg/s: the angle of R_t^T R_t+1 for axis-angle poses
     (T,J,3), times fps."""
-    p = _shaped(poses, "poses", "T,J,3", min_frames=2).double()
-    from graspkit.rotations import axis_angle_to_matrix
-
-    R = axis_angle_to_matrix(p)
+    R = axis_angle_to_matrix(_shaped(poses, "poses", "T,J,3", min_frames=2).double())
     rel = R[:-1].transpose(-1, -2) @ R[1:]
     cos = ((rel.diagonal(dim1=-2, dim2=-1).sum(-1) - 1) / 2).clamp(-1.0, 1.0)
     return (torch.rad2deg(torch.arccos(cos)) * _number(fps, "fps")).numpy()
