@@ -330,35 +330,29 @@ def common_motion_rows(bm, folders: list[Path], checkpoints: Path, k: int = 4) -
 
     seqs = split_sequences(folders, "approach", "test")[:k]
     files = _approach_files(folders, k)
-    made: list[tuple[str, list]] = []
+    goals = torch.stack([goal_from_cylinder(a, 2.0, 0.9) for a in np.linspace(0.0, 360.0, k, endpoint=False)])
+    methods = (  # name, weights, what it needs, its motions, what they are
+        ("SAGA (MotionFill + GraspMotion-Opt)", "motionfill.pt", files,
+         lambda: motionfill_motions(files, checkpoints)[0],
+         "2 s windows ending at the grasp of the first test-object approach clips"),
+        ("GOAL (GNet + MNet)", "mnet.pt", seqs, lambda: goal_motions(seqs, checkpoints),
+         "GNet + MNet rollouts from the same clips' first frames"),
+        ("WANDR", "wandr.pt", True, lambda: wandr_motions(checkpoints / "wandr.pt", goals, 120),
+         "4 s towards goals 2 m away, 0.9 m high, no object"))
+    suffix = f" · {k} common motion{'s' * (k != 1)}"          # COMMON for k = 4
     rows = []
-    suffix = COMMON if k == 4 else f" · {k} common motion{'s' * (k != 1)}"
-    for name, weights, data in (("SAGA (MotionFill + GraspMotion-Opt)", "motionfill.pt", files),
-                                ("GOAL (GNet + MNet)", "mnet.pt", seqs), ("WANDR", "wandr.pt", True)):
+    for name, weights, data, motions, what in methods:
         if not (checkpoints / weights).is_file():
             rows.append(Row("motion", name + suffix, "graspkit", {}, f"checkpoint missing: {checkpoints / weights}"))
         elif not data:
             rows.append(Row("motion", name + suffix, "graspkit", {}, "no test-object approach clip in the data"))
-        elif name.startswith("SAGA"):
-            made.append((name, motionfill_motions(files, checkpoints)[0]))
-        elif name.startswith("GOAL"):
-            made.append((name, goal_motions(seqs, checkpoints)))
         else:
-            goals = torch.stack([goal_from_cylinder(a, 2.0, 0.9) for a in np.linspace(0.0, 360.0, k, endpoint=False)])
-            made.append((name, wandr_motions(checkpoints / "wandr.pt", goals, 120)))
-    for name, motions in made:
-        q = motion_quality(bm, motions)
-        values = {"fs_wandr": 100 * q["fs_wandr"], "skate_saga": q["skate_saga"], "slide_goal": 100 * q["slide_goal"],
-                  "mean_jerk": q["mean_jerk"]}
-        rows.append(Row("motion", name + suffix, "graspkit", values,
-                        f"{q['clips']} motions ({q['frames']} frames): {_COMMON_WHAT[name]}"))
+            q = motion_quality(bm, motions())
+            values = {"fs_wandr": 100 * q["fs_wandr"], "skate_saga": q["skate_saga"],
+                      "slide_goal": 100 * q["slide_goal"], "mean_jerk": q["mean_jerk"]}
+            rows.append(Row("motion", name + suffix, "graspkit", values,
+                            f"{q['clips']} motions ({q['frames']} frames): {what}"))
     return rows
-
-
-_COMMON_WHAT = {
-    "SAGA (MotionFill + GraspMotion-Opt)": "2 s windows ending at the grasp of the first test-object approach clips",
-    "GOAL (GNet + MNet)": "GNet + MNet rollouts from the same clips' first frames",
-    "WANDR": "4 s towards goals 2 m away, 0.9 m high, no object"}
 
 
 def _approach_files(folders: list[Path], k: int) -> list[Path]:

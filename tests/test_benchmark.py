@@ -106,8 +106,8 @@ def test_report_round_trips_and_labels_the_papers(tmp_path):
 def test_eval_cli_errors_name_what_is_wrong(tmp_path, capsys):
     assert main(["eval"]) == 2
     assert "--all" in capsys.readouterr().err
+    from graspkit.benchmark import run_all
     with pytest.raises(FileNotFoundError, match="checkpoints: no folder"):
-        from graspkit.benchmark import run_all
         run_all(tmp_path / "o", checkpoints=tmp_path / "nowhere", methods=("goal",))
     for methods in ("gt,nope", ",", ""):                   # "," ran nothing and wrote the papers' rows alone
         assert main(["eval", "--all", "--methods", methods, "--out", str(tmp_path)]) == 2

@@ -213,7 +213,11 @@ def test_the_evaluation_command_checks_out_and_the_baselines_before_any_work(tmp
         assert re.search(message, capsys.readouterr().err), argv
     got = {}                                                 # example: --out is where the pair goes
     monkeypatch.setattr(E, "held_out_clips", lambda data, per_object: [STUB])
-    monkeypatch.setattr(E, "write_example", lambda files, out, seed: got.setdefault("out", out) and {"rows": [{}]})
+    def write_example(files, out, seed):
+        got["out"] = out
+        return {"rows": [{}]}
+
+    monkeypatch.setattr(E, "write_example", write_example)
     assert E.main(["example", "--out", str(tmp_path / "mine.npz")]) == 0
     assert got["out"] == tmp_path / "mine"
 
