@@ -65,6 +65,26 @@ def test_two_bone_ik_out_of_reach_stretches_towards_the_target():
     assert np.allclose(end, [0.8 * 0.999, 0, 0], atol=1e-9)
 
 
+def test_two_bone_ik_soft_limit_bends_gradually_as_a_target_sweeps_into_reach():
+    b = np.array([0, -0.4, 0.0])
+    d = np.linspace(1.2, 0.4, 801)                          # 1 mm steps, from beyond reach (0.8 m) to well within
+    target = np.stack([d, np.zeros_like(d), np.zeros_like(d)], 1)
+    bend = lambda R1, R2: np.arccos(np.clip(((np.swapaxes(R1, -1, -2) @ R2).trace(axis1=-2, axis2=-1) - 1) / 2, -1, 1))
+    R1h, R2h, _ = two_bone_ik(np.zeros((801, 3)), target, np.array([0, 0, 1.0]), b, b, np.array([0, 0, 1.0]))
+    R1s, R2s, mids = two_bone_ik(np.zeros((801, 3)), target, np.array([0, 0, 1.0]), b, b, np.array([0, 0, 1.0]),
+                                 soft=0.15)
+    # the end's distance: exact below the soft zone, then reach - w exp(-(d - (reach - w)) / w)
+    reach, w = 0.9995 * 0.8, 0.15 * 0.8
+    want = np.where(d > reach - w, reach - w * np.exp(-(d - reach + w) / w), d)
+    assert np.allclose(np.linalg.norm(mids + R2s @ b, axis=1), want, atol=1e-9)
+    assert np.allclose((mids + R2s @ b)[d < reach - w], target[d < reach - w], atol=1e-9)
+    hard, soft = np.abs(np.diff(bend(R1h, R2h))), np.abs(np.diff(bend(R1s, R2s)))
+    # hard limit: the bend jumps as the target crosses full stretch (the square-root law); soft: at most the rate at
+    # the soft zone's edge, d(bend)/d(dist) = 1 / (l sin(bend / 2)) for two bones of length l (0.27 deg per mm here)
+    assert np.degrees(hard.max()) > 2.0 and np.degrees(soft.max()) < 0.5
+    assert soft.max() < 0.25 * hard.max()
+
+
 def test_smoothstep_and_wrap_angle():
     u = np.linspace(-0.5, 1.5, 201)
     s = smoothstep(u)

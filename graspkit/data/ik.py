@@ -88,19 +88,27 @@ def frame(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def two_bone_ik(root: np.ndarray, target: np.ndarray, pole: np.ndarray, bone1: np.ndarray, bone2: np.ndarray,
-                bend: np.ndarray, max_stretch: float = 0.9995) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                bend: np.ndarray, max_stretch: float = 0.9995, soft: float = 0.0
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Global rotations of both bones and the middle-joint position for a chain root -> mid -> end.
 
     root, target, pole (..., 3): world root position, wanted end position, direction the middle joint
     should bend towards; bone1, bone2 (3,) or (..., 3): rest vectors root->mid and mid->end; bend (3,):
     rest direction in which the middle joint moves when the chain flexes (knee: forward, elbow: backward).
     Returns R1, R2 (..., 3, 3) (rest -> posed, global) and mid (..., 3). A target beyond
-    max_stretch * (l1 + l2) (or closer than |l1 - l2|) is reached as far as the chain allows.
+    max_stretch * (l1 + l2) (or closer than |l1 - l2|) is reached as far as the chain allows. soft > 0: the last
+    soft * (l1 + l2) before full stretch is approached exponentially (the end stops short of the target there). The
+    bend grows as the square root of the distance short of full stretch, so with a hard limit a target sweeping in
+    from beyond reach bends the middle joint tens of degrees in one frame; the soft limit bends it gradually.
     """
     l1, l2 = np.linalg.norm(bone1, axis=-1), np.linalg.norm(bone2, axis=-1)
     d_vec = target - root
     d = np.linalg.norm(d_vec, axis=-1)
-    d_cl = np.clip(d, np.abs(l1 - l2) + 1e-6, max_stretch * (l1 + l2))
+    reach = max_stretch * (l1 + l2)
+    if soft > 0:
+        w = soft * (l1 + l2)
+        d = np.where(d > reach - w, reach - w * np.exp(-np.maximum(d - reach + w, 0.0) / w), d)
+    d_cl = np.clip(d, np.abs(l1 - l2) + 1e-6, reach)
     ahat = normalize(d_vec)
     cos_a = np.clip((l1**2 + d_cl**2 - l2**2) / (2 * l1 * d_cl), -1.0, 1.0)      # law of cosines at the root
     p_perp = normalize(pole - (pole * ahat).sum(-1, keepdims=True) * ahat)

@@ -111,6 +111,7 @@ def hand_pose(side: str, curl: np.ndarray, spread: np.ndarray | float = 0.0) -> 
 HEAD_YAW_LIMIT = 1.2    # rad: the most the neck and head together turn towards a gaze target (about 69 deg)
 GAZE_LEVEL = 0.5        # cos of the gaze's elevation below which the head turn fades (a target > 60 deg up or down)
 GAZE_NEAR = 0.25        # m: a gaze target nearer the head than this pulls the look less, in proportion
+SUPPORT_SOFT = 0.15     # the support arm's soft reach limit (`two_bone_ik`), a share of the arm's length
 
 
 def gaze_yaw(g: np.ndarray, limit: float = HEAD_YAW_LIMIT) -> np.ndarray:
@@ -263,9 +264,10 @@ def pose_body(rig: Rig, plan: RootPlan, tracks: FootTracks, style: Style, contro
 
 
 def _arm_ik(rig: Rig, local: np.ndarray, Rg: np.ndarray, pos: np.ndarray, side: str, target: np.ndarray,
-            weight: np.ndarray, pole: np.ndarray) -> np.ndarray:
+            weight: np.ndarray, pole: np.ndarray, soft: float = 0.0) -> np.ndarray:
     """Blend one arm from its current pose into two-bone IK onto target (T,3) with weight (T,) and elbow pole (T,3),
-    overwriting the shoulder and elbow rotations in place; returns the forearm's global rotation (T,3,3)."""
+    overwriting the shoulder and elbow rotations in place (soft: `two_bone_ik`'s soft reach limit); returns the
+    forearm's global rotation (T,3,3)."""
     s, e, wr = J[f"{side}_shoulder"], J[f"{side}_elbow"], J[f"{side}_wrist"]
     wgt = weight[:, None]
     goal = (1 - wgt) * pos[:, wr] + wgt * target
@@ -275,7 +277,7 @@ def _arm_ik(rig: Rig, local: np.ndarray, Rg: np.ndarray, pos: np.ndarray, side: 
     pole = normalize((1 - wgt) * nat_pole + wgt * normalize(pole))
     bend = np.array([0.0, 0.0, -1.0])            # the elbow moves backwards when the arm flexes
     R_up, R_fore, _ = two_bone_ik(pos[:, s], goal, pole, rig.bone(f"{side}_shoulder", f"{side}_elbow"),
-                                  rig.bone(f"{side}_elbow", f"{side}_wrist"), bend)
+                                  rig.bone(f"{side}_elbow", f"{side}_wrist"), bend, soft=soft)
     tr = lambda R: np.swapaxes(R, -1, -2)  # noqa: E731
     local[:, s] = tr(Rg[:, J[f"{side}_collar"]]) @ R_up
     local[:, e] = tr(R_up) @ R_fore
@@ -300,4 +302,6 @@ def _support_arm(rig: Rig, local: np.ndarray, Rg: np.ndarray, pos: np.ndarray, w
     out = normalize(knee - pos[:, J["right_knee"]]) * [1, 1, 0]
     target = knee + 0.09 * np.array([0.0, 0.0, 1.0]) + 0.03 * out
     pole = normalize(out - 0.6 * np.array([0.0, 0.0, 1.0]))
-    _arm_ik(rig, local, Rg, pos, "left", target, weight, pole)
+    # a soft reach limit: the knee comes within reach quickly as the body crouches, and a straight arm bending at
+    # once read as an elbow snap (42 deg in one frame)
+    _arm_ik(rig, local, Rg, pos, "left", target, weight, pole, soft=SUPPORT_SOFT)
