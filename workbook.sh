@@ -5,7 +5,7 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 VENV="${GRASPKIT_VENV:-.venv}"
-TORCH_SPEC="${GRASPKIT_TORCH:-torch==2.13.0}"   # the CPU build here; set GRASPKIT_TORCH for another build
+TORCH_SPEC="${GRASPKIT_TORCH:-torch==2.13.0}"   # the CPU build on this project's machines; GRASPKIT_TORCH for another (README)
 
 setup() {
   [ -x "$VENV/bin/python" ] || python3 -m venv "$VENV"

@@ -3,7 +3,9 @@ same run: grasp metrics against the synthetic ground truth, motion metrics again
 against the papers' published figures (their data, their code: a reference point, not a target).
 
 Run: python benchmarks/all_methods.py [--quick] [--data FOLDER ...] [--out outputs/benchmark]
-Prints the benchmark table, then the ratio tables and each method's wall time.
+     python benchmarks/all_methods.py --csv docs/benchmark/benchmark.csv   # a finished report's table, no rerun
+Runs every method again (graspkit.benchmark.run_all) and prints the benchmark table, then the ratio tables and each
+method's wall time; --csv reads the rows of a benchmark.csv instead.
 """
 from __future__ import annotations
 
@@ -11,7 +13,7 @@ import argparse
 import math
 from pathlib import Path
 
-from graspkit.benchmark import GRASP_METRICS, MOTION_METRICS, Row, markdown, run_all, write_report
+from graspkit.benchmark import GRASP_METRICS, MOTION_METRICS, Row, markdown, read_csv, run_all, write_report
 
 
 def ratio_table(rows: list[Row], table: str, reference: str) -> str:
@@ -62,9 +64,15 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--data", type=Path, action="append", default=None)
     ap.add_argument("--out", type=Path, default=Path("outputs/benchmark"))
+    ap.add_argument("--csv", type=Path, default=None, help="a benchmark.csv to print as ratios (nothing is run)")
     args = ap.parse_args()
-    rows = run_all(args.out, data=args.data, quick=args.quick)
-    write_report(rows, args.out)
+    if args.csv is not None:
+        if not args.csv.is_file():
+            ap.error(f"--csv: no file {args.csv}")
+        rows = read_csv(args.csv)
+    else:
+        rows = run_all(args.out, data=args.data, quick=args.quick)
+        write_report(rows, args.out)
     print(markdown(rows))
     print(ratio_table(rows, "grasp", "ground truth (synthetic)"), "\n")
     print(ratio_table(rows, "motion", "procedural planner (approach clips)"), "\n")

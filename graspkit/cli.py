@@ -172,6 +172,7 @@ def _cmd_goal(args: argparse.Namespace) -> int:
 WANDR_MAX_SECONDS = 8.0       # the goal grid's horizon (§4.2): what the shipped model is trained and measured for
 WANDR_MAX_HEIGHT = 1.9        # m: the highest goals of the training clips (room-scale, docs/data.md); the grid's: 1.8
 WANDR_MAX_SPEED = 1.5         # m/s: the fastest walk of the training clips (the hurried room-scale tasks, docs/data.md)
+WANDR_GOAL_LIMIT = 50.0       # m: the farthest goal `graspkit wandr` takes (30 s at 1.5 m/s is 45 m)
 
 
 def wandr_range_notes(goal, seconds: float) -> list[str]:
@@ -211,6 +212,9 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
 
     if not all(math.isfinite(v) for v in args.goal):
         raise ValueError(f"--goal: expected three finite numbers X Y Z (m), got {' '.join(map(str, args.goal))}")
+    if max(abs(v) for v in args.goal) > WANDR_GOAL_LIMIT:
+        raise ValueError(f"--goal: expected coordinates within {WANDR_GOAL_LIMIT:g} m of the start, got "
+                         f"{' '.join(map(str, args.goal))}")
     if not 0 < args.seconds <= 30:
         raise ValueError(f"--seconds: expected a time to the goal in (0, 30] s, got {args.seconds}")
     frames = int(round(args.seconds * 30.0))

@@ -24,7 +24,7 @@ goals), and the FS equals the full-mesh FS (tests/test_wandr_eval.py checks both
 Four extra columns, not the paper's (`summary`'s SR_grounded, floating, sunk and SR_not_sunk): SR counts a wrist on
 the goal however the body got there, including with both feet off the floor or sunk into it, which the procedural
 clips never show (their lowest vertex stays within 3 mm of it). SR_grounded counts only the frames where a foot is
-within 5 cm of the floor (the lowest foot vertex; SAGA §4.3's contact height), floating is the share of frames where
+within 5 cm of the floor (the lowest foot vertex; SAGA §4.2's heel height for skating), floating is the share of frames where
 none is, sunk the share where the lowest foot vertex is more than 1 cm below the floor, and SR_not_sunk counts only
 the frames where it is not.
 """
@@ -43,7 +43,7 @@ from graspkit.data.reaching import EVAL_ANGLES_DEG, EVAL_DISTANCES, EVAL_FRAMES,
 from graspkit.data.wandr_dataset import FOOT_JOINTS, shaped_rest
 from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS
 
-FOOT_ON_FLOOR = SAGA_SKATE_HEEL_HEIGHT   # m: a foot within 5 cm of the floor touches it (SAGA §4.3's contact height)
+FOOT_ON_FLOOR = SAGA_SKATE_HEEL_HEIGHT   # m: a foot within 5 cm of the floor touches it (SAGA §4.2's heel height for skating)
 SUNK_DEPTH = 0.01                         # m: a lowest foot vertex more than 1 cm below the floor: the body has sunk
 
 T_GOAL = EVAL_FRAMES - 1          # frame 239: 8 s after the start frame

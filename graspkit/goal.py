@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from graspkit.checks import check_bool, check_int, check_positive
 from graspkit.data.motion import Motion
 from graspkit.data.reaching import Start
 from graspkit.models.mnet import STALL_FRAMES, check_stall
@@ -69,13 +70,16 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     from graspkit.objects.user import as_object
     from graspkit.rotations import axis_angle_to_rot6d, matrix_to_axis_angle, rot6d_to_matrix
 
+    check_int(seed, "seed")
+    check_positive(start_distance, "start_distance", most=5.0)
+    check_int(max_frames, "max_frames", least=2)
+    check_bool(penetration, "penetration")
+    check_stall(stall)
+    if object_pose is not None and not isinstance(object_pose, ObjectPose):
+        raise TypeError(f"object_pose: expected a graspkit.objects.placement.ObjectPose or None, "
+                        f"got {type(object_pose).__name__}")
     given = name                     # as the caller gave it: a catalogue name keeps its cached grid
     name, obj_mesh = as_object(name, "name")
-    if not 0 < start_distance <= 5.0:
-        raise ValueError(f"start_distance: expected metres in (0, 5], got {start_distance}")
-    if max_frames < 2:
-        raise ValueError(f"max_frames: expected at least 2 frames, got {max_frames}")
-    check_stall(stall)
     if start is not None and not isinstance(start, Start):
         raise ValueError(f"start: expected a graspkit.data.reaching.Start or None, got {type(start).__name__}")
     ck = Path(checkpoints)

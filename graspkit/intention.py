@@ -7,7 +7,7 @@ Delta (§3.3)  d_i = (d^{t-z}, d^{r-z}, d^θ) ∈ R^135 between p_{i-1} and p_i,
               R_{i-1}); d^θ = θ_i - θ_{i-1} (differences of 6D vectors). `integrate_delta` inverts it exactly.
 State (§3.3)  p^dyn_i = (t_i^z, 6D(R_z(-ψ_i) R_i), θ_i, d_i) ∈ R^268: the pose without its position on the ground and
               its heading, and the last delta (the dynamics).
-Intention (§3.2, Eq. 1-3), each expressed in the body's heading frame (rotated by R_z(-ψ_i)):
+Intention (§3.2; its three unnumbered formulas), each expressed in the body's heading frame (rotated by R_z(-ψ_i)):
               I^w = (G - W_i) / (t_G - i)           wrist: the average velocity that puts the wrist on the goal in time,
                                                     in m/s (t_G - i in seconds); the only time-dependent feature;
               I^r = Ĥ_goal^xy - H_i^xy               orientation: unit forward direction wanted at the goal minus the

@@ -250,7 +250,8 @@ def motion_quality(bm, motions, chunk: int = 96) -> dict[str, Any]:
     Returns the fractions of frame pairs that skate (fs_wandr, skate_saga) or slide (slide_goal), ground
     penetration (max and mean per-frame depth, m), the largest joint speed (m/s, body joints) and where, the largest
     turning speed of a joint's rotation (deg/s, body, jaw and eyes: a head snapping round) and where, the mean jerk
-    (m/s^3, body joints), the largest joint-limit violation (deg) and where, and counts.
+    (m/s^3, body joints), the largest joint-limit violation (deg) and where, and counts (clips, frames, frame pairs).
+    Rates with nothing to count (one-frame clips: no pairs; no clip of four frames: no jerk) are NaN, not 0.
     """
     hl, hr = heel_vertex_ids()
     clips = pairs = fs = sk = sl = frames = 0
@@ -283,10 +284,11 @@ def motion_quality(bm, motions, chunk: int = 96) -> dict[str, Any]:
         if lim.max() > lim_max:
             t, jj = np.unravel_index(np.argmax(lim), lim.shape)
             lim_max, lim_at = float(lim.max()), f"clip {k} frame {t} {JOINT_NAMES[jj]}"
-    return {"clips": clips, "frames": frames, "fs_wandr": fs / max(pairs, 1), "skate_saga": sk / max(pairs, 1),
-            "slide_goal": sl / max(pairs, 1), "penetration_max": pen_max, "penetration_mean": pen_sum / max(frames, 1),
+    per_pair = (lambda x: x / pairs) if pairs else (lambda x: float("nan"))   # no frame pairs: no rate, not 0 %
+    return {"clips": clips, "frames": frames, "pairs": pairs, "fs_wandr": per_pair(fs), "skate_saga": per_pair(sk),
+            "slide_goal": per_pair(sl), "penetration_max": pen_max, "penetration_mean": pen_sum / max(frames, 1),
             "max_joint_speed": vmax, "max_joint_speed_at": vmax_at, "max_joint_turn": turn_max,
-            "max_joint_turn_at": turn_at, "mean_jerk": jerk_sum / max(jerk_n, 1),
+            "max_joint_turn_at": turn_at, "mean_jerk": jerk_sum / max(jerk_n, 1) if jerk_n else float("nan"),
             "joint_limit_max": lim_max, "joint_limit_at": lim_at}
 
 

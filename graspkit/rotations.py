@@ -38,7 +38,7 @@ def axis_angle_to_matrix(aa: Tensor) -> Tensor:
     """Rodrigues' formula: axis-angle (..., 3) -> rotation matrices (..., 3, 3)."""
     _check_last(aa, (3,), "aa")
     theta2 = (aa * aa).sum(-1, keepdim=True)[..., None]  # (..., 1, 1)
-    small = theta2 < _EPS**2
+    small = theta2 <= _EPS**2      # <=: in float16 _EPS**2 rounds to 0, and a zero angle must take the series
     theta2_safe = torch.where(small, torch.ones_like(theta2), theta2)
     theta = theta2_safe.sqrt()
     # sin(t)/t and (1-cos(t))/t^2, with their Taylor series near t = 0 (keeps gradients finite)
@@ -107,7 +107,7 @@ def axis_angle_to_quaternion(aa: Tensor) -> Tensor:
     """Axis-angle (..., 3) -> unit quaternions (w, x, y, z) (..., 4)."""
     _check_last(aa, (3,), "aa")
     theta2 = (aa * aa).sum(-1, keepdim=True)
-    small = theta2 < _EPS**2
+    small = theta2 <= _EPS**2      # <=: in float16 _EPS**2 rounds to 0, and a zero angle must take the series
     theta = torch.where(small, torch.ones_like(theta2), theta2).sqrt()
     half_sinc = torch.where(small, 0.5 - theta2 / 48, torch.sin(theta / 2) / theta)
     w = torch.where(small, 1 - theta2 / 8, torch.cos(theta / 2))

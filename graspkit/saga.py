@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from graspkit.checks import check_bool, check_int, check_positive, check_steps
 from graspkit.data.motion import Motion
 from graspkit.data.reaching import Start
 from graspkit.objects.placement import ObjectPose
@@ -107,12 +108,22 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     from graspkit.optim.grasppose import GraspObject, GraspPoseConfig, GraspPoseOpt
     from graspkit.paths import default_model_path
 
+    check_int(seed, "seed")
+    check_positive(start_distance, "start_distance")
+    grasp_steps, motion_steps = check_steps(grasp_steps, "grasp_steps", 3), check_steps(motion_steps, "motion_steps", 2)
+    if polish_steps is not None:
+        polish_steps = check_steps(polish_steps, "polish_steps", 2)
+    check_bool(hold_start, "hold_start")
+    if object_pose is not None and not isinstance(object_pose, ObjectPose):
+        raise TypeError(f"object_pose: expected a graspkit.objects.placement.ObjectPose or None, "
+                        f"got {type(object_pose).__name__}")
+    if start is not None and not isinstance(start, (Start, Motion)):
+        raise ValueError(f"start: expected a Start, a one-frame Motion or None, got {type(start).__name__}")
+    if bm is not None and getattr(bm, "dtype", None) != torch.float32:
+        raise ValueError(f"bm: expected a float32 BodyModel (the networks and optimisers run in float32), got "
+                         f"{getattr(bm, 'dtype', type(bm).__name__)}")
     given = name                     # as the caller gave it: a catalogue name keeps its cached grid
     name, obj_mesh = as_object(name, "name")
-    if start_distance <= 0:
-        raise ValueError(f"start_distance: expected a positive distance in metres, got {start_distance}")
-    if polish_steps is not None and (len(polish_steps) != 2 or min(polish_steps) < 0):
-        raise ValueError(f"polish_steps: expected two step counts >= 0, got {polish_steps}")
     ck = Path(checkpoints)
     for f in ("wholegrasp.pt", "pose_prior.pt", "motionfill.pt", "motionfill_smooth_ae.pt"):
         if not (ck / f).is_file():

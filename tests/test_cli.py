@@ -87,7 +87,9 @@ def test_out_paths_that_cannot_be_written_and_bad_seeds_fail_before_any_work(tmp
                           (("data", "make", "--kind", "reach", "--n", "1", "--seed", "-1", "--out", str(tmp_path / "d")),
                            "--seed: expected a non-negative integer"),
                           (("wandr", "--goal", "1", "0", "1", "--seconds", "0.01", "--out", str(tmp_path / "w")),
-                           "--seconds: expected at least one frame")):
+                           "--seconds: expected at least one frame"),
+                          (("wandr", "--goal", "1e9", "0", "1", "--out", str(tmp_path / "w")),   # once: 44.7 GiB
+                           "--goal: expected coordinates within 50 m")):
         r = _run(*args)
         assert r.returncode == 2 and message in r.stderr and "Traceback" not in r.stderr, (args, r.stderr)
     assert not (tmp_path / "d").exists() and not (tmp_path / "w").exists()

@@ -178,6 +178,66 @@ def test_wandr_generate_converts_a_float64_start(wandr):
     assert torch.equal(c.p[:, 0], st64.p[None])                               #  samples than a's; the same start)
 
 
+def test_wandr_generate_and_latents_name_bad_types(wandr):
+    """A bool goal frame, an int as the generator, a string as the start and a fractional frame for the latent
+    optimisation gave torch's own errors."""
+    from graspkit.optim.latent import optimise_latents
+
+    model, st = wandr
+    goal = torch.tensor([1.0, 0, 1])
+    for kwargs, message in (({"t_goal": True}, "t_goal: expected goal frames"),
+                            ({"t_goal": 3, "generator": 0}, "generator: expected a torch.Generator"),
+                            ({"t_goal": 3, "start": "x"}, "start: expected a StartPose or a non-empty sequence of "
+                                                          "them, got str")):
+        args = {"start": st, **kwargs}
+        with pytest.raises((ValueError, TypeError), match=message):
+            generate(model, args.pop("start"), goal, **args)
+    with pytest.raises(ValueError, match="t_goal: expected an integer >= 1, got 2.5"):
+        optimise_latents(model, st, goal, t_goal=2.5, iters=1)
+
+
+# ------------------------------------------------------------------------------------------------ one-call pipelines
+@pytest.mark.parametrize("kwargs, message", [
+    ({"seed": 1.5}, "seed: expected an integer >= 0"),
+    ({"seed": -1}, "seed: expected an integer >= 0"),
+    ({"start_distance": NAN}, "start_distance: expected a finite positive number"),
+    ({"start_distance": float("inf")}, "start_distance: expected a finite positive number"),
+    ({"grasp_steps": (-5, 10, 10)}, "grasp_steps: expected 3 step counts"),
+    ({"motion_steps": (1,)}, "motion_steps: expected 2 step counts"),
+    ({"hold_start": "no"}, "hold_start: expected True or False"),
+    ({"object_pose": (0, 0, 1)}, "object_pose: expected a graspkit.objects.placement.ObjectPose"),
+    ({"start": (0, 0, 0)}, "start: expected a Start, a one-frame Motion or None"),
+])
+def test_saga_synthesize_names_a_bad_argument_before_any_work(kwargs, message):
+    from graspkit import saga
+
+    with pytest.raises((ValueError, TypeError), match=message):
+        saga.synthesize("mug", progress=False, checkpoints="/nonexistent", **kwargs)   # checks come before the files
+
+
+def test_saga_synthesize_refuses_a_float64_body_model():
+    from graspkit import saga
+
+    bm = BodyModel.from_file(default_model_path(), dtype=torch.float64)
+    with pytest.raises(ValueError, match="bm: expected a float32 BodyModel"):
+        saga.synthesize("mug", bm=bm, progress=False)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"max_frames": NAN}, "max_frames: expected an integer >= 2"),
+    ({"max_frames": 2.5}, "max_frames: expected an integer >= 2"),
+    ({"seed": -1}, "seed: expected an integer >= 0"),
+    ({"start_distance": NAN}, "start_distance: expected a finite positive number"),
+    ({"penetration": "yes"}, "penetration: expected True or False"),
+    ({"object_pose": (0, 0, 1)}, "object_pose: expected a graspkit.objects.placement.ObjectPose"),
+])
+def test_goal_synthesize_names_a_bad_argument_before_any_work(kwargs, message):
+    from graspkit import goal
+
+    with pytest.raises((ValueError, TypeError), match=message):
+        goal.synthesize("mug", checkpoints="/nonexistent", **kwargs)
+
+
 # ------------------------------------------------------------------------------------------------ BodyModel
 @pytest.fixture(scope="module")
 def body():

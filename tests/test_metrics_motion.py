@@ -255,3 +255,18 @@ def test_motion_quality_reports_the_fastest_turning_joint_of_a_clip(bm):
     t, j = np.unravel_index(deg.argmax(), deg.shape)
     assert q["max_joint_turn"] == pytest.approx(deg.max(), rel=1e-4)
     assert q["max_joint_turn_at"] == f"clip 0 frame {t} {JOINT_NAMES[j]}"
+
+
+def test_motion_quality_of_one_frame_clips_has_no_rates_rather_than_zero(bm):
+    """One frame has no frame pairs: its skating rates were reported as 0 %, which reads as "no skating"."""
+    from graspkit.data import load_motion
+    from graspkit.paths import DATA_STUBS
+
+    m = load_motion(DATA_STUBS / "motion" / "reach" / "reach_000003.npz")
+    one = M.motion_quality(bm, [m.slice(0, 1)])
+    assert one["pairs"] == 0 and one["frames"] == 1
+    assert all(np.isnan(one[k]) for k in ("fs_wandr", "skate_saga", "slide_goal", "mean_jerk"))
+    both = M.motion_quality(bm, [m.slice(0, 1), m])              # the one-frame clip adds nothing to the rates
+    alone = M.motion_quality(bm, [m])
+    assert both["pairs"] == alone["pairs"] == m.num_frames - 1
+    assert both["fs_wandr"] == alone["fs_wandr"] and both["skate_saga"] == alone["skate_saga"]

@@ -90,3 +90,15 @@ def test_rotation_about_z_matches_scipy():
 def test_bad_shape_names_argument():
     with pytest.raises(ValueError, match="aa"):
         rot.axis_angle_to_matrix(torch.zeros(4, 2))
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16])
+def test_half_precision_zero_angle_is_the_identity_and_others_match_scipy(dtype):
+    """In float16 the series threshold 1e-12 rounds to 0: a zero angle once took sin(t)/t = 0/0 (NaN bodies)."""
+    aa = _random_aa(64, seed=3)
+    R = rot.axis_angle_to_matrix(torch.as_tensor(aa, dtype=dtype))
+    q = rot.axis_angle_to_quaternion(torch.as_tensor(aa, dtype=dtype))
+    assert torch.isfinite(R).all() and torch.isfinite(q).all()
+    assert torch.equal(R[0].float(), torch.eye(3)) and torch.equal(q[0].float(), torch.tensor([1.0, 0, 0, 0]))
+    tol = 4e-3 if dtype == torch.float16 else 3e-2
+    assert np.allclose(R.float().numpy(), Rotation.from_rotvec(aa).as_matrix(), atol=tol)

@@ -110,6 +110,20 @@ def test_other_layers_draw(body):
     assert trimesh.Trimesh(v, f).is_watertight
 
 
+def test_ground_lines_every_step_on_a_room_and_bounded_on_a_far_scene():
+    """A goal 1e9 m away once asked for a line every 0.25 m over the scene (a 44.7 GiB allocation)."""
+    from graspkit.viz.scene import MAX_GROUND_LINES
+
+    fig, (ax,) = viz.figure(views=("iso",))
+    room = viz.draw_ground(ax, (-2, 2, -1, 1), step=0.25)
+    far = viz.draw_ground(ax, (-1, 1e9, -1, 1), step=0.25)
+    fig.canvas.draw()                                             # (3D segments are projected at draw time)
+    assert len(room.get_segments()) == 17 + 9                     # every 0.25 m: x -2..2, y -1..1
+    assert len(far.get_segments()) <= 2 * (MAX_GROUND_LINES + 1)
+    with pytest.raises(ValueError, match="extent"):
+        viz.draw_ground(ax, (0, float("inf"), 0, 1))
+
+
 def test_show_scene(body, ball, tmp_path):
     pts = ball.vertices
     fig = viz.show_scene(meshes=[(body.vertices, body.faces), (ball.vertices, ball.faces, viz.OBJECT)],

@@ -40,6 +40,7 @@ import torch
 from torch import Tensor, nn
 
 from graspkit import intention as I
+from graspkit.checks import check_generator
 from graspkit.data.wandr_dataset import FOOT_JOINTS, GOAL_FRAMES, ClipSet, WindowDataset, lowest_foot, make_batch
 from graspkit.models.blocks import GaussianHead, kl_standard_normal
 from graspkit.train import TrainConfig, check_config, fit, load_checkpoint, load_into, save_checkpoint
@@ -439,6 +440,8 @@ def expand_starts(starts: I.StartPose | Sequence[I.StartPose], goals: Tensor, n:
                   ) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
     """Batch every (start, goal, sample) combination, start-major: p_prev, p0 (B, 135), rest (B, 22, 3), goal (B, 3),
     and the index table (B, 3) = (start, goal, sample); B = S * G * n."""
+    if isinstance(starts, (str, bytes)) or not isinstance(starts, (I.StartPose, Sequence)):
+        raise ValueError(f"start: expected a StartPose or a non-empty sequence of them, got {type(starts).__name__}")
     starts = [starts] if isinstance(starts, I.StartPose) else list(starts)
     if not starts or not all(isinstance(s, I.StartPose) for s in starts):
         raise ValueError(f"start: expected a StartPose or a non-empty sequence of them, got {len(starts)} items")
@@ -478,13 +481,14 @@ def generate(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal:
     Every frame draws z for the whole batch from `generator`, so a sequence's draws depend on the batch it is in:
     the same seed gives the same motions for the same starts, goals and n, not for one goal taken out of them."""
     model.eval()
+    check_generator(generator)
     pp, p0, rest, g, idx = expand_starts(start, goal, n)
     dtype = model.decoder[0].weight.dtype                  # float32 unless the caller converted the model
     pp, p0, rest, g = (x.to(dtype) for x in (pp, p0, rest, g))
     tg = torch.as_tensor(t_goal)
     if tg.dim() > 1 or (tg.dim() == 1 and len(tg) != int(idx[:, 1].max()) + 1):
         raise ValueError(f"t_goal: expected a frame or one per goal, got shape {tuple(tg.shape)}")
-    if tg.dtype.is_floating_point or int(tg.min()) < 1:
+    if tg.dtype.is_floating_point or tg.dtype == torch.bool or int(tg.min()) < 1:
         raise ValueError(f"t_goal: expected goal frames (integers >= 1), got {t_goal}")
     if tg.dim() == 1:
         tg = tg[idx[:, 1]]

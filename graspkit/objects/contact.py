@@ -44,7 +44,9 @@ def distance_to(points, target: MeshLike | Tensor) -> Tensor:
 
 
 def marker_contact(markers, obj: MeshLike | Tensor, threshold: float = MARKER_CONTACT_THRESHOLD) -> Tensor:
-    """SAGA's C_M: 1.0 where a marker (N,3)|(B,N,3) is within `threshold` m of the object, else 0.0."""
+    """SAGA's C_M: 1.0 where a marker (N,3)|(B,N,3) is within `threshold` m of the object's surface, else 0.0 (the
+    unsigned distance, as the labels are made: a marker deep inside the object reads 0; `grasp_metrics` uses the
+    signed distance)."""
     markers = as_points(markers, "markers")
     _check_threshold(threshold)
     return (distance_to(markers, obj) <= threshold).to(markers.dtype)

@@ -22,6 +22,7 @@ import torch
 from torch import Tensor
 
 from graspkit import intention as I
+from graspkit.checks import check_generator, check_int
 from graspkit.models.wandr import Rollout, WandrCVAE, expand_starts, rollout
 
 
@@ -56,7 +57,9 @@ def optimise_latents(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose
     there at frame t_goal), n each (B = S * G * n, start-major as `generate`), the pelvis over `waypoints`
     [(frame, (x, y))]. z0 (B, frames, latent), or random N(0, I) from `generator` (the latents of a plain rollout).
     Adam is element-wise and the loss a sum over sequences, so a batch optimises each sequence independently."""
-    frames = t_goal if frames is None else frames
+    check_int(t_goal, "t_goal", least=1)
+    check_generator(generator)
+    frames = t_goal if frames is None else check_int(frames, "frames", least=1)
     if not 1 <= t_goal <= frames:
         raise ValueError(f"t_goal: expected 1 <= t_goal <= frames ({frames}), got {t_goal}")
     for frame, xy in waypoints:

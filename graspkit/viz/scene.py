@@ -60,6 +60,7 @@ def as_mesh(vertices: Any, faces: Any, name: str = "mesh") -> tuple[np.ndarray, 
 # drawing order: ground under meshes under overlays (paths, points, arrows, markers), so overlays stay visible
 # even on the far side of a body; faces within one mesh collection are still depth-sorted
 LAYERS = {"ground": 0.0, "mesh": 1.0, "path": 2.0, "points": 3.0, "arrows": 4.0, "markers": 5.0}
+MAX_GROUND_LINES = 200      # per axis: a far goal once drew a line every 0.25 m over kilometres (GiBs)
 
 
 def _layer(ax: Axes3D, artist: Any, layer: str) -> Any:
@@ -240,10 +241,12 @@ def draw_path(ax: Axes3D, points: Any, color: Any = TRAJECTORY, linewidth: float
 
 def draw_ground(ax: Axes3D, extent: float | Sequence[float] = 1.0, z: float = 0.0, step: float = 0.25,
                 color: Any = GROUND, linewidth: float = 0.6) -> Line3DCollection:
-    """A grid on the plane z, lines every `step` metres over extent: half-size (float) or (xmin, xmax, ymin, ymax)."""
+    """A grid on the plane z, lines every `step` metres over extent: half-size (float) or (xmin, xmax, ymin, ymax);
+    on a scene wider than MAX_GROUND_LINES steps the step grows to keep that many lines."""
     ext = [-extent, extent, -extent, extent] if np.isscalar(extent) else list(map(float, extent))
-    if len(ext) != 4 or ext[0] >= ext[1] or ext[2] >= ext[3]:
+    if len(ext) != 4 or not np.isfinite(ext).all() or ext[0] >= ext[1] or ext[2] >= ext[3]:
         raise ValueError(f"extent: expected a half-size or (xmin, xmax, ymin, ymax), got {extent!r}")
+    step = max(step, max(ext[1] - ext[0], ext[3] - ext[2]) / MAX_GROUND_LINES)
     xs = np.arange(np.ceil(ext[0] / step), np.floor(ext[1] / step) + 1) * step
     ys = np.arange(np.ceil(ext[2] / step), np.floor(ext[3] / step) + 1) * step
     segs = [[(x, ext[2], z), (x, ext[3], z)] for x in xs] + [[(ext[0], y, z), (ext[1], y, z)] for y in ys]

@@ -393,7 +393,7 @@ for r1, r2, d in [(0.05, 0.05, 0.07), (0.06, 0.03, 0.075), (0.04, 0.05, 0.06), (
 # %% [markdown]
 # The volume is a few tenths of a percent low, which is the icospheres' faceting, not the integration: against
 # the exact boolean intersection of the same two meshes these volumes read +0.04 to +0.20 % high (the default refined
-# ray casting; one ray per column agrees to about 0.02 %, docs/objects.md).
+# ray casting; one ray per column, `refine=1`, reads −0.08 to +0.06 % on the same meshes, docs/objects.md).
 
 # %% [markdown]
 # ## 7 · Interaction-aware attention

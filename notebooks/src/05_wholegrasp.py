@@ -362,8 +362,8 @@ print(table2(result))
 # the samples; less than the paper's 0.24, since a hand may rest on the surface, inside the 2 mm threshold) and
 # $E_{cont}$ restores it (0.99); the multi-task model ends with more contact than WholeGrasp-single with its heuristic
 # (0.99 vs 0.82), but no longer penetrates more (0.050 vs 0.055 cm³; the paper's single-task row penetrates less).
-# GrabNet-SMPLX, which samples SAGA's parameters (θ_b in the pose prior's latent, App. B.1), gives the worst bodies
-# (30 cm³, contact 0.86) but not the paper's far lower APD (1.67 against our 1.43; the paper's 0.33 looks like a
+# GrabNet-SMPLX, which samples SAGA's parameters (θ_b in the pose prior's latent, App. B.1), penetrates by far the most
+# (30 cm³, with contact 0.86) but not the paper's far lower APD (1.67 against our 1.43; the paper's 0.33 looks like a
 # collapsed latent, ours keeps ~13 nats in use): one paper direction this workbook does not reproduce.
 
 # %% [markdown]

@@ -333,7 +333,7 @@ print(f"rollouts ({r['clips']} test clips): reached the true goal {100 * r['to_t
 
 # %% [markdown]
 # **Reading the numbers honestly.** graspkit's networks are tiny (about 0.5 M and 0.6 M parameters against
-# GOAL's ~117 M for MNet), trained for minutes on one CPU thread on a few hundred synthetic clips and 1,039
+# GOAL's ~117 M for MNet, a figure from graspkit's brief: the paper's text gives no count), trained for minutes on one CPU thread on a few hundred synthetic clips and 1,039
 # synthetic grasps of a procedural body (`docs/goal.md` has the commands). The protocols are GOAL's; the figures
 # are not comparable with the paper's in absolute terms, only in how the rows relate to each other. They relate
 # partly as GOAL's: the refinement brings the contact ratio to 1 and the feet onto the floor, and MNet beats its

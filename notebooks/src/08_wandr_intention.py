@@ -10,7 +10,7 @@
 # | piece | where | paper |
 # |---|---|---|
 # | pose $p_i$ (135), deltas $d_i$ without global yaw, state $p^{dyn}_i$ | `graspkit.intention` | §3.2, §3.3 |
-# | intention $I_i = (I^w, I^r, I^p)$ | `graspkit.intention.intention` | §3.2, Eq. 1–3 |
+# | intention $I_i = (I^w, I^r, I^p)$ | `graspkit.intention.intention` | §3.2 (three formulas) |
 # | training windows, hindsight goals, splits, statistics | `graspkit.data.wandr_dataset` | §3.2, §4.1 |
 # | the c-VAE, losses, rollout schedule | `graspkit.models.wandr` | §3.3, §3.4, Sup. B.1–B.2 |
 # | batched generation | `graspkit.models.wandr.generate` | §3.5 |

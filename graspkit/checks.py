@@ -1,0 +1,49 @@
+"""Argument checks shared by the one-call entry points: each raises an error naming the argument and what was expected,
+before any work is done."""
+from __future__ import annotations
+
+import math
+import numbers
+from typing import Any
+
+import torch
+
+
+def check_int(value: Any, name: str, least: int = 0) -> int:
+    """value as an int >= least (bools and fractions refused)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < least:
+        raise ValueError(f"{name}: expected an integer >= {least}, got {value!r}")
+    return int(value)
+
+
+def check_steps(steps: Any, name: str, count: int) -> tuple[int, ...]:
+    """A tuple of `count` step counts >= 0."""
+    try:
+        out = tuple(steps)
+    except TypeError:
+        out = ()
+    if len(out) != count or any(isinstance(s, bool) or not isinstance(s, numbers.Integral) or s < 0 for s in out):
+        raise ValueError(f"{name}: expected {count} step counts (integers >= 0), got {steps!r}")
+    return tuple(int(s) for s in out)
+
+
+def check_positive(value: Any, name: str, most: float = math.inf, unit: str = "m") -> float:
+    """A finite real in (0, most]."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) \
+            or not 0 < value <= most:
+        bound = "" if math.isinf(most) else f", at most {most:g}"
+        raise ValueError(f"{name}: expected a finite positive number ({unit}){bound}, got {value!r}")
+    return float(value)
+
+
+def check_bool(value: Any, name: str) -> bool:
+    """A real bool (a string such as 'no' would read as True)."""
+    if not isinstance(value, bool):
+        raise ValueError(f"{name}: expected True or False, got {value!r}")
+    return value
+
+
+def check_generator(generator: Any, name: str = "generator") -> None:
+    """None or a torch.Generator."""
+    if generator is not None and not isinstance(generator, torch.Generator):
+        raise TypeError(f"{name}: expected a torch.Generator or None, got {type(generator).__name__}")
