@@ -47,3 +47,40 @@ def check_generator(generator: Any, name: str = "generator") -> None:
     """None or a torch.Generator."""
     if generator is not None and not isinstance(generator, torch.Generator):
         raise TypeError(f"{name}: expected a torch.Generator or None, got {type(generator).__name__}")
+
+
+# argparse types: a bad value becomes "argument --flag: ..." and exit code 2
+def nonneg_float(text: str) -> float:
+    """A finite float >= 0 (loss weights, noise)."""
+    import argparse
+
+    v = float(text)
+    if not math.isfinite(v) or v < 0:
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
+    return v
+
+
+def positive_float(text: str) -> float:
+    """A finite float > 0 (a time limit in seconds)."""
+    import argparse
+
+    v = float(text)
+    if not math.isfinite(v) or v <= 0:
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text}")
+    return v
+
+
+def count_type(least: int):
+    """An argparse type for integers >= least."""
+    import argparse
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {least}, got {text}") from None
+        if v < least:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {least}, got {text}")
+        return v
+    parse.__name__ = f"integer >= {least}"
+    return parse

@@ -25,6 +25,7 @@ import torch
 from scipy.spatial import cKDTree
 from torch import Tensor
 
+from graspkit.checks import count_type, nonneg_float, positive_float
 from graspkit.cli import check_counts, check_folders, reports_errors
 from graspkit.models.gnet import pose_rotmats
 from graspkit.models.mnet import STALL_FRAMES, MNet, MNetWindows, predict_horizon
@@ -281,7 +282,7 @@ def run_train_gnet(folders, out, variant: str = "gnet", epochs: int = 60, time_l
     import time
 
     from graspkit.models.gnet import GNetConfig, GNetLossWeights, save_weights, train_gnet
-    from graspkit.train import TrainConfig, run_path
+    from graspkit.train import TrainConfig, files_key, run_path
 
     if variant not in ("gnet", "smplx"):
         raise ValueError(f"variant: expected 'gnet' or 'smplx', got {variant!r}")
@@ -291,7 +292,7 @@ def run_train_gnet(folders, out, variant: str = "gnet", epochs: int = 60, time_l
     weights = GNetLossWeights() if kl is None else GNetLossWeights(kl=kl)
     cfg = GNetConfig(offsets=variant == "gnet")
     run = run_path(f"gnet_{variant}", seed, run_dir, cfg=asdict(cfg), weights=asdict(weights), epochs=epochs,
-                    data=[str(f) for f in folders], n=len(train["rot6d"]))
+                    data=[str(f) for f in folders], n=len(train["rot6d"]), files=files_key(folders))
     t0 = time.perf_counter()
     net, hist = train_gnet(train, val, body, cfg, weights,
                            train_cfg=TrainConfig(epochs=epochs, batch_size=64, lr=1e-3, seed=seed, num_threads=threads),
@@ -323,7 +324,7 @@ def run_train_mnet(folders, out, variant: str = "mnet", epochs: int = 20, time_l
 
     from graspkit.models.gnet import save_weights
     from graspkit.models.mnet import MNetConfig, train_mnet
-    from graspkit.train import TrainConfig, run_path
+    from graspkit.train import TrainConfig, files_key, run_path
 
     if variant not in MNET_VARIANTS:
         raise ValueError(f"variant: expected one of {list(MNET_VARIANTS)}, got {variant!r}")
@@ -333,7 +334,8 @@ def run_train_mnet(folders, out, variant: str = "mnet", epochs: int = 20, time_l
     train = mnet_windows(folders, "train", cfg, stride, goal_repeat)
     val = mnet_windows(folders, "val", cfg, max(stride, 4))
     run = run_path(f"mnet_{variant}", seed, run_dir, cfg=asdict(cfg), epochs=epochs, stride=stride,
-                    data=[str(f) for f in folders], n=len(train), goal_repeat=goal_repeat, vel_noise=vel_noise)
+                    data=[str(f) for f in folders], n=len(train), goal_repeat=goal_repeat, vel_noise=vel_noise,
+                    files=files_key(folders))
     net, hist = train_mnet(train, val, cfg, train_cfg=TrainConfig(epochs=epochs, batch_size=128, lr=1e-3, seed=seed,
                                                                    num_threads=threads),
                            checkpoint=run, time_limit_s=time_limit_s, progress=progress, vel_noise=vel_noise)
@@ -360,14 +362,14 @@ def add_goal_train_commands(train_sub) -> None:
                        f"{name}.pt, {name}_<variant>.pt for another --variant)")
         p.set_defaults(out_is_file=True)
         p.add_argument("--epochs", type=int, default=default_epochs)
-        p.add_argument("--time-limit", type=float, default=600.0, help="seconds; stops after the epoch that crosses it")
+        p.add_argument("--time-limit", type=positive_float, default=600.0, help="seconds; stops after the epoch that crosses it")
         p.add_argument("--seed", type=int, default=0)
         p.add_argument("--threads", type=int, default=2)
         if name == "gnet":
-            p.add_argument("--kl", type=float, default=None, help="λ_KL of Eq. 3 (default GNetLossWeights.kl)")
+            p.add_argument("--kl", type=nonneg_float, default=None, help="λ_KL of Eq. 3 (default GNetLossWeights.kl)")
         else:
-            p.add_argument("--goal-repeat", type=int, default=4, help="times the windows near the goal frame are shown")
-            p.add_argument("--vel-noise", type=float, default=0.005, help="m/frame of noise on the input velocities")
+            p.add_argument("--goal-repeat", type=count_type(1), default=4, help="times the windows near the goal frame are shown")
+            p.add_argument("--vel-noise", type=nonneg_float, default=0.005, help="m/frame of noise on the input velocities")
         p.set_defaults(func=lambda a, name=name: _cmd_train(a, name, DATA_STUBS / "checkpoints"))
 
 

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from graspkit.checks import positive_float
 from graspkit.cli import check_counts, check_out, reports_errors
 from graspkit.data.motionfill_dataset import (MotionFillDataset, MotionFillStats, load_windows, make_windows,
                                               save_windows, split_clips)
@@ -305,8 +306,9 @@ def add_motionfill_train_commands(train_sub) -> None:
                    "144 approach)")
     p.add_argument("--data", type=Path, default=None, help="folder of the stage's clips (default: the cache's "
                    "motion/locomotion or grasps/approach)")
-    p.add_argument("--lr", type=float, default=1e-3)
-    p.add_argument("--time-limit", type=float, default=540.0, help="seconds; stops after the epoch that crosses it")
+    p.add_argument("--lr", type=positive_float, default=None, help="default 1e-3 (not with --stage smooth_ae)")
+    p.add_argument("--time-limit", type=positive_float, default=None, help="seconds; stops after the epoch that "
+                   "crosses it (default 540; not with --stage smooth_ae)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--reduction", choices=["sum", "mean"], default=None,
@@ -326,7 +328,7 @@ def add_motionfill_train_commands(train_sub) -> None:
     b.add_argument("--data", type=Path, default=None, help="folder of the approach clips (default: the cache's)")
     b.add_argument("--clips", type=int, default=None, help="approach clips (default 144)")
     b.add_argument("--lr", type=float, default=1e-3)
-    b.add_argument("--time-limit", type=float, default=300.0, help="seconds; stops after the epoch that crosses it")
+    b.add_argument("--time-limit", type=positive_float, default=300.0, help="seconds; stops after the epoch that crosses it")
     b.add_argument("--seed", type=int, default=0)
     b.add_argument("--threads", type=int, default=1)
     b.set_defaults(func=_cmd_train_baseline)
@@ -353,6 +355,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
     if args.stage == "smooth_ae":
         from graspkit.optim.graspmotion import SMOOTH_AE_PATH, train_smooth_ae
 
+        if args.lr is not None or args.time_limit is not None:
+            raise ValueError("--lr, --time-limit: --stage smooth_ae trains S.1's small autoencoder in its own loop "
+                             "(Adam, lr 2e-3, every epoch; not graspkit.train.fit: no resume, no CSV); leave them out")
+
         out = args.out if args.out != CHECKPOINT else SMOOTH_AE_PATH
         marks = []
         for kind in ("locomotion", "approach"):
@@ -364,7 +370,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
         return 0
     kind = STAGES[args.stage][0]
     _, hist = train_stage(args.stage, args.epochs, args.out, init=args.init, seed=args.seed,
-                          time_limit_s=args.time_limit, lr=args.lr,
+                          time_limit_s=540.0 if args.time_limit is None else args.time_limit,
+                          lr=1e-3 if args.lr is None else args.lr,
                           clips=None if args.clips is None else {kind: args.clips},
                           data=args.data, reduction=args.reduction, local_arch=args.local_arch)
     last = hist[-1]

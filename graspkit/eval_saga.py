@@ -36,6 +36,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from graspkit.checks import positive_float
 from graspkit.cli import check_counts, check_folders, reports_errors
 from graspkit.optim.grasppose import ARM_JOINTS, GraspPoseConfig, GraspPoseWeights
 from graspkit.paths import DATA_STUBS, write_atomic
@@ -546,7 +547,7 @@ def add_saga_train_commands(train_sub) -> None:
         p.add_argument("--out", type=Path, default=None, help=f"weights (default data_stubs/checkpoints/{out})")
         p.set_defaults(out_is_file=True)
         p.add_argument("--epochs", type=int, default=30 if name == "pose_prior" else 12)
-        p.add_argument("--time-limit", type=float, default=None if name == "pose_prior" else 600.0,
+        p.add_argument("--time-limit", type=positive_float, default=None if name == "pose_prior" else 600.0,
                        help="seconds; stops after the epoch that crosses it"
                             + (" (default: none)" if name == "pose_prior" else " (default 600)"))
         p.add_argument("--seed", type=int, default=0)

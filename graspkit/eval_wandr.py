@@ -38,6 +38,7 @@ import torch
 from torch import Tensor
 
 from graspkit import intention as I
+from graspkit.checks import count_type, nonneg_float, positive_float
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.data.reaching import EVAL_ANGLES_DEG, EVAL_DISTANCES, EVAL_FRAMES, EVAL_HEIGHTS, Start, evaluation_goals
 from graspkit.data.wandr_dataset import FOOT_JOINTS, shaped_rest
@@ -857,13 +858,13 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     t.add_argument("--out", type=Path, default=None, help="weights (default data_stubs/checkpoints/<variant>.pt)")
     t.set_defaults(out_is_file=True)
     t.add_argument("--epochs", type=int, default=6)
-    t.add_argument("--time-limit", type=float, default=None, help="seconds; stops after the epoch that crosses it")
+    t.add_argument("--time-limit", type=positive_float, default=None, help="seconds; stops after the epoch that crosses it")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--threads", type=int, default=2)
     t.add_argument("--batch-size", type=int, default=512)
     t.add_argument("--lr", type=float, default=1e-3)
     t.add_argument("--max-steps", type=int, default=10, help="rollout steps at the end of the ramp (Sup. B.2)")
-    t.add_argument("--ramp-epochs", type=int, default=4, help="epochs over which the rollout grows from 0")
+    t.add_argument("--ramp-epochs", type=count_type(0), default=4, help="epochs over which the rollout grows from 0")
     t.add_argument("--stride-scale", type=int, default=1, help="multiply the window strides (shorter epochs)")
     t.add_argument("--window-stride", type=int, default=None,
                    help="frames between training windows, every kind (instead of the scaled defaults; 1: every frame)")
@@ -875,14 +876,14 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
                         "faster steps, far lower SR, docs/wandr.md)")
     t.add_argument("--step-stride", type=int, default=1,
                    help="with --rollout-grad step: recompute every n-th rollout step with gradient (default 1: all)")
-    t.add_argument("--alpha-kl", type=float, default=1e-2, help="the KL weight (paper: 1e-2)")
+    t.add_argument("--alpha-kl", type=nonneg_float, default=1e-2, help="the KL weight (paper: 1e-2)")
     t.add_argument("--goal-frame", choices=GOAL_FRAMES, default="reach",
                    help="t_G of a reaching clip: the frame the hand arrives, or the end of the hold after it")
-    t.add_argument("--foot-weight", type=float, default=0.0,
+    t.add_argument("--foot-weight", type=nonneg_float, default=0.0,
                    help="weight of the foot-joint velocity term (not in the paper; mm^2 per frame; docs/wandr.md)")
-    t.add_argument("--contact-weight", type=float, default=0.0,
+    t.add_argument("--contact-weight", type=nonneg_float, default=0.0,
                    help="weight of the planted-foot term (not in the paper; mm^2 per frame; docs/wandr.md)")
-    t.add_argument("--floor-weight", type=float, default=0.0,
+    t.add_argument("--floor-weight", type=nonneg_float, default=0.0,
                    help="weight of the floor term: the lowest foot joint's height against the data's (not in the "
                         "paper; cm^2 per frame; docs/wandr.md)")
     t.add_argument("--init", type=Path, default=None,

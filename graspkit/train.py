@@ -9,11 +9,14 @@
 A checkpoint holds only tensors and plain Python values (model and optimiser state, epoch, history, config,
 extra such as normalisation statistics), so it loads with `torch.load(path, weights_only=True)`. Training
 stopped at any point resumes from the last finished epoch with the same numbers as an uninterrupted run: the
-data order of each epoch comes from `seed + epoch`, and the RNG state is saved.
+data order of each epoch comes from `seed + epoch`, and the RNG state is saved. A `time_limit_s` is the exception:
+it is wall time, so where it stops depends on the machine, and a resumed run gets the whole limit again (a finished
+time-limited command run a second time trains further).
 
 DDP: when `torch.distributed` is initialised (`init_distributed()` under `torchrun --nproc_per_node=2 ...`), `fit`
-wraps the model in DistributedDataParallel, shards every epoch with a DistributedSampler and lets rank 0 alone
-write checkpoints. The step function then receives the DDP wrapper and must run the model through its `forward`
+wraps the model in DistributedDataParallel, shards every epoch with a DistributedSampler, sums the logged terms over
+the ranks and lets rank 0 alone write checkpoints. Training stays on the CPU (gloo): the workbook's models are sized
+for CPU cores, and `fit` does not move models or batches to a GPU. The step function then receives the DDP wrapper and must run the model through its `forward`
 (gradients are averaged across ranks in backward), so every rank keeps identical weights. GNet's and MNet's steps
 do; WholeGrasp, the pose prior, MotionFill and WANDR call other methods (`loss`, `encode` / `decode`), pass
 `ddp=False` and train in one process.
@@ -114,6 +117,21 @@ def file_key(path: str | Path | None) -> str:
     return hashlib.blake2b(p.read_bytes(), digest_size=6).hexdigest()
 
 
+def files_key(folders: str | Path | list[str | Path], pattern: str = "*.npz") -> str:
+    """A short content hash of the files matching `pattern` in one or more folders (names and bytes), for
+    `run_path`: data remade in place (the same names and sizes) is a new run, not the old one resumed."""
+    import hashlib
+
+    h = hashlib.blake2b(digest_size=6)
+    for folder in [folders] if isinstance(folders, (str, Path)) else folders:
+        for f in sorted(Path(folder).glob(pattern)):
+            h.update(f.name.encode())
+            with open(f, "rb") as fh:
+                for chunk in iter(lambda: fh.read(1 << 20), b""):
+                    h.update(chunk)
+    return h.hexdigest()
+
+
 def load_checkpoint(path: str | Path) -> dict[str, Any]:
     """Read a checkpoint without pickle (weights_only); a missing or foreign file gives an error naming it."""
     path = Path(path)
@@ -181,12 +199,12 @@ def state_dict_problem(e: Exception) -> str:
 
 
 def init_distributed() -> bool:
-    """Join the process group that `torchrun` describes (env WORLD_SIZE > 1): gloo on CPU, nccl on GPUs.
-    Returns whether training is distributed. Call once at the start of a script run with torchrun."""
+    """Join the process group that `torchrun` describes (env WORLD_SIZE > 1), with the gloo backend: `fit` trains on
+    the CPU. Returns whether training is distributed. Call once at the start of a script run with torchrun."""
     if int(os.environ.get("WORLD_SIZE", "1")) <= 1 or not torch.distributed.is_available():
         return False
     if not torch.distributed.is_initialized():
-        torch.distributed.init_process_group("nccl" if torch.cuda.is_available() else "gloo")
+        torch.distributed.init_process_group("gloo")
     return True
 
 
@@ -199,8 +217,7 @@ def _distributed() -> tuple[bool, int, int]:
 
 def _agree(flag: bool) -> bool:
     """Rank 0's decision (e.g. the time limit) for every rank, so that all ranks stop at the same epoch."""
-    device = "cuda" if torch.distributed.get_backend() == "nccl" else "cpu"
-    t = torch.tensor([int(flag)], device=device)
+    t = torch.tensor([int(flag)])
     torch.distributed.broadcast(t, src=0)
     return bool(t.item())
 
@@ -217,17 +234,36 @@ def _loader(dataset: Dataset, cfg: TrainConfig, epoch: int, world: tuple[bool, i
     return DataLoader(dataset, batch_size=cfg.batch_size, shuffle=True, generator=g)
 
 
+def batch_len(batch: Any) -> int:
+    """Samples in a batch: the leading size of its first tensor (a tensor, or one inside a dict / list / tuple)."""
+    if isinstance(batch, torch.Tensor):
+        return len(batch) if batch.dim() else 1
+    items = batch.values() if isinstance(batch, dict) else batch if isinstance(batch, (list, tuple)) else ()
+    for x in items:
+        n = batch_len(x)
+        if n:
+            return n
+    return 0
+
+
+def _add_logs(sums: dict[str, float], logs: dict[str, Any], weight: int) -> None:
+    """Accumulate step logs (batch means) weighted by the batch's size (in place)."""
+    for k, v in logs.items():
+        sums[k] = sums.get(k, 0.0) + weight * float(v.detach() if isinstance(v, torch.Tensor) else v)
+
+
 def evaluate(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig, epoch: int = 0
              ) -> dict[str, float]:
-    """Mean of step's logs over `dataset` in eval mode, without gradients (fixed order)."""
+    """Per-sample mean of step's logs over `dataset` (each batch's means weighted by its size, so a short last
+    batch counts as its samples) in eval mode, without gradients (fixed order)."""
     model.eval()
     sums: dict[str, float] = {}
     n = 0
     with torch.no_grad():
         for batch in DataLoader(dataset, batch_size=cfg.batch_size, shuffle=False):
-            for k, v in step(model, batch, epoch).items():
-                sums[k] = sums.get(k, 0.0) + float(v)
-            n += 1
+            w = batch_len(batch) or 1
+            _add_logs(sums, step(model, batch, epoch), w)
+            n += w
     return {k: v / max(n, 1) for k, v in sums.items()}
 
 
@@ -282,7 +318,9 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
     `extra`, e.g. normalisation statistics). `time_limit_s` stops after the epoch that crosses the limit,
     `stop_at` after that epoch (both leave a checkpoint to resume from). With `val_dataset`, each epoch also logs
     `val_<term>`; the history goes to `<checkpoint>.csv` beside the checkpoint (every epoch) and its loss curves to
-    `<checkpoint>.png` (at the end). Resuming refuses a file of another network or of other settings. `ddp=False` marks a step that calls
+    `<checkpoint>.png` (at the end). The logged terms are per-sample means over the epoch (each batch's means
+    weighted by its size; under DDP summed over the ranks). Resuming refuses a file of another network or of other
+    settings; a state already at `stop_at` returns its history without training. `ddp=False` marks a step that calls
     model methods other than `forward` (DDP synchronises only what runs through it): such a model is refused under
     an initialised process group instead of training out of step.
     """
@@ -307,28 +345,32 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
         state = load_checkpoint(checkpoint)
         if not all(k in state for k in ("model", "optimizer", "scheduler", "history", "epoch", "rng")):
             raise ValueError(f"checkpoint {checkpoint}: not a training state of graspkit.train.fit (a weights file?); "
-                             "pass another path to train anew")
+                             "delete it (graspkit's run file) or pass another path to train anew")
         ours = {k: tuple(v.shape) for k, v in model.state_dict().items()}
         theirs = {k: tuple(v.shape) for k, v in state["model"].items()}
         if ours != theirs:
             raise ValueError(f"checkpoint {checkpoint}: holds another network than {type(model).__name__} (its weights "
-                             f"differ in {sorted(set(ours.items()) ^ set(theirs.items()))[:3]}...); pass another "
-                             "path to train anew")
+                             f"differ in {sorted(set(ours.items()) ^ set(theirs.items()))[:3]}...); delete "
+                             "it (graspkit's run file) or pass another path to train anew")
         saved = {k: v for k, v in state.get("config", {}).items() if k not in ("num_threads", "extra")}
         now = {k: v for k, v in asdict(cfg).items() if k not in ("num_threads", "extra")}
         if saved and saved != now:
             raise ValueError(f"checkpoint {checkpoint}: a run with other settings ("
                              + ", ".join(f"{k} {saved.get(k)!r} there, {now.get(k)!r} here" for k in now
-                                         if saved.get(k) != now[k]) + "); pass another path to train anew")
+                                         if saved.get(k) != now[k]) + "); delete it (graspkit's run file) or pass another "
+                             "path to train anew")
         model.load_state_dict(state["model"])
         opt.load_state_dict(state["optimizer"])
         sched.load_state_dict(state["scheduler"])
         history, start = list(state["history"]), int(state["epoch"])
         torch.set_rng_state(state["rng"])
+        if stop_at is not None and start >= stop_at:         # already there (a run killed after saving that epoch)
+            model.eval()
+            return history
     t0 = time.perf_counter()
-    bar = tqdm(range(start, cfg.epochs), desc=type(model).__name__, unit="epoch",
-               disable=not progress or world[1] != 0, initial=start, total=cfg.epochs)
-    for epoch in bar:
+    bar = tqdm(desc=type(model).__name__, unit="epoch", disable=not progress or world[1] != 0, initial=start,
+               total=cfg.epochs)
+    for epoch in range(start, cfg.epochs):
         model.train()
         sums: dict[str, float] = {}
         n = 0
@@ -339,14 +381,20 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
             if cfg.grad_clip:
                 torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
             opt.step()
-            for k, v in logs.items():
-                sums[k] = sums.get(k, 0.0) + float(v.detach())
-            n += 1
+            w = batch_len(batch) or 1
+            _add_logs(sums, logs, w)
+            n += w
         sched.step()
+        if world[0]:                                      # every rank's samples, not rank 0's shard alone
+            keys = sorted(sums)
+            t = torch.tensor([sums[k] for k in keys] + [n], dtype=torch.float64)
+            torch.distributed.all_reduce(t)
+            sums, n = dict(zip(keys, t[:-1].tolist())), t[-1].item()
         history.append({"epoch": epoch + 1, **{k: v / n for k, v in sums.items()}})
         if val_dataset is not None:
             history[-1].update({f"val_{k}": v for k, v in evaluate(model, step, val_dataset, cfg, epoch).items()})
-        bar.set_postfix(loss=f"{history[-1]['loss']:.4f}")
+        bar.set_postfix(loss=f"{history[-1]['loss']:.4f}", refresh=False)
+        bar.update(1)
         if checkpoint is not None and world[1] == 0:
             save_checkpoint(checkpoint, {"model": model.state_dict(), "optimizer": opt.state_dict(),
                                          "scheduler": sched.state_dict(), "epoch": epoch + 1, "history": history,
@@ -357,7 +405,10 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
             stop = _agree(stop)
         if stop:
             break
+    bar.close()
     if checkpoint is not None and world[1] == 0 and history:
+        # the CSV again: a run killed between an epoch's checkpoint and its CSV resumes past the loop
+        write_history_csv(Path(checkpoint).with_suffix(".csv"), history)
         write_history_plot(Path(checkpoint).with_suffix(".png"), history)
     if world[0]:
         torch.distributed.barrier()      # no rank leaves (and tears down gloo) while rank 0 still writes

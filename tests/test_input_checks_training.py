@@ -163,10 +163,27 @@ def test_module_commands_report_bad_input_without_a_traceback(tmp_path, capsys, 
     (["train", "gnet", "--data", str(STUBS / "grasps"), "--data", str(CK / "gnet.pt")], "gnet.pt: is a file"),
     (["eval", "wandr", "--checkpoint", "{tmp}"], "is a folder, expected a checkpoint file"),
     (["wandr", "--goal", "1", "0", "1", "--checkpoint", "{tmp}", "--out", "{tmp}/demo"], "--checkpoint: "),
+    # loss weights and schedules below zero once trained (a logged loss of -131366 with --foot-weight -5)
+    (["train", "gnet", "--kl", "-1", "--out", "{tmp}/demo/g.pt"], "argument --kl: expected a finite number >= 0"),
+    (["train", "wandr", "--foot-weight", "-5", "--out", "{tmp}/demo/w.pt"], "argument --foot-weight: expected"),
+    (["train", "wandr", "--alpha-kl", "nan", "--out", "{tmp}/demo/w.pt"], "argument --alpha-kl: expected"),
+    (["train", "wandr", "--ramp-epochs", "-1", "--out", "{tmp}/demo/w.pt"], "argument --ramp-epochs: expected an "
+                                                                           "integer >= 0"),
+    (["train", "mnet", "--goal-repeat", "0", "--out", "{tmp}/demo/m.pt"], "argument --goal-repeat: expected an "
+                                                                         "integer >= 1"),
+    (["train", "mnet", "--vel-noise", "-1", "--out", "{tmp}/demo/m.pt"], "argument --vel-noise: expected"),
+    (["train", "wholegrasp", "--time-limit", "-1", "--out", "{tmp}/demo/w.pt"], "argument --time-limit: expected a "
+                                                                               "finite number > 0, got -1"),
+    (["train", "motionfill", "--stage", "smooth_ae", "--lr", "0.1", "--out", "{tmp}/demo/s.pt"],
+     "--lr, --time-limit: --stage smooth_ae trains"),
 ])
 def test_graspkit_counts_and_folders_are_checked_before_work(tmp_path, capsys, argv, message):
     from graspkit.cli import main
 
-    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    try:
+        code = main([a.format(tmp=tmp_path) for a in argv])
+    except SystemExit as e:                 # argparse's own "argument --flag: ..." exits from parse_args
+        code = e.code
+    assert code == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "demo").exists()

@@ -48,6 +48,41 @@ def test_resume_gives_the_same_weights_as_an_uninterrupted_run(tmp_path):
         torch.testing.assert_close(p, q)
 
 
+def test_logged_terms_are_per_sample_means_with_a_short_last_batch():
+    """70 samples in batches of 64 + 6: the mean of batch means weighted the 6 as much as the 64 (+32 % on the
+    pose prior's validation loss, an independent check)."""
+    from graspkit.train import evaluate
+
+    x = torch.arange(70, dtype=torch.float32)[:, None]
+    data = TensorDataset(x, x)
+    cfg = TrainConfig(epochs=1, batch_size=64, lr=1e-3)
+    value = lambda m, b, e: {"loss": b[0].mean()}                  # noqa: E731  a batch's mean of 0..69
+    assert evaluate(torch.nn.Linear(1, 1), value, data, cfg)["loss"] == pytest.approx(34.5)   # not (31.5 + 66.5) / 2
+    model = torch.nn.Linear(1, 1)
+    hist = fit(model, lambda m, b, e: {"loss": m(b[0]).mean() * 0 + b[0].mean()}, data, cfg, progress=False)
+    assert hist[0]["loss"] == pytest.approx(34.5)
+
+
+def test_a_state_already_at_stop_at_returns_its_history_and_a_lost_csv_row_is_rewritten(tmp_path):
+    """A run killed after saving an epoch but before its CSV (or, for WANDR's --select-val, before scoring it):
+    the same command once trained to the end (past stop_at) and never rewrote the missing row."""
+    from graspkit.train import write_history_csv
+
+    cfg = TrainConfig(epochs=4, batch_size=16, lr=1e-2, seed=3)
+    ck = tmp_path / "run.pt"
+    torch.manual_seed(1)
+    model = torch.nn.Linear(4, 1)
+    fit(model, _step, _problem(), cfg, checkpoint=ck, progress=False, stop_at=2)
+    weights = {k: v.clone() for k, v in model.state_dict().items()}
+    again = fit(model, _step, _problem(), cfg, checkpoint=ck, progress=False, stop_at=2)
+    assert len(again) == 2 and load_checkpoint(ck)["epoch"] == 2
+    assert all(torch.equal(weights[k], v) for k, v in model.state_dict().items())
+    hist = fit(model, _step, _problem(), cfg, checkpoint=ck, progress=False)
+    write_history_csv(ck.with_suffix(".csv"), hist[:-1])           # the kill's state: 4 epochs saved, 3 rows
+    fit(model, _step, _problem(), cfg, checkpoint=ck, progress=False)
+    assert ck.with_suffix(".csv").read_text().count("\n") == 1 + 4
+
+
 def test_load_checkpoint_names_a_missing_or_pickled_file(tmp_path):
     with pytest.raises(FileNotFoundError, match="nope.pt"):
         load_checkpoint(tmp_path / "nope.pt")
@@ -209,3 +244,21 @@ def test_every_atomic_writer_syncs_the_file_before_renaming_it(tmp_path, monkeyp
         k = events.index(renames[0])
         assert ("fsync", renames[0][1]) in events[:k], (name, events)       # the data, before the rename
         assert ("fsync", str(tmp_path)) in events[k:], (name, events)       # the folder's entry, after it
+
+
+def test_files_key_changes_when_data_are_remade_in_place_at_the_same_size(tmp_path):
+    """GNet's and MNet's runs were keyed on the folder and the sample count: poses edited in place (same names, same
+    sizes) resumed the old run and returned its weights bit for bit."""
+    import numpy as np
+
+    from graspkit.train import files_key
+
+    for i in range(3):
+        np.savez(tmp_path / f"grasp_{i:06d}.npz", pose=np.full(8, float(i)))
+    (tmp_path / "notes.txt").write_text("not data")
+    before = files_key(tmp_path)
+    size = (tmp_path / "grasp_000001.npz").stat().st_size
+    np.savez(tmp_path / "grasp_000001.npz", pose=np.full(8, 0.1))              # remade in place
+    assert (tmp_path / "grasp_000001.npz").stat().st_size == size and files_key(tmp_path) != before
+    (tmp_path / "notes.txt").write_text("other notes")                          # not matched by the pattern
+    assert files_key(tmp_path) == files_key([tmp_path]) == files_key(tmp_path, "grasp_*.npz")

@@ -530,7 +530,7 @@ def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask:
                    lr=lr, config=asdict(model.cfg), augment_yaw=augment_yaw, data=_data_key(root))
     hist = fit(model, step, train, cfg, checkpoint=run, extra={"model_config": asdict(model.cfg)},
                val_dataset=val, progress=progress, time_limit_s=None if time_limit_s is None
-               else max(time_limit_s - prep, 0.0), ddp=False)                   # the step calls m.loss
+               else max(time_limit_s - prep, 1e-9), ddp=False)   # the step calls m.loss; one epoch at least
     seconds = time.perf_counter() - t0
     metrics = reconstruction_metrics(model, val)
     state = model.state()
@@ -545,9 +545,10 @@ def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask:
 
 
 def _data_key(root: str | Path) -> dict[str, Any]:
-    """What a training run's data are, for its run_path: the folder and its grasp files' names and sizes."""
-    files = sorted(Path(root).glob("grasp_*.npz"))
-    return {"root": str(Path(root).resolve()), "files": [(f.name, f.stat().st_size) for f in files]}
+    """What a training run's data are, for its run_path: the folder and its grasp files' content (`files_key`)."""
+    from graspkit.train import files_key
+
+    return {"root": str(Path(root).resolve()), "files": files_key(root, "grasp_*.npz")}
 
 
 def load_wholegrasp(path: str | Path | None = None, multitask: bool = True) -> WholeGraspVAE:
@@ -870,7 +871,7 @@ def train_grabnet_smplx(root: str | Path, out: str | Path | None = None, epochs:
                    augment_yaw=augment_yaw, data=_data_key(root))
     hist = fit(model, step, train, cfg, checkpoint=run,
                extra={"model_config": dict(model.hparams)}, val_dataset=val, progress=progress,
-               time_limit_s=None if time_limit_s is None else max(time_limit_s - (time.perf_counter() - t0), 0.0),
+               time_limit_s=None if time_limit_s is None else max(time_limit_s - (time.perf_counter() - t0), 1e-9),
                ddp=False)                                                          # the step calls m.loss
     state = model.state()
     if half:
