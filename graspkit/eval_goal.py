@@ -362,14 +362,17 @@ def add_goal_train_commands(train_sub) -> None:
                        f"{name}.pt, {name}_<variant>.pt for another --variant)")
         p.set_defaults(out_is_file=True)
         p.add_argument("--epochs", type=int, default=default_epochs)
-        p.add_argument("--time-limit", type=positive_float, default=600.0, help="seconds; stops after the epoch that crosses it")
+        p.add_argument("--time-limit", type=positive_float, default=600.0,
+                       help="seconds; stops after the epoch that crosses it")
         p.add_argument("--seed", type=int, default=0)
         p.add_argument("--threads", type=int, default=2)
         if name == "gnet":
             p.add_argument("--kl", type=nonneg_float, default=None, help="λ_KL of Eq. 3 (default GNetLossWeights.kl)")
         else:
-            p.add_argument("--goal-repeat", type=count_type(1), default=4, help="times the windows near the goal frame are shown")
-            p.add_argument("--vel-noise", type=nonneg_float, default=0.005, help="m/frame of noise on the input velocities")
+            p.add_argument("--goal-repeat", type=count_type(1), default=4,
+                           help="times the windows near the goal frame are shown")
+            p.add_argument("--vel-noise", type=nonneg_float, default=0.005,
+                           help="m/frame of noise on the input velocities")
         p.set_defaults(func=lambda a, name=name: _cmd_train(a, name, DATA_STUBS / "checkpoints"))
 
 

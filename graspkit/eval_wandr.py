@@ -24,9 +24,9 @@ goals), and the FS equals the full-mesh FS (tests/test_wandr_eval.py checks both
 Four extra columns, not the paper's (`summary`'s SR_grounded, floating, sunk and SR_not_sunk): SR counts a wrist on
 the goal however the body got there, including with both feet off the floor or sunk into it, which the procedural
 clips never show (their lowest vertex stays within 3 mm of it). SR_grounded counts only the frames where a foot is
-within 5 cm of the floor (the lowest foot vertex; SAGA §4.2's heel height for skating), floating is the share of frames where
-none is, sunk the share where the lowest foot vertex is more than 1 cm below the floor, and SR_not_sunk counts only
-the frames where it is not.
+within 5 cm of the floor (the lowest foot vertex; SAGA §4.2's heel height for skating), floating is the share of
+frames where none is, sunk the share where the lowest foot vertex is more than 1 cm below the floor, and SR_not_sunk
+counts only the frames where it is not.
 """
 from __future__ import annotations
 
@@ -44,7 +44,7 @@ from graspkit.data.reaching import EVAL_ANGLES_DEG, EVAL_DISTANCES, EVAL_FRAMES,
 from graspkit.data.wandr_dataset import FOOT_JOINTS, shaped_rest
 from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS
 
-FOOT_ON_FLOOR = SAGA_SKATE_HEEL_HEIGHT   # m: a foot within 5 cm of the floor touches it (SAGA §4.2's heel height for skating)
+FOOT_ON_FLOOR = SAGA_SKATE_HEEL_HEIGHT   # m: a foot within 5 cm of the floor touches it (SAGA §4.2's skating heels)
 SUNK_DEPTH = 0.01                         # m: a lowest foot vertex more than 1 cm below the floor: the body has sunk
 
 T_GOAL = EVAL_FRAMES - 1          # frame 239: 8 s after the start frame
@@ -858,7 +858,8 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     t.add_argument("--out", type=Path, default=None, help="weights (default data_stubs/checkpoints/<variant>.pt)")
     t.set_defaults(out_is_file=True)
     t.add_argument("--epochs", type=int, default=6)
-    t.add_argument("--time-limit", type=positive_float, default=None, help="seconds; stops after the epoch that crosses it")
+    t.add_argument("--time-limit", type=positive_float, default=None,
+                   help="seconds; stops after the epoch that crosses it")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--threads", type=int, default=2)
     t.add_argument("--batch-size", type=int, default=512)

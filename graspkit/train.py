@@ -16,10 +16,10 @@ time-limited command run a second time trains further).
 DDP: when `torch.distributed` is initialised (`init_distributed()` under `torchrun --nproc_per_node=2 ...`), `fit`
 wraps the model in DistributedDataParallel, shards every epoch with a DistributedSampler, sums the logged terms over
 the ranks and lets rank 0 alone write checkpoints. Training stays on the CPU (gloo): the workbook's models are sized
-for CPU cores, and `fit` does not move models or batches to a GPU. The step function then receives the DDP wrapper and must run the model through its `forward`
-(gradients are averaged across ranks in backward), so every rank keeps identical weights. GNet's and MNet's steps
-do; WholeGrasp, the pose prior, MotionFill and WANDR call other methods (`loss`, `encode` / `decode`), pass
-`ddp=False` and train in one process.
+for CPU cores, and `fit` does not move models or batches to a GPU. The step function then receives the DDP wrapper
+and must run the model through its `forward` (gradients are averaged across ranks in backward), so every rank keeps
+identical weights. GNet's and MNet's steps do; WholeGrasp, the pose prior, MotionFill and WANDR call other methods
+(`loss`, `encode` / `decode`), pass `ddp=False` and train in one process.
 """
 from __future__ import annotations
 
@@ -355,10 +355,9 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
         saved = {k: v for k, v in state.get("config", {}).items() if k not in ("num_threads", "extra")}
         now = {k: v for k, v in asdict(cfg).items() if k not in ("num_threads", "extra")}
         if saved and saved != now:
-            raise ValueError(f"checkpoint {checkpoint}: a run with other settings ("
-                             + ", ".join(f"{k} {saved.get(k)!r} there, {now.get(k)!r} here" for k in now
-                                         if saved.get(k) != now[k]) + "); delete it (graspkit's run file) or pass another "
-                             "path to train anew")
+            differ = ", ".join(f"{k} {saved.get(k)!r} there, {now.get(k)!r} here" for k in now if saved.get(k) != now[k])
+            raise ValueError(f"checkpoint {checkpoint}: a run with other settings ({differ}); delete it (graspkit's "
+                             "run file) or pass another path to train anew")
         model.load_state_dict(state["model"])
         opt.load_state_dict(state["optimizer"])
         sched.load_state_dict(state["scheduler"])

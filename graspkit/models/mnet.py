@@ -19,9 +19,10 @@ Output (Eq. 10): the next 10 frames as changes from frame t, in the same canonic
 Loss (Eq. 11): λ_v L_v + λ_v^h L_v^h + λ_Θ L_Θ + λ_d L_d^{h→o} + λ_f L_v^f, with L_v^f on the sampled foot
 vertices that are within 5 cm of the floor in the ground truth. No latent: MNet is deterministic.
 
-Size: GOAL's MNet has ~117M parameters (the issue's figure; the paper's text gives no count); graspkit's has 0.61M with the default config (613,850: grouped input
-projections, a two-block residual trunk, and an output head factorised as a per-frame code times one shared linear
-decoder), so that it trains on two CPU cores in minutes and ships as a ~1.3 MB checkpoint (float16).
+Size: GOAL's MNet has ~117M parameters (the issue's figure; the paper's text gives no count); graspkit's has 0.61M
+with the default config (613,850: grouped input projections, a two-block residual trunk, and an output head factorised
+as a per-frame code times one shared linear decoder), so that it trains on two CPU cores in minutes and ships as a
+~1.3 MB checkpoint (float16).
 """
 from __future__ import annotations
 
