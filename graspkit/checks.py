@@ -43,31 +43,35 @@ def check_bool(value: Any, name: str) -> bool:
     return value
 
 
+def check_type(value: Any, cls: type, name: str, optional: bool = False, what: str | None = None) -> None:
+    """value an instance of cls (or None when optional), else a TypeError naming the argument and the class (`what`,
+    default its module path)."""
+    if not (isinstance(value, cls) or (optional and value is None)):
+        what = what or f"{cls.__module__}.{cls.__qualname__}"
+        raise TypeError(f"{name}: expected a {what}{' or None' if optional else ''}, got {type(value).__name__}")
+
+
 def check_generator(generator: Any, name: str = "generator") -> None:
     """None or a torch.Generator."""
-    if generator is not None and not isinstance(generator, torch.Generator):
-        raise TypeError(f"{name}: expected a torch.Generator or None, got {type(generator).__name__}")
+    check_type(generator, torch.Generator, name, optional=True, what="torch.Generator")
 
 
 # argparse types: a bad value becomes "argument --flag: ..." and exit code 2
-def nonneg_float(text: str) -> float:
-    """A finite float >= 0 (loss weights, noise)."""
+def float_type(low: float, strict: bool):
+    """An argparse type for finite floats above low (strict) or at least low."""
     import argparse
 
-    v = float(text)
-    if not math.isfinite(v) or v < 0:
-        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
-    return v
+    def parse(text: str) -> float:
+        v = float(text)
+        if not math.isfinite(v) or v < low or (strict and v == low):
+            raise argparse.ArgumentTypeError(f"expected a finite number {'>' if strict else '>='} {low:g}, got {text}")
+        return v
+    parse.__name__ = f"number {'>' if strict else '>='} {low:g}"
+    return parse
 
 
-def positive_float(text: str) -> float:
-    """A finite float > 0 (a time limit in seconds)."""
-    import argparse
-
-    v = float(text)
-    if not math.isfinite(v) or v <= 0:
-        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {text}")
-    return v
+nonneg_float = float_type(0.0, strict=False)     # loss weights, noise
+positive_float = float_type(0.0, strict=True)    # time limits, learning rates
 
 
 def count_type(least: int):

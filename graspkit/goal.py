@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from graspkit.checks import check_bool, check_int, check_positive
+from graspkit.checks import check_bool, check_int, check_positive, check_type
 from graspkit.data.motion import Motion
 from graspkit.data.reaching import Start
 from graspkit.models.mnet import STALL_FRAMES, check_stall
@@ -75,9 +75,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     check_int(max_frames, "max_frames", least=2)
     check_bool(penetration, "penetration")
     check_stall(stall)
-    if object_pose is not None and not isinstance(object_pose, ObjectPose):
-        raise TypeError(f"object_pose: expected a graspkit.objects.placement.ObjectPose or None, "
-                        f"got {type(object_pose).__name__}")
+    check_type(object_pose, ObjectPose, "object_pose", optional=True)
     given = name                     # as the caller gave it: a catalogue name keeps its cached grid
     name, obj_mesh = as_object(name, "name")
     if start is not None and not isinstance(start, Start):

@@ -255,8 +255,9 @@ def motion_quality(bm, motions, chunk: int = 96) -> dict[str, Any]:
     """
     hl, hr = heel_vertex_ids()
     clips = pairs = fs = sk = sl = frames = 0
-    pen_max = pen_sum = vmax = jerk_sum = lim_max = turn_max = 0.0
-    jerk_n, vmax_at, lim_at, turn_at = 0, "", "", ""
+    pen_max = pen_sum = jerk_sum = 0.0
+    jerk_n = 0
+    speed = turn = limit = (0.0, "")                                     # the largest value so far and where
     for k, m in enumerate(motions):
         clips += 1
         for start, v in m.iter_vertices(bm, chunk=chunk, overlap=1):   # chunks share one frame: every pair once
@@ -268,28 +269,28 @@ def motion_quality(bm, motions, chunk: int = 96) -> dict[str, Any]:
             pen = ground_penetration(v if start == 0 else v[1:])
             pen_max, pen_sum, frames = max(pen_max, float(pen.max(initial=0))), pen_sum + float(pen.sum()), frames + len(pen)
         j = m.joint_positions(bm)[:, BODY_JOINTS]
-        sp = joint_speed(j, m.fps) if len(j) >= 2 else np.zeros((0, 0))
-        if sp.size and sp.max() > vmax:
-            t, jj = np.unravel_index(np.argmax(sp), sp.shape)
-            vmax, vmax_at = float(sp.max()), f"clip {k} frame {t} {JOINT_NAMES[jj]}"
         if len(j) >= 2:
-            turn = joint_turn_speed(np.asarray(m.poses).reshape(len(j), -1, 3)[:, TURN_JOINTS], m.fps)
-            if turn.max() > turn_max:
-                t, jj = np.unravel_index(np.argmax(turn), turn.shape)
-                turn_max, turn_at = float(turn.max()), f"clip {k} frame {t} {JOINT_NAMES[jj]}"
+            speed = _largest(speed, joint_speed(j, m.fps), k)
+            rot = np.asarray(m.poses).reshape(len(j), -1, 3)[:, TURN_JOINTS]
+            turn = _largest(turn, joint_turn_speed(rot, m.fps), k)
         if len(j) >= 4:                                                  # jerk needs four frames; shorter clips add none
             jk = joint_jerk(j, m.fps)
             jerk_sum, jerk_n = jerk_sum + float(jk.sum()), jerk_n + jk.size
-        lim = joint_limit_violation(m.poses)
-        if lim.max() > lim_max:
-            t, jj = np.unravel_index(np.argmax(lim), lim.shape)
-            lim_max, lim_at = float(lim.max()), f"clip {k} frame {t} {JOINT_NAMES[jj]}"
+        limit = _largest(limit, joint_limit_violation(m.poses), k)
     per_pair = (lambda x: x / pairs) if pairs else (lambda x: float("nan"))   # no frame pairs: no rate, not 0 %
     return {"clips": clips, "frames": frames, "pairs": pairs, "fs_wandr": per_pair(fs), "skate_saga": per_pair(sk),
             "slide_goal": per_pair(sl), "penetration_max": pen_max, "penetration_mean": pen_sum / max(frames, 1),
-            "max_joint_speed": vmax, "max_joint_speed_at": vmax_at, "max_joint_turn": turn_max,
-            "max_joint_turn_at": turn_at, "mean_jerk": jerk_sum / max(jerk_n, 1) if jerk_n else float("nan"),
-            "joint_limit_max": lim_max, "joint_limit_at": lim_at}
+            "max_joint_speed": speed[0], "max_joint_speed_at": speed[1], "max_joint_turn": turn[0],
+            "max_joint_turn_at": turn[1], "mean_jerk": jerk_sum / jerk_n if jerk_n else float("nan"),
+            "joint_limit_max": limit[0], "joint_limit_at": limit[1]}
+
+
+def _largest(best: tuple[float, str], values: np.ndarray, clip: int) -> tuple[float, str]:
+    """The larger of `best` (value, where) and the maximum of values (T, J) of clip `clip`, with where it is."""
+    if not values.size or values.max() <= best[0]:
+        return best
+    t, j = np.unravel_index(np.argmax(values), values.shape)
+    return float(values.max()), f"clip {clip} frame {t} {JOINT_NAMES[j]}"
 
 
 # ----------------------------------------------------------------------------- grasps (SAGA Sec. 4.1 / Tab. 1-2, GOAL Tab. 1)

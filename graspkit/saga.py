@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from graspkit.checks import check_bool, check_int, check_positive, check_steps
+from graspkit.checks import check_bool, check_int, check_positive, check_steps, check_type
 from graspkit.data.motion import Motion
 from graspkit.data.reaching import Start
 from graspkit.objects.placement import ObjectPose
@@ -114,9 +114,7 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     if polish_steps is not None:
         polish_steps = check_steps(polish_steps, "polish_steps", 2)
     check_bool(hold_start, "hold_start")
-    if object_pose is not None and not isinstance(object_pose, ObjectPose):
-        raise TypeError(f"object_pose: expected a graspkit.objects.placement.ObjectPose or None, "
-                        f"got {type(object_pose).__name__}")
+    check_type(object_pose, ObjectPose, "object_pose", optional=True)
     if start is not None and not isinstance(start, (Start, Motion)):
         raise ValueError(f"start: expected a Start, a one-frame Motion or None, got {type(start).__name__}")
     if bm is not None and getattr(bm, "dtype", None) != torch.float32:
@@ -168,10 +166,8 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
             st = plan_reach(start, centre, 60, betas=betas, seed=seed, bm=bm).slice(0, 1)
         else:
             st = default_start(pelvis, centre, betas, start_distance, bm, seed)
-    elif isinstance(start, Motion):
+    else:                                                  # a Motion (checked at the top)
         st = start.slice(0, 1)
-    else:
-        raise ValueError(f"start: expected a Start, a one-frame Motion or None, got {type(start).__name__}")
     st = Motion(st.poses, st.trans, betas, 30.0)         # the grasp's shape: beta is fixed in GraspMotion-Opt
 
     # stage 2: the window from the start (frame 0) to the grasp (frame T); only those two frames are known

@@ -355,7 +355,7 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
         saved = {k: v for k, v in state.get("config", {}).items() if k not in ("num_threads", "extra")}
         now = {k: v for k, v in asdict(cfg).items() if k not in ("num_threads", "extra")}
         if saved and saved != now:
-            differ = ", ".join(f"{k} {saved.get(k)!r} there, {now.get(k)!r} here" for k in now if saved.get(k) != now[k])
+            differ = ", ".join(f"{k} {saved.get(k)!r} there, {now[k]!r} here" for k in now if saved.get(k) != now[k])
             raise ValueError(f"checkpoint {checkpoint}: a run with other settings ({differ}); delete it (graspkit's "
                              "run file) or pass another path to train anew")
         model.load_state_dict(state["model"])

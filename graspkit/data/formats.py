@@ -183,8 +183,8 @@ def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
             raise SequenceFileError(f"{path}: key 'trans' has shape {trans.shape}, expected ({len(poses)}, 3)")
         rate_keys = [k for k in ("mocap_frame_rate", "mocap_framerate") if k in npz.files]
         if not rate_keys:
-            raise SequenceFileError(f"{path}: no frame rate: expected a key 'mocap_frame_rate' (AMASS SMPL-X, graspkit) "
-                                    "or 'mocap_framerate' (AMASS SMPL-H)")
+            raise SequenceFileError(f"{path}: no frame rate: expected a key 'mocap_frame_rate' (AMASS SMPL-X, "
+                                    "graspkit) or 'mocap_framerate' (AMASS SMPL-H)")
         src = _scalar(_get(npz, rate_keys[0], path), rate_keys[0], path)
         if not np.isfinite(src) or src <= 0:
             raise SequenceFileError(f"{path}: key {rate_keys[0]!r} is {src}, expected a positive frame rate")

@@ -39,8 +39,9 @@ def as_object(obj: str | Path | trimesh.Trimesh, argument: str = "obj") -> tuple
     The mesh comes back as a copy in the object frame: closed and outward-oriented, metres, origin at its
     bounding-box centre (axes kept as given: z is up; a .glb / .gltf file is y up by the glTF specification and
     is turned +90 deg about x, so that its up becomes z, as graspkit's own GLB exports expect). The name is the
-    catalogue name, the file's stem, or the mesh's `metadata["name"]` (else "object"). A str naming a catalogue object is that object even when a file of
-    that name lies in the working folder; pass a Path (or "./mug") for the file.
+    catalogue name, the file's stem, or the mesh's `metadata["name"]` (else "object"). A str naming a catalogue
+    object is that object even when a file of that name lies in the working folder; pass a Path (or "./mug") for
+    the file.
     """
     if isinstance(obj, trimesh.Trimesh):
         return str(obj.metadata.get("name") or "object"), _checked(obj.copy(), argument)

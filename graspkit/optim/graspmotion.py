@@ -96,8 +96,8 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   floating-point summation order, which Adam amplifies: a test clip fitted alone and batched with another differed by
   0.5 mm (largest marker difference after 20 + 40 + 100 steps) and, in an independent check (the mug stub beside
   the bottle stub, 20 + 40 + 20 steps), by 5.2 mm (mean 0.27 mm; energies and gradients at equal parameters agree
-  to float precision, and equal inputs give equal bits), and over the full schedule such differences can settle a frame's
-  feet differently (eval_motionfill's skating per clip moves by a few frames when the batch changes).
+  to float precision, and equal inputs give equal bits), and over the full schedule such differences can settle a
+  frame's feet differently (eval_motionfill's skating per clip moves by a few frames when the batch changes).
 """
 from __future__ import annotations
 
@@ -111,6 +111,7 @@ from torch import Tensor, nn
 from tqdm.auto import tqdm
 
 from graspkit.body.markers import foot_vertices, palm_vertices, saga_markers, saga_sparse_markers, vertex_normals
+from graspkit.checks import check_steps
 from graspkit.models.gnet import SparseBody
 from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, _nearest, body_joint_ids, free_joint_excess,
                                      hand_vertex_ids, kabsch, with_free_joints)
@@ -269,9 +270,7 @@ class GraspMotionConfig:
         n, lr = self.polish
         if int(n) != n or n < 0 or (n > 0 and not lr > 0):
             raise ValueError(f"polish: expected (steps >= 0, learning rate > 0), got {self.polish}")
-        if (len(self.steps) != 2 or any(isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0
-                                        for s in self.steps)):
-            raise ValueError(f"steps: expected (stage-1 steps, stage-2 steps), whole numbers >= 0, got {self.steps}")
+        check_steps(self.steps, "steps", 2)           # (stage-1 steps, stage-2 steps)
 
 
 @dataclass
