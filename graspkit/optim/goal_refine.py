@@ -179,12 +179,15 @@ class GraspRefiner:
         (and, if `pen`, E_pen's hand and forearm vertices)."""
         return (self.pen_body if pen else self.body)(pose_rotmats(rot6d), betas, transl)[0]
 
-    def pen_points(self, v: Tensor, inner_depths: tuple[float, ...]) -> Tensor:
+    def pen_points(self, v: Tensor, inner_depths: tuple[float, ...], hands: Tensor | None = None,
+                   normals: Tensor | None = None) -> Tensor:
         """E_pen's points (B,M,3) of `vertices(..., pen=True)`: hand vertices, the same moved inward, forearms
-        (GraspPose-Opt's E^B_colli points, grasppose.collision_points)."""
+        (GraspPose-Opt's E^B_colli points, grasppose.collision_points); `hands` (the slice of v) and their vertex
+        `normals` (B,n_h,3) are computed unless given."""
         from graspkit.optim.grasppose import collision_points
 
-        return collision_points(v[:, self.sl_hands], self.hand_faces, inner_depths, v[:, self.sl_arms])
+        hands = v[:, self.sl_hands] if hands is None else hands
+        return collision_points(hands, self.hand_faces, inner_depths, v[:, self.sl_arms], normals=normals)
 
     def near_object_points(self, v: Tensor, object_points: Tensor, k: int) -> Tensor:
         """Indices (B,k) of the object points (B,P,3) nearest the hands of `vertices(..., pen=True)` (B,V,3)."""
@@ -196,11 +199,12 @@ class GraspRefiner:
     def energy(self, rot6d: Tensor, transl: Tensor, betas: Tensor, hat: dict[str, Tensor], object_points: Tensor,
                ground: float = 0.0, sdf: PosedSDF | None = None,
                inner_depths: tuple[float, ...] = (0.005, 0.01), pen_floor: float = 0.0,
-               near: Tensor | None = None) -> dict[str, Tensor]:
+               near: Tensor | None = None, v: Tensor | None = None) -> dict[str, Tensor]:
         """Per-sample terms (B,) of Eq. 4–7 at (rot6d, transl) against GNet's `hat` (rot6d, transl, head_dir,
         hand_offsets), and E_pen (summed depth, m) when `sdf` is given: 'pen' the hand points inside the object, and
-        with `near` (B,K) (indices of object points) 'pen_object' those object points inside the hands."""
-        v = self.vertices(rot6d, transl, betas, pen=sdf is not None)
+        with `near` (B,K) (indices of object points) 'pen_object' those object points inside the hands. `v`: the
+        vertices at (rot6d, transl) if already computed (`vertices(..., pen=sdf is not None)`)."""
+        v = self.vertices(rot6d, transl, betas, pen=sdf is not None) if v is None else v
         hand = v[:, :self.n_hand]
         d = hand_object_offsets(hand, object_points)
         back, front = v[:, self.n_sampled], v[:, self.n_sampled + 1]
@@ -212,15 +216,20 @@ class GraspRefiner:
              "q": (q - hat["head_dir"]).abs().mean(1),
              "f": (low.min(1).values - ground).abs()}
         if sdf is not None:
-            e["pen"] = torch.relu(-sdf(self.pen_points(v, inner_depths)) - pen_floor).sum(-1)
+            from graspkit.body.markers import vertex_normals
+
+            hands = v[:, self.sl_hands]
+            normals = vertex_normals(hands, self.hand_faces) if inner_depths or near is not None else None
+            e["pen"] = torch.relu(-sdf(self.pen_points(v, inner_depths, hands, normals)) - pen_floor).sum(-1)
             if near is not None:
-                from graspkit.body.markers import vertex_normals
                 from graspkit.optim.grasppose import _signed_to_cloud
 
-                hands = v[:, self.sl_hands]
-                obj = object_points.expand(len(v), -1, -1).to(hands.dtype)
+                # the normals only sign this term (no gradient through them); a slice of its own keeps the order
+                # in which backward sums the gradients on v, so the energies are those of separate normals, bit for bit
+                cloud = v[:, self.sl_hands]
+                obj = object_points.expand(len(v), -1, -1).to(cloud.dtype)
                 o = torch.gather(obj, 1, near[..., None].expand(-1, -1, 3))
-                so, _ = _signed_to_cloud(o, hands, vertex_normals(hands, self.hand_faces))
+                so, _ = _signed_to_cloud(o, cloud, normals)
                 e["pen_object"] = torch.relu(-so).sum(-1)
         return e
 
@@ -276,11 +285,11 @@ class GraspRefiner:
         opt = torch.optim.Adam([rot6d, transl], lr=w.lr)
         history = []
         for step in range(w.steps + 1):
+            v = self.vertices(rot6d, transl, betas, pen=sdf is not None)
             if sdf is not None and w.pen_object > 0 and step % w.refresh == 0:
-                near = self.near_object_points(self.vertices(rot6d, transl, betas, pen=True), object_points,
-                                               w.object_near)
+                near = self.near_object_points(v, object_points, w.object_near)
             terms = self.energy(rot6d, transl, betas, hat, object_points, ground, sdf, w.inner_depths, w.pen_floor,
-                                near)
+                                near, v)
             total = sum(lam[k] * t for k, t in terms.items())
             if step in (0, w.steps):
                 history.append({"step": step, "E": float(total.detach().mean()),
@@ -301,7 +310,7 @@ class GraspRefiner:
             v = self.vertices(rot6d, transl, betas, pen=True)
             near = self.near_object_points(v, object_points, w.object_near) if w.pen_object > 0 else None
             terms = self.energy(rot6d, transl, betas, hat, object_points, ground, sdf, w.inner_depths, w.pen_floor,
-                                near)
+                                near, v)
             depth = (-sdf(self.pen_points(v, w.inner_depths))).max(1).values
         return sum(lam[k] * t for k, t in terms.items()), depth
 
