@@ -202,12 +202,13 @@ print("before the reaches-in-a-row clips (stage 3, docs/wandr.md, 240 schedules)
 # a motion can be optimised: $\mathcal L = w_{norm}\,\tfrac12\overline{z^2} + |W_{t_G} - G|^2 + |P^{xy}_{t_w} - w|^2$ —
 # stay likely under $\mathcal N(0, I)$, keep the wrist on the goal at $t_G$, put the pelvis over the waypoint at frame
 # $t_w$. Adam from the latents of the plain WANDR rollout; graspkit's defaults (learning rate 0.05, $w_{norm}$ = 0.01)
-# hardly move this model (below), so here 20 iterations at learning rate 0.5 with $w_{norm}$ = 0.001, about 20 s.
+# hardly move this model (below), so here 10 iterations at learning rate 1.0 with $w_{norm}$ = 0.001, about 12 s
+# (every iteration is a 120-frame rollout and its backward pass).
 
 # %%
 goal = torch.tensor([2.2, 0.0, 1.0])
 waypoint = (60, (0.9, 0.9))
-res_w = optimise_latents(model, start, goal, t_goal=120, waypoints=[waypoint], iters=20, lr=0.5, w_norm=0.001,
+res_w = optimise_latents(model, start, goal, t_goal=120, waypoints=[waypoint], iters=10, lr=1.0, w_norm=0.001,
                          generator=torch.Generator().manual_seed(0))
 plain = M.rollout(model, start.p_prev[None], start.p[None], start.rest[None], goal[None], 120, 120,
                   z=torch.randn(1, 120, model.cfg.latent, generator=torch.Generator().manual_seed(0)))
