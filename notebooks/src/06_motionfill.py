@@ -219,7 +219,7 @@ print("| mean | " + " | ".join(f"{np.mean([r[k] for r in ev['graspmotion']['rows
 # first frame at the start body (graspkit's: left free as in Alg. 2, S.2's planted feet drag it 8–12 cm along the
 # sample's first steps; held, those shuffling steps count as skating instead; `docs/saga_motion.md`, "The start frame"). With the paper's step counts
 # it takes about 100 s on one core (`graspkit saga --object mug` writes GIF, npz and GLB); here, to keep the lesson
-# short, with about a third of the steps (and of the polish), which leaves more skating after the fit than the full
+# short, with about a quarter of the steps (and of the polish), which leaves more skating after the fit than the full
 # schedule does (`docs/saga_motion.md`: 0.000 on its twelve test clips). The mug is a test object, so the models have
 # not seen it; its 2 mm collision grid ships with graspkit (any other object's is built once into the cache, ~20 s).
 # The grasp itself is GraspPose-Opt's and touches the object; the motion's last frame is GraspMotion-Opt's fit to
@@ -237,7 +237,7 @@ from graspkit.metrics import grasp_contact_distance
 from graspkit.saga import synthesize
 
 r = synthesize("mug", bm, object_pose=ObjectPose.from_yaw(0.5, np.array([0.2, -0.7, 0.95])), seed=1,
-               grasp_steps=(100, 120, 150), motion_steps=(40, 60), polish_steps=(50, 30), progress=False)
+               grasp_steps=(70, 90, 110), motion_steps=(30, 45), polish_steps=(35, 20), progress=False)
 print({k: round(v, 3) for k, v in r.metrics.items()})
 v = r.motion.vertices(bm).numpy()
 end_gap = grasp_contact_distance(v[-1], r.mesh)           # signed: < 0 inside; contact is <= 2 mm
