@@ -152,10 +152,11 @@ def load_motionfill(path: str | Path = CHECKPOINT) -> MotionFillVAE:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"path: no MotionFill checkpoint at {path} (graspkit train motionfill)")
+    state = load_checkpoint(path)                       # its errors name the file already
     try:
-        return MotionFillVAE.from_state(load_checkpoint(path))
+        return MotionFillVAE.from_state(state)
     except ValueError as e:
-        raise ValueError(f"{path}: {e}") from None
+        raise ValueError(f"checkpoint {path}: {str(e).removeprefix('state: ')}") from None
 
 
 def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, seed: int = 0,

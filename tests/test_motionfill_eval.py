@@ -6,7 +6,8 @@ import pytest
 import torch
 
 from graspkit.body import BodyModel
-from graspkit.eval_motionfill import approach_scene, heel_columns, linear_local, pskl, pskl_still_share, skating
+from graspkit.eval_motionfill import (approach_scene, heel_columns, linear_local, load_motionfill, pskl, pskl_still_share,
+                                      skating)
 from graspkit.paths import DATA_STUBS, default_model_path
 
 STUB = DATA_STUBS / "approach" / "approach_000000.npz"
@@ -76,7 +77,7 @@ def test_approach_scene_puts_the_object_in_the_window_frame():
 def test_shipped_model_beats_linear_interpolation_on_the_shipped_approach_clips():
     """Tab. 3's ADE (min of 10 samples) on the four shipped approach clips (mug: a held-out object; bottle)."""
     from graspkit.data.motionfill_dataset import make_windows
-    from graspkit.eval_motionfill import approach_motions, evaluate, load_motionfill
+    from graspkit.eval_motionfill import approach_motions, evaluate
 
     torch.set_num_threads(1)
     bm = BodyModel.from_file(default_model_path())
@@ -92,7 +93,6 @@ def test_train_command_end_to_end_on_the_shipped_approach_clips(tmp_path, monkey
     """`graspkit train motionfill --stage traj` on the four shipped clips (bottle: train, mug: test) writes a
     float16 checkpoint that loads; the windows are cached; an unknown stage is refused."""
     from graspkit.cli import main
-    from graspkit.eval_motionfill import load_motionfill
 
     monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
     out = tmp_path / "mf.pt"
@@ -138,7 +138,7 @@ def test_graspmotion_eval_measures_the_last_frame_against_the_clips_posed_mesh()
     negative, or the gap)."""
     import trimesh
 
-    from graspkit.eval_motionfill import graspmotion_eval, load_motionfill
+    from graspkit.eval_motionfill import graspmotion_eval
     from graspkit.optim.graspmotion import GraspMotionOpt
     from graspkit.models.pose_prior import load_pose_prior
 
@@ -227,3 +227,21 @@ def test_approach_scene_names_a_file_that_is_not_an_approach_clip(tmp_path):
     np.savez(tmp_path / "other.npz", poses=np.zeros((3, 165)))
     with pytest.raises(ValueError, match="other.npz is not an approach clip.*missing"):
         approach_scene(tmp_path / "other.npz", bm)
+
+
+def test_load_motionfill_names_the_file_once_for_a_foreign_or_truncated_checkpoint(tmp_path):
+    """Another model's checkpoint (GNet's) and a truncated copy of MotionFill's: each a ValueError that names the file
+    once and says what is wrong with it."""
+    import shutil
+
+    foreign = tmp_path / "gnet.pt"
+    shutil.copy(DATA_STUBS / "checkpoints" / "gnet.pt", foreign)
+    with pytest.raises(ValueError, match="not a MotionFill-VAE checkpoint") as e:
+        load_motionfill(foreign)
+    assert str(e.value).count(str(foreign)) == 1 and "state:" not in str(e.value)
+    cut = tmp_path / "cut.pt"
+    data = (DATA_STUBS / "checkpoints" / "motionfill.pt").read_bytes()
+    cut.write_bytes(data[: len(data) // 2])
+    with pytest.raises(ValueError, match="not a torch checkpoint|damaged") as e:
+        load_motionfill(cut)
+    assert str(e.value).count(str(cut)) == 1
