@@ -333,3 +333,52 @@ def test_restart_frees_a_hand_that_one_run_leaves_in_a_power_drill_handle(setup)
     assert float(e_two) < 0.5 * float(e_one)
     with pytest.raises(ValueError, match="restart_sunk"):
         ref(hat, betas, points, replace(PEN_WEIGHTS, restart_sunk=0.0), sdf=sdf)
+
+
+def test_pen_terms_and_their_gradient_equal_a_from_scratch_evaluation_bit_for_bit(setup):
+    """E_pen's two sums with a hand sunk 2 cm into a ball, as `energy` computes them (the hand normals once, shared by
+    both sums) and as written out here from their parts (grasppose.collision_points with its own normals; SAGA's
+    signed distance to the hand cloud with the normals computed again): equal values and equal gradients on θ and γ,
+    to the bit."""
+    from graspkit.body.markers import vertex_normals
+    from graspkit.optim.goal_refine import PEN_WEIGHTS, PosedSDF
+    from graspkit.optim.grasppose import _signed_to_cloud, collision_points
+
+    bm, gv, ref = setup
+    aa, betas = _grasp_pose(), torch.zeros(1, 10)
+    rot6d, transl = axis_angle_to_rot6d(aa).float(), torch.zeros(1, 3)
+    transl[0, 2] -= ref.vertices(rot6d, transl, betas)[0, :, 2].min()
+    r = 0.045
+    c = ref.vertices(rot6d, transl, betas)[0, :99].mean(0) + torch.tensor([0.0, 0.0, -r + 0.015])  # palm 1.5 cm in
+    obj = _sphere(c, r)[None]
+    sdf = PosedSDF([_ball_grid(r)[1]], torch.eye(3)[None], c[None])
+    hat = {"rot6d": rot6d, "transl": transl, "head_dir": torch.tensor([[0.0, 1.0, 0.0]]),
+           "hand_offsets": torch.zeros(1, 99, 3)}
+    w = PEN_WEIGHTS
+
+    def grads(pen_terms):
+        x, t = rot6d.clone().requires_grad_(True), transl.clone().requires_grad_(True)
+        pen, pen_object = pen_terms(x, t)
+        (w.pen * pen + w.pen_object * pen_object).sum().backward()
+        return pen.detach(), pen_object.detach(), x.grad, t.grad
+
+    def shared(x, t):
+        v = ref.vertices(x, t, betas, pen=True)
+        near = ref.near_object_points(v, obj, w.object_near)
+        e = ref.energy(x, t, betas, hat, obj, 0.0, sdf, w.inner_depths, w.pen_floor, near, v)
+        return e["pen"], e["pen_object"]
+
+    def from_scratch(x, t):
+        v = ref.vertices(x, t, betas, pen=True)
+        near = ref.near_object_points(v, obj, w.object_near)
+        hands = v[:, ref.sl_hands]
+        pts = collision_points(hands, ref.hand_faces, w.inner_depths, v[:, ref.sl_arms])
+        pen = torch.relu(-sdf(pts) - w.pen_floor).sum(-1)
+        cloud = v[:, ref.sl_hands]
+        o = torch.gather(obj, 1, near[..., None].expand(-1, -1, 3))
+        so, _ = _signed_to_cloud(o, cloud, vertex_normals(cloud, ref.hand_faces))
+        return pen, torch.relu(-so).sum(-1)
+
+    a, b = grads(shared), grads(from_scratch)
+    assert float(a[0]) > 0.01 and float(a[1]) > 0.01                  # both sums see the hand in the ball
+    assert all(torch.equal(x, y) for x, y in zip(a, b))

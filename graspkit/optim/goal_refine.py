@@ -224,8 +224,9 @@ class GraspRefiner:
             if near is not None:
                 from graspkit.optim.grasppose import _signed_to_cloud
 
-                # the normals only sign this term (no gradient through them); a slice of its own keeps the order
-                # in which backward sums the gradients on v, so the energies are those of separate normals, bit for bit
+                # the normals only sign this term (no gradient through them); a slice of its own keeps the order in
+                # which backward sums the gradients on v, so the refinement is the one with the normals computed
+                # twice, bit for bit (tests/test_goal_refine.py)
                 cloud = v[:, self.sl_hands]
                 obj = object_points.expand(len(v), -1, -1).to(cloud.dtype)
                 o = torch.gather(obj, 1, near[..., None].expand(-1, -1, 3))
