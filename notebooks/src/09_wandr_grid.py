@@ -202,7 +202,7 @@ print("before the reaches-in-a-row clips (stage 3, docs/wandr.md, 240 schedules)
 # a motion can be optimised: $\mathcal L = w_{norm}\,\tfrac12\overline{z^2} + |W_{t_G} - G|^2 + |P^{xy}_{t_w} - w|^2$ —
 # stay likely under $\mathcal N(0, I)$, keep the wrist on the goal at $t_G$, put the pelvis over the waypoint at frame
 # $t_w$. Adam from the latents of the plain WANDR rollout; graspkit's defaults (learning rate 0.05, $w_{norm}$ = 0.01)
-# hardly move this model (below), so here 10 iterations at learning rate 1.0 with $w_{norm}$ = 0.001, about 12 s
+# hardly move this model (below), so here 10 iterations at learning rate 1.0 with $w_{norm}$ = 0.001, 12–19 s
 # (every iteration is a 120-frame rollout and its backward pass).
 
 # %%
