@@ -328,7 +328,7 @@ def add_motionfill_train_commands(train_sub) -> None:
     b.set_defaults(out_is_file=True)
     b.add_argument("--data", type=Path, default=None, help="folder of the approach clips (default: the cache's)")
     b.add_argument("--clips", type=int, default=None, help="approach clips (default 144)")
-    b.add_argument("--lr", type=float, default=1e-3)
+    b.add_argument("--lr", type=positive_float, default=1e-3)
     b.add_argument("--time-limit", type=positive_float, default=300.0,
                    help="seconds; stops after the epoch that crosses it")
     b.add_argument("--seed", type=int, default=0)

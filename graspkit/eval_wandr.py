@@ -863,7 +863,7 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--threads", type=int, default=2)
     t.add_argument("--batch-size", type=int, default=512)
-    t.add_argument("--lr", type=float, default=1e-3)
+    t.add_argument("--lr", type=positive_float, default=1e-3)
     t.add_argument("--max-steps", type=int, default=10, help="rollout steps at the end of the ramp (Sup. B.2)")
     t.add_argument("--ramp-epochs", type=count_type(0), default=4, help="epochs over which the rollout grows from 0")
     t.add_argument("--stride-scale", type=int, default=1, help="multiply the window strides (shorter epochs)")

@@ -176,6 +176,9 @@ def test_module_commands_report_bad_input_without_a_traceback(tmp_path, capsys, 
                                                                                "finite number > 0, got -1"),
     (["train", "motionfill", "--stage", "smooth_ae", "--lr", "0.1", "--out", "{tmp}/demo/s.pt"],
      "--lr, --time-limit: --stage smooth_ae trains"),
+    (["train", "wandr", "--lr", "-1", "--out", "{tmp}/demo/w.pt"], "argument --lr: expected a finite number > 0"),
+    (["train", "motionfill_baseline", "--model", "cnn_ae", "--lr", "0", "--out", "{tmp}/demo/b.pt"],
+     "argument --lr: expected a finite number > 0"),
 ])
 def test_graspkit_counts_and_folders_are_checked_before_work(tmp_path, capsys, argv, message):
     from graspkit.cli import main
