@@ -38,8 +38,8 @@ import torch
 from torch import Tensor
 
 from graspkit import intention as I
-from graspkit.checks import count_type, nonneg_float, positive_float
 from graspkit.body.skeleton import JOINT_INDEX
+from graspkit.checks import count_type, nonneg_float, positive_float
 from graspkit.data.reaching import EVAL_ANGLES_DEG, EVAL_DISTANCES, EVAL_FRAMES, EVAL_HEIGHTS, Start, evaluation_goals
 from graspkit.data.wandr_dataset import FOOT_JOINTS, shaped_rest
 from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS

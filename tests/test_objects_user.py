@@ -172,7 +172,6 @@ def test_the_shipped_grids_are_what_this_grid_version_builds():
         assert np.abs(z["values"].astype(np.float64) - built.values.numpy()).max() < 5e-5
 
 
-
 def _box_with_sliver() -> trimesh.Trimesh:
     """The box with one face split at the midpoint m of its edge a-b and the T-junction closed by the zero-area face
     (a, b, m), as CAD exports make them: trimesh calls it watertight, consistently wound and of positive volume."""

@@ -150,7 +150,6 @@ def test_file_key_follows_a_files_content(tmp_path):
     assert file_key(f) != k1 and file_key(tmp_path / "missing.pt") == "none" and file_key(None) == "none"
 
 
-
 @pytest.mark.parametrize("kwargs, message", [({"epochs": 0}, "epochs: expected an integer >= 1"),
                                              ({"batch_size": -2}, "batch_size"), ({"seed": -1}, "seed"),
                                              ({"lr": -1e-3}, "lr: expected a finite number in \\[0, inf\\]"),
