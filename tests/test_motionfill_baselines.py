@@ -131,8 +131,10 @@ def _overfit(model: torch.nn.Module, w: dict[str, torch.Tensor], steps: int, lr:
 
 
 @pytest.mark.parametrize("make, steps, lr", [(lambda: CNNAE(channels=(8, 8, 8, 8)), 250, 1e-2),
-                                             (lambda: PoseNet(hidden=48), 500, 3e-3)], ids=["cnn_ae", "posenet"])
+                                             (lambda: PoseNet(hidden=48), 800, 3e-3)], ids=["cnn_ae", "posenet"])
 def test_a_tiny_overfit_beats_the_linear_blend(make, steps, lr):
+    """PoseNet at 500 steps sat at the bars (error / blend 0.14-0.28, contact accuracy 0.76-0.95 under four
+    floating-point kernel sets): 800 steps give 0.06-0.09 and 0.92-0.97."""
     w = _windows(seed=3)
     torch.manual_seed(0)
     m = make().set_stats(_stats(w))

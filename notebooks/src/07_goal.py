@@ -246,7 +246,8 @@ plt.show()
 # step straight towards the goal at MNet's predicted speed and Θ is fitted to them.
 #
 # Here MNet walks the body from the clip's start to GNet's refined grasp for this start (the whole GOAL pipeline;
-# `eval_goal.gnet_goal`). The lesson stops at 140 frames (4.7 s) to stay quick; the evaluation below runs to 300.
+# `eval_goal.gnet_goal`). The lesson stops at 200 frames (6.7 s) at the latest to stay quick; the evaluation below runs
+# to 300.
 #
 # Be warned: the shipped MNet is small (0.6 M parameters) and was trained for 12 epochs (150 s on one CPU thread,
 # `docs/goal.md`). It turns towards the mug and walks up to it, then slows with the hand about 12–14 cm from the
@@ -260,8 +261,14 @@ plt.show()
 #   rollout holds the feet at the floor), so any frame whose soles are below the floor is raised onto it;
 # - `stall=STALL_FRAMES` (10 frames): a hand within 25 cm of the goal hand that has come less than 5 mm closer over
 #   the last 10 frames starts the Eq. 12–13 refinement where it is. Here it fires at frame 61 (the flat stretch of
-#   the blue curve) and the hand arrives at frame 136; on the evaluation's rollouts it takes the goal grasps reached
-#   from 7 to 11 of 12.
+#   the blue curve) and the hand arrives at frame 135 on the machine this lesson was built on; on the evaluation's
+#   rollouts it takes the goal grasps reached from 7 to 11 of 12.
+#
+# The arrival frame is the one figure here that depends on the last bits of the arithmetic: a rollout feeds every
+# frame back in, and the refinement's steps follow MNet's predicted hand speed, so the rounding of another CPU's
+# floating-point kernels grows into a different path once the refinement starts (with the same weights and inputs,
+# other kernels brought the hand in at frame 156). What the cell asserts holds for both; the animation cell below
+# prints this machine's frame.
 #
 # The same pipeline for any object in one call, a mesh of your own included: `graspkit.goal.synthesize(obj, seed=...)`
 # (object placed, a standing start 1 m away, GNet + refinement, MNet) or `graspkit goal --object FILE` on the command
@@ -271,10 +278,11 @@ plt.show()
 goal_r6, goal_t, info = eval_goal.gnet_goal(gnet, (clip.rot6d[0], clip.transl[0]), clip.betas, clip.object_points,
                                             clip.obj_centre, generator=torch.Generator().manual_seed(1))
 roll = rollout(mnet, body, (clip.rot6d[0], clip.transl[0]), (goal_r6, goal_t), clip.betas, clip.object_points,
-               clip.obj_centre, bps_basis(), max_frames=140, refine_weights=MotionRefineWeights(steps=20, lr=4e-3),
+               clip.obj_centre, bps_basis(), max_frames=200, refine_weights=MotionRefineWeights(steps=20, lr=4e-3),
                floor=0.0, stall=STALL_FRAMES)
-print(f"{len(roll.rot6d)} frames; hand-to-goal {100 * roll.hand_dist[0]:.0f} cm -> {100 * roll.hand_dist[-1]:.1f} cm; "
-      f"refined from frame {roll.first_refined}; reached (< 1 cm): {roll.reached}")
+print(f"hand-to-goal {100 * roll.hand_dist[0]:.0f} cm at the start; refined from frame {roll.first_refined}; "
+      f"reached (< 1 cm): {roll.reached}")
+assert roll.reached and roll.first_refined == 61
 Vr = eval_goal.full_vertices(bm, roll.rot6d, roll.transl, clip.betas).numpy()
 print(f"lowest vertex over the rollout: {round(100 * float(Vr[..., 2].min()), 1) + 0.0:.1f} cm (the floor is z = 0)")
 fig, ax = plt.subplots(figsize=(6, 2.6))
@@ -288,6 +296,9 @@ plt.show()
 
 # %%
 # NBVAL_IGNORE_OUTPUT
+# (the arrival frame and the last distance vary with the CPU's floating-point kernels: see above)
+print(f"{len(roll.rot6d)} frames: the hand arrives at frame {len(roll.rot6d) - 1}, "
+      f"{100 * roll.hand_dist[-1]:.2f} cm from the goal hand")
 anim = viz.animate(Vr, faces, objects=[(omesh.vertices, omesh.faces)], views=("side",), stride=5, max_frames=24,
                    size=3.0, max_faces=3000, title="MNet rollout")
 viz.show_animation(anim)

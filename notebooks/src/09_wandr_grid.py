@@ -206,6 +206,9 @@ print("before the reaches-in-a-row clips (stage 3, docs/wandr.md, 240 schedules)
 # (every iteration is a 120-frame rollout and its backward pass).
 
 # %%
+# NBVAL_IGNORE_OUTPUT
+# (ten steps at a large learning rate through a 120-frame rollout: the last digits differ between CPUs' floating-point
+# kernels — mean z^2 17.5 here, 17.6 with others — so the tests check the asserts, not the printed figures)
 goal = torch.tensor([2.2, 0.0, 1.0])
 waypoint = (60, (0.9, 0.9))
 res_w = optimise_latents(model, start, goal, t_goal=120, waypoints=[waypoint], iters=10, lr=1.0, w_norm=0.001,
@@ -216,6 +219,7 @@ h0, h1 = res_w.history[0], min(res_w.history, key=lambda h: h["loss"])
 print(f"pelvis to waypoint at frame {waypoint[0]}: {100 * h0['way'] ** 0.5:.0f} cm -> {100 * h1['way'] ** 0.5:.0f} cm; "
       f"wrist to goal at t_G: {100 * h0['goal'] ** 0.5:.0f} cm -> {100 * h1['goal'] ** 0.5:.0f} cm; "
       f"mean z^2 {2 * float(h1['norm']):.1f} (the prior's: 1)")
+assert h1["way"] ** 0.5 < h0["way"] ** 0.5 - 0.2 and h1["goal"] ** 0.5 < 0.03 and 2 * float(h1["norm"]) > 5
 fig, ax = plt.subplots(figsize=(5.5, 3.6))
 for m, name, c in ((plain, "WANDR", "0.6"), (res_w.motion, "optimised", "#6a3d9a")):
     Jm = m.joints[0].detach()
@@ -257,11 +261,13 @@ print(f"pelvis paths over 4 s: other latents differ by at most {gap(plain, other
 # result as an image (drag the sliders in a live notebook; a static page shows only the controls).
 
 # %%
+# NBVAL_IGNORE_OUTPUT
+# (a 120-frame rollout: its last digits differ between CPUs' floating-point kernels; the tests check the asserts)
 reacher = E.GoalReacher(model, start, angle=45.0, distance=2.0, height=1.0, seconds=4.0)
-r = reacher.update("angle", 90.0)
-print({k: round(v, 2) if isinstance(v, float) else v for k, v in r.items()})
-r = reacher.update("height", 0.4)
-print({k: round(v, 2) if isinstance(v, float) else v for k, v in r.items()})
+for name, value in (("angle", 90.0), ("height", 0.4)):
+    r = reacher.update(name, value)
+    print({k: round(v, 2) if isinstance(v, float) else v for k, v in r.items()})
+    assert r["reached"] and r["dtg_cm"] < 10
 
 # %%
 reacher.widget()
