@@ -277,9 +277,22 @@ def _cmd_eval_all(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of the `graspkit` command."""
+# The commands whose parsers live in modules that import torch and scipy (seconds to load): registered in full only
+# when the command line names them, so that `graspkit --help` and the other commands' parsers come up at once.
+DATA_HELP = "procedural motion data (graspkit data make --kind ...)"
+
+
+def _command_named(argv: list[str] | None) -> str | None:
+    """The subcommand on a command line (its first word not starting with '-'), or None."""
+    return next((a for a in (sys.argv[1:] if argv is None else argv) if not a.startswith("-")), None)
+
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The argument parser of the `graspkit` command for the command line `argv` (None: sys.argv[1:]; the
+    subcommands of data, train and eval are only added when argv names that command)."""
     from graspkit.paths import default_model_path
+
+    named = _command_named(argv)
 
     p = argparse.ArgumentParser(prog="graspkit", description="graspkit: whole-body motion synthesis towards "
                                 "objects and goals (SAGA, GOAL, WANDR), at workbook scale.")
@@ -345,18 +358,23 @@ def build_parser() -> argparse.ArgumentParser:
     wa.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz for the pictures (default: the "
                     "procedural humanoid)")
     wa.set_defaults(func=_cmd_wandr, out_is_file=False)
-    from graspkit.data.cli import add_data_commands
-    add_data_commands(sub)
+    if named == "data":
+        from graspkit.data.cli import add_data_commands
+        add_data_commands(sub)
+    else:
+        sub.add_parser("data", help=DATA_HELP)
 
     # `graspkit train <model>`: each model family adds its own subcommands to this parser
-    train = sub.add_parser("train", help="train a model of the workbook").add_subparsers(dest="train_command",
+    train = sub.add_parser("train", help="train a model of the workbook: wholegrasp, wholegrasp_single, grabnet_smplx, "
+                           "pose_prior, motionfill, motionfill_baseline, gnet, mnet, wandr").add_subparsers(dest="train_command",
                                                                                           required=True)
-    from graspkit.eval_goal import add_goal_train_commands
-    add_goal_train_commands(train)
+    if named == "train":
+        from graspkit.eval_goal import add_goal_train_commands
+        add_goal_train_commands(train)
 
     # `graspkit eval <model>`: each model family adds its own evaluation subcommands to this parser;
     # `graspkit eval --all`: every method on the same objects and goals (graspkit.benchmark)
-    ev = sub.add_parser("eval", help="evaluate a model of the workbook, or every method with --all")
+    ev = sub.add_parser("eval", help="evaluate WANDR's goal grid (eval wandr), or every method with --all")
     ev.add_argument("--all", action="store_true", help="the cross-method benchmark (table, CSV and figure in --out)")
     ev.add_argument("--out", type=Path, default=Path("outputs/benchmark"), help="folder for --all's report")
     ev.add_argument("--quick", action="store_true", help="with --all: a few samples per method (minutes)")
@@ -372,12 +390,14 @@ def build_parser() -> argparse.ArgumentParser:
                          "row whole: run together the methods that fill one row, e.g. saga_motion,motion)")
     ev.set_defaults(func=_cmd_eval_all)
     evaluate = ev.add_subparsers(dest="eval_command", required=False)
-    from graspkit.eval_wandr import add_wandr_commands
-    add_wandr_commands(train, evaluate)
-    from graspkit.eval_saga import add_saga_train_commands
-    add_saga_train_commands(train)
-    from graspkit.eval_motionfill import add_motionfill_train_commands
-    add_motionfill_train_commands(train)
+    if named in ("train", "eval"):
+        from graspkit.eval_wandr import add_wandr_commands
+        add_wandr_commands(train, evaluate)
+    if named == "train":
+        from graspkit.eval_saga import add_saga_train_commands
+        add_saga_train_commands(train)
+        from graspkit.eval_motionfill import add_motionfill_train_commands
+        add_motionfill_train_commands(train)
     return p
 
 
@@ -442,7 +462,7 @@ def reports_errors(prog: str) -> Callable[[Callable[..., int]], Callable[..., in
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the `graspkit` console command."""
-    args = build_parser().parse_args(argv)
+    args = build_parser(argv).parse_args(argv)
     try:
         if getattr(args, "seed", None) is not None and not 0 <= args.seed < 2**63:
             raise ValueError(f"--seed: expected a non-negative integer below 2^63, got {args.seed}")

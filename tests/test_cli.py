@@ -22,6 +22,32 @@ def test_help_and_version():
     assert r.returncode == 0 and r.stdout.strip() == f"graspkit {__version__}"
 
 
+def test_top_level_help_loads_no_torch_and_each_heavy_command_gets_its_subcommands():
+    import subprocess
+    import sys
+
+    from graspkit.cli import build_parser
+
+    code = ("import sys; from graspkit.cli import build_parser; p = build_parser(['--help']); "
+            "print(sorted(p._subparsers._group_actions[0].choices), 'torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split("]")[1].strip() == "False"
+    assert all(c in out for c in ("body", "demo", "saga", "goal", "wandr", "data", "train", "eval"))
+    # named on the command line, a heavy command has its subcommands, and each parses
+    assert build_parser(["data"]).parse_args(["data", "make", "--kind", "reach"]).kind == "reach"
+    def commands(parser):
+        return parser._subparsers._group_actions[0].choices
+
+    train_help = next(a for a in build_parser(["--help"])._subparsers._group_actions[0]._choices_actions
+                      if a.dest == "train").help
+    models = sorted(commands(commands(build_parser(["train"]))["train"]))
+    assert models == sorted(("wholegrasp", "wholegrasp_single", "grabnet_smplx", "pose_prior", "motionfill",
+                             "motionfill_baseline", "gnet", "mnet", "wandr"))
+    assert all(m in train_help.replace(",", " ").split() for m in models)   # the top-level help lists them all
+    assert build_parser(["train"]).parse_args(["train", "wandr"]).train_command == "wandr"
+    assert build_parser(["eval"]).parse_args(["eval", "wandr", "--checkpoint", "c.pt"]).eval_command == "wandr"
+
+
 def test_body_info_reads_a_file_and_reports_a_bad_one(tmp_path):
     arr = random_smplx_arrays(num_vertices=100, num_faces=40, seed=0)
     np.savez(tmp_path / "m.npz", **arr)

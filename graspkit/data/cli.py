@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from graspkit.cli import DATA_HELP
 from graspkit.paths import pool_results
 
 KINDS = ("locomotion", "reach", "reach_far", "reach_chain", "reach_near")   # reach_far: room-scale CIRCLE-style tasks
@@ -166,7 +167,7 @@ def _cmd_make(args: argparse.Namespace) -> int:
 
 def add_data_commands(subparsers) -> None:
     """Register `graspkit data ...` on the top-level subparsers."""
-    data = subparsers.add_parser("data", help="procedural motion data").add_subparsers(dest="data_command", required=True)
+    data = subparsers.add_parser("data", help=DATA_HELP).add_subparsers(dest="data_command", required=True)
     m = data.add_parser("make", help="generate locomotion (AMASS-style) or reaching (CIRCLE-style) clips, "
                         "whole-body grasps or approach-and-grasp clips (GRAB-style)")
     m.add_argument("--kind", choices=KINDS + GRASP_KINDS, required=True)
