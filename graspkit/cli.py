@@ -208,6 +208,7 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
     from graspkit.demo import _write_clip
     from graspkit.eval_wandr import FOOT_ON_FLOOR, SUNK_DEPTH
     from graspkit.metrics import floor_figures, foot_skating_wandr
+    from graspkit.paths import stub_hint
     from graspkit.viz.scene import sphere
 
     if not all(math.isfinite(v) for v in args.goal):
@@ -222,7 +223,7 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
         raise ValueError(f"--seconds: expected at least one frame (1/30 s), got {args.seconds}")
     if not args.checkpoint.is_file():
         what = "is a folder, expected a checkpoint file" if args.checkpoint.is_dir() else "is missing"
-        raise FileNotFoundError(f"--checkpoint: {args.checkpoint} {what} (see docs/wandr.md)")
+        raise FileNotFoundError(f"--checkpoint: {args.checkpoint} {what} (see docs/wandr.md)" + stub_hint(args.checkpoint))
     goal = torch.tensor(args.goal, dtype=torch.float32)
     _print_notes(wandr_range_notes(args.goal, frames / 30.0))
     motion = wandr_motions(args.checkpoint, goal[None], frames, seed=args.seed, lift=args.lift)[0]

@@ -27,7 +27,7 @@ from tqdm import tqdm  # noqa: E402
 
 from graspkit.body import BodyModel  # noqa: E402
 from graspkit.body.poses import body_pose, y_up_to_z_up  # noqa: E402
-from graspkit.paths import DATA_STUBS, default_model_path  # noqa: E402
+from graspkit.paths import DATA_STUBS, default_model_path, stub_hint  # noqa: E402
 from graspkit.viz.export import save_png  # noqa: E402
 from graspkit.viz.style import OBJECT  # noqa: E402
 
@@ -249,7 +249,7 @@ def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, .
         fn, ck = METHOD_STAGES[stage]
         if ck is not None and not (CHECKPOINTS / ck).is_file():
             tqdm.write(f"demo: skipping {stage}: its checkpoint {CHECKPOINTS / ck} is missing "
-                       f"(train it with `graspkit train ...`, see README)")
+                       f"(train it with `graspkit train ...`, see README){stub_hint(CHECKPOINTS / ck)}")
             continue
         paths, panel = fn(bm, out_dir)
         written += paths

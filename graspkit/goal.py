@@ -25,6 +25,7 @@ from graspkit.data.motion import Motion
 from graspkit.data.reaching import Start
 from graspkit.models.mnet import STALL_FRAMES, check_stall
 from graspkit.objects.placement import ObjectPose
+from graspkit.paths import stub_hint
 from graspkit.saga import CHECKPOINTS
 
 
@@ -83,7 +84,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     ck = Path(checkpoints)
     for f in ("gnet.pt", "mnet.pt"):
         if not (ck / f).is_file():
-            raise FileNotFoundError(f"checkpoints: {ck / f} is missing (see docs/goal.md)")
+            raise FileNotFoundError(f"checkpoints: {ck / f} is missing (see docs/goal.md){stub_hint(ck / f)}")
     pose = object_pose if object_pose is not None else within_reach_pose(seed)
     centre = np.asarray(pose.translation, np.float64)
     mesh = apply_pose(pose, obj_mesh)

@@ -12,6 +12,14 @@ DATA_STUBS = REPO_ROOT / "data_stubs"
 BODY_MODELS = DATA_STUBS / "body_models"
 
 
+def stub_hint(path: Path) -> str:
+    """What to add to a "missing" message about `path`: where data_stubs/ went when graspkit runs without it."""
+    if Path(path).resolve().is_relative_to(DATA_STUBS.resolve()) and not DATA_STUBS.is_dir():
+        return (f"; {DATA_STUBS} does not exist: the shipped checkpoints and samples come with a clone of graspkit's "
+                "repository, installed there with `pip install -e .`, not with a plain `pip install`")
+    return ""
+
+
 def default_model_path() -> Path:
     """The SMPL-X-format model to use: $GRASPKIT_MODEL if set, else the shipped procedural humanoid."""
     env = os.environ.get("GRASPKIT_MODEL")

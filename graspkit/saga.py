@@ -22,7 +22,7 @@ from graspkit.checks import check_bool, check_int, check_positive, check_steps, 
 from graspkit.data.motion import Motion
 from graspkit.data.reaching import Start
 from graspkit.objects.placement import ObjectPose
-from graspkit.paths import DATA_STUBS
+from graspkit.paths import DATA_STUBS, stub_hint
 
 CHECKPOINTS = DATA_STUBS / "checkpoints"
 
@@ -125,7 +125,8 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
     ck = Path(checkpoints)
     for f in ("wholegrasp.pt", "pose_prior.pt", "motionfill.pt", "motionfill_smooth_ae.pt"):
         if not (ck / f).is_file():
-            raise FileNotFoundError(f"checkpoints: {ck / f} is missing (see docs/saga.md and docs/saga_motion.md)")
+            raise FileNotFoundError(f"checkpoints: {ck / f} is missing (see docs/saga.md and docs/saga_motion.md)"
+                                    + stub_hint(ck / f))
     bm = bm if bm is not None else BodyModel.from_file(default_model_path())
     pose = object_pose if object_pose is not None else within_reach_pose(seed)
     R_o, centre = np.asarray(pose.rotation, np.float64), np.asarray(pose.translation, np.float64)

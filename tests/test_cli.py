@@ -242,3 +242,24 @@ def test_an_out_in_a_folder_that_takes_no_files_is_named_before_any_work():
         check_out(Path("/proc/graspkit_x"))
     check_out(Path(tempfile.gettempdir()) / "graspkit_x")          # a writable folder passes (nothing is created)
     assert not (Path(tempfile.gettempdir()) / "graspkit_x").exists()
+
+
+def test_a_missing_shipped_checkpoint_says_when_data_stubs_is_not_there(tmp_path, monkeypatch, capsys):
+    """Run from a plain (non-editable) install, data_stubs/ is not beside the package: the missing-checkpoint errors
+    say so; a checkpoint of one's own, or a data_stubs/ that is there, gets the plain message."""
+    import graspkit.paths as paths
+    from graspkit.cli import main
+    from graspkit.goal import synthesize as goal_synthesize
+    from graspkit.saga import synthesize as saga_synthesize
+
+    gone = tmp_path / "site" / "data_stubs"
+    monkeypatch.setattr(paths, "DATA_STUBS", gone)
+    for synth, ck in ((goal_synthesize, "gnet.pt"), (saga_synthesize, "wholegrasp.pt")):
+        with pytest.raises(FileNotFoundError) as e:
+            synth("mug", checkpoints=gone / "checkpoints")
+        assert f"{gone / 'checkpoints' / ck} is missing" in str(e.value) and "pip install -e ." in str(e.value)
+    assert main(["wandr", "--goal", "1", "0", "1", "--checkpoint", str(gone / "w.pt"), "--out", str(tmp_path)]) == 2
+    assert f"{gone} does not exist" in capsys.readouterr().err
+    assert paths.stub_hint(tmp_path / "mine.pt") == ""
+    gone.mkdir(parents=True)
+    assert paths.stub_hint(gone / "checkpoints" / "w.pt") == ""
