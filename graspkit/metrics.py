@@ -99,7 +99,10 @@ def _number(x: Any, name: str, positive: bool = True) -> float:
 
 
 def lowest_vertex_motion(vertices: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Horizontal and 3D displacement (T-1,) from frame t to t+1 of the vertex lowest at frame t; vertices (T,V,3)."""
+    """Horizontal and 3D displacement (T-1,) from frame t to t+1 of the vertex lowest at frame t; vertices (T,V,3).
+
+    Of several vertices equally low at frame t (an exact tie, e.g. soles clamped to z = 0) the first in vertex order
+    is followed (argmin's rule; the papers name no rule for ties)."""
     v = _shaped(vertices, "vertices", "T,V,3", min_frames=2)
     idx = v[:-1, :, 2].argmin(1)
     ar = torch.arange(len(idx))
@@ -247,27 +250,34 @@ def heel_vertex_ids() -> tuple[int, int]:
 def motion_quality(bm, motions, chunk: int = 96) -> dict[str, Any]:
     """All motion metrics over Motion clips, measured on their meshes (chunks of `chunk` frames, nothing stored).
 
-    Returns the fractions of frame pairs that skate (fs_wandr, skate_saga) or slide (slide_goal), ground
+    Returns WANDR's FS (fs_wandr: per motion the share of its frame pairs that skate, averaged over the motions, as
+    WANDR's grid and graspkit.eval_wandr count it), the shares of all frame pairs that skate (skate_saga) or slide
+    (slide_goal: GOAL's share of frames, as graspkit.eval_goal counts it), ground
     penetration (max and mean per-frame depth, m), the largest joint speed (m/s, body joints) and where, the largest
     turning speed of a joint's rotation (deg/s, body, jaw and eyes: a head snapping round) and where, the mean jerk
     (m/s^3, body joints), the largest joint-limit violation (deg) and where, and counts (clips, frames, frame pairs).
     Rates with nothing to count (one-frame clips: no pairs; no clip of four frames: no jerk) are NaN, not 0.
     """
     hl, hr = heel_vertex_ids()
-    clips = pairs = fs = sk = sl = frames = 0
+    clips = pairs = sk = sl = frames = 0
+    fs_shares = []                                                       # WANDR's FS of each motion with a frame pair
     pen_max = pen_sum = jerk_sum = 0.0
     jerk_n = 0
     speed = turn = limit = (0.0, "")                                     # the largest value so far and where
     for k, m in enumerate(motions):
         clips += 1
+        fs = n = 0                                                       # this motion's skating pairs and pairs
         for start, v in m.iter_vertices(bm, chunk=chunk, overlap=1):   # chunks share one frame: every pair once
             if len(v) >= 2:                                              # a one-frame clip has no frame pair
                 fs += int(foot_skating_wandr(v, fps=m.fps).sum())
                 sl += int(foot_sliding_goal(v, fps=m.fps).sum())
                 sk += int(foot_skating_saga(v[:, [hl, hr]], m.fps).sum())
-                pairs += len(v) - 1
+                n += len(v) - 1
             pen = ground_penetration(v if start == 0 else v[1:])
             pen_max, pen_sum, frames = max(pen_max, float(pen.max(initial=0))), pen_sum + float(pen.sum()), frames + len(pen)
+        if n:
+            fs_shares.append(fs / n)
+            pairs += n
         j = m.joint_positions(bm)[:, BODY_JOINTS]
         if len(j) >= 2:
             speed = _largest(speed, joint_speed(j, m.fps), k)
@@ -278,7 +288,8 @@ def motion_quality(bm, motions, chunk: int = 96) -> dict[str, Any]:
             jerk_sum, jerk_n = jerk_sum + float(jk.sum()), jerk_n + jk.size
         limit = _largest(limit, joint_limit_violation(m.poses), k)
     per_pair = (lambda x: x / pairs) if pairs else (lambda x: float("nan"))   # no frame pairs: no rate, not 0 %
-    return {"clips": clips, "frames": frames, "pairs": pairs, "fs_wandr": per_pair(fs), "skate_saga": per_pair(sk),
+    fs_wandr = float(np.mean(fs_shares)) if fs_shares else float("nan")
+    return {"clips": clips, "frames": frames, "pairs": pairs, "fs_wandr": fs_wandr, "skate_saga": per_pair(sk),
             "slide_goal": per_pair(sl), "penetration_max": pen_max, "penetration_mean": pen_sum / max(frames, 1),
             "max_joint_speed": speed[0], "max_joint_speed_at": speed[1], "max_joint_turn": turn[0],
             "max_joint_turn_at": turn[1], "mean_jerk": jerk_sum / jerk_n if jerk_n else float("nan"),
@@ -358,17 +369,31 @@ def grasp_metrics(vertices: Any, faces: Any, obj: Any, threshold: float = GRASP_
             "depth_cm": pen.depth_cm}
 
 
-def contact_ratio(min_distances: Any, threshold: float = GRASP_CONTACT_THRESHOLD) -> float:
-    """Fraction of grasps in contact: min body-object signed distances (N,) <= threshold."""
-    try:
-        d = _t(min_distances).double().numpy().reshape(-1)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"min_distances: expected numbers (metres), got {type(min_distances).__name__}: {e}") from None
-    if not d.size:
-        raise ValueError("min_distances: expected at least one grasp, got none")
-    if not np.isfinite(d).all():
-        raise ValueError("min_distances: contains NaN or Inf")
-    return float((d <= _number(threshold, "threshold", positive=False)).mean())
+def contact_ratio(min_distances: Any, threshold: float = GRASP_CONTACT_THRESHOLD, volumes_cm3: Any = None) -> float:
+    """Fraction of grasps in contact: min body-object signed distances (N,) <= threshold, or (with volumes_cm3 (N,),
+    the interpenetration volumes) a volume > 0, the rule of grasp_metrics: an object poking through between body
+    vertices is in contact although no vertex is near it. Without volumes only the distances count."""
+    def numbers(x: Any, name: str) -> np.ndarray:
+        try:
+            a = _t(x).double().numpy()
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"{name}: expected numbers, got {type(x).__name__}: {e}") from None
+        if a.ndim != 1:
+            raise ValueError(f"{name}: expected one number per grasp, shape (N,), got shape {a.shape}")
+        if not a.size:
+            raise ValueError(f"{name}: expected at least one grasp, got none")
+        if not np.isfinite(a).all():
+            raise ValueError(f"{name}: contains NaN or Inf")
+        return a
+
+    d = numbers(min_distances, "min_distances")
+    touch = d <= _number(threshold, "threshold", positive=False)
+    if volumes_cm3 is not None:
+        vol = numbers(volumes_cm3, "volumes_cm3")
+        if vol.shape != d.shape:
+            raise ValueError(f"volumes_cm3: expected one volume per grasp ({len(d)}), got {len(vol)}")
+        touch |= vol > 0
+    return float(touch.mean())
 
 
 def apd(samples: Any) -> float:

@@ -457,12 +457,20 @@ def test_a_body_with_holes_is_measured_away_from_them():
     obj = _box((0.04, 0.04, 0.04), (0.05, 0.0, -0.03))       # 2 x 4 x 4 cm inside the body: 32 cm³
     side = closed.faces[~np.isclose(closed.triangles_center[:, 0], 0.05)]      # the +x wall removed
     top = closed.faces[~np.isclose(closed.triangles_center[:, 2], 0.05)]       # the lid removed
-    assert interpenetration(closed, obj).volume_cm3 == pytest.approx(32.0, rel=1e-6)
-    assert interpenetration((closed.vertices, side), obj).volume_cm3 == pytest.approx(32.0, rel=1e-6)
-    assert interpenetration((closed.vertices, top), obj).volume_cm3 == 0.0
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                        # a closed body: no warning
+        assert interpenetration(closed, obj).volume_cm3 == pytest.approx(32.0, rel=1e-6)
+    with pytest.warns(UserWarning, match=r"body mesh is not closed \(4 edges border only one face\)"):
+        assert interpenetration((closed.vertices, side), obj).volume_cm3 == pytest.approx(32.0, rel=1e-6)
+    with pytest.warns(UserWarning, match="can be under-counted"):   # the user is told the 32 cm³ read as 0
+        assert interpenetration((closed.vertices, top), obj).volume_cm3 == 0.0
     corner = _box((0.04, 0.04, 0.04), (0.05, 0.05, -0.05))  # around the body's corner vertex: 8 cm³, 2 cm deep
     for faces in (closed.faces, side):
-        pen = interpenetration((closed.vertices, faces), corner)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")                   # the open one's warning, checked above
+            pen = interpenetration((closed.vertices, faces), corner)
         assert pen.volume_cm3 == pytest.approx(8.0, rel=1e-6) and pen.depth_cm == pytest.approx(2.0, abs=1e-9)
 
 

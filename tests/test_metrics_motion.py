@@ -1,6 +1,7 @@
 """Motion metrics on hand-made cases with known answers (a still body, a foot dragged at a known speed, ...)."""
 import numpy as np
 import pytest
+import trimesh
 
 from graspkit import metrics as M
 
@@ -201,6 +202,26 @@ def test_tensors_that_require_grad_and_integer_arrays_are_measured_as_plain_numb
     assert M.contact_ratio(d) == M.contact_ratio([0.001, 0.003]) == 0.5
 
 
+def test_contact_ratio_with_volumes_counts_an_object_poking_between_vertices_as_grasp_metrics_does():
+    """A 10 cm box body and a 1 cm rod pushed 5 mm into the middle of its top face: no body vertex comes within 6 cm
+    of the rod, yet they overlap by 0.5 cm³ (manifold3d's exact intersection): in contact for grasp_metrics, and for
+    contact_ratio once it is given the volumes."""
+    body = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
+    rod = trimesh.creation.box(extents=(0.01, 0.01, 0.1))
+    rod.apply_translation((0.0, 0.0, 0.095))
+    truth = trimesh.boolean.intersection([body, rod], engine="manifold").volume * 1e6
+    assert truth == pytest.approx(0.5, rel=1e-6)
+    g = M.grasp_metrics(body.vertices, body.faces, rod)
+    assert g["min_distance"] > 0.06 and g["contact"] == 1.0 and g["volume_cm3"] == pytest.approx(truth, rel=1e-6)
+    assert M.contact_ratio([g["min_distance"], 0.0]) == 0.5                                # the distances alone miss it
+    assert M.contact_ratio([g["min_distance"], 0.0], volumes_cm3=[g["volume_cm3"], 0.0]) == 1.0
+    assert M.contact_ratio([g["min_distance"]], volumes_cm3=[g["volume_cm3"]]) == M.grasp_quality_table([g])["contact_ratio"]
+    with pytest.raises(ValueError, match=r"volumes_cm3: expected one volume per grasp \(2\)"):
+        M.contact_ratio([0.0, 0.1], volumes_cm3=[0.0])
+    with pytest.raises(ValueError, match=r"min_distances: expected one number per grasp, shape \(N,\)"):
+        M.contact_ratio([[0.0, 0.1]])
+
+
 def test_apd_of_equal_samples_is_zero_and_matches_scipy():
     """APD is the mean of scipy's pairwise distances; equal samples (K > 25, where cdist's matrix-product shortcut
     would round) give exactly 0."""
@@ -270,3 +291,19 @@ def test_motion_quality_of_one_frame_clips_has_no_rates_rather_than_zero(bm):
     alone = M.motion_quality(bm, [m])
     assert both["pairs"] == alone["pairs"] == m.num_frames - 1
     assert both["fs_wandr"] == alone["fs_wandr"] and both["skate_saga"] == alone["skate_saga"]
+
+
+def test_motion_quality_averages_wandrs_fs_per_motion_and_pools_goals_sliding(bm):
+    """Two motions of different lengths: 3 frames gliding 5 cm a frame (both pairs skate and slide) and 21 frames
+    standing still. WANDR's FS is per motion, averaged: (1 + 0) / 2; GOAL's sliding is the share of all frames:
+    2 of 22 pairs; pooling FS as well would read 2 / 22."""
+    from graspkit.data.motion import Motion
+
+    poses = np.zeros((21, 165))
+    glide = Motion(poses[:3], np.array([[0.05 * t, 0.0, 0.0] for t in range(3)]), np.zeros(10), 30.0)
+    still = Motion(poses, np.zeros((21, 3)), np.zeros(10), 30.0)
+    q = M.motion_quality(bm, [glide, still])
+    assert q["pairs"] == 22 and q["fs_wandr"] == pytest.approx(0.5) and q["slide_goal"] == pytest.approx(2 / 22)
+    one = [M.foot_skating_wandr(m.vertices(bm)).mean() for m in (glide, still)]        # each motion on its own
+    assert one == [1.0, 0.0]
+    assert M.motion_quality(bm, [still, glide], chunk=2)["fs_wandr"] == pytest.approx(0.5)  # any order, any chunk

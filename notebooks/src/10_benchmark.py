@@ -47,9 +47,9 @@ print(f"{len(rows)} rows: {sum(r.source == 'graspkit' for r in rows)} measured b
 # | contact ratio | SAGA §4.1, GOAL Tab. 1 | share of grasps whose body mesh comes within 2 mm of the object (signed distance) or overlaps it (volume > 0) |
 # | penetration volume / depth | SAGA Tab. 1–2, GOAL Tab. 1 | cm³ inside both meshes; deepest body vertex inside the object (cm) |
 # | APD | SAGA §4.1 (after DLow) | mean L2 distance between all pairs of samples for one object placement (markers) |
-# | foot skating (WANDR) | WANDR §4.3 | share of frames whose lowest vertex moves > 0.66 cm to the next frame: the paper says "moves"; horizontally is graspkit's reading, as the authors' evaluation code measures it (`docs/wandr.md`) |
+# | foot skating (WANDR) | WANDR §4.3 | per motion, the share of frames whose lowest vertex moves > 0.66 cm to the next frame, averaged over the motions: the paper says "moves"; horizontally is graspkit's reading, as the authors' evaluation code measures it (`docs/wandr.md`) |
 # | foot skating (SAGA) | SAGA §4.2 (following MOJO) | both heels within 5 cm of the ground and both faster than 75 mm/s |
-# | foot sliding (GOAL) | GOAL §4.2 | share of frames whose lowest vertex moves > 1 cm (3D) |
+# | foot sliding (GOAL) | GOAL §4.2 | share of all frames whose lowest vertex moves > 1 cm (3D) |
 # | SR, DTG | WANDR §4.3 | the right wrist comes within 10 cm of the goal; its closest distance |
 #
 # Arrows in the column titles say which direction is better.
