@@ -223,7 +223,8 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
         raise ValueError(f"--seconds: expected at least one frame (1/30 s), got {args.seconds}")
     if not args.checkpoint.is_file():
         what = "is a folder, expected a checkpoint file" if args.checkpoint.is_dir() else "is missing"
-        raise FileNotFoundError(f"--checkpoint: {args.checkpoint} {what} (see docs/wandr.md)" + stub_hint(args.checkpoint))
+        raise FileNotFoundError(f"--checkpoint: {args.checkpoint} {what} (see docs/wandr.md)"
+                                + stub_hint(args.checkpoint))
     goal = torch.tensor(args.goal, dtype=torch.float32)
     _print_notes(wandr_range_notes(args.goal, frames / 30.0))
     motion = wandr_motions(args.checkpoint, goal[None], frames, seed=args.seed, lift=args.lift)[0]
@@ -278,11 +279,12 @@ def _cmd_eval_all(args: argparse.Namespace) -> int:
     return 0
 
 
-# The commands whose parsers live in modules that import torch and scipy (seconds to load): registered in full only
-# when the command line names them, so that `graspkit --help` and the other commands' parsers come up at once.
 DATA_HELP = "procedural motion data (graspkit data make --kind ...)"
 
 
+# The data, train and eval commands' parsers live in modules that import torch and scipy (seconds to load): they are
+# registered in full only when the command line names them, so that `graspkit --help` and the other commands' parsers
+# come up at once.
 def _command_named(argv: list[str] | None) -> str | None:
     """The subcommand on a command line (its first word not starting with '-'), or None."""
     return next((a for a in (sys.argv[1:] if argv is None else argv) if not a.startswith("-")), None)
@@ -366,9 +368,9 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         sub.add_parser("data", help=DATA_HELP)
 
     # `graspkit train <model>`: each model family adds its own subcommands to this parser
-    train = sub.add_parser("train", help="train a model of the workbook: wholegrasp, wholegrasp_single, grabnet_smplx, "
-                           "pose_prior, motionfill, motionfill_baseline, gnet, mnet, wandr").add_subparsers(dest="train_command",
-                                                                                          required=True)
+    train = sub.add_parser("train", help="train a model of the workbook: wholegrasp, wholegrasp_single, "
+                           "grabnet_smplx, pose_prior, motionfill, motionfill_baseline, gnet, mnet, wandr")
+    train = train.add_subparsers(dest="train_command", required=True)
     if named == "train":
         from graspkit.eval_goal import add_goal_train_commands
         add_goal_train_commands(train)

@@ -215,7 +215,8 @@ def test_contact_ratio_with_volumes_counts_an_object_poking_between_vertices_as_
     assert g["min_distance"] > 0.06 and g["contact"] == 1.0 and g["volume_cm3"] == pytest.approx(truth, rel=1e-6)
     assert M.contact_ratio([g["min_distance"], 0.0]) == 0.5                                # the distances alone miss it
     assert M.contact_ratio([g["min_distance"], 0.0], volumes_cm3=[g["volume_cm3"], 0.0]) == 1.0
-    assert M.contact_ratio([g["min_distance"]], volumes_cm3=[g["volume_cm3"]]) == M.grasp_quality_table([g])["contact_ratio"]
+    table = M.grasp_quality_table([g])["contact_ratio"]
+    assert M.contact_ratio([g["min_distance"]], volumes_cm3=[g["volume_cm3"]]) == table == 1.0
     with pytest.raises(ValueError, match=r"volumes_cm3: expected one volume per grasp \(2\)"):
         M.contact_ratio([0.0, 0.1], volumes_cm3=[0.0])
     with pytest.raises(ValueError, match=r"min_distances: expected one number per grasp, shape \(N,\)"):

@@ -265,9 +265,9 @@ def interpenetration(body: MeshLike, obj: MeshLike, spacing: float = 1e-3, refin
     vo, fo = _closed_numpy(obj, "obj")
     holes = _topology(np.ascontiguousarray(fb, dtype=np.int64).tobytes(), len(fb))[1]
     if holes.endswith(HOLES):                   # shown once per mesh topology (Python's default warning filter)
-        warnings.warn(f"interpenetration: the body mesh is not closed ({holes[:-len(HOLES)].strip()}): a column through a hole counts as "
-                      "empty, so the volume inside the object can be under-counted (the depth is not affected)",
-                      stacklevel=2)
+        warnings.warn(f"interpenetration: the body mesh is not closed ({holes[:-len(HOLES)].strip()}): a column "
+                      "through a hole counts as empty, so the volume inside the object can be under-counted (the depth "
+                      "is not affected)", stacklevel=2)
     for v, f, name in ((vb, fb, "body"), (vo, fo, "obj")):
         require_metres(torch.from_numpy(v), torch.from_numpy(f), name)
     return Penetration(volume_cm3=_volume(vb, fb, vo, fo, spacing, _refine(refine)) * 1e6,
