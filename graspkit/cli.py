@@ -73,6 +73,9 @@ def _object_pose(at: list[float] | None):
     if at[2] < 0:
         raise ValueError(f"--at: the object's centre is {-at[2]:g} m below the floor (z = 0); expected Z >= 0 m "
                          "(the training grasps hold it 0.5-1.7 m high)")
+    if max(abs(at[0]), abs(at[1])) > WANDR_GOAL_LIMIT or at[2] > AT_HEIGHT_LIMIT:
+        raise ValueError(f"--at: expected the object within {WANDR_GOAL_LIMIT:g} m of the origin in X and Y and at most "
+                         f"{AT_HEIGHT_LIMIT:g} m high (no one reaches higher), got {' '.join(map(str, at))}")
     return ObjectPose.from_yaw(np.deg2rad(at[3]), np.array(at[:3]))
 
 
@@ -172,7 +175,8 @@ def _cmd_goal(args: argparse.Namespace) -> int:
 WANDR_MAX_SECONDS = 8.0       # the goal grid's horizon (§4.2): what the shipped model is trained and measured for
 WANDR_MAX_HEIGHT = 1.9        # m: the highest goals of the training clips (room-scale, docs/data.md); the grid's: 1.8
 WANDR_MAX_SPEED = 1.5         # m/s: the fastest walk of the training clips (the hurried room-scale tasks, docs/data.md)
-WANDR_GOAL_LIMIT = 50.0       # m: the farthest goal `graspkit wandr` takes (30 s at 1.5 m/s is 45 m)
+WANDR_GOAL_LIMIT = 50.0       # m: the farthest goal `graspkit wandr` takes (30 s at 1.5 m/s is 45 m), and --at's X, Y
+AT_HEIGHT_LIMIT = 3.0         # m: the highest object centre `graspkit saga/goal --at` takes
 
 
 def wandr_range_notes(goal, seconds: float) -> list[str]:
@@ -326,7 +330,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                         help="a catalogue object (graspkit.objects.list_objects()) or a mesh file of one's own "
                              "(closed, metres, z up; .obj, .ply, .stl, .glb)")
         sg.add_argument("--at", type=float, nargs=4, default=None, metavar=("X", "Y", "Z", "YAW_DEG"),
-                        help="the object's centre (m) and yaw (default: drawn from --seed)")
+                        help="the object's centre (m; |X|, |Y| <= 50, 0 <= Z <= 3) and yaw (default: drawn from --seed)")
         sg.add_argument("--seed", type=int, default=0)
         sg.add_argument("--out", type=Path, default=Path(f"outputs/{method}"))
         sg.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")

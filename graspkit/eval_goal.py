@@ -26,7 +26,7 @@ from scipy.spatial import cKDTree
 from torch import Tensor
 
 from graspkit.checks import count_type, nonneg_float, positive_float
-from graspkit.cli import check_counts, check_folders, reports_errors
+from graspkit.cli import check_counts, check_folders, check_out, reports_errors
 from graspkit.models.gnet import pose_rotmats
 from graspkit.models.mnet import STALL_FRAMES, MNet, MNetWindows, predict_horizon
 from graspkit.rotations import rotation_about_z
@@ -779,6 +779,8 @@ def main(argv: list[str] | None = None) -> int:
         raise ValueError("--tab1-row: only with --tab1-only (it names a row of Tab. 1 to measure again)")
     check_counts(a, n_grasps=0, n_rollouts=1, max_frames=2, window_stride=1, threads=1, seed=0)
     check_folders(a.data)
+    if a.out is not None:
+        check_out(a.out, is_file=True)                # before any work
     torch.set_num_threads(a.threads)
     if a.tab1_only or a.saga_only or a.rollouts_only:          # update one part of an existing evaluation
         from graspkit.paths import DATA_STUBS

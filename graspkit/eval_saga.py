@@ -37,7 +37,7 @@ import torch
 from torch import Tensor
 
 from graspkit.checks import positive_float
-from graspkit.cli import check_counts, check_folders, reports_errors
+from graspkit.cli import check_counts, check_folders, check_out, reports_errors
 from graspkit.optim.grasppose import ARM_JOINTS, GraspPoseConfig, GraspPoseWeights
 from graspkit.paths import DATA_STUBS, write_atomic
 
@@ -490,6 +490,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--finish", type=Path, default=None, help="only turn this .partial.json into --out and print it")
     args = ap.parse_args(argv)
     check_counts(args, placements=1, samples=1, gt=1, refine=1)
+    check_out(args.out, is_file=True)                 # before any work (the partial results are written beside it)
     if any(s < 0 for s in args.steps):
         raise ValueError(f"--steps: expected three step counts >= 0, got {args.steps}")
     if args.finish is not None:

@@ -89,7 +89,8 @@ def pool_results(calls: Sequence[tuple[Callable[..., Any], tuple]], workers: int
     `with` block runs every queued call first: Ctrl-C on `data make` went on for minutes)."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    ex = ProcessPoolExecutor(max_workers=workers, initializer=initializer, initargs=initargs)
+    # never more processes than calls: `--workers 500` for 3 clips starts 3 (each process loads torch and a body)
+    ex = ProcessPoolExecutor(max_workers=max(1, min(workers, len(calls))), initializer=initializer, initargs=initargs)
     try:
         futures = [ex.submit(fn, *args) for fn, args in calls]
         for f in as_completed(futures):

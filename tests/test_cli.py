@@ -263,3 +263,42 @@ def test_a_missing_shipped_checkpoint_says_when_data_stubs_is_not_there(tmp_path
     assert paths.stub_hint(tmp_path / "mine.pt") == ""
     gone.mkdir(parents=True)
     assert paths.stub_hint(gone / "checkpoints" / "w.pt") == ""
+
+
+def _mark_worker(folder: str) -> None:
+    """A pool initializer: leaves one file per worker process started."""
+    import os
+
+    Path(folder, f"worker_{os.getpid()}").touch()
+
+
+def test_a_pool_starts_no_more_processes_than_calls(tmp_path):
+    """pool_results with 16 workers for 2 calls starts at most 2 processes (`data make --workers 500` for 3 clips
+    started 500, each loading torch, and ended in a BrokenProcessPool)."""
+    from graspkit.paths import pool_results
+
+    got = sorted(pool_results([(abs, (-1,)), (abs, (-2,))], 16, _mark_worker, (str(tmp_path),)))
+    assert got == [1, 2] and 1 <= len(list(tmp_path.glob("worker_*"))) <= 2
+
+
+def test_the_evaluators_check_out_before_any_work(tmp_path, capsys):
+    """python -m graspkit.eval_saga / eval_goal: an --out that cannot be written is refused at once, naming --out
+    (it had run the whole evaluation first, then failed on a temporary file, once leaving one at /)."""
+    from graspkit import eval_goal, eval_saga
+    from graspkit.paths import DATA_STUBS
+
+    (tmp_path / "afile").touch()
+    assert eval_saga.main(["--data", str(DATA_STUBS / "grasps"), "--out", str(tmp_path)]) == 2
+    assert f"--out: {tmp_path} is a folder; expected a file path" in capsys.readouterr().err
+    assert eval_goal.main(["--data", str(DATA_STUBS / "grasps"), "--out", str(tmp_path / "afile" / "x.json")]) == 2
+    assert "--out: " in capsys.readouterr().err and list(tmp_path.iterdir()) == [tmp_path / "afile"]
+
+
+@pytest.mark.parametrize("at", [["0", "0", "1e6", "0"], ["1e6", "0", "1", "0"], ["0", "-60", "1", "0"]])
+def test_saga_and_goal_refuse_an_object_out_of_any_reach(at, tmp_path, capsys):
+    from graspkit.cli import main
+
+    for method in ("saga", "goal"):
+        assert main([method, "--object", "mug", "--at", *at, "--out", str(tmp_path / method)]) == 2
+        assert "--at: expected the object within 50 m" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())
