@@ -2,12 +2,13 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import functools
 import math
 import os
 import sys
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from graspkit import __version__
@@ -450,6 +451,20 @@ def check_folders(paths: Path | list[Path] | None, flag: str = "--data") -> None
         if not Path(d).is_dir():
             what = "is a file, expected a folder" if Path(d).exists() else "no such folder"
             raise FileNotFoundError(f"{flag}: {d}: {what} (make the data with `graspkit data make`, docs/data.md)")
+
+
+@contextlib.contextmanager
+def as_flags(**flags: str) -> Iterator[None]:
+    """Re-raise a ValueError or OSError whose message starts with `name:` for a name in `flags` (a library function's
+    parameter) as `flag:` (the command-line flag it came from), so that the error names what the user typed."""
+    try:
+        yield
+    except (ValueError, OSError) as e:
+        msg = str(e)
+        for name, flag in flags.items():
+            if msg.startswith(f"{name}:"):
+                raise type(e)(flag + msg[len(name):]) from None
+        raise
 
 
 def reports_errors(prog: str) -> Callable[[Callable[..., int]], Callable[..., int]]:

@@ -302,3 +302,30 @@ def test_saga_and_goal_refuse_an_object_out_of_any_reach(at, tmp_path, capsys):
         assert main([method, "--object", "mug", "--at", *at, "--out", str(tmp_path / method)]) == 2
         assert "--at: expected the object within 50 m" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
+
+
+def test_wandr_train_and_eval_name_the_flag_before_any_work(tmp_path, capsys):
+    """Errors that a library function raised under its parameter's name (floor:, clips_folder:, checkpoint:,
+    stride_scale:) name the flag the user typed, and the counts are checked before the clips load."""
+    from graspkit.cli import as_flags, main
+    from graspkit.paths import DATA_STUBS
+
+    ck = str(DATA_STUBS / "checkpoints" / "wandr.pt")
+    (tmp_path / "no_clips").mkdir()
+    cases = [(["eval", "wandr", "--checkpoint", ck, "--floor", "nan"], "--floor: expected a tolerance >= 0"),
+             (["eval", "wandr", "--checkpoint", str(tmp_path / "no.pt")], "--checkpoint: {} is missing".format(tmp_path / "no.pt")),
+             (["eval", "wandr", "--checkpoint", ck, "--clips", str(tmp_path / "no_clips")],
+              "--clips: no reaching clips"),
+             (["train", "wandr", "--init", str(tmp_path / "no.pt"), "--out", str(tmp_path / "w.pt")],
+              "--init: no checkpoint file at"),
+             (["train", "wandr", "--stride-scale", "0", "--out", str(tmp_path / "w.pt")], "--stride-scale: expected"),
+             (["train", "wandr", "--data", str(tmp_path / "no_clips"), "--out", str(tmp_path / "w.pt")],
+              "--data: no clips under")]
+    for argv, message in cases:
+        assert main(argv) == 2, argv
+        assert message in capsys.readouterr().err, argv
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["no_clips"]            # nothing written
+    with pytest.raises(FileNotFoundError, match="^--x: gone$"), as_flags(x="--x"):
+        raise FileNotFoundError("x: gone")
+    with pytest.raises(ValueError, match="^xy: kept$"), as_flags(x="--x"):    # only a whole leading name
+        raise ValueError("xy: kept")

@@ -158,10 +158,10 @@ def test_module_commands_report_bad_input_without_a_traceback(tmp_path, capsys, 
     (["goal", "--object", "mug", "--out", "{tmp}/demo", "--model", "{tmp}/none.npz"], "--model: "),
     (["data", "make", "--kind", "grasp", "--n", "1", "--objects", "", "--out", "{tmp}/demo"], "--objects: expected"),
     (["data", "make", "--kind", "grasp", "--n", "1", "--objects", "teapot", "--out", "{tmp}/demo"], "got 'teapot'"),
-    (["eval", "wandr", "--checkpoint", str(CK / "wandr.pt"), "--clips", "{tmp}/nosuchdir"], "no reaching clips in"),
+    (["eval", "wandr", "--checkpoint", str(CK / "wandr.pt"), "--clips", "{tmp}/nosuchdir"], "--clips: {tmp}/nosuchdir: no such"),
     (["train", "wholegrasp", "--data", "{tmp}/nosuchdir", "--out", "{tmp}/demo/w.pt"], "nosuchdir: no such folder"),
     (["train", "gnet", "--data", str(STUBS / "grasps"), "--data", str(CK / "gnet.pt")], "gnet.pt: is a file"),
-    (["eval", "wandr", "--checkpoint", "{tmp}"], "is a folder, expected a checkpoint file"),
+    (["eval", "wandr", "--checkpoint", "{tmp}"], "--checkpoint: {tmp} is a folder, expected a checkpoint file"),
     (["wandr", "--goal", "1", "0", "1", "--checkpoint", "{tmp}", "--out", "{tmp}/demo"], "--checkpoint: "),
     # loss weights and schedules below zero once trained (a logged loss of -131366 with --foot-weight -5)
     (["train", "gnet", "--kl", "-1", "--out", "{tmp}/demo/g.pt"], "argument --kl: expected a finite number >= 0"),
@@ -188,5 +188,5 @@ def test_graspkit_counts_and_folders_are_checked_before_work(tmp_path, capsys, a
     except SystemExit as e:                 # argparse's own "argument --flag: ..." exits from parse_args
         code = e.code
     assert code == 2
-    assert message in capsys.readouterr().err
+    assert message.format(tmp=tmp_path) in capsys.readouterr().err
     assert not (tmp_path / "demo").exists()
