@@ -75,8 +75,8 @@ def _object_pose(at: list[float] | None):
         raise ValueError(f"--at: the object's centre is {-at[2]:g} m below the floor (z = 0); expected Z >= 0 m "
                          "(the training grasps hold it 0.5-1.7 m high)")
     if max(abs(at[0]), abs(at[1])) > WANDR_GOAL_LIMIT or at[2] > AT_HEIGHT_LIMIT:
-        raise ValueError(f"--at: expected the object within {WANDR_GOAL_LIMIT:g} m of the origin in X and Y and at most "
-                         f"{AT_HEIGHT_LIMIT:g} m high (no one reaches higher), got {' '.join(map(str, at))}")
+        raise ValueError(f"--at: expected the object within {WANDR_GOAL_LIMIT:g} m of the origin in X and Y and at "
+                         f"most {AT_HEIGHT_LIMIT:g} m high (no one reaches higher), got {' '.join(map(str, at))}")
     return ObjectPose.from_yaw(np.deg2rad(at[3]), np.array(at[:3]))
 
 
@@ -213,7 +213,6 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
     from graspkit.demo import _write_clip
     from graspkit.eval_wandr import FOOT_ON_FLOOR, SUNK_DEPTH
     from graspkit.metrics import floor_figures, foot_skating_wandr
-    from graspkit.paths import stub_hint
     from graspkit.viz.scene import sphere
 
     if not all(math.isfinite(v) for v in args.goal):
@@ -226,10 +225,7 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
     frames = int(round(args.seconds * 30.0))
     if frames < 1:
         raise ValueError(f"--seconds: expected at least one frame (1/30 s), got {args.seconds}")
-    if not args.checkpoint.is_file():
-        what = "is a folder, expected a checkpoint file" if args.checkpoint.is_dir() else "is missing"
-        raise FileNotFoundError(f"--checkpoint: {args.checkpoint} {what} (see docs/wandr.md)"
-                                + stub_hint(args.checkpoint))
+    check_file(args.checkpoint, "--checkpoint", see="docs/wandr.md")
     goal = torch.tensor(args.goal, dtype=torch.float32)
     _print_notes(wandr_range_notes(args.goal, frames / 30.0))
     motion = wandr_motions(args.checkpoint, goal[None], frames, seed=args.seed, lift=args.lift)[0]
@@ -331,7 +327,8 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                         help="a catalogue object (graspkit.objects.list_objects()) or a mesh file of one's own "
                              "(closed, metres, z up; .obj, .ply, .stl, .glb)")
         sg.add_argument("--at", type=float, nargs=4, default=None, metavar=("X", "Y", "Z", "YAW_DEG"),
-                        help="the object's centre (m; |X|, |Y| <= 50, 0 <= Z <= 3) and yaw (default: drawn from --seed)")
+                        help="the object's centre (m; |X|, |Y| <= 50, 0 <= Z <= 3) and yaw (default: drawn from "
+                             "--seed)")
         sg.add_argument("--seed", type=int, default=0)
         sg.add_argument("--out", type=Path, default=Path(f"outputs/{method}"))
         sg.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
@@ -451,6 +448,17 @@ def check_folders(paths: Path | list[Path] | None, flag: str = "--data") -> None
         if not Path(d).is_dir():
             what = "is a file, expected a folder" if Path(d).exists() else "no such folder"
             raise FileNotFoundError(f"{flag}: {d}: {what} (make the data with `graspkit data make`, docs/data.md)")
+
+
+def check_file(path: Path, flag: str, what: str = "a checkpoint file", see: str = "") -> None:
+    """FileNotFoundError naming `flag` unless `path` is a file (`what` it should be; `see`: where to read on), with
+    a word on data_stubs/ when a shipped file is missing because graspkit runs without its repository."""
+    from graspkit.paths import stub_hint
+
+    path = Path(path)
+    if not path.is_file():
+        problem = f"is a folder, expected {what}" if path.is_dir() else "is missing"
+        raise FileNotFoundError(f"{flag}: {path} {problem}" + (f" (see {see})" if see else "") + stub_hint(path))
 
 
 @contextlib.contextmanager

@@ -805,48 +805,41 @@ def _train_selecting(model, train, cfg, ck, stride, progress, folder, bm) -> tup
 
 def _cmd_train(args) -> int:
     """`graspkit train wandr`."""
-    from graspkit.cli import as_flags, check_counts
+    from graspkit.cli import as_flags, check_counts, check_file
 
     check_counts(args, max_steps=0, stride_scale=1, window_stride=1, step_stride=1)     # before the data loads
-    if args.init is not None and not args.init.is_file():
-        raise FileNotFoundError(f"--init: no checkpoint file at {args.init}")
+    if args.init is not None:
+        check_file(args.init, "--init")
     with as_flags(kinds="--kinds", folder="--data"):
-        info = _run_train(args)
+        info = run_train_wandr(args.variant, args.data, args.out, args.epochs, args.time_limit, args.seed,
+                               args.threads, args.batch_size, args.lr, max_steps=args.max_steps,
+                               ramp_epochs=args.ramp_epochs, stride_scale=args.stride_scale, reach_far=args.reach_far,
+                               reach_chain=args.reach_chain, reach_near=args.reach_near,
+                               rollout_latent=args.rollout_latent, alpha_kl=args.alpha_kl, goal_frame=args.goal_frame,
+                               foot_weight=args.foot_weight, select_val=args.select_val,
+                               contact_weight=args.contact_weight, floor_weight=args.floor_weight,
+                               kinds=tuple(args.kinds.split(",")) if args.kinds else None, init=args.init,
+                               window_stride=args.window_stride, rollout_grad=args.rollout_grad,
+                               step_stride=args.step_stride)
     print(f"wrote {info['out']}: {info['epochs']} epochs in {info['train_wall_s']:.0f} s wall "
           f"({info['train_cpu_s']:.0f} s CPU); last loss {info['history'][-1]['loss']:.4f}")
     return 0
-
-
-def _run_train(args) -> dict[str, Any]:
-    """run_train_wandr with the parsed arguments of `graspkit train wandr`."""
-    return run_train_wandr(args.variant, args.data, args.out, args.epochs, args.time_limit, args.seed, args.threads,
-                           args.batch_size, args.lr, max_steps=args.max_steps, ramp_epochs=args.ramp_epochs,
-                           stride_scale=args.stride_scale, reach_far=args.reach_far,
-                           reach_chain=args.reach_chain, reach_near=args.reach_near,
-                           rollout_latent=args.rollout_latent, alpha_kl=args.alpha_kl, goal_frame=args.goal_frame,
-                           foot_weight=args.foot_weight, select_val=args.select_val,
-                           contact_weight=args.contact_weight, floor_weight=args.floor_weight,
-                           kinds=tuple(args.kinds.split(",")) if args.kinds else None, init=args.init,
-                           window_stride=args.window_stride, rollout_grad=args.rollout_grad,
-                           step_stride=args.step_stride)
 
 
 def _cmd_eval(args) -> int:
     """`graspkit eval wandr`."""
     import math
 
-    from graspkit.cli import as_flags, check_folders
+    from graspkit.cli import as_flags, check_file, check_folders
 
     if args.floor is not None and not (math.isfinite(args.floor) and args.floor >= 0):
         raise ValueError(f"--floor: expected a tolerance >= 0 in metres, got {args.floor}")
-    for ck in args.checkpoint:
-        if not ck.is_file():
-            what = "is a folder, expected a checkpoint file" if ck.is_dir() else "is missing"
-            raise FileNotFoundError(f"--checkpoint: {ck} {what}")
+    for ck in args.checkpoint:                         # every one before the first is evaluated
+        check_file(ck, "--checkpoint")
     check_folders(args.clips, "--clips")
     rows, extra = {}, {}
     for ck in args.checkpoint:
-        with as_flags(clips_folder="--clips", floor="--floor"):
+        with as_flags(clips_folder="--clips"):         # a folder without reaching clips
             r = run_eval_wandr(ck, args.n, args.seed, planner=args.planner and not extra, threads=args.threads,
                                clips_folder=args.clips, floor=args.floor, lift=args.lift)
         rows[r["row"]] = r["summary"]

@@ -317,7 +317,7 @@ def test_wandr_train_and_eval_name_the_flag_before_any_work(tmp_path, capsys):
              (["eval", "wandr", "--checkpoint", ck, "--clips", str(tmp_path / "no_clips")],
               "--clips: no reaching clips"),
              (["train", "wandr", "--init", str(tmp_path / "no.pt"), "--out", str(tmp_path / "w.pt")],
-              "--init: no checkpoint file at"),
+              "--init: {} is missing".format(tmp_path / "no.pt")),
              (["train", "wandr", "--stride-scale", "0", "--out", str(tmp_path / "w.pt")], "--stride-scale: expected"),
              (["train", "wandr", "--data", str(tmp_path / "no_clips"), "--out", str(tmp_path / "w.pt")],
               "--data: no clips under")]

@@ -124,6 +124,13 @@ def _topology(faces_bytes: bytes, num_faces: int) -> tuple[np.ndarray, str]:
     return edge_ids.reshape(num_faces, 3), problem
 
 
+def holes(faces: Tensor | np.ndarray) -> str:
+    """'' when every edge of the faces (F,3) borders two faces, else how many border only one (cached per array)."""
+    f = np.ascontiguousarray(faces.cpu().numpy() if isinstance(faces, Tensor) else faces, dtype=np.int64)
+    problem = _topology(f.tobytes(), len(f))[1]
+    return problem[:-len(HOLES)].strip() if problem.endswith(HOLES) else ""
+
+
 def edge_ids(faces: Tensor) -> np.ndarray:
     """Undirected edge index (F,3) of the edges ab, bc, ca of every face (cached per face array)."""
     f = np.ascontiguousarray(faces.cpu().numpy(), dtype=np.int64)

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from graspkit.objects.distance import HOLES, MeshLike, _topology, mesh_arrays, require_closed, require_metres
+from graspkit.objects.distance import MeshLike, holes, mesh_arrays, require_closed, require_metres
 from graspkit.objects.sdf import signed_distance
 
 # column offsets in cells: irrational fractions keep rays off mesh vertices and edges; a ray that still
@@ -263,9 +263,9 @@ def interpenetration(body: MeshLike, obj: MeshLike, spacing: float = 1e-3, refin
     refine: rays per cell side along edges and vertical walls (1: one ray per column, as before 2026-11-30)."""
     vb, fb = _closed_numpy(body, "body", allow_holes=True)
     vo, fo = _closed_numpy(obj, "obj")
-    holes = _topology(np.ascontiguousarray(fb, dtype=np.int64).tobytes(), len(fb))[1]
-    if holes.endswith(HOLES):                   # shown once per mesh topology (Python's default warning filter)
-        warnings.warn(f"interpenetration: the body mesh is not closed ({holes[:-len(HOLES)].strip()}): a column "
+    open_edges = holes(fb)
+    if open_edges:                              # shown once per mesh topology (Python's default warning filter)
+        warnings.warn(f"interpenetration: the body mesh is not closed ({open_edges}): a column "
                       "through a hole counts as empty, so the volume inside the object can be under-counted (the depth "
                       "is not affected)", stacklevel=2)
     for v, f, name in ((vb, fb, "body"), (vo, fo, "obj")):
