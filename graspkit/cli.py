@@ -490,6 +490,16 @@ def reports_errors(prog: str) -> Callable[[Callable[..., int]], Callable[..., in
     return wrap
 
 
+def print_run_logs() -> None:
+    """After `graspkit train`: where each training state that graspkit.train.fit wrote keeps its log and loss plot
+    (a run stopped part-way resumes from that state when the same command is run again)."""
+    from graspkit.train import RUNS
+
+    for run in RUNS:
+        print(f"training state {run}; per-epoch log {run.with_suffix('.csv').name}, loss plot "
+              f"{run.with_suffix('.png').name} beside it")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the `graspkit` console command."""
     args = build_parser(argv).parse_args(argv)
@@ -500,7 +510,13 @@ def main(argv: list[str] | None = None) -> int:
         check_folders(getattr(args, "data", None))   # every command's --data names a folder (or several)
         if getattr(args, "out", None) is not None:
             check_out(args.out, getattr(args, "out_is_file", None))
-        return int(args.func(args) or 0)
+        if args.command == "train":
+            from graspkit.train import RUNS
+            RUNS.clear()
+        rc = int(args.func(args) or 0)
+        if args.command == "train":
+            print_run_logs()
+        return rc
     except (ValueError, OSError) as e:      # OSError: FileNotFoundError, a folder that cannot be written, ...
         print(f"graspkit: error: {e}", file=sys.stderr)
         return 2

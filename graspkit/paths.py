@@ -82,6 +82,30 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
         raise
 
 
+def drop_damaged(paths: Sequence[Path], what: str = "files") -> list[Path]:
+    """Remove those of `paths` (existing .npz files) that are not intact zip archives (truncated, or an entry failing
+    its checksum), warning on stderr, so that a resumed run makes them again; returns the removed paths. Files are
+    written atomically, so only damage from outside (a copy cut short, a bad disk) is caught here."""
+    import sys
+    import zipfile
+
+    bad = []
+    for p in paths:
+        try:
+            with zipfile.ZipFile(p) as zf:
+                ok = zf.testzip() is None
+        except Exception:  # noqa: BLE001 - BadZipFile, zlib.error, OSError, EOFError: any of them is damage
+            ok = False
+        if not ok:
+            bad.append(Path(p))
+    if bad:
+        names = ", ".join(p.name for p in bad[:3]) + (", ..." if len(bad) > 3 else "")
+        print(f"warning: {len(bad)} damaged {what} made again ({names})", file=sys.stderr)
+        for p in bad:
+            p.unlink(missing_ok=True)
+    return bad
+
+
 def pool_results(calls: Sequence[tuple[Callable[..., Any], tuple]], workers: int,
                  initializer: Callable[..., None] | None = None, initargs: tuple = ()) -> Iterator[Any]:
     """Results of calls [(fn, args), ...] run on a pool of `workers` processes, in the order they complete. On any

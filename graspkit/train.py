@@ -43,6 +43,7 @@ StepFn = Callable[[torch.nn.Module, Any, int], dict[str, torch.Tensor]]
 
 
 STALE_TMP_S = 600.0          # s: a checkpoint's temporary file older than this was left by a killed run
+RUNS: list[Path] = []        # the training states `fit` wrote in this process (`graspkit train` names their logs)
 
 
 @dataclass
@@ -132,6 +133,25 @@ def files_key(folders: str | Path | list[str | Path], pattern: str = "*.npz") ->
     return h.hexdigest()
 
 
+def _is_torch_zip(path: Path) -> bool:
+    """Whether `path` is a zip archive as torch.save writes it (an entry <name>/data.pkl)."""
+    if not zipfile.is_zipfile(path):
+        return False
+    with zipfile.ZipFile(path) as zf:
+        return any(n.endswith("/data.pkl") or n == "data.pkl" for n in zf.namelist())
+
+
+def _zip_hint(path: Path) -> str:
+    """'; this is a NumPy .npz archive' when `path` is one (a zip of .npy entries), else ''."""
+    if not zipfile.is_zipfile(path):
+        return ""
+    with zipfile.ZipFile(path) as zf:
+        names = zf.namelist()
+    if names and all(n.endswith(".npy") for n in names):
+        return "; this is a NumPy .npz archive, not a torch file"
+    return "; this zip archive has no data.pkl entry"
+
+
 def load_checkpoint(path: str | Path) -> dict[str, Any]:
     """Read a checkpoint without pickle (weights_only); a missing or foreign file gives an error naming it."""
     path = Path(path)
@@ -150,9 +170,9 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # noqa: BLE001 - re-raised with the file named
-        if not zipfile.is_zipfile(path):
+        if not _is_torch_zip(path):
             raise ValueError(f"checkpoint {path}: not a torch checkpoint (expected the zip archive torch.save "
-                             f"writes)") from e
+                             f"writes{_zip_hint(path)})") from e
         # torch's message suggests weights_only=False; graspkit never unpickles, so keep only what the file holds
         detail = (str(e).split("WeightsUnpickler error:", 1)[-1].strip() or type(e).__name__).splitlines()[0]
         raise ValueError(f"checkpoint {path}: holds more than tensors, numbers, strings and plain containers, "
@@ -405,6 +425,8 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
         if stop:
             break
     bar.close()
+    if checkpoint is not None and world[1] == 0 and Path(checkpoint) not in RUNS:
+        RUNS.append(Path(checkpoint))
     if checkpoint is not None and world[1] == 0 and history:
         # the CSV again: a run killed between an epoch's checkpoint and its CSV resumes past the loop
         write_history_csv(Path(checkpoint).with_suffix(".csv"), history)

@@ -126,9 +126,9 @@ def test_out_paths_that_cannot_be_written_and_bad_seeds_fail_before_any_work(tmp
 
 
 def test_bad_counts_seeds_and_folder_outs_are_named_before_any_work(tmp_path, capsys):
-    """Thread, epoch, batch, clip and chunk counts below one, a bad body-model file, a seed past 2^63 and an --out that is a file where a command writes
-    a folder: exit code 2 and the option named, nothing written (a training run with --epochs 0 used to write an
-    untrained checkpoint over --out)."""
+    """Thread, epoch, batch, clip and chunk counts below one, grasp-only options for a motion kind, a bad body-model
+    file, a seed past 2^63 and an --out that is a file where a command writes a folder: exit code 2 and the option
+    named, nothing written (a training run with --epochs 0 used to write an untrained checkpoint over --out)."""
     from graspkit.cli import main
 
     (tmp_path / "clip.pt").write_text("x")
@@ -145,6 +145,8 @@ def test_bad_counts_seeds_and_folder_outs_are_named_before_any_work(tmp_path, ca
                            "--n: expected an integer >= 1"),
                           (("data", "make", "--kind", "grasp", "--chunk", "0", "--out", str(tmp_path / "d")),
                            "--chunk: expected an integer >= 1"),
+                          (("data", "make", "--kind", "reach", "--chunk", "4", "--objects", "apple", "--out",
+                            str(tmp_path / "d")), "--chunk and --objects: only for --kind grasp or approach, not reach"),
                           (("data", "make", "--kind", "reach", "--model", str(tmp_path / "clip.pt"), "--out",
                             str(tmp_path / "d")), "--model: ")):
         assert main(list(args)) == 2, args

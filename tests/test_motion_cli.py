@@ -18,6 +18,18 @@ def test_make_resume_and_determinism(tmp_path):
     assert clip_seed(7, "reach", 2) != clip_seed(7, "locomotion", 2) != clip_seed(8, "reach", 2)
 
 
+def test_resume_makes_a_damaged_clip_again(tmp_path, capsys):
+    """A clip cut short (a copy stopped half-way) or with a changed byte is made again on resume, to the same
+    bytes; the intact clip is left alone."""
+    a = make_dataset("reach", 2, 7, tmp_path, workers=1, progress=False)
+    whole, stamp = a[0].read_bytes(), a[1].stat().st_mtime_ns
+    for damage in (whole[: len(whole) // 2], whole[:100] + bytes([whole[100] ^ 0xFF]) + whole[101:]):
+        a[0].write_bytes(damage)
+        make_dataset("reach", 2, 7, tmp_path, workers=1, progress=False)
+        assert a[0].read_bytes() == whole and a[1].stat().st_mtime_ns == stamp
+        assert "1 damaged reach clips made again (reach_000000.npz)" in capsys.readouterr().err
+
+
 def test_a_folder_takes_only_files_of_its_own_run(tmp_path):
     """Clips of another seed or body model are refused in a folder that holds a run's clips (a resumed or extended
     run must be the same run); the default body named by its path is the same run."""

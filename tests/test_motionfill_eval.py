@@ -1,5 +1,6 @@
 """MotionFill evaluation (SAGA Tab. 3) and training command: PSKL, skating, the approach scene, `graspkit train motionfill`."""
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -89,9 +90,10 @@ def test_shipped_model_beats_linear_interpolation_on_the_shipped_approach_clips(
     assert rows["Ours"]["APD"] > 0 and rows["Ground truth"]["skating"] < 0.1
 
 
-def test_train_command_end_to_end_on_the_shipped_approach_clips(tmp_path, monkeypatch):
+def test_train_command_end_to_end_on_the_shipped_approach_clips(tmp_path, monkeypatch, capsys):
     """`graspkit train motionfill --stage traj` on the four shipped clips (bottle: train, mug: test) writes a
-    float16 checkpoint that loads; the windows are cached; an unknown stage is refused."""
+    float16 checkpoint that loads and says where the run's log and loss plot are; the windows are cached; an unknown
+    stage is refused."""
     from graspkit.cli import main
 
     monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
@@ -100,6 +102,10 @@ def test_train_command_end_to_end_on_the_shipped_approach_clips(tmp_path, monkey
                "--epochs", "2", "--out", str(out)])
     assert rc == 0 and out.is_file()
     assert len(list((tmp_path / "cache" / "motionfill").glob("approach_4_*.npz"))) == 1
+    said = re.findall(r"training state (\S+); per-epoch log (\S+), loss plot (\S+) beside it", capsys.readouterr().out)
+    assert len(said) == 1
+    run = Path(said[0][0])
+    assert run.is_file() and (run.parent / said[0][1]).is_file() and (run.parent / said[0][2]).is_file()
     # another epoch count is another run: it trains its own epoch instead of resuming the 2-epoch run's file
     rc = main(["train", "motionfill", "--stage", "traj", "--data", str(DATA_STUBS / "approach"), "--clips", "4",
                "--epochs", "1", "--out", str(tmp_path / "mf1.pt")])

@@ -1,6 +1,7 @@
 """The shared training loop (resume = uninterrupted, atomic weights-only checkpoints) and the VAE blocks."""
 import math
 
+import numpy as np
 import pytest
 import torch
 from torch.utils.data import TensorDataset
@@ -95,6 +96,10 @@ def test_load_checkpoint_names_a_missing_or_pickled_file(tmp_path):
     text.write_text("x")
     with pytest.raises(ValueError, match="notes.pt: not a torch checkpoint"):
         load_checkpoint(text)
+    arrays = tmp_path / "arrays.npz"                                 # a zip as well, but NumPy's
+    np.savez(arrays, w=np.zeros(3))
+    with pytest.raises(ValueError, match="arrays.npz: not a torch checkpoint.*NumPy .npz archive"):
+        load_checkpoint(arrays)
 
 
 def test_save_checkpoint_keeps_the_old_file_on_failure_and_concurrent_writers_apart(tmp_path):

@@ -2,8 +2,8 @@
 
     graspkit data make --kind locomotion --n 2000 --seed 0 --out ~/.cache/graspkit/motion/locomotion
 
-Parallel over processes, resumable (finished files are kept; each file is written to a temporary name and
-renamed, so no partial file is ever left), deterministic: clip i's seed derives from (seed, kind, i), so the
+Parallel over processes, resumable (finished files are kept, a damaged one is made again; each file is written to a
+temporary name and renamed, so no partial file is ever left), deterministic: clip i's seed derives from (seed, kind, i), so the
 same command writes the same files whatever the number of workers or interruptions.
 """
 from __future__ import annotations
@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from graspkit.cli import DATA_HELP
-from graspkit.paths import pool_results
+from graspkit.paths import drop_damaged, pool_results
 
 KINDS = ("locomotion", "reach", "reach_far", "reach_chain", "reach_near")   # reach_far: room-scale CIRCLE-style tasks
 # (WANDR's grid); reach_chain: room-scale, starting from a finished reach; reach_near: near goals, floor or overhead
@@ -122,6 +122,7 @@ def make_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2, mode
     check_model(model)
     out.mkdir(parents=True, exist_ok=True)
     claim_folder(out, kind, {"seed": seed, "model": model})
+    drop_damaged([p for p in (clip_path(out, kind, i) for i in range(n)) if p.exists()], f"{kind} clips")
     todo = [i for i in range(n) if not clip_path(out, kind, i).exists()]
     bar = tqdm(total=n, initial=n - len(todo), desc=f"{kind} clips", unit="clip", disable=not progress)
     if workers == 1:
@@ -145,8 +146,13 @@ def _cmd_make(args: argparse.Namespace) -> int:
         from graspkit.paths import cache_dir
 
         out = cache_dir() / ("grasps" if args.kind in GRASP_KINDS else "motion") / args.kind
+    if args.kind not in GRASP_KINDS:
+        given = [f for f, v in (("--chunk", args.chunk), ("--objects", args.objects)) if v is not None]
+        if given:
+            raise ValueError(f"{' and '.join(given)}: only for --kind grasp or approach, not {args.kind} "
+                             "(motion clips are made one at a time, with no object)")
     if args.kind in GRASP_KINDS:
-        from graspkit.data.grasp_make import OBJECT_ORDER, make_grasp_dataset
+        from graspkit.data.grasp_make import CHUNK, OBJECT_ORDER, make_grasp_dataset
 
         objects = None
         if args.objects is not None:
@@ -156,7 +162,8 @@ def _cmd_make(args: argparse.Namespace) -> int:
                 raise ValueError(f"--objects: expected object names of {list(OBJECT_ORDER)} separated by commas, got "
                                  f"{args.objects!r}")
         make_grasp_dataset(args.kind, n, args.seed, out, args.workers, str(args.model) if args.model else None,
-                           progress=not args.quiet, chunk=args.chunk, objects=objects)
+                           progress=not args.quiet, chunk=CHUNK if args.chunk is None else args.chunk,
+                           objects=objects)
         print(f"{n} {args.kind} files in {out}")
         return 0
     make_dataset(args.kind, n, args.seed, out, args.workers, str(args.model) if args.model else None,
@@ -177,6 +184,7 @@ def add_data_commands(subparsers) -> None:
     m.add_argument("--workers", type=int, default=2, help="processes (default 2)")
     m.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
     m.add_argument("--quiet", action="store_true", help="no progress bar")
-    m.add_argument("--chunk", type=int, default=16, help="grasp/approach: grasps fitted together (files depend on it)")
+    m.add_argument("--chunk", type=int, default=None,
+                   help="grasp/approach: grasps fitted together (default 16; files depend on it)")
     m.add_argument("--objects", default=None, help="grasp/approach: comma-separated objects (default: all 17)")
     m.set_defaults(func=_cmd_make, out_is_file=False)

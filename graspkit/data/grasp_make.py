@@ -34,7 +34,7 @@ from graspkit.objects.catalogue import make_object
 from graspkit.objects.contact import OBJECT_CONTACT_THRESHOLD, marker_contact
 from graspkit.objects.distance import nearest_neighbours, point_mesh_distance
 from graspkit.objects.placement import ObjectPose, apply_pose
-from graspkit.paths import default_model_path, pool_results
+from graspkit.paths import default_model_path, drop_damaged, pool_results
 
 KINDS = ("grasp", "approach")
 KIND_IDS = {"grasp": 11, "approach": 12}
@@ -304,6 +304,7 @@ def make_grasp_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2
     check_model(model)
     out.mkdir(parents=True, exist_ok=True)
     claim_folder(out, kind, {"seed": seed, "model": model, "chunk": chunk, "objects": list(objects)})
+    drop_damaged([p for p in (file_path(out, kind, i) for i in range(n)) if p.exists()], f"{kind} files")
     missing = [i for i in range(n) if not file_path(out, kind, i).exists()]
     chunks = sorted({i // chunk for i in missing})
     done = n - len(missing)
