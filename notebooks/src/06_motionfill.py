@@ -105,7 +105,7 @@ print(f"sample spread at mid-motion: {float(s['traj'][:, 30, :2].std(0).norm()):
 # MotionFill predicts in contact (skating: both heels low and faster than 75 mm/s).
 
 # %%
-ex = np.load(DATA_STUBS / "checkpoints" / "motionfill_examples.npz")
+ex = np.load(DATA_STUBS / "checkpoints" / "motionfill_examples.npz", allow_pickle=False)
 info = json.loads((DATA_STUBS / "checkpoints" / "motionfill_examples.json").read_text())
 log = info["log"]
 fig, ax = plt.subplots(figsize=(7, 3))
