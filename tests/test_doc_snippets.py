@@ -1,0 +1,115 @@
+"""The ```python blocks of README.md and docs/*.md against the library: every name they import exists, and every
+keyword they pass to a graspkit function or class is one of its parameters (the blocks are sketches with
+placeholders, so they are checked, not run)."""
+import ast
+import importlib
+import inspect
+import re
+import typing
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def python_blocks(path: Path) -> list[str]:
+    """The ```python fenced blocks of a Markdown file."""
+    return re.findall(r"```python\n(.*?)```", path.read_text(), re.S)
+
+
+def statements(block: str) -> list[ast.stmt]:
+    """The block's statements (the blocks are valid Python: placeholders are `...`)."""
+    return ast.parse(block).body
+
+
+def names_in(stmts: list[ast.stmt]) -> dict[str, object]:
+    """Import the names the statements import: {local name: object}."""
+    names: dict[str, object] = {}
+    for s in stmts:
+        if isinstance(s, ast.ImportFrom):
+            mod = importlib.import_module(s.module)
+            for a in s.names:
+                if hasattr(mod, a.name):
+                    names[a.asname or a.name] = getattr(mod, a.name)
+                else:                          # a submodule: `from graspkit import eval_saga`
+                    names[a.asname or a.name] = importlib.import_module(f"{s.module}.{a.name}")
+        elif isinstance(s, ast.Import):
+            for a in s.names:
+                names[a.asname or a.name.split(".")[0]] = importlib.import_module(a.name)
+    return names
+
+
+class Instance:
+    """An object of a known graspkit class that a block made (`bm = BodyModel.from_file(...)`)."""
+
+    def __init__(self, cls: type) -> None:
+        self.cls = cls
+
+
+def callee(func: ast.expr, names: dict[str, object]) -> object | None:
+    """What a call's function names, when it is an imported graspkit name, an attribute of one, or a method of a
+    variable whose type is known (see `returned_type`); else None."""
+    if isinstance(func, ast.Name):
+        obj = names.get(func.id)
+        if isinstance(obj, Instance):                  # `bm(...)`: a module's forward, else __call__
+            obj = getattr(obj.cls, "forward", None) or getattr(obj.cls, "__call__", None)
+    elif isinstance(func, ast.Attribute) and isinstance(func.value, ast.Name) and func.value.id in names:
+        owner = names[func.value.id]
+        owner = owner.cls if isinstance(owner, Instance) else owner
+        obj = getattr(owner, func.attr, None)
+        assert obj is not None, f"{func.value.id}.{func.attr} does not exist ({owner})"
+    else:
+        return None
+    return obj if getattr(obj, "__module__", "").startswith("graspkit") else None
+
+
+def returned_type(obj: object) -> type | None:
+    """The graspkit class a function returns (its return annotation) or that a class call makes; else None."""
+    if inspect.isclass(obj):
+        return obj
+    try:
+        ret = typing.get_type_hints(obj).get("return")
+    except Exception:  # noqa: BLE001 - an annotation that does not resolve at run time
+        return None
+    return ret if inspect.isclass(ret) and ret.__module__.startswith("graspkit") else None
+
+
+BLOCKS = [(p, i, b) for p in DOCS for i, b in enumerate(python_blocks(p))]
+
+
+def test_the_docs_have_python_blocks():
+    assert len(BLOCKS) >= 10 and {p.name for p, _, _ in BLOCKS} >= {"README.md", "wandr.md", "saga.md", "goal.md"}
+
+
+@pytest.mark.parametrize("path,index,block", BLOCKS, ids=[f"{p.name}-{i}" for p, i, _ in BLOCKS])
+def test_a_doc_block_names_what_the_library_has(path, index, block):
+    stmts = statements(block)
+    names = names_in(stmts)
+    assert names, f"{path.name} block {index} imports nothing from graspkit"
+    checked = 0
+    for s in stmts:
+        if (isinstance(s, ast.Assign) and len(s.targets) == 1 and isinstance(s.targets[0], ast.Name)
+                and isinstance(s.value, ast.Call)):            # `model = load_wandr(...)`: model.<method> is checked too
+            made = returned_type(callee(s.value.func, names))
+            if made is not None:
+                names[s.targets[0].id] = Instance(made)
+        for node in ast.walk(s):
+            if not isinstance(node, ast.Call):
+                continue
+            obj = callee(node.func, names)
+            if obj is None:
+                continue
+            params = inspect.signature(obj).parameters
+            if any(p.kind is p.VAR_KEYWORD for p in params.values()):
+                continue
+            for kw in node.keywords:
+                assert kw.arg is None or kw.arg in params, (
+                    f"{path.name} block {index}: {ast.unparse(node.func)}() has no parameter {kw.arg!r}")
+            n_pos = sum(p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) for p in params.values()
+                        if p.name != "self")
+            if not any(p.kind is p.VAR_POSITIONAL for p in params.values()):
+                assert len(node.args) <= n_pos, f"{path.name} block {index}: {ast.unparse(node)} has too many arguments"
+            checked += 1
+    assert checked, f"{path.name} block {index} calls no graspkit function this test can check"
