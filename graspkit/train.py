@@ -142,7 +142,8 @@ def _is_torch_zip(path: Path) -> bool:
 
 
 def _zip_hint(path: Path) -> str:
-    """'; this is a NumPy .npz archive' when `path` is one (a zip of .npy entries), else ''."""
+    """What a zip archive that torch.load refused is instead (a NumPy .npz: only .npy entries; else a zip without
+    torch's data.pkl), as a clause for the error message; '' when `path` is not a zip archive."""
     if not zipfile.is_zipfile(path):
         return ""
     with zipfile.ZipFile(path) as zf:
@@ -425,9 +426,9 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
         if stop:
             break
     bar.close()
-    if checkpoint is not None and world[1] == 0 and Path(checkpoint) not in RUNS:
-        RUNS.append(Path(checkpoint))
     if checkpoint is not None and world[1] == 0 and history:
+        if Path(checkpoint) not in RUNS:
+            RUNS.append(Path(checkpoint))
         # the CSV again: a run killed between an epoch's checkpoint and its CSV resumes past the loop
         write_history_csv(Path(checkpoint).with_suffix(".csv"), history)
         write_history_plot(Path(checkpoint).with_suffix(".png"), history)

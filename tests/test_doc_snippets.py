@@ -90,8 +90,9 @@ def test_a_doc_block_names_what_the_library_has(path, index, block):
     assert names, f"{path.name} block {index} imports nothing from graspkit"
     checked = 0
     for s in stmts:
+        # `model = load_wandr(...)`: model.<method>(...) is checked too
         if (isinstance(s, ast.Assign) and len(s.targets) == 1 and isinstance(s.targets[0], ast.Name)
-                and isinstance(s.value, ast.Call)):            # `model = load_wandr(...)`: model.<method> is checked too
+                and isinstance(s.value, ast.Call)):
             made = returned_type(callee(s.value.func, names))
             if made is not None:
                 names[s.targets[0].id] = Instance(made)

@@ -3,8 +3,8 @@
     graspkit data make --kind locomotion --n 2000 --seed 0 --out ~/.cache/graspkit/motion/locomotion
 
 Parallel over processes, resumable (finished files are kept, a damaged one is made again; each file is written to a
-temporary name and renamed, so no partial file is ever left), deterministic: clip i's seed derives from (seed, kind, i), so the
-same command writes the same files whatever the number of workers or interruptions.
+temporary name and renamed, so no partial file is ever left), deterministic: clip i's seed derives from
+(seed, kind, i), so the same command writes the same files whatever the number of workers or interruptions.
 """
 from __future__ import annotations
 
