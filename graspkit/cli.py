@@ -8,6 +8,7 @@ import math
 import os
 import sys
 import tempfile
+import warnings
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -501,7 +502,22 @@ def print_run_logs() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the `graspkit` console command."""
+    """Entry point of the `graspkit` console command (graspkit's own warnings show as `graspkit: note: ...` lines)."""
+    with warnings.catch_warnings():
+        shown = warnings.showwarning
+
+        def note(message, category, filename, lineno, file=None, line=None) -> None:
+            if "graspkit" in Path(filename).parts:
+                print(f"graspkit: note: {message}", file=sys.stderr)
+            else:
+                shown(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = note
+        return _main(argv)
+
+
+def _main(argv: list[str] | None) -> int:
+    """`main` with graspkit's warnings shown as notes."""
     args = build_parser(argv).parse_args(argv)
     try:
         if getattr(args, "seed", None) is not None and not 0 <= args.seed < 2**63:

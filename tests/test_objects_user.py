@@ -252,3 +252,42 @@ def test_vertices_no_face_uses_do_not_stretch_the_collision_grid(tmp_path):
 
     grid = SDFGrid.from_mesh(stray, resolution=16, padding=0.01)               # the library's grid alone, too
     np.testing.assert_allclose(grid.lower.numpy(), stray.bounds[0] - 0.01, atol=1e-6)
+
+
+def test_an_object_outside_the_trained_sizes_is_taken_with_a_warning(tmp_path):
+    """The catalogue's largest sides (trimesh's bounds) are the range the methods are trained and evaluated on; a 4 cm ball and a 50 cm box are taken
+    with a UserWarning saying so, a 12 cm box and the catalogue objects without one."""
+    import warnings
+
+    from graspkit.objects.catalogue import list_objects
+    from graspkit.objects.user import CATALOGUE_SIDES
+
+    sides = [float(np.ptp(make_object(n).bounds, axis=0).max()) for n in list_objects()]
+    assert CATALOGUE_SIDES == (round(min(sides), 2), round(max(sides), 2))
+    with pytest.warns(UserWarning, match=r"the mesh: its largest side is 4.0 cm, below the 8-41 cm"):
+        as_object(trimesh.creation.icosphere(radius=0.02))
+    trimesh.creation.box((0.5, 0.1, 0.1)).export(tmp_path / "long.stl")
+    with pytest.warns(UserWarning, match=r"long.stl: its largest side is 50.0 cm, above the 8-41 cm"):
+        as_object(tmp_path / "long.stl")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        as_object(trimesh.creation.box((0.12, 0.05, 0.05)))
+        as_object("frying_pan")
+
+
+def test_the_command_shows_the_size_warning_once_as_a_note(tmp_path, capsys, monkeypatch):
+    """`graspkit goal --object small.ply`: the mesh is checked before the run and again inside it; the warning
+    shows once, as a `graspkit: note:` line (the run itself is stopped at the first place a body is built)."""
+    import graspkit.goal
+    from graspkit.cli import main
+
+    trimesh.creation.icosphere(radius=0.02).export(tmp_path / "small.ply")
+
+    def stop(*a, **k):
+        as_object(tmp_path / "small.ply", "name")       # what synthesize does first
+        raise ValueError("stopped here")
+
+    monkeypatch.setattr(graspkit.goal, "synthesize", stop)
+    assert main(["goal", "--object", str(tmp_path / "small.ply"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("graspkit: note: ") == 1 and "small.ply: its largest side is 4.0 cm, below" in err, err

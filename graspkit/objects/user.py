@@ -6,10 +6,12 @@ against that and moves it there, so that `graspkit.saga.synthesize`, the sampler
 any catalogue name. A mesh that is not closed, is inside out, has faces without area, is made of overlapping parts or
 has a part turned inside out, or whose size says millimetres gets an error naming the argument and what was expected,
 never a silent fix (vertices that no face uses are dropped: they are not part of the surface; one with NaN
-coordinates is still refused, as a sign of a damaged file).
+coordinates is still refused, as a sign of a damaged file). One smaller or larger than every catalogue object (8-41 cm;
+the methods are trained on 12-24 cm and evaluated on the rest) is taken with a UserWarning.
 """
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +27,9 @@ from graspkit.objects.sdf import winding_number
 # catalogue); 0.6 m leaves room for larger ones and still tells metres from millimetres or centimetres.
 MAX_SIDE = 0.6
 MIN_SIDE = 0.01
+# m: the catalogue's largest sides, apple to frying pan: the objects the methods are trained (12-24 cm, the train
+# split) and evaluated on (the held-out test objects span 10-41 cm)
+CATALOGUE_SIDES = (0.08, 0.41)
 SOLID_SAMPLES = 512      # surface points of the one-solid check (solid_problem)
 SOLID_OFFSET = 1e-5      # how far behind / in front of the surface it looks, as a share of the largest side
 MIN_BAD = 2              # samples that must disagree before a mesh is refused
@@ -44,7 +49,7 @@ def as_object(obj: str | Path | trimesh.Trimesh, argument: str = "obj") -> tuple
     the file.
     """
     if isinstance(obj, trimesh.Trimesh):
-        return str(obj.metadata.get("name") or "object"), _checked(obj.copy(), argument)
+        return str(obj.metadata.get("name") or "object"), _noted(_checked(obj.copy(), argument), "the mesh")
     if isinstance(obj, (str, Path)):
         path = Path(obj)       # a catalogue name as a str is the catalogue object, even beside a file of that name
         if str(obj) in list_objects() and (isinstance(obj, str) or not path.is_file()):
@@ -61,13 +66,33 @@ def as_object(obj: str | Path | trimesh.Trimesh, argument: str = "obj") -> tuple
             mesh.process()
             if path.suffix.lower() in Y_UP_SUFFIXES:
                 mesh.apply_transform(Y_UP_TO_Z_UP)
-            return path.stem, _checked(mesh, f"{argument} ({path})")
+            return path.stem, _noted(_checked(mesh, f"{argument} ({path})"), str(path))
         if path.suffix or len(path.parts) > 1:
             raise ValueError(f"{argument}: no such mesh file {str(path)!r} (nor a catalogue name {list_objects()})")
         raise ValueError(f"{argument}: unknown object {str(obj)!r}; expected a catalogue name {list_objects()}, "
                          "a mesh file, or a trimesh.Trimesh")
     raise ValueError(f"{argument}: expected a catalogue name, a mesh file or a trimesh.Trimesh, "
                      f"got {type(obj).__name__}")
+
+
+def size_note(mesh: trimesh.Trimesh) -> str:
+    """'' when the mesh's largest side lies within the catalogue's (CATALOGUE_SIDES: the objects the methods are
+    trained and evaluated on), else a sentence saying how far outside."""
+    side, (lo, hi) = float((mesh.bounds[1] - mesh.bounds[0]).max()), CATALOGUE_SIDES
+    if lo <= side <= hi:
+        return ""
+    return (f"its largest side is {100 * side:.1f} cm, {'below' if side < lo else 'above'} the "
+            f"{100 * lo:g}-{100 * hi:g} cm of the catalogue objects the methods are trained and evaluated on; "
+            "expect the grasp to miss or penetrate it")
+
+
+def _noted(mesh: trimesh.Trimesh, what: str) -> trimesh.Trimesh:
+    """`mesh` (`what`: its file, or 'the mesh'), after a UserWarning when its size is outside the trained range
+    (`size_note`; attributed to as_object, so that the same mesh checked twice in one run warns once)."""
+    note = size_note(mesh)
+    if note:
+        warnings.warn(f"{what}: {note}", UserWarning, stacklevel=2)
+    return mesh
 
 
 def _checked(mesh: trimesh.Trimesh, argument: str) -> trimesh.Trimesh:
