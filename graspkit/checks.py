@@ -6,6 +6,7 @@ import math
 import numbers
 from typing import Any
 
+import numpy as np
 import torch
 
 
@@ -14,6 +15,12 @@ def check_int(value: Any, name: str, least: int = 0) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < least:
         raise ValueError(f"{name}: expected an integer >= {least}, got {value!r}")
     return int(value)
+
+
+def seeded_rng(seed: Any, name: str = "seed") -> np.random.Generator:
+    """np.random.default_rng(seed) for an integer seed >= 0; None (which numpy would seed from the OS), bools and
+    fractions are refused: the same call must give the same numbers."""
+    return np.random.default_rng(check_int(seed, name))
 
 
 def check_steps(steps: Any, name: str, count: int) -> tuple[int, ...]:

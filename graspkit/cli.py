@@ -334,8 +334,8 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         sg.add_argument("--out", type=Path, default=Path(f"outputs/{method}"))
         sg.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
         sg.add_argument("--threads", type=int, default=1,
-                        help="torch threads (default 1: with more, the optimisers' sums may round differently from "
-                             "run to run)")
+                        help="torch threads (default 1; another count rounds the optimisers' sums differently, so "
+                             "the result can differ from the 1-thread one; the same count repeats it)")
         if method == "saga":
             sg.add_argument("--free-joints", nargs="*", default=["arms"], metavar="JOINT",
                             help="GraspPose-Opt and GraspMotion-Opt: body joints given a free rotation on top of the "

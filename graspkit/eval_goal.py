@@ -25,7 +25,7 @@ import torch
 from scipy.spatial import cKDTree
 from torch import Tensor
 
-from graspkit.checks import count_type, nonneg_float, positive_float
+from graspkit.checks import count_type, nonneg_float, positive_float, seeded_rng
 from graspkit.cli import check_counts, check_folders, check_out, reports_errors
 from graspkit.models.gnet import pose_rotmats
 from graspkit.models.mnet import STALL_FRAMES, MNet, MNetWindows, predict_horizon
@@ -689,7 +689,7 @@ def tab1_results(folders, stubs, n_grasps: int = 60, seed: int = 0, penetration:
     if not tests:
         raise ValueError(f"folders: no accepted test grasps in {[str(f) for f in folders]}")
     n = len(tests) if n_grasps <= 0 else n_grasps
-    pick = sorted(np.random.default_rng(seed).permutation(len(tests))[:n].tolist())
+    pick = sorted(seeded_rng(seed).permutation(len(tests))[:n].tolist())
     gnet = load_gnet(Path(stubs) / "gnet.pt")
     base = load_gnet(Path(stubs) / "gnet_smplx.pt") if (Path(stubs) / "gnet_smplx.pt").is_file() else None
     tab1 = gnet_table(gnet, base, [tests[i] for i in pick], seed=seed, penetration=penetration, rows=rows)

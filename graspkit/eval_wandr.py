@@ -39,7 +39,7 @@ from torch import Tensor
 
 from graspkit import intention as I
 from graspkit.body.skeleton import JOINT_INDEX
-from graspkit.checks import count_type, nonneg_float, positive_float
+from graspkit.checks import count_type, nonneg_float, positive_float, seeded_rng
 from graspkit.data.reaching import EVAL_ANGLES_DEG, EVAL_DISTANCES, EVAL_FRAMES, EVAL_HEIGHTS, Start, evaluation_goals
 from graspkit.data.wandr_dataset import FOOT_JOINTS, shaped_rest
 from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS
@@ -61,7 +61,7 @@ PAPER = {
 def validation_goals(n: int = 250, seed: int = 123) -> tuple[Tensor, np.ndarray]:
     """n goals (n, 3) drawn uniformly on the grid's cylinder (any angle, height 0-1.8 m, distance 0.5-5 m), not on its
     125 points, and their (angle deg, height m, distance m) rows (n, 3): model selection's goals."""
-    rng = np.random.default_rng(seed)
+    rng = seeded_rng(seed)
     ang, hgt = rng.uniform(0.0, 2 * np.pi, n), rng.uniform(EVAL_HEIGHTS[0], EVAL_HEIGHTS[-1], n)
     dist = rng.uniform(EVAL_DISTANCES[0], EVAL_DISTANCES[-1], n)
     goals = torch.as_tensor(np.stack([dist * np.cos(ang), dist * np.sin(ang), hgt], 1), dtype=torch.float32)
@@ -464,7 +464,7 @@ def goal_row_schedules(n: int, legs: int = 3, seed: int = 0, spacing: tuple[floa
     `spacing` m (uniform) from the one before in a uniform direction (the first from the start), `heights` m high."""
     if n < 1 or legs < 1:
         raise ValueError(f"n, legs: expected >= 1, got {n}, {legs}")
-    rng = np.random.default_rng(seed)
+    rng = seeded_rng(seed)
     out = np.zeros((n, legs, 3))
     for k in range(n):
         pos = np.zeros(2)

@@ -55,10 +55,12 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
                checkpoints: str | Path = CHECKPOINTS, penetration: bool = True,
                model: str | Path | None = None, stall: int | None = STALL_FRAMES) -> GoalResult:
     """GOAL for object `name` (a catalogue name, a mesh file or a trimesh.Trimesh, closed and in metres): one
-    refined GNet grasp and MNet's approach into it from a standing start, seeded. `penetration`: the refinement
-    adds graspkit's E_pen on the object's collision grid (False: GOAL's Eq. 4-8 alone; docs/goal.md); `model`: an
-    SMPL-X .npz for the body (default: graspkit's procedural one, which the networks were trained on); `stall`: MNet's
-    stall window in frames (`mnet.rollout`; None: GOAL's rollout, which may stop with the hand 10-25 cm short)."""
+    refined GNet grasp and MNet's approach into it from a standing start, seeded (the same seed and torch thread
+    count give the same numbers; another thread count can move the result, the command uses 1). `penetration`: the
+    refinement adds graspkit's E_pen on the object's collision grid (False: GOAL's Eq. 4-8 alone; docs/goal.md);
+    `model`: an SMPL-X .npz for the body (default: graspkit's procedural one, which the networks were trained on);
+    `stall`: MNet's stall window in frames (`mnet.rollout`; None: GOAL's rollout, which may stop with the hand
+    10-25 cm short)."""
     from graspkit.data.grasp_io import object_collision_grid
     from graspkit.data.reaching import plan_reach
     from graspkit.eval_goal import _body, gnet_goal, sliding

@@ -79,7 +79,8 @@ def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None =
                progress: bool = True, free_joints: tuple[str, ...] | None = None,
                polish_steps: tuple[int, int] | None = None, hold_start: bool = True) -> SagaResult:
     """SAGA for object `name` (a catalogue name, a mesh file or a trimesh.Trimesh, closed and in metres): one grasp
-    and one 2-s approach motion into it (Fig. 2), seeded.
+    and one 2-s approach motion into it (Fig. 2), seeded: the same seed and torch thread count give the same numbers
+    (it runs on torch's current threads; another count rounds the optimisers' sums differently; the command uses 1).
 
     object_pose: where the object is (default: drawn by `within_reach_pose(seed)` in front of the origin);
     start: a Start (x, y, heading: a standing body there) or a one-frame Motion (any body) or None (see module doc).

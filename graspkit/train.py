@@ -76,11 +76,13 @@ class TrainConfig:
 
 
 def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
-    """Write a checkpoint atomically (temporary file, then rename); returns the path."""
+    """Write a checkpoint atomically (temporary file, then rename); returns the path. The same state gives the same
+    bytes whatever the path (`file_key` hashes them)."""
     path = Path(path)
     tmp = temp_beside(path)
     try:
-        torch.save(state, tmp)
+        with open(tmp, "wb") as fh:         # torch.save(state, <path>) names the archive's folder after the random temp
+            torch.save(state, fh)           # file; a file object gets torch's fixed name
         publish(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)

@@ -184,3 +184,29 @@ def test_figures_are_saved_atomically(tmp_path, monkeypatch):
     assert path.read_bytes() == b"old" and [q.name for q in tmp_path.iterdir()] == ["fig.png"]
     assert save_png(plt.figure(figsize=(1, 1)), path, dpi=20) == path
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and [q.name for q in tmp_path.iterdir()] == ["fig.png"]
+
+
+@pytest.mark.parametrize("call", ["generate_locomotion", "generate_reach", "generate_reach_chain", "plan_reach",
+                                  "within_reach_pose", "split_clips", "validation_goals", "goal_row_schedules",
+                                  "random_smplx_arrays"])
+def test_a_seeded_function_refuses_seed_none(call):
+    """`seed=None` would make numpy draw from the OS: the same call, other numbers. Each seeded entry point refuses it
+    (and a bool, a fraction, a negative seed) before any work, naming `seed`."""
+    from graspkit.body.random_model import random_smplx_arrays
+    from graspkit.data import generate_locomotion, generate_reach, plan_reach
+    from graspkit.data.motionfill_dataset import split_clips
+    from graspkit.data.reaching import Start, generate_reach_chain
+    from graspkit.eval_wandr import goal_row_schedules, validation_goals
+    from graspkit.objects.placement import within_reach_pose
+
+    fn = {"generate_locomotion": lambda s: generate_locomotion(s, None),
+          "generate_reach": lambda s: generate_reach(s, None),
+          "generate_reach_chain": lambda s: generate_reach_chain(s, None),
+          "plan_reach": lambda s: plan_reach(Start(0, 0, 0), (1.0, 0.0, 1.0), 30, seed=s),
+          "within_reach_pose": within_reach_pose, "split_clips": lambda s: split_clips(10, seed=s),
+          "validation_goals": lambda s: validation_goals(4, seed=s),
+          "goal_row_schedules": lambda s: goal_row_schedules(2, seed=s),
+          "random_smplx_arrays": lambda s: random_smplx_arrays(100, 40, seed=s)}[call]
+    for bad in (None, True, 1.5, -1):
+        with pytest.raises(ValueError, match=r"^seed: expected an integer >= 0, got "):
+            fn(bad)

@@ -118,6 +118,16 @@ def test_save_checkpoint_keeps_the_old_file_on_failure_and_concurrent_writers_ap
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c.pt"]
 
 
+def test_the_same_state_saved_twice_gives_the_same_bytes(tmp_path):
+    """file_key hashes a checkpoint's bytes (a run started from it is named by them): two files of the same state,
+    under different names, are the same bytes."""
+    from graspkit.train import file_key
+
+    state = {"model": {"w": torch.arange(6.0)}, "epoch": 3}
+    a, b = save_checkpoint(tmp_path / "a.pt", state), save_checkpoint(tmp_path / "sub" / "b.pt", state)
+    assert a.read_bytes() == b.read_bytes() and file_key(a) == file_key(b)
+
+
 def test_kl_matches_torch_distributions_and_robust_kl_is_psi_of_it():
     g = torch.Generator().manual_seed(0)
     mu, logvar = torch.randn(5, 16, generator=g), torch.randn(5, 16, generator=g)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX
+from graspkit.checks import seeded_rng
 
 HAND_KINDS = ("flat", "relaxed", "power", "pinch", "tripod", "lateral", "hook", "point", "fist")
 
@@ -125,7 +126,7 @@ def hand_pca(joints: np.ndarray, side: str, n_per_kind: int = 400, seed: int = 0
     The mean is the relaxed, slightly curled hand (as SMPL-X's hands_mean); components come from the
     SVD of the samples minus that mean, so coefficients @ components + mean recovers a pose.
     """
-    rng = np.random.default_rng(seed)
+    rng = seeded_rng(seed)
     X = np.concatenate([sample_hand_poses(n_per_kind, k, rng, side, joints) for k in HAND_KINDS])
     mean = template_pose("relaxed", hand_axes(np.asarray(joints, float), side))
     _, _, Vt = np.linalg.svd(X - mean, full_matrices=True)

@@ -8,12 +8,13 @@ from __future__ import annotations
 import numpy as np
 
 from graspkit.body.skeleton import NUM_JOINTS, PARENTS
+from graspkit.checks import seeded_rng
 
 
 def random_smplx_arrays(num_vertices: int = 10475, num_faces: int = 20908, seed: int = 0,
                         sparse_weights: int = 4) -> dict[str, np.ndarray]:
     """Arrays of a random SMPL-X-format model with V vertices; weights have `sparse_weights` joints per vertex."""
-    rng = np.random.default_rng(seed)
+    rng = seeded_rng(seed)
     V = num_vertices
     v = rng.normal(scale=0.3, size=(V, 3))
     weights = np.zeros((V, NUM_JOINTS))

@@ -12,6 +12,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from graspkit.checks import seeded_rng
 from graspkit.data.footsteps import GaitStyle, foot_tracks, plan_footsteps
 from graspkit.data.motion import Motion
 from graspkit.data.posing import Controls, Style, pose_body
@@ -103,7 +104,7 @@ def locomotion_plan(kind: str, rng: np.random.Generator, num_frames: int, fps: f
 def generate_locomotion(seed: int, bm, num_frames: int | None = None, kind: str | None = None,
                         betas: np.ndarray | None = None, rig: Rig | None = None) -> Motion:
     """One AMASS-style clip (4-10 s unless num_frames) from a seed; kind one of PROGRAMS (None: drawn)."""
-    rng = np.random.default_rng(seed)
+    rng = seeded_rng(seed)
     fps = 30.0
     kind = kind or str(rng.choice(list(PROGRAMS), p=np.array(list(PROGRAMS.values())) / sum(PROGRAMS.values())))
     if kind not in PROGRAMS:

@@ -33,6 +33,7 @@ from tqdm.auto import tqdm
 
 from graspkit.body.markers import saga_sparse_markers
 from graspkit.body.skeleton import JOINT_INDEX
+from graspkit.checks import seeded_rng
 from graspkit.data.formats import npz_arrays, open_npz
 from graspkit.data.motion import Motion, canonicalize
 
@@ -146,7 +147,7 @@ def make_windows(motions: list[Motion], bm, stride: int | None = 30, align_end: 
 
 def split_clips(num_clips: int, seed: int = 0, fractions: tuple[float, float] = (0.8, 0.1)) -> dict[str, np.ndarray]:
     """Deterministic clip-level split {train, val, test} of clip ids (windows of a clip stay together)."""
-    perm = np.random.default_rng(seed).permutation(num_clips)
+    perm = seeded_rng(seed).permutation(num_clips)
     a = int(round(fractions[0] * num_clips))
     b = a + int(round(fractions[1] * num_clips))
     return {"train": np.sort(perm[:a]), "val": np.sort(perm[a:b]), "test": np.sort(perm[b:])}

@@ -36,6 +36,7 @@ from graspkit.data.posing import Controls, Style, pose_body
 from graspkit.data.rig import Rig, build_rig
 from graspkit.data.trajectory import RootPlan, heading_profile, ramp, straight_walk
 from graspkit.body.skeleton import JOINT_INDEX
+from graspkit.checks import seeded_rng
 
 REACH_RHO = 0.86           # shoulder-to-wrist distance at the goal, as a fraction of the arm length
 FAR_MIN_SPEED = 0.25      # m/s: the slowest walk of a room-scale clip (it fills the time to its goal frame)
@@ -140,7 +141,7 @@ def _person(seed: int, bm, betas, style: Style | None, gait: GaitStyle | None, v
     """The body model (default if None), a generator seeded with `seed`, checked betas, their rig, and the person's
     style, gait and preferred speed (drawn in that order unless given): the planners' common start."""
     bm = bm if bm is not None else _default_model()
-    rng = np.random.default_rng(seed)
+    rng = seeded_rng(seed)
     betas = _betas(betas, bm)
     rig = build_rig(bm, betas)
     style = style or _mild(sample_style(rng), Style())
@@ -423,7 +424,7 @@ def generate_reach(seed: int, bm, betas: np.ndarray | None = None, far: bool = F
     `sample_reach_task`; near=True: a near goal at the floor or overhead, `sample_near_task`) for the task drawn."""
     if far and near:
         raise ValueError("far, near: expected at most one of them True")
-    rng = np.random.default_rng(seed)
+    rng = seeded_rng(seed)
     task = sample_near_task(rng) if near else sample_reach_task(rng, far=far)
     room_scale = far or near                           # a near task is a room-scale task: walked as slowly
     style, gait = sample_style(rng), sample_gait_style(rng)
@@ -452,7 +453,7 @@ def generate_reach_chain(seed: int, bm, betas: np.ndarray | None = None) -> Moti
     (`plan_reach_chain`, the second drawn relative to where the first one stands), cut to start at the first goal's
     frame or during its hold; the clip's goal is the second one. WANDR's goals in a row (Sup. C.2) set off from
     exactly this state, which the one-goal clips never show."""
-    rng = np.random.default_rng(seed)
+    rng = seeded_rng(seed)
     first = sample_reach_task(rng, far=True)
     nxt = _far_task(rng, first.betas, 0.0, float(rng.uniform(*FAR_HEIGHTS)))   # body frame: root at the origin, +x
     style, gait = sample_style(rng), sample_gait_style(rng)

@@ -14,6 +14,8 @@ import torch
 import trimesh
 from torch import Tensor
 
+from graspkit.checks import seeded_rng
+
 Array = TypeVar("Array", np.ndarray, Tensor)
 
 
@@ -102,7 +104,7 @@ def sample_object_pose(
 def within_reach_pose(seed: int) -> ObjectPose:
     """The object pose `graspkit.saga.synthesize` and `graspkit.goal.synthesize` draw when none is given:
     `sample_object_pose(seed)` at heights 0.6-1.2 m and 0.5-0.8 m in front of a person at the origin facing -y."""
-    return sample_object_pose(np.random.default_rng(seed), height_range=(0.6, 1.2), distance_range=(0.5, 0.8))
+    return sample_object_pose(seeded_rng(seed), height_range=(0.6, 1.2), distance_range=(0.5, 0.8))
 
 
 @overload
