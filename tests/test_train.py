@@ -1,5 +1,6 @@
 """The shared training loop (resume = uninterrupted, atomic weights-only checkpoints) and the VAE blocks."""
 import math
+import zipfile
 
 import numpy as np
 import pytest
@@ -198,8 +199,11 @@ def test_resuming_refuses_another_network_other_settings_or_a_damaged_file(tmp_p
     with pytest.raises(ValueError, match="weights.pt: not a training state"):
         fit(torch.nn.Linear(4, 1), _step, _problem(), cfg, checkpoint=weights, progress=False)
     data = bytearray(ck.read_bytes())                       # bytes changed in place: torch.load alone accepts it
-    at = data.index(b"data/0") + 200
-    data[at:at + 16] = b"\xff" * 16
+    with zipfile.ZipFile(ck) as zf:                         # inside the weights' entry (its local header: 30 bytes,
+        e = next(i for i in zf.infolist() if i.filename.endswith("data/0"))   # the name and the extra field)
+    at = e.header_offset + 30 + len(e.filename.encode()) + int.from_bytes(data[e.header_offset + 28:
+                                                                               e.header_offset + 30], "little")
+    data[at:at + 4] = b"\xff" * 4
     ck.write_bytes(bytes(data))
     with pytest.raises(ValueError, match="run.pt: damaged"):
         load_checkpoint(ck)
