@@ -61,8 +61,7 @@ METHODS = ("gt", "saga", "saga_motion", "goal", "wandr", "motion")
 # Row-name suffixes: a row holds the figures of one protocol only (an evaluator's own, or the common motions'), so
 # that a column never mixes two (it did until 2026-12-03: WANDR's FS was the grid's 6.5 % beside the common
 # motions' sliding, and on the common motions it is 16.7 %).
-COMMON = " · 4 common motions"
-GOAL_CLIPS = " · GOAL's 12 clips"
+COMMON = " · 4 common motions"            # the full run's; a --quick run names its count (`common_motion_rows`)
 
 
 @dataclass
@@ -174,7 +173,7 @@ def goal_rows(res: dict) -> list[Row]:
             rows.append(Row("motion", "GOAL (GNet + MNet)", "graspkit", {"slide_goal": 100 * float(v)},
                             f"{clips} rollouts of GOAL's evaluation"))
         elif key.startswith("SAGA"):
-            rows.append(Row("motion", f"SAGA (MotionFill + GraspMotion-Opt){GOAL_CLIPS}", "graspkit",
+            rows.append(Row("motion", f"SAGA (MotionFill + GraspMotion-Opt) · GOAL's {clips} clips", "graspkit",
                             {"slide_goal": 100 * float(v)}, f"the {clips} clips of GOAL's evaluation, eval_goal"))
     return rows
 

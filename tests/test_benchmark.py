@@ -242,3 +242,5 @@ def test_a_row_holds_one_protocol_the_common_motions_and_goals_saga_clips_get_ro
     got = {r.method: r.values for r in goal_rows(json.loads((ck / "goal_eval.json").read_text())) if r.table == "motion"}
     assert got["SAGA (MotionFill + GraspMotion-Opt) · GOAL's 12 clips"]["slide_goal"] == pytest.approx(
         100 * sliding["SAGA (WholeGrasp + MotionFill, ours)"])
+    quick = {"rollouts": {"clips": 2}, "sliding": sliding}                  # a --quick run's 2 clips are named so
+    assert "SAGA (MotionFill + GraspMotion-Opt) · GOAL's 2 clips" in {r.method for r in goal_rows(quick)}

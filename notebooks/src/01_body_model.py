@@ -231,7 +231,9 @@ explorer.widget()
 # %% [markdown]
 # ## Exercise
 # 1. With `BodyExplorer.update("left_elbow", ...)`, find the elbow angle at which the forearm first touches the
-#    upper arm (hint: compute the smallest distance between forearm and upper-arm vertices with
+#    upper arm (hint: take the forearm and upper-arm vertices by their dominant joint, `part` of section 5, leave out
+#    those within a few cm of the elbow joint, and compute the smallest distance between the two sets with
 #    `graspkit.objects.nearest_neighbours`).
-# 2. The GOAL vertex budget gives the right hand 99 of 400 vertices. Change `GOAL_BUDGET` and look at the picture:
-#    what would a network conditioned on these vertices lose if the hand got only 20?
+# 2. The GOAL vertex budget gives the right hand 99 of 400 vertices. Set `GOAL_BUDGET["right_hand"] = 20` (a dict in
+#    `graspkit.body.markers`; `goal_vertices(bm)` reads it on every call, and the other parts keep theirs, so the total
+#    falls to 321) and look at the picture: what would a network conditioned on these vertices lose?

@@ -462,7 +462,8 @@ explorer.widget()
 # %% [markdown]
 # ## Exercise
 #
-# 1. Rotate the mug by 90° about z (`ObjectPose.from_yaw`, `apply_pose` on its surface points) and compare its BPS
+# 1. Rotate the mug by 90° about z (`ObjectPose.from_yaw(np.pi / 2, np.zeros(3))`, `apply_pose` on its surface
+#    points) and compare its BPS
 #    code with the unrotated one, using the distances of section 3 as a yardstick. Is the code rotation-invariant?
 #    What must a network conditioned on $\mathbf{b}^o$ therefore see during training?
 # 2. Rebuild the mug's grid with `SDFGrid.from_mesh(mug, resolution=128)` and re-run the numbers of section 4. How

@@ -266,11 +266,12 @@ print(f"{t['grasps']} grasps: contact ratio {t['contact_ratio']:.2f}, volume mea
 # %% [markdown]
 # ## Exercise
 # 1. The papers give no contact threshold; graspkit uses 2 mm (`GRASP_CONTACT_THRESHOLD`). Recompute the table of
-#    section 7 with `M.grasp_metrics(vb, faces, ob, threshold=...)` at 0.5, 1, 5 and 10 mm: at which threshold does the
-#    contact ratio stop changing, and what does that say about how tightly the synthetic hands close on the object?
-# 2. Each grasp's volume comes from the hand sinking into the object between its vertices. Take the grasp with the
-#    largest volume and draw the body vertices inside the object (`graspkit.objects.signed_distance(vb, ob) < 0`):
-#    which fingers are they on, and would one more millimetre of finger flexion remove them?
+#    section 7 with `M.grasp_metrics(vb, faces, ob, threshold=...)` (in metres: 0.5 mm is `threshold=0.0005`) at 10,
+#    1, 0.5 and 0.1 mm: how low must the threshold go before the contact ratio falls, why does a grasp that penetrates
+#    the object count as contact at any threshold, and what does that say about how tightly the synthetic hands close?
+# 2. Each grasp's volume comes from fingertips sinking a little into the object. Take the grasp with the largest
+#    volume and draw the body vertices inside the object (`graspkit.objects.signed_distance(vb, ob) < 0`): which
+#    fingers are they on, and would the hand have to open or close by a millimetre or two to remove them?
 # 3. GOAL Tab. 1 reports GRAB's captured grasps at 1.95 cm³ and SAGA Tab. 2 at 2.04 cm³; the synthetic grasps are
-#    far shallower. Which of the two methods' penetration targets ("≤ 1.15× the ground truth" in graspkit's GOAL
-#    lesson) becomes harder to meet because of that?
+#    far shallower. Which of the two methods' penetration targets (GOAL's "≤ 1.15× the ground truth", docs/goal.md,
+#    against SAGA's absolute ≤ 0.5 cm³) becomes harder to meet because of that?

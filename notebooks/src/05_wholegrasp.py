@@ -391,10 +391,13 @@ walk.widget()
 # 4. Our pose prior knows fewer poses than VPoser, so the arm joints are free by default (section 6). Refit the two
 #    samples with `GraspPoseConfig(free_joints=())` (Alg. 1: the prior's latent alone) and compare the hand-marker
 #    error and the penetration; then look at how far the wrists turned away from the prior in the default fit
-#    (`res.state["joint6d"]`: 6D offsets, `graspkit.rotations.rot6d_to_matrix`). docs/saga.md measures both on the
-#    test objects.
+#    (`res.state["joint6d"]` holds 6D offsets from the identity's 6D code, so a joint's rotation is
+#    `rot6d_to_matrix(joint6d + matrix_to_rot6d(torch.eye(3)))`, both in `graspkit.rotations`). docs/saga.md measures
+#    both on the test objects.
 # 5. Sample 20 binocular grasps and fit them with and without the restart (`GraspPoseConfig(restart_sunk=None)`).
-#    Which samples kept the gated run (`res.energies[-1]["restarted"]`), and how deep were their hands after stage 2?
+#    Which samples kept the gated run (`res.energies[-1]["restarted"]`), how deep were their hands after stage 2, and
+#    did the restart change their depth and volume? If no hand sank on this placement, the gate had nothing to do:
+#    what does docs/saga.md ("Why stage 3 cannot lift a sunk hand") say about when it matters?
 
 # %%
 # NBVAL_IGNORE_OUTPUT

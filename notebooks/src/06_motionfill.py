@@ -255,7 +255,8 @@ viz.show_animation(anim)
 # %% [markdown]
 # ## Exercise
 # 1. Sample 20 trajectories for the mug with `generator=torch.Generator().manual_seed(k)` for a few k and measure the
-#    spread of the end of the walk (frame 45). Is the spread larger sideways or forward? Why would the data make it so?
+#    spread of the walk at frame 20 (mid-walk) and at frame 45. Is the spread larger sideways or forward, why would
+#    the data make it so, and why has it almost gone by frame 45?
 # 2. Replace TrajFill's sample by the ground-truth trajectory (`model.sample(..., traj=torch.as_tensor(scene["traj"]))`)
 #    and compare the marker error at mid-motion with the full sample: how much of the error is the trajectory's?
 # 3. Fit a body standing still (one frame's markers repeated 12 times) with `GraspMotionConfig(terms=("smooth",))`
@@ -263,7 +264,8 @@ viz.show_animation(anim)
 #    would SAGA's skating metric count if the other foot were swinging?
 # 4. Give `synthesize` an object the models never saw, e.g. `trimesh.creation.capsule(height=0.14, radius=0.035)` or
 #    a mesh file of your own, at two seeds. Does the grasp adapt to the shape (compare the hand's spread with the
-#    mug above), and where does the end frame penetrate (`r.metrics`)?
+#    mug above), and does the motion's end frame still touch the object, or penetrate it (`r.metrics`: the
+#    `grasp_*` and `end_*` figures)?
 # 5. Run `graspkit.eval_motionfill.graspmotion_eval` on one test clip with `weights=GraspMotionWeights(heel=0,
 #    foot_acc=0)` (S.2 alone) and with the defaults (about 25 s each). Compare the skating and the heel speed per
 #    frame: where does the metric drop, and what does a foot do that the metric cannot see?

@@ -359,11 +359,12 @@ print(f"rollouts ({r['clips']} test clips): reached the true goal {100 * r['to_t
 #
 # ## Exercise
 #
-# 1. Refine the same two samples with `GraspRefineWeights(d=0)` (no offset term). What happens to the contact and
-#    the hand's distance to the mug? Which term of Eq. 8 did the work?
+# 1. Refine the same two samples with `GraspRefineWeights(d=0)` (no offset term). What happens to the contact, the
+#    hand's distance to the mug and the penetration volume? What does the offset term do that the others cannot?
 # 2. Change the attention weight `w` of `interaction_attention` to 1 and to 20 in section 4. Which body parts light
 #    up? Why does GOAL pick a kernel that is still ~0.6 at 10 cm?
 # 3. Start the rollout of section 5 with `refine=False`, then with `stall=None`. Does MNet alone stop at the mug?
 #    How far from the goal hand does each end, and which frames does the blue curve lose?
-# 4. Run `graspkit.goal.synthesize` on `trimesh.creation.torus(0.07, 0.02)` for seeds 0-3. Does GNet find the ring?
-#    When MNet does not reach the grasp, where is the body and where is the hand (`r.motion.joint_positions`)?
+# 4. Run `graspkit.goal.synthesize` on `trimesh.creation.torus(0.07, 0.02)` for seeds 0-3. Does GNet find the ring,
+#    and where on it does the hand close (`r.motion.joint_positions(bm)`: the right wrist against the torus centre)?
+#    If MNet does not reach the grasp for some seed (`r.reached`), where do the body and the hand end?

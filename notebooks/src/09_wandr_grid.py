@@ -275,8 +275,9 @@ reacher.widget()
 # %% [markdown]
 # ## Exercise
 #
-# 1. Evaluate the full grid for one start (`E.evaluate_grid(model, starts[:1], bm, n=5)`) and compare its height
-#    breakdown with the paper's Fig. 5. Which heights fail, and what would you add to the training data?
+# 1. Evaluate the full grid for one start (`E.evaluate_grid(model, starts[:1], bm, n=5)`), then for all six
+#    (`starts`), and compare the height breakdown with the paper's Fig. 5. Where are the misses, if any, and which
+#    heights would fail with fewer reaching clips at the floor and overhead in the training data (docs/wandr.md)?
 # 2. In section 3, ask for 1 s. What happens when $I^w$ asks for more than a person can do?
 # 3. Add a second waypoint at frame 90 in section 5. How many iterations does the optimiser need, and what happens to
 #    $\mathcal L_{norm}$ (how likely are the latents) as the constraints pile up?
