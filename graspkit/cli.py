@@ -44,6 +44,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     stages = tuple(s for s in args.stages.split(",") if s)
     if not stages:
         raise ValueError("--stages: expected one or more stage names separated by commas, got none")
+    import torch
+
+    torch.set_num_threads(args.threads)
     try:
         written = run_demo(Path(args.out), model_path=args.model, stages=stages)
     except ModelFileError as e:
@@ -229,6 +232,7 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
     check_file(args.checkpoint, "--checkpoint", see="docs/wandr.md")
     goal = torch.tensor(args.goal, dtype=torch.float32)
     _print_notes(wandr_range_notes(args.goal, frames / 30.0))
+    torch.set_num_threads(args.threads)
     motion = wandr_motions(args.checkpoint, goal[None], frames, seed=args.seed, lift=args.lift)[0]
     bm = _body_model(args.model)
     sv, sf = sphere(goal.numpy(), 0.05)
@@ -318,6 +322,8 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     d.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
     d.add_argument("--stages", default="body,planner,saga,saga_motion,goal,wandr",
                    help="comma-separated subset of body, planner, saga, saga_motion, goal, wandr")
+    d.add_argument("--threads", type=int, default=2, help="torch threads (default 2; another count can move the "
+                   "optimised and rolled-out figures in their last digits, or more)")
     d.set_defaults(func=_cmd_demo, out_is_file=False)
     for method, cmd, what in (("saga", _cmd_saga, "SAGA end to end for one object: grasp, then the approach "
                                "motion into it"),
@@ -363,6 +369,8 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     wa.add_argument("--out", type=Path, default=Path("outputs/wandr"))
     wa.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz for the pictures (default: the "
                     "procedural humanoid)")
+    wa.add_argument("--threads", type=int, default=1, help="torch threads (default 1; another count can move the "
+                    "rollout in its last digits)")
     wa.set_defaults(func=_cmd_wandr, out_is_file=False)
     if named == "data":
         from graspkit.data.cli import add_data_commands

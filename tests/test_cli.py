@@ -331,3 +331,29 @@ def test_wandr_train_and_eval_name_the_flag_before_any_work(tmp_path, capsys):
         raise FileNotFoundError("x: gone")
     with pytest.raises(ValueError, match="^xy: kept$"), as_flags(x="--x"):    # only a whole leading name
         raise ValueError("xy: kept")
+
+
+def test_the_wandr_command_fixes_its_thread_count(monkeypatch, tmp_path):
+    """`graspkit wandr` rolls out on --threads (default 1) whatever torch's thread count was before, so that its file
+    does not depend on the machine's cores (larger rollouts' sums round differently on another count: 3e-6 m measured
+    on WANDR's generate). The rollout is replaced by a probe of the thread count it would run on."""
+    import torch
+
+    import graspkit.benchmark
+    from graspkit.cli import main
+
+    seen = []
+
+    def probe(*a, **k):
+        seen.append(torch.get_num_threads())
+        raise ValueError("probe: stopped")
+
+    monkeypatch.setattr(graspkit.benchmark, "wandr_motions", probe)
+    before = torch.get_num_threads()
+    try:
+        for ambient, flag in ((2, []), (1, ["--threads", "2"])):
+            torch.set_num_threads(ambient)
+            assert main(["wandr", "--goal", "1.2", "0.4", "1.0", "--out", str(tmp_path), *flag]) == 2
+    finally:
+        torch.set_num_threads(before)
+    assert seen == [1, 2]
