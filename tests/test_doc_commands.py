@@ -10,7 +10,8 @@ import pytest
 from graspkit.cli import build_parser
 
 ROOT = Path(__file__).resolve().parents[1]
-SOURCES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *sorted((ROOT / "notebooks" / "src").glob("*.py"))]
+SOURCES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")),
+           *sorted((ROOT / "notebooks" / "src").glob("*.py"))]
 
 
 def quoted_commands(path: Path) -> list[str]:
