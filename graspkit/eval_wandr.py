@@ -40,7 +40,7 @@ from torch import Tensor
 from graspkit import intention as I
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.checks import count_type, nonneg_float, positive_float, seeded_rng
-from graspkit.data.reaching import EVAL_ANGLES_DEG, EVAL_DISTANCES, EVAL_FRAMES, EVAL_HEIGHTS, Start, evaluation_goals
+from graspkit.data.reaching import EVAL_DISTANCES, EVAL_FRAMES, EVAL_HEIGHTS, Start, evaluation_goals
 from graspkit.data.wandr_dataset import FOOT_JOINTS, shaped_rest
 from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS
 
@@ -542,10 +542,6 @@ def table(rows: dict[str, dict[str, float]], paper: dict[str, tuple[float, float
         ref = " | ".join(f"{x:g}" for x in p) if p else "— | — | —"
         out.append(f"| {name} | {s['SR']:.1f} | {s['FS']:.1f} | {s['DTG']:.1f} | {ref} |")
     return "\n".join(out)
-
-
-GRID_DESCRIPTION = {"angles_deg": EVAL_ANGLES_DEG, "heights_m": tuple(float(h) for h in EVAL_HEIGHTS),
-                    "distances_m": tuple(float(d) for d in EVAL_DISTANCES), "frames": EVAL_FRAMES, "t_goal": T_GOAL}
 
 
 # ----------------------------------------------------------------------------------------------------- variants, CLI

@@ -92,11 +92,6 @@ def pose_to_axis_angle(p: Tensor, rest: Tensor | None = None) -> tuple[Tensor, T
     return t, torch.cat([body, other], dim=-2)
 
 
-def _yaw_free(r6: Tensor, psi: Tensor) -> Tensor:
-    """6D of R_z(-ψ) R for root 6D (..., 6) and yaw ψ (...)."""
-    return matrix_to_rot6d(rotation_about_z(-psi) @ rot6d_to_matrix(r6))
-
-
 def pose_to_delta(p_prev: Tensor, p: Tensor) -> Tensor:
     """WANDR §3.3 delta d (..., 135) from p_prev to p (both (..., 135)), the yaw of p_prev's root removed."""
     t0, r0, th0 = split_pose(p_prev)

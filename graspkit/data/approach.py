@@ -16,7 +16,6 @@ The lower body is the planner's, so feet, foot contacts and skating are those of
 from __future__ import annotations
 
 import numpy as np
-import torch
 
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.data.ik import axis_angle_matrix, matrix_axis_angle, smoothstep
@@ -200,15 +199,3 @@ def _approach_arm(R: np.ndarray, Rg: np.ndarray, trans: np.ndarray, g: int, fps:
     for j in (sh, el, wr):
         delta = matrix_axis_angle(R[g, j].T @ Rg[j])
         R[win, j] = R[win, j] @ axis_angle_matrix(smoothstep(u)[:, None] * delta)
-
-
-def hand_vertices_track(bm, motion: Motion, ids: np.ndarray) -> np.ndarray:
-    """World positions (T,len(ids),3) of selected vertices over a clip (partial skinning, no gradients)."""
-    from graspkit.data.grasp_opt import PartialBody, coeffs_of
-
-    pb = PartialBody(bm, ids)
-    rot = motion.rotmats(bm.dtype)
-    with torch.no_grad():
-        v, _ = pb(rot, coeffs_of(bm, motion.betas[None]).expand(motion.num_frames, -1),
-                  torch.as_tensor(motion.trans, dtype=bm.dtype))
-    return v.double().numpy()

@@ -115,7 +115,7 @@ def _topology(faces_bytes: bytes, num_faces: int) -> tuple[np.ndarray, str]:
     directed = src * n + dst
     uniq, counts = np.unique(directed, return_counts=True)
     undirected = np.minimum(src, dst) * n + np.maximum(src, dst)
-    edge_codes, edge_ids = np.unique(undirected, return_inverse=True)
+    _, edge_ids = np.unique(undirected, return_inverse=True)
     problem = ""
     if (counts > 1).any():
         problem = f"{int((counts > 1).sum())} directed edges are used by more than one face (inconsistent winding)"
