@@ -35,6 +35,7 @@ from graspkit.cli import check_counts, check_out, reports_errors
 from graspkit.data.motionfill_dataset import (MotionFillDataset, MotionFillStats, load_windows, make_windows,
                                               save_windows, split_clips)
 from graspkit.models.motionfill import MotionFillConfig, MotionFillVAE
+from graspkit.paths import read_cache
 from graspkit.train import load_checkpoint
 
 CHECKPOINT = Path(__file__).resolve().parent.parent / "data_stubs" / "checkpoints" / "motionfill.pt"
@@ -113,8 +114,9 @@ def windows(kind: str, n: int, bm=None, data: Path | None = None, progress: bool
 
         bm = BodyModel.from_file(default_model_path())
     out, root, files = windows_source(kind, n, data, bm.digest())
-    if out.is_file():
-        return load_windows(out)
+    cached = read_cache(out, load_windows)
+    if cached is not None:
+        return cached
     names = None
     if kind == "approach":
         motions, names = approach_motions(root, n)

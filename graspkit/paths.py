@@ -106,6 +106,24 @@ def drop_damaged(paths: Sequence[Path], what: str = "files") -> list[Path]:
     return bad
 
 
+def read_cache(path: Path, load: Callable[[Path], Any]) -> Any | None:
+    """load(path) for a cache file; None when there is none, or when it is damaged (a copy cut short, a changed byte:
+    `load` raises ValueError, OSError or a zip / zlib error), which is then removed with a warning so that the caller makes it again."""
+    import warnings
+    import zipfile
+    import zlib
+
+    path = Path(path)
+    if not path.is_file():
+        return None
+    try:
+        return load(path)
+    except (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as e:
+        warnings.warn(f"{path}: a damaged cache file, made again ({str(e)[:200]})", UserWarning, stacklevel=3)
+        path.unlink(missing_ok=True)
+        return None
+
+
 def pool_results(calls: Sequence[tuple[Callable[..., Any], tuple]], workers: int,
                  initializer: Callable[..., None] | None = None, initargs: tuple = ()) -> Iterator[Any]:
     """Results of calls [(fn, args), ...] run on a pool of `workers` processes, in the order they complete. On any

@@ -12,8 +12,8 @@ import torch
 import trimesh
 
 from graspkit.objects.catalogue import make_object
-from graspkit.paths import DATA_STUBS
 from graspkit.objects.sdf import SDFGrid
+from graspkit.paths import DATA_STUBS, read_cache
 
 SDF_PADDING = 0.03
 # The grid algorithm's version, part of every cached grid's file name: raise it whenever SDFGrid.from_mesh or
@@ -48,17 +48,27 @@ def cached_sdf_grid(name: str | trimesh.Trimesh, resolution: int = 64, folder: P
     folder = Path(folder) if folder is not None else cache_dir() / "sdf"
     fname = _grid_filename(name, resolution)
     path = folder / fname
-    for p in (path, DATA_STUBS / "sdf" / fname):     # the cache, then the few grids shipped in data_stubs/sdf
-        if p.is_file():
-            try:
-                with np.load(p, allow_pickle=False) as z:
-                    return SDFGrid(torch.as_tensor(z["values"]).float(), torch.as_tensor(z["lower"]).float(),
-                                   torch.as_tensor(z["upper"]).float())
-            except (OSError, ValueError, KeyError):
-                pass   # a damaged cache file is rebuilt below
+    grid = read_cache(path, _read_grid)               # the cache (a damaged file is removed), then the few grids
+    stub = DATA_STUBS / "sdf" / fname                 # shipped in data_stubs/sdf (left as they are), else built
+    if grid is None and stub.is_file():
+        try:
+            grid = _read_grid(stub)
+        except ValueError:
+            grid = None
+    if grid is not None:
+        return grid
     grid = SDFGrid.from_mesh(_mesh(name), resolution, SDF_PADDING)
     _write_grid(path, grid)
     return grid
+
+
+def _read_grid(path: Path) -> SDFGrid:
+    """A grid file of `_write_grid`; ValueError naming the file when it is damaged or lacks a key."""
+    from graspkit.data.formats import npz_arrays, open_npz
+
+    with open_npz(path, "an SDF grid (values, lower, upper)") as z:
+        a = npz_arrays(z, ("values", "lower", "upper"), path)
+    return SDFGrid(*(torch.as_tensor(a[k]).float() for k in ("values", "lower", "upper")))
 
 
 def _grid_filename(name: str | trimesh.Trimesh, resolution: int) -> str:

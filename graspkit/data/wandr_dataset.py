@@ -38,6 +38,7 @@ from graspkit import intention as I
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.data.formats import load_motion, npz_arrays, open_npz
 from graspkit.data.motion import Motion
+from graspkit.paths import read_cache
 
 MAX_FOOT_HEIGHT = 0.20          # m (WANDR §4.1)
 HINDSIGHT_HORIZON = 240         # frames: the 8 s test horizon (§4.2)
@@ -379,8 +380,9 @@ def cached_clips(folder: str | Path, bm, limit: int | None = None, cache: str | 
         from graspkit.paths import cache_dir
         cache = cache_dir() / "wandr"
     path = Path(cache) / f"clips_{len(files)}_{key}.npz"
-    if path.is_file():
-        return load_clipset(path)
+    clips = read_cache(path, load_clipset)
+    if clips is not None:
+        return clips
     clips = load_clips(files, bm)
     save_clipset(path, clips)
     return clips
