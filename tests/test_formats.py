@@ -63,7 +63,8 @@ def test_smplh_poses_map_body_and_hands_and_zero_jaw_and_eyes(tmp_path):
     p156 = rng.normal(size=(5, 156))
     np.savez(tmp_path / "h.npz", poses=p156, trans=rng.normal(size=(5, 3)), betas=rng.normal(size=16),
              mocap_framerate=np.array(30.0), gender=np.array(b"female"))
-    m = load_motion(tmp_path / "h.npz")
+    with pytest.warns(UserWarning, match="SMPL\\+H file's betas are read as SMPL-X betas"):
+        m = load_motion(tmp_path / "h.npz")
     p = p156.reshape(5, 52, 3)
     assert np.allclose(m.poses[:, :22], p[:, :22], atol=1e-6) and np.allclose(m.poses[:, 25:], p[:, 22:], atol=1e-6)
     assert np.all(m.poses[:, 22:25] == 0)

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from graspkit.data.formats import SequenceFileError
-from graspkit.data.grab import GraspSequence, load_grasp_sequence, read_arrays, save_grasp_sequence
+from graspkit.data.grab import GraspSequence, load_grasp_sequence, save_grasp_sequence
 
 
 def _sequence(T=5, seed=0):
@@ -30,14 +30,18 @@ def test_round_trip_without_pickle_and_equal_bytes(tmp_path):
     assert not list(tmp_path.glob("*.tmp")) and not list(tmp_path.glob(".*"))
 
 
-def _grab_like(path, T=9):
-    """A file laid out as GRAB's: pickled nested dictionaries, 120 fps, hand poses relative to the hand mean."""
+def _grab_like(path, T=9, fullpose=True):
+    """A file laid out as GRAB's: pickled nested dictionaries, 120 fps, a subject template mesh instead of betas, and
+    smplx's full_pose (absolute hand poses) or, without it, 45-D per-part hand poses relative to the hand mean."""
     rng = np.random.default_rng(4)
     full = rng.normal(scale=0.2, size=(T, 165))
     params = {"global_orient": full[:, :3], "body_pose": full[:, 3:66], "jaw_pose": full[:, 66:69],
-              "leye_pose": full[:, 69:72], "reye_pose": full[:, 72:75], "left_hand_pose": rng.normal(size=(T, 24)),
-              "right_hand_pose": rng.normal(size=(T, 24)), "transl": rng.normal(size=(T, 3)), "fullpose": full,
+              "leye_pose": full[:, 69:72], "reye_pose": full[:, 72:75], "transl": rng.normal(size=(T, 3)),
               "expression": np.zeros((T, 10))}
+    if fullpose:
+        params.update(fullpose=full, left_hand_pose=rng.normal(size=(T, 24)), right_hand_pose=rng.normal(size=(T, 24)))
+    else:
+        params.update(left_hand_pose=full[:, 75:120], right_hand_pose=full[:, 120:])
     np.savez(path, body={"params": params, "vtemp": "tools/subject_meshes/male/s1.ply"},
              object={"params": {"transl": rng.normal(size=(T, 3)), "global_orient": rng.normal(size=(T, 3))},
                      "object_mesh": "tools/object_meshes/contact_meshes/mug.ply"},
@@ -47,17 +51,26 @@ def _grab_like(path, T=9):
 
 
 def test_real_grab_layout_needs_the_pickle_opt_in(tmp_path):
+    """GRAB's fullpose (smplx's full_pose: the hand mean already in it) is read as it is and refuses hands_mean;
+    per-part hand poses relative to the mean get it added; the template-mesh shape is named in a warning."""
     full = _grab_like(tmp_path / "mug_lift.npz")
     with pytest.raises(SequenceFileError, match="allow_pickle"):
         load_grasp_sequence(tmp_path / "mug_lift.npz")
     mean = np.linspace(-0.1, 0.1, 90)
-    s = load_grasp_sequence(tmp_path / "mug_lift.npz", allow_pickle=True, hands_mean=mean)
+    with pytest.raises(ValueError, match="hands_mean: .*mug_lift.npz has 'body.params.fullpose'.*already holds"):
+        load_grasp_sequence(tmp_path / "mug_lift.npz", allow_pickle=True, hands_mean=mean)
+    with pytest.warns(UserWarning, match="body.vtemp.*betas 0"):
+        s = load_grasp_sequence(tmp_path / "mug_lift.npz", allow_pickle=True)
     assert s.fps == 30.0 and s.num_frames == 3                     # 9 frames at 120 Hz -> frames 0, 4, 8 at 30 Hz
-    assert np.allclose(s.poses[0, :25], full[0, :75].reshape(25, 3), atol=1e-6)
-    assert np.allclose(s.poses[0, 25:], (full[0, 75:] + mean).reshape(30, 3), atol=1e-6)
+    assert np.allclose(s.poses[0], full[0].reshape(55, 3), atol=1e-6)
     assert np.allclose(s.poses[1, :1], full[4, :3], atol=1e-5)
     assert s.object_name == "mug" and s.gender == "male" and s.contacts["object"].shape == (3, 48)
-    assert "body.vtemp" in read_arrays(tmp_path / "mug_lift.npz", allow_pickle=True)
+    assert not s.betas.any() and str(s.extras["body.vtemp"]).endswith("s1.ply")
+    parts = _grab_like(tmp_path / "mug_parts.npz", fullpose=False)
+    with pytest.warns(UserWarning, match="body.vtemp"):
+        p = load_grasp_sequence(tmp_path / "mug_parts.npz", allow_pickle=True, hands_mean=mean)
+    assert np.allclose(p.poses[0, :25], parts[0, :75].reshape(25, 3), atol=1e-6)
+    assert np.allclose(p.poses[0, 25:], (parts[0, 75:] + mean).reshape(30, 3), atol=1e-6)
 
 
 def test_errors_name_the_file_and_key(tmp_path):

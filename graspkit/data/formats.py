@@ -9,14 +9,15 @@ AMASS's per-part copies `root_orient`, `pose_body`, `pose_jaw`, `pose_eye`, `pos
 Arrays are float32; strings are plain numpy unicode scalars, so every file loads with allow_pickle=False.
 
 The reader also takes real AMASS files: SMPL-X (`poses` (T,165)) and SMPL-H (`poses` (T,156): 22 body joints
-including the root, then 30 hand joints; jaw and eyes are set to zero), any number of `betas` (the first 10
-are kept), `mocap_frame_rate` or `mocap_framerate`, and resamples to 30 fps (slerp for rotations, linear
+including the root, then 30 hand joints; jaw and eyes are set to zero; its betas are SMPL+H's, read as SMPL-X's with
+a warning), any number of `betas` (the first 10 are kept), `mocap_frame_rate` or `mocap_framerate`, and resamples to 30 fps (slerp for rotations, linear
 for translation, nearest frame for contacts).
 """
 from __future__ import annotations
 
 import os
 import tempfile
+import warnings
 import zipfile
 from pathlib import Path
 
@@ -175,7 +176,8 @@ def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
     if not isinstance(npz, np.lib.npyio.NpzFile):
         raise SequenceFileError(f"{path}: expected an .npz archive of arrays, got a single array")
     with npz:
-        poses = to_smplx_poses(_numbers(_get(npz, "poses", path), "poses", path), path)
+        raw = _numbers(_get(npz, "poses", path), "poses", path)
+        poses = to_smplx_poses(raw, path)
         if len(poses) == 0:
             raise SequenceFileError(f"{path}: key 'poses' has 0 frames, expected at least one")
         trans = _numbers(_get(npz, "trans", path), "trans", path)
@@ -192,6 +194,10 @@ def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
         if "betas" in npz.files:
             b = _numbers(_get(npz, "betas", path), "betas", path).reshape(-1)[:NUM_BETAS]
             betas[:len(b)] = b
+            if raw.ndim == 2 and raw.shape[1] == 156 and np.abs(b).max(initial=0.0) > 0:
+                warnings.warn(f"{path}: an SMPL+H file's betas are read as SMPL-X betas (another shape space: the body "
+                              "is only roughly the subject's); pass betas of your own to the Motion for a fitted shape",
+                              UserWarning, stacklevel=2)
         gender = _string(_get(npz, "gender", path)) if "gender" in npz.files else "neutral"
         contacts = None
         if "contacts" in npz.files:

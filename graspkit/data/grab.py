@@ -17,13 +17,17 @@ graspkit writes the same tree WITHOUT pickle: every leaf is a plain array under 
 | `grasp.*`, `goal.*`, `saga.*` | | graspkit's extras: grasp type, grasp frame, GOAL / SAGA labels |
 
 `load_grasp_sequence` reads these files, and real GRAB files when `allow_pickle=True` is passed explicitly (their
-dictionaries are pickled; only open files you trust). GRAB's hand poses are stored relative to the SMPL-X hand mean
-(its models use flat_hand_mean=False): pass `hands_mean` (90,) (e.g. a model's hands_meanl/r) to make them absolute.
+dictionaries are pickled; only open files you trust). GRAB's `body.params.fullpose` is smplx's `full_pose`, absolute
+(the hand mean already in it: smplx adds it, and GOAL feeds it to flat_hand_mean=True layers), and is read as it is;
+`hands_mean` (90,) (e.g. a model's hands_meanl/r) is for files with per-part 45-D hand poses stored relative to the
+mean (a flat_hand_mean=False model's). GRAB gives each subject's shape as a template mesh (`body.vtemp`), not betas:
+the body is posed with betas 0, with a warning (the path stays in `extras`).
 Sequences are resampled to `fps` (GRAB: 120 Hz) with slerp (graspkit.data.formats.resample).
 """
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -178,8 +182,9 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
                         fps: float | None = 30.0) -> GraspSequence:
     """Read a graspkit GRAB-style file (or a real GRAB file with allow_pickle=True) into a GraspSequence at `fps`.
 
-    hands_mean (90,): added to the hand poses of files that store them relative to the hand mean (real GRAB;
-    graspkit's own files say `body.flat_hand_mean` = True and are never changed)."""
+    hands_mean (90,): added to per-part 45-D hand poses stored relative to the hand mean (files without
+    'body.params.fullpose', which already holds it and refuses hands_mean; graspkit's own files say
+    `body.flat_hand_mean` = True and are never changed)."""
     path = Path(path)
     if fps is not None:
         check_fps(fps, where=" (or None)")
@@ -196,7 +201,12 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
             raise SequenceFileError(f"{path}: key {key!r} has shape {v.shape}, expected ({T}, {width})")
         return v.reshape(T, width)
 
+    flat = bool(a["body.flat_hand_mean"]) if "body.flat_hand_mean" in a else False
     if "body.params.fullpose" in a:
+        if hands_mean is not None and not flat:
+            raise ValueError(f"hands_mean: {path} has 'body.params.fullpose', smplx's full_pose, which already holds "
+                             "the hand mean (smplx adds it; GOAL feeds GRAB's fullpose to flat_hand_mean=True layers); "
+                             "leave hands_mean out (it is for per-part hand poses stored relative to the mean)")
         full = np.asarray(get("body.params.fullpose"), np.float64)
         if full.ndim != 2 or full.shape[1] != 165:
             raise SequenceFileError(f"{path}: key 'body.params.fullpose' has shape {full.shape}, expected (T, 165)")
@@ -215,7 +225,6 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
             parts.append(p.reshape(len(p), hi - lo, 3))
         poses = np.concatenate(parts, 1)
     T = len(poses)
-    flat = bool(a["body.flat_hand_mean"]) if "body.flat_hand_mean" in a else False
     if hands_mean is not None and not flat:
         hm = np.asarray(hands_mean, np.float64)
         if hm.size != 90 or not np.isfinite(hm).all():
@@ -223,6 +232,10 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
         poses = poses.copy()
         poses[:, 25:55] += hm.reshape(30, 3)
     trans = per_frame("body.params.transl", 3)
+    if "body.vtemp" in a and "body.betas" not in a:
+        warnings.warn(f"{path}: the subject's shape is a template mesh (body.vtemp, GRAB's), not betas: the body is "
+                      "posed with betas 0 (the average shape); extras['body.vtemp'] keeps its path", UserWarning,
+                      stacklevel=2)
     betas = np.zeros(10)
     if "body.betas" in a:
         b = np.asarray(a["body.betas"], np.float64).reshape(-1)
