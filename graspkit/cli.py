@@ -286,6 +286,9 @@ def _cmd_eval_all(args: argparse.Namespace) -> int:
 
 
 DATA_HELP = "procedural motion data (graspkit data make --kind ...)"
+# every `graspkit train` command's --time-limit
+TIME_LIMIT_HELP = ("seconds; stops after the epoch that crosses it, so how far one run gets depends on the machine; "
+                   "the same command again resumes towards --epochs")
 
 
 # The data, train and eval commands' parsers live in modules that import torch and scipy (seconds to load): they are

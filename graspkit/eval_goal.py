@@ -26,7 +26,7 @@ from scipy.spatial import cKDTree
 from torch import Tensor
 
 from graspkit.checks import count_type, nonneg_float, positive_float, seeded_rng
-from graspkit.cli import check_counts, check_folders, check_out, reports_errors
+from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_folders, check_out, reports_errors
 from graspkit.models.gnet import pose_rotmats
 from graspkit.models.mnet import STALL_FRAMES, MNet, MNetWindows, predict_horizon
 from graspkit.rotations import rotation_about_z
@@ -362,8 +362,7 @@ def add_goal_train_commands(train_sub) -> None:
                        f"{name}.pt, {name}_<variant>.pt for another --variant)")
         p.set_defaults(out_is_file=True)
         p.add_argument("--epochs", type=int, default=default_epochs)
-        p.add_argument("--time-limit", type=positive_float, default=600.0,
-                       help="seconds; stops after the epoch that crosses it")
+        p.add_argument("--time-limit", type=positive_float, default=600.0, help=TIME_LIMIT_HELP + " (default 600)")
         p.add_argument("--seed", type=int, default=0)
         p.add_argument("--threads", type=int, default=2)
         if name == "gnet":

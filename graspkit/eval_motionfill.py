@@ -31,7 +31,7 @@ import numpy as np
 import torch
 
 from graspkit.checks import positive_float
-from graspkit.cli import check_counts, check_out, reports_errors
+from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_out, reports_errors
 from graspkit.data.motionfill_dataset import (MotionFillDataset, MotionFillStats, load_windows, make_windows,
                                               save_windows, split_clips)
 from graspkit.models.motionfill import MotionFillConfig, MotionFillVAE
@@ -310,8 +310,8 @@ def add_motionfill_train_commands(train_sub) -> None:
     p.add_argument("--data", type=Path, default=None, help="folder of the stage's clips (default: the cache's "
                    "motion/locomotion or grasps/approach)")
     p.add_argument("--lr", type=positive_float, default=None, help="default 1e-3 (not with --stage smooth_ae)")
-    p.add_argument("--time-limit", type=positive_float, default=None, help="seconds; stops after the epoch that "
-                   "crosses it (default 540; not with --stage smooth_ae)")
+    p.add_argument("--time-limit", type=positive_float, default=None,
+                   help=TIME_LIMIT_HELP + " (default 540; not with --stage smooth_ae)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--reduction", choices=["sum", "mean"], default=None,
@@ -331,8 +331,7 @@ def add_motionfill_train_commands(train_sub) -> None:
     b.add_argument("--data", type=Path, default=None, help="folder of the approach clips (default: the cache's)")
     b.add_argument("--clips", type=int, default=None, help="approach clips (default 144)")
     b.add_argument("--lr", type=positive_float, default=1e-3)
-    b.add_argument("--time-limit", type=positive_float, default=300.0,
-                   help="seconds; stops after the epoch that crosses it")
+    b.add_argument("--time-limit", type=positive_float, default=300.0, help=TIME_LIMIT_HELP + " (default 300)")
     b.add_argument("--seed", type=int, default=0)
     b.add_argument("--threads", type=int, default=1)
     b.set_defaults(func=_cmd_train_baseline)

@@ -37,7 +37,7 @@ import torch
 from torch import Tensor
 
 from graspkit.checks import positive_float
-from graspkit.cli import check_counts, check_folders, check_out, reports_errors
+from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_folders, check_out, reports_errors
 from graspkit.optim.grasppose import ARM_JOINTS, GraspPoseConfig, GraspPoseWeights
 from graspkit.paths import DATA_STUBS, write_atomic
 
@@ -549,8 +549,7 @@ def add_saga_train_commands(train_sub) -> None:
         p.set_defaults(out_is_file=True)
         p.add_argument("--epochs", type=int, default=30 if name == "pose_prior" else 12)
         p.add_argument("--time-limit", type=positive_float, default=None if name == "pose_prior" else 600.0,
-                       help="seconds; stops after the epoch that crosses it"
-                            + (" (default: none)" if name == "pose_prior" else " (default 600)"))
+                       help=TIME_LIMIT_HELP + (" (default: none)" if name == "pose_prior" else " (default 600)"))
         p.add_argument("--seed", type=int, default=0)
         p.add_argument("--threads", type=int, default=1)
         if name == "wholegrasp":

@@ -861,6 +861,8 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     """`graspkit train wandr` and `graspkit eval wandr`."""
     from pathlib import Path
 
+    from graspkit.cli import TIME_LIMIT_HELP
+
     from graspkit.data.wandr_dataset import GOAL_FRAMES
     from graspkit.paths import cache_dir
 
@@ -870,8 +872,7 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     t.add_argument("--out", type=Path, default=None, help="weights (default data_stubs/checkpoints/<variant>.pt)")
     t.set_defaults(out_is_file=True)
     t.add_argument("--epochs", type=int, default=6)
-    t.add_argument("--time-limit", type=positive_float, default=None,
-                   help="seconds; stops after the epoch that crosses it")
+    t.add_argument("--time-limit", type=positive_float, default=None, help=TIME_LIMIT_HELP + " (default: none)")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--threads", type=int, default=2)
     t.add_argument("--batch-size", type=int, default=512)
