@@ -108,7 +108,8 @@ def drop_damaged(paths: Sequence[Path], what: str = "files") -> list[Path]:
 
 def read_cache(path: Path, load: Callable[[Path], Any]) -> Any | None:
     """load(path) for a cache file; None when there is none, or when it is damaged (a copy cut short, a changed byte:
-    `load` raises ValueError, OSError or a zip / zlib error), which is then removed with a warning so that the caller makes it again."""
+    `load` raises ValueError, OSError or a zip / zlib error), which is then removed with a warning so that the caller
+    makes it again."""
     import warnings
     import zipfile
     import zlib

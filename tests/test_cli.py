@@ -146,7 +146,8 @@ def test_bad_counts_seeds_and_folder_outs_are_named_before_any_work(tmp_path, ca
                           (("data", "make", "--kind", "grasp", "--chunk", "0", "--out", str(tmp_path / "d")),
                            "--chunk: expected an integer >= 1"),
                           (("data", "make", "--kind", "reach", "--chunk", "4", "--objects", "apple", "--out",
-                            str(tmp_path / "d")), "--chunk and --objects: only for --kind grasp or approach, not reach"),
+                            str(tmp_path / "d")),
+                           "--chunk and --objects: only for --kind grasp or approach, not reach"),
                           (("data", "make", "--kind", "reach", "--model", str(tmp_path / "clip.pt"), "--out",
                             str(tmp_path / "d")), "--model: ")):
         assert main(list(args)) == 2, args

@@ -255,8 +255,9 @@ def test_vertices_no_face_uses_do_not_stretch_the_collision_grid(tmp_path):
 
 
 def test_an_object_outside_the_trained_sizes_is_taken_with_a_warning(tmp_path):
-    """The catalogue's largest sides (trimesh's bounds) are the range the methods are trained and evaluated on; a 4 cm ball and a 50 cm box are taken
-    with a UserWarning saying so, a 12 cm box and the catalogue objects without one."""
+    """The catalogue's largest sides (trimesh's bounds) are the range the methods are trained and evaluated on; a
+    4 cm ball and a 50 cm box are taken with a UserWarning saying so, a 12 cm box and the catalogue objects without
+    one."""
     import warnings
 
     from graspkit.objects.catalogue import list_objects

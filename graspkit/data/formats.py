@@ -10,8 +10,8 @@ Arrays are float32; strings are plain numpy unicode scalars, so every file loads
 
 The reader also takes real AMASS files: SMPL-X (`poses` (T,165)) and SMPL-H (`poses` (T,156): 22 body joints
 including the root, then 30 hand joints; jaw and eyes are set to zero; its betas are SMPL+H's, read as SMPL-X's with
-a warning), any number of `betas` (the first 10 are kept), `mocap_frame_rate` or `mocap_framerate`, and resamples to 30 fps (slerp for rotations, linear
-for translation, nearest frame for contacts).
+a warning), any number of `betas` (the first 10 are kept), `mocap_frame_rate` or `mocap_framerate`, and resamples to
+30 fps (slerp for rotations, linear for translation, nearest frame for contacts).
 """
 from __future__ import annotations
 
