@@ -862,7 +862,6 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
     from pathlib import Path
 
     from graspkit.cli import TIME_LIMIT_HELP
-
     from graspkit.data.wandr_dataset import GOAL_FRAMES
     from graspkit.paths import cache_dir
 

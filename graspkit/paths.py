@@ -83,14 +83,16 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
 
 
 def drop_damaged(paths: Sequence[Path], what: str = "files") -> list[Path]:
-    """Remove those of `paths` (existing .npz files) that are not intact zip archives (truncated, or an entry failing
-    its checksum), warning on stderr, so that a resumed run makes them again; returns the removed paths. Files are
-    written atomically, so only damage from outside (a copy cut short, a bad disk) is caught here."""
+    """Remove those of `paths` (.npz files; missing ones are skipped) that are not intact zip archives (truncated, or
+    an entry failing its checksum), warning on stderr, so that a resumed run makes them again; returns the removed
+    paths. Files are written atomically, so only damage from outside (a copy cut short, a bad disk) is caught here."""
     import sys
     import zipfile
 
     bad = []
     for p in paths:
+        if not Path(p).exists():
+            continue
         try:
             with zipfile.ZipFile(p) as zf:
                 ok = zf.testzip() is None

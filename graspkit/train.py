@@ -135,21 +135,15 @@ def files_key(folders: str | Path | list[str | Path], pattern: str = "*.npz") ->
     return h.hexdigest()
 
 
-def _is_torch_zip(path: Path) -> bool:
-    """Whether `path` is a zip archive as torch.save writes it (an entry <name>/data.pkl)."""
-    if not zipfile.is_zipfile(path):
-        return False
-    with zipfile.ZipFile(path) as zf:
-        return any(n.endswith("/data.pkl") or n == "data.pkl" for n in zf.namelist())
-
-
-def _zip_hint(path: Path) -> str:
-    """What a zip archive that torch.load refused is instead (a NumPy .npz: only .npy entries; else a zip without
-    torch's data.pkl), as a clause for the error message; '' when `path` is not a zip archive."""
+def _foreign_archive(path: Path) -> str | None:
+    """None when `path` is a zip archive as torch.save writes it (an entry <name>/data.pkl); else what it is instead,
+    as a clause for an error message ('' when it is no zip archive at all)."""
     if not zipfile.is_zipfile(path):
         return ""
     with zipfile.ZipFile(path) as zf:
         names = zf.namelist()
+    if any(n.endswith("/data.pkl") or n == "data.pkl" for n in names):
+        return None
     if names and all(n.endswith(".npy") for n in names):
         return "; this is a NumPy .npz archive, not a torch file"
     return "; this zip archive has no data.pkl entry"
@@ -173,9 +167,10 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # noqa: BLE001 - re-raised with the file named
-        if not _is_torch_zip(path):
+        foreign = _foreign_archive(path)
+        if foreign is not None:
             raise ValueError(f"checkpoint {path}: not a torch checkpoint (expected the zip archive torch.save "
-                             f"writes{_zip_hint(path)})") from e
+                             f"writes{foreign})") from e
         # torch's message suggests weights_only=False; graspkit never unpickles, so keep only what the file holds
         detail = (str(e).split("WeightsUnpickler error:", 1)[-1].strip() or type(e).__name__).splitlines()[0]
         raise ValueError(f"checkpoint {path}: holds more than tensors, numbers, strings and plain containers, "

@@ -122,7 +122,7 @@ def make_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2, mode
     check_model(model)
     out.mkdir(parents=True, exist_ok=True)
     claim_folder(out, kind, {"seed": seed, "model": model})
-    drop_damaged([p for p in (clip_path(out, kind, i) for i in range(n)) if p.exists()], f"{kind} clips")
+    drop_damaged([clip_path(out, kind, i) for i in range(n)], f"{kind} clips")
     todo = [i for i in range(n) if not clip_path(out, kind, i).exists()]
     bar = tqdm(total=n, initial=n - len(todo), desc=f"{kind} clips", unit="clip", disable=not progress)
     if workers == 1:

@@ -304,7 +304,7 @@ def make_grasp_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2
     check_model(model)
     out.mkdir(parents=True, exist_ok=True)
     claim_folder(out, kind, {"seed": seed, "model": model, "chunk": chunk, "objects": list(objects)})
-    drop_damaged([p for p in (file_path(out, kind, i) for i in range(n)) if p.exists()], f"{kind} files")
+    drop_damaged([file_path(out, kind, i) for i in range(n)], f"{kind} files")
     missing = [i for i in range(n) if not file_path(out, kind, i).exists()]
     chunks = sorted({i // chunk for i in missing})
     done = n - len(missing)
