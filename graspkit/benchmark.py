@@ -1,6 +1,6 @@
 """One benchmark for every method (`graspkit eval --all`): grasp and motion quality with one metrics module.
 
-Grasp quality (SAGA Sec. 4.1 / Tab. 1-2, GOAL Sec. 4.1 / Tab. 1): contact ratio, interpenetration volume (cm^3)
+Grasp quality (SAGA Sec. 4.1 / Tab. 1-2, GOAL Sec. 4.2 / Tab. 1): contact ratio, interpenetration volume (cm^3)
 and depth (cm), APD, all from `graspkit.metrics`, on the held-out (test-split) objects, for the synthetic ground
 truth, SAGA (WholeGrasp-VAE + GraspPose-Opt, and the GrabNet-SMPLX baseline) and GOAL (GNet + refinement).
 Motion quality (SAGA Sec. 4.2, GOAL Sec. 4.2, WANDR Sec. 4.3): foot skating (WANDR's and SAGA's definitions),

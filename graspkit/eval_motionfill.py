@@ -384,7 +384,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------------------------------------ Tab. 3
-# SAGA Tab. 3 (AMASS / GRAB): ADE (m), skating (fraction of frames), PSKL-J (P, GT) and (GT, P)
+# SAGA Tab. 3 (AMASS / GRAB): ADE (m), skating (fraction of frames), PSKL-J (P, GT) and (GT, P); PSKL-J is on joints,
+# graspkit's PSKL on the 79 markers (docs/saga_motion.md)
 PAPER = {"CNN-AE (local)": (0.091, 0.245, 0.804, 0.739), "LEMO (local)": (0.083, 0.152, 0.507, 0.447),
          "PoseNet (local)": (0.090, 0.236, 0.611, 0.668), "Ours-Local": (0.079, 0.137, 0.377, 0.327),
          "Route+PoseNet": (0.219, 0.575, 0.955, 0.884), "Ours": (0.083, 0.394, 0.772, 0.609)}

@@ -47,7 +47,7 @@ from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WAND
 FOOT_ON_FLOOR = SAGA_SKATE_HEEL_HEIGHT   # m: a foot within 5 cm of the floor touches it (SAGA §4.2's skating heels)
 SUNK_DEPTH = 0.01                         # m: a lowest foot vertex more than 1 cm below the floor: the body has sunk
 
-T_GOAL = EVAL_FRAMES - 1          # frame 239: 8 s after the start frame
+T_GOAL = EVAL_FRAMES - 1          # frame 239, the last of the 240 frames (8 s at 30 fps, the start frame counted)
 
 # the paper's figures (Tab. 1 and Tab. 2): SR %, FS %, DTG cm
 PAPER = {

@@ -1,6 +1,6 @@
-"""GOAL end to end (`../shared/papers/GOAL.txt` §3, Fig. 2): an object in, a grasp and the approach motion into it out.
+"""GOAL end to end (`../shared/papers/GOAL.txt` §3, Fig. 3): an object in, a grasp and the approach motion into it out.
 
-    object -> GNet sample (§3.3, Eq. 2) -> refinement towards its offsets (Eq. 4-8) -> the goal grasp
+    object -> GNet sample (§3.3) -> refinement towards its offsets (Eq. 4-8) -> the goal grasp
     start body + goal grasp -> MNet, 10 frames a step, re-canonicalised, refined near the goal (§3.4, Eq. 9-13),
     each frame raised onto the floor z = 0 where its soles sink below it (graspkit's floor step, not GOAL's),
     the refinement started early for a hand that stalls within 25 cm of the goal hand (graspkit's stall rule)

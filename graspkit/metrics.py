@@ -6,7 +6,7 @@ Motion metrics (this section) take world vertices / joints in the z-up frame, me
 |---|---|---|
 | foot skating (FS) | WANDR Sec. 4.3 | a frame skates if the mesh's lowest vertex moves more than 0.66 cm (at 30 fps) to the next frame; graspkit measures the horizontal move (see below) |
 | foot skating | SAGA Sec. 4.2 (following MOJO, its ref. [65]) | both heels are within 5 cm of the ground and both move faster than 75 mm/s (no foot planted) |
-| foot sliding | GOAL Sec. 4.2 | the vertex closest to the ground moves more than 1 cm per frame at 30 fps (GRAB's captured motion: 6.7 %) |
+| foot sliding | GOAL Sec. 4.2 | the vertex closest to the ground moves more than 1 cm per frame, read at 30 fps (GOAL gives no rate) (GRAB's captured motion: 6.7 %) |
 | success rate (SR), distance to goal (DTG) | WANDR Sec. 4.3 | the right wrist comes within 10 cm of the goal; DTG its closest distance |
 | ground penetration | SAGA Sec. 4.2 (non-collision), GOAL Sec. 3.3 (Eq. 7's lowest vertex) | depth of the lowest vertex below the ground plane z = 0 |
 | non-collision score | SAGA Sec. 4.2 | share of body mesh vertices above the ground (GRAB 0.9771, SAGA 0.9743), per frame |
@@ -19,7 +19,8 @@ Two readings are graspkit's, where the papers leave room:
   locomotion clips, so it would not measure sliding.
 - WANDR says only "moves more than 0.66cm"; graspkit counts the horizontal move, as the authors' evaluation code does
   (docs/wandr.md: a foot lifting or setting down is not skating); GOAL's sliding counts the 3D move.
-Both per-frame thresholds are the papers' at 30 fps (their evaluation rate); for a clip at another `fps` they scale by
+Both per-frame thresholds are taken at 30 fps (WANDR's evaluation rate; GOAL states none, and 30 fps is graspkit's
+reading of its "per frame"); for a clip at another `fps` they scale by
 30 / fps, the same speed (0.198 m/s for WANDR, 0.30 m/s for GOAL), so a clip reads the same resampled or not.
 """
 from __future__ import annotations
@@ -38,7 +39,7 @@ WANDR_SKATE_THRESHOLD = 0.0066       # m per frame at 30 fps (WANDR Sec. 4.3, CI
 METRIC_FPS = 30.0                    # the frame rate the papers' per-frame thresholds are given at
 SAGA_SKATE_HEEL_HEIGHT = 0.05        # m (SAGA Sec. 4.2, following MOJO)
 SAGA_SKATE_HEEL_SPEED = 0.075        # m/s, both heels (SAGA Sec. 4.2)
-GOAL_SLIDE_THRESHOLD = 0.01          # m per frame at 30 fps (GOAL Sec. 4.2)
+GOAL_SLIDE_THRESHOLD = 0.01          # m per frame (GOAL Sec. 4.2), read at 30 fps: GOAL states no frame rate
 GOAL_GRAB_SLIDING = 0.067            # fraction of GRAB's captured frames that "slide" (GOAL Sec. 4.2)
 WANDR_SUCCESS_RADIUS = 0.10          # m, right wrist to goal (WANDR Sec. 4.3, as CIRCLE)
 BODY_JOINTS = slice(0, 22)           # pelvis .. right wrist: speed and jerk are reported on these

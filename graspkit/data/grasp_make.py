@@ -2,7 +2,7 @@
 
 Labels of one frame (`frame_labels`, all in the world frame, z up, metres):
 - SAGA (Sec. 3.2, App. A.1): the 143 markers, C_M (marker within 2 cm of the object surface), the 2048 object points
-  and normals, C_O (object point within 1 cm of the body surface) (thresholds: graspkit.objects.contact);
+  and normals, C_O (object point within 1 cm of the body surface) (graspkit's thresholds: graspkit.objects.contact);
 - GOAL (Sec. 3.2-3.4, Eq. 2, 9): the 400 sampled vertices (99 on the right hand), the offset from each to its closest
   object point, the head direction q, the object translation, the object's BPS code (1024 basis points, 15 cm
   ball, object points minus the object translation) and the goal hand's BPS code with the same basis;

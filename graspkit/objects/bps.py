@@ -1,4 +1,4 @@
-"""Basis Point Set encoding (Prokudin, Lassner & Romero, ICCV 2019), as GOAL uses it (Sec. 3.3, Eq. 2 and 9).
+"""Basis Point Set encoding (Prokudin, Lassner & Romero, ICCV 2019), as GOAL uses it (Sec. 3.3-3.4, Eq. 2 and 9).
 
 A fixed set of K basis points sampled uniformly in a ball (GOAL: K = 1024; the radius is graspkit's, 0.15 m
 around the object centre, as the paper gives none) encodes a point cloud by, for each basis point, the distance

@@ -242,10 +242,10 @@ for ds in (wg, gn, ap):
 # %% [markdown]
 # ## 7 · Quality, measured with `graspkit.metrics`
 #
-# Contact ratio (SAGA §4.1, GOAL Tab. 1: the body within 2 mm of the object), interpenetration volume and depth
-# (exact ray casting and signed distance), the feet's distance to the floor — here over the shipped samples; the
-# table over 272 grasps of all 17 objects is in docs/grasps.md (GRAB's captured grasps, GOAL Tab. 1: 1.95 cm³;
-# SAGA Tab. 2's ground-truth meshes: contact 0.99, 2.04 cm³, 0.45 cm).
+# Contact ratio (SAGA §4.1, GOAL Tab. 1; the body within 2 mm of the object, graspkit's threshold: neither paper gives
+# one), interpenetration volume and depth (exact ray casting and signed distance), the feet's distance to the floor —
+# here over the shipped samples; the table over 272 grasps of all 17 objects is in docs/grasps.md (GRAB's captured
+# grasps, GOAL Tab. 1: 1.95 cm³; SAGA Tab. 2's ground-truth meshes: contact 0.99, 2.04 cm³, 0.45 cm).
 
 # %%
 part = bm.lbs_weights.argmax(1).numpy()

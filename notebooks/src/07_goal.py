@@ -139,8 +139,8 @@ print(f"mean vertex distance between samples: {100 * spread:.1f} cm")
 #
 # the offsets recomputed against the object at every step, the body kept near GNet's output, the head pointing
 # as predicted and the lowest foot vertex on the floor (z here; GOAL's y). Below: the hand vertices with the
-# predicted offsets d̂ (arrows) before and after. Before, the arrows' tips scatter around the surface; after, the
-# hand has moved so that its true offsets match them.
+# predicted offsets d̂ (arrows), on the hand's mesh, before and after. Before, the arrows' tips scatter around the
+# surface; after, the hand has moved so that its true offsets match them.
 
 # %%
 # NBVAL_IGNORE_OUTPUT
@@ -153,17 +153,20 @@ for h in ref.history:
 assert ref.history[-1]["E"] < ref.history[0]["E"]
 V_ref = grasp_bodies(ref.rot6d, ref.transl, cond["betas"])
 i = 0
-fig = plt.figure(figsize=(9, 4))
-for k, (r6, tr, title) in enumerate([(hat["rot6d"], hat["transl"], "GNet's sample"), (ref.rot6d, ref.transl, "refined")]):
+hand_ids = eval_goal.right_hand_ids(bm)
+hand_faces = faces[np.isin(faces, hand_ids).all(1)]              # the right hand's triangles of the full mesh
+fig = plt.figure(figsize=(10, 4.4))
+for k, (r6, tr, v, title) in enumerate([(hat["rot6d"], hat["transl"], V[i], "GNet's sample"),
+                                        (ref.rot6d, ref.transl, V_ref[i], "refined")]):
     hand = refiner.vertices(r6[i:i + 1], tr[i:i + 1], cond["betas"][i:i + 1])[0, :99]
     ax = fig.add_subplot(1, 2, k + 1, projection="3d", proj_type="ortho")
     ax.view_init(20, -60)
-    viz.draw_meshes(ax, [(mesh.vertices, mesh.faces, viz.OBJECT)], alpha=0.35)
+    viz.draw_meshes(ax, [(v, hand_faces), (mesh.vertices, mesh.faces, viz.OBJECT)], alpha=0.35)
     viz.draw_points(ax, hand.numpy(), size=5, color="#444444")
     viz.draw_arrows(ax, hand.numpy(), hat["hand_offsets"][i].numpy(), linewidth=0.8, head=0.15)
     true = hand_object_offsets(hand[None], scene["points"])[0]
     err = 100 * float((true - hat["hand_offsets"][i]).abs().mean())
-    viz.set_equal(ax, np.concatenate([hand.numpy(), mesh.vertices]))
+    viz.set_equal(ax, np.concatenate([v[hand_ids], mesh.vertices]), pad=0.01, zoom=1.3)
     ax.set_title(f"{title}: |d − d̂| = {err:.2f} cm", fontsize=9)
     ax.set_axis_off()
 plt.show()

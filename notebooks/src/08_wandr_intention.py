@@ -189,12 +189,12 @@ stages = M.load_wandr(DATA_STUBS / "checkpoints" / "wandr.pt").meta["stages"]
 # the epochs the shipped weights went through: stage 1 up to its kept epoch, then every later stage's
 kept = [h["steps"] for h in stages[0]["history"][:stages[0].get("selected_epoch", stages[0]["epochs"])]]
 chain = kept + [h["steps"] for st in stages[1:] for h in st["history"]]
-fig, ax = plt.subplots(figsize=(6, 2.4))
+fig, ax = plt.subplots(figsize=(6, 3.0))
 ax.plot(range(1, 121), [paper.rollout_steps(e) for e in range(120)], label="paper: 0 -> 10 over 50 of 900 epochs")
 ax.plot(range(1, len(chain) + 1), chain, "o-", label=f"shipped: {len(kept)} epochs of stage 1, then "
         + ", ".join(f"{st['epochs']} at {st['max_steps']}" for st in stages[1:]))
 ax.set_xlabel("epoch"); ax.set_ylabel("rollout steps s"); ax.set_yscale("symlog", linthresh=10)
-ax.legend(fontsize=8)
+ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.35))
 fig.tight_layout()
 
 # %% [markdown]

@@ -224,9 +224,11 @@ fig, ax = plt.subplots(figsize=(5.5, 3.6))
 for m, name, c in ((plain, "WANDR", "0.6"), (res_w.motion, "optimised", "#6a3d9a")):
     Jm = m.joints[0].detach()
     ax.plot(Jm[:, 0, 0], Jm[:, 0, 1], color=c, label=f"pelvis, {name}")
-ax.plot(*waypoint[1], "o", color="#1f77b4", ms=9, label=f"waypoint (frame {waypoint[0]})")
+    ax.plot(Jm[waypoint[0], 0, 0], Jm[waypoint[0], 0, 1], ".", color=c, ms=8)   # where it is at the waypoint's frame
+ax.plot(*waypoint[1], "o", color="#1f77b4", ms=9, label=f"waypoint (frame {waypoint[0]}; dots: the pelvis then)")
 ax.plot(goal[0], goal[1], "x", color="#d62728", ms=10, mew=2, label="goal")
 ax.set_aspect("equal"); ax.legend(fontsize=7)
+ax.set_xlabel("x (m)"); ax.set_ylabel("y (m)"); ax.set_title("seen from above", fontsize=9)
 fig.tight_layout()
 
 # %% [markdown]
