@@ -8,7 +8,8 @@ start poses, several samples each, the full 8 s always (no early stop).
 
 Grid (§4.2): angles 0, 72, 144, 216, 288 deg from the start's facing direction (counter-clockwise seen from above);
 heights 0, 0.45, 0.9, 1.35, 1.8 m above the ground; distances 0.5, 1.625, 2.75, 3.875, 5 m from the start's pelvis on
-the ground; 240 frames (8 s at 30 fps: the start and 239 generated frames), t_G = frame 239.
+the ground; 240 frames (8 s at 30 fps: the start and 239 generated frames), t_G = frame 239. The paper gives the
+ranges and counts; equal steps, the angles' origin and t_G at the last frame are graspkit's reading.
 Metrics (§4.3): SR, the share of motions whose right wrist comes within 10 cm of the goal at any frame; FS, per motion
 the share of frame pairs whose lowest mesh vertex moves more than 0.66 cm horizontally to the next frame, averaged
 over motions; DTG, the closest the wrist gets to the goal (cm), averaged.
