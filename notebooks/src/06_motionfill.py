@@ -197,9 +197,10 @@ print(table(ev["rows"]))
 # (SAGA's target: no more than 2 points above it); the last two columns show that the heels get there without
 # jumping (99th percentile of the heel markers' acceleration, m/s²; the clips' own beside it). The end grasps keep out
 # of their objects through both sums of Eq. 7 — hand vertices inside the object, read from its 2 mm collision grid,
-# and object points inside the hand — with which the mean penetration fell from about 6.8 to 1.9 cm³ (a mug's handle
-# through the hand: 18 → 0.07 cm³; `docs/saga_motion.md`; with the changes since, 1.25 in the table below). graspkit's floor term keeps every fitted mesh out of the
-# ground (non-collision 1.000, 0.998 without it; the last column: how deep the lowest vertex goes, cm).
+# and object points inside the hand — with which the mean penetration fell from about 6.8 to 2.1 cm³ (a mug's handle
+# through the hand: 18.3 → 0.04 cm³; `docs/saga_motion.md`; with the changes since, 1.25 in the table below).
+# graspkit's floor term keeps every fitted mesh out of the ground (non-collision 1.000, 0.998 without it; the last
+# column: how deep the lowest vertex goes, cm).
 
 # %%
 keys = ["skating_gt", "skating_sample", "skating_opt", "contact_mm", "volume_cm3", "noncollision_opt", "noncollision_gt",
