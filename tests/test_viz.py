@@ -70,7 +70,7 @@ def test_draw_mesh_lit_and_torch_input(body):
     fig, (ax,) = viz.figure(views=("front",))
     v = torch.tensor(body.vertices, requires_grad=True)
     pc = viz.draw_mesh(ax, v * 1.0, torch.tensor(body.faces))
-    colors = pc.get_facecolor()
+    colors = np.asarray(pc.get_facecolor())        # a tuple of RGBA rows in matplotlib 3.7
     assert len(colors) == len(body.faces)
     assert colors[:, :3].std() > 0.01  # shaded, not flat
     fig.canvas.draw()

@@ -43,8 +43,9 @@ def decimate_sequence(frames: list[np.ndarray], faces: np.ndarray,
 
     _, low, collapses = fast_simplification.simplify(frames[0], faces, target_reduction=1.0 - max_faces / len(faces),
                                                      return_collapses=True)
-    return [fast_simplification.replay_simplification(points=v, triangles=faces, collapses=collapses)[0]
-            for v in frames], low
+    # float32 in: fast-simplification < 0.2 takes nothing else, and 0.2 returns float32 whatever it is given
+    return [fast_simplification.replay_simplification(points=np.asarray(v, np.float32), triangles=faces,
+                                                      collapses=collapses)[0] for v in frames], low
 
 
 def animate(frames: Any, faces: Any, objects: Sequence[tuple[Any, ...]] = (), goals: Any = None,
