@@ -13,6 +13,7 @@ look-alikes are training objects here (graspkit.data.grasp.SPLITS); SAGA uses HO
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Callable
@@ -139,7 +140,10 @@ def _apple() -> m3d.Manifold:
 
 def _banana() -> m3d.Manifold:
     a = np.linspace(-0.85, 0.85, 9)  # angles along an arc of radius 0.13 m in the xy-plane
-    pts = np.stack([0.13 * np.sin(a), 0.13 * (1 - np.cos(a)), np.zeros_like(a)], axis=1)
+    # the C library's sine and cosine, not numpy's: numpy 1.x and 2.x round them differently in the last bit, and
+    # the hulls below then split some flat quads along the other diagonal (another mesh than the shipped files')
+    sin, cos = np.array([math.sin(x) for x in a]), np.array([math.cos(x) for x in a])
+    pts = np.stack([0.13 * sin, 0.13 * (1 - cos), np.zeros_like(a)], axis=1)
     radii = 0.018 * np.sqrt(np.clip(1.0 - (a / 0.95) ** 2, 0.06, 1.0))
     return _capsule_chain(pts, radii, 16)
 
