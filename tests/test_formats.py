@@ -91,6 +91,34 @@ def test_resampling_120_to_30_keeps_every_fourth_frame_and_50_to_30_slerps_like_
     assert np.allclose(tr, np.stack([np.interp(f, np.arange(T), trans[:, k]) for k in range(3)], 1))
 
 
+def test_a_reaching_clip_read_at_another_rate_keeps_its_goal_frame_in_time(tmp_path):
+    """A 120 fps clip due at frame 100 (0.833 s) is due at frame 25 when read at 30 fps, the frame whose
+    translation is the source's frame 100."""
+    T = 121
+    trans = np.stack([np.arange(T) / 120.0, np.zeros(T), np.ones(T)], 1)
+    m = Motion(np.zeros((T, 55, 3)), trans, np.zeros(10), 120.0, goal=np.array([1.0, 0.0, 1.0]), goal_frame=100,
+               hand="right")
+    r = load_motion(save_motion(tmp_path / "c.npz", m), fps=30)
+    assert r.fps == 30.0 and r.goal_frame == 25
+    np.testing.assert_allclose(r.trans[r.goal_frame], trans[100], atol=1e-6)
+
+
+def test_amass_per_part_keys_are_the_slices_of_poses(tmp_path):
+    """AMASS's per-part copies (root_orient | pose_body | pose_jaw | pose_eye | pose_hand) put back together are
+    `poses`, joint by joint: every joint carries its own value here, so a slice shifted by a joint shows."""
+    T = 3
+    poses = np.zeros((T, 55, 3))
+    poses[:, :, 0] = 0.01 * np.arange(55)
+    poses[:, :, 1] = 0.001 * np.arange(T)[:, None]
+    p = save_motion(tmp_path / "c.npz", Motion(poses, np.zeros((T, 3)), np.zeros(10), 30.0), amass_keys=True)
+    with np.load(p, allow_pickle=False) as z:
+        parts = [z[k] for k in ("root_orient", "pose_body", "pose_jaw", "pose_eye", "pose_hand")]
+        assert [x.shape[1] for x in parts] == [3, 63, 3, 6, 90]
+        np.testing.assert_array_equal(np.concatenate(parts, 1), z["poses"])
+        np.testing.assert_allclose(z["pose_eye"].reshape(T, 2, 3), poses[:, 23:25], atol=1e-7)
+        np.testing.assert_allclose(z["pose_jaw"], poses[:, 22], atol=1e-7)
+
+
 def test_errors_name_the_file_and_key(tmp_path):
     with pytest.raises(SequenceFileError, match="nope.npz: no such"):
         load_motion(tmp_path / "nope.npz")

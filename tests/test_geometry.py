@@ -241,6 +241,32 @@ def test_winding_number_agrees_with_signed_distance(name):
     np.testing.assert_array_equal(w > 0.5, sd < 0)
 
 
+def _fanned_spike(k: int = 20) -> trimesh.Trimesh:
+    """A closed 10 cm spike (apex at the origin, base triangle at x = 0.1 m) whose one side face is split into a fan
+    of k thin triangles at the apex: the apex's incident faces are mostly that one plane."""
+    tip, b1, b2, b3 = np.zeros(3), np.array([1, .1, 0.]), np.array([1, -.1, 0.]), np.array([1, 0, .05])
+    fan = [b1 + (b3 - b1) * i / k for i in range(k + 1)]
+    v = np.array([tip, b2] + fan) * 0.1
+    f = [[0, 1, 2], [0, 2 + k, 1]] + [[0, 3 + i, 2 + i] for i in range(k)] + [[1, 2 + i, 3 + i] for i in range(k)]
+    m = trimesh.Trimesh(v, f, process=False)
+    m.fix_normals()
+    return m
+
+
+def test_signed_distance_sign_near_a_vertex_with_a_fanned_face():
+    """The sign of a point closest to a vertex comes from the angle-weighted pseudo-normal (Baerentzen & Aanaes): a
+    face split into 20 slivers must weigh as one. Points behind the apex and off to the side are outside by
+    trimesh's containment and the winding number, so their signed distance is positive."""
+    m = _fanned_spike()
+    assert m.is_watertight and m.is_winding_consistent and m.volume > 0
+    pts = np.array([-0.002, -0.005, 0.0]) + np.random.default_rng(0).normal(scale=5e-4, size=(200, 3))
+    assert not m.contains(pts).any()
+    assert (winding_number(pts, m).numpy() < 0.5).all()
+    sd = signed_distance(pts, m).numpy()
+    assert (sd > 0).all()
+    np.testing.assert_allclose(np.abs(sd), trimesh.proximity.closest_point(m, pts)[1], atol=1e-9)
+
+
 def test_signed_distance_of_sphere_is_analytic():
     r = 0.05
     sphere = _sphere(r, subdivisions=5)

@@ -117,6 +117,23 @@ def test_loss_is_zero_at_the_truth_and_exact_for_a_shift(bm):
     assert math.isclose(float(terms["loss"]), 10 * 0.01 + 10 * 0.01 + 0.03 ** 2 / 333, rel_tol=1e-4)
 
 
+def test_the_hand_term_reads_the_first_99_vertices(bm):
+    """Eq. 3's hand-vertex term is over the 99 right-hand vertices, which come first among the 400: a 1 cm error on
+    them alone gives v_hand = 1/3 cm (the mean over 99 x 3 coordinates) and v = 99 / 400 of that; an error on the
+    other 301 vertices alone leaves v_hand at 0."""
+    body = SparseBody(bm, torch.arange(400))
+    batch = _batch(bm, body, 4, 5)
+    truth = {"rot6d": batch["rot6d"], "transl": batch["transl"]}
+    zero = torch.zeros(4, 16)
+    for first, want_hand, want_all in ((True, 0.01 / 3, 0.01 * 99 / (400 * 3)), (False, 0.0, 0.01 * 301 / (400 * 3))):
+        verts = batch["verts"].clone()
+        part = slice(0, 99) if first else slice(99, 400)
+        verts[:, part, 0] += 0.01
+        terms = gnet_loss(truth, zero, zero, dict(batch, verts=verts), body)
+        assert math.isclose(float(terms["v_hand"]), want_hand, abs_tol=1e-7)
+        assert math.isclose(float(terms["v"]), want_all, rel_tol=1e-4)
+
+
 def test_grabnet_style_baseline_outputs_parameters_only(bm):
     body = SparseBody(bm, torch.arange(400))
     batch = _batch(bm, body, 4, 3)

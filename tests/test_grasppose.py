@@ -68,6 +68,28 @@ def test_kabsch_recovers_a_rigid_motion():
     torch.testing.assert_close(c2, c, atol=1e-5, rtol=0)
 
 
+def test_kabsch_of_a_mirror_image_is_still_a_rotation():
+    """Mirrored (or nearly flat) markers make the SVD's best orthogonal map a reflection; the fit must return the best
+    proper rotation instead, scipy's `Rotation.align_vectors` on the centred points."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(0)
+    src = rng.normal(size=(30, 3))
+    tgt = src * np.array([-1.0, 1.0, 1.0]) + 0.01 * rng.normal(size=src.shape)
+    R, _ = kabsch(torch.tensor(src)[None], torch.tensor(tgt)[None])
+    assert torch.det(R[0]).item() == pytest.approx(1.0, abs=1e-9)
+    want = Rotation.align_vectors(tgt - tgt.mean(0), src - src.mean(0))[0].as_matrix()
+    np.testing.assert_allclose(R[0].numpy(), want, atol=1e-6)
+
+
+def test_weights_are_the_papers():
+    """SAGA A.4's weights of Eq. 5-7 and S.3's heuristic thresholds."""
+    w = GraspPoseWeights()
+    assert (w.prior, w.contact_object, w.contact_marker, w.colli_object, w.colli_body) == (5e-4, 15.0, 15.0, 100.0,
+                                                                                          200.0)
+    assert (w.heuristic_prior, w.heuristic_radius) == (0.7, 0.02)
+
+
 def test_markers_of_a_known_body_are_refitted_to_within_a_centimetre(bm, prior):
     verts, _ = _truth(bm, prior)
     opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(60, 200, 200), collision=False, contact=False,

@@ -138,6 +138,18 @@ def test_distance_to_goal_and_success():
         M.distance_to_goal(w, [[1.0, 0.05, 1.0], [0.0, 0.0, 0.0]])
 
 
+def test_distance_to_goal_is_the_closest_approach_not_the_last_frame():
+    """A wrist that passes the goal and goes on: DTG is the perpendicular distance at mid-track (5 cm), not the last
+    frame's 50 cm; on a random track it is scipy's smallest pairwise distance."""
+    from scipy.spatial.distance import cdist
+
+    w = np.stack([np.linspace(0, 1, 11), np.zeros(11), np.ones(11)], 1)
+    assert np.isclose(M.distance_to_goal(w, [0.5, 0.05, 1.0]), 0.05)
+    assert M.goal_reached(w, [0.5, 0.05, 1.0])
+    track, goal = np.random.default_rng(0).normal(size=(40, 3)), np.array([0.2, -0.1, 0.3])
+    assert np.isclose(M.distance_to_goal(track, goal), cdist(track, goal[None]).min())
+
+
 def test_non_collision_score_counts_vertices_above_the_ground():
     v = _cloud(4)                                   # 50 points well above the ground, the sole point at z = 0
     assert np.allclose(M.non_collision_score(v), 1.0)

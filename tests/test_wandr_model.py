@@ -146,11 +146,14 @@ def test_contact_term_holds_planted_feet_only(clips, stats):
 def test_floor_term_is_the_lowest_foot_joints_height_error(clips, stats):
     """The floor term (w_floor, not in the paper): with the data's deltas it is 0; a body that rises 1 cm more each
     frame (z of the translation delta, which the yaw frame leaves alone) is (k + 1) cm high at step k, so over four
-    steps the term is (1 + 4 + 9 + 16) / 4 = 7.5 cm², whatever the feet's phase; it enters the loss times its weight."""
+    steps the term is (1 + 4 + 9 + 16) / 4 = 7.5 cm², whatever the feet's phase; it enters the loss times its weight.
+    §3.4's joint loss sees every joint (k + 1) cm off at step k: its squared distance, summed over x, y, z, is also
+    7.5 cm² on average."""
     items, _, d_gt = _windows(clips)
     for rise in (0.0, 0.01):
         out = _replayed_losses(_model(stats, w_floor=2.0), clips, items, d_gt, axis=2, shift=rise)
         assert out["floor_cm2"].item() == pytest.approx(7.5 if rise else 0.0, abs=1e-3)
+        assert out["joint_cm2"].item() == pytest.approx(7.5 if rise else 0.0, abs=1e-3)
         assert out["loss"].item() == pytest.approx((out["rec"] + 1e-2 * out["kl"] + out["joint_cm2"]
                                                     + 2.0 * out["floor_cm2"]).item(), rel=1e-5)
     assert "floor_cm2" not in M.training_losses(_model(stats), clips, items, 1, generator=torch.Generator().manual_seed(0))

@@ -106,6 +106,28 @@ def test_kl_weight_rises_linearly_to_the_papers_end_point():
     # SAGA A.4: lambda_KL = 0.005 e over 40 epochs
     assert rest(39) == pytest.approx((0.2 - 0.005) * psi, rel=1e-4, abs=1e-6)
     assert rest(19) == pytest.approx((0.1 - 0.005) * psi, rel=1e-4, abs=1e-6)
+    # and the weight itself: the first epoch's KL term is 0.005 psi (epoch is 0-based), the last one's 0.2 psi
+    for e, w in ((0, 0.005), (39, 0.2)):
+        logs = model.loss(batch, out, e, 40)
+        others = logs["rec_markers"] + logs["bce_markers"] + logs["bce_object"] + logs["consistency"]
+        assert (logs["loss"] - others).item() == pytest.approx(w * psi, rel=1e-4)
+
+
+def test_contact_class_weights_are_the_papers():
+    """SAGA A.4: in-contact terms of C_M weigh 5 and of C_O 3 in the default config (what `train_wholegrasp` uses);
+    with every prediction at 0.25, the BCE is -w log 0.25 on in-contact targets and -log 0.75 on the others."""
+    cfg = WholeGraspConfig()
+    assert (cfg.marker_contact_weight, cfg.object_contact_weight) == (5.0, 3.0)
+    model = WholeGraspVAE(cfg).eval()
+    batch = _batch()
+    out = dict(model(batch))
+    out["marker_contact"], out["object_contact"] = torch.full((3, 143), 0.25), torch.full((3, P), 0.25)
+    for mc, oc, want_m, want_o in ((1.0, 0.0, -5 * math.log(0.25), -math.log(0.75)),
+                                   (0.0, 1.0, -math.log(0.75), -3 * math.log(0.25))):
+        b = dict(batch, marker_contact=torch.full((3, 143), mc), object_contact=torch.full((3, P), oc))
+        logs = model.loss(b, out, 0, 40)
+        assert logs["bce_markers"].item() == pytest.approx(want_m, rel=1e-5)
+        assert logs["bce_object"].item() == pytest.approx(want_o, rel=1e-5)
 
 
 def test_sample_is_deterministic_for_a_generator_and_returns_world_transform():
