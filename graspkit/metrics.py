@@ -134,7 +134,7 @@ def foot_sliding_goal(vertices: Any, threshold: float = GOAL_SLIDE_THRESHOLD, fp
 def foot_skating_saga(heels: Any, fps: float = 30.0, height: float = SAGA_SKATE_HEEL_HEIGHT,
                       speed: float = SAGA_SKATE_HEEL_SPEED) -> np.ndarray:
     """SAGA's skating per frame (T-1,) bool from heel positions (T,2,3) [left, right]: both heels within `height`
-    of the ground and both faster than `speed` m/s (speed from frame t to t+1): no foot is planted."""
+    of the ground at frame t and both faster than `speed` m/s from frame t to t+1: no foot is planted."""
     height, speed = _number(height, "height"), _number(speed, "speed")
     h = _shaped(heels, "heels", "T,2,3", min_frames=2).double()
     v = (h[1:] - h[:-1]).norm(dim=-1) * _number(fps, "fps")                     # (T-1, 2)

@@ -64,6 +64,10 @@ def test_saga_needs_both_heels_low_and_fast():
     assert not M.foot_skating_saga(np.stack([moving, still], 1), fps=30).any()        # one foot planted
     assert not M.foot_skating_saga(both + [0, 0, 0.1], fps=30).any()                   # both feet in the air
     assert not M.foot_skating_saga(both, fps=20).any()                                 # 60 mm/s is slow enough
+    rising = both.copy()                                  # 4 cm high at frame t, 6 cm at t + 1: the height read is t's
+    rising[1::2, :, 2] = 0.06
+    rising[0::2, :, 2] = 0.04
+    assert M.foot_skating_saga(rising, fps=30)[0::2].all() and not M.foot_skating_saga(rising, fps=30)[1::2].any()
 
 
 def test_penetration_speed_and_jerk_known_values():
@@ -90,6 +94,29 @@ def test_joint_limits_flag_a_hyperextended_knee_and_a_broken_neck_only():
     lim = M.joint_limit_violation(poses)
     assert lim[:2].max() == 0
     assert np.isclose(lim[2, 4], 20, atol=1e-6) and np.isclose(lim[2, 12], 40, atol=1e-6)
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_elbow_flexion_is_the_forearm_swinging_forward(bm, side):
+    """Each elbow's hinge axis, checked on the body: 90 deg of flexion about it swings the forearm from the side to
+    the front (+z, the canonical facing direction) within the range; 30 deg the other way (hyperextension) reads 20
+    deg beyond its -10 deg limit."""
+    import torch
+
+    j, w = (18, 20) if side == "left" else (19, 21)
+    axis = np.array(M.HINGES[f"{side}_elbow"][0], float)
+    for deg, excess in ((90, 0.0), (-30, 20.0)):
+        body_pose = torch.zeros(1, 21, 3, dtype=bm.dtype)
+        body_pose[0, j - 1] = torch.as_tensor(axis * np.deg2rad(deg))
+        joints = bm(body_pose=body_pose.reshape(1, -1)).joints[0].double().numpy()
+        forearm = joints[w] - joints[j]
+        if deg == 90:
+            assert forearm[2] > 0.95 * np.linalg.norm(forearm)
+        else:
+            assert forearm[2] < -0.4 * np.linalg.norm(forearm)
+        poses = np.zeros((1, 55, 3))
+        poses[0, j] = axis * np.deg2rad(deg)
+        assert np.isclose(M.joint_limit_violation(poses)[0, j], excess, atol=1e-6)
 
 
 def test_joint_limit_excess_is_the_metric_with_a_gradient_along_the_turn():
