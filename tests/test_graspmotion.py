@@ -270,7 +270,11 @@ def test_palm_term_is_small_for_a_palm_facing_a_wall_and_large_for_a_wall_behind
     facing = opt.palm_term(hands, plane(float(lo[1]) - 0.003)).item()
     behind = opt.palm_term(hands, plane(float(hi[1]) + 0.003)).item()
     assert behind > 1.0 and facing < 0.1 * behind, (facing, behind)
-    # alpha_t = 1 - (t/T)^2: the last frame does not count, the first counts fully
+    # alpha_t = 1 - (t/T)^2 over frames 0, 1, 2 of 3: 1, 3/4 and 0 of the same hand's term
+    one = [opt.palm_term(hands[:, :1], plane(float(hi[1]) + 0.003), torch.tensor([t]), total=3).item()
+           for t in range(3)]
+    assert one[0] > 0 and one[1] == pytest.approx(0.75 * one[0], rel=1e-5) and one[2] == 0.0
+    assert behind == pytest.approx(1.75 * one[0], rel=1e-5)
     far = opt.palm_term(hands, plane(float(hi[1]) + 0.5)).item()
     assert far == 0.0
 
