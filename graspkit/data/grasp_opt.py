@@ -11,7 +11,7 @@ Three stages, all batched over B grasps of one object (each with its own body sh
 3. polish  `polish`: Adam over the SMPL-X pose (spine, neck, head, right arm, fingers; the legs and pelvis keep the
            planner's stance, so both feet stay on the ground and the pelvis over the support) minimising
               E = E_colli (SAGA Eq. 7, hand/arm vertices and object points vs the hand) + E_cont (SAGA Eq. 6: the
-                  palm and fingertip regions touch) + E_anchor (GOAL Eq. 4: palm on the chosen spot, facing it)
+                  palm and fingertip regions touch) + E_anchor (after GOAL Eq. 4: palm on the chosen spot, facing it)
                   + E_q (GOAL Eq. 6: head towards the object) + E_theta (GOAL Eq. 5: coupling to the initial pose)
                   + wrist / elbow range-of-motion penalties.
            Signed distances come from the object's SDF grid (graspkit.objects.SDFGrid: differentiable, < 0 inside).
@@ -386,7 +386,7 @@ class PolishWeights:
     colli: float = 1.0        # SAGA Eq. 7, sum of squared penetrations (mm^2) of hand / arm vertices
     colli_obj: float = 0.02   # SAGA Eq. 7, object points inside the hand (S(o, V_h) by nearest hand vertex + normal)
     contact: float = 1.5      # SAGA Eq. 6, squared gap (mm^2) of each contact region's closest vertex
-    anchor: float = 0.2       # GOAL Eq. 4, palm centre to its target (mm^2)
+    anchor: float = 0.2       # after GOAL Eq. 4, palm centre to its target (mm^2)
     facing: float = 30.0      # palm normal against the surface normal, 1 + n . s
     gaze: float = 20.0        # GOAL Eq. 6, 1 - cos(head direction, object)
     prior: float = 200.0      # GOAL Eq. 5, squared rotation change (rad^2) of body joints

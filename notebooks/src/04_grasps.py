@@ -95,7 +95,7 @@ plt.show()
 # | $E_{colli}$ | $\sum_{b \in V^h_B} \max(-S(b, O), 0)^2$: hand/arm vertices inside the object (SDF grid) | SAGA Eq. 7, 1st term |
 # | $E_{colli,O}$ | object points inside the hand: $S(o, V^h_B)$ from the nearest hand vertex and its normal | SAGA Eq. 7, 2nd term |
 # | $E_{cont}$ | the closest vertex of each contact region (palm, five pads) on the surface | SAGA Eq. 6 |
-# | $E_{anchor}$, facing | palm centre on its target, palm normal against the surface normal | GOAL Eq. 4 (offsets) |
+# | $E_{anchor}$, facing | palm centre on its target, palm normal against the surface normal | after GOAL Eq. 4 (offsets) |
 # | $E_q$ | $1 - \cos(q, \text{object} - \text{head})$ | GOAL Eq. 6 |
 # | $E_\theta$ | squared change of every rotation from its initial value (the arm is freer) | GOAL Eq. 5 |
 #
