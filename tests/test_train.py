@@ -74,7 +74,8 @@ def test_resume_of_a_step_that_draws_random_numbers_gives_the_same_weights(tmp_p
 
 
 def test_each_epoch_sees_every_sample_once_in_its_own_order():
-    """The data order of epoch e comes from seed + e: each epoch a permutation of the samples, not one order repeated."""
+    """The data order of epoch e comes from seed + e: each epoch a permutation of the samples, not one order
+    repeated."""
     class Indices(torch.utils.data.Dataset):
         def __len__(self):
             return 10

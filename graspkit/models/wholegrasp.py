@@ -643,8 +643,8 @@ def params_to_rotmats(x: Tensor, pca: HandPCA, prior=None) -> tuple[Tensor, Tens
 class GrabNetSMPLX(nn.Module):
     """SAGA's GrabNet-SMPLX baseline (§4.1, App. B.1, Fig. S3a): a CVAE that generates SMPL-X parameters directly
     for an object encoded by the same PointNet++, in the object frame: t, R (6D), beta, the body pose theta_b and
-    24 + 24 hand PCA coefficients. `body_space="prior"` (default) is SAGA's Theta (§3, Preliminaries): theta_b in the 32-D latent
-    space of a pose prior (VPoser there; graspkit's PosePrior, held frozen inside the model), 99 numbers;
+    24 + 24 hand PCA coefficients. `body_space="prior"` (default) is SAGA's Theta (§3, Preliminaries): theta_b in the
+    32-D latent space of a pose prior (VPoser there; graspkit's PosePrior, held frozen inside the model), 99 numbers;
     "rot6d" generates the 21 joints as 6D rotations (193 numbers). The eyes stay at rest (SAGA's theta_e is not
     generated).
 
