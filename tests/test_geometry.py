@@ -367,6 +367,30 @@ def test_distance_gradient_is_unit_direction_to_closest_point():
 
 # ---------------------------------------------------------------------------------------------- contact, attention
 
+def test_object_contact_measures_to_the_body_surface_not_its_vertices():
+    """SAGA's C_O: an object point within 1 cm of the body's surface; on a coarse body (a 20 cm box, its 8 vertices
+    14-17 cm from these points) the nearest vertex would miss every contact trimesh finds."""
+    box = trimesh.creation.box(extents=(0.2, 0.2, 0.2))
+    pts = np.array([[0.0, 0.0, 0.105], [0.0, 0.0, 0.115], [0.105, 0.02, -0.03], [0.02, -0.108, 0.0]])
+    truth = trimesh.proximity.closest_point(box, pts)[1] <= 0.01          # 5, 15, 5 and 8 mm from a face
+    assert truth.tolist() == [True, False, True, True]
+    body = (torch.as_tensor(box.vertices), torch.as_tensor(box.faces))
+    assert object_contact(torch.as_tensor(pts), body).bool().tolist() == truth.tolist()
+    assert object_contact(torch.as_tensor(pts), box).bool().tolist() == truth.tolist()
+
+
+def test_surface_points_are_uniform_in_a_triangle():
+    """Area-uniform sampling (Osada's square-root warp): on the right triangle (0,0)-(1,0)-(0,1) x has the density
+    2 (1 - x) (Kolmogorov-Smirnov against its CDF) and the points' mean is the centroid (1/3, 1/3)."""
+    from scipy import stats
+
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.0, 0.0, 1e-6]], float)       # closed by three tiny faces
+    mesh = trimesh.Trimesh(v, [[0, 2, 1], [0, 1, 3], [1, 2, 3], [2, 0, 3]], process=False)
+    p, _ = sample_surface(mesh, 20000, seed=0)
+    assert stats.kstest(p[:, 0], lambda s: 1 - (1 - np.clip(s, 0, 1)) ** 2).pvalue > 1e-3
+    np.testing.assert_allclose(p[:, :2].mean(0), [1 / 3, 1 / 3], atol=0.01)
+
+
 def test_marker_and_object_contact_thresholds():
     box = make_object("cracker_box")  # faces at y = +-0.03
     offsets = np.array([0.0, 0.005, 0.019, 0.021, 0.05])

@@ -122,6 +122,30 @@ def test_network_shapes_variants_and_loss(setup):
         MNet(MNetConfig(outputs="markers"))
 
 
+def _loss_pair(err_at):
+    """MNet outputs equal to their targets but for 1 cm on every coordinate of the vertices `err_at` (B = 2, 10
+    frames)."""
+    B, F = 2, 10
+    tgt = {"d_rot6d": torch.zeros(B, F, 55, 6), "d_transl": torch.zeros(B, F, 3), "d_verts": torch.zeros(B, F, 400, 3),
+           "d_hand_obj": torch.zeros(B, F, 99, 3)}
+    out = {k: v.clone() for k, v in tgt.items()}
+    out["d_verts"][:, :, err_at] += 0.01
+    return out, tgt
+
+
+def test_loss_foot_term_is_over_the_masked_vertices_and_the_hand_term_over_the_first_99():
+    """Eq. 11: the foot term is the mean error of the vertices the mask holds on the floor (one vertex in one frame
+    here: 1 cm), and L_v^h reads the 99 hand vertices, which come first (1 cm there, 0 for an error elsewhere)."""
+    out, tgt = _loss_pair([350])
+    foot = torch.zeros(2, 10, 400)
+    foot[0, 3, 350] = 1.0
+    torch.testing.assert_close(mnet_loss(out, tgt, foot)["feet"], torch.tensor(0.01), atol=1e-7, rtol=0)
+    out, tgt = _loss_pair(list(range(99)))
+    torch.testing.assert_close(mnet_loss(out, tgt)["v_hand"], torch.tensor(0.01), atol=1e-7, rtol=0)
+    out, tgt = _loss_pair(list(range(99, 400)))
+    assert float(mnet_loss(out, tgt)["v_hand"]) == 0.0
+
+
 def test_feet_mask_selects_low_foot_vertices():
     z = torch.tensor([[[0.01, 0.2, 0.03, 0.0]]])
     m = feet_mask(z, torch.tensor([1, 2]))
@@ -234,6 +258,19 @@ def test_windows_hold_the_clip_and_pad_its_ends(setup):
     assert torch.equal(s.rot6d[0], clips[0].rot6d[:1].float().expand(5, -1, -1))   # a static start before frame 0
     assert torch.equal(s.rot6d[1], clips[1].rot6d[1:6].float())
     assert foot.shape == (3, 10, 400) and 0 < float(foot.sum())                  # standing: sampled soles on the floor
+
+
+def test_window_targets_are_the_next_ten_frames(setup):
+    """Eq. 10: a window's targets are frames t+1 .. t+10 as changes from frame t, in frame t's canonical frame (a
+    rotation and a shift): the vertex changes have the lengths of the world displacements from t to t + k."""
+    from graspkit.models.mnet import MNetWindows
+    bm, gv, body = setup
+    w = MNetWindows(_reach_clips(1), body, bps_basis())
+    t = 40
+    _, tgt, _ = w.batch(torch.tensor([t]))
+    want = (w.verts[t + 1:t + 11] - w.verts[t]).norm(dim=-1)                 # (10, 400)
+    assert float(want[0].max()) > 1e-3                                        # the body moves at frame 40
+    torch.testing.assert_close(tgt["d_verts"][0].norm(dim=-1), want, atol=1e-5, rtol=1e-5)
 
 
 def test_mnet_learns_the_reaching_windows(setup):

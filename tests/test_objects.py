@@ -48,6 +48,16 @@ def test_seeded_variation_is_deterministic_and_bounded(name):
     np.testing.assert_allclose(a.extents[0] / a.extents[1], canon[0] / canon[1], rtol=1e-9)  # x, y share one scale
 
 
+def test_from_yaw_turns_counter_clockwise_about_z_as_scipy_does():
+    from scipy.spatial.transform import Rotation
+
+    for yaw in (0.3, np.pi / 2, 2.0, -1.1):
+        pose = ObjectPose.from_yaw(yaw, (0.1, -0.2, 0.9))
+        np.testing.assert_allclose(pose.rotation, Rotation.from_euler("z", yaw).as_matrix(), atol=1e-12)
+    q = apply_pose(ObjectPose.from_yaw(np.pi / 2, (0.0, 0.0, 0.0)), np.array([[1.0, 0.0, 0.0]]))
+    np.testing.assert_allclose(q, [[0.0, 1.0, 0.0]], atol=1e-12)                    # +x turns to +y
+
+
 def test_make_object_returns_independent_copies():
     a = make_object("can")
     a.apply_translation([1.0, 0.0, 0.0])

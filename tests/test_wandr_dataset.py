@@ -123,6 +123,21 @@ def test_hindsight_goal_is_the_future_right_wrist(clips, bm):
     assert torch.equal(again["t_goal"], b["t_goal"]) and not torch.equal(other["t_goal"], b["t_goal"])
 
 
+def test_hindsight_offsets_cover_their_whole_range_uniformly():
+    """t_G - i of a locomotion window is uniform over [steps + 1, min(horizon, T - 1 - i)], both ends included: on a
+    6-frame clip from frame 1, the offsets 1..4 come equally often (chi-square) and nothing else."""
+    from scipy import stats
+
+    T = 6
+    p = I.pose_from_rotmats(torch.zeros(T, 3), torch.eye(3).expand(T, 22, 3, 3)).float()
+    clips = W.ClipSet(p, torch.tensor([0, T]), torch.zeros(1, 22, 3), torch.zeros(1, 10), torch.zeros(1, 3),
+                      torch.tensor([-1]), torch.tensor([0]), ["locomotion/a.npz"])
+    b = W.make_batch(clips, torch.tensor([[0, 1]]).expand(4000, 2), steps=0, generator=torch.Generator().manual_seed(0))
+    counts = np.bincount(b["t_goal"].numpy(), minlength=6)
+    assert counts[0] == 0 and counts[5] == 0 and (counts[1:5] > 0).all()
+    assert stats.chisquare(counts[1:5]).pvalue > 1e-3
+
+
 def test_hindsight_horizons_cover_the_test_horizon(clips):
     ds = W.WindowDataset(clips.of_kind("locomotion"), max_steps=0)
     loco = clips.of_kind("locomotion")
