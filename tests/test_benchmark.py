@@ -244,3 +244,18 @@ def test_a_row_holds_one_protocol_the_common_motions_and_goals_saga_clips_get_ro
         100 * sliding["SAGA (WholeGrasp + MotionFill, ours)"])
     quick = {"rollouts": {"clips": 2}, "sliding": sliding}                  # a --quick run's 2 clips are named so
     assert "SAGA (MotionFill + GraspMotion-Opt) · GOAL's 2 clips" in {r.method for r in goal_rows(quick)}
+
+
+def test_goal_sliding_rows_are_percent():
+    """The foot-sliding column is in percent: GOAL's published 13.7 % is eval_goal's 0.137, and a measured share of
+    0.137 (GOAL) or 0.25 (SAGA) reads 13.7 and 25.0."""
+    from graspkit.benchmark import PAPER_ROWS, goal_rows
+    from graspkit.eval_goal import PAPER_SLIDING
+
+    paper = [v for t, m, s, v in PAPER_ROWS if s == "GOAL Sec. 4.2" and m.startswith("GOAL")][0]["slide_goal"]
+    assert paper == pytest.approx(100 * PAPER_SLIDING["GOAL"])
+    rows = goal_rows({"sliding": {"GOAL (GNet + MNet, ours)": 0.137, "SAGA (WholeGrasp + MotionFill, ours)": 0.25},
+                      "rollouts": {"clips": 4}})
+    got = {r.method: r.values["slide_goal"] for r in rows}
+    assert got["GOAL (GNet + MNet)"] == pytest.approx(13.7)
+    assert [v for k, v in got.items() if k.startswith("SAGA")][0] == pytest.approx(25.0)

@@ -94,3 +94,38 @@ def test_grabnet_only_gives_the_full_runs_grabnet_row(tmp_path):
     assert list(only["rows"]) == ["GrabNet-SMPLX"]
     assert only["rows"]["GrabNet-SMPLX"] == full["rows"]["GrabNet-SMPLX"]
     assert only["rows"]["GrabNet-SMPLX"]["apd"] > 0.01
+
+
+def test_apd_is_taken_within_each_placement():
+    """APD is the mean pairwise distance of one placement's samples, averaged over placements (scipy's pdist): two
+    placements 5 m apart must not count their distance to each other."""
+    import torch
+    from scipy.spatial.distance import pdist
+
+    g = torch.Generator().manual_seed(0)
+    base = torch.randn(143, 3, generator=g)
+    a = base + 0.01 * torch.randn(3, 143, 3, generator=g)
+    b = base + 5.0 + 0.02 * torch.randn(3, 143, 3, generator=g)
+    rows = [{"contact": 1.0, "volume_cm3": 0.0, "depth_cm": 0.0}] * 6
+    want = np.mean([pdist(x.reshape(3, -1).double().numpy()).mean() for x in (a, b)])
+    assert summarise(rows, torch.cat([a, b]), per=3)["apd"] == pytest.approx(want, abs=1e-9)
+
+
+def test_body_rows_measure_each_body_against_its_own_placement():
+    """Body i belongs to placement i // per: its floor is at z = -t_O of that placement (object frame), so the
+    lowest vertex's height above it is min z + t_O of its own placement."""
+    import torch
+
+    from graspkit.body import BodyModel
+    from graspkit.eval_saga import Placement, body_rows
+    from graspkit.paths import default_model_path
+
+    bm = BodyModel.from_file(default_model_path())
+    v = bm.forward_rotmats(torch.eye(3).expand(1, 55, 3, 3), betas=torch.zeros(1, 10), transl=torch.zeros(1, 3)).vertices
+    v = v + torch.tensor([3.0, 0.0, 0.0])                                 # far from the object: no contact
+    verts = torch.cat([v + torch.tensor([0.0, 0.0, dz]) for dz in (0.0, 0.1, 0.2, 0.3)])
+    pls = [Placement("mug", torch.zeros(1, 3), torch.zeros(1, 3), h, torch.eye(3), torch.zeros(143, 3),
+                     torch.zeros(143), torch.zeros(1), {}) for h in (0.5, 1.2)]
+    rows = body_rows(bm, verts, pls, per=2, refine=1)
+    want = [100 * (float(verts[i, :, 2].min()) + (0.5, 1.2)[i // 2]) for i in range(4)]
+    np.testing.assert_allclose([r["floor_cm"] for r in rows], want, atol=1e-4)

@@ -198,3 +198,31 @@ def test_rollouts_only_recomputes_the_rollouts_on_the_floor_and_keeps_sagas_row(
     assert all(x["frames"] <= 60 for x in rows)
     assert main(["--rollouts-only", "--data", str(tmp_path), "--out", str(out), "--max-frames", "1"]) == 2
     assert "--max-frames: expected an integer >= 2, got 1" in capsys.readouterr().err
+
+
+def test_rollout_sliding_is_pooled_over_frame_pairs(monkeypatch):
+    """GOAL's foot sliding over the rollouts is the share of all frame pairs that slide (as the other rows pool
+    theirs), not a mean of per-clip shares: a 5-frame clip standing still and a 21-frame one sliding 2 cm a frame
+    give 20 / 24, not 1 / 2."""
+    import math
+
+    import graspkit.models.mnet as mnet_mod
+    from graspkit.eval_goal import rollout_eval
+    from graspkit.models.mnet import ApproachClip, Rollout
+    from graspkit.rotations import axis_angle_to_rot6d
+
+    aa = torch.zeros(55, 3)
+    aa[0] = torch.tensor([math.pi / 2, 0, 0])
+    r6 = axis_angle_to_rot6d(aa)
+
+    def fake_rollout(mnet, body, start, goal, betas, points, centre, basis, **kw):
+        T, step = (5, 0.0) if float(start[1][0]) == 0.0 else (21, 0.02)
+        tr = start[1][None].repeat(T, 1) + torch.arange(T)[:, None] * torch.tensor([step, 0.0, 0.0])
+        return Rollout(r6[None].repeat(T, 1, 1), tr, torch.ones(T), False, None)
+
+    monkeypatch.setattr(mnet_mod, "rollout", fake_rollout)
+    clips = [ApproachClip(r6[None].repeat(3, 1, 1), torch.tensor([[x, 0.0, 0.0]] * 3), torch.zeros(10), 2,
+                          torch.zeros(10, 3), torch.zeros(3)) for x in (0.0, 3.0)]
+    res = rollout_eval(None, clips, refine=False)
+    assert [c["sliding"] for c in res["clips"]] == [0.0, 1.0]
+    assert res["sliding"] == pytest.approx(20 / 24)

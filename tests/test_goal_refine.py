@@ -382,3 +382,52 @@ def test_pen_terms_and_their_gradient_equal_a_from_scratch_evaluation_bit_for_bi
     a, b = grads(shared), grads(from_scratch)
     assert float(a[0]) > 0.01 and float(a[1]) > 0.01                  # both sums see the hand in the ball
     assert all(torch.equal(x, y) for x, y in zip(a, b))
+
+
+def test_head_term_is_zero_at_the_predicted_pose_and_q_points_where_the_body_faces(setup):
+    """Eq. 6's q is the unit vector from the back of the head to the nose: a standing body (root R_x(90)) faces world
+    -y, and with q^ taken from the same body, E_q is zero at GNet's pose (a reversed q would make it largest)."""
+    bm, gv, ref = setup
+    aa = torch.zeros(1, 55, 3)
+    aa[0, 0] = torch.tensor([math.pi / 2, 0, 0])
+    aa[0, J["head"]] = torch.tensor([0.2, 0.3, 0.0])                      # the head turned a little
+    rot6d, transl, betas = axis_angle_to_rot6d(aa), torch.zeros(1, 3), torch.zeros(1, 10)
+    V = bm.forward_rotmats(pose_rotmats(rot6d), betas=betas, transl=transl).vertices
+    q = gv.head_direction(V)
+    assert float(q[0, 1]) < -0.8
+    hat = {"rot6d": rot6d, "transl": transl, "head_dir": q, "hand_offsets": torch.zeros(1, 99, 3)}
+    assert float(ref.energy(rot6d, transl, betas, hat, torch.zeros(1, 10, 3))["q"][0]) < 1e-5
+
+
+def test_restart_starts_from_the_lowest_energy_shift(setup, monkeypatch):
+    """The restart begins at gamma^ plus the RESTART_SHIFTS entry of the lowest full energy: the second run's start
+    equals the brute-force argmin over the candidate starts (which differ in energy, so the choice matters)."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    from graspkit.objects.catalogue import make_object
+    from graspkit.objects.sdf import SDFGrid
+    from graspkit.optim.goal_refine import PEN_WEIGHTS, RESTART_SHIFTS, PosedSDF
+
+    bm, gv, _ = setup
+    ref = GraspRefiner(bm, gv)                                           # its own: _descend is spied on
+    case = np.load(Path(__file__).parent / "data" / "goal_restart_case.npz", allow_pickle=False)
+    hat = {k[4:]: torch.as_tensor(case[k])[None] for k in case.files if k.startswith("hat_")}
+    betas, points = torch.as_tensor(case["betas"])[None], torch.as_tensor(case["points"])[None]
+    R, t = torch.as_tensor(case["R"]), torch.as_tensor(case["t"])
+    sdf = PosedSDF([SDFGrid.from_mesh(make_object(str(case["object_name"])), resolution=96)], R[None], t[None])
+    w = replace(PEN_WEIGHTS, steps=30, restart_sunk=0.002)
+    starts = []
+    descend = ref._descend
+
+    def spy(hat_, betas_, pts_, w_, ground, sdf_, transl0):
+        starts.append(transl0.clone())
+        return descend(hat_, betas_, pts_, w_, ground, sdf_, transl0)
+
+    monkeypatch.setattr(ref, "_descend", spy)
+    out = ref(hat, betas, points, w, sdf=sdf)
+    assert len(starts) == 2 and out.restarted is not None
+    e = torch.stack([ref.full_energy(hat["rot6d"], hat["transl"] + d, betas, hat, points, w, 0.0, sdf)[0]
+                     for d in RESTART_SHIFTS])[:, 0]
+    assert float(e.max() - e.min()) > 1e-3
+    torch.testing.assert_close(starts[1], hat["transl"] + RESTART_SHIFTS[int(e.argmin())])

@@ -329,3 +329,27 @@ def test_goal_repeat_adds_the_windows_near_the_goal_and_vel_noise_moves_only_vel
     for k in ("pose", "goal", "iaa"):                                          # only v̇_t (in 'verts') changes
         torch.testing.assert_close(noisy[k], clean[k])
     assert not torch.allclose(noisy["verts"], clean["verts"])
+
+
+def test_refinement_starts_the_frame_after_the_hand_enters_10_cm(setup):
+    """§3.4: 10 frames a step while far; once the hand comes within 10 cm of the goal hand the rest of that step is
+    dropped and the motion goes on one refined frame at a time. A stand-in MNet walking the body 2 cm a frame
+    towards a goal 25 cm ahead: the hand enters the 10 cm ball at frame 8, mid-step, and frame 9 is refined."""
+    from graspkit.optim.goal_refine import GOAL_HAND_RADIUS
+
+    bm, gv, body = setup
+    net = MNet(MNetConfig())
+    fd = net.frame_dim
+    with torch.no_grad():                       # its decoder's weights are zero: the output is norm_out's mean
+        for k in range(10):
+            net.norm_out.mean[k * fd + 55 * 6 + 1] = 0.02 * (k + 1)      # d_transl along the canonical heading
+    aa = torch.zeros(55, 3)
+    aa[0] = torch.tensor([math.pi / 2, 0, 0])                              # standing, facing world -y
+    r6 = axis_angle_to_rot6d(aa)
+    start, goal = (r6, torch.zeros(3)), (r6, torch.tensor([0.0, -0.25, 0.0]))
+    pts = torch.randn(200, 3, generator=torch.Generator().manual_seed(0)) * 0.02 + torch.tensor([0.3, -0.6, 0.9])
+    r = rollout(net, body, start, goal, torch.zeros(10), pts, pts.mean(0), bps_basis(), max_frames=16)
+    d = r.hand_dist
+    torch.testing.assert_close(d[:9], 0.25 - 0.02 * torch.arange(9.0), atol=2e-4, rtol=0)
+    first_in = int(torch.nonzero(d < GOAL_HAND_RADIUS)[0, 0])
+    assert first_in == 8 and r.first_refined == first_in + 1

@@ -257,3 +257,21 @@ def test_a_tiny_overfit_reduces_every_reconstruction_term(arch):
     # from 10.8 cm; in train mode (sampled latents, batch statistics) the last bits of other CPUs' kernels move it:
     # 0.49-1.29 cm under the four floating-point kernel sets measured (MKL_CBWR, ATEN_CPU_CAPABILITY)
     assert last["marker_error_cm"] < 2.0
+
+
+def test_loss_weights_are_the_papers_and_weight_the_velocity_term():
+    """SAGA A.4's {lambda_KL, l1, l2, l3, l4} = {1, 0.05, 1, 1, 0.5}, and TrajFill's part of Eq. 8 on a hand-built batch
+    is L_traj + l1 L_vel + lambda_KL Psi(KL), recomputed here from the encoder's and decoder's outputs."""
+    c = MotionFillConfig()
+    assert (c.lambda_kl, c.l1, c.l2, c.l3, c.l4) == (1.0, 0.05, 1.0, 1.0, 0.5)
+    torch.manual_seed(0)
+    m = MotionFillVAE().eval()
+    traj = torch.randn(2, 62, 4)
+    batch = {"traj": traj, "traj_interp": torch.zeros(2, 62, 4), "vel": torch.zeros(2, 61, 3)}
+    out = m.loss(batch, parts=("traj",))
+    mu, logvar = m.traj.encode(traj, batch["traj_interp"])
+    pred = m.traj.decode(mu, batch["traj_interp"])                      # eval mode: z = mu
+    l_traj = (pred - traj).abs().mean()
+    l_vel = ((pred[:, 1:] - pred[:, :-1]) - (traj[:, 1:] - traj[:, :-1])).abs().mean()
+    torch.testing.assert_close(out["loss"], l_traj + 0.05 * l_vel + robust_kl(mu, logvar, per_dim=True),
+                               atol=1e-5, rtol=1e-5)

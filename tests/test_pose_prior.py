@@ -87,3 +87,17 @@ def test_a_changed_seed_or_epoch_count_starts_a_new_run(tmp_path, monkeypatch):
     train_pose_prior(tmp_path / "x.pt", epochs=2, seed=1, **kw)                     # more epochs: a fresh 2-epoch run
     a, c = weights(tmp_path / "x.pt"), weights(tmp_path / "z.pt")
     assert all(torch.equal(a[k], c[k]) for k in a)
+
+
+def test_rec_is_the_per_pose_sum_of_squared_matrix_errors():
+    """The pose prior's reconstruction term: the squared error of the 21 decoded rotation matrices summed per pose,
+    averaged over the batch, against scipy's matrices of the input axis-angles."""
+    from scipy.spatial.transform import Rotation
+
+    torch.manual_seed(0)
+    m = PosePrior().eval()
+    x = 0.3 * torch.randn(4, 63)
+    out = m.loss(x)
+    R = m.decode_rotmats(m.encode(x)).detach().double().numpy()
+    target = Rotation.from_rotvec(x.double().numpy().reshape(-1, 3)).as_matrix().reshape(4, 21, 3, 3)
+    np.testing.assert_allclose(out["rec"].item(), ((R - target) ** 2).sum((1, 2, 3)).mean(), rtol=1e-4)
