@@ -112,3 +112,55 @@ def test_the_approach_clip_walks_in_and_holds_the_grasp(fitted):
     hand = va[g - 15:g, fitter.hm.hand_ids].double()                              # the open hand comes in from outside
     depth = max(0.0, -float(min(signed_distance(h, obj).min() for h in hand)))
     assert depth < 0.005, f"the approaching hand is {depth * 100:.1f} cm inside the apple"
+
+
+def test_goal_labels_against_kd_trees():
+    """GOAL's labels of a grasp frame (Eq. 2): b^o is the BPS of the object points minus the object translation, and
+    the offsets go from each of the 400 vertices to its closest object point (scipy KD-trees on the object's own
+    sampled points)."""
+    import math
+
+    from scipy.spatial import cKDTree
+
+    from graspkit.body.markers import goal_vertices
+    from graspkit.data.grasp import object_points
+    from graspkit.data.grasp_make import frame_labels
+    from graspkit.objects.bps import bps_basis
+    from graspkit.objects.placement import ObjectPose
+    from graspkit.optim.grasppose import hand_vertex_ids
+    from graspkit.rotations import axis_angle_to_matrix
+
+    bm = BodyModel.from_file(PROCEDURAL_MODEL, flat_hand_mean=True)
+    aa = torch.zeros(1, 55, 3, dtype=bm.dtype)
+    aa[0, 0] = torch.tensor([math.pi / 2, 0, 0])
+    V = bm.forward_rotmats(axis_angle_to_matrix(aa), betas=torch.zeros(1, 10, dtype=bm.dtype),
+                           transl=torch.zeros(1, 3, dtype=bm.dtype)).vertices[0].double()
+    pose = ObjectPose.from_yaw(0.7, (0.25, -0.55, 0.95))
+    lab = frame_labels(bm, V, "mug", pose, hand_vertex_ids(bm))
+    centred = object_points("mug")[0] @ pose.rotation.T                  # = world points - translation
+    np.testing.assert_allclose(lab["goal.bps_object"], cKDTree(centred).query(bps_basis().double().numpy())[0],
+                               atol=1e-5)
+    world = centred + pose.translation
+    v400 = V[torch.as_tensor(goal_vertices(bm).vertex_ids)].numpy()
+    _, idx = cKDTree(world).query(v400)
+    np.testing.assert_allclose(lab["goal.offsets"], world[idx] - v400, atol=1e-5)
+
+
+def test_two_touching_regions_are_not_a_grasp():
+    """The acceptance rule: a non-pinch grasp needs at least three regions (palm, pads) within 3 mm."""
+    base = {"contact": 1.0, "depth_cm": 0.1, "volume_cm3": 0.5, "feet_cm": 0.2, "arm_residual_deg": 10.0}
+    assert not accepted({**base, "regions_mm": [2.0, 2.0, 9.0, 9.0, 9.0, 9.0]}, "power")
+    assert accepted({**base, "regions_mm": [2.0, 2.0, 2.0, 9.0, 9.0, 9.0]}, "power")
+
+
+def test_builder_centre_maps_the_builder_mesh_onto_the_catalogue_mesh():
+    """builder_centre is the builder mesh's bounding-box centre: moved by it, the builder's mesh has the catalogue
+    mesh's bounds (make_object puts the origin at the box centre)."""
+    from graspkit.data.grasp import builder_centre
+    from graspkit.objects.catalogue import SPECS
+
+    for name in sorted(GRASP_PARTS):
+        v = np.asarray(SPECS[name].build().to_mesh().vert_properties, np.float64)[:, :3]
+        canon = make_object(name)
+        np.testing.assert_allclose(v.min(0) - builder_centre(name), canon.bounds[0], atol=1e-6, err_msg=name)
+        np.testing.assert_allclose(v.max(0) - builder_centre(name), canon.bounds[1], atol=1e-6, err_msg=name)

@@ -59,7 +59,8 @@ def test_a_file_names_the_body_model_it_was_made_with(tmp_path, monkeypatch):
 def test_approach_contacts_are_labelled_on_every_frame_the_body_touches(tmp_path):
     """Per-frame body contacts of an approach clip against trimesh's distances on the smplx body: every frame before
     the goal frame with a body vertex within 1 cm of the object is labelled, with the same vertices (this clip's hand
-    passes through the bottle 29-37 frames before the goal frame, which only the 20 frames before it used to be)."""
+    passes through the bottle 29-37 frames before the goal frame, which only the 20 frames before it used to be);
+    the goal frame itself holds the goal grasp's labels."""
     import smplx
     import torch
     import trimesh
@@ -74,10 +75,10 @@ def test_approach_contacts_are_labelled_on_every_frame_the_body_touches(tmp_path
     z = np.load(path, allow_pickle=False)
     g, P = int(z["grasp.goal_frame"]), z["body.params.fullpose"].reshape(-1, 55, 3)
     ref = smplx.create(str(default_model_path().parent.parent), model_type="smplx", gender="neutral", ext="npz",
-                       use_pca=False, flat_hand_mean=True, batch_size=g)
-    t = lambda x: torch.as_tensor(np.asarray(x[:g]), dtype=torch.float32)  # noqa: E731
+                       use_pca=False, flat_hand_mean=True, batch_size=g + 1)
+    t = lambda x: torch.as_tensor(np.asarray(x[:g + 1]), dtype=torch.float32)  # noqa: E731
     with torch.no_grad():
-        V = ref(betas=t(np.repeat(z["body.betas"][None], g, 0)), global_orient=t(P[:, 0]), body_pose=t(P[:, 1:22]),
+        V = ref(betas=t(np.repeat(z["body.betas"][None], g + 1, 0)), global_orient=t(P[:, 0]), body_pose=t(P[:, 1:22]),
                 jaw_pose=t(P[:, 22]), leye_pose=t(P[:, 23]), reye_pose=t(P[:, 24]), left_hand_pose=t(P[:, 25:40]),
                 right_hand_pose=t(P[:, 40:55]), transl=t(z["body.params.transl"])).vertices.numpy()
     mesh = trimesh.load(tmp_path / str(z["object.object_mesh"]), process=False)
@@ -86,7 +87,7 @@ def test_approach_contacts_are_labelled_on_every_frame_the_body_touches(tmp_path
     mesh.apply_transform(R)
     mesh.apply_translation(z["object.params.transl"][0])
     touching, agree, early = 0, [], 0
-    for f in range(g):
+    for f in range(g + 1):
         near = np.flatnonzero(((V[f] > mesh.bounds[0] - 0.011) & (V[f] < mesh.bounds[1] + 0.011)).all(1))
         within = np.zeros(len(V[f]), bool)
         if len(near):
@@ -97,3 +98,4 @@ def test_approach_contacts_are_labelled_on_every_frame_the_body_touches(tmp_path
             assert z["contact.body"][f].any(), f"frame {f} of {g}: the body touches the object, labelled 0"
             agree.append(np.mean(within == z["contact.body"][f].astype(bool)))
     assert early >= 5 and touching >= early and min(agree) > 0.999
+    assert z["contact.body"][g].any() and z["contact.object"][g].any() and z["contact.markers"][g].any()

@@ -81,3 +81,30 @@ def test_errors_name_the_file_and_key(tmp_path):
     np.savez(tmp_path / "y.npz", **a)
     with pytest.raises(SequenceFileError, match="object.params.transl"):
         load_grasp_sequence(tmp_path / "y.npz")
+
+
+def _joint_valued_seq(T: int, fps: float) -> GraspSequence:
+    """A sequence whose every joint carries its own value (0.01 j about x), with a per-frame contact count."""
+    poses = np.zeros((T, 55, 3), np.float32)
+    poses[:, :, 0] = 0.01 * np.arange(55)
+    return GraspSequence(poses, np.zeros((T, 3)), np.zeros(10), fps, "mug", np.zeros((T, 3)), np.zeros((T, 3)),
+                         contacts={"object": (np.arange(T) % 251)[:, None].astype(np.uint8)})
+
+
+def test_per_part_keys_follow_smplx_joint_order():
+    """GRAB's per-part keys in smplx's joint order (smplx.joint_names: 22 jaw, 23 left eye, 24 right eye)."""
+    import smplx.joint_names as jn
+
+    from graspkit.data.grab import to_arrays
+
+    a = to_arrays(_joint_valued_seq(2, 30.0))
+    for key, name in (("jaw_pose", "jaw"), ("leye_pose", "left_eye_smplhf"), ("reye_pose", "right_eye_smplhf")):
+        j = jn.JOINT_NAMES.index(name)
+        np.testing.assert_allclose(a[f"body.params.{key}"][0], [0.01 * j, 0, 0], atol=1e-7, err_msg=key)
+
+
+def test_contacts_are_resampled_with_the_poses(tmp_path):
+    """A 120 fps file read at 30 fps keeps every fourth frame, its contacts included."""
+    s = load_grasp_sequence(save_grasp_sequence(tmp_path / "s.npz", _joint_valued_seq(121, 120.0)), fps=30.0)
+    assert s.num_frames == 31
+    np.testing.assert_array_equal(s.contacts["object"][:, 0], 4 * np.arange(31))
