@@ -103,7 +103,9 @@ def test_elbow_flexion_is_the_forearm_swinging_forward(bm, side):
     deg beyond its -10 deg limit."""
     import torch
 
-    j, w = (18, 20) if side == "left" else (19, 21)
+    from graspkit.body.skeleton import JOINT_INDEX
+
+    j, w = JOINT_INDEX[f"{side}_elbow"], JOINT_INDEX[f"{side}_wrist"]
     axis = np.array(M.HINGES[f"{side}_elbow"][0], float)
     for deg, excess in ((90, 0.0), (-30, 20.0)):
         body_pose = torch.zeros(1, 21, 3, dtype=bm.dtype)
