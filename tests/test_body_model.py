@@ -100,6 +100,27 @@ def test_gradcheck_through_pose_and_shape():
     assert torch.autograd.gradcheck(f, (pose, betas))
 
 
+def test_a_batch_skinned_in_chunks_matches_smplx_and_the_whole_batch(random_model_dir, monkeypatch):
+    import graspkit.body.model as body_model
+
+    ref = smplx.create(str(random_model_dir), model_type="smplx", gender="neutral", ext="npz", use_pca=False)
+    ours = BodyModel.from_file(random_model_dir / "smplx" / "SMPLX_NEUTRAL.npz")
+    p = _params(8, 45, torch.float32, seed=3)
+    with torch.no_grad():
+        whole = ours(**p)
+        monkeypatch.setattr(body_model, "SKIN_CHUNK_BYTES", 3 * 12 * ours.num_vertices * 4)   # chunks of 3, 3, 2
+        chunked, theirs = ours(**p), ref(**p)
+    assert (chunked.vertices - theirs.vertices).abs().max() <= 1e-5
+    assert torch.allclose(chunked.vertices, whole.vertices, rtol=0, atol=1e-6)
+    assert torch.equal(chunked.joints, whole.joints)
+    # gradients flow through the chunks: one body a chunk, float64
+    bm = BodyModel(random_smplx_arrays(num_vertices=40, num_faces=20, seed=4), dtype=torch.float64)
+    monkeypatch.setattr(body_model, "SKIN_CHUNK_BYTES", 1)
+    g = torch.Generator().manual_seed(2)
+    pose = (torch.randn(3, 63, dtype=torch.float64, generator=g) * 0.5).requires_grad_(True)
+    assert torch.autograd.gradcheck(lambda x: bm(body_pose=x, transl=x[:, :3]).vertices, (pose,))
+
+
 def test_forward_rotmats_matches_axis_angle_forward():
     bm = BodyModel(random_smplx_arrays(num_vertices=200, num_faces=50, seed=5), dtype=torch.float64, flat_hand_mean=True)
     p = _params(2, 45, torch.float64, seed=2)
