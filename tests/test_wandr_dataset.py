@@ -176,6 +176,20 @@ def test_stats_match_the_walking_speed_measured_independently(clips):
     assert stats["state_mean"][7:133].abs().max() <= 1.0                  # 6D entries of rotations
 
 
+def test_stats_of_every_delta_and_state_column_match_numpy_over_every_frame(clips):
+    stats = W.compute_stats(clips, samples=300)
+    d, st = [], []
+    for c in range(len(clips)):                               # clip by clip: frames with a frame before and after
+        p = clips.p[clips.offsets[c]:clips.offsets[c + 1]]
+        d.append(I.pose_to_delta(p[1:-1], p[2:]).numpy())
+        st.append(I.state_features(p[1:-1], I.pose_to_delta(p[:-2], p[1:-1])).numpy())
+    for name, x in (("delta", np.concatenate(d).astype(np.float64)), ("state", np.concatenate(st).astype(np.float64))):
+        assert stats[f"{name}_mean"].shape == (x.shape[1],)          # 135 and 268 columns, several blocks of 64
+        np.testing.assert_allclose(stats[f"{name}_mean"].numpy(), x.mean(0), rtol=1e-6, atol=1e-7)
+        np.testing.assert_allclose(stats[f"{name}_std"].numpy(), np.maximum(x.std(0, ddof=1), W.STD_FLOOR),
+                                   rtol=1e-5, atol=1e-7)
+
+
 def test_held_out_starts_are_test_split_and_canonical(bm):
     names = W.test_start_names(STUBS, n=2, seed=3)
     assert all(W.split_of(n, 3) == "test" for n in names)
