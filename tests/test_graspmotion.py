@@ -37,7 +37,8 @@ def test_markers_of_a_known_sequence_give_the_sequence_back(bm, clip):
 def test_polish_removes_adams_frame_to_frame_jitter_on_a_body_standing_still(bm, clip):
     """A body standing still (one frame repeated): after Alg. 2's 300 steps at lr 0.005 Adam leaves every frame's
     parameters jittering, so the heel markers move between frames; the polish at lr 0.001 holds them far below
-    SAGA's 75 mm/s skating threshold (the median over frames; the first frame has its own learning rate)."""
+    SAGA's 75 mm/s skating threshold (the median over frames; the first frame has its own learning rate). Measured:
+    13 mm/s against 34 without the polish (torch 2.13; 14 / 31 with other kernels, 20 / 48 on torch 2.3)."""
     from graspkit.eval_motionfill import heel_columns
 
     markers, _, betas, _ = clip
@@ -47,7 +48,7 @@ def test_polish_removes_adams_frame_to_frame_jitter_on_a_body_standing_still(bm,
         opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("smooth",), polish=polish))
         h = opt.fit(still, betas[None, :10], progress=False).markers[0][:, heel_columns()]
         speeds[polish[0]] = float(((h[1:] - h[:-1]).norm(dim=-1) * 30).median())
-    assert speeds[100] < 0.015 and speeds[100] < 0.5 * speeds[0], speeds
+    assert speeds[100] < 0.025 and speeds[100] < 0.5 * speeds[0], speeds          # a third of 75 mm/s; half
     with pytest.raises(ValueError, match="polish"):
         GraspMotionConfig(polish=(10, 0.0))
 
