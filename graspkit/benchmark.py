@@ -28,9 +28,18 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
+
+if TYPE_CHECKING:
+    import trimesh
+    from matplotlib.figure import Figure
+
+    from graspkit.body import BodyModel
+    from graspkit.data.grab import GraspSequence
+    from graspkit.data.motion import Motion
 
 GRASP_METRICS = {  # key: (column title, higher is better)
     "contact_ratio": ("contact ratio ↑", True), "volume_cm3": ("penetration volume cm³ ↓", False),
@@ -92,7 +101,7 @@ def split_sequences(folders: list[Path], kind: str, split: str) -> list:
     return out
 
 
-def object_mesh_at(seq, frame: int):
+def object_mesh_at(seq: GraspSequence, frame: int) -> trimesh.Trimesh:
     """The sequence's catalogue object as a trimesh at its pose at `frame`."""
     from graspkit.objects.catalogue import make_object
     from graspkit.objects.placement import ObjectPose, apply_pose
@@ -101,14 +110,14 @@ def object_mesh_at(seq, frame: int):
                       make_object(seq.object_name))
 
 
-def sequence_motion(seq):
+def sequence_motion(seq: GraspSequence) -> Motion:
     """A GraspSequence as a graspkit Motion (same poses, translation, shape and frame rate)."""
     from graspkit.data.motion import Motion
 
     return Motion(seq.poses, seq.trans, seq.betas[:10], seq.fps)
 
 
-def ground_truth_grasps(bm, folders: list[Path], split: str = "test", n: int | None = None) -> Row:
+def ground_truth_grasps(bm: BodyModel, folders: list[Path], split: str = "test", n: int | None = None) -> Row:
     """Grasp quality of the synthetic ground truth: the last frame of every accepted `split` grasp file (<= n)."""
     from graspkit.metrics import grasp_metrics, grasp_quality_table
 
@@ -126,7 +135,7 @@ def ground_truth_grasps(bm, folders: list[Path], split: str = "test", n: int | N
                f"{len(seqs)} grasps of {', '.join(objs)}")
 
 
-def planner_motion(bm, folders: list[Path], split: str = "test", n: int | None = None) -> Row:
+def planner_motion(bm: BodyModel, folders: list[Path], split: str = "test", n: int | None = None) -> Row:
     """Motion quality of the procedural planner's approach-and-grasp clips (`split` objects, <= n clips)."""
     from graspkit.metrics import motion_quality
 
@@ -258,7 +267,8 @@ def run_wandr(checkpoint: Path, out: Path, quick: bool) -> dict:
 
 # ------------------------------------------------------------------------ every method's motions, one metrics function
 
-def motionfill_motions(files: list[Path], checkpoints: Path, steps: tuple[int, int] = (100, 300), seed: int = 0):
+def motionfill_motions(files: list[Path], checkpoints: Path, steps: tuple[int, int] = (100, 300), seed: int = 0
+                       ) -> tuple[list[Motion], list[dict]]:
     """SAGA stage 2 on approach clips `files`: one MotionFill-VAE sample each into the clip's grasp, fitted by
     GraspMotion-Opt (Alg. 2, batched); Motions in MotionFill's canonical frame (A.3) with the floor at z = 0, and
     the scenes (object mesh moved the same way)."""
@@ -319,7 +329,7 @@ def wandr_motions(checkpoint: Path, goals: torch.Tensor, t_goal: int, seed: int 
     return motions
 
 
-def common_motion_rows(bm, folders: list[Path], checkpoints: Path, k: int = 4) -> list[Row]:
+def common_motion_rows(bm: BodyModel, folders: list[Path], checkpoints: Path, k: int = 4) -> list[Row]:
     """graspkit.metrics.motion_quality (WANDR's FS, SAGA's skating, GOAL's sliding, jerk) on k motions of each
     method: SAGA's MotionFill + GraspMotion-Opt and GOAL's GNet + MNet from the first k test-object approach clips,
     WANDR to k goals of its grid (2 m, 0.9 m high, k directions, 4 s). Rows of their own ("<method> · k common
@@ -510,7 +520,7 @@ def to_csv(rows: list[Row]) -> str:
     return buf.getvalue()
 
 
-def figure(rows: list[Row]):
+def figure(rows: list[Row]) -> Figure:
     """Bar charts, one panel per metric that any row gives: ours solid, the papers' hatched (where they give one)."""
     import matplotlib.pyplot as plt
 

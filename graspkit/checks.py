@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -64,7 +65,7 @@ def check_generator(generator: Any, name: str = "generator") -> None:
 
 
 # argparse types: a bad value becomes "argument --flag: ..." and exit code 2
-def float_type(low: float, strict: bool):
+def float_type(low: float, strict: bool) -> Callable[[str], float]:
     """An argparse type for finite floats above low (strict) or at least low."""
     import argparse
 
@@ -81,7 +82,7 @@ nonneg_float = float_type(0.0, strict=False)     # loss weights, noise
 positive_float = float_type(0.0, strict=True)    # time limits, learning rates
 
 
-def count_type(least: int):
+def count_type(least: int) -> Callable[[str], int]:
     """An argparse type for integers >= least."""
     import argparse
 

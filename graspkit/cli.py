@@ -9,10 +9,14 @@ import os
 import sys
 import tempfile
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, TextIO
 
 from graspkit import __version__
+
+if TYPE_CHECKING:
+    from graspkit.objects.placement import ObjectPose
 
 
 def _cmd_body_build(args: argparse.Namespace) -> int:
@@ -84,7 +88,7 @@ def _object_pose(at: list[float] | None):
     return ObjectPose.from_yaw(np.deg2rad(at[3]), np.array(at[:3]))
 
 
-def object_range_notes(pose) -> list[str]:
+def object_range_notes(pose: ObjectPose | None) -> list[str]:
     """Warnings when an object placed with --at (an ObjectPose, or None: drawn in range) has its centre outside the
     0.5-1.7 m heights of the grasp and approach data the SAGA and GOAL networks were trained on."""
     from graspkit.objects.placement import GRASP_HEIGHTS
@@ -184,7 +188,7 @@ WANDR_GOAL_LIMIT = 50.0       # m: the farthest goal `graspkit wandr` takes (30 
 AT_HEIGHT_LIMIT = 3.0         # m: the highest object centre `graspkit saga/goal --at` takes
 
 
-def wandr_range_notes(goal, seconds: float) -> list[str]:
+def wandr_range_notes(goal: Sequence[float], seconds: float) -> list[str]:
     """Warnings when a goal (start frame: the pelvis above the origin) and time to it leave the range the shipped
     WANDR model was trained and evaluated on: beyond 8 s, faster than 1.5 m/s on the ground, below the floor or above
     the highest training goals (1.9 m)."""
@@ -517,7 +521,8 @@ def main(argv: list[str] | None = None) -> int:
     with warnings.catch_warnings():
         shown = warnings.showwarning
 
-        def note(message, category, filename, lineno, file=None, line=None) -> None:
+        def note(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                 file: TextIO | None = None, line: str | None = None) -> None:
             if "graspkit" in Path(filename).parts:
                 print(f"graspkit: note: {message}", file=sys.stderr)
             else:

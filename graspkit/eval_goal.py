@@ -17,8 +17,10 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 from functools import lru_cache
+from collections.abc import Sequence
 from itertools import zip_longest
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -31,6 +33,17 @@ from graspkit.models.gnet import pose_rotmats
 from graspkit.models.mnet import STALL_FRAMES, MNet, MNetWindows, predict_horizon
 from graspkit.rotations import rotation_about_z
 
+if TYPE_CHECKING:
+    import argparse
+
+    import trimesh
+
+    from graspkit.body import BodyModel
+    from graspkit.data.grab import GraspSequence
+    from graspkit.models.gnet import GNet
+    from graspkit.models.mnet import ApproachClip, MNetConfig
+    from graspkit.optim.goal_refine import GraspRefineWeights, PosedSDF
+
 PAPER_TAB1 = {  # GOAL Tab. 1: penetration volume (cm^3), contact ratio
     "GrabNet [57]": (2.65, 1.00), "GrabNet-SMPL-X": (7.33, 0.87), "GNet w/o opt": (5.32, 0.87),
     "GNet": (2.22, 1.00), "GRAB (GT)": (1.95, 1.00)}
@@ -42,7 +55,7 @@ PEN_ROW = "GNet + E_pen (graspkit)"   # Tab. 1's extra row: the refinement with 
 TAB1_ROWS = ("GrabNet-SMPL-X", "GNet w/o opt", "GNet", PEN_ROW, "synthetic GT")   # Tab. 1's rows, in order
 
 
-def part_vertex_ids(bm, joints: tuple[str, ...]) -> np.ndarray:
+def part_vertex_ids(bm: BodyModel, joints: tuple[str, ...]) -> np.ndarray:
     """Vertex ids whose dominant skinning joint is one of `joints`."""
     from graspkit.body.skeleton import JOINT_INDEX
 
@@ -50,14 +63,14 @@ def part_vertex_ids(bm, joints: tuple[str, ...]) -> np.ndarray:
     return np.flatnonzero(np.isin(part, [JOINT_INDEX[j] for j in joints]))
 
 
-def right_hand_ids(bm) -> np.ndarray:
+def right_hand_ids(bm: BodyModel) -> np.ndarray:
     """Vertices of the right hand (wrist and fingers)."""
     from graspkit.body.skeleton import FINGERS
 
     return part_vertex_ids(bm, ("right_wrist",) + tuple(f"right_{f}{k}" for f in FINGERS for k in (1, 2, 3)))
 
 
-def feet_ids(bm) -> np.ndarray:
+def feet_ids(bm: BodyModel) -> np.ndarray:
     """Vertices of both feet (ankles and toes)."""
     return part_vertex_ids(bm, ("left_ankle", "right_ankle", "left_foot", "right_foot"))
 
@@ -72,7 +85,8 @@ class V2V:
 
 
 @torch.no_grad()
-def teacher_forced_v2v(mnet: MNet, windows: MNetWindows, bm, index: Tensor, horizon: int = 10, chunk: int = 32) -> V2V:
+def teacher_forced_v2v(mnet: MNet, windows: MNetWindows, bm: BodyModel, index: Tensor, horizon: int = 10,
+                       chunk: int = 32) -> V2V:
     """Tab. 2 protocol: from the true past 5 frames of windows `index`, predict `horizon` frames (one step of a
     10-frame MNet, ten autoregressive steps of a 1-frame one, no refinement), build the SMPL-X meshes of the predicted
     and true frames, and average the per-vertex distances (mm) over the body, the right hand and the feet."""
@@ -111,7 +125,7 @@ def _files(folder, kind: str, split: str | None) -> list:
     return [s for s in seqs if split is None or split_of(s.object_name) == split]
 
 
-def object_points_world(seq, frame: int = 0) -> Tensor:
+def object_points_world(seq: GraspSequence, frame: int = 0) -> Tensor:
     """The sequence's object surface points (P,3) moved to the world by its pose at `frame`."""
     R, t = seq.object_rotation()[frame], seq.object_transl[frame].astype(np.float64)
     if seq.object_points is None:
@@ -266,7 +280,7 @@ def _head_body():
     return SparseBody(body.bm, torch.tensor([gv.head_back, gv.head_front]))
 
 
-def gnet_data(folders) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
+def gnet_data(folders: Sequence[str | Path]) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
     """GNet's train and validation samples: static grasps and the grasp frames of approach clips."""
     train = _all_files(folders, "grasp", "train") + _all_files(folders, "approach", "train")
     val = _all_files(folders, "grasp", "val") + _all_files(folders, "approach", "val")
@@ -275,8 +289,9 @@ def gnet_data(folders) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
     return gnet_samples(train), (gnet_samples(val) if val else None)
 
 
-def run_train_gnet(folders, out, variant: str = "gnet", epochs: int = 60, time_limit_s: float | None = 600.0,
-                   seed: int = 0, threads: int = 2, run_dir=None, progress: bool = True, kl: float | None = None) -> dict:
+def run_train_gnet(folders: Sequence[str | Path], out: str | Path, variant: str = "gnet", epochs: int = 60,
+                   time_limit_s: float | None = 600.0, seed: int = 0, threads: int = 2,
+                   run_dir: str | Path | None = None, progress: bool = True, kl: float | None = None) -> dict:
     """Train GNet ('gnet') or the GrabNet-style SMPL-X CVAE ('smplx') and ship its float16 weights to `out`;
     `kl` overrides λ_KL of Eq. 3 (GNetLossWeights.kl)."""
     import time
@@ -303,7 +318,8 @@ def run_train_gnet(folders, out, variant: str = "gnet", epochs: int = 60, time_l
     return info
 
 
-def mnet_windows(folders, split: str, cfg=None, stride: int = 1, goal_repeat: int = 1) -> MNetWindows:
+def mnet_windows(folders: Sequence[str | Path], split: str, cfg: MNetConfig | None = None, stride: int = 1,
+                 goal_repeat: int = 1) -> MNetWindows:
     """MNet windows of the approach clips of `split` (`goal_repeat`: see MNetWindows)."""
     from graspkit.objects.bps import bps_basis
 
@@ -314,8 +330,9 @@ def mnet_windows(folders, split: str, cfg=None, stride: int = 1, goal_repeat: in
     return MNetWindows(approach_clips(seqs), body, bps_basis(), cfg, stride=stride, goal_repeat=goal_repeat)
 
 
-def run_train_mnet(folders, out, variant: str = "mnet", epochs: int = 20, time_limit_s: float | None = 600.0,
-                   seed: int = 0, threads: int = 2, stride: int = 1, run_dir=None, progress: bool = True,
+def run_train_mnet(folders: Sequence[str | Path], out: str | Path, variant: str = "mnet", epochs: int = 20,
+                   time_limit_s: float | None = 600.0, seed: int = 0, threads: int = 2, stride: int = 1,
+                   run_dir: str | Path | None = None, progress: bool = True,
                    goal_repeat: int = 4, vel_noise: float = 0.005) -> dict:
     """Train MNet or one of its Tab. 2 ablations (MNET_VARIANTS) and ship its float16 weights to `out`; windows within
     30 frames before / 5 after the goal frame are shown `goal_repeat` times per epoch, and the input velocities are
@@ -346,7 +363,7 @@ def run_train_mnet(folders, out, variant: str = "mnet", epochs: int = 20, time_l
     return info
 
 
-def add_goal_train_commands(train_sub) -> None:
+def add_goal_train_commands(train_sub: argparse._SubParsersAction) -> None:
     """`graspkit train gnet` and `graspkit train mnet` (subcommands of `graspkit train`)."""
     from pathlib import Path
 
@@ -392,7 +409,7 @@ def _cmd_train(args, name: str, stubs) -> int:
 
 # ------------------------------------------------------------------------------------------- Tab. 1: GNet grasps
 
-def object_mesh_world(seq, frame: int = 0):
+def object_mesh_world(seq: GraspSequence, frame: int = 0) -> trimesh.Trimesh:
     """The sequence's catalogue object as a trimesh at its pose at `frame`."""
     from graspkit.objects.catalogue import make_object
     from graspkit.objects.placement import ObjectPose, apply_pose
@@ -415,7 +432,7 @@ def _grasp_row(bm, rot6d: Tensor, transl: Tensor, betas: Tensor, meshes: list) -
     return rows
 
 
-def posed_sdfs(seqs: list, frames: list[int], R: Tensor, o: Tensor):
+def posed_sdfs(seqs: list, frames: list[int], R: Tensor, o: Tensor) -> PosedSDF:
     """GraspRefiner's PosedSDF for sequences' objects at `frames` in GNet's frames (x' = R (x - o); R (B,3,3), o (B,3)),
     from each object's collision grid (graspkit.data.grasp_io.collision_sdf_grid, cached on disk)."""
     from graspkit.data.grasp_io import collision_sdf_grid
@@ -427,8 +444,9 @@ def posed_sdfs(seqs: list, frames: list[int], R: Tensor, o: Tensor):
     return PosedSDF.in_frame([grids[s.object_name] for s in seqs], Ro, to, R, o)
 
 
-def gnet_table(gnet, baseline, seqs: list, seed: int = 0, refine_weights=None, penetration: bool = False,
-               pen_weights=None, rows: tuple[str, ...] | None = None) -> dict:
+def gnet_table(gnet: GNet, baseline: GNet | None, seqs: list, seed: int = 0,
+               refine_weights: GraspRefineWeights | None = None, penetration: bool = False,
+               pen_weights: GraspRefineWeights | None = None, rows: tuple[str, ...] | None = None) -> dict:
     """GOAL Tab. 1 on grasps `seqs` (one GNet sample per ground-truth grasp, same object pose, start and body shape),
     in GNet's frame: {row: {'volume_cm3', 'contact_ratio', 'depth_cm', 'feet_cm', 'n'}}, per-grasp metrics and bodies
     under 'samples', the refinement's energies under 'refine_history'. With `penetration`, also the row PEN_ROW:
@@ -491,7 +509,7 @@ def gnet_table(gnet, baseline, seqs: list, seed: int = 0, refine_weights=None, p
 
 # ------------------------------------------------------------------------------------------- rollouts, foot sliding
 
-def full_vertices(bm, rot6d: Tensor, transl: Tensor, betas: Tensor, chunk: int = 64) -> Tensor:
+def full_vertices(bm: BodyModel, rot6d: Tensor, transl: Tensor, betas: Tensor, chunk: int = 64) -> Tensor:
     """Full SMPL-X meshes (T,V,3) of a sequence (T,55,6), (T,3) with shape betas (10,)."""
     out = []
     with torch.no_grad():
@@ -510,7 +528,7 @@ def sliding(vertices: Tensor) -> tuple[int, int]:
     return int(s.sum()), int(len(s))
 
 
-def rollout_eval(mnet, clips: list, goals: list | None = None, max_frames: int = 300, refine: bool = True,
+def rollout_eval(mnet: MNet, clips: list, goals: list | None = None, max_frames: int = 300, refine: bool = True,
                  floor: float | None = 0.0, stall: int | None = STALL_FRAMES) -> dict:
     """MNet rollouts from each clip's first frame to its goal grasp (or to `goals[i]` = (rot6d, transl)): per clip the
     frames, whether the goal was reached, the final mean hand-to-goal distance, GOAL's foot sliding and how deep the
@@ -551,7 +569,7 @@ def clip_sliding(clips: list, until_goal: bool = True) -> float:
     return slide / max(pairs, 1)
 
 
-def saga_sliding(seqs: list, seed: int = 0, progress: bool = False, **saga_kwargs) -> dict:
+def saga_sliding(seqs: list, seed: int = 0, progress: bool = False, **saga_kwargs: Any) -> dict:
     """SAGA's motions (graspkit.saga.synthesize: WholeGrasp + GraspPose-Opt, MotionFill + GraspMotion-Opt) for GRAB-style
     approach sequences: each sequence's object where it stands and its first frame as the start body; GOAL's foot
     sliding over the 61 frames, and the end grasp's contact. Returns the pooled sliding, per-sequence figures and the
@@ -585,7 +603,7 @@ def saga_sliding(seqs: list, seed: int = 0, progress: bool = False, **saga_kwarg
             "end_contact": float(np.mean([p["end_contact"] for p in per])) if per else float("nan")}
 
 
-def rollout_sequences(folders, n_rollouts: int) -> list:
+def rollout_sequences(folders: Sequence[str | Path], n_rollouts: int) -> list:
     """The test approach sequences of the rollout evaluation: accepted, starting 0.5-1.5 m from the object, n of them
     taken in turn from each test object (file order within an object)."""
     seqs = [s for s in _all_files(folders, "approach", "test") if bool(s.extras.get("grasp.accepted", True))]
@@ -599,7 +617,7 @@ def rollout_sequences(folders, n_rollouts: int) -> list:
 
 # ------------------------------------------------------------------------------------------- the whole evaluation
 
-def start_distance(clip) -> float:
+def start_distance(clip: ApproachClip) -> float:
     """Horizontal distance (m) from the clip's first pelvis position to the object centre."""
     bm, _, _ = _body()
     from graspkit.models.mnet import rest_root
@@ -608,8 +626,9 @@ def start_distance(clip) -> float:
     return float((pelvis[:2] - clip.obj_centre[:2]).norm())
 
 
-def evaluate(folders=None, stubs=None, n_grasps: int = 60, n_rollouts: int = 24, window_stride: int = 5,
-             seed: int = 0, out=None, max_frames: int = 300) -> dict:
+def evaluate(folders: Sequence[str | Path] | None = None, stubs: str | Path | None = None, n_grasps: int = 60,
+             n_rollouts: int = 24, window_stride: int = 5, seed: int = 0, out: str | Path | None = None,
+             max_frames: int = 300) -> dict:
     """GOAL Tab. 1, Tab. 2 and foot sliding on the test objects with the shipped checkpoints (MNet's rollouts up to
     `max_frames` each); written as JSON."""
     import json
@@ -648,7 +667,7 @@ def evaluate(folders=None, stubs=None, n_grasps: int = 60, n_rollouts: int = 24,
     return res
 
 
-def rollout_results(seqs: list, stubs, gnet, seed: int = 0, max_frames: int = 300) -> dict:
+def rollout_results(seqs: list, stubs: str | Path, gnet: GNet, seed: int = 0, max_frames: int = 300) -> dict:
     """The rollout part of the evaluation on `rollout_sequences`: MNet (stubs/mnet.pt) from each test clip's start
     (0.5-1.5 m from the object) to the true goal grasp and to GNet's grasp, up to `max_frames` each, with the floor
     step and stall rule of `rollout_eval`. {'rollouts', 'sliding' (GOAL's rows and the ground truth's),
@@ -672,8 +691,8 @@ def rollout_results(seqs: list, stubs, gnet, seed: int = 0, max_frames: int = 30
             "rollout_seconds": time.perf_counter() - t0}
 
 
-def tab1_results(folders, stubs, n_grasps: int = 60, seed: int = 0, penetration: bool = True,
-                 rows: tuple[str, ...] | None = None) -> dict:
+def tab1_results(folders: Sequence[str | Path], stubs: str | Path, n_grasps: int = 60, seed: int = 0,
+                 penetration: bool = True, rows: tuple[str, ...] | None = None) -> dict:
     """Tab. 1 with the checkpoints in `stubs`: one sample per accepted test grasp of `folders` (n_grasps of them drawn
     with `seed`; 0: every one); `rows` as gnet_table. {'tab1', 'tab1_paired', 'tab1_refine_energy', 'tab1_seconds'}
     ('tab1_refine_energy' only when the row 'GNet' was measured)."""
@@ -698,8 +717,9 @@ def tab1_results(folders, stubs, n_grasps: int = 60, seed: int = 0, penetration:
     return out
 
 
-def gnet_goal(gnet, start: tuple[Tensor, Tensor], betas: Tensor, object_points: Tensor, obj_centre: Tensor,
-              z: Tensor | None = None, generator: torch.Generator | None = None, refine_weights=None,
+def gnet_goal(gnet: GNet, start: tuple[Tensor, Tensor], betas: Tensor, object_points: Tensor, obj_centre: Tensor,
+              z: Tensor | None = None, generator: torch.Generator | None = None,
+              refine_weights: GraspRefineWeights | None = None,
               sdf: tuple | None = None) -> tuple[Tensor, Tensor, dict]:
     """GOAL's first stage for one start pose (rot6d (55,6), transl (3,)) and object (points (P,3), centre (3,)) in the
     world: GNet's frame from the start pelvis to the object, a sample, the refinement (Eq. 4-8), back to the world.

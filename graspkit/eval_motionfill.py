@@ -25,7 +25,7 @@ import argparse
 import functools
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -37,6 +37,9 @@ from graspkit.data.motionfill_dataset import (MotionFillDataset, MotionFillStats
 from graspkit.models.motionfill import MotionFillConfig, MotionFillVAE
 from graspkit.paths import read_cache
 from graspkit.train import load_checkpoint
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
 
 CHECKPOINT = Path(__file__).resolve().parent.parent / "data_stubs" / "checkpoints" / "motionfill.pt"
 STAGES = {"local": ("locomotion", ("local",), "truth"), "traj": ("approach", ("traj",), "truth"),
@@ -103,7 +106,8 @@ def windows_source(kind: str, n: int, data: Path | None = None, body: str | None
     return cache_dir() / "motionfill" / f"{kind}_{n}_{key}.npz", root, files
 
 
-def windows(kind: str, n: int, bm=None, data: Path | None = None, progress: bool = True) -> dict[str, np.ndarray]:
+def windows(kind: str, n: int, bm: BodyModel | None = None, data: Path | None = None,
+            progress: bool = True) -> dict[str, np.ndarray]:
     """Cached windows of the first `n` clips of a procedural set: 'locomotion' (every 30 frames) or 'reach' (one window
     per clip, ending at its goal frame: the wrist on the target, as an approach clip ends at the grasp)."""
     from graspkit.data import load_motion
@@ -297,7 +301,7 @@ def load_baselines(folder: str | Path = BASELINE_DIR) -> dict[str, Any]:
     return out
 
 
-def add_motionfill_train_commands(train_sub) -> None:
+def add_motionfill_train_commands(train_sub: argparse._SubParsersAction) -> None:
     """`graspkit train motionfill --stage {local,traj,finetune}` (A.4's three runs)."""
     p = train_sub.add_parser("motionfill", help="train SAGA's MotionFill-VAE (§3.3), one A.4 stage per run")
     p.add_argument("--stage", choices=list(STAGES) + ["smooth_ae"], required=True,
@@ -533,7 +537,7 @@ APPROACH_KEYS = ("grasp.goal_frame", "body.params.fullpose", "body.params.transl
                  "object.params.global_orient", "object.params.transl", "object.points", "object.normals", "obj_name")
 
 
-def approach_scene(path: str | Path, bm) -> dict[str, Any]:
+def approach_scene(path: str | Path, bm: BodyModel) -> dict[str, Any]:
     """One approach clip as MotionFill sees it (the window ending at the goal frame, canonical frame A.3) and its
     object in that frame: markers (61,79,3), traj (62,4), local, vel, contacts, betas, floor height, object points,
     normals (P,3), contact maps C_O (P,) and C_M (143,) at the grasp, the object's mesh (trimesh) and the pose of its

@@ -30,7 +30,7 @@ import json
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -40,6 +40,10 @@ from graspkit.checks import positive_float
 from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_folders, check_out, reports_errors
 from graspkit.optim.grasppose import ARM_JOINTS, GraspPoseConfig, GraspPoseWeights
 from graspkit.paths import DATA_STUBS, write_atomic
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
+    from graspkit.optim.grasppose import GraspObject, GraspPoseOpt, GraspPoseResult
 
 RESULTS_PATH = DATA_STUBS / "checkpoints" / "wholegrasp_eval.json"
 
@@ -140,7 +144,7 @@ def hand_contact_prior(root: str | Path, split: str = "train") -> Tensor:
     return torch.as_tensor(np.mean([read_arrays(p)["contact.body"][0] for p in files], 0)).float()
 
 
-def body_rows(bm, vertices: Tensor, placements: list[Placement], per: int,
+def body_rows(bm: BodyModel, vertices: Tensor, placements: list[Placement], per: int,
               refine: int | None = None) -> list[dict[str, float]]:
     """graspkit.metrics.grasp_metrics of bodies (B,V,3) (object frame), `per` consecutive bodies per placement, and
     floor_cm, the lowest vertex's height above the floor z = -t_O (cm; negative below it); `refine`: the volume's
@@ -204,8 +208,8 @@ def _object_subset(obj, idx: Tensor) -> Any:
                        None if obj.origin is None or obj.origin.dim() == 1 else obj.origin[idx])
 
 
-def fit_variants(opt, markers: Tensor, obj, mc: Tensor | None, oc: Tensor | None, variants: list[str],
-                 progress: bool = False) -> dict[str, Any]:
+def fit_variants(opt: GraspPoseOpt, markers: Tensor, obj: GraspObject, mc: Tensor | None, oc: Tensor | None,
+                 variants: list[str], progress: bool = False) -> dict[str, Any]:
     """Alg. 1 stage 1 once, stage 2 once per collision setting (E^B_colli enters stage 2 where the variant has E_colli),
     then stage 3 for each variant from its stage-2 state: {variant: GraspPoseResult}."""
     s1 = opt.fit(markers, obj, mc, oc, progress=progress, stages=(1,))
@@ -309,7 +313,8 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
         bases = {c: opt.with_config(collision=c).fit(markers, obj, progress=False, init=s1.state, stages=(2,))
                  for c in ((False, True) if opt.cfg.stage2_collision else (False,))}
 
-        def stage3(o, idx: Tensor, variant: str, cm: Tensor | None = None, co: Tensor | None = None):
+        def stage3(o: GraspPoseOpt, idx: Tensor, variant: str, cm: Tensor | None = None,
+                   co: Tensor | None = None) -> GraspPoseResult:
             """Stage 3 of one variant for the bodies idx of the batch, from the shared stages 1-2."""
             base = bases[VARIANTS[variant]["collision"] and opt.cfg.stage2_collision]
             return o.with_config(**VARIANTS[variant]).fit(
@@ -529,7 +534,7 @@ if __name__ == "__main__":
 
 
 # ------------------------------------------------------------------------------------------------ `graspkit train`
-def add_saga_train_commands(train_sub) -> None:
+def add_saga_train_commands(train_sub: argparse._SubParsersAction) -> None:
     """`graspkit train {wholegrasp,wholegrasp_single,grabnet_smplx,pose_prior}` (subcommands of `graspkit train`)."""
     from graspkit.paths import cache_dir
 

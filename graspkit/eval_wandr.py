@@ -32,7 +32,7 @@ counts only the frames where it is not.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 import torch
@@ -44,6 +44,15 @@ from graspkit.checks import count_type, nonneg_float, positive_float, seeded_rng
 from graspkit.data.reaching import EVAL_DISTANCES, EVAL_FRAMES, EVAL_HEIGHTS, Start, evaluation_goals
 from graspkit.data.wandr_dataset import FOOT_JOINTS, shaped_rest
 from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS
+
+if TYPE_CHECKING:
+    import argparse
+
+    from matplotlib.figure import Figure
+
+    from graspkit.body import BodyModel
+    from graspkit.data.wandr_dataset import ClipSet
+    from graspkit.models.wandr import WandrCVAE
 
 FOOT_ON_FLOOR = SAGA_SKATE_HEEL_HEIGHT   # m: a foot within 5 cm of the floor touches it (SAGA §4.2's skating heels)
 SUNK_DEPTH = 0.01                         # m: a lowest foot vertex more than 1 cm below the floor: the body has sunk
@@ -69,7 +78,8 @@ def validation_goals(n: int = 250, seed: int = 123) -> tuple[Tensor, np.ndarray]
     return goals, np.stack([np.degrees(ang), hgt, dist], 1)
 
 
-def validation_score(model, starts: Sequence[I.StartPose], bm, seed: int = 1) -> dict[str, float]:
+def validation_score(model: WandrCVAE, starts: Sequence[I.StartPose], bm: BodyModel,
+                     seed: int = 1) -> dict[str, float]:
     """SR / FS / DTG of one rollout per validation start and validation goal (8 s): the score that picks the epoch
     of `graspkit train wandr --select-val` (validation-split starts, goals off the grid; the test grid is not used)."""
     goals, cells = validation_goals()
@@ -175,7 +185,7 @@ class LowVertices:
     poses where it can be lower than the feet: its vertices lie within `reach` (S,) of its wrist (a bound from the
     rest shape: vertex-to-joint distances plus bone lengths along the tree)."""
 
-    def __init__(self, bm, betas: Tensor, full_pose: Tensor | None = None) -> None:
+    def __init__(self, bm: BodyModel, betas: Tensor, full_pose: Tensor | None = None) -> None:
         from graspkit.rotations import axis_angle_to_matrix
 
         weights = bm.lbs_weights.float()                                  # (V, 55)
@@ -352,9 +362,9 @@ class GridMeter:
             self.frames += 1
 
 
-def evaluate_grid(model, starts: Sequence[I.StartPose], bm, n: int = 5, seed: int = 0, goals: Tensor | None = None,
-                  cells: np.ndarray | None = None, t_goal: int = T_GOAL, frames: int | None = None,
-                  floor: float | None = None, lift: bool = False) -> GridResult:
+def evaluate_grid(model: WandrCVAE, starts: Sequence[I.StartPose], bm: BodyModel, n: int = 5, seed: int = 0,
+                  goals: Tensor | None = None, cells: np.ndarray | None = None, t_goal: int = T_GOAL,
+                  frames: int | None = None, floor: float | None = None, lift: bool = False) -> GridResult:
     """Roll the model out on the grid (or `goals` (G, 3) with their `cells` rows) from every start, n samples each,
     all in one batch (torch.Generator seeded with `seed`), measuring on the fly; floor, lift: `rollout`'s floor
     constraints (off: the paper's rollout)."""
@@ -384,7 +394,7 @@ def _result(meter: GridMeter, idx: Tensor, cells: np.ndarray) -> GridResult:
                       sunk=(meter.sunk / max(meter.frames, 1)).double().numpy(), unsunk=meter.unsunk.numpy())
 
 
-def evaluate_motions(p: Tensor, rest: Tensor, goals: Tensor, betas: Tensor, bm, t_goal: int = T_GOAL,
+def evaluate_motions(p: Tensor, rest: Tensor, goals: Tensor, betas: Tensor, bm: BodyModel, t_goal: int = T_GOAL,
                      cells: np.ndarray | None = None, index: Tensor | None = None,
                      full_pose: Tensor | None = None, full_mesh: bool = False) -> GridResult:
     """Score given motions p (B, T, 135) with rest joints (B, 22, 3), goals (B, 3) and betas (B, 10) the same way;
@@ -413,7 +423,7 @@ def evaluate_motions(p: Tensor, rest: Tensor, goals: Tensor, betas: Tensor, bm, 
     return _result(meter, idx, cells if cells is not None else np.zeros((B, 3)))
 
 
-def evaluate_planner(starts: Sequence[I.StartPose], bm, t_goal: int = T_GOAL, seed: int = 0) -> GridResult:
+def evaluate_planner(starts: Sequence[I.StartPose], bm: BodyModel, t_goal: int = T_GOAL, seed: int = 0) -> GridResult:
     """The procedural planner (graspkit.data.plan_reach) on the grid, one motion per goal and start body (it starts
     standing at rest, not from the start pose: it cannot take an arbitrary pose), scored as the model is."""
     from graspkit.data import plan_reach
@@ -437,7 +447,7 @@ def evaluate_planner(starts: Sequence[I.StartPose], bm, t_goal: int = T_GOAL, se
 
 
 @torch.no_grad()
-def evaluate_clips(model, clips, seed: int = 0, after_s: float = 1.0) -> dict[str, float]:
+def evaluate_clips(model: WandrCVAE, clips: ClipSet, seed: int = 0, after_s: float = 1.0) -> dict[str, float]:
     """The model on held-out reaching clips (a ClipSet of goal clips, e.g. the test split's): from each clip's frames
     0-1 towards its own goal at its own goal frame (the timing of the data, not the grid's 8 s), all in one batch. SR
     (%: the wrist within 10 cm at any frame up to `after_s` seconds past t_G), DTG (cm, the closest over the same
@@ -476,8 +486,8 @@ def goal_row_schedules(n: int, legs: int = 3, seed: int = 0, spacing: tuple[floa
     return torch.as_tensor(out, dtype=torch.float32)
 
 
-def evaluate_goal_rows(model, starts: Sequence[I.StartPose], per_start: int = 40, legs: int = 3, leg_frames: int = 90,
-                       seed: int = 0, lift: bool = False) -> dict[str, Any]:
+def evaluate_goal_rows(model: WandrCVAE, starts: Sequence[I.StartPose], per_start: int = 40, legs: int = 3,
+                       leg_frames: int = 90, seed: int = 0, lift: bool = False) -> dict[str, Any]:
     """Several goals in a row (Sup. C.2; not a protocol of the paper): per start, `per_start` schedules of
     `goal_row_schedules` (seeded with `seed`), goal k due at frame (k+1) * leg_frames (`goal_schedule`), one rollout
     each, all in one batch. A goal counts as reached when the right wrist comes within 10 cm of it in its own window
@@ -858,7 +868,7 @@ def _cmd_eval(args) -> int:
     return 0
 
 
-def add_wandr_commands(train_sub, eval_sub) -> None:
+def add_wandr_commands(train_sub: argparse._SubParsersAction, eval_sub: argparse._SubParsersAction) -> None:
     """`graspkit train wandr` and `graspkit eval wandr`."""
     from pathlib import Path
 
@@ -936,7 +946,7 @@ def add_wandr_commands(train_sub, eval_sub) -> None:
 
 
 # ----------------------------------------------------------------------------------------------------- meshes, widget
-def body_vertices(bm, p: Tensor, start: I.StartPose, chunk: int = 64) -> Tensor:
+def body_vertices(bm: BodyModel, p: Tensor, start: I.StartPose, chunk: int = 64) -> Tensor:
     """Mesh vertices (T, V, 3) of generated poses p (T, 135) on the start's body; jaw, eyes and hands keep the start's
     pose (WANDR generates the 22 body joints only)."""
     return _pose_vertices(bm, p, start.betas, start.full_pose, chunk)
@@ -970,7 +980,7 @@ class GoalReacher:
     SLIDERS = {"angle": (0.0, 360.0, 15.0), "distance": (0.3, 5.0, 0.1), "height": (0.0, 1.8, 0.05),
                "seconds": (1.0, 8.0, 0.5)}
 
-    def __init__(self, model, start: I.StartPose, seed: int = 0, angle: float = 45.0, distance: float = 2.0,
+    def __init__(self, model: WandrCVAE, start: I.StartPose, seed: int = 0, angle: float = 45.0, distance: float = 2.0,
                  height: float = 1.0, seconds: float = 4.0, floor: float | None = None) -> None:
         """floor: `rollout`'s floor constraint (m; None: off, the paper's rollout)."""
         self.model, self.start, self.seed, self.floor = model, start, seed, floor
@@ -1015,7 +1025,7 @@ class GoalReacher:
                 "error_at_goal_cm": 100 * float(d[-1]), "reached": bool(d.min() <= WANDR_SUCCESS_RADIUS),
                 "lift_cm": 100 * float((low - low[0]).max())}
 
-    def figure(self, readout: dict[str, float] | None = None):
+    def figure(self, readout: dict[str, float] | None = None) -> Figure:
         """Top view of the pelvis and wrist paths with the goal, and the wrist's distance to the goal over time."""
         import matplotlib.pyplot as plt
 

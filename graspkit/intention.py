@@ -23,6 +23,7 @@ heading ψ is the angle of the root's canonical +z axis projected on the ground,
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor
@@ -30,6 +31,10 @@ from torch import Tensor
 from graspkit.body.skeleton import JOINT_INDEX, PARENTS
 from graspkit.rotations import (axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix,
                                 rotation_about_z)
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
+    from graspkit.data.motion import Motion
 
 FPS = 30.0
 NUM_BODY = 22                                   # pelvis + 21 body joints: the joints of p and of the joint loss
@@ -267,7 +272,7 @@ class StartPose:
         return StartPose(move(self.p_prev), move(self.p), self.rest, self.betas, self.full_pose, self.source)
 
     @staticmethod
-    def from_motion(motion, frame: int, bm, source: str = "") -> "StartPose":
+    def from_motion(motion: Motion, frame: int, bm: BodyModel, source: str = "") -> "StartPose":
         """The start at `frame` (>= 1) of a Motion, on body model bm (rest joints from the motion's betas)."""
         if not 1 <= frame < motion.num_frames:
             raise ValueError(f"frame: expected 1 <= frame < {motion.num_frames}, got {frame}")

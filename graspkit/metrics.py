@@ -26,13 +26,18 @@ reading of its "per frame"); for a clip at another `fps` they scale by
 from __future__ import annotations
 
 import math
-from typing import Any
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
 
 from graspkit.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 from graspkit.rotations import axis_angle_to_matrix
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
+    from graspkit.data.motion import Motion
 
 # ----------------------------------------------------------------------------- motion: thresholds
 WANDR_SKATE_THRESHOLD = 0.0066       # m per frame at 30 fps (WANDR Sec. 4.3, CIRCLE's 1 cm adjusted to 30 fps)
@@ -248,7 +253,7 @@ def heel_vertex_ids() -> tuple[int, int]:
     return L["LHeel"], L["RHeel"]
 
 
-def motion_quality(bm, motions, chunk: int = 96) -> dict[str, Any]:
+def motion_quality(bm: BodyModel, motions: Sequence[Motion], chunk: int = 96) -> dict[str, Any]:
     """All motion metrics over Motion clips, measured on their meshes (chunks of `chunk` frames, nothing stored).
 
     Returns WANDR's FS (fs_wandr: per motion the share of its frame pairs that skate, averaged over the motions, as

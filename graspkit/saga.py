@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -23,6 +23,9 @@ from graspkit.data.motion import Motion
 from graspkit.data.reaching import Start
 from graspkit.objects.placement import ObjectPose
 from graspkit.paths import DATA_STUBS, stub_hint
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
 
 CHECKPOINTS = DATA_STUBS / "checkpoints"
 
@@ -43,8 +46,8 @@ class SagaResult:
                                      # last frame, skating, floor
 
 
-def rigid_params(poses: np.ndarray, transl: np.ndarray, betas: np.ndarray, R: np.ndarray, o: np.ndarray, bm
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def rigid_params(poses: np.ndarray, transl: np.ndarray, betas: np.ndarray, R: np.ndarray, o: np.ndarray,
+                 bm: BodyModel) -> tuple[np.ndarray, np.ndarray]:
     """SMPL-X poses (T,55,3) and transl (T,3) of bodies moved by x -> R x + o: the global rotation turns about the
     rest pelvis J0 (which depends on betas), so transl' = R (J0 + t) + o - J0."""
     from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle
@@ -57,8 +60,8 @@ def rigid_params(poses: np.ndarray, transl: np.ndarray, betas: np.ndarray, R: np
     return out, (np.asarray(transl, np.float64) + J0) @ R.T + o - J0
 
 
-def default_start(grasp_pelvis: np.ndarray, centre: np.ndarray, betas: np.ndarray, distance: float, bm,
-                  seed: int = 0) -> Motion:
+def default_start(grasp_pelvis: np.ndarray, centre: np.ndarray, betas: np.ndarray, distance: float,
+                  bm: BodyModel, seed: int = 0) -> Motion:
     """A standing body (the procedural planner's first frame) `distance` m from the grasp pelvis, on the side away
     from the object centre, facing it."""
     from graspkit.data.reaching import plan_reach
@@ -72,7 +75,7 @@ def default_start(grasp_pelvis: np.ndarray, centre: np.ndarray, betas: np.ndarra
     return plan.slice(0, 1)
 
 
-def synthesize(name: str | Path | Any, bm=None, object_pose: ObjectPose | None = None,
+def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose: ObjectPose | None = None,
                start: Start | Motion | None = None, seed: int = 0, start_distance: float = 0.4,
                grasp_steps: tuple[int, int, int] = (300, 400, 500),
                motion_steps: tuple[int, int] = (100, 300), checkpoints: str | Path = CHECKPOINTS,

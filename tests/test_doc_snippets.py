@@ -65,12 +65,23 @@ def callee(func: ast.expr, names: dict[str, object]) -> object | None:
     return obj if getattr(obj, "__module__", "").startswith("graspkit") else None
 
 
+def hint_namespace(obj: object) -> dict[str, object]:
+    """The globals of obj's module plus the names its `if TYPE_CHECKING:` block imports (annotations only)."""
+    module = inspect.getmodule(obj)
+    ns = dict(vars(module)) if module else {}
+    if module and getattr(module, "__file__", None):
+        for node in ast.parse(Path(module.__file__).read_text()).body:
+            if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING":
+                exec(compile(ast.Module(node.body, type_ignores=[]), module.__file__, "exec"), ns)
+    return ns
+
+
 def returned_type(obj: object) -> type | None:
     """The graspkit class a function returns (its return annotation) or that a class call makes; else None."""
     if inspect.isclass(obj):
         return obj
     try:
-        ret = typing.get_type_hints(obj).get("return")
+        ret = typing.get_type_hints(obj, globalns=hint_namespace(obj)).get("return")
     except Exception:  # noqa: BLE001 - an annotation that does not resolve at run time
         return None
     return ret if inspect.isclass(ret) and ret.__module__.startswith("graspkit") else None

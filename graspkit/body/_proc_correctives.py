@@ -10,6 +10,7 @@ of SMPL's pose blend shapes B_P(theta) = sum_j (vec(R_j) - vec(I)) P_j.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -20,6 +21,9 @@ from scipy.sparse.linalg import spsolve
 from graspkit.body._proc_mesh import vertex_neighbours
 from graspkit.body._proc_sdf import Body
 from graspkit.body.skeleton import NUM_JOINTS, PARENTS
+
+if TYPE_CHECKING:
+    from scipy.sparse import csr_matrix
 
 
 def rodrigues(aa: np.ndarray) -> np.ndarray:
@@ -84,7 +88,8 @@ def fit_correctives(v: np.ndarray, f: np.ndarray, weights: np.ndarray, joints: n
     return posedirs
 
 
-def radial_target(x: np.ndarray, centre: np.ndarray, axis: np.ndarray, body: Body, pose, max_move: float,
+def radial_target(x: np.ndarray, centre: np.ndarray, axis: np.ndarray, body: Body,
+                  pose: tuple[np.ndarray, np.ndarray], max_move: float,
                   n_grid: int = 48, reach: float = 1.5) -> np.ndarray:
     """Points (N,3) moved onto the posed zero level set along the ray from the rotation axis (through centre).
 
@@ -126,7 +131,7 @@ def radial_target(x: np.ndarray, centre: np.ndarray, axis: np.ndarray, body: Bod
     return np.where(ok[:, None], y, x), ok
 
 
-def harmonic_fill(delta: np.ndarray, known: np.ndarray, region: np.ndarray, A) -> np.ndarray:
+def harmonic_fill(delta: np.ndarray, known: np.ndarray, region: np.ndarray, A: csr_matrix) -> np.ndarray:
     """Displacements (V,3): known rows kept, other region rows harmonic (graph Laplacian), zero outside region."""
     out = np.zeros_like(delta)
     out[region[known]] = delta[region[known]]

@@ -7,7 +7,7 @@ edge once), Euler characteristic, signed volume, and self-intersection of non-ad
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
+from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 
@@ -210,7 +210,7 @@ def self_intersections(v: np.ndarray, f: np.ndarray, subset: np.ndarray | None =
     return np.concatenate(hits) if hits else np.zeros((0, 2), np.int64)
 
 
-def vertex_neighbours(f: np.ndarray, n: int):
+def vertex_neighbours(f: np.ndarray, n: int) -> csr_matrix:
     """Sparse (n, n) adjacency matrix (CSR, 1 per edge) of a triangle mesh."""
     e = edges(f)
     A = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()

@@ -336,7 +336,8 @@ def expression_basis(v: np.ndarray, w: np.ndarray, joints: np.ndarray) -> np.nda
     """Ten face-only expression components (V, 3, 10): smooth compact bumps of a few millimetres."""
     face = _smoothstep((w[:, [J["head"], J["jaw"]]].sum(1) - 0.3) / 0.5) * _smoothstep((v[:, 2] + 0.01) / 0.04)
 
-    def bump(c, sigma, d, mirror=False) -> np.ndarray:
+    def bump(c: tuple[float, float, float], sigma: float, d: tuple[float, float, float],
+             mirror: bool = False) -> np.ndarray:
         """Displacement (V,3) d times a smooth compact bump of radius 3 sigma around c (and its mirror)."""
         out = np.zeros_like(v)
         for cc, dd in ((np.asarray(c, float), np.asarray(d, float)),) + (

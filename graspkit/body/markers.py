@@ -23,12 +23,16 @@ from __future__ import annotations
 
 import weakref
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX, SMPLX_LANDMARK_VERTEX_IDS
 from graspkit.rotations import axis_angle_to_matrix
+
+if TYPE_CHECKING:
+    from graspkit.body.model import BodyModel
 
 F, B, U, D, L, R = (0, 0, 1), (0, 0, -1), (0, 1, 0), (0, -1, 0), (1, 0, 0), (-1, 0, 0)
 
@@ -62,7 +66,7 @@ class _Rest:
     hands: 'mean' puts the file's mean (relaxed) hands on the rest body, 'flat' the template's flat hands; either way,
     whatever the BodyModel's flat_hand_mean, so one file gives one layout."""
 
-    def __init__(self, bm, hands: str = "mean") -> None:
+    def __init__(self, bm: BodyModel, hands: str = "mean") -> None:
         if hands not in ("mean", "flat"):
             raise ValueError(f"hands: expected 'mean' or 'flat', got {hands!r}")
         pose = torch.zeros(1, len(bm.parents), 3, dtype=bm.dtype, device=bm.v_template.device)
@@ -237,12 +241,12 @@ def _marker_sets(bm) -> dict[str, MarkerSet]:
     }
 
 
-def saga_markers(bm) -> MarkerSet:
+def saga_markers(bm: BodyModel) -> MarkerSet:
     """SAGA's 143 markers (49 body, 14 face, 6 hand, 30 finger, 44 palm) on a BodyModel."""
     return _cached(bm)["saga"]
 
 
-def saga_sparse_markers(bm) -> MarkerSet:
+def saga_sparse_markers(bm: BodyModel) -> MarkerSet:
     """SAGA's stage-2 markers (49 body, 14 face, 6 hand, 10 fingertips) on a BodyModel."""
     return _cached(bm)["saga_sparse"]
 
@@ -278,7 +282,7 @@ class GoalVertices:
         return q / q.norm(dim=-1, keepdim=True)
 
 
-def goal_vertices(bm) -> GoalVertices:
+def goal_vertices(bm: BodyModel) -> GoalVertices:
     """The 400 GOAL vertices (right hand 99 first), spread by farthest-point sampling within each part's budget, on
     the rest body with flat hands (the template's; GOAL's checkpoints were trained on this layout)."""
     r = _Rest(bm, hands="flat")
@@ -301,7 +305,7 @@ def goal_vertices(bm) -> GoalVertices:
                         r.place(hc, None, 0, _d(B), head), _landmark(r, "nose"))
 
 
-def foot_vertices(bm, height: float = 0.02) -> dict[str, np.ndarray]:
+def foot_vertices(bm: BodyModel, height: float = 0.02) -> dict[str, np.ndarray]:
     """Sole vertex ids per foot part: {'left_heel', 'left_toe', 'right_heel', 'right_toe'} (lowest `height` m at rest)."""
     r = _Rest(bm)
     out = {}
@@ -314,7 +318,7 @@ def foot_vertices(bm, height: float = 0.02) -> dict[str, np.ndarray]:
     return out
 
 
-def sole_rest_heights(bm, feet: dict[str, np.ndarray] | None = None) -> np.ndarray:
+def sole_rest_heights(bm: BodyModel, feet: dict[str, np.ndarray] | None = None) -> np.ndarray:
     """Each sole vertex's height (m) above its foot's lowest vertex at rest: (N,), in the order of `feet` (default
     foot_vertices(bm)) concatenated."""
     r = _Rest(bm)
@@ -323,7 +327,7 @@ def sole_rest_heights(bm, feet: dict[str, np.ndarray] | None = None) -> np.ndarr
     return np.concatenate([r.v[ids, 1] - lowest[k.split("_")[0]] for k, ids in f.items()])
 
 
-def palm_vertices(bm, min_cos: float = 0.7) -> dict[str, np.ndarray]:
+def palm_vertices(bm: BodyModel, min_cos: float = 0.7) -> dict[str, np.ndarray]:
     """Palm-side vertex ids of each hand: {'left', 'right'}: wrist-dominated vertices whose normal faces the palm (-y at rest)."""
     r = _Rest(bm)
     n = vertex_normals(torch.as_tensor(r.v)[None], bm.faces.cpu())[0].numpy()

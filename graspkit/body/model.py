@@ -16,7 +16,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
+from typing import Any, Mapping
 
 import numpy as np
 import torch
@@ -246,7 +246,7 @@ class BodyModel(nn.Module):
         self._unorder = torch.tensor(np.argsort(order))  # level order -> joint order
 
     @classmethod
-    def from_file(cls, path: str | os.PathLike, *, allow_pickle: bool = False, **kwargs) -> "BodyModel":
+    def from_file(cls, path: str | os.PathLike, *, allow_pickle: bool = False, **kwargs: Any) -> "BodyModel":
         """Load an SMPL-X-format .npz (procedural or real) and build the model; kwargs go to __init__."""
         return cls(load_model_arrays(path, allow_pickle=allow_pickle), source=str(path), **kwargs)
 

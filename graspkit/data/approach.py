@@ -15,11 +15,16 @@ The lower body is the planner's, so feet, foot contacts and skating are those of
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.data.ik import axis_angle_matrix, matrix_axis_angle, smoothstep
 from graspkit.data.motion import Motion
+
+if TYPE_CHECKING:
+    from graspkit.data.rig import Rig
 
 J = JOINT_INDEX
 BLEND_S = 0.5          # s before the grasp frame in which the body turns into the fitted pose
@@ -51,7 +56,8 @@ def _slerp_from(R0: np.ndarray, R1: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 
 def approach_motion(plan: Motion, grasp_frame: int, grasp_pose: np.ndarray, open_hand: np.ndarray,
-                    start_pose: str = "idle", approach_dir: np.ndarray | None = None, rig=None) -> Motion:
+                    start_pose: str = "idle", approach_dir: np.ndarray | None = None,
+                    rig: Rig | None = None) -> Motion:
     """The approach-and-grasp clip: the plan (T frames) with the fitted grasp pose (55,3) reached at grasp_frame and
     held to the end; open_hand (15,3): the right hand's pre-shape; start_pose 'idle' or 't_pose'.
 

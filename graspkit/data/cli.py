@@ -172,7 +172,7 @@ def _cmd_make(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_data_commands(subparsers) -> None:
+def add_data_commands(subparsers: argparse._SubParsersAction) -> None:
     """Register `graspkit data ...` on the top-level subparsers."""
     data = subparsers.add_parser("data", help=DATA_HELP).add_subparsers(dest="data_command", required=True)
     m = data.add_parser("make", help="generate locomotion (AMASS-style) or reaching (CIRCLE-style) clips, "

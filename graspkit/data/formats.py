@@ -19,6 +19,7 @@ import os
 import tempfile
 import warnings
 import zipfile
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -120,7 +121,7 @@ def open_npz(path: str | os.PathLike, what: str = "an .npz file") -> np.lib.npyi
     return npz
 
 
-def npz_arrays(npz: np.lib.npyio.NpzFile, keys, path: str | os.PathLike) -> dict[str, np.ndarray]:
+def npz_arrays(npz: np.lib.npyio.NpzFile, keys: Iterable[str], path: str | os.PathLike) -> dict[str, np.ndarray]:
     """The arrays `keys` of an open archive; a SequenceFileError (a ValueError) naming the file for one that is corrupt
     or needs pickle."""
     out = {}

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -43,6 +44,9 @@ from graspkit.data.rig import build_rig
 from graspkit.objects.catalogue import SPECS, TEST_OBJECTS, list_objects, make_object
 from graspkit.objects.placement import ObjectPose, sample_object_pose
 from graspkit.rotations import axis_angle_to_matrix
+
+if TYPE_CHECKING:
+    from graspkit.objects.sdf import SDFGrid
 
 J = JOINT_INDEX
 GRASP_TYPES = ("power", "side", "pinch", "handle")
@@ -427,7 +431,7 @@ class GraspFitter:
         gv = goal_vertices(self.bm)
         self.head_pb = go.PartialBody(self.bm, np.array([gv.head_back, gv.head_front]))
 
-    def grid(self, name: str):
+    def grid(self, name: str) -> SDFGrid:
         """The object's SDF grid (built once; see graspkit.data.grasp_io.cached_sdf_grid)."""
         if name not in self._grids:
             from graspkit.data.grasp_io import cached_sdf_grid

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -21,6 +22,9 @@ from graspkit.data.formats import npz_arrays, open_npz
 from graspkit.data.grab import read_arrays
 from graspkit.data.grasp import SPLITS, split_of
 from graspkit.rotations import axis_angle_to_matrix, axis_angle_to_rot6d
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
 
 SAGA_CLIP_FRAMES = 62        # SAGA App. A.3: 2-s clips at 30 fps ending in a stable grasp (62 frames with both ends)
 
@@ -190,7 +194,7 @@ class ApproachDataset(_Files):
             "goal.vertex_ids", "goal.vertices", "goal.right_hand")
 
     def __init__(self, root: str | os.PathLike, split: str | None = "train", window: int | None = SAGA_CLIP_FRAMES,
-                 bm=None, accepted_only: bool = True) -> None:
+                 bm: BodyModel | None = None, accepted_only: bool = True) -> None:
         super().__init__(root, split, accepted_only)
         if window is not None and window < 2:
             raise ValueError(f"window: expected None or >= 2 frames, got {window}")

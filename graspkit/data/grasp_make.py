@@ -20,6 +20,7 @@ from __future__ import annotations
 import os
 from functools import lru_cache
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -35,6 +36,9 @@ from graspkit.objects.contact import OBJECT_CONTACT_THRESHOLD, marker_contact
 from graspkit.objects.distance import nearest_neighbours, point_mesh_distance
 from graspkit.objects.placement import ObjectPose, apply_pose
 from graspkit.paths import default_model_path, drop_damaged, pool_results
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
 
 KINDS = ("grasp", "approach")
 KIND_IDS = {"grasp": 11, "approach": 12}
@@ -90,7 +94,8 @@ def _basis() -> torch.Tensor:
     return bps_basis().double()
 
 
-def frame_labels(bm, vertices: torch.Tensor, name: str, pose: ObjectPose, hand_ids: np.ndarray) -> dict[str, np.ndarray]:
+def frame_labels(bm: BodyModel, vertices: torch.Tensor, name: str, pose: ObjectPose,
+                 hand_ids: np.ndarray) -> dict[str, np.ndarray]:
     """SAGA and GOAL labels of one body (V,3) (world, float64) grasping object `name` at `pose` (module docstring)."""
     obj = apply_pose(pose, make_object(name))
     V = vertices.double()
@@ -252,7 +257,7 @@ def write_chunk(fitter: GraspFitter, kind: str, seed: int, chunk: int, out: Path
     return written
 
 
-def model_name(bm) -> str:
+def model_name(bm: BodyModel) -> str:
     """What a file's `body.model` says: graspkit's name for the shipped body, else the model file as given."""
     same = Path(bm.source).resolve() == default_model_path().resolve()
     return DEFAULT_MODEL_NAME if same else str(bm.source)

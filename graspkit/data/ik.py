@@ -30,9 +30,9 @@ def axis_rotation(axis: int, angle: np.ndarray | float) -> np.ndarray:
     return R
 
 
-def rot_x(a): return axis_rotation(0, a)  # noqa: E704
-def rot_y(a): return axis_rotation(1, a)  # noqa: E704
-def rot_z(a): return axis_rotation(2, a)  # noqa: E704
+def rot_x(a: np.ndarray | float) -> np.ndarray: return axis_rotation(0, a)  # noqa: E704
+def rot_y(a: np.ndarray | float) -> np.ndarray: return axis_rotation(1, a)  # noqa: E704
+def rot_z(a: np.ndarray | float) -> np.ndarray: return axis_rotation(2, a)  # noqa: E704
 
 
 def axis_angle_matrix(aa: np.ndarray) -> np.ndarray:

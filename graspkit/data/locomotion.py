@@ -9,6 +9,7 @@ Every draw comes from one np.random.Generator seeded per clip: the same seed giv
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,6 +19,9 @@ from graspkit.data.motion import Motion
 from graspkit.data.posing import Controls, Style, pose_body
 from graspkit.data.rig import Rig, build_rig
 from graspkit.data.trajectory import RootPlan, integrate_controls, smooth_controls
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
 
 PROGRAMS = {"walk": 0.24, "curve": 0.2, "start_stop": 0.18, "turn": 0.14, "side": 0.1, "idle": 0.08, "backward": 0.06}
 SPEED_RANGE = (0.5, 1.6)
@@ -101,7 +105,7 @@ def locomotion_plan(kind: str, rng: np.random.Generator, num_frames: int, fps: f
     return integrate_controls(v, u, w, (0.0, 0.0), rng.uniform(-np.pi, np.pi), fps), v
 
 
-def generate_locomotion(seed: int, bm, num_frames: int | None = None, kind: str | None = None,
+def generate_locomotion(seed: int, bm: BodyModel, num_frames: int | None = None, kind: str | None = None,
                         betas: np.ndarray | None = None, rig: Rig | None = None) -> Motion:
     """One AMASS-style clip (4-10 s unless num_frames) from a seed; kind one of PROGRAMS (None: drawn)."""
     rng = seeded_rng(seed)

@@ -7,13 +7,16 @@ smplx model built with flat_hand_mean=True.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Iterator
+from typing import TYPE_CHECKING, Iterator
 
 import numpy as np
 import torch
 
 from graspkit.body.skeleton import JOINT_INDEX, NUM_JOINTS
 from graspkit.rotations import axis_angle_to_matrix
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
 
 CONTACT_NAMES = ("left_heel", "left_toe", "right_heel", "right_toe")
 HANDS = ("right", "left")
@@ -90,7 +93,7 @@ class Motion:
         """Local rotation matrices (T,55,3,3)."""
         return axis_angle_to_matrix(torch.as_tensor(self.poses, dtype=dtype))
 
-    def joint_positions(self, bm) -> np.ndarray:
+    def joint_positions(self, bm: BodyModel) -> np.ndarray:
         """World joint positions (T,55,3) by joints-only forward kinematics on `bm`."""
         coeffs = torch.zeros(1, bm.num_betas + bm.num_expression, dtype=bm.dtype)
         coeffs[0, :min(bm.num_betas, len(self.betas))] = torch.as_tensor(self.betas[:bm.num_betas], dtype=bm.dtype)
@@ -99,7 +102,7 @@ class Motion:
             _, t = bm.global_transforms(self.rotmats(bm.dtype), J.expand(self.num_frames, -1, -1))
         return (t + torch.as_tensor(self.trans, dtype=bm.dtype)[:, None]).numpy()
 
-    def vertices(self, bm, start: int = 0, stop: int | None = None) -> torch.Tensor:
+    def vertices(self, bm: BodyModel, start: int = 0, stop: int | None = None) -> torch.Tensor:
         """Mesh vertices (n,V,3) of frames [start, stop) on `bm` (hand mean not added)."""
         sl = slice(start, stop)
         rot = self.rotmats(bm.dtype)[sl]
@@ -107,7 +110,7 @@ class Motion:
         with torch.no_grad():
             return bm.forward_rotmats(rot, betas=betas, transl=torch.as_tensor(self.trans[sl], dtype=bm.dtype)).vertices
 
-    def iter_vertices(self, bm, chunk: int = 64, overlap: int = 0) -> Iterator[tuple[int, torch.Tensor]]:
+    def iter_vertices(self, bm: BodyModel, chunk: int = 64, overlap: int = 0) -> Iterator[tuple[int, torch.Tensor]]:
         """(first frame, vertices (n,V,3)) for consecutive chunks of frames; chunks share `overlap` frames."""
         for name, value in (("chunk", chunk), ("overlap", overlap)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)):

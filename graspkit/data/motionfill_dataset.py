@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -36,6 +37,9 @@ from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.checks import seeded_rng
 from graspkit.data.formats import npz_arrays, open_npz
 from graspkit.data.motion import Motion, canonicalize
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
 
 T = 60                          # in-between span: frames 0..T
 NUM_FRAMES = T + 1              # local motion frames
@@ -98,7 +102,7 @@ def geometric_contacts(foot: np.ndarray, fps: float = 30.0, first_at_rest: bool 
     return low & (v < CONTACT_SPEED)
 
 
-def make_windows(motions: list[Motion], bm, stride: int | None = 30, align_end: bool = False,
+def make_windows(motions: list[Motion], bm: BodyModel, stride: int | None = 30, align_end: bool = False,
                  progress: bool = True, start_at_rest: bool = False) -> dict[str, np.ndarray]:
     """Canonical 62-frame windows of many clips -> arrays {traj (N,62,4), markers (N,61,79,3), local, vel (N,61,3),
     contacts (N,61,4), clip (N,)}. `align_end`: one window per clip ending at its last frame (approach clips, whose

@@ -23,8 +23,10 @@ WANDR's evaluation volume).
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -37,6 +39,9 @@ from graspkit.data.rig import Rig, build_rig
 from graspkit.data.trajectory import RootPlan, heading_profile, ramp, straight_walk
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.checks import seeded_rng
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
 
 REACH_RHO = 0.86           # shoulder-to-wrist distance at the goal, as a fraction of the arm length
 FAR_MIN_SPEED = 0.25      # m/s: the slowest walk of a room-scale clip (it fills the time to its goal frame)
@@ -159,9 +164,9 @@ def _pose(rig: Rig, plan: RootPlan, gait: GaitStyle, style: Style, c: Controls, 
                   goal_frame=goal_frame, hand="right")
 
 
-def plan_reach(start: Start | tuple[float, float, float], goal, t_goal_frames: int, betas=None, seed: int = 0,
-               bm=None, hold_frames: int = 15, style: Style | None = None, gait: GaitStyle | None = None,
-               v_pref: float | None = None) -> Motion:
+def plan_reach(start: Start | tuple[float, float, float], goal: np.ndarray | Sequence[float], t_goal_frames: int,
+               betas: np.ndarray | None = None, seed: int = 0, bm: BodyModel | None = None, hold_frames: int = 15,
+               style: Style | None = None, gait: GaitStyle | None = None, v_pref: float | None = None) -> Motion:
     """The procedural planner: walk, turn, slow down and reach so the right wrist is on `goal` (3,) (world, z up)
     at frame t_goal_frames; the clip has t_goal_frames + 1 + hold_frames frames. start: Start or (x, y, heading).
 
@@ -249,7 +254,8 @@ def _blend_unit(a: np.ndarray, wa: np.ndarray, b: np.ndarray, wb: np.ndarray) ->
 
 
 def plan_reach_chain(start: Start | tuple[float, float, float], goals: np.ndarray, goal_frames: tuple[int, int],
-                     hold_frames: tuple[int, int], betas=None, seed: int = 0, bm=None, style: Style | None = None,
+                     hold_frames: tuple[int, int], betas: np.ndarray | None = None, seed: int = 0,
+                     bm: BodyModel | None = None, style: Style | None = None,
                      gait: GaitStyle | None = None, v_pref: float | None = None, release_s: float = RELEASE_S
                      ) -> tuple[Motion, int]:
     """Two reaches in a row: `plan_reach` to goals[0] (2,3) at goal_frames[0], held hold_frames[0] frames, then the arm
@@ -419,7 +425,8 @@ def sample_near_task(rng: np.random.Generator) -> ReachTask:
     return _far_task(rng, betas, h0, float(rng.uniform(*band)), distance=NEAR_DISTANCE)
 
 
-def generate_reach(seed: int, bm, betas: np.ndarray | None = None, far: bool = False, near: bool = False) -> Motion:
+def generate_reach(seed: int, bm: BodyModel, betas: np.ndarray | None = None, far: bool = False,
+                   near: bool = False) -> Motion:
     """One CIRCLE-style clip (a step or two at most, then a right-hand reach; far=True: a room-scale task, see
     `sample_reach_task`; near=True: a near goal at the floor or overhead, `sample_near_task`) for the task drawn."""
     if far and near:
@@ -448,7 +455,7 @@ def _goal_as_reached(m: Motion, bm) -> Motion:
     return m
 
 
-def generate_reach_chain(seed: int, bm, betas: np.ndarray | None = None) -> Motion:
+def generate_reach_chain(seed: int, bm: BodyModel, betas: np.ndarray | None = None) -> Motion:
     """One room-scale clip that starts from a finished reach: two `sample_reach_task(far=True)` tasks in a row
     (`plan_reach_chain`, the second drawn relative to where the first one stands), cut to start at the first goal's
     frame or during its hold; the clip's goal is the second one. WANDR's goals in a row (Sup. C.2) set off from
@@ -483,7 +490,8 @@ def evaluation_goals(start: Start = Start()) -> np.ndarray:
     return np.array(rows)
 
 
-def evaluate_planner(bm, start: Start = Start(), t_goal_frames: int = EVAL_FRAMES - 1, betas=None, seed: int = 0,
+def evaluate_planner(bm: BodyModel, start: Start = Start(), t_goal_frames: int = EVAL_FRAMES - 1,
+                     betas: np.ndarray | None = None, seed: int = 0,
                      goals: np.ndarray | None = None, hold_frames: int = 0) -> list[dict]:
     """Run plan_reach on WANDR's grid (or `goals` rows as evaluation_goals gives) and score each motion on its mesh:
     success (wrist within 10 cm, WANDR Sec. 4.3), DTG (m), wrist error at the goal frame, FS (WANDR), GOAL sliding."""

@@ -8,12 +8,16 @@ Everything is measured on the shaped rest mesh in the SMPL-X canonical frame (y 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
 from graspkit.body.markers import foot_vertices
 from graspkit.body.skeleton import JOINT_INDEX
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
 
 J = JOINT_INDEX
 # canonical x (left) -> world +y, canonical y (up) -> world +z, canonical z (forward) -> world +x
@@ -91,7 +95,7 @@ def _foot(side: str, v: np.ndarray, joints: np.ndarray, weights: np.ndarray, sol
     return FootGeometry(ankle, ball, heel, ref, toe_tip, pts)
 
 
-def build_rig(bm, betas: np.ndarray | torch.Tensor | None = None, strike_angle: float = 0.3) -> Rig:
+def build_rig(bm: BodyModel, betas: np.ndarray | torch.Tensor | None = None, strike_angle: float = 0.3) -> Rig:
     """Measure a Rig on model `bm` for betas (10,) (None: zeros)."""
     b = torch.zeros(1, bm.num_betas, dtype=bm.dtype) if betas is None else torch.as_tensor(
         np.asarray(betas, np.float64).reshape(1, -1)[:, :bm.num_betas], dtype=bm.dtype)

@@ -45,7 +45,8 @@ class RootPlan:
         return np.gradient(np.unwrap(self.heading)) * self.fps
 
 
-def integrate_controls(v_fwd: np.ndarray, v_side: np.ndarray, yaw_rate: np.ndarray, xy0=(0.0, 0.0),
+def integrate_controls(v_fwd: np.ndarray, v_side: np.ndarray, yaw_rate: np.ndarray,
+                       xy0: tuple[float, float] | np.ndarray = (0.0, 0.0),
                        heading0: float = 0.0, fps: float = 30.0) -> RootPlan:
     """Integrate per-frame forward / leftward speed (m/s) and yaw rate (rad/s), all (T,), into a RootPlan."""
     heading = heading0 + np.concatenate([[0.0], np.cumsum(0.5 * (yaw_rate[1:] + yaw_rate[:-1]))]) / fps
@@ -66,8 +67,9 @@ def ramp(T: int, t0: float, t1: float, fps: float = 30.0) -> np.ndarray:
     return smoothstep((t - t0) / max(t1 - t0, 1e-6))
 
 
-def straight_walk(T: int, start_xy, heading: float, distance: float, t_start: float, t_stop: float,
-                  accel_time: float = 0.9, fps: float = 30.0) -> tuple[np.ndarray, np.ndarray]:
+def straight_walk(T: int, start_xy: tuple[float, float] | np.ndarray, heading: float, distance: float,
+                  t_start: float, t_stop: float, accel_time: float = 0.9,
+                  fps: float = 30.0) -> tuple[np.ndarray, np.ndarray]:
     """Ground positions (T,2) walking `distance` m along `heading` between t_start and t_stop (s), and speeds (T,).
 
     The speed profile rises and falls with minimum-jerk ramps of `accel_time`, then is scaled so that the

@@ -27,7 +27,7 @@ from __future__ import annotations
 import hashlib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 import torch
@@ -39,6 +39,9 @@ from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.data.formats import load_motion, npz_arrays, open_npz
 from graspkit.data.motion import Motion
 from graspkit.paths import read_cache
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
 
 MAX_FOOT_HEIGHT = 0.20          # m (WANDR §4.1)
 HINDSIGHT_HORIZON = 240         # frames: the 8 s test horizon (§4.2)
@@ -117,7 +120,7 @@ def list_clips(folder: str | Path, kinds: Sequence[str] = KINDS, limit: int | No
     return out
 
 
-def shaped_rest(bm, betas: np.ndarray | Tensor) -> tuple[Tensor, Tensor]:
+def shaped_rest(bm: BodyModel, betas: np.ndarray | Tensor) -> tuple[Tensor, Tensor]:
     """Shaped rest vertices (B, V, 3) and joints (B, 55, 3), in bm's dtype, for betas (B, k) (no expression)."""
     b = torch.as_tensor(np.asarray(betas), dtype=bm.dtype).reshape(len(betas), -1)
     coeffs = torch.zeros(len(b), bm.num_betas + bm.num_expression, dtype=bm.dtype)
@@ -127,7 +130,7 @@ def shaped_rest(bm, betas: np.ndarray | Tensor) -> tuple[Tensor, Tensor]:
         return bm.shaped(coeffs)
 
 
-def rest_joints(bm, betas: np.ndarray | Tensor) -> Tensor:
+def rest_joints(bm: BodyModel, betas: np.ndarray | Tensor) -> Tensor:
     """Shaped rest joints (B, 22, 3) float32 of the body joints for betas (B, k)."""
     return shaped_rest(bm, betas)[1][:, :I.NUM_BODY].float()
 
@@ -148,7 +151,7 @@ def motion_kind(m: Motion) -> str:
     return "reach" if m.goal is not None and m.hand == "right" else "locomotion"
 
 
-def clips_from_motions(motions: Sequence[Motion], names: Sequence[str], bm,
+def clips_from_motions(motions: Sequence[Motion], names: Sequence[str], bm: BodyModel,
                        max_foot_height: float | None = MAX_FOOT_HEIGHT) -> ClipSet:
     """A ClipSet from Motion objects (30 fps, >= 3 frames); clips failing WANDR's foot filter are dropped."""
     if len(motions) != len(names):
@@ -183,7 +186,8 @@ def clips_from_motions(motions: Sequence[Motion], names: Sequence[str], bm,
                    [names[k] for k in keep])
 
 
-def load_clips(paths: Sequence[str | Path], bm, max_foot_height: float | None = MAX_FOOT_HEIGHT) -> ClipSet:
+def load_clips(paths: Sequence[str | Path], bm: BodyModel,
+               max_foot_height: float | None = MAX_FOOT_HEIGHT) -> ClipSet:
     """Load clip files (AMASS / CIRCLE-style .npz, resampled to 30 fps) into a ClipSet named '<kind folder>/<file>'."""
     paths = [Path(p) for p in paths]
     motions = [load_motion(p) for p in paths]
@@ -315,7 +319,8 @@ def compute_stats(clips: ClipSet, samples: int = 20000, seed: int = 0, goal_fram
 
 
 # ----------------------------------------------------------------------------------------------------- starts
-def held_out_starts(motions: Sequence[Motion], names: Sequence[str], bm, n: int = 6, frame: int = 1) -> list[I.StartPose]:
+def held_out_starts(motions: Sequence[Motion], names: Sequence[str], bm: BodyModel, n: int = 6,
+                    frame: int = 1) -> list[I.StartPose]:
     """WANDR §4.2's held-out start poses: frame `frame` (with the frame before it for the dynamics) of the first n
     clips given (pass test-split clips, alternating kinds), each moved to the origin facing +x."""
     if len(motions) < n:
@@ -371,7 +376,7 @@ def load_clipset(path: str | Path) -> ClipSet:
 CLIPSET_VERSION = 1
 
 
-def cached_clips(folder: str | Path, bm, limit: int | None = None, cache: str | Path | None = None,
+def cached_clips(folder: str | Path, bm: BodyModel, limit: int | None = None, cache: str | Path | None = None,
                  kinds: Sequence[str] = KINDS) -> ClipSet:
     """All clips under `folder` (<kind>/*.npz for the sub-folders `kinds`, at most `limit` per kind) as a ClipSet, read
     from / written to a cache file named after the folder's file list, the body model (`bm.digest()`) and

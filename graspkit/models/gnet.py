@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import torch
 from torch import Tensor, nn
@@ -36,6 +37,14 @@ from torch import Tensor, nn
 from graspkit.models.blocks import GaussianHead, ResBlock, kl_standard_normal, reparameterize
 from graspkit.objects.contact import IAA_WEIGHT
 from graspkit.rotations import rot6d_to_matrix
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    import numpy as np
+
+    from graspkit.body import BodyModel
+    from graspkit.train import TrainConfig
 
 NUM_JOINTS = 55
 POSE_DIM = NUM_JOINTS * 6 + 3        # Θ = 55 6D rotations + translation γ
@@ -47,7 +56,7 @@ GNET_KEYS = ("rot6d", "transl", "betas", "verts", "head_dir", "obj_transl", "bps
 class SparseBody(nn.Module):
     """SMPL-X LBS of a BodyModel evaluated at `vertex_ids` only (exactly the full model's vertices there)."""
 
-    def __init__(self, bm, vertex_ids) -> None:
+    def __init__(self, bm: BodyModel, vertex_ids: Tensor | np.ndarray | Sequence[int]) -> None:
         super().__init__()
         ids = torch.as_tensor(vertex_ids, dtype=torch.long).reshape(-1)
         if ids.numel() == 0 or int(ids.min()) < 0 or int(ids.max()) >= bm.num_vertices:
@@ -334,8 +343,9 @@ def load_gnet(path: str | Path) -> GNet:
 
 
 def train_gnet(train: dict[str, Tensor], val: dict[str, Tensor] | None, body: SparseBody,
-               cfg: GNetConfig | None = None, weights: GNetLossWeights | None = None, train_cfg=None,
-               checkpoint=None, time_limit_s=None, progress: bool = True) -> tuple[GNet, list[dict[str, float]]]:
+               cfg: GNetConfig | None = None, weights: GNetLossWeights | None = None,
+               train_cfg: TrainConfig | None = None, checkpoint: str | Path | None = None,
+               time_limit_s: float | None = None, progress: bool = True) -> tuple[GNet, list[dict[str, float]]]:
     """Fit GNet (Eq. 3) with the shared loop on samples {key: (N, ...)} (see GNet.features for the keys)."""
     from graspkit.train import TrainConfig, fit
 
@@ -345,12 +355,12 @@ def train_gnet(train: dict[str, Tensor], val: dict[str, Tensor] | None, body: Sp
     net.fit_normalisation(train)
     keys = list(GNET_KEYS)
 
-    def step(model, batch, epoch):
+    def step(model: nn.Module, batch: list[Tensor], epoch: int) -> dict[str, Tensor]:
         b = dict(zip(keys, batch))     # training draws z from torch's RNG, which fit() saves and restores on resume
         out, mu, logvar = model(b, generator=None if model.training else torch.Generator().manual_seed(0))
         return gnet_loss(out, mu, logvar, b, body, weights, net.cfg.n_hand)
 
-    def tensors(d):
+    def tensors(d: dict[str, Tensor]) -> torch.utils.data.TensorDataset:
         missing = [k for k in keys if k not in d]
         if missing:
             raise ValueError(f"samples: missing {missing} (expected {keys})")

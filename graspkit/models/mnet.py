@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -40,12 +42,18 @@ from graspkit.objects.bps import bps_encode
 from graspkit.objects.contact import IAA_WEIGHT
 from graspkit.rotations import matrix_to_rot6d, rot6d_to_matrix, rotation_about_z
 
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
+    from graspkit.models.gnet import SparseBody
+    from graspkit.optim.goal_refine import MotionRefineWeights
+    from graspkit.train import TrainConfig
+
 FOOT_CONTACT_HEIGHT = 0.05   # m: L_v^f covers the sampled foot vertices this close to the floor (ground truth)
 
 
 # ------------------------------------------------------------------------------------------- canonical frames
 
-def rest_root(bm, betas: Tensor) -> Tensor:
+def rest_root(bm: BodyModel, betas: Tensor) -> Tensor:
     """The rest-pose root (pelvis) joint J_0(β) (B,3): the point the root rotation turns the body about."""
     coeffs = torch.zeros(betas.shape[0], bm.num_betas + bm.num_expression, dtype=bm.dtype)
     coeffs[:, :betas.shape[1]] = betas.to(bm.dtype)
@@ -305,7 +313,7 @@ def mnet_step(mnet: MNet, s: MNetState, basis: Tensor) -> tuple[Tensor, Tensor, 
 
 
 @torch.no_grad()
-def predict_horizon(mnet: MNet, body, s: MNetState, object_points: Tensor, basis: Tensor, horizon: int = 10
+def predict_horizon(mnet: MNet, body: SparseBody, s: MNetState, object_points: Tensor, basis: Tensor, horizon: int = 10
                     ) -> tuple[Tensor, Tensor]:
     """Autoregress from state s (B samples) until `horizon` frames exist (one step for a 10-frame MNet, ten for a
     1-frame one), no refinement: world rot6d (B,horizon,55,6), transl (B,horizon,3). Object points (B,P,3)."""
@@ -336,16 +344,16 @@ STALL_RADIUS = 0.25  # m: ... and only for a hand this close to the goal hand (n
 STALL_FRAMES = 10    # frames: the window graspkit's pipelines give `rollout`'s stall rule (one MNet step)
 
 
-def check_stall(stall) -> None:
+def check_stall(stall: Any) -> None:
     """ValueError naming `stall` unless it is None (off) or a whole number of frames >= 1."""
     if stall is not None and (isinstance(stall, bool) or not isinstance(stall, int) or stall < 1):
         raise ValueError(f"stall: expected a whole number of frames >= 1, or None (off), got {stall!r}")
 
 
 @torch.no_grad()
-def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, Tensor], betas: Tensor,
+def rollout(mnet: MNet, body: SparseBody, start: tuple[Tensor, Tensor], goal: tuple[Tensor, Tensor], betas: Tensor,
             object_points: Tensor, obj_centre: Tensor, basis: Tensor, max_frames: int = 300, refine: bool = True,
-            reach_tol: float = 0.01, min_speed: float = 0.003, refine_weights=None,
+            reach_tol: float = 0.01, min_speed: float = 0.003, refine_weights: MotionRefineWeights | None = None,
             floor: float | None = None, stall: int | None = None) -> Rollout:
     """GOAL's autoregressive inference (§3.4) for one body: from `start` (rot6d (55,6), transl (3,)) to the grasp
     `goal` (same), re-canonicalised at every step; 10 frames per step while far, one frame per step once the hand is
@@ -371,7 +379,7 @@ def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, 
     obj = object_points.reshape(1, -1, 3).float()
     centre = obj_centre.reshape(1, 3).float()
 
-    def verts(r6, t):
+    def verts(r6: Tensor, t: Tensor) -> Tensor:
         return body(pose_rotmats(r6), betas.expand(len(r6), -1), t)[0].float()
 
     if floor is not None:
@@ -379,7 +387,7 @@ def rollout(mnet: MNet, body, start: tuple[Tensor, Tensor], goal: tuple[Tensor, 
 
         soles = SparseBody(body.bm, torch.as_tensor(np.concatenate(list(foot_vertices(body.bm).values()))))
 
-    def on_floor(r6, t):
+    def on_floor(r6: Tensor, t: Tensor) -> Tensor:
         """t (1,3) raised so that the lowest sole vertex of (r6, t) is not below `floor`."""
         if floor is None:
             return t
@@ -445,7 +453,7 @@ class MNetWindows:
     repeat its last (the grasp holds). Per frame the 400 sampled vertices and their offsets to the object are
     computed once; everything that depends on frame t's canonical frame is computed in `batch`."""
 
-    def __init__(self, clips: list[ApproachClip], body, basis: Tensor, cfg: MNetConfig | None = None,
+    def __init__(self, clips: list[ApproachClip], body: SparseBody, basis: Tensor, cfg: MNetConfig | None = None,
                  stride: int = 1, chunk: int = 256, goal_repeat: int = 1, goal_span: tuple[int, int] = (-30, 5)) -> None:
         from graspkit.models.gnet import pose_rotmats
 
@@ -530,7 +538,7 @@ class MNetWindows:
         return feats, tgt, feet_mask(self.verts[fut][..., 2], self.feet)
 
 
-def feet_positions(body) -> list[int]:
+def feet_positions(body: SparseBody) -> list[int]:
     """Positions, among a SparseBody's vertices, of those dominated by an ankle or foot joint."""
     from graspkit.optim.goal_refine import feet_vertex_ids
 
@@ -539,7 +547,8 @@ def feet_positions(body) -> list[int]:
 
 
 def train_mnet(train: MNetWindows, val: MNetWindows | None, cfg: MNetConfig | None = None,
-               weights: MNetLossWeights | None = None, train_cfg=None, checkpoint=None, time_limit_s=None,
+               weights: MNetLossWeights | None = None, train_cfg: TrainConfig | None = None,
+               checkpoint: str | Path | None = None, time_limit_s: float | None = None,
                progress: bool = True, vel_noise: float = 0.0) -> tuple[MNet, list[dict[str, float]]]:
     """Fit MNet with the shared loop (graspkit.train.fit) on windows; normalisation from up to 4096 windows."""
     from graspkit.train import TrainConfig, fit
@@ -554,7 +563,7 @@ def train_mnet(train: MNetWindows, val: MNetWindows | None, cfg: MNetConfig | No
     feats, tgt, _ = train.batch(sub)
     net.fit_normalisation(feats, tgt)
 
-    def step(model, batch, epoch):
+    def step(model: nn.Module, batch: list[Tensor], epoch: int) -> dict[str, Tensor]:
         f, y, foot = train.batch(batch[0], vel_noise) if model.training else val.batch(batch[0])
         return mnet_loss(model(f), y, foot, weights, net.cfg.n_hand)
 
@@ -565,7 +574,7 @@ def train_mnet(train: MNetWindows, val: MNetWindows | None, cfg: MNetConfig | No
     return net, hist
 
 
-def load_mnet(path) -> MNet:
+def load_mnet(path: str | Path) -> MNet:
     """An MNet from a shipped (or training) checkpoint, in float32 and eval mode."""
     from graspkit.models.gnet import load_weights
     from graspkit.train import load_into

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -26,6 +26,9 @@ from graspkit.body.skeleton import JOINT_NAMES
 from graspkit.models.blocks import GaussianHead, kl_standard_normal, reparameterize
 from graspkit.paths import DATA_STUBS
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
 
 POSE_PRIOR_PATH = DATA_STUBS / "checkpoints" / "pose_prior.pt"
 NUM_BODY_JOINTS = 21
@@ -153,8 +156,8 @@ def body_poses_from_motions(motions: list, stride: int = 4) -> np.ndarray:
     return np.concatenate([m.poses[::stride, 1:22] for m in motions]).astype(np.float32)
 
 
-def pose_training_set(n_clips: int = 300, seed: int = 0, extra: np.ndarray | None = None, bm=None,
-                      stride: int = 4, progress: bool = True) -> np.ndarray:
+def pose_training_set(n_clips: int = 300, seed: int = 0, extra: np.ndarray | None = None,
+                      bm: BodyModel | None = None, stride: int = 4, progress: bool = True) -> np.ndarray:
     """Body poses (n, 21, 3) for the prior: frames of n_clips locomotion + n_clips reaching clips generated in
     memory from `seed` (graspkit.data), plus `extra` poses (n', 21, 3), all also mirrored left/right."""
     from tqdm.auto import tqdm

@@ -43,7 +43,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 from torch import Tensor, nn
@@ -55,6 +55,11 @@ from graspkit.paths import DATA_STUBS
 from graspkit.models.blocks import GaussianHead, ResBlock, kl_standard_normal, reparameterize, robust_kl
 from graspkit.models.pointnet2 import (FeaturePropagation, Grouping, PointNet2Encoder, gather, groupings_from_tensors,
                                        groupings_to_tensors, interpolation_weights)
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
+    from graspkit.models.gnet import SparseBody
+    from graspkit.models.pose_prior import PosePrior
 
 
 CONSISTENCY = ("paper", "signed")   # Eq. 3 as printed; as the authors' released code computes it
@@ -574,7 +579,7 @@ N_PCA = 24
 class HandPCA:
     """SAGA's hand pose space: 24 PCA coefficients per hand about the model's mean hand (absolute axis-angle)."""
 
-    def __init__(self, bm, n: int = N_PCA) -> None:
+    def __init__(self, bm: BodyModel, n: int = N_PCA) -> None:
         if bm.use_pca or bm.flat_hand_mean:
             raise ValueError("bm: build the BodyModel with the defaults (use_pca=False, flat_hand_mean=False)")
         self.comps = {s: getattr(bm, f"{s}_hand_components")[:n].float() for s in ("left", "right")}
@@ -621,7 +626,7 @@ def check_sample_inputs(points: Tensor, normals: Tensor, n: int, least: int, nam
         raise ValueError(f"n: expected at least one sample, got {n}")
 
 
-def params_to_rotmats(x: Tensor, pca: HandPCA, prior=None) -> tuple[Tensor, Tensor, Tensor]:
+def params_to_rotmats(x: Tensor, pca: HandPCA, prior: PosePrior | None = None) -> tuple[Tensor, Tensor, Tensor]:
     """GrabNet-SMPLX's parameter vector -> rotation matrices (B, 55, 3, 3), betas (B, 10), transl (B, 3) (jaw and
     eyes at rest). x (B, 99) = [transl 3, root 6D, betas 10, body latent 32, left 24, right 24] with `prior` (the
     pose prior whose latent the body pose is in), or (B, 193) with the 21 body joints as 6D rotations (prior None)."""
@@ -714,7 +719,7 @@ class GrabNetSMPLX(nn.Module):
         return {"params": self.decode(z, batch["points"], batch["normals"], batch["height"], g), "mu": mu,
                 "logvar": logvar}
 
-    def loss(self, batch: dict[str, Tensor], out: dict[str, Tensor], body, pca: HandPCA, epoch: int,
+    def loss(self, batch: dict[str, Tensor], out: dict[str, Tensor], body: SparseBody, pca: HandPCA, epoch: int,
              epochs: int) -> dict[str, Tensor]:
         """Marker L1 through `body` (SparseBody at the 143 markers) + parameter L1 + annealed KL."""
         rot, betas, transl = self.to_rotmats(out["params"], pca)
@@ -754,7 +759,7 @@ class GrabNetSMPLX(nn.Module):
         return model.eval()
 
 
-def rest_root_joint(bm, betas: Tensor) -> Tensor:
+def rest_root_joint(bm: BodyModel, betas: Tensor) -> Tensor:
     """The rest-pose pelvis joint (B,3) of bodies with shapes betas (B,10)."""
     with torch.no_grad():
         coeffs = torch.cat([betas.to(bm.dtype), torch.zeros(len(betas), bm.num_expression, dtype=bm.dtype)], -1)
@@ -762,7 +767,7 @@ def rest_root_joint(bm, betas: Tensor) -> Tensor:
 
 
 def grasp_params(fullpose: Tensor, transl: Tensor, betas: Tensor, object_transl: Tensor, pca: HandPCA,
-                 prior=None) -> Tensor:
+                 prior: PosePrior | None = None) -> Tensor:
     """GrabNet-SMPLX parameter vectors of grasps: fullpose (B,55,3) absolute, world transl (B,3), betas (B,10), the
     object translation (B,3) (the object frame's origin); the body pose as `prior`'s posterior mean (B, 99) or,
     prior None, as 6D rotations (B, 193)."""
@@ -783,7 +788,8 @@ class GrabNetTrainingSet(torch.utils.data.Dataset):
     """Parameter vectors, markers and objects of graspkit's grasps (one split), PointNet++ groupings precomputed;
     `augment_yaw` turns each item about the vertical axis through the object centre (root and translation)."""
 
-    def __init__(self, root: str | Path, split: str, bm, model: GrabNetSMPLX, augment_yaw: bool = False) -> None:
+    def __init__(self, root: str | Path, split: str, bm: BodyModel, model: GrabNetSMPLX,
+                 augment_yaw: bool = False) -> None:
         from graspkit.data.grasp_datasets import GNetDataset, WholeGraspDataset
 
         wg, gn = WholeGraspDataset(root, split=split), GNetDataset(root, split=split)

@@ -30,7 +30,8 @@ def bps_basis(n: int = 1024, radius: float = 0.15, seed: int = 0, dtype: torch.d
     return torch.as_tensor(direction * r[:, None], dtype=dtype)
 
 
-def bps_encode(points, basis: Tensor, return_deltas: bool = False) -> Tensor | tuple[Tensor, Tensor]:
+def bps_encode(points: Tensor | np.ndarray, basis: Tensor,
+               return_deltas: bool = False) -> Tensor | tuple[Tensor, Tensor]:
     """BPS code of point clouds (N,3)|(B,N,3): distances (B,K) from each basis point to its nearest point.
 
     With return_deltas, also the offsets (B,K,3) = nearest point - basis point. Differentiable w.r.t.

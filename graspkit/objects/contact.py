@@ -16,12 +16,16 @@ from __future__ import annotations
 
 import math
 import numbers
+from typing import TYPE_CHECKING
 
 import torch
 import trimesh
 from torch import Tensor
 
 from graspkit.objects.distance import MeshLike, as_points, nearest_neighbours, point_mesh_distance
+
+if TYPE_CHECKING:
+    import numpy as np
 
 MARKER_CONTACT_THRESHOLD = 0.02  # m
 OBJECT_CONTACT_THRESHOLD = 0.01  # m
@@ -35,7 +39,7 @@ def _check_threshold(threshold: float) -> None:
         raise ValueError(f"threshold: expected a finite distance >= 0 in metres, got {threshold!r}")
 
 
-def distance_to(points, target: MeshLike | Tensor) -> Tensor:
+def distance_to(points: Tensor | np.ndarray, target: MeshLike | Tensor) -> Tensor:
     """Distance (N,)|(B,N) from points to a mesh (Trimesh or (vertices, faces): exact surface distance)
     or to a point set (M,3)|(B,M,3) (nearest point)."""
     if isinstance(target, (trimesh.Trimesh, tuple, list)):
@@ -43,7 +47,8 @@ def distance_to(points, target: MeshLike | Tensor) -> Tensor:
     return nearest_neighbours(points, target)[0]
 
 
-def marker_contact(markers, obj: MeshLike | Tensor, threshold: float = MARKER_CONTACT_THRESHOLD) -> Tensor:
+def marker_contact(markers: Tensor | np.ndarray, obj: MeshLike | Tensor,
+                   threshold: float = MARKER_CONTACT_THRESHOLD) -> Tensor:
     """SAGA's C_M: 1.0 where a marker (N,3)|(B,N,3) is within `threshold` m of the object's surface, else 0.0 (the
     unsigned distance, as the labels are made: a marker deep inside the object reads 0; `grasp_metrics` uses the
     signed distance)."""
@@ -52,7 +57,8 @@ def marker_contact(markers, obj: MeshLike | Tensor, threshold: float = MARKER_CO
     return (distance_to(markers, obj) <= threshold).to(markers.dtype)
 
 
-def object_contact(object_points, body: MeshLike | Tensor, threshold: float = OBJECT_CONTACT_THRESHOLD) -> Tensor:
+def object_contact(object_points: Tensor | np.ndarray, body: MeshLike | Tensor,
+                   threshold: float = OBJECT_CONTACT_THRESHOLD) -> Tensor:
     """SAGA's C_O: 1.0 where an object point (P,3)|(B,P,3) is within `threshold` m of the body, else 0.0.
 
     `body` is a body mesh (Trimesh or (vertices (V,3)|(B,V,3), faces)) or just its vertices.
@@ -76,6 +82,6 @@ def interaction_attention(distance: Tensor, w: float = IAA_WEIGHT) -> Tensor:
     return torch.exp(-w * distance)
 
 
-def body_object_attention(body_vertices, obj: MeshLike | Tensor, w: float = IAA_WEIGHT) -> Tensor:
+def body_object_attention(body_vertices: Tensor | np.ndarray, obj: MeshLike | Tensor, w: float = IAA_WEIGHT) -> Tensor:
     """exp(-w d(v, O)) (N,)|(B,N) for body vertices v and an object mesh (exact) or object points O."""
     return interaction_attention(distance_to(as_points(body_vertices, "body_vertices"), obj), w)

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Union
+from typing import Any, Union
 
 import numpy as np
 import torch
@@ -40,7 +40,7 @@ FACE, VERT_A, VERT_B, VERT_C, EDGE_AB, EDGE_BC, EDGE_CA = range(7)
 
 # ---------------------------------------------------------------------------------------------- input checks
 
-def as_points(x, name: str, dtype: torch.dtype | None = None) -> Tensor:
+def as_points(x: Any, name: str, dtype: torch.dtype | None = None) -> Tensor:
     """Validate a point set (..., N, 3): a float tensor with at least one point, all finite; numpy -> float64."""
     if not isinstance(x, Tensor):
         try:
@@ -170,7 +170,8 @@ def zero_area_faces(tri: Tensor) -> Tensor:
 
 # ---------------------------------------------------------------------------------------------- point <-> point
 
-def nearest_neighbours(query, target, squared: bool = False) -> tuple[Tensor, Tensor]:
+def nearest_neighbours(query: Tensor | np.ndarray, target: Tensor | np.ndarray,
+                       squared: bool = False) -> tuple[Tensor, Tensor]:
     """For every query point its nearest target point: (N,3)|(B,N,3) vs (M,3)|(B,M,3) -> dist (B,N), index (B,N).
 
     Differentiable w.r.t. both point sets; `squared` gives ||q - t||^2 as in SAGA Eq. 3. The batch
@@ -342,7 +343,7 @@ class MeshDistance:
     region: Tensor
 
 
-def point_mesh_distance(points, mesh: MeshLike) -> MeshDistance:
+def point_mesh_distance(points: Tensor | np.ndarray, mesh: MeshLike) -> MeshDistance:
     """Exact unsigned distance from points (N,3)|(B,N,3) to a triangle mesh (Trimesh or (vertices, faces)).
 
     Vertices may be (V,3) or batched (B,V,3) with shared faces (a posed body). Differentiable w.r.t.

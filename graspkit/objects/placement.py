@@ -115,7 +115,9 @@ def apply_pose(pose: ObjectPose, x: Array, normals: None = None) -> Array: ...
 def apply_pose(pose: ObjectPose, x: Array, normals: Array) -> tuple[Array, Array]: ...
 
 
-def apply_pose(pose, x, normals=None):
+def apply_pose(pose: ObjectPose, x: trimesh.Trimesh | np.ndarray | Tensor,
+               normals: np.ndarray | Tensor | None = None
+               ) -> trimesh.Trimesh | np.ndarray | Tensor | tuple[np.ndarray | Tensor, np.ndarray | Tensor]:
     """Move a mesh (copy), or points (..., 3) [and their normals (..., 3)] by `pose`; normals rotate only.
 
     numpy in -> numpy out, torch in -> torch out (same dtype/device, differentiable).

@@ -50,7 +50,7 @@ def pseudo_normals(verts: Tensor, faces: Tensor) -> tuple[Tensor, Tensor, Tensor
     return fn, en, vn
 
 
-def signed_distance(points, mesh: MeshLike, check: bool = True) -> Tensor:
+def signed_distance(points: Tensor | np.ndarray, mesh: MeshLike, check: bool = True) -> Tensor:
     """Exact signed distance (N,)|(B,N) from points (N,3)|(B,N,3) to a closed mesh; negative inside.
 
     Differentiable w.r.t. the points and the mesh vertices (the sign is locally constant). `check`
@@ -85,7 +85,8 @@ def signed_distance(points, mesh: MeshLike, check: bool = True) -> Tensor:
     return res.distance * sign
 
 
-def signed_distance_to_points(points, cloud, normals) -> Tensor:
+def signed_distance_to_points(points: Tensor | np.ndarray, cloud: Tensor | np.ndarray,
+                              normals: Tensor | np.ndarray) -> Tensor:
     """SAGA Eq. 7's S(x, Y) for a point cloud Y with outward normals: |x - y*| signed by (x - y*) . n(y*).
 
     y* is the nearest cloud point; points (N,3)|(B,N,3), cloud and normals (M,3)|(B,M,3) -> (N,)|(B,N),
@@ -107,7 +108,7 @@ def signed_distance_to_points(points, cloud, normals) -> Tensor:
     return dist * sign.reshape(dist.shape)
 
 
-def winding_number(points, mesh: MeshLike, chunk: int = 2_000_000) -> Tensor:
+def winding_number(points: Tensor | np.ndarray, mesh: MeshLike, chunk: int = 2_000_000) -> Tensor:
     """Generalized winding number (N,) of a single mesh at points (N,3): ~1 inside, ~0 outside (no gradient)."""
     p = as_points(points, "points").detach().to(torch.float64)
     verts, faces = mesh_arrays(mesh, "mesh")
@@ -126,7 +127,7 @@ def winding_number(points, mesh: MeshLike, chunk: int = 2_000_000) -> Tensor:
     return out
 
 
-def contains(points, mesh: MeshLike) -> Tensor:
+def contains(points: Tensor | np.ndarray, mesh: MeshLike) -> Tensor:
     """Boolean (N,)|(B,N): points strictly inside the closed mesh (by the exact signed distance)."""
     return signed_distance(points, mesh) < 0
 
@@ -179,7 +180,7 @@ class SDFGrid:
         """A copy on another device and/or in another dtype (do this once, not per query)."""
         return SDFGrid(*(t.to(device=device, dtype=dtype) for t in (self.values, self.lower, self.upper)))
 
-    def __call__(self, points) -> Tensor:
+    def __call__(self, points: Tensor | np.ndarray) -> Tensor:
         """Interpolated signed distance (...,) at points (..., 3); differentiable w.r.t. the points."""
         if not isinstance(points, Tensor):
             try:

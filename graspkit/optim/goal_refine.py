@@ -42,6 +42,7 @@ E_MNet = λ_Θ E_Θ + λ_v^h E_v^h (Eq. 13): E_Θ couples to MNet's Θ̂ (square
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -51,6 +52,10 @@ from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.models.gnet import SparseBody, pose_rotmats
 from graspkit.objects.distance import nearest_neighbours
 from graspkit.objects.sdf import SDFGrid
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
+    from graspkit.body.markers import GoalVertices
 
 FEET_PARTS = ("left_ankle", "right_ankle", "left_foot", "right_foot")
 GOAL_HAND_RADIUS = 0.10   # m: MNet's refinement starts when the hand is this close to the goal hand (§3.4)
@@ -65,7 +70,7 @@ def hand_object_offsets(points: Tensor, object_points: Tensor) -> Tensor:
     return nearest - points
 
 
-def feet_vertex_ids(bm) -> np.ndarray:
+def feet_vertex_ids(bm: BodyModel) -> np.ndarray:
     """Ids of the vertices whose dominant skinning joint is an ankle or a foot (the soles and toes among them)."""
     part = bm.lbs_weights.argmax(1).numpy()
     return np.flatnonzero(np.isin(part, [JOINT_INDEX[j] for j in FEET_PARTS]))
@@ -162,7 +167,7 @@ class RefinedGrasp:
 class GraspRefiner:
     """Eq. 4–8 on one body model: the sampled vertices (hand first), the head pair and the feet, evaluated sparsely."""
 
-    def __init__(self, bm, gv, n_hand: int = 99) -> None:
+    def __init__(self, bm: BodyModel, gv: GoalVertices, n_hand: int = 99) -> None:
         from graspkit.optim.grasppose import forearm_vertex_ids, hand_faces, hand_vertex_ids
 
         self.n_hand, self.n_sampled = n_hand, len(gv.vertex_ids)

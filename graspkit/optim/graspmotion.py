@@ -103,7 +103,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -118,6 +118,10 @@ from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, _nearest, body_jo
 from graspkit.optim.step import energy_step
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
 from graspkit.train import load_checkpoint, state_dict_problem
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
+    from graspkit.models.pose_prior import PosePrior
 
 SMOOTH_AE_PATH = Path(__file__).resolve().parents[2] / "data_stubs" / "checkpoints" / "motionfill_smooth_ae.pt"
 FOOT_PARTS = ("left_heel", "left_toe", "right_heel", "right_toe")
@@ -287,8 +291,8 @@ class GraspMotionResult:
 class GraspMotionOpt:
     """SAGA's GraspMotion-Opt for a BodyModel (flat_hand_mean=False), the pose prior and S.1's autoencoder."""
 
-    def __init__(self, bm, prior, smooth_ae: MarkerDiffAE | None = None, config: GraspMotionConfig | None = None
-                 ) -> None:
+    def __init__(self, bm: BodyModel, prior: PosePrior, smooth_ae: MarkerDiffAE | None = None,
+                 config: GraspMotionConfig | None = None) -> None:
         if bm.flat_hand_mean:
             raise ValueError("bm: build the BodyModel with flat_hand_mean=False (hand PCA about the mean hand)")
         self.bm, self.prior, self.ae = bm, prior.eval(), smooth_ae

@@ -91,7 +91,7 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -107,6 +107,10 @@ from graspkit.objects.distance import require_points_in_metres
 from graspkit.objects.sdf import SDFGrid
 from graspkit.optim.step import energy_step
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
+    from graspkit.models.pose_prior import PosePrior
 
 TERMS = ("fit", "prior", "contact_object", "contact_marker", "colli_body", "colli_object", "ground", "heuristic",
          "limits")
@@ -288,14 +292,14 @@ def body_joint_ids(names: tuple[str, ...]) -> Tensor:
     return torch.tensor([BODY_JOINTS.index(n) for n in names], dtype=torch.long)
 
 
-def hand_vertex_ids(bm, sides: tuple[str, ...] = ("left", "right")) -> np.ndarray:
+def hand_vertex_ids(bm: BodyModel, sides: tuple[str, ...] = ("left", "right")) -> np.ndarray:
     """Vertex ids (sorted) dominated by the wrists and fingers of the given hands."""
     parts = [JOINT_INDEX[f"{s}_wrist"] for s in sides]
     parts += [JOINT_INDEX[f"{s}_{f}{k}"] for s in sides for f in FINGERS for k in (1, 2, 3)]
     return np.flatnonzero(np.isin(bm.lbs_weights.argmax(1).numpy(), parts))
 
 
-def hand_faces(bm, hands: Tensor) -> Tensor:
+def hand_faces(bm: BodyModel, hands: Tensor) -> Tensor:
     """The body's faces whose three vertices are all hand vertices (ids `hands` (n,)), re-indexed into 0..n-1 (F,3)."""
     pos = torch.full((bm.num_vertices,), -1, dtype=torch.long)
     pos[hands] = torch.arange(len(hands))
@@ -317,7 +321,7 @@ def collision_points(hands: Tensor, faces: Tensor, inner_depths: tuple[float, ..
     return torch.cat(q, 1) if q else hands[:, :0]
 
 
-def forearm_vertex_ids(bm) -> np.ndarray:
+def forearm_vertex_ids(bm: BodyModel) -> np.ndarray:
     """Vertex ids (sorted) dominated by the elbows' joints (the forearms)."""
     parts = [JOINT_INDEX[f"{s}_elbow"] for s in ("left", "right")]
     return np.flatnonzero(np.isin(bm.lbs_weights.argmax(1).numpy(), parts))
@@ -366,7 +370,7 @@ def _signed_to_cloud(q: Tensor, cloud: Tensor, normals: Tensor, idx: Tensor | No
 class GraspPoseOpt:
     """SAGA's GraspPose-Opt for a BodyModel and a pose prior; call `fit` with markers, contacts and the object."""
 
-    def __init__(self, bm, prior, config: GraspPoseConfig | None = None,
+    def __init__(self, bm: BodyModel, prior: PosePrior, config: GraspPoseConfig | None = None,
                  hand_contact_prior: Tensor | None = None) -> None:
         self.bm, self.prior = bm, prior.eval()
         for p in self.prior.parameters():

@@ -16,7 +16,7 @@ latents of a WANDR rollout and keep its intention. graspkit's choices (the paper
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import torch
 from torch import Tensor
@@ -24,6 +24,10 @@ from torch import Tensor
 from graspkit import intention as I
 from graspkit.checks import check_generator, check_int
 from graspkit.models.wandr import Rollout, WandrCVAE, expand_starts, rollout
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
+    from graspkit.eval_wandr import GridResult
 
 
 @dataclass
@@ -101,8 +105,8 @@ def optimise_latents(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose
     return LatentResult(best_z, final, history)
 
 
-def evaluate_vae_opt(model: WandrCVAE, starts: Sequence[I.StartPose], bm, seed: int = 0, n_starts: int = 2,
-                     iters: int = 30, chunk: int = 125, **kw):
+def evaluate_vae_opt(model: WandrCVAE, starts: Sequence[I.StartPose], bm: BodyModel, seed: int = 0, n_starts: int = 2,
+                     iters: int = 30, chunk: int = 125, **kw: Any) -> GridResult:
     """Tab. 2's "VAE + opt" on the goal grid: a model without intention, latents optimised from random draws towards
     each goal (L_norm + L_goal at t_G), scored as evaluate_grid scores WANDR. Cost: every iteration is a rollout and its
     backward pass, so this runs on the first `n_starts` starts with one sample per goal (documented in docs/wandr.md)."""

@@ -4,12 +4,16 @@ the ipywidgets layer only wires sliders to them and redraws a matplotlib figure.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
 
 from graspkit.body.model import BodyModel
 from graspkit.body.skeleton import JOINT_INDEX, NUM_BODY_JOINTS
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 # joints the body explorer exposes, with the axis (canonical frame) that bends them naturally
 EXPLORER_JOINTS: dict[str, tuple[float, float, float]] = {
@@ -95,7 +99,7 @@ class BodyExplorer:
         v, _ = self.mesh()
         return float(v[:, 1].max() - v[:, 1].min())
 
-    def figure(self):
+    def figure(self) -> Figure:
         """A matplotlib figure of the current body: front and side views in the z-up world."""
         import matplotlib.pyplot as plt
 
@@ -114,7 +118,7 @@ class BodyExplorer:
         plt.close(fig)
         return fig
 
-    def widget(self, betas_shown: int = 3, dpi: float = 72.0):  # pragma: no cover - needs a browser; logic is tested
+    def widget(self, betas_shown: int = 3, dpi: float = 72.0) -> Any:  # pragma: no cover - needs a browser; logic is tested
         """An ipywidgets box: sliders for the first betas and the exposed joints, and the redrawn front/side view."""
         import ipywidgets as w
 
