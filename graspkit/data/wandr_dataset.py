@@ -310,7 +310,8 @@ def compute_stats(clips: ClipSet, samples: int = 20000, seed: int = 0, goal_fram
         mean, std = [], []
         for a in range(0, chunks[0].shape[1], block):
             x = torch.cat([c[:, a:a + block] for c in chunks]).double()
-            mean.append(x.mean(0)), std.append(x.std(0))
+            mean.append(x.mean(0))
+            std.append(x.std(0))
         return torch.cat(mean).float(), torch.cat(std).clamp(min=STD_FLOOR).float()
 
     (dm, dsd), (sm, ssd), (im, isd) = ms(d_all), ms(s_all), ms([inten])
