@@ -46,6 +46,7 @@ from graspkit.objects.placement import ObjectPose, sample_object_pose
 from graspkit.rotations import axis_angle_to_matrix
 
 if TYPE_CHECKING:
+    from graspkit.body import BodyModel
     from graspkit.objects.sdf import SDFGrid
 
 J = JOINT_INDEX
@@ -420,7 +421,7 @@ class GraspResult:
 class GraspFitter:
     """Holds the body model, its hand model and the per-object SDF grids; `fit(tasks)` runs the pipeline."""
 
-    bm: object
+    bm: BodyModel
     steps: int = 40
     grid_resolution: int = 64
     _grids: dict = field(default_factory=dict)

@@ -17,7 +17,7 @@ import os
 import struct
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import trimesh
@@ -28,6 +28,10 @@ from trimesh.visual.material import PBRMaterial
 from graspkit.paths import publish, temp_beside, write_atomic  # noqa: F401 (re-exported: callers import them here)
 from graspkit.viz.scene import as_array, as_mesh
 from graspkit.viz.style import OBJECT, SEQUENCE, SKIN
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
+    from graspkit.data.motion import Motion
 
 FORMATS = (".glb", ".obj", ".ply")
 Z_UP_TO_Y_UP = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # rotation of -90 deg about x: (x, y, z) -> (x, z, -y)
@@ -268,7 +272,7 @@ def load_sequence_glb(path: str | os.PathLike, name: str = "body",
     return np.stack(frames) @ rot, arr(prim["indices"]).reshape(-1, 3).astype(np.int64), times
 
 
-def export_motion(motion: Any, bm: Any, folder: str | os.PathLike, name: str,
+def export_motion(motion: Motion, bm: BodyModel, folder: str | os.PathLike, name: str,
                   objects: Mapping[str, Any] | None = None, stride: int = 2) -> dict[str, Path]:
     """A whole sequence (graspkit.data.Motion) for other tools: `<name>.npz` (AMASS-style SMPL-X parameters with
     AMASS's per-part keys too, loads in the smplx package), `<name>.glb` (animated: morph targets every `stride`
@@ -294,7 +298,7 @@ def export_motion(motion: Any, bm: Any, folder: str | os.PathLike, name: str,
     return out
 
 
-def motion_vertices(motion: Any, bm: Any, chunk: int = 64) -> np.ndarray:
+def motion_vertices(motion: Motion, bm: BodyModel, chunk: int = 64) -> np.ndarray:
     """Mesh vertices (T,V,3) of a Motion on body model bm as a float32 numpy array."""
     if motion.num_frames == 0:
         raise ValueError("motion: has no frames, expected at least one")

@@ -7,7 +7,7 @@ The state and the callback are plain Python (tests/test_object_explorer.py check
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch
@@ -19,6 +19,9 @@ from graspkit.objects import (MARKER_CONTACT_THRESHOLD, OBJECT_CONTACT_THRESHOLD
                               signed_distance)
 from graspkit.viz.explorers import slider_bounds, slider_value
 
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
+
 # right arm held forward at chest height, palm down, the left arm lowered (SMPL-X canonical frame, see body/poses.py)
 REACH_FORWARD: dict[str, tuple[float, float, float]] = {
     "right_shoulder": (0.0, 1.35, 0.25), "right_elbow": (0.0, 0.25, 0.0), "left_shoulder": (0.0, 0.0, -1.2),
@@ -28,7 +31,7 @@ YAW_SLIDER = "yaw"  # rotation about the world z axis through the object centre,
 MARKER_IN_CONTACT = "#2ca02c"  # SAGA Fig. 3 draws markers in contact in green
 
 
-def reaching_body(bm: Any, pose: dict[str, tuple[float, float, float]] | None = None
+def reaching_body(bm: BodyModel, pose: dict[str, tuple[float, float, float]] | None = None
                   ) -> tuple[np.ndarray, np.ndarray]:
     """The body in `pose` (default REACH_FORWARD), z-up world, facing -y, feet on z = 0: vertices (V,3), faces (F,3)."""
     from graspkit.body.poses import y_up_to_z_up
@@ -44,7 +47,7 @@ def reaching_body(bm: Any, pose: dict[str, tuple[float, float, float]] | None = 
     return v, bm.faces.cpu().numpy().astype(np.int64)
 
 
-def hand_vertices(bm: Any, side: str = "right") -> np.ndarray:
+def hand_vertices(bm: BodyModel, side: str = "right") -> np.ndarray:
     """Ids (N,) of the vertices a hand moves: those whose largest skinning weight is the wrist or a finger joint."""
     from graspkit.body.skeleton import FINGERS, JOINT_INDEX
 
