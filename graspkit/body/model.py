@@ -405,10 +405,9 @@ class BodyModel(nn.Module):
         # chunks of bodies: a (B,12,V) product for a large batch leaves the caches (and is a fresh allocation every
         # call); the same per-body arithmetic in chunks of SKIN_CHUNK_BYTES is bit-equal and ~2x faster at B = 512
         n = max(1, SKIN_CHUNK_BYTES // (12 * self.num_vertices * v.element_size()))
-        if B <= n:
-            return BodyOutput(self._skin(A, v, transl), tg + transl.unsqueeze(1), self.faces, rot)
-        chunks = [self._skin(A[s:s + n], v[s:s + n], transl[s:s + n]) for s in range(0, B, n)]
-        return BodyOutput(torch.cat(chunks), tg + transl.unsqueeze(1), self.faces, rot)
+        verts = self._skin(A, v, transl) if B <= n else \
+            torch.cat([self._skin(A[s:s + n], v[s:s + n], transl[s:s + n]) for s in range(0, B, n)])
+        return BodyOutput(verts, tg + transl.unsqueeze(1), self.faces, rot)
 
     def _skin(self, A: Tensor, v: Tensor, transl: Tensor) -> Tensor:
         """Linear blend skinning of n bodies: transforms A (n,12,55), rest vertices (n,3,V), transl (n,3) -> (n,V,3)."""
