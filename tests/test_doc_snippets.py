@@ -2,6 +2,7 @@
 keyword they pass to a graspkit function or class is one of its parameters (the blocks are sketches with
 placeholders, so they are checked, not run)."""
 import ast
+import functools
 import importlib
 import inspect
 import re
@@ -68,8 +69,15 @@ def callee(func: ast.expr, names: dict[str, object]) -> object | None:
 def hint_namespace(obj: object) -> dict[str, object]:
     """The globals of obj's module plus the names its `if TYPE_CHECKING:` block imports (annotations only)."""
     module = inspect.getmodule(obj)
-    ns = dict(vars(module)) if module else {}
-    if module and getattr(module, "__file__", None):
+    return _module_hint_namespace(module.__name__) if module else {}
+
+
+@functools.lru_cache(maxsize=None)
+def _module_hint_namespace(name: str) -> dict[str, object]:
+    """hint_namespace of one module, read and executed once."""
+    module = importlib.import_module(name)
+    ns = dict(vars(module))
+    if getattr(module, "__file__", None):
         for node in ast.parse(Path(module.__file__).read_text()).body:
             if isinstance(node, ast.If) and getattr(node.test, "id", None) == "TYPE_CHECKING":
                 exec(compile(ast.Module(node.body, type_ignores=[]), module.__file__, "exec"), ns)
