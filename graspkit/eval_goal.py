@@ -280,8 +280,9 @@ def _head_body():
     return SparseBody(body.bm, torch.tensor([gv.head_back, gv.head_front]))
 
 
-def gnet_data(folders: Sequence[str | Path]) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
-    """GNet's train and validation samples: static grasps and the grasp frames of approach clips."""
+def gnet_data(folders: Sequence[str | Path]) -> tuple[dict[str, Tensor], dict[str, Tensor] | None]:
+    """GNet's train and validation samples (None: no validation files): static grasps and the grasp frames of approach
+    clips."""
     train = _all_files(folders, "grasp", "train") + _all_files(folders, "approach", "train")
     val = _all_files(folders, "grasp", "val") + _all_files(folders, "approach", "val")
     if not train:

@@ -324,9 +324,10 @@ def hand_rotation(hf: go.HandFrame, axis_h: np.ndarray, s: np.ndarray, y: np.nda
     return frame(-s, y) @ frame(hf.normal, axis_h).T
 
 
-def hand_anchor(hm: go.HandModel, betas: np.ndarray, grasp_type: str) -> tuple[np.ndarray, np.ndarray, go.HandFrame]:
+def hand_anchor(hm: go.HandModel, betas: np.ndarray, grasp_type: str) -> tuple[np.ndarray, np.ndarray | None, go.HandFrame]:
     """Rest-pose anchor point (3,) of the hand for a grasp type (palm centre; pinch: between the thumb and index
-    pads of the closed pinch), the hand axis (3,) that follows the frame's y, and the hand frame."""
+    pads of the closed pinch), the pinch axis (3,) that follows the frame's y (None for other grasps), and the hand
+    frame."""
     hf = hm.frame(betas)
     if grasp_type != "pinch":
         return hf.palm, None, hf
