@@ -237,3 +237,24 @@ def test_digest_names_the_model_arrays_and_dtype():
     assert BodyModel(moved).digest() != a.digest()
     assert BodyModel(random_smplx_arrays(num_vertices=300, num_faces=500, seed=4)).digest() != a.digest()
     assert BodyModel(arrays, dtype=torch.float64).digest() != a.digest()
+
+
+def test_a_400_component_file_matches_smplx_with_16_betas_and_short_betas_pad_at_the_end(tmp_path):
+    """In an SMPL-X 2020 file (300 shape + 100 expression components) the expression basis starts at component 300
+    whatever num_betas (smplx reads it so); betas shorter than num_betas are the leading components (zero-padded at
+    the end). Truth: the smplx package on the same file."""
+    arr = random_smplx_arrays(seed=3)
+    arr["shapedirs"] = np.random.default_rng(5).normal(scale=0.01, size=arr["shapedirs"].shape[:2] + (400,))
+    (tmp_path / "smplx").mkdir()
+    np.savez(tmp_path / "smplx" / "SMPLX_NEUTRAL.npz", **arr)
+    kw = dict(num_betas=16, num_expression_coeffs=10, use_pca=False, flat_hand_mean=True, dtype=torch.float64)
+    ref = smplx.create(str(tmp_path), model_type="smplx", gender="neutral", ext="npz", **kw)
+    ours = BodyModel(arr, num_betas=16, num_expression=10, flat_hand_mean=True, dtype=torch.float64)
+    p = _params(2, 45, torch.float64)                      # smplx needs every argument at the batch size
+    p["betas"] = torch.randn(2, 16, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
+    with torch.no_grad():
+        a, b = ref(**p), ours(**p)
+        short = ours(**{**p, "betas": p["betas"][:, :3]}).vertices
+        padded = ref(**{**p, "betas": torch.cat([p["betas"][:, :3], torch.zeros(2, 13, dtype=torch.float64)], 1)})
+    assert (a.vertices - b.vertices).abs().max().item() < 1e-6            # 1e-7 m as the other parity tests
+    assert (short - padded.vertices).abs().max().item() < 1e-6

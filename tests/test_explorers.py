@@ -1,11 +1,12 @@
 """The body explorer's callback logic (the ipywidgets layer only wires sliders to it)."""
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from graspkit.body import BodyModel
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.paths import default_model_path
-from graspkit.viz.explorers import BodyExplorer, canonical_to_world
+from graspkit.viz.explorers import BodyExplorer, BodyExplorerState, canonical_to_world, slider_bounds
 
 
 @pytest.fixture(scope="module")
@@ -37,17 +38,9 @@ def test_elbow_slider_moves_the_wrist_by_the_forearm_rotation(explorer):
 
 def test_unknown_slider_is_named():
     ex = BodyExplorer.__new__(BodyExplorer)
-    from graspkit.viz.explorers import BodyExplorerState
     ex.state = BodyExplorerState()
     with pytest.raises(ValueError, match="wiggle"):
         ex.state.set("wiggle", 1.0)
-
-
-def test_canonical_to_world_is_a_rotation_taking_up_to_z():
-    p = np.random.default_rng(0).normal(size=(10, 3))
-    w = canonical_to_world(p)
-    np.testing.assert_allclose(np.linalg.norm(w, axis=1), np.linalg.norm(p, axis=1))
-    np.testing.assert_allclose(canonical_to_world(np.array([0.0, 1.0, 0.0])), [0, 0, 1])
 
 
 def test_a_non_finite_value_is_refused_and_leaves_the_state_alone(explorer):
@@ -76,3 +69,25 @@ def test_the_widget_sliders_show_the_state_even_outside_their_range(explorer):
     finally:
         explorer.update("beta0", 0.0)
         explorer.update("left_elbow", 0.0)
+
+
+def test_slider_bounds_hold_the_value_on_either_side():
+    assert slider_bounds(-3.0, -2.0, 2.0) == {"value": -3.0, "min": -3.0, "max": 2.0}
+    assert slider_bounds(2.5, -2.0, 2.0) == {"value": 2.5, "min": -2.0, "max": 2.5}
+    assert slider_bounds(0.5, -2.0, 2.0) == {"value": 0.5, "min": -2.0, "max": 2.0}
+
+
+def test_canonical_to_world_is_the_rotation_about_x():
+    """+90 deg about x (scipy), a proper rotation: canonical up (+y) becomes z, the body's front (+z) faces -y."""
+    p = np.random.default_rng(0).normal(size=(20, 3))
+    np.testing.assert_allclose(canonical_to_world(p), Rotation.from_euler("x", 90, degrees=True).apply(p), atol=1e-12)
+    np.testing.assert_allclose(canonical_to_world(np.array([0.0, 1.0, 0.0])), [0.0, 0.0, 1.0], atol=1e-12)
+    np.testing.assert_allclose(canonical_to_world(np.array([0.0, 0.0, 1.0])), [0.0, -1.0, 0.0], atol=1e-12)
+
+
+def test_a_beta_past_the_models_is_an_unknown_slider():
+    s = BodyExplorerState(np.zeros(10))
+    with pytest.raises(ValueError, match="unknown slider 'beta10'"):
+        s.set("beta10", 1.0)
+    s.set("beta9", 1.0)
+    assert s.betas[9] == 1.0

@@ -658,3 +658,16 @@ def test_refined_slabs_through_yawed_walls_over_a_sweep():
     errs, ones = np.abs(errs), np.abs(ones)
     assert errs.mean() < 0.003 and errs.max() < 0.02
     assert ones.mean() > 5 * errs.mean()
+
+
+def test_point_mesh_distance_is_exact_far_from_the_mesh():
+    """Points 1.2-2.5 m from a 10 cm sphere (a body 1-1.5 m from an object at GOAL's start): trimesh's
+    point-triangle distance over every (point, face) pair."""
+    mesh = trimesh.creation.icosphere(2, 0.1)
+    rng = np.random.default_rng(0)
+    d = rng.normal(size=(40, 3))
+    pts = d / np.linalg.norm(d, axis=1, keepdims=True) * rng.uniform(1.2, 2.5, (40, 1))
+    tri = mesh.triangles
+    cp = trimesh.triangles.closest_point(np.tile(tri, (len(pts), 1, 1)), np.repeat(pts, len(tri), 0))
+    want = np.linalg.norm(np.repeat(pts, len(tri), 0) - cp, axis=1).reshape(len(pts), len(tri)).min(1)
+    np.testing.assert_allclose(point_mesh_distance(pts, mesh).distance.numpy(), want, atol=1e-9)

@@ -83,3 +83,14 @@ def test_goal_and_wandr_commands_name_bad_arguments(tmp_path, capsys):
     assert not (tmp_path / "x").exists()
     assert main(["wandr", "--goal", "1", "0", "1", "--checkpoint", str(tmp_path / "none.pt")]) == 2
     assert "checkpoint" in capsys.readouterr().err
+
+
+def test_default_start_is_on_the_minus_y_side_facing_the_centre():
+    """`distance` m from the object centre on its -y side, facing it; yaw_offset turns the start about the centre."""
+    c = np.array([0.3, 1.2, 0.8])
+    s = default_start(c, 1.0)
+    np.testing.assert_allclose([s.x, s.y], [0.3, 0.2], atol=1e-12)
+    np.testing.assert_allclose(s.heading, np.pi / 2, atol=1e-12)            # facing +y, towards the centre
+    t = default_start(c, 0.5, yaw_offset=np.pi / 2)                         # turned a quarter about the centre
+    np.testing.assert_allclose([t.x, t.y], [0.8, 1.2], atol=1e-12)
+    np.testing.assert_allclose(np.cos(t.heading), -1.0, atol=1e-12)         # facing -x, towards the centre

@@ -100,3 +100,27 @@ def test_the_datasets_read_the_samples():
     assert item["foot_contacts"][g:].all()
     whole = ApproachDataset(STUBS / "approach", split=None, window=None)
     assert whole[0]["fullpose"].shape[0] == len(load_grasp_sequence(APPROACH[0]).poses)
+
+
+def test_approach_window_goal_frame_and_hand_to_goal():
+    """In a window that holds the clip's goal frame as its 21st frame, goal_frame is 20 (the file's pose there),
+    and hand_to_goal is the goal hand minus the current hand (GOAL's d^h): at frame 0, rebuilt by smplx, the current
+    right hand plus hand_to_goal is the goal hand."""
+    z = dict(np.load(APPROACH[0], allow_pickle=False))
+    T, g = len(z["body.params.transl"]), int(z["grasp.goal_frame"])
+    window = T - g + 20
+    assert window < T
+    item = ApproachDataset(STUBS / "approach", split=None, window=window, bm=BodyModel.from_file(PROCEDURAL_MODEL))[0]
+    assert int(item["goal_frame"]) == 20
+    np.testing.assert_allclose(item["fullpose"][20].numpy().reshape(-1), z["body.params.fullpose"][g], atol=1e-6)
+    k = T - window                                               # the window's frame 0 in the clip
+    model = smplx.create(str(STUBS / "body_models"), model_type="smplx", gender="neutral", ext="npz", use_pca=False,
+                         flat_hand_mean=True, num_betas=10, dtype=torch.float64)
+    with torch.no_grad():
+        v = model(betas=torch.as_tensor(z["body.betas"][None], dtype=torch.float64),
+                  **{p: torch.as_tensor(z[f"body.params.{p}"][k:k + 1], dtype=torch.float64) for p in PARAMS}
+                  ).vertices[0].numpy()
+    rh = z["goal.right_hand"]
+    hand_now, goal_hand = v[z["goal.vertex_ids"]][rh], z["goal.vertices"][rh]
+    assert np.linalg.norm(goal_hand - hand_now, axis=1).mean() > 0.02      # the hand is still on its way
+    np.testing.assert_allclose(hand_now + item["hand_to_goal"][0].numpy(), goal_hand, atol=1e-4)

@@ -5,6 +5,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
+import torch
 import trimesh
 
 from graspkit import metrics
@@ -210,3 +211,25 @@ def test_a_seeded_function_refuses_seed_none(call):
     for bad in (None, True, 1.5, -1):
         with pytest.raises(ValueError, match=r"^seed: expected an integer >= 0, got "):
             fn(bad)
+
+
+def test_slice_ending_at_the_goal_frame_drops_the_goal():
+    """A slice keeps the goal only when the goal frame lies inside it, the end excluded."""
+    m = load_motion(CLIP)
+    g = m.goal_frame
+    assert g is not None and g > 0
+    before = m.slice(0, g)                          # frames 0..g-1: the goal frame just outside
+    assert before.num_frames == g and before.goal is None and before.goal_frame is None
+    upto = m.slice(1, g + 1)
+    assert upto.goal_frame == g - 1 and np.array_equal(upto.goal, m.goal)
+
+
+def test_iter_vertices_chunks_overlap_and_match_the_whole_clip(bm):
+    """Each chunk starts `overlap` frames before the last one ended and holds Motion.vertices of its frames."""
+    m = load_motion(CLIP).slice(0, 11)
+    whole = m.vertices(bm)
+    starts = []
+    for start, v in m.iter_vertices(bm, chunk=4, overlap=1):
+        starts.append(start)
+        torch.testing.assert_close(v, whole[start:start + len(v)], rtol=0, atol=1e-5)
+    assert starts == [0, 3, 6, 9]

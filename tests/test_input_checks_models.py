@@ -277,3 +277,18 @@ def test_from_file_names_a_text_file_that_is_not_an_npz(tmp_path):
     text.write_text("hello\n")
     with pytest.raises(ModelFileError, match=r"notes\.npz: not an \.npz body model"):
         BodyModel.from_file(text)
+
+
+@pytest.mark.parametrize("value", [0.0, -0.5])
+def test_a_zero_or_negative_start_distance_is_refused(value):
+    """SAGA's and GOAL's start_distance must be a finite positive number (GOAL's at most 5 m), refused before any
+    work, with the argument named."""
+    from graspkit import goal, saga
+
+    msg = "start_distance: expected a finite positive number"
+    with pytest.raises(ValueError, match=msg):
+        saga.synthesize("mug", progress=False, checkpoints="/nonexistent", start_distance=value)
+    with pytest.raises(ValueError, match=msg):
+        goal.synthesize("mug", checkpoints="/nonexistent", start_distance=value)
+    with pytest.raises(ValueError, match=msg):
+        goal.synthesize("mug", checkpoints="/nonexistent", start_distance=5.5)

@@ -2,10 +2,11 @@
 import numpy as np
 import pytest
 import torch
+import trimesh
 
 from graspkit.body import BodyModel
 from graspkit.body.markers import (farthest_point_sampling, foot_vertices, goal_vertices, palm_vertices,
-                                   saga_markers, saga_sparse_markers, vertex_normals)
+                                   saga_markers, saga_sparse_markers, sole_rest_heights, vertex_normals)
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.paths import default_model_path
 
@@ -125,3 +126,45 @@ def test_the_marker_cache_does_not_keep_a_model_alive():
     del m
     gc.collect()
     assert ref() is None and len(ids) == 143
+
+
+def test_sole_heights_are_above_each_foots_lowest_vertex(bm, rest):
+    """sole_rest_heights: each sole vertex's height above its own foot's lowest vertex at rest (the rest mesh's y)."""
+    v = rest[0]
+    feet, h, start = foot_vertices(bm), sole_rest_heights(bm), 0
+    for side in ("left", "right"):
+        ids = np.concatenate([feet[k] for k in feet if k.startswith(side)])
+        want = v[ids, 1] - v[ids, 1].min()
+        got = h[start:start + len(ids)]
+        np.testing.assert_allclose(got, want, atol=1e-9, err_msg=side)
+        assert got.min() == 0.0
+        start += len(ids)
+    assert start == len(h)
+
+
+def test_palm_vertices_face_the_palm(bm, rest):
+    """palm_vertices are on the palm side: trimesh's vertex normals of the rest mesh point down (-y) there."""
+    n = trimesh.Trimesh(rest[0], bm.faces.numpy(), process=False).vertex_normals
+    for side, ids in palm_vertices(bm).items():
+        assert len(ids) > 20, side
+        assert np.mean(n[ids, 1] < -0.5) > 0.95, side
+
+
+def test_palm_grid_runs_from_wrist_to_knuckles(bm, rest):
+    """A marker's anchor is (1 - t) a + t b: the palm grid's four markers along each finger's wrist -> knuckle line
+    come in order from the wrist (t = 0.2) to the knuckles (t = 0.95); the thigh's front marker (t = 0.4) is nearer
+    the hip than the knee."""
+    v, j = rest
+    m = saga_markers(bm)
+    p = dict(zip(m.names, v[m.vertex_ids]))
+    for s, S in (("left", "L"), ("right", "R")):
+        w = j[JOINT_INDEX[f"{s}_wrist"]]
+        for f in ("index", "middle", "ring", "pinky"):
+            k = j[JOINT_INDEX[f"{s}_{f}1"]]
+            axis = (k - w) / np.linalg.norm(k - w)
+            along = [(p[f"{S}PALM_{f}{i}"] - w) @ axis for i in range(4)]
+            assert np.all(np.diff(along) > 0), (S, f, along)
+            assert along[0] < 0.5 * np.linalg.norm(k - w) < along[3], (S, f, along)
+        hip, knee = j[JOINT_INDEX[f"{s}_hip"]], j[JOINT_INDEX[f"{s}_knee"]]
+        thf = p[f"{S}THF"]
+        assert np.linalg.norm(thf - hip) < np.linalg.norm(thf - knee), S

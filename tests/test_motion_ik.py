@@ -2,7 +2,7 @@
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from graspkit.data.ik import axis_angle_matrix, matrix_axis_angle, smoothstep, two_bone_ik, wrap_angle
+from graspkit.data.ik import axis_angle_matrix, frame, matrix_axis_angle, rot_x, rot_y, rot_z, smoothstep, two_bone_ik, wrap_angle
 
 
 def _is_rotation(R):
@@ -91,3 +91,20 @@ def test_smoothstep_and_wrap_angle():
     assert s[0] == 0 and s[-1] == 1 and np.all(np.diff(s) >= 0)
     assert np.isclose(smoothstep(np.array(0.5)), 0.5)
     assert np.allclose(wrap_angle(np.array([3 * np.pi, -3 * np.pi / 2, 0.1])), [np.pi, np.pi / 2, 0.1])
+
+
+def test_axis_rotations_turn_by_plus_angle_as_scipy():
+    a = np.random.default_rng(0).uniform(-3, 3, 7)
+    for f, ax in ((rot_x, "x"), (rot_y, "y"), (rot_z, "z")):
+        np.testing.assert_allclose(f(a), Rotation.from_euler(ax, a[:, None]).as_matrix(), atol=1e-12, err_msg=ax)
+    np.testing.assert_allclose(rot_z(np.pi / 2) @ [1.0, 0, 0], [0, 1.0, 0], atol=1e-12)     # +x turns to +y
+
+
+def test_frame_is_a_proper_rotation_with_the_given_axes():
+    """frame(a, b): columns a, b made perpendicular to a, and a x b: a rotation, never a reflection."""
+    rng = np.random.default_rng(1)
+    a, b = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
+    F = frame(a, b)
+    assert _is_rotation(F)
+    np.testing.assert_allclose(F[..., 0], a / np.linalg.norm(a, axis=1, keepdims=True), atol=1e-12)
+    np.testing.assert_allclose(frame(np.array([1.0, 0, 0]), np.array([0.3, 1.0, 0])), np.eye(3), atol=1e-12)

@@ -5,7 +5,7 @@ import pytest
 from graspkit import metrics as M
 from graspkit.body.markers import foot_vertices
 from graspkit.data import generate_locomotion
-from graspkit.data.footsteps import GaitStyle, foot_tracks, plan_footsteps
+from graspkit.data.footsteps import GaitStyle, foot_tracks, plan_footsteps, support_weight
 from graspkit.data.rig import build_rig
 from graspkit.data.trajectory import RootPlan, heading_profile, integrate_controls, straight_walk
 
@@ -142,3 +142,57 @@ def test_same_seed_same_clip_different_seed_different_clip(bm):
     a, b, c = (generate_locomotion(s, bm, num_frames=45) for s in (3, 3, 4))
     assert np.array_equal(a.poses, b.poses) and np.array_equal(a.trans, b.trans) and np.array_equal(a.betas, b.betas)
     assert not np.array_equal(a.betas, c.betas)
+
+
+# ------------------------------------------------------------------ headings across +-pi, the gait's size scaling
+def test_plan_heading_is_interpolated_the_short_way_across_pi():
+    plan = RootPlan(np.zeros((2, 2)), np.array([np.pi - 0.1, -np.pi + 0.1]), fps=30.0)
+    _, h = plan.at(0.5 / 30.0)
+    assert np.cos(h) < -0.999                                # half-way is pi, not 0
+
+
+def test_turn_rate_is_steady_when_the_heading_wraps():
+    T, fps, w = 300, 30.0, 0.5
+    h = np.angle(np.exp(1j * w * np.arange(T) / fps))           # wraps from pi to -pi twice
+    np.testing.assert_allclose(RootPlan(np.zeros((T, 2)), h, fps).turn_rate(), w, atol=1e-9)
+
+
+def test_heading_profile_turns_the_short_way():
+    h = heading_profile(90, 3.0, -3.0, 0.5, 2.5)
+    assert np.abs(np.diff(h)).sum() < 0.3 + 1e-9                # a 0.28 rad turn through pi, not 6 rad back round
+    assert abs(np.angle(np.exp(1j * (h[-1] + 3.0)))) < 1e-9
+
+
+def test_integrated_controls_follow_a_circle_and_step_left():
+    """A constant forward speed v and turn rate w trace the circle of radius v / w; the left of heading h is
+    (-sin h, cos h)."""
+    T, fps, v, w = 301, 30.0, 1.0, 0.8
+    plan = integrate_controls(np.full(T, v), np.zeros(T), np.full(T, w), fps=fps)
+    t = np.arange(T) / fps
+    np.testing.assert_allclose(plan.xy, np.stack([np.sin(w * t), 1 - np.cos(w * t)], 1) * v / w, atol=2e-3)
+    np.testing.assert_allclose(plan.heading, w * t, atol=1e-9)
+    side = integrate_controls(np.zeros(T), np.full(T, 0.5), np.zeros(T), heading0=np.pi / 2, fps=fps)
+    np.testing.assert_allclose(side.xy[-1], [-0.5 * (T - 1) / fps, 0.0], atol=1e-9)     # facing +y, left is -x
+
+
+def test_cadence_scales_like_a_pendulum():
+    """Dynamic similarity: a body s times the size steps at 1 / sqrt(s) the cadence at s times the speed."""
+    g = GaitStyle()
+    for s in (0.9, 1.1, 1.21):
+        np.testing.assert_allclose(g.cadence(0.0, s), g.cadence(0.0, 1.0) / np.sqrt(s), rtol=1e-12)
+        np.testing.assert_allclose(g.cadence(1.2 * s, s), g.cadence(1.2, 1.0) / np.sqrt(s), rtol=1e-12)
+    assert g.cadence(1.0, 1.1) < g.cadence(1.0, 1.0)
+
+
+def test_support_weight_moves_from_the_old_stance_foot_to_the_new_one():
+    """Left single support, 5 frames on both feet, right single support: the weight on the left foot falls from 1
+    to 0 through the double support, monotonically."""
+    T = 30
+    c = np.zeros((T, 4), bool)
+    c[:15, :2] = True            # left heel and toe on the ground for frames 0..14
+    c[10:, 2:] = True            # right foot from frame 10: both feet on frames 10..14
+    w = support_weight(c, 30.0)
+    np.testing.assert_array_equal(w[:10], 1.0)
+    np.testing.assert_array_equal(w[15:], 0.0)
+    assert (np.diff(w[9:16]) < 0).all()
+    assert w[10] > 0.5 > w[14]

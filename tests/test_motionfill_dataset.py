@@ -129,3 +129,15 @@ def test_files_round_trip_and_bad_file_is_named(tmp_path, windows):
     np.savez(tmp_path / "bad.npz", traj=np.zeros(3))
     with pytest.raises(ValueError, match="bad.npz"):
         mf.load_windows(tmp_path / "bad.npz")
+
+
+def test_yaw_velocity_is_wrapped_across_pi():
+    """The root's yaw velocity is wrap(g_t+1 - g_t): a body turning steadily through +-pi has the same yaw velocity
+    on every frame, and its ground step is expressed in the heading frame."""
+    t = np.arange(mf.NUM_ROOT)
+    h = 3.0 + 0.01 * t                                   # crosses pi near t = 14
+    traj = np.stack([0.02 * t, np.zeros_like(h), np.cos(h), np.sin(h)], 1)
+    _, vel = mf.local_motion(np.zeros((mf.NUM_FRAMES, 79, 3)), traj)
+    np.testing.assert_allclose(vel[:, 2], 0.01, atol=1e-9)
+    np.testing.assert_allclose(vel[:, 0], 0.02 * np.cos(h[:-1]), atol=1e-9)     # 2 cm along x, turned by -h
+    np.testing.assert_allclose(vel[:, 1], -0.02 * np.sin(h[:-1]), atol=1e-9)

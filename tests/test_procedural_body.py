@@ -4,15 +4,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.linalg
 import smplx
 import torch
 import trimesh
 
 from graspkit.body import BodyModel
 from graspkit.body import _proc_mesh as M
-from graspkit.body.hand_poses import HAND_KINDS, sample_hand_poses
+from graspkit.body.hand_poses import HAND_KINDS, hand_axes, hand_pca, sample_hand_poses, template_pose
 from graspkit.body.procedural import build_procedural_smplx, part_of_vertex
-from graspkit.body.skeleton import JOINT_INDEX, NUM_VERTICES, PARENTS, SMPLX_LANDMARK_VERTEX_IDS as LMK
+from graspkit.body.skeleton import FINGERS, JOINT_INDEX, NUM_VERTICES, PARENTS, SMPLX_LANDMARK_VERTEX_IDS as LMK
+from graspkit.checks import seeded_rng
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL_DIR = ROOT / "data_stubs" / "body_models"
@@ -327,3 +329,34 @@ def test_hand_poses_curl_towards_the_palm_and_mirror(shipped):
                 assert J[j, 1] < J0[j, 1] - 0.01, (kind, finger)                  # towards the palm (-y)
     mean = shipped["hands_meanl"].reshape(15, 3)
     assert 0.1 < np.linalg.norm(mean, axis=1).mean() < 0.6              # a relaxed, slightly curled hand
+
+
+def test_hand_pca_components_are_the_principal_axes_about_the_returned_mean(shipped):
+    """hand_pca's components are the principal axes of the seeded hand poses about the returned mean (the relaxed
+    template), by variance, each with its largest entry positive: scipy's eigh of the scatter about that mean."""
+    J0 = shipped["J_regressor"] @ shipped["v_template"]
+    comps, mean = hand_pca(J0, "right", n_per_kind=60, seed=3)
+    rng = seeded_rng(3)                                          # the same draws, in the same order
+    X = np.concatenate([sample_hand_poses(60, k, rng, "right", J0) for k in HAND_KINDS])
+    _, U = scipy.linalg.eigh((X - mean).T @ (X - mean))          # ascending eigenvalues
+    for i in range(6):                                            # the leading axes, up to sign
+        assert abs(comps[i] @ U[:, -1 - i]) > 1 - 1e-6, i
+    np.testing.assert_allclose(comps @ comps.T, np.eye(45), atol=1e-10)
+    left, _ = hand_pca(J0, "left", n_per_kind=20, seed=0)
+    assert (left[np.arange(45), np.abs(left).argmax(1)] > 0).all()
+
+
+def test_hand_templates_flex_by_their_angles(shipped):
+    """A template's finger flexions are its angles about the flexion axes (only hyperextension past -10 deg is
+    clipped): the flat hand's fingers are straight, the pointing hand's index 5 deg at MCP and PIP, straight at DIP."""
+    J0 = shipped["J_regressor"] @ shipped["v_template"]
+    for side in ("left", "right"):
+        axes = hand_axes(J0, side)
+        flat = template_pose("flat", axes).reshape(15, 3)
+        for fi, f in enumerate(FINGERS[:4]):
+            np.testing.assert_allclose(flat[3 * fi + 1:3 * fi + 3], 0.0, atol=1e-12, err_msg=f"{side} {f}")
+        point = template_pose("point", axes).reshape(15, 3)
+        i = FINGERS.index("index")
+        np.testing.assert_allclose(np.linalg.norm(point[3 * i + 1]), np.deg2rad(5.0), atol=1e-12)
+        np.testing.assert_allclose(point[3 * i + 1] @ axes["flex"][3 * i + 1], np.deg2rad(5.0), atol=1e-12)
+        np.testing.assert_allclose(point[3 * i + 2], 0.0, atol=1e-12)

@@ -438,3 +438,24 @@ def test_goal_frame_hold_changes_only_the_reaching_windows(clips, stats):
         assert torch.equal(out[0], out[1]) != changes
     with pytest.raises(ValueError, match="goal_frame"):
         M.WandrConfig(goal_frame="arrival")
+
+
+def test_latent_loss_terms_are_the_modules_formulas():
+    """L_norm = mean z^2 / 2 per sequence, L_goal = |W_tG - G|^2 at the goal frame itself, L_way = |P^xy_tw - w^xy|^2,
+    on hand-made joints whose right wrist is on the goal at t_G only (latent_loss reads only the rollout's joints)."""
+    from types import SimpleNamespace
+
+    B, T, L = 2, 12, 16
+    joints = torch.zeros(B, T + 1, I.NUM_BODY, 3)
+    joints[:, :, I.WRIST] = torch.tensor([0.0, 0.0, 1.0])
+    joints[:, 7, I.WRIST] = torch.tensor([0.5, 0.2, 1.0])
+    joints[:, 4, I.PELVIS] = torch.tensor([0.3, -0.1, 0.9])
+    z = torch.arange(B * T * L, dtype=torch.float32).reshape(B, T, L) / (B * T * L)
+    goal = torch.tensor([[0.5, 0.2, 1.0]]).expand(B, 3)
+    t = latent_loss(SimpleNamespace(joints=joints), z, goal, 7, [(4, (0.0, 0.3))], w_norm=0.01, w_goal=1.0, w_way=2.0)
+    torch.testing.assert_close(t["norm"], 0.5 * (z ** 2).mean(dim=(1, 2)))
+    torch.testing.assert_close(t["goal"], torch.zeros(B))
+    torch.testing.assert_close(t["way"], torch.full((B,), 0.3 ** 2 + 0.4 ** 2))
+    torch.testing.assert_close(t["loss"], 0.01 * t["norm"] + 2.0 * t["way"])
+    t6 = latent_loss(SimpleNamespace(joints=joints), z, goal, 6)
+    torch.testing.assert_close(t6["goal"], torch.full((B,), 0.5 ** 2 + 0.2 ** 2))

@@ -1,6 +1,7 @@
 """WholeGrasp-VAE (SAGA §3.2): shapes, gradients, the losses of Eq. 1-3 on hand-made cases, deterministic sampling."""
 import math
 
+import numpy as np
 import pytest
 import torch
 
@@ -346,3 +347,24 @@ def test_height_slope_normalisation_recovers_a_linear_height_dependence():
     for k in ("marker_slope", "height_mean"):
         st["model"].pop(k)
     assert WholeGraspVAE.from_state(st).cfg.height_slope is False
+
+
+def test_hand_pca_codes_each_hand_about_its_own_mean():
+    """HandPCA is each hand's PCA about that hand's mean (the file's hands_meanl / hands_meanr, as smplx adds them):
+    zero coefficients decode to that side's mean, and a pose in the span of the first 24 components round-trips."""
+    from graspkit.body import BodyModel
+    from graspkit.models.wholegrasp import HandPCA
+    from graspkit.paths import default_model_path
+
+    pca = HandPCA(BodyModel.from_file(default_model_path()))
+    with np.load(default_model_path(), allow_pickle=False) as f:
+        mean = {"left": f["hands_meanl"], "right": f["hands_meanr"]}
+        comps = {"left": f["hands_componentsl"], "right": f["hands_componentsr"]}
+    assert not np.allclose(mean["left"], mean["right"])                       # mirrored hands: not the same
+    c = torch.randn(3, 24, generator=torch.Generator().manual_seed(0)) * 0.5
+    for side in ("left", "right"):
+        np.testing.assert_allclose(pca.decode(torch.zeros(1, 24), side)[0].numpy(), mean[side], atol=1e-6)
+        pose = mean[side] + c.numpy() @ comps[side][:24]
+        np.testing.assert_allclose(pca.decode(c, side).numpy(), pose, atol=1e-5)
+        np.testing.assert_allclose(pca.encode(torch.as_tensor(pose, dtype=torch.float32), side).numpy(), c.numpy(),
+                                   atol=1e-5)

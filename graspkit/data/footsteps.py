@@ -48,7 +48,8 @@ class GaitStyle:
     first_step: float = 0.4        # earliest lift-off (s) when starting from rest: time to shift the weight first
 
     def cadence(self, speed: np.ndarray | float, scale: float = 1.0) -> np.ndarray:
-        """Steps per second at a root speed (m/s) for a body `scale` times 1.70 m (taller: slower cadence)."""
+        """Steps per second at a root speed (m/s) for a body `scale` times 1.70 m (taller: slower cadence; dynamic
+        similarity: a body s times the size walks at 1/sqrt(s) the cadence at s times the speed)."""
         v = np.maximum(np.asarray(speed, np.float64), 0.0) / scale
         return np.maximum(1.0 + self.cadence_gain * v**0.8, self.cadence_min) / np.sqrt(scale)
 
