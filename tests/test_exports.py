@@ -1,5 +1,7 @@
 """Whole-sequence exports (graspkit.viz.export_motion): the AMASS-style npz read back by the smplx package and the
 GLB files read back by trimesh give the same bodies as graspkit."""
+import json
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +12,7 @@ import trimesh
 
 from graspkit.body import BodyModel
 from graspkit.data import load_motion
-from graspkit.viz.export import Z_UP_TO_Y_UP, export_motion, load_sequence_glb
+from graspkit.viz.export import Z_UP_TO_Y_UP, export_motion, export_sequence_glb, load_sequence_glb
 
 from conftest import PROCEDURAL_MODEL
 
@@ -85,3 +87,47 @@ def test_bad_name_is_refused(exported, tmp_path):
     m, bm, _, _ = exported
     with pytest.raises(ValueError, match="name"):
         export_motion(m, bm, tmp_path, "../escape")
+
+
+# The animated GLB plays the input frames at their times, and its header follows the glTF 2.0 binary layout (total
+# length = file size).
+def _accessor(gltf, blob, i):
+    acc = gltf["accessors"][i]
+    view = gltf["bufferViews"][acc["bufferView"]]
+    width = {"SCALAR": 1, "VEC3": 3}[acc["type"]]
+    a = np.frombuffer(blob, np.float32, acc["count"] * width, view["byteOffset"])
+    return a.reshape(acc["count"], width) if width > 1 else a
+
+
+def _parse(path):
+    """glTF 2.0 binary container, read by the specification (12-byte header, then JSON and BIN chunks)."""
+    data = path.read_bytes()
+    magic, version, total = struct.unpack_from("<III", data, 0)
+    n_json, kind_json = struct.unpack_from("<II", data, 12)
+    gltf = json.loads(data[20:20 + n_json])
+    n_bin, kind_bin = struct.unpack_from("<II", data, 20 + n_json)
+    blob = data[28 + n_json:28 + n_json + n_bin]
+    return data, (magic, version, total, kind_json, kind_bin), gltf, blob
+
+
+def test_glb_animation_shows_each_input_frame_at_its_time_and_the_header_is_the_file_size(tmp_path):
+    rng = np.random.default_rng(0)
+    T, fps, stride = 7, 20.0, 2
+    base = rng.normal(size=(4, 3))
+    verts = base + 0.1 * rng.normal(size=(T, 4, 3))            # 7 distinct frames of a tetrahedron
+    faces = np.array([[0, 1, 2], [0, 3, 1], [1, 3, 2], [0, 2, 3]])
+    path = export_sequence_glb(verts, faces, tmp_path / "seq.glb", fps=fps, stride=stride, y_up=False)
+    data, (magic, version, total, kj, kb), gltf, blob = _parse(path)
+    assert (magic, version, kj, kb) == (0x46546C67, 2, 0x4E4F534A, 0x004E4942)
+    assert total == len(data)                                  # glTF 2.0: the header's length is the whole file's
+    prim = gltf["meshes"][0]["primitives"][0]
+    pos = _accessor(gltf, blob, prim["attributes"]["POSITION"])
+    targets = np.stack([_accessor(gltf, blob, t["POSITION"]) for t in prim["targets"]])
+    sampler = gltf["animations"][0]["samplers"][0]
+    times = _accessor(gltf, blob, sampler["input"])
+    weights = _accessor(gltf, blob, sampler["output"]).reshape(len(times), len(targets))
+    kept = [0, 2, 4, 6]
+    assert np.allclose(times, np.array(kept) / fps)
+    for key, k in enumerate(kept):                             # what a viewer draws at the key's time
+        shown = pos + np.tensordot(weights[key], targets, 1)
+        assert np.abs(shown - verts[k]).max() < 1e-5, k

@@ -671,3 +671,21 @@ def test_point_mesh_distance_is_exact_far_from_the_mesh():
     cp = trimesh.triangles.closest_point(np.tile(tri, (len(pts), 1, 1)), np.repeat(pts, len(tri), 0))
     want = np.linalg.norm(np.repeat(pts, len(tri), 0) - cp, axis=1).reshape(len(pts), len(tri)).min(1)
     np.testing.assert_allclose(point_mesh_distance(pts, mesh).distance.numpy(), want, atol=1e-9)
+
+
+# SDFGrid.from_mesh puts `resolution` nodes along the longest side of the padded box (docstring), with cubic cells,
+# and its box covers the mesh's bounds plus the padding.
+def test_grid_has_resolution_nodes_on_the_longest_side_and_covers_the_padded_box():
+    mesh = trimesh.creation.box((0.10, 0.16, 0.30))
+    res, pad = 16, 0.02
+    grid = SDFGrid.from_mesh(mesh, resolution=res, padding=pad, dtype=torch.float64)
+    nz, ny, nx = grid.values.shape
+    assert nz == res                                               # z is the longest side: 0.34 m padded
+    h = (0.30 + 2 * pad) / (res - 1)
+    np.testing.assert_allclose(grid.cell.numpy(), h, rtol=1e-9)    # cubic cells of the longest side's spacing
+    lo, hi = mesh.bounds[0] - pad, mesh.bounds[1] + pad
+    np.testing.assert_allclose(grid.lower.numpy(), lo, atol=1e-12)
+    assert (grid.upper.numpy() >= hi - 1e-9).all()                 # every padded bound inside the grid
+    assert (grid.upper.numpy() < hi + h).all()                     # and less than one extra cell beyond it
+    for n, ext in ((nx, (hi - lo)[0]), (ny, (hi - lo)[1])):          # the fewest whole cells that span each side
+        assert (n - 1) * h >= ext - 1e-9 and (n - 2) * h < ext

@@ -1,13 +1,18 @@
 """Static grasp synthesis end to end, checked with independent geometry (trimesh) and the motion of the approach."""
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 import torch
 import trimesh
+from scipy.spatial.transform import Rotation
 
 from graspkit import metrics as M
 from graspkit.body import BodyModel
 from graspkit.body.skeleton import JOINT_INDEX as J
-from graspkit.data.approach import approach_motion
+from graspkit.data import Motion
+from graspkit.data import grasp_make as gm
+from graspkit.data.approach import TPOSE_S, _continuous, _rate_limited, approach_motion
 from graspkit.data.grasp import GRASP_PARTS, SPLITS, GraspFitter, grasp_candidates, grasp_types, split_of
 from graspkit.data.grasp_make import accepted, fit_chunk
 from graspkit.data.rig import build_rig
@@ -164,3 +169,89 @@ def test_builder_centre_maps_the_builder_mesh_onto_the_catalogue_mesh():
         canon = make_object(name)
         np.testing.assert_allclose(v.min(0) - builder_centre(name), canon.bounds[0], atol=1e-6, err_msg=name)
         np.testing.assert_allclose(v.max(0) - builder_centre(name), canon.bounds[1], atol=1e-6, err_msg=name)
+
+
+# The approach clip's helpers against analytic cases: the axis-angle unwrapping keeps each rotation (scipy), the
+# elbow's rate-limited swivel turns towards its target, and a T-pose start lowers the arms over TPOSE_S seconds.
+def test_continuous_axis_angles_keep_their_rotations_across_pi():
+    n = np.array([0.0, 0.6, 0.8])
+    angles = np.linspace(2.6, 3.7, 12)                           # through pi: the plain log flips the axis there
+    aa = Rotation.from_rotvec(angles[:, None] * n).as_rotvec()    # scipy's principal axis-angles (|aa| <= pi)
+    out = _continuous(aa[:, None])[:, 0]
+    same = Rotation.from_rotvec(out) * Rotation.from_rotvec(aa).inv()
+    assert np.abs(same.magnitude()).max() < 1e-9                  # every frame is still its own rotation
+    np.testing.assert_allclose(out, angles[:, None] * n, atol=1e-9)   # and the sequence runs on past pi
+
+
+def test_rate_limited_swivel_turns_towards_the_wanted_side_at_most_max_step_per_frame():
+    T, step = 6, np.deg2rad(8.0)
+    axis = np.tile([0.0, 0.0, 1.0], (T, 1))
+    dirs = np.tile([0.0, 1.0, 0.0], (T, 1))
+    dirs[0] = [1.0, 0.0, 0.0]                                     # wanted: +x, then +y (90 deg counter-clockwise)
+    out = _rate_limited(dirs, axis, step)
+    ang = np.arctan2(out[:, 1], out[:, 0])
+    np.testing.assert_allclose(ang, step * np.arange(T), atol=1e-12)
+
+
+def test_a_t_pose_start_lowers_the_arms_over_tpose_s():
+    T, fps = 60, 30.0
+    poses = np.zeros((T, 55, 3))
+    poses[:, J["left_shoulder"]] = [0.0, 0.0, -1.1]               # the plan's arm, down from the T-pose
+    poses[:, J["left_elbow"]] = [0.0, 0.4, 0.0]
+    plan = Motion(poses, np.zeros((T, 3)), np.zeros(10), fps)
+    m = approach_motion(plan, T - 1, poses[0], np.zeros((15, 3)), start_pose="t_pose")
+    for j in ("left_shoulder", "left_elbow"):
+        a = m.poses[:, J[j]]
+        np.testing.assert_allclose(a[0], 0.0, atol=1e-9)                                  # T-pose at the start
+        np.testing.assert_allclose(a[int(round(0.5 * TPOSE_S * fps))], 0.5 * poses[0, J[j]], atol=1e-6)   # halfway
+        np.testing.assert_allclose(a[int(round(TPOSE_S * fps))], poses[0, J[j]], atol=1e-6)              # lowered
+
+
+# fit_chunk keeps the attempt of lowest badness when every attempt fails ("lower is better", badness's docstring),
+# write_chunk writes only the missing items with index < n, and accepted() follows its docstring's thresholds.
+GOOD = {"contact": True, "depth_cm": 0.2, "volume_cm3": 1.0, "feet_cm": 0.3, "arm_residual_deg": 20.0,
+        "regions_mm": [2.0, 1.0, 1.5, 2.5, 9.0, 12.0]}
+
+
+def test_accepted_follows_its_docstring_thresholds():
+    assert gm.accepted(GOOD, "power")
+    for key, bad in (("depth_cm", 0.6), ("volume_cm3", 4.5), ("feet_cm", 1.2), ("arm_residual_deg", 80.0),
+                     ("contact", False)):
+        assert not gm.accepted({**GOOD, key: bad}, "power"), key
+
+
+def test_fit_chunk_keeps_the_least_bad_of_failed_attempts():
+    depths = iter([3.0, 1.0, 4.0, 2.0])                         # attempt 0..3 all fail (depth > 0.5 cm); 1 is best
+
+    class Fitter:
+        def fit(self, tasks):
+            d = next(depths)
+            return [SimpleNamespace(task=t, quality={**GOOD, "depth_cm": d}) for t in tasks]
+
+        def evaluate(self, res):
+            pass
+
+    best = gm.fit_chunk(Fitter(), "grasp", 0, 0, size=1)
+    (r, attempt, ok), = best
+    assert not ok and attempt == 1 and r.quality["depth_cm"] == 1.0
+    assert gm.badness(r.quality) == min(gm.badness({**GOOD, "depth_cm": d}) for d in (3.0, 1.0, 4.0, 2.0))
+
+
+def test_write_chunk_writes_only_the_missing_indices_below_n(tmp_path, monkeypatch):
+    """n = 3, chunks of 4: chunk 0 writes items 0, 1, 2 (index < n, write_chunk's docstring), never item 3."""
+    from pathlib import Path
+
+    monkeypatch.setattr(gm, "export_object_ply", lambda name, folder: None)
+    monkeypatch.setattr(gm, "fit_chunk", lambda fitter, kind, seed, chunk, size, objects: [(None, 0, True)] * size)
+    monkeypatch.setattr(gm, "grasp_sequence", lambda *a: None)
+    monkeypatch.setattr(gm, "model_name", lambda bm: "stub")
+
+    def save(path, seq, model):
+        Path(path).write_bytes(b"")
+        return Path(path)
+    monkeypatch.setattr(gm, "save_grasp_sequence", save)
+    fitter = SimpleNamespace(bm=None, vertices=lambda results: [None] * len(results))
+    gm.file_path(tmp_path, "grasp", 1).write_bytes(b"")                         # item 1 is there already
+    written = gm.write_chunk(fitter, "grasp", 0, 0, tmp_path, n=3, size=4)
+    assert sorted(Path(p).name for p in written) == ["grasp_000000.npz", "grasp_000002.npz"]
+    assert not gm.file_path(tmp_path, "grasp", 3).exists()

@@ -9,7 +9,7 @@ from graspkit.body.skeleton import FINGERS, JOINT_INDEX as J
 from graspkit.data import grasp_opt as go
 from graspkit.data.ik import axis_angle_matrix
 from graspkit.data.posing import forward_kinematics
-from graspkit.data.rig import build_rig
+from graspkit.data.rig import R_BASE, build_rig
 from graspkit.objects.sdf import SDFGrid
 from graspkit.rotations import axis_angle_to_matrix
 
@@ -102,3 +102,41 @@ def test_profile_sdf_is_the_sdf_of_the_revolved_solid():
     rz = torch.as_tensor(np.stack([np.linalg.norm(P[:, :2], axis=1), P[:, 2]], 1))
     d = go.profile_sdf(rz, torch.as_tensor(prof)).numpy()
     assert np.abs(d + trimesh.proximity.signed_distance(solid, P)).max() < 1e-4       # trimesh: > 0 inside
+
+
+# The fitter's hand geometry and arm against independent references: trimesh's normals (finger pads on the palm
+# side), the thumb joint (the frame's thumb side) and world height (the elbow below the shoulder).
+def test_finger_pads_are_on_the_palm_side_of_the_distal_segments(bm, hm):
+    with torch.no_grad():
+        v = bm().vertices[0].double().numpy()
+    n = trimesh.Trimesh(v, bm.faces.numpy(), process=False).vertex_normals      # rest pose: the palm faces -y
+    part = bm.lbs_weights.argmax(1).numpy()
+    for f, js in go.FINGER_JOINTS.items():
+        pads, distal = hm.pad_ids[f], np.flatnonzero(part == js[2])
+        assert set(pads) <= set(distal)
+        assert n[pads, 1].mean() < -0.3 and n[pads, 1].mean() < n[distal, 1].mean() - 0.2, f
+
+
+def test_hand_frame_thumb_points_to_the_thumb_side(bm, hm):
+    hf = hm.frame(np.zeros(10))
+    _, j = hm.rest(np.zeros(10))
+    side = j[J["right_thumb1"]] - j[J["right_middle1"]]
+    assert hf.thumb @ side > 0.5 * np.linalg.norm(side - (side @ hf.finger) * hf.finger - (side @ hf.normal) * hf.normal)
+    assert abs(hf.thumb @ hf.finger) < 1e-9 and abs(hf.thumb @ hf.normal) < 1e-9
+
+
+def test_solve_arm_keeps_the_elbow_below_the_shoulder_in_the_z_up_world(bm):
+    rig = build_rig(bm)
+    local = np.broadcast_to(np.eye(3), (1, 55, 3, 3)).copy()
+    local[0, 0] = R_BASE                                       # the z-up world, facing +x
+    Rg, pos = forward_kinematics(rig, local, rig.joints[:1])
+    sh0, arm = pos[0, J["right_shoulder"]], rig.arm_length
+    targets = sh0 + np.array([[0.7, -0.1, -0.2], [0.6, 0.1, -0.4], [0.7, -0.3, 0.0]]) * arm
+    hands = Rg[0, J["right_wrist"]] @ axis_angle_matrix(np.array([[0.0, 0.3, 0.0], [0.2, 0.0, 0.0], [0.0, 0.0, 0.3]]))
+    sh, el, wr, _ = go.solve_arm(Rg[0, J["right_collar"]], sh0, rig.joints, targets, hands)
+    for k in range(3):
+        loc = local.copy()
+        loc[0, J["right_shoulder"]], loc[0, J["right_elbow"]], loc[0, J["right_wrist"]] = sh[k], el[k], wr[k]
+        _, pk = forward_kinematics(rig, loc, rig.joints[:1])
+        assert np.allclose(pk[0, J["right_wrist"]], targets[k], atol=1e-6)
+        assert pk[0, J["right_elbow"], 2] < sh0[2] - 0.03, k                       # the elbow hangs, not raised

@@ -1,11 +1,14 @@
 """Footstep planner, foot motion and contact labels, locomotion clips measured on the procedural humanoid's mesh."""
 import numpy as np
 import pytest
+import torch
 
 from graspkit import metrics as M
 from graspkit.body.markers import foot_vertices
+from graspkit.body.skeleton import JOINT_INDEX as J
 from graspkit.data import generate_locomotion
 from graspkit.data.footsteps import GaitStyle, foot_tracks, plan_footsteps, support_weight
+from graspkit.data.locomotion import _segments, locomotion_plan
 from graspkit.data.rig import build_rig
 from graspkit.data.trajectory import RootPlan, heading_profile, integrate_controls, straight_walk
 
@@ -196,3 +199,82 @@ def test_support_weight_moves_from_the_old_stance_foot_to_the_new_one():
     np.testing.assert_array_equal(w[15:], 0.0)
     assert (np.diff(w[9:16]) < 0).all()
     assert w[10] > 0.5 > w[14]
+
+
+# A curved walk segment of curvature k at speed v turns at k * v rad/s (steady state), and every locomotion clip
+# starts near the origin (docstring).
+def test_curved_walk_turns_at_curvature_times_speed():
+    fps, T, checked = 30.0, 600, 0
+    for seed in range(4):
+        segs = _segments("curve", np.random.default_rng(seed), T / fps)     # the same draws locomotion_plan makes
+        plan, _ = locomotion_plan("curve", np.random.default_rng(seed), T, fps)
+        w, speed = plan.turn_rate(), plan.speed()
+        t0 = 0.0
+        for name, dur, p in segs:
+            mid = int(round((t0 + dur / 2) * fps))
+            if name == "walk" and dur >= 2.4 and t0 >= 0.5 and t0 + dur <= T / fps:   # steady middle of a segment
+                assert abs(speed[mid] - p["v"]) < 0.02 * p["v"] + 0.01
+                assert abs(w[mid] - p["k"] * p["v"]) < 0.05 * abs(p["k"] * p["v"]) + 0.02, (seed, p)
+                checked += 1
+            t0 += int(round(dur * fps)) / fps
+    assert checked >= 4
+
+
+def test_every_locomotion_clip_starts_near_the_origin(bm):
+    for seed, kind in ((0, "walk"), (1, "curve"), (2, "backward")):
+        m = generate_locomotion(seed, bm, num_frames=90, kind=kind)
+        assert np.abs(m.trans[0, :2]).max() <= 0.5 + 1e-9, (seed, kind)
+        assert np.linalg.norm(m.trans[-1, :2] - m.trans[0, :2]) > 0.3 or kind == "backward"   # it did move
+
+
+# Rig.leg_length is the hip -> knee -> ankle length (docstring) of the body's rest joints, and scales with the body
+# (a uniformly scaled skeleton).
+def test_leg_length_is_thigh_plus_shin_of_the_rest_joints(bm):
+    betas = np.zeros(10)
+    betas[0] = 1.5
+    rig = build_rig(bm, betas)
+    with torch.no_grad():
+        j = bm(betas=torch.as_tensor(betas[None], dtype=bm.dtype)).joints[0].double().numpy()
+    thigh = np.linalg.norm(j[J["left_knee"]] - j[J["left_hip"]])
+    shin = np.linalg.norm(j[J["left_ankle"]] - j[J["left_knee"]])
+    assert abs(rig.leg_length - (thigh + shin)) < 1e-6
+    arm = np.linalg.norm(j[J["right_elbow"]] - j[J["right_shoulder"]]) + np.linalg.norm(j[J["right_wrist"]] - j[J["right_elbow"]])
+    assert abs(rig.arm_length - arm) < 1e-6
+
+
+# In a straight walk the pelvis sways over the stance foot (posing.py: the weight goes to the loaded foot) and the
+# arms swing in counter-phase with the legs and with each other (module doc), measured on the mesh joints of the
+# generated clip.
+@pytest.fixture(scope="module")
+def walk(bm):
+    m = generate_locomotion(3, bm, num_frames=180, kind="walk")
+    p = m.joint_positions(bm)
+    v = np.gradient(p[:, 0, :2], axis=0)
+    fwd = v / np.linalg.norm(v, axis=1, keepdims=True)
+    left = np.stack([-fwd[:, 1], fwd[:, 0]], 1)
+    moving = np.linalg.norm(v, axis=1) * m.fps > 0.5
+    return m, p, fwd, left, moving
+
+
+def _along(x, d):
+    return (x * d).sum(1)
+
+
+def test_pelvis_sways_towards_the_stance_foot(walk):
+    m, p, fwd, left, moving = walk
+    mid = 0.5 * (p[:, J["left_ankle"], :2] + p[:, J["right_ankle"], :2])
+    lat = _along(p[:, 0, :2] - mid, left)
+    c = m.contacts.astype(bool)
+    on_l, on_r = c[:, :2].any(1), c[:, 2:].any(1)
+    only_l, only_r = moving & on_l & ~on_r, moving & on_r & ~on_l
+    assert only_l.sum() > 10 and only_r.sum() > 10
+    assert lat[only_l].mean() > 0.005 and lat[only_r].mean() < -0.005
+
+
+def test_arms_swing_against_the_legs_and_each_other(walk):
+    m, p, fwd, left, moving = walk
+    rel = lambda j: _along(p[:, J[j], :2] - p[:, 0, :2], fwd)[moving]        # noqa: E731  ahead of the pelvis
+    lw, rw, la, ra = rel("left_wrist"), rel("right_wrist"), rel("left_ankle"), rel("right_ankle")
+    corr = lambda a, b: np.corrcoef(a - a.mean(), b - b.mean())[0, 1]       # noqa: E731
+    assert corr(lw, rw) < -0.5                                             # the arms alternate
+    assert corr(lw, la) < -0.3 and corr(rw, ra) < -0.3                     # each arm against its own leg

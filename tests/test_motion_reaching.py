@@ -4,8 +4,10 @@ import pytest
 from scipy import stats
 
 from graspkit import metrics as M
+from graspkit.body.skeleton import JOINT_INDEX as J
 from graspkit.data import Start, evaluation_goals, generate_reach, plan_reach
-from graspkit.data.reaching import FAR_HEIGHTS, FLOOR_WRIST
+from graspkit.data.motion import heading_of
+from graspkit.data.reaching import FAR_HEIGHTS, FLOOR_WRIST, RELEASE_S, plan_reach_chain
 
 
 WRIST = 21
@@ -238,3 +240,28 @@ def test_the_head_never_snaps_round_when_the_gaze_target_passes_behind_or_under_
     to = m.goal - m.slice(k, k + 1).joint_positions(bm)[0, 15]
     cos = head[:, 2] @ to / np.linalg.norm(to)               # SMPL-X's forward is the head's +z
     assert cos > np.cos(np.radians(25.0))
+
+
+# At the goal frame the goal lies to the RIGHT of the heading as seen from the right shoulder (the stand-off) and
+# the right elbow bends out to the body's right (the pole); a second goal frame exactly at the end of the first hold
+# plus the release is refused ("must come after").
+@pytest.mark.parametrize("goal", [(1.5, 0.4, 1.0), (0.2, -1.6, 1.3)])
+def test_the_goal_is_reached_right_of_the_heading_with_the_elbow_out_to_the_right(bm, goal):
+    m = plan_reach(Start(0.0, 0.0, 0.3), goal, 90, seed=1, bm=bm, hold_frames=0)
+    g = m.goal_frame
+    p = m.joint_positions(bm)[g]
+    h = float(heading_of(m.poses[g:g + 1, 0])[0])
+    fwd, right = np.array([np.cos(h), np.sin(h), 0.0]), np.array([np.sin(h), -np.cos(h), 0.0])
+    sh, el, wr = p[J["right_shoulder"]], p[J["right_elbow"]], p[J["right_wrist"]]
+    to_goal = np.asarray(goal) - sh                                              # seen from the reaching shoulder
+    assert to_goal @ fwd > 0 and to_goal @ right > 0.02                          # ahead, to the right
+    line = (wr - sh) / np.linalg.norm(wr - sh)
+    out = (el - sh) - ((el - sh) @ line) * line                                  # the elbow off the shoulder-wrist line
+    assert out @ right > 0.01                                                    # bent out to the right, not across
+
+
+def test_a_second_goal_frame_at_the_end_of_the_release_is_refused(bm):
+    goals = np.array([[0.8, -0.3, 1.0], [1.6, 0.5, 0.9]])
+    r = int(round(RELEASE_S * 30.0))
+    with pytest.raises(ValueError, match="goal_frames: the second goal frame must come after"):
+        plan_reach_chain(Start(), goals, (60, 60 + 15 + r), (15, 5), bm=bm)

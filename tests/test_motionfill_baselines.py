@@ -6,6 +6,7 @@ import torch
 
 from graspkit.data.motionfill_dataset import MotionFillStats, global_motion, interpolated_trajectory, local_motion
 from graspkit.eval_motionfill import linear_local
+from graspkit.models.motionfill import NUM_FRAMES, NUM_MARKERS
 from graspkit.models.motionfill_baselines import (CNNAE, PoseNet, RouteNet, RoutePoseNet, baseline_from_state,
                                                   num_weights)
 
@@ -239,3 +240,21 @@ def test_train_command_end_to_end_on_the_shipped_approach_clips(tmp_path, monkey
     assert set(models) == {"routenet"} and isinstance(models["routenet"], RouteNet)
     with pytest.raises(SystemExit):
         main(["train", "motionfill_baseline", "--model", "lemo"])
+
+
+# PoseNet's per-frame input is [start markers, end markers, root velocity, t/T] (class docstring, Wang et al.): read
+# at its input layer with a forward hook.
+def test_posenet_reads_start_end_velocity_and_normalised_time_per_frame():
+    g = torch.Generator().manual_seed(0)
+    local = torch.randn(2, NUM_FRAMES, NUM_MARKERS, 3, generator=g)
+    vel = torch.randn(2, NUM_FRAMES, 3, generator=g)
+    m = PoseNet().eval()                                   # unit statistics: normalisation is the identity
+    seen = []
+    m.inp[0].register_forward_hook(lambda mod, args, out: seen.append(args[0].detach()))
+    m.infill(local, torch.zeros(2, NUM_FRAMES, 4), vel)
+    f = seen[0]
+    n = NUM_MARKERS * 3
+    torch.testing.assert_close(f[..., :n], local[:, :1].flatten(2).expand(-1, NUM_FRAMES, -1))
+    torch.testing.assert_close(f[..., n:2 * n], local[:, -1:].flatten(2).expand(-1, NUM_FRAMES, -1))
+    torch.testing.assert_close(f[..., 2 * n:2 * n + 3], vel)
+    np.testing.assert_allclose(f[0, :, -1].numpy(), np.arange(NUM_FRAMES) / (NUM_FRAMES - 1), atol=1e-6)   # t / T

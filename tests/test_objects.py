@@ -5,6 +5,8 @@ import numpy as np
 import pytest
 import torch
 import trimesh
+from scipy.spatial.transform import Rotation
+from scipy.stats import binomtest
 
 from graspkit.objects import (SPECS, TEST_OBJECTS, ObjectPose, apply_pose, list_objects, make_object,
                               sample_object_pose, sample_surface)
@@ -169,3 +171,23 @@ def test_apply_pose_errors():
         apply_pose(pose, np.zeros((4, 3)), np.zeros((5, 3)))
     with pytest.raises(ValueError, match="normals"):
         apply_pose(pose, trimesh.creation.box(), np.zeros((5, 3)))
+
+
+# ObjectPose.compose is the product of the 4x4 matrices (x_world = A (B x)), and sample_surface is uniform over the
+# surface AREA (a two-triangle mesh of areas 1 : 9).
+def test_compose_is_the_matrix_product_and_applies_the_right_pose_first():
+    r = Rotation.random(2, random_state=3).as_matrix()
+    a = ObjectPose(np.array([0.3, -0.2, 1.0]), r[0])
+    b = ObjectPose(np.array([-0.1, 0.5, 0.2]), r[1])
+    ab = a.compose(b)
+    np.testing.assert_allclose(ab.matrix(), a.matrix() @ b.matrix(), atol=1e-12)
+    x = np.random.default_rng(0).normal(size=(5, 3))
+    np.testing.assert_allclose(apply_pose(ab, x), apply_pose(a, apply_pose(b, x)), atol=1e-12)
+
+
+def test_surface_samples_fall_on_faces_in_proportion_to_their_area():
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 2, 0], [3, 0, 1], [3, 6, 1], [6, 0, 1]], float)   # areas 1 and 9
+    f = np.array([[0, 1, 2], [3, 5, 4]])
+    pts, _ = sample_surface((v, f), n=4000, seed=0)
+    on_small = int((pts[:, 2] < 0.5).sum())
+    assert binomtest(on_small, 4000, 0.1).pvalue > 1e-4          # uniform over the area: 10 % on the small face

@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 import torch
+from scipy.spatial.transform import Rotation
 
 from graspkit.data import load_motion
 from graspkit.metrics import joint_limit_violation
@@ -101,3 +102,16 @@ def test_rec_is_the_per_pose_sum_of_squared_matrix_errors():
     R = m.decode_rotmats(m.encode(x)).detach().double().numpy()
     target = Rotation.from_rotvec(x.double().numpy().reshape(-1, 3)).as_matrix().reshape(4, 21, 3, 3)
     np.testing.assert_allclose(out["rec"].item(), ((R - target) ** 2).sum((1, 2, 3)).mean(), rtol=1e-4)
+
+
+# The logged angle error is the mean geodesic angle between the decoded and the input rotations, as scipy computes
+# it.
+def test_angle_error_is_the_mean_geodesic_angle_of_the_decoded_rotations():
+    torch.manual_seed(0)
+    m = PosePrior().eval()
+    x = 0.4 * torch.randn(3, 63)
+    out = m.loss(x)
+    R = m.decode_rotmats(m.encode(x)).detach().double().numpy().reshape(-1, 3, 3)
+    target = Rotation.from_rotvec(x.double().numpy().reshape(-1, 3))
+    ang = (Rotation.from_matrix(R).inv() * target).magnitude()
+    assert out["angle_error_deg"].item() == pytest.approx(np.rad2deg(ang).mean(), abs=0.05)

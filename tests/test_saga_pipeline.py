@@ -4,8 +4,11 @@ import numpy as np
 import pytest
 import torch
 
-from graspkit.data.motion import Motion
-from graspkit.saga import rigid_params, synthesize
+from graspkit.body.markers import saga_sparse_markers
+from graspkit.data import Start
+from graspkit.data.motion import Motion, heading_of
+from graspkit.objects.placement import ObjectPose
+from graspkit.saga import default_start, rigid_params, synthesize
 
 
 def test_rigid_params_equals_moving_every_vertex(bm):
@@ -123,3 +126,33 @@ def test_saga_command_names_a_bad_mesh_file(tmp_path, capsys):
     trimesh.creation.box((50.0, 70.0, 100.0)).export(path)      # millimetres
     assert main(["saga", "--object", str(path), "--out", str(tmp_path)]) == 2
     assert "in metres" in capsys.readouterr().err
+
+
+# saga.default_start puts the standing body `distance` m from the grasp pelvis on the side AWAY from the object
+# centre, facing the object (docstring).
+def test_default_start_stands_away_from_the_object_and_faces_it(bm):
+    centre = np.array([0.4, 0.3, 0.9])
+    grasp_pelvis = np.array([0.4 + 0.36, 0.3 - 0.48, 0.95])        # 0.6 m from the centre in the plane, along (0.6, -0.8)
+    d = np.array([0.6, -0.8])
+    st = default_start(grasp_pelvis, centre, np.zeros(10), 1.0, bm, seed=0)
+    assert st.num_frames == 1
+    pelvis = st.joint_positions(bm)[0, 0]
+    np.testing.assert_allclose(pelvis[:2], grasp_pelvis[:2] + 1.0 * d, atol=0.05)     # 1.6 m from the centre
+    h = float(heading_of(st.poses[:1, 0])[0])
+    to_obj = centre[:2] - pelvis[:2]
+    assert np.cos(h - np.arctan2(to_obj[1], to_obj[0])) > np.cos(np.deg2rad(20))      # facing the object
+
+
+# SagaResult.markers (MotionFill's sample, taken back to the world) starts at the start body's markers, where the
+# sample's known first frame is, and ends near the fitted motion's last markers. (A few optimiser steps only; about
+# 4 s, most of it synthesize.)
+def test_sample_markers_are_in_the_world_frame_of_the_start_body(bm):
+    # a start facing -x (towards the object): the canonical frame is turned well away from the world's
+    r = synthesize("camera", bm, object_pose=ObjectPose.from_yaw(0.8, np.array([0.3, -0.6, 0.85])), seed=3,
+                   start=Start(1.4, -0.3, 3.3), grasp_steps=(5, 5, 5), motion_steps=(5, 5), polish_steps=(0, 0),
+                   progress=False)
+    start = saga_sparse_markers(bm).select(r.start.vertices(bm))[0].double().numpy()
+    first = r.markers[0].double().numpy()
+    assert np.linalg.norm(first - start, axis=1).mean() < 0.05                 # the known first frame, in the world
+    fitted = saga_sparse_markers(bm).select(r.motion.vertices(bm, 60, 61))[0].double().numpy()
+    assert np.linalg.norm(r.markers[-1].double().numpy() - fitted, axis=1).mean() < 0.25
