@@ -1,4 +1,5 @@
 """Static grasp synthesis end to end, checked with independent geometry (trimesh) and the motion of the approach."""
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -239,8 +240,6 @@ def test_fit_chunk_keeps_the_least_bad_of_failed_attempts():
 
 def test_write_chunk_writes_only_the_missing_indices_below_n(tmp_path, monkeypatch):
     """n = 3, chunks of 4: chunk 0 writes items 0, 1, 2 (index < n, write_chunk's docstring), never item 3."""
-    from pathlib import Path
-
     monkeypatch.setattr(gm, "export_object_ply", lambda name, folder: None)
     monkeypatch.setattr(gm, "fit_chunk", lambda fitter, kind, seed, chunk, size, objects: [(None, 0, True)] * size)
     monkeypatch.setattr(gm, "grasp_sequence", lambda *a: None)

@@ -227,8 +227,8 @@ def test_every_locomotion_clip_starts_near_the_origin(bm):
         assert np.linalg.norm(m.trans[-1, :2] - m.trans[0, :2]) > 0.3 or kind == "backward"   # it did move
 
 
-# Rig.leg_length is the hip -> knee -> ankle length (docstring) of the body's rest joints, and scales with the body
-# (a uniformly scaled skeleton).
+# Rig.leg_length is the hip -> knee -> ankle length (docstring) of the body's rest joints, and arm_length the
+# shoulder -> elbow -> wrist one, for a body of another shape (beta_0 = 1.5).
 def test_leg_length_is_thigh_plus_shin_of_the_rest_joints(bm):
     betas = np.zeros(10)
     betas[0] = 1.5
