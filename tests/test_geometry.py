@@ -673,9 +673,9 @@ def test_point_mesh_distance_is_exact_far_from_the_mesh():
     np.testing.assert_allclose(point_mesh_distance(pts, mesh).distance.numpy(), want, atol=1e-9)
 
 
-# SDFGrid.from_mesh puts `resolution` nodes along the longest side of the padded box (docstring), with cubic cells,
-# and its box covers the mesh's bounds plus the padding.
 def test_grid_has_resolution_nodes_on_the_longest_side_and_covers_the_padded_box():
+    """SDFGrid.from_mesh puts `resolution` nodes along the longest side of the padded box (docstring), with cubic
+    cells, and its box covers the mesh's bounds plus the padding."""
     mesh = trimesh.creation.box((0.10, 0.16, 0.30))
     res, pad = 16, 0.02
     grid = SDFGrid.from_mesh(mesh, resolution=res, padding=pad, dtype=torch.float64)

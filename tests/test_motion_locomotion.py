@@ -201,9 +201,8 @@ def test_support_weight_moves_from_the_old_stance_foot_to_the_new_one():
     assert w[10] > 0.5 > w[14]
 
 
-# A curved walk segment of curvature k at speed v turns at k * v rad/s (steady state), and every locomotion clip
-# starts near the origin (docstring).
 def test_curved_walk_turns_at_curvature_times_speed():
+    """A curved walk segment of curvature k at speed v turns at k * v rad/s (steady state)."""
     fps, T, checked = 30.0, 600, 0
     for seed in range(4):
         segs = _segments("curve", np.random.default_rng(seed), T / fps)     # the same draws locomotion_plan makes
@@ -221,15 +220,16 @@ def test_curved_walk_turns_at_curvature_times_speed():
 
 
 def test_every_locomotion_clip_starts_near_the_origin(bm):
+    """Every locomotion clip starts within 0.5 m of the origin in x and y (generate_locomotion) and moves away from it."""
     for seed, kind in ((0, "walk"), (1, "curve"), (2, "backward")):
         m = generate_locomotion(seed, bm, num_frames=90, kind=kind)
         assert np.abs(m.trans[0, :2]).max() <= 0.5 + 1e-9, (seed, kind)
         assert np.linalg.norm(m.trans[-1, :2] - m.trans[0, :2]) > 0.3 or kind == "backward"   # it did move
 
 
-# Rig.leg_length is the hip -> knee -> ankle length (docstring) of the body's rest joints, and arm_length the
-# shoulder -> elbow -> wrist one, for a body of another shape (beta_0 = 1.5).
 def test_leg_length_is_thigh_plus_shin_of_the_rest_joints(bm):
+    """Rig.leg_length is the hip -> knee -> ankle length (docstring) of the body's rest joints, and arm_length the
+    shoulder -> elbow -> wrist one, for a body of another shape (beta_0 = 1.5)."""
     betas = np.zeros(10)
     betas[0] = 1.5
     rig = build_rig(bm, betas)

@@ -242,9 +242,9 @@ def test_train_command_end_to_end_on_the_shipped_approach_clips(tmp_path, monkey
         main(["train", "motionfill_baseline", "--model", "lemo"])
 
 
-# PoseNet's per-frame input is [start markers, end markers, root velocity, t/T] (class docstring, Wang et al.): read
-# at its input layer with a forward hook.
 def test_posenet_reads_start_end_velocity_and_normalised_time_per_frame():
+    """PoseNet's per-frame input is [start markers, end markers, root velocity, t/T] (class docstring, Wang et al.):
+    read at its input layer with a forward hook."""
     g = torch.Generator().manual_seed(0)
     local = torch.randn(2, NUM_FRAMES, NUM_MARKERS, 3, generator=g)
     vel = torch.randn(2, NUM_FRAMES, 3, generator=g)

@@ -128,9 +128,9 @@ def test_saga_command_names_a_bad_mesh_file(tmp_path, capsys):
     assert "in metres" in capsys.readouterr().err
 
 
-# saga.default_start puts the standing body `distance` m from the grasp pelvis on the side AWAY from the object
-# centre, facing the object (docstring).
 def test_default_start_stands_away_from_the_object_and_faces_it(bm):
+    """saga.default_start puts the standing body `distance` m from the grasp pelvis on the side AWAY from the object
+    centre, facing the object (docstring)."""
     centre = np.array([0.4, 0.3, 0.9])
     grasp_pelvis = np.array([0.4 + 0.36, 0.3 - 0.48, 0.95])        # 0.6 m from the centre in the plane, along (0.6, -0.8)
     d = np.array([0.6, -0.8])
@@ -143,10 +143,10 @@ def test_default_start_stands_away_from_the_object_and_faces_it(bm):
     assert np.cos(h - np.arctan2(to_obj[1], to_obj[0])) > np.cos(np.deg2rad(20))      # facing the object
 
 
-# SagaResult.markers (MotionFill's sample, taken back to the world) starts at the start body's markers, where the
-# sample's known first frame is, and ends near the fitted motion's last markers. (A few optimiser steps only; about
-# 4 s, most of it synthesize.)
 def test_sample_markers_are_in_the_world_frame_of_the_start_body(bm):
+    """SagaResult.markers (MotionFill's sample, taken back to the world) starts at the start body's markers, where the
+    sample's known first frame is, and ends near the fitted motion's last markers. (A few optimiser steps only;
+    about 4 s, most of it synthesize.)"""
     # a start facing -x (towards the object): the canonical frame is turned well away from the world's
     r = synthesize("camera", bm, object_pose=ObjectPose.from_yaw(0.8, np.array([0.3, -0.6, 0.85])), seed=3,
                    start=Start(1.4, -0.3, 3.3), grasp_steps=(5, 5, 5), motion_steps=(5, 5), polish_steps=(0, 0),
