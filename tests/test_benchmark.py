@@ -9,10 +9,12 @@ import torch
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from graspkit.benchmark import Row, ground_truth_grasps, markdown, paper_rows, planner_motion, read_csv, write_report
+from graspkit.benchmark import (PAPER_ROWS, Row, ground_truth_grasps, markdown, paper_rows, planner_motion, read_csv,
+                                saga_motion_rows, wandr_rows, write_report)
 from graspkit.body import BodyModel
 from graspkit.cli import main
 from graspkit.data.grasp import split_of
+from graspkit.paths import DATA_STUBS, default_model_path
 
 from conftest import PROCEDURAL_MODEL
 
@@ -259,3 +261,110 @@ def test_goal_sliding_rows_are_percent():
     got = {r.method: r.values["slide_goal"] for r in rows}
     assert got["GOAL (GNet + MNet)"] == pytest.approx(13.7)
     assert [v for k, v in got.items() if k.startswith("SAGA")][0] == pytest.approx(25.0)
+
+
+def test_planner_row_gives_goals_sliding_in_percent_on_a_clip_that_slides(tmp_path):
+    """A shipped test-object approach clip pushed 2 cm sideways per frame for 20 frames: GOAL's sliding (the lowest
+    vertex moves > 1 cm to the next frame, §4.2) counted by hand on its meshes, in % as the column says."""
+    from graspkit.data.grab import load_grasp_sequence
+    from graspkit.data.motion import Motion
+
+    src = DATA_STUBS / "approach" / "approach_000000.npz"            # the mug: a test object
+    z = dict(np.load(src, allow_pickle=False))
+    tr = z["body.params.transl"].copy()
+    k = np.arange(len(tr))
+    tr[:, 0] += 0.02 * np.clip(k - 19, 0, 20)
+    z["body.params.transl"] = tr
+    np.savez(tmp_path / "approach_000000.npz", **z)
+    bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    row = planner_motion(bm, [tmp_path])
+    s = load_grasp_sequence(tmp_path / "approach_000000.npz")
+    v = Motion(s.poses, s.trans, s.betas[:10], 30.0).vertices(bm).double().numpy()
+    T = len(v)
+    low = v[:-1, :, 2].argmin(1)
+    move = np.linalg.norm(v[1:][np.arange(T - 1), low] - v[:-1][np.arange(T - 1), low], axis=1)
+    share = float((move > 0.01).mean())
+    assert share > 0.2
+    assert row.values["slide_goal"] == pytest.approx(100 * share, abs=1e-6)
+
+
+def test_motionfill_rows_keep_their_protocols_names():
+    """SAGA Tab. 3: 'Ours' is trajectory + local (TrajFill then LocalMotionFill), 'Ours-Local' the local infilling on the
+    true trajectory; the benchmark's 'traj + local' row is 'Ours' and sits beside the paper's ADE 0.083 / skating 0.394
+    (Tab. 3, 'Ours')."""
+    rows = saga_motion_rows({"rows": {"Ours": {"ADE": 0.11, "skating": 0.22}, "Ours-Local": {"ADE": 0.33, "skating": 0.44}},
+                             "test_windows": 5})
+    by = {r.method: r.values for r in rows}
+    assert by["SAGA (MotionFill, traj + local)"] == {"ade": 0.11, "skate_saga": 0.22}
+    assert by["SAGA (MotionFill, local, true trajectory)"] == {"ade": 0.33, "skate_saga": 0.44}
+    paper = next(v for t, m, s, v in PAPER_ROWS if m == "SAGA (MotionFill, traj + local)")
+    assert paper == {"ade": 0.083, "skate_saga": 0.394}
+
+
+def test_wandr_row_takes_the_mean_distance_to_goal():
+    """WANDR §4.3's DTG is the mean closest wrist distance over the rollouts (the summary's 'DTG', not its median)."""
+    s = {"SR": 30.0, "FS": 12.0, "DTG": 40.0, "DTG_median": 10.0, "rollouts": 5}
+    rows = wandr_rows({"summary": s, "planner": {**s, "DTG": 50.0, "DTG_median": 5.0}})
+    assert [r.values for r in rows] == [{"SR": 30.0, "fs_wandr": 12.0, "DTG": 40.0},
+                                        {"SR": 30.0, "fs_wandr": 12.0, "DTG": 50.0}]
+
+
+def test_papers_wandr_row_is_wandr_table_1():
+    """WANDR Tab. 1 (full intention): SR 32 %, FS 16 %, DTG 24.8 cm; the same figures as eval_wandr.PAPER's."""
+    from graspkit.eval_wandr import PAPER
+
+    row = next(v for t, m, s, v in PAPER_ROWS if m == "WANDR" and s == "WANDR Tab. 1")
+    assert row == {"SR": 32.0, "fs_wandr": 16.0, "DTG": 24.8}
+    assert (row["SR"], row["fs_wandr"], row["DTG"]) == PAPER["WANDR"]
+    goal = next(v for t, m, s, v in PAPER_ROWS if m == "GOAL (on WANDR's grid)")
+    assert (goal["SR"], goal["fs_wandr"], goal["DTG"]) == PAPER["GOAL"] == (0.0, 29.0, 149.2)
+
+
+def test_common_wandr_motions_go_to_k_different_directions(tmp_path, monkeypatch):
+    """common_motion_rows: WANDR towards k goals 2 m away, 0.9 m high, in k different directions (every 360/k deg)."""
+    import graspkit.benchmark as B
+    from graspkit.data import load_motion
+
+    (tmp_path / "wandr.pt").write_bytes(b"")                   # present; the motions are stubbed
+    seen = []
+
+    def fake(ck, goals, t_goal, seed=0, lift=False):
+        seen.append(goals.clone())
+        m = load_motion(DATA_STUBS / "motion" / "reach" / "reach_000002.npz").slice(0, 6)
+        return [m] * len(goals)
+
+    monkeypatch.setattr(B, "wandr_motions", fake)
+    bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    rows = B.common_motion_rows(bm, [DATA_STUBS / "approach"], tmp_path, k=4)
+    assert len(seen) == 1 and any(r.method.startswith("WANDR") and r.values for r in rows)
+    g = seen[0].double().numpy()
+    assert g.shape == (4, 3) and np.allclose(np.linalg.norm(g[:, :2], axis=1), 2.0) and np.allclose(g[:, 2], 0.9)
+    ang = np.sort(np.degrees(np.arctan2(g[:, 1], g[:, 0])) % 360)
+    assert np.allclose(ang, [0, 90, 180, 270], atol=1e-4)
+
+
+def test_motionfill_motions_stand_on_the_floor_z_0(monkeypatch):
+    """motionfill_motions returns the fitted bodies with the scene's floor moved to z = 0 (its docstring): a body whose
+    soles stand on the scene's floor (z = -0.85 in MotionFill's canonical frame) comes back with its soles at 0, the
+    object mesh moved the same way."""
+    import torch
+    import trimesh
+
+    import graspkit.eval_motionfill as EM
+    from graspkit.benchmark import motionfill_motions
+
+    bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    floor, F = -0.85, 3
+    with torch.no_grad():
+        z0 = float(bm().vertices[0, :, 2].min())
+    transl = torch.tensor([[0.1, 0.2, floor - z0]]).expand(F, 3)[None].clone()
+    box = trimesh.creation.box((0.1, 0.1, 0.1))
+    box.apply_translation([0.5, 0.0, floor + 0.8])
+    params = {"poses": torch.zeros(1, F, 165), "transl": transl, "betas": torch.zeros(1, 10)}
+    monkeypatch.setattr(EM, "load_motionfill", lambda path: None)
+    monkeypatch.setattr(EM, "graspmotion_eval", lambda model, files, **kw: {
+        "result": type("R", (), {"params": params})(), "scenes": [{"floor": floor, "mesh": box}]})
+    motions, scenes = motionfill_motions([DATA_STUBS / "approach" / "approach_000000.npz"], DATA_STUBS / "checkpoints")
+    v = motions[0].vertices(bm)
+    assert abs(float(v[:, :, 2].min())) < 1e-5
+    assert np.allclose(scenes[0]["mesh"].bounds[:, 2], [0.75, 0.85], atol=1e-6)

@@ -358,3 +358,34 @@ def test_the_wandr_command_fixes_its_thread_count(monkeypatch, tmp_path):
     finally:
         torch.set_num_threads(before)
     assert seen == [1, 2]
+
+
+def test_saga_stage_draws_the_object_at_the_first_test_grasps_pose(tmp_path, monkeypatch):
+    """The saga stage shows the WholeGrasp sample on 'the placement of the first shipped test grasp' (module doc): the
+    object mesh in the world is the catalogue mesh at that grasp file's object pose (rotation, then translation)."""
+    import torch
+
+    import graspkit.demo as D
+    import graspkit.eval_saga as ES
+    from graspkit.body import BodyModel
+    from graspkit.data.grasp_datasets import grasp_files
+    from graspkit.objects.catalogue import make_object
+    from graspkit.objects.placement import ObjectPose, apply_pose
+    from graspkit.paths import DATA_STUBS, default_model_path
+    from graspkit.rotations import axis_angle_to_matrix
+
+    seen = {}
+    zero = {k: torch.zeros(1, n) for k, n in (("global_orient", 3), ("body_pose", 63), ("jaw_pose", 3),
+                                               ("leye_pose", 3), ("reye_pose", 3), ("left_hand_pose", 45),
+                                               ("right_hand_pose", 45), ("transl", 3), ("betas", 10))}
+    monkeypatch.setattr(ES, "fit_variants", lambda *a, **k: {"full": type("R", (), {"params": zero})()})
+    monkeypatch.setattr(D, "_write_clip", lambda bm, motion, out, name, objects, title: seen.update(objects) or ([], None))
+    D.saga_stage(BodyModel.from_file(default_model_path()), tmp_path)
+    (name, mesh), = seen.items()
+    first = next(f for f in grasp_files(DATA_STUBS / "grasps", "grasp", split="test")
+                 if str(np.load(f, allow_pickle=False)["obj_name"]) == name)
+    z = np.load(first, allow_pickle=False)
+    R = axis_angle_to_matrix(torch.as_tensor(z["object.params.global_orient"][0], dtype=torch.float64)).numpy()
+    assert np.linalg.norm(R - R.T) > 0.1                        # a turn that R and R^T tell apart
+    want = apply_pose(ObjectPose(z["object.params.transl"][0].astype(np.float64), R), make_object(name))
+    assert np.allclose(mesh.vertices, want.vertices, atol=1e-5)

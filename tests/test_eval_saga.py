@@ -4,10 +4,12 @@ import shutil
 
 import numpy as np
 import pytest
+import torch
+import trimesh
 
 from graspkit.eval_saga import (PAPER_TAB1, EvalConfig, evaluate, finish_partial, rows_from_objects, summarise,
                                 table1, table2)
-from graspkit.paths import DATA_STUBS
+from graspkit.paths import DATA_STUBS, default_model_path
 
 
 def _rows(contacts, volumes, depths, floors=None):
@@ -129,3 +131,77 @@ def test_body_rows_measure_each_body_against_its_own_placement():
     rows = body_rows(bm, verts, pls, per=2, refine=1)
     want = [100 * (float(verts[i, :, 2].min()) + (0.5, 1.2)[i // 2]) for i in range(4)]
     np.testing.assert_allclose([r["floor_cm"] for r in rows], want, atol=1e-4)
+
+
+def test_placements_are_the_grasp_in_the_object_frame():
+    """A placement is object-centred in the world orientation: its points lie on the catalogue mesh turned by
+    `rotation` (no translation), and its ground-truth markers are SAGA's marker vertices of its ground-truth body
+    (the stored parameters, in the same frame), within a few cm of the object."""
+    from graspkit.body import BodyModel
+    from graspkit.body.markers import saga_markers
+    from graspkit.eval_saga import load_placements
+    from graspkit.objects import make_object
+    from graspkit.rotations import axis_angle_to_matrix
+
+    bm = BodyModel.from_file(default_model_path())
+    ids = torch.as_tensor(saga_markers(bm).vertex_ids)
+    for name in ("mug", "pitcher"):
+        for pl in load_placements(DATA_STUBS / "grasps", name, 2, split=None if name == "pitcher" else "test"):
+            mesh = make_object(pl.name)
+            mesh.apply_transform(np.block([[pl.rotation.double().numpy(), np.zeros((3, 1))], [np.zeros((1, 3)), 1.0]]))
+            _, d, _ = trimesh.proximity.closest_point(mesh, pl.points.double().numpy())
+            assert d.max() < 1e-3
+            with torch.no_grad():
+                v = bm.forward_rotmats(axis_angle_to_matrix(pl.body["fullpose"][None]), betas=pl.body["betas"][None],
+                                       transl=pl.body["transl"][None]).vertices[0]
+            assert torch.allclose(pl.markers, v[ids].float(), atol=2e-3)
+            _, dm, _ = trimesh.proximity.closest_point(mesh, pl.markers.double().numpy())
+            assert dm.min() < 0.05
+
+
+def test_hand_contact_prior_is_the_share_of_grasps_touching_each_vertex():
+    """S.3's C_H: per body vertex, the share (0..1) of the split's grasps whose body touches the object there, read
+    here from the files with numpy."""
+    from graspkit.data.grasp import split_of
+    from graspkit.eval_saga import hand_contact_prior
+
+    got = hand_contact_prior(DATA_STUBS / "grasps", split="test").numpy()
+    maps = []
+    for f in sorted((DATA_STUBS / "grasps").glob("grasp_*.npz")):
+        z = np.load(f, allow_pickle=False)
+        if split_of(str(z["obj_name"])) == "test" and bool(z["grasp.accepted"]):
+            maps.append(z["contact.body"][0].astype(np.float64))
+    assert len(maps) >= 2 and np.stack(maps).sum(0).max() >= 2           # some vertex touches in several grasps
+    assert np.allclose(got, np.mean(maps, 0), atol=1e-6) and got.max() <= 1.0
+
+
+def test_table2_puts_ground_truth_and_samples_in_their_columns():
+    """SAGA Tab. 2: per stage-3 variant, the fit of the ground-truth markers (GT) and of WholeGrasp-VAE's samples
+    (Samples) beside the paper's (E_fit + E_g: contact 0.99 / 0.96, volume 2.21 / 12.20; + E_cont: 0.94 / 0.94,
+    0.52 / 0.48), WholeGrasp-single's rows nowhere."""
+    from graspkit.eval_saga import table2
+
+    keys = ("GT mesh", "GT + E_fit + E_g", "WholeGrasp w/o opt.", "GT + E_colli", "samples + E_colli", "GT + E_cont",
+            "WholeGrasp w/ opt. (Ours)", "WholeGrasp-single w/o opt.")
+    rows = {k: {"contact_ratio": 0.11 * (i + 1), "volume_cm3": 1.0 + i, "depth_cm": 0.5 + i} for i, k in enumerate(keys)}
+    lines = {x.split("|")[1].strip(): [c.strip() for c in x.split("|")[2:-1]] for x in table2({"rows": rows}).splitlines()[2:]}
+    assert lines["E_fit + E_g"] == ["0.22 / 0.99", "0.33 / 0.96", "2.00 / 2.21", "3.00 / 12.20", "1.50 / 0.46",
+                                    "2.50 / 0.85"]
+    assert lines["+ E_cont"] == ["0.66 / 0.94", "0.77 / 0.94", "6.00 / 0.52", "7.00 / 0.48", "5.50 / 0.17",
+                                 "6.50 / 0.16"]
+    assert lines["GT mesh"][:2] == ["0.11 / 0.99", "- / -"]
+
+
+def test_ground_truth_fit_rows_hold_the_ground_truth_bodies_only(tmp_path):
+    """Tab. 2's GT rows are the fits of the ground-truth markers (gt_grasps per object), also when WholeGrasp-single's
+    weights are there and its samples share the batch (here the shipped WholeGrasp-VAE's weights stand in for them)."""
+    import shutil
+
+    from graspkit.eval_saga import EvalConfig, evaluate
+
+    for name in ("wholegrasp.pt", "wholegrasp_single.pt"):
+        shutil.copy(DATA_STUBS / "checkpoints" / "wholegrasp.pt", tmp_path / name)
+    cfg = EvalConfig(objects=("mug",), placements=1, samples=2, gt_grasps=1, steps=(2, 2, 2), polish=(0, 0.0))
+    rows = evaluate(DATA_STUBS / "grasps", cfg, progress=False, out=None, checkpoints=tmp_path)["rows"]
+    assert rows["WholeGrasp-single w/o opt."]["n"] == 2
+    assert [rows[k]["n"] for k in ("GT mesh", "GT + E_fit + E_g", "GT + E_colli", "GT + E_cont")] == [1, 1, 1, 1]

@@ -4,6 +4,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+import trimesh
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
@@ -12,7 +13,9 @@ from graspkit.data import load_motion
 from graspkit.data.grab import GraspSequence, save_grasp_sequence
 from graspkit.data.grasp import object_points
 from graspkit.eval_goal import _body, approach_clips, gnet_samples
+from graspkit.models.mnet import ApproachClip
 from graspkit.paths import DATA_STUBS
+from graspkit.rotations import axis_angle_to_rot6d
 
 REACH = sorted((DATA_STUBS / "motion" / "reach").glob("*.npz"))
 
@@ -226,3 +229,57 @@ def test_rollout_sliding_is_pooled_over_frame_pairs(monkeypatch):
     res = rollout_eval(None, clips, refine=False)
     assert [c["sliding"] for c in res["clips"]] == [0.0, 1.0]
     assert res["sliding"] == pytest.approx(20 / 24)
+
+
+def test_tab1_object_meshes_are_in_gnets_frame_with_the_object_points():
+    """gnet_table measures every body against its object mesh in GNet's frame x' = R (x - o): the mesh there is the
+    world mesh moved so, and the object's sample points in GNet's frame (gt['points']) lie on its surface."""
+    from graspkit.eval_goal import gnet_table, object_mesh_world
+    from graspkit.models.gnet import load_gnet
+
+    seqs = [_sequence(k, "mug") for k in (0, 1)]
+    t = gnet_table(load_gnet(DATA_STUBS / "checkpoints" / "gnet.pt"), None, seqs, rows=("GNet w/o opt",))
+    for b, s in enumerate(seqs):
+        R, o = t["gt"]["R"][b].double().numpy(), t["gt"]["o"][b].double().numpy()
+        assert abs(np.linalg.det(R) - 1) < 1e-5 and np.linalg.norm(o) > 0.1          # a real move
+        world = object_mesh_world(s, int(s.extras["grasp.goal_frame"]))
+        assert np.allclose(t["meshes"][b].vertices, (world.vertices - o) @ R.T, atol=1e-5)
+        _, dist, _ = trimesh.proximity.closest_point(t["meshes"][b], t["gt"]["points"][b].double().numpy())
+        assert dist.max() < 2e-3
+
+
+def _still_clip(T, goal_frame, transl, obj_centre):
+    """A body standing still at rest pose (T frames), translations `transl` (T, 3)."""
+    rot6d = axis_angle_to_rot6d(torch.zeros(T, 55, 3, dtype=torch.float64)).float()
+    return ApproachClip(rot6d, torch.as_tensor(transl, dtype=torch.float32), torch.zeros(10), goal_frame,
+                        torch.zeros(5, 3), torch.as_tensor(obj_centre, dtype=torch.float32), "mug")
+
+
+def test_ground_truth_sliding_counts_the_frame_pairs_up_to_and_including_the_goal_frame():
+    """clip_sliding: frames 0..goal_frame (the docstring's 'up to the goal frame'), i.e. goal_frame frame pairs; a body
+    that stands still and jumps 5 cm sideways into the goal frame slides on 1 of its 10 pairs (GOAL §4.2: the vertex
+    closest to the ground moves more than 1 cm)."""
+    from graspkit.eval_goal import clip_sliding
+
+    tr = np.zeros((13, 3))
+    tr[10:, 0] = 0.05                                        # the step into the goal frame 10 (and stays there)
+    c = _still_clip(13, 10, tr, [1.0, 0.0, 0.8])
+    assert clip_sliding([c]) == pytest.approx(1 / 10)
+    assert clip_sliding([c], until_goal=False) == pytest.approx(1 / 12)
+    tr[10:, 0] = 0.0
+    tr[11:, 0] = 0.05                                        # the step after the goal frame: not counted
+    assert clip_sliding([_still_clip(13, 10, tr, [1.0, 0.0, 0.8])]) == 0.0
+
+
+def test_start_distance_is_measured_on_the_floor_plane():
+    """start_distance: the horizontal distance from the first frame's pelvis (the posed body's joint 0) to the object
+    centre, whatever the object's height (a 1.4 m high shelf 1 m away is 1 m away)."""
+    from graspkit.eval_goal import start_distance
+
+    bm, _, _ = _body()
+    tr = np.tile([0.2, -0.1, 0.0], (3, 1))
+    with torch.no_grad():
+        pelvis = bm(transl=torch.as_tensor(tr[:1], dtype=bm.dtype)).joints[0, 0].double().numpy()
+    for z in (0.0, 1.4):
+        c = _still_clip(3, 2, tr, [pelvis[0] + 0.6, pelvis[1] + 0.8, z])
+        assert start_distance(c) == pytest.approx(1.0, abs=1e-5)

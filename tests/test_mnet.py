@@ -282,8 +282,23 @@ def test_mnet_learns_the_reaching_windows(setup):
     assert hist[-1]["loss"] < 0.5 * hist[0]["loss"] and hist[-1]["v"] < 0.5 * hist[0]["v"]
 
 
+def _subtree(parents: list[int], root: int) -> set[int]:
+    """Joint `root` and every joint below it in the kinematic tree."""
+    out = {root}
+    for j in range(len(parents)):
+        k = j
+        while k >= 0:
+            if k == root:
+                out.add(j)
+                break
+            k = parents[k]
+    return out
+
+
 def test_horizon_prediction_of_a_standing_mnet_is_the_current_pose(setup):
-    """A 1-frame MNet that predicts no change, rolled ten steps, repeats frame t: V2V = the true motion since t."""
+    """A 1-frame MNet that predicts no change, rolled ten steps, repeats frame t: each V2V column is the mean distance
+    (mm) the true motion moves since t over its vertices: the whole body; the right hand = the vertices skinned mostly
+    to the right wrist or a joint below it (all three finger segments); the feet = to an ankle or below (the toes)."""
     from graspkit.eval_goal import teacher_forced_v2v
     from graspkit.models.mnet import MNetWindows
     bm, gv, body = setup
@@ -295,7 +310,17 @@ def test_horizon_prediction_of_a_standing_mnet_is_the_current_pose(setup):
     now = bm.forward_rotmats(pose_rotmats(w.rot6d[t:t + 1]), betas=w.betas[:1], transl=w.transl[t:t + 1]).vertices
     fut = bm.forward_rotmats(pose_rotmats(w.rot6d[t + 1:t + 11]), betas=w.betas[:1].expand(10, -1),
                              transl=w.transl[t + 1:t + 11]).vertices
-    assert got.body == pytest.approx(1000 * float((fut - now).norm(dim=-1).mean()), rel=1e-3)
+    d = (fut - now).norm(dim=-1)                                                  # (10, V) m
+    parents = [int(x) for x in bm.parents]
+    part = bm.lbs_weights.argmax(1)
+    hand_joints = _subtree(parents, J["right_wrist"])
+    hand = torch.isin(part, torch.tensor(sorted(hand_joints)))
+    feet = torch.isin(part, torch.tensor(sorted(_subtree(parents, J["left_ankle"]) | _subtree(parents, J["right_ankle"]))))
+    assert len(hand_joints) == 16 and int(hand.sum()) > 100 and int(feet.sum()) > 100
+    assert got.body == pytest.approx(1000 * float(d.mean()), rel=1e-3)
+    assert got.hand == pytest.approx(1000 * float(d[:, hand].mean()), rel=1e-3)
+    assert got.feet == pytest.approx(1000 * float(d[:, feet].mean()), rel=1e-3)
+    assert abs(got.hand - got.feet) > 1.0                     # the columns differ: the reaching hand moves, the feet less
 
 
 def test_window_features_match_the_direct_computation(setup):

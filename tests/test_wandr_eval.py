@@ -1,4 +1,5 @@
 """WANDR's goal-grid evaluation (§4.2-4.3): the grid, SR / DTG on hand-made motions, FS on the fly against full meshes."""
+import dataclasses
 import warnings
 
 import numpy as np
@@ -460,3 +461,44 @@ def test_the_shipped_model_reaches_goals_one_after_another():
     model = load_wandr(DATA_STUBS / "checkpoints" / "wandr.pt")
     r = E.evaluate_goal_rows(model, E.starts_from_meta(model.meta), per_start=10, seed=1)
     assert r["SR_per_goal"][2] >= 60.0 and r["SR_all"] >= 60.0
+
+
+def test_evaluate_clips_reads_the_wrist_at_the_clips_own_goal_frame(bm):
+    """A clip's goal frame g counts from its first frame (the rollout starts at frame 1): with the goal put on the
+    replayed clip's wrist at frame g, the frame its wrist moves fastest, the error at t_G is 0 and the wrist at frame g + 1
+    (a frame late) is centimetres away."""
+    from graspkit.data.wandr_dataset import list_clips, load_clips
+
+    clips = load_clips(list_clips(DATA_STUBS / "motion", kinds=("reach",)), bm)
+    wrists = [I.body_joints(clips.clip(c), clips.rest[c])[:, I.WRIST] for c in range(len(clips))]
+    speed = [(w[1:] - w[:-1]).norm(dim=-1) for w in wrists]                # speed[k]: frame k -> k + 1
+    g = torch.tensor([2 + int(s[2:len(s) - 1].argmax()) for s in speed])   # the fastest wrist frame of each clip
+    goal = torch.stack([w[k] for w, k in zip(wrists, g.tolist())])
+    late = torch.stack([s[k] for s, k in zip(speed, g.tolist())])
+    assert float(late.min()) > 0.005                                   # the wrist moves > 5 mm from g to g + 1
+    cs = dataclasses.replace(clips, goal=goal, goal_frame=g)
+    L = int(cs.lengths.max()) + 40
+    p = torch.stack([torch.cat([cs.clip(c), cs.clip(c)[-1:].expand(L - len(cs.clip(c)), -1)]) for c in range(len(cs))])
+    r = E.evaluate_clips(_Replay(I.poses_to_deltas(p)), cs)
+    assert r["error_at_goal"] == pytest.approx(0.0, abs=0.05)         # cm
+    assert r["SR"] == 100.0 and r["DTG"] == pytest.approx(0.0, abs=0.05)
+
+
+def test_a_foot_within_5_cm_of_the_floor_is_on_it(bm):
+    """SAGA's 5 cm heel height is the floor contact (FOOT_ON_FLOOR): a clip lifted 3 cm (its lowest vertex 2-4 cm up,
+    full meshes) never floats and its reach is a grounded success; lifted 8 cm it floats on every lifted frame."""
+    m = load_motion(DATA_STUBS / "motion" / "reach" / "reach_000002.npz")
+    p = I.pose_from_axis_angle(torch.as_tensor(m.trans), torch.as_tensor(m.poses))
+    rest = rest_joints(bm, m.betas[None])[0]
+    low = m.vertices(bm)[..., 2].min(-1).values
+    assert float(low.abs().max()) < 0.01                               # the clip as made stands on the floor
+    up3, up8 = p.clone(), p.clone()
+    up3[:, 2] += 0.03
+    up8[:, 2] += 0.08
+    assert float((low + 0.03).max()) < 0.05 and float((low + 0.08).min()) > 0.05
+    goal = torch.stack([I.body_joints(q, rest)[40, I.WRIST] for q in (up3, up8)])
+    res = E.evaluate_motions(torch.stack([up3, up8]), rest[None].expand(2, -1, -1), goal,
+                             torch.as_tensor(m.betas)[None].expand(2, -1), bm, t_goal=40)
+    assert res.success.tolist() == [True, True]
+    assert res.floating.tolist() == pytest.approx([0.0, 1.0])
+    assert res.grounded.tolist() == [True, False]
