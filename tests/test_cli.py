@@ -389,3 +389,39 @@ def test_saga_stage_draws_the_object_at_the_first_test_grasps_pose(tmp_path, mon
     assert np.linalg.norm(R - R.T) > 0.1                        # a turn that R and R^T tell apart
     want = apply_pose(ObjectPose(z["object.params.transl"][0].astype(np.float64), R), make_object(name))
     assert np.allclose(mesh.vertices, want.vertices, atol=1e-5)
+
+
+@pytest.fixture
+def probe(monkeypatch):
+    """`saga.synthesize` and `goal.synthesize` replaced by a probe that records its keyword arguments and stops."""
+    import graspkit.goal
+    import graspkit.saga
+    seen = []
+
+    def fake(*a, **k):
+        seen.append(k)
+        raise ValueError("probe: stopped")
+
+    monkeypatch.setattr(graspkit.saga, "synthesize", fake)
+    monkeypatch.setattr(graspkit.goal, "synthesize", fake)
+    return seen
+
+
+def test_saga_passes_hold_start_on(probe, tmp_path):
+    """`graspkit saga` passes --hold-start / --no-hold-start on to synthesize."""
+    from graspkit.cli import main
+
+    for flag in ([], ["--no-hold-start"]):
+        assert main(["saga", "--object", "mug", "--out", str(tmp_path), *flag]) == 2
+    assert [k.get("hold_start") for k in probe] == [True, False]
+
+
+def test_goal_passes_max_frames_and_stall_on(probe, tmp_path):
+    """`graspkit goal` passes --max-frames and --stall on to synthesize (defaults 150 frames and STALL_FRAMES)."""
+    from graspkit.cli import main
+    from graspkit.models.mnet import STALL_FRAMES
+
+    for flag in ([], ["--max-frames", "37", "--stall", "0"]):
+        assert main(["goal", "--object", "mug", "--out", str(tmp_path), *flag]) == 2
+    assert [k.get("max_frames") for k in probe] == [150, 37]
+    assert [k.get("stall") for k in probe] == [STALL_FRAMES, None]

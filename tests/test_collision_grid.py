@@ -5,7 +5,7 @@ import pytest
 import torch
 import trimesh
 
-from graspkit.data.grasp_io import COLLISION_CELL, collision_sdf_grid, resolution_for
+from graspkit.data.grasp_io import COLLISION_CELL, SDF_PADDING, cached_sdf_grid, collision_sdf_grid, resolution_for
 from graspkit.objects import make_object
 from graspkit.objects.sdf import SDFGrid, signed_distance
 
@@ -35,3 +35,23 @@ def test_resolution_for_small_objects_keeps_the_minimum_and_rejects_bad_cells():
     assert (float(np.max(ext[1] - ext[0])) + 0.06) / (n - 1) <= COLLISION_CELL
     with pytest.raises(ValueError, match="cell"):
         resolution_for("apple", 0.0)
+
+
+def test_a_grid_read_from_the_cache_has_the_built_box_and_values(tmp_path):
+    """A cached SDF grid read back from its file is the grid that was built: the box starts at the mesh's bounds padded by
+    SDF_PADDING, `resolution` nodes on the longest side, cubic cells; inside a box the SDF is minus the distance to its
+    nearest face."""
+    mesh = trimesh.creation.box(extents=(0.10, 0.06, 0.04))
+    built = cached_sdf_grid(mesh, 24, tmp_path)                   # built and written
+    assert len(list(tmp_path.glob("*.npz"))) == 1
+    read = cached_sdf_grid(mesh, 24, tmp_path)                    # read from the file
+    lo, hi = mesh.bounds - SDF_PADDING * np.array([1.0, -1.0])[:, None]
+    cell = (hi - lo).max() / (24 - 1)                              # 24 nodes on the longest side, cubic cells
+    for g in (built, read):
+        np.testing.assert_allclose(g.lower.numpy(), lo, atol=1e-6)
+        np.testing.assert_allclose(g.upper.numpy()[0], hi[0], atol=1e-6)                  # the longest side
+        assert (g.upper.numpy() >= hi - 1e-6).all() and (g.upper.numpy() < hi + cell).all()   # whole cells
+        np.testing.assert_allclose(g.cell.numpy(), cell, rtol=1e-5)
+    assert float(read(torch.zeros(1, 3))[0]) == float(built(torch.zeros(1, 3))[0])
+    np.testing.assert_allclose(float(read(torch.zeros(1, 3))[0]), -0.02, atol=cell / 2)   # 2 cm to the top face
+    #   (up to half a cell off: the SDF has a kink at the centre, between two nodes)

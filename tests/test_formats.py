@@ -8,6 +8,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from graspkit.body import BodyModel
 from graspkit.data import Motion, SequenceFileError, load_motion, save_motion
 from graspkit.data.formats import resample, to_smplx_poses
+from graspkit.data.wandr_dataset import motion_kind
 
 from conftest import PROCEDURAL_MODEL
 
@@ -167,3 +168,27 @@ def test_a_folder_or_a_file_without_a_frame_rate_is_named(tmp_path):
              contacts=np.ones((3, 4), np.int8))          # whole-number rate and 0/1 contacts are fine
     m = load_motion(tmp_path / "ints.npz")
     assert m.fps == 30.0 and m.contacts.all()
+
+
+def test_resampled_contacts_come_from_the_nearest_source_frame():
+    """`resample` takes each new frame's contacts from the nearest source frame (50 -> 30 fps: nearest and floor differ)."""
+    T, src, fps = 11, 50.0, 30.0
+    contacts = np.zeros((T, 4), bool)
+    contacts[np.arange(T), np.arange(T) % 4] = True                 # a different pattern on every source frame
+    poses, trans = np.zeros((T, 55, 3)), np.zeros((T, 3))
+    _, _, c, _ = resample(poses, trans, src, fps, contacts)
+    t = np.arange(len(c)) / fps                                     # the new frames' times (s)
+    nearest = np.array([int(np.argmin(np.abs(np.arange(T) / src - x))) for x in t])
+    assert len(set((nearest * fps / src) % 1)) > 1                  # not an integer ratio: nearest != floor somewhere
+    assert np.array_equal(c, contacts[nearest])
+
+
+def test_a_goal_without_a_hand_key_is_a_right_hand_reach(tmp_path):
+    """A CIRCLE-style clip without a 'hand' key is a right-hand reach (docs/data.md; WANDR puts the right wrist on the goal)."""
+    T = 5
+    path = tmp_path / "circle_style.npz"
+    np.savez(path, poses=np.zeros((T, 165), np.float32), trans=np.zeros((T, 3), np.float32),
+             mocap_frame_rate=np.array(30.0), goal=np.array([1.0, 0.5, 1.2], np.float32), goal_frame=np.array(3))
+    m = load_motion(path)
+    assert m.hand == "right" and m.goal_frame == 3
+    assert motion_kind(m) == "reach"

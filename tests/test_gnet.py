@@ -160,3 +160,29 @@ def test_gnet_fits_a_small_set_through_the_training_loop(bm):
 
     hist = fit(net, step, data, TrainConfig(epochs=50, batch_size=32, lr=3e-3, seed=0), progress=False)
     assert hist[-1]["v"] < 0.2 * hist[0]["v"] and hist[-1]["d"] < 0.2 * hist[0]["d"]
+
+
+def test_decoder_blocks_see_the_latent_and_the_condition_bps_translation_and_betas():
+    """GNet's decoder is conditioned on [b°, γ°, β] ('Decoder: [z, C = (b°, γ°), β]', §3.3), and its second block gets the
+    latent and the condition again (the skip); another body shape with the same object and latent gives another grasp."""
+    torch.manual_seed(0)
+    net = GNet().eval()
+    torch.nn.init.normal_(net.out.weight, std=0.1)                  # as if trained: outputs depend on the inputs
+    g = torch.Generator().manual_seed(1)
+    B = 4
+    z, bps = torch.randn(B, 16, generator=g), 0.1 * torch.rand(B, 1024, generator=g)
+    t, betas = 0.3 * torch.randn(B, 3, generator=g), torch.randn(B, 10, generator=g)
+    seen = {}
+    hooks = [net.dec1.register_forward_hook(lambda m, i, o: seen.update(dec1_in=i[0], dec1_out=o)),
+             net.dec2.register_forward_hook(lambda m, i, o: seen.update(dec2_in=i[0]))]
+    with torch.no_grad():
+        out = net.sample(bps, t, betas, z=z)
+        for h in hooks:
+            h.remove()
+        c = net.cond_net(net.norm_cond(torch.cat([bps, t, betas], 1)))    # C = [b°, γ°] and β, coded once
+        other = net.sample(bps, t, betas + 1.0, z=z)
+    torch.testing.assert_close(seen["dec1_in"], torch.cat([z, c], 1))
+    torch.testing.assert_close(seen["dec2_in"], torch.cat([seen["dec1_out"], z, c], 1))
+    # another body shape, the same object and latent: another grasp (the arm length matters)
+    assert (other["rot6d"] - out["rot6d"]).abs().max() > 1e-3
+    assert (other["transl"] - out["transl"]).abs().max() > 1e-4

@@ -14,10 +14,12 @@ from graspkit.body.skeleton import JOINT_INDEX as J
 from graspkit.data import Motion
 from graspkit.data import grasp_make as gm
 from graspkit.data.approach import TPOSE_S, _continuous, _rate_limited, approach_motion
-from graspkit.data.grasp import GRASP_PARTS, SPLITS, GraspFitter, grasp_candidates, grasp_types, split_of
+from graspkit.data.grasp import (GRASP_PARTS, SPLITS, GraspFitter, grasp_candidates, grasp_types, object_points_world,
+                                 object_radius, split_of)
 from graspkit.data.grasp_make import accepted, fit_chunk
 from graspkit.data.rig import build_rig
 from graspkit.objects import TEST_OBJECTS, apply_pose, list_objects, make_object, signed_distance
+from graspkit.objects.placement import ObjectPose
 
 from conftest import PROCEDURAL_MODEL
 
@@ -254,3 +256,32 @@ def test_write_chunk_writes_only_the_missing_indices_below_n(tmp_path, monkeypat
     written = gm.write_chunk(fitter, "grasp", 0, 0, tmp_path, n=3, size=4)
     assert sorted(Path(p).name for p in written) == ["grasp_000000.npz", "grasp_000002.npz"]
     assert not gm.file_path(tmp_path, "grasp", 3).exists()
+
+
+def test_world_points_lie_on_the_placed_object():
+    """object_points_world puts the surface points on the object as placed (x = R x + t), checked with trimesh."""
+    pose = ObjectPose.from_yaw(1.1, (0.8, -0.3, 0.9))
+    mesh = make_object("mug").copy()
+    mesh.apply_transform(pose.matrix())
+    pts = object_points_world("mug", pose)
+    _, dist, _ = trimesh.proximity.closest_point(mesh, pts[::16])
+    assert float(dist.max()) < 1e-5
+
+
+def test_object_radius_is_horizontal():
+    """object_radius is the largest horizontal distance of the canonical vertices from the centre, not the 3D one."""
+    for name in ("mug", "bottle"):      # both taller than wide
+        v = np.asarray(make_object(name).vertices)
+        r = object_radius(name)
+        np.testing.assert_allclose(r, np.hypot(v[:, 0], v[:, 1]).max(), rtol=0, atol=1e-9)
+        assert r < np.linalg.norm(v, axis=1).max() - 1e-3          # not the 3D distance
+
+
+def test_a_parts_facing_cone_is_in_degrees():
+    """Part.facing = (direction, max angle in DEGREES) (Part's docstring): 30 deg off the direction is inside a
+    40-deg cone, 50 deg is not."""
+    from graspkit.data.grasp import Part, _allowed
+    part = Part("test", "sphere", (0.0, 0.0, 0.0), (0.05,), ("power",), facing=((1.0, 0.0, 0.0), 40.0))
+    a = np.deg2rad([0.0, 30.0, 50.0, 150.0])
+    s = np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], 1)
+    assert _allowed(part, s).tolist() == [True, True, False, False]

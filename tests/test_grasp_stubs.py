@@ -14,6 +14,7 @@ from graspkit.body.skeleton import SMPLX_LANDMARK_VERTEX_IDS
 from graspkit.data.grab import load_grasp_sequence
 from graspkit.data.grasp_datasets import ApproachDataset, GNetDataset, WholeGraspDataset
 from graspkit.eval_goal import _body
+from graspkit.objects.contact import MARKER_CONTACT_THRESHOLD
 
 from conftest import PROCEDURAL_MODEL
 
@@ -124,3 +125,19 @@ def test_approach_window_goal_frame_and_hand_to_goal():
     hand_now, goal_hand = v[z["goal.vertex_ids"]][rh], z["goal.vertices"][rh]
     assert np.linalg.norm(goal_hand - hand_now, axis=1).mean() > 0.02      # the hand is still on its way
     np.testing.assert_allclose(hand_now + item["hand_to_goal"][0].numpy(), goal_hand, atol=1e-4)
+
+
+def test_object_points_are_turned_by_the_object_pose():
+    """WholeGraspDataset's object points and normals are world-oriented ('the object is rotated by its pose'): the stored
+    object-frame points turned by the object's axis-angle orientation (scipy), so the in-contact markers lie on them."""
+    ds = WholeGraspDataset(STUBS / "grasps", split=None)
+    for i, f in enumerate(ds.files[:2]):
+        a = np.load(f, allow_pickle=False)
+        R = Rotation.from_rotvec(a["object.params.global_orient"][0].astype(np.float64))
+        assert R.magnitude() > 0.5                                  # a turned object: R and R^T differ
+        np.testing.assert_allclose(ds[i]["object_points"].numpy(), R.apply(a["object.points"]), atol=1e-5)
+        np.testing.assert_allclose(ds[i]["object_normals"].numpy(), R.apply(a["object.normals"]), atol=1e-5)
+        touching = ds[i]["marker_contacts"].numpy() > 0.5
+        assert touching.sum() > 0
+        d = np.linalg.norm(ds[i]["markers"].numpy()[touching][:, None] - ds[i]["object_points"].numpy()[None], axis=-1)
+        assert d.min(1).max() < MARKER_CONTACT_THRESHOLD + 0.01    # in contact: within 2 cm of the surface (+ spacing)

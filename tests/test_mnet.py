@@ -1,5 +1,6 @@
 """MNet (GOAL §3.4, Eq. 9-13): canonical frames against the body model, invariance, round trips, loss, rollout."""
 import math
+from pathlib import Path
 
 import pytest
 import torch
@@ -7,6 +8,7 @@ import torch
 from graspkit.body import BodyModel
 from graspkit.body.markers import goal_vertices
 from graspkit.body.skeleton import JOINT_INDEX as J
+from graspkit.models import mnet as M
 from graspkit.models.gnet import SparseBody, pose_rotmats
 from graspkit.models.mnet import (MNet, MNetConfig, MNetState, apply_changes, canonical_frame, feet_mask, heading,
                                   mnet_inputs, mnet_loss, mnet_targets, rest_root, rollout, transform_params,
@@ -378,3 +380,66 @@ def test_refinement_starts_the_frame_after_the_hand_enters_10_cm(setup):
     torch.testing.assert_close(d[:9], 0.25 - 0.02 * torch.arange(9.0), atol=2e-4, rtol=0)
     first_in = int(torch.nonzero(d < GOAL_HAND_RADIUS)[0, 0])
     assert first_in == 8 and r.first_refined == first_in + 1
+
+
+def _clip(path, frames: int, g: torch.Generator):
+    """The first `frames` frames of a reaching clip as an approach clip (a 4 cm ball of points at its goal)."""
+    from graspkit.data import load_motion
+    m = load_motion(path)
+    ball = torch.nn.functional.normalize(torch.randn(200, 3, generator=g), dim=-1) * 0.04 + torch.as_tensor(m.goal)
+    return M.ApproachClip(axis_angle_to_rot6d(torch.as_tensor(m.poses[:frames])), torch.as_tensor(m.trans[:frames]),
+                          torch.as_tensor(m.betas), min(m.goal_frame, frames - 1), ball, torch.as_tensor(m.goal))
+
+
+def test_a_clips_first_window_repeats_its_first_frame_as_the_previous_one(setup):
+    """MNetWindows repeats a clip's first frame before its start: frame t-1 of a clip's first window is that first
+    frame (no velocity), never the previous clip's last frame."""
+    body = setup[2]
+    files = sorted(Path(default_model_path()).parents[2].joinpath("motion", "reach").glob("*.npz"))[:2]
+    g = torch.Generator().manual_seed(0)
+    clips = [_clip(files[0], 20, g), _clip(files[1], 20, g)]
+    w = M.MNetWindows(clips, body, bps_basis())
+    c = clips[1]
+    with torch.no_grad():
+        v0 = body(pose_rotmats(c.rot6d[:1].float()), c.betas.reshape(1, -1).float(), c.transl[:1].float())[0][0]
+        v_last_of_clip0 = body(pose_rotmats(clips[0].rot6d[-1:].float()), clips[0].betas.reshape(1, -1).float(),
+                               clips[0].transl[-1:].float())[0][0]
+    assert float((v0 - v_last_of_clip0).norm(dim=-1).max()) > 0.01          # the two clips do not join up
+    s = w.state(torch.tensor([20]))                                           # clip 1, frame 0
+    torch.testing.assert_close(s.verts[0], v0, atol=1e-5, rtol=0)
+    torch.testing.assert_close(s.verts_prev[0], v0, atol=1e-5, rtol=0)         # a static start: no velocity
+    feats, _, _ = w.batch(torch.tensor([20]))
+    vel = feats["verts"][0, 3 * 400:]                                          # (v_t - v_{t-1}) in the canonical frame
+    assert float(vel.abs().max()) < 1e-5
+
+
+def test_rollout_gives_mnet_the_current_and_the_previous_frames_vertices(setup, monkeypatch):
+    """The rollout hands MNet the vertices of frame t as `verts` and of frame t-1 as `verts_prev` (MNetState), here on a
+    stand-in MNet that walks 2 cm further per future frame."""
+    body = setup[2]
+    torch.manual_seed(0)
+    net = M.MNet().eval()
+    F, D = net.cfg.n_future, net.frame_dim
+    mean = torch.zeros(F, D)
+    mean[:, 330] = 0.02 * torch.arange(1, F + 1)          # canonical x: 2 cm more per future frame (a steady walk)
+    net.norm_out.mean.copy_(mean.reshape(-1))
+    seen = []
+    real_step = M.mnet_step
+    monkeypatch.setattr(M, "mnet_step", lambda mnet, s, basis: (seen.append(s), real_step(mnet, s, basis))[1])
+    aa = torch.zeros(55, 3)
+    aa[0] = torch.tensor([math.pi / 2, 0, 0])
+    start = (axis_angle_to_rot6d(aa), torch.zeros(3))
+    betas = torch.zeros(10)
+    goal = (start[0], torch.tensor([5.0, 5.0, 0.0]))                    # far away: MNet's 10-frame steps all the way
+    obj = torch.tensor([5.0, 5.0, 1.0]) + 0.03 * torch.randn(100, 3)
+    r = M.rollout(net, body, start, goal, betas, obj, obj.mean(0), bps_basis(), max_frames=25, refine=False)
+    assert len(seen) >= 2
+    with torch.no_grad():
+        verts = body(pose_rotmats(r.rot6d), betas.expand(len(r.rot6d), -1), r.transl)[0]
+    step = (verts[1:] - verts[:-1]).norm(dim=-1).mean(-1)
+    assert float(step[1:].min()) > 1e-3                                        # the body moves from frame to frame
+    n = 1
+    for s in seen:
+        torch.testing.assert_close(s.verts[0], verts[n - 1], atol=1e-5, rtol=0)                 # frame t
+        torch.testing.assert_close(s.verts_prev[0], verts[max(n - 2, 0)], atol=1e-5, rtol=0)     # frame t - 1
+        n += F

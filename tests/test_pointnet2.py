@@ -107,3 +107,32 @@ def test_interpolation_reproduces_coarse_features_at_their_points_and_constants(
     fine = torch.rand(1, 100, 3, generator=g, dtype=torch.float64)
     const = torch.full((1, 20, 2), 3.5, dtype=torch.float64)
     torch.testing.assert_close(interpolate(fine, coarse, const), torch.full((1, 100, 2), 3.5, dtype=torch.float64))
+
+
+def test_encoder_levels_are_sagas():
+    enc = PointNet2Encoder(4)
+    got = [(sa.npoint, sa.radius, sa.mlp.layers[-1].out_features) for sa in enc.sa]
+    assert got == [(256, 0.2, 128), (128, 0.25, 256), (None, None, 512)]
+    assert [sa.mlp.layers[0].out_features for sa in enc.sa] == [64, 128, 256]
+
+
+def test_interpolation_weights_are_inverse_squared_distances_of_the_three_nearest():
+    coarse = torch.tensor([[[1.0, 0, 0], [0, 2.0, 0], [0, 0, -3.0], [10.0, 10.0, 10.0]]], dtype=torch.float64)
+    feat = torch.tensor([[[1.0], [2.0], [3.0], [100.0]]], dtype=torch.float64)
+    fine = torch.zeros(1, 1, 3, dtype=torch.float64)               # distances 1, 2, 3 (and a far fourth point)
+    w = torch.tensor([1.0, 1 / 4, 1 / 9], dtype=torch.float64)
+    want = (w * torch.tensor([1.0, 2.0, 3.0], dtype=torch.float64)).sum() / w.sum()
+    torch.testing.assert_close(interpolate(fine, coarse, feat)[0, 0, 0], want, atol=1e-7, rtol=0)
+
+
+def test_group_all_level_max_pools_the_shared_mlp_over_every_point():
+    torch.manual_seed(0)
+    sa = SetAbstraction(None, None, 8, 2, [16, 24], norm=False).double()
+    x = torch.rand(2, 50, 3, dtype=torch.float64)
+    f = torch.randn(2, 50, 2, dtype=torch.float64)
+    centre, out = sa(x, f)
+    h = torch.cat([x, f], -1)                                      # [xyz, features] of every point
+    for lin in sa.mlp.layers:
+        h = torch.relu(lin(h))
+    torch.testing.assert_close(out[:, 0], h.max(1).values)
+    assert centre.shape == (2, 1, 3) and float(centre.abs().max()) == 0.0

@@ -16,6 +16,7 @@ from PIL import Image  # noqa: E402
 from graspkit import viz  # noqa: E402
 from graspkit.viz import animate as animate_fn  # noqa: E402
 from graspkit.viz.animate import save_animation, to_html  # noqa: E402
+from graspkit.viz.scene import sphere  # noqa: E402
 from graspkit.viz.export import (Z_UP_TO_Y_UP, export_scene, export_sequence_glb, load_sequence_glb,  # noqa: E402
                                   read_glb)
 
@@ -290,3 +291,28 @@ def test_export_sequence_glb_round_trip(body, ball, tmp_path):
     third = load_sequence_glb(export_sequence_glb(frames, body.faces, tmp_path / "third.glb", stride=4))
     np.testing.assert_allclose(third[0], frames[[0, 4, 6]], atol=1e-5)   # the last frame always kept
     np.testing.assert_allclose(third[2], np.array([0, 4, 6]) / 30, atol=1e-6)
+
+
+def test_strided_animation_plays_at_real_time_and_stamps_clip_times():
+    """`animate` plays at real time with a stride (every stride-th frame shown for stride / fps s) and stamps a drawn
+    frame with its clip frame's time."""
+    v = np.array([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0, 0, 0.1]], float)
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    frames = np.stack([v + [0.01 * t, 0, 0] for t in range(12)])
+    anim = animate_fn(frames, f, fps=30.0, stride=3, max_frames=None, views=("front",), ground=False)
+    assert anim._interval == 100.0                                  # 3 frames of a 30 fps clip: 0.1 s each
+    assert anim.graspkit_fps == 10.0
+    anim._func(2)                                                   # the third drawn frame is clip frame 6
+    assert anim._fig.texts[0].get_text().strip() == "t = 0.20 s"
+    anim._draw_was_started = True                                   # (never rendered on purpose: no warning)
+
+
+def test_sphere_is_closed_and_wound_outward():
+    """viz.scene.sphere is a closed mesh wound outward, as trimesh sees it."""
+    c = np.array([0.3, -0.2, 1.1])
+    v, f = sphere(c, 0.05, n=8)
+    m = trimesh.Trimesh(v, f, process=False)
+    assert m.is_watertight and m.is_winding_consistent and m.volume > 0
+    out = ((m.triangles_center - c) * m.face_normals).sum(1)
+    assert (out > 0).all()
+    np.testing.assert_allclose(np.linalg.norm(v - c, axis=1), 0.05, atol=1e-12)

@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 import torch
 
+from graspkit.body.markers import saga_markers
 from graspkit.models.wholegrasp import WholeGraspVAE
 from graspkit.viz.saga import CONTACT_LEVEL, LatentWalk
 
@@ -51,3 +52,22 @@ def test_bad_names_and_the_figure(walk):
     assert len(fig.axes) == 2
     assert walk.png()[:4] == b"\x89PNG"
     assert "markers" in LatentWalk.describe(walk.measure())
+
+
+def test_palm_distance_is_the_right_palms(bm):
+    """The latent explorer's palm_to_object_cm is the distance (cm) from the right palm's markers to the object: markers
+    placed by hand, the left palm nearer than the right."""
+    g = torch.Generator().manual_seed(0)
+    pts = torch.nn.functional.normalize(torch.randn(256, 3, generator=g), dim=-1) * 0.05     # a 5 cm ball
+    walk = LatentWalk(WholeGraspVAE(), pts, torch.nn.functional.normalize(pts, dim=-1), 0.9, dims=2, seed=0)
+    names = saga_markers(bm).names
+    right = np.array([n.startswith("RPALM_") for n in names])
+    left = np.array([n.startswith("LPALM_") for n in names])
+    assert right.sum() == 22 and left.sum() == 22
+    m = torch.full((143, 3), 1.0)                                  # every marker 1.6 m from the ball's centre ...
+    m[torch.as_tensor(right)] = torch.tensor([0.0, 0.0, 0.08])     # ... the right palm 3 cm above the ball
+    m[torch.as_tensor(left)] = torch.tensor([0.0, 0.0, -0.06])     # ... the left palm 1 cm below it
+    walk.grasp = {**walk.grasp, "markers": m}
+    d = torch.cdist(torch.tensor([[0.0, 0.0, 0.08]]), pts).min()
+    assert abs(walk.measure()["palm_to_object_cm"] - 100 * float(d)) < 1e-3
+    assert abs(walk.measure()["palm_to_object_cm"] - 3.0) < 0.3
