@@ -94,3 +94,29 @@ def test_default_start_is_on_the_minus_y_side_facing_the_centre():
     t = default_start(c, 0.5, yaw_offset=np.pi / 2)                         # turned a quarter about the centre
     np.testing.assert_allclose([t.x, t.y], [0.8, 1.2], atol=1e-12)
     np.testing.assert_allclose(np.cos(t.heading), -1.0, atol=1e-12)         # facing -x, towards the centre
+
+
+def test_the_seed_reaches_gnets_generator(monkeypatch):
+    """synthesize passes its seed on to GNet's draw: GNet's generator is seeded with it."""
+    import torch
+
+    import graspkit.eval_goal as EG
+    from graspkit.data.reaching import Start
+
+    states = []
+    orig = EG.gnet_goal
+
+    def spy(*args, generator=None, **kw):
+        states.append(None if generator is None else generator.get_state().clone())
+        return orig(*args, generator=generator, **kw)
+
+    monkeypatch.setattr(EG, "gnet_goal", spy)
+    mesh = trimesh.creation.capsule(height=0.14, radius=0.035)
+    pose = ObjectPose.from_yaw(0.3, np.array([0.2, -0.5, 0.9]))
+    start = Start(0.2, -1.5, np.pi / 2)
+    for seed in (0, 7):
+        synthesize(mesh, object_pose=pose, start=start, seed=seed, max_frames=2, penetration=False)
+    assert all(s is not None for s in states)
+    assert not torch.equal(states[0], states[1])
+    want = torch.Generator().manual_seed(7).get_state()
+    assert torch.equal(states[1], want)

@@ -285,3 +285,45 @@ def test_a_parts_facing_cone_is_in_degrees():
     a = np.deg2rad([0.0, 30.0, 50.0, 150.0])
     s = np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], 1)
     assert _allowed(part, s).tolist() == [True, True, False, False]
+
+
+def _q(regions: list[float]) -> dict:
+    """A quality record that passes every rule but the pads' contact (`regions_mm`: per pad region, mm)."""
+    return {"regions_mm": regions, "contact": True, "depth_cm": 0.1, "volume_cm3": 0.5, "feet_cm": 0.2,
+            "arm_residual_deg": 10.0}
+
+
+def test_a_pinch_needs_the_thumb_and_the_index_or_middle_pad():
+    """A pinch is accepted with the thumb AND the index or middle pad in contact (`accepted`'s docstring)."""
+    far = 20.0
+    assert gm.accepted(_q([far, 1.0, 1.0, far, far, far]), "pinch")           # thumb + index
+    assert gm.accepted(_q([far, 1.0, far, 1.0, far, far]), "pinch")           # thumb + middle
+    assert not gm.accepted(_q([far, far, 1.0, 1.0, far, far]), "pinch")      # index + middle, no thumb
+    assert not gm.accepted(_q([far, 1.0, far, far, 1.0, far]), "pinch")      # thumb + ring only
+
+
+class _NeverFitter:
+    """Records the tasks of every fit call; every result fails acceptance (no contact)."""
+
+    def __init__(self):
+        self.calls = []
+
+    def fit(self, tasks):
+        self.calls.append(list(tasks))
+        return [SimpleNamespace(task=t, quality={**_q([20.0] * 6), "contact": False, "depth_cm": 0.0}) for t in tasks]
+
+    def evaluate(self, res):
+        pass
+
+
+def test_fit_chunk_tries_max_attempts_times_with_new_tasks(monkeypatch):
+    """fit_chunk makes MAX_ATTEMPTS attempts in all for a fitter that never succeeds, each retry a newly drawn task."""
+    monkeypatch.setattr(gm, "badness", lambda q: 1.0)
+    f = _NeverFitter()
+    best = gm.fit_chunk(f, "grasp", 0, 0, size=2)
+    assert len(f.calls) == gm.MAX_ATTEMPTS                                  # the first attempt + MAX_ATTEMPTS - 1 retries
+    assert [len(c) for c in f.calls] == [2] * gm.MAX_ATTEMPTS and not any(ok for _, _, ok in best)
+    for k in range(2):                                                       # item k's task in every attempt
+        tasks = [c[k] for c in f.calls]
+        keys = {(float(t.choice), tuple(np.round(t.betas, 9)), float(t.start.x), float(t.start.y)) for t in tasks}
+        assert len(keys) == gm.MAX_ATTEMPTS                                  # each retry draws another task

@@ -168,3 +168,21 @@ def test_palm_grid_runs_from_wrist_to_knuckles(bm, rest):
         hip, knee = j[JOINT_INDEX[f"{s}_hip"]], j[JOINT_INDEX[f"{s}_knee"]]
         thf = p[f"{S}THF"]
         assert np.linalg.norm(thf - hip) < np.linalg.norm(thf - knee), S
+
+
+def test_front_markers_are_in_front_and_back_markers_behind(bm, rest):
+    """SAGA's front/back marker pairs (GRAB layout) on the rest body, which faces +z: the F-markers lie in front of their
+    B or anchor counterparts."""
+    v, j = rest
+    m = saga_markers(bm)
+    z = {n: v[i, 2] for n, i in zip(m.names, m.vertex_ids)}
+    for front, back in (("LFHD", "LBHD"), ("RFHD", "RBHD"), ("STRN", "T10"), ("CLAV", "C7"),
+                        ("LFWT", "LBWT"), ("RFWT", "RBWT"), ("LELBIN", "LELB"), ("RELBIN", "RELB")):
+        assert z[front] > z[back], (front, back)
+    for s, S in (("left", "L"), ("right", "R")):
+        # thigh front (THF) is placed from 0.4 of the hip->knee segment along +z: in front of that segment
+        anchor = 0.6 * j[JOINT_INDEX[f"{s}_hip"]] + 0.4 * j[JOINT_INDEX[f"{s}_knee"]]
+        assert z[f"{S}THF"] > anchor[2], S
+        # shin (SHN) is placed forward from the knee->ankle midpoint
+        anchor = 0.5 * j[JOINT_INDEX[f"{s}_knee"]] + 0.5 * j[JOINT_INDEX[f"{s}_ankle"]]
+        assert z[f"{S}SHN"] > anchor[2], S

@@ -9,6 +9,7 @@ from graspkit.body.skeleton import JOINT_INDEX as J
 from graspkit.data import generate_locomotion
 from graspkit.data.footsteps import GaitStyle, foot_tracks, plan_footsteps, support_weight
 from graspkit.data.locomotion import _segments, locomotion_plan
+from graspkit.data.motion import Motion
 from graspkit.data.rig import build_rig
 from graspkit.data.trajectory import RootPlan, heading_profile, integrate_controls, straight_walk
 
@@ -278,3 +279,21 @@ def test_arms_swing_against_the_legs_and_each_other(walk):
     corr = lambda a, b: np.corrcoef(a - a.mean(), b - b.mean())[0, 1]       # noqa: E731
     assert corr(lw, rw) < -0.5                                             # the arms alternate
     assert corr(lw, la) < -0.3 and corr(rw, ra) < -0.3                     # each arm against its own leg
+
+
+def test_duration_from_first_to_last_frame():
+    """Motion.duration is the time from the first to the last frame, (T - 1) / fps."""
+    m = Motion(np.zeros((31, 55, 3)), np.zeros((31, 3)), np.zeros(10), 30.0)
+    assert m.duration == 1.0
+    assert Motion(np.zeros((1, 55, 3)), np.zeros((1, 3)), np.zeros(10), 30.0).duration == 0.0
+
+
+def test_a_curve_plan_does_not_turn_in_place_at_its_start():
+    """A 'curve' program walks arcs of curvature |k| <= 0.8 rad/m and starts from rest: over its first quarter
+    second the heading turns at most 0.8 rad per metre walked, not in place."""
+    for seed in range(10):
+        plan, _ = locomotion_plan("curve", np.random.default_rng(seed), 120)
+        rest = int(0.25 * plan.fps)
+        h = np.unwrap(plan.heading)
+        walked = np.linalg.norm(np.diff(plan.xy[:rest + 1], axis=0), axis=1).sum()
+        assert abs(h[rest] - h[0]) <= 0.8 * walked, (seed, abs(h[rest] - h[0]), walked)

@@ -7,6 +7,7 @@ from graspkit import metrics as M
 from graspkit.body.skeleton import JOINT_INDEX as J
 from graspkit.data import Start, evaluation_goals, generate_reach, plan_reach
 from graspkit.data.motion import heading_of
+from graspkit.data.posing import GAZE_LEVEL, HEAD_YAW_LIMIT, gaze_yaw, hand_pose
 from graspkit.data.reaching import FAR_HEIGHTS, FLOOR_WRIST, RELEASE_S, plan_reach_chain
 
 
@@ -265,3 +266,44 @@ def test_a_second_goal_frame_at_the_end_of_the_release_is_refused(bm):
     r = int(round(RELEASE_S * 30.0))
     with pytest.raises(ValueError, match="goal_frames: the second goal frame must come after"):
         plan_reach_chain(Start(), goals, (60, 60 + 15 + r), (15, 5), bm=bm)
+
+
+def test_left_hand_is_the_mirror_of_the_right():
+    """The left hand's finger pose mirrors the right's (R_left = M R_right M, M = diag(-1, 1, 1))."""
+    curl = np.array([0.0, 0.4, 1.0])
+    M = np.diag([-1.0, 1.0, 1.0])
+    for spread in (0.0, 0.7):
+        r, l = hand_pose("right", curl, spread), hand_pose("left", curl, spread)
+        np.testing.assert_allclose(l, M @ r @ M, atol=1e-12)
+        assert not np.allclose(l[1:], r[1:])                 # curled fingers do differ between the hands
+
+
+def test_a_level_gaze_turns_by_its_full_yaw():
+    """gaze_yaw turns fully towards a target less than 60 deg up or down (GAZE_LEVEL = cos 60 deg); steeper ones fade."""
+    assert GAZE_LEVEL == 0.5
+    for yaw in (-0.9, -0.3, 0.2, 0.5, 1.1):
+        for elev in (0.0, 0.5, -0.9):                        # up to ~52 deg up or down: cos(elev) > 0.5, no fade
+            g = np.array([[np.cos(elev) * np.sin(yaw), np.sin(elev), np.cos(elev) * np.cos(yaw)]])
+            np.testing.assert_allclose(gaze_yaw(g), [yaw], atol=1e-12)
+    assert abs(HEAD_YAW_LIMIT - 1.2) < 1e-12
+    g = np.array([[np.sin(1.1) * np.cos(np.pi / 3 + 0.2), np.sin(np.pi / 3 + 0.2), 0.0]])   # steeper: faded
+    assert abs(gaze_yaw(g)[0]) < np.pi / 2
+
+
+def test_the_wrist_is_on_the_goal_at_the_goal_frame(bm):
+    """plan_reach puts the right wrist on the goal at the goal frame (within 1 mm)."""
+    goal = (1.2, 0.3, 1.1)
+    m = plan_reach(Start(), goal, 60, seed=0, bm=bm, hold_frames=0)
+    assert np.linalg.norm(m.joint_positions(bm)[60, WRIST] - goal) < 1e-3
+
+
+def test_a_hand_on_the_floor_lies_flat_for_short_and_tall_bodies(bm):
+    """For a goal on the floor the hand lies flat on it for a short and a tall body alike (lowest vertex 0-8 mm up)."""
+    part = bm.lbs_weights.argmax(1).numpy()
+    hand = np.isin(part, [WRIST] + list(range(40, 55)))
+    for b0 in (-2.5, 2.5):
+        betas = np.zeros(10)
+        betas[0] = b0
+        m = plan_reach(Start(0, 0, 0.3), (0.9, -0.4, 0.0), 100, betas=betas, seed=2, bm=bm, hold_frames=0)
+        z = m.vertices(bm, 100, 101)[0].numpy()[hand, 2].min()
+        assert 0.0 <= z <= 0.008, (b0, z)

@@ -11,7 +11,9 @@ import trimesh
 
 from graspkit.body import BodyModel
 from graspkit.body import _proc_mesh as M
+from graspkit.body._proc_anatomy import Proportions
 from graspkit.body._proc_remesh import closest_point_on_triangles
+from graspkit.body._proc_rig import skinning_weights
 from graspkit.body.hand_poses import HAND_KINDS, hand_axes, hand_pca, sample_hand_poses, template_pose
 from graspkit.body.procedural import build_procedural_smplx, part_of_vertex
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX, NUM_VERTICES, PARENTS, SMPLX_LANDMARK_VERTEX_IDS as LMK
@@ -374,3 +376,47 @@ def test_closest_point_on_triangles_matches_trimesh():
     # the edge-ab region on its own: a point beside the middle of ab, off the triangle
     t = np.array([[[0.0, 0, 0], [2.0, 0, 0], [0, 2.0, 0]]])
     np.testing.assert_allclose(closest_point_on_triangles(np.array([[0.5, -1.0, 0.3]]), t), [[0.5, 0, 0]], atol=1e-12)
+
+
+def _far_joints() -> tuple[np.ndarray, np.ndarray]:
+    """Joints and bone ends far from a small mesh at the origin, so that no blend of the rig reaches it."""
+    joints = np.array([[100.0 + j, 100.0, 100.0] for j in range(55)])
+    return joints, joints + np.array([0.0, 0.1, 0.0])
+
+
+def test_smoothing_is_laplacian_averaging_with_the_neighbours():
+    """skinning_weights' smoothing is Laplacian averaging w <- (w + mean of the neighbours) / 2, neighbours from
+    trimesh, on a small sphere (the full build's test checks the weights only where this machine triangulates alike)."""
+    mesh = trimesh.creation.icosphere(subdivisions=2)
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    labels = np.where(v[:, 0] > 0.2, JOINT_INDEX["jaw"], JOINT_INDEX["left_eye_smplhf"])     # owners no blend touches
+    joints, ends = _far_joints()
+    got = skinning_weights(v, f, labels, joints, ends, Proportions(), smooth_iters=3)
+    w = np.zeros((len(v), 55))
+    w[np.arange(len(v)), labels] = 1.0
+    nb = mesh.vertex_neighbors
+    for _ in range(3):
+        w = 0.5 * w + 0.5 * np.stack([w[n].mean(0) for n in nb])
+    w[w < 1e-6] = 0.0
+    w /= w.sum(1, keepdims=True)
+    np.testing.assert_allclose(got, w, atol=1e-12)
+
+
+def test_a_plane_blend_is_the_smoothstep_across_the_plane():
+    """A plane blend's child weight is the smoothstep of (s + size) / (2 size) clipped to [0, 1], s the signed distance
+    across the plane."""
+    size = 0.05                                                       # spine1's plane blend half-width
+    joints, ends = _far_joints()
+    joints[JOINT_INDEX["pelvis"]] = (0.0, 0.0, 0.0)
+    joints[JOINT_INDEX["spine1"]], ends[JOINT_INDEX["spine1"]] = (0.0, 0.1, 0.0), (0.0, 10.0, 0.0)
+    joints[JOINT_INDEX["spine2"]], ends[JOINT_INDEX["spine2"]] = (0.0, 10.0, 0.0), (0.0, 20.0, 0.0)
+    joints[JOINT_INDEX["spine3"]], ends[JOINT_INDEX["spine3"]] = (0.0, 20.0, 0.0), (0.0, 30.0, 0.0)
+    y = np.linspace(0.02, 0.18, 33)
+    v = np.stack([0.01 * np.cos(7 * y), y, 0.01 * np.sin(7 * y)], 1)
+    f = np.array([[k, k + 1, k + 2] for k in range(len(v) - 2)])
+    labels = np.where(y < 0.1, JOINT_INDEX["pelvis"], JOINT_INDEX["spine1"])
+    w = skinning_weights(v, f, labels, joints, ends, Proportions(), smooth_iters=0)
+    t = np.clip((y - 0.1 + size) / (2 * size), 0.0, 1.0)
+    want = t * t * (3 - 2 * t)
+    np.testing.assert_allclose(w[:, JOINT_INDEX["spine1"]], want, atol=1e-12)
+    np.testing.assert_allclose(w[:, JOINT_INDEX["pelvis"]], 1 - want, atol=1e-12)

@@ -3,11 +3,13 @@ of one's own to an approach-and-grasp motion, checked with trimesh against the o
 import numpy as np
 import pytest
 import torch
+import trimesh
 
 from graspkit.body.markers import saga_sparse_markers
 from graspkit.data import Start
 from graspkit.data.motion import Motion, heading_of
 from graspkit.objects.placement import ObjectPose
+from graspkit.optim import graspmotion
 from graspkit.saga import default_start, rigid_params, synthesize
 
 
@@ -156,3 +158,36 @@ def test_sample_markers_are_in_the_world_frame_of_the_start_body(bm):
     assert np.linalg.norm(first - start, axis=1).mean() < 0.05                 # the known first frame, in the world
     fitted = saga_sparse_markers(bm).select(r.motion.vertices(bm, 60, 61))[0].double().numpy()
     assert np.linalg.norm(r.markers[-1].double().numpy() - fitted, axis=1).mean() < 0.25
+
+
+class _Stop(Exception):
+    """Raised by a stand-in to stop a pipeline once it has seen what the test needs."""
+
+
+def test_motion_opt_gets_normals_in_the_points_frame(bm, monkeypatch):
+    """GraspMotion-Opt gets the object's points and normals in one frame: for a capsule the normals are its own
+    outward normals at the points, R n_mesh (against the analytic capsule)."""
+    seen = {}
+
+    def fit(self, markers, betas, contacts, obj, *a, **k):
+        seen["obj"] = obj
+        raise _Stop
+
+    monkeypatch.setattr(graspmotion.GraspMotionOpt, "fit", fit)
+    radius, height = 0.035, 0.14
+    mesh = trimesh.creation.capsule(height=height, radius=radius)             # axis z, centred at the origin
+    with pytest.raises(_Stop):
+        synthesize(mesh, bm, object_pose=ObjectPose.from_yaw(0.8, np.array([0.3, -0.6, 0.85])), seed=3,
+                   grasp_steps=(5, 5, 5), motion_steps=(5, 5), polish_steps=(0, 0), progress=False)
+    o = seen["obj"]
+    R = o.rotation.double().reshape(3, 3).numpy()
+    origin = o.origin.double().reshape(3).numpy()
+    p = o.points.double().reshape(-1, 3).numpy()
+    n = o.normals.double().reshape(-1, 3).numpy()
+    q = (p - origin) @ R                                                       # back in the mesh frame: R^T (p - origin)
+    axis = np.zeros_like(q)
+    axis[:, 2] = np.clip(q[:, 2], -height / 2, height / 2)
+    n_mesh = (q - axis) / np.linalg.norm(q - axis, axis=1, keepdims=True)
+    assert np.abs(np.linalg.norm(q - axis, axis=1) - radius).max() < 2e-3       # the points are on the capsule
+    cos = np.sum((n_mesh @ R.T) * n, axis=1)
+    assert np.quantile(cos, 0.05) > 0.95, np.quantile(cos, [0.0, 0.05, 0.5])

@@ -324,3 +324,40 @@ def test_files_key_changes_when_data_are_remade_in_place_at_the_same_size(tmp_pa
     assert (tmp_path / "grasp_000001.npz").stat().st_size == size and files_key(tmp_path) != before
     (tmp_path / "notes.txt").write_text("other notes")                          # not matched by the pattern
     assert files_key(tmp_path) == files_key([tmp_path]) == files_key(tmp_path, "grasp_*.npz")
+
+
+def _steep_problem():
+    """32 samples of a steep linear map: large errors, large gradients."""
+    g = torch.Generator().manual_seed(0)
+    x = torch.randn(32, 4, generator=g)
+    return TensorDataset(x, 100.0 * x.sum(1, keepdim=True) + 50.0)       # large errors: large gradients
+
+
+def test_the_optimiser_sees_gradients_clipped_to_grad_clip():
+    """The gradient that reaches the optimiser is clipped to cfg.grad_clip (read by an optimiser pre-step hook)."""
+    norms = []
+
+    def hook(opt, args, kwargs):
+        g = [p.grad for group in opt.param_groups for p in group["params"] if p.grad is not None]
+        norms.append(float(torch.linalg.vector_norm(torch.stack([torch.linalg.vector_norm(x) for x in g]))))
+
+    from torch.optim.optimizer import register_optimizer_step_pre_hook
+    h = register_optimizer_step_pre_hook(hook)
+    try:
+        torch.manual_seed(0)
+        fit(torch.nn.Linear(4, 1), _step, _steep_problem(), TrainConfig(epochs=2, batch_size=8, lr=1e-3, grad_clip=0.5),
+            progress=False)
+    finally:
+        h.remove()
+    assert len(norms) == 8
+    assert max(norms) <= 0.5 * (1 + 1e-5) and min(norms) > 0.49    # every raw gradient was far above 0.5
+
+
+def test_history_epochs_are_the_epochs_done(tmp_path):
+    """The history's epochs are the epochs done (1, 2, ..), as the checkpoint counts them."""
+    torch.manual_seed(0)
+    ck = tmp_path / "run.pt"
+    hist = fit(torch.nn.Linear(4, 1), _step, _steep_problem(), TrainConfig(epochs=3, batch_size=8), checkpoint=ck,
+               progress=False)
+    assert [h["epoch"] for h in hist] == [1, 2, 3]
+    assert load_checkpoint(ck)["epoch"] == hist[-1]["epoch"] == 3

@@ -5,10 +5,14 @@ import warnings
 import numpy as np
 import pytest
 import torch
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import shortest_path
 
 from graspkit import eval_wandr as E
 from graspkit import intention as I
 from graspkit import metrics
+from graspkit.body import BodyModel
+from graspkit.body.random_model import random_smplx_arrays
 from graspkit.data import load_motion
 from graspkit.data.wandr_dataset import rest_joints
 from graspkit.paths import DATA_STUBS
@@ -502,3 +506,77 @@ def test_a_foot_within_5_cm_of_the_floor_is_on_it(bm):
     assert res.success.tolist() == [True, True]
     assert res.floating.tolist() == pytest.approx([0.0, 1.0])
     assert res.grounded.tolist() == [True, False]
+
+
+def _reach_clip(bm, name: str = "reach/reach_000002.npz"):
+    """A shipped reaching clip, its WANDR poses and its rest joints."""
+    m = load_motion(DATA_STUBS / "motion" / name)
+    p = I.pose_from_axis_angle(torch.as_tensor(m.trans), torch.as_tensor(m.poses))
+    return m, p, rest_joints(bm, m.betas[None])[0]
+
+
+def test_corrective_bound_is_attained_by_a_half_turn():
+    """Pose features are entries of R - I, which reach -2 on the diagonal of a half turn: correctives aligned with
+    those entries give |delta_v| = 2 sum |pd| exactly, so the bound must be (at least) that."""
+    V, c = 3, 0.3
+    weights = torch.zeros(V, 55)
+    weights[:, 0] = 1.0
+    posedirs = torch.zeros(486, 3, V)
+    posedirs[0, 0], posedirs[4, 0] = -c, -c           # joint 1's (0,0) and (1,1) entries push along -x ... 
+    v, J = torch.randn(1, V, 3, generator=torch.Generator().manual_seed(0)), torch.zeros(1, 55, 3)
+    s = E.Skinned(weights, torch.arange(V), v, J, posedirs, torch.zeros(1, 486))
+    R = torch.eye(3).repeat(21, 1, 1)
+    R[0] = torch.diag(torch.tensor([-1.0, -1.0, 1.0]))   # joint 1 turned by pi about z: R - I = diag(-2, -2, 0)
+    feature = (R - torch.eye(3)).reshape(1, 189)
+    d = s.delta(feature)[0]                             # (V, 3): ... so a half turn moves them by 4c along +x
+    torch.testing.assert_close(d, torch.tensor([4 * c, 0.0, 0.0]).expand(V, 3))
+    assert (d.norm(dim=-1) <= s.bound + 1e-6).all()
+    # and no rotation exceeds it (random rotations of every body joint)
+    from graspkit.rotations import axis_angle_to_matrix
+    g = torch.Generator().manual_seed(1)
+    for _ in range(20):
+        Rr = axis_angle_to_matrix(torch.randn(21, 3, generator=g, dtype=torch.float64) * 2).float()
+        f = (Rr - torch.eye(3)).reshape(1, 189)
+        assert (s.delta(f)[0].norm(dim=-1) <= s.bound + 1e-6).all()
+
+
+def test_hand_reach_is_the_docstrings_bound():
+    """reach = max_v sum_k w_vk (|x_v - J_k| + tree path from joint k to the wrist), on a model whose hand vertices
+    are skinned to joints all over the tree (the path is computed here by scipy on the bone-length tree)."""
+    arr = random_smplx_arrays(seed=3)
+    w = np.abs(np.asarray(arr["weights"], np.float64))
+    w[:, 22:25] = 0.0                                   # LowVertices refuses feet or hands skinned to jaw or eyes
+    w = np.where(w < np.quantile(w, 0.8, axis=1, keepdims=True), 0.0, w)      # sparse-ish, many joints per vertex
+    part = np.argmax(arr["weights"], 1)
+    w[np.arange(len(w)), part] += 1.0                  # each vertex still dominated by its part
+    w[:, 22:25] = 0.0
+    arr = {**arr, "weights": w / w.sum(1, keepdims=True), "posedirs": np.zeros_like(arr["posedirs"])}
+    bm = BodyModel(arr, dtype=torch.float64)
+    betas = torch.zeros(1, 10, dtype=torch.float64)
+    low = E.LowVertices(bm, betas)
+    v, J = bm.shaped(torch.zeros(1, bm.num_betas + bm.num_expression, dtype=torch.float64))
+    v, J = v[0].numpy(), J[0].numpy()
+    par = bm.parents.numpy()
+    bone = np.linalg.norm(J[1:] - J[par[1:]], axis=1)
+    tree = csr_matrix((bone, (np.arange(1, 55), par[1:])), shape=(55, 55))
+    dist = shortest_path(tree, directed=False)
+    for hand, wrist, reach in zip(low.hands, E.WRISTS, low.reach):
+        ids = hand.ids.numpy()
+        W = arr["weights"][ids]
+        r = (W * (np.linalg.norm(v[ids, None] - J[None], axis=-1) + dist[None, :, wrist])).sum(1)
+        np.testing.assert_allclose(float(reach[0]), r.max(), rtol=1e-5)
+
+
+def test_where_the_previous_lowest_vertex_is_now_at_the_foot_hand_boundary(bm):
+    """`lowest(previous=...)` returns where the given vertices are now: the last foot vertex, the first vertex of
+    each hand (indices at the offsets' boundaries) and a random one, against the body model's full mesh."""
+    m, p, rest = _reach_clip(bm)
+    frames = slice(30, 60)
+    low = E.LowVertices(bm, torch.as_tensor(m.betas)[None].expand(30, -1), torch.as_tensor(m.poses[frames]))
+    Rg, pos = I.body_transforms(p[frames], rest)
+    body = torch.arange(30)
+    full = m.vertices(bm, 30, 60)
+    o = low.offsets
+    prev = torch.tensor([o[1] - 1, o[1], o[2] - 1, o[2], o[3] - 1, 0] * 5)
+    _, _, _, was = low.lowest(Rg, pos, body, prev)
+    torch.testing.assert_close(was, full[torch.arange(30), low.ids[prev]], atol=1e-5, rtol=0)

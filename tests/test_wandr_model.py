@@ -2,6 +2,7 @@
 import pytest
 import torch
 
+from graspkit import eval_wandr as E
 from graspkit import intention as I
 from graspkit.data import load_motion
 from graspkit.data import wandr_dataset as W
@@ -459,3 +460,31 @@ def test_latent_loss_terms_are_the_modules_formulas():
     torch.testing.assert_close(t["loss"], 0.01 * t["norm"] + 2.0 * t["way"])
     t6 = latent_loss(SimpleNamespace(joints=joints), z, goal, 6)
     torch.testing.assert_close(t6["goal"], torch.full((B,), 0.5 ** 2 + 0.2 ** 2))
+
+
+def test_per_goal_frames_reach_their_own_goals():
+    """generate's per-goal frames t_goal (G,) belong to their goals: one goal's frame changed changes that goal's
+    motion only, and the default length is the latest goal frame."""
+    model = M.load_wandr(DATA_STUBS / "checkpoints" / "wandr.pt")
+    start = E.starts_from_meta(model.meta)[0]
+    goals = torch.stack([E.goal_from_cylinder(30, 1.0, 0.9), E.goal_from_cylinder(-30, 1.0, 0.9)])
+    run = lambda tg: M.generate(model, start, goals, torch.tensor(tg), generator=torch.Generator().manual_seed(0))  # noqa: E731
+    a, b = run([5, 9]), run([9, 9])
+    assert a.p.shape[1] == b.p.shape[1] == 10                   # frames: the latest goal frame (9), start included
+    torch.testing.assert_close(a.p[1], b.p[1])                   # goal 1 keeps t_goal = 9 in both: the same motion
+    assert not torch.allclose(a.p[0], b.p[0])                    # goal 0's time left differs: another motion
+    c = run([9, 5])
+    torch.testing.assert_close(c.p[0], b.p[0])
+
+
+def test_initial_latents_come_from_the_generator():
+    """optimise_latents draws its initial latents from `generator`: the same seed, the same latents and motion."""
+    model = M.load_wandr(DATA_STUBS / "checkpoints" / "wandr.pt")
+    start = E.starts_from_meta(model.meta)[0]
+    goal = E.goal_from_cylinder(30, 1.0, 0.9)
+    run = lambda s: optimise_latents(model, start, goal, t_goal=5, iters=0, generator=torch.Generator().manual_seed(s))  # noqa: E731
+    a, b, c = run(0), run(0), run(1)
+    torch.testing.assert_close(a.z, b.z)
+    torch.testing.assert_close(a.motion.p, b.motion.p)
+    assert not torch.allclose(a.z, c.z)
+    torch.testing.assert_close(a.z, torch.randn(a.z.shape, generator=torch.Generator().manual_seed(0)))
