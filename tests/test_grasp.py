@@ -134,7 +134,6 @@ def test_goal_labels_against_kd_trees():
     from graspkit.data.grasp import object_points
     from graspkit.data.grasp_make import frame_labels
     from graspkit.objects.bps import bps_basis
-    from graspkit.objects.placement import ObjectPose
     from graspkit.optim.grasppose import hand_vertex_ids
     from graspkit.rotations import axis_angle_to_matrix
 

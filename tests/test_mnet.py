@@ -6,8 +6,9 @@ import pytest
 import torch
 
 from graspkit.body import BodyModel
+from graspkit.body._proc_correctives import subtree
 from graspkit.body.markers import goal_vertices
-from graspkit.body.skeleton import JOINT_INDEX as J
+from graspkit.body.skeleton import JOINT_INDEX as J, PARENTS
 from graspkit.models import mnet as M
 from graspkit.models.gnet import SparseBody, pose_rotmats
 from graspkit.models.mnet import (MNet, MNetConfig, MNetState, apply_changes, canonical_frame, feet_mask, heading,
@@ -284,19 +285,6 @@ def test_mnet_learns_the_reaching_windows(setup):
     assert hist[-1]["loss"] < 0.5 * hist[0]["loss"] and hist[-1]["v"] < 0.5 * hist[0]["v"]
 
 
-def _subtree(parents: list[int], root: int) -> set[int]:
-    """Joint `root` and every joint below it in the kinematic tree."""
-    out = {root}
-    for j in range(len(parents)):
-        k = j
-        while k >= 0:
-            if k == root:
-                out.add(j)
-                break
-            k = parents[k]
-    return out
-
-
 def test_horizon_prediction_of_a_standing_mnet_is_the_current_pose(setup):
     """A 1-frame MNet that predicts no change, rolled ten steps, repeats frame t: each V2V column is the mean distance
     (mm) the true motion moves since t over its vertices: the whole body; the right hand = the vertices skinned mostly
@@ -313,11 +301,11 @@ def test_horizon_prediction_of_a_standing_mnet_is_the_current_pose(setup):
     fut = bm.forward_rotmats(pose_rotmats(w.rot6d[t + 1:t + 11]), betas=w.betas[:1].expand(10, -1),
                              transl=w.transl[t + 1:t + 11]).vertices
     d = (fut - now).norm(dim=-1)                                                  # (10, V) m
-    parents = [int(x) for x in bm.parents]
+    assert bm.parents.tolist() == list(PARENTS)
     part = bm.lbs_weights.argmax(1)
-    hand_joints = _subtree(parents, J["right_wrist"])
-    hand = torch.isin(part, torch.tensor(sorted(hand_joints)))
-    feet = torch.isin(part, torch.tensor(sorted(_subtree(parents, J["left_ankle"]) | _subtree(parents, J["right_ankle"]))))
+    hand_joints = subtree(J["right_wrist"])
+    hand = torch.isin(part, torch.tensor(hand_joints))
+    feet = torch.isin(part, torch.tensor(subtree(J["left_ankle"]) + subtree(J["right_ankle"])))
     assert len(hand_joints) == 16 and int(hand.sum()) > 100 and int(feet.sum()) > 100
     assert got.body == pytest.approx(1000 * float(d.mean()), rel=1e-3)
     assert got.hand == pytest.approx(1000 * float(d[:, hand].mean()), rel=1e-3)

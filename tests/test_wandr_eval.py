@@ -508,13 +508,6 @@ def test_a_foot_within_5_cm_of_the_floor_is_on_it(bm):
     assert res.grounded.tolist() == [True, False]
 
 
-def _reach_clip(bm, name: str = "reach/reach_000002.npz"):
-    """A shipped reaching clip, its WANDR poses and its rest joints."""
-    m = load_motion(DATA_STUBS / "motion" / name)
-    p = I.pose_from_axis_angle(torch.as_tensor(m.trans), torch.as_tensor(m.poses))
-    return m, p, rest_joints(bm, m.betas[None])[0]
-
-
 def test_corrective_bound_is_attained_by_a_half_turn():
     """Pose features are entries of R - I, which reach -2 on the diagonal of a half turn: correctives aligned with
     those entries give |delta_v| = 2 sum |pd| exactly, so the bound must be (at least) that."""
@@ -570,7 +563,7 @@ def test_hand_reach_is_the_docstrings_bound():
 def test_where_the_previous_lowest_vertex_is_now_at_the_foot_hand_boundary(bm):
     """`lowest(previous=...)` returns where the given vertices are now: the last foot vertex, the first vertex of
     each hand (indices at the offsets' boundaries) and a random one, against the body model's full mesh."""
-    m, p, rest = _reach_clip(bm)
+    m, p, rest = _clip(bm, "reach/reach_000002.npz")
     frames = slice(30, 60)
     low = E.LowVertices(bm, torch.as_tensor(m.betas)[None].expand(30, -1), torch.as_tensor(m.poses[frames]))
     Rg, pos = I.body_transforms(p[frames], rest)
