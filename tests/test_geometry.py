@@ -6,6 +6,7 @@ import pytest
 import torch
 import trimesh
 from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 
 from graspkit.objects import (IAA_WEIGHT, SDFGrid, TEST_OBJECTS, apply_pose, body_object_attention, bps_basis,
                               bps_encode, interaction_attention, interpenetration, intersection_volume,
@@ -689,3 +690,49 @@ def test_grid_has_resolution_nodes_on_the_longest_side_and_covers_the_padded_box
     assert (grid.upper.numpy() < hi + h).all()                     # and less than one extra cell beyond it
     for n, ext in ((nx, (hi - lo)[0]), (ny, (hi - lo)[1])):          # the fewest whole cells that span each side
         assert (n - 1) * h >= ext - 1e-9 and (n - 2) * h < ext
+
+
+def test_a_long_thin_box_inside_a_big_box_has_its_own_volume():
+    """A 6 x 1 x 2 cm box wholly inside a 10 cm cube: the intersection is the small box, 12 cm^3 (its overlap box is
+    not square, so the ray grid's cells are not square either)."""
+    big = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
+    small = trimesh.creation.box(extents=(0.06, 0.01, 0.02))
+    small.apply_translation((0.01, -0.02, 0.005))
+    pen = interpenetration(small, big)
+    assert pen.volume_cm3 == pytest.approx(12.0, rel=2e-3)
+    assert interpenetration(big, small).volume_cm3 == pytest.approx(12.0, rel=2e-3)
+
+
+def test_a_turned_cube_inside_a_big_box_has_its_own_volume():
+    """A 3 cm cube turned about an oblique axis (no face horizontal or vertical) wholly inside a 12 cm cube: 27 cm^3,
+    trimesh's volume of the turned cube."""
+    big = trimesh.creation.box(extents=(0.12, 0.12, 0.12))
+    cube = trimesh.creation.box(extents=(0.03, 0.03, 0.03))
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec([0.4, -0.7, 0.3]).as_matrix()
+    T[:3, 3] = (0.005, 0.01, -0.01)
+    cube.apply_transform(T)
+    assert cube.volume * 1e6 == pytest.approx(27.0, rel=1e-9)
+    assert interpenetration(cube, big).volume_cm3 == pytest.approx(27.0, rel=3e-3)
+
+
+def test_depth_is_the_deepest_body_vertex_not_an_average():
+    """A body tetrahedron poking into a 10 cm cube from above: its vertices 3 cm, 0.5 cm, 0.5 cm inside the top face
+    and one 1 cm above it. The depth is the deepest, 3 cm (trimesh's signed distance, positive inside)."""
+    obj = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
+    pts = np.array([[0.0, 0.0, 0.02], [0.01, 0.0, 0.045], [0.0, 0.01, 0.045], [0.0, 0.0, 0.06]])
+    body = trimesh.convex.convex_hull(pts)
+    sd = trimesh.proximity.signed_distance(obj, body.vertices)
+    assert sd.max() == pytest.approx(0.03, abs=1e-9)
+    assert interpenetration(body, obj).depth_cm == pytest.approx(100 * sd.max(), abs=1e-6)
+
+
+def test_an_ellipsoid_inside_a_big_box_has_its_own_volume_on_a_grid_of_oblong_cells():
+    """A flat ellipsoid mesh (semi-axes 3.125, 0.565, 1 cm; its overlap box 62.5 x 11.3 mm does not divide into whole
+    1-mm cells, so the cells that tile it are oblong) wholly inside a 10 cm cube: the intersection is the ellipsoid,
+    trimesh's volume of the mesh."""
+    big = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
+    ell = trimesh.creation.icosphere(subdivisions=3)
+    ell.apply_scale((0.03125, 0.00565, 0.01))
+    ell.apply_translation((0.004, -0.003, 0.002))
+    assert interpenetration(ell, big).volume_cm3 == pytest.approx(ell.volume * 1e6, rel=3e-3)

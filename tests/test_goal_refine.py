@@ -431,3 +431,56 @@ def test_restart_starts_from_the_lowest_energy_shift(setup, monkeypatch):
                      for d in RESTART_SHIFTS])[:, 0]
     assert float(e.max() - e.min()) > 1e-3
     torch.testing.assert_close(starts[1], hat["transl"] + RESTART_SHIFTS[int(e.argmin())])
+
+
+def _case(ref):
+    aa = torch.zeros(1, 55, 3)
+    aa[0, 0] = torch.tensor([math.pi / 2, 0, 0])
+    rot6d, transl, betas = axis_angle_to_rot6d(aa), torch.zeros(1, 3), torch.zeros(1, 10)
+    v = ref.vertices(rot6d, transl, betas)
+    q = torch.nn.functional.normalize(v[:, 401] - v[:, 400], dim=-1)
+    hat = {"rot6d": rot6d + 0.1, "transl": transl + torch.tensor([[0.01, -0.02, 0.03]]), "head_dir": q,
+           "hand_offsets": torch.zeros(1, 99, 3)}
+    return rot6d, transl, betas, hat, v
+
+
+def test_theta_and_gamma_terms_are_eq5s_norms(setup):
+    """Eq. 5: E_gamma = ||gamma - gamma^||_1 (here per coordinate, averaged: the offset 1, -2, 3 cm reads 2 cm, an L2
+    would read 0.047 cm^2), E_theta the (squared, averaged) 2-norm of the 6D pose offset (0.1 everywhere: 0.01)."""
+    ref = setup[2]
+    rot6d, transl, betas, hat, v = _case(ref)
+    obj = v[0, :99] + torch.tensor([0.0, 0.0, 0.01])       # object points 1 cm above the hand vertices
+    e = ref.energy(rot6d, transl, betas, hat, obj)
+    assert float(e["gamma"][0]) == pytest.approx(0.02, rel=1e-5)
+    assert float(e["theta"][0]) == pytest.approx(0.01, rel=1e-4)
+
+
+def test_the_energy_weighs_each_term_by_its_own_lambda(setup):
+    """Eq. 8: E = lambda_d E_d + lambda_theta E_theta + lambda_gamma E_gamma + lambda_q E_q + lambda_f E_f, each lambda
+    by its name in GraspRefineWeights; after one Adam step (theta and gamma off GNet's prediction) the history's E is
+    that sum of its terms."""
+    ref = setup[2]
+    rot6d, transl, betas, hat, v = _case(ref)
+    obj = v[0, :99] + torch.tensor([0.0, 0.0, 0.01])
+    w = GraspRefineWeights(d=1.0, theta=0.7, gamma=0.03, q=0.2, f=0.5, steps=1)
+    out = ref(hat, betas, obj, w)
+    h = out.history[-1]
+    want = w.d * h["d"] + w.theta * h["theta"] + w.gamma * h["gamma"] + w.q * h["q"] + w.f * h["f"]
+    assert h["theta"] > 0 and h["gamma"] > 0
+    assert h["E"] == pytest.approx(want, rel=1e-5)
+
+
+def test_eq13_holds_the_body_translation_with_its_weight(setup):
+    """Eq. 13's E_Theta couples gamma to MNet's with weight MotionRefineWeights.transl (1000: "so the body does not
+    slide to help the hand"). A hand target 3 cm to the side of the hand, reachable by sliding the whole body: with
+    the coupling the body moves under 2 mm; with transl=0 (no coupling of gamma) it slides several times as far."""
+    bm, gv, _ = setup
+    hand_body = SparseBody(bm, torch.as_tensor(gv.vertex_ids[gv.right_hand]))
+    aa = torch.zeros(1, 55, 3)
+    aa[0, 0] = torch.tensor([math.pi / 2, 0, 0])
+    rot6d, transl, betas = axis_angle_to_rot6d(aa), torch.zeros(1, 3), torch.zeros(1, 10)
+    target = hand_body(pose_rotmats(rot6d), betas, transl)[0] + torch.tensor([0.03, 0.0, 0.0])
+    _, t_held = refine_frame(hand_body, rot6d, transl, betas, target, MotionRefineWeights())
+    _, t_free = refine_frame(hand_body, rot6d, transl, betas, target, MotionRefineWeights(transl=0.0))
+    held, free = float(t_held.norm()), float(t_free.norm())
+    assert held < 0.002 and free > 4 * held, (held, free)

@@ -3,12 +3,14 @@ hand-made cases."""
 import numpy as np
 import pytest
 import torch
+from scipy.spatial import cKDTree
 
 from graspkit.body import BodyModel
-from graspkit.body.markers import saga_sparse_markers
+from graspkit.body.markers import palm_vertices, saga_sparse_markers
 from graspkit.data import load_motion
 from graspkit.models.pose_prior import load_pose_prior
 from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, MarkerDiffAE, train_smooth_ae
+from graspkit.optim.grasppose import GraspObject, hand_vertex_ids
 from graspkit.paths import DATA_STUBS, default_model_path
 
 
@@ -438,3 +440,115 @@ def test_marker_contact_brings_the_contact_markers_onto_an_object_the_markers_mi
         v = opt.vertices(res)[-1].double().numpy()
         gap[name] = float(cKDTree(pts.numpy()).query(v[ms.vertex_ids[palm]])[0].mean())
     assert gap["without"] > 0.02 and gap["with"] < gap["without"] - 0.005, gap
+
+
+def test_object_contact_term_is_eq6s_object_side_on_the_last_five_frames_and_the_most_likely_points(bm):
+    """E^o_cont's object side: w_o sum over the last 5 frames and the 256 object points of highest C^_O of C^_O times
+    the squared distance to the nearest right-hand vertex (the right hand and palm vertices read off the full mesh,
+    distances from scipy's KD-tree). The body slides 5 cm a frame, so the first frames are farther from the object."""
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("contact",)))
+    F, w = 7, opt.cfg.weights
+    p = opt.init_params(torch.zeros(F, 79, 3), torch.zeros(F, 10))
+    p = {k: torch.zeros_like(v) if k != "orient6d" else v for k, v in p.items()}
+    p["transl"] = torch.arange(F, dtype=torch.float32)[:, None] * torch.tensor([0.05, 0.0, 0.0])
+    with torch.no_grad():
+        full = bm.forward_rotmats(opt.rotmats(p), betas=torch.zeros(F, 10), transl=p["transl"]).vertices.double()
+    hand_ids = np.union1d(hand_vertex_ids(bm, ("right",)), palm_vertices(bm)["right"])
+    g = torch.Generator().manual_seed(0)
+    centre = full[-1, hand_ids].mean(0)
+    pts = centre + 0.06 * torch.nn.functional.normalize(torch.randn(500, 3, generator=g, dtype=torch.float64))
+    obj = GraspObject(pts.float()[None], torch.zeros(1, 500, 3), 0.0)
+    c_o = torch.rand(1, 500, generator=g)
+    e = opt.energy(p, torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, None, obj, c_o)["contact"].item()
+    top = np.argsort(-c_o[0].numpy())[:256]
+    want = 0.0
+    for t in range(F - 5, F):
+        d, _ = cKDTree(full[t, hand_ids].numpy()).query(pts[top].numpy())
+        want += float((c_o[0, top].double().numpy() * d ** 2).sum())
+    assert e == pytest.approx(w.contact * want, rel=1e-3) and e > 0
+
+
+def _schedule(bm, monkeypatch, start):
+    """The learning rates of every Adam step of GraspMotionOpt.fit on 3 frames of the rest body's markers (the energy
+    replaced by a constant: only the schedule is read), as (stage, i, [lr of each parameter group])."""
+    import graspkit.optim.graspmotion as GM
+
+    seen = []
+    monkeypatch.setattr(GM, "energy_step", lambda opt, e, log, i, step, stage, every: seen.append(
+        (stage, i, [(g["lr"], sum(p.numel() for p in g["params"])) for g in opt.param_groups])))
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("smooth",)))
+    monkeypatch.setattr(opt, "energy", lambda *a, **k: {"fit": torch.zeros(1, requires_grad=True)})
+    with torch.no_grad():
+        m = saga_sparse_markers(bm).select(bm().vertices).float()            # (1, 79, 3)
+    markers = m[:, None].expand(1, 3, -1, -1).clone()
+    opt.fit(markers, torch.zeros(1, 10), progress=False, start=m.clone() if start else None)
+    return seen
+
+
+def test_alg2_learning_rate_schedule_is_the_papers(bm, monkeypatch):
+    """SAGA appendix (GraspMotion-Opt): stage 1, 100 steps, lr 0.1 for the first frame and 0.01 for the others, 0.01
+    after step 60 and 0.003 after step 80; stage 2, 300 steps at 0.01 decaying to 0.005 after step 150 (then
+    graspkit's polish, 100 steps at 0.001). The first frame's group holds a third of the parameters of 3 frames."""
+    seen = _schedule(bm, monkeypatch, start=False)
+    s1 = [x for x in seen if x[0] == 1]
+    s2 = [x for x in seen if x[0] == 2]
+    assert len(s1) == 100 and len(s2) == 400
+    for _, i, groups in s1:
+        lrs = [g[0] for g in groups]
+        assert lrs == ([0.1, 0.01] if i < 60 else [0.01, 0.01] if i < 80 else [0.003, 0.003]), (i, lrs)
+        assert 2 * groups[0][1] == groups[1][1]                               # frame 0 vs frames 1-2
+    for _, i, groups in s2:
+        want = 0.01 if i < 150 else 0.005 if i < 300 else 1e-3
+        assert [g[0] for g in groups] == [want, want], (i, groups)
+
+
+def test_a_given_start_frame_is_fitted_in_stage_1_and_held_in_stage_2(bm, monkeypatch):
+    """fit's docstring: with `start`, stage 1 fits frame 0 to the start body's markers and stage 2 holds it there: stage
+    1 optimises both groups (frame 0 at lr 0.1), stage 2 only the other frames'."""
+    seen = _schedule(bm, monkeypatch, start=True)
+    assert all(len(g) == 2 and g[0][0] in (0.1, 0.01, 0.003) for s, _, g in seen if s == 1)
+    assert [g[0][0] for s, i, g in seen if s == 1 and i == 0] == [0.1]
+    assert all(len(g) == 1 for s, _, g in seen if s == 2)
+
+
+def test_skating_term_counts_the_displacement_from_a_frame_in_contact(bm):
+    """Module docstring: T_c are the frames whose contact is above 0.5 and v^foot a sole vertex's displacement to the
+    next frame. A body sliding 2 cm a frame over 4 frames with the left heel in contact at frame 1 only (S.2 alone,
+    one_foot_down off): one displacement (frame 1 -> 2) of each left-heel vertex counts; in contact at the last frame
+    only, none does (no next frame)."""
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("skate",), one_foot_down=False))
+    w, F = opt.cfg.weights, 4
+    p = opt.init_params(torch.zeros(F, 79, 3), torch.zeros(F, 10))
+    p = {k: torch.zeros_like(v) if k != "orient6d" else v for k, v in p.items()}
+    p["transl"] = torch.arange(F, dtype=torch.float32)[:, None] * torch.tensor([0.02, 0.0, 0.0])
+    n_heel = int((opt.foot_part == 0).sum())
+    args = (torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2)
+    c = torch.zeros(1, F, 4)
+    c[0, 1, 0] = 1.0
+    e = opt.energy(p, *args, c, None, None)["skate"].item()
+    assert e == pytest.approx(w.skate * n_heel * (0.02 - w.skate_sigma), rel=1e-4)
+    c = torch.zeros(1, F, 4)
+    c[0, F - 1, 0] = 1.0
+    assert opt.energy(p, *args, c, None, None)["skate"].item() == 0.0
+
+
+def test_palm_term_counts_only_palm_vertices_within_sigma_of_the_object(bm):
+    """Eq. 11's indicator 1(d < sigma), sigma = 1 cm (module docstring; weights.palm_sigma): a plane of points 3 mm
+    past the palm's highest vertex counts (the nearest palm vertices are within 1 cm of it); the same plane 3 cm past it
+    (every palm vertex at least 3 cm away) gives 0."""
+    opt = GraspMotionOpt(bm, load_pose_prior())
+    assert opt.cfg.weights.palm_sigma == pytest.approx(0.01)
+    rot = torch.eye(3).expand(1, 55, 3, 3)
+    v, _ = opt.sparse(rot, torch.zeros(1, 10), torch.zeros(1, 3))
+    hands = v[:, opt.sl_h].float()[:, None].expand(1, 2, -1, -1)
+    palm = hands[0, 0, opt.palm]
+    lo, hi = palm.min(0).values, palm.max(0).values
+    xs = torch.arange(float(lo[0]) - 0.03, float(hi[0]) + 0.03, 0.002)
+    zs = torch.arange(float(lo[2]) - 0.03, float(hi[2]) + 0.03, 0.002)
+    grid = torch.stack(torch.meshgrid(xs, zs, indexing="ij"), -1).reshape(-1, 2)
+
+    def plane(y: float) -> torch.Tensor:
+        return torch.stack([grid[:, 0], torch.full((len(grid),), y), grid[:, 1]], -1)[None]
+
+    assert opt.palm_term(hands, plane(float(hi[1]) + 0.003)).item() > 0
+    assert opt.palm_term(hands, plane(float(hi[1]) + 0.03)).item() == 0.0

@@ -8,7 +8,7 @@ import torch
 import trimesh
 from scipy.spatial import cKDTree
 
-from graspkit.body.markers import foot_vertices, palm_vertices
+from graspkit.body.markers import foot_vertices, palm_vertices, saga_markers
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.metrics import joint_limit_violation
 from graspkit.models.pose_prior import load_pose_prior
@@ -505,3 +505,97 @@ def test_ground_from_the_rest_heights_stands_a_flat_footed_body_on_the_floor(bm,
     floored = opt.with_config(ground_rest=False, weights=GraspPoseWeights()).fit(markers, obj, stages=(2,), init=s1,
                                                                                  progress=False)
     assert low(floored) > -0.001, low(floored)
+
+
+def _object(centre, n=300):
+    pts = torch.tensor(trimesh.creation.icosphere(2, 0.05).vertices[:n], dtype=torch.float32)
+    return GraspObject(pts + centre, torch.nn.functional.normalize(pts, dim=-1), height=1.0)
+
+
+def test_alg1_frees_the_papers_variables_at_the_papers_learning_rates(bm, prior, monkeypatch):
+    """SAGA appendix: Adam at 0.016, 0.012, 0.008 for stages 1-3; Alg. 1: stage 1 the global translation and
+    rotation, stage 2 these with shape and the body pose latent (+ graspkit's free arm joints), stage 3 the pose
+    latent, hand PCA and eyes (+ the arm joints); the polish goes on in stage 3 at its own lr. The energy is replaced
+    by a constant: only the schedule is read, as (stage, i, lr, shapes of the optimised tensors)."""
+    import graspkit.optim.grasppose as GP
+
+    seen = []
+    monkeypatch.setattr(GP, "energy_step", lambda opt, e, log, i, step, stage, every: seen.append(
+        (stage, i, [g["lr"] for g in opt.param_groups], [tuple(p.shape) for g in opt.param_groups for p in g["params"]])))
+    cfg = GraspPoseConfig(steps=(3, 4, 5), polish=(2, 1e-3), restart_sunk=None)
+    assert GraspPoseConfig().lrs == (0.016, 0.012, 0.008) and GraspPoseConfig().steps == (300, 400, 500)
+    opt = GraspPoseOpt(bm, prior, cfg)
+    monkeypatch.setattr(opt, "energy", lambda *a, **k: {"fit": torch.zeros(1, requires_grad=True)})
+    with torch.no_grad():
+        markers = bm().vertices[:, saga_markers(bm).vertex_ids].float()
+    opt.fit(markers, _object(markers[0].mean(0)), progress=False)
+    L, A = prior.cfg.latent, len(cfg.free_joints)
+    want = {1: [(1, 3), (1, 6)], 2: [(1, 3), (1, 6), (1, 10), (1, L), (1, A, 6)],
+            3: [(1, L), (1, 24), (1, 24), (1, 6), (1, A, 6)]}
+    assert [(s, i) for s, i, _, _ in seen] == [(1, i) for i in range(3)] + [(2, i) for i in range(4)] + \
+        [(3, i) for i in range(7)]
+    for stage, i, lrs, shapes in seen:
+        assert shapes == want[stage], (stage, shapes)
+        lr = (0.016, 0.012, 0.008)[stage - 1] if not (stage == 3 and i >= 5) else 1e-3
+        assert lrs == [pytest.approx(lr)], (stage, i, lrs)
+
+
+def test_object_contact_term_uses_the_points_of_highest_contact_probability(bm, prior):
+    """Eq. 6's object side over cfg.contact_points object points: the ones of HIGHEST C^_O. 300 object points, C^_O
+    random, contact_points = 20: alpha^o sum over the 20 most probable points of C^_O times the squared distance to the
+    nearest hand vertex (scipy's KD-tree over both hands' vertices of the full mesh)."""
+    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(contact_points=20, collision=False, ground=False))
+    with torch.no_grad():
+        markers = bm().vertices[:, saga_markers(bm).vertex_ids].float()
+        p = opt.init_params(markers)
+        v = bm.forward_rotmats(opt.rotmats(p), betas=p["betas"], transl=p["transl"]).vertices[0].double().numpy()
+    hand = hand_vertex_ids(bm)
+    obj = _object(torch.as_tensor(v[hand].mean(0), dtype=torch.float32))
+    g = torch.Generator().manual_seed(0)
+    co = torch.rand(1, obj.num_points, generator=g)
+    cm = torch.zeros(1, 143)
+    cache = opt._stage3_cache(p, obj, co)
+    e = opt.energy(p, markers, obj, 3, cm, co, cache)["contact_object"].item()
+    top = np.argsort(-co[0].numpy())[:20]
+    d, _ = cKDTree(v[hand]).query(obj.points.numpy()[top])
+    want = opt.cfg.weights.contact_object * float((co[0].numpy()[top] * d ** 2).sum())
+    assert want > 0 and e == pytest.approx(want, rel=1e-3)
+
+
+def test_heuristic_contact_pulls_only_likely_hand_vertices_within_its_radius(bm, prior):
+    """S.3 (WholeGrasp-single's heuristic contact): alpha^h sum of C_h d^2 over the hand vertices whose prior contact
+    probability C_h is above 0.7 and whose nearest object point is closer than heuristic_radius (2 cm). A ball of 300
+    points around the right hand: the truth from scipy's KD-tree over the full mesh's hand vertices."""
+    hand = hand_vertex_ids(bm)
+    g = torch.Generator().manual_seed(1)
+    ch = torch.rand(len(hand), generator=g)
+    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(heuristic=True, contact=False, collision=False, ground=False),
+                       hand_contact_prior=ch)
+    with torch.no_grad():
+        markers = bm().vertices[:, saga_markers(bm).vertex_ids].float()
+        p = opt.init_params(markers)
+        v = bm.forward_rotmats(opt.rotmats(p), betas=p["betas"], transl=p["transl"]).vertices[0].double().numpy()
+    right = hand_vertex_ids(bm, ("right",))
+    obj = _object(torch.as_tensor(v[right].mean(0), dtype=torch.float32))
+    e = opt.energy(p, markers, obj, 3, None, None, opt._stage3_cache(p, obj, None))["heuristic"].item()
+    d, _ = cKDTree(obj.points.numpy()).query(v[hand])
+    w = opt.cfg.weights
+    on = (ch.numpy() > 0.7) & (d < 0.02)
+    assert on.any() and ((ch.numpy() > 0.7) & (d >= 0.02) & (d < 0.1)).any()   # both kinds of likely vertex
+    assert e == pytest.approx(w.heuristic * float((on * ch.numpy() * d ** 2).sum()), rel=1e-3)
+
+
+def test_fit_term_is_eq5s_l1_distance_to_the_markers(bm, prior):
+    """SAGA Eq. 5: E_fit = |M^ - M(Theta)| (L1, summed over the 143 markers' coordinates), the markers read off the
+    full mesh at SAGA's marker vertices; targets moved 0-3 cm from the body's markers."""
+    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(collision=False, ground=False, contact=False))
+    ids = saga_markers(bm).vertex_ids
+    with torch.no_grad():
+        markers = bm().vertices[:, ids].float()
+        p = opt.init_params(markers)
+        v = bm.forward_rotmats(opt.rotmats(p), betas=p["betas"], transl=p["transl"]).vertices[0].double().numpy()
+    g = torch.Generator().manual_seed(2)
+    target = markers + 0.03 * torch.rand(markers.shape, generator=g)
+    e = opt.energy(p, target, _object(markers[0].mean(0)), 1, None, None, {})["fit"].item()
+    want = float(np.abs(v[ids] - target[0].double().numpy()).sum())
+    assert want > 1.0 and e == pytest.approx(want, rel=1e-4)

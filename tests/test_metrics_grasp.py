@@ -86,3 +86,15 @@ def test_grasp_metrics_contact_threshold_is_checked_and_applied():
     for bad in (np.nan, np.inf, "2mm", None):
         with pytest.raises(ValueError, match="threshold: expected a finite distance"):
             M.grasp_metrics(v, f, near, threshold=bad)
+
+
+def test_grasp_quality_table_median_and_feet_share_on_known_rows():
+    """Three grasps with volumes 0, 1, 11 cm^3 (median 1, mean 4) and feet 0.5, 2, 0.9 cm above the ground (two of
+    three within 1 cm: the key and the docstring say cm)."""
+    rows = [{"contact": 1.0, "volume_cm3": 0.0, "depth_cm": 0.0, "feet_cm": 0.5},
+            {"contact": 0.0, "volume_cm3": 1.0, "depth_cm": 0.2, "feet_cm": 2.0},
+            {"contact": 1.0, "volume_cm3": 11.0, "depth_cm": 1.0, "feet_cm": 0.9}]
+    t = M.grasp_quality_table(rows)
+    assert t["volume_median_cm3"] == pytest.approx(1.0) and t["volume_mean_cm3"] == pytest.approx(4.0)
+    assert t["feet_within_1cm"] == pytest.approx(2 / 3) and t["feet_max_cm"] == pytest.approx(2.0)
+    assert t["contact_ratio"] == pytest.approx(2 / 3) and t["depth_max_cm"] == pytest.approx(1.0)

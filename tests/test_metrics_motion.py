@@ -349,3 +349,31 @@ def test_motion_quality_averages_wandrs_fs_per_motion_and_pools_goals_sliding(bm
     one = [M.foot_skating_wandr(m.vertices(bm)).mean() for m in (glide, still)]        # each motion on its own
     assert one == [1.0, 0.0]
     assert M.motion_quality(bm, [still, glide], chunk=2)["fs_wandr"] == pytest.approx(0.5)  # any order, any chunk
+
+
+def test_skating_follows_the_vertex_lowest_at_t_not_the_one_lowest_at_t_plus_1():
+    """metrics' docstring: "the lowest vertex moves" is measured on the same vertex from t to t+1, the vertex that is
+    lowest at t. Vertex A is lowest at t and lifts straight up; vertex B comes down 5 cm sideways and is lowest at
+    t+1. Followed from t, A moves 0 horizontally (no skating) and 2 cm in 3D."""
+    v = np.array([[[0.0, 0.0, 0.0], [0.0, 0.0, 0.05], [0.0, 0.0, 1.0]],
+                  [[0.0, 0.0, 0.02], [0.05, 0.0, 0.0], [0.0, 0.0, 1.0]]], np.float32)
+    h, d3 = M.lowest_vertex_motion(v)
+    assert h[0] == pytest.approx(0.0, abs=1e-7) and d3[0] == pytest.approx(0.02, abs=1e-6)
+    assert not M.foot_skating_wandr(v).any()
+    assert M.foot_sliding_goal(v).all()                   # 2 cm per frame in 3D: above GOAL's 1 cm
+
+
+def test_motion_quality_counts_each_frame_once_across_chunks(bm):
+    """A clip of 10 frames sinking 1 cm a frame, read in chunks of 3 (chunks share one frame): motion_quality's
+    frames and mean penetration are those of the 10 frames, each once (the depth of the lowest vertex below z = 0,
+    measured here on the whole clip's vertices with numpy)."""
+    from graspkit.data.motion import Motion
+
+    T = 10
+    m = Motion(np.zeros((T, 165)), np.array([[0.0, 0.0, -0.01 * t] for t in range(T)]), np.zeros(10), 30.0)
+    v = np.asarray(m.vertices(bm))
+    depth = np.maximum(-v[:, :, 2].min(1), 0.0)
+    q = M.motion_quality(bm, [m], chunk=3)
+    assert q["frames"] == T
+    assert q["penetration_mean"] == pytest.approx(depth.mean(), rel=1e-5)
+    assert q["penetration_max"] == pytest.approx(depth.max(), rel=1e-5)

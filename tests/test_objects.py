@@ -191,3 +191,18 @@ def test_surface_samples_fall_on_faces_in_proportion_to_their_area():
     pts, _ = sample_surface((v, f), n=4000, seed=0)
     on_small = int((pts[:, 2] < 0.5).sum())
     assert binomtest(on_small, 4000, 0.1).pvalue > 1e-4          # uniform over the area: 10 % on the small face
+
+
+def test_yaw_range_is_in_degrees_and_the_centre_at_its_distance_and_bearing():
+    """sample_object_pose's docstring: the object is rotated by U(yaw_range_deg) degrees about z; its centre is at
+    distance U(distance_range) in the direction facing + U(bearing) degrees. Fixed ranges give a known pose: yaw 30 deg
+    (scipy's rotation), 0.5 m along -90 + 20 = -70 deg from (1, 2), at 0.9 m."""
+    p = sample_object_pose(0, height_range=(0.9, 0.9), yaw_range_deg=(30.0, 30.0), distance_range=(0.5, 0.5),
+                           bearing_range_deg=(20.0, 20.0), start=(1.0, 2.0))
+    assert np.allclose(p.rotation, Rotation.from_euler("z", 30, degrees=True).as_matrix(), atol=1e-9)
+    b = np.deg2rad(-70.0)
+    assert np.allclose(p.translation, [1.0 + 0.5 * np.cos(b), 2.0 + 0.5 * np.sin(b), 0.9], atol=1e-9)
+    for seed in range(10):                                  # drawn yaws stay in their degree range
+        R = sample_object_pose(seed, yaw_range_deg=(10.0, 20.0)).rotation
+        yaw = np.degrees(np.arctan2(R[1, 0], R[0, 0]))
+        assert 10.0 - 1e-9 <= yaw <= 20.0 + 1e-9 and R[2, 2] == pytest.approx(1.0)

@@ -488,3 +488,21 @@ def test_initial_latents_come_from_the_generator():
     torch.testing.assert_close(a.motion.p, b.motion.p)
     assert not torch.allclose(a.z, c.z)
     torch.testing.assert_close(a.z, torch.randn(a.z.shape, generator=torch.Generator().manual_seed(0)))
+
+
+def test_the_returned_motion_is_decoded_from_the_returned_best_latents_when_adam_overshoots(bm, stats):
+    """With a step size large enough that Adam overshoots (the loss goes up at some iterations, the last one not the
+    lowest), the returned z is the best iterate and the returned motion is its rollout: latent_loss of (motion, z)
+    is the smallest loss of the history, and a rollout of z alone (iters=0 from z0 = z) gives the same joints."""
+    start = W.held_out_starts([load_motion(STUBS / "reach/reach_000001.npz")], ["reach/reach_000001.npz"], bm,
+                              n=1, frame=3)[0]
+    model = _model(stats)
+    goal = torch.tensor([0.8, 0.3, 1.0])
+    res = optimise_latents(model, start, goal, t_goal=12, iters=5, lr=2.0, w_norm=1e-4,
+                           generator=torch.Generator().manual_seed(0))
+    losses = [h["loss"] for h in res.history]
+    assert min(losses) < losses[-1]                         # the case: the last iterate is not the best
+    terms = latent_loss(res.motion, res.z, goal[None], 12, (), 1e-4)
+    assert terms["loss"].item() == pytest.approx(min(losses), rel=1e-5)
+    again = optimise_latents(model, start, goal, t_goal=12, iters=0, z0=res.z, w_norm=1e-4)
+    assert torch.allclose(again.motion.joints, res.motion.joints, atol=1e-5)
