@@ -736,3 +736,16 @@ def test_an_ellipsoid_inside_a_big_box_has_its_own_volume_on_a_grid_of_oblong_ce
     ell.apply_scale((0.03125, 0.00565, 0.01))
     ell.apply_translation((0.004, -0.003, 0.002))
     assert interpenetration(ell, big).volume_cm3 == pytest.approx(ell.volume * 1e6, rel=3e-3)
+
+
+@pytest.mark.parametrize("overlap_mm, tol", [(1.0, 0.02), (3.0, 0.01)])
+def test_a_thin_lens_on_the_overlap_boxs_border_is_refined(overlap_mm, tol):
+    """Two 3 cm spheres (meshes) overlapping by 1 or 3 mm along x: the lens's bounding-box overlap is 1-3 mm wide, so
+    its cells all lie on the overlap box's border, where a column's length changes steeply within a cell (the lens
+    thins to nothing at its rim and its tip). Those cells are refined: the volume is within 1-2 % of manifold3d's exact
+    intersection (unrefined border cells read 2.5-10 % high)."""
+    a = _sphere(0.03)
+    b = _sphere(0.03, centre=(0.06 - overlap_mm / 1000, 0.0, 0.0))
+    exact = a.intersection(b, engine="manifold").volume
+    assert exact > 0
+    assert abs(intersection_volume(a, b) / exact - 1) < tol

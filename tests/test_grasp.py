@@ -326,3 +326,24 @@ def test_fit_chunk_tries_max_attempts_times_with_new_tasks(monkeypatch):
         tasks = [c[k] for c in f.calls]
         keys = {(float(t.choice), tuple(np.round(t.betas, 9)), float(t.start.x), float(t.start.y)) for t in tasks}
         assert len(keys) == gm.MAX_ATTEMPTS                                  # each retry draws another task
+
+
+def test_the_approach_clip_opens_the_right_hand_into_its_grasp_types_pre_shape(fitted):
+    """graspkit.data.approach: before closing, the fingers take the grasp type's open pre-shape (the hand path at zero
+    curl, with the task's noise, grasp_opt.hand_path). In the saved approach clip, the frame just before the closing
+    starts (8 frames before the grasp frame, the pre-shape blend at 99 %) holds the RIGHT hand within 0.05 rad of that
+    pre-shape, built here from the grasp type and the hand axes."""
+    from graspkit.data import grasp_opt as go
+
+    bm, fitter, res, ok = fitted
+    for r in res:
+        t = r.task
+        pre = go.hand_path(go.HAND_SHAPES[t.grasp_type], fitter.hm.axes(t.betas), np.zeros((1, 5)), t.hand_noise)[0]
+        seq = gm.approach_sequence(fitter, r, fitter.vertices([r])[0], 0, 0, 0, True, "apple.ply")
+        f = r.grasp_frame - 8
+        assert f > 0
+        got = Rotation.from_rotvec(seq.poses[f, 40:55].astype(np.float64))
+        err = (got.inv() * Rotation.from_rotvec(np.asarray(pre, np.float64))).magnitude()
+        assert err.max() < 0.05, err
+        left = Rotation.from_rotvec(np.asarray(r.init_poses[25:40], np.float64))
+        assert (left.inv() * Rotation.from_rotvec(np.asarray(pre, np.float64))).magnitude().max() > 0.2  # the case

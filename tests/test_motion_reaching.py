@@ -307,3 +307,15 @@ def test_a_hand_on_the_floor_lies_flat_for_short_and_tall_bodies(bm):
         m = plan_reach(Start(0, 0, 0.3), (0.9, -0.4, 0.0), 100, betas=betas, seed=2, bm=bm, hold_frames=0)
         z = m.vertices(bm, 100, 101)[0].numpy()[hand, 2].min()
         assert 0.0 <= z <= 0.008, (b0, z)
+
+
+@pytest.mark.parametrize("t_goal", [9, 12, 15])
+def test_a_reach_given_little_time_starts_from_rest(bm, t_goal):
+    """Step 3 of plan_reach: the reach takes at most 0.8 t_G, so with a goal 0.3-0.6 s away it starts after the
+    first fifth of that time and the wrist leaves the standing start at rest (under 0.15 m/s over the first frame;
+    a reach begun before frame 0 would start at 1-2 m/s), and is still on the goal at t_G."""
+    for goal in ((0.45, -0.1, 1.0), (0.4, -0.2, 1.3), (0.5, -0.1, 0.6)):
+        m = plan_reach(Start(), goal, t_goal, seed=0, bm=bm, hold_frames=0)
+        w = m.joint_positions(bm)[:, J["right_wrist"]]
+        assert np.linalg.norm(w[1] - w[0]) * m.fps < 0.15, goal
+        assert np.linalg.norm(w[t_goal] - np.asarray(goal)) < 1e-3

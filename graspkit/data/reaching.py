@@ -10,7 +10,8 @@ hand so that the wrist is on the goal exactly at frame t_G (WANDR's time control
              wrist target lies within REACH_RHO arm lengths of the shoulder is chosen.
 2. stand-off the root point from which that shoulder sees the goal at a comfortable reach, on the line from
              the start to the goal, facing so that the goal is ahead and to the right.
-3. schedule  backwards from t_G: the reach takes 0.9-1.6 s (longer for lower goals) and starts while the
+3. schedule  backwards from t_G: the reach takes 0.9-1.6 s (longer for lower goals), at most 0.8 t_G (a reach
+             given little time starts after its first fifth, from rest, not before frame 0), and starts while the
              last step lands; walking (turn towards the stand-off, straight walk, final turn) is timed to
              stop then; if there is time to spare the person waits first, if not they walk faster.
 4. motion    footsteps and whole-body posing as for locomotion, plus controls blending into the posture,
