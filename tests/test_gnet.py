@@ -186,3 +186,26 @@ def test_decoder_blocks_see_the_latent_and_the_condition_bps_translation_and_bet
     # another body shape, the same object and latent: another grasp (the arm length matters)
     assert (other["rot6d"] - out["rot6d"]).abs().max() > 1e-3
     assert (other["transl"] - out["transl"]).abs().max() > 1e-4
+
+
+def test_q_term_is_the_squared_length_of_the_head_direction_error():
+    """GNetLossWeights doc / GOAL Eq. 3: the q term is ||q - q^||^2 (squared length) averaged over the batch. One of
+    two samples off by (0.3, 0.4, 0): squared length 0.25, mean 0.125 (an L1 would give 0.35); the weighted sum adds
+    lambda_q times it."""
+    from graspkit.body.random_model import random_smplx_arrays
+    bm = BodyModel(random_smplx_arrays(num_vertices=500, num_faces=200, seed=3), flat_hand_mean=True)
+    body = SparseBody(bm, torch.arange(400))
+    g = torch.Generator().manual_seed(4)
+    rot6d = axis_angle_to_rot6d(0.2 * torch.randn(2, 55, 3, generator=g))
+    transl, betas = 0.1 * torch.randn(2, 3, generator=g), torch.randn(2, 10, generator=g)
+    with torch.no_grad():
+        verts = body(pose_rotmats(rot6d), betas, transl)[0].float()
+    head = torch.nn.functional.normalize(torch.randn(2, 3, generator=g), dim=-1)
+    offsets = 0.1 * torch.randn(2, 400, 3, generator=g)
+    batch = {"rot6d": rot6d, "transl": transl, "betas": betas, "verts": verts, "head_dir": head, "offsets": offsets}
+    out = {"rot6d": rot6d, "transl": transl, "head_dir": head + torch.tensor([[0.3, 0.4, 0.0], [0.0, 0.0, 0.0]]),
+           "hand_offsets": offsets[:, :99]}
+    zero = torch.zeros(2, 16)
+    terms = gnet_loss(out, zero, zero, batch, body, GNetLossWeights(q=2.0, kl=0.0))
+    assert math.isclose(float(terms["q"]), 0.125, rel_tol=1e-5)
+    assert math.isclose(float(terms["loss"]), 2.0 * 0.125, rel_tol=1e-4, abs_tol=1e-6)

@@ -2,6 +2,7 @@
 and MNet's approach into it, checked with trimesh; the `graspkit goal` and `graspkit wandr` commands' errors."""
 import numpy as np
 import pytest
+import torch
 import trimesh
 
 from graspkit.goal import default_start, synthesize
@@ -120,3 +121,37 @@ def test_the_seed_reaches_gnets_generator(monkeypatch):
     assert not torch.equal(states[0], states[1])
     want = torch.Generator().manual_seed(7).get_state()
     assert torch.equal(states[1], want)
+
+
+def test_end_figures_are_of_the_last_frame_and_sliding_is_per_frame_pair(monkeypatch):
+    """GoalResult.metrics: grasp figures of the goal grasp and of the motion's LAST frame; 'sliding' is GOAL's foot
+    sliding (§4.2) as a share of the motion's frame pairs (frames - 1). Truth: the returned motion's own last frame and
+    frame count (the sliding count is passed through a wrapper that makes it non-zero, so that the denominator shows)."""
+    import graspkit.eval_goal as eg
+    import graspkit.metrics as gm
+    from graspkit.eval_goal import _body
+    from graspkit.goal import synthesize
+    seen = {}
+    real_fig, real_sl = gm.grasp_and_end_figures, eg.sliding
+
+    def fig(grasp_vertices, end_vertices, faces, obj):
+        seen["end"] = torch.as_tensor(end_vertices).detach().double().clone()
+        return real_fig(grasp_vertices, end_vertices, faces, obj)
+
+    def sl(vertices):
+        s, p = real_sl(vertices)
+        seen["sliding"] = (max(s, 1), p)
+        return seen["sliding"]
+
+    monkeypatch.setattr(gm, "grasp_and_end_figures", fig)
+    monkeypatch.setattr(eg, "sliding", sl)
+    mesh = trimesh.creation.capsule(height=0.14, radius=0.035)
+    r = synthesize(mesh, object_pose=ObjectPose.from_yaw(0.3, np.array([0.2, -0.5, 0.9])), seed=0, max_frames=12,
+                   penetration=False)
+    v = r.motion.vertices(_body()[0]).double()
+    T = r.motion.num_frames
+    assert T >= 3 and float((v[-1] - v[0]).norm(dim=-1).max()) > 1e-2
+    torch.testing.assert_close(seen["end"], v[-1], atol=1e-5, rtol=0)
+    slid, pairs = seen["sliding"]
+    assert pairs == T - 1
+    assert r.metrics["sliding"] == pytest.approx(slid / (T - 1), abs=1e-12)

@@ -1,11 +1,12 @@
 """Marker and vertex sets on the procedural humanoid: counts, uniqueness and anatomy checked geometrically."""
 import numpy as np
 import pytest
+import smplx
 import torch
 import trimesh
 
 from graspkit.body import BodyModel
-from graspkit.body.markers import (farthest_point_sampling, foot_vertices, goal_vertices, palm_vertices,
+from graspkit.body.markers import (_Rest, farthest_point_sampling, foot_vertices, goal_vertices, palm_vertices,
                                    saga_markers, saga_sparse_markers, sole_rest_heights, vertex_normals)
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.paths import default_model_path
@@ -186,3 +187,33 @@ def test_front_markers_are_in_front_and_back_markers_behind(bm, rest):
         # shin (SHN) is placed forward from the knee->ankle midpoint
         anchor = 0.5 * j[JOINT_INDEX[f"{s}_knee"]] + 0.5 * j[JOINT_INDEX[f"{s}_ankle"]]
         assert z[f"{S}SHN"] > anchor[2], S
+
+
+def test_rest_bodies_carry_the_documented_hands():
+    """Module doc: SAGA's markers are placed on the rest body with the file's mean hands, GOAL's vertices on the rest
+    body with flat hands -- whatever the BodyModel's flat_hand_mean. Truth: the smplx package's zero-pose body with
+    flat_hand_mean=False (mean hands) and =True (flat hands) of the same file."""
+    bm = BodyModel.from_file(default_model_path(), dtype=torch.float64)
+    root = str(default_model_path().parents[1])
+    for hands, flat in (("mean", False), ("flat", True)):
+        ref = smplx.create(root, model_type="smplx", gender="neutral", ext="npz", use_pca=False,
+                           flat_hand_mean=flat, dtype=torch.float64)
+        with torch.no_grad():
+            want = ref().vertices[0].numpy()
+        got = _Rest(bm, hands).v
+        np.testing.assert_allclose(got, want, atol=1e-6, err_msg=hands)
+    assert np.abs(_Rest(bm, "mean").v - _Rest(bm, "flat").v).max() > 0.01     # the two rests differ (fingers)
+
+
+def test_fin_markers_sit_on_the_back_of_the_hand():
+    """SAGA's hand markers (App. A.1): LFIN/RFIN on the back of the hand between wrist and knuckles. At rest the palms
+    face -y (down), so the back of the hand faces +y. Truth: trimesh's vertex normals of the rest mesh (mean hands)."""
+    bm = BodyModel.from_file(default_model_path(), dtype=torch.float64)
+    out = bm()                                              # zero pose + the file's mean hands (flat_hand_mean=False)
+    v, j = out.vertices[0].numpy(), out.joints[0].numpy()
+    normals = trimesh.Trimesh(v, bm.faces.numpy(), process=False).vertex_normals
+    m = saga_markers(bm)
+    for S, s in (("L", "left"), ("R", "right")):
+        i = m.vertex_ids[m.names.index(f"{S}FIN")]
+        assert normals[i, 1] > 0.7, (S, normals[i])
+        assert v[i, 1] > j[JOINT_INDEX[f"{s}_wrist"], 1], S   # above the wrist joint: the back, not the palm

@@ -11,10 +11,11 @@ from graspkit.body.markers import goal_vertices
 from graspkit.body.skeleton import JOINT_INDEX as J, PARENTS
 from graspkit.models import mnet as M
 from graspkit.models.gnet import SparseBody, pose_rotmats
-from graspkit.models.mnet import (MNet, MNetConfig, MNetState, apply_changes, canonical_frame, feet_mask, heading,
-                                  mnet_inputs, mnet_loss, mnet_targets, rest_root, rollout, transform_params,
-                                  transform_points)
+from graspkit.models.mnet import (MNet, MNetConfig, MNetLossWeights, MNetState, apply_changes, canonical_frame,
+                                  feet_mask, heading, mnet_inputs, mnet_loss, mnet_targets, rest_root, rollout,
+                                  transform_params, transform_points)
 from graspkit.objects.bps import bps_basis
+from graspkit.objects.contact import IAA_WEIGHT
 from graspkit.optim.goal_refine import hand_object_offsets
 from graspkit.paths import default_model_path
 from graspkit.rotations import axis_angle_to_rot6d, rotation_about_z
@@ -431,3 +432,66 @@ def test_rollout_gives_mnet_the_current_and_the_previous_frames_vertices(setup, 
         torch.testing.assert_close(s.verts[0], verts[n - 1], atol=1e-5, rtol=0)                 # frame t
         torch.testing.assert_close(s.verts_prev[0], verts[max(n - 2, 0)], atol=1e-5, rtol=0)     # frame t - 1
         n += F
+
+
+def test_floor_attention_reads_each_vertex_height_above_the_floor():
+    """Eq. 9's attention inputs end with exp(-w max(h, 0)) of each of the 400 vertices, h its height above the floor
+    (z up; the canonical frame turns about z and moves along the floor only). Truth: the world vertices' z."""
+    bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    body = SparseBody(bm, torch.as_tensor(goal_vertices(bm).vertex_ids))
+    g = torch.Generator().manual_seed(7)
+    aa = 0.2 * torch.randn(2, 6, 55, 3, generator=g)
+    aa[..., 0, :] = torch.tensor([math.pi / 2, 0, 0]) + 0.3 * torch.randn(2, 6, 3, generator=g)
+    rot6d = axis_angle_to_rot6d(aa)
+    transl = torch.randn(2, 6, 3, generator=g) * torch.tensor([1.0, 1.0, 0.05])
+    betas = 0.5 * torch.randn(2, 10, generator=g)
+    v = body(pose_rotmats(rot6d[:, -2:].reshape(-1, 55, 6)), betas.repeat_interleave(2, 0),
+             transl[:, -2:].reshape(-1, 3))[0].reshape(2, 2, -1, 3)
+    obj = torch.randn(2, 200, 3, generator=g) * 0.05 + torch.tensor([0.5, 0.5, 0.9])
+    goal_hand = torch.randn(2, 99, 3, generator=g) * 0.05 + torch.tensor([0.5, 0.45, 0.9])
+    s = MNetState(rot6d[:, -5:], transl[:, -5:], betas, v[:, 1], v[:, 0], goal_hand, obj.mean(1),
+                  hand_object_offsets(v[:, 1], obj), rest_root(bm, betas))
+    feats, _, _ = mnet_inputs(s, bps_basis())
+    want = torch.exp(-IAA_WEIGHT * s.verts[..., 2].clamp_min(0))
+    assert float(s.verts[..., 2].std()) > 0.1                            # heights vary over the body
+    torch.testing.assert_close(feats["iaa"][:, 3 * 400:], want, atol=1e-5, rtol=1e-4)
+
+
+@pytest.mark.parametrize("w", [None, MNetLossWeights(v=5.0, v_hand=7.0, theta=3.0, d=11.0)])
+def test_eq11_loss_is_the_weighted_sum_of_its_terms(w):
+    """Eq. 11: L = lambda_theta L_theta + lambda_v L_v + lambda_vh L_v^h + lambda_d L_d (+ feet). Errors: 0.1 on every
+    pose entry (L_theta = 0.01, mean squared), 1 cm on every vertex (L_v = L_v^h = 0.01), 2 cm on every hand offset
+    (L_d = 0.02); defaults lambda_theta = 10, the others 1 (MNetLossWeights)."""
+    B, F = 2, 10
+    tgt = {"d_rot6d": torch.zeros(B, F, 55, 6), "d_transl": torch.zeros(B, F, 3), "d_verts": torch.zeros(B, F, 400, 3),
+           "d_hand_obj": torch.zeros(B, F, 99, 3)}
+    out = {"d_rot6d": tgt["d_rot6d"] + 0.1, "d_transl": tgt["d_transl"] + 0.1, "d_verts": tgt["d_verts"] + 0.01,
+           "d_hand_obj": tgt["d_hand_obj"] + 0.02}
+    lam = w or MNetLossWeights()
+    want = lam.theta * 0.01 + lam.v * 0.01 + lam.v_hand * 0.01 + lam.d * 0.02
+    if w is None:
+        assert math.isclose(want, 10 * 0.01 + 0.01 + 0.01 + 0.02)
+    terms = mnet_loss(out, tgt, None, w)
+    assert math.isclose(float(terms["theta"]), 0.01, rel_tol=1e-4)
+    assert math.isclose(float(terms["loss"]), want, rel_tol=1e-4)
+
+
+def test_windows_take_the_goal_hand_at_the_goal_frame():
+    """MNetWindows: each clip's goal hand (Eq. 9's goal input and its BPS) is the 99 hand vertices at the clip's goal
+    frame (ApproachClip doc: the first frame of the final grasp), not at its last frame. Truth: the SparseBody at the
+    goal frame's parameters of a clip that keeps moving after it."""
+    from graspkit.models.mnet import ApproachClip, MNetWindows
+    bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    body = SparseBody(bm, torch.as_tensor(goal_vertices(bm).vertex_ids))
+    g = torch.Generator().manual_seed(11)
+    T, gf = 16, 6
+    aa = 0.3 * torch.randn(T, 55, 3, generator=g)
+    aa[:, 0] = torch.tensor([math.pi / 2, 0, 0])
+    transl = torch.stack([torch.linspace(0, 0.6, T), torch.zeros(T), torch.zeros(T)], 1)   # walks on after gf
+    betas = 0.5 * torch.randn(10, generator=g)
+    pts = torch.randn(300, 3, generator=g) * 0.05 + torch.tensor([0.8, 0.3, 0.9])
+    clip = ApproachClip(axis_angle_to_rot6d(aa), transl, betas, gf, pts, pts.mean(0))
+    w = MNetWindows([clip], body, bps_basis())
+    with torch.no_grad():
+        want = body(pose_rotmats(clip.rot6d[gf:gf + 1]), betas[None], transl[gf:gf + 1])[0][0, :99]
+    torch.testing.assert_close(w.goal_hand[0], want, atol=1e-5, rtol=0)

@@ -191,3 +191,36 @@ def test_motion_opt_gets_normals_in_the_points_frame(bm, monkeypatch):
     assert np.abs(np.linalg.norm(q - axis, axis=1) - radius).max() < 2e-3       # the points are on the capsule
     cos = np.sum((n_mesh @ R.T) * n, axis=1)
     assert np.quantile(cos, 0.05) > 0.95, np.quantile(cos, [0.0, 0.05, 0.5])
+
+
+def test_end_figures_and_skating_are_of_the_returned_motion(bm, monkeypatch):
+    """SagaResult.metrics: the end_* figures are of the motion's last frame (frame 60) and skating_opt is SAGA's
+    skating of the fitted markers in the world. Truth: the returned motion itself -- its last frame's vertices and its
+    sparse markers (r.motion is the fitted body moved to the world; a few optimiser steps only)."""
+    import graspkit.eval_motionfill as emf
+    import graspkit.metrics as gm
+    from graspkit.saga import synthesize
+    seen = {}
+    real_fig, real_sk = gm.grasp_and_end_figures, emf.skating
+
+    def fig(grasp_vertices, end_vertices, faces, obj):
+        seen["end"] = torch.as_tensor(end_vertices).detach().double().clone()
+        return real_fig(grasp_vertices, end_vertices, faces, obj)
+
+    def sk(markers, floor, heels):
+        seen.setdefault("skating", []).append(np.array(markers, np.float64))
+        return real_sk(markers, floor, heels)
+
+    monkeypatch.setattr(gm, "grasp_and_end_figures", fig)
+    monkeypatch.setattr(emf, "skating", sk)
+    r = synthesize("camera", bm, object_pose=ObjectPose.from_yaw(0.8, np.array([0.3, -0.6, 0.85])), seed=3,
+                   start=Start(1.4, -0.3, 3.3), grasp_steps=(2, 2, 2), motion_steps=(2, 2), polish_steps=(0, 0),
+                   progress=False)
+    v = r.motion.vertices(bm).double()
+    assert r.motion.num_frames == 61
+    torch.testing.assert_close(seen["end"], v[-1], atol=1e-4, rtol=0)
+    assert float((v[-1] - v[-2]).norm(dim=-1).max()) > 1e-3           # the last two frames differ
+    fitted = seen["skating"][1][0]                                      # skating_opt's markers (61, 79, 3)
+    want = saga_sparse_markers(bm).select(v)[...].numpy()
+    np.testing.assert_allclose(fitted, want, atol=1e-3)
+    assert r.metrics["skating_opt"] == pytest.approx(real_sk(want[None], np.zeros(1), emf.heel_columns()), abs=0.02)

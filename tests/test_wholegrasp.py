@@ -381,3 +381,67 @@ def test_marker_error_is_the_mean_marker_distance_in_cm():
     out = {"markers": truth + shift, "mu": torch.zeros(2, 16), "logvar": torch.zeros(2, 16)}
     logs = model.loss({"markers": truth}, out, 0, 1)
     torch.testing.assert_close(logs["marker_error_cm"], torch.tensor(7.5), atol=1e-4, rtol=0)
+
+
+def test_eq1_marker_l1_is_summed_over_markers_and_averaged_over_the_batch():
+    """Module doc (Reductions): |M - M~|_1 is summed over the 143 markers (and their coordinates) and averaged over the
+    batch. Every marker 3 cm / 4 cm off along x / y (L1 7 cm), the second sample twice as far: 143 * 0.07 * (1 + 2) / 2."""
+    model = WholeGraspVAE(WholeGraspConfig(multitask=False))
+    truth = torch.randn(2, 143, 3, generator=torch.Generator().manual_seed(0))
+    shift = torch.zeros(2, 143, 3)
+    shift[..., 0], shift[..., 1] = 0.03, -0.04
+    shift[1] *= 2
+    out = {"markers": truth + shift, "mu": torch.zeros(2, 16), "logvar": torch.zeros(2, 16)}
+    logs = model.loss({"markers": truth}, out, 0, 1)
+    torch.testing.assert_close(logs["rec_markers"], torch.tensor(143 * 0.07 * 1.5), atol=1e-4, rtol=0)
+    # with a zero posterior (KL 0) the single-task loss is that L1 alone
+    torch.testing.assert_close(logs["loss"], torch.tensor(143 * 0.07 * 1.5), atol=1e-4, rtol=0)
+
+
+def test_grabnet_parameters_put_the_body_in_the_object_frame():
+    """grasp_params: the translation is the body's in the object frame (world transl minus the object translation),
+    so the markers the parameters pose are the world markers minus the object translation. Truth: the same body posed
+    directly from the absolute fullpose and world translation (hands in the PCA span, so their codes are exact)."""
+    from graspkit.body import BodyModel
+    from graspkit.body.markers import saga_markers
+    from graspkit.models.gnet import SparseBody
+    from graspkit.models.wholegrasp import HandPCA, grasp_params, params_to_rotmats
+    from graspkit.paths import default_model_path
+    from graspkit.rotations import axis_angle_to_matrix
+    bm = BodyModel.from_file(default_model_path())
+    body, pca = SparseBody(bm, saga_markers(bm).vertex_ids), HandPCA(bm)
+    g = torch.Generator().manual_seed(2)
+    fp = torch.randn(3, 55, 3, generator=g) * 0.2
+    fp[:, 22:25] = 0.0                                               # jaw and eyes at rest (not in the parameters)
+    fp[:, 25:] = pca.decode(torch.randn(6, 24, generator=g) * 0.5, "left").view(3, 2, 15, 3).reshape(3, 30, 3)
+    fp[:, 40:55] = pca.decode(torch.randn(3, 24, generator=g) * 0.5, "right").view(3, 15, 3)
+    transl, betas = torch.randn(3, 3, generator=g), torch.randn(3, 10, generator=g)
+    obj = torch.tensor([[0.4, -0.2, 0.9], [1.0, 0.5, 0.7], [-0.3, 0.8, 1.1]])
+    x = grasp_params(fp, transl, betas, obj, pca)
+    world = body(axis_angle_to_matrix(fp), betas, transl)[0]
+    local = body(*params_to_rotmats(x, pca))[0]
+    torch.testing.assert_close(local, world - obj[:, None], atol=1e-4, rtol=0)
+
+
+def test_reconstruction_marker_error_is_the_mean_distance_in_cm():
+    """reconstruction_metrics' marker_error_cm (the validation figure train_wholegrasp reports) is the mean Euclidean
+    distance between reconstructed and true markers, in cm. An untrained decoder (zero output layer, zero
+    normalisation) returns every marker at the origin; true markers 3 cm / 4 cm off along x / y (5 cm away), the second
+    sample twice as far: 7.5 cm (an L1 |dx| + |dy| would give 10.5)."""
+    from graspkit.models.wholegrasp import reconstruction_metrics
+    model = WholeGraspVAE(WholeGraspConfig(multitask=False))
+    g = torch.Generator().manual_seed(1)
+    pts = torch.randn(2, 512, 3, generator=g) * 0.05
+    markers = torch.zeros(2, 143, 3)
+    markers[..., 0], markers[..., 1] = 0.03, -0.04
+    markers[1] *= 2
+
+    class Data:
+        data = {"markers": markers, "points": pts, "normals": torch.nn.functional.normalize(pts, dim=-1),
+                "height": torch.full((2, 1), 0.8)}
+
+        def __len__(self):
+            return 2
+
+    res = reconstruction_metrics(model, Data())
+    assert abs(res["marker_error_cm"] - 7.5) < 1e-4
