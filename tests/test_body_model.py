@@ -4,10 +4,15 @@ import pickle
 import numpy as np
 import pytest
 import smplx
+import smplx.joint_names as SJ
+import smplx.vertex_ids as SV
 import torch
+from scipy.spatial.transform import Rotation
 
 from graspkit.body import BodyModel, ModelFileError
+from graspkit.body.poses import POSES, body_pose, y_up_to_z_up
 from graspkit.body.random_model import random_smplx_arrays
+from graspkit.body.skeleton import FINGERS, JOINT_INDEX, JOINT_NAMES, PARENTS, SMPLX_LANDMARK_VERTEX_IDS
 from graspkit.rotations import axis_angle_to_matrix
 
 
@@ -258,3 +263,54 @@ def test_a_400_component_file_matches_smplx_with_16_betas_and_short_betas_pad_at
         padded = ref(**{**p, "betas": torch.cat([p["betas"][:, :3], torch.zeros(2, 13, dtype=torch.float64)], 1)})
     assert (a.vertices - b.vertices).abs().max().item() < 1e-6            # 1e-7 m as the other parity tests
     assert (short - padded.vertices).abs().max().item() < 1e-6
+
+
+def test_joint_names_and_finger_order_are_smplx():
+    assert list(JOINT_NAMES) == SJ.JOINT_NAMES[:55]
+    order = []
+    for n in SJ.JOINT_NAMES[25:40]:                      # the left hand's 15 joints in SMPL-X order
+        f = n[len("left_"):-1]
+        if f not in order:
+            order.append(f)
+    assert tuple(order) == FINGERS
+
+
+def test_landmark_vertex_ids_are_smplx_vertex_ids():
+    assert SMPLX_LANDMARK_VERTEX_IDS == SV.vertex_ids["smplx"]
+
+
+def test_finger_jaw_and_eye_parents_follow_the_anatomy():
+    for side in ("left", "right"):
+        for f in ("index", "middle", "pinky", "ring", "thumb"):
+            chain = [f"{side}_wrist", f"{side}_{f}1", f"{side}_{f}2", f"{side}_{f}3"]
+            for parent, child in zip(chain[:-1], chain[1:]):
+                assert PARENTS[JOINT_INDEX[child]] == JOINT_INDEX[parent], child
+    for n in ("jaw", "left_eye_smplhf", "right_eye_smplhf"):
+        assert PARENTS[JOINT_INDEX[n]] == JOINT_INDEX["head"], n
+    assert PARENTS[JOINT_INDEX["head"]] == JOINT_INDEX["neck"]
+
+
+def test_body_pose_is_smplx_layout_joints_1_to_21():
+    for name, joints in POSES.items():
+        bp = body_pose(name, torch.float64)
+        assert bp.shape == (1, 63)
+        want = np.zeros((21, 3))
+        for j, aa in joints.items():
+            want[JOINT_INDEX[j] - 1] = aa
+        np.testing.assert_array_equal(bp.reshape(21, 3).numpy(), want)
+
+
+def test_a_pose_lowers_both_arms_symmetrically(bm):
+    with torch.no_grad():
+        J = bm(body_pose=body_pose("a_pose", bm.dtype)).joints[0].double().numpy()
+    for side in ("left", "right"):
+        sh, wr = J[JOINT_INDEX[f"{side}_shoulder"]], J[JOINT_INDEX[f"{side}_wrist"]]
+        assert wr[1] < sh[1] - 0.2, side                      # y up: the wrist well below the shoulder
+    l, r = J[JOINT_INDEX["left_wrist"]], J[JOINT_INDEX["right_wrist"]]
+    np.testing.assert_allclose([l[0], l[1]], [-r[0], r[1]], atol=0.02)   # mirror images across x = 0
+
+
+def test_y_up_to_z_up_maps_canonical_up_to_world_up_and_faces_minus_y():
+    R = Rotation.from_rotvec(y_up_to_z_up(torch.float64).numpy()[0]).as_matrix()
+    np.testing.assert_allclose(R @ [0, 1, 0], [0, 0, 1], atol=1e-12)      # canonical y up -> world z up
+    np.testing.assert_allclose(R @ [0, 0, 1], [0, -1, 0], atol=1e-12)     # facing +z -> facing -y

@@ -13,6 +13,7 @@ from graspkit.objects import (IAA_WEIGHT, SDFGrid, TEST_OBJECTS, apply_pose, bod
                               list_objects, make_object, marker_contact, nearest_neighbours, object_contact,
                               object_sdf_grid, penetration_depth, point_mesh_distance, sample_object_pose, sample_surface,
                               signed_distance, signed_distance_to_points, winding_number)
+from graspkit.objects.contact import distance_to
 
 ALL = list_objects()
 
@@ -749,3 +750,36 @@ def test_a_thin_lens_on_the_overlap_boxs_border_is_refined(overlap_mm, tol):
     exact = a.intersection(b, engine="manifold").volume
     assert exact > 0
     assert abs(intersection_volume(a, b) / exact - 1) < tol
+
+
+def test_distance_to_a_point_set_is_the_euclidean_distance_to_the_nearest_point():
+    rng = np.random.default_rng(0)
+    pts, cloud = rng.uniform(-0.2, 0.2, (50, 3)), rng.uniform(-0.2, 0.2, (200, 3))
+    want, _ = cKDTree(cloud).query(pts)
+    got = distance_to(torch.tensor(pts), torch.tensor(cloud)).numpy()
+    np.testing.assert_allclose(got, want, atol=1e-9)
+
+
+def test_object_contact_against_a_vertex_cloud_uses_metres_not_squared_metres():
+    # one point 5 mm from the nearest cloud point (in contact at 1 cm), one 5 cm away (not: 0.05^2 < 0.01 would say so)
+    cloud = torch.tensor([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], dtype=torch.float64)
+    pts = torch.tensor([[0.005, 0.0, 0.0], [0.0, 0.05, 0.0]], dtype=torch.float64)
+    assert object_contact(pts, cloud).tolist() == [1.0, 0.0]
+
+
+@pytest.mark.parametrize("w", [1.0, 2.0, 20.0])
+def test_body_object_attention_uses_the_given_weight(w):
+    """GOAL Eq. 1, I_w(d) = exp(-w d), with d the exact distance to the mesh (trimesh) and the weight w asked for."""
+    box = trimesh.creation.box((0.1, 0.1, 0.1))
+    verts = np.array([[0.0, 0.0, 0.15], [0.2, 0.0, 0.0], [0.08, 0.09, 0.0]])
+    _, d, _ = trimesh.proximity.closest_point(box, verts)
+    got = body_object_attention(torch.tensor(verts), box, w=w).numpy()
+    np.testing.assert_allclose(got, np.exp(-w * d), rtol=1e-6)
+
+
+def test_marker_contact_uses_the_given_threshold():
+    box = trimesh.creation.box((0.1, 0.1, 0.1))
+    markers = torch.tensor([[0.0, 0.0, 0.08], [0.0, 0.0, 0.09], [0.0, 0.0, 0.1]], dtype=torch.float64)  # 3, 4, 5 cm
+    assert marker_contact(markers, box, threshold=0.035).tolist() == [1.0, 0.0, 0.0]
+    assert marker_contact(markers, box, threshold=0.045).tolist() == [1.0, 1.0, 0.0]
+    assert marker_contact(markers, box).tolist() == [0.0, 0.0, 0.0]     # the 2 cm default

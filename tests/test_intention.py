@@ -7,7 +7,9 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from graspkit import intention as I
+from graspkit.data import load_motion
 from graspkit.data.rig import R_BASE
+from graspkit.paths import DATA_STUBS
 from graspkit.rotations import axis_angle_to_matrix, rotation_about_z
 
 ROOT = "data_stubs/motion"
@@ -223,3 +225,47 @@ def test_a_nan_time_left_goal_or_body_is_refused_not_read_as_goal_time_passed():
             _I([0.0, 0.0, 1.0], [0.0, float("inf"), 0.9], 0.0, [2.0, 1.0, 1.0], time_left)
         with pytest.raises(ValueError, match="psi: contains NaN"):
             _I([0.0, 0.0, 1.0], [0.0, 0.0, 0.9], float("nan"), [2.0, 1.0, 1.0], time_left)
+
+
+def _start(bm, frame=5):
+    f = sorted((DATA_STUBS / "motion" / "locomotion").glob("*.npz"))[0]
+    m = load_motion(f)
+    return m, I.StartPose.from_motion(m, frame, bm)
+
+
+def test_from_motion_full_pose_is_the_start_frames(bm):
+    m, s = _start(bm, 5)
+    np.testing.assert_allclose(s.full_pose.numpy(), m.poses[5], atol=1e-6)
+    _, body = I.pose_to_axis_angle(s.p)                      # p's 22 body rotations, as scipy reads them
+    np.testing.assert_allclose(Rotation.from_rotvec(body[:22].double().numpy()).as_matrix(),
+                               Rotation.from_rotvec(np.asarray(s.full_pose[:22], np.float64)).as_matrix(), atol=1e-5)
+
+
+def test_from_motion_rest_joints_give_the_motions_joints(bm):
+    """FK of the start pose with its rest joints = the body model's joints of that frame (Motion.joint_positions)."""
+    m, s = _start(bm, 5)
+    J = I.body_joints(s.p, s.rest).double().numpy()
+    np.testing.assert_allclose(J, m.joint_positions(bm)[5, :22], atol=1e-4)
+
+
+def test_canonical_puts_the_pelvis_joint_over_the_origin_facing_plus_x(bm):
+    _, s = _start(bm, 5)
+    c = s.canonical()
+    J0, Jc = I.body_joints(s.p, s.rest), I.body_joints(c.p, c.rest)
+    assert Jc[0, :2].abs().max() < 1e-5                      # the pelvis joint (not the root translation)
+    assert abs(Jc[0, 2] - J0[0, 2]) < 1e-5                    # height kept
+    assert abs(I.heading_of_pose(c.p).item()) < 1e-5
+    torch.testing.assert_close(I.pose_to_delta(c.p_prev, c.p), I.pose_to_delta(s.p_prev, s.p), atol=1e-5, rtol=0)
+    # the whole body moved rigidly: pairwise joint distances unchanged, and the rest joint J_0 is not at the origin
+    assert s.rest[0].norm() > 0.05
+    torch.testing.assert_close(torch.cdist(Jc, Jc), torch.cdist(J0, J0), atol=1e-5, rtol=0)
+
+
+def test_pose_to_axis_angle_takes_joints_22_to_54_from_rest_unchanged():
+    """The docstring: joints 22-54 (jaw, eyes, hands) are taken from `rest` (a full (55, 3) pose)."""
+    g = torch.Generator().manual_seed(0)
+    rest = 0.3 * torch.randn(55, 3, generator=g, dtype=torch.float64)
+    p = I.pose_from_axis_angle(torch.zeros(3, dtype=torch.float64), rest)
+    _, aa = I.pose_to_axis_angle(p, rest)
+    torch.testing.assert_close(aa[22:], rest[22:], rtol=0, atol=0)
+    torch.testing.assert_close(aa[:22], rest[:22], rtol=0, atol=1e-9)     # the body round-trips through p

@@ -6,9 +6,11 @@ matplotlib.use("Agg")
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial.transform import Rotation
 
+from graspkit.body.skeleton import JOINT_NAMES
 from graspkit.objects import MARKER_CONTACT_THRESHOLD, OBJECT_CONTACT_THRESHOLD, ObjectPose, make_object
-from graspkit.viz.object_explorer import HandObjectExplorer, place_at_palm
+from graspkit.viz.object_explorer import HandObjectExplorer, hand_vertices, place_at_palm
 
 HAND = (0.06, 0.04, 0.02)  # a flat box "hand" centred at the origin
 GAP = 0.015  # the cracker box starts 1.5 cm above the hand's top face: within the marker threshold only
@@ -171,3 +173,64 @@ def test_body_scene_one_metre_down_has_no_contact(body_scene):
     assert got["marker_contacts"] == got["object_contacts"] == 0 == want["object_contacts"]
     assert got["min_distance_cm"] == pytest.approx(want["min_distance_cm"], abs=1e-3)
     assert 90.0 < got["min_distance_cm"] <= 100.2  # the palm was 2 mm above; other vertices may come closer
+
+
+HAND = (0.06, 0.04, 0.02)
+
+
+def _explorer(gap: float, base_rotation=np.eye(3)) -> HandObjectExplorer:
+    hand = trimesh.creation.box(HAND)
+    half = make_object("cracker_box").extents[2] / 2
+    base = ObjectPose(np.array([0.0, 0.0, HAND[2] / 2 + gap + half]), base_rotation)
+    return HandObjectExplorer(hand.vertices, hand.faces, "cracker_box", base=base, num_points=1024)
+
+
+def test_yaw_slider_is_degrees_about_the_world_z_after_the_base_rotation():
+    """The docstring: the base pose turned by `yaw` (degrees) about the world z through the object's centre."""
+    base_R = Rotation.from_euler("x", 90, degrees=True).as_matrix()
+    ex = _explorer(0.3, base_R)
+    ex.update("yaw", 90.0)
+    want = Rotation.from_euler("z", 90, degrees=True).as_matrix() @ base_R
+    np.testing.assert_allclose(ex.pose().rotation, want, atol=1e-12)
+    np.testing.assert_allclose(ex.pose().translation, ex.base.translation, atol=1e-12)   # about its own centre
+    # the object's points: world = Rz(90) (Rx(90) p) + t
+    want_pts = ex.points @ want.T + ex.base.translation
+    np.testing.assert_allclose(ex.object_points(), want_pts, atol=1e-9)
+
+
+@pytest.mark.parametrize("gap", [0.004, 0.008])
+def test_object_contacts_under_the_threshold_match_trimesh(gap):
+    """An object hovering `gap` < 1 cm over the hand's top face: its points within 1 cm of the hand count as contacts,
+    as trimesh's exact closest-point distance says."""
+    ex = _explorer(gap)
+    got = ex.measure()
+    body = trimesh.Trimesh(ex.vertices, ex.faces, process=False)
+    _, d, _ = trimesh.proximity.closest_point(body, ex.object_points())
+    want = float((d <= OBJECT_CONTACT_THRESHOLD).sum())
+    assert want > 0
+    assert got["object_contacts"] == want
+
+
+def test_hand_vertices_are_those_skinned_mostly_to_the_wrist_or_a_finger_joint(bm):
+    names = [n for n in JOINT_NAMES if n.startswith("right_") and
+             (n == "right_wrist" or any(f in n for f in ("index", "middle", "ring", "pinky", "thumb")))]
+    assert len(names) == 16
+    joints = [JOINT_NAMES.index(n) for n in names]
+    w = bm.lbs_weights.cpu().numpy()
+    want = np.flatnonzero(np.isin(w.argmax(1), joints))
+    np.testing.assert_array_equal(hand_vertices(bm, "right"), want)
+    tips = [JOINT_NAMES.index(f"right_{f}3") for f in ("index", "middle", "ring", "pinky", "thumb")]
+    assert np.isin(w[hand_vertices(bm, "right")].argmax(1), tips).sum() > 0   # the fingertips are part of the hand
+
+
+@pytest.mark.parametrize("gap", [0.03, 0.06])
+def test_place_at_palm_holds_any_requested_gap(gap):
+    """The docstring: the nearest body vertex `gap` m outside the object, for any gap (trimesh's signed distance)."""
+    palm = trimesh.creation.icosphere(3, 0.04)
+    ids = np.flatnonzero(palm.vertices[:, 2] < -0.035)
+    mug = make_object("mug")
+    pose = place_at_palm(mug, palm.vertices, palm.faces, ids, gap=gap)
+    moved = mug.copy()
+    moved.apply_transform(pose.matrix())
+    d = -trimesh.proximity.signed_distance(moved, palm.vertices)
+    assert d.min() == pytest.approx(gap, abs=2e-5)

@@ -1,6 +1,8 @@
 """Catalogue and placement: closed, outward, realistic meshes; consistent rigid transforms."""
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 import torch
@@ -10,6 +12,7 @@ from scipy.stats import binomtest
 
 from graspkit.objects import (SPECS, TEST_OBJECTS, ObjectPose, apply_pose, list_objects, make_object,
                               sample_object_pose, sample_surface)
+from graspkit.paths import REPO_ROOT
 
 ALL = list_objects()
 
@@ -206,3 +209,25 @@ def test_yaw_range_is_in_degrees_and_the_centre_at_its_distance_and_bearing():
         R = sample_object_pose(seed, yaw_range_deg=(10.0, 20.0)).rotation
         yaw = np.degrees(np.arctan2(R[1, 0], R[0, 0]))
         assert 10.0 - 1e-9 <= yaw <= 20.0 + 1e-9 and R[2, 2] == pytest.approx(1.0)
+
+
+def _documented_volume_cm3(name: str) -> float:
+    for line in (REPO_ROOT / "docs" / "objects.md").read_text().splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if cells and cells[0] == name and len(cells) >= 5 and re.fullmatch(r"[0-9.]+", cells[4]):
+            return float(cells[4])
+    raise AssertionError(f"{name} not in docs/objects.md's table")
+
+
+def test_mug_is_an_open_cup_hollow_to_near_its_bottom():
+    mug = make_object("mug")
+    lo, hi = mug.bounds
+    radius = mug.extents[1] / 2                      # the cup's diameter is the y extent (the handle lies in xz)
+    axis_x = lo[0] + radius                          # the cup side is at -x, the handle at +x
+    z = np.linspace(lo[2] + 0.01, hi[2] - 0.002, 12)
+    axis = np.stack([np.full_like(z, axis_x), np.zeros_like(z), z], 1)
+    assert not mug.contains(axis).any()              # open top, hollow from 1 cm above the bottom up
+    assert mug.contains([[axis_x, 0.0, lo[2] + 0.002]]).all()    # a floor
+    wall = np.array([[lo[0] + 0.002, 0.0, (lo[2] + hi[2]) / 2]])  # 2 mm into the 4 mm wall
+    assert mug.contains(wall).all()
+    assert mug.volume * 1e6 == pytest.approx(_documented_volume_cm3("mug"), abs=1.0)

@@ -136,3 +136,21 @@ def test_group_all_level_max_pools_the_shared_mlp_over_every_point():
         h = torch.relu(lin(h))
     torch.testing.assert_close(out[:, 0], h.max(1).values)
     assert centre.shape == (2, 1, 3) and float(centre.abs().max()) == 0.0
+
+
+def test_ball_query_on_a_cloud_smaller_than_k_repeats_the_nearest():
+    x = torch.tensor([[[0.0, 0, 0], [0.3, 0, 0], [0.1, 0, 0]]], dtype=torch.float64)   # N = 3 < k = 5
+    c = torch.tensor([[[0.02, 0, 0], [0.29, 0, 0]]], dtype=torch.float64)
+    idx = ball_query(x, c, radius=1.0, k=5)
+    d = torch.cdist(c, x)[0].numpy()
+    for s in range(2):
+        order = np.argsort(d[s], kind="stable")                     # every point is inside the 1 m ball
+        want = np.r_[order, np.full(5 - 3, order[0])]              # then the nearest repeated
+        assert idx[0, s].tolist() == want.tolist()
+
+
+def test_encoder_default_nsample_is_16():
+    enc = PointNet2Encoder(4)
+    assert [sa.nsample for sa in enc.sa[:2]] == [16, 16]
+    g = enc.group(torch.rand(1, 300, 3, generator=torch.Generator().manual_seed(0)))
+    assert g[0].neighbours.shape == (1, 256, 16) and g[1].neighbours.shape == (1, 128, 16)

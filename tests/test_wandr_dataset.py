@@ -246,3 +246,61 @@ def test_cached_clips_are_keyed_by_the_clips_and_the_body(bm, tmp_path):
     W.cached_clips(STUBS, bm, limit=1, cache=tmp_path)
     mp.undo()
     assert len(list(tmp_path.glob("clips_*.npz"))) == 3
+
+
+def test_intention_stats_are_taken_at_frame_i_with_t_goal_minus_i_frames_left(bm):
+    clips = W.load_clips(W.list_clips(DATA_STUBS / "motion", kinds=("reach",), limit=1), bm)
+    k = 0
+    p_all, g = clips.clip(k), int(clips.goal_frame[k])
+    assert g >= 2
+    p = p_all[g - 2:g + 1]                           # three frames: the only window (i = 1) has t_G = i + 1
+    one = W.ClipSet(p, torch.tensor([0, 3]), clips.rest[k:k + 1], clips.betas[k:k + 1], clips.goal[k:k + 1],
+                    torch.tensor([2]), torch.tensor([1]), ["reach/one.npz"])
+    assert len(W.WindowDataset(one, max_steps=0)) == 1
+    stats = W.compute_stats(one, samples=50)
+    # closed form at frame i = 1: I^w = R_z(-psi)(G - W) / (1/30 s), I^r = (cos, sin)(psi_G - psi) - (1, 0),
+    # I^p = 2 (1 - e^{-|D|}) D / |D| with D = R_z(-psi)(G - P)^xy
+    J = I.body_joints(p[1], clips.rest[k])
+    psi, psi_g = I.heading_of_pose(p[1]).double(), I.heading_of_pose(p[2]).double()
+    c, s = torch.cos(psi), torch.sin(psi)
+    R = torch.tensor([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]], dtype=torch.float64)
+    goal = clips.goal[k].double()
+    iw = R @ (goal - J[I.WRIST].double()) * 30.0
+    D = (R @ (goal - J[I.PELVIS].double()))[:2]
+    ip = 2 * (1 - torch.exp(-D.norm())) * D / D.norm()
+    ir = torch.stack([torch.cos(psi_g - psi) - 1, torch.sin(psi_g - psi)])
+    want = torch.cat([iw, ir, ip]).float()
+    torch.testing.assert_close(stats["intention_mean"], want, rtol=1e-4, atol=1e-4)
+    # one window and one frame with a frame on each side: no spread, so every std is the documented floor (not NaN)
+    for k in ("delta_std", "state_std", "intention_std"):
+        torch.testing.assert_close(stats[k], torch.full_like(stats[k], W.STD_FLOOR), rtol=0, atol=0)
+
+
+def test_a_dropped_clip_does_not_shift_the_rest_joints_of_those_kept(bm):
+    """clips_from_motions keeps each clip's own shaped rest joints when the foot filter drops a clip before it: the FK
+    of the kept clip matches Motion.joint_positions (the body model's joints-only forward pass) for its own betas."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    m = load_motion(sorted((DATA_STUBS / "motion" / "locomotion").glob("*.npz"))[1])
+    b1 = np.zeros(10, np.float32)
+    b1[0] = 2.0                                               # another body than the kept clip's
+    assert not np.allclose(b1, np.asarray(m.betas[:10]))
+    lifted = replace(m, trans=m.trans + np.array([0, 0, 1.0], np.float32), betas=b1)   # dropped (feet > 20 cm)
+    kept = m
+    cs = W.clips_from_motions([lifted, kept], ["lifted", "kept"], bm)
+    assert cs.names == ["kept"]
+    J = I.body_joints(cs.clip(0)[:3], cs.rest[0]).double().numpy()
+    np.testing.assert_allclose(J, kept.joint_positions(bm)[:3, :22], atol=1e-4)
+
+
+def test_clips_shorter_than_three_frames_are_dropped(bm):
+    """clips_from_motions' docstring: Motion objects of >= 3 frames (one frame before and after a state); shorter
+    clips are left out."""
+    from dataclasses import replace
+
+    m = load_motion(sorted((DATA_STUBS / "motion" / "locomotion").glob("*.npz"))[0])
+    short = [replace(m, poses=m.poses[:n], trans=m.trans[:n], contacts=None) for n in (1, 2, 3)]
+    cs = W.clips_from_motions(short, ["one", "two", "three"], bm)
+    assert cs.names == ["three"] and cs.lengths.tolist() == [3]

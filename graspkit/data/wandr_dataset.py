@@ -311,7 +311,7 @@ def compute_stats(clips: ClipSet, samples: int = 20000, seed: int = 0, goal_fram
         for a in range(0, chunks[0].shape[1], block):
             x = torch.cat([c[:, a:a + block] for c in chunks]).double()
             mean.append(x.mean(0))
-            std.append(x.std(0))
+            std.append(x.std(0, correction=1 if len(x) > 1 else 0))      # one row: 0 (then the floor), not NaN
         return torch.cat(mean).float(), torch.cat(std).clamp(min=STD_FLOOR).float()
 
     (dm, dsd), (sm, ssd), (im, isd) = ms(d_all), ms(s_all), ms([inten])
