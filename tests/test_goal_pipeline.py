@@ -130,7 +130,6 @@ def test_end_figures_are_of_the_last_frame_and_sliding_is_per_frame_pair(monkeyp
     import graspkit.eval_goal as eg
     import graspkit.metrics as gm
     from graspkit.eval_goal import _body
-    from graspkit.goal import synthesize
     seen = {}
     real_fig, real_sl = gm.grasp_and_end_figures, eg.sliding
 

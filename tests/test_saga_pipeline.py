@@ -199,7 +199,6 @@ def test_end_figures_and_skating_are_of_the_returned_motion(bm, monkeypatch):
     sparse markers (r.motion is the fitted body moved to the world; a few optimiser steps only)."""
     import graspkit.eval_motionfill as emf
     import graspkit.metrics as gm
-    from graspkit.saga import synthesize
     seen = {}
     real_fig, real_sk = gm.grasp_and_end_figures, emf.skating
 
@@ -221,6 +220,6 @@ def test_end_figures_and_skating_are_of_the_returned_motion(bm, monkeypatch):
     torch.testing.assert_close(seen["end"], v[-1], atol=1e-4, rtol=0)
     assert float((v[-1] - v[-2]).norm(dim=-1).max()) > 1e-3           # the last two frames differ
     fitted = seen["skating"][1][0]                                      # skating_opt's markers (61, 79, 3)
-    want = saga_sparse_markers(bm).select(v)[...].numpy()
+    want = saga_sparse_markers(bm).select(v).numpy()
     np.testing.assert_allclose(fitted, want, atol=1e-3)
     assert r.metrics["skating_opt"] == pytest.approx(real_sk(want[None], np.zeros(1), emf.heel_columns()), abs=0.02)
