@@ -13,7 +13,7 @@ from graspkit.body import BodyModel
 from graspkit.body.skeleton import JOINT_INDEX as J
 from graspkit.data import Motion
 from graspkit.data import grasp_make as gm
-from graspkit.data.approach import TPOSE_S, _continuous, _rate_limited, approach_motion
+from graspkit.data.approach import GRASP_CLOSE_S, TPOSE_S, _continuous, _rate_limited, approach_motion
 from graspkit.data.grasp import (GRASP_PARTS, SPLITS, GraspFitter, grasp_candidates, grasp_types, object_points_world,
                                  object_radius, split_of)
 from graspkit.data.grasp_make import accepted, fit_chunk
@@ -347,3 +347,27 @@ def test_the_approach_clip_opens_the_right_hand_into_its_grasp_types_pre_shape(f
         assert err.max() < 0.05, err
         left = Rotation.from_rotvec(np.asarray(r.init_poses[25:40], np.float64))
         assert (left.inv() * Rotation.from_rotvec(np.asarray(pre, np.float64))).magnitude().max() > 0.2  # the case
+
+
+def test_fingers_close_over_grasp_close_s_and_arrive_at_the_grasp_frame():
+    """approach_motion: the fingers go plan -> open pre-shape -> grasp, starting to close GRASP_CLOSE_S before the
+    grasp frame (module constants), so they arrive there: one frame before it they are within 5 % of the way, and no
+    frame-to-frame change near the grasp is a snap (each < 25 % of the open -> grasp angle). Angles by scipy."""
+    T, fps, g = 60, 30.0, 45
+    plan = Motion(np.zeros((T, 55, 3)), np.zeros((T, 3)), np.zeros(10), fps)
+    grasp = np.zeros((55, 3))
+    grasp[40:55] = [0.0, 0.0, 0.9]                 # every right finger joint flexed 0.9 rad about z
+    open_hand = np.tile([0.0, 0.0, -0.2], (15, 1))
+    m = approach_motion(plan, g, grasp, open_hand)
+    R = Rotation.from_rotvec(m.poses[:, 40:55].reshape(-1, 3).astype(np.float64)).as_matrix().reshape(T, 15, 3, 3)
+    Rg = Rotation.from_rotvec(grasp[40:55]).as_matrix()
+
+    def ang(a, b):
+        return Rotation.from_matrix(np.swapaxes(a, -1, -2) @ b).magnitude()
+
+    total = ang(Rotation.from_rotvec(open_hand).as_matrix(), Rg).max()        # 1.1 rad
+    assert ang(R[g], Rg).max() < 1e-6
+    assert ang(R[g - 1], Rg).max() < 0.05 * total
+    k0 = g - int(round(GRASP_CLOSE_S * fps)) - 2
+    steps = [ang(R[k], R[k + 1]).max() for k in range(k0, g)]
+    assert max(steps) < 0.25 * total, np.round(steps, 3)

@@ -10,6 +10,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from graspkit.body import BodyModel
+from graspkit.body.markers import saga_sparse_markers
 from graspkit.body.skeleton import SMPLX_LANDMARK_VERTEX_IDS
 from graspkit.data.grab import load_grasp_sequence
 from graspkit.data.grasp_datasets import ApproachDataset, GNetDataset, WholeGraspDataset
@@ -141,3 +142,22 @@ def test_object_points_are_turned_by_the_object_pose():
         assert touching.sum() > 0
         d = np.linalg.norm(ds[i]["markers"].numpy()[touching][:, None] - ds[i]["object_points"].numpy()[None], axis=-1)
         assert d.min(1).max() < MARKER_CONTACT_THRESHOLD + 0.01    # in contact: within 2 cm of the surface (+ spacing)
+
+
+def test_approach_markers_are_the_mesh_at_the_saga_marker_ids():
+    """ApproachDataset(bm=...)['markers'] (T,79,3): SAGA's stage-2 markers, i.e. the posed mesh (smplx, flat hand mean,
+    as the file's parameters) at saga_sparse_markers' vertex ids, on the first and the last frame of the clip."""
+    bm = BodyModel.from_file(PROCEDURAL_MODEL)
+    item = ApproachDataset(STUBS / "approach", split=None, window=None, bm=bm)[0]
+    z = dict(np.load(APPROACH[0], allow_pickle=False))
+    T = len(z["body.params.transl"])
+    ids = saga_sparse_markers(bm).vertex_ids
+    assert item["markers"].shape == (T, len(ids), 3)
+    model = smplx.create(str(STUBS / "body_models"), model_type="smplx", gender="neutral", ext="npz", use_pca=False,
+                         flat_hand_mean=True, num_betas=10, dtype=torch.float64)
+    for k in (0, T - 1):
+        with torch.no_grad():
+            v = model(betas=torch.as_tensor(z["body.betas"][None], dtype=torch.float64),
+                      **{p: torch.as_tensor(z[f"body.params.{p}"][k:k + 1], dtype=torch.float64) for p in PARAMS}
+                      ).vertices[0].numpy()
+        np.testing.assert_allclose(item["markers"][k].numpy(), v[ids], atol=1e-4)

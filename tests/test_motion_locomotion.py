@@ -2,16 +2,21 @@
 import numpy as np
 import pytest
 import torch
+from scipy.ndimage import gaussian_filter1d
 
 from graspkit import metrics as M
+from graspkit.body import BodyModel
 from graspkit.body.markers import foot_vertices
 from graspkit.body.skeleton import JOINT_INDEX as J
 from graspkit.data import generate_locomotion
 from graspkit.data.footsteps import GaitStyle, foot_tracks, plan_footsteps, support_weight
+from graspkit.data.ik import wrap_angle
 from graspkit.data.locomotion import _segments, locomotion_plan
 from graspkit.data.motion import Motion
+from graspkit.data.posing import Controls, Style, pose_body
 from graspkit.data.rig import build_rig
 from graspkit.data.trajectory import RootPlan, heading_profile, integrate_controls, straight_walk
+from graspkit.paths import REPO_ROOT
 
 
 @pytest.fixture(scope="module")
@@ -297,3 +302,224 @@ def test_a_curve_plan_does_not_turn_in_place_at_its_start():
         h = np.unwrap(plan.heading)
         walked = np.linalg.norm(np.diff(plan.xy[:rest + 1], axis=0), axis=1).sum()
         assert abs(h[rest] - h[0]) <= 0.8 * walked, (seed, abs(h[rest] - h[0]), walked)
+
+
+def test_standing_feet_stand_under_the_rest_ankles(bm, rig):
+    """A body standing still (facing +x) stands with its ankles where the rest skeleton has them relative to the
+    pelvis, along the facing direction: the footprint is under the ankle (FootGeometry.ref), not mirrored about the
+    pelvis. Truth: the rest joints of the body model (canonical z forward -> world x)."""
+    T = 6
+    plan = RootPlan(np.zeros((T, 2)), np.zeros(T))
+    tracks = foot_tracks(plan_footsteps(plan, rig, GaitStyle()), plan, rig, GaitStyle())
+    _, _, extra = pose_body(rig, plan, tracks, Style())
+    pos = extra["joints"]
+    with torch.no_grad():
+        j = bm(betas=torch.zeros(1, 10, dtype=bm.dtype)).joints[0].double().numpy()
+    for side in ("left", "right"):
+        want = j[J[f"{side}_ankle"], 2] - j[J["pelvis"], 2]            # rest: ankle ahead (+) / behind (-) the pelvis
+        got = pos[:, J[f"{side}_ankle"], 0] - pos[:, J["pelvis"], 0]
+        np.testing.assert_allclose(got, want, atol=0.01)
+
+
+def test_footsteps_do_not_depend_on_how_the_heading_is_wrapped(rig):
+    """A turn in place across +-pi: the plan with its heading wrapped to (-pi, pi] (a jump of 2 pi at the seam) is the
+    same motion as the unwrapped one, so it takes the same steps at the same times (angles are compared modulo 2 pi)."""
+    T = 150
+    h = heading_profile(T, 2.6, -2.6, 0.5, 3.0)             # the short way: +1.08 rad through pi
+    assert h.max() > np.pi
+    a = plan_footsteps(RootPlan(np.zeros((T, 2)), h), rig, GaitStyle())
+    b = plan_footsteps(RootPlan(np.zeros((T, 2)), wrap_angle(h)), rig, GaitStyle())
+    assert len(a) >= 2
+    assert [(s.side, round(s.t_lift, 6)) for s in a] == [(s.side, round(s.t_lift, 6)) for s in b]
+    T2 = 90                                                   # standing still facing -x, heading noise across the seam
+    h2 = wrap_angle(np.pi + 1e-3 * np.where(np.arange(T2) % 2 == 0, 1.0, -1.0))
+    assert plan_footsteps(RootPlan(np.zeros((T2, 2)), h2), rig, GaitStyle()) == []
+
+
+def test_backward_steps_land_without_a_heel_strike(rig):
+    """Walking backwards the foot lands toes first (the heel-strike toes-up angle is for forward travel:
+    GaitStyle.strike_gain per m ahead); walking forwards it lands heel first."""
+    T = 150
+    xb, _ = straight_walk(T, (0, 0), np.pi, 2.0, 0.3, 4.5)      # moving along -x while facing +x
+    back = plan_footsteps(RootPlan(xb, np.zeros(T)), rig, GaitStyle())
+    xf, _ = straight_walk(T, (0, 0), 0.0, 2.0, 0.3, 4.5)
+    fwd = plan_footsteps(RootPlan(xf, np.zeros(T)), rig, GaitStyle())
+    assert len(back) >= 4 and all(s.strike == 0.0 for s in back)
+    assert max(s.strike for s in fwd) > 0.1
+
+
+def test_support_weight_moves_from_the_right_foot_to_the_left():
+    """The mirror of the suite's left -> right case: right single support, 5 frames on both feet, then left single
+    support: the weight on the left foot rises from 0 to 1 through the double support, monotonically (w -> 1 - w)."""
+    T = 30
+    c = np.zeros((T, 4), bool)
+    c[:15, 2:] = True
+    c[10:, :2] = True
+    w = support_weight(c, 30.0)
+    np.testing.assert_array_equal(w[:10], 0.0)
+    np.testing.assert_array_equal(w[15:], 1.0)
+    assert (np.diff(w[9:16]) > 0).all()
+    c2 = c[:, [2, 3, 0, 1]]                                   # the same contacts with the sides swapped
+    np.testing.assert_allclose(support_weight(c2, 30.0), 1.0 - w, atol=1e-12)
+
+
+def test_the_swing_joins_the_stance_without_a_jump_in_vertical_speed(rig):
+    """The swing is a Hermite curve matched to the toe-off and heel-strike states (module doc) plus a clearance bump:
+    sampled finely (600 fps), the ankle's vertical speed is continuous at lift-off and at landing (a jump < 0.15 m/s;
+    a bump with non-zero slope at its ends adds about 0.5 m/s)."""
+    fps = 600.0
+    T = int(4.0 * fps)
+    xy, _ = straight_walk(T, (0, 0), 0.0, 2.5, 0.3, 3.8, fps=fps)
+    plan = RootPlan(xy, np.zeros(T), fps)
+    steps = plan_footsteps(plan, rig, GaitStyle())
+    tr = foot_tracks(steps, plan, rig, GaitStyle())
+    assert len(steps) >= 4
+    for s in steps[1:-1]:
+        z = tr.ankle[s.side, :, 2]
+        for t in (s.t_lift, s.t_land):
+            k = int(np.ceil(t * fps))
+            before, after = (z[k - 1] - z[k - 3]) / 2 * fps, (z[k + 2] - z[k]) / 2 * fps
+            assert abs(after - before) < 0.15, (s.side, t, after - before)
+
+
+def test_swing_clearance_is_in_units_of_a_170_cm_body(bm):
+    """GaitStyle: 'lengths in m for a 1.70 m body'. Raising the clearance by dc raises the swing ankle at mid-swing by
+    dc x (body height / 1.70 m) (height measured on the shaped mesh), for a body 10 % taller than 1.70 m."""
+    betas = np.zeros(10)
+    betas[0] = 2.0
+    rig = build_rig(bm, betas)
+    with torch.no_grad():
+        v = bm(betas=torch.as_tensor(betas[None], dtype=bm.dtype)).vertices[0].double().numpy()
+    height = v[:, 1].max() - v[:, 1].min()
+    assert height > 1.80
+    T = 150
+    xy, _ = straight_walk(T, (0, 0), 0.0, 3.0, 0.3, 4.5)
+    plan = RootPlan(xy, np.zeros(T))
+    lo, hi = GaitStyle(clearance=0.06), GaitStyle(clearance=0.09)
+    steps = plan_footsteps(plan, rig, lo)
+    a = foot_tracks(steps, plan, rig, lo).ankle[..., 2]
+    b = foot_tracks(steps, plan, rig, hi).ankle[..., 2]
+    assert np.abs(b - a).max() == pytest.approx(0.03 * height / 1.70, rel=0.03)
+
+
+def test_the_hip_of_the_leading_leg_is_ahead(walk):
+    """Pelvic rotation (Inman; posing.py: 'pelvic rotation (yaw) with the stepping leg'): the hip on the side of the
+    leading foot is ahead, so the hips' separation along the path follows the ankles'."""
+    m, p, _, _, moving = walk
+    v = np.gradient(gaussian_filter1d(p[:, 0, :2], 15, axis=0, mode="nearest"), axis=0)   # the path, without the sway
+    fwd = v / np.linalg.norm(v, axis=1, keepdims=True)
+    hips = _along(p[:, J["left_hip"], :2] - p[:, J["right_hip"], :2], fwd)[moving]
+    ankles = _along(p[:, J["left_ankle"], :2] - p[:, J["right_ankle"], :2], fwd)[moving]
+    assert np.corrcoef(hips, ankles)[0, 1] > 0.5
+
+
+def test_the_pelvis_drops_on_the_swing_side(walk):
+    """Obliquity (posing.py module doc: 'the swing side drops'): in left single support the left hip is higher than
+    the right, in right single support lower."""
+    m, p, fwd, _, moving = walk
+    c = m.contacts.astype(bool)
+    on_l, on_r = c[:, :2].any(1), c[:, 2:].any(1)
+    only_l, only_r = moving & on_l & ~on_r, moving & on_r & ~on_l
+    dz = p[:, J["left_hip"], 2] - p[:, J["right_hip"], 2]
+    assert only_l.sum() > 10 and only_r.sum() > 10
+    assert dz[only_l].mean() > 0.002 and dz[only_r].mean() < -0.002
+
+
+def test_the_arms_lag_the_legs(walk):
+    """posing.py: 'arms swing against the legs ... arms lag a little': the left wrist's swing along the path follows
+    the right ankle's best a few frames later (a positive lag), not earlier."""
+    m, p, fwd, _, moving = walk
+    idx = np.flatnonzero(moving)
+    sl = slice(idx[0], idx[-1])
+    a = _along(p[:, J["left_wrist"], :2] - p[:, 0, :2], fwd)[sl]
+    b = _along(p[:, J["right_ankle"], :2] - p[:, 0, :2], fwd)[sl]
+    a, b = a - a.mean(), b - b.mean()
+
+    def corr(lag):   # wrist at t + lag against ankle at t
+        x, y = (a[lag:], b[:len(b) - lag]) if lag >= 0 else (a[:lag], b[-lag:])
+        return np.corrcoef(x, y)[0, 1]
+
+    best = max(range(-6, 7), key=corr)
+    assert 1 <= best <= 6, best
+
+
+@pytest.mark.parametrize("look_yaw", [-0.5, 0.0, 0.7])
+def test_the_head_looks_along_the_look_direction(bm, look_yaw):
+    """A standing body with the look turned by look_yaw: the head's forward axis (canonical +z) points at that yaw
+    from the heading, pitched down by Style.head_pitch (posing.py: 'looks along the path (slightly down)'); the neck
+    and head together turn by the whole yaw, not more."""
+    rig = build_rig(bm)
+    T = 8
+    plan = RootPlan(np.zeros((T, 2)), np.full(T, 0.3))
+    tracks = foot_tracks([], plan, rig, GaitStyle())
+    c = Controls.zeros(T)
+    c.look_yaw = np.full(T, look_yaw)
+    style = Style()
+    _, _, extra = pose_body(rig, plan, tracks, style, c)
+    d = extra["global_rot"][:, J["head"]] @ np.array([0.0, 0.0, 1.0])
+    yaw = np.arctan2(d[:, 1], d[:, 0])
+    pitch_down = -np.arcsin(d[:, 2])
+    np.testing.assert_allclose(yaw, 0.3 + look_yaw, atol=0.03)
+    np.testing.assert_allclose(pitch_down, style.head_pitch, atol=0.03)
+
+
+def test_plan_at_a_frame_time_is_that_frame_and_between_frames_linear():
+    """RootPlan.at(t) (docstring: linear interpolation, held at the ends): at t = k / fps it is frame k; a quarter of
+    the way from frame 1 to frame 2 it is 0.75 xy[1] + 0.25 xy[2]; the heading likewise."""
+    xy = np.array([[0.0, 0.0], [1.0, 0.5], [3.0, 0.5], [4.0, 2.0]])
+    h = np.array([0.0, 0.2, 0.4, 0.8])
+    plan = RootPlan(xy, h, fps=10.0)
+    for k in range(4):
+        p, hk = plan.at(k / 10.0)
+        np.testing.assert_allclose(p, xy[k], atol=1e-12)
+        np.testing.assert_allclose(hk, h[k], atol=1e-12)
+    p, hk = plan.at(0.125)
+    np.testing.assert_allclose(p, 0.75 * xy[1] + 0.25 * xy[2], atol=1e-12)
+    np.testing.assert_allclose(hk, 0.75 * h[1] + 0.25 * h[2], atol=1e-12)
+    p, _ = plan.at(np.array([-1.0, 5.0]))                     # held at the ends
+    np.testing.assert_allclose(p, xy[[0, 3]], atol=1e-12)
+
+
+def test_side_steps_go_left_for_a_positive_sideways_speed():
+    """A 'side' program's segment with sideways speed u (> 0: leftward, integrate_controls' v_side) moves the plan to
+    the left of its heading (-sin h, cos h) at about u m/s in the segment's steady middle."""
+    fps, T, checked = 30.0, 300, 0
+    for seed in range(6):
+        segs = _segments("side", np.random.default_rng(seed), T / fps)       # the draws locomotion_plan makes
+        plan, _ = locomotion_plan("side", np.random.default_rng(seed), T, fps)
+        t0 = 0.0
+        for name, dur, p in segs:
+            if name == "side" and dur >= 1.2 and t0 + dur <= T / fps:
+                a, b = int(round((t0 + 0.4 * dur) * fps)), int(round((t0 + 0.6 * dur) * fps))
+                h = plan.heading[a]
+                left = np.array([-np.sin(h), np.cos(h)])
+                vel = (plan.xy[b] - plan.xy[a]) / ((b - a) / fps)
+                assert np.sign(vel @ left) == np.sign(p["u"]), (seed, p)
+                assert abs(vel @ left - p["u"]) < 0.35 * abs(p["u"]), (seed, p, vel @ left)
+                checked += 1
+            t0 += int(round(dur * fps)) / fps
+    assert checked >= 2
+
+
+@pytest.fixture(scope="module")
+def shifted_model(tmp_path_factory):
+    """The shipped body model with its template translated by (2, 3, 5) cm (the same body; its rest pelvis J0 moves)."""
+    a = dict(np.load(REPO_ROOT / "data_stubs" / "body_models" / "smplx" / "SMPLX_NEUTRAL.npz", allow_pickle=False))
+    a["v_template"] = a["v_template"] + np.array([0.02, 0.03, 0.05], a["v_template"].dtype)
+    root = tmp_path_factory.mktemp("shifted_model")
+    (root / "smplx").mkdir()
+    np.savez(root / "smplx" / "SMPLX_NEUTRAL.npz", **a)
+    return BodyModel.from_file(root / "smplx" / "SMPLX_NEUTRAL.npz")
+
+
+@pytest.mark.parametrize("kind", ["walk", "idle"])
+def test_a_clip_does_not_depend_on_where_the_template_sits(bm, shifted_model, kind):
+    """Translating the model's template translates J0 with it; SMPL-X puts the pelvis at J0 + trans, so a clip that
+    sets trans = pelvis - J0 (generate_locomotion) gives the same mesh: the same heights (feet on the floor), and the
+    same horizontal motion up to the clip's start offset."""
+    m1 = generate_locomotion(1, bm, num_frames=30, kind=kind)
+    m2 = generate_locomotion(1, shifted_model, num_frames=30, kind=kind)
+    v1, v2 = m1.vertices(bm).numpy(), m2.vertices(shifted_model).numpy()
+    np.testing.assert_allclose(v2[..., 2], v1[..., 2], atol=1e-4)
+    c1, c2 = v1[0, :, :2].mean(0), v2[0, :, :2].mean(0)
+    np.testing.assert_allclose(v2[..., :2] - c2, v1[..., :2] - c1, atol=1e-4)

@@ -6,9 +6,11 @@ from scipy import stats
 from graspkit import metrics as M
 from graspkit.body.skeleton import JOINT_INDEX as J
 from graspkit.data import Start, evaluation_goals, generate_reach, plan_reach
+from graspkit.data.ik import wrap_angle
 from graspkit.data.motion import heading_of
 from graspkit.data.posing import GAZE_LEVEL, HEAD_YAW_LIMIT, gaze_yaw, hand_pose
-from graspkit.data.reaching import FAR_HEIGHTS, FLOOR_WRIST, RELEASE_S, plan_reach_chain
+from graspkit.data.reaching import (FAR_HEIGHTS, FLOOR_WRIST, LEVELS, REACH_RHO, RELEASE_S, _approach_plan,
+                                    choose_posture, plan_reach_chain)
 
 
 WRIST = 21
@@ -319,3 +321,37 @@ def test_a_reach_given_little_time_starts_from_rest(bm, t_goal):
         w = m.joint_positions(bm)[:, J["right_wrist"]]
         assert np.linalg.norm(w[1] - w[0]) * m.fps < 0.15, goal
         assert np.linalg.norm(w[t_goal] - np.asarray(goal)) < 1e-3
+
+
+def _shoulders():
+    """Synthetic right-shoulder heights: 1.4 m at level 0, 0.6 m lower per unit of b (b > 0 lowers the body)."""
+    s = np.zeros((len(LEVELS), 3))
+    s[:, 0] = 0.1
+    s[:, 2] = 1.4 - 0.6 * LEVELS
+    return s
+
+
+def test_choose_posture_takes_the_smallest_level_that_reaches():
+    """choose_posture (docstring): the level with the smallest |b| whose shoulder reaches target_z. A goal just below
+    the standing shoulder needs no bend (b = 0, reached at REACH_RHO arm lengths); a low one needs the first level
+    whose shoulder is within 0.95 arm lengths above it (here b = 0.55, not the deepest squat)."""
+    arm = 0.6
+    b, sh, reach = choose_posture(_shoulders(), 1.3, arm)
+    assert b == 0.0 and sh[2] == 1.4
+    r = REACH_RHO * arm
+    assert abs(reach - np.sqrt(r**2 - 0.1**2)) < 1e-9
+    b, sh, _ = choose_posture(_shoulders(), 0.52, arm)
+    assert abs(b - 0.55) < 1e-9                               # 1.4 - 0.6 b - 0.52 <= 0.57  <=>  b >= 0.5167
+    assert 0.52 - sh[2] >= -0.95 * arm
+
+
+def test_the_final_turn_takes_the_short_way_across_pi():
+    """_approach_plan walks along phi = 3.0 rad, then turns to face psi_f = -3.0 rad: the short way is +0.28 rad
+    through pi, not -6 rad round (heading_profile's rule: the short way)."""
+    T, fps = 150, 30.0
+    phi, psi_f = 3.0, -3.0
+    P = 2.0 * np.array([np.cos(phi), np.sin(phi)])
+    plan = _approach_plan(T, np.zeros(2), phi, P, psi_f, 3.5, 3.8, 1.0, fps)
+    h = np.unwrap(plan.heading)
+    assert abs(wrap_angle(h[-1] - psi_f)) < 1e-6                         # ends facing psi_f
+    assert np.abs(np.diff(h)).sum() < abs(wrap_angle(psi_f - phi)) + 0.05   # and turned no more than the short way

@@ -1,4 +1,6 @@
 """MotionFill-VAE's windows (SAGA §3.3, A.3): canonical frame, root states, local motion round trip, images."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -6,9 +8,9 @@ from scipy.spatial.transform import Rotation
 
 from graspkit.body.markers import saga_sparse_markers
 from graspkit.data import load_motion
-from graspkit.data.motion import Motion
 from graspkit.data import motionfill_dataset as mf
-from pathlib import Path
+from graspkit.data.motion import Motion
+from graspkit.data.motionfill_dataset import CONTACT_HEIGHT, CONTACT_SPEED, geometric_contacts
 
 STUBS = Path(__file__).resolve().parents[1] / "data_stubs" / "motion"
 
@@ -141,3 +143,31 @@ def test_yaw_velocity_is_wrapped_across_pi():
     np.testing.assert_allclose(vel[:, 2], 0.01, atol=1e-9)
     np.testing.assert_allclose(vel[:, 0], 0.02 * np.cos(h[:-1]), atol=1e-9)     # 2 cm along x, turned by -h
     np.testing.assert_allclose(vel[:, 1], -0.02 * np.sin(h[:-1]), atol=1e-9)
+
+
+def test_a_still_foot_held_above_the_floor_is_not_in_contact():
+    """Contacts: 'near the clip's lowest foot height and slow'. The left foot stands on the floor (z = 0); the right
+    heel stands there too, the right toe is held still 20 cm up (> CONTACT_HEIGHT above the clip's lowest marker):
+    not a contact, however still."""
+    n = 20
+    foot = np.zeros((n, 4, 3))
+    foot[:, :, 0] = [0.0, 0.2, 0.3, 0.5]
+    foot[:, 3, 2] = 0.2
+    c = geometric_contacts(foot, 30.0)
+    assert CONTACT_HEIGHT < 0.2
+    assert c[:, :3].all() and not c[:, 3].any()
+
+
+def test_contact_speed_is_in_metres_per_second():
+    """CONTACT_SPEED = 0.2 m/s: a foot marker on the floor sliding at 1 m/s (3.3 cm per frame at 30 fps) is not in
+    contact; one creeping at 0.1 m/s is; at 120 fps the same 1 m/s slide is still not a contact."""
+    assert CONTACT_SPEED == 0.2
+    for fps in (30.0, 120.0):
+        n = 30
+        t = np.arange(n) / fps
+        foot = np.zeros((n, 4, 3))
+        foot[:, 0, 0] = 1.0 * t            # sliding at 1 m/s
+        foot[:, 1, 0] = 0.1 * t            # creeping at 0.1 m/s
+        c = geometric_contacts(foot, fps)
+        assert not c[:, 0].any(), fps
+        assert c[:, 1].all() and c[:, 2:].all(), fps
