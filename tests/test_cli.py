@@ -425,3 +425,41 @@ def test_goal_passes_max_frames_and_stall_on(probe, tmp_path):
         assert main(["goal", "--object", "mug", "--out", str(tmp_path), *flag]) == 2
     assert [k.get("max_frames") for k in probe] == [150, 37]
     assert [k.get("stall") for k in probe] == [STALL_FRAMES, None]
+
+
+@pytest.fixture
+def probe_args(monkeypatch):
+    """saga/goal.synthesize and benchmark.wandr_motions replaced by a probe that records its arguments and stops."""
+    import graspkit.benchmark
+    import graspkit.goal
+    import graspkit.saga
+    seen = []
+
+    def fake(*a, **k):
+        seen.append((a, k))
+        raise ValueError("probe: stopped")
+
+    monkeypatch.setattr(graspkit.saga, "synthesize", fake)
+    monkeypatch.setattr(graspkit.goal, "synthesize", fake)
+    monkeypatch.setattr(graspkit.benchmark, "wandr_motions", fake)
+    return seen
+
+
+def test_at_yaw_is_in_degrees(probe_args, tmp_path):
+    """`--at X Y Z YAW_DEG`: YAW_DEG = 90 turns the object a quarter turn about z (x -> y), placed at X Y Z."""
+    from graspkit.cli import main
+
+    assert main(["saga", "--object", "mug", "--at", "0.3", "-0.6", "0.8", "90", "--out", str(tmp_path)]) == 2
+    pose = probe_args[0][1]["object_pose"]
+    np.testing.assert_allclose(pose.rotation @ [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(pose.translation, [0.3, -0.6, 0.8])
+
+
+@pytest.mark.parametrize("seconds, frames", [("0.999", 30), ("1.99", 60), ("2", 60)])
+def test_wandr_seconds_are_rounded_to_frames_at_30_fps(probe_args, tmp_path, seconds, frames):
+    """`graspkit wandr --seconds S` generates round(30 S) frames (t_G at 30 fps)."""
+    from graspkit.cli import main
+
+    assert main(["wandr", "--goal", "1", "0", "1", "--seconds", seconds, "--out", str(tmp_path)]) == 2
+    a, k = probe_args[0]
+    assert a[2] == frames

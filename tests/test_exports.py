@@ -12,7 +12,7 @@ import trimesh
 
 from graspkit.body import BodyModel
 from graspkit.data import load_motion
-from graspkit.viz.export import Z_UP_TO_Y_UP, export_motion, export_sequence_glb, load_sequence_glb
+from graspkit.viz.export import Z_UP_TO_Y_UP, export_motion, export_scene, export_sequence_glb, load_sequence_glb
 
 from conftest import PROCEDURAL_MODEL
 
@@ -131,3 +131,28 @@ def test_glb_animation_shows_each_input_frame_at_its_time_and_the_header_is_the_
     for key, k in enumerate(kept):                             # what a viewer draws at the key's time
         shown = pos + np.tensordot(weights[key], targets, 1)
         assert np.abs(shown - verts[k]).max() < 1e-5, k
+
+
+def _tet():
+    v = np.array([[1.0, 2.0, 3.0], [1.5, 2.0, 3.0], [1.0, 2.5, 3.0], [1.0, 2.0, 3.5]])
+    return v, np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+
+
+def test_glb_scene_is_y_up_by_a_rotation(tmp_path):
+    """glTF is y-up and right-handed: a z-up point (x, y, z) is (x, z, -y) in the file (a -90 deg turn about x, det
+    +1, so that a mesh's winding and handedness survive), read back with trimesh."""
+    v, f = _tet()
+    path = export_scene({"tet": (v, f)}, tmp_path / "t.glb")
+    got = np.asarray(next(iter(trimesh.load(path).geometry.values())).vertices)
+    want = np.stack([v[:, 0], v[:, 2], -v[:, 1]], 1)
+    assert np.abs(got - want).max() < 1e-6
+
+
+def test_glb_sequence_first_frame_is_y_up_by_a_rotation(tmp_path):
+    """The animated GLB's base mesh (what a viewer without animation shows) is frame 0 in glTF's y-up frame:
+    (x, y, z) -> (x, z, -y), read back with trimesh."""
+    v, f = _tet()
+    frames = np.stack([v, v + [0.1, 0.0, 0.0]])
+    path = export_sequence_glb(frames, f, tmp_path / "s.glb")
+    got = np.asarray(next(iter(trimesh.load(path).geometry.values())).vertices)
+    assert np.abs(got - np.stack([v[:, 0], v[:, 2], -v[:, 1]], 1)).max() < 1e-6

@@ -4,8 +4,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
+from torch import nn
 
-from graspkit.data.motionfill_dataset import MotionFillStats, interpolated_trajectory, local_motion
+from graspkit.data.motionfill_dataset import MotionFillStats, global_motion, interpolated_trajectory, local_motion
 from graspkit.models.blocks import kl_standard_normal, robust_kl
 from graspkit.models.motionfill import (FEATURES, NUM_FRAMES, NUM_ROOT, LocalMotionFill, MotionFillConfig,
                                         MotionFillVAE, TemporalMotionFill, TrajFill, dct_basis, traj_velocity)
@@ -216,8 +217,6 @@ def test_checkpoints_from_before_the_temporal_network_load_as_they_were():
 
 def test_global_motion_round_trip_through_the_model_image():
     """Canonical markers -> (local, vel) -> image -> split -> global markers gives the markers back."""
-    from graspkit.data.motionfill_dataset import global_motion
-
     b = _batch(B=2, seed=3)
     g = np.random.default_rng(3)
     markers = g.normal(0, 0.3, (NUM_FRAMES, 79, 3))
@@ -294,3 +293,81 @@ def test_each_local_weight_multiplies_its_own_term():
             more = m.loss(b, parts=("local",))
             torch.testing.assert_close(more["loss"] - base["loss"], base[term], atol=1e-5, rtol=1e-4)
     m.cfg = base_cfg
+
+
+def _batch_with_markers(B: int = 2, seed: int = 0) -> dict[str, torch.Tensor]:
+    g = np.random.default_rng(seed)
+    heading = np.cumsum(g.normal(0, 0.05, (B, NUM_ROOT)), 1)
+    xy = np.cumsum(g.normal(0, 0.03, (B, NUM_ROOT, 2)), 1)
+    traj = np.concatenate([xy, np.cos(heading)[..., None], np.sin(heading)[..., None]], -1).astype(np.float32)
+    markers = g.normal(0, 0.3, (B, NUM_FRAMES, 79, 3))
+    local, vel = zip(*[local_motion(m, t) for m, t in zip(markers, traj)])
+    return {"traj": torch.as_tensor(traj), "traj_interp": torch.as_tensor(interpolated_trajectory(traj)),
+            "local": torch.as_tensor(np.stack(local)).float(), "vel": torch.as_tensor(np.stack(vel)).float(),
+            "contacts": torch.as_tensor(g.random((B, NUM_FRAMES, 4)) < 0.5).float(), "markers": markers}
+
+
+class _Echo(nn.Module):
+    """A stand-in LocalMotionFill: returns the target's channel 0 with `shift` (normalised units) added to every
+    marker x coordinate, and records the condition image it was given."""
+
+    def __init__(self, shift: float = 0.0):
+        super().__init__()
+        self.shift, self.cond = shift, None
+
+    def forward(self, target, cond):
+        self.cond = cond
+        ch0 = target[:, 0].clone()
+        ch0[..., 0:-4:3] += self.shift
+        z = torch.zeros(len(target), 4, requires_grad=True)
+        return ch0, z, z
+
+
+def test_marker_error_cm_is_the_mean_marker_distance_in_centimetres():
+    """With unit marker statistics, decoded markers 2 cm off in x give marker_error_cm = 2.0."""
+    m = MotionFillVAE().eval()
+    m.local = _Echo(0.02)
+    logs = m.loss(_batch_with_markers(), parts=("local",))
+    assert logs["marker_error_cm"].item() == pytest.approx(2.0, rel=1e-4)
+
+
+def test_fine_tuning_conditions_local_fill_on_trajfills_trajectory():
+    """trajectory='predicted': the condition image's velocity channels are the root velocities of TrajFill's output
+    (at initialisation exactly Gamma_bar), by the data module's local_motion, not those of the true trajectory."""
+    torch.manual_seed(0)
+    m = MotionFillVAE().eval()
+    echo = _Echo()
+    m.local = echo
+    b = _batch_with_markers()
+    m.loss(b, trajectory="predicted")
+    got = echo.cond[:, 1:, :, 0].permute(0, 2, 1).double().numpy()          # (B, 61, 3) normalised = raw (stats 0/1)
+    want = np.stack([local_motion(mk, ti)[1] for mk, ti in zip(b["markers"], b["traj_interp"].double().numpy())])
+    np.testing.assert_allclose(got, want, atol=1e-5)
+    assert np.abs(want - b["vel"].double().numpy()).max() > 1e-3             # the two trajectories differ
+
+
+def test_sampled_contacts_are_probabilities():
+    """sample() returns contact probabilities in [0, 1] (the sigmoid of the decoded logits), even when the decoded
+    logits reach far outside it."""
+    torch.manual_seed(0)
+    m = MotionFillVAE().eval()
+    torch.nn.init.normal_(m.local.out.weight, std=1.0)
+    b = _batch_with_markers()
+    s = m.sample(b["traj_interp"][0], b["local"][0], b["contacts"][0], 2, torch.Generator().manual_seed(1))
+    c = s["contacts"]
+    assert ((c >= 0) & (c <= 1)).all()
+    assert ((c > 0.01) & (c < 0.99)).any()
+
+
+def test_sampled_markers_follow_the_given_trajectory():
+    """sample(traj=...) places the sampled local markers along the given trajectory: markers = global_motion(local,
+    traj) (the data module's inverse of local_motion), not along the straight Gamma_bar."""
+    torch.manual_seed(0)
+    m = MotionFillVAE().eval()
+    b = _batch_with_markers()
+    s = m.sample(b["traj_interp"][0], b["local"][0], b["contacts"][0], 2, torch.Generator().manual_seed(1),
+                 traj=b["traj"][0])
+    want = global_motion(s["local"].double().numpy(), b["traj"][0].double().numpy()[None].repeat(2, 0))
+    np.testing.assert_allclose(s["markers"].double().numpy(), want, atol=1e-4)
+    straight = global_motion(s["local"].double().numpy(), b["traj_interp"][0].double().numpy()[None].repeat(2, 0))
+    assert np.abs(straight - want).max() > 1e-2

@@ -258,3 +258,44 @@ def test_posenet_reads_start_end_velocity_and_normalised_time_per_frame():
     torch.testing.assert_close(f[..., n:2 * n], local[:, -1:].flatten(2).expand(-1, NUM_FRAMES, -1))
     torch.testing.assert_close(f[..., 2 * n:2 * n + 3], vel)
     np.testing.assert_allclose(f[0, :, -1].numpy(), np.arange(NUM_FRAMES) / (NUM_FRAMES - 1), atol=1e-6)   # t / T
+
+
+NR = 62
+
+
+def _window(seed: int = 0):
+    g = np.random.default_rng(seed)
+    t = np.arange(NR) / 60.0
+    heading = np.pi / 2 + 0.8 * np.sin(np.pi * t)
+    xy = np.cumsum(0.03 * np.stack([np.cos(heading), np.sin(heading)], -1), 0)
+    traj = np.concatenate([xy - xy[0], np.cos(heading)[:, None], np.sin(heading)[:, None]], -1)[None]
+    local, vel = local_motion(g.normal(0, 0.3, (NUM_FRAMES, 79, 3)), traj[0])
+    contacts = (g.random((1, NUM_FRAMES, 4)) < 0.5)
+    f = lambda x: torch.as_tensor(np.asarray(x)).float()   # noqa: E731
+    return {"traj": f(traj), "traj_interp": f(interpolated_trajectory(traj)), "local": f(local[None]),
+            "vel": f(vel[None]), "contacts": f(contacts)}
+
+
+def test_routenet_root_error_is_the_horizontal_root_distance_in_cm():
+    """At initialisation RouteNet returns Gamma_bar; its root_error_cm is the mean horizontal (x, y) distance between
+    Gamma_bar and Gamma in cm (numpy), the heading's cos/sin not counted."""
+    torch.manual_seed(0)
+    w = _window()
+    logs = RouteNet().eval().loss(w)
+    d = w["traj_interp"][0, :, :2].double().numpy() - w["traj"][0, :, :2].double().numpy()
+    assert logs["root_error_cm"].item() == pytest.approx(100 * np.linalg.norm(d, axis=-1).mean(), rel=1e-4)
+
+
+@pytest.mark.parametrize("make", [CNNAE, PoseNet])
+def test_baseline_contacts_are_probabilities(make):
+    """predict() returns contact probabilities in [0, 1] even when the decoded logits lie far outside it."""
+    w = _window()
+    torch.manual_seed(0)
+    m = make()
+    m.set_stats(MotionFillStats.fit({"local": w["local"].numpy(), "vel": w["vel"].numpy()}))
+    for name, p in m.named_parameters():
+        if name.startswith(("out", "contact_head.")):
+            torch.nn.init.normal_(p, std=2.0)
+    c = m.eval().predict(w["traj_interp"][0], w["local"][0], w["contacts"][0])["contacts"]
+    assert ((c >= 0) & (c <= 1)).all()
+    assert ((c > 0.01) & (c < 0.99)).any()

@@ -7,9 +7,11 @@ import pytest
 import torch
 
 from graspkit.body import BodyModel
+from graspkit.body.markers import saga_sparse_markers
 from graspkit.eval_motionfill import (approach_scene, heel_columns, linear_local, load_motionfill, pskl, pskl_still_share,
                                       skating)
 from graspkit.paths import DATA_STUBS, default_model_path
+from graspkit.rotations import axis_angle_to_matrix
 
 STUB = DATA_STUBS / "approach" / "approach_000000.npz"
 
@@ -369,3 +371,32 @@ def test_tab3_table_shows_the_papers_figures_beside_the_rows_they_belong_to():
     full = next(x for x in lines if x.startswith("| Ours |"))
     assert local.rstrip(" |").endswith("0.079 / 0.137 / 0.377 / 0.327")
     assert full.rstrip(" |").endswith("0.083 / 0.394 / 0.772 / 0.609")
+
+
+STUB_UNPADDED = DATA_STUBS / "approach" / "approach_000002.npz"    # 91 frames up to the grasp: no front padding
+
+
+def _rigid(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Kabsch: R, t with b ~ a @ R.T + t."""
+    ca, cb = a.mean(0), b.mean(0)
+    u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
+    d = np.sign(np.linalg.det(vt.T @ u.T))
+    R = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    return R, cb - ca @ R.T
+
+
+def test_approach_scene_object_is_in_the_frame_of_the_window_markers():
+    """The scene's object points are the clip's world object points moved by the same rigid map that takes the
+    clip's last 61 frames of world markers (saga_sparse_markers on the posed body) to the window's markers (Kabsch)."""
+    bm = BodyModel.from_file(default_model_path())
+    s = approach_scene(STUB_UNPADDED, bm)
+    with np.load(STUB_UNPADDED) as a:
+        g = int(a["grasp.goal_frame"])
+        R_o = axis_angle_to_matrix(torch.as_tensor(a["object.params.global_orient"][g]).double()).numpy()
+        world_pts = a["object.points"].astype(np.float64) @ R_o.T + a["object.params.transl"][g]
+    m = s["motion"]                                             # the clip's last 61 frames up to the grasp
+    assert m.num_frames == 61 and g + 1 > 62
+    mark = saga_sparse_markers(bm).select(m.vertices(bm)).numpy().astype(np.float64)
+    R, t = _rigid(mark.reshape(-1, 3), s["markers"].astype(np.float64).reshape(-1, 3))
+    assert np.abs(mark.reshape(-1, 3) @ R.T + t - s["markers"].reshape(-1, 3)).max() < 1e-4   # rigid, exactly
+    assert np.abs(world_pts @ R.T + t - s["points"]).max() < 1e-4

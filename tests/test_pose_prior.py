@@ -6,8 +6,8 @@ from scipy.spatial.transform import Rotation
 
 from graspkit.data import load_motion
 from graspkit.metrics import joint_limit_violation
-from graspkit.models.pose_prior import (POSE_PRIOR_PATH, PosePrior, body_poses_from_motions, load_pose_prior,
-                                        mirror_body_pose)
+from graspkit.models.pose_prior import (POSE_PRIOR_PATH, PosePrior, PosePriorConfig, body_poses_from_motions,
+                                        load_pose_prior, mirror_body_pose)
 from graspkit.paths import DATA_STUBS
 
 
@@ -114,3 +114,41 @@ def test_angle_error_is_the_mean_geodesic_angle_of_the_decoded_rotations():
     target = Rotation.from_rotvec(x.double().numpy().reshape(-1, 3))
     ang = (Rotation.from_matrix(R).inv() * target).magnitude()
     assert out["angle_error_deg"].item() == pytest.approx(np.rad2deg(ang).mean(), abs=0.05)
+
+
+def test_loss_is_rec_plus_beta_times_the_closed_form_kl():
+    """The beta-VAE objective: loss = rec + kl_weight * KL(q || N(0, I)), the KL in closed form from the posterior
+    (summed over the latent, averaged over the batch), for a kl_weight that is not 1."""
+    torch.manual_seed(0)
+    m = PosePrior(PosePriorConfig(kl_weight=0.37)).eval()
+    x = 0.3 * torch.randn(5, 63, generator=torch.Generator().manual_seed(2))
+    out = m.loss(x)
+    with torch.no_grad():
+        mu, logvar = m.posterior(x)
+        mu, logvar = mu.double(), logvar.double()
+        kl = (0.5 * (mu ** 2 + logvar.exp() - 1 - logvar)).sum(-1).mean()
+    assert float(out["kl"]) == pytest.approx(float(kl), rel=1e-5)
+    assert float(out["loss"]) == pytest.approx(float(out["rec"]) + 0.37 * float(kl), rel=1e-5)
+
+
+def test_train_pose_prior_holds_out_its_validation_poses(tmp_path, monkeypatch):
+    """train_pose_prior's split: the validation poses (val_fraction of them) are not in the training set, and the two
+    sets together are every pose once."""
+    import graspkit.train as train
+    from graspkit.models.pose_prior import train_pose_prior
+
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
+    got = {}
+
+    def fake_fit(model, step, dataset, cfg, **kw):
+        got["train"], got["val"] = dataset.tensors[0], kw["val_dataset"].tensors[0]
+        return []
+
+    monkeypatch.setattr(train, "fit", fake_fit)
+    poses = (0.3 * np.random.default_rng(0).standard_normal((40, 21, 3))).astype(np.float32)
+    train_pose_prior(tmp_path / "x.pt", poses=poses, epochs=1, val_fraction=0.25, progress=False)
+    tr, va = got["train"].numpy(), got["val"].numpy()
+    assert len(va) == 10 and len(tr) == 30
+    rows = lambda a: {r.tobytes() for r in a}           # noqa: E731
+    assert not rows(tr) & rows(va)
+    assert rows(tr) | rows(va) == rows(poses.reshape(-1, 63))

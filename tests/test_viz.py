@@ -11,6 +11,7 @@ import torch  # noqa: E402
 import trimesh  # noqa: E402
 from matplotlib.animation import FuncAnimation  # noqa: E402
 from mpl_toolkits.mplot3d import Axes3D  # noqa: E402
+from mpl_toolkits.mplot3d.art3d import Line3DCollection  # noqa: E402
 from PIL import Image  # noqa: E402
 
 from graspkit import viz  # noqa: E402
@@ -316,3 +317,34 @@ def test_sphere_is_closed_and_wound_outward():
     out = ((m.triangles_center - c) * m.face_normals).sum(1)
     assert (out > 0).all()
     np.testing.assert_allclose(np.linalg.norm(v - c, axis=1), 0.05, atol=1e-12)
+
+
+def test_a_strided_animation_draws_the_moving_object_at_the_drawn_frames(tmp_path):
+    """stride=4 over 20 frames draws frames 0, 4, .., 16: an object moving 5 m along x over the clip is drawn up to
+    frame 16 (x = 16/19 * 5 m = 4.2 m), so the panel's x range reaches past 4 m (a static body at the origin)."""
+    box = trimesh.creation.box((0.2, 0.2, 0.2))
+    body = trimesh.creation.box((0.3, 0.3, 1.0))
+    T = 20
+    obj = np.stack([box.vertices + [5.0 * t / (T - 1), 0.0, 0.5] for t in range(T)])
+    anim = animate_fn(np.stack([body.vertices] * T), body.faces, objects=[(obj, box.faces)], stride=4,
+                      views=("top",), size=1.5, dpi=30, ground=False)
+    fig = anim._fig
+    hi = fig.axes[0].get_xlim3d()[1]
+    assert hi > 4.0
+    with Image.open(save_animation(anim, tmp_path / "strided.gif")) as im:      # rendered: the 5 drawn frames
+        assert im.n_frames == 5
+    plt.close(fig)
+
+
+def test_ground_lines_stay_inside_the_extent():
+    """draw_ground(ax, (x0, x1, y0, y1)): the lines of constant x run from y0 to y1, those of constant y from x0 to
+    x1; none leaves the rectangle."""
+    fig, (ax,) = viz.figure(views=("iso",))
+    lc = viz.draw_ground(ax, (-2, 2, -1, 1), step=0.5)
+    assert isinstance(lc, Line3DCollection)
+    seg = np.asarray(lc._segments3d, float)                   # (n, 2, 3)
+    assert (seg[..., 0] >= -2 - 1e-9).all() and (seg[..., 0] <= 2 + 1e-9).all()
+    assert (seg[..., 1] >= -1 - 1e-9).all() and (seg[..., 1] <= 1 + 1e-9).all()
+    const_x = seg[np.isclose(seg[:, 0, 0], seg[:, 1, 0])]
+    assert len(const_x) == 9 and np.allclose(np.sort(const_x[:, :, 1], 1), [[-1, 1]] * 9)
+    plt.close(fig)

@@ -14,7 +14,7 @@ from graspkit import metrics
 from graspkit.body import BodyModel
 from graspkit.body.random_model import random_smplx_arrays
 from graspkit.data import load_motion
-from graspkit.data.wandr_dataset import rest_joints
+from graspkit.data.wandr_dataset import list_clips, load_clips, rest_joints
 from graspkit.paths import DATA_STUBS
 
 
@@ -573,3 +573,51 @@ def test_where_the_previous_lowest_vertex_is_now_at_the_foot_hand_boundary(bm):
     prev = torch.tensor([o[1] - 1, o[1], o[2] - 1, o[2], o[3] - 1, 0] * 5)
     _, _, _, was = low.lowest(Rg, pos, body, prev)
     torch.testing.assert_close(was, full[torch.arange(30), low.ids[prev]], atol=1e-5, rtol=0)
+
+
+def test_full_mesh_fs_is_the_share_of_frame_pairs_whose_lowest_vertex_slides(bm):
+    """A body lying on its back that slides 1 cm along x on every other frame: the lowest vertex of the whole mesh
+    moves > 0.66 cm in about half the frame pairs; full_mesh=True's FS is that share (numpy on the posed vertices)."""
+    m = load_motion(DATA_STUBS / "motion" / "locomotion/locomotion_000003.npz")
+    rest = rest_joints(bm, m.betas[None])[0]
+    T = 21
+    Rs = torch.eye(3).expand(T, I.NUM_BODY, 3, 3).clone()
+    x = 0.01 * torch.tensor([(k + 1) // 2 for k in range(T)], dtype=torch.float32)     # +1 cm at every odd frame
+    ts = torch.stack([0.3 + x, torch.full((T,), -0.2), torch.full((T,), 0.1)], 1)
+    q = I.pose_from_rotmats(ts, Rs)
+    betas = torch.as_tensor(m.betas)[None]
+    verts = bm.forward_rotmats(torch.cat([Rs, torch.eye(3).expand(T, 33, 3, 3)], 1), betas=betas,
+                               transl=ts).vertices.numpy()
+    low = verts[..., 2].argmin(1)
+    move = np.linalg.norm(verts[np.arange(1, T), low[:-1], :2] - verts[np.arange(T - 1), low[:-1], :2], axis=1)
+    truth = float((move > 0.0066).mean())
+    assert 0.4 < truth < 0.6
+    full = E.evaluate_motions(q[None], rest[None], torch.zeros(1, 3), betas, bm, full_mesh=True)
+    assert full.fs[0] == pytest.approx(truth, abs=1e-6)
+
+
+def test_evaluate_clips_window_includes_its_last_frame(bm):
+    """after_s=0: the window ends at the clip's goal frame g itself; with the goal put on the replayed wrist at g (a
+    frame it moves into fast), SR is 100 % and DTG 0 cm: frame g is in the window."""
+    clips = load_clips(list_clips(DATA_STUBS / "motion", kinds=("reach",)), bm)
+    wrists = [I.body_joints(clips.clip(c), clips.rest[c])[:, I.WRIST] for c in range(len(clips))]
+    speed = [(w[1:] - w[:-1]).norm(dim=-1) for w in wrists]                # speed[k]: frame k -> k + 1
+    g = torch.tensor([2 + int(s[1:len(s) - 1].argmax()) for s in speed])   # the wrist moves fast from g - 1 into g
+    assert float(torch.stack([s[k - 1] for s, k in zip(speed, g.tolist())]).min()) > 0.005
+    goal = torch.stack([w[k] for w, k in zip(wrists, g.tolist())])
+    cs = dataclasses.replace(clips, goal=goal, goal_frame=g)
+    L = int(cs.lengths.max()) + 40
+    p = torch.stack([torch.cat([cs.clip(c), cs.clip(c)[-1:].expand(L - len(cs.clip(c)), -1)]) for c in range(len(cs))])
+    r = E.evaluate_clips(_Replay(I.poses_to_deltas(p)), cs, after_s=0.0)
+    assert r["SR"] == 100.0 and r["DTG"] == pytest.approx(0.0, abs=0.05)
+
+
+def test_summary_dtg_median_is_the_median():
+    """summary's DTG_median (cm) is the median of the closest distances: 5, 9, 20, 50 cm and 4 m give 20 cm (the
+    mean would be 96.8 cm)."""
+    d = np.array([0.05, 0.09, 0.2, 0.5, 4.0])
+    n = len(d)
+    r = E.GridResult(np.zeros(n, int), np.arange(n), np.zeros(n, int), np.zeros((n, 3)), d, np.full(n, -1),
+                     np.zeros(n), np.full(n, 0.3))
+    s = E.summary(r)
+    assert s["DTG_median"] == pytest.approx(100 * np.median(d)) and s["DTG"] == pytest.approx(96.8)

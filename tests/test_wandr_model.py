@@ -506,3 +506,43 @@ def test_the_returned_motion_is_decoded_from_the_returned_best_latents_when_adam
     assert terms["loss"].item() == pytest.approx(min(losses), rel=1e-5)
     again = optimise_latents(model, start, goal, t_goal=12, iters=0, z0=res.z, w_norm=1e-4)
     assert torch.allclose(again.motion.joints, res.motion.joints, atol=1e-5)
+
+
+def test_floor_term_compares_with_the_datas_lowest_foot_at_the_same_frame():
+    """The floor term is (100 (lowest foot joint here - the data's at the same frame))² (cm²): a hand-made step where
+    the data's lowest foot joint is 3 cm up at the step's frame and 0 cm at the frame before, and the decoded body's
+    is 1 cm up, gives (1 - 3)² = 4 cm², not (1 - 0)² = 1."""
+    torch.manual_seed(0)
+    model = M.WandrCVAE(M.WandrConfig(**TINY, w_floor=1.0)).eval()
+    J = torch.zeros(2, I.NUM_BODY, 3)
+    J[..., 2] = 0.5                                   # every joint 50 cm up, the foot joints set below
+    J_prev, J_true, J_true_prev = J.clone(), J.clone(), J.clone()
+    J[:, list(M.FEET), 2] = 0.01
+    J_prev[:, list(M.FEET), 2] = 0.01
+    J_true[:, list(M.FEET), 2] = 0.03
+    J_true_prev[:, list(M.FEET), 2] = 0.0
+    d = torch.zeros(2, I.DELTA_DIM)
+    e = M._step_terms(model, d, d, J, J_prev, J_true, J_true_prev)
+    assert e["floor"].item() == pytest.approx(4.0, rel=1e-4)
+
+
+def test_train_wandr_strides_each_kind_by_its_own_stride(bm, monkeypatch):
+    """train_wandr(stride={'locomotion': 3, 'reach': 1}) keeps every reaching window and the locomotion windows whose
+    start frame is a multiple of 3 (the windows fit sees, against WindowDataset's full list)."""
+    clips = W.load_clips(W.list_clips(DATA_STUBS / "motion", limit=3), bm)
+    assert {0, 1} <= set(clips.kind.tolist())
+    full = W.WindowDataset(clips, max_steps=2).items
+    got = {}
+
+    def fake_fit(model, step, ds, cfg, **kw):
+        got["items"] = ds.items.clone()
+        return []
+
+    monkeypatch.setattr(M, "fit", fake_fit)
+    torch.manual_seed(0)
+    model = M.WandrCVAE(M.WandrConfig(**TINY, max_steps=2))
+    M.train_wandr(model, clips, M.TrainConfig(epochs=1), stride={"locomotion": 3, "reach": 1}, progress=False)
+    kind = clips.kind[full[:, 0]]
+    want = full[(kind != 0) | (full[:, 1] % 3 == 0)]
+    assert torch.equal(got["items"], want)
+    assert (clips.kind[want[:, 0]] == 1).sum() == (kind == 1).sum()
