@@ -24,6 +24,16 @@ def _clip(bm, name="locomotion/locomotion_000003.npz"):
     return m, p, rest_joints(bm, m.betas[None])[0]
 
 
+def _reach_frames(bm):
+    """Frames 30-59 of a reach clip as 30 "bodies", each with its frame's finger pose: LowVertices, the body
+    transforms, the body index per frame and the body model's full mesh of those frames."""
+    m, p, rest = _clip(bm, "reach/reach_000002.npz")
+    frames = slice(30, 60)
+    low = E.LowVertices(bm, torch.as_tensor(m.betas)[None].expand(30, -1), torch.as_tensor(m.poses[frames]))
+    Rg, pos = I.body_transforms(p[frames], rest)
+    return low, Rg, pos, torch.arange(30), m.vertices(bm, 30, 60)
+
+
 def test_the_grid_is_the_papers():
     goals, cells = E.grid_goals()
     assert goals.shape == (125, 3) and cells.shape == (125, 3)
@@ -36,13 +46,7 @@ def test_the_grid_is_the_papers():
 
 
 def test_foot_and_hand_vertices_are_posed_exactly_as_the_body_model_does(bm):
-    m, p, rest = _clip(bm, "reach/reach_000002.npz")
-    frames = slice(30, 60)
-    # one "body" per frame, each with that frame's finger pose
-    low = E.LowVertices(bm, torch.as_tensor(m.betas)[None].expand(30, -1), torch.as_tensor(m.poses[frames]))
-    Rg, pos = I.body_transforms(p[frames], rest)
-    body = torch.arange(30)
-    full = m.vertices(bm, 30, 60)
+    low, Rg, pos, body, full = _reach_frames(bm)
     assert torch.allclose(low.feet.points(Rg, pos, body), full[:, low.feet.ids], atol=1e-5)
     assert torch.allclose(low.feet.heights(Rg, pos, body), full[:, low.feet.ids, 2], atol=1e-5)
     one = torch.randint(len(low.feet.ids), (30,), generator=torch.Generator().manual_seed(0))
@@ -563,12 +567,7 @@ def test_hand_reach_is_the_docstrings_bound():
 def test_where_the_previous_lowest_vertex_is_now_at_the_foot_hand_boundary(bm):
     """`lowest(previous=...)` returns where the given vertices are now: the last foot vertex, the first vertex of
     each hand (indices at the offsets' boundaries) and a random one, against the body model's full mesh."""
-    m, p, rest = _clip(bm, "reach/reach_000002.npz")
-    frames = slice(30, 60)
-    low = E.LowVertices(bm, torch.as_tensor(m.betas)[None].expand(30, -1), torch.as_tensor(m.poses[frames]))
-    Rg, pos = I.body_transforms(p[frames], rest)
-    body = torch.arange(30)
-    full = m.vertices(bm, 30, 60)
+    low, Rg, pos, body, full = _reach_frames(bm)
     o = low.offsets
     prev = torch.tensor([o[1] - 1, o[1], o[2] - 1, o[2], o[3] - 1, 0] * 5)
     _, _, _, was = low.lowest(Rg, pos, body, prev)
