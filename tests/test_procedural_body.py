@@ -8,12 +8,17 @@ import scipy.linalg
 import smplx
 import torch
 import trimesh
+from scipy.sparse import coo_matrix
+from scipy.spatial import Delaunay
+from scipy.spatial.transform import Rotation
 
 from graspkit.body import BodyModel
 from graspkit.body import _proc_mesh as M
-from graspkit.body._proc_anatomy import Proportions
-from graspkit.body._proc_remesh import closest_point_on_triangles
+from graspkit.body._proc_anatomy import Proportions, rest_joints
+from graspkit.body._proc_correctives import harmonic_fill, radial_target
+from graspkit.body._proc_remesh import SurfaceProjector, closest_point_on_triangles, delaunay_flips, relax
 from graspkit.body._proc_rig import skinning_weights
+from graspkit.body._proc_sdf import Body, Ellipsoid, Floor, Lens, Loft, Sweep
 from graspkit.body.hand_poses import HAND_KINDS, hand_axes, hand_pca, sample_hand_poses, template_pose
 from graspkit.body.procedural import build_procedural_smplx, part_of_vertex
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX, NUM_VERTICES, PARENTS, SMPLX_LANDMARK_VERTEX_IDS as LMK
@@ -35,9 +40,20 @@ def fresh() -> dict[str, np.ndarray]:
     return build_procedural_smplx(seed=0, progress=False)
 
 
-def _smplx(**kw):
+@pytest.fixture(scope="module")
+def fresh_dir(fresh, tmp_path_factory) -> Path:
+    """The fresh build written as `<tmp>/smplx/SMPLX_NEUTRAL.npz`, for the smplx package."""
+    root = tmp_path_factory.mktemp("fresh_body_model")
+    (root / "smplx").mkdir()
+    np.savez(root / "smplx" / "SMPLX_NEUTRAL.npz", **fresh)
+    return root
+
+
+def _smplx(root: Path = MODEL_DIR, **kw):
+    """The smplx package's model of the body file under root (float64, full hand pose, flat hand mean unless
+    overridden)."""
     kw = {"use_pca": False, "flat_hand_mean": True, "dtype": torch.float64, **kw}
-    return smplx.create(str(MODEL_DIR), model_type="smplx", gender="neutral", ext="npz", **kw)
+    return smplx.create(str(root), model_type="smplx", gender="neutral", ext="npz", **kw)
 
 
 def _pose(**joints: tuple[float, float, float]) -> torch.Tensor:
@@ -232,22 +248,32 @@ def test_smplx_poses_the_file_like_a_plain_numpy_lbs(shipped):
     assert np.abs(out.vertices[0].detach().numpy() - ours).max() < 1e-5
 
 
-def _contour(model, yaw_deg: float) -> np.ndarray:
-    """smplx's 17 jaw-contour landmarks (17, 3) with the head turned by yaw_deg about the vertical (canonical y)."""
-    return model(body_pose=_pose(head=(0, np.deg2rad(yaw_deg), 0))).joints[0, -17:].detach().numpy()
+def _contour(model, yaw_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """smplx's 17 jaw-contour landmarks (17, 3) and the head joint (3,) with the NECK turned by yaw_deg about the
+    vertical (canonical y): smplx picks the yaw bin from the neck chain (joints 12, 9, 6, 3, 0), not the head."""
+    o = model(body_pose=_pose(neck=(0, np.deg2rad(yaw_deg), 0)))
+    return o.joints[0, -17:].detach().numpy(), o.joints[0, JOINT_INDEX["head"]].detach().numpy()
 
 
-def test_smplx_face_contour_reads_the_yaw_bins_in_smplx_order():
-    """smplx (lbs.find_dynamic_lmk_idx_and_bcoords) reads the 79 contour bins as yaw 0, +1..+39, -1..-39: at rest it
-    must pick a jaw line symmetric about the face (right ear -> chin -> left ear mirrors onto itself, x -> -x), and
-    a head turned left and right by the same angle must give mirror images."""
-    model = _smplx(use_face_contour=True)
+@pytest.mark.parametrize("which", ["shipped", "fresh"])
+def test_smplx_face_contour_reads_the_yaw_bins_in_smplx_order(which, fresh_dir):
+    """smplx (lbs.find_dynamic_lmk_idx_and_bcoords) reads the 79 contour bins as yaw 0, +1..+39, -1..-39, the jaw
+    line seen from the front (+z): at rest it must be symmetric about the face (right ear -> chin -> left ear mirrors
+    onto itself, x -> -x); with the neck turned by +-25 deg the chin point turns the same way by less than the turn,
+    every point stays on the camera-facing half (< 90 deg round from +z about the head joint), and the two turns are
+    mirror images. On the shipped file and on a fresh build of seed 0."""
+    model = _smplx(MODEL_DIR if which == "shipped" else fresh_dir, use_face_contour=True)
     mirror = lambda c: c[::-1] * np.array([-1.0, 1.0, 1.0])  # noqa: E731
-    rest = _contour(model, 0)
+    rest = _contour(model, 0)[0]
     assert abs(rest[8, 0]) < 3e-3                              # the chin on the midline
     assert np.abs(rest - mirror(rest)).max() < 4e-3
-    for yaw in (10, 25):
-        assert np.abs(_contour(model, yaw) - mirror(_contour(model, -yaw))).max() < 4e-3
+    for yaw in (10.0, 25.0):
+        assert np.abs(_contour(model, yaw)[0] - mirror(_contour(model, -yaw)[0])).max() < 4e-3
+    for yaw in (-25.0, 25.0):
+        c, head = _contour(model, yaw)
+        angle = np.degrees(np.arctan2(c[:, 0] - head[0], c[:, 2] - head[2]))
+        assert 0 < angle[8] * np.sign(yaw) < abs(yaw), (yaw, angle)
+        assert np.abs(angle).max() < 90.0, (yaw, angle)
 
 
 @pytest.mark.parametrize("joint, aa", [("left_elbow", (0, -np.pi / 2, 0)), ("right_elbow", (0, np.pi / 2, 0)),
@@ -420,3 +446,484 @@ def test_a_plane_blend_is_the_smoothstep_across_the_plane():
     want = t * t * (3 - 2 * t)
     np.testing.assert_allclose(w[:, JOINT_INDEX["spine1"]], want, atol=1e-12)
     np.testing.assert_allclose(w[:, JOINT_INDEX["pelvis"]], 1 - want, atol=1e-12)
+
+
+# pseudo-vector mirror of a hand pose (45,): each joint's axis-angle r -> -M r, M = diag(-1, 1, 1)
+_MIRROR45 = np.tile([1.0, -1.0, -1.0], 15)
+
+
+# ----------------------------------------------------------------------------- regressor and weights
+def test_fresh_regressor_hits_the_designed_rest_joints(fresh):
+    """J_regressor @ v_template is the designed rest skeleton (rest_joints of seed 0's proportions) to 1e-8 m, each
+    row a convex combination."""
+    R, v = fresh["J_regressor"], fresh["v_template"]
+    np.testing.assert_allclose(R @ v, rest_joints(Proportions().jittered(0)), rtol=0, atol=1e-8)
+    assert R.min() >= 0 and np.allclose(R.sum(1), 1.0)
+
+
+def _mid_segment(v: np.ndarray, a: np.ndarray, b: np.ndarray, radius: float) -> np.ndarray:
+    """Mask of vertices within `radius` of the segment a-b's axis whose projection falls in its middle third."""
+    u = (b - a) / np.linalg.norm(b - a)
+    s = (v - a) @ u / np.linalg.norm(b - a)
+    lateral = np.linalg.norm((v - a) - np.outer((v - a) @ u, u), axis=1)
+    return (s > 1 / 3) & (s < 2 / 3) & (lateral < radius)
+
+
+def test_fresh_weights_give_each_limb_segment_to_its_bone(fresh):
+    """The dominant skinning joint of the middle third of each limb segment is the joint driving that bone (upper arm:
+    shoulder, forearm: elbow, thigh: hip, shank: knee, both sides), and each fingertip, toe and heel landmark vertex
+    belongs to its finger's last joint, its foot and ankle."""
+    v, J0 = fresh["v_template"], fresh["J_regressor"] @ fresh["v_template"]
+    part = part_of_vertex(fresh)
+    for side in ("left", "right"):
+        for a, b, r in (("shoulder", "elbow", 0.07), ("elbow", "wrist", 0.06), ("hip", "knee", 0.10),
+                        ("knee", "ankle", 0.07)):
+            ja, jb = JOINT_INDEX[f"{side}_{a}"], JOINT_INDEX[f"{side}_{b}"]
+            mid = _mid_segment(v, J0[ja], J0[jb], r)
+            assert mid.sum() > 20, (side, a)
+            assert (part[mid] == ja).mean() > 0.95, (side, a, np.bincount(part[mid]))
+        s = side[0]
+        for finger in FINGERS:
+            assert part[LMK[s + finger]] == JOINT_INDEX[f"{side}_{finger}3"], (side, finger)
+        S = s.upper()
+        assert part[LMK[f"{S}Heel"]] == JOINT_INDEX[f"{side}_ankle"]
+        assert part[LMK[f"{S}BigToe"]] == JOINT_INDEX[f"{side}_foot"]
+
+
+def test_cone_weight_turns_a_vertex_linearly_with_its_cone_angle():
+    """_cone_weight (private: skinning_weights applies it to the fresh mesh only) gives the child weight t whose turn
+    angle psi = atan(t / (1 - t)) for a 90 deg bend grows linearly from 0 at alpha = 90 + beta to 90 deg at 90 - beta
+    (docs/body_model.md, step 5): t = 0 beyond, 1/2 on the joint plane (alpha = 90), 1 past 90 - beta."""
+    from graspkit.body._proc_rig import _cone_weight
+    beta = 55.0
+    alpha = np.linspace(90 - beta, 90 + beta, 23)
+    t = _cone_weight(alpha, beta)
+    psi = np.degrees(np.arctan2(t, 1 - t))
+    np.testing.assert_allclose(psi, 90 * (90 + beta - alpha) / (2 * beta), atol=1e-9)
+    np.testing.assert_allclose(_cone_weight(np.array([0.0, 20.0, 90.0, 160.0, 180.0]), beta), [1, 1, 0.5, 0, 0],
+                               atol=1e-12)
+
+
+def test_fresh_fingertip_landmarks_are_the_farthest_points_along_the_fingers(fresh):
+    """As on the shipped file (test_landmark_vertices_sit_on_their_anatomy): each fingertip landmark id of the fresh
+    build is its finger's farthest vertex along the last bone."""
+    v, J0 = fresh["v_template"], fresh["J_regressor"] @ fresh["v_template"]
+    part = part_of_vertex(fresh)
+    for s, prefix in (("l", "left_"), ("r", "right_")):
+        for finger in FINGERS:
+            j3 = JOINT_INDEX[f"{prefix}{finger}3"]
+            d = (J0[j3] - J0[j3 - 1]) / np.linalg.norm(J0[j3] - J0[j3 - 1])
+            along = (v[part == j3] - J0[j3]) @ d
+            assert (v[LMK[s + finger]] - J0[j3]) @ d == pytest.approx(along.max()), (s, finger)
+
+
+# ----------------------------------------------------------------------------- shape space
+def _dJ(a: dict, i: int) -> np.ndarray:
+    """Joint displacement (55, 3) per unit of shape component i."""
+    return a["J_regressor"] @ a["shapedirs"][:, :, i]
+
+
+def test_fresh_height_component_scales_about_the_pelvis_joint(fresh):
+    """beta_0 is a uniform 5 % scale about the pelvis joint (docs/body_model.md): the pelvis stays, every joint moves
+    by 0.05 (J - J_pelvis), and the stature at beta_0 = -2 / +2 is 0.9 / 1.1 times the rest stature."""
+    v, J0 = fresh["v_template"], fresh["J_regressor"] @ fresh["v_template"]
+    np.testing.assert_allclose(_dJ(fresh, 0), 0.05 * (J0 - J0[0]), rtol=0, atol=1e-9)
+    h = np.ptp(v[:, 1])
+    for b in (-2.0, 2.0):
+        assert np.ptp((v + b * fresh["shapedirs"][:, :, 0])[:, 1]) == pytest.approx((1 + 0.05 * b) * h, rel=1e-9)
+
+
+def test_fresh_girth_grows_cross_sections_not_lengths(fresh):
+    """beta_1 grows cross-sections about the bone axes: limb joints stay within 1 mm, trunk vertices do not move
+    vertically, and the belly front moves forward at least 2 cm per unit (docs: 'belly forward 2 cm')."""
+    dJ = _dJ(fresh, 1)
+    for n in ("elbow", "wrist", "knee", "ankle"):
+        for side in ("left", "right"):
+            assert np.linalg.norm(dJ[JOINT_INDEX[f"{side}_{n}"]]) < 1e-3, (side, n, dJ[JOINT_INDEX[f"{side}_{n}"]])
+    v, w, S = fresh["v_template"], fresh["weights"], fresh["shapedirs"][:, :, 1]
+    trunk = w[:, [JOINT_INDEX[n] for n in ("pelvis", "spine1", "spine2", "spine3")]].sum(1) > 0.999
+    assert np.abs(S[trunk, 1]).max() < 1e-4
+    belly = trunk & (np.abs(v[:, 0]) < 0.03) & (np.abs(v[:, 1] + 0.20) < 0.03)
+    front = np.nonzero(belly)[0][v[belly, 2].argmax()]
+    assert S[front, 2] > 0.02, S[front]
+
+
+def test_fresh_shoulder_width_moves_each_arm_outwards(fresh):
+    """beta_2 moves each arm out by 2.2 cm per unit (docs): left arm joints +x, right arm joints -x, nothing else."""
+    dJ = _dJ(fresh, 2)
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        for n in ["elbow", "wrist"] + [f"{f}{k}" for f in FINGERS for k in (1, 2, 3)]:
+            np.testing.assert_allclose(dJ[JOINT_INDEX[f"{side}_{n}"]], (0.022 * sign, 0, 0), atol=1e-6,
+                                       err_msg=f"{side}_{n}")
+
+
+def test_fresh_hip_width_moves_vertices_sideways_and_outwards_only(fresh):
+    """beta_3 stretches the pelvis sideways (docs: '10 % per unit, the legs follow by 0.5 cm'): every vertex moves
+    along x only, away from the midline, and the hip joints by 0.5 cm."""
+    S, v = fresh["shapedirs"][:, :, 3], fresh["v_template"]
+    assert np.abs(S[:, 1:]).max() < 1e-12
+    off = np.abs(v[:, 0]) > 0.03                          # (a crotch vertex of the other leg may cross the midline)
+    assert (S[off, 0] * np.sign(v[off, 0]) >= -1e-12).all()
+    dJ = _dJ(fresh, 3)
+    assert dJ[JOINT_INDEX["left_hip"], 0] == pytest.approx(0.005, abs=1e-3)
+    assert dJ[JOINT_INDEX["right_hip"], 0] == pytest.approx(-0.005, abs=1e-3)
+
+
+@pytest.mark.parametrize("i, a, bones", [(4, 0.04, ("shoulder", "elbow", "wrist")), (5, 0.045, ("hip", "knee", "ankle"))])
+def test_fresh_limb_length_components_stretch_both_bones(fresh, i, a, bones):
+    """beta_4 / beta_5 stretch the upper and lower bone of each limb by 4 % / 4.5 % along the bone (docs), so the distal
+    joint moves by a times the (straight) limb's whole length and the hand or foot follows."""
+    J0 = fresh["J_regressor"] @ fresh["v_template"]
+    dJ = _dJ(fresh, i)
+    for side in ("left", "right"):
+        r, m, d = (JOINT_INDEX[f"{side}_{b}"] for b in bones)
+        for j, L0 in ((m, J0[m] - J0[r]), (d, J0[d] - J0[m])):
+            u = L0 / np.linalg.norm(L0)
+            base = dJ[r] if j == m else dJ[m]
+            assert (dJ[j] - base) @ u == pytest.approx(a * np.linalg.norm(L0), rel=0.1), (side, j)
+        assert np.linalg.norm(dJ[d] - dJ[r]) == pytest.approx(a * np.linalg.norm(J0[d] - J0[r]), rel=0.1)
+
+
+def test_fresh_torso_length_is_vertical_and_the_head_follows_the_neck(fresh):
+    """beta_6 stretches the trunk between pelvis and neck by 5 % (docs): every vertex moves vertically only, and the
+    head, jaw and eyes ride on the stretched trunk's top: dy = 0.05 (y_neck - y_pelvis)."""
+    S = fresh["shapedirs"][:, :, 6]
+    assert np.abs(S[:, [0, 2]]).max() < 1e-12
+    J0 = fresh["J_regressor"] @ fresh["v_template"]
+    dJ = _dJ(fresh, 6)
+    want = 0.05 * (J0[JOINT_INDEX["neck"], 1] - J0[0, 1])
+    for n in ("head", "jaw", "left_eye_smplhf", "right_eye_smplhf"):
+        assert dJ[JOINT_INDEX[n], 1] == pytest.approx(want, abs=5e-4), n
+
+
+def test_fresh_head_size_scales_about_the_head_joint(fresh):
+    """beta_7 scales head, jaw and eyes 4 % about the head joint (docs): vertices wholly of the head move by
+    0.04 (v - J_head), so the head joint itself stays within 1.5 mm (its regressor also reads neck vertices)."""
+    v, w, S = fresh["v_template"], fresh["weights"], fresh["shapedirs"][:, :, 7]
+    J0 = fresh["J_regressor"] @ v
+    head = w[:, [JOINT_INDEX[n] for n in ("head", "jaw")]].sum(1) > 1 - 1e-12
+    np.testing.assert_allclose(S[head], 0.04 * (v[head] - J0[JOINT_INDEX["head"]]), atol=1e-9)
+    assert np.linalg.norm(_dJ(fresh, 7)[JOINT_INDEX["head"]]) < 1.5e-3
+
+
+def test_fresh_chest_depth_moves_the_front_and_keeps_the_back(fresh):
+    """beta_8: the chest moves forward, the back stays (docs): the front of the upper chest moves > 1 cm per unit along
+    +z, the back of the chest not at all, and nothing moves sideways or vertically."""
+    v, w, S = fresh["v_template"], fresh["weights"], fresh["shapedirs"][:, :, 8]
+    chest = w[:, [JOINT_INDEX["spine2"], JOINT_INDEX["spine3"]]].sum(1) > 0.9
+    front = np.nonzero(chest)[0][v[chest, 2].argmax()]
+    back = chest & (v[:, 2] < -0.10)
+    assert S[front, 2] > 0.01
+    assert back.sum() > 10 and np.abs(S[back]).max() < 1e-12
+    assert np.abs(S[:, :2]).max() < 1e-12
+
+
+def test_fresh_muscularity_slims_the_waist(fresh):
+    """beta_9: 'waist a little slimmer' (docs): vertices of the lower spine (spine1 part) move towards the vertical
+    axis through spine1, limbs and shoulders grow outwards from their bones."""
+    v, w, S = fresh["v_template"], fresh["weights"], fresh["shapedirs"][:, :, 9]
+    J0 = fresh["J_regressor"] @ v
+    waist = w[:, JOINT_INDEX["spine1"]] > 0.9
+    radial = v[waist] - J0[JOINT_INDEX["spine1"]]
+    radial[:, 1] = 0.0
+    assert waist.sum() > 20 and ((S[waist] * radial).sum(1) < 0).mean() > 0.95
+
+
+# ----------------------------------------------------------------------------- expressions
+def test_fresh_expressions_are_left_right_symmetric(fresh):
+    """Every expression is symmetric about the face's midline: the summed sideways displacements of the left (x > 0) and
+    right (x < 0) halves are opposite, equal to 25 % of their size (the face mesh is mirror-symmetric only up to its
+    triangulation, a few mm), and the mouth-open component moves the chin down."""
+    S, x = fresh["shapedirs"][:, :, 10:], fresh["v_template"][:, 0]
+    for i in range(10):
+        left, right = S[x > 0, 0, i].sum(), S[x < 0, 0, i].sum()
+        assert abs(left + right) <= 0.25 * (abs(left) + abs(right)), (i, left, right)
+    jaw = S[:, :, 0]
+    k = np.linalg.norm(jaw, axis=1).argmax()
+    assert jaw[k, 1] < 0, jaw[k]
+
+
+# ----------------------------------------------------------------------------- face landmarks
+def _static_landmarks(a: dict) -> np.ndarray:
+    """The 51 static face landmarks (51, 3) of arrays a at rest (barycentric points of lmk_faces_idx)."""
+    tri = a["v_template"][a["f"][a["lmk_faces_idx"]]]
+    return np.einsum("lk,lkd->ld", a["lmk_bary_coords"], tri)
+
+
+def test_fresh_face_landmarks_run_from_the_subjects_right_to_left(fresh):
+    """iBUG-68 order (points 17..67 stored as 0..50): brows, nostrils and each eye run from -x to +x; the outer lip
+    contour starts at the right mouth corner, runs over the upper lip to the left corner and back under the lower lip."""
+    p = _static_landmarks(fresh)
+    for lo, hi in ((17, 21), (22, 26), (31, 35)):
+        assert (np.diff(p[lo - 17:hi - 16, 0]) > 0).all(), (lo, hi)
+    outer = p[48 - 17:60 - 17]
+    assert outer[0, 0] == outer[:, 0].min() and outer[6, 0] == outer[:, 0].max()      # corners 48 and 54
+    assert (np.diff(outer[0:7, 0]) > 0).all() and outer[3, 1] > outer[9, 1]           # 51 above 57
+
+
+# ----------------------------------------------------------------------------- pose correctives
+def test_fresh_correctives_sit_only_in_the_elbow_knee_and_hip_slots(fresh):
+    """posedirs (V, 3, 486) has nine columns per joint 1..54 ((j - 1) 9 .. j 9, SMPL-X's layout); the fitted
+    correctives fill exactly the slots of the elbows, knees and hips, and each of the six is non-zero."""
+    P = fresh["posedirs"].reshape(len(fresh["v_template"]), 3, 54, 9)
+    used = {j + 1 for j in range(54) if np.abs(P[:, :, j]).max() > 0}
+    want = {JOINT_INDEX[f"{s}_{n}"] for s in ("left", "right") for n in ("elbow", "knee", "hip")}
+    assert used == want
+
+
+@pytest.mark.parametrize("joint, aa, radius", [("left_elbow", (0, -np.pi / 2, 0), 0.12),
+                                               ("right_elbow", (0, np.pi / 2, 0), 0.12),
+                                               ("left_knee", (np.pi / 2, 0, 0), 0.15),
+                                               ("right_knee", (np.pi / 2, 0, 0), 0.15)])
+def test_fresh_correctives_keep_the_volume_of_a_90_degree_bend(fresh, fresh_dir, joint, aa, radius):
+    """smplx posing the fresh build: the local volume near a 90 deg elbow or knee (cones from the joint to the faces
+    within 12 / 15 cm) changes by < 10 % with the correctives and by at least 5 points less than with plain LBS
+    (posedirs zeroed; docs: about -5 % against about -20 %)."""
+    bm = _smplx(fresh_dir)
+    f = fresh["f"]
+    c = JOINT_INDEX[joint]
+    pose = _pose(**{joint: aa})
+    rest = bm()
+    v0, J0 = rest.vertices[0].detach().numpy(), rest.joints[0].detach().numpy()
+    near = (np.linalg.norm(v0 - J0[c], axis=1) < radius)[f].all(1)
+
+    def cone_volume(v, centre):
+        t = v[f[near]] - centre
+        return np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6
+
+    def change(model):
+        o = model(body_pose=pose)
+        v1, J1 = o.vertices[0].detach().numpy(), o.joints[0].detach().numpy()
+        return cone_volume(v1, J1[c]) / cone_volume(v0, J0[c]) - 1
+
+    with_correctives = change(bm)
+    bm.posedirs.zero_()
+    plain = change(bm)
+    assert abs(with_correctives) < 0.10 and abs(with_correctives) < abs(plain) - 0.05, (with_correctives, plain)
+
+
+def test_harmonic_fill_interpolates_linearly_along_a_path():
+    """harmonic_fill on a path graph: the known ends are kept, the unknown interior is the discrete harmonic (linear)
+    interpolation between them, and rows outside the region are zero."""
+    n = 7
+    i = np.arange(n - 1)
+    A = coo_matrix((np.ones(2 * (n - 1)), (np.r_[i, i + 1], np.r_[i + 1, i])), shape=(n, n)).tocsr()
+    delta = np.zeros((n, 3))
+    delta[0], delta[5] = (1.0, 2.0, -1.0), (6.0, -3.0, 4.0)
+    region = np.arange(6)                                     # vertex 6 lies outside
+    known = np.array([True, False, False, False, False, True])
+    out = harmonic_fill(delta, known, region, A)
+    want = np.outer(1 - np.arange(6) / 5, delta[0]) + np.outer(np.arange(6) / 5, delta[5])
+    np.testing.assert_allclose(out[:6], want, atol=1e-12)
+    np.testing.assert_allclose(out[6], 0.0)
+
+
+def test_radial_target_moves_points_onto_a_sphere_along_rays_from_the_axis():
+    """radial_target on a sphere of radius 0.05 about the z axis through its centre: points inside and outside the
+    surface move along their ray from the axis onto the sphere (height along the axis kept)."""
+    r = 0.05
+    body = Body([Ellipsoid((0.0, 0.0, 0.0), (r, r, r), joint=0)], Floor(-10.0, 0.0))
+    pose = (np.tile(np.eye(3), (55, 1, 1)), np.zeros((55, 3)))
+    ang = np.linspace(0, 2 * np.pi, 9)[:-1]
+    rho = np.array([0.035, 0.040, 0.043, 0.050, 0.055, 0.038, 0.048, 0.060])    # the surface is at 0.0458
+    x = np.stack([rho * np.cos(ang), rho * np.sin(ang), np.full(8, 0.02)], 1)
+    y, ok = radial_target(x, np.zeros(3), np.array([0.0, 0.0, 1.0]), body, pose, max_move=0.05)
+    assert ok.all()
+    want_rho = np.sqrt(r ** 2 - 0.02 ** 2)
+    np.testing.assert_allclose(np.linalg.norm(y[:, :2], axis=1), want_rho, atol=1e-5)
+    np.testing.assert_allclose(np.arctan2(y[:, 1], y[:, 0]), np.arctan2(x[:, 1], x[:, 0]), atol=1e-9)
+    np.testing.assert_allclose(y[:, 2], 0.02, atol=1e-12)
+
+
+def test_posed_body_carries_each_primitive_rigidly_with_its_joint():
+    """Body.evaluate with a pose (R, t) per joint: the distance at R x + t equals the rest distance at x (x_posed =
+    R x_rest + t), for a rotation that is not its own inverse."""
+    e = Ellipsoid((0.3, 0.1, 0.0), (0.08, 0.03, 0.05), joint=5)
+    body = Body([e], Floor(-10.0, 0.0))
+    R = Rotation.from_rotvec([0.3, -0.7, 0.5]).as_matrix()
+    Rs, ts = np.tile(np.eye(3), (55, 1, 1)), np.zeros((55, 3))
+    Rs[5], ts[5] = R, (0.05, -0.02, 0.1)
+    x = e.c + np.random.default_rng(0).normal(scale=0.05, size=(200, 3))
+    rest, _ = body.evaluate(x)
+    posed, _ = body.evaluate(x @ R.T + ts[5], (Rs, ts))
+    np.testing.assert_allclose(posed, rest, atol=1e-12)
+
+
+# ----------------------------------------------------------------------------- signed distances and lenses
+def test_sweep_and_loft_caps_reach_as_far_as_stated():
+    """A Sweep's rounded ends reach caps[0] before a and caps[1] beyond b, and its first semi-axis runs from sa[0] at a
+    to sb[0] at b; a Loft's caps reach caps[0] below its first section and caps[1] above its last."""
+    s = Sweep((0.0, 0.0, 0.0), (0.2, 0.0, 0.0), (0.02, 0.03), (0.04, 0.05), up=(0.0, 1.0, 0.0), caps=(0.01, 0.03))
+    pts = np.array([[-0.01, 0, 0], [0.23, 0, 0], [0, 0.02, 0], [0.2, 0.04, 0], [0.1, 0.03, 0]])
+    np.testing.assert_allclose(s.sdf(pts), 0.0, atol=1e-12)
+    loft = Loft(np.array([[-0.1, 0.10, 0.08, 0.0], [0.1, 0.12, 0.09, 0.0]]), caps=(0.04, 0.02))
+    np.testing.assert_allclose(loft.sdf(np.array([[0, -0.14, 0], [0, 0.12, 0]])), 0.0, atol=1e-12)
+
+
+def test_lens_is_a_c1_round_trip_with_the_stated_magnification():
+    """A bubble lens maps the u-ball of radius r0 onto the world ball r0 / m (magnification m), is the identity beyond
+    r1, has a continuous radial derivative at r0 and r1 (C1), and inverse(forward(u)) = u."""
+    lens = Lens((0.1, 0.2, 0.3), 0.2875, 0.60, 2.5)
+    r0, r1, m = lens.r0, lens.r1, lens.m
+    e = 1e-7
+    for r, slope_in, slope_out in ((r0, 1 / m, None), (r1, None, 1.0)):
+        d_lo = (lens.rho(np.array([r])) - lens.rho(np.array([r - e])))[0] / e
+        d_hi = (lens.rho(np.array([r + e])) - lens.rho(np.array([r])))[0] / e
+        assert d_lo == pytest.approx(d_hi, rel=1e-4), r
+    assert lens.rho(np.array([0.1]))[0] == pytest.approx(0.1 / m)
+    u = np.asarray(lens.c) + np.random.default_rng(0).normal(scale=0.3, size=(500, 3))
+    np.testing.assert_allclose(lens.inverse(lens.forward(u)), u, atol=1e-9)
+
+
+# ----------------------------------------------------------------------------- mesh checks and remeshing
+def test_topology_report_flags_an_edge_shared_by_four_faces():
+    """Two tetrahedra sharing one edge: each is closed, together they are not an edge-manifold surface (an edge in four
+    faces), as trimesh says too."""
+    tet = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    assert M.topology_report(tet.vertices, tet.faces)["watertight"] and tet.is_watertight
+    other = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, -1, 0], [0, 0, -1]], [[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]])
+    both = trimesh.util.concatenate([tet, other])
+    both.merge_vertices()
+    assert not both.is_watertight
+    assert not M.topology_report(np.asarray(both.vertices), np.asarray(both.faces))["watertight"]
+
+
+def test_split_longest_edges_splits_the_longest_edge_at_its_midpoint():
+    """One split of a closed tetrahedron adds the midpoint of its longest edge, keeps the surface (same volume) and the
+    mesh closed and oriented."""
+    v = np.array([[0.0, 0, 0], [3.0, 0, 0], [0, 1.0, 0], [0, 0, 2.0]])
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    assert M.signed_volume(v, f) > 0
+    v2, f2 = M.split_longest_edges(v, f, 5)
+    np.testing.assert_allclose(v2[4], (1.5, 0.0, 1.0))                 # edge (3,0,0)-(0,0,2) is the longest
+    assert M.signed_volume(v2, f2) == pytest.approx(M.signed_volume(v, f))
+    mesh = trimesh.Trimesh(v2, f2, process=False)
+    assert mesh.is_watertight and mesh.is_winding_consistent
+
+
+@pytest.mark.parametrize("flip_a", [False, True])
+@pytest.mark.parametrize("flip_b", [False, True])
+@pytest.mark.parametrize("swap", [False, True])
+def test_self_intersections_find_piercing_and_interlocking_triangles(flip_a, flip_b, swap):
+    """Two triangles that cross are one intersecting pair, whatever the winding of either and the order of the two
+    faces: a small triangle piercing a large one (only the small one's edges cross the other) and two interlocking
+    triangles (one edge of each crosses the other); moved apart, none."""
+    big = np.array([[-1.0, -1, 0], [1, -1, 0], [0, 1, 0]])
+    cases = [
+        (big, np.array([[0, -0.1, -0.2], [0.1, 0.1, 0.3], [-0.1, 0.1, 0.3]])),              # piercing
+        (np.array([[0.0, 0, 0], [2, 0, 0], [1, 2, 0]]), np.array([[1.0, 1, -1], [1, 1, 1], [3, 1, 0.1]])),  # interlocking
+    ]
+    for a, b in cases:
+        a, b = (a[::-1] if flip_a else a), (b[::-1] if flip_b else b)
+        v = np.concatenate([a, b])
+        f = np.array([[3, 4, 5], [0, 1, 2]] if swap else [[0, 1, 2], [3, 4, 5]])
+        assert len(M.self_intersections(v, f)) == 1
+        v[3:, 2] += 5.0
+        assert len(M.self_intersections(v, f)) == 0
+
+
+def test_delaunay_flips_restore_a_planar_delaunay_triangulation():
+    """On a jittered planar grid, scipy's Delaunay triangulation with one interior edge flipped the wrong way comes back
+    to the Delaunay triangulation after delaunay_flips, and an already Delaunay one is left as it is."""
+    rng = np.random.default_rng(4)
+    g = np.stack(np.meshgrid(np.arange(7.0), np.arange(7.0)), -1).reshape(-1, 2)
+    p = g + rng.uniform(-0.2, 0.2, g.shape)
+    tri = Delaunay(p).simplices
+    v = np.column_stack([p, np.zeros(len(p))])
+    n = np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]])[:, 2]
+    tri = np.where((n < 0)[:, None], tri[:, ::-1], tri)               # counter-clockwise, seen from +z
+    key = lambda f: {tuple(sorted(t)) for t in f.tolist()}  # noqa: E731
+    assert key(delaunay_flips(v, tri)) == key(tri)
+    centre = np.argmin(np.linalg.norm(p - p.mean(0), axis=1))           # an interior vertex
+    f1 = next(i for i in range(len(tri)) if centre in tri[i])
+    a = tri[f1][(list(tri[f1]).index(centre) + 1) % 3]
+    f2 = next(i for i in range(len(tri)) if i != f1 and centre in tri[i] and a in tri[i])
+    c = next(x for x in tri[f1] if x not in (centre, a))
+    d = next(x for x in tri[f2] if x not in (centre, a))
+    bad = tri.copy()
+    # the wrong diagonal c-d of the quad (centre, a, c, d), both faces counter-clockwise
+    for i, (x, y, z) in ((f1, (c, d, centre)), (f2, (d, c, a))):
+        t = np.array([x, y, z])
+        nz = np.cross(v[t[1]] - v[t[0]], v[t[2]] - v[t[0]])[2]
+        bad[i] = t if nz > 0 else t[::-1]
+    assert key(bad) != key(tri)
+    assert key(delaunay_flips(v, bad)) == key(tri)
+
+
+def test_relax_keeps_the_vertices_on_the_reference_surface():
+    """Tangential relaxation of a jittered sphere mesh, projected onto a fine sphere of radius 1, leaves every vertex on
+    that sphere (within the fine mesh's chordal error)."""
+    fine = trimesh.creation.icosphere(subdivisions=5)
+    coarse = trimesh.creation.icosphere(subdivisions=2)
+    rng = np.random.default_rng(2)
+    v = coarse.vertices + rng.normal(scale=0.04, size=coarse.vertices.shape)
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    out = relax(v, np.asarray(coarse.faces), SurfaceProjector(np.asarray(fine.vertices), np.asarray(fine.faces)),
+                iters=3)
+    r = np.linalg.norm(out, axis=1)
+    assert np.abs(r - 1).max() < 2e-3
+    assert np.linalg.norm(out - v, axis=1).max() > 1e-3                 # it did move
+
+
+# ----------------------------------------------------------------------------- hands
+def _rot_about(axis: np.ndarray, deg: float) -> np.ndarray:
+    """Rotation matrix (3, 3) by deg degrees about the unit axis (scipy)."""
+    return Rotation.from_rotvec(np.deg2rad(deg) * axis).as_matrix()
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_hand_axes_bend_towards_the_palm_and_spread_towards_the_thumb(side):
+    """With the procedural humanoid's rest joints: a positive rotation about a finger joint's flexion axis moves the next joint
+    towards the palm (-y in the rest pose, both hands), about the MCP's spread axis moves the finger tip towards the
+    thumb side, and about the thumb's abduction axis moves the thumb tip out of the palm plane to the palm side."""
+    J0 = rest_joints(Proportions().jittered(0))
+    ax = hand_axes(J0, side)
+    j = lambda n: J0[JOINT_INDEX[f"{side}_{n}"]]  # noqa: E731
+    thumb_side = j("index1") - j("pinky1")
+    for fi, f in enumerate(FINGERS[:4]):
+        for k in (1, 2):
+            base, nxt = j(f"{f}{k}"), j(f"{f}{k + 1}")
+            moved = base + _rot_about(ax["flex"][3 * fi + k - 1], 20) @ (nxt - base)
+            assert moved[1] < nxt[1] - 1e-3, (f, k)
+        base, tip = j(f"{f}1"), j(f"{f}3")
+        moved = base + _rot_about(ax["spread"][3 * fi], 10) @ (tip - base)
+        assert (moved - tip) @ thumb_side > 0, f
+    base, tip = j("thumb1"), j("thumb3")
+    moved = base + _rot_about(ax["abduct"], 20) @ (tip - base)
+    assert moved[1] < tip[1] - 1e-3
+
+
+def test_thumb_template_flexions_are_about_the_thumb_flexion_axes():
+    """As for the fingers (test_hand_templates_flex_by_their_angles): a template's thumb MCP and IP flexions are its
+    angles about those joints' own flexion axes (the pointing hand: 30 and 30 deg)."""
+    J0 = rest_joints(Proportions().jittered(0))
+    for side in ("left", "right"):
+        axes = hand_axes(J0, side)
+        point = template_pose("point", axes).reshape(15, 3)
+        np.testing.assert_allclose(point[13], np.deg2rad(30.0) * axes["flex"][13], atol=1e-12)
+        np.testing.assert_allclose(point[14], np.deg2rad(30.0) * axes["flex"][14], atol=1e-12)
+
+
+def test_hand_pca_mean_is_the_relaxed_template_and_the_sides_mirror():
+    """hand_pca's mean is the relaxed template of that side's axes (docs: 'as SMPL-X's hands_mean'), and the left hand's
+    components are the right hand's mirrored as pseudo-vectors (-M r per joint), up to sign, as the draws are equal."""
+    J0 = rest_joints(Proportions().jittered(0))
+    cl, ml = hand_pca(J0, "left", n_per_kind=40, seed=5)
+    cr, mr = hand_pca(J0, "right", n_per_kind=40, seed=5)
+    np.testing.assert_allclose(ml, template_pose("relaxed", hand_axes(J0, "left")), atol=1e-12)
+    np.testing.assert_allclose(mr, template_pose("relaxed", hand_axes(J0, "right")), atol=1e-12)
+    for i in range(6):
+        assert abs(cl[i] @ (cr[i] * _MIRROR45)) > 1 - 1e-8, i
+
+
+def test_fresh_hand_pca_arrays_belong_to_their_side(fresh):
+    """The fresh file's hands_mean{l,r} and hands_components{l,r} are the left and right hands' own: the means mirror
+    each other as pseudo-vectors and are each side's relaxed template; component i of the left hand is the mirror of
+    component i of the right, up to sign."""
+    J0 = fresh["J_regressor"] @ fresh["v_template"]
+    np.testing.assert_allclose(fresh["hands_meanl"], template_pose("relaxed", hand_axes(J0, "left")), atol=1e-12)
+    np.testing.assert_allclose(fresh["hands_meanr"], template_pose("relaxed", hand_axes(J0, "right")), atol=1e-12)
+    np.testing.assert_allclose(fresh["hands_meanl"], fresh["hands_meanr"] * _MIRROR45, atol=1e-9)
+    cl, cr = fresh["hands_componentsl"], fresh["hands_componentsr"]
+    for i in range(6):
+        assert abs(cl[i] @ (cr[i] * _MIRROR45)) > 1 - 1e-6, i
