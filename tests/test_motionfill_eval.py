@@ -400,3 +400,277 @@ def test_approach_scene_object_is_in_the_frame_of_the_window_markers():
     R, t = _rigid(mark.reshape(-1, 3), s["markers"].astype(np.float64).reshape(-1, 3))
     assert np.abs(mark.reshape(-1, 3) @ R.T + t - s["markers"].reshape(-1, 3)).max() < 1e-4   # rigid, exactly
     assert np.abs(world_pts @ R.T + t - s["points"]).max() < 1e-4
+
+
+def test_approach_motions_end_at_the_grasp_frame():
+    """approach_motions cuts each clip at its goal frame: frames 0..goal_frame of the file, so the window's frame T is
+    the grasp (SAGA A.3)."""
+    from graspkit.eval_motionfill import approach_motions
+
+    motions, names = approach_motions(DATA_STUBS / "approach")
+    files = sorted((DATA_STUBS / "approach").glob("approach_*.npz"))
+    assert len(motions) == len(files) == 4
+    for m, name, f in zip(motions, names, files):
+        with np.load(f) as a:
+            g = int(a["grasp.goal_frame"])
+            assert m.num_frames == g + 1 and name == str(a["obj_name"])
+            np.testing.assert_allclose(m.poses[-1].reshape(-1), a["body.params.fullpose"][g].reshape(-1), atol=1e-6)
+            np.testing.assert_allclose(m.trans[-1], a["body.params.transl"][g], atol=1e-6)
+
+
+def test_approach_windows_are_split_by_grabs_held_out_objects(tmp_path, monkeypatch):
+    """windows('approach') tags each window with its object's split (0 train, 1 val, 2 test; GRAB's split: mug test,
+    bottle train) and clip_split gives the mug clips as the test set."""
+    from graspkit.data.grasp import split_of
+    from graspkit.eval_motionfill import approach_motions, clip_split, windows
+
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
+    arr = windows("approach", 4, data=DATA_STUBS / "approach", progress=False)
+    _, names = approach_motions(DATA_STUBS / "approach")
+    assert split_of("mug") == "test" and split_of("bottle") == "train"
+    want = {"mug": 2, "bottle": 0}
+    assert [int(s) for s in arr["split"]] == [want[names[c]] for c in arr["clip"]]
+    sp = clip_split(arr)
+    assert sorted(sp["test"].tolist()) == [c for c, n in enumerate(names) if n == "mug"]
+    assert sorted(sp["train"].tolist()) == [c for c, n in enumerate(names) if n == "bottle"] and len(sp["val"]) == 0
+
+
+def test_clip_split_puts_every_clip_in_exactly_one_split():
+    """clip_split of windows without object tags: every clip id is in exactly one of train / val / test."""
+    from graspkit.eval_motionfill import clip_split
+
+    for n in (1, 7, 10):
+        sp = clip_split({"clip": np.repeat(np.arange(n), 3)})
+        got = np.concatenate([sp["train"], sp["val"], sp["test"]])
+        assert sorted(got.tolist()) == list(range(n))
+
+
+def test_shipped_state_round_trips_the_normalisation_statistics_exactly():
+    """shipped_state: weights in float16, but the normalisation means and stds stay float32: a model rebuilt from it
+    normalises exactly as the trained one."""
+    from graspkit.eval_motionfill import shipped_state
+    from graspkit.models.motionfill import MotionFillVAE
+
+    torch.manual_seed(0)
+    model = MotionFillVAE()
+    g = torch.Generator().manual_seed(1)
+    for k in ("marker_mean", "marker_std", "vel_mean", "vel_std"):
+        b = getattr(model, k)
+        b.copy_(0.3 + torch.rand(b.shape, generator=g) * 1.234567)
+    back = MotionFillVAE.from_state(shipped_state(model))
+    for k in ("marker_mean", "marker_std", "vel_mean", "vel_std"):
+        assert torch.equal(getattr(back, k), getattr(model, k)), k
+
+
+def test_pskl_counts_a_slowly_accelerating_coordinate():
+    """PSKL leaves out only coordinates that do not accelerate at all (rounding): a heel drifting at 9 mm/s^2
+    (1e-5 m per frame^2 at 30 fps) is motion and is counted."""
+    from graspkit.eval_motionfill import pskl_still_share
+
+    t = np.arange(40, dtype=np.float64)
+    x = np.zeros((1, 40, 1, 3))
+    x[0, :, 0, 0] = 0.5e-5 * t ** 2 + 1e-6 * np.sin(t)
+    x[0, :, 0, 1] = 1e-5 * np.cos(0.3 * t)
+    x[0, :, 0, 2] = 0.2 * t                                      # constant velocity: no acceleration
+    assert pskl_still_share(x) == pytest.approx(1 / 3)
+
+
+def test_heel_columns_are_the_rearmost_markers_of_each_foot():
+    """heel_columns: [left heel, right heel] are, on the rest body (SMPL-X: y up, z forward, +x the body's left), the
+    rearmost markers among those within 8 cm of the sole on the left and the right side."""
+    from graspkit.eval_motionfill import heel_columns
+
+    bm = BodyModel.from_file(default_model_path())
+    with torch.no_grad():
+        v = bm().vertices[0]
+    mk = saga_sparse_markers(bm).select(v[None])[0].double().numpy()
+    sole = float(v[:, 1].min())
+    low = np.flatnonzero(mk[:, 1] < sole + 0.08)
+    want = [int(low[mk[low, 0] > 0][np.argmin(mk[low[mk[low, 0] > 0], 2])]),
+            int(low[mk[low, 0] < 0][np.argmin(mk[low[mk[low, 0] < 0], 2])])]
+    assert heel_columns() == want
+
+
+def test_heel_acceleration_is_the_99th_percentile_in_metres_per_second_squared():
+    """heel_jerkiness: two heel markers built by integrating hand-made accelerations (m/s^2, 30 fps) twice, 199 each
+    (the right heel's half the left's), give the 99th percentile of all 398 back."""
+    from graspkit.eval_motionfill import heel_jerkiness
+
+    fps = 30.0
+    acc = np.random.default_rng(3).permutation(np.linspace(0.0, 19.8, 199))   # m/s^2, |a| along x
+    m = np.zeros((201, 3, 3))
+    for col, a in ((0, acc), (2, 0.5 * acc)):
+        m[2:, col, 0] = np.cumsum(np.cumsum(a / fps ** 2))                   # x[t+2] - 2 x[t+1] + x[t] = a_t / fps^2
+    r = heel_jerkiness(m, [0, 2], fps)
+    assert r["heel_acc_p99"] == pytest.approx(np.percentile(np.r_[acc, 0.5 * acc], 99), abs=1e-6)
+
+
+def _stub_windows():
+    from graspkit.data.motionfill_dataset import make_windows
+    from graspkit.eval_motionfill import approach_motions
+
+    bm = BodyModel.from_file(default_model_path())
+    motions, _ = approach_motions(DATA_STUBS / "approach")
+    return make_windows(motions, bm, align_end=True, progress=False)
+
+
+def test_tab3_models_are_given_the_linear_start_to_end_trajectory():
+    """Tab. 3: the model's Gamma_bar is the straight blend of the window's true trajectory from frame 0 to frame T
+    (one step past it at T+1: SAGA §3.3), for both rows, never the true trajectory in between."""
+    from graspkit.eval_motionfill import evaluate
+
+    arr = _stub_windows()
+    seen = []
+
+    class Recorder:
+        def sample(self, ti, local, contacts, n, g, traj=None):
+            i = len(seen) // 2
+            seen.append(i)
+            g0, gT = arr["traj"][i][0].astype(np.float64), arr["traj"][i][60].astype(np.float64)
+            s = np.arange(62)[:, None] / 60.0
+            np.testing.assert_allclose(np.asarray(ti, np.float64), g0 + s * (gT - g0), atol=1e-5)
+            return {"markers": torch.as_tensor(arr["markers"][i])[None].expand(n, -1, -1, -1)}
+
+    evaluate(Recorder(), arr, np.unique(arr["clip"]), n=1, seed=0)
+    assert len(seen) == 2 * len(arr["clip"])
+
+
+def test_ade_takes_the_best_sample_of_each_window_as_a_whole():
+    """Tab. 3's ADE: per window, the sample with the smallest mean marker error (not the best sample per marker):
+    two samples, each 10 cm off on a different half of the markers (40 and 39 of 79), give 10 cm x 39/79."""
+    from graspkit.eval_motionfill import evaluate
+
+    arr = _stub_windows()
+    calls = []
+
+    class Halves:
+        def sample(self, ti, local, contacts, n, g, traj=None):
+            i = len(calls) // 2
+            calls.append(i)
+            m = torch.as_tensor(arr["markers"][i]).double()[None].repeat(2, 1, 1, 1)
+            m[0, :, :40, 0] += 0.1
+            m[1, :, 40:, 0] += 0.1
+            return {"markers": m}
+
+    rows = evaluate(Halves(), arr, np.unique(arr["clip"]), n=2, seed=0)
+    for name in ("Ours", "Ours-Local"):
+        assert rows[name]["ADE"] == pytest.approx(0.1 * 39 / 79, abs=1e-6)
+
+
+def _kabsch(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """R, t with b ~ a @ R.T + t."""
+    ca, cb = a.mean(0), b.mean(0)
+    u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
+    d = np.sign(np.linalg.det(vt.T @ u.T))
+    R = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
+    return R, cb - ca @ R.T
+
+
+def test_approach_scene_of_a_short_clip_is_the_world_clip_moved_rigidly():
+    """A clip shorter than a window (50 frames up to the grasp, padded in front): the rigid map that takes its world
+    markers to the window's last 50 frames of markers also takes the world object points, normals and catalogue mesh
+    to the scene's; the scene's mesh pose is x = mesh_rotation x_mesh + mesh_origin."""
+    from graspkit.eval_motionfill import approach_scene
+    from graspkit.objects.catalogue import make_object
+
+    bm = BodyModel.from_file(default_model_path())
+    s = approach_scene(STUB, bm)
+    with np.load(STUB) as a:
+        g = int(a["grasp.goal_frame"])
+        R_o = axis_angle_to_matrix(torch.as_tensor(a["object.params.global_orient"][g]).double()).numpy()
+        t_o = a["object.params.transl"][g].astype(np.float64)
+        pts, nrm = a["object.points"].astype(np.float64), a["object.normals"].astype(np.float64)
+    m = s["motion"]
+    assert m.num_frames == g + 1 < 61
+    mark = saga_sparse_markers(bm).select(m.vertices(bm)).numpy().astype(np.float64).reshape(-1, 3)
+    win = s["markers"][61 - m.num_frames:].astype(np.float64).reshape(-1, 3)
+    R, t = _kabsch(mark, win)
+    assert np.abs(mark @ R.T + t - win).max() < 1e-4
+    assert np.abs((pts @ R_o.T + t_o) @ R.T + t - s["points"]).max() < 1e-4
+    assert np.abs(nrm @ R_o.T @ R.T - s["normals"]).max() < 1e-4
+    cat = np.asarray(make_object(s["name"]).vertices, np.float64)
+    assert np.abs((cat @ R_o.T + t_o) @ R.T + t - s["mesh"].vertices).max() < 1e-4
+    assert np.abs(cat @ s["mesh_rotation"].T + s["mesh_origin"] - s["mesh"].vertices).max() < 1e-4
+
+
+def test_tab3_command_evaluates_the_test_objects_windows(tmp_path, monkeypatch):
+    """`python -m graspkit.eval_motionfill tab3` evaluates the windows of the held-out test objects (split code 2),
+    and reports their number."""
+    import json
+
+    import graspkit.eval_motionfill as E
+
+    arr = {"clip": np.array([0, 0, 1, 2, 2, 3]), "split": np.array([0, 0, 2, 1, 1, 2])}
+    got = {}
+
+    def fake_evaluate(model, a, clips, **kw):
+        got["clips"] = sorted(np.asarray(clips).tolist())
+        return {"Ours": {"ADE": 0.0, "skating": 0.0, "PSKL (P, GT)": 0.0, "PSKL (GT, P)": 0.0, "APD": 0.0}}
+
+    monkeypatch.setattr(E, "windows", lambda kind, n, data=None: arr)
+    monkeypatch.setattr(E, "evaluate", fake_evaluate)
+    monkeypatch.setattr(E, "load_motionfill", lambda path=None: None)
+    monkeypatch.setattr(E, "load_baselines", lambda folder=None: {})
+    out = tmp_path / "e.json"
+    assert E.main(["tab3", "--out", str(out), "--clips", "4"]) == 0
+    assert got["clips"] == [1, 3]
+    assert json.loads(out.read_text())["test_windows"] == 2
+
+
+def test_graspmotion_rows_measure_the_floor_of_the_scene():
+    """graspmotion_eval's per-clip figures stand on the scene's floor (the window's canonical frame puts it at
+    s['floor'], not z = 0): the non-collision score is the share of the fitted mesh's vertices at or above that
+    floor (SAGA §4.2), and a stand-in sample that is the clip's window raised 8 cm and sliding 1 cm a frame never
+    skates (both heels must be within 5 cm of the floor). (~10 s: one GraspMotion-Opt fit of 2 + 2 steps.)"""
+    from graspkit.eval_motionfill import approach_scene, graspmotion_eval
+    from graspkit.models.pose_prior import load_pose_prior
+    from graspkit.optim.graspmotion import GraspMotionOpt
+
+    bm = BodyModel.from_file(default_model_path())
+    window = torch.as_tensor(approach_scene(STUB, bm)["markers"]).float()
+
+    class Raised:
+        def sample(self, ti, local, contacts, n, g, traj=None):
+            m = window.clone()
+            m[..., 0] += 0.01 * torch.arange(len(m))[:, None]
+            m[..., 2] += 0.08
+            return {"markers": m[None], "contacts": torch.zeros(1, len(m), 4)}
+
+    ev = graspmotion_eval(Raised(), [STUB], steps=(2, 2), progress=False)
+    s, row = ev["scenes"][0], ev["rows"][0]
+    assert abs(s["floor"]) > 0.3                                         # the floor is not z = 0 in this frame
+    v = GraspMotionOpt(bm, load_pose_prior()).vertices(ev["result"], 0).double().numpy()
+    assert row["noncollision_opt"] == pytest.approx(float((v[..., 2] >= s["floor"]).mean()), abs=1e-9)
+    names = saga_sparse_markers(bm).names
+    h = ev["markers"][0].double().numpy()[:, [names.index("LHEE"), names.index("RHEE")]]
+    assert (h[..., 2] - s["floor"]).min() > 0.05 and row["skating_sample"] == 0.0
+
+
+def test_finetune_stage_trains_both_cvaes(tmp_path, monkeypatch):
+    """A.4's third run (`finetune`) trains TrajFill and LocalMotionFill together: from the shipped checkpoint, one
+    epoch on the four shipped approach clips changes the weights of both."""
+    from graspkit.eval_motionfill import CHECKPOINT, load_motionfill, train_stage
+
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
+    init = load_motionfill(CHECKPOINT)
+    model, _ = train_stage("finetune", 1, tmp_path / "mf.pt", init=CHECKPOINT, clips={"approach": 4},
+                           data=DATA_STUBS / "approach", progress=False, lr=1e-2)
+    for part in ("local", "traj"):
+        a, b = getattr(init, part).state_dict(), getattr(model, part).state_dict()
+        assert any(not torch.equal(a[k], b[k]) for k in a), part
+
+
+def test_approach_scene_mesh_pose_holds_for_a_tilted_object(tmp_path):
+    """approach_scene's mesh pose x = mesh_rotation x_mesh + mesh_origin holds for an object tilted off the vertical
+    (the shipped clip with its object turned about x and y as well: rotations about z alone commute and hide the
+    order of the product)."""
+    from graspkit.objects.catalogue import make_object
+
+    with np.load(DATA_STUBS / "approach" / "approach_000000.npz") as a:
+        arrays = {k: a[k] for k in a.files}
+    arrays["object.params.global_orient"] = (arrays["object.params.global_orient"]
+                                             + np.array([0.4, -0.3, 0.0], arrays["object.params.global_orient"].dtype))
+    np.savez(tmp_path / "approach_tilted.npz", **arrays)
+    s = approach_scene(tmp_path / "approach_tilted.npz", BodyModel.from_file(default_model_path()))
+    cat = np.asarray(make_object(s["name"]).vertices, np.float64)
+    assert np.abs(cat @ s["mesh_rotation"].T + s["mesh_origin"] - s["mesh"].vertices).max() < 1e-4
