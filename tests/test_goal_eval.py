@@ -209,12 +209,9 @@ def test_rollout_sliding_is_pooled_over_frame_pairs(monkeypatch):
     """GOAL's foot sliding over the rollouts is the share of all frame pairs that slide (as the other rows pool
     theirs), not a mean of per-clip shares: a 5-frame clip standing still and a 21-frame one sliding 2 cm a frame
     give 20 / 24, not 1 / 2."""
-    import math
-
     import graspkit.models.mnet as mnet_mod
     from graspkit.eval_goal import rollout_eval
     from graspkit.models.mnet import ApproachClip, Rollout
-    from graspkit.rotations import axis_angle_to_rot6d
 
     aa = torch.zeros(55, 3)
     aa[0] = torch.tensor([math.pi / 2, 0, 0])
@@ -348,7 +345,6 @@ def test_object_points_follow_the_object_pose_of_the_requested_frame():
 def test_gnet_frame_without_a_stored_start_looks_from_the_first_frames_pelvis():
     """GNet's frame (x' = R (x - o)) for a sequence that stores no task start: the horizontal direction from the first
     frame's pelvis (the posed body's joint 0) to the object is -y."""
-    from graspkit.eval_goal import gnet_samples
 
     bm, _, _ = _body()
     seq = _sequence(3, "mug")

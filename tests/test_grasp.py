@@ -1,4 +1,6 @@
 """Static grasp synthesis end to end, checked with independent geometry (trimesh) and the motion of the approach."""
+import dataclasses
+import math
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -6,20 +8,25 @@ import numpy as np
 import pytest
 import torch
 import trimesh
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from graspkit import metrics as M
 from graspkit.body import BodyModel
+from graspkit.body.markers import palm_vertices
 from graspkit.body.skeleton import JOINT_INDEX as J
 from graspkit.data import Motion
 from graspkit.data import grasp_make as gm
 from graspkit.data.approach import GRASP_CLOSE_S, TPOSE_S, _continuous, _rate_limited, approach_motion
-from graspkit.data.grasp import (GRASP_PARTS, SPLITS, GraspFitter, grasp_candidates, grasp_types, object_points_world,
-                                 object_radius, split_of)
+from graspkit.data.grasp import (GRASP_PARTS, SPLITS, GraspFitter, grasp_candidates, grasp_types, object_points,
+                                 object_points_world, object_radius, sample_grasp_task, split_of)
 from graspkit.data.grasp_make import accepted, fit_chunk
 from graspkit.data.rig import build_rig
 from graspkit.objects import TEST_OBJECTS, apply_pose, list_objects, make_object, signed_distance
+from graspkit.objects.bps import bps_basis
 from graspkit.objects.placement import ObjectPose
+from graspkit.optim.grasppose import hand_vertex_ids
+from graspkit.rotations import axis_angle_to_matrix
 
 from conftest import PROCEDURAL_MODEL
 
@@ -89,7 +96,6 @@ def test_quality_figures_agree_with_trimesh_and_manifold(fitted):
 
 def test_pelvis_over_the_feet_and_head_towards_the_object(fitted):
     bm, fitter, res, _ = fitted
-    from graspkit.rotations import axis_angle_to_matrix
     for r in res:
         out = bm.forward_rotmats(axis_angle_to_matrix(torch.as_tensor(r.poses))[None], betas=torch.as_tensor(r.betas[None]),
                                  transl=torch.as_tensor(r.trans[None]))
@@ -126,16 +132,8 @@ def test_goal_labels_against_kd_trees():
     """GOAL's labels of a grasp frame (Eq. 2): b^o is the BPS of the object points minus the object translation, and
     the offsets go from each of the 400 vertices to its closest object point (scipy KD-trees on the object's own
     sampled points)."""
-    import math
-
-    from scipy.spatial import cKDTree
-
     from graspkit.body.markers import goal_vertices
-    from graspkit.data.grasp import object_points
     from graspkit.data.grasp_make import frame_labels
-    from graspkit.objects.bps import bps_basis
-    from graspkit.optim.grasppose import hand_vertex_ids
-    from graspkit.rotations import axis_angle_to_matrix
 
     bm = BodyModel.from_file(PROCEDURAL_MODEL, flat_hand_mean=True)
     aa = torch.zeros(1, 55, 3, dtype=bm.dtype)
@@ -371,3 +369,111 @@ def test_fingers_close_over_grasp_close_s_and_arrive_at_the_grasp_frame():
     k0 = g - int(round(GRASP_CLOSE_S * fps)) - 2
     steps = [ang(R[k], R[k + 1]).max() for k in range(k0, g)]
     assert max(steps) < 0.25 * total, np.round(steps, 3)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """A standing body (flat hand mean, z up) and a mug turned about a tilted axis, its centre 2 cm from the right
+    palm's centre: some of its points touch the hand; the one-frame grasp file built from them (grasp_sequence with
+    stand-ins for the fitter and its result)."""
+    bm = BodyModel.from_file(PROCEDURAL_MODEL, flat_hand_mean=True)
+    aa = torch.zeros(1, 55, 3, dtype=bm.dtype)
+    aa[0, 0] = torch.tensor([math.pi / 2, 0, 0])
+    with torch.no_grad():
+        V = bm.forward_rotmats(axis_angle_to_matrix(aa)).vertices[0].double()
+    palm = V[palm_vertices(bm)["right"]].mean(0).numpy()
+    c, s = math.cos(0.8), math.sin(0.8)
+    R = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]]) @ np.array([[1.0, 0, 0], [0, math.cos(0.3), -math.sin(0.3)],
+                                                                  [0, math.sin(0.3), math.cos(0.3)]])
+    pose = ObjectPose(palm + np.array([0.0, -0.02, 0.0]), R)
+    hand_ids = hand_vertex_ids(bm)
+    task = dataclasses.replace(sample_grasp_task(np.random.default_rng(0), "mug", grasp_type="power"),
+                               object_pose=pose, candidate=0)
+    q = {"min_distance": 0.001, "volume_cm3": 0.5, "depth_cm": 0.2, "feet_cm": 0.3,
+         "regions_mm": [1.0, 1.0, 1.0, 5.0, 5.0, 5.0], "arm_residual_deg": 10.0}
+    r = SimpleNamespace(task=task, poses=aa[0].numpy().astype(np.float32), trans=np.zeros(3, np.float32),
+                        betas=np.zeros(10, np.float32), curls=np.full(5, 0.5), quality=q)
+    fitter = SimpleNamespace(bm=bm, hm=SimpleNamespace(hand_ids=hand_ids))
+    seq = gm.grasp_sequence(fitter, r, V, 0, 0, 0, True, "meshes/mug.ply")
+    lab = gm.frame_labels(bm, V, "mug", pose, hand_ids)
+    return dict(bm=bm, V=V.numpy(), pose=pose, hand_ids=hand_ids, seq=seq, lab=lab)
+
+
+def test_grasp_file_object_orientation_is_the_object_pose(scene):
+    """The file's object orientation (axis-angle, GRAB's object.params.global_orient) turns into the object pose's
+    rotation, and its translation is the pose's (x_world = R x_obj + t)."""
+    seq, pose = scene["seq"], scene["pose"]
+    np.testing.assert_allclose(seq.object_rotation()[0], pose.rotation, atol=1e-6)
+    np.testing.assert_allclose(seq.object_transl[0], pose.translation, atol=1e-6)
+
+
+def test_static_grasp_file_has_both_feet_planted(scene):
+    """A static grasp stands on both feet (the acceptance rule keeps them within 1 cm of the ground): the file's four
+    foot contacts (heels and toes) are 1 on its one frame."""
+    assert scene["seq"].contacts["feet"].tolist() == [[1, 1, 1, 1]]
+
+
+def test_object_height_is_the_objects_z(scene):
+    """SAGA's t_O: the object's height above the floor, the z of its translation (z up)."""
+    assert float(scene["lab"]["object.height"]) == pytest.approx(scene["pose"].translation[2], abs=1e-6)
+
+
+def test_hand_bps_is_centred_on_the_object_translation(scene):
+    """GOAL's hand BPS uses the object's basis: the distance from each basis point to the nearest hand vertex minus the
+    object translation (scipy's KD-tree), like b^o."""
+    hand = scene["V"][scene["hand_ids"]] - scene["pose"].translation
+    want = cKDTree(hand).query(bps_basis().double().numpy())[0]
+    np.testing.assert_allclose(scene["lab"]["goal.bps_hand"], want, atol=1e-5)
+
+
+def test_object_contacts_are_the_points_within_1_cm_of_the_body(scene):
+    """C_O (SAGA Sec. 3.2, graspkit's 1 cm): an object point is in contact when trimesh's distance from it to the body
+    mesh is at most 1 cm (points within 0.1 mm of the threshold are not judged)."""
+    pts = object_points("mug")[0] @ scene["pose"].rotation.T + scene["pose"].translation
+    body = trimesh.Trimesh(scene["V"], scene["bm"].faces.numpy(), process=False)
+    d = trimesh.proximity.closest_point(body, pts)[1]
+    c = scene["lab"]["contact.object"].astype(bool)
+    sure = np.abs(d - 0.01) > 1e-4
+    assert c.sum() > 20 and ((d > 0.01) & (d < 0.02)).sum() > 20
+    assert (c[sure] == (d[sure] <= 0.01)).all()
+
+
+def test_badness_prefers_an_attempt_in_contact():
+    """badness (lower is better): of two attempts that differ only in contact, the one touching the object scores
+    lower, as the acceptance rule asks for contact."""
+    q = {"depth_cm": 0.3, "volume_cm3": 1.0, "feet_cm": 0.5, "regions_mm": [2.0, 4.0, 4.0, 9.0, 9.0, 9.0]}
+    assert gm.badness({**q, "contact": 1.0}) < gm.badness({**q, "contact": 0.0})
+    assert gm.badness({**q, "contact": True}) < gm.badness({**q, "contact": False})
+
+
+class _Recorder:
+    """A fitter stand-in that records the tasks it is given; every result is accepted."""
+
+    def __init__(self) -> None:
+        self.tasks = []
+
+    def fit(self, tasks):
+        self.tasks += tasks
+        q = {"contact": 1.0, "depth_cm": 0.1, "volume_cm3": 0.1, "feet_cm": 0.1, "arm_residual_deg": 5.0,
+             "regions_mm": [1.0] * 6}
+        return [SimpleNamespace(task=t, quality=q) for t in tasks]
+
+    def evaluate(self, res):
+        pass
+
+
+def test_chunk_c_draws_the_tasks_of_items_c_size_onwards():
+    """fit_chunk: chunk c of `size` grasps holds items c*size .. (c+1)*size - 1, each drawn from its own task seed
+    (module docstring: grasp i's task derives from (seed, kind, i, attempt)): chunk 2 of 3 draws items 6, 7, 8."""
+    rec = _Recorder()
+    gm.fit_chunk(rec, "grasp", 5, 2, size=3, objects=("apple", "mug"))
+    want = [sample_grasp_task(np.random.default_rng(gm.task_seed(5, "grasp", i, 0)), "apple") for i in (6, 7, 8)]
+    assert [t.plan_seed for t in rec.tasks] == [t.plan_seed for t in want]
+    assert [t.choice for t in rec.tasks] == [t.choice for t in want]
+
+
+def test_grasp_and_approach_sets_draw_different_tasks():
+    """The module docstring: a task seed derives from (seed, kind, index, attempt), so item i of the grasp set and of
+    the approach set (same --seed) are different draws."""
+    seeds = {k: [gm.task_seed(0, k, i) for i in range(20)] for k in gm.KINDS}
+    assert not set(seeds["grasp"]) & set(seeds["approach"])

@@ -3,15 +3,21 @@ hand-made cases."""
 import numpy as np
 import pytest
 import torch
+import trimesh
 from scipy.spatial import cKDTree
 
 from graspkit.body import BodyModel
-from graspkit.body.markers import palm_vertices, saga_sparse_markers
+from graspkit.body.markers import foot_vertices, palm_vertices, saga_sparse_markers
 from graspkit.data import load_motion
 from graspkit.models.pose_prior import load_pose_prior
-from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, MarkerDiffAE, train_smooth_ae
+from graspkit.objects.sdf import SDFGrid
+from graspkit.optim.graspmotion import (GraspMotionConfig, GraspMotionOpt, GraspMotionWeights, MarkerDiffAE, in_box,
+                                       load_smooth_ae, train_smooth_ae)
 from graspkit.optim.grasppose import GraspObject, hand_vertex_ids
 from graspkit.paths import DATA_STUBS, default_model_path
+from graspkit.rotations import matrix_to_axis_angle, matrix_to_rot6d
+
+from conftest import PROCEDURAL_MODEL
 
 
 @pytest.fixture(scope="module")
@@ -130,7 +136,6 @@ def test_floor_term_is_the_sole_vertices_depth_below_a_given_floor_and_off_witho
     """graspkit's floor term: w_floor times the summed depth below the floor given to `fit` of each frame's lowest sole
     vertex (`foot_vertices`), read here off the full mesh of the same parameters; 0 with the floor below the feet, and
     absent when no floor is given (the heel markers' default floor is not the ground)."""
-    from graspkit.body.markers import foot_vertices
 
     opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("floor",)))
     F, w = 3, opt.cfg.weights
@@ -200,9 +205,6 @@ def test_object_in_hand_hinge_measures_points_pushed_into_the_palm_and_ignores_p
     """Eq. 7's second sum in GraspMotion-Opt: object points 4 mm inside the palm (along trimesh's vertex normals of
     the full body mesh) are 2-4 mm deep less sigma_o (the nearest hand vertex decides); points 4 mm outside and a
     point far from the hand's box are 0."""
-    import trimesh
-
-    from graspkit.body.markers import palm_vertices
 
     opt = GraspMotionOpt(bm, load_pose_prior())
     p = {"transl": torch.zeros(1, 3), "orient6d": torch.tensor([[1.0, 0, 0, 0, 1, 0]]), "z": torch.zeros(1, 32),
@@ -229,11 +231,8 @@ def test_approach_scene_poses_the_collision_grid_where_its_mesh_is(bm):
     """The object of an approach clip in MotionFill's canonical frame: the catalogue collision grid read through
     GraspObject's rotation and origin gives trimesh's signed distance to the scene's mesh (opposite sign), also as a
     one-grid-per-sample list."""
-    import trimesh
-
     from graspkit.data.grasp_io import collision_sdf_grid
     from graspkit.eval_motionfill import approach_scene
-    from graspkit.optim.grasppose import GraspObject
 
     s = approach_scene(DATA_STUBS / "approach" / "approach_000000.npz", bm)
     pts = torch.as_tensor(s["points"]).float()
@@ -291,8 +290,6 @@ def test_smoothness_autoencoder_trains_and_round_trips_its_checkpoint(tmp_path):
     markers = g.normal(0, 0.3, (16, 1, 79, 3)) + 0.2 * np.sin(t * g.uniform(1, 3, (16, 1, 1, 1)))
     ae, hist = train_smooth_ae(markers.astype(np.float32), epochs=25, out=tmp_path / "ae.pt")
     assert hist[-1] < 0.6 * hist[0]
-    from graspkit.optim.graspmotion import load_smooth_ae
-
     again = load_smooth_ae(tmp_path / "ae.pt")
     x = torch.as_tensor(np.diff(markers, axis=1)).float().flatten(2)
     torch.testing.assert_close(again.encode(x), ae.encode(x), atol=2e-2, rtol=2e-2)        # float16 weights
@@ -385,10 +382,7 @@ def test_marker_contact_term_is_eq6s_marker_side_on_the_last_five_frames(bm):
     """E^o_cont's marker side (Eq. 6 in Eq. 10): w_m sum over the last 5 frames and the 143 SAGA markers of C^_M times
     the squared distance to the nearest object point, the markers read off the full mesh and the distances from
     scipy's KD-tree; frames before the last five do not count, and C^_M = 0 gives 0."""
-    from scipy.spatial import cKDTree
-
     from graspkit.body.markers import saga_markers
-    from graspkit.optim.grasppose import GraspObject
 
     opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("contact",)))
     F, w = 7, opt.cfg.weights
@@ -416,10 +410,7 @@ def test_marker_contact_brings_the_contact_markers_onto_an_object_the_markers_mi
     C^_M = 1 on those markers (0 elsewhere) they end at least 5 mm closer to the ball (scipy's KD-tree on its points)
     than fitted without it, which leaves them where the markers put them, over 2 cm off. (The L1 marker fit holds
     them back: the squared distance's pull is 2 w_m d, 0.6 per marker at 2 cm.)"""
-    from scipy.spatial import cKDTree
-
     from graspkit.body.markers import saga_markers
-    from graspkit.optim.grasppose import GraspObject
 
     markers, _, betas, m = clip
     ms = saga_markers(bm)
@@ -533,3 +524,262 @@ def test_skating_term_counts_the_displacement_from_a_frame_in_contact(bm):
     c = torch.zeros(1, F, 4)
     c[0, F - 1, 0] = 1.0
     assert opt.energy(p, *args, c, None, None)["skate"].item() == 0.0
+
+
+def _params(opt: GraspMotionOpt, orient: torch.Tensor, transl: torch.Tensor) -> dict[str, torch.Tensor]:
+    """Frame parameters of the prior's mean pose (zero latent, zero hand codes) with global rotations orient (F,3,3)
+    and translations transl (F,3)."""
+    F = len(transl)
+    p = {"transl": transl.float(), "orient6d": matrix_to_rot6d(orient.float()), "z": torch.zeros(F, 32),
+         "left_pca": torch.zeros(F, opt.cfg.n_pca), "right_pca": torch.zeros(F, opt.cfg.n_pca)}
+    if len(opt.free_ids):
+        p["joint6d"] = torch.zeros(F, len(opt.free_ids), 6)
+    return p
+
+
+def _still(opt: GraspMotionOpt, F: int, transl=None) -> dict[str, torch.Tensor]:
+    """The mean pose, unrotated, at translations transl (F,3) (default 0)."""
+    t = torch.zeros(F, 3) if transl is None else transl
+    return _params(opt, torch.eye(3).expand(F, 3, 3), t)
+
+
+def _rz(a: float) -> torch.Tensor:
+    c, s = np.cos(a), np.sin(a)
+    return torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], dtype=torch.float32)
+
+
+def _right_hand_ids(bm) -> np.ndarray:
+    """The vertices of GraspMotion-Opt's hand slice: the right hand and its palm."""
+    return np.union1d(hand_vertex_ids(bm, ("right",)), palm_vertices(bm)["right"])
+
+
+def test_hand_codes_are_pca_about_each_hands_own_mean(bm):
+    """rotmats: each hand's pose is its own 24 PCA coefficients times the model's components plus that hand's mean
+    (flat_hand_mean=False), as BodyModel.forward with use_pca=True builds the same named SMPL-X parameters."""
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig())
+    g = torch.Generator().manual_seed(0)
+    p = _still(opt, 2)
+    p["left_pca"] = 0.8 * torch.randn(2, 24, generator=g)
+    p["right_pca"] = 0.8 * torch.randn(2, 24, generator=g)
+    rot = opt.rotmats(p)
+    pca = BodyModel.from_file(PROCEDURAL_MODEL, use_pca=True, num_pca_comps=24)
+    with torch.no_grad():
+        out = pca(global_orient=matrix_to_axis_angle(rot[:, 0]), body_pose=matrix_to_axis_angle(rot[:, 1:22]).reshape(2, 63),
+                  left_hand_pose=p["left_pca"], right_hand_pose=p["right_pca"], transl=p["transl"]).vertices
+        got = opt.body(p, torch.zeros(2, 10))[0]
+    torch.testing.assert_close(got[:, opt.sl_h], out[:, _right_hand_ids(bm)], atol=1e-4, rtol=0)
+    torch.testing.assert_close(got[:, opt.sl_m], saga_sparse_markers(bm).select(out), atol=1e-4, rtol=0)
+
+
+def test_init_params_put_the_mean_pose_exactly_on_rigidly_moved_markers(bm):
+    """init_params (the prior's mean pose Kabsch-aligned to the markers): markers of the mean pose turned by 1 rad about
+    z and 0.4 rad about x and moved by (0.5, -1.2, 0.9) m are met exactly (a rigid motion about the pelvis joint)."""
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig())
+    with torch.no_grad():
+        m0 = opt.body(_still(opt, 1), torch.zeros(1, 10))[0][:, opt.sl_m]
+    c, s = float(np.cos(0.4)), float(np.sin(0.4))
+    R = _rz(1.0) @ torch.tensor([[1.0, 0, 0], [0, c, -s], [0, s, c]])
+    target = m0 @ R.T + torch.tensor([0.5, -1.2, 0.9])
+    p = opt.init_params(target, torch.zeros(1, 10))
+    with torch.no_grad():
+        got = opt.body(p, torch.zeros(1, 10))[0][:, opt.sl_m]
+    torch.testing.assert_close(got, target, atol=2e-4, rtol=0)
+
+
+def test_marker_fit_term_is_the_l1_distance(bm):
+    """E_fit (Eq. 5 as GraspPose-Opt: L1 marker distance): every marker 1 cm, 2 cm and 5 mm off along x, y, z over 3
+    frames gives 3 x 79 x 0.035."""
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=()))
+    F = 3
+    p = _still(opt, F, torch.arange(F, dtype=torch.float32)[:, None] * torch.tensor([0.02, 0.0, 0.0]))
+    with torch.no_grad():
+        m = opt.body(p, torch.zeros(F, 10))[0][:, opt.sl_m]
+        target = (m + torch.tensor([0.01, -0.02, 0.005]))[None]
+        e = opt.energy(p, target, torch.zeros(F, 10), 2, None, None, None)["fit"].item()
+    assert e == pytest.approx(F * 79 * 0.035, rel=1e-3)
+
+
+def test_grid_collision_term_is_the_hand_depth_past_sigma_b(bm):
+    """E^o_colli with the object's grid (Eq. 7's first sum, sigma_b = 1 mm): a box through the right hand gives
+    w_colli sum over the hand vertices of (depth - sigma_b)_+, the depth from the analytic box SDF (the grid's
+    trilinear values are exact near a face); the object-points sum is switched off."""
+    cfg = GraspMotionConfig(terms=("colli",), weights=GraspMotionWeights(colli_object=0.0))
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, cfg)
+    p = _still(opt, 2)
+    with torch.no_grad():
+        hands = opt.body(p, torch.zeros(2, 10))[0][0, opt.sl_h].double().numpy()
+    centre = hands.mean(0)
+    ext = np.array([0.3, 0.3, 0.3])
+    box = trimesh.creation.box(extents=ext)
+    origin = np.array([centre[0], centre[1], np.quantile(hands[:, 2], 0.3) - 0.15])   # its top face 30 % into the hand
+    grid = SDFGrid.from_mesh(box, resolution=24)
+    pts, fid = trimesh.sample.sample_surface_even(box, 2000, seed=0)
+    obj = GraspObject(torch.as_tensor(pts + origin).float()[None], torch.as_tensor(box.face_normals[fid]).float()[None],
+                      0.0, grid, torch.eye(3)[None], torch.as_tensor(origin).float()[None])
+    q = np.abs(hands - origin) - ext / 2
+    sdf = np.linalg.norm(np.maximum(q, 0), axis=1) + np.minimum(q.max(1), 0)
+    w = opt.cfg.weights
+    want = 2 * w.colli * np.maximum(-sdf - w.sigma_b, 0).sum()          # both frames
+    assert (sdf < -0.005).sum() > 20
+    with torch.no_grad():
+        e = opt.energy(p, torch.zeros(1, 2, 79, 3), torch.zeros(2, 10), 2, None, obj, None)["colli"].item()
+    assert e == pytest.approx(want, rel=0.03)
+
+
+def test_palm_term_weighs_the_near_frames_by_their_place_in_the_sequence(bm):
+    """Eq. 11's alpha_t = 1 - (t/T)^2 counts t over the whole sequence: of 3 frames, frame 0 far from the object and
+    frames 1, 2 at a plane behind the palm, the energy is w_g (3/4 E(frame 1) + 0 E(frame 2))."""
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("palm",), point_stride=1))
+    p = _still(opt, 3, torch.tensor([[-1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]))
+    with torch.no_grad():
+        hands = opt.body(p, torch.zeros(3, 10))[0][:, opt.sl_h].float()
+    palm = hands[1, opt.palm]
+    lo, hi = palm.min(0).values, palm.max(0).values
+    xs = torch.arange(float(lo[0]) - 0.02, float(hi[0]) + 0.02, 0.003)
+    zs = torch.arange(float(lo[2]) - 0.02, float(hi[2]) + 0.02, 0.003)
+    grid = torch.stack(torch.meshgrid(xs, zs, indexing="ij"), -1).reshape(-1, 2)
+    pts = torch.stack([grid[:, 0], torch.full((len(grid),), float(hi[1]) + 0.003), grid[:, 1]], -1)[None]
+    obj = GraspObject(pts, torch.zeros_like(pts), 0.0)
+    with torch.no_grad():
+        e = opt.energy(p, torch.zeros(1, 3, 79, 3), torch.zeros(3, 10), 2, None, obj, None)["palm"].item()
+        one = opt.palm_term(hands[1:2][None], pts, torch.tensor([0]), total=3).item()     # alpha = 1
+    assert one > 0.5
+    assert e == pytest.approx(opt.cfg.weights.palm * 0.75 * one, rel=1e-4)
+
+
+def test_latent_smoothness_depends_on_marker_differences_only(bm):
+    """S.1: S = AE(M_{1:T} - M_{0:T-1}) encodes marker differences, so E_smooth (shipped autoencoder) is the same for a
+    walking body and the same body moved by (1, 2, 0.5) m on every frame."""
+    opt = GraspMotionOpt(bm, load_pose_prior(), load_smooth_ae(), GraspMotionConfig(terms=("smooth",)))
+    F = 6
+    t = torch.arange(F, dtype=torch.float32)[:, None]
+    walk = 0.03 * t * torch.tensor([1.0, 0.0, 0.0]) + 0.01 * t ** 2 * torch.tensor([0.0, 0.0, 1.0])
+    args = (torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, None, None, None)
+    with torch.no_grad():
+        e = opt.energy(_still(opt, F, walk), *args)["smooth"].item()
+        moved = opt.energy(_still(opt, F, walk + torch.tensor([1.0, 2.0, 0.5])), *args)["smooth"].item()
+    assert e > 0 and moved == pytest.approx(e, rel=1e-3)
+
+
+UP = torch.tensor([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])    # canonical y up -> world z up
+
+
+def _heels(bm) -> list[int]:
+    names = saga_sparse_markers(bm).names
+    return [names.index("LHEE"), names.index("RHEE")]
+
+
+def test_default_floor_is_the_lowest_heel_marker_height_and_heels_10cm_up_are_lifted(bm):
+    """graspkit's planted heel (module docstring): the floor defaults to the lowest heel marker of the target (its z, z
+    up), and the term counts frames with both heel markers within 6 cm of it. A body sliding 2 cm a frame: target heels
+    1 cm under the body's gives a_heel (0.02 - sigma) per frame; the right heel's target 1 m lower (the lowest) puts
+    the floor 1 m down: 0; target heels 10 cm under the body's: 0 (lifted)."""
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("heel",)))
+    F, w = 5, opt.cfg.weights
+    p = _params(opt, UP.expand(F, 3, 3), torch.arange(F, dtype=torch.float32)[:, None] * torch.tensor([0.02, 0.0, 0.0]))
+    hl, hr = _heels(bm)
+    with torch.no_grad():
+        hz = opt.body(p, torch.zeros(F, 10))[0][:, opt.sl_m][:, [hl, hr], 2]
+    low = float(hz.min())
+
+    def energy(zl: float, zr: float) -> float:
+        target = torch.zeros(1, F, 79, 3)
+        target[..., 1] = -5.0                                           # far along y: not a height
+        target[0, :, hl, 2], target[0, :, hr, 2] = zl, zr
+        with torch.no_grad():
+            return opt.energy(p, target, torch.zeros(F, 10), 2, None, None, None)["heel"].item()
+
+    assert energy(low - 0.01, low - 0.01) == pytest.approx(w.heel * (F - 1) * (0.02 - w.skate_sigma), rel=1e-4)
+    assert energy(low - 0.01, low - 1.0) == 0.0
+    assert energy(low - 0.10, low - 0.10) == 0.0
+
+
+def test_planted_heel_term_is_zero_while_one_heel_stands_still(bm):
+    """The planted-heel term takes the slower heel marker (min(|v^LHEE|, |v^RHEE|) - sigma)_+: a z-up body turning
+    0.1 rad a frame about a vertical axis through its left heel marker costs nothing (that heel stands still); the
+    same turn about the pelvis moves both heels and costs a_heel (v_min - sigma) per frame."""
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("heel",)))
+    F, w = 4, opt.cfg.weights
+    up = UP
+    hl, hr = _heels(bm)
+    with torch.no_grad():
+        v, J = opt.body(_params(opt, up[None], torch.zeros(1, 3)), torch.zeros(1, 10))
+    J0 = J[0, 0].float()
+    heel_l = v[0, opt.sl_m][hl].float()                                  # its place with orientation `up`
+    x_l = up.T @ (heel_l - J0)                                           # the heel about J0 in the canonical frame
+    R = torch.stack([_rz(0.1 * k) @ up for k in range(F)])
+    about_heel = torch.stack([up @ x_l - R[k] @ x_l for k in range(F)])
+    floor = (heel_l[2] - 0.01).reshape(1)
+    e = {}
+    for name, transl in (("heel", about_heel), ("pelvis", torch.zeros(F, 3))):
+        p = _params(opt, R, transl)
+        with torch.no_grad():
+            m = opt.body(p, torch.zeros(F, 10))[0][:, opt.sl_m]
+            e[name] = opt.energy(p, torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, None, None, None, floor)["heel"].item()
+        speed = (m[1:, [hl, hr]] - m[:-1, [hl, hr]]).norm(dim=-1)
+        assert float((m[:, [hl, hr], 2] - floor).abs().max()) < 0.06
+    assert float(speed.min()) > 2 * w.skate_sigma                       # (the pelvis turn: both heels move)
+    assert e["heel"] < 1e-3
+    want = w.heel * float((speed.min(-1).values - w.skate_sigma).clamp(min=0).sum())
+    assert e["pelvis"] == pytest.approx(want, rel=1e-3)
+
+
+def test_foot_contact_columns_are_left_heel_left_toe_right_heel_right_toe(bm):
+    """S.2's contact probabilities come in the order of the module docstring (left heel, left toe, right heel, right
+    toe): a body sliding 2 cm a frame with only column k in contact skates with the sole vertices of that part
+    (foot_vertices), a (0.02 - sigma) per vertex and frame."""
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("skate",), one_foot_down=False))
+    F, w = 4, opt.cfg.weights
+    p = _still(opt, F, torch.arange(F, dtype=torch.float32)[:, None] * torch.tensor([0.02, 0.0, 0.0]))
+    feet = foot_vertices(bm)
+    for k, part in enumerate(("left_heel", "left_toe", "right_heel", "right_toe")):
+        c = torch.zeros(1, F, 4)
+        c[:, :, k] = 1.0
+        with torch.no_grad():
+            e = opt.energy(p, torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, c, None, None)["skate"].item()
+        assert e == pytest.approx(w.skate * len(feet[part]) * (F - 1) * (0.02 - w.skate_sigma), rel=1e-4), part
+
+
+def test_in_box_widens_the_box_by_the_margin_on_both_sides():
+    """in_box's docstring: inside [lo - margin, hi + margin] on every axis."""
+    lo, hi = torch.zeros(1, 1, 3), torch.ones(1, 1, 3)
+    x = torch.tensor([[[-0.01, 0.5, 0.5], [0.5, 1.01, 0.5], [0.5, 0.5, -0.03], [1.03, 0.5, 0.5], [0.5, 0.5, 0.5]]])
+    assert in_box(x, lo, hi, 0.02).tolist() == [[True, True, False, False, True]]
+
+
+@pytest.fixture(scope="module")
+def pair(bm):
+    """Two still bodies of different shapes (betas 0 and beta_0 = 2) fitted in one batch (1 + 1 steps)."""
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(steps=(1, 1), polish=(0, 0.0),
+                                                                        terms=("smooth",)))
+    betas = torch.zeros(2, 10)
+    betas[1, 0] = 2.0
+    with torch.no_grad():
+        m = [saga_sparse_markers(bm).select(bm(betas=betas[b:b + 1]).vertices) for b in range(2)]
+    markers = torch.stack([x.expand(3, -1, -1) for x in m]).float()
+    return opt, opt.fit(markers, betas, progress=False), betas
+
+
+def test_each_sequence_of_a_batch_is_fitted_with_its_own_betas(bm, pair):
+    """fit (B sequences of T+1 frames, betas (B, 10)): the fitted markers of each sequence are those of the full mesh of
+    its own parameters and betas (sequences of two shapes fitted together)."""
+    opt, res, betas = pair
+    for b in range(2):
+        torch.testing.assert_close(saga_sparse_markers(bm).select(opt.vertices(res, b)), res.markers[b], atol=1e-4,
+                                   rtol=0)
+
+
+def test_result_parameters_follow_the_smplx_layout(bm, pair):
+    """The result's named parameters are the SMPL-X slices of `poses` (global_orient 0:3, body_pose 3:66, left hand
+    75:120, right hand 120:165; absolute, hand mean included): a flat-hand-mean BodyModel fed those named parameters
+    gives the fitted markers back."""
+    _, res, betas = pair
+    pr = res.params
+    flat = BodyModel.from_file(PROCEDURAL_MODEL, flat_hand_mean=True)
+    for b in range(2):
+        with torch.no_grad():
+            out = flat(betas=betas[b:b + 1].expand(3, -1), global_orient=pr["global_orient"][b],
+                       body_pose=pr["body_pose"][b], left_hand_pose=pr["left_hand_pose"][b],
+                       right_hand_pose=pr["right_hand_pose"][b], transl=pr["transl"][b])
+        torch.testing.assert_close(saga_sparse_markers(bm).select(out.vertices), res.markers[b], atol=1e-4, rtol=0)
+    torch.testing.assert_close(pr["body_pose"], pr["poses"][..., 3:66])

@@ -164,8 +164,6 @@ def test_graspmotion_eval_measures_the_last_frame_against_the_clips_posed_mesh()
     assert row["below_floor_max_cm"] == pytest.approx(100 * dip.max(), abs=1e-3)
     assert row["below_floor_mean_cm"] == pytest.approx(100 * dip.mean(), abs=1e-3)
     # start_cm: the fitted frame 0's markers, read off its full mesh, from the clip's first frame
-    from graspkit.body.markers import saga_sparse_markers
-
     frame0 = GraspMotionOpt(bm, load_pose_prior()).vertices(ev["result"], 0)[0]
     first = saga_sparse_markers(bm).select(frame0).double().numpy()
     assert row["start_cm"] == pytest.approx(100 * np.linalg.norm(first - s["markers"][0], axis=-1).mean(), abs=1e-3)
@@ -465,7 +463,6 @@ def test_shipped_state_round_trips_the_normalisation_statistics_exactly():
 def test_pskl_counts_a_slowly_accelerating_coordinate():
     """PSKL leaves out only coordinates that do not accelerate at all (rounding): a heel drifting at 9 mm/s^2
     (1e-5 m per frame^2 at 30 fps) is motion and is counted."""
-    from graspkit.eval_motionfill import pskl_still_share
 
     t = np.arange(40, dtype=np.float64)
     x = np.zeros((1, 40, 1, 3))
@@ -478,7 +475,6 @@ def test_pskl_counts_a_slowly_accelerating_coordinate():
 def test_heel_columns_are_the_rearmost_markers_of_each_foot():
     """heel_columns: [left heel, right heel] are, on the rest body (SMPL-X: y up, z forward, +x the body's left), the
     rearmost markers among those within 8 cm of the sole on the left and the right side."""
-    from graspkit.eval_motionfill import heel_columns
 
     bm = BodyModel.from_file(default_model_path())
     with torch.no_grad():
@@ -570,7 +566,6 @@ def test_approach_scene_of_a_short_clip_is_the_world_clip_moved_rigidly():
     """A clip shorter than a window (50 frames up to the grasp, padded in front): the rigid map that takes its world
     markers to the window's last 50 frames of markers also takes the world object points, normals and catalogue mesh
     to the scene's; the scene's mesh pose is x = mesh_rotation x_mesh + mesh_origin."""
-    from graspkit.eval_motionfill import approach_scene
     from graspkit.objects.catalogue import make_object
 
     bm = BodyModel.from_file(default_model_path())
