@@ -1,5 +1,6 @@
 """The cross-method benchmark (`graspkit eval --all`): the ground-truth row against smplx + trimesh, the planner
 row against the metrics' definitions, the report round trip and the CLI's errors."""
+import json
 from pathlib import Path
 
 import numpy as np
@@ -9,8 +10,9 @@ import torch
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from graspkit.benchmark import (PAPER_ROWS, Row, ground_truth_grasps, markdown, paper_rows, planner_motion, read_csv,
-                                saga_motion_rows, wandr_rows, write_report)
+import graspkit.benchmark as B
+from graspkit.benchmark import (PAPER_ROWS, Row, goal_rows, ground_truth_grasps, markdown, paper_rows, planner_motion,
+                                read_csv, run_all, saga_motion_rows, wandr_rows, write_report)
 from graspkit.body import BodyModel
 from graspkit.cli import main
 from graspkit.data.grasp import split_of
@@ -108,7 +110,6 @@ def test_report_round_trips_and_labels_the_papers(tmp_path):
 def test_eval_cli_errors_name_what_is_wrong(tmp_path, capsys):
     assert main(["eval"]) == 2
     assert "--all" in capsys.readouterr().err
-    from graspkit.benchmark import run_all
     with pytest.raises(FileNotFoundError, match="checkpoints: no folder"):
         run_all(tmp_path / "o", checkpoints=tmp_path / "nowhere", methods=("goal",))
     for methods in ("gt,nope", ",", ""):                   # "," ran nothing and wrote the papers' rows alone
@@ -122,9 +123,6 @@ def test_eval_cli_errors_name_what_is_wrong(tmp_path, capsys):
 def test_a_method_comes_from_its_shipped_evaluation_or_says_what_is_missing(tmp_path):
     """--reuse reads <method>_eval.json (the evaluator's own output format); without it and without weights, a row
     names the missing checkpoint."""
-    import json
-
-    from graspkit.benchmark import run_all
 
     ck = tmp_path / "ck"
     ck.mkdir()
@@ -144,9 +142,6 @@ def test_a_method_comes_from_its_shipped_evaluation_or_says_what_is_missing(tmp_
 def test_saga_motion_rows_from_a_run_equal_those_from_its_saved_evaluation(tmp_path):
     """MotionFill's Tab. 3 on the shipped test-object approach clips: run, saved as JSON, read back with --reuse."""
     import shutil
-
-    from graspkit.benchmark import run_all
-    from graspkit.paths import DATA_STUBS
 
     ck = tmp_path / "ck"
     ck.mkdir()
@@ -178,8 +173,6 @@ def test_rows_of_one_method_merge_and_keep_the_first_value():
 def test_update_replaces_whole_rows_of_the_methods_run_and_keeps_the_others(tmp_path, capsys):
     """`graspkit eval --all --update`: a saved report keeps its other rows; a reused method's rows are replaced by
     those of its (new) evaluation file, values and note together."""
-    import json
-
     from graspkit.benchmark import update
 
     old = [Row("grasp", "ground truth (synthetic)", "graspkit", {"contact_ratio": 1.0}, "3 grasps"),
@@ -198,7 +191,6 @@ def test_update_replaces_whole_rows_of_the_methods_run_and_keeps_the_others(tmp_
     ck.mkdir()
     (ck / "wholegrasp_eval.json").write_text(json.dumps({"config": {"objects": ["mug"]}, "rows": {
         "WholeGrasp w/ opt. (Ours)": {"n": 6, "contact_ratio": 0.5, "volume_cm3": 1.25, "depth_cm": 0.5, "apd": 2.0}}}))
-    from graspkit.benchmark import run_all
 
     rows = update(read_csv(out / "benchmark.csv"), run_all(tmp_path / "x", data=[STUBS / "grasps"], checkpoints=ck,
                                                             methods=("saga",), reuse=True))
@@ -213,7 +205,6 @@ def test_a_row_holds_one_protocol_the_common_motions_and_goals_saga_clips_get_ro
     """WANDR's own grid row keeps the grid's FS; its motion on the common goals is a row of its own, measured here
     again with the metrics' definition (the lowest vertex's horizontal step > 0.66 cm); GOAL's evaluation gives
     SAGA's sliding on its clips a row."""
-    import json
     import shutil
 
     from graspkit.benchmark import COMMON, common_motion_rows, goal_rows, run_all, wandr_motions
@@ -251,7 +242,6 @@ def test_a_row_holds_one_protocol_the_common_motions_and_goals_saga_clips_get_ro
 def test_goal_sliding_rows_are_percent():
     """The foot-sliding column is in percent: GOAL's published 13.7 % is eval_goal's 0.137, and a measured share of
     0.137 (GOAL) or 0.25 (SAGA) reads 13.7 and 25.0."""
-    from graspkit.benchmark import PAPER_ROWS, goal_rows
     from graspkit.eval_goal import PAPER_SLIDING
 
     paper = [v for t, m, s, v in PAPER_ROWS if s == "GOAL Sec. 4.2" and m.startswith("GOAL")][0]["slide_goal"]
@@ -322,7 +312,6 @@ def test_papers_wandr_row_is_wandr_table_1():
 
 def test_common_wandr_motions_go_to_k_different_directions(tmp_path, monkeypatch):
     """common_motion_rows: WANDR towards k goals 2 m away, 0.9 m high, in k different directions (every 360/k deg)."""
-    import graspkit.benchmark as B
     from graspkit.data import load_motion
 
     (tmp_path / "wandr.pt").write_bytes(b"")                   # present; the motions are stubbed
@@ -347,9 +336,6 @@ def test_motionfill_motions_stand_on_the_floor_z_0(monkeypatch):
     """motionfill_motions returns the fitted bodies with the scene's floor moved to z = 0 (its docstring): a body whose
     soles stand on the scene's floor (z = -0.85 in MotionFill's canonical frame) comes back with its soles at 0, the
     object mesh moved the same way."""
-    import torch
-    import trimesh
-
     import graspkit.eval_motionfill as EM
     from graspkit.benchmark import motionfill_motions
 
@@ -368,3 +354,161 @@ def test_motionfill_motions_stand_on_the_floor_z_0(monkeypatch):
     v = motions[0].vertices(bm)
     assert abs(float(v[:, :, 2].min())) < 1e-5
     assert np.allclose(scenes[0]["mesh"].bounds[:, 2], [0.75, 0.85], atol=1e-6)
+
+
+def _names(folder: Path, kind: str) -> list[str]:
+    """Object names of a folder's `kind` files, read with numpy."""
+    return [str(np.load(f, allow_pickle=False)["obj_name"]) for f in sorted(folder.glob(f"{kind}_*.npz"))]
+
+
+def test_goal_grasp_rows_keep_the_refinement_and_the_pen_row_apart():
+    """GOAL Tab. 1: eval_goal's 'GNet' row (Eq. 4-8 refinement) is the benchmark's 'GOAL (GNet + refinement)', its
+    E_pen row the one named so."""
+    from graspkit.eval_goal import PEN_ROW
+
+    rows = goal_rows({"tab1": {"GNet": {"n": 4, "contact_ratio": 0.5, "volume_cm3": 2.0, "depth_cm": 0.25},
+                               PEN_ROW: {"n": 4, "contact_ratio": 0.75, "volume_cm3": 1.0, "depth_cm": 0.125}}})
+    by = {r.method: r.values for r in rows}
+    assert by["GOAL (GNet + refinement)"] == {"contact_ratio": 0.5, "volume_cm3": 2.0, "depth_cm": 0.25}
+    assert by["GOAL (GNet + refinement + E_pen, graspkit's)"]["volume_cm3"] == 1.0
+
+
+def test_run_saga_evaluates_the_test_objects_with_the_quick_protocol(tmp_path, monkeypatch):
+    """run_saga: the held-out (test-split) objects of the folder; quick = one placement, three samples, one GT grasp;
+    otherwise eval_saga's defaults."""
+    import graspkit.eval_saga as ES
+
+    seen = []
+    monkeypatch.setattr(ES, "evaluate", lambda root, cfg, **kw: seen.append(cfg) or {"rows": {}})
+    want = tuple(sorted({n for n in _names(DATA_STUBS / "grasps", "grasp") if split_of(n) == "test"}))
+    assert want == ("mug",)
+    B.run_saga(DATA_STUBS / "grasps", tmp_path / "s.json", True, DATA_STUBS / "checkpoints")
+    B.run_saga(DATA_STUBS / "grasps", tmp_path / "s.json", False, DATA_STUBS / "checkpoints")
+    quick, full = seen
+    assert (quick.objects, quick.placements, quick.samples, quick.gt_grasps) == (want, 1, 3, 1)
+    assert full == ES.EvalConfig(objects=want)
+
+
+def test_run_saga_motion_evaluates_the_test_object_clips(tmp_path, monkeypatch):
+    """run_saga_motion hands MotionFill's Tab. 3 the windows of the test-object approach clips only (the stubs: two
+    mug clips, two bottle clips)."""
+    import graspkit.eval_motionfill as EM
+
+    seen = []
+    monkeypatch.setattr(EM, "load_motionfill", lambda path: None)
+    monkeypatch.setattr(EM, "evaluate", lambda model, arr, clips, n=10: seen.append((arr, clips)) or {})
+    res = B.run_saga_motion(DATA_STUBS / "approach", tmp_path / "m.json", True, DATA_STUBS / "checkpoints")
+    (arr, clips), = seen
+    _, names = EM.approach_motions(DATA_STUBS / "approach")
+    assert sorted(names[c] for c in clips) == ["mug", "mug"]
+    assert res["test_windows"] == int(np.isin(arr["clip"], clips).sum()) and res["samples"] == 3
+
+
+def _sliding_motions(k: int) -> list:
+    """k short clips pushed 2 cm sideways per frame (they slide in GOAL's sense)."""
+    from graspkit.data import load_motion
+    from graspkit.data.motion import Motion
+
+    m = load_motion(DATA_STUBS / "motion" / "reach" / "reach_000002.npz").slice(0, 6)
+    tr = m.trans + 0.02 * np.arange(len(m.trans))[:, None] * np.array([1.0, 0.0, 0.0])
+    return [Motion(m.poses, tr, m.betas, m.fps)] * k
+
+
+def test_common_wandr_motions_run_four_seconds_and_slide_in_percent(tmp_path, monkeypatch):
+    """common_motion_rows: WANDR's goal frame is 4 s at 30 fps (120), and the sliding column is in percent (100 x
+    graspkit.metrics.motion_quality's share of the same motions)."""
+    from graspkit.metrics import motion_quality
+
+    (tmp_path / "wandr.pt").write_bytes(b"")
+    seen = []
+    monkeypatch.setattr(B, "wandr_motions", lambda ck, goals, t_goal, seed=0, lift=False:
+                        seen.append(t_goal) or _sliding_motions(len(goals)))
+    bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    rows = B.common_motion_rows(bm, [DATA_STUBS / "approach"], tmp_path, k=2)
+    assert seen == [120]
+    (w,) = [r for r in rows if r.method.startswith("WANDR")]
+    share = motion_quality(bm, _sliding_motions(2))["slide_goal"]
+    assert share > 0.2 and w.values["slide_goal"] == pytest.approx(100 * share)
+
+
+def test_common_saga_and_goal_motions_start_from_test_object_clips(tmp_path, monkeypatch):
+    """The common motions of SAGA and GOAL come from the first k test-object approach clips only (the stubs hold two
+    mug and two bottle clips; k = 4)."""
+    from graspkit.data.grab import load_grasp_sequence
+
+    for f in ("motionfill.pt", "mnet.pt"):
+        (tmp_path / f).write_bytes(b"")
+    files, seqs = [], []
+    monkeypatch.setattr(B, "motionfill_motions", lambda fs, ck: files.extend(fs) or (_sliding_motions(len(fs)), []))
+    monkeypatch.setattr(B, "goal_motions", lambda ss, ck: seqs.extend(ss) or _sliding_motions(len(ss)))
+    bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    B.common_motion_rows(bm, [DATA_STUBS / "approach"], tmp_path, k=4)
+    assert [load_grasp_sequence(f).object_name for f in files] == ["mug", "mug"]
+    assert [s.object_name for s in seqs] == ["mug", "mug"]
+
+
+def test_run_all_runs_each_saga_evaluator_on_its_kind_of_data(tmp_path, monkeypatch):
+    """run_all with data = [grasps folder, approach folder]: SAGA's grasp evaluation reads the grasp files, its
+    MotionFill evaluation the approach clips."""
+    ck = tmp_path / "ck"
+    ck.mkdir()
+    for f in ("wholegrasp.pt", "motionfill.pt"):
+        (ck / f).write_bytes(b"")
+    seen = {}
+    monkeypatch.setattr(B, "run_saga", lambda root, o, q, c: seen.setdefault("saga", Path(root)) and {"rows": {}})
+    monkeypatch.setattr(B, "run_saga_motion", lambda root, o, q, c: seen.setdefault("motion", Path(root)) and {"rows": {}})
+    run_all(tmp_path / "out", data=[DATA_STUBS / "grasps", DATA_STUBS / "approach"], checkpoints=ck,
+            methods=("saga", "saga_motion"))
+    assert list(seen["saga"].glob("grasp_*.npz")) and list(seen["motion"].glob("approach_*.npz"))
+
+
+def test_shipped_evaluation_is_read_only_with_reuse(tmp_path):
+    """Without --reuse a method runs its evaluator: a shipped <method>_eval.json is not read, and without weights the
+    row says the checkpoint is missing."""
+    ck = tmp_path / "ck"
+    ck.mkdir()
+    (ck / "wholegrasp_eval.json").write_text(json.dumps({"config": {"objects": ["mug"]}, "rows": {
+        "WholeGrasp w/ opt. (Ours)": {"n": 6, "contact_ratio": 0.5, "volume_cm3": 1.25, "depth_cm": 0.5}}}))
+    rows = run_all(tmp_path / "out", data=[DATA_STUBS / "grasps"], checkpoints=ck, methods=("saga",))
+    (saga,) = [r for r in rows if r.source == "graspkit"]
+    assert not saga.values and f"checkpoint missing: {ck / 'wholegrasp.pt'}" in saga.note
+
+
+def test_markdown_lists_ours_before_the_papers_rows():
+    """Each table lists graspkit's rows first, then the papers' (markdown's docstring), whatever the input order."""
+    ours = Row("grasp", "ground truth (synthetic)", "graspkit", {"contact_ratio": 1.0}, "3 grasps")
+    lines = [x for x in markdown(paper_rows() + [ours]).splitlines() if x.startswith("| ")]
+    grasp = [x for x in lines if "contact ratio" not in x and "foot" not in x][:6]
+    assert "graspkit (ours)" in grasp[0] and all("paper:" in x for x in grasp[1:])
+
+
+def test_papers_saga_rows_are_saga_tables_1_and_2():
+    """The benchmark's SAGA figures are eval_saga's transcriptions of Tab. 1 (ours, GrabNet-SMPLX) and Tab. 2 (GT)."""
+    from graspkit.eval_saga import PAPER_TAB1, PAPER_TAB2
+
+    by = {(m, s): v for t, m, s, v in PAPER_ROWS}
+    for name, key in (("SAGA (WholeGrasp w/ opt.)", "WholeGrasp w/ opt. (Ours)"), ("GrabNet-SMPLX", "GrabNet-SMPLX")):
+        v = by[(name, "SAGA Tab. 1")]
+        assert (v["apd"], v["contact_ratio"], v["volume_cm3"], v["depth_cm"]) == PAPER_TAB1[key]
+    gt = by[("ground truth (GRAB)", "SAGA Tab. 2")]
+    assert (gt["contact_ratio"], gt["volume_cm3"], gt["depth_cm"]) == tuple(c[0] for c in PAPER_TAB2["GT mesh"])
+
+
+def test_ground_truth_row_averages_the_grasps_volumes_and_depths(tmp_path):
+    """The ground-truth row's volume and depth are the means over its grasps: the row of three grasps equals the
+    mean of the three one-grasp rows (each grasp file alone in a folder)."""
+    import shutil
+
+    bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    files = [f for f in sorted((DATA_STUBS / "grasps").glob("grasp_*.npz"))
+             if split_of(str(np.load(f, allow_pickle=False)["obj_name"])) == "test"][:3]
+    one = []
+    for i, f in enumerate(files):
+        (tmp_path / str(i)).mkdir()
+        shutil.copy(f, tmp_path / str(i) / f.name)
+        one.append(ground_truth_grasps(bm, [tmp_path / str(i)]).values)
+    vols = [r["volume_cm3"] for r in one]
+    assert np.ptp(vols) > 1e-3 and abs(np.mean(vols) - np.median(vols)) > 1e-4   # a case where mean != median
+    row = ground_truth_grasps(bm, [DATA_STUBS / "grasps"], n=3).values
+    for k in ("contact_ratio", "volume_cm3", "depth_cm"):
+        assert row[k] == pytest.approx(np.mean([r[k] for r in one]), rel=1e-9, abs=1e-12), k
