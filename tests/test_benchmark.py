@@ -123,7 +123,6 @@ def test_eval_cli_errors_name_what_is_wrong(tmp_path, capsys):
 def test_a_method_comes_from_its_shipped_evaluation_or_says_what_is_missing(tmp_path):
     """--reuse reads <method>_eval.json (the evaluator's own output format); without it and without weights, a row
     names the missing checkpoint."""
-
     ck = tmp_path / "ck"
     ck.mkdir()
     saga = {"config": {"objects": ["mug"]}, "rows": {

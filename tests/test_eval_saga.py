@@ -45,7 +45,6 @@ def test_finish_partial_writes_a_table_with_the_objects_done(tmp_path):
 
 
 def test_summarise_apd_is_the_mean_pairwise_marker_distance_per_run():
-
     m = torch.zeros(4, 143, 3)
     m[1, 0, 0] = 3.0                                               # run 1: two sets 3 apart; run 2: identical
     s = summarise(_rows([1] * 4, [0] * 4, [0] * 4), m, per=2)
@@ -96,7 +95,6 @@ def test_grabnet_only_gives_the_full_runs_grabnet_row(tmp_path):
 def test_apd_is_taken_within_each_placement():
     """APD is the mean pairwise distance of one placement's samples, averaged over placements (scipy's pdist): two
     placements 5 m apart must not count their distance to each other."""
-
     g = torch.Generator().manual_seed(0)
     base = torch.randn(143, 3, generator=g)
     a = base + 0.01 * torch.randn(3, 143, 3, generator=g)
@@ -168,7 +166,6 @@ def test_table2_puts_ground_truth_and_samples_in_their_columns():
     """SAGA Tab. 2: per stage-3 variant, the fit of the ground-truth markers (GT) and of WholeGrasp-VAE's samples
     (Samples) beside the paper's (E_fit + E_g: contact 0.99 / 0.96, volume 2.21 / 12.20; + E_cont: 0.94 / 0.94,
     0.52 / 0.48), WholeGrasp-single's rows nowhere."""
-
     keys = ("GT mesh", "GT + E_fit + E_g", "WholeGrasp w/o opt.", "GT + E_colli", "samples + E_colli", "GT + E_cont",
             "WholeGrasp w/ opt. (Ours)", "WholeGrasp-single w/o opt.")
     rows = {k: {"contact_ratio": 0.11 * (i + 1), "volume_cm3": 1.0 + i, "depth_cm": 0.5 + i} for i, k in enumerate(keys)}
@@ -183,7 +180,6 @@ def test_table2_puts_ground_truth_and_samples_in_their_columns():
 def test_ground_truth_fit_rows_hold_the_ground_truth_bodies_only(tmp_path):
     """Tab. 2's GT rows are the fits of the ground-truth markers (gt_grasps per object), also when WholeGrasp-single's
     weights are there and its samples share the batch (here the shipped WholeGrasp-VAE's weights stand in for them)."""
-
     for name in ("wholegrasp.pt", "wholegrasp_single.pt"):
         shutil.copy(DATA_STUBS / "checkpoints" / "wholegrasp.pt", tmp_path / name)
     cfg = EvalConfig(objects=("mug",), placements=1, samples=2, gt_grasps=1, steps=(2, 2, 2), polish=(0, 0.0))

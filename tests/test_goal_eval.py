@@ -345,7 +345,6 @@ def test_object_points_follow_the_object_pose_of_the_requested_frame():
 def test_gnet_frame_without_a_stored_start_looks_from_the_first_frames_pelvis():
     """GNet's frame (x' = R (x - o)) for a sequence that stores no task start: the horizontal direction from the first
     frame's pelvis (the posed body's joint 0) to the object is -y."""
-
     bm, _, _ = _body()
     seq = _sequence(3, "mug")
     del seq.extras["grasp.start"]

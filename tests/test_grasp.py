@@ -408,13 +408,14 @@ def test_grasp_file_object_orientation_is_the_object_pose(scene):
 
 
 def test_static_grasp_file_has_both_feet_planted(scene):
-    """A static grasp stands on both feet (the acceptance rule keeps them within 1 cm of the ground): the file's four
-    foot contacts (heels and toes) are 1 on its one frame."""
+    """A static grasp's file labels all four foot contacts (heels and toes) 1 on its one frame: graspkit's convention,
+    not measured from the mesh (the acceptance rule keeps a static grasp's feet within 1 cm of the ground)."""
     assert scene["seq"].contacts["feet"].tolist() == [[1, 1, 1, 1]]
 
 
 def test_object_height_is_the_objects_z(scene):
-    """SAGA's t_O: the object's height above the floor, the z of its translation (z up)."""
+    """SAGA's t_O (A.3, the object's height): the z of the object's world translation (z up; the generated grasps
+    stand on the floor z = 0)."""
     assert float(scene["lab"]["object.height"]) == pytest.approx(scene["pose"].translation[2], abs=1e-6)
 
 

@@ -60,9 +60,17 @@ def test_hand_shapes_use_the_hand_pose_conventions(bm):
         assert np.allclose(out.reshape(45), template_pose(kind, axes), atol=1e-12)
 
 
+def _box_sdf(p: np.ndarray, box: trimesh.Trimesh) -> np.ndarray:
+    """The analytic signed distance (negative inside) of an axis-aligned box mesh."""
+    lo, hi = box.bounds
+    q = np.abs(p - (lo + hi) / 2) - (hi - lo) / 2
+    return np.linalg.norm(np.maximum(q, 0), axis=1) + np.minimum(q.max(1), 0)
+
+
 def test_fingers_close_until_they_touch_a_box(bm, hm):
     """An open right hand above a box (rest pose, palm facing -y): every digit stops within a few mm of the analytic
-    box surface and no deeper than the stop depth plus the grid's error, or closes fully without touching."""
+    box surface and no deeper than the stop depth (PENETRATION_STOP, 1 mm) plus 0.2 mm of the grid's error, or closes
+    fully without touching."""
     rest_v = bm().vertices[0].detach().numpy()
     palm = rest_v[hm.palm_ids]
     top = palm[:, 1].min() - 0.012
@@ -77,22 +85,17 @@ def test_fingers_close_until_they_touch_a_box(bm, hm):
     curls, hands = go.close_fingers(pb, hm, rot, go.coeffs_of(bm, np.zeros((1, 10))), torch.zeros(1, 3), sdf, [path])
     rot[0, 40:55] = axis_angle_to_matrix(torch.as_tensor(hands[0], dtype=torch.float32))
     v = bm.forward_rotmats(rot).vertices[0].detach().numpy()
-    lo, hi = box.bounds
-    def box_sdf(p):
-        q = np.abs(p - box.centroid) - (hi - lo) / 2                                # analytic box SDF
-        return np.linalg.norm(np.maximum(q, 0), axis=1) + np.minimum(q.max(1), 0)
-
     open_rot = torch.eye(3).repeat(1, 55, 1, 1)
     open_rot[0, 40:55] = axis_angle_to_matrix(torch.as_tensor(path(np.zeros((1, 5)))[0], dtype=torch.float32))
     v_open = bm.forward_rotmats(open_rot).vertices[0].detach().numpy()
     for k, f in enumerate(FINGERS):
-        d = box_sdf(v[hm.finger_ids[f]])
+        d = _box_sdf(v[hm.finger_ids[f]], box)
         if f != "thumb":
             assert 0 < curls[0, k] < 1, f"{f} never touched or started inside"
         if curls[0, k] == 0:       # a digit that is already inside when open stays open
-            assert box_sdf(v_open[hm.finger_ids[f]]).min() < -go.PENETRATION_STOP
+            assert _box_sdf(v_open[hm.finger_ids[f]], box).min() < -go.PENETRATION_STOP
         else:
-            assert -0.0025 < d.min() < 0.004, f"{f}: closest {d.min() * 1000:.1f} mm from the surface"
+            assert -go.PENETRATION_STOP - 2e-4 < d.min() < 0.004, f"{f}: {d.min() * 1000:.1f} mm from the surface"
 
 
 def test_profile_sdf_is_the_sdf_of_the_revolved_solid():
@@ -141,13 +144,6 @@ def test_solve_arm_keeps_the_elbow_below_the_shoulder_in_the_z_up_world(bm):
         _, pk = forward_kinematics(rig, loc, rig.joints[:1])
         assert np.allclose(pk[0, J["right_wrist"]], targets[k], atol=1e-6)
         assert pk[0, J["right_elbow"], 2] < sh0[2] - 0.03, k                       # the elbow hangs, not raised
-
-
-def _box_sdf(p: np.ndarray, box: trimesh.Trimesh) -> np.ndarray:
-    """The analytic signed distance (negative inside) of an axis-aligned box mesh."""
-    lo, hi = box.bounds
-    q = np.abs(p - (lo + hi) / 2) - (hi - lo) / 2
-    return np.linalg.norm(np.maximum(q, 0), axis=1) + np.minimum(q.max(1), 0)
 
 
 def test_hand_frame_normal_is_the_palms_outward_normal(bm, hm):
@@ -209,7 +205,7 @@ def test_solve_arm_moves_a_forearm_twist_into_the_elbow(bm):
     assert resid[0] < np.deg2rad(15.0), np.rad2deg(resid[0])
 
 
-def test_posed_sdf_reads_the_grid_through_the_object_pose(bm):
+def test_posed_sdf_reads_the_grid_through_the_object_pose():
     """PosedSDF (x_obj = R^T (x - t)): the grid of a 20 x 10 x 6 cm box seen through a turned and moved pose gives
     trimesh's signed distance to the box mesh moved by the same pose (opposite sign), away from its edges."""
     box = trimesh.creation.box(extents=(0.20, 0.10, 0.06))
@@ -333,25 +329,6 @@ def test_polish_learning_rate_decays_linearly_to_a_tenth(bm, hm, scene, monkeypa
     go.polish(scene["pb"], hm, scene["head_pb"], (0, 1), torch.eye(3).repeat(1, 55, 1, 1),
               go.coeffs_of(bm, np.zeros((1, 10))), torch.zeros(1, 3), scene["sdf"], targets, pts, steps=10, lr=0.005)
     assert seen == pytest.approx([0.005 * (1 - 0.9 * k / 10) for k in range(10)], rel=1e-9)
-
-
-def test_closed_fingers_stop_at_the_stop_depth(bm, hm, scene):
-    """close_fingers (PENETRATION_STOP: a closing finger stops before it enters deeper than 1 mm): every digit that
-    closed part way over the box is at most 1 mm (+ 0.2 mm) inside it (the analytic box SDF on the full mesh)."""
-    axes = hm.axes(np.zeros(10))
-    path = lambda c: go.hand_path(go.HAND_SHAPES["power"], axes, c)  # noqa: E731
-    rot = torch.eye(3).repeat(1, 55, 1, 1)
-    curls, hands = go.close_fingers(scene["pb"], hm, rot, go.coeffs_of(bm, np.zeros((1, 10))), torch.zeros(1, 3),
-                                    scene["sdf"], [path])
-    rot[0, 40:55] = axis_angle_to_matrix(torch.as_tensor(hands[0], dtype=torch.float32))
-    with torch.no_grad():
-        v = bm.forward_rotmats(rot).vertices[0].double().numpy()
-    n = 0
-    for k, f in enumerate(FINGERS):
-        if 0 < curls[0, k] < 1:
-            n += 1
-            assert _box_sdf(v[hm.finger_ids[f]], scene["box"]).min() > -go.PENETRATION_STOP - 2e-4, f
-    assert n >= 4
 
 
 def test_fit_arm_vertices_are_on_the_right_arm(bm, hm):

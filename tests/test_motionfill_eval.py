@@ -463,7 +463,6 @@ def test_shipped_state_round_trips_the_normalisation_statistics_exactly():
 def test_pskl_counts_a_slowly_accelerating_coordinate():
     """PSKL leaves out only coordinates that do not accelerate at all (rounding): a heel drifting at 9 mm/s^2
     (1e-5 m per frame^2 at 30 fps) is motion and is counted."""
-
     t = np.arange(40, dtype=np.float64)
     x = np.zeros((1, 40, 1, 3))
     x[0, :, 0, 0] = 0.5e-5 * t ** 2 + 1e-6 * np.sin(t)
@@ -475,7 +474,6 @@ def test_pskl_counts_a_slowly_accelerating_coordinate():
 def test_heel_columns_are_the_rearmost_markers_of_each_foot():
     """heel_columns: [left heel, right heel] are, on the rest body (SMPL-X: y up, z forward, +x the body's left), the
     rearmost markers among those within 8 cm of the sole on the left and the right side."""
-
     bm = BodyModel.from_file(default_model_path())
     with torch.no_grad():
         v = bm().vertices[0]
@@ -553,15 +551,6 @@ def test_ade_takes_the_best_sample_of_each_window_as_a_whole():
         assert rows[name]["ADE"] == pytest.approx(0.1 * 39 / 79, abs=1e-6)
 
 
-def _kabsch(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """R, t with b ~ a @ R.T + t."""
-    ca, cb = a.mean(0), b.mean(0)
-    u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
-    d = np.sign(np.linalg.det(vt.T @ u.T))
-    R = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
-    return R, cb - ca @ R.T
-
-
 def test_approach_scene_of_a_short_clip_is_the_world_clip_moved_rigidly():
     """A clip shorter than a window (50 frames up to the grasp, padded in front): the rigid map that takes its world
     markers to the window's last 50 frames of markers also takes the world object points, normals and catalogue mesh
@@ -579,7 +568,7 @@ def test_approach_scene_of_a_short_clip_is_the_world_clip_moved_rigidly():
     assert m.num_frames == g + 1 < 61
     mark = saga_sparse_markers(bm).select(m.vertices(bm)).numpy().astype(np.float64).reshape(-1, 3)
     win = s["markers"][61 - m.num_frames:].astype(np.float64).reshape(-1, 3)
-    R, t = _kabsch(mark, win)
+    R, t = _rigid(mark, win)
     assert np.abs(mark @ R.T + t - win).max() < 1e-4
     assert np.abs((pts @ R_o.T + t_o) @ R.T + t - s["points"]).max() < 1e-4
     assert np.abs(nrm @ R_o.T @ R.T - s["normals"]).max() < 1e-4

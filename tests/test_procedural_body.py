@@ -762,15 +762,17 @@ def test_sweep_and_loft_caps_reach_as_far_as_stated():
 
 def test_lens_is_a_c1_round_trip_with_the_stated_magnification():
     """A bubble lens maps the u-ball of radius r0 onto the world ball r0 / m (magnification m), is the identity beyond
-    r1, has a continuous radial derivative at r0 and r1 (C1), and inverse(forward(u)) = u."""
+    r1, has a continuous radial derivative at r0 and r1 (C1: 1 / m inside r0, 1 outside r1), and
+    inverse(forward(u)) = u."""
     lens = Lens((0.1, 0.2, 0.3), 0.2875, 0.60, 2.5)
     r0, r1, m = lens.r0, lens.r1, lens.m
     e = 1e-7
-    for r, slope_in, slope_out in ((r0, 1 / m, None), (r1, None, 1.0)):
+    for r, slope in ((r0, 1 / m), (r1, 1.0)):
         d_lo = (lens.rho(np.array([r])) - lens.rho(np.array([r - e])))[0] / e
         d_hi = (lens.rho(np.array([r + e])) - lens.rho(np.array([r])))[0] / e
-        assert d_lo == pytest.approx(d_hi, rel=1e-4), r
-    assert lens.rho(np.array([0.1]))[0] == pytest.approx(0.1 / m)
+        assert d_lo == pytest.approx(d_hi, rel=1e-4) and d_lo == pytest.approx(slope, rel=1e-4), r
+    assert lens.rho(np.array([0.1, r0]))[0:2] == pytest.approx([0.1 / m, r0 / m])
+    assert lens.rho(np.array([r1 + 0.01, r1 + 0.3])) == pytest.approx([r1 + 0.01, r1 + 0.3])
     u = np.asarray(lens.c) + np.random.default_rng(0).normal(scale=0.3, size=(500, 3))
     np.testing.assert_allclose(lens.inverse(lens.forward(u)), u, atol=1e-9)
 
