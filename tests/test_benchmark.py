@@ -1,6 +1,7 @@
 """The cross-method benchmark (`graspkit eval --all`): the ground-truth row against smplx + trimesh, the planner
 row against the metrics' definitions, the report round trip and the CLI's errors."""
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -140,8 +141,6 @@ def test_a_method_comes_from_its_shipped_evaluation_or_says_what_is_missing(tmp_
 
 def test_saga_motion_rows_from_a_run_equal_those_from_its_saved_evaluation(tmp_path):
     """MotionFill's Tab. 3 on the shipped test-object approach clips: run, saved as JSON, read back with --reuse."""
-    import shutil
-
     ck = tmp_path / "ck"
     ck.mkdir()
     shutil.copy(DATA_STUBS / "checkpoints" / "motionfill.pt", ck / "motionfill.pt")
@@ -204,9 +203,7 @@ def test_a_row_holds_one_protocol_the_common_motions_and_goals_saga_clips_get_ro
     """WANDR's own grid row keeps the grid's FS; its motion on the common goals is a row of its own, measured here
     again with the metrics' definition (the lowest vertex's horizontal step > 0.66 cm); GOAL's evaluation gives
     SAGA's sliding on its clips a row."""
-    import shutil
-
-    from graspkit.benchmark import COMMON, common_motion_rows, goal_rows, run_all, wandr_motions
+    from graspkit.benchmark import COMMON, common_motion_rows, wandr_motions
     from graspkit.eval_wandr import goal_from_cylinder
 
     ck = tmp_path / "ck"
@@ -355,9 +352,15 @@ def test_motionfill_motions_stand_on_the_floor_z_0(monkeypatch):
     assert np.allclose(scenes[0]["mesh"].bounds[:, 2], [0.75, 0.85], atol=1e-6)
 
 
+def _name(path: Path) -> str:
+    """The object name a GRAB-style file stores, read with numpy."""
+    with np.load(path, allow_pickle=False) as z:
+        return str(z["obj_name"])
+
+
 def _names(folder: Path, kind: str) -> list[str]:
-    """Object names of a folder's `kind` files, read with numpy."""
-    return [str(np.load(f, allow_pickle=False)["obj_name"]) for f in sorted(folder.glob(f"{kind}_*.npz"))]
+    """Object names of a folder's `kind` files, in file order."""
+    return [_name(f) for f in sorted(folder.glob(f"{kind}_*.npz"))]
 
 
 def test_goal_grasp_rows_keep_the_refinement_and_the_pen_row_apart():
@@ -496,11 +499,8 @@ def test_papers_saga_rows_are_saga_tables_1_and_2():
 def test_ground_truth_row_averages_the_grasps_volumes_and_depths(tmp_path):
     """The ground-truth row's volume and depth are the means over its grasps: the row of three grasps equals the
     mean of the three one-grasp rows (each grasp file alone in a folder)."""
-    import shutil
-
     bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
-    files = [f for f in sorted((DATA_STUBS / "grasps").glob("grasp_*.npz"))
-             if split_of(str(np.load(f, allow_pickle=False)["obj_name"])) == "test"][:3]
+    files = [f for f in sorted((DATA_STUBS / "grasps").glob("grasp_*.npz")) if split_of(_name(f)) == "test"][:3]
     one = []
     for i, f in enumerate(files):
         (tmp_path / str(i)).mkdir()

@@ -205,17 +205,22 @@ def test_rollouts_only_recomputes_the_rollouts_on_the_floor_and_keeps_sagas_row(
     assert "--max-frames: expected an integer >= 2, got 1" in capsys.readouterr().err
 
 
+def _standing_r6() -> torch.Tensor:
+    """The rest pose stood up in a z-up world (55, 6): the root turned +90 deg about x."""
+    aa = torch.zeros(55, 3)
+    aa[0] = torch.tensor([math.pi / 2, 0, 0])                                       # y up -> z up: standing
+    return axis_angle_to_rot6d(aa)
+
+
 def test_rollout_sliding_is_pooled_over_frame_pairs(monkeypatch):
     """GOAL's foot sliding over the rollouts is the share of all frame pairs that slide (as the other rows pool
     theirs), not a mean of per-clip shares: a 5-frame clip standing still and a 21-frame one sliding 2 cm a frame
     give 20 / 24, not 1 / 2."""
     import graspkit.models.mnet as mnet_mod
     from graspkit.eval_goal import rollout_eval
-    from graspkit.models.mnet import ApproachClip, Rollout
+    from graspkit.models.mnet import Rollout
 
-    aa = torch.zeros(55, 3)
-    aa[0] = torch.tensor([math.pi / 2, 0, 0])
-    r6 = axis_angle_to_rot6d(aa)
+    r6 = _standing_r6()
 
     def fake_rollout(mnet, body, start, goal, betas, points, centre, basis, **kw):
         T, step = (5, 0.0) if float(start[1][0]) == 0.0 else (21, 0.02)
@@ -363,7 +368,7 @@ def test_gnet_frame_without_a_stored_start_looks_from_the_first_frames_pelvis():
 def test_gnet_validation_samples_are_the_validation_objects(tmp_path):
     """gnet_data: training samples from the training objects, validation samples from the validation objects
     (GRAB's split: bottle train, apple val, mug test); the held-out test objects are in neither."""
-    from graspkit.eval_goal import gnet_data, gnet_samples
+    from graspkit.eval_goal import gnet_data
 
     for k, (i, name) in enumerate([(0, "bottle"), (1, "apple"), (2, "mug"), (3, "mug")]):
         save_grasp_sequence(tmp_path / f"approach_{k:06d}.npz", _sequence(i, name))
@@ -477,19 +482,13 @@ def test_tab1_takes_the_static_grasps_of_the_test_objects_only(tmp_path):
 # ----------------------------------------------------------------------------------------------------------- rollouts
 
 
-def _standing_r6() -> torch.Tensor:
-    aa = torch.zeros(55, 3)
-    aa[0] = torch.tensor([math.pi / 2, 0, 0])                                       # y up -> z up: standing
-    return axis_angle_to_rot6d(aa)
-
-
 def test_rollout_rows_measure_the_rollout_from_the_goal_frame(monkeypatch):
     """rollout_eval with a stand-in MNet rollout: it is asked for the clip's goal-frame pose; the row's final hand
     distance is the rollout's last frame's (cm), the ground truth has goal_frame + 1 frames (0..goal), and the
     deepest the lowest vertex goes under z = 0 is the deepest frame's (2 cm), not a mean over frames."""
     import graspkit.models.mnet as mnet_mod
     from graspkit.eval_goal import full_vertices, rollout_eval
-    from graspkit.models.mnet import ApproachClip, Rollout
+    from graspkit.models.mnet import Rollout
 
     bm, _, _ = _body()
     r6 = _standing_r6()

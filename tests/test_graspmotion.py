@@ -304,7 +304,7 @@ def test_free_arm_joints_fit_a_wrist_the_prior_cannot_and_are_the_prior_at_zero(
 
     from graspkit.body.skeleton import JOINT_INDEX
     from graspkit.data.motion import Motion
-    from graspkit.optim.grasppose import ARM_JOINTS, hand_vertex_ids
+    from graspkit.optim.grasppose import ARM_JOINTS
 
     _, _, betas, m = clip
     poses = m.poses.copy()

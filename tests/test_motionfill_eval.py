@@ -1,4 +1,5 @@
 """MotionFill evaluation (SAGA Tab. 3) and training command: PSKL, skating, the approach scene, `graspkit train motionfill`."""
+import json
 import re
 from pathlib import Path
 
@@ -282,7 +283,7 @@ def test_tab3_skating_floor_is_the_lowest_heel_of_the_window():
     window): a stand-in model whose motion is the truth raised 8 cm and sliding 1 cm per frame has its heels 8+ cm
     above the ground on every frame, so it never skates, however fast it slides; the same slide on the ground skates."""
     from graspkit.data.motionfill_dataset import make_windows
-    from graspkit.eval_motionfill import approach_motions, evaluate, heel_columns
+    from graspkit.eval_motionfill import approach_motions, evaluate
 
     bm = BodyModel.from_file(default_model_path())
     motions, _ = approach_motions(DATA_STUBS / "approach")
@@ -330,7 +331,7 @@ def test_tab3_rows_give_the_model_and_the_linear_baseline_the_same_trajectory():
     linear local motion: a stand-in model that answers the linear blend along the trajectory it is told gives exactly
     the linear rows."""
     from graspkit.data.motionfill_dataset import global_motion, make_windows
-    from graspkit.eval_motionfill import approach_motions, evaluate, linear_local
+    from graspkit.eval_motionfill import approach_motions, evaluate
 
     bm = BodyModel.from_file(default_model_path())
     motions, _ = approach_motions(DATA_STUBS / "approach")
@@ -580,8 +581,6 @@ def test_approach_scene_of_a_short_clip_is_the_world_clip_moved_rigidly():
 def test_tab3_command_evaluates_the_test_objects_windows(tmp_path, monkeypatch):
     """`python -m graspkit.eval_motionfill tab3` evaluates the windows of the held-out test objects (split code 2),
     and reports their number."""
-    import json
-
     import graspkit.eval_motionfill as E
 
     arr = {"clip": np.array([0, 0, 1, 2, 2, 3]), "split": np.array([0, 0, 2, 1, 1, 2])}
@@ -606,7 +605,7 @@ def test_graspmotion_rows_measure_the_floor_of_the_scene():
     s['floor'], not z = 0): the non-collision score is the share of the fitted mesh's vertices at or above that
     floor (SAGA §4.2), and a stand-in sample that is the clip's window raised 8 cm and sliding 1 cm a frame never
     skates (both heels must be within 5 cm of the floor). (~10 s: one GraspMotion-Opt fit of 2 + 2 steps.)"""
-    from graspkit.eval_motionfill import approach_scene, graspmotion_eval
+    from graspkit.eval_motionfill import graspmotion_eval
     from graspkit.models.pose_prior import load_pose_prior
     from graspkit.optim.graspmotion import GraspMotionOpt
 
@@ -633,7 +632,7 @@ def test_graspmotion_rows_measure_the_floor_of_the_scene():
 def test_finetune_stage_trains_both_cvaes(tmp_path, monkeypatch):
     """A.4's third run (`finetune`) trains TrajFill and LocalMotionFill together: from the shipped checkpoint, one
     epoch on the four shipped approach clips changes the weights of both."""
-    from graspkit.eval_motionfill import CHECKPOINT, load_motionfill, train_stage
+    from graspkit.eval_motionfill import CHECKPOINT, train_stage
 
     monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
     init = load_motionfill(CHECKPOINT)
