@@ -9,6 +9,7 @@ from scipy.spatial import cKDTree
 from graspkit.body import BodyModel
 from graspkit.body.markers import foot_vertices, palm_vertices, saga_sparse_markers
 from graspkit.data import load_motion
+from graspkit.eval_motionfill import heel_columns
 from graspkit.models.pose_prior import load_pose_prior
 from graspkit.objects.sdf import SDFGrid
 from graspkit.optim.graspmotion import (GraspMotionConfig, GraspMotionOpt, GraspMotionWeights, MarkerDiffAE, in_box,
@@ -47,8 +48,6 @@ def test_polish_removes_adams_frame_to_frame_jitter_on_a_body_standing_still(bm,
     parameters jittering, so the heel markers move between frames; the polish at lr 0.001 holds them far below
     SAGA's 75 mm/s skating threshold (the median over frames; the first frame has its own learning rate). Measured:
     13 mm/s against 34 without the polish (torch 2.13; 14 / 31 with other kernels, 20 / 48 on torch 2.3)."""
-    from graspkit.eval_motionfill import heel_columns
-
     markers, _, betas, _ = clip
     still = markers[:1].expand(len(markers), -1, -1)[None].clone()
     speeds = {}
@@ -115,8 +114,6 @@ def _sliding(opt, F: int, transl) -> dict:
 def test_planted_heel_term_is_analytic_and_off_when_a_heel_is_lifted(bm):
     """graspkit's planted-heel term on a body sliding 2 cm per frame: both heel markers move 2 cm, so it is
     a_heel (0.02 - sigma) per frame while both heels are within heel_height of the floor, and 0 above it."""
-    from graspkit.eval_motionfill import heel_columns
-
     opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("heel",)))
     F, w = 5, opt.cfg.weights
     p = _sliding(opt, F, torch.arange(F, dtype=torch.float32)[:, None] * torch.tensor([0.02, 0.0, 0.0]))
@@ -662,11 +659,6 @@ def test_latent_smoothness_depends_on_marker_differences_only(bm):
 UP = torch.tensor([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])    # canonical y up -> world z up
 
 
-def _heels(bm) -> list[int]:
-    names = saga_sparse_markers(bm).names
-    return [names.index("LHEE"), names.index("RHEE")]
-
-
 def test_default_floor_is_the_lowest_heel_marker_height_and_heels_10cm_up_are_lifted(bm):
     """graspkit's planted heel (module docstring): the floor defaults to the lowest heel marker of the target (its z, z
     up), and the term counts frames with both heel markers within 6 cm of it. A body sliding 2 cm a frame: target heels
@@ -675,7 +667,7 @@ def test_default_floor_is_the_lowest_heel_marker_height_and_heels_10cm_up_are_li
     opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("heel",)))
     F, w = 5, opt.cfg.weights
     p = _params(opt, UP.expand(F, 3, 3), torch.arange(F, dtype=torch.float32)[:, None] * torch.tensor([0.02, 0.0, 0.0]))
-    hl, hr = _heels(bm)
+    hl, hr = heel_columns()
     with torch.no_grad():
         hz = opt.body(p, torch.zeros(F, 10))[0][:, opt.sl_m][:, [hl, hr], 2]
     low = float(hz.min())
@@ -698,7 +690,7 @@ def test_planted_heel_term_is_zero_while_one_heel_stands_still(bm):
     same turn about the pelvis moves both heels and costs a_heel (v_min - sigma) per frame."""
     opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("heel",)))
     F, w = 4, opt.cfg.weights
-    hl, hr = _heels(bm)
+    hl, hr = heel_columns()
     with torch.no_grad():
         v, J = opt.body(_params(opt, UP[None], torch.zeros(1, 3)), torch.zeros(1, 10))
     J0 = J[0, 0].float()
