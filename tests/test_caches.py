@@ -1,6 +1,8 @@
 """graspkit's caches (SDF grids, WANDR clip sets, MotionFill windows): a cache file damaged after it was written (cut
 short, a changed byte) is made again, with a warning, to the same arrays; a damaged shipped grid is left alone."""
+import os
 import warnings
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -65,3 +67,50 @@ def test_damaged_motionfill_windows_are_made_again(tmp_path, monkeypatch):
     with pytest.warns(UserWarning, match="damaged cache file"):
         again = windows("approach", 2, data=DATA_STUBS / "approach", progress=False)
     assert first.keys() == again.keys() and all(np.array_equal(first[k], again[k]) for k in first)
+
+
+def test_write_atomic_replaces_not_rewrites_and_leaves_no_temporary(tmp_path):
+    """write_atomic replaces the file by a rename: a hard link to the old file keeps the old bytes (an in-place write
+    would change both), the new file gets the mode a plain open() gives, and a failed write leaves no temporary."""
+    from graspkit.paths import write_atomic
+
+    p = tmp_path / "out.txt"
+    p.write_text("old")
+    os.link(p, tmp_path / "link.txt")
+    write_atomic(p, "new")
+    assert p.read_text() == "new" and (tmp_path / "link.txt").read_text() == "old"
+    plain = tmp_path / "plain.txt"
+    plain.write_text("x")
+    assert (p.stat().st_mode & 0o777) == (plain.stat().st_mode & 0o777)
+    before = sorted(q.name for q in tmp_path.iterdir())
+    with pytest.raises(TypeError):
+        write_atomic(tmp_path / "bad.txt", 123)
+    assert sorted(q.name for q in tmp_path.iterdir()) == before
+
+
+def test_drop_damaged_removes_only_archives_failing_their_checksums(tmp_path, capsys):
+    """drop_damaged: an .npz with a changed data byte (zipfile's CRC check fails) is removed, an intact one kept, a
+    missing one skipped (not reported as removed)."""
+    from graspkit.paths import drop_damaged
+
+    good, bad, gone = tmp_path / "good.npz", tmp_path / "bad.npz", tmp_path / "gone.npz"
+    np.savez(good, a=np.arange(100.0))
+    np.savez(bad, a=np.arange(100.0))
+    raw = bytearray(bad.read_bytes())
+    with zipfile.ZipFile(bad) as z:
+        info = z.infolist()[0]
+    raw[info.header_offset + 30 + len(info.filename) + len(info.extra) + 200] ^= 0xFF
+    bad.write_bytes(bytes(raw))
+    assert drop_damaged([good, bad, gone]) == [bad]
+    assert good.exists() and not bad.exists()
+    assert "1 damaged files" in capsys.readouterr().err
+
+
+def test_default_model_path_follows_graspkit_model(monkeypatch, tmp_path):
+    """$GRASPKIT_MODEL names the model to use (default_model_path's docstring); unset, the shipped humanoid."""
+    from graspkit.paths import BODY_MODELS, default_model_path
+
+    monkeypatch.setenv("GRASPKIT_MODEL", str(tmp_path / "m.npz"))
+    assert default_model_path() == tmp_path / "m.npz"
+    monkeypatch.delenv("GRASPKIT_MODEL")
+    assert default_model_path() == BODY_MODELS / "smplx" / "SMPLX_NEUTRAL.npz"

@@ -4,8 +4,10 @@ import sys
 import tempfile
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pytest
+import torch
 
 from graspkit import __version__
 from graspkit.body.random_model import random_smplx_arrays
@@ -463,3 +465,73 @@ def test_wandr_seconds_are_rounded_to_frames_at_30_fps(probe_args, tmp_path, sec
     assert main(["wandr", "--goal", "1", "0", "1", "--seconds", seconds, "--out", str(tmp_path)]) == 2
     a, k = probe_args[0]
     assert a[2] == frames
+
+
+def test_object_pose_yaw_is_in_degrees_and_the_floor_is_allowed():
+    """--at X Y Z YAW_DEG: yaw 90 is a quarter turn about z (scipy's rotation), and Z = 0 (documented 0 <= Z) is
+    taken."""
+    from scipy.spatial.transform import Rotation
+
+    from graspkit.cli import _object_pose
+
+    pose = _object_pose([1.0, 2.0, 0.8, 90.0])
+    np.testing.assert_allclose(pose.rotation, Rotation.from_euler("z", 90, degrees=True).as_matrix(), atol=1e-12)
+    np.testing.assert_allclose(pose.translation, [1.0, 2.0, 0.8])
+    assert _object_pose([0.0, 0.0, 0.0, 0.0]).translation[2] == 0.0
+
+
+def test_wandr_speed_note_uses_the_ground_distance():
+    """The speed note compares the distance on the ground (x, y) over the time with 1.5 m/s (docstring: 'faster than
+    1.5 m/s on the ground'): 5.8 m in 4 s is 1.45 m/s however high the goal."""
+    from graspkit.cli import wandr_range_notes
+
+    assert not any("m/s" in n for n in wandr_range_notes((5.8, 0.0, 1.8), 4.0))
+    assert any("m/s" in n for n in wandr_range_notes((6.2, 0.0, 0.2), 4.0))
+
+
+def test_cli_check_helpers_accept_an_existing_file_and_name_one_missing_folder(tmp_path):
+    """check_out takes an existing file as --out (it is replaced); check_folders checks a single path too; a
+    reports_errors main turns an OSError into exit status 2 with `prog: error:`."""
+    from graspkit.cli import check_folders, check_out, reports_errors
+
+    (tmp_path / "w.pt").write_text("x")
+    check_out(tmp_path / "w.pt", True)
+    with pytest.raises(FileNotFoundError, match="--data: .*nope: no such folder"):
+        check_folders(tmp_path / "nope")
+    check_folders(tmp_path)
+
+    @reports_errors("prog")
+    def main(argv=None):
+        raise FileNotFoundError("data: gone")
+
+    assert main([]) == 2
+
+
+def test_body_gallery_stands_each_body_on_the_ground_with_its_own_height(bm):
+    """Each gallery body stands on z = 0 and is centred above the origin, and its height is that of the body model
+    posed with its (pose, beta0): a standing pose with beta0 +2 and -2 gets the model's heights for those shapes."""
+    from graspkit.body.poses import body_pose, y_up_to_z_up
+    from graspkit.demo import body_gallery
+
+    bodies = [("a_pose", -2.0), ("squat", 0.0), ("a_pose", 2.0)]
+    fig, v = body_gallery(bm, bodies)
+    plt.close(fig)
+    np.testing.assert_allclose(v[..., 2].amin(1).numpy(), 0.0, atol=1e-6)
+    np.testing.assert_allclose(v[..., :2].mean(1).numpy(), 0.0, atol=1e-5)
+    with torch.no_grad():
+        for k, (pose, beta) in enumerate(bodies):
+            b = torch.zeros(1, bm.num_betas)
+            b[0, 0] = beta
+            ref = bm(betas=b, body_pose=body_pose(pose), global_orient=y_up_to_z_up()).vertices[0]
+            h = float(ref[:, 2].max() - ref[:, 2].min())
+            assert float(v[k, :, 2].max()) == pytest.approx(h, abs=1e-5)
+
+
+def test_a_missing_model_file_given_by_name_is_not_built(tmp_path):
+    """load_or_build_body builds only the default model when it is missing; a named file that is not there is an error
+    and nothing is written in its place."""
+    from graspkit.demo import load_or_build_body
+
+    with pytest.raises((ValueError, OSError)):
+        load_or_build_body(tmp_path / "none.npz")
+    assert not list(tmp_path.iterdir())

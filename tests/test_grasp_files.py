@@ -83,7 +83,7 @@ def test_errors_name_the_file_and_key(tmp_path):
         load_grasp_sequence(tmp_path / "y.npz")
 
 
-def _joint_valued_seq(T: int, fps: float) -> GraspSequence:
+def _joint_valued_small_sequence(T: int, fps: float) -> GraspSequence:
     """A sequence whose every joint carries its own value (0.01 j about x), with a per-frame contact count."""
     poses = np.zeros((T, 55, 3), np.float32)
     poses[:, :, 0] = 0.01 * np.arange(55)
@@ -97,7 +97,7 @@ def test_per_part_keys_follow_smplx_joint_order():
 
     from graspkit.data.grab import to_arrays
 
-    a = to_arrays(_joint_valued_seq(2, 30.0))
+    a = to_arrays(_joint_valued_small_sequence(2, 30.0))
     for key, name in (("jaw_pose", "jaw"), ("leye_pose", "left_eye_smplhf"), ("reye_pose", "right_eye_smplhf")):
         j = jn.JOINT_NAMES.index(name)
         np.testing.assert_allclose(a[f"body.params.{key}"][0], [0.01 * j, 0, 0], atol=1e-7, err_msg=key)
@@ -105,6 +105,87 @@ def test_per_part_keys_follow_smplx_joint_order():
 
 def test_contacts_are_resampled_with_the_poses(tmp_path):
     """A 120 fps file read at 30 fps keeps every fourth frame, its contacts included."""
-    s = load_grasp_sequence(save_grasp_sequence(tmp_path / "s.npz", _joint_valued_seq(121, 120.0)), fps=30.0)
+    s = load_grasp_sequence(save_grasp_sequence(tmp_path / "s.npz", _joint_valued_small_sequence(121, 120.0)), fps=30.0)
     assert s.num_frames == 31
     np.testing.assert_array_equal(s.contacts["object"][:, 0], 4 * np.arange(31))
+
+
+def _small_sequence(T=4, fps=30.0, extras=None):
+    """_sequence's layout with 16 object points, at a chosen rate and with chosen extras."""
+    rng = np.random.default_rng(0)
+    return GraspSequence(rng.normal(scale=0.3, size=(T, 55, 3)), rng.normal(size=(T, 3)), rng.normal(size=10), fps,
+                         "mug", rng.normal(size=(T, 3)), rng.normal(size=(T, 3)), "meshes/mug.ply",
+                         {"object": rng.random((T, 16)) < 0.3}, dict(extras or {}),
+                         rng.normal(size=(16, 3)), rng.normal(size=(16, 3)))
+
+
+def _rewrite(tmp_path, name, drop=(), **replace):
+    """A saved sequence's arrays with keys replaced or dropped, written again with np.savez."""
+    good = save_grasp_sequence(tmp_path / "good.npz", _small_sequence())
+    with np.load(good) as z:
+        arrays = {k: v for k, v in dict(z).items() if k not in drop}
+    arrays.update(replace)
+    np.savez(tmp_path / name, **arrays)
+    return tmp_path / name
+
+
+def test_grab_malformed_keys_are_refused_naming_file_and_key(tmp_path):
+    """Per-frame keys transposed to (3, T), points of 2 columns, points without normals and a NaN in a float contact
+    map are malformed files: each read raises SequenceFileError naming the file and the key (module docstring's
+    table of shapes)."""
+    s = _small_sequence()
+    cases = [("transposed.npz", {}, {"object.params.transl": s.object_transl.T.copy()}, "object.params.transl"),
+             ("flat.npz", {}, {"object.points": np.zeros((16, 2), np.float32),
+                               "object.normals": np.zeros((16, 2), np.float32)}, "object.points"),
+             ("alone.npz", ("object.normals",), {}, "object.points"),
+             ("nancontact.npz", {}, {"contact.object": np.where(np.eye(4, 16) > 0, np.nan, 0.5)}, "contact.object")]
+    for name, drop, replace, key in cases:
+        p = _rewrite(tmp_path, name, drop, **replace)
+        with pytest.raises(SequenceFileError, match=rf"{name}.*'{key}'"):
+            load_grasp_sequence(p)
+
+
+def test_saving_a_bad_sequence_writes_nothing(tmp_path):
+    """save_grasp_sequence refuses a NaN translation, an infinite object orientation and a zero frame rate before
+    writing: the folder stays empty (a NaN file would only fail later, when read)."""
+    for attr, index, value in (("trans", (1, 2), np.nan), ("object_orient", (0, 0), np.inf)):
+        s = _small_sequence()
+        getattr(s, attr)[index] = value
+        with pytest.raises(ValueError, match="NaN or Inf"):
+            save_grasp_sequence(tmp_path / f"{attr}.npz", s)
+    with pytest.raises(ValueError, match="fps"):
+        save_grasp_sequence(tmp_path / "rate.npz", _small_sequence(fps=0.0))
+    assert not list(tmp_path.iterdir())
+
+
+def test_grab_round_trip_keeps_exactly_the_extras_and_reads_old_style_strings(tmp_path):
+    """extras read back are exactly those written (GRAB's own keys, body.model included, are not extras); an integer
+    framerate and byte-string (numpy 'S') names, which `_str` decodes, read as 120 Hz and 'mug' / 'male'."""
+    s = _small_sequence(extras={"grasp.type": np.array("handle"), "goal.frame": np.array(3)})
+    r = load_grasp_sequence(save_grasp_sequence(tmp_path / "a.npz", s))
+    assert set(r.extras) == set(s.extras)
+    p = _rewrite(tmp_path, "old.npz", framerate=np.array(120), obj_name=np.array(b"mug"), gender=np.array(b"male"))
+    old = load_grasp_sequence(p, fps=None)
+    assert old.fps == 120.0 and old.object_name == "mug" and old.gender == "male"
+
+
+def test_contacts_are_resampled_to_the_nearest_source_frame(tmp_path):
+    """Read 120 -> 50 fps (a non-integer ratio 2.4), new frame k lies at source frame 2.4 k: its contacts are those of
+    the nearest source frame; the body translation (linear) marks the source position, so |contact - x| <= 0.5."""
+    T = 25
+    poses = np.zeros((T, 55, 3))
+    trans = np.zeros((T, 3))
+    trans[:, 0] = np.arange(T)
+    s = GraspSequence(poses, trans, np.zeros(10), 120.0, "mug", np.zeros((T, 3)), np.zeros((T, 3)),
+                      contacts={"object": np.arange(T, dtype=np.uint8)[:, None]})
+    r = load_grasp_sequence(save_grasp_sequence(tmp_path / "s.npz", s), fps=50.0)
+    np.testing.assert_allclose(r.trans[:, 0], 2.4 * np.arange(r.num_frames), atol=1e-5)
+    assert np.abs(r.contacts["object"][:, 0].astype(float) - r.trans[:, 0]).max() <= 0.5 + 1e-6
+
+
+def test_a_one_frame_file_is_returned_at_the_rate_asked_for(tmp_path):
+    """A one-frame file has nothing to resample, but load_grasp_sequence(fps=30) still returns it at 30 fps as its
+    docstring says (not at the 120 fps it was stored at); fps=None keeps the stored rate."""
+    s = _small_sequence(T=1, fps=120.0)
+    p = save_grasp_sequence(tmp_path / "one.npz", s)
+    assert load_grasp_sequence(p, fps=30.0).fps == 30.0 and load_grasp_sequence(p, fps=None).fps == 120.0

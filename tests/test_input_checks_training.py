@@ -190,3 +190,29 @@ def test_graspkit_counts_and_folders_are_checked_before_work(tmp_path, capsys, a
     assert code == 2
     assert message.format(tmp=tmp_path) in capsys.readouterr().err
     assert not (tmp_path / "demo").exists()
+
+
+def test_argument_checks_at_their_documented_bounds():
+    """check_int refuses bools, check_positive takes `most` itself ((0, most]), seeded_rng refuses None (an OS seed is
+    not repeatable), check_type refuses None unless optional, check_steps refuses bools; the argparse types take
+    their bound itself when not strict (>= 0, >= 1)."""
+    import argparse
+
+    from graspkit.checks import (check_int, check_positive, check_steps, check_type, count_type, nonneg_float,
+                                 seeded_rng)
+
+    with pytest.raises(ValueError, match="n: expected an integer >= 0"):
+        check_int(True, "n")
+    assert check_positive(2.0, "d", most=2.0) == 2.0
+    with pytest.raises(ValueError, match="seed"):
+        seeded_rng(None)
+    assert seeded_rng(5).random() == np.random.default_rng(5).random()
+    with pytest.raises(TypeError, match="g: expected a torch.Generator, got NoneType"):
+        check_type(None, torch.Generator, "g", what="torch.Generator")
+    check_type(None, torch.Generator, "g", optional=True)
+    with pytest.raises(ValueError, match="steps"):
+        check_steps((True, 1, 1), "steps", 3)
+    assert count_type(1)("1") == 1 and count_type(0)("0") == 0
+    with pytest.raises(argparse.ArgumentTypeError):
+        count_type(1)("0")
+    assert nonneg_float("0") == 0.0

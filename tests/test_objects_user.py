@@ -292,3 +292,23 @@ def test_the_command_shows_the_size_warning_once_as_a_note(tmp_path, capsys, mon
     assert main(["goal", "--object", str(tmp_path / "small.ply"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert err.count("graspkit: note: ") == 1 and "small.ply: its largest side is 4.0 cm, below" in err, err
+
+
+def test_user_object_names_sizes_and_upper_case_glb(tmp_path):
+    """A mesh's metadata name is its name; a 5 mm box is refused as not metres (the documented 0.01-0.6 m); a glTF file
+    named .GLB is y up like .glb (the specification does not depend on the suffix's case): the mug comes back z up."""
+    from graspkit.objects import make_object
+    from graspkit.objects.user import as_object
+    from graspkit.viz.export import export_scene
+
+    box = trimesh.creation.box((0.05, 0.07, 0.10))
+    box.metadata["name"] = "kettle"
+    assert as_object(box)[0] == "kettle"
+    with pytest.raises(ValueError, match="obj: expected a hand-held object in metres"):
+        as_object(trimesh.creation.box((0.005, 0.004, 0.003)))
+    mug = make_object("mug")
+    path = export_scene({"mug": mug}, tmp_path / "mug.glb")
+    upper = path.rename(tmp_path / "MUG.GLB")
+    name, m = as_object(upper)
+    assert name == "MUG"
+    np.testing.assert_allclose(m.extents, mug.extents, atol=1e-6)

@@ -348,3 +348,33 @@ def test_ground_lines_stay_inside_the_extent():
     const_x = seg[np.isclose(seg[:, 0, 0], seg[:, 1, 0])]
     assert len(const_x) == 9 and np.allclose(np.sort(const_x[:, :, 1], 1), [[-1, 1]] * 9)
     plt.close(fig)
+
+
+def test_scene_face_indices_padding_alpha_goals_and_ground():
+    """Face indices must lie in [0, V) (V itself and -1 are refused); set_equal pads each side by `pad`; draw_mesh's
+    alpha reaches every face colour; goal spheres of radius r fit in the limits; the ground grid lies on z = 0 under a
+    floating scene."""
+    from graspkit import viz
+    from graspkit.viz.scene import as_mesh
+
+    v = np.eye(3)
+    for bad in ([[0, 1, 3]], [[0, 1, -1]]):
+        with pytest.raises(ValueError, match="faces: indices must lie in"):
+            as_mesh(v, bad)
+    fig, (ax,) = viz.figure(views=("front",))
+    lim = viz.set_equal(ax, np.array([[0.0, 0.0, 0.0], [2.0, 1.0, 1.0]]), pad=0.1)
+    np.testing.assert_allclose(lim, [[-0.1, -0.1, -0.1], [2.1, 1.1, 1.1]])
+    pc = viz.draw_mesh(ax, v, [[0, 1, 2]], alpha=0.3)
+    np.testing.assert_allclose(np.asarray(pc.get_facecolor())[:, 3], 0.3)
+    plt.close(fig)
+    fig = viz.show_scene(goals=[0.0, 0.0, 1.0], goal_radius=0.2, ground=False, views=("front",), size=1.0)
+    ax = fig.axes[0]
+    assert ax.get_xlim()[0] <= -0.2 + 1e-9 and ax.get_xlim()[1] >= 0.2 - 1e-9
+    assert ax.get_zlim()[0] <= 0.8 + 1e-9 and ax.get_zlim()[1] >= 1.2 - 1e-9
+    plt.close(fig)
+    box = trimesh.creation.box((0.2, 0.2, 0.2))
+    fig = viz.show_scene(meshes=[(box.vertices + [0, 0, 1.0], box.faces)], views=("front",), size=1.0)
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
+    [grid] = [c for c in fig.axes[0].collections if isinstance(c, Line3DCollection)]
+    np.testing.assert_allclose(np.asarray(grid._segments3d, float)[..., 2], 0.0)
+    plt.close(fig)

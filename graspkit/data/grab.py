@@ -271,7 +271,8 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
         o_r = o_r3[:, 0]
         idx = np.minimum(np.round(np.arange(len(poses)) * src / fps).astype(int), n_old - 1)
         contacts = {k: c[idx] for k, c in contacts.items()}
-        src = fps
+    if fps is not None:
+        src = fps  # a one-frame file has nothing to resample, but it is still returned at the rate asked for
     skip = {"framerate", "n_frames", "obj_name", "gender", "sbj_id", "motion_intent", "body.betas", "body.model",
             "body.flat_hand_mean", "object.object_mesh", "object.points", "object.normals"}
     extras = {k: v for k, v in a.items() if not (k in skip or k.startswith(("body.params.", "object.params.", "contact.")))}
