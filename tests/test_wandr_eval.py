@@ -14,8 +14,9 @@ from graspkit import metrics
 from graspkit.body import BodyModel
 from graspkit.body.random_model import random_smplx_arrays
 from graspkit.data import load_motion
-from graspkit.data.wandr_dataset import list_clips, load_clips, rest_joints
+from graspkit.data.wandr_dataset import FOOT_JOINTS, held_out_starts, list_clips, load_clips, rest_joints
 from graspkit.paths import DATA_STUBS
+from graspkit.rotations import axis_angle_to_matrix
 
 
 def _clip(bm, name="locomotion/locomotion_000003.npz"):
@@ -620,3 +621,257 @@ def test_summary_dtg_median_is_the_median():
                      np.zeros(n), np.full(n, 0.3))
     s = E.summary(r)
     assert s["DTG_median"] == pytest.approx(100 * np.median(d)) and s["DTG"] == pytest.approx(96.8)
+
+
+def _tiny(dropout=0.0):
+    from graspkit.models.wandr import WandrConfig, WandrCVAE
+
+    torch.manual_seed(0)
+    return WandrCVAE(WandrConfig(latent=4, hidden=32, enc_layers=1, dec_layers=1, dropout=dropout))
+
+
+def test_validation_goals_cover_the_whole_cylinder_with_their_angles_in_degrees():
+    """250 uniform goals: each row's angle (deg) is the goal's counter-clockwise direction atan2(y, x), every quarter
+    of the circle holds about a quarter of them, and the heights and distances fill 0-1.8 m and 0.5-5 m."""
+    goals, cells = E.validation_goals()
+    g = goals.double().numpy()
+    ang = np.degrees(np.arctan2(g[:, 1], g[:, 0])) % 360
+    diff = (cells[:, 0] - ang + 180) % 360 - 180
+    assert np.abs(diff).max() < 1e-3
+    quarter = np.bincount((ang // 90).astype(int), minlength=4)
+    assert quarter.min() > 40                                          # 62.5 expected per quarter
+    assert np.allclose(cells[:, 1], g[:, 2], atol=1e-6)
+    assert cells[:, 1].max() > 1.6 and cells[:, 1].min() < 0.2
+    assert cells[:, 2].max() > 4.6 and cells[:, 2].min() < 0.9
+
+
+def test_goal_row_schedules_step_in_every_direction():
+    """Each leg's direction is uniform on the circle: of 150 legs every quarter gets a fair share."""
+    g = E.goal_row_schedules(50, legs=3, seed=4).double().numpy()
+    xy = np.concatenate([np.zeros((50, 1, 2)), g[:, :, :2]], 1)
+    step = np.diff(xy, axis=1).reshape(-1, 2)
+    ang = np.degrees(np.arctan2(step[:, 1], step[:, 0])) % 360
+    assert np.bincount((ang // 90).astype(int), minlength=4).min() > 20      # 37.5 expected per quarter
+
+
+def test_breakdown_by_distance_groups_by_the_distance_column():
+    """SR per distance on a hand-made result: the rows at 0.5 m reach 2 of 2, at 5 m 1 of 3, whatever their height."""
+    cells = np.array([[0, 0.0, 0.5], [72, 1.8, 0.5], [0, 0.0, 5.0], [144, 0.45, 5.0], [0, 1.8, 5.0]])
+    n = len(cells)
+    r = E.GridResult(np.zeros(n, int), np.arange(n), np.zeros(n, int), cells, np.array([0.05, 0.02, 0.5, 0.08, 0.3]),
+                     np.array([3, 1, -1, 9, -1]), np.zeros(n), np.full(n, 0.3))
+    assert E.breakdown(r, "distance") == pytest.approx({0.5: 100.0, 5.0: 100 / 3})
+    assert E.breakdown(r, "height") == pytest.approx({0.0: 50.0, 0.45: 100.0, 1.8: 50.0})
+
+
+def test_variants_match_their_tables_rows_and_the_papers_figures():
+    """Tab. 1/2 (WANDR paper): each variant's row names the intention parts it keeps (I^w wrist, I^p pelvis, I^r
+    orientation; full intention otherwise, none for VAE + opt) and the data it learns from; PAPER holds the paper's
+    SR / FS / DTG of each row."""
+    parts = {"I^w": "wrist", "I^p": "pelvis", "I^r": "orientation"}
+    for name, v in E.VARIANTS.items():
+        row = v["row"]
+        named = {p for tag, p in parts.items() if tag in row}
+        want = set() if row == "VAE + opt" else named or {"wrist", "pelvis", "orientation"}
+        assert set(v["intention"]) == want, name
+        kinds = ("locomotion",) if "AMASS" in row else ("reach",) if "Circle" in row else ("locomotion", "reach")
+        assert tuple(v["kinds"]) == kinds, name
+        assert row in E.PAPER
+    paper = {"WANDR / reaching only (Circle)": (0, 56, 205.4), "WANDR / locomotion only (AMASS)": (16, 19, 48.0),
+             "WANDR": (32, 16, 24.8), "GOAL": (0, 29, 149.2), "WANDR (I^w)": (15, 13, 62.9),
+             "WANDR (I^w + I^p)": (18, 17, 44.9), "WANDR (I^w + I^r)": (19, 19, 36.0), "VAE + opt": (3, 4, 217.0)}
+    assert E.PAPER == paper
+
+
+def test_start_poses_round_trip_through_a_checkpoints_meta(bm):
+    """starts_to_meta then starts_from_meta gives the same start poses back (p_prev before p); a meta without them
+    is refused by name."""
+    names = ["reach/reach_000001.npz", "locomotion/locomotion_000003.npz"]
+    starts = held_out_starts([load_motion(DATA_STUBS / "motion" / n) for n in names], names, bm, n=2)
+    back = E.starts_from_meta({"starts": E.starts_to_meta(starts)})
+    assert len(back) == 2
+    for a, b in zip(starts, back):
+        for k in ("p_prev", "p", "rest", "betas", "full_pose"):
+            assert torch.equal(getattr(a, k), getattr(b, k)), k
+        assert a.source == b.source
+    assert not torch.equal(starts[0].p_prev, starts[0].p)
+    with pytest.raises(ValueError, match="no held-out start poses"):
+        E.starts_from_meta({})
+
+
+def test_goal_reacher_reads_the_error_at_its_goal_frame_and_the_time_of_the_closest_frame(bm):
+    """The readout's error at t_G is the wrist's distance at frame t_G of the same motion (generate, same seed), and
+    closest_s the closest frame's time at 30 fps (frame 0 at 0 s)."""
+    from graspkit.models.wandr import generate
+
+    start = held_out_starts([load_motion(DATA_STUBS / "motion" / "reach" / "reach_000001.npz")], ["r1"], bm, n=1)[0]
+    model = _tiny().eval()
+    r = E.GoalReacher(model, start, seed=2, angle=30.0, distance=0.6, height=1.2, seconds=1.5)
+    out = r.run()
+    ref = generate(model, start, r.goal[None], 45, generator=torch.Generator().manual_seed(2))
+    d = (ref.joints[0, :, I.WRIST] - r.goal).norm(dim=-1)
+    assert len(d) == 46
+    assert out["error_at_goal_cm"] == pytest.approx(100 * float(d[45]), abs=1e-4)
+    k = int(d.argmin())
+    assert out["closest_s"] == pytest.approx(k / 30.0) and out["closest_frame"] == k
+    assert float((d[45] - d[44]).abs()) > 1e-4                         # the two frames differ
+
+
+def _posed_bodies(bm, frames=(30, 45, 60, 75)):
+    """Frames of a reach clip, each on a body of its own shape (random betas) with its own finger pose: LowVertices,
+    body transforms, body index and the body model's full meshes."""
+    m, p, _ = _clip(bm, "reach/reach_000002.npz")
+    n = len(frames)
+    betas = torch.as_tensor(np.random.default_rng(5).normal(0, 2.0, (n, 10)), dtype=torch.float32)
+    rest = rest_joints(bm, betas)
+    q = p[list(frames)]
+    hands = torch.as_tensor(m.poses[list(frames)], dtype=torch.float32)
+    low = E.LowVertices(bm, betas, hands)
+    Rg, pos = I.body_transforms(q, rest)
+    rot = torch.cat([I.pose_rotmats(q)[1], axis_angle_to_matrix(hands[:, 22:].double()).float()], 1)
+    full = torch.cat([bm.forward_rotmats(rot[b:b + 1], betas=betas[b:b + 1], transl=q[b:b + 1, :3]).vertices
+                      for b in range(n)])
+    return low, Rg, pos, torch.arange(n), full, rest
+
+
+def test_feet_and_hands_of_bodies_of_different_shapes_are_each_bodys_own(bm):
+    """Several bodies of different betas in one batch: every foot and hand vertex (points and heights) and the hand
+    reach bound match each body's own full mesh (the body model), not the first body's."""
+    low, Rg, pos, body, full, rest = _posed_bodies(bm)
+    assert float((rest[1:] - rest[:1]).abs().max()) > 0.02            # the shapes differ by centimetres
+    torch.testing.assert_close(low.feet.points(Rg, pos, body), full[:, low.feet.ids], atol=1e-5, rtol=0)
+    torch.testing.assert_close(low.feet.heights(Rg, pos, body), full[:, low.feet.ids, 2], atol=1e-5, rtol=0)
+    RgF, posF = low.with_fingers(Rg, pos, body)
+    for hand, wrist, reach in zip(low.hands, E.WRISTS, low.reach):
+        torch.testing.assert_close(hand.points(RgF, posF, body), full[:, hand.ids], atol=1e-5, rtol=0)
+        torch.testing.assert_close(hand.heights(RgF, posF, body), full[:, hand.ids, 2], atol=1e-5, rtol=0)
+        assert ((full[:, hand.ids] - pos[:, None, wrist]).norm(dim=-1).amax(1) <= reach).all()
+    lowest, at, foot_low, _ = low.lowest(Rg, pos, body)
+    truth = full[:, low.ids, 2].min(1)
+    torch.testing.assert_close(at[:, 2], truth.values, atol=1e-5, rtol=0)
+    torch.testing.assert_close(foot_low, full[:, low.feet.ids, 2].amin(1), atol=1e-5, rtol=0)
+
+
+def test_an_upside_down_body_with_a_hand_below_the_floor_has_its_feet_in_the_air(bm):
+    """A body turned upside down (a half turn about x), a hand 5 cm under the floor: the lowest vertex searched is
+    that hand's, but the lowest foot vertex (full mesh: > 50 cm up) decides floating and sunk: it floats on every
+    frame and never sinks."""
+    m, p, rest = _clip(bm, "reach/reach_000002.npz")
+    betas = torch.as_tensor(m.betas)[None]
+    T = 4
+    Rs = torch.eye(3).expand(T, I.NUM_BODY, 3, 3).clone()
+    Rs[:, 0] = torch.diag(torch.tensor([1.0, -1.0, -1.0])) @ I.pose_rotmats(p[:1])[1][0, 0]   # standing, turned
+    fingers = torch.eye(3).expand(T, 33, 3, 3)
+    v0 = bm.forward_rotmats(torch.cat([Rs[:1], fingers[:1]], 1), betas=betas, transl=torch.zeros(1, 3)).vertices[0]
+    part = bm.lbs_weights.argmax(1)
+    feet = torch.isin(part, torch.tensor(list(FOOT_JOINTS)))
+    hands = torch.isin(part, torch.tensor([20, 21] + list(range(25, 55))))
+    ts = torch.tensor([0.0, 0.0, -0.05 - float(v0[hands, 2].min())]).expand(T, 3)
+    v = bm.forward_rotmats(torch.cat([Rs, fingers], 1), betas=betas, transl=ts).vertices
+    assert float(v[:, feet, 2].min()) > 0.5 and float(v[:, hands, 2].min()) == pytest.approx(-0.05, abs=1e-5)
+    q = I.pose_from_rotmats(ts, Rs)
+    res = E.evaluate_motions(q[None], rest[None], torch.zeros(1, 3), betas, bm)
+    assert res.floating[0] == 1.0 and res.sunk[0] == 0.0
+
+
+def test_evaluate_grid_scores_the_motions_it_generates(bm):
+    """evaluate_grid on 2 starts x 3 goals x 2 samples (t_G = 6, 9 frames) of a tiny model left in training mode with
+    dropout: start-major rows, each goal's own cell, and SR / DTG / error at t_G / FS equal those measured on the
+    same motions from `generate` (same seed; wrist distances, and FS on the body model's full meshes)."""
+    from graspkit.models.wandr import generate
+
+    names = ["reach/reach_000001.npz", "locomotion/locomotion_000003.npz"]
+    starts = held_out_starts([load_motion(DATA_STUBS / "motion" / n) for n in names], names, bm, n=2)
+    gg, cc = E.grid_goals()
+    pick = [7, 61, 118]
+    goals, cells = gg[pick], cc[pick]
+    model = _tiny(dropout=0.5).train()
+    res = E.evaluate_grid(model, starts, bm, n=2, seed=3, goals=goals, cells=cells, t_goal=6, frames=9)
+    assert res.start.tolist() == [0] * 6 + [1] * 6
+    assert res.goal_index.tolist() == [0, 0, 1, 1, 2, 2] * 2 and res.sample.tolist() == [0, 1] * 6
+    assert np.array_equal(res.cell, cells[res.goal_index])
+    out = generate(model.eval(), starts, goals, 6, n=2, generator=torch.Generator().manual_seed(3), frames=9)
+    assert out.joints.shape[1] == 10
+    d = (out.joints[:, :, I.WRIST] - out.goal[:, :1]).norm(dim=-1).double().numpy()
+    assert np.allclose(res.dtg, d.min(1), atol=1e-6) and np.allclose(res.error_at_goal, d[:, 6], atol=1e-6)
+    first = np.array([int(np.flatnonzero(r <= 0.1)[0]) if (r <= 0.1).any() else -1 for r in d])
+    assert np.array_equal(res.reach_frame, first)
+    fs = [metrics.foot_skating_wandr(E.body_vertices(bm, out.p[b], starts[int(res.start[b])])).mean()
+          for b in range(12)]
+    assert np.allclose(res.fs, fs, atol=1e-6)
+    assert not np.allclose(res.dtg, E.evaluate_grid(model, starts, bm, n=2, seed=4, goals=goals, cells=cells,
+                                                     t_goal=6, frames=9).dtg)   # another seed, other motions
+    short = E.evaluate_grid(model, starts[:1], bm, n=2, seed=3, goals=goals[:1], cells=cells[:1], t_goal=8, frames=4)
+    out = generate(model, starts[:1], goals[:1], 8, n=2, generator=torch.Generator().manual_seed(3), frames=4)
+    d = (out.joints[:, :, I.WRIST] - goals[:1]).norm(dim=-1).double().numpy()
+    assert d.shape == (2, 5) and np.allclose(short.dtg, d.min(1), atol=1e-6)
+    assert np.isnan(short.error_at_goal).all()                         # the motions end before t_G
+
+
+def test_validation_score_is_one_rollout_per_start_and_goal_and_keeps_the_training_mode(bm, monkeypatch):
+    """validation_score: SR / DTG of one 8 s rollout per start and validation goal (as measured on `generate`'s
+    motions, same seed), and a model in training mode comes back in it (training goes on after the score)."""
+    from graspkit.models.wandr import generate
+
+    goals = torch.stack([E.goal_from_cylinder(40.0, 1.0, 0.9), E.goal_from_cylinder(200.0, 2.0, 0.3)])
+    monkeypatch.setattr(E, "validation_goals", lambda: (goals, np.array([[40.0, 0.9, 1.0], [200.0, 0.3, 2.0]])))
+    start = held_out_starts([load_motion(DATA_STUBS / "motion" / "reach" / "reach_000001.npz")], ["r1"], bm, n=1)
+    model = _tiny().train()
+    s = E.validation_score(model, start, bm, seed=2)
+    assert model.training
+    out = generate(model, start, goals, E.T_GOAL, n=1, generator=torch.Generator().manual_seed(2))
+    d = (out.joints[:, :, I.WRIST] - out.goal[:, :1]).norm(dim=-1).min(1).values
+    assert out.joints.shape[:2] == (2, 240)
+    assert s["DTG"] == pytest.approx(100 * float(d.mean()), abs=1e-4)
+    assert s["SR"] == pytest.approx(100 * float((d <= 0.1).float().mean()))
+
+
+def test_goals_in_a_row_count_each_goal_in_its_own_window_only(bm):
+    """A replayed motion that teleports its wrist: rollout 0 puts it on goal 2 at goal 1's frame only (before goal 2's
+    window), rollout 1 on each goal exactly at that goal's own frame. Goal 2 of rollout 0 is missed (closest: the
+    far frames), every goal of rollout 1 is reached at distance 0; closest_cm is the closest distance in cm."""
+    L, legs = 8, 3
+    start = held_out_starts([load_motion(DATA_STUBS / "motion" / "reach" / "reach_000001.npz")], ["r1"], bm, n=1)[0]
+    goals = E.goal_row_schedules(2, legs, seed=7)                     # the schedules evaluate_goal_rows draws
+    T = legs * L + 1
+    wrist0 = I.body_joints(start.p[None], start.rest)[0, I.WRIST]
+    far = torch.tensor([0.0, 0.0, 3.0]) + 0.01 * torch.arange(T)[:, None]    # 3 m up: far from every goal
+    want = far[None].repeat(2, 1, 1)
+    want[:, 0] = wrist0                                                # frame 0: the start itself
+    want[0, L] = goals[0, 1]
+    for k in range(legs):
+        want[1, (k + 1) * L] = goals[1, k]
+    p = start.p.expand(2, T + 1, -1).clone()
+    p[:, 0] = start.p_prev
+    p[:, 1:, :3] += want - wrist0                                      # move the body so the wrist is where wanted
+    wr = I.body_joints(p[:, 1:].reshape(-1, I.POSE_DIM), start.rest.expand(2 * T, -1, -1)).reshape(2, T, 22, 3)
+    torch.testing.assert_close(wr[:, :, I.WRIST], want, atol=1e-5, rtol=0)
+    r = E.evaluate_goal_rows(_Replay(I.poses_to_deltas(p)), [start], per_start=2, legs=legs, leg_frames=L, seed=7)
+    w = want.double().numpy()
+    truth = np.array([[np.linalg.norm(w[b, lo:hi + 1] - goals[b, k].double().numpy(), axis=1).min()
+                       for k, (lo, hi) in enumerate([(0, L), (L + 1, 2 * L), (2 * L + 1, 3 * L)])] for b in range(2)])
+    assert truth[0, 1] > 1.0 and np.allclose(truth[1], 0.0, atol=1e-5)
+    assert np.allclose(r["closest"].double().numpy(), truth, atol=1e-4)
+    assert r["SR_per_goal"] == pytest.approx((100 * (truth <= 0.1).mean(0)).tolist())
+    assert r["closest_cm"] == pytest.approx((100 * truth.mean(0)).tolist(), abs=1e-2)
+
+
+def test_evaluate_clips_counts_a_late_arrival_within_after_s_and_reports_centimetres(bm):
+    """Replayed reaching clips whose goal frame g is set 15 frames (0.5 s) before the wrist arrives on the goal: with
+    after_s=1 the window holds that frame (SR 100 %, DTG 0); with after_s=0.2 (6 frames) the DTG is the mean over clips
+    of the closest wrist distance in clip frames 1..g+6 (cm), and the error at t_G is the wrist's distance at g (cm)."""
+    clips = load_clips(list_clips(DATA_STUBS / "motion", kinds=("reach",)), bm)
+    wrists = [I.body_joints(clips.clip(c), clips.rest[c])[:, I.WRIST] for c in range(len(clips))]
+    g = clips.goal_frame - 15                                          # the wrist arrives 15 frames after g
+    goal = torch.stack([w[k + 15] for w, k in zip(wrists, g.tolist())])
+    cs = dataclasses.replace(clips, goal=goal, goal_frame=g)
+    L = int(cs.lengths.max()) + 40
+    p = torch.stack([torch.cat([cs.clip(c), cs.clip(c)[-1:].expand(L - len(cs.clip(c)), -1)]) for c in range(len(cs))])
+    on = E.evaluate_clips(_Replay(I.poses_to_deltas(p)), cs, after_s=1.0)
+    assert on["SR"] == 100.0 and on["DTG"] == pytest.approx(0.0, abs=0.01)
+    short = E.evaluate_clips(_Replay(I.poses_to_deltas(p)), cs, after_s=0.2)
+    dmin = np.array([float((w[1:k + 7] - gl).norm(dim=-1).min()) for w, k, gl in zip(wrists, g.tolist(), goal)])
+    err = np.array([float((w[k] - gl).norm()) for w, k, gl in zip(wrists, g.tolist(), goal)])
+    assert dmin.max() > 0.02 and abs(np.mean(dmin) - np.median(dmin)) > 0.005
+    assert short["DTG"] == pytest.approx(100 * dmin.mean(), abs=0.01)
+    assert short["error_at_goal"] == pytest.approx(100 * err.mean(), abs=0.01) and err.mean() > 0.02
