@@ -13,6 +13,7 @@ from graspkit.objects import (IAA_WEIGHT, SDFGrid, TEST_OBJECTS, apply_pose, bod
                               list_objects, make_object, marker_contact, nearest_neighbours, object_contact,
                               object_sdf_grid, penetration_depth, point_mesh_distance, sample_object_pose, sample_surface,
                               signed_distance, signed_distance_to_points, winding_number)
+from graspkit.objects import distance as D
 from graspkit.objects.contact import distance_to
 
 ALL = list_objects()
@@ -783,3 +784,146 @@ def test_marker_contact_uses_the_given_threshold():
     assert marker_contact(markers, box, threshold=0.035).tolist() == [1.0, 0.0, 0.0]
     assert marker_contact(markers, box, threshold=0.045).tolist() == [1.0, 1.0, 0.0]
     assert marker_contact(markers, box).tolist() == [0.0, 0.0, 0.0]     # the 2 cm default
+
+
+CORNER = {D.VERT_A: 0, D.VERT_B: 1, D.VERT_C: 2}  # region code -> the corner it names
+EDGE = {D.EDGE_AB: (0, 1), D.EDGE_BC: (1, 2), D.EDGE_CA: (2, 0)}
+
+
+def _check_codes(tri: np.ndarray, p: np.ndarray, q: np.ndarray, code: np.ndarray, tol: float = 1e-9) -> None:
+    """Each region code names the feature the closest point q lies on: a vertex code -> q is that corner; an edge code
+    -> q on that edge's segment; FACE -> q strictly inside the triangle (barycentrics)."""
+    for k in range(len(p)):
+        c = int(code[k])
+        if c in CORNER:
+            assert np.linalg.norm(q[k] - tri[CORNER[c]]) < tol, (k, c, p[k], q[k])
+        elif c in EDGE:
+            u, v = tri[EDGE[c][0]], tri[EDGE[c][1]]
+            s = np.clip(np.dot(q[k] - u, v - u) / np.dot(v - u, v - u), 0, 1)
+            assert np.linalg.norm(u + s * (v - u) - q[k]) < tol, (k, c, p[k], q[k])
+        else:
+            assert c == D.FACE
+            bary = trimesh.triangles.points_to_barycentric(tri[None], q[k][None])[0]
+            assert bary.min() > -tol, (k, bary)
+
+
+def test_region_codes_name_the_closest_feature_and_points_match_trimesh():
+    """closest_point_on_triangle: the closest point equals trimesh's and the region code names the vertex / edge / face
+    it lies on (the code picks the pseudo-normal of signed_distance's sign), for points around a triangle in all
+    seven Voronoi regions."""
+    tri = np.array([[0.0, 0.0, 0.0], [1.0, 0.1, 0.0], [0.3, 0.8, 0.1]])
+    rng = np.random.default_rng(0)
+    p = rng.uniform(-1.0, 2.0, (4000, 3)) * [1, 1, 0.5]
+    q, code = D.closest_point_on_triangle(torch.as_tensor(p), *torch.as_tensor(tri))
+    q, code = q.numpy(), code.numpy()
+    truth = trimesh.triangles.closest_point(np.repeat(tri[None], len(p), 0), p)
+    np.testing.assert_allclose(q, truth, atol=1e-9, rtol=0)
+    assert set(code.tolist()) == set(range(7))
+    _check_codes(tri, p, q, code)
+
+
+def test_region_codes_of_a_triangle_without_area_name_the_closest_feature():
+    """On a triangle whose corners lie on a line, a point beyond an end gets the code of that end's corner and one
+    beside the segment an edge code whose segment holds the closest point (checked geometrically)."""
+    tri = np.array([[0.0, 0.0, 0.0], [0.3, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    rng = np.random.default_rng(1)
+    p = np.concatenate([rng.normal(size=(300, 3)), [[1.5, 0.2, 0.0], [-0.4, 0.1, 0.3], [0.6, 0.5, 0.0]]])
+    q, code = D.closest_point_on_triangle(torch.as_tensor(p), *torch.as_tensor(tri))
+    q, code = q.numpy(), code.numpy()
+    np.testing.assert_allclose(np.linalg.norm(p - q, axis=1),
+                               np.linalg.norm(p - np.clip(p[:, :1], 0, 1) * [1, 0, 0], axis=1), atol=1e-12)
+    _check_codes(tri, p, q, code)
+    assert code[-3] == D.VERT_C and code[-2] == D.VERT_A
+
+
+def test_zero_area_faces_is_scale_invariant():
+    """Whether a face has area (to rounding) is a property of its shape: the same triangles scaled by 1e-6 .. 10 give
+    the same answer (a sound 1-unit triangle has area, a sliver 1e-12 wide per unit has none)."""
+    tri = torch.tensor([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]],              # sound
+                        [[0.0, 0, 0], [1, 0, 0], [0.5, 1e-12, 0]],        # sliver
+                        [[0.0, 0, 0], [0.5, 0, 0], [1, 0, 0]]], dtype=torch.float64)   # corners on a line
+    for k in (1e-6, 1e-3, 1.0, 10.0):
+        assert D.zero_area_faces(tri * k).tolist() == [False, True, True], k
+
+
+def test_require_closed_refuses_a_flat_two_sided_sheet_and_flipped_faces_even_with_holes_allowed():
+    """A triangle and its reverse form a closed, consistently wound surface enclosing zero volume (refused: degenerate);
+    a box with one face flipped is inconsistently wound, which allow_holes (boundary edges only) does not excuse."""
+    v = torch.tensor([[0.0, 0, 0], [0.1, 0, 0], [0, 0.1, 0]], dtype=torch.float64)
+    f = torch.tensor([[0, 1, 2], [0, 2, 1]])
+    with pytest.raises(ValueError, match="volume"):
+        D.require_closed(v, f, "sheet")
+    box = trimesh.creation.box((0.1, 0.1, 0.1))
+    faces = np.array(box.faces)
+    faces[3] = faces[3, ::-1]
+    vb, fb = torch.as_tensor(np.array(box.vertices)), torch.as_tensor(faces)
+    for allow in (False, True):
+        with pytest.raises(ValueError, match="winding"):
+            D.require_closed(vb, fb, "box", allow_holes=allow)
+
+
+def test_nearest_neighbours_broadcasts_a_single_batch_against_many():
+    """Query (1,N,3) against targets (B,M,3) broadcasts like torch and equals scipy cKDTree per batch entry."""
+    rng = np.random.default_rng(2)
+    q = rng.normal(size=(1, 50, 3))
+    t = rng.normal(size=(3, 80, 3))
+    dist, idx = D.nearest_neighbours(q, t)
+    assert dist.shape == (3, 50)
+    for b in range(3):
+        d, i = cKDTree(t[b]).query(q[0])
+        np.testing.assert_allclose(dist[b].numpy(), d, atol=1e-12)
+        assert idx[b].tolist() == i.tolist()
+    dist2, _ = D.nearest_neighbours(t, q)
+    for b in range(3):
+        np.testing.assert_allclose(dist2[b].numpy(), cKDTree(q[0]).query(t[b])[0], atol=1e-12)
+
+
+def test_point_mesh_distance_promotes_float32_points_against_a_float64_mesh():
+    """float32 points against a float64 mesh are measured in float64 (torch type promotion), matching trimesh on the
+    same (float32-exact) points to 1e-10 m; rounding the mesh to float32 would be off by ~1e-8."""
+    mesh = trimesh.creation.icosphere(subdivisions=2, radius=0.37)
+    rng = np.random.default_rng(3)
+    p32 = torch.as_tensor(rng.normal(scale=0.5, size=(200, 3)), dtype=torch.float32)
+    res = D.point_mesh_distance(p32, mesh)
+    assert res.distance.dtype == torch.float64
+    _, truth, _ = trimesh.proximity.closest_point(mesh, p32.double().numpy())
+    np.testing.assert_allclose(res.distance.numpy(), truth, atol=1e-10, rtol=0)
+
+
+def test_point_mesh_distance_batch_mismatch_is_a_value_error():
+    """Points (2,N,3) against vertices (3,V,3) cannot broadcast: a ValueError naming the batch sizes."""
+    box = trimesh.creation.box((0.1, 0.1, 0.1))
+    v = torch.as_tensor(np.array(box.vertices))[None].repeat(3, 1, 1)
+    with pytest.raises(ValueError, match="batch"):
+        D.point_mesh_distance(torch.zeros(2, 4, 3, dtype=torch.float64), (v, torch.as_tensor(box.faces)))
+
+
+def test_a_point_without_its_n_axis_is_refused_by_name():
+    """as_points' contract is (..., N, 3): a bare (3,) vector is not a point set and is refused naming the argument,
+    as are the distance functions given one."""
+    with pytest.raises(ValueError, match="q"):
+        D.as_points(np.zeros(3), "q")
+    with pytest.raises(ValueError, match="query"):
+        D.nearest_neighbours(np.zeros(3), np.zeros((4, 3)))
+
+
+def test_a_face_index_equal_to_the_vertex_count_is_refused():
+    """Face indices index the vertices: with V vertices, index V is out of range and is refused by name (ValueError),
+    not left to fail later as an IndexError."""
+    box = trimesh.creation.box((0.1, 0.1, 0.1))
+    faces = np.array(box.faces)
+    faces[0, 0] = len(box.vertices)
+    with pytest.raises(ValueError, match="face indices"):
+        D.mesh_arrays((np.array(box.vertices), faces), "m")
+
+
+def test_the_metres_check_measures_the_span_and_ignores_where_the_mesh_is():
+    """require_metres refuses a mesh by its span (largest side of its box), which moving it does not change: a 0.5 m
+    box is accepted at the origin and 20 m away, the same box in millimetres is refused wherever it is."""
+    box = trimesh.creation.box((0.5, 0.3, 0.2))
+    f = torch.as_tensor(box.faces)
+    for shift in ([0.0, 0, 0], [20.0, -5.0, 3.0]):
+        v = torch.as_tensor(np.array(box.vertices) + shift)
+        D.require_metres(v, f, "box")
+        with pytest.raises(ValueError, match="box: largest side"):
+            D.require_metres(v * 1000.0, f, "box")

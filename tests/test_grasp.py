@@ -16,6 +16,7 @@ from graspkit.body import BodyModel
 from graspkit.body.markers import palm_vertices
 from graspkit.body.skeleton import JOINT_INDEX as J
 from graspkit.data import Motion
+from graspkit.data import grasp as G
 from graspkit.data import grasp_make as gm
 from graspkit.data.approach import GRASP_CLOSE_S, TPOSE_S, _continuous, _rate_limited, approach_motion
 from graspkit.data.grasp import (GRASP_PARTS, SPLITS, GraspFitter, grasp_candidates, grasp_types, object_points,
@@ -478,3 +479,164 @@ def test_grasp_and_approach_sets_draw_different_tasks():
     the approach set (same --seed) are different draws."""
     seeds = {k: [gm.task_seed(0, k, i) for i in range(20)] for k in gm.KINDS}
     assert not set(seeds["grasp"]) & set(seeds["approach"])
+
+
+def test_solid_profiles_span_the_objects_height():
+    """solid_profiles are in the object frame: the mug's profile spans the mesh's z extent and the wine glass's
+    bowl profile tops out at the mesh's top (trimesh bounds of the catalogue mesh)."""
+    for name, lo in (("mug", True), ("wine_glass", False)):
+        z = np.array(make_object(name).bounds)[:, 2]
+        prof = G.solid_profiles(name)[0]
+        assert abs(prof[:, 1].max() - z[1]) < 2e-3, name
+        if lo:
+            assert abs(prof[:, 1].min() - z[0]) < 2e-3, name
+
+
+def test_a_facing_direction_need_not_be_unit():
+    """Part.facing's direction is a direction: (3, 0, 0) allows the same cone as (1, 0, 0)."""
+    part = G.Part("t", "sphere", (0.0, 0.0, 0.0), (0.05,), ("power",), facing=((3.0, 0.0, 0.0), 40.0))
+    a = np.deg2rad([0.0, 30.0, 50.0, 150.0])
+    s = np.stack([np.cos(a), np.sin(a), np.zeros_like(a)], 1)
+    assert G._allowed(part, s).tolist() == [True, True, False, False]
+
+
+def test_palm_frames_approach_from_outside_and_pinch_axes_cross_the_part():
+    """Palm frames: s is the outward direction at the anchor (trimesh's signed distance, > 0 inside, is lower 3 mm
+    out along s than 3 mm in); cylinder pinches: the pinch axis y is across the part (perpendicular to its axis
+    and to s); box power grasps: y runs along the face's long side (the fingers wrap the thin one, as round a
+    cylinder's axis). The probe skips the wine glass (3 mm in crosses its thin bowl wall into the cup), the
+    toothbrush (thinner than the 6 mm probe) and the binoculars (the barrel's ends run into the body)."""
+    for name in sorted(G.GRASP_PARTS):
+        mesh = make_object(name)
+        for t in G.grasp_types(name):
+            c = G.grasp_candidates(name, t)
+            parts = G.GRASP_PARTS[name]
+            if t != "pinch" and name not in ("wine_glass", "toothbrush", "binoculars"):
+                out = trimesh.proximity.signed_distance(mesh, c.p + 0.003 * c.s)
+                inn = trimesh.proximity.signed_distance(mesh, c.p - 0.003 * c.s)
+                assert (out < inn).all(), f"{name} {t}: {(out >= inn).sum()} frames approach from inside"
+            for k in range(len(c.p)):
+                part = parts[c.part[k]]
+                if t == "pinch" and part.shape == "cylinder":
+                    ax = np.asarray(part.axis, float) / np.linalg.norm(part.axis)
+                    assert abs(c.y[k] @ ax) < 1e-9 and abs(c.y[k] @ c.s[k]) < 1e-9, (name, k)
+                if t == "power" and part.shape == "box":
+                    n = int(np.argmax(np.abs(c.s[k])))
+                    tang = [i for i in range(3) if i != n]
+                    long_ = tang[int(np.argmax(np.asarray(part.size)[tang]))]
+                    assert abs(abs(c.y[k][long_]) - 1) < 1e-9, (name, k, c.y[k])
+
+
+def test_natural_hand_rotation_points_the_fingers_at_the_object_palm_to_the_left():
+    """natural_hand_rotation (docstring): a rotation whose finger column points horizontally at the object and down,
+    more for a low object, and whose palm normal faces the person's left (z x facing direction)."""
+    for u in ([0.0, 1.0, 0.0], [0.6, -0.8, 0.0]):
+        u = np.array(u)
+        Rs = {}
+        for h in (0.5, 1.0, 1.3):
+            R = G.natural_hand_rotation(u, h)
+            np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
+            assert np.linalg.det(R) > 0
+            f, n = R[:, 0], R[:, 1]
+            assert f[2] < 0
+            fh = f[:2] / np.linalg.norm(f[:2])
+            np.testing.assert_allclose(fh, -u[:2], atol=1e-12)
+            left = np.cross([0, 0, 1.0], -u)
+            assert n @ left > 0.5
+            Rs[h] = f[2]
+        assert Rs[0.5] < Rs[1.0] < Rs[1.3]
+
+
+def _rand_unit(rng, n=None):
+    v = rng.normal(size=(3,) if n is None else (n, 3))
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def test_hand_rotation_puts_the_palm_on_minus_s_and_the_pinch_axis_on_y():
+    """hand_rotation (docstring): palm grasps map the palm normal exactly onto -s and the hand axis onto y made
+    perpendicular to s; pinches map the pinch axis exactly onto y and pinch_from onto -s (y perpendicular to s)."""
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        Rb = Rotation.random(random_state=rng).as_matrix()
+        hf = SimpleNamespace(normal=Rb[:, 0], thumb=Rb[:, 1])
+        s, y = _rand_unit(rng), _rand_unit(rng)
+        R = G.hand_rotation(hf, Rb[:, 1], s, y)
+        np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+        assert np.linalg.det(R) > 0
+        np.testing.assert_allclose(R @ Rb[:, 0], -s, atol=1e-12)
+        yp = y - (y @ s) * s
+        np.testing.assert_allclose(R @ Rb[:, 1], yp / np.linalg.norm(yp), atol=1e-12)
+        y2 = yp / np.linalg.norm(yp)
+        R2 = G.hand_rotation(hf, Rb[:, 1], s, y2, pinch_from=Rb[:, 2])
+        np.testing.assert_allclose(R2 @ Rb[:, 1], y2, atol=1e-12)
+        np.testing.assert_allclose(R2 @ Rb[:, 2], -s, atol=1e-12)
+
+
+def _start_distance(task):
+    return float(np.hypot(task.start.x - task.object_pose.translation[0], task.start.y - task.object_pose.translation[1]))
+
+
+def test_sampled_tasks_keep_the_start_clear_of_the_object_and_face_it():
+    """sample_grasp_task (module docstring, START_*): the start is between radius + START_CLEARANCE and 1.5 m from the
+    object centre; a drawn object lies within +-10 deg of -y from the origin; with a given placement the person
+    faces the object within +-10 deg."""
+    lo = G.object_radius("mug") + G.START_CLEARANCE
+    rng = np.random.default_rng(6)
+    pose = ObjectPose(np.array([0.4, -0.7, 0.9]), np.eye(3))
+    for _ in range(40):
+        t = G.sample_grasp_task(rng, "mug", "power")
+        d = _start_distance(t)
+        assert lo - 1e-9 <= d <= 1.5 + 1e-9
+        bearing = np.degrees(np.arctan2(t.object_pose.translation[1], t.object_pose.translation[0]))
+        assert abs(bearing + 90.0) <= 10.0 + 1e-9
+        t = G.sample_grasp_task(rng, "mug", "power", object_pose=pose)
+        d = _start_distance(t)
+        assert lo - 1e-9 <= d <= 1.5 + 1e-9
+        to = pose.translation[:2] - [t.start.x, t.start.y]
+        off = np.degrees(np.arccos(np.clip(np.dot(to / d, [np.cos(t.start.heading), np.sin(t.start.heading)]), -1, 1)))
+        assert off <= 10.0 + 1e-6
+
+
+def test_a_start_range_below_the_clearance_starts_at_the_clearance():
+    """start_distance (0.05, 0.1) is below the mug's radius + START_CLEARANCE: the start is at that clearance (the
+    start is always at least that far), not an error about a distance_range the caller never passed."""
+    lo = G.object_radius("mug") + G.START_CLEARANCE
+    rng = np.random.default_rng(7)
+    pose = ObjectPose(np.array([0.4, -0.7, 0.9]), np.eye(3))
+    for op in (None, pose):
+        t = G.sample_grasp_task(rng, "mug", "power", object_pose=op, start_distance=(0.05, 0.1))
+        assert abs(_start_distance(t) - lo) < 1e-9
+
+
+@pytest.fixture(scope="module")
+def fitter(bm):
+    return G.GraspFitter(bm)
+
+
+@pytest.mark.parametrize("name, gtype", [("apple", "power"), ("cracker_box", "side")])
+def test_world_frames_are_the_candidates_moved_by_the_object_pose(fitter, name, gtype):
+    """GraspFitter._frames: every candidate not approached from below (world s_z >= -0.35) appears twice (both
+    flips); the palm target is the candidate anchor moved by the pose matrix plus PALM_GAP along the world s (the
+    pose's rotation of the object-frame s); the rest hand rotated by R puts its palm normal on -s and, placed at the
+    wrist target, its anchor on the target; the two flips turn the hand axis to opposite sides."""
+    rot = Rotation.from_euler("zx", [50.0, 35.0], degrees=True).as_matrix()
+    pose = ObjectPose(np.array([0.3, -0.6, 1.0]), rot)
+    task = G.sample_grasp_task(np.random.default_rng(8), name, gtype, object_pose=pose)
+    T, S, R, Wr, rows = fitter._frames(task)
+    cand = G.grasp_candidates(name, gtype)
+    M = pose.matrix()
+    s_world = cand.s @ M[:3, :3].T
+    keep = np.flatnonzero(s_world[:, 2] >= -0.35)
+    assert len(keep) < len(cand.p)              # the tilt puts some frames below
+    assert sorted(rows[:, 0].tolist()) == sorted(np.repeat(keep, 2).tolist())
+    p_world = trimesh.transform_points(cand.p, M)
+    np.testing.assert_allclose(S, s_world[rows[:, 0]], atol=1e-12)
+    np.testing.assert_allclose(T, p_world[rows[:, 0]] + G.PALM_GAP * S, atol=1e-12)
+    anchor, _, hf = G.hand_anchor(fitter.hm, task.betas, gtype)
+    np.testing.assert_allclose(np.einsum("mij,j->mi", R, hf.normal), -S, atol=1e-9)
+    np.testing.assert_allclose(Wr + np.einsum("mij,j->mi", R, anchor - hf.wrist), T, atol=1e-9)
+    axis = G._hand_axis(hf, cand.kind[0], None)
+    a = np.einsum("mij,j->mi", R, axis)
+    for i in keep[:10]:
+        m0, m1 = (np.flatnonzero((rows[:, 0] == i) & (rows[:, 1] == f))[0] for f in (0, 1))
+        assert a[m0] @ a[m1] < 0
