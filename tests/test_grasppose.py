@@ -13,9 +13,9 @@ from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.metrics import joint_limit_violation
 from graspkit.models.pose_prior import load_pose_prior
 from graspkit.objects.sdf import SDFGrid, signed_distance
-from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, GraspPoseConfig, GraspPoseOpt, GraspPoseWeights,
-                                      body_joint_ids, expand_free_joints, forearm_vertex_ids, hand_vertex_ids,
-                                      kabsch, valid_body_joints)
+from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, GraspPoseConfig, GraspPoseOpt, GraspPoseResult,
+                                      GraspPoseWeights, body_joint_ids, energies_table, expand_free_joints,
+                                      forearm_vertex_ids, hand_vertex_ids, kabsch, valid_body_joints)
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d
 
 
@@ -599,3 +599,210 @@ def test_fit_term_is_eq5s_l1_distance_to_the_markers(bm, prior):
     e = opt.energy(p, target, _object(markers[0].mean(0)), 1, None, None, {})["fit"].item()
     want = float(np.abs(v[ids] - target[0].double().numpy()).sum())
     assert want > 1.0 and e == pytest.approx(want, rel=1e-4)
+
+
+def _box_cloud(n: int = 600, size: float = 0.06):
+    """n points (seeded) on a cube of side `size` centred at 0, with its outward face normals."""
+    box = trimesh.creation.box((size, size, size))
+    pts, face = trimesh.sample.sample_surface(box, n, seed=0)
+    return np.asarray(pts), box.face_normals[face]
+
+
+def _cloud_sd(q, pts, nrm):
+    """SAGA's S(x, Y) to a point cloud with outward normals: the distance to the nearest point, signed by its normal."""
+    d, i = cKDTree(pts).query(q)
+    return d * np.sign(((q - pts[i]) * nrm[i]).sum(-1))
+
+
+def _hand_normals(bm, v):
+    """trimesh's vertex normals of the hand surface (the body's faces whose vertices are all hand vertices)."""
+    both = hand_vertex_ids(bm)
+    f = bm.faces.numpy()
+    pos = np.full(len(v), -1)
+    pos[both] = np.arange(len(both))
+    return both, trimesh.Trimesh(v[both], pos[f][(pos[f] >= 0).all(1)], process=False).vertex_normals
+
+
+def test_energy_of_a_batch_is_each_samples_energy_alone(bm, prior):
+    """Module doc: the samples of a batch are independent (energies per sample, summed only by the optimiser). Two
+    bodies, each with its own object pose (a cube through sample 0's right hand, one shifted off sample 1's),
+    floor height (sample 1's soles 1 cm under its floor, sample 0's above) and contacts, sunk_depth between the two
+    hands' depths: every stage-2 and stage-3 term of the batch equals that sample's term computed alone."""
+    _, truth = _truth(bm, prior, B=2, seed=3)
+    opt0 = GraspPoseOpt(bm, prior)
+    g = torch.Generator().manual_seed(4)
+    p = _params_of(opt0, truth)
+    p["eyes"] = 0.1 * torch.randn(2, 6, generator=g)
+    p["joint6d"] = 0.05 * torch.randn(2, len(opt0.free_ids), 6, generator=g)
+    with torch.no_grad():
+        verts = bm.forward_rotmats(opt0.rotmats(p), betas=p["betas"], transl=p["transl"]).vertices
+    hands = hand_vertex_ids(bm, ("right",))
+    local, nrm = _box_cloud()
+    centres = verts[:, hands].mean(1).double().numpy() + np.array([[0.0, 0, 0], [0.0, 0.0, 0.035]])
+    pts = torch.tensor(local[None] + centres[:, None], dtype=torch.float32)
+    nrms = torch.tensor(nrm, dtype=torch.float32).expand(2, -1, -1).contiguous()
+    feet = np.concatenate(list(foot_vertices(bm).values()))
+    low = verts[:, feet, 2].min(1).values
+    height = torch.stack([-low[0] + 0.05, -low[1] - 0.01])
+
+    # the hands' depths in their cubes (the cube's closed-form signed distance) and a sunk_depth between them
+    def cube_sd(x, c):
+        q = np.abs(x - c) - 0.03
+        return np.linalg.norm(np.maximum(q, 0), axis=-1) + np.minimum(q.max(-1), 0)
+    depth = [max(0.0, -cube_sd(verts[b, hand_vertex_ids(bm)].double().numpy(), centres[b]).min()) for b in range(2)]
+    assert depth[0] > depth[1] + 2e-3 and depth[1] > 0, depth
+    opt = opt0.with_config(sunk_depth=0.5 * (depth[0] + depth[1]), collision_points=200, contact_points=100)
+    target = verts[:, opt.marker_ids] + 0.01 * torch.randn(2, 143, 3, generator=g)
+    cm, co = torch.rand(2, 143, generator=g), torch.rand(2, pts.shape[1], generator=g)
+    grid = SDFGrid.from_mesh(trimesh.creation.box((0.06, 0.06, 0.06)), resolution=32, padding=0.02)
+    origin = torch.tensor(centres, dtype=torch.float32)
+    obj = GraspObject(pts, nrms, height, sdf=grid, origin=origin)
+    with torch.no_grad():
+        full = {s: opt.energy(p, target, obj, s, cm, co, opt._stage3_cache(p, obj, co)) for s in (2, 3)}
+        for b in range(2):
+            one = {k: v[b:b + 1] for k, v in p.items()}
+            ob = GraspObject(pts[b], nrms[b], float(height[b]), sdf=grid, origin=origin[b])
+            for s in (2, 3):
+                e = opt.energy(one, target[b:b + 1], ob, s, cm[b:b + 1], co[b:b + 1], opt._stage3_cache(one, ob, co[b:b + 1]))
+                assert set(e) == set(full[s])
+                for k in e:
+                    torch.testing.assert_close(full[s][k][b:b + 1], e[k], rtol=1e-5, atol=1e-6, msg=f"{s} {k} {b}")
+    # the set-up exercises what it should: E^O on for sample 1 (sample 0's hand is sunk), E^B for both
+    assert full[3]["colli_object"][1] > 0 and full[3]["colli_object"][0] == 0 and (full[3]["colli_body"] > 0).all()
+
+
+def test_energy_terms_take_their_own_weights_and_hinge_floors(bm, prior):
+    """Eq. 5-7 with every weight distinct (A.4's equal ones would hide a swap): alpha_theta (|z|^2 + |theta_h|^2 +
+    |theta_e|^2) + the free joints' weight |6D offsets|^2; alpha^m_cont sum C_m d(m, O) (scipy KD-tree); E^O_colli
+    over the collision_points object points nearest the hand, alpha^O sum max(-S(o, V^h) - sigma_o, 0) with S signed
+    by trimesh's hand vertex normals; stage 2's E^B_colli over the hand, its 5 / 10 mm inner copies and the forearms,
+    alpha^B sum max(-S(b, O) - sigma_b, 0) with S the cube's closed form (read from its grid)."""
+    verts, truth = _truth(bm, prior, B=1, seed=3)
+    local, nrm = _box_cloud()
+    right = hand_vertex_ids(bm, ("right",))
+    c = verts[0, right].mean(0).double().numpy()
+    pts_np = local + c
+    grid = SDFGrid.from_mesh(trimesh.creation.box((0.06, 0.06, 0.06)), resolution=32, padding=0.02)
+    obj = GraspObject(torch.tensor(pts_np, dtype=torch.float32), torch.tensor(nrm, dtype=torch.float32), 1.0,
+                      sdf=grid, origin=torch.tensor(c, dtype=torch.float32))
+    w = GraspPoseWeights(prior=2e-3, free_joints=7e-3, contact_marker=3.0, contact_object=7.0, colli_object=70.0,
+                         colli_body=200.0, sigma_o=2e-3, sigma_b=3e-3)
+    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(collision_points=150, weights=w))
+    g = torch.Generator().manual_seed(5)
+    p = _params_of(opt, truth)
+    p["eyes"] = 0.3 * torch.randn(1, 6, generator=g)
+    p["joint6d"] = 0.05 * torch.randn(1, len(opt.free_ids), 6, generator=g)
+    cm, co = torch.rand(1, 143, generator=g), torch.rand(1, len(pts_np), generator=g)
+    cache = opt._stage3_cache(p, obj, co)
+    target = verts[:, opt.marker_ids]
+    with torch.no_grad():
+        v = bm.forward_rotmats(opt.rotmats(p), betas=p["betas"], transl=p["transl"]).vertices[0].double().numpy()
+        e3 = opt.energy(p, target, obj, 3, cm, co, cache)
+        e2 = opt.energy(p, target, obj, 2, cm, co, cache)
+    sq = lambda k: float(p[k].double().pow(2).sum())  # noqa: E731
+    assert e3["prior"].item() == pytest.approx(2e-3 * (sq("z") + sq("left_pca") + sq("right_pca") + sq("eyes"))
+                                               + 7e-3 * sq("joint6d"), rel=1e-5)
+    d, _ = cKDTree(pts_np).query(v[opt.marker_ids])
+    assert e3["contact_marker"].item() == pytest.approx(3.0 * float((cm[0].double().numpy() * d ** 2).sum()), rel=1e-3)
+    # E^O_colli: the 150 object points nearest the hand vertices (both hands), inside the hand past sigma_o
+    both, hn = _hand_normals(bm, v)
+    dh, _ = cKDTree(v[both]).query(pts_np)
+    near = np.argsort(dh)[:150]
+    assert set(cache["collision_idx"][0].tolist()) == set(near.tolist())
+    dd, j = cKDTree(v[both]).query(pts_np[near])
+    so = dd * np.sign(((pts_np[near] - v[both][j]) * hn[j]).sum(-1))
+    want_o = 70.0 * np.maximum(-so - 2e-3, 0).sum()
+    assert want_o > 0.05 and np.maximum(-so, 0).sum() > 1.2 * np.maximum(-so - 2e-3, 0).sum()
+    assert e3["colli_object"].item() == pytest.approx(want_o, rel=0.02)
+    # stage 2's E^B_colli: hand vertices, their inner copies and the forearms, each past sigma_b
+    q = np.concatenate([v[both], v[both] - 0.005 * hn, v[both] - 0.01 * hn, v[forearm_vertex_ids(bm)]])
+    sb = np.abs(q - c) - 0.03                                                   # the cube's closed-form S
+    sb = np.linalg.norm(np.maximum(sb, 0), axis=-1) + np.minimum(sb.max(-1), 0)
+    want_b = 200.0 * np.maximum(-sb - 3e-3, 0).sum()
+    assert want_b > 1.0 and np.maximum(-sb, 0).sum() > 1.2 * np.maximum(-sb - 3e-3, 0).sum()
+    assert e2["colli_body"].item() == pytest.approx(want_b, rel=0.05)
+
+
+def test_result_in_the_world_reposes_with_smplx_parameters_and_carries_its_markers(bm, prior):
+    """GraspPoseResult: its SMPL-X parameters (eyes, absolute hands) re-pose its vertices through BodyModel.forward;
+    to_world(t) moves vertices, markers and transl by t, and the moved parameters re-pose the moved vertices, whose
+    marker vertices are the moved markers (a rigid translation of everything)."""
+    _, truth = _truth(bm, prior, B=2, seed=1)
+    opt = GraspPoseOpt(bm, prior)
+    p = _params_of(opt, truth)
+    p["eyes"] = torch.tensor([[0.0, 0.6, 0.0, 0.0, -0.2, 0.3], [0.4, 0.0, 0.0, 0.0, 0.0, -0.5]])
+    res = opt._result(p, [], [])
+    t = torch.tensor([0.4, -1.2, 0.9])
+    moved = res.to_world(t)
+    for r in (res, moved):
+        q = r.params
+        again = bm(betas=q["betas"], global_orient=q["global_orient"], body_pose=q["body_pose"],
+                   left_hand_pose=q["left_hand_pose"] - bm.pose_mean[75:120],
+                   right_hand_pose=q["right_hand_pose"] - bm.pose_mean[120:165], leye_pose=q["leye_pose"],
+                   reye_pose=q["reye_pose"], jaw_pose=q["jaw_pose"], transl=q["transl"]).vertices
+        torch.testing.assert_close(again, r.vertices, atol=2e-4, rtol=0)
+        torch.testing.assert_close(r.markers, r.vertices[:, opt.marker_ids])
+    torch.testing.assert_close(moved.vertices, res.vertices + t)
+
+
+def test_energies_table_sums_each_term_over_the_batch():
+    """energies_table's docstring: one row per stage and term, before and after each summed over the batch."""
+    e = [{"stage": 1, "before": {"fit": torch.tensor([1.0, 2.0])}, "after": {"fit": torch.tensor([0.5, 0.25])}},
+         {"stage": 3, "before": {"fit": torch.tensor([0.5, 0.25]), "ground": torch.tensor([4.0, 0.0])},
+          "after": {"fit": torch.tensor([0.1, 0.2]), "ground": torch.tensor([1.0, 1.0])}}]
+    r = GraspPoseResult({}, torch.zeros(2, 1, 3), torch.zeros(2, 143, 3), e, [])
+    rows = energies_table(r)
+    assert [(x["stage"], x["term"]) for x in rows] == [(1, "fit"), (3, "fit"), (3, "ground")]
+    assert [x["before"] for x in rows] == pytest.approx([3.0, 0.75, 4.0])
+    assert [x["after"] for x in rows] == pytest.approx([0.75, 0.3, 2.0])
+
+
+def test_inner_depths_must_be_strictly_positive(bm, prior):
+    """fit's check (its message: depths in metres in (0, 0.05)): a depth of 0 would only repeat the hand vertices."""
+    opt = GraspPoseOpt(bm, prior, GraspPoseConfig(inner_depths=(0.0, 0.01), steps=(1, 0, 0)))
+    with pytest.raises(ValueError, match="inner_depths"):
+        opt.fit(torch.zeros(1, 143, 3), _dummy_object(), progress=False)
+
+
+def test_grid_signed_distance_takes_each_samples_own_origin():
+    """GraspObject (B,3) origins, one per sample: S(x) from a ball's grid is |x - origin_b| - r for sample b's queries
+    (the analytic distance of the 5 cm ball, within the 32-node grid's error)."""
+    ball = trimesh.creation.icosphere(3, 0.05)
+    grid = SDFGrid.from_mesh(ball, resolution=32, padding=0.02)
+    origin = torch.tensor([[0.3, 0.0, 0.0], [-0.2, 0.1, 0.4]])
+    g = torch.Generator().manual_seed(0)
+    d = torch.nn.functional.normalize(torch.randn(2, 50, 3, generator=g), dim=-1)
+    x = origin[:, None] + d * (0.02 + 0.05 * torch.rand(2, 50, 1, generator=g))
+    obj = GraspObject(torch.zeros(2, 10, 3), torch.zeros(2, 10, 3), torch.tensor([0.8, 0.9]), sdf=grid, origin=origin)
+    want = (x - origin[:, None]).norm(dim=-1) - 0.05
+    assert (obj.signed_distance(x) - want).abs().max() < 3e-3
+
+
+def test_restart_reports_the_full_energy_of_the_run_it_keeps(bm, prior):
+    """restart_sunk (module doc): each sample keeps the run with the lower FULL (ungated) energy, and stage 3's
+    'after' energies are those of the kept parameters. A hand swallowed by a ball stays sunk through 3 steps, so its
+    gated run still has E^O_colli > 0 in the full energy: the reported terms equal the full energy recomputed from
+    the returned state, and the choice is the lower of the two runs' full energies."""
+    import test_grasppose as TG
+    verts, truth = _truth(bm, prior, B=1, seed=3)
+    hand = hand_vertex_ids(bm, ("right",))
+    _, obj = TG._ball(verts[0, hand].mean(0), 0.04)
+    cfg = GraspPoseConfig(steps=(0, 0, 3), contact=False, ground=False, polish=(0, 0.0), restart_sunk=0.005,
+                          inner_depths=(), forearms=False)
+    opt = GraspPoseOpt(bm, prior, cfg)
+    init = _params_of(opt, truth)
+    markers = verts[:, opt.marker_ids]
+    run = lambda o: o.fit(markers, obj, init={k: v.clone() for k, v in init.items()}, stages=(3,),  # noqa: E731
+                          progress=False)
+    both, plain = run(opt), run(opt.with_config(restart_sunk=None))
+    gated = run(opt.with_config(sunk_depth=0.005, restart_sunk=None))
+    cache = opt._stage3_cache({k: v.clone() for k, v in init.items()}, obj, None)
+    with torch.no_grad():
+        full = {n: opt.energy(r.state, markers, obj, 3, None, None, cache) for n, r in
+                (("both", both), ("plain", plain), ("gated", gated))}
+    assert full["gated"]["colli_object"][0] > 0                     # sample 0 still sunk: the gate matters here
+    rep = both.energies[0]["after"]
+    for k in full["both"]:
+        torch.testing.assert_close(rep[k], full["both"][k], rtol=1e-4, atol=1e-5, msg=k)
+    tot = {n: sum(e.values()) for n, e in full.items()}
+    torch.testing.assert_close(both.energies[0]["restarted"], tot["gated"] < tot["plain"])

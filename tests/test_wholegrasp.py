@@ -4,20 +4,23 @@ import math
 import numpy as np
 import pytest
 import torch
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 
 from graspkit.models.wholegrasp import (WholeGraspConfig, WholeGraspVAE, consistency_distances, consistency_loss,
-                                        squared_min_distance, weighted_bce)
+                                        squared_min_distance, weighted_bce, yaw_spread)
 
 P = 512  # object points in these tests (the model takes any P >= 256; SAGA uses 2,048)
 
 
-def _batch(B: int = 3, seed: int = 0) -> dict[str, torch.Tensor]:
+def _batch(B: int = 3, seed: int = 0, contact: float = 0.1) -> dict[str, torch.Tensor]:
+    """A seeded batch of WholeGrasp inputs; `contact` is the share of markers and points in contact."""
     g = torch.Generator().manual_seed(seed)
     pts = torch.randn(B, P, 3, generator=g) * 0.05
     return dict(markers=torch.randn(B, 143, 3, generator=g) * 0.3,
-                marker_contact=(torch.rand(B, 143, generator=g) < 0.1).float(),
+                marker_contact=(torch.rand(B, 143, generator=g) < contact).float(),
                 points=pts, normals=torch.nn.functional.normalize(pts, dim=-1),
-                object_contact=(torch.rand(B, P, generator=g) < 0.1).float(),
+                object_contact=(torch.rand(B, P, generator=g) < contact).float(),
                 height=torch.rand(B, 1, generator=g) + 0.5)
 
 
@@ -445,3 +448,158 @@ def test_reconstruction_marker_error_is_the_mean_distance_in_cm():
 
     res = reconstruction_metrics(model, Data())
     assert abs(res["marker_error_cm"] - 7.5) < 1e-4
+
+
+def _eq3_numpy(mp, m, cm, pts, co, nrm=None):
+    """Eq. 3 per sample with scipy KD-trees: squared unsigned distances (as printed), or with normals Euclidean and
+    d(m, O) signed by the nearest point's normal; contacts weight, summed over markers / points."""
+    out = []
+    for b in range(len(m)):
+        tree = cKDTree(pts[b])
+
+        def dmo(x):
+            d, i = tree.query(x)
+            if nrm is None:
+                return d ** 2
+            return d * np.sign(((x - pts[b][i]) * nrm[b][i]).sum(-1))
+
+        def dom(x):
+            d, _ = cKDTree(x).query(pts[b])
+            return d ** 2 if nrm is None else d
+        out.append((cm[b] * np.abs(dmo(mp[b]) - dmo(m[b]))).sum() + (co[b] * np.abs(dom(mp[b]) - dom(m[b]))).sum())
+    return np.array(out)
+
+
+def test_eq3_consistency_averages_over_the_batch_and_passes_no_gradient_to_the_contacts():
+    """Module doc: Eq. 3's sums are averaged over the batch, and the predicted contacts weight the distances without
+    passing gradients back. Two samples, the hand-made case (1.6e-3: 8e-4 each side) and one that fits (0): 8e-4."""
+    pts = torch.tensor([[[0.0, 0, 0], [1.0, 0, 0]]]).expand(2, -1, -1)
+    m = torch.tensor([[[0.0, 0.01, 0], [1.0, 0.5, 0]]]).expand(2, -1, -1)
+    m_pred = torch.stack([torch.tensor([[0.0, 0.03, 0], [1.0, 0.5, 0]]), m[1]]).requires_grad_(True)
+    cm = torch.ones(2, 2, requires_grad=True)
+    co = torch.tensor([[1.0, 0.0], [1.0, 0.0]], requires_grad=True)
+    loss = consistency_loss(m_pred, m, cm, pts, co)
+    assert loss.item() == pytest.approx(0.5 * 1.6e-3, rel=1e-4)
+    loss.backward()
+    assert cm.grad is None and co.grad is None
+    assert m_pred.grad.abs().sum() > 0
+
+
+@pytest.mark.parametrize("consistency", ["paper", "signed"])
+def test_eq1_to_3_total_loss_weights_each_term_by_its_lambda(consistency):
+    """SAGA Eq. 1-3: L = |M - M~|_1 + lambda_M BCE_5(C_M) + lambda_O BCE_3(C_O) + lambda_c L_c (+ lambda_KL Psi(KL),
+    0 at a zero posterior), L_c weighted by the PREDICTED contacts C~; each piece computed here independently (torch's
+    weighted BCE, scipy KD-trees for Eq. 3, signed by the normals for consistency='signed'), lambdas 2, 3, 5."""
+    torch.manual_seed(0)
+    model = WholeGraspVAE(WholeGraspConfig(lambda_m=2.0, lambda_o=3.0, lambda_c=5.0, consistency=consistency)).eval()
+    torch.nn.init.normal_(model.out_markers.weight, std=0.02)
+    b = _batch(B=2, contact=0.3)
+    with torch.no_grad():
+        out = dict(model(b))
+    out["mu"], out["logvar"] = torch.zeros(2, 16), torch.zeros(2, 16)
+    logs = model.loss(b, out, 0, 10)
+    F = torch.nn.functional
+    rec = (out["markers"] - b["markers"]).abs().sum((1, 2)).mean()
+    bce_m = F.binary_cross_entropy(out["marker_contact"], b["marker_contact"],
+                                   weight=torch.where(b["marker_contact"] > 0, 5.0, 1.0))
+    bce_o = F.binary_cross_entropy(out["object_contact"], b["object_contact"],
+                                   weight=torch.where(b["object_contact"] > 0, 3.0, 1.0))
+    n = lambda k: out[k].double().numpy() if k in out else None  # noqa: E731
+    c = _eq3_numpy(n("markers"), b["markers"].double().numpy(), n("marker_contact"), b["points"].double().numpy(),
+                   n("object_contact"), b["normals"].double().numpy() if consistency == "signed" else None).mean()
+    assert c > 1e-3
+    assert logs["consistency"].item() == pytest.approx(c, rel=1e-3)
+    want = rec.item() + 2 * bce_m.item() + 3 * bce_o.item() + 5 * c
+    assert logs["loss"].item() == pytest.approx(want, rel=1e-4)
+
+
+def test_encoder_reads_the_standardised_markers_the_decoder_emits():
+    """Module doc (marker normalisation): the networks see and emit standardised markers, M = mean + slope (t_O -
+    mean t_O) + std * u. Round trip: the markers the decoder makes from its output u, fed to the encoder, reach the
+    encoder's body branch as u again (at heights other than the mean, with a fitted slope and per-axis std != 1)."""
+    torch.manual_seed(0)
+    model = WholeGraspVAE().eval()
+    b = _batch(B=40, seed=1, contact=0.3)
+    m = b["markers"].clone()
+    m[:, :, 2] += -b["height"]                                                # a height dependence to fit
+    model.fit_normalisation(m, b["height"])
+    assert model.marker_slope.abs().max() > 0.5 and (model.marker_std - 1).abs().min() > 0.3
+    torch.nn.init.normal_(model.out_markers.weight, std=0.3)
+    seen = {}
+    model.out_markers.register_forward_hook(lambda mod, i, o: seen.__setitem__("u", o.detach()))
+    model.body_enc.register_forward_hook(lambda mod, i, o: seen.__setitem__("x", i[0].detach()))
+    h = torch.tensor([[0.55], [1.45]])
+    with torch.no_grad():
+        dec = model.decode(torch.randn(2, 16), b["points"][:2], b["normals"][:2], h)
+        model.encode(dec["markers"], dec["marker_contact"], b["points"][:2], b["normals"][:2], dec["object_contact"], h)
+    torch.testing.assert_close(seen["x"][:, :143 * 3], seen["u"], atol=1e-4, rtol=1e-4)
+
+
+def test_sampling_leaves_the_model_in_the_mode_it_found():
+    """sample() switches to eval for inference and must hand the model back as it was: a model being trained
+    (dropout/BatchNorm in train mode) stays in training mode, an evaluated one in eval mode."""
+    torch.manual_seed(0)
+    model = WholeGraspVAE()
+    g = torch.Generator().manual_seed(2)
+    pts = torch.randn(P, 3, generator=g) * 0.05
+    nrm = torch.nn.functional.normalize(pts, dim=-1)
+    model.train()
+    model.sample(pts, nrm, 0.9, 1, g)
+    assert model.training and all(mod.training for mod in model.modules())
+    model.eval()
+    model.sample(pts, nrm, 0.9, 1, g)
+    assert not model.training
+
+
+def test_yaw_spread_is_even_turns_about_z_round_the_full_circle():
+    """yaw_spread(m, 8): the set turned by 0, 45, ..., 315 degrees about z (scipy's Rotation), stacked turn by turn;
+    over the full circle each marker's 8 copies average to its height on the z axis; float64 markers stay float64."""
+    for dtype, tol in ((torch.float32, 1e-5), (torch.float64, 1e-12)):
+        m = torch.randn(2, 5, 3, generator=torch.Generator().manual_seed(0), dtype=dtype)
+        s = yaw_spread(m, 8)
+        assert s.shape == (16, 5, 3) and s.dtype == dtype
+        for k in range(8):
+            R = Rotation.from_euler("z", 45 * k, degrees=True)
+            np.testing.assert_allclose(s[2 * k:2 * k + 2].numpy(),
+                                       R.apply(m.reshape(-1, 3).double().numpy()).reshape(2, 5, 3), atol=tol)
+        mean = s.view(8, 2, 5, 3).mean(0)
+        np.testing.assert_allclose(mean[..., :2].numpy(), 0.0, atol=tol)
+
+
+def test_sample_accepts_the_documented_bounds_of_height_and_point_count():
+    """check_height's docstring: heights in [0, MAX_METRES] m (0 included); check_sample_inputs: P >= the first
+    PointNet++ level's centres (exactly that many included, one fewer named)."""
+    from graspkit.models.wholegrasp import check_height
+    check_height(0.0, "object_height")
+    torch.manual_seed(0)
+    model = WholeGraspVAE().eval()
+    least = model.obj_dec.sa[0].npoint
+    g = torch.Generator().manual_seed(3)
+    pts = torch.randn(least, 3, generator=g) * 0.05
+    nrm = torch.nn.functional.normalize(pts, dim=-1)
+    out = model.sample(pts, nrm, object_height=0.0, n=1, generator=g)
+    assert out.markers.shape == (1, 143, 3)
+    with pytest.raises(ValueError, match="object_points"):
+        model.sample(pts[1:], nrm[1:], n=1)
+
+
+def test_grabnet_kl_weight_rises_linearly_to_the_papers_end_point(bm):
+    """GrabNet-SMPLX's loss (docstring: lambda_KL rising linearly to 0.2 as WholeGrasp's, SAGA A.4's 0.005 e over
+    40 epochs): with the parameters and markers exact, the loss is lambda_KL Psi(KL), 0.005 Psi in the first epoch
+    (0-based) and 0.2 Psi in the 40th, Psi(s) = sqrt(s^2 + 1) - 1 of KL = 32 (mu = 2 in 16 dimensions)."""
+    from graspkit.body.markers import saga_markers
+    from graspkit.models.gnet import SparseBody
+    from graspkit.models.wholegrasp import GrabNetSMPLX, HandPCA
+    torch.manual_seed(0)
+    model = GrabNetSMPLX(body_space="rot6d")
+    body, pca = SparseBody(bm, saga_markers(bm).vertex_ids), HandPCA(bm)
+    x = torch.zeros(2, model.n_params)
+    x[:, 3:9] = torch.tensor([1.0, 0, 0, 0, 1.0, 0])                        # identity rotations (6D)
+    x[:, 19:19 + 126] = torch.tensor([1.0, 0, 0, 0, 1.0, 0]).repeat(21)
+    with torch.no_grad():
+        markers = body(*model.to_rotmats(x, pca))[0]
+    out = {"params": x, "mu": torch.full((2, 16), 2.0), "logvar": torch.zeros(2, 16)}
+    psi = math.sqrt(32 ** 2 + 1) - 1
+    for e, w in ((0, 0.005), (19, 0.1), (39, 0.2)):
+        logs = model.loss({"params": x, "markers": markers}, out, body, pca, e, 40)
+        assert logs["loss"].item() == pytest.approx(w * psi, rel=1e-4, abs=1e-5), e

@@ -458,7 +458,8 @@ def yaw_spread(markers: Tensor, turns: int = 8) -> Tensor:
     out = []
     for k in range(turns):
         a = 2 * math.pi * k / turns
-        R = torch.tensor([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
+        R = torch.tensor([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]],
+                         dtype=markers.dtype, device=markers.device)
         out.append(markers @ R.T)
     return torch.cat(out)
 

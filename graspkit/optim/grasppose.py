@@ -28,7 +28,8 @@ graspkit's choices where the paper is silent (all in `GraspPoseWeights` / `Grasp
   256 object points with the highest C^_o enter that sum per sample; S(o, V^h_B) is taken for the 512 object points
   nearest the hand at the start of stage 3 (the hand moves little in stage 3), signed by the hand's vertex normals.
   S(b, O) uses the object's signed-distance grid when one is given, else the point cloud with its normals (SAGA's
-  "signed distance from point x to point cloud Y"). The evaluation, the lessons and `graspkit.saga` pass
+  "signed distance from point x to point cloud Y"; the nearest point's normal signs it, so beside a sharp edge of a
+  sparse cloud a point outside can read as inside). The evaluation, the lessons and `graspkit.saga` pass
   `collision_sdf_grid(name)` (graspkit.data.grasp_io): cells of at most 2 mm. A 64-node grid (cells up to 7.5 mm)
   reads most points 1-2 mm inside the thin walls of the frying pan and wine glass as outside, so E^B_colli could
   not see a finger there (docs/objects.md).
