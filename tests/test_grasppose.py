@@ -783,10 +783,9 @@ def test_restart_reports_the_full_energy_of_the_run_it_keeps(bm, prior):
     'after' energies are those of the kept parameters. A hand swallowed by a ball stays sunk through 3 steps, so its
     gated run still has E^O_colli > 0 in the full energy: the reported terms equal the full energy recomputed from
     the returned state, and the choice is the lower of the two runs' full energies."""
-    import test_grasppose as TG
     verts, truth = _truth(bm, prior, B=1, seed=3)
     hand = hand_vertex_ids(bm, ("right",))
-    _, obj = TG._ball(verts[0, hand].mean(0), 0.04)
+    _, obj = _ball(verts[0, hand].mean(0), 0.04)
     cfg = GraspPoseConfig(steps=(0, 0, 3), contact=False, ground=False, polish=(0, 0.0), restart_sunk=0.005,
                           inner_depths=(), forearms=False)
     opt = GraspPoseOpt(bm, prior, cfg)
