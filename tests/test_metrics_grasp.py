@@ -98,3 +98,42 @@ def test_grasp_quality_table_median_and_feet_share_on_known_rows():
     assert t["volume_median_cm3"] == pytest.approx(1.0) and t["volume_mean_cm3"] == pytest.approx(4.0)
     assert t["feet_within_1cm"] == pytest.approx(2 / 3) and t["feet_max_cm"] == pytest.approx(2.0)
     assert t["contact_ratio"] == pytest.approx(2 / 3) and t["depth_max_cm"] == pytest.approx(1.0)
+
+
+def test_grasp_quality_table_means_and_maxima_by_hand():
+    """Three grasps, volumes 0, 1, 11 cm^3 (max 11) and depths 0, 0.2, 1.0 cm (mean 0.4, median 0.2)."""
+    rows = [{"contact": 1.0, "volume_cm3": 0.0, "depth_cm": 0.0},
+            {"contact": 0.0, "volume_cm3": 1.0, "depth_cm": 0.2},
+            {"contact": 1.0, "volume_cm3": 11.0, "depth_cm": 1.0}]
+    t = M.grasp_quality_table(rows)
+    assert t["volume_max_cm3"] == pytest.approx(11.0) and t["depth_mean_cm"] == pytest.approx(0.4)
+    assert "feet_within_1cm" not in t
+
+
+def test_contact_ratio_counts_a_volume_only_when_it_is_positive():
+    """Two grasps 10 cm from the object, one overlapping it by 0.3 cm^3: one of two in contact (a zero volume is none)."""
+    assert M.contact_ratio([0.1, 0.1], volumes_cm3=[0.0, 0.3]) == 0.5
+
+
+def test_contact_distance_finds_a_closer_vertex_outside_the_padded_box():
+    """A 10 cm sphere: a vertex off its bounding-box corner (inside the 5 cm padded box) is ~9 cm from the surface,
+    one 6 cm off its +x pole (outside the padded box) is 6 cm away: the answer is trimesh's 6 cm."""
+    s = trimesh.creation.icosphere(4, radius=0.1)
+    pts = np.array([[0.11, 0.11, 0.11], [0.16, 0.0, 0.0]])
+    truth = float(-trimesh.proximity.signed_distance(s, pts).max())
+    assert truth == pytest.approx(0.06, abs=1e-3)
+    assert M.grasp_contact_distance(pts, s) == pytest.approx(truth, abs=1e-6)
+
+
+def test_grasp_contact_at_exactly_the_threshold_and_grasp_and_end_figures_measure_each_body():
+    """grasp_metrics' rule "min_distance <= threshold" holds at equality; grasp_and_end_figures measures the grasp
+    body and the end body each (a box body half-overlapping a 2 cm cube, then the same body 50 cm away: contact 1 then 0)."""
+    b = trimesh.creation.box(extents=[0.2] * 3)
+    v, f = np.asarray(b.vertices), np.asarray(b.faces)
+    near = trimesh.creation.box(extents=[0.02] * 3, transform=trimesh.transformations.translation_matrix([0.115, 0.1, 0.1]))
+    d = M.grasp_metrics(v, f, near)["min_distance"]
+    assert d == pytest.approx(0.005, abs=1e-6)
+    assert M.grasp_metrics(v, f, near, threshold=d)["contact"] == 1.0
+    touch = trimesh.creation.box(extents=[0.02] * 3, transform=trimesh.transformations.translation_matrix([0.1, 0.0, 0.0]))
+    g = M.grasp_and_end_figures(v, v + [0.5, 0.0, 0.0], f, touch)
+    assert g["grasp_contact"] == 1.0 and g["end_contact"] == 0.0

@@ -377,3 +377,116 @@ def test_motion_quality_counts_each_frame_once_across_chunks(bm):
     assert q["frames"] == T
     assert q["penetration_mean"] == pytest.approx(depth.mean(), rel=1e-5)
     assert q["penetration_max"] == pytest.approx(depth.max(), rel=1e-5)
+
+
+def _step(move: float) -> np.ndarray:
+    """One vertex on the ground that moves `move` m along x in the first frame pair and then stands: (3, 1, 3)."""
+    v = np.zeros((3, 1, 3))
+    v[1:, 0, 0] = move
+    return v
+
+
+def test_more_than_thresholds_are_strict_and_within_radii_inclusive():
+    """The docstrings' words on exactly representable numbers: a move exactly at the threshold is not "more than" it
+    (WANDR FS, GOAL sliding, SAGA's heel speed); a distance exactly at the radius/threshold is "within" it (WANDR's
+    success, contact_ratio's <= threshold, the feet share's "within 1 cm")."""
+    for f in (M.foot_skating_wandr, M.foot_sliding_goal):
+        assert f(_step(0.5), threshold=0.5).tolist() == [False, False]      # 0.5 * 30 / 30 is exactly 0.5
+        assert f(_step(0.5), threshold=0.25).tolist() == [True, False]
+    heels = np.zeros((3, 2, 3))
+    heels[1:, :, 0] = 1.0                                   # both heels on the floor, 1 m in the first pair: 1 m/s at 1 fps
+    assert M.foot_skating_saga(heels, fps=1.0, speed=1.0).tolist() == [False, False]
+    assert M.foot_skating_saga(heels, fps=1.0, speed=0.5).tolist() == [True, False]
+    wrist = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.25]])
+    assert M.goal_reached(wrist, [0.5, 0.0, 0.0], radius=0.5) and not M.goal_reached(wrist, [0.5, 0.0, 0.0], radius=0.25)
+    t = M.GRASP_CONTACT_THRESHOLD
+    assert M.contact_ratio([t, t + 1e-4]) == 0.5 and M.contact_ratio([0.5, 0.75], threshold=0.5) == 0.5
+    rows = [{"contact": 1.0, "volume_cm3": 0.0, "depth_cm": 0.0, "feet_cm": f} for f in (1.0, 1.5)]
+    assert M.grasp_quality_table(rows)["feet_within_1cm"] == 0.5
+
+
+def test_saga_skating_defaults_to_30_fps_like_the_other_metrics():
+    """Heels on the floor gliding 2.8 mm a frame: 84 mm/s at the default 30 fps (the metrics' default rate, as
+    joint_speed's and WANDR's), above SAGA's 75 mm/s; the default reads exactly as fps=30."""
+    T = 10
+    heels = np.zeros((T, 2, 3))
+    heels[:, :, 0] = np.arange(T)[:, None] * 0.0028
+    heels[:, 1, 1] = 0.2
+    assert M.foot_skating_saga(heels).all()
+    np.testing.assert_array_equal(M.foot_skating_saga(heels), M.foot_skating_saga(heels, fps=30.0))
+    assert not M.foot_skating_saga(heels, fps=20.0).any()   # 56 mm/s
+
+
+def test_joint_limits_flag_a_twisted_knee_and_an_overbent_finger_everywhere_on_the_hand():
+    """A knee does not twist: 60 deg about the hinge's perpendicular is off-axis rotation beyond the table's off-axis
+    limit (HINGES), by 60 - that limit; a finger curled 170 deg is beyond any human range (first and last finger joints,
+    both hands), one curled 30 deg is not."""
+    from graspkit.body.skeleton import JOINT_INDEX
+
+    poses = np.zeros((3, 55, 3))
+    knee = JOINT_INDEX["left_knee"]
+    poses[0, knee] = [0.0, np.deg2rad(60.0), 0.0]
+    lim = M.joint_limit_violation(poses)
+    assert lim[0, knee] == pytest.approx(60.0 - M.HINGES["left_knee"][3], abs=1e-6)
+    for j in (25, 39, 40, 54):
+        poses[1, j] = [0.0, 0.0, np.deg2rad(170.0)]
+        poses[2, j] = [0.0, 0.0, np.deg2rad(30.0)]
+    lim = M.joint_limit_violation(poses)
+    assert (lim[1, [25, 39, 40, 54]] > 0).all() and lim[2].max() == 0.0
+
+
+def test_measures_over_pairs_refuse_inputs_without_a_pair():
+    """APD averages over pairs i != j and WANDR's FS / GOAL's sliding over frame pairs t, t+1: one sample or one frame
+    has no pair, so it is an error (as SAGA's skating gives), not NaN or an empty answer."""
+    with pytest.raises(ValueError, match="at least 2 samples"):
+        M.apd(np.zeros((1, 4, 3)))
+    for f in (M.foot_skating_wandr, M.foot_sliding_goal, M.lowest_vertex_motion):
+        with pytest.raises(ValueError, match=r"vertices: .*T >= 2"):
+            f(np.zeros((1, 4, 3)))
+
+
+def _reach():
+    from graspkit.data import load_motion
+    from graspkit.paths import DATA_STUBS
+    return load_motion(DATA_STUBS / "motion" / "reach" / "reach_000003.npz")
+
+
+def test_motion_quality_speed_jerk_and_fs_match_numpy_on_a_reach_clip(bm):
+    """On a shipped reach clip read in chunks of 16: the largest body-joint speed (joints 0..21, pelvis to right wrist)
+    and where, the mean jerk over every frame and body joint, and WANDR's FS are numpy's finite differences of the
+    clip's own joints and vertices; a 4-frame clip has one jerk frame (not NaN)."""
+    from graspkit.body.skeleton import JOINT_NAMES
+
+    m = _reach()
+    j = np.asarray(m.joint_positions(bm), np.float64)[:, :22]
+    sp = np.linalg.norm(np.diff(j, axis=0), axis=-1) * m.fps
+    jerk = np.linalg.norm(np.diff(j, 3, axis=0), axis=-1) * m.fps ** 3
+    v = np.asarray(m.vertices(bm), np.float64)
+    low = v[:-1, :, 2].argmin(1)
+    ar = np.arange(len(low))
+    h = np.linalg.norm(v[1:][ar, low, :2] - v[:-1][ar, low, :2], axis=-1)
+    q = M.motion_quality(bm, [m], chunk=16)
+    t, k = np.unravel_index(sp.argmax(), sp.shape)
+    assert q["max_joint_speed"] == pytest.approx(sp.max(), rel=1e-4)
+    assert q["max_joint_speed_at"] == f"clip 0 frame {t} {JOINT_NAMES[k]}"
+    assert q["mean_jerk"] == pytest.approx(jerk.mean(), rel=1e-3)
+    assert q["pairs"] == m.num_frames - 1 and q["fs_wandr"] == pytest.approx(np.mean(h > 0.0066), abs=1e-9)
+    q4 = M.motion_quality(bm, [m.slice(0, 4)])
+    assert q4["mean_jerk"] == pytest.approx(jerk[:1].mean(), rel=1e-3)
+
+
+def test_motion_quality_reads_sagas_heel_speed_at_the_clips_own_rate(bm):
+    """A standing body gliding at 10 cm/s with both heels 1 cm above the floor, captured at 60 fps: both heels low
+    and faster than SAGA's 75 mm/s in every pair (skate_saga 1), whatever the rate it is stored at."""
+    from graspkit.data.motion import Motion
+
+    T, fps = 10, 60.0
+    hl, hr = M.heel_vertex_ids()
+    trans = np.array([[0.1 * t / fps, 0.0, 0.0] for t in range(T)])
+    m0 = Motion(np.zeros((T, 165)), trans, np.zeros(10), fps)
+    heel_z = np.asarray(m0.vertices(bm, 0, 1))[0, [hl, hr], 2]
+    trans[:, 2] = 0.01 - heel_z.max()
+    m = Motion(np.zeros((T, 165)), trans, np.zeros(10), fps)
+    heels = np.asarray(m.vertices(bm))[:, [hl, hr]]
+    assert (heels[:, :, 2] < 0.05).all() and (heels[:, :, 2] > -0.01).all()
+    assert M.motion_quality(bm, [m])["skate_saga"] == 1.0
