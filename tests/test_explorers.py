@@ -1,6 +1,10 @@
 """The body explorer's callback logic (the ipywidgets layer only wires sliders to it)."""
+import re
+
+import matplotlib.pyplot as plt
 import numpy as np
 import pytest
+import torch
 from scipy.spatial.transform import Rotation
 
 from graspkit.body import BodyModel
@@ -91,3 +95,21 @@ def test_a_beta_past_the_models_is_an_unknown_slider():
         s.set("beta10", 1.0)
     s.set("beta9", 1.0)
     assert s.betas[9] == 1.0
+
+
+def test_body_explorer_stature_and_figure_are_the_canonical_y_extent(explorer):
+    """The stature is the body's extent along canonical y (up), computed from the model's vertices at the explorer's
+    betas and pose; the figure's title states it and its panels are centred on the body turned z up (scipy)."""
+    ex, bm = explorer, explorer.bm
+    ex.update("beta0", 1.5)
+    with torch.no_grad():
+        v = bm(betas=torch.as_tensor(ex.state.betas, dtype=bm.dtype)[None]).vertices[0].numpy().astype(float)
+    h = v[:, 1].max() - v[:, 1].min()
+    assert ex.stature() == pytest.approx(h, abs=1e-5)
+    fig = ex.figure()
+    assert float(re.search(r"stature ([0-9.]+) m", fig._suptitle.get_text()).group(1)) == pytest.approx(h, abs=0.006)
+    w = Rotation.from_euler("x", 90, degrees=True).apply(v)
+    for ax in fig.axes:
+        assert np.mean(ax.get_zlim()) == pytest.approx((w[:, 2].max() + w[:, 2].min()) / 2, abs=1e-3)
+    plt.close(fig)
+    ex.update("beta0", 0.0)                                            # the module's explorer back at the mean shape

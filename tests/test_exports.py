@@ -9,10 +9,13 @@ import pytest
 import smplx
 import torch
 import trimesh
+from matplotlib.colors import to_rgba
+from scipy.spatial.transform import Rotation
 
 from graspkit.body import BodyModel
 from graspkit.data import load_motion
 from graspkit.viz.export import Z_UP_TO_Y_UP, export_motion, export_scene, export_sequence_glb, load_sequence_glb
+from graspkit.viz.style import OBJECT, SKIN
 
 from conftest import PROCEDURAL_MODEL
 
@@ -95,7 +98,8 @@ def _accessor(gltf, blob, i):
     acc = gltf["accessors"][i]
     view = gltf["bufferViews"][acc["bufferView"]]
     width = {"SCALAR": 1, "VEC3": 3}[acc["type"]]
-    a = np.frombuffer(blob, np.float32, acc["count"] * width, view["byteOffset"])
+    dtype = np.uint32 if acc["componentType"] == 5125 else np.float32
+    a = np.frombuffer(blob, dtype, acc["count"] * width, view["byteOffset"] + acc.get("byteOffset", 0))
     return a.reshape(acc["count"], width) if width > 1 else a
 
 
@@ -133,8 +137,9 @@ def test_glb_animation_shows_each_input_frame_at_its_time_and_the_header_is_the_
         assert np.abs(shown - verts[k]).max() < 1e-5, k
 
 
-def _tet():
-    v = np.array([[1.0, 2.0, 3.0], [1.5, 2.0, 3.0], [1.0, 2.5, 3.0], [1.0, 2.0, 3.5]])
+def _tet(shift=(0.0, 0.0, 0.0)):
+    """A tetrahedron (vertices (4,3), outward faces (4,3)) moved by shift."""
+    v = np.array([[1.0, 2.0, 3.0], [1.5, 2.0, 3.0], [1.0, 2.5, 3.0], [1.0, 2.0, 3.5]]) + np.asarray(shift)
     return v, np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
 
 
@@ -156,3 +161,115 @@ def test_glb_sequence_first_frame_is_y_up_by_a_rotation(tmp_path):
     path = export_sequence_glb(frames, f, tmp_path / "s.glb")
     got = np.asarray(next(iter(trimesh.load(path).geometry.values())).vertices)
     assert np.abs(got - np.stack([v[:, 0], v[:, 2], -v[:, 1]], 1)).max() < 1e-6
+
+
+def _yup(v):
+    """glTF's y-up frame by the spec's convention as the module doc states: (x, y, z) -> (x, z, -y) (scipy rotation)."""
+    return Rotation.from_euler("x", -90, degrees=True).apply(v)
+
+
+def _close_rgba(got, want):
+    """Colour bytes are the nearest 8-bit value of the wanted colour (within half a step)."""
+    got = np.asarray(got, float)
+    if got.max() > 1.0:
+        got = got / 255.0
+    return np.abs(got - np.asarray(want)).max() <= 0.5 / 255 + 1e-9
+
+
+def test_scene_glb_default_and_given_colours_read_back_by_trimesh(tmp_path):
+    """export_scene's colours, read back by trimesh: the first entry skin, the second the object colour (module rule),
+    a given colour quantised to the nearest 8-bit value (0.999 -> 255, 0.5 -> 128 not 127)."""
+    want3 = (0.999, 0.5, 0.0041, 1.0)
+    meshes = {"person": _tet(), "thing": _tet((1, 0, 0)), "third": _tet((2, 0, 0))}
+    path = export_scene(meshes, tmp_path / "c.glb", colors={"third": want3})
+    scene = trimesh.load_scene(path, process=False)
+    col = {n: g.visual.material.baseColorFactor for n, g in scene.geometry.items()}
+    assert _close_rgba(col["person"], to_rgba(SKIN))
+    assert _close_rgba(col["thing"], to_rgba(OBJECT))
+    assert _close_rgba(col["third"], want3)
+    ply = trimesh.load(export_scene({"a": _tet()}, tmp_path / "c.ply", colors={"a": want3}), process=False)
+    assert _close_rgba(ply.visual.vertex_colors[0], want3)
+
+
+def test_scene_y_up_flag_is_honoured_for_every_format(tmp_path):
+    """y_up=True turns an .obj by (x, y, z) -> (x, z, -y) (scipy's -90 deg about x); y_up=False writes a .glb in world
+    coordinates: bounds read back by trimesh."""
+    v, f = _tet()
+    obj = trimesh.load_scene(export_scene({"t": (v, f)}, tmp_path / "t.obj", y_up=True), process=False)
+    np.testing.assert_allclose(obj.bounds, [_yup(v).min(0), _yup(v).max(0)], atol=1e-6)
+    glb = trimesh.load_scene(export_scene({"t": (v, f)}, tmp_path / "t.glb", y_up=False), process=False)
+    np.testing.assert_allclose(np.asarray(glb.geometry["t"].vertices), v, atol=1e-6)
+
+
+def test_export_scene_refuses_nan_vertices(tmp_path):
+    """A NaN vertex is refused with a ValueError naming the mesh (no file written), as for sequences."""
+    v, f = _tet()
+    v[1, 2] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        export_scene({"bad": (v, f)}, tmp_path / "n.glb")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_sequence_glb_refuses_bool_stride_and_out_of_range_faces(tmp_path):
+    """stride must be an integer >= 1 (True is a flag, 0 is no step) and face indices must lie in [0, V): a vertex
+    index V or -1 names no vertex, so the file would be broken."""
+    v, f = _tet()
+    frames = np.stack([v, v + 0.1])
+    with pytest.raises(TypeError, match="stride"):
+        export_sequence_glb(frames, f, tmp_path / "a.glb", stride=True)
+    with pytest.raises(ValueError, match="stride"):
+        export_sequence_glb(frames, f, tmp_path / "b.glb", stride=0)
+    for bad in (4, -1):
+        g = f.copy()
+        g[2, 1] = bad
+        with pytest.raises(ValueError, match="faces"):
+            export_sequence_glb(frames, g, tmp_path / "c.glb")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("oname", ["o", "oo", "ooo", "oooo"])
+def test_sequence_glb_follows_the_gltf_binary_spec(tmp_path, oname):
+    """glTF 2.0: the JSON chunk is padded with spaces to 4 bytes; POSITION accessors (base and morph targets) and
+    animation inputs carry per-component min/max equal to their data; index views target ELEMENT_ARRAY_BUFFER
+    (34963), vertex views ARRAY_BUFFER (34962); primitives are TRIANGLES (mode 4); the clip is LINEAR as documented."""
+    rng = np.random.default_rng(1)
+    v, f = _tet()
+    frames = v + 0.05 * rng.normal(size=(5, 4, 3))
+    path = export_sequence_glb(frames, f, tmp_path / "s.glb", fps=10, objects={oname: _tet((0, 1, 0))})
+    data, _, gltf, blob = _parse(path)
+    js = data[20:20 + struct.unpack_from("<I", data, 12)[0]]
+    assert len(js) % 4 == 0 and (len(data) - len(blob)) % 4 == 0
+    assert js.rstrip(b" ").endswith(b"}")                                     # the padding is spaces only
+    views = gltf["bufferViews"]
+    for mesh in gltf["meshes"]:
+        for prim in mesh["primitives"]:
+            assert prim.get("mode", 4) == 4
+            assert views[gltf["accessors"][prim["indices"]]["bufferView"]].get("target") == 34963
+            pos = [prim["attributes"]["POSITION"]] + [t["POSITION"] for t in prim.get("targets", [])]
+            for i in pos:
+                a = _accessor(gltf, blob, i)
+                acc = gltf["accessors"][i]
+                assert views[acc["bufferView"]].get("target") == 34962
+                assert len(acc["min"]) == len(acc["max"]) == 3
+                np.testing.assert_allclose(acc["min"], a.min(0), atol=1e-6)
+                np.testing.assert_allclose(acc["max"], a.max(0), atol=1e-6)
+    s = gltf["animations"][0]["samplers"][0]
+    t = _accessor(gltf, blob, s["input"])
+    assert s["interpolation"] == "LINEAR"
+    assert gltf["accessors"][s["input"]]["min"] == [t.min()] and gltf["accessors"][s["input"]]["max"] == [t.max()]
+
+
+def test_sequence_glb_static_objects_are_turned_y_up_and_coloured(tmp_path):
+    """The static objects of an animated GLB are in glTF's y-up frame like the body (scipy rotation), read back by
+    trimesh; an object without a colour gets the object colour, a given colour is used, the body is opaque skin."""
+    v, f = _tet()
+    cup, plate = _tet((0.3, 0, 0)), _tet((0, 0.4, 0))
+    path = export_sequence_glb(np.stack([v, v + 0.1]), f, tmp_path / "o.glb", objects={"cup": cup, "plate": plate},
+                               colors={"plate": "tab:green"})
+    scene = trimesh.load_scene(path, process=False)
+    np.testing.assert_allclose(np.asarray(scene.geometry["cup"].vertices), _yup(cup[0]), atol=1e-6)
+    np.testing.assert_allclose(np.asarray(scene.geometry["plate"].vertices), _yup(plate[0]), atol=1e-6)
+    col = {n: g.visual.material.baseColorFactor for n, g in scene.geometry.items()}
+    assert _close_rgba(col["cup"], to_rgba(OBJECT))
+    assert _close_rgba(col["plate"], to_rgba("tab:green"))
+    assert _close_rgba(col["body"], to_rgba(SKIN))

@@ -3,6 +3,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 
+import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np
 import pytest
 import trimesh
@@ -234,3 +235,42 @@ def test_place_at_palm_holds_any_requested_gap(gap):
     moved.apply_transform(pose.matrix())
     d = -trimesh.proximity.signed_distance(moved, palm.vertices)
     assert d.min() == pytest.approx(gap, abs=2e-5)
+
+
+def test_hand_vertices_refuses_an_unknown_side(bm):
+    """side is 'left' or 'right'; anything else is a ValueError naming side."""
+    for side in ("both", "middle"):
+        with pytest.raises(ValueError, match="side"):
+            hand_vertices(bm, side)
+
+
+def test_min_distance_is_over_the_hand_vertices_only():
+    """min_distance_cm is the signed distance of the hand_ids vertices alone (trimesh's, negated: outside positive):
+    hand_ids the bottom corners of a slab under the object, the top ones being nearer."""
+    slab = trimesh.creation.box((0.3, 0.3, 0.1))
+    half = make_object("cracker_box").extents[2] / 2
+    base = ObjectPose(np.array([0.0, 0.0, 0.05 + 0.02 + half]), np.eye(3))
+    bottom = np.flatnonzero(slab.vertices[:, 2] < 0)
+    ex = HandObjectExplorer(slab.vertices, slab.faces, "cracker_box", base=base, hand_ids=bottom, num_points=256)
+    got = ex.measure()["min_distance_cm"]
+    want = (-trimesh.proximity.signed_distance(ex.object_mesh(), slab.vertices[bottom])).min() * 100
+    assert got == pytest.approx(want, abs=1e-4)
+
+
+def test_figure_draws_the_body_faces_near_the_objects_current_place():
+    """figure(radius=r) draws the body faces whose centroid lies within r of the object's current centre (after a
+    slider move), recomputed with numpy; the object's own faces follow them."""
+    slab = trimesh.creation.box((1.0, 1.0, 0.02)).subdivide().subdivide().subdivide().subdivide()
+    ex = HandObjectExplorer(slab.vertices, slab.faces, "cracker_box", base=ObjectPose(np.array([0.0, 0.0, 0.3]),
+                                                                                      np.eye(3)), num_points=128)
+    ex.update("x", 0.25)
+    centre = np.array([0.25, 0.0, 0.3])
+    cent = slab.vertices[slab.faces].mean(1)
+    want = np.linalg.norm(cent - centre, axis=1) < 0.35
+    fig = ex.figure(views=("front",), radius=0.35)
+    [pc] = [c for c in fig.axes[0].collections if type(c).__name__ == "Poly3DCollection"]
+    tri = np.asarray(pc._faces)
+    n_obj = len(ex.object_mesh().faces)
+    assert len(tri) == want.sum() + n_obj
+    np.testing.assert_allclose(np.sort(tri[:-n_obj].mean(1), axis=0), np.sort(cent[want], axis=0), atol=1e-9)
+    plt.close(fig)

@@ -21,6 +21,8 @@ from graspkit.viz.scene import sphere  # noqa: E402
 from graspkit.viz.export import (Z_UP_TO_Y_UP, export_scene, export_sequence_glb, load_sequence_glb,  # noqa: E402
                                   read_glb)
 
+from test_exports import _tet  # noqa: E402
+
 
 @pytest.fixture
 def body() -> trimesh.Trimesh:
@@ -378,3 +380,64 @@ def test_scene_face_indices_padding_alpha_goals_and_ground():
     [grid] = [c for c in fig.axes[0].collections if isinstance(c, Line3DCollection)]
     np.testing.assert_allclose(np.asarray(grid._segments3d, float)[..., 2], 0.0)
     plt.close(fig)
+
+
+def _drawn(anim, i):
+    """The 3D triangles (F,3,3) the animation's first panel holds after drawing frame i."""
+    anim._func(i)
+    [pc] = [c for c in anim._fig.axes[0].collections if type(c).__name__ == "Poly3DCollection"]
+    return np.asarray(pc._faces)
+
+
+def test_animation_draws_body_and_moving_object_at_the_drawn_clip_frames():
+    """stride 2 over 7 frames draws clip frames 0, 2, 4, 6: drawn frame i shows the body (a list of frames) and the
+    moving object at clip frame 2 i (their x positions are the clip's, by construction)."""
+    v, f = _tet()
+    v = v - v.mean(0)
+    body = [v + [0.0, 0.0, 0.5 * t] for t in range(7)]              # body rises 0.5 m per frame
+    obj = np.stack([v + [1.0 * t, 0.0, 0.0] for t in range(7)])     # object moves 1 m per frame along x
+    anim = animate_fn(body, f, objects=[(obj, f)], stride=2, max_frames=None, views=("front",), ground=False)
+    for i, k in enumerate([0, 2, 4, 6]):
+        tri = _drawn(anim, i)
+        assert len(tri) == 8                                          # two tets: body and object
+        want = (body[k].mean(0) + obj[k].mean(0)) / 2                 # each tet vertex lies on 3 of its 4 faces
+        np.testing.assert_allclose(tri.reshape(-1, 3).mean(0), want, atol=1e-9)
+    anim._draw_was_started = True
+    plt.close(anim._fig)
+
+
+def test_animation_refuses_a_stride_below_one():
+    """stride 0 or -1 is no step through the clip: a ValueError naming stride, even with max_frames raising it."""
+    v, f = _tet()
+    for s in (0, -1):
+        with pytest.raises(ValueError, match="stride"):
+            animate_fn(np.stack([v, v]), f, stride=s, views=("front",))
+    plt.close("all")
+
+
+def test_gif_plays_at_real_time_and_honours_an_explicit_fps(tmp_path):
+    """A 20 fps clip drawn every 2nd frame plays each GIF frame for 2/20 s = 100 ms; save_animation(fps=4) plays
+    4 drawn frames per second (250 ms), read back by PIL."""
+    v, f = _tet()
+    frames = np.stack([v + [0.1 * t, 0.05 * (t % 2), 0.0] for t in range(6)])
+    anim = animate_fn(frames, f, fps=20.0, stride=2, max_frames=None, views=("front",), size=1.0, dpi=30)
+    for fps, ms in ((None, 100), (4.0, 250)):
+        path = save_animation(anim, tmp_path / f"a{ms}.gif", fps=fps)
+        with Image.open(path) as im:
+            assert im.n_frames == 3
+            durations = []
+            for k in range(im.n_frames):
+                im.seek(k)
+                durations.append(im.info["duration"])
+        assert durations == [ms] * 3, durations
+
+
+def test_to_html_limit_is_in_megabytes_of_the_encoded_page():
+    """max_mb compares the page's UTF-8 size in MB (2**20 bytes): a limit just under the page's size refuses it, one
+    just over accepts it."""
+    v, f = _tet()
+    anim = animate_fn(np.stack([v, v + 0.1]), f, views=("front",), size=1.0, dpi=30)
+    mb = len(to_html(anim, max_mb=100).encode()) / 2**20
+    to_html(anim, max_mb=mb * 1.05)
+    with pytest.raises(ValueError, match="max_mb"):
+        to_html(anim, max_mb=mb * 0.95)

@@ -2,10 +2,11 @@
 import numpy as np
 import pytest
 import torch
+from matplotlib.colors import to_rgba
 
 from graspkit.body.markers import saga_markers
 from graspkit.models.wholegrasp import WholeGraspVAE
-from graspkit.viz.saga import CONTACT_LEVEL, LatentWalk
+from graspkit.viz.saga import CONTACT_LEVEL, MARKER_IN_CONTACT, LatentWalk
 
 
 @pytest.fixture(scope="module")
@@ -71,3 +72,28 @@ def test_palm_distance_is_the_right_palms(bm):
     d = torch.cdist(torch.tensor([[0.0, 0.0, 0.08]]), pts).min()
     assert abs(walk.measure()["palm_to_object_cm"] - 100 * float(d)) < 1e-3
     assert abs(walk.measure()["palm_to_object_cm"] - 3.0) < 0.3
+
+
+def test_latent_walk_dims_seed_and_z_norm(walk):
+    """dims must be 1..latent (0 sliders is refused); the seed slider's value is kept; z_norm is the Euclidean norm
+    of z (numpy)."""
+    with pytest.raises(ValueError, match="dims"):
+        LatentWalk(walk.model, walk.points, walk.normals, 0.9, dims=0)
+    numbers = walk.update("seed", 11)
+    assert walk.seed == 11
+    assert numbers["z_norm"] == pytest.approx(float(np.linalg.norm(walk.z.numpy())), rel=1e-6)
+    numbers = walk.update("z1", -2.5)
+    assert numbers["z_norm"] == pytest.approx(float(np.linalg.norm(walk.z.numpy())), rel=1e-6)
+
+
+def test_latent_walk_figure_draws_green_exactly_the_markers_above_the_level(walk):
+    """The first panel draws in green the markers whose contact probability exceeds CONTACT_LEVEL and the others
+    blue: counts from a hand-set contact vector."""
+    cm = torch.linspace(0.0, 1.0, 143)
+    walk.grasp = {**walk.grasp, "marker_contact": cm}
+    fig = walk.figure(size=2.0)
+    green = [c for c in fig.axes[0].collections
+             if np.allclose(c.get_facecolor()[:, :3], to_rgba(MARKER_IN_CONTACT)[:3]) and len(c.get_offsets())]
+    assert len(green) == 1
+    assert len(green[0].get_offsets()) == int((cm > CONTACT_LEVEL).sum())
+    walk.decode()
