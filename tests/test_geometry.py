@@ -927,3 +927,97 @@ def test_the_metres_check_measures_the_span_and_ignores_where_the_mesh_is():
         D.require_metres(v, f, "box")
         with pytest.raises(ValueError, match="box: largest side"):
             D.require_metres(v * 1000.0, f, "box")
+
+
+def test_boxes_touching_along_a_face_or_an_edge_do_not_interpenetrate():
+    """Two closed boxes that only share a face (or an edge) have an intersection of zero volume and no body vertex
+    strictly inside the other: analytic, the interiors are disjoint."""
+    a = _box((0.1, 0.1, 0.1), (0.0, 0.0, 0.0))
+    for centre in [(0.1, 0.0, 0.0), (0.0, 0.0, 0.1), (0.1, 0.1, 0.0), (0.0, 0.1, 0.0)]:
+        b = _box((0.1, 0.1, 0.1), centre)
+        pen = interpenetration(a, b)
+        assert pen.volume_cm3 == 0.0 and pen.depth_cm == 0.0
+        assert intersection_volume(b, a) == 0.0
+
+
+def test_grid_spacing_and_refine_refuse_booleans():
+    """`refine` is a number of rays per cell side and `spacing` a length in metres: True/False are neither, and are
+    refused by name like other non-numbers (a bool is not a count, per the documented 'positive integer')."""
+    a, b = _box((0.1, 0.1, 0.1), (0, 0, 0)), _box((0.1, 0.1, 0.1), (0.05, 0, 0))
+    with pytest.raises(ValueError, match="refine"):
+        interpenetration(a, b, refine=True)
+    with pytest.raises(ValueError, match="spacing"):
+        interpenetration(a, b, spacing=True)
+    assert interpenetration(a, b, refine=np.int64(2)).volume_cm3 == pytest.approx(500.0, rel=1e-6)   # 5 x 10 x 10 cm
+
+
+def test_sdf_grid_nodes_hold_the_exact_sdf_and_padding_zero_is_the_surface_box():
+    """SDFGrid.from_mesh with padding 0 spans the surface's own box (vertices no face uses do not count, docstring);
+    node (ix, iy, iz) sits at lower + cell * (ix, iy, iz) and stores the exact signed distance there, and the lookup
+    there returns it (trilinear interpolation is exact at a node)."""
+    box = trimesh.creation.box(extents=(0.06, 0.1, 0.16))
+    far = np.vstack([box.vertices, [[-1.0, -1.0, -1.0]]])             # an unused vertex far away
+    grid = SDFGrid.from_mesh((far, box.faces), resolution=9, padding=0.0, dtype=torch.float64)
+    np.testing.assert_allclose(grid.lower.numpy(), box.bounds[0], atol=1e-12)
+    assert (grid.upper.numpy() >= box.bounds[1] - 1e-12).all()
+    nz, ny, nx = grid.values.shape
+    rng = np.random.default_rng(0)
+    idx = np.stack([rng.integers(0, n, 40) for n in (nx, ny, nz)], 1)
+    nodes = grid.lower.numpy() + grid.cell.numpy() * idx
+    want = signed_distance(nodes, box).numpy()
+    np.testing.assert_allclose(grid.values.numpy()[idx[:, 2], idx[:, 1], idx[:, 0]], want, atol=1e-12)
+    np.testing.assert_allclose(grid(torch.tensor(nodes)).numpy(), want, atol=1e-9)
+
+
+def test_sdf_grid_far_outside_reads_about_the_true_distance_and_resolution_one_is_refused():
+    """Outside its box the grid continues as sdf(clamped) + |p - clamped| (docstring), so a point 0.5 m off a 6 cm
+    cube reads its exact distance to within a cell; a grid of one node has no spacing and is refused by name."""
+    box = trimesh.creation.box(extents=(0.06, 0.06, 0.06))
+    grid = SDFGrid.from_mesh(box, resolution=16, padding=0.01, dtype=torch.float64)
+    p = np.array([[0.53, 0.0, 0.0], [0.0, -0.4, 0.1], [0.2, 0.2, 0.2]])
+    np.testing.assert_allclose(grid(torch.tensor(p)).numpy(), signed_distance(p, box).numpy(),
+                               atol=float(grid.cell.max()))
+    with pytest.raises(ValueError, match="resolution"):
+        SDFGrid.from_mesh(box, resolution=1)
+
+
+def test_contact_at_exactly_the_threshold_counts_and_threshold_zero_is_allowed():
+    """'within threshold' includes the threshold (dyadic distances, exact in floating point): a point 1/16 m off a
+    box face is in contact at threshold 1/16 m; threshold 0 (documented '>= 0') marks only points on the surface."""
+    box = trimesh.creation.box(extents=(0.25, 0.25, 0.25))            # faces at +-0.125
+    pts = torch.tensor([[0.1875, 0.0, 0.0], [0.125, 0.0, 0.0], [0.25, 0.0, 0.0]], dtype=torch.float64)
+    np.testing.assert_array_equal(marker_contact(pts, box, threshold=0.0625).numpy(), [1, 1, 0])
+    np.testing.assert_array_equal(object_contact(pts, box, threshold=0.0625).numpy(), [1, 1, 0])
+    np.testing.assert_array_equal(marker_contact(pts, box, threshold=0.0).numpy(), [0, 1, 0])
+    cloud = torch.tensor(box.vertices)
+    np.testing.assert_array_equal(object_contact(cloud[:3], cloud, threshold=0).numpy(), [1, 1, 1])
+
+
+def test_columns_through_two_stacked_open_boxes_count_as_empty():
+    """Two lidless boxes stacked one above the other: each vertical ray enters both bottoms and leaves through
+    neither (two crossings, both entering), so its counts do not close and the column counts as empty (module
+    docstring), even though the count is even: the object inside the lower box measures 0 cm^3, with the warning."""
+    lower, upper = _box((0.1, 0.1, 0.1), (0, 0, 0)), _box((0.1, 0.1, 0.1), (0, 0, 0.2))
+    keep = lambda b: b.faces[~np.isclose(b.triangles_center[:, 2], b.bounds[1, 2])]   # noqa: E731  lid removed
+    verts = np.vstack([lower.vertices, upper.vertices])
+    faces = np.vstack([keep(lower), keep(upper) + len(lower.vertices)])
+    obj = _box((0.04, 0.04, 0.04), (0.0, 0.0, -0.01))
+    with pytest.warns(UserWarning, match="not closed"):
+        assert interpenetration((verts, faces), obj).volume_cm3 == 0.0
+
+
+def test_a_column_length_linear_in_y_is_integrated_exactly_on_oblong_cells():
+    """A 100 x 10.05 x 60 mm box cut by a 45-degree plane z = -y (a big cube turned about x): each column's length is
+    30 mm - y, linear, so the midpoint rule is exact on any grid of cells centred on their rays; on 5 mm spacing the
+    overlap box's 10.05 mm side splits into three 3.35 mm cells (oblong), and the volume is 100 * 10.05 * 30 mm^3
+    (the linear term integrates to zero): analytic."""
+    a = _box((0.1, 0.01005, 0.06), (0.0, 0.0, 0.0))
+    b = trimesh.creation.box(extents=(0.3, 0.3, 0.3))
+    b.apply_translation((0.0, 0.0, -0.15))                              # top face z = 0
+    b.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 4, [1, 0, 0]))   # top face now z = y ... turned
+    n = b.face_normals[np.argmax(b.face_normals[:, 2])]
+    assert np.allclose(np.abs(n), [0, np.sqrt(0.5), np.sqrt(0.5)])
+    exact = 100 * 10.05 * 30 / 1000                                     # cm^3
+    for spacing in (0.005, 0.003):
+        assert intersection_volume(a, b, spacing=spacing) * 1e6 == pytest.approx(exact, rel=1e-4)
+        assert intersection_volume(b, a, spacing=spacing) * 1e6 == pytest.approx(exact, rel=1e-4)

@@ -12,6 +12,7 @@ from scipy.stats import binomtest
 
 from graspkit.objects import (SPECS, TEST_OBJECTS, ObjectPose, apply_pose, list_objects, make_object,
                               sample_object_pose, sample_surface)
+from graspkit.objects.placement import within_reach_pose
 from graspkit.paths import REPO_ROOT
 
 ALL = list_objects()
@@ -231,3 +232,35 @@ def test_mug_is_an_open_cup_hollow_to_near_its_bottom():
     wall = np.array([[lo[0] + 0.002, 0.0, (lo[2] + hi[2]) / 2]])  # 2 mm into the 4 mm wall
     assert mug.contains(wall).all()
     assert mug.volume * 1e6 == pytest.approx(_documented_volume_cm3("mug"), abs=1.0)
+
+
+def test_inverse_pose_undoes_the_pose():
+    """pose.inverse() maps world points back: apply(inverse, apply(pose, x)) == x, and pose o inverse is the
+    identity matrix (a rigid-transform round trip)."""
+    pose = ObjectPose.from_yaw(0.7, (0.3, -0.5, 1.1))
+    x = np.random.default_rng(1).normal(size=(20, 3))
+    np.testing.assert_allclose(apply_pose(pose.inverse(), apply_pose(pose, x)), x, atol=1e-12)
+    np.testing.assert_allclose(pose.compose(pose.inverse()).matrix(), np.eye(4), atol=1e-12)
+    np.testing.assert_allclose(pose.inverse().matrix(), np.linalg.inv(pose.matrix()), atol=1e-12)
+
+
+def test_within_reach_pose_keeps_its_documented_heights_and_distances():
+    """within_reach_pose draws heights 0.6-1.2 m and distances 0.5-0.8 m in front of a person at the origin facing -y
+    (its docstring); over 200 seeds every pose stays in those ranges and both ends are approached."""
+    t = np.stack([within_reach_pose(s).translation for s in range(200)])
+    dist = np.linalg.norm(t[:, :2], axis=1)
+    assert t[:, 2].min() >= 0.6 and t[:, 2].max() <= 1.2 and t[:, 2].min() < 0.62 and t[:, 2].max() > 1.18
+    assert dist.min() >= 0.5 - 1e-12 and dist.max() <= 0.8 + 1e-12 and dist.min() < 0.52
+    assert (t[:, 1] < 0).all()
+
+
+def test_a_zero_distance_places_the_object_at_the_start():
+    """distance_range (0, 0) is valid (documented: distances >= 0) and puts the object centre right above `start`."""
+    pose = sample_object_pose(3, distance_range=(0.0, 0.0), start=(0.2, -0.1))
+    np.testing.assert_allclose(pose.translation[:2], (0.2, -0.1), atol=1e-15)
+
+
+def test_negative_variation_seed_is_refused_by_name():
+    """make_object's seed is None or an integer >= 0 (docstring); -1 is refused naming `seed`, not silently used."""
+    with pytest.raises(ValueError, match="seed"):
+        make_object("mug", seed=-1)
