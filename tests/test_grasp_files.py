@@ -83,7 +83,7 @@ def test_errors_name_the_file_and_key(tmp_path):
         load_grasp_sequence(tmp_path / "y.npz")
 
 
-def _joint_valued_small_sequence(T: int, fps: float) -> GraspSequence:
+def _joint_valued_seq(T: int, fps: float) -> GraspSequence:
     """A sequence whose every joint carries its own value (0.01 j about x), with a per-frame contact count."""
     poses = np.zeros((T, 55, 3), np.float32)
     poses[:, :, 0] = 0.01 * np.arange(55)
@@ -97,7 +97,7 @@ def test_per_part_keys_follow_smplx_joint_order():
 
     from graspkit.data.grab import to_arrays
 
-    a = to_arrays(_joint_valued_small_sequence(2, 30.0))
+    a = to_arrays(_joint_valued_seq(2, 30.0))
     for key, name in (("jaw_pose", "jaw"), ("leye_pose", "left_eye_smplhf"), ("reye_pose", "right_eye_smplhf")):
         j = jn.JOINT_NAMES.index(name)
         np.testing.assert_allclose(a[f"body.params.{key}"][0], [0.01 * j, 0, 0], atol=1e-7, err_msg=key)
@@ -105,7 +105,7 @@ def test_per_part_keys_follow_smplx_joint_order():
 
 def test_contacts_are_resampled_with_the_poses(tmp_path):
     """A 120 fps file read at 30 fps keeps every fourth frame, its contacts included."""
-    s = load_grasp_sequence(save_grasp_sequence(tmp_path / "s.npz", _joint_valued_small_sequence(121, 120.0)), fps=30.0)
+    s = load_grasp_sequence(save_grasp_sequence(tmp_path / "s.npz", _joint_valued_seq(121, 120.0)), fps=30.0)
     assert s.num_frames == 31
     np.testing.assert_array_equal(s.contacts["object"][:, 0], 4 * np.arange(31))
 

@@ -614,6 +614,12 @@ def _cloud_sd(q, pts, nrm):
     return d * np.sign(((q - pts[i]) * nrm[i]).sum(-1))
 
 
+def _cube_sd(x, c, half: float = 0.03):
+    """Closed-form signed distance (> 0 outside) of points x (N,3) to the axis-aligned cube of half-side `half` at c."""
+    q = np.abs(x - c) - half
+    return np.linalg.norm(np.maximum(q, 0), axis=-1) + np.minimum(q.max(-1), 0)
+
+
 def _hand_normals(bm, v):
     """trimesh's vertex normals of the hand surface (the body's faces whose vertices are all hand vertices)."""
     both = hand_vertex_ids(bm)
@@ -646,10 +652,7 @@ def test_energy_of_a_batch_is_each_samples_energy_alone(bm, prior):
     height = torch.stack([-low[0] + 0.05, -low[1] - 0.01])
 
     # the hands' depths in their cubes (the cube's closed-form signed distance) and a sunk_depth between them
-    def cube_sd(x, c):
-        q = np.abs(x - c) - 0.03
-        return np.linalg.norm(np.maximum(q, 0), axis=-1) + np.minimum(q.max(-1), 0)
-    depth = [max(0.0, -cube_sd(verts[b, hand_vertex_ids(bm)].double().numpy(), centres[b]).min()) for b in range(2)]
+    depth = [max(0.0, -_cube_sd(verts[b, hand_vertex_ids(bm)].double().numpy(), centres[b]).min()) for b in range(2)]
     assert depth[0] > depth[1] + 2e-3 and depth[1] > 0, depth
     opt = opt0.with_config(sunk_depth=0.5 * (depth[0] + depth[1]), collision_points=200, contact_points=100)
     target = verts[:, opt.marker_ids] + 0.01 * torch.randn(2, 143, 3, generator=g)
@@ -716,8 +719,7 @@ def test_energy_terms_take_their_own_weights_and_hinge_floors(bm, prior):
     assert e3["colli_object"].item() == pytest.approx(want_o, rel=0.02)
     # stage 2's E^B_colli: hand vertices, their inner copies and the forearms, each past sigma_b
     q = np.concatenate([v[both], v[both] - 0.005 * hn, v[both] - 0.01 * hn, v[forearm_vertex_ids(bm)]])
-    sb = np.abs(q - c) - 0.03                                                   # the cube's closed-form S
-    sb = np.linalg.norm(np.maximum(sb, 0), axis=-1) + np.minimum(sb.max(-1), 0)
+    sb = _cube_sd(q, c)                                                         # the cube's closed-form S
     want_b = 200.0 * np.maximum(-sb - 3e-3, 0).sum()
     assert want_b > 1.0 and np.maximum(-sb, 0).sum() > 1.2 * np.maximum(-sb - 3e-3, 0).sum()
     assert e2["colli_body"].item() == pytest.approx(want_b, rel=0.05)

@@ -307,10 +307,8 @@ def test_motion_quality_reports_the_fastest_turning_joint_of_a_clip(bm):
     from scipy.spatial.transform import Rotation
 
     from graspkit.body.skeleton import JOINT_NAMES
-    from graspkit.data import load_motion
-    from graspkit.paths import DATA_STUBS
 
-    m = load_motion(DATA_STUBS / "motion" / "reach" / "reach_000003.npz")
+    m = _reach()
     p = m.poses.reshape(len(m.poses), -1, 3)[:, :25]
     r = [Rotation.from_rotvec(p[:, j]) for j in range(25)]
     deg = np.stack([np.degrees((x[:-1].inv() * x[1:]).magnitude()) for x in r], 1) * m.fps
@@ -322,10 +320,7 @@ def test_motion_quality_reports_the_fastest_turning_joint_of_a_clip(bm):
 
 def test_motion_quality_of_one_frame_clips_has_no_rates_rather_than_zero(bm):
     """One frame has no frame pairs: its skating rates were reported as 0 %, which reads as "no skating"."""
-    from graspkit.data import load_motion
-    from graspkit.paths import DATA_STUBS
-
-    m = load_motion(DATA_STUBS / "motion" / "reach" / "reach_000003.npz")
+    m = _reach()
     one = M.motion_quality(bm, [m.slice(0, 1)])
     assert one["pairs"] == 0 and one["frames"] == 1
     assert all(np.isnan(one[k]) for k in ("fs_wandr", "skate_saga", "slide_goal", "mean_jerk"))
@@ -446,6 +441,7 @@ def test_measures_over_pairs_refuse_inputs_without_a_pair():
 
 
 def _reach():
+    """A shipped reaching clip (graspkit.data.Motion)."""
     from graspkit.data import load_motion
     from graspkit.paths import DATA_STUBS
     return load_motion(DATA_STUBS / "motion" / "reach" / "reach_000003.npz")
