@@ -30,6 +30,27 @@ def test_round_trip_without_pickle_and_equal_bytes(tmp_path):
     assert not list(tmp_path.glob("*.tmp")) and not list(tmp_path.glob(".*"))
 
 
+def test_a_copy_saved_elsewhere_still_points_at_the_mesh(tmp_path):
+    """object_mesh is stored relative to the file: a file loaded from one folder and saved in another names the same
+    PLY (trimesh reads identical vertices through both), and saving it back beside the mesh gives the first bytes."""
+    import trimesh
+
+    from graspkit.data.grab import export_object_ply
+    a_dir, b_dir = tmp_path / "a", tmp_path / "b" / "deeper"
+    export_object_ply("mug", a_dir / "meshes")
+    first = save_grasp_sequence(a_dir / "s.npz", _sequence())
+    r = load_grasp_sequence(first)
+    assert r.object_mesh == str((a_dir / "meshes" / "mug.ply").absolute())
+    copy = save_grasp_sequence(b_dir / "s.npz", r)
+    with np.load(copy, allow_pickle=False) as z:
+        stored = str(z["object.object_mesh"])
+    assert not stored.startswith("/") and (b_dir / stored).resolve() == (a_dir / "meshes" / "mug.ply").resolve()
+    want = trimesh.load(a_dir / "meshes" / "mug.ply", process=False).vertices
+    assert np.array_equal(trimesh.load(b_dir / stored, process=False).vertices, want)
+    assert load_grasp_sequence(copy).object_mesh == r.object_mesh
+    assert save_grasp_sequence(a_dir / "t.npz", load_grasp_sequence(copy)).read_bytes() == first.read_bytes()
+
+
 def _grab_like(path, T=9, fullpose=True):
     """A file laid out as GRAB's: pickled nested dictionaries, 120 fps, a subject template mesh instead of betas, and
     smplx's full_pose (absolute hand poses) or, without it, 45-D per-part hand poses relative to the hand mean."""

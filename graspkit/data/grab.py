@@ -11,7 +11,7 @@ graspkit writes the same tree WITHOUT pickle: every leaf is a plain array under 
 | `body.params.transl`, `.expression`, `.fullpose` | (T,3), (T,10), (T,165) | fullpose = all 55 joints |
 | `body.betas`, `body.flat_hand_mean`, `body.model` | (10,), (), () | shape; hand mean not added; the model file |
 | `object.params.transl`, `.global_orient` | (T,3), (T,3) | object pose per frame: x_world = R(orient) x_obj + transl |
-| `object.object_mesh`, `object.points`, `object.normals` | (), (P,3), (P,3) | PLY path relative to the file; SAGA's 2048 points |
+| `object.object_mesh`, `object.points`, `object.normals` | (), (P,3), (P,3) | PLY path relative to the file (read back absolute when it is there); SAGA's 2048 points |
 | `contact.object`, `contact.markers`, `contact.body`, `contact.feet` | (T,P), (T,143), (T,V), (T,4) uint8 | C_O, C_M, body vertices, feet |
 | `framerate`, `n_frames`, `obj_name`, `gender`, `sbj_id`, `motion_intent` | () | as GRAB |
 | `grasp.*`, `goal.*`, `saga.*` | | graspkit's extras: grasp type, grasp frame, GOAL / SAGA labels |
@@ -43,7 +43,8 @@ BODY_PARTS = (("global_orient", 0, 1), ("body_pose", 1, 22), ("jaw_pose", 22, 23
 @dataclass
 class GraspSequence:
     """One GRAB-style sequence: poses (T,55,3) absolute axis-angle, trans (T,3), betas (10,), fps; the object's
-    name, per-frame translation (T,3) and axis-angle orientation (T,3), mesh path; contacts {name: (T,N) uint8};
+    name, per-frame translation (T,3) and axis-angle orientation (T,3), mesh path (stored relative to the file; loaded
+    as an absolute path when the mesh is there, so a copy saved elsewhere points at it); contacts {name: (T,N) uint8};
     extras {key: array} (graspkit's labels); object points / normals (P,3) in the object frame."""
 
     poses: np.ndarray
@@ -124,6 +125,7 @@ def save_grasp_sequence(path: str | os.PathLike, seq: GraspSequence, model: str 
     path = Path(path)
     check_fps(seq.fps, "seq.fps")
     a = to_arrays(seq, model)
+    a["object.object_mesh"] = np.array(_mesh_path_for(seq.object_mesh, path.parent))
     for key in ("body.params.fullpose", "body.params.transl", "body.betas", "object.params.transl",
                 "object.params.global_orient", "object.points", "object.normals"):
         if key in a and not np.isfinite(a[key]).all():
@@ -276,9 +278,22 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
     skip = {"framerate", "n_frames", "obj_name", "gender", "sbj_id", "motion_intent", "body.betas", "body.model",
             "body.flat_hand_mean", "object.object_mesh", "object.points", "object.normals"}
     extras = {k: v for k, v in a.items() if not (k in skip or k.startswith(("body.params.", "object.params.", "contact.")))}
-    return GraspSequence(poses, trans, betas, src, _str(a.get("obj_name")), o_t, o_r, _str(a.get("object.object_mesh")),
+    mesh = _str(a.get("object.object_mesh"))
+    if mesh and not os.path.isabs(mesh) and (path.parent / mesh).is_file():
+        mesh = os.path.normpath(path.parent.absolute() / mesh)  # so that a copy saved elsewhere still finds it
+    return GraspSequence(poses, trans, betas, src, _str(a.get("obj_name")), o_t, o_r, mesh,
                          contacts, extras, a.get("object.points"), a.get("object.normals"), _str(a.get("gender"), "neutral"),
                          _str(a.get("sbj_id"), ""), _str(a.get("motion_intent"), ""))
+
+
+def _mesh_path_for(mesh: str, folder: Path) -> str:
+    """The object_mesh string to store in a file in `folder`: an absolute path relative to it (as stored otherwise)."""
+    if not mesh or not os.path.isabs(mesh):
+        return mesh
+    try:
+        return Path(os.path.relpath(mesh, folder.absolute())).as_posix()
+    except ValueError:  # another drive (Windows): no relative path exists
+        return mesh
 
 
 def export_object_ply(name: str, folder: str | os.PathLike) -> Path:
