@@ -426,6 +426,24 @@ def test_latent_optimisation_pulls_the_wrist_to_the_goal_and_the_pelvis_over_a_w
         optimise_latents(model, starts[1], goal, t_goal=10, waypoints=[(50, (0, 0))])
 
 
+def test_latent_optimisation_runs_in_the_models_dtype_and_names_bad_arguments(stats, starts):
+    """A float64 copy of the model (generate takes one) optimises the same latents as the float32 model, to float32
+    rounding; a fractional or boolean waypoint frame and a fractional iteration count are refused by name."""
+    import copy
+    model = _model(stats)
+    goal = torch.tensor([0.6, 0.2, 1.0])
+    z0 = torch.randn(1, 8, model.cfg.latent, generator=torch.Generator().manual_seed(3))
+    a = optimise_latents(model, starts[1], goal, t_goal=8, iters=3, z0=z0)
+    b = optimise_latents(copy.deepcopy(model).double(), starts[1], goal, t_goal=8, iters=3, z0=z0)
+    assert b.z.dtype == torch.float64 and b.motion.joints.dtype == torch.float64
+    assert torch.allclose(b.z.float(), a.z, atol=1e-4)
+    assert torch.allclose(b.motion.joints.float(), a.motion.joints, atol=1e-4)
+    for kw, name in ((dict(waypoints=[(2.5, (0, 0))]), "waypoints"), (dict(waypoints=[(True, (0, 0))]), "waypoints"),
+                     (dict(iters=2.0), "iters")):
+        with pytest.raises(ValueError, match=name):
+            optimise_latents(model, starts[1], goal, t_goal=8, **kw)
+
+
 def test_goal_frame_hold_changes_only_the_reaching_windows(clips, stats):
     """goal_frame="hold" moves t_G of the reaching clips to the end of their hold: locomotion windows (hindsight
     goals) keep their losses, reaching windows get a different intention and so a different loss."""

@@ -15,6 +15,7 @@ latents of a WANDR rollout and keep its intention. graspkit's choices (the paper
 """
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Sequence
 
@@ -67,18 +68,21 @@ def optimise_latents(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose
     if not 1 <= t_goal <= frames:
         raise ValueError(f"t_goal: expected 1 <= t_goal <= frames ({frames}), got {t_goal}")
     for frame, xy in waypoints:
-        if not 0 <= frame <= frames or len(xy) < 2:
-            raise ValueError(f"waypoints: expected (frame in [0, {frames}], (x, y)), got {(frame, xy)}")
-    if iters < 0:
-        raise ValueError(f"iters: expected >= 0, got {iters}")
+        ok = isinstance(frame, numbers.Integral) and not isinstance(frame, bool) and 0 <= frame <= frames
+        if not ok or len(xy) < 2:
+            raise ValueError(f"waypoints: expected (frame, an integer in [0, {frames}], (x, y)), got {(frame, xy)}")
+    check_int(iters, "iters")
     model.eval()
     pp, p0, rest, g, idx = expand_starts(start, torch.as_tensor(goal, dtype=torch.float32).reshape(-1, 3), n)
+    dtype = model.decoder[0].weight.dtype                  # float32 unless the caller converted the model (as generate)
+    pp, p0, rest, g = (x.to(dtype) for x in (pp, p0, rest, g))
     B, L = len(g), model.cfg.latent
-    z = (torch.randn(B, frames, L, generator=generator) if z0 is None else z0.detach().clone()).requires_grad_(True)
+    z = (torch.randn(B, frames, L, generator=generator) if z0 is None else z0.detach().clone()).to(dtype)
+    z.requires_grad_(True)
     if z.shape != (B, frames, L):
         raise ValueError(f"z0: expected shape ({B}, {frames}, {L}), got {tuple(z.shape)}")
     opt = torch.optim.Adam([z], lr=lr)
-    best_z, best = z.detach().clone(), torch.full((B,), float("inf"))
+    best_z, best = z.detach().clone(), torch.full((B,), float("inf"), dtype=dtype)
     history: list[dict[str, float]] = []
     grads = [q.requires_grad for q in model.parameters()]
     for q in model.parameters():
