@@ -112,6 +112,8 @@ def plan_footsteps(plan: RootPlan, rig: Rig, style: GaitStyle, t_begin: float = 
         t_land = t + 2 * (1 - style.duty) * P
         tau = t_land + style.lead * P
         v_tau = speed[min(int(round(tau * fps)), plan.num_frames - 1)]
+        # the farther foot first; on a symmetric start (a straight walk) the two distances tie and rounding picks
+        # the foot, so the first foot can differ between headings (kept: changing it would remake the shipped data)
         order = [1 - last, last] if last is not None else sorted((0, 1), key=lambda s: -_distance(
             footprint_target(plan, rig, style, s, tau, v_tau), pos[s]))
         chosen = None
