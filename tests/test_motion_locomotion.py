@@ -56,6 +56,21 @@ def test_standing_still_takes_no_step_and_turning_in_place_follows_the_heading(r
         assert abs(s.yaw - want) < style.yaw_threshold + 1e-9
 
 
+def test_a_one_or_two_frame_stand_is_the_start_of_a_longer_one(rig):
+    """A body standing still is posed the same on every frame, so one- and two-frame plans give the first frames of a
+    five-frame plan (they crashed: central differences and the arms' two-frame lag need three frames)."""
+    def posed(T):
+        plan = RootPlan(np.tile([[0.3, -0.2]], (T, 1)), np.full(T, 0.7))
+        assert np.array_equal(plan.speed(), np.zeros(T)) and np.array_equal(plan.turn_rate(), np.zeros(T))
+        tracks = foot_tracks(plan_footsteps(plan, rig, GaitStyle()), plan, rig, GaitStyle())
+        return pose_body(rig, plan, tracks, Style())[:2]
+    local5, root5 = posed(5)
+    assert np.allclose(local5, local5[:1]) and np.allclose(root5, root5[:1])
+    for T in (1, 2):
+        local, root = posed(T)
+        assert np.array_equal(local, local5[:T]) and np.array_equal(root, root5[:T])
+
+
 def test_contact_labels_are_honest_on_the_mesh(bm, rig):
     """A labelled heel / toe touches the ground and has a vertex that does not move (the pivot it rolls about);
     an unlabelled one is not below the ground."""

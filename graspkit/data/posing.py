@@ -59,7 +59,7 @@ class Controls:
     hip_flex: np.ndarray             # (T,) forward pitch of the pelvis (rad)
     spine_flex: np.ndarray           # (T,) forward bend of the spine, total over 3 joints (rad)
     spine_twist: np.ndarray          # (T,) thorax yaw (left +), total (rad)
-    spine_side: np.ndarray           # (T,) lateral bend (towards the right +), total (rad)
+    spine_side: np.ndarray           # (T,) lateral bend (towards the left +), total (rad)
     collar_raise: np.ndarray         # (T,) right collar elevation (rad; < 0 depresses and protracts the shoulder)
     gaze: np.ndarray | None = None   # (T,3) world point to look at; None: along the path
     gaze_weight: np.ndarray | None = None  # (T,) 0 path, 1 gaze point
@@ -220,8 +220,8 @@ def pose_body(rig: Rig, plan: RootPlan, tracks: FootTracks, style: Style, contro
 
     # ---- arms swing against the legs (the left arm forward when the right foot is ahead); arms lag a little
     amp = style.arm_swing * np.clip(walking, 0.15, 1.0)
-    sig = np.roll(np.clip(-sep / (0.7 * sc), -1.15, 1.15), 2)
-    sig[:2] = sig[2]
+    raw = np.clip(-sep / (0.7 * sc), -1.15, 1.15)
+    sig = np.concatenate([np.full(min(2, T), raw[0]), raw[:max(T - 2, 0)]])   # the arms lag two frames
     for side, sgn in (("left", 1.0), ("right", -1.0)):
         swing = sgn * amp * sig + 0.06
         extra = c.arm_flex if c.arm_flex is not None else np.zeros(T)

@@ -37,11 +37,15 @@ class RootPlan:
         return xy, self.heading[i0] + a[..., 0] * dh
 
     def speed(self) -> np.ndarray:
-        """Ground speed (T,) in m/s (central differences)."""
+        """Ground speed (T,) in m/s (central differences; 0 for a one-frame plan)."""
+        if self.num_frames < 2:
+            return np.zeros(self.num_frames)
         return np.linalg.norm(np.gradient(self.xy, axis=0), axis=1) * self.fps
 
     def turn_rate(self) -> np.ndarray:
-        """Heading rate (T,) in rad/s."""
+        """Heading rate (T,) in rad/s (0 for a one-frame plan)."""
+        if self.num_frames < 2:
+            return np.zeros(self.num_frames)
         return np.gradient(np.unwrap(self.heading)) * self.fps
 
 
