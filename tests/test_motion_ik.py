@@ -1,8 +1,10 @@
 """Rotation helpers and analytic two-bone IK against scipy and closed-form truths."""
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
-from graspkit.data.ik import axis_angle_matrix, frame, matrix_axis_angle, rot_x, rot_y, rot_z, smoothstep, two_bone_ik, wrap_angle
+from graspkit.data.ik import (axis_angle_matrix, frame, matrix_axis_angle, normalize, rot_x, rot_y, rot_z, smoothstep,
+                              two_bone_ik, wrap_angle)
 
 
 def _is_rotation(R):
@@ -108,3 +110,72 @@ def test_frame_is_a_proper_rotation_with_the_given_axes():
     assert _is_rotation(F)
     np.testing.assert_allclose(F[..., 0], a / np.linalg.norm(a, axis=1, keepdims=True), atol=1e-12)
     np.testing.assert_allclose(frame(np.array([1.0, 0, 0]), np.array([0.3, 1.0, 0])), np.eye(3), atol=1e-12)
+
+
+def test_normalize_gives_unit_directions_and_keeps_zero_vectors_zero():
+    """normalize: a batch of vectors -> unit vectors along them (|v| and v/|v| by hand); zero vectors stay zero (docstring),
+    never NaN."""
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(4, 5, 3))
+    v[1, 2] = 0.0
+    with np.errstate(all="raise"):
+        u = normalize(v)
+    n = np.linalg.norm(v, axis=-1)
+    ok = n > 0
+    np.testing.assert_allclose(np.linalg.norm(u, axis=-1)[ok], 1.0, atol=1e-12)
+    np.testing.assert_allclose(u[ok] * n[ok][:, None], v[ok], atol=1e-12)
+    np.testing.assert_array_equal(u[1, 2], 0.0)
+
+
+def test_matrix_axis_angle_matches_scipy_close_to_pi_and_for_batched_leading_dims():
+    """matrix_axis_angle against scipy's as_rotvec for angles in (pi/2, pi - 1e-4] about random axes (the branches of
+    Shepperd's method on the diagonal, where the rotation vector is still unique) and for a (2, 3, 3, 3) batch."""
+    rng = np.random.default_rng(3)
+    ax = rng.normal(size=(300, 3))
+    ax /= np.linalg.norm(ax, axis=1, keepdims=True)
+    ang = rng.uniform(np.pi / 2, np.pi - 1e-4, (300, 1))
+    for k in range(3):                                   # axes close to each coordinate axis: each diagonal case
+        ax[100 * k:100 * k + 50, k] += 3.0
+    ax /= np.linalg.norm(ax, axis=1, keepdims=True)
+    rv = ax * ang
+    R = Rotation.from_rotvec(rv).as_matrix()
+    np.testing.assert_allclose(matrix_axis_angle(R), rv, atol=1e-8)
+    Rb = R[:18].reshape(2, 3, 3, 3, 3)
+    np.testing.assert_allclose(matrix_axis_angle(Rb), rv[:18].reshape(2, 3, 3, 3), atol=1e-8)
+
+
+def test_two_bone_ik_with_per_item_bones_matches_one_chain_at_a_time():
+    """Bones given per item (n, 3) (docstring: "(3,) or (..., 3)"): each item's chain keeps its own bone lengths, its end
+    lands on its reachable target by forward kinematics, and it equals the same chain solved alone with (3,) bones."""
+    rng = np.random.default_rng(4)
+    n = 6
+    b1 = rng.normal(size=(n, 3)) * 0.05 + np.array([0, -0.3, 0])
+    b2 = rng.normal(size=(n, 3)) * 0.05 + np.array([0, -0.25, 0])
+    b1 *= rng.uniform(0.6, 1.6, (n, 1))
+    l1, l2 = np.linalg.norm(b1, axis=1), np.linalg.norm(b2, axis=1)
+    root = rng.normal(size=(n, 3))
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    target = root + d * (np.abs(l1 - l2) + rng.uniform(0.2, 0.8, n) * (l1 + l2 - np.abs(l1 - l2)))[:, None]
+    pole, bend = rng.normal(size=(n, 3)), np.array([0.0, 0.0, 1.0])
+    R1, R2, mid = two_bone_ik(root, target, pole, b1, b2, bend)
+    np.testing.assert_allclose(np.linalg.norm(mid - root, axis=1), l1, atol=1e-9)
+    np.testing.assert_allclose(root + np.einsum("nij,nj->ni", R1, b1), mid, atol=1e-9)
+    np.testing.assert_allclose(mid + np.einsum("nij,nj->ni", R2, b2), target, atol=1e-9)
+    for k in range(n):
+        r1, r2, m = two_bone_ik(root[k], target[k], pole[k], b1[k], b2[k], bend)
+        np.testing.assert_allclose(r1, R1[k], atol=1e-12)
+        np.testing.assert_allclose(r2, R2[k], atol=1e-12)
+        np.testing.assert_allclose(m, mid[k], atol=1e-12)
+
+
+def test_smoothstep_is_the_minimum_jerk_quintic():
+    """smoothstep is 10u^3 - 15u^4 + 6u^5 (docstring): hand values at u = 1/4, 3/4, and zero velocity and zero
+    acceleration at both ends (finite differences), which the cubic 3u^2 - 2u^3 lacks."""
+    assert smoothstep(np.array(0.25)) == pytest.approx(10 / 64 - 15 / 256 + 6 / 1024, abs=1e-12)
+    assert smoothstep(np.array(0.75)) == pytest.approx(1 - (10 / 64 - 15 / 256 + 6 / 1024), abs=1e-12)
+    h = 1e-4
+    for uu in (np.array([0.0, h, 2 * h]), np.array([1.0, 1 - h, 1 - 2 * h])):     # one-sided at each end
+        s = smoothstep(uu)
+        assert abs((s[1] - s[0]) / h) < 1e-6                       # velocity (the cubic's is 6u there: 6e-4)
+        assert abs((s[2] - 2 * s[1] + s[0]) / h**2) < 0.01         # acceleration (the cubic's is 6 there)
