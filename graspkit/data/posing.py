@@ -64,12 +64,13 @@ class Controls:
     gaze: np.ndarray | None = None   # (T,3) world point to look at; None: along the path
     gaze_weight: np.ndarray | None = None  # (T,) 0 path, 1 gaze point
     reach_target: np.ndarray | None = None  # (T,3) right wrist target
-    reach_weight: np.ndarray | None = None  # (T,) 0 natural arm, 1 wrist on target
+    reach_weight: np.ndarray | None = None  # (T,) 0 natural wrist and elbow (IK sets the arm's twist), 1 wrist on target
     reach_pole: np.ndarray | None = None    # (T,3) direction the right elbow points when reaching
     hand_open: np.ndarray | None = None     # (T,) 0 relaxed, 1 pre-shaped (right hand)
     finger_dir: np.ndarray | None = None    # (T,3) wanted world direction of the right fingers when reaching
     palm_dir: np.ndarray | None = None      # (T,3) wanted world direction the right palm faces when reaching
-    support_weight: np.ndarray | None = None  # (T,) left hand onto the left knee (with a reach)
+    support_weight: np.ndarray | None = None  # (T,) left hand onto the left knee (with a reach; at 0 the soft reach
+    #                                             limit can still pull a near-straight arm in: 2 cm in a crouch)
     weight_shift: np.ndarray | None = None  # (T,) added to the weight on the left foot while both feet stand
     look_yaw: np.ndarray | None = None      # (T,) head turned left (+) from the path direction (rad)
     arm_flex: np.ndarray | None = None      # (T,) shoulders flexed forward, elbows bent (arms stay off the floor when the trunk bends)
