@@ -287,7 +287,7 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
 
 
 def _mesh_path_for(mesh: str, folder: Path) -> str:
-    """The object_mesh string to store in a file in `folder`: an absolute path relative to it (as stored otherwise)."""
+    """The object_mesh string to store in a file in `folder`: an absolute path made relative to it, any other as is."""
     if not mesh or not os.path.isabs(mesh):
         return mesh
     try:
