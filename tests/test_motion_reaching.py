@@ -10,7 +10,9 @@ from graspkit.data.ik import wrap_angle
 from graspkit.data.motion import heading_of
 from graspkit.data.posing import GAZE_LEVEL, HEAD_YAW_LIMIT, gaze_yaw, hand_pose
 from graspkit.data.reaching import (FAR_HEIGHTS, FLOOR_WRIST, LEVELS, REACH_RHO, RELEASE_S, _approach_plan,
-                                    choose_posture, plan_reach_chain)
+                                    _goal_as_reached, _natural_time, choose_posture, plan_reach_chain,
+                                    posture_shoulders, sample_reach_task)
+from graspkit.data.rig import build_rig
 
 
 WRIST = 21
@@ -355,3 +357,179 @@ def test_the_final_turn_takes_the_short_way_across_pi():
     h = np.unwrap(plan.heading)
     assert abs(wrap_angle(h[-1] - psi_f)) < 1e-6                         # ends facing psi_f
     assert np.abs(np.diff(h)).sum() < abs(wrap_angle(psi_f - phi)) + 0.05   # and turned no more than the short way
+
+
+def _rot(a):
+    """Rotation (3,3) about world z by a rad."""
+    return np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+
+
+@pytest.mark.parametrize("goal", [(0.0, 0.0, 1.0), (1.3, -0.4, 1.6), (0.9, 0.6, 0.3)])
+def test_plan_reach_is_equivariant_under_rotations_and_translations_about_z(bm, goal):
+    """Rotating and shifting the start and the goal about the vertical rotates and shifts the whole planned motion
+    (the planner has no preferred world direction; the floor is the only fixed reference), even for a goal right
+    above the start, where the facing must come from the start's heading."""
+    a, tr = 1.1, np.array([0.7, -1.2, 0.0])
+    m1 = plan_reach(Start(0.0, 0.0, 0.3), goal, 60, seed=3, bm=bm, hold_frames=5)
+    m2 = plan_reach(Start(0.7, -1.2, 0.3 + a), _rot(a) @ np.asarray(goal) + tr, 60, seed=3, bm=bm, hold_frames=5)
+    j1, j2 = m1.joint_positions(bm), m2.joint_positions(bm)
+    np.testing.assert_allclose(j1 @ _rot(a).T + tr, j2, atol=1e-4)
+
+
+def test_plan_reach_refuses_bad_frame_counts_and_goals_by_name(bm):
+    """plan_reach needs at least one frame before the goal (its docstring: the clip has t_goal_frames + 1 + hold
+    frames, the wrist reaching the goal at t_goal_frames): 0, a negative, fractional or boolean goal frame, a negative
+    hold and a non-finite goal are refused by name, as plan_reach_chain refuses them."""
+    for t in (0, -5, 60.5, True):
+        with pytest.raises(ValueError, match="t_goal_frames"):
+            plan_reach(Start(), (0.8, -0.3, 1.0), t, bm=bm)
+    with pytest.raises(ValueError, match="hold_frames"):          # a negative hold, named (not a Motion error)
+        plan_reach(Start(), (0.8, -0.3, 1.0), 40, bm=bm, hold_frames=-5)
+    with pytest.raises(ValueError, match="goal: expected a finite point"):
+        plan_reach(Start(), (0.8, np.nan, 1.0), 40, bm=bm)
+
+
+def test_a_chain_without_holds_and_with_an_instant_release_is_valid(bm):
+    """plan_reach_chain's docstring and checks: hold frames >= 0 and release_s in [0, 10); holds of 0 frames and a
+    release of 0 s are valid, and the wrist is still on each goal at its goal frame (forward kinematics)."""
+    goals = np.array([[0.8, -0.3, 1.0], [1.6, 0.5, 0.9]])
+    m, f_rel = plan_reach_chain(Start(), goals, (60, 120), (0, 0), bm=bm, release_s=0.0)
+    assert f_rel == 60 and m.num_frames == 121
+    w = m.joint_positions(bm)[:, WRIST]
+    assert np.linalg.norm(w[60] - goals[0]) < 0.01 and np.linalg.norm(w[120] - goals[1]) < 0.01
+
+
+def test_evaluation_grid_angles_are_measured_from_the_start_heading():
+    """WANDR Sec. 4.2: goals at 5 angles 72 deg apart relative to the start's facing; each row's (x, y) lies at the
+    row's distance along start.heading + angle (atan2 of the offset, hand-computed)."""
+    s = Start(1.0, 2.0, 0.5)
+    g = evaluation_goals(s)
+    off = g[:, 3:5] - [s.x, s.y]
+    ang = np.arctan2(off[:, 1], off[:, 0])
+    want = s.heading + np.radians(g[:, 0])
+    assert np.abs(np.angle(np.exp(1j * (ang - want)))).max() < 1e-9
+    np.testing.assert_allclose(np.hypot(off[:, 0], off[:, 1]), g[:, 2], atol=1e-12)
+
+
+def test_circle_tasks_keep_their_documented_distance_and_hold_ranges():
+    """sample_reach_task's docstring: the goal 0.3-1.2 m from the start, held 0.3-1.0 s (9-30 frames at 30 fps);
+    2000 seeded draws stay inside and fill both ranges."""
+    rng = np.random.default_rng(5)
+    tasks = [sample_reach_task(rng) for _ in range(2000)]
+    r = np.array([np.hypot(t.goal[0] - t.start.x, t.goal[1] - t.start.y) for t in tasks])
+    hold = np.array([t.hold_frames for t in tasks]) / 30.0
+    assert r.min() >= 0.3 - 1e-9 and r.max() <= 1.2 + 1e-9 and r.min() < 0.33 and r.max() > 1.17
+    assert hold.min() >= 0.3 - 1e-9 and hold.max() <= 1.0 + 1e-9 and hold.min() < 0.31 and hold.max() > 0.99
+
+
+def test_the_natural_time_is_longer_for_low_goals_and_not_for_high_ones():
+    """_natural_time's docstring: a slower reach for low goals; a floor goal (z = 0) takes longer than one at 1.2 m,
+    a goal overhead (1.8 m) no longer than one at 1.2 m, at every distance."""
+    for r in (0.3, 0.8, 2.0):
+        assert _natural_time(r, 0.0) > _natural_time(r, 1.2) + 0.2
+        assert _natural_time(r, 1.8) <= _natural_time(r, 1.2) + 1e-12
+
+
+def test_choose_posture_puts_goals_above_the_shoulder_at_reach_rho():
+    """choose_posture's docstring: a goal level with or above the shoulder is reached at REACH_RHO arm lengths, so the
+    returned horizontal reach and the height above the returned shoulder make a hypotenuse of REACH_RHO * arm; a goal
+    no level can reach takes the highest shoulder (b = -1, the closest). Synthetic shoulders: 1.4 m at b = 0, 0.6 m
+    higher per unit of -b."""
+    s = np.zeros((len(LEVELS), 3))
+    s[:, 0], s[:, 2] = 0.1, 1.4 - 0.6 * LEVELS
+    arm = 0.6
+    for z in (1.4, 1.75, 1.9, 2.3):
+        b, sh, reach = choose_posture(s, z, arm)
+        assert abs(np.hypot(reach, z - sh[2]) - REACH_RHO * arm) < 1e-9, z
+        assert b <= 0.0
+    b, sh, _ = choose_posture(s, 3.5, arm)                    # out of reach for every level
+    assert b == -1.0 and sh[2] == s[:, 2].max()
+
+
+def test_posture_levels_for_high_goals_raise_the_right_shoulder_and_lean_back(bm):
+    """The posture family (module docstring): b < 0 raises the right collar and extends the spine for high goals, so
+    by forward kinematics the right shoulder at b = -1 is higher than standing (b = 0) and further back (extension
+    leans the thorax backwards, body facing +x), and b > 0 lowers it."""
+    rig = build_rig(bm, np.zeros(10))
+    sh = posture_shoulders(rig)
+    k0, km, kp = int(np.argmin(np.abs(LEVELS))), 0, len(LEVELS) - 1
+    assert sh[km, 2] > sh[k0, 2] + 0.01
+    assert sh[km, 0] < sh[k0, 0] - 0.01
+    assert sh[kp, 2] < sh[k0, 2] - 0.3
+
+
+def test_an_unreachable_goal_is_stored_where_the_wrist_went_and_a_floor_goal_stays_on_the_floor(bm):
+    """_goal_as_reached's docstring: a goal the wrist missed becomes the wrist's position at the goal frame; a floor goal
+    the hand reached (wrist FLOOR_WRIST scaled by the body above it) stays on the floor, for a tall and a short body."""
+    m = plan_reach(Start(), (0.8, -0.3, 1.0), 60, seed=0, bm=bm, hold_frames=0)
+    m.goal = np.array([0.8, -0.3, 1.05])                      # 5 cm above where the wrist went
+    w = m.joint_positions(bm)[60, WRIST]
+    assert np.linalg.norm(_goal_as_reached(m, bm).goal - w) < 1e-5
+    for b0 in (-3.0, 3.0):
+        betas = np.zeros(10)
+        betas[0] = b0
+        goal = np.array([0.9, -0.4, 0.0])
+        m = plan_reach(Start(0, 0, 0.3), goal, 100, betas=betas, seed=2, bm=bm, hold_frames=0)
+        np.testing.assert_allclose(_goal_as_reached(m, bm).goal, goal, atol=1e-9)
+
+
+@pytest.mark.parametrize("z", [2.0, 1.1, 0.3])
+def test_the_reach_with_its_hand_pre_shaping_takes_about_a_second_for_high_middle_and_low_goals(bm, z):
+    """Module docstring, step 3-4: with time to spare the reach takes 0.9-1.6 s before the goal frame, the hand opening
+    into its pre-shape as the wrist moves in; the right hand's finger pose (read from the clip's axis-angles) starts
+    changing 0.8-1.6 s before t_G (the arm's blend spans the last 0.9 of the reach), holds still after it, and is
+    open (the fingers less flexed than at the start) at the goal."""
+    m = plan_reach(Start(), (0.5, -0.3, z), 120, seed=0, bm=bm, hold_frames=10)
+    f = m.poses.reshape(len(m.poses), -1, 3)[:, 40:55].reshape(len(m.poses), -1)
+    moving = np.abs(f - f[0]).max(1) > 1e-6
+    dur = (120 - int(np.argmax(moving)) + 1) / m.fps
+    assert 0.78 <= dur <= 1.6, dur
+    assert np.abs(f[120:] - f[120]).max() < 1e-6
+    bend = np.linalg.norm(f.reshape(len(f), 15, 3)[:, 3:], axis=-1).sum(1)   # flexion of the four fingers (rad)
+    assert bend[120] < 0.7 * bend[0]                       # opened (less curled) at the goal than at the start
+
+
+def test_evaluate_planner_scores_the_clip_plan_reach_makes_for_a_grid_row(bm):
+    """evaluate_planner on one row of WANDR's grid (angle 0, height 0.9 m, distance 0.5 m): the row's height and
+    distance come back as given, the goal is (x, y, height), and the scores agree with forward kinematics of the
+    same plan_reach clip: the wrist error at the goal frame, DTG (the track's closest approach, so no larger than
+    that error) and success (DTG within WANDR's 10 cm)."""
+    from graspkit.data.reaching import evaluate_planner
+
+    s = Start(0.5, -0.2, 0.4)
+    row = evaluation_goals(s)[10]
+    assert tuple(row[:3]) == (0.0, 0.9, 0.5)
+    out = evaluate_planner(bm, s, t_goal_frames=60, seed=4, goals=row[None])
+    assert len(out) == 1
+    r = out[0]
+    goal = np.array([row[3], row[4], 0.9])
+    assert r["height"] == 0.9 and r["distance"] == 0.5 and np.allclose(r["goal"], goal)
+    w = plan_reach(s, goal, 60, seed=4, bm=bm, hold_frames=0).joint_positions(bm)[:, WRIST]
+    err = float(np.linalg.norm(w[60] - goal))
+    assert abs(r["error_at_goal_frame"] - err) < 1e-6 and err < 0.01
+    assert abs(r["dtg"] - np.linalg.norm(w - goal, axis=1).min()) < 1e-6 and r["dtg"] <= err + 1e-9
+    assert r["success"]
+
+
+def test_the_planner_refuses_non_finite_betas_by_name(bm):
+    """_betas' docstring: betas must be finite; a NaN or an Inf shape coefficient is refused by name rather than
+    turning the whole clip into NaN."""
+    for bad in (np.nan, np.inf):
+        betas = np.zeros(10)
+        betas[3] = bad
+        with pytest.raises(ValueError, match="betas"):
+            plan_reach(Start(), (0.8, -0.3, 1.0), 30, betas=betas, bm=bm)
+
+
+def test_generate_reach_uses_the_betas_it_is_given(bm):
+    """generate_reach(betas=...) makes the clip for that body: the clip stores those betas, and by forward kinematics
+    of that body the wrist is at the stored goal at the goal frame."""
+    from graspkit.data.reaching import FLOOR_WRIST, generate_reach
+
+    betas = np.zeros(10)
+    betas[0], betas[1] = 2.0, -1.0
+    for seed in (0, 1):
+        m = generate_reach(seed, bm, betas=betas)
+        np.testing.assert_allclose(np.asarray(m.betas, np.float64)[:10], betas, atol=1e-6)
+        w = m.joint_positions(bm)[m.goal_frame, WRIST]
+        assert np.linalg.norm(w - np.maximum(m.goal, [-9, -9, FLOOR_WRIST])) < 0.02

@@ -95,7 +95,8 @@ def locomotion_plan(kind: str, rng: np.random.Generator, num_frames: int, fps: f
         k += n
         if k >= T:
             break
-    # every plan starts from rest (the feet stand at their footprints); a clip that should begin in motion gets a
+    # every plan starts slow with the feet at their footprints (the controls are zero for 0.25 s; after smoothing,
+    # frame 0 already moves at about a fifth of the walking speed); a clip that should begin in motion gets a
     # pre-roll that is cut later. Smoothing makes ramps of about a second.
     rest = int(0.25 * fps)
     v[:rest], u[:rest], w[:rest] = 0.0, 0.0, 0.0

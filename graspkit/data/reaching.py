@@ -10,7 +10,7 @@ hand so that the wrist is on the goal exactly at frame t_G (WANDR's time control
              wrist target lies within REACH_RHO arm lengths of the shoulder is chosen.
 2. stand-off the root point from which that shoulder sees the goal at a comfortable reach, on the line from
              the start to the goal, facing so that the goal is ahead and to the right.
-3. schedule  backwards from t_G: the reach takes 0.9-1.6 s (longer for lower goals), at most 0.8 t_G (a reach
+3. schedule  backwards from t_G: the reach takes 0.9-1.7 s (longer for lower goals), at most 0.8 t_G (a reach
              given little time starts after its first fifth, from rest, not before frame 0), and starts while the
              last step lands; walking (turn towards the stand-off, straight walk, final turn) is timed to
              stop then; if there is time to spare the person waits first, if not they walk faster.
@@ -173,10 +173,12 @@ def plan_reach(start: Start | tuple[float, float, float], goal: np.ndarray | Seq
 
     seed draws the small person-to-person variations (style, gait, preferred speed) unless given.
     """
-    if t_goal_frames < 1:
-        raise ValueError(f"t_goal_frames: expected >= 1, got {t_goal_frames}")
+    t_goal_frames = _frame("t_goal_frames", t_goal_frames, 1)
+    hold_frames = _frame("hold_frames", hold_frames, 0)
     start = start if isinstance(start, Start) else Start(*map(float, start))
     goal = np.asarray(goal, np.float64).reshape(3)
+    if not np.isfinite(goal).all():
+        raise ValueError(f"goal: expected a finite point (3,) in metres, got {goal}")
     bm, rng, betas, rig, style, gait, v_pref = _person(seed, bm, betas, style, gait, v_pref)
     fps, T = 30.0, t_goal_frames + 1 + hold_frames
     plan, c = _reach_leg(rig, style, start, goal, t_goal_frames, T, rng, v_pref, fps)

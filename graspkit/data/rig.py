@@ -96,9 +96,11 @@ def _foot(side: str, v: np.ndarray, joints: np.ndarray, weights: np.ndarray, sol
 
 
 def build_rig(bm: BodyModel, betas: np.ndarray | torch.Tensor | None = None, strike_angle: float = 0.3) -> Rig:
-    """Measure a Rig on model `bm` for betas (10,) (None: zeros)."""
-    b = torch.zeros(1, bm.num_betas, dtype=bm.dtype) if betas is None else torch.as_tensor(
-        np.asarray(betas, np.float64).reshape(1, -1)[:, :bm.num_betas], dtype=bm.dtype)
+    """Measure a Rig on model `bm` for betas (K,) (None: zeros; zero-padded or cut to the model's, as BodyModel)."""
+    b = torch.zeros(1, bm.num_betas, dtype=bm.dtype)
+    if betas is not None:
+        x = np.asarray(betas, np.float64).reshape(-1)[:bm.num_betas]
+        b[0, :len(x)] = torch.as_tensor(x, dtype=bm.dtype)
     coeffs = torch.cat([b, torch.zeros(1, bm.num_expression, dtype=bm.dtype)], 1)
     with torch.no_grad():
         v, j = bm.shaped(coeffs)
