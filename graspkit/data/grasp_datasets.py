@@ -209,6 +209,9 @@ class ApproachDataset(_Files):
             raise ValueError(f"{path}: key 'grasp.goal_frame' is {g}, expected a frame in [0, {T - 1}]")
         raw = np.arange(T) if self.window is None else np.arange(T - self.window, T)
         valid, sel, first = raw >= 0, np.maximum(raw, 0), int(raw[0])
+        if g < first:
+            raise ValueError(f"window: the last {self.window} frames of {path} ({T} frames) start after its goal "
+                             f"frame {g}; expected a window of at least {T - g} frames (or None)")
         item = {"fullpose": torch.as_tensor(pose[sel]), "transl": torch.as_tensor(a["body.params.transl"][sel]),
                 "betas": torch.as_tensor(a["body.betas"]), "foot_contacts": torch.as_tensor(a["contact.feet"][sel].astype(bool)),
                 "goal_frame": torch.tensor(g - first),
