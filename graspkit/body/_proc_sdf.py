@@ -11,6 +11,7 @@ fingers at ~1.8 mm while the trunk is sampled at ~4.5 mm.
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -73,7 +74,7 @@ class Sweep(Prim):
         up = np.asarray(self.up, float)
         e1 = up - (up @ self.u) * self.u
         if np.linalg.norm(e1) < 1e-6:  # axis parallel to `up`: any perpendicular will do
-            e1 = np.cross(self.u, [1.0, 0.0, 0.0])
+            e1 = np.cross(self.u, np.eye(3)[np.argmin(np.abs(self.u))])   # the world axis least along u, never parallel
         self.e1 = _unit(e1)
         self.e2 = np.cross(self.u, self.e1)
         if self.caps is None:
@@ -207,8 +208,8 @@ class Loft(Prim):
         return lo, hi
 
     def mirrored(self) -> "Loft":
-        """Copy mirrored across the plane x = 0."""
-        return self
+        """Copy mirrored across the plane x = 0 (the trunk is symmetric: the same shape, a new object)."""
+        return copy.copy(self)
 
 
 def smin(a: np.ndarray, b: np.ndarray, k: float) -> np.ndarray:
