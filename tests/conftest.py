@@ -13,6 +13,19 @@ ROOT = Path(__file__).resolve().parents[1]
 PROCEDURAL_MODEL = ROOT / "data_stubs" / "body_models" / "smplx" / "SMPLX_NEUTRAL.npz"
 
 
+def npz_copy(src: Path, dst: Path, **replace) -> Path:
+    """The .npz `src` written to `dst` with arrays replaced (a value None drops the key); returns dst."""
+    with np.load(src, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    for k, v in replace.items():
+        if v is None:
+            arrays.pop(k)
+        else:
+            arrays[k] = v
+    np.savez(dst, **arrays)
+    return dst
+
+
 @pytest.fixture(scope="session")
 def random_model_dir(tmp_path_factory) -> Path:
     """A folder `<tmp>/smplx/SMPLX_NEUTRAL.npz` holding a random dense model (non-zero pose correctives)."""

@@ -11,21 +11,14 @@ from graspkit.data.grasp import SPLITS
 from graspkit.data.grasp_datasets import ApproachDataset, GNetDataset, check_arrays, grasp_files
 from graspkit.paths import DATA_STUBS
 
+from conftest import npz_copy
+
 STUBS = DATA_STUBS
 
 
 def _copy(dst: Path, name: str, kind: str = "grasp", **replace) -> Path:
     """Shipped file `name` copied into `dst` with arrays replaced (None drops a key)."""
-    src = STUBS / ("grasps" if kind == "grasp" else "approach") / name
-    with np.load(src, allow_pickle=False) as z:
-        a = {k: z[k] for k in z.files}
-    for k, v in replace.items():
-        if v is None:
-            a.pop(k)
-        else:
-            a[k] = v
-    np.savez(dst / name, **a)
-    return dst / name
+    return npz_copy(STUBS / ("grasps" if kind == "grasp" else "approach") / name, dst / name, **replace)
 
 
 def test_grasp_files_by_split_and_acceptance(tmp_path):

@@ -10,6 +10,8 @@ import torch
 from graspkit.data.grasp_datasets import ApproachDataset, GNetDataset, WholeGraspDataset
 from graspkit.train import load_checkpoint
 
+from conftest import npz_copy
+
 STUBS = Path(__file__).resolve().parents[1] / "data_stubs"
 CK = STUBS / "checkpoints"
 
@@ -18,16 +20,9 @@ def _copy_with(tmp_path: Path, kind: str, first: int = 0, **replace) -> Path:
     """A folder holding two shipped `kind` files from number `first` on, the first one's arrays updated with
     `replace` (a value None drops the key)."""
     src = sorted((STUBS / ("grasps" if kind == "grasp" else "approach")).glob(f"{kind}_*.npz"))[first:first + 2]
-    for p in src:
+    for p in src[1:]:
         shutil.copy(p, tmp_path / p.name)
-    with np.load(src[0], allow_pickle=False) as z:
-        arrays = {k: z[k] for k in z.files}
-    for k, v in replace.items():
-        if v is None:
-            arrays.pop(k)
-        else:
-            arrays[k] = v
-    np.savez(tmp_path / src[0].name, **arrays)
+    npz_copy(src[0], tmp_path / src[0].name, **replace)
     return tmp_path
 
 
