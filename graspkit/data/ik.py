@@ -93,7 +93,8 @@ def two_bone_ik(root: np.ndarray, target: np.ndarray, pole: np.ndarray, bone1: n
     """Global rotations of both bones and the middle-joint position for a chain root -> mid -> end.
 
     root, target, pole (..., 3): world root position, wanted end position, direction the middle joint
-    should bend towards; bone1, bone2 (3,) or (..., 3): rest vectors root->mid and mid->end; bend (3,):
+    should bend towards (not parallel to target - root: the bend plane is then undefined and R1, R2 are not
+    rotations); bone1, bone2 (3,) or (..., 3): rest vectors root->mid and mid->end; bend (3,):
     rest direction in which the middle joint moves when the chain flexes (knee: forward, elbow: backward).
     Returns R1, R2 (..., 3, 3) (rest -> posed, global) and mid (..., 3). A target beyond
     max_stretch * (l1 + l2) (or closer than |l1 - l2|) is reached as far as the chain allows. soft > 0: the last
