@@ -214,7 +214,8 @@ def test_a_seeded_function_refuses_seed_none(call):
 
 
 def test_slice_ending_at_the_goal_frame_drops_the_goal():
-    """A slice keeps the goal only when the goal frame lies inside it, the end excluded."""
+    """A slice keeps the goal only when the goal frame lies inside it, the end excluded; a negative start counts from
+    the end (the goal frame was shifted by the negative start and lost)."""
     m = load_motion(CLIP)
     g = m.goal_frame
     assert g is not None and g > 0
@@ -222,6 +223,9 @@ def test_slice_ending_at_the_goal_frame_drops_the_goal():
     assert before.num_frames == g and before.goal is None and before.goal_frame is None
     upto = m.slice(1, g + 1)
     assert upto.goal_frame == g - 1 and np.array_equal(upto.goal, m.goal)
+    tail = m.slice(g - m.num_frames)                # a negative start counts from the end, as numpy's slicing
+    assert tail.num_frames == m.num_frames - g and tail.goal_frame == 0 and np.array_equal(tail.goal, m.goal)
+    np.testing.assert_array_equal(tail.poses, m.poses[g:])
 
 
 def test_iter_vertices_chunks_overlap_and_match_the_whole_clip(bm):

@@ -81,9 +81,10 @@ class Motion:
         """Frames [start, stop) as a new Motion (goal_frame shifted; the goal dropped if it falls outside)."""
         sl = slice(start, stop)
         goal, gf, hand = self.goal, self.goal_frame, self.hand
-        n = len(range(*sl.indices(self.num_frames)))
+        first, last, _ = sl.indices(self.num_frames)       # a negative start counts from the end, as numpy's
+        n = len(range(first, last))
         if gf is not None:
-            gf = gf - start
+            gf = gf - first
             if not 0 <= gf < n:
                 goal, gf, hand = None, None, None
         return replace(self, poses=self.poses[sl], trans=self.trans[sl],
