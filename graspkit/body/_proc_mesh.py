@@ -125,8 +125,8 @@ def split_longest_edges(v: np.ndarray, f: np.ndarray, n_target: int, batch: int 
             new_v.append(0.5 * (v[a] + v[b]))
             for fi in faces:
                 tri = f[fi].tolist()
-                while {tri[0], tri[1]} != {a, b}:     # rotate so the split edge comes first
-                    tri = tri[1:] + tri[:1]
+                k = next(k for k in range(3) if {tri[k], tri[(k + 1) % 3]} == {a, b})   # the split edge first
+                tri = tri[k:] + tri[:k]
                 p, q, r = tri
                 f[fi] = (p, m, r)
                 new_faces.append((m, q, r))
