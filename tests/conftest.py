@@ -13,6 +13,20 @@ ROOT = Path(__file__).resolve().parents[1]
 PROCEDURAL_MODEL = ROOT / "data_stubs" / "body_models" / "smplx" / "SMPLX_NEUTRAL.npz"
 
 
+def jittered_plane(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """An n x n unit grid jittered by up to 0.2 in the plane z = 0 (vertices (n*n, 3)) and scipy's Delaunay
+    triangulation of it, counter-clockwise seen from +z (faces (F, 3))."""
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(seed)
+    g = np.stack(np.meshgrid(np.arange(float(n)), np.arange(float(n))), -1).reshape(-1, 2)
+    p = g + rng.uniform(-0.2, 0.2, g.shape)
+    tri = Delaunay(p).simplices
+    v = np.column_stack([p, np.zeros(len(p))])
+    n_z = np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]])[:, 2]
+    return v, np.where((n_z < 0)[:, None], tri[:, ::-1], tri)
+
+
 def npz_copy(src: Path, dst: Path, **replace) -> Path:
     """The .npz `src` written to `dst` with arrays replaced (a value None drops the key); returns dst."""
     with np.load(src, allow_pickle=False) as z:

@@ -9,7 +9,6 @@ import smplx
 import torch
 import trimesh
 from scipy.sparse import coo_matrix
-from scipy.spatial import Delaunay
 from scipy.spatial.transform import Rotation
 
 from graspkit.body import BodyModel
@@ -23,6 +22,8 @@ from graspkit.body.hand_poses import HAND_KINDS, hand_axes, hand_pca, sample_han
 from graspkit.body.procedural import build_procedural_smplx, part_of_vertex
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX, NUM_VERTICES, PARENTS, SMPLX_LANDMARK_VERTEX_IDS as LMK
 from graspkit.checks import seeded_rng
+
+from conftest import jittered_plane
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL_DIR = ROOT / "data_stubs" / "body_models"
@@ -819,13 +820,8 @@ def test_self_intersections_find_piercing_and_interlocking_triangles(flip_a, fli
 def test_delaunay_flips_restore_a_planar_delaunay_triangulation():
     """On a jittered planar grid, scipy's Delaunay triangulation with one interior edge flipped the wrong way comes back
     to the Delaunay triangulation after delaunay_flips, and an already Delaunay one is left as it is."""
-    rng = np.random.default_rng(4)
-    g = np.stack(np.meshgrid(np.arange(7.0), np.arange(7.0)), -1).reshape(-1, 2)
-    p = g + rng.uniform(-0.2, 0.2, g.shape)
-    tri = Delaunay(p).simplices
-    v = np.column_stack([p, np.zeros(len(p))])
-    n = np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]])[:, 2]
-    tri = np.where((n < 0)[:, None], tri[:, ::-1], tri)               # counter-clockwise, seen from +z
+    v, tri = jittered_plane(7, seed=4)                                   # counter-clockwise, seen from +z
+    p = v[:, :2]
     key = lambda f: {tuple(sorted(t)) for t in f.tolist()}  # noqa: E731
     assert key(delaunay_flips(v, tri)) == key(tri)
     centre = np.argmin(np.linalg.norm(p - p.mean(0), axis=1))           # an interior vertex

@@ -8,6 +8,8 @@ from scipy.spatial import Delaunay
 from graspkit.body import _proc_mesh as M
 from graspkit.body._proc_remesh import SurfaceProjector, delaunay_flips, relax
 
+from conftest import jittered_plane
+
 
 def _within(seconds, fn, *args):
     """fn(*args), failing the test instead of hanging if it runs longer than seconds (SIGALRM, main thread)."""
@@ -182,13 +184,7 @@ def test_delaunay_flips_on_a_stretched_sphere_keep_it_closed_convex_and_flip_onl
 def test_relax_on_a_plane_is_one_uniform_laplacian_step():
     """On a flat jittered grid projected onto its own plane, each relaxation step moves every vertex by step times the
     offset to the mean of its edge neighbours (uniform Laplacian, hand-computed), and stays in the plane."""
-    rng = np.random.default_rng(3)
-    g = np.stack(np.meshgrid(np.arange(6.0), np.arange(6.0)), -1).reshape(-1, 2)
-    p = g + rng.uniform(-0.2, 0.2, g.shape)
-    tri = Delaunay(p).simplices
-    v = np.column_stack([p, np.zeros(len(p))])
-    n = np.cross(v[tri[:, 1]] - v[tri[:, 0]], v[tri[:, 2]] - v[tri[:, 0]])[:, 2]
-    tri = np.where((n < 0)[:, None], tri[:, ::-1], tri)
+    v, tri = jittered_plane(6, seed=3)
     gp = np.stack(np.meshgrid(np.linspace(-20, 20, 9), np.linspace(-20, 20, 9)), -1).reshape(-1, 2)
     ref = trimesh.Trimesh(np.column_stack([gp, np.zeros(len(gp))]), Delaunay(gp).simplices, process=False)
     proj = SurfaceProjector(np.asarray(ref.vertices), np.asarray(ref.faces))

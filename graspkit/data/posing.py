@@ -70,7 +70,7 @@ class Controls:
     finger_dir: np.ndarray | None = None    # (T,3) wanted world direction of the right fingers when reaching
     palm_dir: np.ndarray | None = None      # (T,3) wanted world direction the right palm faces when reaching
     support_weight: np.ndarray | None = None  # (T,) left hand onto the left knee (with a reach; at 0 the soft reach
-    #                                             limit can still pull a near-straight arm in: 2 cm in a crouch)
+    #                                             limit can still pull a near-straight arm in a little)
     weight_shift: np.ndarray | None = None  # (T,) added to the weight on the left foot while both feet stand
     look_yaw: np.ndarray | None = None      # (T,) head turned left (+) from the path direction (rad)
     arm_flex: np.ndarray | None = None      # (T,) shoulders flexed forward, elbows bent (arms stay off the floor when the trunk bends)

@@ -15,7 +15,6 @@ latents of a WANDR rollout and keep its intention. graspkit's choices (the paper
 """
 from __future__ import annotations
 
-import numbers
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Sequence
 
@@ -68,9 +67,8 @@ def optimise_latents(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose
     if not 1 <= t_goal <= frames:
         raise ValueError(f"t_goal: expected 1 <= t_goal <= frames ({frames}), got {t_goal}")
     for frame, xy in waypoints:
-        ok = isinstance(frame, numbers.Integral) and not isinstance(frame, bool) and 0 <= frame <= frames
-        if not ok or len(xy) < 2:
-            raise ValueError(f"waypoints: expected (frame, an integer in [0, {frames}], (x, y)), got {(frame, xy)}")
+        if check_int(frame, "waypoints: a frame") > frames or len(xy) < 2:
+            raise ValueError(f"waypoints: expected (frame in [0, {frames}], (x, y)), got {(frame, xy)}")
     check_int(iters, "iters")
     model.eval()
     pp, p0, rest, g, idx = expand_starts(start, torch.as_tensor(goal, dtype=torch.float32).reshape(-1, 3), n)
