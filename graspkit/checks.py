@@ -44,6 +44,19 @@ def check_positive(value: Any, name: str, most: float = math.inf, unit: str = "m
     return float(value)
 
 
+def check_weight(value: Any, name: str) -> float:
+    """A finite real >= 0 (a loss weight)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) or value < 0:
+        raise ValueError(f"{name}: expected a finite number >= 0, got {value!r}")
+    return float(value)
+
+
+def check_finite(x: Any, name: str, what: str) -> None:
+    """x (a tensor or array) without NaN or Inf; `what` says what was expected."""
+    if not bool(torch.isfinite(torch.as_tensor(x)).all()):
+        raise ValueError(f"{name}: contains NaN or Inf (expected {what})")
+
+
 def check_bool(value: Any, name: str) -> bool:
     """A real bool (a string such as 'no' would read as True)."""
     if not isinstance(value, bool):

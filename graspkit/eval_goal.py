@@ -721,17 +721,18 @@ def tab1_results(folders: Sequence[str | Path], stubs: str | Path, n_grasps: int
 def gnet_goal(gnet: GNet, start: tuple[Tensor, Tensor], betas: Tensor, object_points: Tensor, obj_centre: Tensor,
               z: Tensor | None = None, generator: torch.Generator | None = None,
               refine_weights: GraspRefineWeights | None = None,
-              sdf: tuple | None = None) -> tuple[Tensor, Tensor, dict]:
+              sdf: tuple | None = None, model: str | Path | None = None) -> tuple[Tensor, Tensor, dict]:
     """GOAL's first stage for one start pose (rot6d (55,6), transl (3,)) and object (points (P,3), centre (3,)) in the
     world: GNet's frame from the start pelvis to the object, a sample, the refinement (Eq. 4-8), back to the world.
     With `sdf` = (SDFGrid in the mesh's frame, the object's world rotation (3,3), translation (3,)) the refinement
-    adds graspkit's E_pen (weights default goal_refine.PEN_WEIGHTS).
+    adds graspkit's E_pen (weights default goal_refine.PEN_WEIGHTS). `model`: the SMPL-X .npz the grasp is refined on
+    (default graspkit's body); the betas are that body's.
     Returns the goal grasp's rot6d (55,6), transl (3,) and {'hat', 'refined', 'R', 'o'} (GNet's frame)."""
     from graspkit.models.mnet import _invert, rest_root, transform_params, transform_points
     from graspkit.objects.bps import bps_basis
     from graspkit.optim.goal_refine import PEN_WEIGHTS, GraspRefiner, PosedSDF
 
-    bm, gv, _ = _body()
+    bm, gv, _ = _body(model)
     b = betas.reshape(1, -1).float()
     root = rest_root(bm, b)
     R, o = gnet_frame((root[0] + start[1].float())[None, :2], obj_centre.reshape(1, 3).float())

@@ -441,7 +441,7 @@ def heel_columns() -> list[int]:
 
 def skating(markers: np.ndarray, floor: np.ndarray, heels: list[int]) -> float:
     """SAGA's skating rate (§4.2: both heels within 5 cm of the ground and faster than 75 mm/s) of marker sequences
-    (..., T, M, 3) whose ground height is `floor` (...) (the lowest foot marker of the ground truth window)."""
+    (..., T, M, 3) whose ground height is `floor` (...) (Tab. 3 passes the ground truth window's lowest heel marker)."""
     from graspkit.metrics import foot_skating_saga
 
     h = markers[..., heels, :].copy()
@@ -453,7 +453,13 @@ def skating(markers: np.ndarray, floor: np.ndarray, heels: list[int]) -> float:
 def heel_jerkiness(markers: np.ndarray, heels: list[int], fps: float = 30.0) -> dict[str, float]:
     """Largest heel-marker speed (m/s) and the 99th percentile of its acceleration (m/s^2) over a marker sequence
     (T, M, 3): a foot that stands still and then jumps can pass the skating metric while moving unnaturally."""
-    h = np.asarray(markers, np.float64)[:, heels]
+    h = np.asarray(markers, np.float64)
+    if h.ndim != 3 or h.shape[0] < 3 or h.shape[-1] != 3:
+        raise ValueError(f"markers: expected (T, M, 3) with T >= 3 frames (an acceleration needs three), got "
+                         f"{h.shape}")
+    if not np.isfinite(h).all():
+        raise ValueError("markers: contains NaN or Inf")
+    h = h[:, heels]
     v = np.linalg.norm(np.diff(h, axis=0), axis=-1) * fps
     a = np.linalg.norm(np.diff(h, 2, axis=0), axis=-1) * fps ** 2
     return {"heel_speed_max": float(v.max()), "heel_acc_p99": float(np.percentile(a, 99))}

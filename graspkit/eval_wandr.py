@@ -44,6 +44,7 @@ from graspkit.checks import count_type, nonneg_float, positive_float, seeded_rng
 from graspkit.data.reaching import EVAL_DISTANCES, EVAL_FRAMES, EVAL_HEIGHTS, Start, evaluation_goals
 from graspkit.data.wandr_dataset import FOOT_JOINTS, shaped_rest
 from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS
+from graspkit.models.blocks import evaluating
 
 if TYPE_CHECKING:
     import argparse
@@ -83,10 +84,7 @@ def validation_score(model: WandrCVAE, starts: Sequence[I.StartPose], bm: BodyMo
     """SR / FS / DTG of one rollout per validation start and validation goal (8 s): the score that picks the epoch
     of `graspkit train wandr --select-val` (validation-split starts, goals off the grid; the test grid is not used)."""
     goals, cells = validation_goals()
-    was_training = model.training
-    model.eval()
-    s = summary(evaluate_grid(model, starts, bm, n=1, seed=seed, goals=goals, cells=cells))
-    model.train(was_training)
+    s = summary(evaluate_grid(model, starts, bm, n=1, seed=seed, goals=goals, cells=cells))   # keeps model's mode
     return {k: float(s[k]) for k in ("SR", "FS", "DTG")}
 
 
@@ -377,8 +375,7 @@ def evaluate_grid(model: WandrCVAE, starts: Sequence[I.StartPose], bm: BodyModel
     low = LowVertices(bm, torch.stack([s.betas for s in starts]), torch.stack([s.full_pose for s in starts]))
     meter = GridMeter(low, idx[:, 0], rest, g, t_goal)
     gen = torch.Generator().manual_seed(seed)
-    model.eval()
-    with torch.no_grad():
+    with torch.no_grad(), evaluating(model):
         rollout(model, pp, p0, rest, g, t_goal, frames if frames is not None else t_goal, generator=gen, keep=False,
                 on_frame=meter, floor=floor, lift=lift)
     return _result(meter, idx, cells)
@@ -398,7 +395,9 @@ def evaluate_motions(p: Tensor, rest: Tensor, goals: Tensor, betas: Tensor, bm: 
                      cells: np.ndarray | None = None, index: Tensor | None = None,
                      full_pose: Tensor | None = None, full_mesh: bool = False) -> GridResult:
     """Score given motions p (B, T, 135) with rest joints (B, 22, 3), goals (B, 3) and betas (B, 10) the same way;
-    full_pose (B, 55, 3) or (55, 3): the fingers' local pose (as `StartPose.full_pose`; None: zeros).
+    full_pose (B, 55, 3) or (55, 3): the fingers' local pose (as `StartPose.full_pose`; None: zeros). cells: the
+    (angle, height, distance) table indexed by goal, i.e. by `index`'s goal column (B, 3) = (start, goal, sample);
+    without `index` the motions are goals 0..B-1.
 
     FS follows the lowest of the feet and hands vertices, as the grid does: exact for standing, walking and reaching
     bodies, not for one that lies, sits or kneels; full_mesh=True measures FS on every vertex of the posed mesh
@@ -440,10 +439,8 @@ def evaluate_planner(starts: Sequence[I.StartPose], bm: BodyModel, t_goal: int =
             bs.append(s.betas)
             idx.append((s_i, g_i, 0))
             hands.append(torch.as_tensor(m.poses[0], dtype=torch.float32))   # the planner holds its fingers still
-    res = evaluate_motions(torch.stack(ps), torch.stack(rests), torch.stack(gs), torch.stack(bs), bm, t_goal,
-                           cells[[i[1] for i in idx]], torch.tensor(idx), torch.stack(hands))
-    res.cell = cells[res.goal_index]
-    return res
+    return evaluate_motions(torch.stack(ps), torch.stack(rests), torch.stack(gs), torch.stack(bs), bm, t_goal, cells,
+                            torch.tensor(idx), torch.stack(hands))
 
 
 @torch.no_grad()
@@ -460,8 +457,9 @@ def evaluate_clips(model: WandrCVAE, clips: ClipSet, seed: int = 0, after_s: flo
     p0 = torch.stack([clips.clip(c)[1] for c in range(len(clips))])
     tg = clips.goal_frame - 1                        # counted from frame 1, the rollout's frame 0
     extra = int(round(after_s * I.FPS))
-    out = rollout(model.eval(), p_prev, p0, clips.rest, clips.goal, tg, int(tg.max()) + extra,
-                  generator=torch.Generator().manual_seed(seed))
+    with evaluating(model):
+        out = rollout(model, p_prev, p0, clips.rest, clips.goal, tg, int(tg.max()) + extra,
+                      generator=torch.Generator().manual_seed(seed))
     d = (out.joints[:, :, I.WRIST] - clips.goal[:, None]).norm(dim=-1)             # (B, T)
     d = d.masked_fill(torch.arange(d.shape[1])[None] > (tg + extra)[:, None], float("inf"))
     dmin = d.min(1).values
@@ -504,8 +502,8 @@ def evaluate_goal_rows(model: WandrCVAE, starts: Sequence[I.StartPose], per_star
     frames = t_goals[-1]
     g, tg = map(torch.stack, zip(*[goal_schedule(row, t_goals, frames) for row in goals]))
     st = [s for s in starts for _ in range(per_start)]
-    with torch.no_grad():
-        out = rollout(model.eval(), torch.stack([s.p_prev for s in st]), torch.stack([s.p for s in st]),
+    with torch.no_grad(), evaluating(model):
+        out = rollout(model, torch.stack([s.p_prev for s in st]), torch.stack([s.p for s in st]),
                       torch.stack([s.rest for s in st]), g, tg, frames, generator=torch.Generator().manual_seed(seed),
                       lift=lift)
     d = (out.joints[:, :, I.WRIST] - g).norm(dim=-1)                   # (B, frames + 1): to the active goal
@@ -982,9 +980,11 @@ class GoalReacher:
 
     def __init__(self, model: WandrCVAE, start: I.StartPose, seed: int = 0, angle: float = 45.0, distance: float = 2.0,
                  height: float = 1.0, seconds: float = 4.0, floor: float | None = None) -> None:
-        """floor: `rollout`'s floor constraint (m; None: off, the paper's rollout)."""
+        """The sliders' start values (in their ranges, SLIDERS); floor: `rollout`'s floor constraint (m; None: off,
+        the paper's rollout)."""
         self.model, self.start, self.seed, self.floor = model, start, seed, floor
-        self.values = {"angle": angle, "distance": distance, "height": height, "seconds": seconds}
+        self.values = {k: self._checked(k, v) for k, v in
+                       (("angle", angle), ("distance", distance), ("height", height), ("seconds", seconds))}
         self.motion: Tensor | None = None
         self.joints: Tensor | None = None
 
@@ -1003,11 +1003,16 @@ class GoalReacher:
         """Set one slider (angle deg, distance m, height m, seconds), roll the model out, return the readout."""
         if name not in self.values:
             raise ValueError(f"name: expected one of {list(self.values)}, got {name!r}")
-        lo, hi, _ = self.SLIDERS[name]
-        if not lo <= float(value) <= hi:
-            raise ValueError(f"{name}: expected a value in [{lo}, {hi}], got {value}")
-        self.values[name] = float(value)
+        self.values[name] = self._checked(name, value)
         return self.run()
+
+    def _checked(self, name: str, value: Any) -> float:
+        """value as a float within the slider `name`'s range, else a ValueError naming it."""
+        lo, hi, _ = self.SLIDERS[name]
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
+                or not lo <= float(value) <= hi:                          # NaN fails the range test too
+            raise ValueError(f"{name}: expected a value in [{lo}, {hi}], got {value!r}")
+        return float(value)
 
     def run(self) -> dict[str, float]:
         """Generate the motion for the current goal (one sample, fixed seed) and measure it: closest wrist distance

@@ -101,7 +101,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
          torch.as_tensor(first.trans[0]).float())
     g = torch.Generator().manual_seed(seed)
     sdf = (object_collision_grid(given, obj_mesh), pose.rotation, pose.translation) if penetration else None
-    goal = gnet_goal(load_gnet(ck / "gnet.pt"), s, betas, pts, c, generator=g, sdf=sdf)[:2]
+    goal = gnet_goal(load_gnet(ck / "gnet.pt"), s, betas, pts, c, generator=g, sdf=sdf, model=model)[:2]
     r = rollout(load_mnet(ck / "mnet.pt"), body, s, goal, betas, pts, c, bps_basis(), max_frames=max_frames,
                 floor=0.0, stall=stall)      # graspkit's floor step and stall rule (not GOAL's): docs/goal.md
 

@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from graspkit.body import BodyModel
 
 CHECKPOINTS = DATA_STUBS / "checkpoints"
+MAX_START_DISTANCE = 3.0     # m: MotionFill fills 2 s, and 3 m in 2 s is already a brisk walk
 
 
 @dataclass
@@ -93,7 +94,7 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
     polish_steps: the polish steps of GraspPose-Opt and of GraspMotion-Opt (None: their configs' 100 each; a lesson
     with fewer steps throughout passes fewer).
     hold_start: GraspMotion-Opt fits frame 0 to the start body and holds it there (graspkit's; False: Alg. 2, where
-    S.2's planted feet drag frame 0 some 8-12 cm along the sample's first steps; docs/saga_motion.md, "The start
+    S.2's planted feet drag frame 0 some 8-22 cm along the sample's first steps; docs/saga_motion.md, "The start
     frame").
     """
     from graspkit.body import BodyModel
@@ -113,7 +114,7 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
     from graspkit.paths import default_model_path
 
     check_int(seed, "seed")
-    check_positive(start_distance, "start_distance")
+    check_positive(start_distance, "start_distance", most=MAX_START_DISTANCE)
     grasp_steps, motion_steps = check_steps(grasp_steps, "grasp_steps", 3), check_steps(motion_steps, "motion_steps", 2)
     if polish_steps is not None:
         polish_steps = check_steps(polish_steps, "polish_steps", 2)
@@ -121,6 +122,8 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
     check_type(object_pose, ObjectPose, "object_pose", optional=True)
     if start is not None and not isinstance(start, (Start, Motion)):
         raise ValueError(f"start: expected a Start, a one-frame Motion or None, got {type(start).__name__}")
+    if isinstance(start, Motion) and start.num_frames < 1:
+        raise ValueError("start: expected a Motion with at least one frame (its first is the start body), got none")
     if bm is not None and getattr(bm, "dtype", None) != torch.float32:
         raise ValueError(f"bm: expected a float32 BodyModel (the networks and optimisers run in float32), got "
                          f"{getattr(bm, 'dtype', type(bm).__name__)}")

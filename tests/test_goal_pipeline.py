@@ -154,3 +154,33 @@ def test_end_figures_are_of_the_last_frame_and_sliding_is_per_frame_pair(monkeyp
     slid, pairs = seen["sliding"]
     assert pairs == T - 1
     assert r.metrics["sliding"] == pytest.approx(slid / (T - 1), abs=1e-12)
+
+
+@pytest.mark.parametrize("bad", [dict(x=float("nan")), dict(y=float("inf")), dict(heading=float("nan")),
+                                 dict(x="1"), dict(heading=True)])
+def test_start_refuses_what_is_not_a_finite_number(bad):
+    """A NaN start used to fail deep in the planner ("cannot convert float NaN to integer"): Start names the field."""
+    from graspkit.data.reaching import Start
+
+    field = next(iter(bad))
+    with pytest.raises(ValueError, match=f"Start.{field}: expected a finite number"):
+        Start(**bad)
+
+
+def test_the_grasp_is_refined_on_the_body_given(tmp_path):
+    """`model` is the body of the whole pipeline: GNet's grasp is refined (E_f puts its lowest vertex on the floor,
+    Eq. 7) on a body 15 % larger than graspkit's, as the rollout is. Until 2026-12-06 the refinement ran on the
+    default body and the grasp stood 14 cm under the floor on the given one."""
+    from conftest import PROCEDURAL_MODEL, npz_copy
+
+    from graspkit.body import BodyModel
+
+    with np.load(PROCEDURAL_MODEL, allow_pickle=False) as z:
+        tall = npz_copy(PROCEDURAL_MODEL, tmp_path / "SMPLX_TALL.npz", v_template=z["v_template"] * 1.15)
+    mesh = trimesh.creation.box((0.08, 0.12, 0.18))
+    pose = ObjectPose.from_yaw(0.0, np.array([0.0, 0.0, 1.0]))
+    r = synthesize(mesh, object_pose=pose, seed=0, max_frames=2, penetration=False, model=str(tall))
+    bm = BodyModel.from_file(tall, flat_hand_mean=True)
+    low = float(r.grasp.vertices(bm)[0, :, 2].min())
+    assert low == pytest.approx(0.0, abs=0.01)
+    assert r.metrics["grasp_contact"] == 1.0

@@ -93,6 +93,29 @@ def test_refiner_names_a_missing_prediction(setup):
             torch.zeros(1, 10), torch.zeros(5, 3))
 
 
+def test_refiner_names_nan_predictions_mismatched_betas_and_bad_steps(setup):
+    """All-NaN offsets were taken (E_d then added nothing), steps -5 returned GNet's prediction unrefined, betas of
+    another batch failed in an expand: each is named."""
+    from graspkit.optim.goal_refine import GraspRefineWeights
+
+    _, _, ref = setup
+    hat = {"rot6d": torch.zeros(2, 55, 6), "transl": torch.zeros(2, 3), "head_dir": torch.zeros(2, 3),
+           "hand_offsets": torch.zeros(2, 99, 3)}
+    pts = torch.zeros(5, 3)
+    with pytest.raises(ValueError, match="hat\\['hand_offsets'\\]: expected 2 finite rows"):
+        ref({**hat, "hand_offsets": torch.full((2, 99, 3), float("nan"))}, torch.zeros(2, 10), pts)
+    with pytest.raises(ValueError, match="hat\\['transl'\\]: expected 2 finite rows"):
+        ref({**hat, "transl": torch.zeros(3, 3)}, torch.zeros(2, 10), pts)
+    with pytest.raises(ValueError, match="betas: expected finite shape coefficients \\(1 or 2"):
+        ref(hat, torch.zeros(3, 10), pts)
+    with pytest.raises(ValueError, match="object_points: expected finite points"):
+        ref(hat, torch.zeros(2, 10), torch.full((5, 3), float("nan")))
+    with pytest.raises(ValueError, match="weights.steps: expected an integer >= 0"):
+        ref(hat, torch.zeros(2, 10), pts, GraspRefineWeights(steps=-5))
+    with pytest.raises(ValueError, match="weights.lr: expected a learning rate > 0"):
+        ref(hat, torch.zeros(2, 10), pts, GraspRefineWeights(lr=0.0))
+
+
 def test_hand_step_targets_is_eq12_without_overshoot():
     now = torch.zeros(2, 1, 3)
     goal = torch.tensor([[[0.1, 0.0, 0.0]], [[0.0, 0.0, 0.02]]])

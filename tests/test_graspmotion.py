@@ -386,7 +386,8 @@ def test_marker_contact_term_is_eq6s_marker_side_on_the_last_five_frames(bm):
     with torch.no_grad():
         full = bm.forward_rotmats(opt.rotmats(p), betas=torch.zeros(F, 10), transl=p["transl"]).vertices.double()
     pts = full[-1, 5000] + 0.05 * torch.nn.functional.normalize(torch.randn(500, 3, generator=g, dtype=torch.float64))
-    obj = GraspObject(pts.float()[None], torch.zeros(1, 500, 3), 0.0)
+    up = torch.tensor([0.0, 0.0, 1.0]).expand(1, 500, 3)            # the contact term reads no normals
+    obj = GraspObject(pts.float()[None], up, 0.0)
     c_m = torch.rand(1, 143, generator=g)
     args = (torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, None, obj, None)
     e = opt.energy(p, *args, None, c_m)["contact"].item()
@@ -446,7 +447,8 @@ def test_object_contact_term_is_eq6s_object_side_on_the_last_five_frames_and_the
     g = torch.Generator().manual_seed(0)
     centre = full[-1, hand_ids].mean(0)
     pts = centre + 0.06 * torch.nn.functional.normalize(torch.randn(500, 3, generator=g, dtype=torch.float64))
-    obj = GraspObject(pts.float()[None], torch.zeros(1, 500, 3), 0.0)
+    up = torch.tensor([0.0, 0.0, 1.0]).expand(1, 500, 3)            # the contact term reads no normals
+    obj = GraspObject(pts.float()[None], up, 0.0)
     c_o = torch.rand(1, 500, generator=g)
     e = opt.energy(p, torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, None, obj, c_o)["contact"].item()
     top = np.argsort(-c_o[0].numpy())[:256]
@@ -634,7 +636,7 @@ def test_palm_term_weighs_the_near_frames_by_their_place_in_the_sequence(bm):
     zs = torch.arange(float(lo[2]) - 0.02, float(hi[2]) + 0.02, 0.003)
     grid = torch.stack(torch.meshgrid(xs, zs, indexing="ij"), -1).reshape(-1, 2)
     pts = torch.stack([grid[:, 0], torch.full((len(grid),), float(hi[1]) + 0.003), grid[:, 1]], -1)[None]
-    obj = GraspObject(pts, torch.zeros_like(pts), 0.0)
+    obj = GraspObject(pts, torch.tensor([0.0, 1.0, 0.0]).expand_as(pts), 0.0)      # E_g reads no normals
     with torch.no_grad():
         e = opt.energy(p, torch.zeros(1, 3, 79, 3), torch.zeros(3, 10), 2, None, obj, None)["palm"].item()
         one = opt.palm_term(hands[1:2][None], pts, torch.tensor([0]), total=3).item()     # alpha = 1
@@ -764,3 +766,50 @@ def test_result_parameters_follow_the_smplx_layout(bm, pair):
                        right_hand_pose=pr["right_hand_pose"][b], transl=pr["transl"][b])
         torch.testing.assert_close(saga_sparse_markers(bm).select(out.vertices), res.markers[b], atol=1e-4, rtol=0)
     torch.testing.assert_close(pr["body_pose"], pr["poses"][..., 3:66])
+
+
+def test_contact_frames_0_means_no_object_contact_and_bad_settings_are_named(bm):
+    """contact_frames = k puts E^o_cont on the last k frames: 0 is none (Python's x[-0:] had put it on every frame),
+    k past the sequence is all of it; GraspMotionConfig / GraspMotionWeights name a bad setting before any work."""
+    F = 6
+    energies = {}
+    for k in (0, 1, F, F + 3):
+        opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("contact",), contact_frames=k))
+        p = opt.init_params(torch.zeros(F, 79, 3), torch.zeros(F, 10))
+        p = {n: torch.zeros_like(v) if n != "orient6d" else v for n, v in p.items()}
+        p["transl"] = torch.arange(F, dtype=torch.float32)[:, None] * torch.tensor([0.05, 0.0, 0.0])
+        pts = 0.3 + 0.05 * torch.nn.functional.normalize(torch.randn(200, 3, generator=torch.Generator().manual_seed(0)))
+        obj = GraspObject(pts[None], torch.nn.functional.normalize(pts - 0.3)[None], 0.0)
+        e = opt.energy(p, torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, None, obj, torch.ones(1, 200))
+        energies[k] = float(e.get("contact", torch.zeros(1)).sum())
+    assert energies[0] == 0.0 and 0 < energies[1] < energies[F]
+    assert energies[F + 3] == pytest.approx(energies[F], rel=1e-6)
+    for kw, name in ((dict(contact_frames=-1), "contact_frames"), (dict(point_stride=0), "point_stride"),
+                     (dict(n_pca=100), "n_pca"), (dict(n_pca=0), "n_pca"), (dict(one_foot_down="no"), "one_foot_down"),
+                     (dict(terms=("colli", "contcat")), "terms"), (dict(terms="colli"), "terms")):
+        with pytest.raises(ValueError, match=name):
+            GraspMotionConfig(**kw)
+    for kw, name in ((dict(skate=-300.0), "skate"), (dict(skate_sigma=float("nan")), "skate_sigma"),
+                     (dict(palm_sigma=0.0), "palm_sigma"), (dict(colli=True), "colli")):
+        with pytest.raises(ValueError, match=name):
+            GraspMotionWeights(**kw)
+    GraspMotionWeights(sigma_b=0.0, sigma_o=0.0)                  # the hinge floors may be 0 (GraspPose-Opt's are)
+
+
+def test_fit_names_contact_maps_outside_0_1_and_too_many_betas(bm):
+    """NaN contact maps used to give NaN bodies without a word, a negative C_O pushed the hand away, and 300 betas
+    failed inside the body model."""
+    opt = GraspMotionOpt(bm, load_pose_prior())
+    m, b = torch.zeros(1, 5, 79, 3), torch.zeros(1, 10)
+    pts = torch.nn.functional.normalize(torch.randn(50, 3, generator=torch.Generator().manual_seed(0)))
+    obj = GraspObject(0.05 * pts[None], pts[None], 1.0)
+    with pytest.raises(ValueError, match="object_contact: expected contact probabilities in"):
+        opt.fit(m, b, obj=obj, object_contact=torch.full((1, 50), float("nan")))
+    with pytest.raises(ValueError, match="object_contact: expected contact probabilities in"):
+        opt.fit(m, b, obj=obj, object_contact=-torch.ones(1, 50))
+    with pytest.raises(ValueError, match="marker_contact: expected contact probabilities in"):
+        opt.fit(m, b, obj=obj, marker_contact=torch.full((1, 143), float("nan")))
+    with pytest.raises(ValueError, match="foot_contact: expected contact probabilities in"):
+        opt.fit(m, b, foot_contact=torch.full((1, 5, 4), 7.0))
+    with pytest.raises(ValueError, match="betas: expected at most the body model's 10"):
+        opt.fit(m, torch.zeros(1, 300))

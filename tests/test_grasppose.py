@@ -281,8 +281,8 @@ def test_rotated_object_grid_matches_the_exact_signed_distance_of_the_turned_mes
     turned = mesh.copy().apply_transform(T)
     g = torch.Generator().manual_seed(0)
     q = (torch.rand(2, 300, 3, generator=g) - 0.5) * torch.tensor([0.16, 0.16, 0.14])
-    obj = GraspObject(torch.zeros(2, 10, 3), torch.zeros(2, 10, 3), torch.tensor([0.8, 0.9]),
-                      sdf=cached_sdf_grid("mug"), rotation=R.expand(2, 3, 3))
+    obj = GraspObject(torch.zeros(2, 10, 3), torch.tensor([0.0, 0.0, 1.0]).expand(2, 10, 3),
+                      torch.tensor([0.8, 0.9]), sdf=cached_sdf_grid("mug"), rotation=R.expand(2, 3, 3))
     want = signed_distance(q.double(), turned).float()
     got = obj.signed_distance(q)
     far = want.abs() > 0.004                      # beyond a cell of the 64-node grid the sign is exact
@@ -775,7 +775,8 @@ def test_grid_signed_distance_takes_each_samples_own_origin():
     g = torch.Generator().manual_seed(0)
     d = torch.nn.functional.normalize(torch.randn(2, 50, 3, generator=g), dim=-1)
     x = origin[:, None] + d * (0.02 + 0.05 * torch.rand(2, 50, 1, generator=g))
-    obj = GraspObject(torch.zeros(2, 10, 3), torch.zeros(2, 10, 3), torch.tensor([0.8, 0.9]), sdf=grid, origin=origin)
+    obj = GraspObject(torch.zeros(2, 10, 3), torch.tensor([0.0, 0.0, 1.0]).expand(2, 10, 3),
+                      torch.tensor([0.8, 0.9]), sdf=grid, origin=origin)
     want = (x - origin[:, None]).norm(dim=-1) - 0.05
     assert (obj.signed_distance(x) - want).abs().max() < 3e-3
 

@@ -121,6 +121,22 @@ def test_wholegrasp_and_grasppose_refuse_millimetres(wholegrasp):
         GraspObject(pts, nrm, 850.0)
 
 
+def test_wholegrasp_and_grasppose_refuse_normals_that_are_not_unit(wholegrasp):
+    """SAGA's object input is xyz + unit surface normal (App. A.2): normals scaled by 2 moved the sampled markers by
+    4 mm and zero normals silently switched off E^B_colli's point-cloud sign (an independent check); both refused."""
+    from graspkit.optim.grasppose import GraspObject
+    pts, nrm = _cloud(300)
+    for bad in (nrm * 2, nrm * 0, nrm * 0.95):
+        with pytest.raises(ValueError, match="object_normals: expected unit normals"):
+            wholegrasp.sample(pts, bad)
+        with pytest.raises(ValueError, match="normals: expected unit normals"):
+            GraspObject(pts, bad, 0.8)
+    with pytest.raises(ValueError, match="normals: contains NaN"):
+        GraspObject(pts, nrm.clone().fill_(float("nan")), 0.8)
+    assert wholegrasp.sample(pts, nrm * (1 + 5e-3)).markers.shape[0] == 1     # float16 rounding is fine
+    GraspObject(pts, nrm.half().float(), 0.8)
+
+
 def test_wholegrasp_sample_requires_an_int_n(wholegrasp):
     pts, nrm = _cloud(300)
     with pytest.raises(TypeError, match="n: expected an int"):

@@ -495,3 +495,32 @@ def test_windows_take_the_goal_hand_at_the_goal_frame():
     with torch.no_grad():
         want = body(pose_rotmats(clip.rot6d[gf:gf + 1]), betas[None], transl[gf:gf + 1])[0][0, :99]
     torch.testing.assert_close(w.goal_hand[0], want, atol=1e-5, rtol=0)
+
+
+
+def test_rollout_names_a_bad_argument(setup):
+    """rollout checked only `stall`: max_frames 0 returned one frame, reach_tol -1 could never be met, a NaN start
+    returned NaN frames, and wrong shapes failed in a matrix product. Each is named now, before any frame."""
+    args = list(_bent_elbow_args(setup[2], 0.5))
+    r6, t = args[2]
+    for kw, name in ((dict(max_frames=0), "max_frames"), (dict(max_frames=2.5), "max_frames"),
+                     (dict(reach_tol=-1.0), "reach_tol"), (dict(reach_tol=0.0), "reach_tol"),
+                     (dict(min_speed=-0.1), "min_speed"), (dict(floor=float("nan")), "floor")):
+        with pytest.raises(ValueError, match=f"{name}: expected"):
+            rollout(*args, **kw)
+    bad = list(args)
+    bad[2] = (r6, torch.tensor([float("nan"), 0.0, 0.0]))
+    with pytest.raises(ValueError, match="start: contains NaN"):
+        rollout(*bad, max_frames=5)
+    bad[2] = (r6[:54], t)
+    with pytest.raises(ValueError, match=r"start: expected \(rot6d \(55, 6\)"):
+        rollout(*bad, max_frames=5)
+    bad = list(args)
+    bad[3] = (args[3][0], torch.zeros(2))
+    with pytest.raises(ValueError, match="goal: expected"):
+        rollout(*bad, max_frames=5)
+    bad = list(args)
+    bad[4] = torch.zeros(16)
+    with pytest.raises(ValueError, match="betas: expected 10"):
+        rollout(*bad, max_frames=5)
+    assert len(rollout(*args, max_frames=1).rot6d) == 1

@@ -74,6 +74,21 @@ def test_sizes_shapes_and_the_linear_blend_at_initialisation():
     torch.testing.assert_close(r.route(w["traj_interp"]), w["traj_interp"])     # starts at Gamma_bar
 
 
+def test_predict_refuses_non_finite_inputs_as_the_vae_does():
+    """A NaN contact made CNN-AE return NaN markers without a word; MotionFillVAE.sample refuses it, so do they."""
+    w = _windows()
+    for m in (CNNAE(), PoseNet()):
+        m.set_stats(_stats(w)).eval()
+        c = w["contacts"][0].clone()
+        c[3, 1] = float("nan")
+        with pytest.raises(ValueError, match="contacts: expected finite real values"):
+            m.predict(w["traj_interp"][0], w["local"][0], c, traj=w["traj"][0])
+        loc = w["local"][0].clone()
+        loc[0, 0, 0] = float("inf")
+        with pytest.raises(ValueError, match="local: expected finite real values"):
+            m.predict(w["traj_interp"][0], loc, w["contacts"][0], traj=w["traj"][0])
+
+
 def test_deterministic_outputs_keep_the_known_frames():
     w = _windows(seed=1)
     route = _perturbed(RouteNet(), 2)

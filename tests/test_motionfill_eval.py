@@ -657,3 +657,17 @@ def test_approach_scene_mesh_pose_holds_for_a_tilted_object(tmp_path):
     s = approach_scene(tmp_path / "approach_tilted.npz", BodyModel.from_file(default_model_path()))
     cat = np.asarray(make_object(s["name"]).vertices, np.float64)
     assert np.abs(cat @ s["mesh_rotation"].T + s["mesh_origin"] - s["mesh"].vertices).max() < 1e-4
+
+
+def test_heel_jerkiness_names_short_or_non_finite_markers():
+    """One or two frames have no acceleration (an IndexError / ValueError from numpy before), NaN gave NaN figures."""
+    from graspkit.eval_motionfill import heel_jerkiness
+
+    for T in (1, 2):
+        with pytest.raises(ValueError, match="markers: expected .*T >= 3"):
+            heel_jerkiness(np.zeros((T, 4, 3)), [0, 1])
+    bad = np.zeros((5, 4, 3))
+    bad[2, 1, 0] = np.nan
+    with pytest.raises(ValueError, match="markers: contains NaN"):
+        heel_jerkiness(bad, [0, 1])
+    assert heel_jerkiness(np.zeros((3, 4, 3)), [0, 1]) == {"heel_speed_max": 0.0, "heel_acc_p99": 0.0}

@@ -142,3 +142,10 @@ def test_a_windows_file_without_contacts_is_refused(tmp_path, windows):
     np.savez(tmp_path / "nocontacts.npz", **{k: v for k, v in windows.items() if k != "contacts"})
     with pytest.raises(ValueError, match=r"nocontacts\.npz.*contacts"):
         mf.load_windows(tmp_path / "nocontacts.npz")
+
+
+def test_a_stride_that_is_not_a_whole_number_of_frames_is_named(bm, clip):
+    """stride 0 used to mean 62 (read as None), a negative one blamed the clips, True meant 1."""
+    for bad in (0, -5, 2.5, True):
+        with pytest.raises(ValueError, match="stride: expected an integer >= 1"):
+            mf.make_windows([clip], bm, stride=bad, progress=False)

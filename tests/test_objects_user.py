@@ -197,6 +197,21 @@ def _one_part_inverted() -> trimesh.Trimesh:
     return trimesh.util.concatenate([big, small])
 
 
+def _touching_boxes() -> trimesh.Trimesh:
+    """Two 5 cm cubes side by side, each closed, sharing the face x = 0 (a body and its lid glued face to face): the
+    10 x 5 x 5 cm box, with an inner wall along which the distance to the surface is 0 at 2.5 cm depth."""
+    a, b = trimesh.creation.box((0.05, 0.05, 0.05)), trimesh.creation.box((0.05, 0.05, 0.05))
+    a.apply_translation((-0.025, 0, 0))
+    b.apply_translation((0.025, 0, 0))
+    return trimesh.util.concatenate([a, b])
+
+
+def _repeated_corner() -> trimesh.Trimesh:
+    """A closed box plus one face that repeats a corner (zero area): it also fails trimesh's watertight test."""
+    m = _box()
+    return trimesh.Trimesh(m.vertices, np.vstack([m.faces, [[0, 0, 1]]]), process=False)
+
+
 def _nan_vertex() -> trimesh.Trimesh:
     m = _box()
     v = np.array(m.vertices)
@@ -211,21 +226,35 @@ def _unmerged() -> trimesh.Trimesh:
 
 @pytest.mark.parametrize("make, message", [
     (_box_with_sliver, "1 faces have zero area"), (_overlapping_bars, "overlap"), (_one_part_inverted, "inside out"),
-    (_nan_vertex, "NaN"), (_unmerged, "merge_vertices"),
+    (_nan_vertex, "NaN"), (_unmerged, "merge_vertices"), (_touching_boxes, "touch along shared faces"),
+    (_repeated_corner, "1 faces have zero area"),
 ])
 def test_meshes_that_pass_trimesh_checks_but_give_wrong_signs_are_refused(make, message):
     mesh = make()
-    if make in (_box_with_sliver, _overlapping_bars, _one_part_inverted):     # what the old checks let through
+    if make in (_box_with_sliver, _overlapping_bars, _one_part_inverted, _touching_boxes):   # what trimesh passes
         assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
     with pytest.raises(ValueError, match=f"obj: .*{message}"):
         as_object(mesh)
 
 
-def test_a_zero_area_face_is_refused_by_the_signed_distance_too():
+@pytest.mark.parametrize("make", [_box_with_sliver, _repeated_corner])
+def test_a_zero_area_face_is_refused_by_the_signed_distance_too(make):
     from graspkit.objects.sdf import signed_distance
 
     with pytest.raises(ValueError, match="mesh: 1 faces have zero area"):
-        signed_distance(np.zeros((1, 3)), _box_with_sliver())
+        signed_distance(np.zeros((1, 3)), make())
+
+
+def test_touching_parts_would_give_signs_against_trimeshs_box():
+    """Why the touching boxes are refused: the winding number is 1 inside (volumes are right), but the inner wall
+    is surface to a distance query, so points deep inside read as on or outside it (trimesh's box is the truth)."""
+    from graspkit.objects.sdf import signed_distance
+
+    box = trimesh.creation.box((0.1, 0.05, 0.05))
+    p = np.array([[0.0, 0, 0], [-0.001, 0, 0], [0.001, 0.01, 0]])
+    truth = -trimesh.proximity.signed_distance(box, p)
+    assert (truth < -0.015).all()
+    assert (signed_distance(p, _touching_boxes()).numpy() > -0.002).all()
 
 
 def test_a_cavity_is_one_solid_and_its_signs_match_trimesh():
@@ -312,3 +341,28 @@ def test_user_object_names_sizes_and_upper_case_glb(tmp_path):
     name, m = as_object(upper)
     assert name == "MUG"
     np.testing.assert_allclose(m.extents, mug.extents, atol=1e-6)
+
+
+@pytest.mark.parametrize("offset", [3e4, 1e5, 3e5])
+def test_a_mesh_far_from_the_origin_is_taken_and_centred(offset):
+    """A closed, outward box still in map coordinates (tens of km out) was refused as inside out: the volume's
+    triple products about the world origin cancelled to noise. It is taken, centred, with trimesh's volume."""
+    box = trimesh.creation.box((0.10, 0.06, 0.04))
+    far = box.copy()
+    far.apply_translation((offset, -2 * offset, offset / 2))
+    _, m = as_object(far)
+    np.testing.assert_allclose(m.bounds, box.bounds, atol=1e-9 * offset)
+    assert m.volume == pytest.approx(box.volume, rel=1e-6)
+    from graspkit.objects.sdf import signed_distance
+    assert float(signed_distance(np.array(far.centroid)[None], far)[0]) == pytest.approx(-0.02, abs=1e-6)
+
+
+@pytest.mark.parametrize("side", [0.004, 0.002])
+def test_a_small_part_sunk_into_another_is_seen(side):
+    """A knob of 2-4 mm sunk half into a 12 cm ball is under 0.5 % of the surface, so area-uniform samples missed it;
+    each connected part now gets samples of its own. The same knob set apart from the ball is fine."""
+    ball = trimesh.creation.icosphere(4, 0.06)
+    knob = trimesh.creation.box((side,) * 3)
+    with pytest.raises(ValueError, match="overlap"):
+        as_object(trimesh.util.concatenate([ball, knob.copy().apply_translation((0.06, 0, 0))]))
+    as_object(trimesh.util.concatenate([ball, knob.copy().apply_translation((0.07, 0, 0))]))

@@ -7,6 +7,7 @@ import trimesh
 
 from graspkit.body.markers import saga_sparse_markers
 from graspkit.data import Start
+from graspkit.data.motion import Motion
 from graspkit.data.motion import Motion, heading_of
 from graspkit.objects.placement import ObjectPose
 from graspkit.optim import graspmotion
@@ -66,6 +67,10 @@ def test_the_same_seed_gives_the_same_motion_and_polish_steps_are_checked(bm, mo
         synthesize("camera", bm, polish_steps=(10, -1))
     with pytest.raises(ValueError, match="name"):
         synthesize("teapot", bm)
+    with pytest.raises(ValueError, match="start_distance: .*at most 3"):      # 1e6 m ran, 31 km under the floor
+        synthesize("camera", bm, start_distance=1e6)
+    with pytest.raises(ValueError, match="start: expected a Motion with at least one frame"):
+        synthesize("camera", bm, start=Motion(np.zeros((0, 55, 3)), np.zeros((0, 3)), np.zeros(10), 30.0))
 
 
 def test_saga_command_names_a_bad_object(capsys):

@@ -787,6 +787,7 @@ def test_evaluate_grid_scores_the_motions_it_generates(bm):
     goals, cells = gg[pick], cc[pick]
     model = _tiny(dropout=0.5).train()
     res = E.evaluate_grid(model, starts, bm, n=2, seed=3, goals=goals, cells=cells, t_goal=6, frames=9)
+    assert model.training                            # the caller's mode comes back
     assert res.start.tolist() == [0] * 6 + [1] * 6
     assert res.goal_index.tolist() == [0, 0, 1, 1, 2, 2] * 2 and res.sample.tolist() == [0, 1] * 6
     assert np.array_equal(res.cell, cells[res.goal_index])
@@ -875,3 +876,36 @@ def test_evaluate_clips_counts_a_late_arrival_within_after_s_and_reports_centime
     assert dmin.max() > 0.02 and abs(np.mean(dmin) - np.median(dmin)) > 0.005
     assert short["DTG"] == pytest.approx(100 * dmin.mean(), abs=0.01)
     assert short["error_at_goal"] == pytest.approx(100 * err.mean(), abs=0.01) and err.mean() > 0.02
+
+
+def test_vae_opt_cells_are_their_goals_whatever_the_chunk_and_samples(bm, monkeypatch):
+    """evaluate_vae_opt's rows carry their own goal's grid cell (Fig. 5 groups by it) and the goals per optimisation
+    batch (`chunk`) change nothing: chunk 50 crashed on its second chunk, and n = 2 gave 248 of 250 rows another
+    goal's cell. Scored against evaluate_motions on the whole batch at once (iters = 0: the decoded random draws)."""
+    from graspkit.optim.latent import evaluate_vae_opt
+
+    goals, cells = E.grid_goals()
+    sub = torch.arange(0, 125, 11)                            # 12 goals of the grid, to keep it short
+    monkeypatch.setattr(E, "grid_goals", lambda: (goals[sub], cells[sub.numpy()]))
+    start = held_out_starts([load_motion(DATA_STUBS / "motion" / "reach" / "reach_000001.npz")], ["r1"], bm, n=1)
+    model = _tiny()
+    whole = evaluate_vae_opt(model, start, bm, n_starts=1, iters=0)
+    for chunk, n in ((5, 1), (12, 2)):
+        res = evaluate_vae_opt(model, start, bm, n_starts=1, iters=0, chunk=chunk, n=n)
+        assert len(res.dtg) == 12 * n
+        np.testing.assert_array_equal(res.cell, cells[sub.numpy()][res.goal_index])
+    res = evaluate_vae_opt(model, start, bm, n_starts=1, iters=0, chunk=5)
+    np.testing.assert_array_equal(res.goal_index, whole.goal_index)
+    assert np.isfinite(res.dtg).all() and (res.dtg > 0).all()
+
+
+def test_goal_reacher_refuses_start_values_outside_its_sliders():
+    """The constructor's values obey the sliders' ranges, as update() does: seconds 0 used to run a 1-frame goal, a
+    negative distance put the goal behind, NaN failed as 'cannot convert float NaN to integer'."""
+    for kw in (dict(seconds=0.0), dict(seconds=-3.0), dict(seconds=float("nan")), dict(distance=-2.0),
+               dict(height=5.0), dict(angle=float("nan")), dict(seconds=True)):
+        name = next(iter(kw))
+        with pytest.raises(ValueError, match=f"{name}: expected a value in"):
+            E.GoalReacher(None, None, **kw)
+    r = E.GoalReacher(None, None, angle=360.0, distance=0.3, height=0.0, seconds=8.0)      # the ends are fine
+    assert r.t_goal == 240

@@ -82,10 +82,10 @@ def test_optimise_latents_leaves_the_model_untouched_and_decodes_without_dropout
     assert all(torch.equal(before[k], v) for k, v in model.state_dict().items())
     assert [q.requires_grad for q in model.parameters()] == [q is not frozen for q in model.parameters()]
     assert all(q.grad is None for q in model.parameters())
-    model.train()
+    assert model.training                        # the caller's mode comes back (dropout off only inside)
     b = optimise_latents(model, start, goal, t_goal=6, z0=a.z, iters=0)
-    model.train()
     c = optimise_latents(model, start, goal, t_goal=6, z0=a.z, iters=0)
+    assert model.training
     torch.testing.assert_close(b.motion.joints, c.motion.joints)
     torch.testing.assert_close(b.motion.joints, a.motion.joints)
 
@@ -104,6 +104,18 @@ def test_optimise_latents_refuses_frames_and_waypoints_outside_the_motion(start)
         optimise_latents(model, start, goal, t_goal=4, waypoints=[(2, (0.5,))], iters=0)
     with pytest.raises(ValueError, match="iters"):
         optimise_latents(model, start, goal, t_goal=4, iters=-1)
+    for bad in ([(2, (float("nan"), 0.0))], [(2, (0.0, float("inf")))]):       # refused before any rollout, iters=0 too
+        with pytest.raises(ValueError, match="waypoints: contains NaN or Inf"):
+            optimise_latents(model, start, goal, t_goal=4, waypoints=bad, iters=0)
+    for bad in ([(5, 0.5)], [(2,)], [(2, "ab")]):
+        with pytest.raises(ValueError, match="waypoints: expected"):
+            optimise_latents(model, start, goal, t_goal=4, waypoints=bad, iters=0)
+    for name in ("w_norm", "w_goal", "w_way"):
+        for bad in (float("nan"), -1.0, True):
+            with pytest.raises(ValueError, match=f"{name}: expected a finite number >= 0"):
+                optimise_latents(model, start, goal, t_goal=4, iters=0, **{name: bad})
+    with pytest.raises(ValueError, match="z0: contains NaN"):
+        optimise_latents(model, start, goal, t_goal=4, iters=0, z0=torch.full((1, 4, 4), float("nan")))
     res = optimise_latents(model, start, goal, t_goal=4, waypoints=[(4, (0.5, 0.5))], iters=6, lr=0.3, w_goal=0.0,
                            w_norm=0.0, generator=torch.Generator().manual_seed(0))
     P = res.motion.joints[0, 4, I.PELVIS, :2]

@@ -351,7 +351,7 @@ def test_rollout_errors_name_the_argument(stats, starts):
         M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], torch.zeros(3), 5, 5, z=torch.zeros(1, 4, 4))
     with pytest.raises(ValueError, match="goal: contains NaN"):     # below generate's checks, NaN poses otherwise
         M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], torch.tensor([[float("nan"), 0, 1]]), 5, 5)
-    with pytest.raises(ValueError, match="t_goal: expected goal frames >= 1"):
+    with pytest.raises(ValueError, match="t_goal: expected whole goal frames >= 1"):
         M.rollout(model, s.p_prev[None], s.p[None], s.rest[None], torch.zeros(3), 0, 5)
     goal = torch.tensor([[1.0, 0.5, 1.0]])
     for bad_goal in (torch.tensor([[1.0, 0.5]]), torch.tensor([[float("nan"), 0.5, 1.0]]), torch.zeros(0, 3)):
@@ -564,3 +564,60 @@ def test_train_wandr_strides_each_kind_by_its_own_stride(bm, monkeypatch):
     want = full[(kind != 0) | (full[:, 1] % 3 == 0)]
     assert torch.equal(got["items"], want)
     assert (clips.kind[want[:, 0]] == 1).sum() == (kind == 1).sum()
+
+
+def test_goal_schedule_reads_an_iterator_of_frames_as_the_list():
+    """The frames may come as any iterable: an iterator gives the list's schedule (it was read twice, and the second
+    pass found it empty, leaving the tensors uninitialised); fractional frames and flat goals are named."""
+    goals = torch.tensor([[1.0, 0, 1], [2.0, 0, 1]])
+    want = M.goal_schedule(goals, [30, 60], 60)
+    for frames in (iter([30, 60]), (t for t in [30, 60]), torch.tensor([30, 60])):
+        got = M.goal_schedule(goals, frames, 60)
+        assert torch.equal(got[0], want[0]) and torch.equal(got[1], want[1])
+    assert torch.equal(want[1][:31], torch.full((31,), 30)) and torch.equal(want[1][31:], torch.full((30,), 60))
+    with pytest.raises(ValueError, match="t_goals: expected 2 strictly increasing whole frames"):
+        M.goal_schedule(goals, [30.5, 60], 60)
+    with pytest.raises(ValueError, match="goals: expected"):
+        M.goal_schedule(torch.zeros(2, 2), [30, 60], 60)
+    with pytest.raises(ValueError, match="frames: expected an integer >= 1"):
+        M.goal_schedule(goals, [30, 60], -4)
+
+
+def test_generation_keeps_the_callers_training_mode_and_decodes_without_dropout(stats, starts):
+    """generate runs in eval mode and gives the model back in the mode it came in: a model in training (dropout on)
+    generates what its eval-mode self generates, and is still training afterwards."""
+    model = _model(stats, dropout=0.5)
+    goal = torch.tensor([[1.0, 0.5, 1.0]])
+    ref = M.generate(model.eval(), starts[0], goal, 8, generator=torch.Generator().manual_seed(0))
+    got = M.generate(model.train(), starts[0], goal, 8, generator=torch.Generator().manual_seed(0))
+    assert model.training
+    torch.testing.assert_close(got.joints, ref.joints, rtol=0, atol=0)
+
+
+def test_rollout_and_generate_name_a_bad_value(stats, starts):
+    """NaN poses, rest joints or goal headings, a fractional goal frame and bad frame counts are named (a NaN used to
+    surface as 'wrist: contains NaN', an argument nobody passed)."""
+    model = _model(stats)
+    s = starts[0]
+    pp, p0, rest, goal = s.p_prev[None], s.p[None], s.rest[None], torch.tensor([[1.0, 0.5, 1.0]])
+    nan = lambda x: x.clone().index_fill_(-1, torch.tensor([1]), float("nan"))  # noqa: E731
+    for kw, name in ((dict(p_prev=nan(pp)), "p_prev"), (dict(p0=nan(p0)), "p0"), (dict(rest=nan(rest)), "rest")):
+        args = {**dict(p_prev=pp, p0=p0, rest=rest), **kw}
+        with pytest.raises(ValueError, match=f"{name}: contains NaN"):
+            M.rollout(model, args["p_prev"], args["p0"], args["rest"], goal, 5, 5)
+    with pytest.raises(ValueError, match="goal_heading: contains NaN"):
+        M.rollout(model, pp, p0, rest, goal, 5, 5, goal_heading=torch.tensor([float("nan")]))
+    with pytest.raises(ValueError, match="goal_heading: expected shape"):
+        M.rollout(model, pp, p0, rest, goal, 5, 5, goal_heading=torch.zeros(5))
+    with pytest.raises(ValueError, match="t_goal: expected whole goal frames"):
+        M.rollout(model, pp, p0, rest, goal, 10.5, 12)
+    for bad in (-1, 0, 2.5, True):
+        with pytest.raises(ValueError, match="frames: expected an integer >= 1"):
+            M.rollout(model, pp, p0, rest, goal, 5, bad)
+    for bad in (5.5, True, 0):
+        with pytest.raises(ValueError, match="frames: expected an integer >= 1"):
+            M.generate(model, s, goal, 5, frames=bad)
+    with pytest.raises(ValueError, match="t_goal: expected goal frames"):
+        M.generate(model, s, goal, "10")
+    out = M.rollout(model, pp, p0, rest, goal, torch.tensor(5.0), 6)       # a float tensor of whole frames is fine
+    assert out.p.shape == (1, 7, 135)

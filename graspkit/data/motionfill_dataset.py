@@ -34,6 +34,7 @@ from tqdm.auto import tqdm
 
 from graspkit.body.markers import saga_sparse_markers
 from graspkit.body.skeleton import JOINT_INDEX
+from graspkit.checks import check_int
 from graspkit.checks import seeded_rng
 from graspkit.data.formats import npz_arrays, open_npz
 from graspkit.data.motion import Motion, canonicalize
@@ -108,6 +109,8 @@ def make_windows(motions: list[Motion], bm: BodyModel, stride: int | None = 30, 
     contacts (N,61,4), clip (N,)}. `align_end`: one window per clip ending at its last frame (approach clips, whose
     last frames hold the grasp); otherwise windows every `stride` frames. `start_at_rest`: clips without contact
     labels get geometric ones with their first frame at rest (`geometric_contacts`' first_at_rest)."""
+    if stride is not None:
+        check_int(stride, "stride", least=1)
     mk = saga_sparse_markers(bm)
     foot_cols = [mk.names.index(n) for n in FOOT_MARKERS]
     out: dict[str, list[np.ndarray]] = {k: [] for k in ("traj", "markers", "local", "vel", "contacts", "clip")}

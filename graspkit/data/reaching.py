@@ -68,6 +68,13 @@ class Start:
     y: float = 0.0
     heading: float = 0.0
 
+    def __post_init__(self) -> None:
+        for k in ("x", "y", "heading"):
+            v = getattr(self, k)
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                    or not np.isfinite(v):
+                raise ValueError(f"Start.{k}: expected a finite number, got {v!r}")
+
 
 def posture_controls(b: np.ndarray | float, scale: float = 1.0) -> dict[str, np.ndarray]:
     """Control values (each shaped like b) of posture level b: > 0 bend and squat for low goals, < 0 stretch for high."""

@@ -6,8 +6,24 @@ with KL(q(z|.) || N(0, I)); SAGA wraps the KL in the robust function Psi(s) = sq
 """
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 import torch
 from torch import nn
+
+
+@contextmanager
+def evaluating(model: nn.Module) -> Iterator[nn.Module]:
+    """`model` in eval mode inside the block and in the mode it had after it (a caller that is training keeps its
+    dropout)."""
+    was = getattr(model, "training", None)           # None: a stand-in with only eval() (tests' replay models)
+    model.eval()
+    try:
+        yield model
+    finally:
+        if was is not None:
+            model.train(was)
 
 
 class ResBlock(nn.Module):

@@ -351,6 +351,31 @@ def check_stall(stall: Any) -> None:
 
 
 @torch.no_grad()
+def _check_rollout_inputs(start: Any, goal: Any, betas: Any, max_frames: Any, reach_tol: Any, min_speed: Any,
+                          floor: Any) -> None:
+    """`rollout`'s arguments, each named in a ValueError when it is not what `rollout` expects."""
+    from graspkit.checks import check_int
+
+    for name, pose in (("start", start), ("goal", goal)):
+        ok = isinstance(pose, (tuple, list)) and len(pose) == 2 and all(isinstance(x, Tensor) for x in pose)
+        if not ok or tuple(pose[0].shape) != (55, 6) or tuple(pose[1].shape) != (3,):
+            got = tuple(tuple(x.shape) for x in pose) if ok else type(pose).__name__
+            raise ValueError(f"{name}: expected (rot6d (55, 6), transl (3,)) tensors, got {got}")
+        if not all(bool(torch.isfinite(x).all()) for x in pose):
+            raise ValueError(f"{name}: contains NaN or Inf")
+    if not isinstance(betas, Tensor) or betas.numel() != 10 or not bool(torch.isfinite(betas).all()):
+        got = tuple(betas.shape) if isinstance(betas, Tensor) else type(betas).__name__
+        raise ValueError(f"betas: expected 10 finite shape coefficients (GOAL's networks take 10), got {got}")
+    check_int(max_frames, "max_frames", least=1)
+    for name, value, low in (("reach_tol", reach_tol, 0.0), ("min_speed", min_speed, None)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                or (value <= low if low is not None else value < 0):
+            raise ValueError(f"{name}: expected a finite distance in metres {'> 0' if low is not None else '>= 0'}, "
+                             f"got {value!r}")
+    if floor is not None and (isinstance(floor, bool) or not isinstance(floor, (int, float)) or not math.isfinite(floor)):
+        raise ValueError(f"floor: expected None (off) or a finite height in metres, got {floor!r}")
+
+
 def rollout(mnet: MNet, body: SparseBody, start: tuple[Tensor, Tensor], goal: tuple[Tensor, Tensor], betas: Tensor,
             object_points: Tensor, obj_centre: Tensor, basis: Tensor, max_frames: int = 300, refine: bool = True,
             reach_tol: float = 0.01, min_speed: float = 0.003, refine_weights: MotionRefineWeights | None = None,
@@ -371,6 +396,7 @@ def rollout(mnet: MNet, body: SparseBody, start: tuple[Tensor, Tensor], goal: tu
     from graspkit.models.gnet import SparseBody, pose_rotmats
 
     check_stall(stall)
+    _check_rollout_inputs(start, goal, betas, max_frames, reach_tol, min_speed, floor)
     mnet.eval()
     c = mnet.cfg
     betas = betas.reshape(1, -1).float()

@@ -120,7 +120,7 @@ class TrajFill(nn.Module):
         self.head = GaussianHead(enc, latent)
         self.dec = nn.Sequential(ResBlock(latent + n, w1), ResBlock(w1, w2))
         # basis > 0: the deviation is synthesised from its `basis` lowest DCT-II frequencies per channel (16 of 62:
-        # up to 3.9 Hz at 30 fps). A per-frame output's sub-millimetre noise is doubled twice by the second difference
+        # up to 3.6 Hz at 30 fps). A per-frame output's sub-millimetre noise is doubled twice by the second difference
         # and swamps the spectrum of a root's acceleration (SAGA's PSKL); the data's trajectories lose 0.1 of their
         # 4-unit L1 error to this truncation (docs/saga_motion.md).
         self.register_buffer("dct", dct_basis(frames, basis) if basis else torch.zeros(0, 0), persistent=False)

@@ -45,10 +45,12 @@ L_TRAJ, L_TRAJ_VEL = 1.0, 0.05                           # Eq. 8's trajectory te
 
 
 def _check(name: str, x: Tensor, shape: tuple[int, ...]) -> None:
-    """Raise a ValueError naming `name` unless x has `shape` (or (1, *shape))."""
+    """Raise a ValueError naming `name` unless x has `shape` (or (1, *shape)) and finite values."""
     if not isinstance(x, Tensor) or tuple(x.shape) not in (shape, (1,) + shape):
         got = tuple(x.shape) if isinstance(x, Tensor) else type(x).__name__
         raise ValueError(f"{name}: expected shape {shape} (one window), got {got}")
+    if not bool(torch.isfinite(x).all()):
+        raise ValueError(f"{name}: expected finite real values, got NaN or Inf")
 
 
 def blend(x: Tensor) -> Tensor:

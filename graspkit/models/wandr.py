@@ -40,9 +40,9 @@ import torch
 from torch import Tensor, nn
 
 from graspkit import intention as I
-from graspkit.checks import check_generator
+from graspkit.checks import check_finite, check_generator, check_int
 from graspkit.data.wandr_dataset import FOOT_JOINTS, GOAL_FRAMES, ClipSet, WindowDataset, lowest_foot, make_batch
-from graspkit.models.blocks import GaussianHead, kl_standard_normal
+from graspkit.models.blocks import GaussianHead, evaluating, kl_standard_normal
 from graspkit.train import TrainConfig, check_config, fit, load_checkpoint, load_into, save_checkpoint
 
 FULL_INTENTION = ("wrist", "orientation", "pelvis")
@@ -382,11 +382,17 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
     the body sinking into the floor; both together pin that joint at its start height).
     """
     B = p0.shape[0]
-    T = frames + 1
+    T = check_int(frames, "frames", least=1) + 1
     if p_prev.shape != p0.shape or p0.shape[-1] != I.POSE_DIM or p0.dim() != 2:
         raise ValueError(f"p0: expected (B, 135) with p_prev alike, got {tuple(p0.shape)} and {tuple(p_prev.shape)}")
     if rest.shape != (B, I.NUM_BODY, 3):
         raise ValueError(f"rest: expected shape ({B}, 22, 3), got {tuple(rest.shape)}")
+    for x, name, what in ((p_prev, "p_prev", "poses"), (p0, "p0", "poses"), (rest, "rest", "rest joints in metres")):
+        check_finite(x, name, what)
+    if goal_heading is not None:
+        if tuple(goal_heading.shape) != (B,):
+            raise ValueError(f"goal_heading: expected shape ({B},), got {tuple(goal_heading.shape)}")
+        check_finite(goal_heading, "goal_heading", "headings in radians")
     if z is not None and tuple(z.shape) != (B, frames, model.cfg.latent):
         raise ValueError(f"z: expected shape ({B}, {frames}, {model.cfg.latent}), got {tuple(z.shape)}")
     if floor is not None and not (isinstance(floor, (int, float)) and floor >= 0):
@@ -397,9 +403,9 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
     tg = _per_frame(torch.as_tensor(t_goal), B, T, None, "t_goal")
     if not bool(torch.isfinite(goals).all()):
         raise ValueError("goal: contains NaN or Inf (expected world positions in metres)")
-    if not bool((tg >= 1).all()):       # NaN fails this too
-        raise ValueError(f"t_goal: expected goal frames >= 1 (counted from the start, frame 0), got min "
-                         f"{float(tg.min()) if tg.numel() else tg}")
+    if not bool((tg >= 1).all()) or bool((tg != tg.round()).any()):       # NaN fails this too
+        raise ValueError(f"t_goal: expected whole goal frames >= 1 (counted from the start, frame 0), got "
+                         f"{tg.unique()[:5].tolist()}")
     cur_p, cur_d = p0, I.pose_to_delta(p_prev, p0)
     t, R = I.pose_rotmats(p0)
     ps, js = [], []
@@ -480,23 +486,24 @@ def generate(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal:
     frames + 1 poses, the start included); floor, lift: `rollout`'s floor constraints (off, as the paper).
     Every frame draws z for the whole batch from `generator`, so a sequence's draws depend on the batch it is in:
     the same seed gives the same motions for the same starts, goals and n, not for one goal taken out of them."""
-    model.eval()
     check_generator(generator)
     pp, p0, rest, g, idx = expand_starts(start, goal, n)
     dtype = model.decoder[0].weight.dtype                  # float32 unless the caller converted the model
     pp, p0, rest, g = (x.to(dtype) for x in (pp, p0, rest, g))
-    tg = torch.as_tensor(t_goal)
+    try:
+        tg = torch.as_tensor(t_goal)
+    except (TypeError, ValueError, RuntimeError):
+        raise ValueError(f"t_goal: expected goal frames (integers >= 1), got {t_goal!r}") from None
     if tg.dim() > 1 or (tg.dim() == 1 and len(tg) != int(idx[:, 1].max()) + 1):
         raise ValueError(f"t_goal: expected a frame or one per goal, got shape {tuple(tg.shape)}")
     if tg.dtype.is_floating_point or tg.dtype == torch.bool or int(tg.min()) < 1:
         raise ValueError(f"t_goal: expected goal frames (integers >= 1), got {t_goal}")
     if tg.dim() == 1:
         tg = tg[idx[:, 1]]
-    frames = int(tg.max()) if frames is None else frames
-    if frames < 1:
-        raise ValueError(f"frames: expected >= 1, got {frames}")
-    out = rollout(model, pp, p0, rest, g, tg, frames, generator=generator, keep=keep, on_frame=on_frame, floor=floor,
-                  lift=lift)
+    frames = int(tg.max()) if frames is None else check_int(frames, "frames", least=1)
+    with evaluating(model):
+        out = rollout(model, pp, p0, rest, g, tg, frames, generator=generator, keep=keep, on_frame=on_frame,
+                      floor=floor, lift=lift)
     out.info["index"] = idx
     return out
 
@@ -507,21 +514,26 @@ def goal_schedule(goals: Tensor, t_goals: Sequence[int], frames: int) -> tuple[T
 
     At frame t_k the time left is 0, so that one frame's intention is zero (as after t_G in training); switching at
     t_k instead moved the wrist's closest approach by at most 2 cm (docs/wandr.md)."""
-    goals = torch.as_tensor(goals, dtype=torch.float32).reshape(-1, 3)
-    if not bool(torch.isfinite(goals).all()):
-        raise ValueError("goals: contains NaN or Inf (expected world positions in metres)")
-    t = list(t_goals)
-    if len(t) != len(goals) or not t or t[0] < 1 or any(b <= a for a, b in zip(t, t[1:])):
-        raise ValueError(f"t_goals: expected {len(goals)} strictly increasing frames >= 1, got {t}")
-    if len(t) > 1 and t[-2] >= frames:
+    goals = torch.as_tensor(goals, dtype=torch.float32)
+    goals = goals.reshape(1, 3) if goals.shape == (3,) else goals
+    if goals.dim() != 2 or goals.shape[1] != 3:
+        raise ValueError(f"goals: expected (G, 3) world positions in metres, got shape {tuple(goals.shape)}")
+    check_finite(goals, "goals", "world positions in metres")
+    frames = check_int(frames, "frames", least=1)
+    ts = list(t_goals)                          # once: an iterator is read here and nowhere else
+    whole = all((isinstance(t, (int, np.integer)) and not isinstance(t, bool)) or (isinstance(t, Tensor) and t.dim() == 0
+                and not t.is_floating_point() and t.dtype != torch.bool) for t in ts)
+    if len(ts) != len(goals) or not ts or not whole or ts[0] < 1 or any(b <= a for a, b in zip(ts, ts[1:])):
+        raise ValueError(f"t_goals: expected {len(goals)} strictly increasing whole frames >= 1, got {ts}")
+    if len(ts) > 1 and ts[-2] >= frames:
         raise ValueError(f"t_goals: every goal but the last must fall before frame {frames} (the next one gets the "
-                         f"frames after it), got {t}")
+                         f"frames after it), got {ts}")
     g = torch.empty(frames + 1, 3)
     tg = torch.empty(frames + 1, dtype=torch.long)
     lo = 0
-    for k, t in enumerate(t_goals):
-        hi = frames + 1 if k == len(t_goals) - 1 else t + 1
-        g[lo:hi], tg[lo:hi] = goals[k], t
+    for k, t in enumerate(ts):
+        hi = frames + 1 if k == len(ts) - 1 else int(t) + 1
+        g[lo:hi], tg[lo:hi] = goals[k], int(t)
         lo = hi
     return g, tg
 

@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING, Any
 import torch
 from torch import Tensor, nn
 
-from graspkit.objects.distance import MAX_METRES, nearest_neighbours, require_points_in_metres
+from graspkit.objects.distance import MAX_METRES, nearest_neighbours, require_points_in_metres, require_unit_normals
 from graspkit.objects.placement import GRASP_HEIGHTS
 from graspkit.objects.sdf import signed_distance_to_points
 from graspkit.paths import DATA_STUBS
@@ -618,6 +618,7 @@ def check_sample_inputs(points: Tensor, normals: Tensor, n: int, least: int, nam
         if x is not None and not torch.isfinite(torch.as_tensor(x, dtype=torch.float32)).all():
             raise ValueError(f"{name}: contains NaN or Inf")
     require_points_in_metres(points, names[0])
+    require_unit_normals(normals, names[1])
     for name, x in extra.items():
         if name.endswith("height") and x is not None:
             check_height(x, name)

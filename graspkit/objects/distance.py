@@ -102,6 +102,17 @@ def require_points_in_metres(points: Tensor, name: str, hint: str = "points in m
                          f"m): {hint}")
 
 
+UNIT_TOL = 0.01           # how far from 1 a unit normal's length may be (float16 files round to ~1e-3)
+
+
+def require_unit_normals(normals: Tensor, name: str) -> None:
+    """A ValueError naming `name` unless every normal (..., 3) has length 1 within UNIT_TOL."""
+    length = torch.linalg.vector_norm(torch.as_tensor(normals, dtype=torch.float64), dim=-1)
+    if length.numel() and not bool(((length - 1).abs() <= UNIT_TOL).all()):
+        raise ValueError(f"{name}: expected unit normals, got lengths {float(length.min()):.3g} to "
+                         f"{float(length.max()):.3g} (the surface normals at the points, outward)")
+
+
 ZERO_AREA = 1e-10         # twice a face's area over its longest edge squared at or below which it has no normal
 HOLES = "(holes)"        # how _topology's reason ends when the only problem is boundary edges (require_closed checks it)
 
@@ -140,16 +151,22 @@ def edge_ids(faces: Tensor) -> np.ndarray:
 def require_closed(verts: Tensor, faces: Tensor, name: str, allow_holes: bool = False) -> None:
     """Raise ValueError naming `name` unless the mesh is watertight, consistently wound and outward-oriented
     (`allow_holes`: edges that border one face are accepted, e.g. for a body mesh that is not closed)."""
+    require_face_areas(verts, faces, name)      # first: a repeated corner also reads as an edge used twice
     f = np.ascontiguousarray(faces.cpu().numpy(), dtype=np.int64)
     problem = _topology(f.tobytes(), len(f))[1]
     if problem and not (allow_holes and problem.endswith(HOLES)):
         raise ValueError(f"{name}: the mesh must be watertight and consistently oriented; {problem}")
     tri = verts.detach()[..., faces, :].to(torch.float64)
+    tri = tri - tri.mean((-3, -2), keepdim=True)    # about the mesh: far from the origin the products cancel to noise
     volume = (tri[..., 0, :] * torch.linalg.cross(tri[..., 1, :], tri[..., 2, :])).sum((-1, -2)) / 6.0
     if (volume <= 0).any():
         raise ValueError(f"{name}: the mesh encloses a non-positive volume ({volume.min().item():.3g} m^3): "
                          "its faces point inwards (flip them) or it is degenerate")
-    flat = zero_area_faces(tri)
+
+
+def require_face_areas(verts: Tensor, faces: Tensor, name: str) -> None:
+    """Raise ValueError naming `name` if a face of the mesh (verts (..., V, 3), faces (F, 3)) has zero area."""
+    flat = zero_area_faces(verts.detach()[..., faces, :])
     if flat.any():
         raise ValueError(f"{name}: {int(flat.sum())} faces have zero area (slivers or repeated corners, e.g. face "
                          f"{int(flat.nonzero()[0, -1])}); the sign of a signed distance comes from face normals, which "

@@ -19,7 +19,7 @@ import torch
 import trimesh
 
 from graspkit.objects.catalogue import list_objects, make_object
-from graspkit.objects.distance import require_closed
+from graspkit.objects.distance import require_closed, require_face_areas
 from graspkit.objects.sampling import sample_surface
 from graspkit.objects.sdf import winding_number
 
@@ -33,6 +33,7 @@ CATALOGUE_SIDES = (0.08, 0.41)
 SOLID_SAMPLES = 512      # surface points of the one-solid check (solid_problem)
 SOLID_OFFSET = 1e-5      # how far behind / in front of the surface it looks, as a share of the largest side
 MIN_BAD = 2              # samples that must disagree before a mesh is refused
+PART_SAMPLES = 64        # more samples on each connected part of a mesh of several (at most SOLID_SAMPLES in all)
 SOLID_PAIRS = 10_000_000  # at most this many (sample, face) pairs: fewer samples on meshes of over 20,000 faces
 Y_UP_SUFFIXES = (".glb", ".gltf")   # glTF 2.0 is +y up by specification: turned to z up on reading
 Y_UP_TO_Z_UP = np.array([[1.0, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]])   # +90 deg about x: y -> z
@@ -101,7 +102,8 @@ def _checked(mesh: trimesh.Trimesh, argument: str) -> trimesh.Trimesh:
     if not np.isfinite(mesh.vertices).all():
         raise ValueError(f"{argument}: the mesh has NaN or infinite vertex coordinates")
     mesh.remove_unreferenced_vertices()
-    if not mesh.is_watertight:
+    require_face_areas(torch.as_tensor(mesh.vertices), torch.as_tensor(mesh.faces), argument)   # before the
+    if not mesh.is_watertight:                                  # closure test, which such faces fail with a wrong hint
         merged = mesh.copy()
         merged.merge_vertices()
         hint = ("its faces do not share vertices where they meet: trimesh's merge_vertices() joins them" if
@@ -113,7 +115,7 @@ def _checked(mesh: trimesh.Trimesh, argument: str) -> trimesh.Trimesh:
     if not mesh.volume > 0:
         raise ValueError(f"{argument}: the mesh is inside out (negative volume {mesh.volume:.3g}); "
                          "its normals must point outward (trimesh's invert())")
-    require_closed(torch.as_tensor(mesh.vertices), torch.as_tensor(mesh.faces), argument)   # and no zero-area faces
+    require_closed(torch.as_tensor(mesh.vertices), torch.as_tensor(mesh.faces), argument)
     side = float((mesh.bounds[1] - mesh.bounds[0]).max())
     if not MIN_SIDE <= side <= MAX_SIDE:
         hint = ("; in metres that is larger than a hand-held object: a mesh in millimetres needs apply_scale(0.001), "
@@ -130,25 +132,44 @@ def _checked(mesh: trimesh.Trimesh, argument: str) -> trimesh.Trimesh:
 
 def solid_problem(mesh: trimesh.Trimesh, samples: int = SOLID_SAMPLES) -> str:
     """'' if the closed mesh bounds solids that do not overlap (separate pieces are fine), else what is wrong: the
-    generalized winding number just behind and just in front of `samples` surface points (area-uniform, seed 0)
-    must be 1 and 0. Parts that overlap (2 behind the surface) or a part turned inside out (-1 in front) pass the
-    closed-and-outward checks (the total volume is positive) but give signed distances of the wrong sign; a cavity
-    (an inner surface facing inwards) is fine."""
+    generalized winding number just behind and just in front of `samples` surface points (area-uniform, seed 0, and
+    up to PART_SAMPLES more on each connected part) must be 1 and 0. Parts that overlap (2 behind the surface), parts that touch along a shared face (1 in front) or
+    a part turned inside out (-1 in front) pass the closed-and-outward checks (the total volume is positive) but give
+    signed distances of the wrong sign; a cavity (an inner surface facing inwards) is fine."""
     samples = min(samples, max(64, SOLID_PAIRS // len(mesh.faces)))      # bounded time on large meshes
     pts, nrm = sample_surface(mesh, samples, seed=0)
+    pts, nrm = _part_samples(mesh, samples, pts, nrm)
     eps = SOLID_OFFSET * float((mesh.bounds[1] - mesh.bounds[0]).max())
     w = winding_number(np.concatenate([pts - eps * nrm, pts + eps * nrm]), mesh).numpy()
-    behind, front = w[:samples], w[samples:]
+    behind, front = w[:len(pts)], w[len(pts):]
     overlap, inverted = behind > 1.5, (behind < 0.5) | (front < -0.5)
-    if (overlap.sum() < MIN_BAD) and (inverted.sum() < MIN_BAD):   # a lone sample at a sharp edge is not a part
+    inner = (front > 0.5) & ~overlap           # solid on both sides: parts that touch along a shared face
+    if max(overlap.sum(), inverted.sum(), inner.sum()) < MIN_BAD:   # a lone sample at a sharp edge is not a part
         return ""
-    share = lambda m: f"{100 * m.mean():.1f} % of the surface"   # noqa: E731
+    share = lambda m: (f"{100 * m[:samples].mean():.1f} % of the surface" if m[:samples].any()  # noqa: E731
+                       else "a small part of the surface")
+    union = ("signed distances and volumes need one closed surface around the solid: a boolean union of the parts "
+             "(trimesh.boolean.union, manifold3d) makes one")
     if overlap.sum() >= MIN_BAD:
-        return (f"parts of the mesh overlap or intersect themselves ({share(overlap)} lies inside another part); "
-                "signed distances and volumes need one closed surface around the solid: a boolean union of the "
-                "parts (trimesh.boolean.union, manifold3d) makes one")
+        return f"parts of the mesh overlap or intersect themselves ({share(overlap)} lies inside another part); {union}"
+    if inner.sum() >= MIN_BAD:
+        return (f"parts of the mesh touch along shared faces ({share(inner)} has solid on both sides, so the "
+                f"distance to it is not a distance to the solid's surface); {union}")
     return (f"a part of the mesh is inside out ({share(inverted)} faces inwards with no solid behind it); "
             "its normals must point outward (that part's invert())")
+
+
+def _part_samples(mesh: trimesh.Trimesh, samples: int, pts: np.ndarray, nrm: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """The area-uniform samples (n,3) and normals, with PART_SAMPLES more on each connected part of a mesh of several
+    (seed 1): a small part (a knob sunk into a ball) gets too few area-uniform samples to be seen overlapping."""
+    labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, node_count=len(mesh.faces))
+    parts = np.unique(labels)
+    if len(parts) < 2:
+        return pts, nrm
+    per = max(MIN_BAD * 4, min(PART_SAMPLES, samples // len(parts)))
+    extra = [sample_surface(mesh.submesh([np.flatnonzero(labels == k)], append=True), per, seed=1) for k in parts]
+    return np.concatenate([pts] + [e[0] for e in extra]), np.concatenate([nrm] + [e[1] for e in extra])
 
 
 __all__ = ["MAX_SIDE", "MIN_SIDE", "as_object", "solid_problem"]

@@ -41,6 +41,7 @@ E_MNet = λ_Θ E_Θ + λ_v^h E_v^h (Eq. 13): E_Θ couples to MNet's Θ̂ (square
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -49,6 +50,7 @@ import torch
 from torch import Tensor
 
 from graspkit.body.skeleton import JOINT_INDEX
+from graspkit.checks import check_int
 from graspkit.models.gnet import SparseBody, pose_rotmats
 from graspkit.objects.distance import nearest_neighbours
 from graspkit.objects.sdf import SDFGrid
@@ -250,7 +252,21 @@ class GraspRefiner:
             if k not in hat or tuple(hat[k].shape[1:]) != shape:
                 raise ValueError(f"hat[{k!r}]: expected shape (B, {', '.join(map(str, shape))}), "
                                  f"got {None if k not in hat else tuple(hat[k].shape)}")
+        B = hat["rot6d"].shape[0]
+        for k in ("rot6d", "transl", "head_dir", "hand_offsets"):
+            if hat[k].shape[0] != B or not bool(torch.isfinite(hat[k]).all()):
+                raise ValueError(f"hat[{k!r}]: expected {B} finite rows (one per sample)")
+        if not isinstance(betas, Tensor) or betas.dim() != 2 or betas.shape[0] not in (1, B) \
+                or not bool(torch.isfinite(betas).all()):
+            got = tuple(betas.shape) if isinstance(betas, Tensor) else type(betas).__name__
+            raise ValueError(f"betas: expected finite shape coefficients (1 or {B}, num_betas), got {got}")
+        if not isinstance(object_points, Tensor) or object_points.shape[-1] != 3 or object_points.dim() not in (2, 3) \
+                or not bool(torch.isfinite(object_points).all()):
+            raise ValueError("object_points: expected finite points (P, 3) or (B, P, 3) in metres")
         w = weights or GraspRefineWeights()
+        check_int(w.steps, "weights.steps", least=0)
+        if not (math.isfinite(w.lr) and w.lr > 0):
+            raise ValueError(f"weights.lr: expected a learning rate > 0, got {w.lr!r}")
         if any(not 0 < x < 0.05 for x in w.inner_depths):
             raise ValueError(f"weights.inner_depths: expected depths in metres in (0, 0.05), got {w.inner_depths}")
         if sdf is not None and len(sdf) != hat["rot6d"].shape[0]:

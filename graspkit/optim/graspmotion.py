@@ -79,7 +79,7 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   grasp's. With the arms free: 3.1 cm, 12 of 12 clips end in contact, last-frame volume 1.92 -> 1.20 cm3 (docs).
 - The start frame (graspkit's, since 2026-12-03; `fit(start=...)`, passed by `saga.synthesize`): stage 1 fits frame 0
   to the start body's markers and stage 2 leaves it there. Without it S.2's planted feet drag frame 0 along the
-  sample's first steps, 8-12 cm off the start body; held, it is 2-3 mm from it, at the price of the sample's first
+  sample's first steps, 8-22 cm off the start body in the calls measured; held, it is 2-3 mm from it, at the price of the sample's first
   shuffling steps counted as skating (docs/saga_motion.md, "The start frame").
 - Initialisation: the prior's mean pose, rigidly aligned per frame (Kabsch on the body and face markers).
 - E^o_colli and E_g are evaluated on the frames where a hand vertex is within 2 cm of the object's bounding box
@@ -111,7 +111,7 @@ from torch import Tensor, nn
 from tqdm.auto import tqdm
 
 from graspkit.body.markers import foot_vertices, palm_vertices, saga_markers, saga_sparse_markers, vertex_normals
-from graspkit.checks import check_steps
+from graspkit.checks import check_bool, check_int, check_steps, check_weight
 from graspkit.models.gnet import SparseBody
 from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, _nearest, body_joint_ids, free_joint_excess,
                                      hand_vertex_ids, kabsch, with_free_joints)
@@ -228,6 +228,9 @@ def _boxed_hinge(q: Tensor, inside: Tensor, cloud: Tensor, normals: Tensor, sigm
 
 
 # ------------------------------------------------------------------------------------------------ the optimiser
+TERMS = ("colli", "contact", "palm", "smooth", "skate", "heel", "floor")     # stage 2's terms, all on by default
+
+
 @dataclass
 class GraspMotionWeights:
     """Weights and thresholds (see the module docstring for which are the paper's)."""
@@ -252,6 +255,13 @@ class GraspMotionWeights:
     free_joints: float = 5e-4      # on the 6D offsets of GraspMotionConfig.free_joints (graspkit's; = alpha_theta)
     limits: float = 0.5            # per degree a free joint turns past the human range (metrics.joint_limit_excess)
 
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():        # a negative weight rewards what its term removes
+            check_weight(value, name)
+        for name in ("palm_sigma", "skate_sigma", "heel_height"):        # the hinge floors sigma_b, sigma_o may be 0
+            if getattr(self, name) <= 0:
+                raise ValueError(f"{name}: expected a threshold > 0, got {getattr(self, name)!r}")
+
 
 @dataclass
 class GraspMotionConfig:
@@ -263,7 +273,7 @@ class GraspMotionConfig:
     contact_frames: int = 5        # Eq. 10: object contact on the last 5 frames
     point_stride: int = 4          # E^o_colli and E_g use every 4th object point (512 of SAGA's 2048)
     log_every: int = 10
-    terms: tuple[str, ...] = ("colli", "contact", "palm", "smooth", "skate", "heel", "floor")
+    terms: tuple[str, ...] = TERMS
     one_foot_down: bool = True     # T_c also holds each frame's most probable foot part (a foot is always planted)
     # body joints (SMPL-X names) given a free rotation per frame on top of the prior's decoded pose, penalised by
     # weights.free_joints and weights.limits (graspkit's, as GraspPose-Opt's; () is Alg. 2's prior latent alone)
@@ -275,6 +285,16 @@ class GraspMotionConfig:
         if int(n) != n or n < 0 or (n > 0 and not lr > 0):
             raise ValueError(f"polish: expected (steps >= 0, learning rate > 0), got {self.polish}")
         check_steps(self.steps, "steps", 2)           # (stage-1 steps, stage-2 steps)
+        check_int(self.n_pca, "n_pca", least=1)
+        if self.n_pca > 45:
+            raise ValueError(f"n_pca: expected at most the model's 45 hand components, got {self.n_pca}")
+        check_int(self.contact_frames, "contact_frames", least=0)     # 0: no object contact term
+        check_int(self.point_stride, "point_stride", least=1)
+        check_int(self.log_every, "log_every", least=1)
+        check_bool(self.one_foot_down, "one_foot_down")
+        unknown = [t for t in self.terms if t not in TERMS]
+        if isinstance(self.terms, str) or unknown:
+            raise ValueError(f"terms: expected a tuple of {TERMS}, got unknown {unknown or self.terms!r}")
 
 
 @dataclass
@@ -396,14 +416,15 @@ class GraspMotionOpt:
                     K = len(near)
                     inner = self.object_in_hand(hf.reshape(B * K, -1, 3), pts.repeat_interleave(K, 0))
                     e["colli"] = e["colli"] + w.colli_object * inner.view(B, -1).sum(-1)
-            if "contact" in terms and object_contact is not None:
-                last = hands[:, -cfg.contact_frames:]
+            k_c = min(cfg.contact_frames, hands.shape[1])              # the last k_c frames (0: none)
+            if "contact" in terms and object_contact is not None and k_c:
+                last = hands[:, hands.shape[1] - k_c:]
                 idx = object_contact.topk(min(256, object_contact.shape[1]), -1).indices
                 po = torch.gather(obj.batch(B)[0], 1, idx.unsqueeze(-1).expand(-1, -1, 3))
                 d2 = torch.stack([_nearest(po, last[:, k])[0] for k in range(last.shape[1])], 1)   # (B, 5, 256)
                 e["contact"] = w.contact * (torch.gather(object_contact, 1, idx)[:, None] * d2).sum((1, 2))
-            if "contact" in terms and marker_contact is not None:     # Eq. 6's other side: C^_M markers to the object
-                cm = v[:, -cfg.contact_frames:, self.sl_c]                                   # (B, 5, 143, 3)
+            if "contact" in terms and marker_contact is not None and k_c:   # Eq. 6's other side: C^_M to the object
+                cm = v[:, v.shape[1] - k_c:, self.sl_c]                                      # (B, 5, 143, 3)
                 whole = obj.batch(B)[0]
                 d2 = torch.stack([_nearest(cm[:, k], whole)[0] for k in range(cm.shape[1])], 1)    # (B, 5, 143)
                 e["contact"] = e.get("contact", 0) + w.contact_marker * (marker_contact[:, None] * d2).sum((1, 2))
@@ -495,8 +516,16 @@ class GraspMotionOpt:
                 raise ValueError(f"{name}: contains NaN or Inf")
         if betas.shape[0] != B:
             raise ValueError(f"betas: expected {B} rows (one per sequence), got {tuple(betas.shape)}")
+        if betas.shape[1] > self.bm.num_betas:
+            raise ValueError(f"betas: expected at most the body model's {self.bm.num_betas} shape coefficients, "
+                             f"got {betas.shape[1]}")
         if foot_contact is not None and tuple(foot_contact.shape) != (B, F, 4):
             raise ValueError(f"foot_contact: expected shape ({B}, {F}, 4), got {tuple(foot_contact.shape)}")
+        for name, x in (("foot_contact", foot_contact), ("object_contact", object_contact),
+                        ("marker_contact", marker_contact)):
+            if isinstance(x, Tensor) and not bool(((x >= 0) & (x <= 1)).all()):      # NaN fails this too
+                raise ValueError(f"{name}: expected contact probabilities in [0, 1], got values from "
+                                 f"{float(x.min()):g} to {float(x.max()):g}")
         if object_contact is not None and (obj is None or tuple(object_contact.shape) != (B, obj.num_points)):
             raise ValueError(f"object_contact: expected shape ({B}, P) with an object of P points")
         if marker_contact is not None:

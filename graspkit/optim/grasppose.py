@@ -104,7 +104,7 @@ from graspkit.body.skeleton import FINGERS, JOINT_INDEX, JOINT_NAMES
 from graspkit.metrics import joint_limit_excess
 from graspkit.models.gnet import SparseBody
 from graspkit.models.wholegrasp import check_height
-from graspkit.objects.distance import require_points_in_metres
+from graspkit.objects.distance import require_points_in_metres, require_unit_normals
 from graspkit.objects.sdf import SDFGrid
 from graspkit.optim.step import energy_step
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
@@ -208,6 +208,9 @@ class GraspObject:
         if self.origin is not None and (self.origin.dim() not in (1, 2) or self.origin.shape[-1] != 3):
             raise ValueError(f"origin: expected shape (3,) or (B, 3), got {tuple(self.origin.shape)}")
         require_points_in_metres(self.points, "points")
+        if not bool(torch.isfinite(self.normals).all()):
+            raise ValueError("normals: contains NaN or Inf")
+        require_unit_normals(self.normals, "normals")
         check_height(self.height, "height")
         self.points, self.normals = self.points.float(), self.normals.float()
 

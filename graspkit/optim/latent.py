@@ -4,8 +4,9 @@ The decoder turns one latent z_k per frame into a pose delta, and the whole roll
 kinematics, intention) is differentiable, so the per-frame latents Z = (z_1 .. z_T) of a motion can be optimised:
 
     L_opt = w_norm L_norm + w_goal L_goal (+ w_way L_way)
-    L_norm = mean_k,j z_kj^2 / 2           the negative log-likelihood of Z under N(0, I) (up to a constant):
-                                            keeps the motion where the prior puts its mass
+    L_norm = mean_k,j z_kj^2 / 2           the negative log-likelihood of Z under N(0, I) up to a constant, divided
+                                            by frames x latent size (so w_norm does not grow with the motion's
+                                            length): keeps the motion where the prior puts its mass
     L_goal = |W_{t_G} - G|^2               the right wrist at the goal frame vs the goal (m^2)
     L_way  = sum_w |P^xy_{t_w} - w^xy|^2   the pelvis's ground projection at frame t_w vs each waypoint (m^2, Sup. C.2)
 
@@ -22,7 +23,8 @@ import torch
 from torch import Tensor
 
 from graspkit import intention as I
-from graspkit.checks import check_generator, check_int
+from graspkit.checks import check_finite, check_generator, check_int, check_weight
+from graspkit.models.blocks import evaluating
 from graspkit.models.wandr import Rollout, WandrCVAE, expand_starts, rollout
 
 if TYPE_CHECKING:
@@ -66,11 +68,29 @@ def optimise_latents(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose
     frames = t_goal if frames is None else check_int(frames, "frames", least=1)
     if not 1 <= t_goal <= frames:
         raise ValueError(f"t_goal: expected 1 <= t_goal <= frames ({frames}), got {t_goal}")
-    for frame, xy in waypoints:
-        if check_int(frame, "waypoints: a frame") > frames or len(xy) < 2:
-            raise ValueError(f"waypoints: expected (frame in [0, {frames}], (x, y)), got {(frame, xy)}")
+    for w in waypoints:
+        frame, xy = w if isinstance(w, (tuple, list)) and len(w) == 2 else (None, None)
+        try:
+            xy = torch.as_tensor(xy, dtype=torch.float64)
+        except (TypeError, ValueError, RuntimeError):
+            xy = torch.zeros(0)
+        if frame is None or check_int(frame, "waypoints: a frame") > frames or xy.shape not in ((2,), (3,)):
+            raise ValueError(f"waypoints: expected (frame in [0, {frames}], (x, y)), got {w!r}")
+        check_finite(xy, "waypoints", "finite (x, y) in metres")
     check_int(iters, "iters")
-    model.eval()
+    for v, name in ((w_norm, "w_norm"), (w_goal, "w_goal"), (w_way, "w_way")):
+        check_weight(v, name)
+    if z0 is not None:
+        check_finite(z0, "z0", "latents")
+    with evaluating(model):
+        return _optimise(model, start, goal, t_goal, frames, n, waypoints, z0, iters, lr, w_norm, w_goal, w_way,
+                         generator)
+
+
+def _optimise(model: WandrCVAE, start, goal, t_goal: int, frames: int, n: int, waypoints, z0: Tensor | None,
+              iters: int, lr: float, w_norm: float, w_goal: float, w_way: float,
+              generator: torch.Generator | None) -> LatentResult:
+    """`optimise_latents` after its checks, the model in eval mode."""
     pp, p0, rest, g, idx = expand_starts(start, torch.as_tensor(goal, dtype=torch.float32).reshape(-1, 3), n)
     dtype = model.decoder[0].weight.dtype                  # float32 unless the caller converted the model (as generate)
     pp, p0, rest, g = (x.to(dtype) for x in (pp, p0, rest, g))
@@ -126,7 +146,7 @@ def evaluate_vae_opt(model: WandrCVAE, starts: Sequence[I.StartPose], bm: BodyMo
             idx = res.motion.info["index"].clone()
             idx[:, 0], idx[:, 1] = s_i, idx[:, 1] + lo
             parts.append(evaluate_motions(m.p, m.rest, m.goal[:, 0], s.betas[None].expand(len(idx), -1), bm, T_GOAL,
-                                          cells[idx[:, 1].numpy()], idx, s.full_pose))
+                                          cells, idx, s.full_pose))      # cells by goal: idx's goal column
     cat = lambda k: np.concatenate([getattr(p, k) for p in parts])  # noqa: E731
     return GridResult(cat("start"), cat("goal_index"), cat("sample"), cat("cell"), cat("dtg"), cat("reach_frame"),
                       cat("fs"), cat("error_at_goal"), {"iters": iters, "starts": n_starts})
