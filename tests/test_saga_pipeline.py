@@ -7,7 +7,6 @@ import trimesh
 
 from graspkit.body.markers import saga_sparse_markers
 from graspkit.data import Start
-from graspkit.data.motion import Motion
 from graspkit.data.motion import Motion, heading_of
 from graspkit.objects.placement import ObjectPose
 from graspkit.optim import graspmotion
