@@ -360,8 +360,9 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         if method == "goal":
             sg.add_argument("--max-frames", type=int, default=150, help="MNet's rollout stops here if not at the grasp")
             sg.add_argument("--stall", type=int, default=None, metavar="FRAMES",
-                            help="graspkit's stall rule: a hand within 25 cm of the goal hand that gains < 5 mm in this "
-                                 "many frames starts the refinement (default 10; 0: off, GOAL's rollout; docs/goal.md)")
+                            help="graspkit's stall rule's window: at each MNet step a hand within 25 cm of the goal hand "
+                                 "that is not 5 mm closer than at its closest in this many frames before starts the "
+                                 "refinement (default 10; 0: off, GOAL's rollout; docs/goal.md)")
         sg.set_defaults(func=cmd, out_is_file=False)
     from graspkit.paths import DATA_STUBS
     wa = sub.add_parser("wandr", help="WANDR from its held-out start pose to one goal in a given time")

@@ -31,6 +31,7 @@ counts only the frames where it is not.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Sequence
 
@@ -40,7 +41,7 @@ from torch import Tensor
 
 from graspkit import intention as I
 from graspkit.body.skeleton import JOINT_INDEX
-from graspkit.checks import count_type, nonneg_float, positive_float, seeded_rng
+from graspkit.checks import check_int, count_type, nonneg_float, positive_float, seeded_rng
 from graspkit.data.reaching import EVAL_DISTANCES, EVAL_FRAMES, EVAL_HEIGHTS, Start, evaluation_goals
 from graspkit.data.wandr_dataset import FOOT_JOINTS, shaped_rest
 from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS
@@ -471,8 +472,11 @@ def goal_row_schedules(n: int, legs: int = 3, seed: int = 0, spacing: tuple[floa
                        heights: tuple[float, float] = (0.3, 1.6)) -> Tensor:
     """n random schedules of `legs` goals (n, legs, 3) around a canonical start (pelvis above the origin): each goal
     `spacing` m (uniform) from the one before in a uniform direction (the first from the start), `heights` m high."""
-    if n < 1 or legs < 1:
-        raise ValueError(f"n, legs: expected >= 1, got {n}, {legs}")
+    check_int(n, "n", least=1)
+    check_int(legs, "legs", least=1)
+    for name, (lo, hi), least in (("spacing", spacing, 0.0), ("heights", heights, 0.0)):
+        if not (math.isfinite(lo) and math.isfinite(hi) and least <= lo <= hi):
+            raise ValueError(f"{name}: expected (low, high) in metres with {least:g} <= low <= high, got {(lo, hi)}")
     rng = seeded_rng(seed)
     out = np.zeros((n, legs, 3))
     for k in range(n):
@@ -495,8 +499,8 @@ def evaluate_goal_rows(model: WandrCVAE, starts: Sequence[I.StartPose], per_star
 
     if len(starts) == 0:
         raise ValueError("starts: expected at least one start pose")
-    if leg_frames < 2:
-        raise ValueError(f"leg_frames: expected >= 2, got {leg_frames}")
+    check_int(per_start, "per_start", least=1)
+    check_int(leg_frames, "leg_frames", least=2)
     goals = goal_row_schedules(per_start * len(starts), legs, seed)
     t_goals = [(k + 1) * leg_frames for k in range(legs)]
     frames = t_goals[-1]

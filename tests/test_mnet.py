@@ -524,3 +524,46 @@ def test_rollout_names_a_bad_argument(setup):
     with pytest.raises(ValueError, match="betas: expected 10"):
         rollout(*bad, max_frames=5)
     assert len(rollout(*args, max_frames=1).rot6d) == 1
+
+
+
+def _walking_in(bm, speed: float) -> tuple:
+    """rollout's arguments for an MNet whose mean output walks the body forward `speed` m a frame towards the same body
+    20 cm ahead (every hand vertex 20 cm from its goal, closing `speed` a frame)."""
+    from graspkit.data.reaching import Start, plan_reach
+    from graspkit.rotations import rot6d_to_matrix
+
+    net = MNet().eval()
+    with torch.no_grad():
+        for k in range(net.cfg.n_future):
+            net.norm_out.mean[k * net.frame_dim + 331] = (k + 1) * speed       # root translation, canonical +y
+    first = plan_reach(Start(0.0, 0.0, math.pi / 2), (0.0, 1.0, 1.0), 60, seed=0, bm=bm).slice(0, 1)
+    r6 = axis_angle_to_rot6d(torch.as_tensor(first.poses[0], dtype=torch.float64)).float()
+    t0 = torch.as_tensor(first.trans[0]).float()
+    fwd = rot6d_to_matrix(r6[0])[:, 2].clone()
+    fwd[2] = 0
+    return (net, None, (r6, t0), (r6, t0 + 0.20 * fwd / fwd.norm()), torch.as_tensor(first.betas[:10]).float(),
+            torch.randn(256, 3, generator=torch.Generator().manual_seed(0)) * 0.02 + torch.tensor([0.0, 1.0, 1.0]),
+            torch.tensor([0.0, 1.0, 1.0]), bps_basis())
+
+
+def test_the_stall_rule_is_a_speed_below_stall_gain_a_frame_at_an_mnet_step(setup):
+    """What the rule measures (docs/goal.md): at each MNet step, the last frame's distance against the closest of the
+    `stall` frames before it. A hand closing 1 mm a frame (10 mm per window, but under STALL_GAIN in its last frame)
+    is handed to the refinement at the first step within 25 cm, frame 11; one closing 6 mm a frame is left to MNet
+    until GOAL's 10 cm, as without the rule."""
+    from graspkit.models.mnet import STALL_GAIN
+
+    bm, gv, body = setup
+    for speed, stalls in ((0.001, True), (0.006, False)):
+        args = list(_walking_in(bm, speed))
+        args[1] = body
+        paper, ours = rollout(*args, max_frames=140), rollout(*args, max_frames=140, stall=10)
+        d = paper.hand_dist
+        assert float(d[9] - d[10]) == pytest.approx(speed, abs=2e-4) and (speed < STALL_GAIN) == stalls
+        assert paper.first_refined is not None and float(d[paper.first_refined]) < 0.1
+        if stalls:
+            assert ours.first_refined == 11 and float(ours.hand_dist[11]) > 0.15
+        else:
+            assert ours.first_refined == paper.first_refined
+            torch.testing.assert_close(ours.hand_dist, paper.hand_dist)

@@ -909,3 +909,17 @@ def test_goal_reacher_refuses_start_values_outside_its_sliders():
             E.GoalReacher(None, None, **kw)
     r = E.GoalReacher(None, None, angle=360.0, distance=0.3, height=0.0, seconds=8.0)      # the ends are fine
     assert r.t_goal == 240
+
+
+def test_goal_rows_name_a_bad_schedule():
+    """spacing (2.5, 0.8) failed in numpy ('high - low < 0'), a NaN height overflowed, per_start 0 was blamed on `n`
+    and a fractional leg length failed in torch.empty."""
+    for kw, name in ((dict(spacing=(2.5, 0.8)), "spacing"), (dict(spacing=(-1.0, -0.5)), "spacing"),
+                     (dict(heights=(float("nan"), 1.0)), "heights"), (dict(legs=0), "legs")):
+        with pytest.raises(ValueError, match=f"{name}: expected"):
+            E.goal_row_schedules(2, **kw)
+    start = [object()]
+    for kw, name in ((dict(per_start=0), "per_start"), (dict(leg_frames=2.5), "leg_frames"),
+                     (dict(leg_frames=1), "leg_frames")):
+        with pytest.raises(ValueError, match=f"{name}: expected an integer"):
+            E.evaluate_goal_rows(None, start, **kw)

@@ -339,7 +339,7 @@ def predict_horizon(mnet: MNet, body: SparseBody, s: MNetState, object_points: T
     return torch.stack(fr[:horizon], 1), torch.stack(ft[:horizon], 1)
 
 
-STALL_GAIN = 0.005   # m: `rollout`'s stall rule (graspkit's): less progress than this over its window is a stall
+STALL_GAIN = 0.005   # m: `rollout`'s stall rule (graspkit's): a last frame less than this below the window's closest
 STALL_RADIUS = 0.25  # m: ... and only for a hand this close to the goal hand (not a body still standing at its start)
 STALL_FRAMES = 10    # frames: the window graspkit's pipelines give `rollout`'s stall rule (one MNet step)
 
@@ -388,9 +388,10 @@ def rollout(mnet: MNet, body: SparseBody, start: tuple[Tensor, Tensor], goal: tu
     object centre (3,) (the BPS basis centre) in the world. `floor` (m; None: off, GOAL's rollout) is graspkit's floor
     step, not in the paper: a frame whose lowest sole vertex is below this height is raised onto it before it is
     kept (MNet's frames sank up to 4.4 cm on the evaluation's rollouts: docs/goal.md). `stall` (frames; None: off,
-    GOAL's rollout) is graspkit's stall rule, not in the paper: a hand within `STALL_RADIUS` m of the goal hand that
-    has come no closer than `STALL_GAIN` m over the last `stall` frames starts Eq. 12–13's refinement there (MNet's
-    hand can stop 10–25 cm short and stay there: docs/goal.md)."""
+    GOAL's rollout) is graspkit's stall rule, not in the paper: at each MNet step, a hand within `STALL_RADIUS` m of
+    the goal hand whose distance is not `STALL_GAIN` m below the closest of the `stall` frames before (for a hand
+    coming steadily closer: one that gained less than `STALL_GAIN` in its last frame) starts Eq. 12–13's refinement
+    there (MNet's hand can stop 10–25 cm short and stay there: docs/goal.md)."""
     from graspkit.optim.goal_refine import (GOAL_HAND_RADIUS, MotionRefineWeights, hand_object_offsets,
                                             hand_step_targets, refine_frame)
     from graspkit.models.gnet import SparseBody, pose_rotmats
@@ -450,7 +451,7 @@ def rollout(mnet: MNet, body: SparseBody, start: tuple[Tensor, Tensor], goal: tu
             rs.append(r[0])
             ts.append(t[0])
             vs.append(verts(r, t)[0])
-            dist.append(float((vs[-1][:c.n_hand] - goal_hand[0]).norm(dim=-1).mean()))
+            dist.append(float((vs[-1][:c.n_hand] - goal_hand[0]).norm(dim=-1).mean().detach()))
             if len(rs) >= max_frames or dist[-1] <= reach_tol or (refine and not near and dist[-1] < GOAL_HAND_RADIUS):
                 break                                  # (within 10 cm: the rest of this step's frames are re-planned)
     return Rollout(torch.stack(rs), torch.stack(ts), torch.tensor(dist), dist[-1] <= reach_tol, first_refined)

@@ -485,7 +485,8 @@ def generate(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal:
     start-major). t_goal: the goal frame (int or (G,)); frames: how many to generate (default max t_goal: the clip has
     frames + 1 poses, the start included); floor, lift: `rollout`'s floor constraints (off, as the paper).
     Every frame draws z for the whole batch from `generator`, so a sequence's draws depend on the batch it is in:
-    the same seed gives the same motions for the same starts, goals and n, not for one goal taken out of them."""
+    the same seed gives the same motions for the same starts, goals and n, not for one goal taken out of them.
+    The model runs in eval mode (no dropout) and is left in the mode it came in."""
     check_generator(generator)
     pp, p0, rest, g, idx = expand_starts(start, goal, n)
     dtype = model.decoder[0].weight.dtype                  # float32 unless the caller converted the model

@@ -262,9 +262,10 @@ plt.show()
 # paper's rollout for either):
 # - `floor=0.0`: MNet's frames tend to sink into the floor (up to 4 cm on the evaluation's rollouts: nothing in its
 #   rollout holds the feet at the floor), so any frame whose soles are below the floor is raised onto it;
-# - `stall=STALL_FRAMES` (10 frames): a hand within 25 cm of the goal hand that has come less than 5 mm closer over
-#   the last 10 frames starts the Eq. 12–13 refinement where it is. Here it fires at frame 61 (the flat stretch of
-#   the blue curve) and the hand arrives at frame 135 on the machine this lesson was built on; on the evaluation's
+# - `stall=STALL_FRAMES` (10 frames): at each MNet step, a hand within 25 cm of the goal hand that is not 5 mm closer
+#   than at its closest in the 10 frames before (one creeping in at under 5 mm a frame) starts the Eq. 12–13
+#   refinement where it is. Here it fires at frame 61 (the flat stretch of
+#   the blue curve) and the hand arrives at frame 136 on the machine this lesson was built on (135 on another); on the evaluation's
 #   rollouts it takes the goal grasps reached from 7 to 11 of 12.
 #
 # The arrival frame is the one figure here that depends on the last bits of the arithmetic: a rollout feeds every
