@@ -114,6 +114,8 @@ def test_image_round_trip_and_deterministic_sampling():
     for n in (2.5, True):
         with pytest.raises(ValueError, match="n: expected a whole number"):
             m.sample(b["traj_interp"][0], b["local"][0], b["contacts"][0], n)
+    with pytest.raises(TypeError, match="generator: expected a torch.Generator"):     # torch's randn error before
+        m.sample(b["traj_interp"][0], b["local"][0], b["contacts"][0], 2, generator="x")
     bad = b["local"][0].clone()
     bad[3, 4, 1] = float("nan")                                   # would give all-NaN markers without a word
     with pytest.raises(ValueError, match="local: expected finite"):

@@ -47,6 +47,7 @@ import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
+from graspkit.checks import check_generator
 from graspkit.models.blocks import GaussianHead, ResBlock, kl_standard_normal, reparameterize, robust_kl
 
 T = 60
@@ -423,6 +424,7 @@ class MotionFillVAE(nn.Module):
         traj = None if traj is None else torch.as_tensor(traj)
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise ValueError(f"n: expected a whole number >= 1 of samples, got {n!r}")
+        check_generator(generator)
         was = self.training
         self.eval()
         ti = traj_interp.float().expand(n, -1, -1)
