@@ -191,7 +191,12 @@ def intention(wrist: Tensor, pelvis: Tensor, psi: Tensor, goal: Tensor, time_lef
     dtype = wrist.dtype
     psi, time_left = (x if isinstance(x, Tensor) else torch.as_tensor(x, dtype=dtype, device=wrist.device)
                       for x in (psi, time_left))                      # a plain number is one for every body
-    shape = (wrist[..., 0] + pelvis[..., 0] + psi + goal[..., 0] + time_left).shape     # the broadcast shape
+    try:
+        shape = torch.broadcast_shapes(wrist.shape[:-1], pelvis.shape[:-1], psi.shape, goal.shape[:-1], time_left.shape)
+    except RuntimeError:
+        raise ValueError(f"wrist, pelvis, psi, goal, time_left: expected shapes that broadcast ((..., 3) positions, "
+                         f"(...) headings and times), got {tuple(wrist.shape)}, {tuple(pelvis.shape)}, "
+                         f"{tuple(psi.shape)}, {tuple(goal.shape)}, {tuple(time_left.shape)}") from None
     if not bool(torch.isfinite(goal).all()):     # a NaN goal would make I^r silently 0 (NaN > eps is False)
         raise ValueError("goal: contains NaN or Inf (expected world positions in metres)")
     for x, n, unit in ((wrist, "wrist", "a position in metres"), (pelvis, "pelvis", "a position in metres"),

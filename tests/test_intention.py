@@ -211,6 +211,10 @@ def test_errors_name_the_argument():
         I.intention(torch.zeros(3), torch.zeros(3), torch.tensor(0.0), torch.zeros(2), torch.tensor(1.0))
     with pytest.raises(ValueError, match="rest"):
         I.body_joints(torch.zeros(135), torch.zeros(21, 3))
+    with pytest.raises(ValueError, match="wrist, pelvis, psi, goal, time_left: expected shapes that broadcast"):
+        I.intention(torch.zeros(2, 3), torch.zeros(2, 3), torch.zeros(5), torch.zeros(2, 3), 1.0)
+    out = I.intention(torch.zeros(2, 3), torch.zeros(2, 3), torch.zeros(1), torch.ones(2, 3), torch.tensor([1.0, 0.0]))
+    assert out.shape == (2, 7) and (out[1] == 0).all() and (out[0] != 0).any()      # broadcast; past t_G zero
 
 
 def test_a_nan_time_left_goal_or_body_is_refused_not_read_as_goal_time_passed():
