@@ -234,6 +234,8 @@ def run_saga_motion(approach: Path, out: Path, quick: bool, checkpoints: Path) -
     from graspkit.viz.export import write_atomic
 
     motions, names = approach_motions(approach)
+    if not motions:
+        raise FileNotFoundError(f"data: no approach clips (approach_*.npz) in {approach}")
     arr = make_windows(motions, BodyModel.from_file(default_model_path()), stride=30, align_end=True, progress=False)
     test = np.unique(arr["clip"][[split_of(names[c]) == "test" for c in arr["clip"]]])
     if not len(test):
@@ -402,7 +404,6 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
     if unknown:
         raise ValueError(f"methods: unknown {sorted(unknown)}; expected some of {', '.join(METHODS)}")
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     ck = Path(checkpoints) if checkpoints else DATA_STUBS / "checkpoints"
     if not ck.is_dir():
         raise FileNotFoundError(f"checkpoints: no folder {ck}")
@@ -412,6 +413,8 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
     for f in folders:
         if not f.is_dir():
             raise FileNotFoundError(f"data: no folder {f}")
+    grasps, approach = _holding(folders, "grasp_*.npz"), _holding(folders, "approach_*.npz")   # in any --data order
+    out.mkdir(parents=True, exist_ok=True)                # after the checks: a refused run leaves no folder
     bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
     rows: list[Row] = []
     steps = tqdm(list(methods), desc="eval --all", unit="method")
@@ -423,10 +426,10 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
                    planner_motion(bm, folders, n=4 if quick else 40)]
         elif m == "saga":
             new = _method(ck / "wholegrasp.pt", out / "saga_eval.json", ck / "wholegrasp_eval.json", reuse, saga_rows,
-                          lambda o: run_saga(folders[0], o, quick, ck), "SAGA (WholeGrasp w/ opt.)", "grasp")
+                          lambda o: run_saga(grasps, o, quick, ck), "SAGA (WholeGrasp w/ opt.)", "grasp")
         elif m == "saga_motion":
             new = _method(ck / "motionfill.pt", out / "motionfill_eval.json", ck / "motionfill_eval.json", reuse,
-                          saga_motion_rows, lambda o: run_saga_motion(folders[-1], o, quick, ck),
+                          saga_motion_rows, lambda o: run_saga_motion(approach, o, quick, ck),
                           "SAGA (MotionFill, traj + local)", "motion")
         elif m == "motion":
             new = common_motion_rows(bm, folders, ck, k=2 if quick else 4)
@@ -441,6 +444,11 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
                 r.note = (r.note + "; " if r.note else "") + f"{time.perf_counter() - t0:.0f} s"
         rows += new
     return merge(rows) + paper_rows()
+
+
+def _holding(folders: list[Path], pattern: str) -> Path:
+    """The first of the folders with a file matching pattern (else the first folder: its evaluator says what is missing)."""
+    return next((f for f in folders if any(f.glob(pattern))), folders[0])
 
 
 def merge(rows: list[Row]) -> list[Row]:

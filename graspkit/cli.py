@@ -410,7 +410,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     ev.add_argument("--update", action="store_true",
                     help="with --all: keep --out's benchmark.csv and replace only the rows the --methods make (a "
                          "row whole: run together the methods that fill one row, e.g. saga_motion,motion)")
-    ev.set_defaults(func=_cmd_eval_all)
+    ev.set_defaults(func=_cmd_eval_all, out_is_file=False)       # --all's --out is a folder, whatever its name
     evaluate = ev.add_subparsers(dest="eval_command", required=False)
     if named in ("train", "eval"):
         from graspkit.eval_wandr import add_wandr_commands

@@ -511,3 +511,27 @@ def test_ground_truth_row_averages_the_grasps_volumes_and_depths(tmp_path):
     row = ground_truth_grasps(bm, [DATA_STUBS / "grasps"], n=3).values
     for k in ("contact_ratio", "volume_cm3", "depth_cm"):
         assert row[k] == pytest.approx(np.mean([r[k] for r in one]), rel=1e-9, abs=1e-12), k
+
+
+def test_folders_are_found_by_what_they_hold_and_a_refused_run_writes_nothing(tmp_path, monkeypatch, capsys):
+    """--data in either order: SAGA takes the folder with grasp files, MotionFill the one with approach clips (saga
+    read only the first folder and saga_motion only the last); a folder without approach clips is named (it failed as
+    'motions: no clip gave a window'); a refused run leaves no --out folder; --all's --out is a folder whatever its
+    name (x.csv was asked to be a file)."""
+    seen = {}
+    monkeypatch.setattr(B, "run_saga", lambda folder, o, quick, ck: seen.setdefault("saga", folder) and {"rows": {}})
+    monkeypatch.setattr(B, "run_saga_motion", lambda folder, o, quick, ck: seen.setdefault("motion", folder) and {})
+    monkeypatch.setattr(B, "_method", lambda ck, out, shipped, reuse, rows, run, *a: (run(out), [])[1])
+    B.run_all(tmp_path / "o", data=[STUBS / "approach", STUBS / "grasps"], methods=("saga", "saga_motion"))
+    assert seen == {"saga": STUBS / "grasps", "motion": STUBS / "approach"}
+    monkeypatch.undo()
+    with pytest.raises(FileNotFoundError, match="data: no approach clips \\(approach_\\*.npz\\) in"):
+        B.run_saga_motion(STUBS / "grasps", tmp_path / "m.json", True, DATA_STUBS / "checkpoints")
+    with pytest.raises(FileNotFoundError, match="data: no folder"):
+        B.run_all(tmp_path / "refused", data=[tmp_path / "missing"], methods=("gt",))
+    assert not (tmp_path / "refused").exists()
+    folder = tmp_path / "dir.csv"
+    folder.mkdir()
+    monkeypatch.setattr(B, "run_all", lambda *a, **k: [])
+    main(["eval", "--all", "--methods", "gt", "--out", str(folder)])
+    assert "expected a file path" not in capsys.readouterr().err

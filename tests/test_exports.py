@@ -87,9 +87,12 @@ def test_glb_files_read_back_with_trimesh(exported):
 
 
 def test_bad_name_is_refused(exported, tmp_path):
-    m, bm, _, _ = exported
+    m, bm, box, _ = exported
     with pytest.raises(ValueError, match="name"):
         export_motion(m, bm, tmp_path, "../escape")
+    with pytest.raises(ValueError, match="objects: 'body' is the body mesh's name"):   # it replaced the body
+        export_motion(m, bm, tmp_path, "x", objects={"body": box})
+    assert not list(tmp_path.iterdir())                          # refused before any file
 
 
 # The animated GLB plays the input frames at their times, and its header follows the glTF 2.0 binary layout (total

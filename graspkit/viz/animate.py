@@ -147,6 +147,16 @@ def _ffmpeg_path() -> str | None:
     return imageio_ffmpeg.get_ffmpeg_exe()
 
 
+class RealTimeGif(PillowWriter):
+    """Pillow's GIF writer with frame delays that add up to real time: a GIF stores delays in 1/100 s, and one
+    delay of int(1000 / fps) ms per frame (Pillow's) plays 30 fps 10 % fast; here 30, 40, 30 ms ... at 30 fps."""
+
+    def finish(self) -> None:
+        edges = np.round(np.arange(len(self._frames) + 1) * 100.0 / self.fps).astype(int) * 10   # ms, 10 ms steps
+        self._frames[0].save(self.outfile, save_all=True, append_images=self._frames[1:],
+                             duration=np.maximum(np.diff(edges), 10).tolist(), loop=0)
+
+
 def save_animation(anim: FuncAnimation, path: str | os.PathLike, fps: float | None = None, dpi: float | None = None,
                    progress: bool | None = None) -> Path:
     """Write anim to path (.gif with Pillow, .mp4 with ffmpeg) atomically; a progress bar over frames is shown
@@ -156,7 +166,7 @@ def save_animation(anim: FuncAnimation, path: str | os.PathLike, fps: float | No
     fps = fps or getattr(anim, "graspkit_fps", None) or 1000.0 / anim._interval
     rc: dict[str, Any] = {}
     if suffix == ".gif":
-        writer: Any = PillowWriter(fps=fps)
+        writer: Any = RealTimeGif(fps=fps)
     elif suffix == ".mp4":
         exe = _ffmpeg_path()
         if exe is None:

@@ -58,13 +58,16 @@ def _as_trimesh(item: Any, name: str) -> tuple[np.ndarray, np.ndarray]:
     return v, f
 
 
-def _check_objects(objects: Any) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Validated static objects {name: (vertices, faces) or Trimesh} (None: none) as {name: (V,3), (F,3)}."""
+def _check_objects(objects: Any, body: str = "body") -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Validated static objects {name: (vertices, faces) or Trimesh} (None: none) as {name: (V,3), (F,3)}; no object
+    may take the body mesh's name `body` (it would replace or shadow the body in the scene)."""
     if objects is None:
         return {}
     if not isinstance(objects, Mapping):
         raise TypeError(f"objects: expected a mapping {{name: (vertices, faces) or Trimesh}}, "
                         f"got {type(objects).__name__}")
+    if body in map(str, objects):
+        raise ValueError(f"objects: {body!r} is the body mesh's name; give the object another")
     return {str(k): _as_trimesh(item, str(k)) for k, item in objects.items()}
 
 
@@ -208,7 +211,7 @@ def export_sequence_glb(vertices: Any, faces: Any, path: str | os.PathLike, fps:
         raise ValueError("vertices: need at least one frame, got 0")
     if not np.isfinite(verts).all():
         raise ValueError("vertices: contain NaN or Inf")
-    objs = _check_objects(objects)
+    objs = _check_objects(objects, name)
     kept = np.unique(np.append(np.arange(0, len(verts), stride), len(verts) - 1))
     verts = verts[kept]
     if f.size and (f.min() < 0 or f.max() >= verts.shape[1]):
