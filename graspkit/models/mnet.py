@@ -350,7 +350,6 @@ def check_stall(stall: Any) -> None:
         raise ValueError(f"stall: expected a whole number of frames >= 1, or None (off), got {stall!r}")
 
 
-@torch.no_grad()
 def _check_rollout_inputs(start: Any, goal: Any, betas: Any, max_frames: Any, reach_tol: Any, min_speed: Any,
                           floor: Any) -> None:
     """`rollout`'s arguments, each named in a ValueError when it is not what `rollout` expects."""
@@ -376,6 +375,7 @@ def _check_rollout_inputs(start: Any, goal: Any, betas: Any, max_frames: Any, re
         raise ValueError(f"floor: expected None (off) or a finite height in metres, got {floor!r}")
 
 
+@torch.no_grad()
 def rollout(mnet: MNet, body: SparseBody, start: tuple[Tensor, Tensor], goal: tuple[Tensor, Tensor], betas: Tensor,
             object_points: Tensor, obj_centre: Tensor, basis: Tensor, max_frames: int = 300, refine: bool = True,
             reach_tol: float = 0.01, min_speed: float = 0.003, refine_weights: MotionRefineWeights | None = None,
