@@ -271,6 +271,36 @@ def test_bad_inputs_are_named(bm, prior):
             GraspPoseOpt(bm, prior, GraspPoseConfig(steps=steps)).fit(torch.zeros(1, 143, 3), _dummy_object())
 
 
+def test_contact_maps_markers_and_settings_are_checked_before_any_step(bm, prior):
+    """A contact map of -1 made E^m_cont negative (the optimiser rewarded for leaving the object), NaN markers failed in
+    the Kabsch SVD, markers in millimetres ran, one contact map alone dropped both contact terms, and nn_every 0,
+    two learning rates or 50 hand components failed deep inside (an independent check): each is named."""
+    opt = GraspPoseOpt(bm, prior)
+    m, obj = torch.zeros(2, 143, 3), _dummy_object()
+    mc, oc = torch.full((2, 143), 0.5), torch.full((2, obj.num_points), 0.5)
+    for bad_mc, bad_oc, name in ((-mc, oc, "marker_contact"), (mc, 5 * oc, "object_contact"),
+                                 (mc * float("nan"), oc, "marker_contact")):
+        with pytest.raises(ValueError, match=f"{name}: expected contact probabilities in"):
+            opt.fit(m, obj, bad_mc, bad_oc)
+    with pytest.raises(ValueError, match="marker_contact, object_contact: .* need both"):
+        opt.fit(m, obj, mc, None)
+    nan = m.clone()
+    nan[0, 3, 1] = float("nan")
+    with pytest.raises(ValueError, match="markers: contains NaN"):
+        opt.fit(nan, obj)
+    with pytest.raises(ValueError, match="markers: largest side .* millimetres"):
+        opt.fit(torch.randn(2, 143, 3, generator=torch.Generator().manual_seed(0)) * 300.0, obj)
+    for kw, name in ((dict(nn_every=0), "nn_every"), (dict(log_every=0), "log_every"),
+                     (dict(contact_points=0), "contact_points"), (dict(n_pca=50), "n_pca"),
+                     (dict(lrs=(0.01, 0.01)), "lrs"), (dict(lrs=(0.01, -1.0, 0.01)), "lrs"),
+                     (dict(collision="no"), "collision")):
+        with pytest.raises(ValueError, match=f"{name}: expected"):
+            GraspPoseConfig(**kw)
+    for kw in (dict(colli_body=-200.0), dict(sigma_b=-0.01), dict(floor=float("nan"))):
+        with pytest.raises(ValueError, match=f"{next(iter(kw))}: expected a finite number >= 0"):
+            GraspPoseWeights(**kw)
+
+
 def test_rotated_object_grid_matches_the_exact_signed_distance_of_the_turned_mesh():
     from graspkit.data.grasp_io import cached_sdf_grid
     from graspkit.objects import make_object

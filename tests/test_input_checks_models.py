@@ -111,9 +111,14 @@ def test_wholegrasp_and_grasppose_refuse_millimetres(wholegrasp):
     pts, nrm = _cloud(300)
     with pytest.raises(ValueError, match="object_points: largest side 99.*metres"):
         wholegrasp.sample(pts * 1000, nrm)
-    for h in (850.0, -0.2, torch.tensor([0.8, 900.0])):
+    for h in (850.0, -0.2, torch.tensor([900.0])):
         with pytest.raises(ValueError, match="object_height: .*expected an object-centre height in metres"):
             wholegrasp.sample(pts, nrm, object_height=h, n=2)
+    for h, name in ((torch.tensor([0.8, 0.9]), "object_height"), ("abc", "object_height")):   # one object, one height
+        with pytest.raises(ValueError, match=f"{name}: expected"):
+            wholegrasp.sample(pts, nrm, object_height=h, n=2)
+    with pytest.raises(ValueError, match=r"centre: expected a point \(3,\)"):
+        wholegrasp.sample(pts, nrm, centre=torch.zeros(2))
     assert wholegrasp.sample(pts, nrm, object_height=0.0).markers.shape[0] == 1     # an object on the floor is fine
     with pytest.raises(ValueError, match="points: largest side"):
         GraspObject(pts * 1000, nrm, 0.8)

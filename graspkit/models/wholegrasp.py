@@ -614,6 +614,16 @@ def check_sample_inputs(points: Tensor, normals: Tensor, n: int, least: int, nam
     if len(points) < least:
         raise ValueError(f"{names[0]}: expected at least {least} points (PointNet++'s first level samples "
                          f"{least} centres), got {len(points)}")
+    for name, x in extra.items():                  # one object: a height is one number, a centre one point
+        want = (3,) if name == "centre" else ()
+        try:
+            shape = None if x is None else tuple(torch.as_tensor(x, dtype=torch.float32).reshape(-1).shape)
+        except (TypeError, ValueError, RuntimeError):
+            raise ValueError(f"{name}: expected {'a point (3,)' if want else 'a number'} in metres, got "
+                             f"{type(x).__name__}") from None
+        if shape is not None and shape != (want[0] if want else 1,):
+            raise ValueError(f"{name}: expected {'a point (3,)' if want else 'one number'} in metres for the one "
+                             f"object, got {shape[0]} values")
     for name, x in ((names[0], points), (names[1], normals), *extra.items()):
         if x is not None and not torch.isfinite(torch.as_tensor(x, dtype=torch.float32)).all():
             raise ValueError(f"{name}: contains NaN or Inf")

@@ -26,7 +26,8 @@ graspkit's choices where the paper is silent (all in `GraspPoseWeights` / `Grasp
   least-squares rigid fit (Kabsch) of that body's body and face markers to the target ones.
 - V_B in d(o, V_B) is the hand vertices (contacts are with the hands; the rest of the body is far), and only the
   256 object points with the highest C^_o enter that sum per sample; S(o, V^h_B) is taken for the 512 object points
-  nearest the hand at the start of stage 3 (the hand moves little in stage 3), signed by the hand's vertex normals.
+  nearest the hand at the start of stage 3 (the hand moves little in stage 3), signed by the hand's vertex normals;
+  points that end inside the hand outside that set are not seen (docs/saga.md: up to 7.1 against a reported 0.31).
   S(b, O) uses the object's signed-distance grid when one is given, else the point cloud with its normals (SAGA's
   "signed distance from point x to point cloud Y"; the nearest point's normal signs it, so beside a sharp edge of a
   sparse cloud a point outside can read as inside). The evaluation, the lessons and `graspkit.saga` pass
@@ -91,6 +92,7 @@ Frames: everything in the object frame of WholeGrasp-VAE (object centre at 0, z 
 from __future__ import annotations
 
 import copy
+import math
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
@@ -100,6 +102,7 @@ from torch import Tensor
 from tqdm.auto import tqdm
 
 from graspkit.body.markers import foot_vertices, saga_markers, sole_rest_heights, vertex_normals
+from graspkit.checks import check_bool, check_int, check_weight
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX, JOINT_NAMES
 from graspkit.metrics import joint_limit_excess
 from graspkit.models.gnet import SparseBody
@@ -135,6 +138,10 @@ class GraspPoseWeights:
     heuristic: float = 15.0       # alpha^h_cont of S.3 (not in the paper)
     heuristic_prior: float = 0.7  # S.3: hand vertices with prior contact probability above this ...
     heuristic_radius: float = 0.02  # ... and closer than this (m) are pulled to the object
+
+    def __post_init__(self) -> None:
+        for name, value in vars(self).items():        # a negative weight rewards what its term removes
+            check_weight(value, name)
 
 
 PARAMS = ("transl", "orient6d", "betas", "z", "left_pca", "right_pca", "eyes", "joint6d")
@@ -178,6 +185,19 @@ class GraspPoseConfig:
     # stages 2-3, penalised by weights.free_joints and weights.limits (graspkit's; () is Alg. 1: docs/saga.md)
     free_joints: tuple[str, ...] = ARM_JOINTS
     weights: GraspPoseWeights = field(default_factory=GraspPoseWeights)
+
+    def __post_init__(self) -> None:
+        for name in ("contact_points", "collision_points", "log_every", "nn_every"):
+            check_int(getattr(self, name), name, least=1)
+        check_int(self.n_pca, "n_pca", least=1)
+        if self.n_pca > 45:
+            raise ValueError(f"n_pca: expected at most the model's 45 hand components, got {self.n_pca}")
+        lrs = tuple(self.lrs) if isinstance(self.lrs, (tuple, list)) else ()
+        if len(lrs) != 3 or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                                    and x > 0 for x in lrs):
+            raise ValueError(f"lrs: expected three learning rates > 0 (stages 1-3 of Alg. 1), got {self.lrs!r}")
+        for name in ("collision", "contact", "ground", "heuristic"):
+            check_bool(getattr(self, name), name)
 
 
 @dataclass
@@ -543,6 +563,16 @@ class GraspPoseOpt:
             raise ValueError("markers: expected at least one marker set (B >= 1), got 0")
         if len(self.cfg.steps) != 3 or any(isinstance(k, bool) or not isinstance(k, int) or k < 0 for k in self.cfg.steps):
             raise ValueError(f"steps: expected three step counts >= 0 (stages 1-3 of Alg. 1), got {self.cfg.steps}")
+        if not bool(torch.isfinite(markers).all()):
+            raise ValueError("markers: contains NaN or Inf")
+        require_points_in_metres(markers, "markers", "markers in millimetres need a scale of 0.001")
+        if (marker_contact is None) != (object_contact is None):
+            raise ValueError("marker_contact, object_contact: E^o_cont and E^m_cont need both contact maps (or "
+                             "neither: E_fit alone)")
+        for name, c in (("marker_contact", marker_contact), ("object_contact", object_contact)):
+            if isinstance(c, Tensor) and not bool(((c >= 0) & (c <= 1)).all()):          # NaN fails this too
+                raise ValueError(f"{name}: expected contact probabilities in [0, 1], got values from "
+                                 f"{float(c.min()):g} to {float(c.max()):g}")
         if marker_contact is not None and marker_contact.shape != markers.shape[:2]:
             raise ValueError(f"marker_contact: expected shape {tuple(markers.shape[:2])}, "
                              f"got {tuple(marker_contact.shape)}")
