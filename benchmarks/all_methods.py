@@ -26,6 +26,9 @@ def ratio_table(rows: list[Row], table: str, reference: str) -> str:
     cols = [k for k in metrics if k in ref.values]
     lines = [f"| {table}: method / {reference} | " + " | ".join(metrics[k][0] for k in cols) + " |",
              "|---|" + "---|" * len(cols)]
+    if table == "motion":        # the planner's row is its own protocol (its 40 clips): a scale, not a like-for-like
+        lines.insert(0, f"(each row against {reference!r}, which is measured on other clips: a scale across "
+                        "protocols, not a comparison; compare a column's cells within one protocol, README)\n")
     for r in ours:
         if r is ref or not r.values:
             continue

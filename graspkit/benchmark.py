@@ -343,18 +343,19 @@ def common_motion_rows(bm: BodyModel, folders: list[Path], checkpoints: Path, k:
     files = _approach_files(folders, k)
     goals = torch.stack([goal_from_cylinder(a, 2.0, 0.9) for a in np.linspace(0.0, 360.0, k, endpoint=False)])
     methods = (  # name, weights, what it needs, its motions, what they are
-        ("SAGA (MotionFill + GraspMotion-Opt)", "motionfill.pt", files,
+        ("SAGA (MotionFill + GraspMotion-Opt)", ("motionfill.pt", "pose_prior.pt", "motionfill_smooth_ae.pt"), files,
          lambda: motionfill_motions(files, checkpoints)[0],
          "2 s windows ending at the grasp of the first test-object approach clips"),
-        ("GOAL (GNet + MNet)", "mnet.pt", seqs, lambda: goal_motions(seqs, checkpoints),
+        ("GOAL (GNet + MNet)", ("gnet.pt", "mnet.pt"), seqs, lambda: goal_motions(seqs, checkpoints),
          "GNet + MNet rollouts from the same clips' first frames"),
-        ("WANDR", "wandr.pt", True, lambda: wandr_motions(checkpoints / "wandr.pt", goals, 120),
+        ("WANDR", ("wandr.pt",), True, lambda: wandr_motions(checkpoints / "wandr.pt", goals, 120),
          "4 s towards goals 2 m away, 0.9 m high, no object"))
     suffix = f" · {k} common motion{'s' * (k != 1)}"          # COMMON for k = 4
     rows = []
     for name, weights, data, motions, what in methods:
-        if not (checkpoints / weights).is_file():
-            rows.append(Row("motion", name + suffix, "graspkit", {}, f"checkpoint missing: {checkpoints / weights}"))
+        missing = [checkpoints / w for w in weights if not (checkpoints / w).is_file()]   # every file it loads
+        if missing:
+            rows.append(Row("motion", name + suffix, "graspkit", {}, f"checkpoint missing: {missing[0]}"))
         elif not data:
             rows.append(Row("motion", name + suffix, "graspkit", {}, "no test-object approach clip in the data"))
         else:
@@ -425,7 +426,8 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
             new = [ground_truth_grasps(bm, folders, n=8 if quick else 200),
                    planner_motion(bm, folders, n=4 if quick else 40)]
         elif m == "saga":
-            new = _method(ck / "wholegrasp.pt", out / "saga_eval.json", ck / "wholegrasp_eval.json", reuse, saga_rows,
+            new = _method((ck / "wholegrasp.pt", ck / "pose_prior.pt"), out / "saga_eval.json",
+                          ck / "wholegrasp_eval.json", reuse, saga_rows,
                           lambda o: run_saga(grasps, o, quick, ck), "SAGA (WholeGrasp w/ opt.)", "grasp")
         elif m == "saga_motion":
             new = _method(ck / "motionfill.pt", out / "motionfill_eval.json", ck / "motionfill_eval.json", reuse,
@@ -434,7 +436,8 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
         elif m == "motion":
             new = common_motion_rows(bm, folders, ck, k=2 if quick else 4)
         elif m == "goal":
-            new = _method(ck / "gnet.pt", out / "goal_eval.json", ck / "goal_eval.json", reuse, goal_rows,
+            new = _method((ck / "gnet.pt", ck / "mnet.pt"), out / "goal_eval.json", ck / "goal_eval.json", reuse,
+                          goal_rows,
                           lambda o: run_goal(folders, o, quick, ck), "GOAL (GNet + refinement)", "grasp")
         else:
             new = _method(ck / "wandr.pt", out / "wandr_eval.json", ck / "wandr_eval.json", reuse, wandr_rows,
@@ -474,10 +477,10 @@ def update(old: list[Row], new: list[Row]) -> list[Row]:
     return out + list(fresh.values())
 
 
-def _method(checkpoint: Path, out: Path, shipped: Path, reuse: bool, rows_of, run, method: str, table: str
+def _method(checkpoint: Path | tuple[Path, ...], out: Path, shipped: Path, reuse: bool, rows_of, run, method: str, table: str
             ) -> list[Row]:
     """A method's rows: from its shipped evaluation (`shipped`, when reuse and present), else by running its evaluator
-    into `out`; a row naming the file when its checkpoint is missing."""
+    into `out`; a row naming the file when a checkpoint it loads (one path or several) is missing."""
     import json
 
     if reuse and shipped.is_file():
@@ -485,8 +488,9 @@ def _method(checkpoint: Path, out: Path, shipped: Path, reuse: bool, rows_of, ru
         for r in rows:
             r.note += f" (from {shipped.name})"
         return rows
-    if not checkpoint.is_file():
-        return [Row(table, method, "graspkit", note=f"checkpoint missing: {checkpoint}")]
+    missing = [c for c in (checkpoint if isinstance(checkpoint, tuple) else (checkpoint,)) if not c.is_file()]
+    if missing:
+        return [Row(table, method, "graspkit", note=f"checkpoint missing: {missing[0]}")]
     return rows_of(run(out))
 
 

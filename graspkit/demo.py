@@ -217,9 +217,10 @@ def wandr_stage(bm: BodyModel, out_dir: Path, seconds: float = 4.0) -> tuple[lis
                        f"WANDR (+ lift): reach the goal in {seconds:g} s", goals=goal[None].numpy())
 
 
-METHOD_STAGES = {"planner": (planner_stage, None), "saga": (saga_stage, "wholegrasp.pt"),
-                 "saga_motion": (saga_motion_stage, "motionfill.pt"),
-                 "goal": (goal_stage, "mnet.pt"), "wandr": (wandr_stage, "wandr.pt")}
+METHOD_STAGES = {"planner": (planner_stage, ()), "saga": (saga_stage, ("wholegrasp.pt", "pose_prior.pt")),   # every
+                 "saga_motion": (saga_motion_stage, ("wholegrasp.pt", "pose_prior.pt", "motionfill.pt",  # file a
+                                                     "motionfill_smooth_ae.pt")),                        # stage loads
+                 "goal": (goal_stage, ("gnet.pt", "mnet.pt")), "wandr": (wandr_stage, ("wandr.pt",))}
 
 
 def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, ...] = STAGES) -> list[Path]:
@@ -246,10 +247,11 @@ def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, .
             scene = {f"body_{k}": (verts[k].numpy() + [1.0 * k, 0.0, 0.0], faces) for k in range(len(verts))}
             written += [path, export_scene(scene, out_dir / "body_poses_shapes.glb")]
             continue
-        fn, ck = METHOD_STAGES[stage]
-        if ck is not None and not (CHECKPOINTS / ck).is_file():
-            tqdm.write(f"demo: skipping {stage}: its checkpoint {CHECKPOINTS / ck} is missing "
-                       f"(train it with `graspkit train ...`, see README){stub_hint(CHECKPOINTS / ck)}")
+        fn, needs = METHOD_STAGES[stage]
+        missing = [CHECKPOINTS / ck for ck in needs if not (CHECKPOINTS / ck).is_file()]
+        if missing:
+            tqdm.write(f"demo: skipping {stage}: its checkpoint {missing[0]} is missing "
+                       f"(train it with `graspkit train ...`, see README){stub_hint(missing[0])}")
             continue
         paths, panel = fn(bm, out_dir)
         written += paths

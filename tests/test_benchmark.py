@@ -137,6 +137,10 @@ def test_a_method_comes_from_its_shipped_evaluation_or_says_what_is_missing(tmp_
     assert ours["GrabNet-SMPLX"].values["volume_cm3"] == 8.0 and "wholegrasp_eval.json" in ours["GrabNet-SMPLX"].note
     assert not ours["GOAL (GNet + refinement)"].values
     assert f"checkpoint missing: {ck / 'gnet.pt'}" in ours["GOAL (GNet + refinement)"].note
+    (ck / "gnet.pt").write_bytes(b"")                 # the evaluator loads mnet.pt too: named, not a crash
+    rows = run_all(tmp_path / "out", data=[STUBS / "grasps"], checkpoints=ck, methods=("goal",), reuse=False)
+    goal = next(r for r in rows if r.method == "GOAL (GNet + refinement)" and r.source == "graspkit")
+    assert f"checkpoint missing: {ck / 'mnet.pt'}" in goal.note and not goal.values
 
 
 def test_saga_motion_rows_from_a_run_equal_those_from_its_saved_evaluation(tmp_path):
@@ -213,8 +217,8 @@ def test_a_row_holds_one_protocol_the_common_motions_and_goals_saga_clips_get_ro
     common = common_motion_rows(bm, [STUBS / "approach"], ck, k=1)          # only WANDR's weights are there
     assert [r.method for r in common if r.values] == ["WANDR · 1 common motion"]
     missing = {r.method: r.note for r in common if not r.values}      # named, not left out without a word
-    assert missing == {f"{m} · 1 common motion": f"checkpoint missing: {ck / f}" for m, f in (
-        ("SAGA (MotionFill + GraspMotion-Opt)", "motionfill.pt"), ("GOAL (GNet + MNet)", "mnet.pt"))}
+    assert missing == {f"{m} · 1 common motion": f"checkpoint missing: {ck / f}" for m, f in (   # the first file
+        ("SAGA (MotionFill + GraspMotion-Opt)", "motionfill.pt"), ("GOAL (GNet + MNet)", "gnet.pt"))}   # each loads
     goal = torch.stack([goal_from_cylinder(0.0, 2.0, 0.9)])
     (m,) = wandr_motions(ck / "wandr.pt", goal, 120)
     v = m.vertices(bm).numpy()
@@ -438,7 +442,7 @@ def test_common_saga_and_goal_motions_start_from_test_object_clips(tmp_path, mon
     mug and two bottle clips; k = 4)."""
     from graspkit.data.grab import load_grasp_sequence
 
-    for f in ("motionfill.pt", "mnet.pt"):
+    for f in ("motionfill.pt", "pose_prior.pt", "motionfill_smooth_ae.pt", "gnet.pt", "mnet.pt"):   # all they load
         (tmp_path / f).write_bytes(b"")
     files, seqs = [], []
     monkeypatch.setattr(B, "motionfill_motions", lambda fs, ck: files.extend(fs) or (_sliding_motions(len(fs)), []))
@@ -454,7 +458,7 @@ def test_run_all_runs_each_saga_evaluator_on_its_kind_of_data(tmp_path, monkeypa
     MotionFill evaluation the approach clips."""
     ck = tmp_path / "ck"
     ck.mkdir()
-    for f in ("wholegrasp.pt", "motionfill.pt"):
+    for f in ("wholegrasp.pt", "pose_prior.pt", "motionfill.pt"):
         (ck / f).write_bytes(b"")
     seen = {}
     monkeypatch.setattr(B, "run_saga", lambda root, o, q, c: seen.setdefault("saga", Path(root)) and {"rows": {}})
