@@ -119,6 +119,12 @@ def test_wholegrasp_and_grasppose_refuse_millimetres(wholegrasp):
             wholegrasp.sample(pts, nrm, object_height=h, n=2)
     with pytest.raises(ValueError, match=r"centre: expected a point \(3,\)"):
         wholegrasp.sample(pts, nrm, centre=torch.zeros(2))
+    with pytest.raises(TypeError, match="generator: expected a torch.Generator"):
+        wholegrasp.sample(pts, nrm, generator=0)
+    from graspkit.optim.grasppose import GraspObject
+    for R in (2 * torch.eye(3), torch.diag(torch.tensor([1.0, 1.0, -1.0]))):    # a scale, a mirror
+        with pytest.raises(ValueError, match="rotation: expected a rotation matrix"):
+            GraspObject(pts, nrm, 0.8, rotation=R)
     assert wholegrasp.sample(pts, nrm, object_height=0.0).markers.shape[0] == 1     # an object on the floor is fine
     with pytest.raises(ValueError, match="points: largest side"):
         GraspObject(pts * 1000, nrm, 0.8)

@@ -48,6 +48,7 @@ from typing import TYPE_CHECKING, Any
 import torch
 from torch import Tensor, nn
 
+from graspkit.checks import check_generator
 from graspkit.objects.distance import MAX_METRES, nearest_neighbours, require_points_in_metres, require_unit_normals
 from graspkit.objects.placement import GRASP_HEIGHTS
 from graspkit.objects.sdf import signed_distance_to_points
@@ -335,6 +336,7 @@ class WholeGraspVAE(nn.Module):
         """
         check_sample_inputs(object_points, object_normals, n, self.obj_dec.sa[0].npoint,
                             object_height=object_height, centre=centre)
+        check_generator(generator)
         was = self.training
         self.eval()
         dev = self.out_markers.weight.device

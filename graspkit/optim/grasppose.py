@@ -225,6 +225,12 @@ class GraspObject:
                              f"got {tuple(self.normals.shape)}")
         if self.rotation is not None and tuple(self.rotation.shape[-2:]) != (3, 3):
             raise ValueError(f"rotation: expected shape (3, 3) or (B, 3, 3), got {tuple(self.rotation.shape)}")
+        if self.rotation is not None:          # a scale or shear would make the grid read another object
+            R = self.rotation.double()
+            eye = torch.eye(3, dtype=R.dtype)
+            if not (torch.allclose(R @ R.transpose(-1, -2), eye.expand_as(R), atol=1e-4)
+                    and bool((torch.linalg.det(R) > 0).all())):
+                raise ValueError("rotation: expected a rotation matrix (orthonormal, determinant +1)")
         if self.origin is not None and (self.origin.dim() not in (1, 2) or self.origin.shape[-1] != 3):
             raise ValueError(f"origin: expected shape (3,) or (B, 3), got {tuple(self.origin.shape)}")
         require_points_in_metres(self.points, "points")
