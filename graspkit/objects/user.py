@@ -33,7 +33,7 @@ CATALOGUE_SIDES = (0.08, 0.41)
 SOLID_SAMPLES = 512      # surface points of the one-solid check (solid_problem)
 SOLID_OFFSET = 1e-5      # how far behind / in front of the surface it looks, as a share of the largest side
 MIN_BAD = 2              # samples that must disagree before a mesh is refused
-PART_SAMPLES = 64        # more samples on each connected part of a mesh of several (at most SOLID_SAMPLES in all)
+PART_SAMPLES = 64        # more samples on each connected part of a mesh of several (down to 4 * MIN_BAD when many)
 SOLID_PAIRS = 10_000_000  # at most this many (sample, face) pairs: fewer samples on meshes of over 20,000 faces
 Y_UP_SUFFIXES = (".glb", ".gltf")   # glTF 2.0 is +y up by specification: turned to z up on reading
 Y_UP_TO_Z_UP = np.array([[1.0, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]])   # +90 deg about x: y -> z
@@ -133,9 +133,10 @@ def _checked(mesh: trimesh.Trimesh, argument: str) -> trimesh.Trimesh:
 def solid_problem(mesh: trimesh.Trimesh, samples: int = SOLID_SAMPLES) -> str:
     """'' if the closed mesh bounds solids that do not overlap (separate pieces are fine), else what is wrong: the
     generalized winding number just behind and just in front of `samples` surface points (area-uniform, seed 0, and
-    up to PART_SAMPLES more on each connected part) must be 1 and 0. Parts that overlap (2 behind the surface), parts that touch along a shared face (1 in front) or
-    a part turned inside out (-1 in front) pass the closed-and-outward checks (the total volume is positive) but give
-    signed distances of the wrong sign; a cavity (an inner surface facing inwards) is fine."""
+    up to PART_SAMPLES more on each connected part) must be 1 and 0. Parts that overlap (2 behind the surface), parts
+    that touch along a shared face (1 in front) or a part turned inside out (-1 in front) pass the closed-and-outward
+    checks (the total volume is positive) but give signed distances of the wrong sign; a cavity (an inner surface
+    facing inwards) is fine."""
     samples = min(samples, max(64, SOLID_PAIRS // len(mesh.faces)))      # bounded time on large meshes
     pts, nrm = sample_surface(mesh, samples, seed=0)
     pts, nrm = _part_samples(mesh, samples, pts, nrm)
