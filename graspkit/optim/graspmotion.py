@@ -79,8 +79,8 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   grasp's. With the arms free: 3.1 cm, 12 of 12 clips end in contact, last-frame volume 1.92 -> 1.20 cm3 (docs).
 - The start frame (graspkit's, since 2026-12-03; `fit(start=...)`, passed by `saga.synthesize`): stage 1 fits frame 0
   to the start body's markers and stage 2 leaves it there. Without it S.2's planted feet drag frame 0 along the
-  sample's first steps, 8-22 cm off the start body in the calls measured; held, it is 2-3 mm from it, at the price of the sample's first
-  shuffling steps counted as skating (docs/saga_motion.md, "The start frame").
+  sample's first steps, 8-22 cm off the start body in the calls measured; held, it is 2-3 mm from it, at the price
+  of the sample's first shuffling steps counted as skating (docs/saga_motion.md, "The start frame").
 - Initialisation: the prior's mean pose, rigidly aligned per frame (Kabsch on the body and face markers).
 - E^o_colli and E_g are evaluated on the frames where a hand vertex is within 2 cm of the object's bounding box
   (chosen without gradient each step; elsewhere both are 0 by definition: no vertex can be inside or within 1 cm),
