@@ -57,6 +57,13 @@ def check_finite(x: Any, name: str, what: str) -> None:
         raise ValueError(f"{name}: contains NaN or Inf (expected {what})")
 
 
+def check_probabilities(x: Any, name: str) -> None:
+    """x (a tensor or None) with every value in [0, 1] (NaN fails too): a contact map, say."""
+    if x is not None and not bool(((x >= 0) & (x <= 1)).all()):
+        raise ValueError(f"{name}: expected contact probabilities in [0, 1], got values from {float(x.min()):g} to "
+                         f"{float(x.max()):g}")
+
+
 def check_bool(value: Any, name: str) -> bool:
     """A real bool (a string such as 'no' would read as True)."""
     if not isinstance(value, bool):

@@ -36,6 +36,7 @@ import torch
 from scipy.spatial import cKDTree
 from torch import Tensor, nn
 
+from graspkit.checks import check_int
 from graspkit.models.blocks import ResBlock
 from graspkit.models.gnet import NUM_JOINTS, POSE_DIM, Standardiser
 from graspkit.objects.bps import bps_encode
@@ -353,8 +354,6 @@ def check_stall(stall: Any) -> None:
 def _check_rollout_inputs(start: Any, goal: Any, betas: Any, max_frames: Any, reach_tol: Any, min_speed: Any,
                           floor: Any) -> None:
     """`rollout`'s arguments, each named in a ValueError when it is not what `rollout` expects."""
-    from graspkit.checks import check_int
-
     for name, pose in (("start", start), ("goal", goal)):
         ok = isinstance(pose, (tuple, list)) and len(pose) == 2 and all(isinstance(x, Tensor) for x in pose)
         if not ok or tuple(pose[0].shape) != (55, 6) or tuple(pose[1].shape) != (3,):

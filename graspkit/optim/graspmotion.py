@@ -111,7 +111,7 @@ from torch import Tensor, nn
 from tqdm.auto import tqdm
 
 from graspkit.body.markers import foot_vertices, palm_vertices, saga_markers, saga_sparse_markers, vertex_normals
-from graspkit.checks import check_bool, check_int, check_steps, check_weight
+from graspkit.checks import check_bool, check_int, check_probabilities, check_steps, check_weight
 from graspkit.models.gnet import SparseBody
 from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, _nearest, body_joint_ids, free_joint_excess,
                                      hand_vertex_ids, kabsch, with_free_joints)
@@ -523,9 +523,7 @@ class GraspMotionOpt:
             raise ValueError(f"foot_contact: expected shape ({B}, {F}, 4), got {tuple(foot_contact.shape)}")
         for name, x in (("foot_contact", foot_contact), ("object_contact", object_contact),
                         ("marker_contact", marker_contact)):
-            if isinstance(x, Tensor) and not bool(((x >= 0) & (x <= 1)).all()):      # NaN fails this too
-                raise ValueError(f"{name}: expected contact probabilities in [0, 1], got values from "
-                                 f"{float(x.min()):g} to {float(x.max()):g}")
+            check_probabilities(x, name)
         if object_contact is not None and (obj is None or tuple(object_contact.shape) != (B, obj.num_points)):
             raise ValueError(f"object_contact: expected shape ({B}, P) with an object of P points")
         if marker_contact is not None:

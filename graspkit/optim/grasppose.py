@@ -102,7 +102,7 @@ from torch import Tensor
 from tqdm.auto import tqdm
 
 from graspkit.body.markers import foot_vertices, saga_markers, sole_rest_heights, vertex_normals
-from graspkit.checks import check_bool, check_int, check_weight
+from graspkit.checks import check_bool, check_int, check_probabilities, check_weight
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX, JOINT_NAMES
 from graspkit.metrics import joint_limit_excess
 from graspkit.models.gnet import SparseBody
@@ -576,9 +576,7 @@ class GraspPoseOpt:
             raise ValueError("marker_contact, object_contact: E^o_cont and E^m_cont need both contact maps (or "
                              "neither: E_fit alone)")
         for name, c in (("marker_contact", marker_contact), ("object_contact", object_contact)):
-            if isinstance(c, Tensor) and not bool(((c >= 0) & (c <= 1)).all()):          # NaN fails this too
-                raise ValueError(f"{name}: expected contact probabilities in [0, 1], got values from "
-                                 f"{float(c.min()):g} to {float(c.max()):g}")
+            check_probabilities(c, name)
         if marker_contact is not None and marker_contact.shape != markers.shape[:2]:
             raise ValueError(f"marker_contact: expected shape {tuple(markers.shape[:2])}, "
                              f"got {tuple(marker_contact.shape)}")
