@@ -881,7 +881,7 @@ def test_evaluate_clips_counts_a_late_arrival_within_after_s_and_reports_centime
 def test_vae_opt_cells_are_their_goals_whatever_the_chunk_and_samples(bm, monkeypatch):
     """evaluate_vae_opt's rows carry their own goal's grid cell (Fig. 5 groups by it) and the goals per optimisation
     batch (`chunk`) change nothing: chunk 50 crashed on its second chunk, and n = 2 gave 248 of 250 rows another
-    goal's cell. Scored against evaluate_motions on the whole batch at once (iters = 0: the decoded random draws)."""
+    goal's cell (here chunk 5 on a 12-goal grid; iters = 0: the decoded random draws, scored as they are)."""
     from graspkit.optim.latent import evaluate_vae_opt
 
     goals, cells = E.grid_goals()
