@@ -240,16 +240,27 @@ def _agree(flag: bool) -> bool:
     return bool(t.item())
 
 
-def _loader(dataset: Dataset, cfg: TrainConfig, epoch: int, world: tuple[bool, int, int]) -> DataLoader:
-    """A DataLoader whose order depends only on (seed, epoch), sharded across ranks under DDP."""
+def _has_batchnorm(model: torch.nn.Module) -> bool:
+    """Whether any layer of `model` is a BatchNorm (which cannot train on a batch of one sample)."""
+    return any(isinstance(m, torch.nn.modules.batchnorm._BatchNorm) for m in model.modules())
+
+
+def _loader(dataset: Dataset, cfg: TrainConfig, epoch: int, world: tuple[bool, int, int],
+            no_single: bool = False) -> DataLoader:
+    """A DataLoader whose order depends only on (seed, epoch), sharded across ranks under DDP.
+
+    no_single: drop a last batch of one sample (BatchNorm models: a one-row batch cannot be normalised in training;
+    the order is shuffled each epoch, so a different sample sits out each time)."""
     dist, rank, size = world
     g = torch.Generator().manual_seed(cfg.seed + epoch)
     if dist:
         sampler = torch.utils.data.DistributedSampler(dataset, num_replicas=size, rank=rank, shuffle=True,
                                                       seed=cfg.seed, drop_last=False)
         sampler.set_epoch(epoch)
-        return DataLoader(dataset, batch_size=cfg.batch_size, sampler=sampler)
-    return DataLoader(dataset, batch_size=cfg.batch_size, shuffle=True, generator=g)
+        drop = no_single and len(sampler) % cfg.batch_size == 1
+        return DataLoader(dataset, batch_size=cfg.batch_size, sampler=sampler, drop_last=drop)
+    drop = no_single and len(dataset) % cfg.batch_size == 1  # type: ignore[arg-type]
+    return DataLoader(dataset, batch_size=cfg.batch_size, shuffle=True, generator=g, drop_last=drop)
 
 
 def batch_len(batch: Any) -> int:
@@ -337,13 +348,17 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
     `stop_at` after that epoch (both leave a checkpoint to resume from). With `val_dataset`, each epoch also logs
     `val_<term>`; the history goes to `<checkpoint>.csv` beside the checkpoint (every epoch) and its loss curves to
     `<checkpoint>.png` (at the end). The logged terms are per-sample means over the epoch (each batch's means
-    weighted by its size; under DDP summed over the ranks). Resuming refuses a file of another network or of other
+    weighted by its size; under DDP summed over the ranks); a model with BatchNorm layers skips a last batch of one
+    sample (shuffled each epoch, so another sample each time). Resuming refuses a file of another network or of other
     settings; a state already at `stop_at` returns its history without training. `ddp=False` marks a step that calls
     model methods other than `forward` (DDP synchronises only what runs through it): such a model is refused under
     an initialised process group instead of training out of step.
     """
     if len(dataset) == 0:
         raise ValueError("dataset: empty")
+    if len(dataset) < 2 and _has_batchnorm(model):
+        raise ValueError(f"dataset: {type(model).__name__} has BatchNorm layers, which need at least 2 samples to "
+                         f"train on; got {len(dataset)}")
     if time_limit_s is not None and not (isinstance(time_limit_s, (int, float)) and time_limit_s > 0):
         raise ValueError(f"time_limit_s: expected None or a positive number of seconds, got {time_limit_s!r}")
     if cfg.num_threads:
@@ -384,6 +399,7 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
         if stop_at is not None and start >= stop_at:         # already there (a run killed after saving that epoch)
             model.eval()
             return history
+    no_single = _has_batchnorm(model)
     t0 = time.perf_counter()
     bar = tqdm(desc=type(model).__name__, unit="epoch", disable=not progress or world[1] != 0, initial=start,
                total=cfg.epochs)
@@ -391,7 +407,7 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
         model.train()
         sums: dict[str, float] = {}
         n = 0
-        for batch in _loader(dataset, cfg, epoch, world):
+        for batch in _loader(dataset, cfg, epoch, world, no_single):
             logs = step(net, batch, epoch)
             opt.zero_grad(set_to_none=True)
             logs["loss"].backward()

@@ -122,6 +122,10 @@ def test_network_shapes_variants_and_loss(setup):
         torch.testing.assert_close(mean["d_transl"], tgt["d_transl"].mean(0).expand(B, -1, -1), atol=1e-5, rtol=1e-5)
         truth = {k: tgt[k] for k in keys}
         assert float(mnet_loss(truth, tgt, feet_mask(torch.zeros(B, cfg.n_future, 400), torch.arange(139, 179)))["loss"]) == 0
+        with pytest.raises(ValueError, match=r"feats\['goal'\]: expected shape \(B, 1321\)"):
+            net({**feats, "goal": torch.randn(B, 1000)})      # was torch's "size of tensor a (1000) must match"
+        with pytest.raises(ValueError, match=r"feats\['iaa'\]: .*got missing"):
+            net({k: v for k, v in feats.items() if k != "iaa"})
     with pytest.raises(ValueError, match="outputs"):
         MNet(MNetConfig(outputs="markers"))
 

@@ -373,3 +373,23 @@ def test_sampled_markers_follow_the_given_trajectory():
     np.testing.assert_allclose(s["markers"].double().numpy(), want, atol=1e-4)
     straight = global_motion(s["local"].double().numpy(), b["traj_interp"][0].double().numpy()[None].repeat(2, 0))
     assert np.abs(straight - want).max() > 1e-2
+
+
+def test_loss_names_unknown_parts_trajectory_and_a_batch_of_wrong_shape():
+    """A typo in `parts` trained nothing and one in `trajectory` silently used the true velocities; wrong shapes
+    failed deep in torch (an independent check). Each is now a ValueError naming the argument or the key."""
+    m = MotionFillVAE()
+    b = _batch()
+    for kwargs, message in (({"parts": ("trajectory",)}, "parts:"), ({"parts": ()}, "parts:"),
+                            ({"trajectory": "pred"}, "trajectory:")):
+        with pytest.raises(ValueError, match=message):
+            m.loss(b, **kwargs)
+    for key, value, message in (("local", b["local"][:, :, :78], r"batch\['local'\]: expected shape \(B, 61, 79, 3\)"),
+                                ("vel", b["vel"][:, :60], r"batch\['vel'\]"),
+                                ("vel", b["vel"][:2], r"batch\['vel'\]: expected shape \(B, 61, 3\) with B=3, got \(2, 61, 3\)"),
+                                ("contacts", b["contacts"] * 2, r"batch\['contacts'\]: expected float contact labels")):
+        with pytest.raises(ValueError, match=message):
+            m.loss({**b, key: value})
+    with pytest.raises(ValueError, match="missing key 'vel'"):
+        m.loss({k: v for k, v in b.items() if k != "vel"})
+    assert set(m.loss(b, parts=("local",))) >= {"markers", "contacts"}     # the checks leave valid calls alone

@@ -603,3 +603,21 @@ def test_grabnet_kl_weight_rises_linearly_to_the_papers_end_point(bm):
     for e, w in ((0, 0.005), (19, 0.1), (39, 0.2)):
         logs = model.loss({"params": x, "markers": markers}, out, body, pca, e, 40)
         assert logs["loss"].item() == pytest.approx(w * psi, rel=1e-4, abs=1e-5), e
+
+
+def test_the_kl_weight_is_annealed_over_valid_epochs_only_and_bool_labels_are_named():
+    """lambda_KL = 0.2 (e + 1) / E for 0 <= e < E (A.4); an epoch past the schedule gave a weight past the paper's
+    end value and a negative epoch a negative one (the KL term then rewarded a large KL), an independent check."""
+    from graspkit.models.blocks import annealed_kl_weight
+
+    assert [annealed_kl_weight(0.2, e, 4) for e in range(4)] == pytest.approx([0.05, 0.1, 0.15, 0.2])
+    model = WholeGraspVAE()
+    batch = _batch()
+    out = model(batch)
+    for epoch, epochs, name in ((10, 10, "epoch"), (-5, 10, "epoch"), (0, 0, "epochs"), (1.5, 10, "epoch")):
+        with pytest.raises(ValueError, match=f"^{name}:"):
+            model.loss(batch, out, epoch, epochs)
+    with pytest.raises(ValueError, match="marker_contact: expected float contact labels in \\[0, 1\\]"):
+        model({**batch, "marker_contact": batch["marker_contact"] > 0.5})
+    with pytest.raises(ValueError, match="object_contact: expected float contact labels"):
+        model({**batch, "object_contact": batch["object_contact"] * 2})

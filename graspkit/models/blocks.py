@@ -12,6 +12,8 @@ from contextlib import contextmanager
 import torch
 from torch import nn
 
+from graspkit.checks import check_int
+
 
 @contextmanager
 def evaluating(model: nn.Module) -> Iterator[nn.Module]:
@@ -84,3 +86,13 @@ def robust_kl(mu: torch.Tensor, logvar: torch.Tensor, per_dim: bool = False) -> 
     if per_dim:
         kl = kl / mu.shape[-1]
     return torch.sqrt(1.0 + kl.pow(2)) - 1.0
+
+
+def annealed_kl_weight(final: float, epoch: int, epochs: int) -> float:
+    """SAGA's KL weight annealed linearly with the epoch (A.4): final * (epoch + 1) / epochs, epoch 0-based in
+    [0, epochs)."""
+    epochs = check_int(epochs, "epochs", 1)
+    epoch = check_int(epoch, "epoch", 0)
+    if epoch >= epochs:
+        raise ValueError(f"epoch: expected a 0-based epoch below epochs={epochs}, got {epoch}")
+    return final * (epoch + 1) / epochs

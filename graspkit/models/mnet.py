@@ -239,6 +239,14 @@ class MNet(nn.Module):
 
     def forward(self, feats: dict[str, Tensor]) -> dict[str, Tensor]:
         """Eq. 9 features {'pose', 'verts', 'goal', 'iaa'} (B, ·) -> Eq. 10 changes (see `unpack`)."""
+        if not isinstance(feats, dict):
+            raise ValueError(f"feats: expected a dict of feature groups {sorted(self.proj)}, got {type(feats).__name__}")
+        for k in self.proj:
+            want = self.proj[k][0].in_features
+            x = feats.get(k)
+            if not isinstance(x, torch.Tensor) or x.dim() != 2 or x.shape[1] != want:
+                got = tuple(x.shape) if isinstance(x, torch.Tensor) else ("missing" if x is None else type(x).__name__)
+                raise ValueError(f"feats[{k!r}]: expected shape (B, {want}) (mnet.features), got {got}")
         h = torch.cat([self.proj[k](self.norms[k](feats[k])) for k in self.proj], 1)
         h = self.trunk(h)
         B = h.shape[0]

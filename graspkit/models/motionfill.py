@@ -57,6 +57,33 @@ NUM_MARKERS = 79
 FEATURES = NUM_MARKERS * 3 + 4
 
 
+WINDOW_SHAPES = {"traj": (NUM_ROOT, 4), "traj_interp": (NUM_ROOT, 4), "vel": (NUM_FRAMES, 3),
+                 "local": (NUM_FRAMES, NUM_MARKERS, 3), "contacts": (NUM_FRAMES, 4)}
+
+
+def check_window_batch(batch: dict[str, Tensor], keys: tuple[str, ...]) -> None:
+    """ValueError naming the first of `keys` missing from a batch of MotionFillDataset items or of a wrong shape
+    (B, *WINDOW_SHAPES[key]); contact labels must lie in [0, 1]."""
+    if not isinstance(batch, dict):
+        raise ValueError(f"batch: expected a dict of MotionFillDataset tensors, got {type(batch).__name__}")
+    B = None
+    for k in keys:
+        if k not in batch:
+            raise ValueError(f"batch: missing key {k!r} (a MotionFillDataset batch has {sorted(WINDOW_SHAPES)})")
+        x = batch[k]
+        want = WINDOW_SHAPES[k]
+        if not isinstance(x, Tensor) or x.dim() != len(want) + 1 or tuple(x.shape[1:]) != want \
+                or (B is not None and x.shape[0] != B):
+            got = tuple(x.shape) if isinstance(x, Tensor) else type(x).__name__
+            raise ValueError(f"batch[{k!r}]: expected shape (B, {', '.join(map(str, want))})"
+                             f"{'' if B is None else f' with B={B}'}, got {got}")
+        B = x.shape[0]
+    if "contacts" in keys:
+        c = batch["contacts"]
+        if not c.is_floating_point() or bool(((c < 0) | (c > 1)).any()):
+            raise ValueError("batch['contacts']: expected float contact labels in [0, 1]")
+
+
 def _reduce(err: Tensor, reduction: str) -> Tensor:
     """Per-element errors (B, frames, features) -> scalar: summed over frames and features and averaged over the
     batch ("sum", Eq. 8 as printed), or averaged over every element ("mean", the authors' released code)."""
@@ -369,6 +396,13 @@ class MotionFillVAE(nn.Module):
         cfg = self.cfg
         if cfg.reduction not in ("sum", "mean"):
             raise ValueError(f"reduction: expected 'sum' or 'mean', got {cfg.reduction!r}")
+        if not isinstance(parts, (tuple, list)) or not parts or not set(parts) <= {"traj", "local"}:
+            raise ValueError(f"parts: expected a non-empty subset of ('traj', 'local'), got {parts!r}")
+        if trajectory not in ("truth", "predicted"):
+            raise ValueError(f"trajectory: expected 'truth' or 'predicted', got {trajectory!r}")
+        check_window_batch(batch, ("traj", "traj_interp", "vel") if "local" not in parts
+                           else ("traj", "traj_interp", "vel", "local", "contacts") if "traj" in parts
+                           else ("vel", "local", "contacts"))
         logs: dict[str, Tensor] = {}
         loss = torch.zeros(())
         vel = batch["vel"]

@@ -53,7 +53,8 @@ from graspkit.objects.distance import MAX_METRES, nearest_neighbours, require_po
 from graspkit.objects.placement import GRASP_HEIGHTS
 from graspkit.objects.sdf import signed_distance_to_points
 from graspkit.paths import DATA_STUBS
-from graspkit.models.blocks import GaussianHead, ResBlock, kl_standard_normal, reparameterize, robust_kl
+from graspkit.models.blocks import (GaussianHead, ResBlock, annealed_kl_weight, kl_standard_normal, reparameterize,
+                                   robust_kl)
 from graspkit.models.pointnet2 import (FeaturePropagation, Grouping, PointNet2Encoder, gather, groupings_from_tensors,
                                        groupings_to_tensors, interpolation_weights)
 
@@ -301,6 +302,10 @@ class WholeGraspVAE(nn.Module):
         if self.cfg.multitask:
             self._check("marker_contact", batch["marker_contact"], (B, N))
             self._check("object_contact", batch["object_contact"], (B, P))
+            for k in ("marker_contact", "object_contact"):
+                c = batch[k]
+                if not c.is_floating_point() or bool(((c < 0) | (c > 1)).any()):
+                    raise ValueError(f"{k}: expected float contact labels in [0, 1] (a bool mask: .float())")
 
     # ------------------------------------------------------------------ losses
     def loss(self, batch: dict[str, Tensor], out: dict[str, Tensor], epoch: int, epochs: int) -> dict[str, Tensor]:
@@ -318,7 +323,7 @@ class WholeGraspVAE(nn.Module):
                                                    batch["normals"] if cfg.consistency == "signed" else None)
             rec = rec + cfg.lambda_m * logs["bce_markers"] + cfg.lambda_o * logs["bce_object"]
         logs["kl"] = kl_standard_normal(out["mu"], out["logvar"])
-        kl_w = cfg.kl_final * (epoch + 1) / max(epochs, 1)
+        kl_w = annealed_kl_weight(cfg.kl_final, epoch, epochs)
         loss = rec + kl_w * robust_kl(out["mu"], out["logvar"])
         if cfg.multitask:
             loss = loss + cfg.lambda_c * logs["consistency"]
@@ -741,7 +746,7 @@ class GrabNetSMPLX(nn.Module):
         logs = {"rec_markers": (markers - batch["markers"]).abs().sum((1, 2)).mean(),
                 "rec_params": ((out["params"] - batch["params"]) / self.param_std).abs().mean(),
                 "kl": kl_standard_normal(out["mu"], out["logvar"])}
-        kl_w = self.hparams["kl_final"] * (epoch + 1) / max(epochs, 1)
+        kl_w = annealed_kl_weight(self.hparams["kl_final"], epoch, epochs)
         loss = logs["rec_markers"] + logs["rec_params"] + kl_w * robust_kl(out["mu"], out["logvar"])
         logs["marker_error_cm"] = (markers - batch["markers"]).norm(dim=-1).mean().detach() * 100
         return {"loss": loss, **logs}
