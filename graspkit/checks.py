@@ -57,6 +57,15 @@ def check_finite(x: Any, name: str, what: str) -> None:
         raise ValueError(f"{name}: contains NaN or Inf (expected {what})")
 
 
+def check_betas(betas: Any, least: int) -> np.ndarray:
+    """Shape coefficients as a float64 1-D array of at least `least` finite values."""
+    b = np.asarray(betas, np.float64)
+    if b.ndim != 1 or len(b) < least or not np.isfinite(b).all():
+        raise ValueError(f"betas: expected {least} finite shape coefficients (a 1-D array), got shape "
+                         f"{np.shape(betas)}{'' if np.isfinite(b).all() else ' with NaN or Inf'}")
+    return b
+
+
 def check_probabilities(x: Any, name: str) -> None:
     """x (a tensor or None) with every value in [0, 1] (NaN fails too): a contact map, say."""
     if x is not None and not bool(((x >= 0) & (x <= 1)).all()):

@@ -68,6 +68,18 @@ def test_approach_rejects_a_bad_grasp_frame_or_start_pose():
         approach_motion(plan, g, grasp, open_hand, start_pose="tpose")
 
 
+def test_approach_dir_and_rig_go_together(bm):
+    """approach_dir without rig fell back to the plain blend without a word (an independent check): the straight
+    approach was lost silently. One without the other is now refused, naming both."""
+    plan, g, grasp, open_hand, _ = _approach_case()
+    with pytest.raises(ValueError, match="approach_dir, rig: expected both"):
+        approach_motion(plan, g, grasp, open_hand, approach_dir=np.array([0.0, 0.0, 1.0]))
+    with pytest.raises(ValueError, match="approach_dir, rig: expected both"):
+        approach_motion(plan, g, grasp, open_hand, rig=build_rig(bm, np.zeros(10)))
+    with pytest.raises(ValueError, match="^betas: expected finite shape coefficients"):
+        build_rig(bm, np.full(10, np.nan))
+
+
 def test_swivel_dirs_carry_over_where_the_arm_is_straight():
     """_swivel_dirs (docstring): the unit part of v perpendicular to the axis, carried over from the previous frame
     where v lies along the axis, and taken from the first good frame when the arm starts straight."""

@@ -3,6 +3,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 from graspkit.data.grab import load_grasp_sequence
 from graspkit.data.grasp_make import make_grasp_dataset, task_seed
@@ -99,3 +100,31 @@ def test_approach_contacts_are_labelled_on_every_frame_the_body_touches(tmp_path
             agree.append(np.mean(within == z["contact.body"][f].astype(bool)))
     assert early >= 5 and touching >= early and min(agree) > 0.999
     assert z["contact.body"][g].any() and z["contact.object"][g].any() and z["contact.markers"][g].any()
+
+
+def test_the_library_call_names_a_bad_seed_or_count_before_touching_the_folder(tmp_path):
+    """make_grasp_dataset(seed=-1) failed in numpy without naming the seed and left the folder claimed for seed -1,
+    so the corrected call was refused (an independent check); now nothing is created."""
+    for kwargs, message in (({"seed": -1}, "^seed: expected a non-negative integer"),
+                            ({"seed": 1.5}, "^seed:"), ({"seed": True}, "^seed:"),
+                            ({"chunk": 2.5}, "^chunk: expected an integer >= 1"), ({"n": True}, "^n:")):
+        args = {"kind": "grasp", "n": 1, "seed": 0, "out": tmp_path / "p", "workers": 1, "progress": False,
+                "chunk": 1, "objects": ("mug",), **kwargs}
+        with pytest.raises(ValueError, match=message):
+            make_grasp_dataset(**args)
+        assert not (tmp_path / "p").exists()
+
+
+def test_sample_grasp_task_names_a_bad_argument():
+    """A start pose of 'sitting', a grasp type the object does not afford, a reversed or negative start distance and
+    an int for rng were taken (or failed with an AttributeError) before (an independent check)."""
+    from graspkit.data.grasp import sample_grasp_task
+
+    rng = np.random.default_rng(0)
+    for kwargs, message in (({"start_pose": "sitting"}, "^start_pose:"), ({"grasp_type": "fist"}, "^grasp_type: mug affords"),
+                            ({"start_distance": (1.5, 0.05)}, "^start_distance:"),
+                            ({"start_distance": (-1, -0.5)}, "^start_distance:")):
+        with pytest.raises(ValueError, match=message):
+            sample_grasp_task(rng, "mug", **kwargs)
+    with pytest.raises(ValueError, match="^rng: expected a numpy Generator"):
+        sample_grasp_task(5, "mug")

@@ -81,8 +81,8 @@ def test_gnet_items_rebuild_their_vertices_with_smplx():
 def test_approach_window_and_goal_frame_are_checked(tmp_path):
     """ApproachDataset: a window under 2 frames ('None or >= 2'), a goal frame past the clip's last frame and a window
     that starts after the goal frame (goal_frame is an index within the item) are refused with a ValueError."""
-    for w in (0, 1):
-        with pytest.raises(ValueError, match="window"):
+    for w in (0, 1, 62.0, 2.5, True, "62"):      # 62.0 was a bare IndexError, "62" a TypeError (an independent check)
+        with pytest.raises(ValueError, match="^window: expected None or a whole number >= 2 frames"):
             ApproachDataset(STUBS / "approach", split=None, window=w)
     with np.load(STUBS / "approach" / "approach_000000.npz", allow_pickle=False) as z:
         T = len(z["body.params.fullpose"])

@@ -210,3 +210,17 @@ def test_a_one_frame_file_is_returned_at_the_rate_asked_for(tmp_path):
     s = _small_sequence(T=1, fps=120.0)
     p = save_grasp_sequence(tmp_path / "one.npz", s)
     assert load_grasp_sequence(p, fps=30.0).fps == 30.0 and load_grasp_sequence(p, fps=None).fps == 120.0
+
+
+def test_resampling_moves_the_goal_frame_with_the_frames(tmp_path):
+    """An approach clip read at another rate kept grasp.goal_frame at the file's rate: at 15 fps past the clip's end,
+    at 60 fps on the wrong frame (an independent check). It now follows the frames, as formats.resample moves a
+    motion's goal frame (frame g at src -> round(g fps / src))."""
+    seq = _joint_valued_seq(81, 30.0)
+    seq.extras["grasp.goal_frame"] = np.array(46)
+    path = save_grasp_sequence(tmp_path / "a.npz", seq)
+    for fps, want in ((15.0, 23), (60.0, 92), (30.0, 46)):
+        s = load_grasp_sequence(path, fps=fps)
+        g = int(s.extras["grasp.goal_frame"])
+        assert g == want and g < s.num_frames
+        np.testing.assert_allclose(s.poses[g], seq.poses[46], atol=1e-5)      # the same instant of the clip

@@ -340,3 +340,18 @@ def test_fit_arm_vertices_are_on_the_right_arm(bm, hm):
     x = v[hm.arm_ids, 0]
     assert len(x) > 100 and (x < 0).all()
     assert j[J["right_wrist"], 0] - 0.02 < np.median(x) < j[J["right_shoulder"], 0] + 0.02
+
+
+def test_the_pads_depend_on_the_model_file_not_on_flat_hand_mean(bm):
+    """HandModel chose the fingertip pads on bm()'s rest body, whose hands are curled or flat by flat_hand_mean: the
+    two models of one file shared 2-8 of 4-11 pad vertices per digit, and the same task fitted to an accepted grasp
+    with one and a rejected, 5 mm deep one with the other (an independent check). Now one file, one set of pads
+    (the mean hands' rest body, as the marker layouts)."""
+    from graspkit.body import BodyModel
+    from graspkit.paths import default_model_path
+
+    flat = go.HandModel(BodyModel.from_file(default_model_path(), flat_hand_mean=True))
+    mean = go.HandModel(bm)
+    assert set(flat.pad_ids) == set(mean.pad_ids) == set(go.FINGER_JOINTS)
+    for f in go.FINGER_JOINTS:
+        np.testing.assert_array_equal(flat.pad_ids[f], mean.pad_ids[f])

@@ -237,3 +237,77 @@ def test_iter_vertices_chunks_overlap_and_match_the_whole_clip(bm):
         starts.append(start)
         torch.testing.assert_close(v, whole[start:start + len(v)], rtol=0, atol=1e-5)
     assert starts == [0, 3, 6, 9]
+
+
+# ------------------------------------------------------------------- the motion and grasp generators' arguments
+def test_the_planners_and_generators_name_a_bad_argument(bm):
+    """Each was taken silently or failed deep inside numpy before (an independent check of the motion data): a goal
+    frame too soon for a step (the wrist 8-12 cm off the stored goal), a zero / NaN / negative v_pref, a 2-D or
+    short or NaN betas, num_frames 0 (a random length) or -5 (a 20-frame clip), a goal of two coordinates, a start
+    of two values."""
+    from graspkit.data.locomotion import generate_locomotion
+    from graspkit.data.reaching import MIN_GOAL_FRAMES, Start, generate_reach_chain, plan_reach
+
+    goal = (0.5, -0.2, 1.0)
+    with pytest.raises(ValueError, match=f"t_goal_frames: expected an integer >= {MIN_GOAL_FRAMES}"):
+        plan_reach(Start(), goal, MIN_GOAL_FRAMES - 1, bm=bm)
+    for v in (0.0, float("nan"), -1.0, 2.5, True):
+        with pytest.raises(ValueError, match=r"v_pref: expected a walking speed in \(0, 1.6\] m/s"):
+            plan_reach(Start(), goal, 30, bm=bm, v_pref=v)
+    with pytest.raises(ValueError, match=r"goal: expected a finite point \(3,\)"):
+        plan_reach(Start(), (1.0, 0.0), 30, bm=bm)
+    with pytest.raises(ValueError, match=r"start: expected a Start or \(x, y, heading\)"):
+        plan_reach((0.0, 0.0), goal, 30, bm=bm)
+    for betas in (np.zeros((2, 10)), np.ones(3), np.full(10, np.nan)):
+        with pytest.raises(ValueError, match="^betas: expected 10 finite shape coefficients"):
+            generate_locomotion(1, bm, num_frames=30, betas=betas)
+    with pytest.raises(ValueError, match="^betas:"):
+        generate_reach_chain(1, bm, betas=np.full(10, np.nan))
+    for n in (0, -5, True, 2.5, "60"):
+        with pytest.raises(ValueError, match="^num_frames: expected an integer >= 1"):
+            generate_locomotion(1, bm, num_frames=n)
+    m = plan_reach(Start(), goal, MIN_GOAL_FRAMES, bm=bm, hold_frames=0)         # the shortest time is met
+    wrist = m.joint_positions(bm)[MIN_GOAL_FRAMES, 21]
+    assert np.linalg.norm(wrist - np.asarray(goal)) < 1e-3
+
+
+def test_a_motion_keeps_goal_frame_and_hand_only_with_a_goal_and_a_whole_goal_frame(clip):
+    """Motion(goal_frame=2.7) was truncated to 2 (load_motion refuses it in a file), and a goal_frame or hand without
+    a goal was kept and then dropped by save_motion without a word."""
+    args = (clip.poses, clip.trans, clip.betas)
+    with pytest.raises(ValueError, match="goal_frame: expected a whole frame"):
+        Motion(*args, goal=(0, 0, 1), goal_frame=2.7, hand="right")
+    with pytest.raises(ValueError, match="goal_frame, hand: given .* without a goal"):
+        Motion(*args, goal_frame=2, hand="right")
+    assert Motion(*args, goal=(0, 0, 1), goal_frame=np.int64(2), hand="right").goal_frame == 2
+
+
+def test_the_datasets_name_bad_windows_splits_and_statistics(bm):
+    """WANDR: samples=0 gave NaN intention statistics, a horizon below the window put t_G inside it, a clip index out
+    of range was a bare IndexError, a fractional max_steps was taken; MotionFill: fractions over 1 or negative and a
+    negative clip count were split silently."""
+    from graspkit.data import motionfill_dataset as MF
+    from graspkit.data import wandr_dataset as W
+
+    clips = W.clips_from_motions([load_motion(p) for p in sorted(CLIP.parent.glob("*.npz"))[:2]], ["a", "b"], bm)
+    for samples in (0, 1, -5):
+        with pytest.raises(ValueError, match="^samples: expected an integer >= 2"):
+            W.compute_stats(clips, samples=samples)
+    items = torch.tensor([[0, 5]])
+    with pytest.raises(ValueError, match="^horizon: expected an integer >= 11"):
+        W.make_batch(clips, items, steps=10, horizon=5)
+    with pytest.raises(ValueError, match="^steps: expected an integer >= 0"):
+        W.make_batch(clips, items, steps=-1)
+    with pytest.raises(ValueError, match=r"^items: clip indices expected in \[0, 2\)"):
+        W.make_batch(clips, torch.tensor([[5, 5]]), steps=2)
+    for bad in (2.5, True, -1):
+        with pytest.raises(ValueError, match="^max_steps: expected an integer >= 0"):
+            W.WindowDataset(clips, max_steps=bad)
+    for fractions in ((0.9, 0.3), (-0.2, 0.1), (0.8,)):
+        with pytest.raises(ValueError, match="^fractions: expected two non-negative numbers"):
+            MF.split_clips(10, fractions=fractions)
+    for n in (-3, 10.5):
+        with pytest.raises(ValueError, match="^num_clips: expected an integer >= 0"):
+            MF.split_clips(n)
+    s = MF.split_clips(10, fractions=(0.6, 0.4))
+    assert (len(s["train"]), len(s["val"]), len(s["test"])) == (6, 4, 0)

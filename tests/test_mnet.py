@@ -572,3 +572,42 @@ def test_the_stall_rule_is_a_speed_below_stall_gain_a_frame_at_an_mnet_step(setu
         else:
             assert ours.first_refined == paper.first_refined
             torch.testing.assert_close(ours.hand_dist, paper.hand_dist)
+
+
+def test_a_start_pose_outside_what_training_moved_is_warned_about(setup):
+    """The shipped MNet's statistics put 354 of its pose inputs (jaw, eyes, left fingers, ...: joints the synthetic
+    clips never move) at the 1e-3 std floor, so a jaw turned 0.05 rad reads 50 stds out, and that rollout missed the
+    goal the unturned start reached (an independent check). rollout now warns, naming the joint; a start from the
+    planner, as graspkit.goal.synthesize builds it, does not warn. Standardiser.untrained on a hand-made case."""
+    import warnings
+
+    from graspkit.data.reaching import Start, plan_reach
+    from graspkit.models.gnet import Standardiser
+    from graspkit.models.mnet import load_mnet
+
+    st = Standardiser(3)
+    x = torch.tensor([[1.0, 2.0, 5.0], [3.0, 2.0, 5.0], [5.0, 2.0, 5.0]])
+    st.fit(x)                                   # the last two columns are constant: std at the floor
+    assert st.untrained(torch.tensor([[40.0, 2.004, 5.0]])).tolist() == [False, False, False]   # 4 stds
+    assert st.untrained(torch.tensor([[40.0, 2.0, 5.01]])).tolist() == [False, False, True]     # 10 stds
+    bm, _, body = setup
+    net = load_mnet(Path(__file__).resolve().parents[1] / "data_stubs" / "checkpoints" / "mnet.pt")
+    first = plan_reach(Start(0.0, 0.0, math.pi / 2), (0.0, 1.0, 1.0), 60, seed=0, bm=bm).slice(0, 1)
+    poses = torch.as_tensor(first.poses[0], dtype=torch.float64)
+    t0 = torch.as_tensor(first.trans[0]).float()
+    betas = torch.as_tensor(first.betas[:10]).float()
+    obj = torch.randn(64, 3, generator=torch.Generator().manual_seed(0)) * 0.04 + torch.tensor([0.0, 0.7, 0.9])
+
+    def warned(p):
+        r6 = axis_angle_to_rot6d(p).float()
+        with warnings.catch_warnings(record=True) as w:
+            warnings.simplefilter("always")
+            M.rollout(net, body, (r6, t0), (r6, t0 + torch.tensor([0.0, 0.5, 0.0])), betas, obj, obj.mean(0),
+                      bps_basis(), max_frames=2)
+        return [str(x.message) for x in w if "training stds" in str(x.message)]
+
+    assert warned(poses) == []
+    jaw = poses.clone()
+    jaw[J["jaw"], 0] += 0.05
+    [msg] = warned(jaw)
+    assert msg.startswith("start: the pose features of jaw lie more than 5 training stds")

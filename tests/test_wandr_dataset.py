@@ -248,6 +248,26 @@ def test_cached_clips_are_keyed_by_the_clips_and_the_body(bm, tmp_path):
     assert len(list(tmp_path.glob("clips_*.npz"))) == 3
 
 
+def test_a_clip_remade_in_place_at_the_same_size_rebuilds_the_cache(bm, tmp_path):
+    """The cache was keyed on names and sizes only: a clip rewritten with one beta's sign flipped (the same bytes
+    long) returned the stale ClipSet (an independent check). The key now holds each npz member's CRC-32."""
+    src = sorted((STUBS / "reach").glob("*.npz"))[0]
+    (tmp_path / "d" / "reach").mkdir(parents=True)
+    clip = tmp_path / "d" / "reach" / src.name
+    with np.load(src, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    np.savez(clip, **arrays)                              # uncompressed: a changed value keeps the size
+    a = W.cached_clips(tmp_path / "d", bm, cache=tmp_path / "c", kinds=("reach",))
+    size = clip.stat().st_size
+    arrays["betas"] = arrays["betas"].copy()
+    arrays["betas"][9] = 0.5 if arrays["betas"][9] != 0.5 else -0.5
+    np.savez(clip, **arrays)
+    assert clip.stat().st_size == size
+    b = W.cached_clips(tmp_path / "d", bm, cache=tmp_path / "c", kinds=("reach",))
+    assert len(list((tmp_path / "c").glob("clips_*.npz"))) == 2
+    assert float(b.betas[0, 9]) == pytest.approx(float(arrays["betas"][9])) != float(a.betas[0, 9])
+
+
 def test_intention_stats_are_taken_at_frame_i_with_t_goal_minus_i_frames_left(bm):
     clips = W.load_clips(W.list_clips(DATA_STUBS / "motion", kinds=("reach",), limit=1), bm)
     k = 0

@@ -303,6 +303,9 @@ class _Replay:
     def condition(self, state, inten):
         return state
 
+    def untrained_features(self, state):
+        return []                                          # no training statistics: nothing to warn about
+
     def decode(self, z, cond):
         self.k += 1
         return self.deltas[:, self.k]

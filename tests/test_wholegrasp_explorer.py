@@ -97,3 +97,19 @@ def test_latent_walk_figure_draws_green_exactly_the_markers_above_the_level(walk
     assert len(green) == 1
     assert len(green[0].get_offsets()) == int((cm > CONTACT_LEVEL).sum())
     walk.decode()
+
+
+def test_a_bad_seed_or_height_is_named_and_changes_nothing(walk):
+    """A fractional, boolean or negative seed was truncated or taken silently and a NaN height made every readout
+    NaN (an independent check); each is now a ValueError naming the argument, and z stays as it was."""
+    z = walk.z.clone()
+    for value in (2.7, True, -4, None, "abc"):
+        with pytest.raises(ValueError, match="^seed: expected an integer >= 0"):
+            walk.update("seed", value)
+    torch.testing.assert_close(walk.z, z, rtol=0, atol=0)
+    with pytest.raises(ValueError, match="^seed:"):
+        LatentWalk(walk.model, walk.points, walk.normals, 0.9, seed=2.5)
+    with pytest.raises(ValueError, match="^height: expected a finite number"):
+        LatentWalk(walk.model, walk.points, walk.normals, float("nan"))
+    walk.update("seed", np.int64(5))                     # a numpy integer from a widget is a seed
+    assert walk.seed == 5

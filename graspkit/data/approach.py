@@ -66,6 +66,10 @@ def approach_motion(plan: Motion, grasp_frame: int, grasp_pose: np.ndarray, open
     grasp's elbow pole), so the open hand reaches the object from outside rather than sweeping through it."""
     if start_pose not in ("idle", "t_pose"):
         raise ValueError(f"start_pose: expected 'idle' or 't_pose', got {start_pose!r}")
+    if (approach_dir is None) != (rig is None):
+        raise ValueError("approach_dir, rig: expected both (the straight approach needs rig = build_rig(bm, betas)) or "
+                         f"neither, got approach_dir={'None' if approach_dir is None else 'given'}, "
+                         f"rig={'None' if rig is None else 'given'}")
     T, fps, g = plan.num_frames, plan.fps, int(grasp_frame)
     if not 0 <= g < T:
         raise ValueError(f"grasp_frame: expected a frame in [0, {T}), got {grasp_frame}")

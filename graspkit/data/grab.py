@@ -84,6 +84,7 @@ class GraspSequence:
         return axis_angle_matrix(self.object_orient.astype(np.float64))
 
 
+FRAME_EXTRAS = {"grasp.goal_frame", "grasp.frame"}   # extras that are frame numbers (rescaled when resampled)
 DEFAULT_MODEL_NAME = "graspkit procedural SMPLX_NEUTRAL.npz"   # body.model of files made with the shipped body
 
 
@@ -266,8 +267,9 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
                      ("object.params.global_orient", o_r), *numeric):
         if not np.isfinite(arr).all():
             raise SequenceFileError(f"{path}: key {key!r} contains NaN or Inf")
+    frame_scale = None
     if fps is not None and abs(src - fps) > 1e-6 and T > 1:
-        n_old = T
+        n_old, frame_scale = T, fps / src
         poses, trans, _, _ = resample(poses, trans, src, fps)
         o_r3, o_t, _, _ = resample(o_r[:, None], o_t, src, fps)
         o_r = o_r3[:, 0]
@@ -278,6 +280,10 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
     skip = {"framerate", "n_frames", "obj_name", "gender", "sbj_id", "motion_intent", "body.betas", "body.model",
             "body.flat_hand_mean", "object.object_mesh", "object.points", "object.normals"}
     extras = {k: v for k, v in a.items() if not (k in skip or k.startswith(("body.params.", "object.params.", "contact.")))}
+    if frame_scale is not None:                   # resampled: the frame numbers graspkit's files carry follow
+        for k in FRAME_EXTRAS & set(extras):      # (as formats.resample moves a motion's goal frame)
+            f = np.asarray(extras[k])
+            extras[k] = np.array(min(int(round(float(f) * frame_scale)), len(poses) - 1), dtype=f.dtype)
     mesh = _str(a.get("object.object_mesh"))
     if mesh and not os.path.isabs(mesh) and (path.parent / mesh).is_file():
         mesh = os.path.normpath(path.parent.absolute() / mesh)  # so that a copy saved elsewhere still finds it

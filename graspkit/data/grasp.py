@@ -372,6 +372,15 @@ def sample_grasp_task(rng: np.random.Generator, name: str, grasp_type: str | Non
     """Draw one grasp task for object `name` (see the module docstring); grasp_type / object_pose fix those draws."""
     if name not in GRASP_PARTS:
         raise ValueError(f"name: unknown object {name!r}; valid names are {list_objects()}")
+    if not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng: expected a numpy Generator (np.random.default_rng(seed)), got {type(rng).__name__}")
+    if grasp_type is not None and grasp_type not in grasp_types(name):
+        raise ValueError(f"grasp_type: {name} affords {list(grasp_types(name))}, got {grasp_type!r}")
+    if start_pose is not None and start_pose not in ("idle", "t_pose"):
+        raise ValueError(f"start_pose: expected None, 'idle' or 't_pose', got {start_pose!r}")
+    if len(start_distance) != 2 or not 0 <= start_distance[0] <= start_distance[1] <= 3.0:
+        raise ValueError(f"start_distance: expected (low, high) metres with 0 <= low <= high <= 3, got "
+                         f"{tuple(start_distance)}")
     betas = sample_betas(rng)
     if grasp_type is None:
         grasp_type = str(rng.choice(grasp_types(name)))
@@ -586,9 +595,8 @@ class GraspFitter:
         V = self.vertices(results).double()
         faces = self.bm.faces
         feet = _foot_ids(self.bm)
-        mesh = make_object(results[0].task.object_name)
         for b, r in enumerate(results):
-            obj = apply_pose(r.task.object_pose, mesh)
+            obj = apply_pose(r.task.object_pose, make_object(r.task.object_name))   # each its own object
             q = M.grasp_metrics(V[b], faces, obj, refine=1)    # one ray per column: the shipped sets were made so
             # the shipped sets were accepted on the vertices' distance alone (grasp_metrics also counts an overlap)
             q["contact"] = float(q["min_distance"] <= M.GRASP_CONTACT_THRESHOLD)

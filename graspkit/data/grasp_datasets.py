@@ -196,9 +196,10 @@ class ApproachDataset(_Files):
     def __init__(self, root: str | os.PathLike, split: str | None = "train", window: int | None = SAGA_CLIP_FRAMES,
                  bm: BodyModel | None = None, accepted_only: bool = True) -> None:
         super().__init__(root, split, accepted_only)
-        if window is not None and window < 2:
-            raise ValueError(f"window: expected None or >= 2 frames, got {window}")
-        self.window = window
+        if window is not None and (isinstance(window, (bool, np.bool_)) or not isinstance(window, (int, np.integer))
+                                   or window < 2):
+            raise ValueError(f"window: expected None or a whole number >= 2 frames, got {window!r}")
+        self.window = None if window is None else int(window)
         self.items = [self._item(a, bm, p) for p, a in zip(self.files, self.arrays)]
 
     def _item(self, a: dict[str, np.ndarray], bm, path: Path) -> dict[str, torch.Tensor]:

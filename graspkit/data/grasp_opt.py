@@ -115,12 +115,12 @@ class HandModel:
         part = bm.lbs_weights.argmax(1).numpy()
         self.finger_ids = {f: np.flatnonzero(np.isin(part, js)) for f, js in FINGER_JOINTS.items()}
         # fingertip pads: the third of each distal segment's vertices whose rest normals face the palm side (-y),
-        # the regions that touch in a grasp
-        with torch.no_grad():
-            out = bm()
-        from graspkit.body.markers import vertex_normals
-        n = vertex_normals(out.vertices, bm.faces)[0].numpy()
-        rest = out.vertices[0].numpy()
+        # the regions that touch in a grasp; on the rest body with the file's mean hands whatever bm.flat_hand_mean
+        # (as the marker layouts), so one model file gives one set of pads (the flat hands' gave other pads)
+        from graspkit.body.markers import _Rest, vertex_normals
+        v = torch.as_tensor(_Rest(bm, "mean").v, dtype=bm.dtype)[None]
+        n = vertex_normals(v, bm.faces)[0].numpy()
+        rest = v[0].numpy()
         self.pad_ids = {}
         for f, js in FINGER_JOINTS.items():
             dist = np.flatnonzero(part == js[2])

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from graspkit.checks import seeded_rng
+from graspkit.checks import check_betas, check_int, seeded_rng
 from graspkit.data.footsteps import GaitStyle, foot_tracks, plan_footsteps
 from graspkit.data.motion import Motion
 from graspkit.data.posing import Controls, Style, pose_body
@@ -114,8 +114,8 @@ def generate_locomotion(seed: int, bm: BodyModel, num_frames: int | None = None,
     kind = kind or str(rng.choice(list(PROGRAMS), p=np.array(list(PROGRAMS.values())) / sum(PROGRAMS.values())))
     if kind not in PROGRAMS:
         raise ValueError(f"kind: expected one of {sorted(PROGRAMS)}, got {kind!r}")
-    T = num_frames or int(rng.integers(120, 301))
-    betas = sample_betas(rng) if betas is None else np.asarray(betas, np.float64)
+    T = int(rng.integers(120, 301)) if num_frames is None else check_int(num_frames, "num_frames", 1)
+    betas = sample_betas(rng) if betas is None else check_betas(betas, bm.num_betas)
     rig = rig or build_rig(bm, betas)
     gait, style = sample_gait_style(rng), sample_style(rng)
     preroll = 2.5 if kind in ("walk", "curve") and rng.random() < 0.6 else 0.0

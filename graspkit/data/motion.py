@@ -62,11 +62,15 @@ class Motion:
                 raise ValueError(f"contacts: expected shape ({T}, 4), got {self.contacts.shape}")
         if self.goal is not None:
             self.goal = np.asarray(self.goal, np.float32).reshape(3)
-            if self.goal_frame is None or not 0 <= int(self.goal_frame) < T:
-                raise ValueError(f"goal_frame: expected a frame in [0, {T}) with a goal, got {self.goal_frame}")
-            self.goal_frame = int(self.goal_frame)
+            gf = self.goal_frame
+            if isinstance(gf, (bool, np.bool_)) or not isinstance(gf, (int, np.integer)) or not 0 <= gf < T:
+                raise ValueError(f"goal_frame: expected a whole frame in [0, {T}) with a goal, got {gf!r}")
+            self.goal_frame = int(gf)
             if self.hand not in HANDS:
                 raise ValueError(f"hand: expected one of {HANDS}, got {self.hand!r}")
+        elif self.goal_frame is not None or self.hand is not None:
+            raise ValueError(f"goal_frame, hand: given ({self.goal_frame!r}, {self.hand!r}) without a goal; a Motion "
+                             "keeps them only with its goal (3,)")
 
     @property
     def num_frames(self) -> int:

@@ -34,8 +34,7 @@ from tqdm.auto import tqdm
 
 from graspkit.body.markers import saga_sparse_markers
 from graspkit.body.skeleton import JOINT_INDEX
-from graspkit.checks import check_int
-from graspkit.checks import seeded_rng
+from graspkit.checks import check_int, seeded_rng
 from graspkit.data.formats import npz_arrays, open_npz
 from graspkit.data.motion import Motion, canonicalize
 
@@ -153,7 +152,12 @@ def make_windows(motions: list[Motion], bm: BodyModel, stride: int | None = 30, 
 
 
 def split_clips(num_clips: int, seed: int = 0, fractions: tuple[float, float] = (0.8, 0.1)) -> dict[str, np.ndarray]:
-    """Deterministic clip-level split {train, val, test} of clip ids (windows of a clip stay together)."""
+    """Deterministic clip-level split {train, val, test} of clip ids (windows of a clip stay together); `fractions`
+    are train's and val's shares, test has the rest."""
+    num_clips = check_int(num_clips, "num_clips", 0)
+    if len(fractions) != 2 or min(fractions) < 0 or sum(fractions) > 1 + 1e-9:
+        raise ValueError(f"fractions: expected two non-negative numbers (train, val) summing to at most 1, got "
+                         f"{fractions}")
     perm = seeded_rng(seed).permutation(num_clips)
     a = int(round(fractions[0] * num_clips))
     b = a + int(round(fractions[1] * num_clips))

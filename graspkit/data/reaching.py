@@ -39,12 +39,14 @@ from graspkit.data.posing import Controls, Style, pose_body
 from graspkit.data.rig import Rig, build_rig
 from graspkit.data.trajectory import RootPlan, heading_profile, ramp, straight_walk
 from graspkit.body.skeleton import JOINT_INDEX
-from graspkit.checks import seeded_rng
+from graspkit.checks import check_betas, seeded_rng
 
 if TYPE_CHECKING:
     from graspkit.body import BodyModel
 
 REACH_RHO = 0.86           # shoulder-to-wrist distance at the goal, as a fraction of the arm length
+MIN_GOAL_FRAMES = 9       # plan_reach: the shortest time to the goal (0.3 s, when a shuffle arrives at the earliest)
+MAX_WALK_SPEED = 1.6      # m/s: the planner's fastest walk when it has the time (and the largest v_pref taken)
 FAR_MIN_SPEED = 0.25      # m/s: the slowest walk of a room-scale clip (it fills the time to its goal frame)
 FAR_HEIGHTS = (0.0, 1.9)   # room-scale goal heights (m), uniform: the grid's 0-1.8 m evenly, a little above
 FAR_HURRY = 0.4            # share of room-scale tasks due at a fast walk (FAR_HURRY_SPEED) rather than at leisure
@@ -137,10 +139,7 @@ def _betas(betas, bm) -> np.ndarray:
     """betas (k,) as float64, checked: finite, at least bm.num_betas of them (None: zeros (10,))."""
     if betas is None:
         return np.zeros(10)
-    b = np.asarray(betas, np.float64).reshape(-1)
-    if len(b) < bm.num_betas or not np.isfinite(b).all():
-        raise ValueError(f"betas: expected {bm.num_betas} finite shape coefficients, got shape {np.shape(betas)}")
-    return b
+    return check_betas(betas, bm.num_betas)
 
 
 def _frame(name: str, value, least: int) -> int:
@@ -148,6 +147,19 @@ def _frame(name: str, value, least: int) -> int:
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < least:
         raise ValueError(f"{name}: expected an integer >= {least}, got {value!r}")
     return int(value)
+
+
+def _start(start) -> Start:
+    """A Start, or one from (x, y, heading) (metres, radians), checked."""
+    if isinstance(start, Start):
+        return start
+    try:
+        values = [float(v) for v in start]
+    except (TypeError, ValueError):
+        values = []
+    if len(values) != 3:
+        raise ValueError(f"start: expected a Start or (x, y, heading) in metres and radians, got {start!r}")
+    return Start(*values)
 
 
 def _person(seed: int, bm, betas, style: Style | None, gait: GaitStyle | None, v_pref: float | None):
@@ -160,7 +172,10 @@ def _person(seed: int, bm, betas, style: Style | None, gait: GaitStyle | None, v
     style = style or _mild(sample_style(rng), Style())
     gait = gait or _mild(sample_gait_style(rng), GaitStyle())
     v_pref = v_pref if v_pref is not None else float(rng.uniform(1.0, 1.35))
-    return bm, rng, betas, rig, style, gait, v_pref
+    if isinstance(v_pref, bool) or not isinstance(v_pref, (int, float, np.floating, np.integer)) \
+            or not 0 < v_pref <= MAX_WALK_SPEED:
+        raise ValueError(f"v_pref: expected a walking speed in (0, {MAX_WALK_SPEED}] m/s, got {v_pref!r}")
+    return bm, rng, betas, rig, style, gait, float(v_pref)
 
 
 def _pose(rig: Rig, plan: RootPlan, gait: GaitStyle, style: Style, c: Controls, betas: np.ndarray, goal: np.ndarray,
@@ -180,12 +195,12 @@ def plan_reach(start: Start | tuple[float, float, float], goal: np.ndarray | Seq
 
     seed draws the small person-to-person variations (style, gait, preferred speed) unless given.
     """
-    t_goal_frames = _frame("t_goal_frames", t_goal_frames, 1)
+    t_goal_frames = _frame("t_goal_frames", t_goal_frames, MIN_GOAL_FRAMES)
     hold_frames = _frame("hold_frames", hold_frames, 0)
-    start = start if isinstance(start, Start) else Start(*map(float, start))
-    goal = np.asarray(goal, np.float64).reshape(3)
-    if not np.isfinite(goal).all():
-        raise ValueError(f"goal: expected a finite point (3,) in metres, got {goal}")
+    start = _start(start)
+    goal = np.asarray(goal, np.float64)
+    if goal.shape != (3,) or not np.isfinite(goal).all():
+        raise ValueError(f"goal: expected a finite point (3,) in metres, got {goal.tolist()}")
     bm, rng, betas, rig, style, gait, v_pref = _person(seed, bm, betas, style, gait, v_pref)
     fps, T = 30.0, t_goal_frames + 1 + hold_frames
     plan, c = _reach_leg(rig, style, start, goal, t_goal_frames, T, rng, v_pref, fps)
@@ -275,10 +290,10 @@ def plan_reach_chain(start: Start | tuple[float, float, float], goals: np.ndarra
     The second leg starts from where the first one stands, so the body sets off from a finished reach (WANDR's goals in
     a row, Sup. C.2, ask for exactly that state; CIRCLE's subjects reach targets one after another).
     """
-    start = start if isinstance(start, Start) else Start(*map(float, start))
+    start = _start(start)
     if len(goal_frames) != 2 or len(hold_frames) != 2:
         raise ValueError(f"goal_frames, hold_frames: expected two each, got {goal_frames!r}, {hold_frames!r}")
-    g1, g2 = _frame("goal_frames[0]", goal_frames[0], 1), _frame("goal_frames[1]", goal_frames[1], 1)
+    g1, g2 = _frame("goal_frames[0]", goal_frames[0], MIN_GOAL_FRAMES), _frame("goal_frames[1]", goal_frames[1], 1)
     h1, h2 = _frame("hold_frames[0]", hold_frames[0], 0), _frame("hold_frames[1]", hold_frames[1], 0)
     if not 0.0 <= release_s < 10.0:
         raise ValueError(f"release_s: expected seconds in [0, 10), got {release_s}")
@@ -351,7 +366,8 @@ def _approach_plan(T: int, xy0: np.ndarray, h0: float, P: np.ndarray, psi_f: flo
     accel = 0.9
     walk_pref = D / v_pref + accel
     avail = t_stop - 0.2 - overlap * T_turn
-    walk = min(max(walk_pref, D / 1.6 + accel), avail) if avail > D / 1.6 + accel else max(avail, 0.6)
+    walk = (min(max(walk_pref, D / MAX_WALK_SPEED + accel), avail) if avail > D / MAX_WALK_SPEED + accel
+            else max(avail, 0.6))     # too little time: squeezed in, faster than MAX_WALK_SPEED (docs/data.md)
     t_ws = t_stop - walk
     t_turn0 = max(0.1, t_ws - overlap * T_turn)
     xy, _ = straight_walk(T, xy0, phi, D, t_ws, t_stop, accel, fps)
@@ -475,7 +491,7 @@ def generate_reach_chain(seed: int, bm: BodyModel, betas: np.ndarray | None = No
     nxt = _far_task(rng, first.betas, 0.0, float(rng.uniform(*FAR_HEIGHTS)))   # body frame: root at the origin, +x
     style, gait = sample_style(rng), sample_gait_style(rng)
     plan_seed, cut = int(rng.integers(2**31)), int(rng.integers(0, first.hold_frames + 1))
-    betas = first.betas if betas is None else np.asarray(betas, np.float64).reshape(-1)
+    betas = first.betas if betas is None else _betas(betas, bm)
     _, _, _, P, psi = _stand_off(build_rig(bm, betas), style, first.start, first.goal)
     rel = nxt.goal - np.array([nxt.start.x, nxt.start.y, 0.0])
     goal2 = np.array([*(P + _rot2(psi) @ rel[:2]), rel[2]])

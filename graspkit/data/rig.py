@@ -100,6 +100,8 @@ def build_rig(bm: BodyModel, betas: np.ndarray | torch.Tensor | None = None, str
     b = torch.zeros(1, bm.num_betas, dtype=bm.dtype)
     if betas is not None:
         x = np.asarray(betas, np.float64).reshape(-1)[:bm.num_betas]
+        if not np.isfinite(x).all():
+            raise ValueError(f"betas: expected finite shape coefficients, got {x.tolist()}")
         b[0, :len(x)] = torch.as_tensor(x, dtype=bm.dtype)
     coeffs = torch.cat([b, torch.zeros(1, bm.num_expression, dtype=bm.dtype)], 1)
     with torch.no_grad():

@@ -25,6 +25,7 @@ goals, normalisation statistics, deterministic splits and the held-out start pos
 from __future__ import annotations
 
 import hashlib
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
@@ -36,6 +37,7 @@ from torch.utils.data import Dataset
 
 from graspkit import intention as I
 from graspkit.body.skeleton import JOINT_INDEX
+from graspkit.checks import check_int
 from graspkit.data.formats import load_motion, npz_arrays, open_npz
 from graspkit.data.motion import Motion
 from graspkit.paths import read_cache
@@ -219,8 +221,7 @@ class WindowDataset(Dataset):
     state at i and predicts d_{i+1}, then rolls out up to max_steps more frames (Sup. B.2)."""
 
     def __init__(self, clips: ClipSet, max_steps: int = 10) -> None:
-        if max_steps < 0:
-            raise ValueError(f"max_steps: expected >= 0, got {max_steps}")
+        max_steps = check_int(max_steps, "max_steps", 0)
         rows = []
         for c, T in enumerate(clips.lengths.tolist()):
             hi = T - 2 - max_steps               # i + 1 + max_steps <= T - 1
@@ -246,8 +247,12 @@ def make_batch(clips: ClipSet, items: Tensor, steps: int, generator: torch.Gener
     the end of the hold that follows, so the clip reads "be at the goal by t_G and stay")."""
     if goal_frame not in GOAL_FRAMES:
         raise ValueError(f"goal_frame: expected one of {GOAL_FRAMES}, got {goal_frame!r}")
+    steps = check_int(steps, "steps", 0)
+    horizon = check_int(horizon, "horizon", steps + 1)      # hindsight t_G at the window's last frame at the earliest
     items = torch.as_tensor(items, dtype=torch.long).reshape(-1, 2)
     c, i = items[:, 0], items[:, 1]
+    if len(c) and not (0 <= int(c.min()) and int(c.max()) < len(clips)):
+        raise ValueError(f"items: clip indices expected in [0, {len(clips)}), got {int(c.min())} .. {int(c.max())}")
     start = clips.offsets[c]
     T = clips.lengths[c]
     if (i < 1).any() or (i + 1 + steps > T - 1).any():
@@ -286,6 +291,7 @@ def compute_stats(clips: ClipSet, samples: int = 20000, seed: int = 0, goal_fram
     run's `goal_frame` rule for t_G: `make_batch`)."""
     if len(clips) == 0:
         raise ValueError("clips: empty")
+    samples = check_int(samples, "samples", 2)                # a std needs two
     # every frame i with a frame before and after it in its clip: delta d_{i+1} and state (p_i, d_i), in chunks
     start = clips.offsets[:-1].repeat_interleave(clips.lengths)
     end = clips.offsets[1:].repeat_interleave(clips.lengths)
@@ -377,13 +383,23 @@ def load_clipset(path: str | Path) -> ClipSet:
 CLIPSET_VERSION = 1
 
 
+def _crcs(path: Path) -> str:
+    """The CRC-32s of an npz's members, from its zip directory ('' for a file that is no zip: load_clips names it)."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            return ",".join(f"{i.CRC:08x}" for i in z.infolist())
+    except (zipfile.BadZipFile, OSError):
+        return ""
+
+
 def cached_clips(folder: str | Path, bm: BodyModel, limit: int | None = None, cache: str | Path | None = None,
                  kinds: Sequence[str] = KINDS) -> ClipSet:
     """All clips under `folder` (<kind>/*.npz for the sub-folders `kinds`, at most `limit` per kind) as a ClipSet, read
-    from / written to a cache file named after the folder's file list, the body model (`bm.digest()`) and
-    CLIPSET_VERSION (so new clips, another body or another clip code rebuild it)."""
+    from / written to a cache file named after the folder's file list with each file's member CRC-32s (read from the
+    npz's zip directory, no decompression: a clip remade in place at the same size is new data), the body model
+    (`bm.digest()`) and CLIPSET_VERSION (so new or changed clips, another body or another clip code rebuild it)."""
     files = list_clips(folder, kinds=kinds, limit=limit)
-    listing = "\n".join(f"{f.parent.name}/{f.name}:{f.stat().st_size}" for f in files)
+    listing = "\n".join(f"{f.parent.name}/{f.name}:{f.stat().st_size}:{_crcs(f)}" for f in files)
     key = hashlib.blake2b(f"{listing}\nbody={bm.digest()};version={CLIPSET_VERSION}".encode(),
                           digest_size=6).hexdigest()
     if cache is None:

@@ -27,6 +27,7 @@ outputs Θ only (no offsets to refine with, no head direction), trained with the
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -103,6 +104,9 @@ def attention_offsets(offsets: Tensor, w: float = IAA_WEIGHT) -> Tensor:
 
 # ------------------------------------------------------------------------------------------- normalisation
 
+MIN_STD = 1e-3     # Standardiser's floor on a feature's std
+
+
 class Standardiser(nn.Module):
     """Feature-wise (x - mean) / std with statistics kept as buffers (saved with the weights): (B,D) -> (B,D)."""
 
@@ -111,8 +115,9 @@ class Standardiser(nn.Module):
         self.register_buffer("mean", torch.zeros(dim))
         self.register_buffer("std", torch.ones(dim))
 
-    def fit(self, x: Tensor, min_std: float = 1e-3) -> None:
-        """Set the statistics from samples x (N,D); features with std < min_std are only centred."""
+    def fit(self, x: Tensor, min_std: float = MIN_STD) -> None:
+        """Set the statistics from samples x (N,D); a feature with std < min_std gets std min_std (not 1: a feature
+        that hardly varied in training is scaled up 1/min_std times, so `untrained` names inputs far from it)."""
         if x.dim() != 2 or x.shape[1] != self.mean.numel():
             raise ValueError(f"x: expected (N, {self.mean.numel()}), got {tuple(x.shape)}")
         self.mean.copy_(x.mean(0))
@@ -125,6 +130,12 @@ class Standardiser(nn.Module):
     def inverse(self, y: Tensor) -> Tensor:
         """Undo: (B,D) -> (B,D)."""
         return y * self.std + self.mean
+
+    def untrained(self, x: Tensor, sigma: float = 5.0, min_std: float = MIN_STD) -> Tensor:
+        """(D,) bool: features of x (B,D) more than `sigma` stds from the mean where the std sits at the floor (the
+        training data hardly moved them, and the network has only seen them still)."""
+        floored = self.std <= min_std * (1 + 1e-3)     # fp32 statistics land a little above the floor
+        return ((((x - self.mean) / self.std).abs() > sigma) & floored).any(0)
 
 
 # ------------------------------------------------------------------------------------------- GNet
@@ -254,6 +265,12 @@ class GNet(nn.Module):
                                   (("bps", bps, cfg.n_bps), ("obj_transl", obj_transl, 3), ("betas", betas, cfg.n_betas)))
         if z is not None:
             z = self._sample_input("z", z, (B, cfg.latent))
+        far = torch.nonzero(self.norm_cond.untrained(self.condition(bps, obj_transl, betas))).flatten().tolist()
+        if far:
+            names = sorted({"bps" if i < cfg.n_bps else "obj_transl" if i < cfg.n_bps + 3 else "betas" for i in far})
+            warnings.warn(f"{', '.join(names)}: values more than 5 training stds from where the training data held "
+                          "them (std at the 1e-3 floor; GNet's frame puts the object at x = y = 0, so obj_transl is "
+                          "(0, 0, height)); the decoder has never seen such a condition", stacklevel=2)
         was = self.training
         self.eval()
         if z is None:

@@ -27,6 +27,7 @@ as a per-frame code times one shared linear decoder), so that it trains on two C
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -36,6 +37,7 @@ import torch
 from scipy.spatial import cKDTree
 from torch import Tensor, nn
 
+from graspkit.body.skeleton import JOINT_NAMES
 from graspkit.checks import check_int
 from graspkit.models.blocks import ResBlock
 from graspkit.models.gnet import NUM_JOINTS, POSE_DIM, Standardiser
@@ -321,6 +323,21 @@ def mnet_step(mnet: MNet, s: MNetState, basis: Tensor) -> tuple[Tensor, Tensor, 
     return r_w, t_w, out
 
 
+def _warn_untrained_start(mnet: MNet, s: MNetState, basis: Tensor, sigma: float = 5.0) -> None:
+    """Warn when the start's pose features lie `sigma` stds out where the training clips never moved them (the
+    shipped MNet then goes astray: a jaw turned 3 degrees, 50 stds out, makes the rollout miss, docs/goal.md)."""
+    feats, _, _ = mnet_inputs(s, basis, mnet.cfg.attention, mnet.cfg.n_hand)
+    far = torch.nonzero(mnet.norms["pose"].untrained(feats["pose"], sigma)).flatten().tolist()
+    per = NUM_JOINTS * 6 + 3                       # one past frame: 55 joints' 6D, the translation; then betas
+    names = sorted({"betas" if i >= mnet.cfg.n_past * per else "translation" if i % per >= NUM_JOINTS * 6
+                    else JOINT_NAMES[(i % per) // 6] for i in far})
+    if names:
+        warnings.warn(f"start: the pose features of {', '.join(names)} lie more than {sigma:g} training stds from where the training "
+                      "clips held them (they never moved there, std at the 1e-3 floor); MNet can then go astray "
+                      "(docs/goal.md). Start from a pose like the planner's (graspkit.goal.synthesize does)",
+                      stacklevel=4)   # past rollout and its no_grad wrapper: the caller
+
+
 @torch.no_grad()
 def predict_horizon(mnet: MNet, body: SparseBody, s: MNetState, object_points: Tensor, basis: Tensor, horizon: int = 10
                     ) -> tuple[Tensor, Tensor]:
@@ -438,6 +455,8 @@ def rollout(mnet: MNet, body: SparseBody, start: tuple[Tensor, Tensor], goal: tu
         s = MNetState(torch.stack([rs[i] for i in idx])[None], torch.stack([ts[i] for i in idx])[None], betas,
                       vs[-1][None], vs[max(len(vs) - 2, 0)][None], goal_hand, centre,
                       hand_object_offsets(vs[-1][None], obj), root)
+        if len(rs) == 1:
+            _warn_untrained_start(mnet, s, basis)
         r_w, t_w, out = mnet_step(mnet, s, basis)                                    # (1,F,55,6), (1,F,3) world
         stalled = (stall is not None and dist[-1] < STALL_RADIUS and len(dist) > stall
                    and dist[-1] > min(dist[-stall - 1:-1]) - STALL_GAIN)

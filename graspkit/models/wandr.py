@@ -30,6 +30,7 @@ over `ramp_epochs`, then stays.
 """
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -40,13 +41,16 @@ import torch
 from torch import Tensor, nn
 
 from graspkit import intention as I
+from graspkit.body.skeleton import JOINT_NAMES
 from graspkit.checks import check_finite, check_generator, check_int
-from graspkit.data.wandr_dataset import FOOT_JOINTS, GOAL_FRAMES, ClipSet, WindowDataset, lowest_foot, make_batch
+from graspkit.data.wandr_dataset import (FOOT_JOINTS, GOAL_FRAMES, STD_FLOOR, ClipSet, WindowDataset, lowest_foot,
+                                         make_batch)
 from graspkit.models.blocks import GaussianHead, evaluating, kl_standard_normal
 from graspkit.train import TrainConfig, check_config, fit, load_checkpoint, load_into, save_checkpoint
 
 FULL_INTENTION = ("wrist", "orientation", "pelvis")
 FEET = FOOT_JOINTS                                   # ankles and feet: the foot-velocity, contact and floor terms
+OUT_OF_TRAINING_SIGMA = 5.0  # a start's state feature this many stds from the mean, where training hardly moved it
 PLANTED_STEP = 1e-3          # m per frame: a foot joint the data moves less than this is planted (w_contact)
 
 
@@ -135,6 +139,13 @@ class WandrCVAE(nn.Module):
         s = (state - self.state_mean) / self.state_std
         i = ((inten - self.intention_mean) / self.intention_std)[..., self.intention_keep]
         return torch.cat([s, i], dim=-1)
+
+    def untrained_features(self, state: Tensor, sigma: float = OUT_OF_TRAINING_SIGMA) -> list[str]:
+        """Names of the state features (B, 268) that lie more than `sigma` stds from the training mean where training
+        hardly moved them (std at STD_FLOOR): the joints the model has only ever seen still (docs/wandr.md)."""
+        floored = self.state_std <= STD_FLOOR * (1 + 1e-3)
+        far = ((((state - self.state_mean) / self.state_std).abs() > sigma) & floored).any(0)
+        return sorted({state_feature_name(int(i)) for i in torch.nonzero(far).flatten()})
 
     def normalise_delta(self, d: Tensor) -> Tensor:
         """Raw delta (B, 135) -> normalised."""
@@ -363,6 +374,19 @@ def _per_frame(x: Tensor | int, B: int, T: int, width: int | None, name: str) ->
     raise ValueError(f"{name}: expected shape {w}, {(B,) + w}, {(1, T) + w} or {(B, T) + w}, got {tuple(x.shape)}")
 
 
+def state_feature_name(i: int) -> str:
+    """What state feature i (of 268, `intention.state_features`) describes: a joint's rotation or its change."""
+    body = JOINT_NAMES[1:I.NUM_BODY]
+    if i == 0:
+        return "pelvis height"
+    if i < 7:
+        return "root (yaw-free)"
+    if i < 7 + 6 * len(body):
+        return body[(i - 7) // 6]
+    j = i - 7 - 6 * len(body)                     # the previous delta: translation (3), root (6), body joints (126)
+    return "previous delta: " + ("translation" if j < 3 else "root" if j < 9 else body[(j - 9) // 6])
+
+
 def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Tensor, t_goal: Tensor | int,
             frames: int, z: Tensor | None = None, generator: torch.Generator | None = None,
             keep: bool = True, on_frame: FrameHook | None = None, goal_heading: Tensor | None = None,
@@ -408,6 +432,14 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
                          f"{tg.unique()[:5].tolist()}")
     cur_p, cur_d = p0, I.pose_to_delta(p_prev, p0)
     t, R = I.pose_rotmats(p0)
+    with torch.no_grad():
+        untrained = model.untrained_features(I.state_features(p0.detach(), cur_d.detach()))
+    if untrained:
+        warnings.warn(f"start: the state features of {', '.join(untrained)} lie more than {OUT_OF_TRAINING_SIGMA:g} training stds from where "
+                      "the training clips held them (they never moved there, std at the 1e-3 floor); the shipped "
+                      "model then reaches far less often (a left wrist turned 0.1 rad: SR 99.5 -> 6 %, docs/wandr.md). "
+                      "Start from a pose of the training distribution (eval_wandr.starts_from_meta, or the planner's)",
+                      stacklevel=2)
     ps, js = [], []
     low0 = None
     for k in range(T):

@@ -14,6 +14,7 @@ import torch
 from matplotlib.figure import Figure
 from torch import Tensor
 
+from graspkit.checks import check_int
 from graspkit.viz.explorers import slider_bounds, slider_value
 
 _BOXES = [  # (x, y, w, h, text, colour) of the WholeGrasp-VAE diagram (SAGA Fig. 3)
@@ -71,9 +72,10 @@ class LatentWalk:
                  seed: int = 0) -> None:
         if not 1 <= dims <= model.cfg.latent:
             raise ValueError(f"dims: expected 1..{model.cfg.latent} latent sliders, got {dims}")
-        self.model, self.points, self.normals, self.height = model.eval(), points.float(), normals.float(), height
+        self.model, self.points, self.normals = model.eval(), points.float(), normals.float()
+        self.height = slider_value("height", height)
         self.dims = dims
-        self.seed = seed
+        self.seed = check_int(seed, "seed", 0)
         self.z = self._draw(seed)
         self.grasp: dict[str, Tensor] = {}
         self.decode()
@@ -97,7 +99,7 @@ class LatentWalk:
     def update(self, name: str, value: float | int) -> dict[str, float]:
         """Set latent coordinate `name` ('z0'...) or draw a new z (`seed`); decode; return `measure()`."""
         if name == SEED_SLIDER:
-            self.seed = int(value)
+            self.seed = check_int(value, "seed", 0)
             self.z = self._draw(self.seed)
         elif name in self.names:
             self.z[0, int(name[1:])] = slider_value(name, value)
