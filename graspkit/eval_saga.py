@@ -359,6 +359,7 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
               "per_object": per_object}
     if out is not None:
         _write_json(out, result)
+        Path(out).with_suffix(".partial.json").unlink(missing_ok=True)    # only an interrupted run leaves one
     return result
 
 

@@ -986,7 +986,7 @@ class GoalReacher:
                  height: float = 1.0, seconds: float = 4.0, floor: float | None = None) -> None:
         """The sliders' start values (in their ranges, SLIDERS); floor: `rollout`'s floor constraint (m; None: off,
         the paper's rollout)."""
-        self.model, self.start, self.seed, self.floor = model, start, seed, floor
+        self.model, self.start, self.seed, self.floor = model, start, check_int(seed, "seed"), floor
         self.values = {k: self._checked(k, v) for k, v in
                        (("angle", angle), ("distance", distance), ("height", height), ("seconds", seconds))}
         self.motion: Tensor | None = None

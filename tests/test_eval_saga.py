@@ -60,8 +60,10 @@ def test_evaluation_without_the_unshipped_baselines_leaves_their_rows_out(tmp_pa
     shutil.copy(DATA_STUBS / "checkpoints" / "wholegrasp.pt", tmp_path / "wholegrasp.pt")
     cfg = EvalConfig(objects=("mug",), placements=1, samples=2, gt_grasps=1, steps=(2, 2, 2),
                      polish=(0, 0.0))
-    r = evaluate(DATA_STUBS / "grasps", cfg, progress=False, out=None, checkpoints=tmp_path)
+    r = evaluate(DATA_STUBS / "grasps", cfg, progress=False, out=tmp_path / "e.json", checkpoints=tmp_path)
     assert "graspkit train wholegrasp_single" in capsys.readouterr().out
+    # a run that finished leaves its table and not the .partial.json an interrupted one leaves (it did, a check found)
+    assert (tmp_path / "e.json").is_file() and not (tmp_path / "e.partial.json").exists()
     rows = r["rows"]
     assert not any(k.startswith(("WholeGrasp-single", "GrabNet")) for k in rows)
     assert rows["WholeGrasp w/ opt. (Ours)"]["n"] == 2 and rows["GT + E_cont"]["n"] == 1 and rows["GT mesh"]["n"] == 1

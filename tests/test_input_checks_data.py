@@ -311,3 +311,35 @@ def test_the_datasets_name_bad_windows_splits_and_statistics(bm):
             MF.split_clips(n)
     s = MF.split_clips(10, fractions=(0.6, 0.4))
     assert (len(s["train"]), len(s["val"]), len(s["test"])) == (6, 4, 0)
+
+
+def test_hand_poses_rig_and_gnet_layouts_are_checked(bm, tmp_path):
+    """sample_hand_poses passed n, noise_deg and rng to numpy unchecked; generate_locomotion took a rig of another
+    body (the body then floated 14-16 cm above the floor); GNetDataset took the GOAL layout of its first file for
+    all (independent checks)."""
+    import shutil
+
+    from graspkit.body.hand_poses import sample_hand_poses
+    from graspkit.data.grasp_datasets import GNetDataset
+    from graspkit.data.locomotion import generate_locomotion
+    from graspkit.data.rig import build_rig
+
+    for kwargs, message in (({"n": -1}, "^n: expected an integer >= 0"), ({"n": 2.5}, "^n:"),
+                            ({"noise_deg": -5.0}, "^noise_deg: expected a finite number >= 0"),
+                            ({"noise_deg": float("nan")}, "^noise_deg:"), ({"rng": -1}, "^rng: expected an integer")):
+        with pytest.raises(ValueError, match=message):
+            sample_hand_poses(**{"n": 2, **kwargs})
+    with pytest.raises(ValueError, match="^rig: built for another body"):
+        generate_locomotion(5, bm, num_frames=30, kind="walk", betas=np.full(10, -2.0), rig=build_rig(bm, np.zeros(10)))
+    m = generate_locomotion(5, bm, num_frames=30, kind="walk", betas=np.zeros(10), rig=build_rig(bm, np.zeros(10)))
+    assert m.num_frames == 30
+    stubs = Path(__file__).resolve().parents[1] / "data_stubs" / "grasps"
+    files = sorted(stubs.glob("grasp_*.npz"))[:2]
+    for f in files:
+        shutil.copy(f, tmp_path / f.name)
+    with np.load(files[1], allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["goal.vertex_ids"] = arrays["goal.vertex_ids"][::-1].copy()
+    np.savez(tmp_path / files[1].name, **arrays)
+    with pytest.raises(ValueError, match="goal.vertex_ids' differs from"):
+        GNetDataset(tmp_path, split=None)

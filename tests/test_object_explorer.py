@@ -274,3 +274,22 @@ def test_figure_draws_the_body_faces_near_the_objects_current_place():
     assert len(tri) == want.sum() + n_obj
     np.testing.assert_allclose(np.sort(tri[:-n_obj].mean(1), axis=0), np.sort(cent[want], axis=0), atol=1e-9)
     plt.close(fig)
+
+
+def test_bad_arrays_are_named_in_the_constructor():
+    """Out-of-range ids failed at measure() with a bare IndexError, (V, 2) vertices were taken until measure() broke,
+    NaN vertices were named 'points' (an independent check); the constructor now names each."""
+    hand = trimesh.creation.box(HAND)
+    V = len(hand.vertices)
+    for kwargs, message in (({"hand_ids": [10**6]}, f"^hand_ids: expected vertex ids \\(N,\\) in 0..{V - 1}"),
+                            ({"marker_ids": [-1]}, "^marker_ids:"), ({"hand_ids": [0.5]}, "^hand_ids:")):
+        with pytest.raises(ValueError, match=message):
+            HandObjectExplorer(hand.vertices, hand.faces, "apple", **kwargs)
+    with pytest.raises(ValueError, match=r"^vertices: expected finite \(V, 3\)"):
+        HandObjectExplorer(hand.vertices[:, :2], hand.faces, "apple")
+    bad = hand.vertices.copy()
+    bad[0, 0] = np.nan
+    with pytest.raises(ValueError, match="^vertices:"):
+        HandObjectExplorer(bad, hand.faces, "apple")
+    with pytest.raises(ValueError, match=f"^faces: expected \\(F, 3\\) vertex indices in 0..{V - 1}"):
+        HandObjectExplorer(hand.vertices, hand.faces + V, "apple")

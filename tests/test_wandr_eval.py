@@ -241,6 +241,9 @@ def test_goal_reacher_callback(bm):
     torch.manual_seed(0)
     model = WandrCVAE(WandrConfig(latent=4, hidden=32, enc_layers=1, dec_layers=1, dropout=0.0)).eval()
     r = E.GoalReacher(model, start, seed=3, angle=0.0, distance=1.0, height=1.0, seconds=1.0)
+    for bad in (2.5, True, -1, "3"):                 # was torch's manual_seed error at run(), naming nothing
+        with pytest.raises(ValueError, match="^seed: expected an integer >= 0"):
+            E.GoalReacher(model, start, seed=bad)
     out = r.update("angle", 90.0)
     assert torch.allclose(r.goal, torch.tensor([0.0, 1.0, 1.0]), atol=1e-6) and r.t_goal == 30
     ref = generate(model, start, r.goal[None], 30, generator=torch.Generator().manual_seed(3))

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX
-from graspkit.checks import seeded_rng
+from graspkit.checks import check_int, check_weight, seeded_rng
 
 HAND_KINDS = ("flat", "relaxed", "power", "pinch", "tripod", "lateral", "hook", "point", "fist")
 
@@ -110,7 +110,9 @@ def sample_hand_poses(n: int, kind: str = "mixture", rng: np.random.Generator | 
         raise ValueError(f"side: expected 'left' or 'right', got {side!r}")
     if kind != "mixture" and kind not in HAND_KINDS:
         raise ValueError(f"kind: unknown hand pose kind {kind!r}; expected 'mixture' or one of {HAND_KINDS}")
-    rng = np.random.default_rng(rng) if not isinstance(rng, np.random.Generator) else rng
+    n = check_int(n, "n", 0)
+    noise_deg = check_weight(noise_deg, "noise_deg")
+    rng = seeded_rng(rng, "rng") if not isinstance(rng, np.random.Generator) else rng
     if joints is None:
         from graspkit.body._proc_anatomy import Proportions, rest_joints
         joints = rest_joints(Proportions().jittered(0))

@@ -26,7 +26,8 @@ from graspkit.rotations import axis_angle_to_matrix, axis_angle_to_rot6d
 if TYPE_CHECKING:
     from graspkit.body import BodyModel
 
-SAGA_CLIP_FRAMES = 62        # SAGA App. A.3: 2-s clips at 30 fps ending in a stable grasp (62 frames with both ends)
+SAGA_CLIP_FRAMES = 62        # SAGA App. A.3: 2-s clips at 30 fps ending in a stable grasp; 62 = MotionFill's T + 2
+                             # root states (T = 60: 61 marker frames, docs/data.md)
 
 
 def grasp_files(root: str | os.PathLike, kind: str = "grasp", split: str | None = None,
@@ -167,6 +168,11 @@ class GNetDataset(_Files):
         self.data = {k: torch.as_tensor(np.stack([np.asarray(a[src], np.float32).reshape(shape) for a in self.arrays]))
                      for k, (src, shape) in keys.items()}
         self.data["fullpose_6d"] = axis_angle_to_rot6d(self.data["fullpose"])
+        for key in ("goal.vertex_ids", "goal.right_hand"):      # one GOAL layout for the whole set
+            for p, a in zip(self.files[1:], self.arrays[1:]):
+                if not np.array_equal(a[key], self.arrays[0][key]):
+                    raise ValueError(f"{p}: key {key!r} differs from {self.files[0].name}'s: files of another GOAL "
+                                     "vertex layout (another body model) cannot share one GNetDataset")
         self.right_hand = torch.as_tensor(self.arrays[0]["goal.right_hand"])
         self.vertex_ids = torch.as_tensor(self.arrays[0]["goal.vertex_ids"])
 

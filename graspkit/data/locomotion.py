@@ -17,7 +17,7 @@ from graspkit.checks import check_betas, check_int, seeded_rng
 from graspkit.data.footsteps import GaitStyle, foot_tracks, plan_footsteps
 from graspkit.data.motion import Motion
 from graspkit.data.posing import Controls, Style, pose_body
-from graspkit.data.rig import Rig, build_rig
+from graspkit.data.rig import Rig, build_rig, check_rig
 from graspkit.data.trajectory import RootPlan, integrate_controls, smooth_controls
 
 if TYPE_CHECKING:
@@ -116,7 +116,10 @@ def generate_locomotion(seed: int, bm: BodyModel, num_frames: int | None = None,
         raise ValueError(f"kind: expected one of {sorted(PROGRAMS)}, got {kind!r}")
     T = int(rng.integers(120, 301)) if num_frames is None else check_int(num_frames, "num_frames", 1)
     betas = sample_betas(rng) if betas is None else check_betas(betas, bm.num_betas)
-    rig = rig or build_rig(bm, betas)
+    if rig is None:
+        rig = build_rig(bm, betas)
+    else:
+        check_rig(rig, bm, betas)
     gait, style = sample_gait_style(rng), sample_style(rng)
     preroll = 2.5 if kind in ("walk", "curve") and rng.random() < 0.6 else 0.0
     post = 1.0   # planned past the end, so the last steps are taken as if the motion went on, then cut

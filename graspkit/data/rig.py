@@ -95,6 +95,26 @@ def _foot(side: str, v: np.ndarray, joints: np.ndarray, weights: np.ndarray, sol
     return FootGeometry(ankle, ball, heel, ref, toe_tip, pts)
 
 
+def rest_joints(bm: BodyModel, betas: np.ndarray | torch.Tensor | None = None) -> np.ndarray:
+    """The shaped rest joints (55,3) (float64) of `bm` for betas (K,) (None: zeros; padded or cut as build_rig)."""
+    b = torch.zeros(1, bm.num_betas, dtype=bm.dtype)
+    if betas is not None:
+        x = np.asarray(betas, np.float64).reshape(-1)[:bm.num_betas]
+        if not np.isfinite(x).all():
+            raise ValueError(f"betas: expected finite shape coefficients, got {x.tolist()}")
+        b[0, :len(x)] = torch.as_tensor(x, dtype=bm.dtype)
+    with torch.no_grad():
+        return bm.shaped(torch.cat([b, torch.zeros(1, bm.num_expression, dtype=bm.dtype)], 1))[1][0].double().numpy()
+
+
+def check_rig(rig: Rig, bm: BodyModel, betas: np.ndarray | None) -> None:
+    """ValueError naming `rig` unless it was built for this body (build_rig(bm, betas): its rest joints, to 0.1 mm)."""
+    err = float(np.abs(rig.joints - rest_joints(bm, betas)).max())
+    if err > 1e-4:
+        raise ValueError(f"rig: built for another body (its rest joints are {100 * err:.1f} cm off those of bm with "
+                         "these betas); pass rig=build_rig(bm, betas) or None")
+
+
 def build_rig(bm: BodyModel, betas: np.ndarray | torch.Tensor | None = None, strike_angle: float = 0.3) -> Rig:
     """Measure a Rig on model `bm` for betas (K,) (None: zeros; zero-padded or cut to the model's, as BodyModel)."""
     b = torch.zeros(1, bm.num_betas, dtype=bm.dtype)

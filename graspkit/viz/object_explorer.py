@@ -81,6 +81,15 @@ def place_at_palm(mesh: trimesh.Trimesh, vertices: np.ndarray, faces: np.ndarray
     return ObjectPose(t, np.eye(3))
 
 
+def _ids(ids: Any, name: str, V: int) -> np.ndarray:
+    """Vertex ids (N,) as int64, each in 0..V-1, or a ValueError naming them."""
+    a = np.asarray(ids)
+    if a.ndim != 1 or (len(a) and (a.dtype.kind not in "iu" or a.min() < 0 or a.max() >= V)):
+        raise ValueError(f"{name}: expected vertex ids (N,) in 0..{V - 1}, got {a.dtype} of shape {a.shape}"
+                         + (f" from {a.min()} to {a.max()}" if a.ndim == 1 and len(a) and a.dtype.kind in "iuf" else ""))
+    return a.astype(np.int64)
+
+
 class HandObjectExplorer:
     """An object near a posed body: slide it by x, y, z offsets (m) and a yaw (deg), read distances and contacts.
 
@@ -91,9 +100,16 @@ class HandObjectExplorer:
     def __init__(self, vertices: Any, faces: Any, object_name: str = "mug", base: ObjectPose | None = None,
                  hand_ids: Any = None, marker_ids: Any = None, num_points: int = 2048, seed: int = 0) -> None:
         self.vertices = np.asarray(vertices, dtype=np.float64)
+        if self.vertices.ndim != 2 or self.vertices.shape[1] != 3 or not len(self.vertices) \
+                or not np.isfinite(self.vertices).all():
+            raise ValueError(f"vertices: expected finite (V, 3) positions in metres, got shape {self.vertices.shape}")
+        V = len(self.vertices)
         self.faces = np.asarray(faces, dtype=np.int64)
-        self.hand_ids = np.arange(len(self.vertices)) if hand_ids is None else np.asarray(hand_ids, dtype=np.int64)
-        self.marker_ids = np.zeros(0, np.int64) if marker_ids is None else np.asarray(marker_ids, dtype=np.int64)
+        if self.faces.ndim != 2 or self.faces.shape[1] != 3 or not len(self.faces) or self.faces.min() < 0 \
+                or self.faces.max() >= V:
+            raise ValueError(f"faces: expected (F, 3) vertex indices in 0..{V - 1}, got shape {self.faces.shape}")
+        self.hand_ids = np.arange(V) if hand_ids is None else _ids(hand_ids, "hand_ids", V)
+        self.marker_ids = np.zeros(0, np.int64) if marker_ids is None else _ids(marker_ids, "marker_ids", V)
         self.base = ObjectPose.identity() if base is None else base
         self.num_points, self.seed = num_points, seed
         self.offset, self.yaw = np.zeros(3), 0.0

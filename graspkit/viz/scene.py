@@ -305,7 +305,9 @@ def figure(views: Sequence[View] = ("front", "side", "top"), size: float = 4.0, 
         axes.append(ax)
     if title:
         fig.suptitle(title, fontsize=11)
-    fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=0.9 if title else 0.95, wspace=0.0)
+    # a title above panel titles needs more room, or the two overprint at the small sizes of animations
+    top = (0.86 if len(views) > 1 else 0.9) if title else 0.95
+    fig.subplots_adjust(left=0.0, right=1.0, bottom=0.0, top=top, wspace=0.0)
     return fig, axes
 
 
