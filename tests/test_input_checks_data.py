@@ -280,6 +280,9 @@ def test_a_motion_keeps_goal_frame_and_hand_only_with_a_goal_and_a_whole_goal_fr
     with pytest.raises(ValueError, match="goal_frame, hand: given .* without a goal"):
         Motion(*args, goal_frame=2, hand="right")
     assert Motion(*args, goal=(0, 0, 1), goal_frame=np.int64(2), hand="right").goal_frame == 2
+    with pytest.raises(ValueError, match=r"betas: expected one body's shape coefficients \(K,\)"):
+        Motion(clip.poses, clip.trans, np.zeros((2, 10)))
+    assert Motion(clip.poses, clip.trans, np.zeros((1, 10))).betas.shape == (10,)
 
 
 def test_the_datasets_name_bad_windows_splits_and_statistics(bm):

@@ -51,7 +51,10 @@ class Motion:
     def __post_init__(self) -> None:
         self.poses = np.asarray(self.poses, np.float32).reshape(-1, NUM_JOINTS, 3)
         self.trans = np.asarray(self.trans, np.float32).reshape(-1, 3)
-        self.betas = np.asarray(self.betas, np.float32).reshape(-1)
+        b = np.asarray(self.betas, np.float32)
+        if b.ndim > 1 and b.shape[0] != 1:              # (1, K) is one body's; (2, 10) would read as 20 coefficients
+            raise ValueError(f"betas: expected one body's shape coefficients (K,), got shape {b.shape}")
+        self.betas = b.reshape(-1)
         T = len(self.poses)
         self.fps = check_fps(self.fps)
         if len(self.trans) != T:

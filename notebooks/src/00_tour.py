@@ -50,8 +50,10 @@ fig = pipeline_diagram()
 # ```
 #
 # The lessons are built from `notebooks/src/*.py` by `python tools/notebooks.py`, which executes them and stores
-# their outputs; nbval re-runs each lesson and compares. Every random draw is seeded, so the numbers you see are
-# the numbers you get.
+# their outputs; nbval re-runs each lesson and compares. Every random draw is seeded, so on one machine, with one
+# torch thread count, the numbers you see are the numbers you get; another CPU's floating-point kernels can move
+# the last digits, and an optimisation or a rollout can carry them further (README, "Other CPUs": those cells are
+# the ones nbval does not compare).
 
 # %% [markdown]
 # ## Environment check

@@ -111,7 +111,7 @@ print(f"at 90 deg of elbow flexion they move vertices by up to {(with_c - plain)
 # %%
 part = arrays["weights"].argmax(1)
 fig, axes = viz.figure(views=("front",), size=5, title="dominant skinning joint per vertex")
-viz.draw_points(axes[0], vw, values=(part % 11) / 10, cmap="tab20", size=1.5)
+viz.draw_points(axes[0], vw, values=(part % 11) / 10, cmap="tab20", size=1.5, colorbar=False)  # colour: joint id mod 11
 _ = viz.set_equal(axes[0], vw)
 
 # %%
@@ -187,8 +187,10 @@ back_aa, six = matrix_to_axis_angle(R), matrix_to_rot6d(R)
 fig, ax = plt.subplots(1, 2, figsize=(9, 2.6))
 ax[0].plot(angles, back_aa[:, 2])
 ax[0].set_title("axis-angle (z) of a rotation turning once: jumps at pi")
+ax[0].set_ylabel("axis-angle z (rad)")
 ax[1].plot(angles, six)
 ax[1].set_title("6D code of the same rotations: continuous")
+ax[1].set_ylabel("6D components (unitless)")
 for a in ax:
     a.set_xlabel("angle (rad)")
 fig.tight_layout()
@@ -230,10 +232,12 @@ explorer.widget()
 
 # %% [markdown]
 # ## Exercise
-# 1. With `BodyExplorer.update("left_elbow", ...)`, find the elbow angle at which the forearm first touches the
-#    upper arm (hint: take the forearm and upper-arm vertices by their dominant joint, `part` of section 5, leave out
-#    those within a few cm of the elbow joint, and compute the smallest distance between the two sets with
-#    `graspkit.objects.nearest_neighbours`).
+# 1. With `BodyExplorer.update("left_elbow", ...)` (radians; `update` takes angles past the slider's 1.6), find the
+#    elbow angle at which the forearm first touches the upper arm. Hint: take the forearm and upper-arm vertices by
+#    their dominant joint (`part` of section 5), leave out those within 6 cm of the elbow joint (they sit on the
+#    crease and touch at any angle), and step the angle until the smallest distance between the two sets
+#    (`graspkit.objects.nearest_neighbours`) falls under 5 mm. Vertex-to-vertex distances cannot see two surfaces
+#    cross, so a small gap stands in for touching, and the answer moves with the exclusion radius: try 4 and 8 cm.
 # 2. The GOAL vertex budget gives the right hand 99 of 400 vertices. Set `GOAL_BUDGET["right_hand"] = 20` (a dict in
 #    `graspkit.body.markers`; `goal_vertices(bm)` reads it on every call, and the other parts keep theirs, so the total
 #    falls to 321) and look at the picture: what would a network conditioned on these vertices lose?

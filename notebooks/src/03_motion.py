@@ -76,6 +76,7 @@ for st in steps:
 ax.plot(*plan.xy.T, "k-", lw=1, label="root plan")
 ax.plot(*root[:, :2].T, color="#6a3d9a", lw=1, label="pelvis (with sway)")
 ax.set_aspect("equal"); ax.legend(fontsize=8); ax.set_title("footprints (blue left, red right; landing time in s)")
+ax.set_xlabel("x (m)"); ax.set_ylabel("y (m)")
 speeds = np.linspace(0.5, 1.6, 12)
 f = gait.cadence(speeds)
 ax2.plot(speeds, f, "o-", label="cadence (steps/s)")
@@ -212,11 +213,14 @@ print(f"success rate on this slice: {100 * np.mean(dtg <= M.WANDR_SUCCESS_RADIUS
 # idling; 4–10 s) and **CIRCLE-style** reaching (a step or two at most, then a right-hand reach; goal, goal frame and
 # hand stored). Below, as WANDR's Fig. S.4: the training goals in cylindrical coordinates around the start pose
 # (distance, angle from the facing direction, height) — CIRCLE-style goals and AMASS-style *hindsight* goals
-# (the wrist at a random future frame, WANDR §3.2) — with the evaluation goals as ×. Like WANDR's, most evaluation
-# goals lie where the training data is thin.
+# (the wrist at a random future frame up to 8 s ahead, WANDR §3.2, drawn as the training windows draw them:
+# `HINDSIGHT_HORIZON`, capped by the clip's end) — with the evaluation goals as ×. Only the default reach tasks are
+# drawn; the room-scale sets (reach_far, reach_near, reach_chain: docs/data.md) add goals out to 5 m. Like WANDR's,
+# many evaluation goals lie where this training data is thin.
 
 # %%
 from graspkit.data.reaching import sample_reach_task
+from graspkit.data.wandr_dataset import HINDSIGHT_HORIZON
 
 
 def cylindrical(goal, start_xy, heading):
@@ -236,7 +240,7 @@ for s in range(12):
     h = heading_of(m.poses[:, 0])
     for _ in range(25):
         i = int(rng.integers(0, m.num_frames - 2))
-        tg = int(rng.integers(i + 1, min(m.num_frames, i + 90)))
+        tg = i + int(rng.integers(1, min(HINDSIGHT_HORIZON, m.num_frames - 1 - i) + 1))   # the dataset's rule
         hindsight.append(cylindrical(j[tg, JOINT_INDEX["right_wrist"]][None], j[i, 0, :2], h[i])[0])
 hindsight = np.array(hindsight)
 evalg = np.stack([grid[:, 2], grid[:, 0], grid[:, 1]], 1)
@@ -296,7 +300,8 @@ print("round trip exact:", np.array_equal(back.poses, clips[5].poses), "| goal f
 # ## Exercise
 # 1. Make the person walk backwards (`integrate_controls` with a negative forward speed): which parts of the footstep
 #    and foot-phase rules still make sense? Look at the heel-strike angle (`Step.strike`) of backward steps.
-# 2. Change `GaitStyle.lead` from 0.45 to 0.8 and re-run section 1: where do the footprints land, and what happens to
+# 2. Change the gait's `lead` from 0.45 to 0.8 (`gait = GaitStyle(lead=0.8)`: a GaitStyle is frozen, so build a new
+#    one rather than setting `gait.lead`) and re-run section 1: where do the footprints land, and what happens to
 #    the pelvis height (the legs must still reach both feet)?
 # 3. Raise the goal of section 5 to 2.1 m. Which posture level does `choose_posture` pick, and why does the wrist
 #    stop short? What would a person do (tiptoe, a step closer)?

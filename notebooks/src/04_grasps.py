@@ -101,6 +101,12 @@ plt.show()
 #
 # (SAGA's foot–ground term $E^g_{cont}$ and GOAL's $E_f$, Eq. 7, hold by construction: the lower body is the
 # planner's standing pose, both feet flat on $z = 0$.)
+#
+# What is minimised is the weighted **total** (black in the plot); the terms are drawn unweighted, and they trade
+# against each other. The first steps overshoot (Adam's first moves are a full learning rate in every coordinate),
+# then the total settles several times below where it started. Along the way the polish brings the contact regions
+# (thumb, palm) onto the surface and pays for it with a little penetration, so $E_{colli}$ and the printed volume
+# and depth can end higher than after closing the fingers: compare the two lines printed under the figure.
 
 # %%
 task = sample_grasp_task(np.random.default_rng(3), "mug", grasp_type="handle",
@@ -118,9 +124,10 @@ for k, (title, pose) in enumerate(stages):
     closeup(ax, body(pose, res.trans, res.betas), obj)
     ax.set_axis_off(); ax.set_title(title, fontsize=9)
 ax = fig.add_subplot(1, 4, 4)
+ax.semilogy([h["total"] for h in history], color="k", lw=2, label="total (weighted)")
 for key in ("colli", "colli_obj", "contact", "anchor", "prior"):
     ax.semilogy([max(h[key], 1e-3) for h in history], label=key)
-ax.set_xlabel("Adam step"); ax.set_title("energy terms (mean)", fontsize=9); ax.legend(fontsize=7)
+ax.set_xlabel("Adam step"); ax.set_title("energy: total and terms (unweighted)", fontsize=9); ax.legend(fontsize=7)
 plt.tight_layout(); plt.show()
 for name, r in (("closed", closed), ("polished", res)):
     q = r.quality

@@ -70,8 +70,9 @@ fig = plt.figure(figsize=(11, 3.4))
 for k, (p, code, title) in enumerate(zip((pts, pts @ turn.T), codes, ("the test mug", "turned by 90°"))):
     ax = fig.add_subplot(1, 3, k + 1, projection="3d", proj_type="ortho")
     ax.view_init(25, -60)
-    ax.scatter(*p[::4].T, s=1, c="#888888")
-    sc = ax.scatter(*basis.T, s=3, c=code, cmap="viridis_r", vmin=0, vmax=0.12)
+    ax.computed_zorder = False                      # draw the mug over the basis points, not sorted by depth
+    sc = ax.scatter(*basis.T, s=2, c=code, cmap="viridis_r", vmin=0, vmax=0.12, alpha=0.35)
+    ax.scatter(*p[::2].T, s=2, c="k")
     ax.set_title(title, fontsize=9)
     ax.set_axis_off()
 ax = fig.add_subplot(1, 3, 3)
@@ -86,7 +87,8 @@ print(f"codes differ by {100 * float((codes[0] - codes[1]).abs().mean()):.1f} cm
 #
 # GNet is a conditional VAE. Its encoder sees the whole grasp — Θ (55 joint rotations in 6D and γ), β, the 400
 # sampled body vertices, the head direction **q**, and the 400 body-to-object offsets weighted by the attention of
-# Eq. 1 — and its decoder, from a 16-D latent **z** and the condition [BPS, object translation, β], outputs Θ̂, q̂
+# Eq. 1 — and its decoder, from a 16-D latent **z** and the condition [BPS, object translation] (GOAL's; graspkit
+# adds β, docs/goal.md), outputs Θ̂, q̂
 # and the 99 right-hand-to-object offsets d̂. At test time only the decoder runs, with z ~ N(0, I). The mug is one
 # of the held-out test objects: GNet never saw it during training.
 #
@@ -237,6 +239,8 @@ for k, (f, v) in enumerate(zip(frames, Vc)):
     viz.set_equal(ax, np.concatenate([v, omesh.vertices]))
     ax.set_title(f"frame {f}: max I = {att.max():.2f}", fontsize=9)
     ax.set_axis_off()
+fig.colorbar(plt.cm.ScalarMappable(plt.Normalize(0, 1), "YlOrRd"), ax=fig.axes, shrink=0.6,
+             label="attention $I = e^{-5d}$ (d: distance to the object, m)")
 plt.show()
 
 # %% [markdown]

@@ -108,7 +108,9 @@ for ax, (name, sl), sym in zip(axs, I.INTENTION_PARTS.items(), "wrp"):
     ax.axvline(reach.goal_frame / I.FPS, color="0.6", ls=":", lw=1)
     ax.set_title(f"$I^{sym}$ ({name}), heading frame", fontsize=9)
     ax.set_xlabel("s")
-axs[0].legend(["forward", "left", "up"], fontsize=7)
+for ax, labels in zip(axs, (["forward", "left", "up"], ["forward", "left"], ["forward", "left"])):
+    ax.legend(labels, fontsize=7)
+axs[0].set_ylabel("m/s"); axs[2].set_ylabel("m")
 fig.tight_layout()
 
 

@@ -175,8 +175,8 @@ print(f"WANDR on the full grid: SR {w['SR']:.1f} %, with a foot on the floor {w[
 #    8 mug grasps, 2 approach clips) and compare with the shipped table, made on the full data sets: which rows move
 #    most, and which differences are the data rather than the number of samples?
 # 2. Compare the motions of the cell above against 0.66 cm instead of `GOAL_SLIDE_THRESHOLD` (1 cm), or call
-#    `graspkit.metrics.foot_sliding_goal(vertices, threshold=0.0066)` on each, and see how the GOAL-style number of
-#    each motion changes.
+#    `graspkit.metrics.foot_sliding_goal(vertices, threshold=0.0066)` on each (it returns one flag per frame pair:
+#    `.mean()` is the share), and see how the GOAL-style number of each motion changes.
 # 3. Add a row to the benchmark: the WANDR motion above, measured with `graspkit.metrics.motion_quality` (it returns
 #    shares, 0-1; the table's FS and sliding columns are percentages, as `graspkit.benchmark.common_motion_rows`
 #    writes them).
