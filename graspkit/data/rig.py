@@ -95,16 +95,24 @@ def _foot(side: str, v: np.ndarray, joints: np.ndarray, weights: np.ndarray, sol
     return FootGeometry(ankle, ball, heel, ref, toe_tip, pts)
 
 
-def rest_joints(bm: BodyModel, betas: np.ndarray | torch.Tensor | None = None) -> np.ndarray:
-    """The shaped rest joints (55,3) (float64) of `bm` for betas (K,) (None: zeros; padded or cut as build_rig)."""
+def _shaped(bm: BodyModel, betas: np.ndarray | torch.Tensor | None) -> tuple[np.ndarray, np.ndarray]:
+    """Rest vertices (V,3) and joints (55,3) (float64) of `bm` for betas (K,) (None: zeros; zero-padded or cut to the
+    model's, as BodyModel)."""
     b = torch.zeros(1, bm.num_betas, dtype=bm.dtype)
     if betas is not None:
         x = np.asarray(betas, np.float64).reshape(-1)[:bm.num_betas]
         if not np.isfinite(x).all():
             raise ValueError(f"betas: expected finite shape coefficients, got {x.tolist()}")
         b[0, :len(x)] = torch.as_tensor(x, dtype=bm.dtype)
+    coeffs = torch.cat([b, torch.zeros(1, bm.num_expression, dtype=bm.dtype)], 1)
     with torch.no_grad():
-        return bm.shaped(torch.cat([b, torch.zeros(1, bm.num_expression, dtype=bm.dtype)], 1))[1][0].double().numpy()
+        v, j = bm.shaped(coeffs)
+    return v[0].double().numpy(), j[0].double().numpy()
+
+
+def rest_joints(bm: BodyModel, betas: np.ndarray | torch.Tensor | None = None) -> np.ndarray:
+    """The shaped rest joints (55,3) (float64) of `bm` for betas (K,) (None: zeros; padded or cut as build_rig)."""
+    return _shaped(bm, betas)[1]
 
 
 def check_rig(rig: Rig, bm: BodyModel, betas: np.ndarray | None) -> None:
@@ -117,16 +125,7 @@ def check_rig(rig: Rig, bm: BodyModel, betas: np.ndarray | None) -> None:
 
 def build_rig(bm: BodyModel, betas: np.ndarray | torch.Tensor | None = None, strike_angle: float = 0.3) -> Rig:
     """Measure a Rig on model `bm` for betas (K,) (None: zeros; zero-padded or cut to the model's, as BodyModel)."""
-    b = torch.zeros(1, bm.num_betas, dtype=bm.dtype)
-    if betas is not None:
-        x = np.asarray(betas, np.float64).reshape(-1)[:bm.num_betas]
-        if not np.isfinite(x).all():
-            raise ValueError(f"betas: expected finite shape coefficients, got {x.tolist()}")
-        b[0, :len(x)] = torch.as_tensor(x, dtype=bm.dtype)
-    coeffs = torch.cat([b, torch.zeros(1, bm.num_expression, dtype=bm.dtype)], 1)
-    with torch.no_grad():
-        v, j = bm.shaped(coeffs)
-    v, j = v[0].double().numpy(), j[0].double().numpy()
+    v, j = _shaped(bm, betas)
     weights = bm.lbs_weights.double().numpy()
     soles = foot_vertices(bm)
     sole_y = float(v[:, 1].min())
