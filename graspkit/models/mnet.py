@@ -332,8 +332,8 @@ def _warn_untrained_start(mnet: MNet, s: MNetState, basis: Tensor, sigma: float 
     names = sorted({"betas" if i >= mnet.cfg.n_past * per else "translation" if i % per >= NUM_JOINTS * 6
                     else JOINT_NAMES[(i % per) // 6] for i in far})
     if names:
-        warnings.warn(f"start: the pose features of {', '.join(names)} lie more than {sigma:g} training stds from where the training "
-                      "clips held them (they never moved there, std at the 1e-3 floor); MNet can then go astray "
+        warnings.warn(f"start: the pose features of {', '.join(names)} lie more than {sigma:g} training stds from "
+                      "where the training clips held them (they never moved there, std at the 1e-3 floor); MNet can then go astray "
                       "(docs/goal.md). Start from a pose like the planner's (graspkit.goal.synthesize does)",
                       stacklevel=4)   # past rollout and its no_grad wrapper: the caller
 
