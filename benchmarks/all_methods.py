@@ -10,6 +10,7 @@ method's wall time; --csv reads the rows of a benchmark.csv instead.
 from __future__ import annotations
 
 import argparse
+import os
 import math
 from pathlib import Path
 
@@ -69,6 +70,7 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=Path("outputs/benchmark"))
     ap.add_argument("--csv", type=Path, default=None, help="a benchmark.csv to print as ratios (nothing is run)")
     args = ap.parse_args()
+    print(f"load average {os.getloadavg()[0]:.1f}")
     if args.csv is not None:
         if not args.csv.is_file():
             ap.error(f"--csv: no file {args.csv}")

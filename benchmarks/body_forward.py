@@ -7,6 +7,7 @@ Prints bodies per second for both and the ratio. Run: python benchmarks/body_for
 from __future__ import annotations
 
 import argparse
+import os
 import tempfile
 import time
 import warnings
@@ -65,7 +66,8 @@ def main() -> None:
         dense.mkdir(parents=True)
         np.savez(dense / "SMPLX_NEUTRAL.npz", **random_smplx_arrays(seed=0))
         files = {"procedural": default_model_path(), "dense random (pose correctives)": dense / "SMPLX_NEUTRAL.npz"}
-        print(f"torch {torch.__version__}, {args.threads} threads; bodies/s, higher is better\n")
+        print(f"torch {torch.__version__}, {args.threads} threads, load average {os.getloadavg()[0]:.1f} (on a busy "
+              "machine two threads can run slower than one: compare with --threads 1); bodies/s, higher is better\n")
         print("| model file | B | pass | graspkit | smplx | ratio | target |\n|---|---|---|---|---|---|---|")
         for label, path in files.items():
             ours = BodyModel.from_file(path)

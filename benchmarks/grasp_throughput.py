@@ -16,6 +16,7 @@ in the same run, and the deepest body-object penetration before the goal frame.
 from __future__ import annotations
 
 import argparse
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -174,6 +175,7 @@ def main() -> None:
     p.add_argument("--motion", type=Path, default=None, help="a folder of approach files: foot skating and sliding")
     p.add_argument("--apd", default="", help="comma-separated objects: APD over grasps of one placement")
     args = p.parse_args()
+    print(f"load average {os.getloadavg()[0]:.1f}")
     torch.set_num_threads(1)
     bm = BodyModel.from_file(default_model_path())
     if args.chunks:

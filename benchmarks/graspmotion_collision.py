@@ -11,6 +11,7 @@ Run: python benchmarks/graspmotion_collision.py
 from __future__ import annotations
 
 import argparse
+import os
 
 import torch
 from geometry import _best                      # benchmarks/geometry.py: best wall time of a few calls
@@ -47,6 +48,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
+    print(f"load average {os.getloadavg()[0]:.1f}")
     torch.set_num_threads(args.threads)
     bm = BodyModel.from_file(default_model_path())
     opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(steps=(100, 0), polish=(0, 0.0)))

@@ -11,6 +11,7 @@ the generated SMPL-X meshes of the procedural humanoid; reference figures from t
 from __future__ import annotations
 
 import argparse
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -30,19 +31,21 @@ GENERATORS = {"locomotion": generate_locomotion, "reach": generate_reach}
 
 
 def throughput(bm, n: int) -> None:
-    """Clips and frames per second per core, for each kind, and the time of the default training sets on 2 cores."""
+    """Clips and frames per second per core (CPU time of this process), for each kind, and the time of the default
+    training sets on 2 cores (at that rate, perfectly parallel: a lower bound on a busy machine)."""
+    print(f"load average {os.getloadavg()[0]:.1f}; rates from CPU time (time.process_time), one torch thread\n")
     print("| kind | clips | mean frames | generate (clips/s/core) | generate + write (clips/s/core) | default set | time on 2 cores |")
     print("|---|---|---|---|---|---|---|")
     for kind, gen in GENERATORS.items():
         gen(clip_seed(0, kind, 10**6), bm)                                   # warm-up
-        t0 = time.perf_counter()
+        t0 = time.process_time()                   # CPU time: one core's work, whatever else the machine runs
         clips = [gen(clip_seed(0, kind, i), bm) for i in range(n)]
-        t_gen = time.perf_counter() - t0
+        t_gen = time.process_time() - t0
         with tempfile.TemporaryDirectory() as d:
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             for i in range(n):
                 save_motion(Path(d) / f"{i}.npz", gen(clip_seed(0, kind, i), bm))
-            t_all = time.perf_counter() - t0
+            t_all = time.process_time() - t0
         rate = n / t_all
         N = DEFAULT_N[kind]
         print(f"| {kind} | {n} | {np.mean([c.num_frames for c in clips]):.0f} | {n / t_gen:.1f} | {rate:.1f} | {N} | "

@@ -644,7 +644,9 @@ def evaluate(folders: Sequence[str | Path] | None = None, stubs: str | Path | No
     folders = folders or default_data_folders()
     stubs = Path(stubs or DATA_STUBS / "checkpoints")
     bm, gv, body = _body()
-    res: dict = {"paper": {"tab1": PAPER_TAB1, "tab2": PAPER_TAB2, "sliding": PAPER_SLIDING}}
+    res: dict = {"paper": {"tab1": PAPER_TAB1, "tab2": PAPER_TAB2, "sliding": PAPER_SLIDING},
+                 "config": {"n_grasps": n_grasps, "n_rollouts": n_rollouts, "window_stride": window_stride,
+                            "seed": seed, "max_frames": max_frames, "threads": torch.get_num_threads()}}
     res.update(tab1_results(folders, stubs, n_grasps, seed))
     gnet = load_gnet(stubs / "gnet.pt")
     # Tab. 2: teacher-forced 10-frame horizon on the test clips' windows
@@ -832,6 +834,9 @@ def main(argv: list[str] | None = None) -> int:
         else:
             r = add_saga_rows(r, rollout_sequences(folders, a.n_rollouts), a.seed)
             shown = {"sliding": r["sliding"], "saga_end_contact": r["saga"]["end_contact"]}
+        r.setdefault("updates", []).append({"flag": flag, "n_grasps": a.n_grasps, "n_rollouts": a.n_rollouts,
+                                            "seed": a.seed, "max_frames": a.max_frames,
+                                            "threads": torch.get_num_threads()})     # what changed the file since
         write_atomic(out, json.dumps(r, indent=1, default=float))
         print(json.dumps(shown, indent=1))
         return 0

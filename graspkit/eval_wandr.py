@@ -758,7 +758,9 @@ def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = F
     else:                                  # "VAE + opt": no intention to steer, latents optimised per goal
         from graspkit.optim.latent import evaluate_vae_opt
         res = evaluate_vae_opt(model, starts, bm, seed=seed)
-    out = {"row": row, "summary": summary(res), "seconds": time.perf_counter() - t0,
+    out = {"row": row, "config": {"checkpoint": str(checkpoint), "n": n, "seed": seed, "threads": threads,
+                                  "floor": floor, "lift": lift, "starts": [s.source for s in starts]},
+           "summary": summary(res), "seconds": time.perf_counter() - t0,
            "breakdown": {b: breakdown(res, b) for b in ("height", "angle", "distance")}}
     if planner:
         out["planner"] = summary(evaluate_planner(starts, bm))

@@ -403,7 +403,7 @@ class BodyModel(nn.Module):
         A = torch.cat([Rg.transpose(2, 3), offset.unsqueeze(2)], dim=2)                # (B,55,4,3)
         A = A.reshape(B, NUM_JOINTS, 12).transpose(1, 2)                                # (B,12,55)
         # chunks of bodies: a (B,12,V) product for a large batch leaves the caches (and is a fresh allocation every
-        # call); the same per-body arithmetic in chunks of SKIN_CHUNK_BYTES is bit-equal and ~2x faster at B = 512
+        # call); the same per-body arithmetic in chunks of SKIN_CHUNK_BYTES is bit-equal and 1.4-1.7x faster at B = 512
         n = max(1, SKIN_CHUNK_BYTES // (12 * self.num_vertices * v.element_size()))
         verts = self._skin(A, v, transl) if B <= n else \
             torch.cat([self._skin(A[s:s + n], v[s:s + n], transl[s:s + n]) for s in range(0, B, n)])
