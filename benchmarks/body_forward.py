@@ -18,6 +18,7 @@ import torch
 
 from graspkit.body import BodyModel
 from graspkit.body.random_model import random_smplx_arrays
+from graspkit.checks import count_type, positive_float
 from graspkit.paths import default_model_path
 
 
@@ -53,8 +54,8 @@ def _rate(model: torch.nn.Module, B: int, backward: bool, seconds: float) -> flo
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--seconds", type=float, default=1.5, help="time per measurement")
+    ap.add_argument("--threads", type=count_type(1), default=2)
+    ap.add_argument("--seconds", type=positive_float, default=1.5, help="time per measurement")
     ap.add_argument("--batches", type=int, nargs="+", default=[1, 64, 512])
     args = ap.parse_args()
     torch.set_num_threads(args.threads)

@@ -14,6 +14,7 @@ import numpy as np
 import torch
 import trimesh
 
+from graspkit.checks import count_type
 from graspkit.objects import SDFGrid, make_object, signed_distance
 
 
@@ -30,8 +31,8 @@ def _best(fn, repeat: int = 3) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--objects", nargs="+", default=["mug", "wine_glass", "camera", "power_drill"])
-    ap.add_argument("--points", type=int, default=10_000)
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--points", type=count_type(1), default=10_000)
+    ap.add_argument("--threads", type=count_type(1), default=2)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     rng = np.random.default_rng(0)

@@ -26,6 +26,7 @@ import torch
 
 from graspkit import metrics as M
 from graspkit.body import BodyModel
+from graspkit.checks import count_type
 from graspkit.data import grasp_make as gm
 from graspkit.data.grab import load_grasp_sequence
 from graspkit.data.grasp import GraspFitter, sample_grasp_task
@@ -169,7 +170,7 @@ def diversity(bm, names: list[str], k: int = 10) -> None:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--chunks", type=int, default=0, help="chunks of 16 grasps to time (0: skip)")
+    p.add_argument("--chunks", type=count_type(0), default=0, help="chunks of 16 grasps to time (0: skip)")
     p.add_argument("--kind", default="grasp", choices=gm.KINDS)
     p.add_argument("--quality", type=Path, default=None, help="a folder of grasp or approach files")
     p.add_argument("--motion", type=Path, default=None, help="a folder of approach files: foot skating and sliding")

@@ -17,6 +17,7 @@ import torch
 from geometry import _best                      # benchmarks/geometry.py: best wall time of a few calls
 
 from graspkit.body import BodyModel
+from graspkit.checks import count_type
 from graspkit.eval_motionfill import approach_scene, interp, load_motionfill
 from graspkit.models.pose_prior import load_pose_prior
 from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, in_box
@@ -45,8 +46,8 @@ def near_hands(opt: GraspMotionOpt, scene: dict, seed: int) -> tuple[torch.Tenso
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--threads", type=count_type(1), default=1)
+    ap.add_argument("--seed", type=count_type(0), default=0)
     args = ap.parse_args()
     print(f"load average {os.getloadavg()[0]:.1f}")
     torch.set_num_threads(args.threads)

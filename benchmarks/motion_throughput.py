@@ -21,6 +21,7 @@ import torch
 
 from graspkit import metrics as M
 from graspkit.body import BodyModel
+from graspkit.checks import count_type
 from graspkit.data.cli import DEFAULT_N, clip_seed
 from graspkit.data.formats import save_motion
 from graspkit.data.locomotion import generate_locomotion
@@ -86,8 +87,8 @@ def grid(bm) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--n", type=int, default=40, help="clips per kind for the throughput")
-    ap.add_argument("--quality", type=int, default=0, help="clips per kind for the quality table (0: skip)")
+    ap.add_argument("--n", type=count_type(1), default=40, help="clips per kind for the throughput")
+    ap.add_argument("--quality", type=count_type(0), default=0, help="clips per kind for the quality table (0: skip)")
     ap.add_argument("--grid", action="store_true", help="evaluate the planner on WANDR's grid")
     args = ap.parse_args()
     torch.set_num_threads(1)

@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from graspkit.body import BodyModel
+from graspkit.checks import count_type
 from graspkit.eval_wandr import PAPER, breakdown, evaluate_grid, grid_goals, starts_from_meta, summary
 from graspkit.models.wandr import load_wandr
 from graspkit.paths import DATA_STUBS, default_model_path
@@ -26,9 +27,9 @@ from graspkit.paths import DATA_STUBS, default_model_path
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--checkpoint", default=str(DATA_STUBS / "checkpoints" / "wandr.pt"))
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--loop", type=int, default=12, help="rollouts timed in the per-goal loop")
-    ap.add_argument("--n", type=int, default=5, help="samples per start and goal")
+    ap.add_argument("--threads", type=count_type(1), default=2)
+    ap.add_argument("--loop", type=count_type(1), default=12, help="rollouts timed in the per-goal loop")
+    ap.add_argument("--n", type=count_type(1), default=5, help="samples per start and goal")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     bm = BodyModel.from_file(default_model_path())
