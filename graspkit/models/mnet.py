@@ -333,8 +333,9 @@ def _warn_untrained_start(mnet: MNet, s: MNetState, basis: Tensor, sigma: float 
                     else JOINT_NAMES[(i % per) // 6] for i in far})
     if names:
         warnings.warn(f"start: the pose features of {', '.join(names)} lie more than {sigma:g} training stds from "
-                      "where the training clips held them (they never moved there, std at the 1e-3 floor); MNet can then go astray "
-                      "(docs/goal.md). Start from a pose like the planner's (graspkit.goal.synthesize does)",
+                      "where the training clips held them (they never moved there, std at the 1e-3 floor); MNet can "
+                      "then go astray (docs/goal.md). The planner's start for graspkit's body does not warn; another "
+                      "body's proportions, or a start posed by hand, can",
                       stacklevel=4)   # past rollout and its no_grad wrapper: the caller
 
 
