@@ -61,7 +61,7 @@ def check_betas(betas: Any, least: int) -> np.ndarray:
     """Shape coefficients as a float64 1-D array of at least `least` finite values."""
     b = np.asarray(betas, np.float64)
     if b.ndim != 1 or len(b) < least or not np.isfinite(b).all():
-        raise ValueError(f"betas: expected {least} finite shape coefficients (a 1-D array), got shape "
+        raise ValueError(f"betas: expected at least {least} finite shape coefficients (a 1-D array), got shape "
                          f"{np.shape(betas)}{'' if np.isfinite(b).all() else ' with NaN or Inf'}")
     return b
 

@@ -356,9 +356,12 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
     """
     if len(dataset) == 0:
         raise ValueError("dataset: empty")
-    if len(dataset) < 2 and _has_batchnorm(model):
+    if _has_batchnorm(model) and len(dataset) < 2:
         raise ValueError(f"dataset: {type(model).__name__} has BatchNorm layers, which need at least 2 samples to "
                          f"train on; got {len(dataset)}")
+    if _has_batchnorm(model) and cfg.batch_size < 2:
+        raise ValueError(f"batch_size: {type(model).__name__} has BatchNorm layers, which cannot train on batches of "
+                         f"one sample; expected at least 2, got {cfg.batch_size}")
     if time_limit_s is not None and not (isinstance(time_limit_s, (int, float)) and time_limit_s > 0):
         raise ValueError(f"time_limit_s: expected None or a positive number of seconds, got {time_limit_s!r}")
     if cfg.num_threads:

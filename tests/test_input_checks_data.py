@@ -259,13 +259,18 @@ def test_the_planners_and_generators_name_a_bad_argument(bm):
     with pytest.raises(ValueError, match=r"start: expected a Start or \(x, y, heading\)"):
         plan_reach((0.0, 0.0), goal, 30, bm=bm)
     for betas in (np.zeros((2, 10)), np.ones(3), np.full(10, np.nan)):
-        with pytest.raises(ValueError, match="^betas: expected 10 finite shape coefficients"):
+        with pytest.raises(ValueError, match="^betas: expected at least 10 finite shape coefficients"):
             generate_locomotion(1, bm, num_frames=30, betas=betas)
     with pytest.raises(ValueError, match="^betas:"):
         generate_reach_chain(1, bm, betas=np.full(10, np.nan))
     for n in (0, -5, True, 2.5, "60"):
         with pytest.raises(ValueError, match="^num_frames: expected an integer >= 1"):
             generate_locomotion(1, bm, num_frames=n)
+    from graspkit.data.reaching import plan_reach_chain
+
+    with pytest.raises(ValueError, match=f"goal_frames: the second goal frame must come at least {MIN_GOAL_FRAMES}"):
+        plan_reach_chain(Start(), np.array([goal, (1.5, 0.0, 1.0)]), (30, 30 + 10 + 24 + MIN_GOAL_FRAMES - 1), (10, 10),
+                         bm=bm)                    # a second leg of 8 frames left the wrist 17-36 cm off its goal
     m = plan_reach(Start(), goal, MIN_GOAL_FRAMES, bm=bm, hold_frames=0)         # the shortest time is met
     wrist = m.joint_positions(bm)[MIN_GOAL_FRAMES, 21]
     assert np.linalg.norm(wrist - np.asarray(goal)) < 1e-3
@@ -280,6 +285,7 @@ def test_a_motion_keeps_goal_frame_and_hand_only_with_a_goal_and_a_whole_goal_fr
     with pytest.raises(ValueError, match="goal_frame, hand: given .* without a goal"):
         Motion(*args, goal_frame=2, hand="right")
     assert Motion(*args, goal=(0, 0, 1), goal_frame=np.int64(2), hand="right").goal_frame == 2
+    assert Motion(*args, goal=(0, 0, 1), goal_frame=np.array(2), hand="right").goal_frame == 2    # as read from a file
     with pytest.raises(ValueError, match=r"betas: expected one body's shape coefficients \(K,\)"):
         Motion(clip.poses, clip.trans, np.zeros((2, 10)))
     assert Motion(clip.poses, clip.trans, np.zeros((1, 10))).betas.shape == (10,)
@@ -297,8 +303,12 @@ def test_the_datasets_name_bad_windows_splits_and_statistics(bm):
         with pytest.raises(ValueError, match="^samples: expected an integer >= 2"):
             W.compute_stats(clips, samples=samples)
     items = torch.tensor([[0, 5]])
-    with pytest.raises(ValueError, match="^horizon: expected an integer >= 11"):
-        W.make_batch(clips, items, steps=10, horizon=5)
+    with pytest.raises(ValueError, match="^horizon: expected an integer >= 1"):
+        W.make_batch(clips, items, steps=10, horizon=0)
+    loco = W.clips_from_motions([load_motion(p) for p in sorted((CLIP.parent.parent / "locomotion").glob("*.npz"))[:1]],
+                                ["l"], bm)
+    b = W.make_batch(loco, torch.tensor([[0, 5]] * 4), steps=10, horizon=5, generator=torch.Generator().manual_seed(0))
+    assert b["hindsight"].all() and (b["t_goal"] == 11).all()     # a horizon under the window: its last frame
     with pytest.raises(ValueError, match="^steps: expected an integer >= 0"):
         W.make_batch(clips, items, steps=-1)
     with pytest.raises(ValueError, match=r"^items: clip indices expected in \[0, 2\)"):

@@ -206,13 +206,13 @@ def test_near_tasks_put_the_goal_close_by_at_the_floor_or_overhead_and_their_cli
 
 
 @pytest.mark.parametrize("bad, match", [
-    ({"goal_frames": (90, 120)}, "goal_frames: the second goal frame must come after"),   # 90 + 10 held + 24 released
+    ({"goal_frames": (90, 120)}, "goal_frames: the second goal frame must come at least 9 frames after"),   # 90 + 10 held + 24 released
     ({"hold_frames": (-1, 5)}, r"hold_frames\[0\]: expected an integer >= 0"),
     ({"hold_frames": (10, -2)}, r"hold_frames\[1\]"),
     ({"goal_frames": (90.5, 200)}, r"goal_frames\[0\]: expected an integer"),
     ({"goals": np.zeros((3, 3))}, r"goals: expected two finite goals \(2, 3\)"),
     ({"goals": np.array([[1.0, 0.0, np.nan], [2.0, 1.0, 1.0]])}, "NaN or Inf"),
-    ({"betas": np.zeros(5)}, "betas: expected 10 finite shape coefficients"),
+    ({"betas": np.zeros(5)}, "betas: expected at least 10 finite shape coefficients"),
     ({"release_s": -0.1}, "release_s"),
 ])
 def test_a_chain_of_reaches_refuses_bad_input_by_name(bm, bad, match):
@@ -249,7 +249,7 @@ def test_the_head_never_snaps_round_when_the_gaze_target_passes_behind_or_under_
 
 # At the goal frame the goal lies to the RIGHT of the heading as seen from the right shoulder (the stand-off) and
 # the right elbow bends out to the body's right (the pole); a second goal frame exactly at the end of the first hold
-# plus the release is refused ("must come after").
+# plus the release (or fewer than MIN_GOAL_FRAMES after it) is refused ("must come at least ... after").
 @pytest.mark.parametrize("goal", [(1.5, 0.4, 1.0), (0.2, -1.6, 1.3)])
 def test_the_goal_is_reached_right_of_the_heading_with_the_elbow_out_to_the_right(bm, goal):
     m = plan_reach(Start(0.0, 0.0, 0.3), goal, 90, seed=1, bm=bm, hold_frames=0)
@@ -268,7 +268,7 @@ def test_the_goal_is_reached_right_of_the_heading_with_the_elbow_out_to_the_righ
 def test_a_second_goal_frame_at_the_end_of_the_release_is_refused(bm):
     goals = np.array([[0.8, -0.3, 1.0], [1.6, 0.5, 0.9]])
     r = int(round(RELEASE_S * 30.0))
-    with pytest.raises(ValueError, match="goal_frames: the second goal frame must come after"):
+    with pytest.raises(ValueError, match="goal_frames: the second goal frame must come at least 9 frames after"):
         plan_reach_chain(Start(), goals, (60, 60 + 15 + r), (15, 5), bm=bm)
 
 

@@ -381,7 +381,8 @@ def test_loss_names_unknown_parts_trajectory_and_a_batch_of_wrong_shape():
     m = MotionFillVAE()
     b = _batch()
     for kwargs, message in (({"parts": ("trajectory",)}, "parts:"), ({"parts": ()}, "parts:"),
-                            ({"trajectory": "pred"}, "trajectory:")):
+                            ({"trajectory": "pred"}, "trajectory:"),
+                            ({"parts": ("local",), "trajectory": "predicted"}, "trajectory: 'predicted' needs")):
         with pytest.raises(ValueError, match=message):
             m.loss(b, **kwargs)
     for key, value, message in (("local", b["local"][:, :, :78], r"batch\['local'\]: expected shape \(B, 61, 79, 3\)"),

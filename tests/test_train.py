@@ -127,6 +127,8 @@ def test_a_batchnorm_model_skips_a_last_batch_of_one_and_other_models_keep_it():
     assert sorted(len(b) for e, b in seen_lin if e == 0) == [1, 4, 4]
     with pytest.raises(ValueError, match="dataset: .*BatchNorm.* at least 2"):
         fit(bn, recorder([]), Indices(1), cfg, progress=False)
+    with pytest.raises(ValueError, match="batch_size: .*BatchNorm.* at least 2, got 1"):   # every batch one sample
+        fit(bn, recorder([]), Indices(9), TrainConfig(epochs=1, batch_size=1), progress=False)
 
 
 def test_logged_terms_are_per_sample_means_with_a_short_last_batch():

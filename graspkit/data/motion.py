@@ -65,9 +65,9 @@ class Motion:
                 raise ValueError(f"contacts: expected shape ({T}, 4), got {self.contacts.shape}")
         if self.goal is not None:
             self.goal = np.asarray(self.goal, np.float32).reshape(3)
-            gf = self.goal_frame
-            if isinstance(gf, (bool, np.bool_)) or not isinstance(gf, (int, np.integer)) or not 0 <= gf < T:
-                raise ValueError(f"goal_frame: expected a whole frame in [0, {T}) with a goal, got {gf!r}")
+            gf = np.asarray(self.goal_frame)                  # an int, or a 0-d integer array read from a file
+            if gf.ndim != 0 or gf.dtype.kind not in "iu" or not 0 <= int(gf) < T:
+                raise ValueError(f"goal_frame: expected a whole frame in [0, {T}) with a goal, got {self.goal_frame!r}")
             self.goal_frame = int(gf)
             if self.hand not in HANDS:
                 raise ValueError(f"hand: expected one of {HANDS}, got {self.hand!r}")

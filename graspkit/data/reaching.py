@@ -298,9 +298,9 @@ def plan_reach_chain(start: Start | tuple[float, float, float], goals: np.ndarra
     if not 0.0 <= release_s < 10.0:
         raise ValueError(f"release_s: expected seconds in [0, 10), got {release_s}")
     fps, r = 30.0, int(round(release_s * 30.0))
-    if g2 <= g1 + h1 + r:
-        raise ValueError(f"goal_frames: the second goal frame must come after the first one's hold and the arm's "
-                         f"release ({g1} + {h1} + {r} frames), got {g2}")
+    if g2 < g1 + h1 + r + MIN_GOAL_FRAMES:
+        raise ValueError(f"goal_frames: the second goal frame must come at least {MIN_GOAL_FRAMES} frames after the "
+                         f"first one's hold and the arm's release ({g1} + {h1} + {r} frames), got {g2}")
     goals = np.asarray(goals, np.float64)
     if goals.shape != (2, 3) or not np.isfinite(goals).all():
         raise ValueError(f"goals: expected two finite goals (2, 3) in metres, got shape {goals.shape}"

@@ -120,7 +120,8 @@ def check_rig(rig: Rig, bm: BodyModel, betas: np.ndarray | None) -> None:
     err = float(np.abs(rig.joints - rest_joints(bm, betas)).max())
     if err > 1e-4:
         raise ValueError(f"rig: built for another body (its rest joints are {100 * err:.1f} cm off those of bm with "
-                         "these betas); pass rig=build_rig(bm, betas) or None")
+                         "the clip's betas: the ones given, or else the ones drawn from the seed); pass the same betas "
+                         "to build_rig and here, or rig=None")
 
 
 def build_rig(bm: BodyModel, betas: np.ndarray | torch.Tensor | None = None, strike_angle: float = 0.3) -> Rig:

@@ -248,7 +248,7 @@ def make_batch(clips: ClipSet, items: Tensor, steps: int, generator: torch.Gener
     if goal_frame not in GOAL_FRAMES:
         raise ValueError(f"goal_frame: expected one of {GOAL_FRAMES}, got {goal_frame!r}")
     steps = check_int(steps, "steps", 0)
-    horizon = check_int(horizon, "horizon", steps + 1)      # hindsight t_G at the window's last frame at the earliest
+    horizon = check_int(horizon, "horizon", 1)      # a horizon under steps + 1 puts t_G at the window's last frame
     items = torch.as_tensor(items, dtype=torch.long).reshape(-1, 2)
     c, i = items[:, 0], items[:, 1]
     if len(c) and not (0 <= int(c.min()) and int(c.max()) < len(clips)):
@@ -261,11 +261,12 @@ def make_batch(clips: ClipSet, items: Tensor, steps: int, generator: torch.Gener
     p = clips.p[frames]
     rest = clips.rest[c]
     labelled = clips.goal_frame[c] >= 0
-    # hindsight: t_G - i uniform over [steps + 1, min(horizon, T - 1 - i)]
+    # hindsight: t_G - i uniform over [steps + 1, min(horizon, T - 1 - i)], or steps + 1 when that range is empty
+    # (the shipped chain's 240-step rollouts with the 240-frame horizon)
     lo = torch.full_like(i, steps + 1)
     hi = torch.minimum(torch.full_like(i, horizon), T - 1 - i)
     u = torch.rand(len(i), generator=generator)
-    offset = lo + (u * (hi - lo + 1).float()).long().clamp(max=(hi - lo).clamp(min=0))
+    offset = lo + (u * (hi - lo + 1).float()).long().clamp(min=0).clamp(max=(hi - lo).clamp(min=0))
     labelled_tg = clips.goal_frame[c] if goal_frame == "reach" else T - 1
     tg_abs = torch.where(labelled, labelled_tg, i + offset)
     p_goal = clips.p[start + tg_abs]

@@ -400,6 +400,8 @@ class MotionFillVAE(nn.Module):
             raise ValueError(f"parts: expected a non-empty subset of ('traj', 'local'), got {parts!r}")
         if trajectory not in ("truth", "predicted"):
             raise ValueError(f"trajectory: expected 'truth' or 'predicted', got {trajectory!r}")
+        if trajectory == "predicted" and "traj" not in parts:
+            raise ValueError("trajectory: 'predicted' needs TrajFill's prediction, so parts must include 'traj'")
         check_window_batch(batch, ("traj", "traj_interp", "vel") if "local" not in parts
                            else ("traj", "traj_interp", "vel", "local", "contacts") if "traj" in parts
                            else ("vel", "local", "contacts"))

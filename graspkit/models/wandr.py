@@ -439,7 +439,7 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
                       "the training clips held them (they never moved there, std at the 1e-3 floor); the shipped "
                       "model then reaches far less often (a left wrist turned 0.1 rad: SR 99.5 -> 6 %, docs/wandr.md). "
                       "Start from a pose of the training distribution (eval_wandr.starts_from_meta, or the planner's)",
-                      stacklevel=2)
+                      stacklevel=3)   # past generate (or the other callers): the user's call
     ps, js = [], []
     low0 = None
     for k in range(T):
