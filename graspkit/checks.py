@@ -66,6 +66,19 @@ def check_betas(betas: Any, least: int) -> np.ndarray:
     return b
 
 
+def check_labels(x: Any, name: str) -> None:
+    """x (a tensor) of float contact labels in [0, 1] (a bool mask is refused: the losses subtract it)."""
+    if not x.is_floating_point() or bool(((x < 0) | (x > 1)).any()):
+        raise ValueError(f"{name}: expected float contact labels in [0, 1] (a bool mask: .float())")
+
+
+def check_seed(value: Any, name: str = "seed") -> int:
+    """A seed as numpy's SeedSequence and torch take it: an integer in [0, 2^63) (bools refused)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not 0 <= value < 2**63:
+        raise ValueError(f"{name}: expected a non-negative integer below 2^63, got {value!r}")
+    return int(value)
+
+
 def check_probabilities(x: Any, name: str) -> None:
     """x (a tensor or None) with every value in [0, 1] (NaN fails too): a contact map, say."""
     if x is not None and not bool(((x >= 0) & (x <= 1)).all()):

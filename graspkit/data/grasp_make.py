@@ -17,7 +17,6 @@ kept and its file says whether it passed (`grasp.accepted`).
 """
 from __future__ import annotations
 
-import numbers
 import os
 from functools import lru_cache
 from pathlib import Path
@@ -27,7 +26,7 @@ import numpy as np
 import torch
 
 from graspkit.body.markers import goal_vertices, saga_markers
-from graspkit.checks import check_int
+from graspkit.checks import check_int, check_seed
 from graspkit.data.approach import approach_motion
 from graspkit.data.grab import DEFAULT_MODEL_NAME, GraspSequence, export_object_ply, save_grasp_sequence
 from graspkit.data.grasp import GRASP_PARTS, GraspFitter, GraspResult, object_points, sample_grasp_task
@@ -304,8 +303,7 @@ def make_grasp_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2
         raise ValueError(f"kind: expected one of {KINDS}, got {kind!r}")
     for name, value, least in (("n", n, 0), ("workers", workers, 1), ("chunk", chunk, 1)):
         check_int(value, name, least)
-    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or not 0 <= seed < 2**63:
-        raise ValueError(f"seed: expected a non-negative integer below 2^63, got {seed!r}")
+    check_seed(seed)
     out = Path(out)
     from graspkit.data.cli import check_model, claim_folder
 

@@ -47,7 +47,7 @@ import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
-from graspkit.checks import check_generator
+from graspkit.checks import check_generator, check_labels
 from graspkit.models.blocks import GaussianHead, ResBlock, kl_standard_normal, reparameterize, robust_kl
 
 T = 60
@@ -79,9 +79,7 @@ def check_window_batch(batch: dict[str, Tensor], keys: tuple[str, ...]) -> None:
                              f"{'' if B is None else f' with B={B}'}, got {got}")
         B = x.shape[0]
     if "contacts" in keys:
-        c = batch["contacts"]
-        if not c.is_floating_point() or bool(((c < 0) | (c > 1)).any()):
-            raise ValueError("batch['contacts']: expected float contact labels in [0, 1]")
+        check_labels(batch["contacts"], "batch['contacts']")
 
 
 def _reduce(err: Tensor, reduction: str) -> Tensor:

@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING, Any
 import torch
 from torch import Tensor, nn
 
-from graspkit.checks import check_generator
+from graspkit.checks import check_generator, check_labels
 from graspkit.objects.distance import MAX_METRES, nearest_neighbours, require_points_in_metres, require_unit_normals
 from graspkit.objects.placement import GRASP_HEIGHTS
 from graspkit.objects.sdf import signed_distance_to_points
@@ -303,9 +303,7 @@ class WholeGraspVAE(nn.Module):
             self._check("marker_contact", batch["marker_contact"], (B, N))
             self._check("object_contact", batch["object_contact"], (B, P))
             for k in ("marker_contact", "object_contact"):
-                c = batch[k]
-                if not c.is_floating_point() or bool(((c < 0) | (c > 1)).any()):
-                    raise ValueError(f"{k}: expected float contact labels in [0, 1] (a bool mask: .float())")
+                check_labels(batch[k], k)
 
     # ------------------------------------------------------------------ losses
     def loss(self, batch: dict[str, Tensor], out: dict[str, Tensor], epoch: int, epochs: int) -> dict[str, Tensor]:
