@@ -336,8 +336,8 @@ def test_sphere_is_closed_and_wound_outward():
 
 
 def test_a_strided_animation_draws_the_moving_object_at_the_drawn_frames(tmp_path):
-    """stride=4 over 20 frames draws frames 0, 4, .., 16: an object moving 5 m along x over the clip is drawn up to
-    frame 16 (x = 16/19 * 5 m = 4.2 m), so the panel's x range reaches past 4 m (a static body at the origin)."""
+    """stride=4 over 20 frames draws frames 0, 4, .., 16 and the last, 19: an object moving 5 m along x over the clip
+    is drawn up to x = 5 m, so the panel's x range reaches past 5 m (a static body at the origin)."""
     box = trimesh.creation.box((0.2, 0.2, 0.2))
     body = trimesh.creation.box((0.3, 0.3, 1.0))
     T = 20
@@ -346,9 +346,9 @@ def test_a_strided_animation_draws_the_moving_object_at_the_drawn_frames(tmp_pat
                       views=("top",), size=1.5, dpi=30, ground=False)
     fig = anim._fig
     hi = fig.axes[0].get_xlim3d()[1]
-    assert hi > 4.0
-    with Image.open(save_animation(anim, tmp_path / "strided.gif")) as im:      # rendered: the 5 drawn frames
-        assert im.n_frames == 5
+    assert hi > 5.0
+    with Image.open(save_animation(anim, tmp_path / "strided.gif")) as im:      # rendered: the 6 drawn frames
+        assert im.n_frames == 6
     plt.close(fig)
 
 
@@ -420,6 +420,23 @@ def test_animation_draws_body_and_moving_object_at_the_drawn_clip_frames():
     plt.close(anim._fig)
 
 
+def test_animation_always_draws_the_last_frame():
+    """stride 5 over 12 frames draws clip frames 0, 5, 10 and then 11, the last (a reach ends there): its drawn frame
+    shows the body and the moving object at frame 11 and is stamped with frame 11's time."""
+    v, f = _tet()
+    v = v - v.mean(0)
+    body = np.stack([v + [0.0, 0.0, 0.5 * t] for t in range(12)])
+    obj = np.stack([v + [1.0 * t, 0.0, 0.0] for t in range(12)])
+    anim = animate_fn(body, f, objects=[(obj, f)], fps=30.0, stride=5, max_frames=None, views=("front",), ground=False)
+    assert anim._save_count == 4
+    for i, k in enumerate([0, 5, 10, 11]):
+        np.testing.assert_allclose(_drawn(anim, i).reshape(-1, 3).mean(0), (body[k].mean(0) + obj[k].mean(0)) / 2,
+                                   atol=1e-9)
+    assert anim._fig.texts[0].get_text().strip() == "t = 0.37 s"
+    anim._draw_was_started = True
+    plt.close(anim._fig)
+
+
 def test_animation_refuses_a_stride_below_one():
     """stride 0 or -1 is no step through the clip: a ValueError naming stride, even with max_frames raising it."""
     v, f = _tet()
@@ -433,7 +450,7 @@ def test_gif_plays_at_real_time_and_honours_an_explicit_fps(tmp_path):
     """A 20 fps clip drawn every 2nd frame plays each GIF frame for 2/20 s = 100 ms; save_animation(fps=4) plays
     4 drawn frames per second (250 ms), read back by PIL."""
     v, f = _tet()
-    frames = np.stack([v + [0.1 * t, 0.05 * (t % 2), 0.0] for t in range(6)])
+    frames = np.stack([v + [0.1 * t, 0.05 * (t % 2), 0.0] for t in range(5)])  # frames 0, 2, 4: 4 is the last
     anim = animate_fn(frames, f, fps=20.0, stride=2, max_frames=None, views=("front",), size=1.0, dpi=30)
     for fps, ms in ((None, 100), (4.0, 250)):
         path = save_animation(anim, tmp_path / f"a{ms}.gif", fps=fps)

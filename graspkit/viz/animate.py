@@ -55,7 +55,8 @@ def animate(frames: Any, faces: Any, objects: Sequence[tuple[Any, ...]] = (), go
             num_frames: int | None = None, max_faces: int | None = 8000, close: bool = True) -> FuncAnimation:
     """A body moving over time: frames (T,V,3) array / list of (V,3) / function t -> (V,3) (with num_frames),
     faces (F,3); objects [(vertices (V,3) static or (T,V,3) moving, faces[, color])]; static goals (G,3),
-    paths [(N,3)]. Every `stride`-th frame, stride raised so at most max_frames are drawn; plays at real time.
+    paths [(N,3)]. Every `stride`-th frame, stride raised so at most max_frames are drawn (plus the last frame, which
+    is always drawn: a reach or grasp ends there); plays at real time, the last frame up to stride - 1 frames early.
     max_faces: larger bodies are decimated (same topology every frame): matplotlib's time per frame grows with
     the face count, and a few thousand faces already fill a small panel. close=True closes the figure so a
     notebook shows only the animation, not a still of its last frame.
@@ -68,6 +69,8 @@ def animate(frames: Any, faces: Any, objects: Sequence[tuple[Any, ...]] = (), go
     if max_frames is not None:
         stride = max(stride, math.ceil(total / max_frames))
     ticks = list(range(0, total, stride))
+    if ticks[-1] != total - 1:
+        ticks.append(total - 1)
     body = [get(t) for t in ticks]
     _, f = as_mesh(body[0], faces, "frames")
     if max_faces is not None and len(f) > max_faces:

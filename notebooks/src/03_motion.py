@@ -135,7 +135,7 @@ fig.tight_layout()
 # ## 4 · The walk, animated
 #
 # Arms swing in counter-phase with the legs (elbows bend on the forward swing), the thorax counter-rotates against
-# the pelvis, the head looks along the path. (Every 5th frame is drawn.)
+# the pelvis, the head looks along the path. (Every 5th frame is drawn, and the last.)
 
 # %%
 # NBVAL_IGNORE_OUTPUT

@@ -203,7 +203,7 @@ plt.show()
 # T-pose or an idle stance), walks, reaches; half a second before the grasp frame the upper body turns into the
 # fitted pose, the fingers take the pre-shape and close, and the grasp is held to the end (GOAL's *goal frame* is
 # the first held frame). The lower body is the planner's, so foot contacts and skating are those of the motion
-# data. A shipped approach clip, every third frame:
+# data. A shipped approach clip, every third frame and the last:
 
 # %%
 afile = sorted((DATA_STUBS / "approach").glob("approach_*.npz"))[0]
