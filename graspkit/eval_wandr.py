@@ -41,7 +41,7 @@ from torch import Tensor
 
 from graspkit import intention as I
 from graspkit.body.skeleton import JOINT_INDEX
-from graspkit.checks import check_int, count_type, nonneg_float, positive_float, seeded_rng
+from graspkit.checks import check_int, check_seed, check_type, count_type, nonneg_float, positive_float, seeded_rng
 from graspkit.data.reaching import EVAL_DISTANCES, EVAL_FRAMES, EVAL_HEIGHTS, Start, evaluation_goals
 from graspkit.data.wandr_dataset import FOOT_JOINTS, shaped_rest
 from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS
@@ -977,6 +977,12 @@ def goal_from_cylinder(angle_deg: float, distance: float, height: float) -> Tens
     return torch.tensor([distance * np.cos(a), distance * np.sin(a), height], dtype=torch.float32)
 
 
+def _is_canonical(start: I.StartPose, tol: float = 1e-5) -> bool:
+    """Whether the start's pelvis is above the origin and it faces +x (within tol m / rad): the held-out starts are."""
+    pelvis = start.p[:2] + start.rest[0, :2].to(start.p.dtype)
+    return bool(pelvis.abs().max() <= tol) and abs(float(I.heading_of_pose(start.p))) <= tol
+
+
 class GoalReacher:
     """Place a goal around a start pose and let the model reach it (lesson 09's widget). The callback `update` is plain
     Python (tested); `widget()` only wires ipywidgets sliders to it and shows the figure as PNG bytes in an Image."""
@@ -987,10 +993,16 @@ class GoalReacher:
     def __init__(self, model: WandrCVAE, start: I.StartPose, seed: int = 0, angle: float = 45.0, distance: float = 2.0,
                  height: float = 1.0, seconds: float = 4.0, floor: float | None = None) -> None:
         """The sliders' start values (in their ranges, SLIDERS); floor: `rollout`'s floor constraint (m; None: off,
-        the paper's rollout)."""
-        self.model, self.start, self.seed, self.floor = model, start, check_int(seed, "seed"), floor
+        the paper's rollout). The sliders place the goal around a canonical start (pelvis above the origin, facing
+        +x): any other start (`StartPose.from_motion`, say) is moved there first (`StartPose.canonical`)."""
+        from graspkit.models.wandr import check_floor
+
         self.values = {k: self._checked(k, v) for k, v in
                        (("angle", angle), ("distance", distance), ("height", height), ("seconds", seconds))}
+        check_type(start, I.StartPose, "start", what="graspkit.intention.StartPose")
+        check_floor(floor)
+        self.model, self.seed, self.floor = model, check_seed(seed), floor
+        self.start = start if _is_canonical(start) else start.canonical()
         self.motion: Tensor | None = None
         self.joints: Tensor | None = None
 
@@ -1015,8 +1027,9 @@ class GoalReacher:
     def _checked(self, name: str, value: Any) -> float:
         """value as a float within the slider `name`'s range, else a ValueError naming it."""
         lo, hi, _ = self.SLIDERS[name]
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) \
-                or not lo <= float(value) <= hi:                          # NaN fails the range test too
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+            raise ValueError(f"{name}: expected a number in [{lo}, {hi}], got {type(value).__name__} {value!r}")
+        if not lo <= float(value) <= hi:                                  # NaN fails the range test too
             raise ValueError(f"{name}: expected a value in [{lo}, {hi}], got {value!r}")
         return float(value)
 
@@ -1036,14 +1049,16 @@ class GoalReacher:
                 "error_at_goal_cm": 100 * float(d[-1]), "reached": bool(d.min() <= WANDR_SUCCESS_RADIUS),
                 "lift_cm": 100 * float((low - low[0]).max())}
 
-    def figure(self, readout: dict[str, float] | None = None) -> Figure:
-        """Top view of the pelvis and wrist paths with the goal, and the wrist's distance to the goal over time."""
+    def figure(self) -> Figure:
+        """Top view of the pelvis and wrist paths with the goal, and the wrist's distance to the goal over time (not
+        left open in pyplot: the caller shows it)."""
         import matplotlib.pyplot as plt
 
         if self.joints is None:
             self.run()
         J, g = self.joints.numpy(), self.goal.numpy()
         fig, (ax, bx) = plt.subplots(1, 2, figsize=(8.5, 3.4), dpi=72)
+        plt.close(fig)
         ax.plot(J[:, 0, 0], J[:, 0, 1], color="#6a3d9a", label="pelvis")
         ax.plot(J[:, I.WRIST, 0], J[:, I.WRIST, 1], color="#e377c2", label="right wrist")
         ax.plot(*g[:2], "x", color="#d62728", ms=10, mew=2, label=f"goal ({g[2]:.2f} m high)")

@@ -113,3 +113,21 @@ def test_body_explorer_stature_and_figure_are_the_canonical_y_extent(explorer):
         assert np.mean(ax.get_zlim()) == pytest.approx((w[:, 2].max() + w[:, 2].min()) / 2, abs=1e-3)
     plt.close(fig)
     ex.update("beta0", 0.0)                                            # the module's explorer back at the mean shape
+
+
+def test_a_value_the_model_cannot_pose_is_refused_and_the_state_kept(explorer):
+    """beta3 = 1e39 (finite in float64, inf in the model's float32) was stored and then broke every later update
+    with an error naming `betas`; an elbow turned 1e20 rad gave NaN vertices from then on (an independent check).
+    Both are refused by the slider's name, the state stays, and the next update gives the body before them."""
+    v0, _ = explorer.mesh()
+    for name, value in (("beta3", 1e39), ("left_elbow", 1e20)):
+        with pytest.raises(ValueError, match=f"^{name}: {re.escape(repr(value))} gives a body the model cannot pose"):
+            explorer.update(name, value)
+        assert explorer.state.betas[3] == 0.0 and explorer.state.angles["left_elbow"] == 0.0
+    v1, _ = explorer.update("beta0", 0.0)
+    np.testing.assert_array_equal(v0, v1)
+    with pytest.raises(ValueError, match="^name: unknown slider 'beta01'"):      # was read as beta1
+        explorer.update("beta01", 1.0)
+    for bad in (12, -1, 2.5):
+        with pytest.raises(ValueError, match="^betas_shown: expected"):
+            explorer.widget(betas_shown=bad)

@@ -293,3 +293,34 @@ def test_bad_arrays_are_named_in_the_constructor():
         HandObjectExplorer(bad, hand.faces, "apple")
     with pytest.raises(ValueError, match=f"^faces: expected \\(F, 3\\) vertex indices in 0..{V - 1}"):
         HandObjectExplorer(hand.vertices, hand.faces + V, "apple")
+
+
+def test_an_offset_that_cannot_be_measured_is_refused_and_the_state_kept(explorer):
+    """x = 1e15 m collapsed the mug's float64 mesh (1e17 the cracker box's), was stored, and every later update failed
+    naming `mesh_b` (an independent check): refused by the slider's name now, and the explorer measures as before."""
+    before = explorer.measure()
+    with pytest.raises(ValueError, match="^x: 1e\\+17 puts the object where it cannot be measured"):
+        explorer.update("x", 1e17)
+    np.testing.assert_array_equal(explorer.offset, np.zeros(3))
+    assert explorer.update("z", 0.0) == before
+    with pytest.raises(ValueError, match="^object: unknown object"):            # an array is not a name
+        explorer.update("object", np.array(["apple"]))
+    assert explorer.name == "cracker_box"
+
+
+def test_constructor_and_widget_arguments_are_named():
+    """hand_ids=[] failed at the first measure ('points: empty point set'), a translation as `base` with an
+    AttributeError, num_points=0 and an unknown object were named after inner functions' arguments (`n`, `name`),
+    a negative span froze the widget's sliders (an independent check): each is named where it is given."""
+    hand = trimesh.creation.box(HAND)
+    for kwargs, message in (({"hand_ids": []}, "^hand_ids: expected at least one"),
+                            ({"base": np.array([0, 0, 0.06])}, "^base: expected a graspkit.objects.ObjectPose"),
+                            ({"num_points": 0}, "^num_points: expected an integer >= 1"),
+                            ({"object_name": "nope"}, "^object_name: unknown object 'nope'"),
+                            ({"seed": -1}, "^seed: expected")):
+        with pytest.raises((ValueError, TypeError), match=message):
+            HandObjectExplorer(hand.vertices, hand.faces, **{"object_name": "apple", **kwargs})
+    ex = HandObjectExplorer(hand.vertices, hand.faces, "apple", num_points=256)
+    for kwargs, name in (({"span": -0.1}, "span"), ({"span": float("nan")}, "span"), ({"step": 0.0}, "step")):
+        with pytest.raises(ValueError, match=f"^{name}: expected a finite positive number"):
+            ex.widget(**kwargs)

@@ -242,7 +242,7 @@ def test_goal_reacher_callback(bm):
     model = WandrCVAE(WandrConfig(latent=4, hidden=32, enc_layers=1, dec_layers=1, dropout=0.0)).eval()
     r = E.GoalReacher(model, start, seed=3, angle=0.0, distance=1.0, height=1.0, seconds=1.0)
     for bad in (2.5, True, -1, "3"):                 # was torch's manual_seed error at run(), naming nothing
-        with pytest.raises(ValueError, match="^seed: expected an integer >= 0"):
+        with pytest.raises(ValueError, match="^seed: expected a non-negative integer"):
             E.GoalReacher(model, start, seed=bad)
     out = r.update("angle", 90.0)
     assert torch.allclose(r.goal, torch.tensor([0.0, 1.0, 1.0]), atol=1e-6) and r.t_goal == 30
@@ -263,6 +263,38 @@ def test_goal_reacher_callback(bm):
         r.update("height", 3.0)
     with pytest.raises(ValueError, match="name"):
         r.update("colour", 1.0)
+
+
+def test_goal_reacher_moves_any_start_to_where_its_sliders_measure_from(bm):
+    """A start from StartPose.from_motion (pelvis at (-1.0, -1.7) m, facing -113°) took the goal at angle 0, 1 m as
+    world (1, 0): 2.6 m from the pelvis at 152° (an independent check). The reacher moves such a start onto the
+    origin facing +x, body pose unchanged, so the goal lies 1 m straight ahead of the pelvis; floor=True is refused
+    when built (it failed in torch at the first run), and figure() leaves no pyplot figure open."""
+    import matplotlib.pyplot as plt
+
+    from graspkit.models.wandr import WandrConfig, WandrCVAE
+
+    m = load_motion(DATA_STUBS / "motion" / "locomotion" / "locomotion_000003.npz")
+    start = I.StartPose.from_motion(m, 40, bm)
+    pelvis0 = start.p[:2] + start.rest[0, :2]
+    assert float(pelvis0.norm()) > 0.5 and abs(float(I.heading_of_pose(start.p))) > 0.5       # not canonical
+    torch.manual_seed(0)
+    model = WandrCVAE(WandrConfig(latent=4, hidden=32, enc_layers=1, dec_layers=1, dropout=0.0)).eval()
+    r = E.GoalReacher(model, start, seed=1, angle=0.0, distance=1.0, height=1.0, seconds=1.0)
+    J = I.body_joints(r.start.p[None], r.start.rest)[0]                 # (22, 3) at the start
+    fwd = J[I.PELVIS, :2] + torch.stack([torch.cos(I.heading_of_pose(r.start.p)),
+                                          torch.sin(I.heading_of_pose(r.start.p))])
+    torch.testing.assert_close(r.goal[:2], fwd.float(), atol=1e-4, rtol=0)   # 1 m ahead of the pelvis
+    torch.testing.assert_close(r.start.p[9:], start.p[9:])                  # the body's pose is the start's
+    assert J[:, 2].min() == pytest.approx(float(I.body_joints(start.p[None], start.rest)[0, :, 2].min()), abs=1e-5)
+    figs = plt.get_fignums()
+    r.figure()
+    assert plt.get_fignums() == figs
+    for bad in (True, -0.1, float("nan"), "1cm"):
+        with pytest.raises(ValueError, match="^floor: expected None or a tolerance"):
+            E.GoalReacher(model, start, floor=bad)
+    with pytest.raises(TypeError, match="^start: expected a graspkit.intention.StartPose"):
+        E.GoalReacher(model, start.p)
 
 
 def test_train_command_parses_the_schedule_flags():
@@ -905,15 +937,18 @@ def test_vae_opt_cells_are_their_goals_whatever_the_chunk_and_samples(bm, monkey
     assert np.isfinite(res.dtg).all() and (res.dtg > 0).all()
 
 
-def test_goal_reacher_refuses_start_values_outside_its_sliders():
+def test_goal_reacher_refuses_start_values_outside_its_sliders(bm):
     """The constructor's values obey the sliders' ranges, as update() does: seconds 0 used to run a 1-frame goal, a
     negative distance put the goal behind, NaN failed as 'cannot convert float NaN to integer'."""
     for kw in (dict(seconds=0.0), dict(seconds=-3.0), dict(seconds=float("nan")), dict(distance=-2.0),
                dict(height=5.0), dict(angle=float("nan")), dict(seconds=True)):
         name = next(iter(kw))
-        with pytest.raises(ValueError, match=f"{name}: expected a value in"):
+        with pytest.raises(ValueError, match=f"{name}: expected a (value|number) in"):
             E.GoalReacher(None, None, **kw)
-    r = E.GoalReacher(None, None, angle=360.0, distance=0.3, height=0.0, seconds=8.0)      # the ends are fine
+    from graspkit.data.wandr_dataset import held_out_starts
+
+    start = held_out_starts([load_motion(DATA_STUBS / "motion" / "reach" / "reach_000001.npz")], ["r"], bm, n=1)[0]
+    r = E.GoalReacher(None, start, angle=360.0, distance=0.3, height=0.0, seconds=8.0)      # the ends are fine
     assert r.t_goal == 240
 
 

@@ -104,7 +104,7 @@ def test_a_bad_seed_or_height_is_named_and_changes_nothing(walk):
     NaN (an independent check); each is now a ValueError naming the argument, and z stays as it was."""
     z = walk.z.clone()
     for value in (2.7, True, -4, None, "abc"):
-        with pytest.raises(ValueError, match="^seed: expected an integer >= 0"):
+        with pytest.raises(ValueError, match="^seed: expected a non-negative integer"):
             walk.update("seed", value)
     torch.testing.assert_close(walk.z, z, rtol=0, atol=0)
     with pytest.raises(ValueError, match="^seed:"):
@@ -113,3 +113,53 @@ def test_a_bad_seed_or_height_is_named_and_changes_nothing(walk):
         LatentWalk(walk.model, walk.points, walk.normals, float("nan"))
     walk.update("seed", np.int64(5))                     # a numpy integer from a widget is a seed
     assert walk.seed == 5
+
+
+def test_the_walk_takes_what_sample_takes_and_refuses_what_it_refuses(walk):
+    """A height in millimetres, NaN points, a float `dims` and WholeGrasp-single were taken and gave nonsense or
+    failed at the first update (KeyError 'object_contact'); numpy points failed with an AttributeError (an independent
+    check). The walk now checks as WholeGraspVAE.sample does: numpy points decode the same as tensors."""
+    from graspkit.models.wholegrasp import WholeGraspConfig
+
+    p, n = walk.points, walk.normals
+    bad_p = p.clone()
+    bad_p[3, 0] = float("nan")
+    for args, kwargs, message in (((p, n, 850.0), {}, "^height: 850, expected an object-centre height in metres"),
+                                  ((p, n, -0.5), {}, "^height: -0.5"),
+                                  ((bad_p, n, 0.9), {}, "^points:"),
+                                  ((p[:, :2], n, 0.9), {}, "^points: expected shape"),
+                                  ((p, n, 0.9), {"dims": 2.0}, "^dims: expected an integer >= 1")):
+        with pytest.raises(ValueError, match=message):
+            LatentWalk(walk.model, *args, **kwargs)
+    torch.manual_seed(0)
+    with pytest.raises(ValueError, match=r"^model: expected the multi-task WholeGrasp-VAE"):
+        LatentWalk(WholeGraspVAE(WholeGraspConfig(multitask=False)), p, n, 0.9)
+    twin = LatentWalk(walk.model, p.numpy(), n.numpy(), 0.9, dims=3, seed=walk.seed)
+    walk.update("seed", walk.seed)
+    torch.testing.assert_close(twin.grasp["markers"], walk.grasp["markers"], rtol=0, atol=0)
+
+
+def test_a_seed_or_latent_out_of_range_is_refused_and_changes_nothing(walk):
+    """seed 2**64 failed in torch ('Overflow when unpacking long long') after being stored, so the slider showed a
+    seed that did not match z; z0 = 1e30 gave |z| = inf (an independent check)."""
+    walk.update("seed", 7)
+    z = walk.z.clone()
+    with pytest.raises(ValueError, match="^seed: expected a non-negative integer below 2\\^63"):
+        walk.update("seed", 2**64)
+    with pytest.raises(ValueError, match="^z0: expected a latent coordinate within"):
+        walk.update("z0", 1e30)
+    assert walk.seed == 7
+    torch.testing.assert_close(walk.z, z, rtol=0, atol=0)
+
+
+def test_the_object_panel_draws_green_only_the_hand_markers_in_contact(walk):
+    """The second panel coloured every hand marker within 10 cm of the object in the 'in contact' green (40 green,
+    28 in contact, an independent check): green there now means C_M above the level, as in the first panel."""
+    cm = torch.zeros(143)
+    cm[63:143:2] = 1.0                                       # every other hand marker in contact
+    walk.grasp = {**walk.grasp, "markers": walk.points[:143].clone(), "marker_contact": cm}   # all near the object
+    fig = walk.figure(size=2.0)
+    green = [c for c in fig.axes[1].collections
+             if np.allclose(c.get_facecolor()[:, :3], to_rgba(MARKER_IN_CONTACT)[:3]) and len(c.get_offsets())]
+    assert sum(len(c.get_offsets()) for c in green) == 40
+    walk.decode()

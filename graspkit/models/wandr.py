@@ -30,6 +30,7 @@ over `ramp_epochs`, then stays.
 """
 from __future__ import annotations
 
+import numbers
 import warnings
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -360,6 +361,12 @@ class Rollout:
 FrameHook = Callable[[int, Tensor, Tensor, Tensor], None]
 
 
+def check_floor(floor: Any) -> None:
+    """A ValueError unless floor (rollout's floor constraint) is None or a tolerance >= 0 in metres (bools refused)."""
+    if floor is not None and (isinstance(floor, bool) or not isinstance(floor, numbers.Real) or not floor >= 0):
+        raise ValueError(f"floor: expected None or a tolerance >= 0 in metres, got {floor!r}")
+
+
 def _per_frame(x: Tensor | int, B: int, T: int, width: int | None, name: str) -> Tensor:
     """A goal / goal frame given once (w,), per sequence (B, w), per frame (1, T, w) or both (B, T, w) -> (B, T, w)
     (w omitted for goal frames)."""
@@ -419,8 +426,7 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
         check_finite(goal_heading, "goal_heading", "headings in radians")
     if z is not None and tuple(z.shape) != (B, frames, model.cfg.latent):
         raise ValueError(f"z: expected shape ({B}, {frames}, {model.cfg.latent}), got {tuple(z.shape)}")
-    if floor is not None and not (isinstance(floor, (int, float)) and floor >= 0):
-        raise ValueError(f"floor: expected None or a tolerance >= 0 in metres, got {floor!r}")
+    check_floor(floor)
     if not isinstance(lift, bool):
         raise ValueError(f"lift: expected True or False, got {lift!r}")
     goals = _per_frame(goal, B, T, 3, "goal").to(p0.dtype)

@@ -11,6 +11,7 @@ import torch
 
 from graspkit.body.model import BodyModel
 from graspkit.body.skeleton import JOINT_INDEX, NUM_BODY_JOINTS
+from graspkit.checks import check_int
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -55,7 +56,8 @@ class BodyExplorerState:
 
     def set(self, name: str, value: float) -> None:
         """Set one slider: 'beta0'..'beta9' or a joint name from EXPLORER_JOINTS; unknown name -> ValueError."""
-        if name.startswith("beta") and name[4:].isdigit() and int(name[4:]) < len(self.betas):
+        if name.startswith("beta") and name[4:].isdigit() and name == f"beta{int(name[4:])}" \
+                and int(name[4:]) < len(self.betas):
             self.betas[int(name[4:])] = slider_value(name, value)
         elif name in self.angles:
             self.angles[name] = slider_value(name, value)
@@ -90,9 +92,20 @@ class BodyExplorer:
         return out.vertices[0].numpy(), out.joints[0].numpy()
 
     def update(self, name: str, value: float) -> tuple[np.ndarray, np.ndarray]:
-        """Apply one slider change, then return (vertices, joints)."""
+        """Apply one slider change, then return (vertices, joints). A value the model cannot pose (one that
+        overflows its float32 arithmetic, or turns a joint so far that the rotation is NaN) is refused with a
+        ValueError naming the slider, and the state is left as it was."""
+        betas, angles = self.state.betas.copy(), dict(self.state.angles)
         self.state.set(name, value)
-        return self.mesh()
+        try:
+            v, j = self.mesh()
+            if not (np.isfinite(v).all() and np.isfinite(j).all()):
+                raise ValueError("non-finite vertices")
+        except (ValueError, RuntimeError) as e:
+            self.state.betas, self.state.angles = betas, angles     # a stored bad value would break every update
+            raise ValueError(f"{name}: {value!r} gives a body the model cannot pose ({e}); expected a shape "
+                             "coefficient or an angle in radians of a usual size (the sliders span ±2 and ±1.6)") from None
+        return v, j
 
     def stature(self) -> float:
         """Height of the current body in metres (vertical extent in the canonical y-up frame)."""
@@ -120,6 +133,10 @@ class BodyExplorer:
 
     def widget(self, betas_shown: int = 3, dpi: float = 72.0) -> Any:  # pragma: no cover - needs a browser; logic is tested
         """An ipywidgets box: sliders for the first betas and the exposed joints, and the redrawn front/side view."""
+        betas_shown = check_int(betas_shown, "betas_shown", 0)
+        if betas_shown > len(self.state.betas):
+            raise ValueError(f"betas_shown: expected at most the model's {len(self.state.betas)} shape coefficients, "
+                             f"got {betas_shown}")
         import ipywidgets as w
 
         from graspkit.viz.export import png_bytes

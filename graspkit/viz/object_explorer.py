@@ -14,6 +14,7 @@ import torch
 import trimesh
 from matplotlib.figure import Figure
 
+from graspkit.checks import check_int, check_positive, check_seed, check_type
 from graspkit.objects import (MARKER_CONTACT_THRESHOLD, OBJECT_CONTACT_THRESHOLD, ObjectPose, apply_pose, list_objects,
                               intersection_volume, make_object, marker_contact, object_contact, sample_surface,
                               signed_distance)
@@ -81,6 +82,12 @@ def place_at_palm(mesh: trimesh.Trimesh, vertices: np.ndarray, faces: np.ndarray
     return ObjectPose(t, np.eye(3))
 
 
+def _check_object_name(value: Any, name: str) -> None:
+    """A ValueError naming `name` unless value is a catalogue object's name (a str)."""
+    if not isinstance(value, str) or value not in list_objects():
+        raise ValueError(f"{name}: unknown object {value!r}; expected one of {list_objects()}")
+
+
 def _ids(ids: Any, name: str, V: int) -> np.ndarray:
     """Vertex ids (N,) as int64, each in 0..V-1, or a ValueError naming them."""
     a = np.asarray(ids)
@@ -109,9 +116,13 @@ class HandObjectExplorer:
                 or self.faces.max() >= V:
             raise ValueError(f"faces: expected (F, 3) vertex indices in 0..{V - 1}, got shape {self.faces.shape}")
         self.hand_ids = np.arange(V) if hand_ids is None else _ids(hand_ids, "hand_ids", V)
+        if not len(self.hand_ids):
+            raise ValueError("hand_ids: expected at least one vertex id (the distance readout is over them)")
         self.marker_ids = np.zeros(0, np.int64) if marker_ids is None else _ids(marker_ids, "marker_ids", V)
+        check_type(base, ObjectPose, "base", optional=True, what="graspkit.objects.ObjectPose (ObjectPose.from_yaw)")
         self.base = ObjectPose.identity() if base is None else base
-        self.num_points, self.seed = num_points, seed
+        self.num_points, self.seed = check_int(num_points, "num_points", 1), check_seed(seed)
+        _check_object_name(object_name, "object_name")
         self.offset, self.yaw = np.zeros(3), 0.0
         self.body_closed = trimesh.Trimesh(self.vertices, self.faces, process=False).is_watertight
         tri = self.vertices[self.faces]
@@ -137,19 +148,27 @@ class HandObjectExplorer:
         return apply_pose(self.pose(), self.points)
 
     def update(self, name: str, value: float | str) -> dict[str, float]:
-        """Set one slider ('x', 'y', 'z' in m, 'yaw' in deg, or 'object' = a catalogue name), then `measure()`."""
+        """Set one slider ('x', 'y', 'z' in m, 'yaw' in deg, or 'object' = a catalogue name), then `measure()`.
+        A value that cannot be measured (an offset so large the object's float64 mesh collapses) is refused with a
+        ValueError naming the slider, and the state is left as it was."""
+        before = (self.offset.copy(), self.yaw, self.name, self.mesh, self.points, self.normals)
         if name in OFFSET_SLIDERS:
             self.offset[OFFSET_SLIDERS.index(name)] = slider_value(name, value)
         elif name == YAW_SLIDER:
             self.yaw = slider_value(name, value)
         elif name == "object":
-            if value not in list_objects():
-                raise ValueError(f"object: unknown object {value!r}; expected one of {list_objects()}")
+            _check_object_name(value, "object")
             self.set_object(str(value))
         else:
             names = [*OFFSET_SLIDERS, YAW_SLIDER, "object"]
             raise ValueError(f"name: unknown slider {name!r}; expected one of {names}")
-        return self.measure()
+        try:
+            return self.measure()
+        except ValueError as e:
+            self.offset, self.yaw, self.name, self.mesh, self.points, self.normals = before
+            raise ValueError(f"{name}: {value!r} puts the object where it cannot be measured ({e}); expected an "
+                             "offset in metres or a yaw in degrees of a usual size (the sliders span ±0.1 m, ±180°)") \
+                from None
 
     def contacts(self) -> tuple[np.ndarray, np.ndarray]:
         """SAGA's contact maps at the current pose: C_M (M,) over the markers, C_O (P,) over the object points."""
@@ -214,6 +233,7 @@ class HandObjectExplorer:
 
     def widget(self, step: float = 0.005, span: float = 0.1, dpi: float = 72.0) -> Any:  # pragma: no cover - UI only
         """An ipywidgets box: object dropdown, x/y/z sliders (±span m), a yaw slider, the figure and the readout."""
+        step, span = check_positive(step, "step"), check_positive(span, "span")
         import ipywidgets as w
 
         from graspkit.viz.export import png_bytes

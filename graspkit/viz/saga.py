@@ -14,7 +14,7 @@ import torch
 from matplotlib.figure import Figure
 from torch import Tensor
 
-from graspkit.checks import check_int
+from graspkit.checks import check_int, check_seed, check_type
 from graspkit.viz.explorers import slider_bounds, slider_value
 
 _BOXES = [  # (x, y, w, h, text, colour) of the WholeGrasp-VAE diagram (SAGA Fig. 3)
@@ -63,6 +63,7 @@ def wholegrasp_diagram(width: float = 11.0) -> Figure:
 SEED_SLIDER = "seed"
 MARKER_IN_CONTACT = "#2ca02c"     # SAGA Fig. 3: markers in contact in green
 CONTACT_LEVEL = 0.5               # probability above which a marker / point is drawn as in contact
+MAX_LATENT = 100.0                # a latent coordinate beyond this is a typo, not a walk (z ~ N(0, 1))
 
 
 class LatentWalk:
@@ -70,12 +71,24 @@ class LatentWalk:
 
     def __init__(self, model: Any, points: Tensor, normals: Tensor, height: float, dims: int = 4,
                  seed: int = 0) -> None:
-        if not 1 <= dims <= model.cfg.latent:
+        """model: the multi-task WholeGrasp-VAE (the walk shows its contact maps); points, normals (P,3) tensors or
+        arrays centred at the object (SAGA A.3), height t_O in metres, as `WholeGraspVAE.sample` takes them."""
+        from graspkit.models.wholegrasp import WholeGraspVAE, check_sample_inputs
+
+        check_type(model, WholeGraspVAE, "model", what="graspkit.models.wholegrasp.WholeGraspVAE")
+        if not model.cfg.multitask:
+            raise ValueError("model: expected the multi-task WholeGrasp-VAE (cfg.multitask=True); WholeGrasp-single "
+                             "has no contact maps to show")
+        dims = check_int(dims, "dims", 1)
+        if dims > model.cfg.latent:
             raise ValueError(f"dims: expected 1..{model.cfg.latent} latent sliders, got {dims}")
+        points, normals = (torch.as_tensor(x) if isinstance(x, np.ndarray) else x for x in (points, normals))
+        height = slider_value("height", height)
+        check_sample_inputs(points, normals, 1, model.obj_dec.sa[0].npoint, ("points", "normals"), height=height)
         self.model, self.points, self.normals = model.eval(), points.float(), normals.float()
-        self.height = slider_value("height", height)
+        self.height = height
         self.dims = dims
-        self.seed = check_int(seed, "seed", 0)
+        self.seed = check_seed(seed)
         self.z = self._draw(seed)
         self.grasp: dict[str, Tensor] = {}
         self.decode()
@@ -99,10 +112,14 @@ class LatentWalk:
     def update(self, name: str, value: float | int) -> dict[str, float]:
         """Set latent coordinate `name` ('z0'...) or draw a new z (`seed`); decode; return `measure()`."""
         if name == SEED_SLIDER:
-            self.seed = check_int(value, "seed", 0)
-            self.z = self._draw(self.seed)
+            self.z = self._draw(check_seed(value))       # drawn first: a refused seed changes nothing
+            self.seed = int(value)
         elif name in self.names:
-            self.z[0, int(name[1:])] = slider_value(name, value)
+            v = slider_value(name, value)
+            if abs(v) > MAX_LATENT:
+                raise ValueError(f"{name}: expected a latent coordinate within ±{MAX_LATENT:g} (the prior is "
+                                 f"N(0, 1); the sliders span ±3), got {value!r}")
+            self.z[0, int(name[1:])] = v
         else:
             raise ValueError(f"name: expected one of {self.names}, got {name!r}")
         self.decode()
@@ -141,11 +158,12 @@ class LatentWalk:
         ax.view_init(15, -60)
         ax.set_axis_off()
         scene.draw_points(ax, p, values=co, cmap="Reds", size=3.0, colorbar=False)
-        hand = m[63:143]                                          # hand, finger and palm markers of both hands
+        hand, hc = m[63:143], cm[63:143]                          # hand, finger and palm markers of both hands
         near = np.linalg.norm(hand[:, None] - p[None], axis=-1).min(1) < 0.1
-        ax.scatter(*hand[near].T, s=6, c=MARKER_IN_CONTACT)
+        ax.scatter(*hand[near & (hc <= CONTACT_LEVEL)].T, s=4, c="#3b6ea8")
+        ax.scatter(*hand[near & (hc > CONTACT_LEVEL)].T, s=6, c=MARKER_IN_CONTACT)
         scene.set_equal(ax, p)
-        ax.set_title("object contacts C_O (red)", fontsize=8)
+        ax.set_title("object contacts C_O (red); hand markers within 10 cm", fontsize=8)
         fig.tight_layout()
         return fig
 
