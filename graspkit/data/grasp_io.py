@@ -41,20 +41,21 @@ def mesh_digest(obj: str | trimesh.Trimesh) -> str:
 
 
 def cached_sdf_grid(name: str | trimesh.Trimesh, resolution: int = 64, folder: Path | None = None) -> SDFGrid:
-    """The SDF grid of catalogue object `name` (or of a mesh in its object frame), read from `<cache>/sdf/` or built
-    (seconds) and stored atomically."""
+    """The SDF grid of catalogue object `name` (or of a mesh in its object frame): the grid shipped in
+    data_stubs/sdf when there is one, else read from `<cache>/sdf/` or built (seconds) and stored atomically."""
     from graspkit.paths import cache_dir
 
-    folder = Path(folder) if folder is not None else cache_dir() / "sdf"
     fname = _grid_filename(name, resolution)
-    path = folder / fname
-    grid = read_cache(path, _read_grid)               # the cache (a damaged file is removed), then the few grids
-    stub = DATA_STUBS / "sdf" / fname                 # shipped in data_stubs/sdf (left as they are), else built
-    if grid is None and stub.is_file():
+    stub = DATA_STUBS / "sdf" / fname
+    if stub.is_file():
+        # the shipped grid first, whatever the cache holds: mug_r84 ships as float16, and a float32 grid of the same
+        # name in the cache (one built where data_stubs was missing) took lesson 05's fit to other energies
         try:
-            grid = _read_grid(stub)
+            return _read_grid(stub)
         except ValueError:
-            grid = None
+            pass
+    path = (Path(folder) if folder is not None else cache_dir() / "sdf") / fname
+    grid = read_cache(path, _read_grid)               # a damaged cache file is removed and rebuilt
     if grid is not None:
         return grid
     grid = SDFGrid.from_mesh(_mesh(name), resolution, SDF_PADDING)
@@ -114,5 +115,5 @@ def ship_sdf_grid(name: str, resolution: int, folder: Path = DATA_STUBS / "sdf")
     """Write object `name`'s grid at `resolution` into `folder` with float16 values (within 0.03 mm of float32) for
     shipping in data_stubs/sdf, e.g. `ship_sdf_grid("mug", resolution_for("mug", COLLISION_CELL))` (lesson 05)."""
     path = Path(folder) / _grid_filename(name, resolution)
-    _write_grid(path, cached_sdf_grid(name, resolution), np.float16)
+    _write_grid(path, SDFGrid.from_mesh(_mesh(name), resolution, SDF_PADDING), np.float16)   # built, not a read
     return path

@@ -281,8 +281,7 @@ fig.tight_layout()
 
 # %%
 # NBVAL_IGNORE_OUTPUT
-# (another CPU's floating-point kernels change the last bits, and the optimisation can carry them into visibly other
-# energies: stage 3's E^O_colli ended at 4.64 on one machine, 0.46 on another; the asserts below hold on both)
+# (an optimisation's energies vary in the last digits between CPUs; the asserts below are what the tests check)
 prior = load_pose_prior()
 opt = GraspPoseOpt(bm, prior, GraspPoseConfig(steps=(100, 150, 150), polish=(30, 1e-3)))
 sdf = collision_sdf_grid("mug")                                # the mug's signed-distance grid, 2 mm cells (shipped)
