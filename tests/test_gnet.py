@@ -209,3 +209,20 @@ def test_q_term_is_the_squared_length_of_the_head_direction_error():
     terms = gnet_loss(out, zero, zero, batch, body, GNetLossWeights(q=2.0, kl=0.0))
     assert math.isclose(float(terms["q"]), 0.125, rel_tol=1e-5)
     assert math.isclose(float(terms["loss"]), 2.0 * 0.125, rel_tol=1e-4, abs_tol=1e-6)
+
+
+def test_sample_names_a_generator_that_is_not_a_torch_generator():
+    """generator=0 or a numpy Generator failed inside torch.randn with its 20-line overload list (an independent
+    check); GNet.sample answers as the other samplers do, and a torch.Generator still gives the same grasp twice."""
+    import numpy as np
+
+    torch.manual_seed(0)
+    net = GNet().eval()
+    g = torch.Generator().manual_seed(1)
+    bps, t, betas = 0.1 * torch.rand(2, 1024, generator=g), 0.3 * torch.randn(2, 3, generator=g), torch.zeros(2, 10)
+    for bad in (0, np.random.default_rng(0)):
+        with pytest.raises(TypeError, match="^generator: expected a torch.Generator or None"):
+            net.sample(bps, t, betas, generator=bad)
+    a, b = (net.sample(bps, t, betas, generator=torch.Generator().manual_seed(3)) for _ in range(2))
+    for k in a:
+        torch.testing.assert_close(a[k], b[k], rtol=0, atol=0)

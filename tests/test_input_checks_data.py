@@ -129,7 +129,7 @@ def test_export_motion_checks_arguments_before_writing(bm, clip, tmp_path, kwarg
 
 def test_export_motion_zero_frames_is_a_clear_error(bm, clip, tmp_path):
     with pytest.raises(ValueError, match="no frames"):
-        export_motion(clip.slice(0, 0), bm, tmp_path, "empty")
+        export_motion(Motion(clip.poses[:0], clip.trans[:0], clip.betas), bm, tmp_path, "empty")   # slice(0, 0) refuses
     assert not list(tmp_path.iterdir())
 
 

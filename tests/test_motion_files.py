@@ -91,7 +91,8 @@ def test_a_failed_write_leaves_no_temporary_file_and_keeps_the_old_file(tmp_path
 
 def test_saving_a_motion_with_nan_translation_names_the_field(tmp_path):
     """check_motion's docstring: a ValueError naming the field for non-finite values (here trans)."""
-    m = Motion(np.zeros((3, 55, 3)), np.array([[0, 0, 0], [np.nan, 0, 0], [0, 0, 0]]), np.zeros(10))
+    m = Motion(np.zeros((3, 55, 3)), np.zeros((3, 3)), np.zeros(10))
+    m.trans[1, 0] = np.nan                              # the constructor refuses it too: here it came in later
     with pytest.raises(ValueError, match="trans"):
         save_motion(tmp_path / "n.npz", m)
     assert not list(tmp_path.iterdir())
@@ -138,3 +139,25 @@ def test_rest_pose_joint_positions_are_the_regressed_shaped_mesh_plus_translatio
     v = m.vertices(bm).double()
     ref = torch.einsum("jv,tvc->tjc", bm.J_regressor.double(), v).numpy()
     np.testing.assert_allclose(m.joint_positions(bm), ref, atol=1e-4)
+
+
+def test_motion_refuses_layouts_it_would_scramble():
+    """A (3, T) translation and (55, 3, T) poses were reshaped into scrambled frames (frame 0's translation became the
+    first three x values), SMPL-H-width poses were blamed on `trans`, NaN poses were taken and then named `rot_mats`,
+    and slice(50, 20) gave a 0-frame clip (an independent check). Each is refused by name; (T, 165) poses still read
+    as (T, 55, 3)."""
+    T = 30
+    poses, trans = np.zeros((T, 55, 3), np.float32), np.stack([np.linspace(0, 1, T), np.zeros(T), np.full(T, 0.9)], 1)
+    for kw, message in (({"trans": trans.T}, r"^trans: expected \(T, 3\)"),
+                        ({"poses": np.moveaxis(poses, 0, -1)}, r"^poses: expected \(T, 55, 3\) or \(T, 165\)"),
+                        ({"poses": np.zeros((T, 156))}, "^poses: expected"),
+                        ({"poses": np.zeros((T, 63))}, "^poses: expected"),
+                        ({"poses": np.full((T, 55, 3), np.nan)}, "^poses: contains NaN"),
+                        ({"trans": np.full((T, 3), np.inf)}, "^trans: contains NaN")):
+        with pytest.raises(ValueError, match=message):
+            Motion(**{"poses": poses, "trans": trans, "betas": np.zeros(10), **kw})
+    m = Motion(poses.reshape(T, 165), trans, np.zeros(10))
+    assert m.poses.shape == (T, 55, 3)
+    np.testing.assert_allclose(m.trans[0], [0.0, 0.0, 0.9])
+    with pytest.raises(ValueError, match=r"^start, stop: frames \[50, 20\) of 30 hold no frame"):
+        m.slice(50, 20)

@@ -264,3 +264,14 @@ def test_negative_variation_seed_is_refused_by_name():
     """make_object's seed is None or an integer >= 0 (docstring); -1 is refused naming `seed`, not silently used."""
     with pytest.raises(ValueError, match="seed"):
         make_object("mug", seed=-1)
+
+
+def test_sample_surface_refuses_an_unseeded_draw():
+    """seed=None drew other points on every call (numpy's OS entropy), against 'every seeded function refuses
+    seed=None' (an independent check); refused by name now, while an integer or a numpy Generator still draws."""
+    mesh = make_object("apple")
+    with pytest.raises(ValueError, match="^seed: expected a non-negative integer or a numpy Generator"):
+        sample_surface(mesh, 64, seed=None)
+    a, _ = sample_surface(mesh, 64, seed=np.random.default_rng(4))
+    b, _ = sample_surface(mesh, 64, seed=4)
+    np.testing.assert_array_equal(a, b)

@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from graspkit.body.skeleton import JOINT_INDEX, NUM_JOINTS
+from graspkit.checks import check_finite
 from graspkit.rotations import axis_angle_to_matrix
 
 if TYPE_CHECKING:
@@ -49,8 +50,17 @@ class Motion:
     gender: str = "neutral"
 
     def __post_init__(self) -> None:
-        self.poses = np.asarray(self.poses, np.float32).reshape(-1, NUM_JOINTS, 3)
-        self.trans = np.asarray(self.trans, np.float32).reshape(-1, 3)
+        poses, trans = np.asarray(self.poses, np.float32), np.asarray(self.trans, np.float32)
+        # only the documented layouts: a reshape would take a (3, T) translation or (55, 3, T) poses as scrambled frames
+        if not (poses.ndim == 3 and poses.shape[1:] == (NUM_JOINTS, 3) or poses.ndim == 2
+                and poses.shape[1] == 3 * NUM_JOINTS):
+            raise ValueError(f"poses: expected (T, {NUM_JOINTS}, 3) or (T, {3 * NUM_JOINTS}) axis-angle (SMPL-X), got "
+                             f"shape {poses.shape} (load_motion converts SMPL-H files)")
+        if trans.ndim != 2 or trans.shape[1] != 3:
+            raise ValueError(f"trans: expected (T, 3) translations in metres, got shape {trans.shape}")
+        check_finite(poses, "poses", "axis-angle rotations in radians")
+        check_finite(trans, "trans", "translations in metres")
+        self.poses, self.trans = poses.reshape(-1, NUM_JOINTS, 3), trans
         b = np.asarray(self.betas, np.float32)
         if b.ndim > 1 and b.shape[0] != 1:              # (1, K) is one body's; (2, 10) would read as 20 coefficients
             raise ValueError(f"betas: expected one body's shape coefficients (K,), got shape {b.shape}")
@@ -90,6 +100,8 @@ class Motion:
         goal, gf, hand = self.goal, self.goal_frame, self.hand
         first, last, _ = sl.indices(self.num_frames)       # a negative start counts from the end, as numpy's
         n = len(range(first, last))
+        if n == 0:
+            raise ValueError(f"start, stop: frames [{start}, {stop}) of {self.num_frames} hold no frame")
         if gf is not None:
             gf = gf - first
             if not 0 <= gf < n:

@@ -193,7 +193,9 @@ def plan_reach(start: Start | tuple[float, float, float], goal: np.ndarray | Seq
     """The procedural planner: walk, turn, slow down and reach so the right wrist is on `goal` (3,) (world, z up)
     at frame t_goal_frames; the clip has t_goal_frames + 1 + hold_frames frames. start: Start or (x, y, heading).
 
-    seed draws the small person-to-person variations (style, gait, preferred speed) unless given.
+    seed draws the small person-to-person variations (style, gait, preferred speed) unless given. A goal out of the
+    body's reach is kept as given and the arm stops at full stretch (`generate_reach` relabels such a goal to where
+    the wrist is).
     """
     t_goal_frames = _frame("t_goal_frames", t_goal_frames, MIN_GOAL_FRAMES)
     hold_frames = _frame("hold_frames", hold_frames, 0)

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING
 import torch
 from torch import Tensor, nn
 
+from graspkit.checks import check_generator
 from graspkit.models.blocks import GaussianHead, ResBlock, kl_standard_normal, reparameterize
 from graspkit.objects.contact import IAA_WEIGHT
 from graspkit.rotations import rot6d_to_matrix
@@ -259,6 +260,7 @@ class GNet(nn.Module):
     def sample(self, bps: Tensor, obj_transl: Tensor, betas: Tensor, generator: torch.Generator | None = None,
                z: Tensor | None = None) -> dict[str, Tensor]:
         """Inference (§3.3): skip the encoder, z ~ N(0, I) from `generator` (or given), decode: (B,...) -> outputs."""
+        check_generator(generator)
         cfg = self.cfg
         B = len(bps) if isinstance(bps, Tensor) and bps.dim() == 2 else "B"
         bps, obj_transl, betas = (self._sample_input(name, x, (B, width)) for name, x, width in

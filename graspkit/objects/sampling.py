@@ -10,7 +10,7 @@ import numpy as np
 from graspkit.objects.distance import MeshLike, mesh_arrays
 
 
-def sample_surface(mesh: MeshLike, n: int = 2048, seed: int | np.random.Generator | None = 0
+def sample_surface(mesh: MeshLike, n: int = 2048, seed: int | np.random.Generator = 0
                    ) -> tuple[np.ndarray, np.ndarray]:
     """n points (n,3) uniformly distributed over the surface area, and the unit face normals (n,3) there.
 
@@ -26,9 +26,9 @@ def sample_surface(mesh: MeshLike, n: int = 2048, seed: int | np.random.Generato
     area2 = np.linalg.norm(cross, axis=1)
     if area2.sum() <= 0:
         raise ValueError("mesh: the surface has zero area")
-    if not (seed is None or isinstance(seed, np.random.Generator)
-            or (isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and seed >= 0)):
-        raise ValueError(f"seed: expected a non-negative integer, a numpy Generator or None, got {seed!r}")
+    if not (isinstance(seed, np.random.Generator)                 # None (numpy's OS entropy) is refused: same seed,
+            or (isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and seed >= 0)):   # same points
+        raise ValueError(f"seed: expected a non-negative integer or a numpy Generator, got {seed!r}")
     rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     face = rng.choice(len(tri), size=n, p=area2 / area2.sum())
     # uniform barycentrics by the square-root warp (Osada et al. 2002, Eq. 1)
