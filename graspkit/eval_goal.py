@@ -258,16 +258,22 @@ def default_data_folders() -> list:
     return [cache_dir() / "grasps" / "grasp", cache_dir() / "grasps" / "approach"]
 
 
-@lru_cache(maxsize=2)
 def _body(model: str | Path | None = None):
-    """The body model (default: graspkit's; hand mean not added: the files store absolute poses), GOAL's vertex
-    sampler and a SparseBody over its 400 vertices (built once per model)."""
+    """The body model (default: graspkit's, the file default_model_path() names now; hand mean not added: the files
+    store absolute poses), GOAL's vertex sampler and a SparseBody over its 400 vertices (built once per model file)."""
+    from graspkit.paths import default_model_path
+
+    return _body_of(str(model or default_model_path()))
+
+
+@lru_cache(maxsize=2)
+def _body_of(model: str):
+    """_body for one model file."""
     from graspkit.body import BodyModel
     from graspkit.body.markers import goal_vertices
     from graspkit.models.gnet import SparseBody
-    from graspkit.paths import default_model_path
 
-    bm = BodyModel.from_file(model or default_model_path(), flat_hand_mean=True)
+    bm = BodyModel.from_file(model, flat_hand_mean=True)
     gv = goal_vertices(bm)
     return bm, gv, SparseBody(bm, torch.as_tensor(gv.vertex_ids))
 
@@ -309,7 +315,8 @@ def run_train_gnet(folders: Sequence[str | Path], out: str | Path, variant: str 
     weights = GNetLossWeights() if kl is None else GNetLossWeights(kl=kl)
     cfg = GNetConfig(offsets=variant == "gnet")
     run = run_path(f"gnet_{variant}", seed, run_dir, cfg=asdict(cfg), weights=asdict(weights), epochs=epochs,
-                    data=[str(f) for f in folders], n=len(train["rot6d"]), files=files_key(folders))
+                    data=[str(f) for f in folders], n=len(train["rot6d"]), files=files_key(folders),
+                    body=bm.digest())   # the labels are recomputed on this body: another never resumes the run
     t0 = time.perf_counter()
     net, hist = train_gnet(train, val, body, cfg, weights,
                            train_cfg=TrainConfig(epochs=epochs, batch_size=64, lr=1e-3, seed=seed, num_threads=threads),
@@ -354,7 +361,7 @@ def run_train_mnet(folders: Sequence[str | Path], out: str | Path, variant: str 
     val = mnet_windows(folders, "val", cfg, max(stride, 4))
     run = run_path(f"mnet_{variant}", seed, run_dir, cfg=asdict(cfg), epochs=epochs, stride=stride,
                     data=[str(f) for f in folders], n=len(train), goal_repeat=goal_repeat, vel_noise=vel_noise,
-                    files=files_key(folders))
+                    files=files_key(folders), body=_body()[0].digest())
     net, hist = train_mnet(train, val, cfg, train_cfg=TrainConfig(epochs=epochs, batch_size=128, lr=1e-3, seed=seed,
                                                                    num_threads=threads),
                            checkpoint=run, time_limit_s=time_limit_s, progress=progress, vel_noise=vel_noise)

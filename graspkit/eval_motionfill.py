@@ -70,22 +70,31 @@ def approach_motions(root: str | Path, n: int | None = None) -> tuple[list, list
 WINDOWS_VERSION = 1
 
 
-@functools.lru_cache(maxsize=1)
 def default_body_digest() -> str:
-    """BodyModel.digest() of graspkit's default body model (loaded once per process)."""
-    from graspkit.body import BodyModel
+    """BodyModel.digest() of graspkit's default body model (the file default_model_path() names now: GRASPKIT_MODEL
+    may change within a process; each file is loaded once)."""
     from graspkit.paths import default_model_path
 
-    return BodyModel.from_file(default_model_path()).digest()
+    return _body_digest(str(default_model_path()))
+
+
+@functools.lru_cache(maxsize=4)
+def _body_digest(path: str) -> str:
+    """BodyModel.digest() of the model file at path."""
+    from graspkit.body import BodyModel
+
+    return BodyModel.from_file(path).digest()
 
 
 def windows_source(kind: str, n: int, data: Path | None = None, body: str | None = None
                    ) -> tuple[Path, Path, list[Path]]:
     """(cache file, clip folder, the first `n` clip files) of a window set; the cache file is named by the clips'
-    names and sizes, the body model's digest (`body`, BodyModel.digest(); None: the default model's) and
-    WINDOWS_VERSION, so remade or other clips, another body or another window code never read another set's windows."""
+    names, sizes and member CRC-32s (a clip rewritten at the same size is new data), the body model's digest (`body`,
+    BodyModel.digest(); None: the default model's) and WINDOWS_VERSION, so remade or other clips, another body or
+    another window code never read another set's windows."""
     import hashlib
 
+    from graspkit.data.formats import member_crcs
     from graspkit.paths import cache_dir
 
     if kind not in ("locomotion", "reach", "approach"):
@@ -100,7 +109,7 @@ def windows_source(kind: str, n: int, data: Path | None = None, body: str | None
     if len(files) < n:
         raise FileNotFoundError(f"data: {root} holds {len(files)} {kind} clips, {n} wanted "
                                 f"(graspkit data make --kind {kind} --n {n})")
-    listing = "\n".join(f"{f.name}:{f.stat().st_size}" for f in files)
+    listing = "\n".join(f"{f.name}:{f.stat().st_size}:{member_crcs(f)}" for f in files)
     stamp = f"\nbody={body or default_body_digest()};version={WINDOWS_VERSION}"
     key = hashlib.blake2b((listing + stamp).encode(), digest_size=5).hexdigest()
     return cache_dir() / "motionfill" / f"{kind}_{n}_{key}.npz", root, files

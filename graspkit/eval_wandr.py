@@ -589,6 +589,19 @@ def starts_from_meta(meta: dict[str, Any]) -> list[I.StartPose]:
             for k in range(len(s["source"]))]
 
 
+def clipset_key(clips: ClipSet) -> str:
+    """A short hash of every array of a ClipSet (poses, offsets, rest joints, betas, goals, goal frames, kinds) and its
+    names: the training run's data key (a sum of the poses missed a moved goal and changes below its 7 digits)."""
+    import hashlib
+
+    h = hashlib.blake2b(digest_size=4)
+    h.update("\n".join(clips.names).encode())
+    for t in (clips.p, clips.offsets, clips.rest, clips.betas, clips.goal, clips.goal_frame, clips.kind):
+        h.update(str((t.dtype, tuple(t.shape))).encode())
+        h.update(t.detach().cpu().contiguous().numpy().tobytes())
+    return h.hexdigest()
+
+
 def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str | None = None, epochs: int = 6,
                     time_limit: float | None = None, seed: int = 0, threads: int = 2, batch_size: int = 512,
                     lr: float = 1e-3, progress: bool = True, max_steps: int = 10, ramp_epochs: int = 4,
@@ -614,7 +627,6 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     checkpoint (save_wandr's file) to start from, weights and normalisation statistics, instead of a fresh model
     (continue training with another schedule, e.g. longer rollouts; the network's shape and intention must match).
     The resumable training state lives in <cache>/wandr, named by every setting."""
-    import hashlib
     import resource
     import time
     from pathlib import Path
@@ -673,8 +685,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
     if window_stride is not None:
         stride = {k: window_stride for k in STRIDE}
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, num_threads=threads)
-    data_key = hashlib.blake2b(f"{train.names}:{int(train.lengths.sum())}:{float(train.p.sum()):.6e}".encode(),
-                               digest_size=4).hexdigest()       # other clips never resume this run
+    data_key = clipset_key(train)                                # other clips (or goals) never resume this run
     # the experiment flags away from their defaults: (command-line text, run-name part); the data key covers reach_far
     flags = [(f" --{k.replace('_', '-')}", "") for k in extra] \
         + ([(f" --rollout-latent {rollout_latent}", "_zpost")] if rollout_latent != "prior" else []) \

@@ -27,8 +27,10 @@ def default_model_path() -> Path:
 
 
 def cache_dir() -> Path:
-    """Folder for generated training sets and outputs of long jobs: $GRASPKIT_CACHE or ~/.cache/graspkit."""
-    return Path(os.environ.get("GRASPKIT_CACHE", Path.home() / ".cache" / "graspkit"))
+    """Folder for generated training sets and outputs of long jobs: $GRASPKIT_CACHE (`~` expanded; set but empty
+    counts as unset, not as the working folder) or ~/.cache/graspkit."""
+    env = os.environ.get("GRASPKIT_CACHE")
+    return Path(env).expanduser() if env else Path.home() / ".cache" / "graspkit"
 
 
 def temp_beside(path: Path, suffix: str = ".tmp") -> Path:

@@ -378,7 +378,10 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
     history: list[dict[str, float]] = []
     start = 0
     if checkpoint is not None and Path(checkpoint).is_file():
-        state = load_checkpoint(checkpoint)
+        try:
+            state = load_checkpoint(checkpoint)
+        except ValueError as e:                  # a run file cut short by a full disk, say: every rerun would stop here
+            raise ValueError(f"{e}; delete it (graspkit's run file) or pass another path to train anew") from None
         if not all(k in state for k in ("model", "optimizer", "scheduler", "history", "epoch", "rng")):
             raise ValueError(f"checkpoint {checkpoint}: not a training state of graspkit.train.fit (a weights file?); "
                              "delete it (graspkit's run file) or pass another path to train anew")

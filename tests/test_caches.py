@@ -114,3 +114,97 @@ def test_default_model_path_follows_graspkit_model(monkeypatch, tmp_path):
     assert default_model_path() == tmp_path / "m.npz"
     monkeypatch.delenv("GRASPKIT_MODEL")
     assert default_model_path() == BODY_MODELS / "smplx" / "SMPLX_NEUTRAL.npz"
+
+
+def test_window_and_wandr_run_keys_see_content_not_only_sizes(tmp_path):
+    """The MotionFill window cache was named by the clips' names and sizes: a clip rewritten at the same size (one
+    joint's sign flipped: save_motion kept the size 19 times in 50) read the old windows; the WANDR run key hashed the
+    clips' names and a 7-digit sum of their poses, so moved goals resumed the old run (an independent check). Both
+    keys change now with a clip's content at the same size, and with one goal moved."""
+    import shutil
+
+    import torch
+
+    from graspkit.data.wandr_dataset import ClipSet
+    from graspkit.eval_motionfill import windows_source
+    from graspkit.eval_wandr import clipset_key
+
+    src = sorted((DATA_STUBS / "motion" / "locomotion").glob("locomotion_*.npz"))[0]
+    folder = tmp_path / "loco"
+    folder.mkdir()
+    clip = folder / src.name
+    shutil.copy(src, clip)
+    before = windows_source("locomotion", 1, folder, body="b")[0]
+    with np.load(clip, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    poses = arrays["poses"].copy()
+    poses[12, 48:51] *= -1                                       # same dtype and shape: stored at the same size
+    with zipfile.ZipFile(clip) as zf:
+        compressed = zf.infolist()[0].compress_type == zipfile.ZIP_DEFLATED
+    (np.savez_compressed if compressed else np.savez)(clip, **{**arrays, "poses": poses})
+    if clip.stat().st_size == src.stat().st_size:                # the case the sizes alone missed
+        assert windows_source("locomotion", 1, folder, body="b")[0] != before
+    assert windows_source("locomotion", 1, folder, body="b")[0] != before     # content, whatever the size
+    cs = ClipSet(torch.zeros(10, 135), torch.tensor([0, 5, 10]), torch.zeros(2, 22, 3), torch.zeros(2, 10),
+                 torch.zeros(2, 3), torch.tensor([4, -1]), torch.tensor([1, 0]), ["r", "l"])
+    moved = ClipSet(cs.p, cs.offsets, cs.rest, cs.betas, cs.goal + torch.tensor([0.3, 0.0, 0.0]), cs.goal_frame,
+                    cs.kind, cs.names)
+    same = ClipSet(*(t.clone() for t in (cs.p, cs.offsets, cs.rest, cs.betas, cs.goal, cs.goal_frame, cs.kind)),
+                   list(cs.names))
+    assert clipset_key(cs) != clipset_key(moved) and clipset_key(cs) == clipset_key(same)
+
+
+def test_foreign_shipped_and_run_files_are_named(tmp_path, monkeypatch):
+    """A cache grid of the right keys but a 1-D `values` was used and failed in grid_sample; an unreadable shipped grid
+    fell back to the cache silently (today's lesson-05 bug again); a damaged run file stopped every rerun with 'not a
+    torch checkpoint' and no way out; GRASPKIT_CACHE='' put the cache in the working folder and '~' was not
+    expanded (an independent check)."""
+    import torch
+
+    from graspkit.data import grasp_io
+    from graspkit.data.formats import write_npz_atomic
+    from graspkit.paths import cache_dir
+    from graspkit.train import TrainConfig, fit
+
+    foreign = tmp_path / "g.npz"
+    write_npz_atomic(foreign, {"values": np.zeros(8, np.float32), "lower": np.zeros(3), "upper": np.ones(3)})
+    with pytest.raises(ValueError, match="g.npz: not an SDF grid"):
+        grasp_io._read_grid(foreign)
+    stubs = tmp_path / "stubs"
+    (stubs / "sdf").mkdir(parents=True)
+    name = grasp_io._grid_filename("apple", 16)
+    (stubs / "sdf" / name).write_text("version https://git-lfs.github.com/spec/v1\n")
+    monkeypatch.setattr(grasp_io, "DATA_STUBS", stubs)
+    with pytest.warns(UserWarning, match=f"{name}: the shipped grid cannot be read"):
+        grasp_io.cached_sdf_grid("apple", 16, folder=tmp_path / "cache")
+    run = tmp_path / "run.pt"
+    run.write_bytes(b"cut short")
+    net = torch.nn.Linear(2, 1)
+    data = torch.utils.data.TensorDataset(torch.zeros(4, 2))
+    with pytest.raises(ValueError, match="run.pt: .*; delete it \\(graspkit's run file\\)"):
+        fit(net, lambda m, b, e: {"loss": m(b[0]).sum()}, data, TrainConfig(epochs=1, batch_size=2), checkpoint=run,
+            progress=False)
+    monkeypatch.setenv("GRASPKIT_CACHE", "")
+    assert cache_dir() == Path.home() / ".cache" / "graspkit"
+    monkeypatch.setenv("GRASPKIT_CACHE", "~/gk")
+    assert cache_dir() == Path.home() / "gk"
+
+
+def test_the_default_body_follows_graspkit_model_within_a_process(tmp_path, monkeypatch):
+    """MotionFill's window key and GOAL's `_body()` kept the first default body of the process (an lru_cache without
+    the path), so a notebook that set GRASPKIT_MODEL later keyed runs by windows of another body (an independent
+    check); both follow the file GRASPKIT_MODEL names now, as BodyModel.digest() of that file."""
+    from graspkit.body import BodyModel
+    from graspkit.eval_goal import _body
+    from graspkit.eval_motionfill import default_body_digest
+    from graspkit.paths import default_model_path
+
+    first, bm0 = default_body_digest(), _body()[0]
+    with np.load(default_model_path(), allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    tall = tmp_path / "tall.npz"
+    np.savez(tall, **{**arrays, "v_template": arrays["v_template"] * 1.2})
+    monkeypatch.setenv("GRASPKIT_MODEL", str(tall))
+    want = BodyModel.from_file(tall).digest()
+    assert default_body_digest() == want != first
+    assert _body()[0].digest() == BodyModel.from_file(tall, flat_hand_mean=True).digest() != bm0.digest()

@@ -2,6 +2,8 @@
 import subprocess
 import sys
 
+import numpy as np
+
 from graspkit.data import load_motion
 from graspkit.data.cli import clip_seed, make_dataset
 
@@ -39,8 +41,11 @@ def test_a_folder_takes_only_files_of_its_own_run(tmp_path):
 
     from graspkit.paths import default_model_path
 
+    from graspkit.body import BodyModel
+
     make_dataset("reach", 1, 7, tmp_path, workers=1, progress=False)
-    assert json.loads((tmp_path / "graspkit_make_reach.json").read_text()) == {"kind": "reach", "model": None, "seed": 7}
+    assert json.loads((tmp_path / "graspkit_make_reach.json").read_text()) == {
+        "kind": "reach", "model": None, "seed": 7, "body": BodyModel.from_file(default_model_path()).digest()}
     with pytest.raises(ValueError, match=r"--out: .*\(seed: 7 there, 8 now\)"):
         make_dataset("reach", 2, 8, tmp_path, workers=1, progress=False)
     assert not (tmp_path / "reach_000001.npz").exists()
@@ -54,6 +59,37 @@ def test_a_folder_takes_only_files_of_its_own_run(tmp_path):
         with pytest.raises(ValueError, match=rf"--out: .*graspkit_make_reach\.json {message}"):
             make_dataset("reach", 3, 7, tmp_path, workers=1, progress=False)
         assert not (tmp_path / "reach_000002.npz").exists()
+
+
+def test_a_folder_refuses_another_body_behind_the_same_name(tmp_path, monkeypatch):
+    """The record named the body by its path (None for the default), so GRASPKIT_MODEL pointing at a taller body, or
+    the model file changed in place, added that body's clips to the folder (an independent check). The body's digest
+    is in the record now: both are refused, and a record written before the digest was kept still extends."""
+    import json
+
+    import pytest
+
+    from graspkit.paths import default_model_path
+
+    with np.load(default_model_path(), allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    tall = tmp_path / "tall.npz"
+    np.savez(tall, **{**arrays, "v_template": arrays["v_template"] * 1.2})
+    make_dataset("reach", 1, 7, tmp_path / "a", workers=1, progress=False)
+    monkeypatch.setenv("GRASPKIT_MODEL", str(tall))
+    with pytest.raises(ValueError, match=r"--out: .*\(body: '[0-9a-f]+' there, '[0-9a-f]+' now\)"):
+        make_dataset("reach", 2, 7, tmp_path / "a", workers=1, progress=False)
+    monkeypatch.delenv("GRASPKIT_MODEL")
+    own = tmp_path / "own.npz"
+    np.savez(own, **arrays)
+    make_dataset("reach", 1, 7, tmp_path / "b", workers=1, progress=False, model=str(own))
+    np.savez(own, **{**arrays, "v_template": arrays["v_template"] * 1.2})          # changed in place
+    with pytest.raises(ValueError, match=r"--out: .*\(body: "):
+        make_dataset("reach", 2, 7, tmp_path / "b", workers=1, progress=False, model=str(own))
+    record = tmp_path / "a" / "graspkit_make_reach.json"
+    record.write_text(json.dumps({"kind": "reach", "model": None, "seed": 7}))      # an older record
+    make_dataset("reach", 2, 7, tmp_path / "a", workers=1, progress=False)
+    assert (tmp_path / "a" / "reach_000001.npz").exists()
 
 
 def test_cli_with_two_workers_writes_the_same_bytes(tmp_path):

@@ -34,12 +34,16 @@ def claim_folder(out: Path, kind: str, settings: dict) -> None:
     from graspkit.paths import default_model_path
     from graspkit.viz.export import write_atomic
 
+    from graspkit.body import BodyModel
+
     record = Path(out) / f"graspkit_make_{kind}.json"
     settings = dict(settings)
+    # the body by its content too: the path (or $GRASPKIT_MODEL) may name another model file than last time
+    body = BodyModel.from_file(settings.get("model") or default_model_path()).digest()
     if settings.get("model") is not None:           # the default body given by its path is the default body
         m = Path(settings["model"]).resolve()
         settings["model"] = None if m == Path(default_model_path()).resolve() else str(m)
-    want = {"kind": kind, **settings}
+    want = {"kind": kind, **settings, "body": body}
     if record.is_file():
         try:
             have = json.loads(record.read_text())
@@ -48,6 +52,8 @@ def claim_folder(out: Path, kind: str, settings: dict) -> None:
                              "with the settings given now") from None
         if not isinstance(have, dict):
             raise ValueError(f"--out: {record} holds a {type(have).__name__}, expected the settings of a run")
+        if "body" not in have:                      # a record written before the body's digest was kept
+            want.pop("body")
         if have != want:
             diff = "; ".join(f"{k}: {have.get(k)!r} there, {want.get(k)!r} now"
                              for k in sorted(set(have) | set(want)) if have.get(k) != want.get(k))

@@ -279,3 +279,13 @@ def slerp(q0: np.ndarray, q1: np.ndarray, t: np.ndarray) -> np.ndarray:
     w1 = np.where(small, t, np.sin(t * theta) / s)
     q = w0[..., None] * q0 + w1[..., None] * q1
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def member_crcs(path: Path) -> str:
+    """The CRC-32s of an npz's members, from its zip directory ('' for a file that is no zip: its reader names it): a
+    cache key part that sees a file rewritten in place at the same size."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            return ",".join(f"{i.CRC:08x}" for i in z.infolist())
+    except (zipfile.BadZipFile, OSError):
+        return ""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -52,8 +53,9 @@ def cached_sdf_grid(name: str | trimesh.Trimesh, resolution: int = 64, folder: P
         # name in the cache (one built where data_stubs was missing) took lesson 05's fit to other energies
         try:
             return _read_grid(stub)
-        except ValueError:
-            pass
+        except ValueError as e:
+            warnings.warn(f"{stub}: the shipped grid cannot be read ({str(e)[:200]}; a Git LFS pointer?); the cache's or "
+                          "a new build is used, whose last bits differ (restore data_stubs: git checkout)", stacklevel=2)
     path = (Path(folder) if folder is not None else cache_dir() / "sdf") / fname
     grid = read_cache(path, _read_grid)               # a damaged cache file is removed and rebuilt
     if grid is not None:
@@ -69,7 +71,12 @@ def _read_grid(path: Path) -> SDFGrid:
 
     with open_npz(path, "an SDF grid (values, lower, upper)") as z:
         a = npz_arrays(z, ("values", "lower", "upper"), path)
-    return SDFGrid(*(torch.as_tensor(a[k]).float() for k in ("values", "lower", "upper")))
+    v, lo, hi = a["values"], a["lower"], a["upper"]
+    if v.ndim != 3 or min(v.shape) < 2 or lo.shape != (3,) or hi.shape != (3,) or not (lo < hi).all() \
+            or not all(np.isfinite(x).all() for x in (v, lo, hi)):
+        raise ValueError(f"{path}: not an SDF grid (expected finite values (X, Y, Z) of at least 2 nodes a side and "
+                         f"corners lower < upper (3,), got values {v.shape}, lower {lo.shape}, upper {hi.shape})")
+    return SDFGrid(*(torch.as_tensor(x).float() for x in (v, lo, hi)))
 
 
 def _grid_filename(name: str | trimesh.Trimesh, resolution: int) -> str:

@@ -25,7 +25,6 @@ goals, normalisation statistics, deterministic splits and the held-out start pos
 from __future__ import annotations
 
 import hashlib
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
@@ -38,7 +37,7 @@ from torch.utils.data import Dataset
 from graspkit import intention as I
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.checks import check_int
-from graspkit.data.formats import load_motion, npz_arrays, open_npz
+from graspkit.data.formats import load_motion, member_crcs, npz_arrays, open_npz
 from graspkit.data.motion import Motion
 from graspkit.paths import read_cache
 
@@ -384,15 +383,6 @@ def load_clipset(path: str | Path) -> ClipSet:
 CLIPSET_VERSION = 1
 
 
-def _crcs(path: Path) -> str:
-    """The CRC-32s of an npz's members, from its zip directory ('' for a file that is no zip: load_clips names it)."""
-    try:
-        with zipfile.ZipFile(path) as z:
-            return ",".join(f"{i.CRC:08x}" for i in z.infolist())
-    except (zipfile.BadZipFile, OSError):
-        return ""
-
-
 def cached_clips(folder: str | Path, bm: BodyModel, limit: int | None = None, cache: str | Path | None = None,
                  kinds: Sequence[str] = KINDS) -> ClipSet:
     """All clips under `folder` (<kind>/*.npz for the sub-folders `kinds`, at most `limit` per kind) as a ClipSet, read
@@ -400,7 +390,7 @@ def cached_clips(folder: str | Path, bm: BodyModel, limit: int | None = None, ca
     npz's zip directory, no decompression: a clip remade in place at the same size is new data), the body model
     (`bm.digest()`) and CLIPSET_VERSION (so new or changed clips, another body or another clip code rebuild it)."""
     files = list_clips(folder, kinds=kinds, limit=limit)
-    listing = "\n".join(f"{f.parent.name}/{f.name}:{f.stat().st_size}:{_crcs(f)}" for f in files)
+    listing = "\n".join(f"{f.parent.name}/{f.name}:{f.stat().st_size}:{member_crcs(f)}" for f in files)
     key = hashlib.blake2b(f"{listing}\nbody={bm.digest()};version={CLIPSET_VERSION}".encode(),
                           digest_size=6).hexdigest()
     if cache is None:

@@ -891,7 +891,7 @@ def train_grabnet_smplx(root: str | Path, out: str | Path | None = None, epochs:
 
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed)
     run = run_path("grabnet_smplx", seed, epochs=epochs, batch_size=batch_size, lr=lr, config=dict(model.hparams),
-                   augment_yaw=augment_yaw, data=_data_key(root))
+                   augment_yaw=augment_yaw, data=_data_key(root), body=bm.digest())   # its loss poses this body
     hist = fit(model, step, train, cfg, checkpoint=run,
                extra={"model_config": dict(model.hparams)}, val_dataset=val, progress=progress,
                time_limit_s=None if time_limit_s is None else max(time_limit_s - (time.perf_counter() - t0), 1e-9),
