@@ -84,6 +84,27 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
         raise
 
 
+def create_exclusive(path: str | os.PathLike, data: bytes | str) -> bool:
+    """Write data to path whole (a temporary file, the usual permissions, synced, then hard-linked) unless path exists;
+    False when it did (another process created it first, even a moment before)."""
+    path = Path(path)
+    tmp = temp_beside(path)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data.encode() if isinstance(data, str) else data)
+            f.flush()
+            os.fsync(f.fileno())
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.link(tmp, path)
+        return True
+    except FileExistsError:
+        return False
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
 def drop_damaged(paths: Sequence[Path], what: str = "files") -> list[Path]:
     """Remove those of `paths` (.npz files; missing ones are skipped) that are not intact zip archives (truncated, or
     an entry failing its checksum), warning on stderr, so that a resumed run makes them again; returns the removed

@@ -234,3 +234,51 @@ def test_reach_near_clips_are_the_generators(tmp_path, bm):
     for i, p in enumerate(files):
         m, want = load_motion(p), generate_reach(clip_seed(3, "reach_near", i), bm, near=True)
         assert np.allclose(m.poses, want.poses, atol=1e-6) and m.goal_frame == want.goal_frame
+
+
+def _claim(out, seed, barrier, results):
+    """A process that claims `out` for `seed` as `data make` does, released together with another."""
+    from graspkit.data.cli import claim_folder
+
+    barrier.wait()
+    try:
+        claim_folder(out, "locomotion", {"seed": seed, "model": None})
+        results[seed] = "ok"
+    except ValueError:
+        results[seed] = "refused"
+
+
+def test_two_runs_started_together_into_one_folder_do_not_both_claim_it(tmp_path):
+    """Both saw no record and both wrote one (9 trials in 10, an independent check): the folder then held one seed's
+    record and the other's files. The record is created exclusively now: exactly one of the two is refused, and the
+    record names the seed that was accepted. A folder of older files without a record gets no record vouching for
+    them (a warning instead)."""
+    import json
+    import multiprocessing as mp
+
+    import pytest
+
+    from graspkit.data.cli import claim_folder
+
+    ctx = mp.get_context("fork")
+    for trial in range(3):
+        out = tmp_path / f"t{trial}"
+        out.mkdir()
+        with ctx.Manager() as manager:
+            results, barrier = manager.dict(), manager.Barrier(2)
+            procs = [ctx.Process(target=_claim, args=(out, seed, barrier, results)) for seed in (0, 1)]
+            for p in procs:
+                p.start()
+            for p in procs:
+                p.join(60)
+            got = dict(results)
+        assert sorted(got.values()) == ["ok", "refused"], got
+        [winner] = [s for s, r in got.items() if r == "ok"]
+        assert json.loads((out / "graspkit_make_locomotion.json").read_text())["seed"] == winner
+        assert [p.name for p in out.iterdir()] == ["graspkit_make_locomotion.json"]       # no temporary left
+    old = tmp_path / "old"
+    old.mkdir()
+    (old / "locomotion_000000.npz").write_bytes(b"")
+    with pytest.warns(UserWarning, match="no record of the run that made them"):
+        claim_folder(old, "locomotion", {"seed": 3, "model": None})
+    assert not (old / "graspkit_make_locomotion.json").exists()

@@ -28,13 +28,14 @@ _BM = None
 def claim_folder(out: Path, kind: str, settings: dict) -> None:
     """Record the settings that shape a folder's `kind` files (<out>/graspkit_make_<kind>.json) on its first run, and
     refuse to add files made with other settings (another seed, body model, chunk or object list) to it: a resumed or
-    extended run must be the same run. A folder of files made before this record existed is taken as it is."""
+    extended run must be the same run. The record is created exclusively (of two runs started together into one new
+    folder, the second is refused like a later one). A folder of files made before this record existed is taken as it
+    is, and no record is written for it (it would vouch for files it never checked)."""
     import json
-
-    from graspkit.paths import default_model_path
-    from graspkit.viz.export import write_atomic
+    import warnings
 
     from graspkit.body import BodyModel
+    from graspkit.paths import create_exclusive, default_model_path
 
     record = Path(out) / f"graspkit_make_{kind}.json"
     settings = dict(settings)
@@ -44,23 +45,28 @@ def claim_folder(out: Path, kind: str, settings: dict) -> None:
         m = Path(settings["model"]).resolve()
         settings["model"] = None if m == Path(default_model_path()).resolve() else str(m)
     want = {"kind": kind, **settings, "body": body}
-    if record.is_file():
-        try:
-            have = json.loads(record.read_text())
-        except (UnicodeDecodeError, json.JSONDecodeError) as e:
-            raise ValueError(f"--out: {record} is damaged ({e}); remove it only if the folder's files were made "
-                             "with the settings given now") from None
-        if not isinstance(have, dict):
-            raise ValueError(f"--out: {record} holds a {type(have).__name__}, expected the settings of a run")
-        if "body" not in have:                      # a record written before the body's digest was kept
-            want.pop("body")
-        if have != want:
-            diff = "; ".join(f"{k}: {have.get(k)!r} there, {want.get(k)!r} now"
-                             for k in sorted(set(have) | set(want)) if have.get(k) != want.get(k))
-            raise ValueError(f"--out: {out} holds {kind} files made with other settings ({diff}); "
-                             "use another --out or remove its files")
-    else:
-        write_atomic(record, json.dumps(want, sort_keys=True))
+    if not record.is_file():
+        older = sorted(Path(out).glob(f"{kind}_*.npz"))
+        if older:
+            warnings.warn(f"--out: {out} holds {len(older)} {kind} files and no record of the run that made them: "
+                          "taken as they are, unchecked", stacklevel=2)
+            return
+        if create_exclusive(record, json.dumps(want, sort_keys=True)):
+            return                                   # else another run created it meanwhile: its record decides
+    try:
+        have = json.loads(record.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ValueError(f"--out: {record} is damaged ({e}); remove it only if the folder's files were made "
+                         "with the settings given now") from None
+    if not isinstance(have, dict):
+        raise ValueError(f"--out: {record} holds a {type(have).__name__}, expected the settings of a run")
+    if "body" not in have:                      # a record written before the body's digest was kept
+        want.pop("body")
+    if have != want:
+        diff = "; ".join(f"{k}: {have.get(k)!r} there, {want.get(k)!r} now"
+                         for k in sorted(set(have) | set(want)) if have.get(k) != want.get(k))
+        raise ValueError(f"--out: {out} holds {kind} files made with other settings ({diff}); "
+                         "use another --out or remove its files")
 
 
 def check_model(model: str | None) -> None:
