@@ -84,6 +84,23 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
         raise
 
 
+STALE_TMP_S = 600.0          # s: a temporary file older than this beside its target was left by a killed writer
+
+
+def sweep_stale_temps(path: Path) -> None:
+    """Remove `path`'s temporary files (.<name>.*.tmp) older than STALE_TMP_S: left by a process killed while writing
+    it (kill -9); a writer of this path at work now is not touched."""
+    import time
+
+    now = time.time()
+    for stale in Path(path).parent.glob(f".{Path(path).name}.*.tmp"):
+        try:
+            if now - stale.stat().st_mtime > STALE_TMP_S:
+                stale.unlink()
+        except FileNotFoundError:
+            pass
+
+
 def create_exclusive(path: str | os.PathLike, data: bytes | str) -> bool:
     """Write data to path whole (a temporary file, the usual permissions, synced, then hard-linked) unless path exists;
     False when it did (another process created it first, even a moment before)."""

@@ -37,12 +37,11 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 from tqdm.auto import tqdm
 
-from graspkit.paths import publish, temp_beside, write_atomic
+from graspkit.paths import publish, sweep_stale_temps, temp_beside, write_atomic
 
 StepFn = Callable[[torch.nn.Module, Any, int], dict[str, torch.Tensor]]
 
 
-STALE_TMP_S = 600.0          # s: a checkpoint's temporary file older than this was left by a killed run
 RUNS: list[Path] = []        # the training states `fit` wrote in this process (`graspkit train` names their logs)
 
 
@@ -87,13 +86,7 @@ def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
-    now = time.time()
-    for stale in path.parent.glob(f".{path.name}.*.tmp"):   # left by a run killed while writing (kill -9); a
-        try:                                                # writer of this path at work now is not touched
-            if now - stale.stat().st_mtime > STALE_TMP_S:
-                stale.unlink()
-        except FileNotFoundError:
-            pass
+    sweep_stale_temps(path)
     return path
 
 

@@ -208,3 +208,21 @@ def test_the_default_body_follows_graspkit_model_within_a_process(tmp_path, monk
     want = BodyModel.from_file(tall).digest()
     assert default_body_digest() == want != first
     assert _body()[0].digest() == BodyModel.from_file(tall, flat_hand_mean=True).digest() != bm0.digest()
+
+
+def test_an_npz_write_clears_a_killed_writers_temporary_files(tmp_path):
+    """A process killed while writing a cache .npz left `.<name>.<random>.tmp` for ever (a 240 MB one in an independent
+    check); the next write of that entry removes such files older than STALE_TMP_S, and leaves a fresh one (another
+    writer at work now) alone, as checkpoints do."""
+    import time
+
+    from graspkit.data.formats import write_npz_atomic
+    from graspkit.paths import STALE_TMP_S
+
+    target = tmp_path / "c.npz"
+    stale, fresh = tmp_path / ".c.npz.abc.tmp", tmp_path / ".c.npz.def.tmp"
+    for f, age in ((stale, STALE_TMP_S + 60), (fresh, 1)):
+        f.write_bytes(b"half")
+        os.utime(f, (time.time() - age, time.time() - age))
+    write_npz_atomic(target, {"a": np.arange(3)})
+    assert not stale.exists() and fresh.exists() and np.load(target)["a"].tolist() == [0, 1, 2]

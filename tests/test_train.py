@@ -296,7 +296,7 @@ def test_a_run_writes_its_loss_curve_and_clears_a_killed_runs_temporary_files(tm
     import os
     import time
 
-    from graspkit.train import STALE_TMP_S
+    from graspkit.paths import STALE_TMP_S
 
     ck = tmp_path / "run.pt"
     stale, fresh = tmp_path / ".run.pt.abc.tmp", tmp_path / ".run.pt.def.tmp"

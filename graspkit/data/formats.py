@@ -27,7 +27,7 @@ import torch
 
 from graspkit.data.motion import HANDS, Motion, check_fps
 from graspkit.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
-from graspkit.paths import sync_rename
+from graspkit.paths import sweep_stale_temps, sync_rename
 
 FPS = 30.0
 NUM_BETAS = 10
@@ -104,6 +104,7 @@ def write_npz_atomic(path: Path, arrays: dict[str, np.ndarray]) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+    sweep_stale_temps(path)
 
 
 def open_npz(path: str | os.PathLike, what: str = "an .npz file") -> np.lib.npyio.NpzFile:
