@@ -850,12 +850,14 @@ def _cmd_train(args) -> int:
 
 def _cmd_eval(args) -> int:
     """`graspkit eval wandr`."""
-    import math
-
     from graspkit.cli import as_flags, check_file, check_folders
 
-    if args.floor is not None and not (math.isfinite(args.floor) and args.floor >= 0):
-        raise ValueError(f"--floor: expected a tolerance >= 0 in metres, got {args.floor}")
+    from graspkit.models.wandr import check_floor
+
+    try:
+        check_floor(args.floor)
+    except ValueError:
+        raise ValueError(f"--floor: expected a finite tolerance >= 0 in metres, got {args.floor}") from None
     for ck in args.checkpoint:                         # every one before the first is evaluated
         check_file(ck, "--checkpoint")
     check_folders(args.clips, "--clips")
@@ -988,12 +990,6 @@ def goal_from_cylinder(angle_deg: float, distance: float, height: float) -> Tens
     return torch.tensor([distance * np.cos(a), distance * np.sin(a), height], dtype=torch.float32)
 
 
-def _is_canonical(start: I.StartPose, tol: float = 1e-5) -> bool:
-    """Whether the start's pelvis is above the origin and it faces +x (within tol m / rad): the held-out starts are."""
-    pelvis = start.p[:2] + start.rest[0, :2].to(start.p.dtype)
-    return bool(pelvis.abs().max() <= tol) and abs(float(I.heading_of_pose(start.p))) <= tol
-
-
 class GoalReacher:
     """Place a goal around a start pose and let the model reach it (lesson 09's widget). The callback `update` is plain
     Python (tested); `widget()` only wires ipywidgets sliders to it and shows the figure as PNG bytes in an Image."""
@@ -1013,7 +1009,7 @@ class GoalReacher:
         check_type(start, I.StartPose, "start", what="graspkit.intention.StartPose")
         check_floor(floor)
         self.model, self.seed, self.floor = model, check_seed(seed), floor
-        self.start = start if _is_canonical(start) else start.canonical()
+        self.start = start if start.is_canonical() else start.canonical()   # (bit-equal when it is)
         self.motion: Tensor | None = None
         self.joints: Tensor | None = None
 

@@ -276,6 +276,12 @@ class StartPose:
 
         return StartPose(move(self.p_prev), move(self.p), self.rest, self.betas, self.full_pose, self.source)
 
+    def is_canonical(self, tol: float = 1e-5) -> bool:
+        """Whether the pelvis is above the origin and the body faces +x (within tol m / rad), as `canonical()` leaves
+        it: the held-out starts are."""
+        pelvis = self.p[:2] + self.rest[0, :2].to(self.p.dtype)
+        return bool(pelvis.abs().max() <= tol) and abs(float(heading_of_pose(self.p))) <= tol
+
     @staticmethod
     def from_motion(motion: Motion, frame: int, bm: BodyModel, source: str = "") -> "StartPose":
         """The start at `frame` (>= 1) of a Motion, on body model bm (rest joints from the motion's betas)."""

@@ -341,7 +341,7 @@ def test_wandr_train_and_eval_name_the_flag_before_any_work(tmp_path, capsys):
 
     ck = str(DATA_STUBS / "checkpoints" / "wandr.pt")
     (tmp_path / "no_clips").mkdir()
-    cases = [(["eval", "wandr", "--checkpoint", ck, "--floor", "nan"], "--floor: expected a tolerance >= 0"),
+    cases = [(["eval", "wandr", "--checkpoint", ck, "--floor", "nan"], "--floor: expected a finite tolerance >= 0"),
              (["eval", "wandr", "--checkpoint", str(tmp_path / "no.pt")], "--checkpoint: {} is missing".format(tmp_path / "no.pt")),
              (["eval", "wandr", "--checkpoint", ck, "--clips", str(tmp_path / "no_clips")],
               "--clips: no reaching clips"),

@@ -290,8 +290,8 @@ def test_goal_reacher_moves_any_start_to_where_its_sliders_measure_from(bm):
     figs = plt.get_fignums()
     r.figure()
     assert plt.get_fignums() == figs
-    for bad in (True, -0.1, float("nan"), "1cm"):
-        with pytest.raises(ValueError, match="^floor: expected None or a tolerance"):
+    for bad in (True, -0.1, float("nan"), float("inf"), "1cm"):
+        with pytest.raises(ValueError, match="^floor: expected None or a finite tolerance"):
             E.GoalReacher(model, start, floor=bad)
     with pytest.raises(TypeError, match="^start: expected a graspkit.intention.StartPose"):
         E.GoalReacher(model, start.p)

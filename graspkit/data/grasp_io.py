@@ -43,7 +43,8 @@ def mesh_digest(obj: str | trimesh.Trimesh) -> str:
 
 def cached_sdf_grid(name: str | trimesh.Trimesh, resolution: int = 64, folder: Path | None = None) -> SDFGrid:
     """The SDF grid of catalogue object `name` (or of a mesh in its object frame): the grid shipped in
-    data_stubs/sdf when there is one, else read from `<cache>/sdf/` or built (seconds) and stored atomically."""
+    data_stubs/sdf when there is one (then `folder` is not read), else read from `folder` (default `<cache>/sdf/`) or
+    built (seconds) and stored there atomically."""
     from graspkit.paths import cache_dir
 
     fname = _grid_filename(name, resolution)

@@ -35,9 +35,10 @@ def check_fps(fps: object, name: str = "fps", where: str = "") -> float:
 
 @dataclass
 class Motion:
-    """poses (T,55,3) axis-angle, trans (T,3), betas (10,), fps; contacts (T,4) bool [l heel, l toe, r heel, r toe];
-    for reaching clips the goal (3,) (world, m), the frame goal_frame at which `hand`'s wrist is on it
-    (a floor goal: the wrist FLOOR_WRIST, scaled with the body, above it)."""
+    """poses (T,55,3) or (T,165) axis-angle, trans (T,3) (one frame too: poses[None], trans[None]; finite), betas
+    (10,), fps; contacts (T,4) bool [l heel, l toe, r heel, r toe]; for reaching clips the goal (3,) (world, m), the
+    frame goal_frame at which `hand`'s wrist is on it (a floor goal: the wrist FLOOR_WRIST, scaled with the body,
+    above it). Other layouts are refused by name (a reshape would scramble a (3, T) translation into frames)."""
 
     poses: np.ndarray
     trans: np.ndarray
@@ -54,10 +55,11 @@ class Motion:
         # only the documented layouts: a reshape would take a (3, T) translation or (55, 3, T) poses as scrambled frames
         if not (poses.ndim == 3 and poses.shape[1:] == (NUM_JOINTS, 3) or poses.ndim == 2
                 and poses.shape[1] == 3 * NUM_JOINTS):
-            raise ValueError(f"poses: expected (T, {NUM_JOINTS}, 3) or (T, {3 * NUM_JOINTS}) axis-angle (SMPL-X), got "
-                             f"shape {poses.shape} (load_motion converts SMPL-H files)")
+            raise ValueError(f"poses: expected (T, {NUM_JOINTS}, 3) or (T, {3 * NUM_JOINTS}) axis-angle (SMPL-X; one "
+                             f"frame: poses[None]), got shape {poses.shape} (load_motion converts SMPL-H files)")
         if trans.ndim != 2 or trans.shape[1] != 3:
-            raise ValueError(f"trans: expected (T, 3) translations in metres, got shape {trans.shape}")
+            raise ValueError(f"trans: expected (T, 3) translations in metres (one frame: trans[None]), got shape "
+                             f"{trans.shape}")
         check_finite(poses, "poses", "axis-angle rotations in radians")
         check_finite(trans, "trans", "translations in metres")
         self.poses, self.trans = poses.reshape(-1, NUM_JOINTS, 3), trans
@@ -95,7 +97,8 @@ class Motion:
         return (self.num_frames - 1) / self.fps
 
     def slice(self, start: int, stop: int | None = None) -> "Motion":
-        """Frames [start, stop) as a new Motion (goal_frame shifted; the goal dropped if it falls outside)."""
+        """Frames [start, stop) as a new Motion (goal_frame shifted; the goal dropped if it falls outside); an empty
+        range is refused (the constructor still takes T = 0, which the writers refuse)."""
         sl = slice(start, stop)
         goal, gf, hand = self.goal, self.goal_frame, self.hand
         first, last, _ = sl.indices(self.num_frames)       # a negative start counts from the end, as numpy's

@@ -363,8 +363,9 @@ FrameHook = Callable[[int, Tensor, Tensor, Tensor], None]
 
 def check_floor(floor: Any) -> None:
     """A ValueError unless floor (rollout's floor constraint) is None or a tolerance >= 0 in metres (bools refused)."""
-    if floor is not None and (isinstance(floor, bool) or not isinstance(floor, numbers.Real) or not floor >= 0):
-        raise ValueError(f"floor: expected None or a tolerance >= 0 in metres, got {floor!r}")
+    if floor is not None and (isinstance(floor, bool) or not isinstance(floor, numbers.Real)
+                              or not 0 <= floor < float("inf")):                    # NaN fails this too
+        raise ValueError(f"floor: expected None or a finite tolerance >= 0 in metres, got {floor!r}")
 
 
 def _per_frame(x: Tensor | int, B: int, T: int, width: int | None, name: str) -> Tensor:

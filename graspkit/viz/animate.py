@@ -1,7 +1,7 @@
 """Mesh sequences as matplotlib animations: inline JSHTML for notebooks, GIF / MP4 files.
 
-Notebook outputs stay small by default: at most `max_frames` frames (the stride grows to fit, playback
-stays real-time), small panels, low dpi; `to_html` refuses to embed more than `max_mb` megabytes.
+Notebook outputs stay small by default: about `max_frames` frames (the stride grows to fit; the last frame is
+added), small panels, low dpi; `to_html` refuses to embed more than `max_mb` megabytes.
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import numpy as np
 from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter, writers
 from tqdm.auto import tqdm
 
-from graspkit.viz.export import publish, temp_beside
+from graspkit.viz.export import drawn_frames, publish, temp_beside
 from graspkit.viz.scene import (View, _mesh_polys, as_array, as_mesh, as_points, bounds_of, draw_ground, draw_meshes,
                                 draw_path, figure, set_equal, sphere, to_numpy)
 from graspkit.viz.style import GOAL, OBJECT, SKIN
@@ -55,8 +55,9 @@ def animate(frames: Any, faces: Any, objects: Sequence[tuple[Any, ...]] = (), go
             num_frames: int | None = None, max_faces: int | None = 8000, close: bool = True) -> FuncAnimation:
     """A body moving over time: frames (T,V,3) array / list of (V,3) / function t -> (V,3) (with num_frames),
     faces (F,3); objects [(vertices (V,3) static or (T,V,3) moving, faces[, color])]; static goals (G,3),
-    paths [(N,3)]. Every `stride`-th frame, stride raised so at most max_frames are drawn (plus the last frame, which
-    is always drawn: a reach or grasp ends there); plays at real time, the last frame up to stride - 1 frames early.
+    paths [(N,3)]. Every `stride`-th frame, stride raised so at most max_frames are drawn, plus the last frame (a reach
+    or grasp ends there; so up to max_frames + 1); each drawn frame shows for stride / fps s, real time, except that
+    the step into an added last frame is shorter in the clip than on screen (it shows up to stride - 1 frames late).
     max_faces: larger bodies are decimated (same topology every frame): matplotlib's time per frame grows with
     the face count, and a few thousand faces already fill a small panel. close=True closes the figure so a
     notebook shows only the animation, not a still of its last frame.
@@ -68,9 +69,7 @@ def animate(frames: Any, faces: Any, objects: Sequence[tuple[Any, ...]] = (), go
         raise ValueError(f"stride: expected >= 1, got {stride}")
     if max_frames is not None:
         stride = max(stride, math.ceil(total / max_frames))
-    ticks = list(range(0, total, stride))
-    if ticks[-1] != total - 1:
-        ticks.append(total - 1)
+    ticks = drawn_frames(total, stride)
     body = [get(t) for t in ticks]
     _, f = as_mesh(body[0], faces, "frames")
     if max_faces is not None and len(f) > max_faces:

@@ -40,6 +40,18 @@ def slider_value(name: str, value: float) -> float:
     return v
 
 
+MAX_BETA = 10.0            # stds: a shape coefficient beyond this is a typo (the sliders span ±2)
+MAX_ANGLE = 2 * np.pi      # rad: every bend is within a full turn (the sliders span ±1.6)
+
+
+def _bounded(name: str, value: Any, most: float, what: str) -> float:
+    """slider_value(name, value) within ±most, else a ValueError naming the slider."""
+    v = slider_value(name, value)
+    if abs(v) > most:
+        raise ValueError(f"{name}: expected {what} within ±{most:g}, got {value!r}")
+    return v
+
+
 def slider_bounds(value: float, low: float, high: float) -> dict[str, float]:
     """A slider's value, min and max: the range [low, high] widened to hold `value` (ipywidgets clamps a value
     outside its range, and the slider would then show a number the explorer does not hold)."""
@@ -55,12 +67,13 @@ class BodyExplorerState:
     angles: dict[str, float] = field(default_factory=lambda: {j: 0.0 for j in EXPLORER_JOINTS})
 
     def set(self, name: str, value: float) -> None:
-        """Set one slider: 'beta0'..'beta9' or a joint name from EXPLORER_JOINTS; unknown name -> ValueError."""
+        """Set one slider: 'beta0'..'beta9' (|value| <= MAX_BETA) or a joint name from EXPLORER_JOINTS (radians,
+        |value| <= MAX_ANGLE); unknown name or value out of bounds -> ValueError, the state unchanged."""
         if name.startswith("beta") and name[4:].isdigit() and name == f"beta{int(name[4:])}" \
                 and int(name[4:]) < len(self.betas):
-            self.betas[int(name[4:])] = slider_value(name, value)
+            self.betas[int(name[4:])] = _bounded(name, value, MAX_BETA, "a shape coefficient (in stds)")
         elif name in self.angles:
-            self.angles[name] = slider_value(name, value)
+            self.angles[name] = _bounded(name, value, MAX_ANGLE, "an angle in radians")
         else:
             raise ValueError(f"name: unknown slider {name!r}; expected beta0..beta{len(self.betas) - 1} "
                              f"or one of {list(self.angles)}")

@@ -194,6 +194,13 @@ class _GLBBuilder:
                 + struct.pack("<II", len(bin_), 0x004E4942) + bin_)
 
 
+def drawn_frames(total: int, stride: int) -> list[int]:
+    """The frames of a clip of `total` that an animation or an animated GLB shows: every `stride`-th and the last
+    (a reach or grasp ends there)."""
+    ticks = list(range(0, total, stride))
+    return ticks if ticks[-1] == total - 1 else ticks + [total - 1]
+
+
 def export_sequence_glb(vertices: Any, faces: Any, path: str | os.PathLike, fps: float = 30.0,
                         objects: Mapping[str, Any] | None = None, color: Any = SKIN,
                         colors: Mapping[str, Any] | None = None, stride: int = 1, y_up: bool = True,
@@ -212,7 +219,7 @@ def export_sequence_glb(vertices: Any, faces: Any, path: str | os.PathLike, fps:
     if not np.isfinite(verts).all():
         raise ValueError("vertices: contain NaN or Inf")
     objs = _check_objects(objects, name)
-    kept = np.unique(np.append(np.arange(0, len(verts), stride), len(verts) - 1))
+    kept = np.asarray(drawn_frames(len(verts), stride))
     verts = verts[kept]
     if f.size and (f.min() < 0 or f.max() >= verts.shape[1]):
         raise ValueError(f"faces: indices must lie in [0, {verts.shape[1]}), got [{f.min()}, {f.max()}]")

@@ -30,6 +30,7 @@ REACH_FORWARD: dict[str, tuple[float, float, float]] = {
 OFFSET_SLIDERS = ("x", "y", "z")  # object translation in metres, world axes
 YAW_SLIDER = "yaw"  # rotation about the world z axis through the object centre, degrees
 MARKER_IN_CONTACT = "#2ca02c"  # SAGA Fig. 3 draws markers in contact in green
+MAX_OFFSET = 10.0  # m: an offset beyond this is a typo, not a move around a hand
 
 
 def reaching_body(bm: BodyModel, pose: dict[str, tuple[float, float, float]] | None = None
@@ -153,7 +154,11 @@ class HandObjectExplorer:
         ValueError naming the slider, and the state is left as it was."""
         before = (self.offset.copy(), self.yaw, self.name, self.mesh, self.points, self.normals)
         if name in OFFSET_SLIDERS:
-            self.offset[OFFSET_SLIDERS.index(name)] = slider_value(name, value)
+            v = slider_value(name, value)
+            if abs(v) > MAX_OFFSET:                # the scene is a hand's reach: beyond, float64 meshes collapse
+                raise ValueError(f"{name}: expected an offset within ±{MAX_OFFSET:g} m (the sliders span ±0.1 m), "
+                                 f"got {value!r}")
+            self.offset[OFFSET_SLIDERS.index(name)] = v
         elif name == YAW_SLIDER:
             self.yaw = slider_value(name, value)
         elif name == "object":
