@@ -1,6 +1,6 @@
 """The ```python blocks of README.md and docs/*.md against the library: every name they import exists, and every
-keyword they pass to a graspkit function or class is one of its parameters (the blocks are sketches with
-placeholders, so they are checked, not run)."""
+keyword they pass to a graspkit function or class is one of its parameters, and every name they read is defined
+(checked, not run: the blocks run for minutes, and a few are sketches that say so)."""
 import ast
 import functools
 import importlib
@@ -133,3 +133,30 @@ def test_a_doc_block_names_what_the_library_has(path, index, block):
                 assert len(node.args) <= n_pos, f"{path.name} block {index}: {ast.unparse(node)} has too many arguments"
             checked += 1
     assert checked, f"{path.name} block {index} calls no graspkit function this test can check"
+
+
+USUAL = {"bm", "torch", "np"}      # the setup every page assumes: a BodyModel `bm`, `import torch, numpy as np`
+
+
+@pytest.mark.parametrize("path", DOCS, ids=lambda p: p.name)
+def test_blocks_read_only_names_they_or_the_page_define(path):
+    """Every name a block reads is defined by the block, a block before it on the page, a builtin or USUAL (a block
+    in docs/saga_motion.md read `Gamma_bar`, `betas` and a file name no reader has, an independent check); a block
+    that opens with a comment calling itself a sketch is exempt (it says where its inputs come from)."""
+    import builtins
+
+    defined = set(dir(builtins)) | USUAL
+    for block in python_blocks(path):
+        tree = ast.parse(block)
+        assigned, loaded = set(), set()
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                assigned |= {(a.asname or a.name).split(".")[0] for a in node.names}
+            elif isinstance(node, ast.Name):
+                (assigned if isinstance(node.ctx, ast.Store) else loaded).add(node.id)
+            elif isinstance(node, (ast.FunctionDef, ast.Lambda)):
+                args = node.args
+                assigned |= {a.arg for a in args.args + args.kwonlyargs + args.posonlyargs}
+        if not block.lstrip().startswith("#") or "sketch" not in block.split("\n", 1)[0]:
+            assert loaded <= defined | assigned, f"{path.name}: a block reads {sorted(loaded - defined - assigned)}"
+        defined |= assigned
