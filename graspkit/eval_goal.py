@@ -263,12 +263,15 @@ def _body(model: str | Path | None = None):
     store absolute poses), GOAL's vertex sampler and a SparseBody over its 400 vertices (built once per model file)."""
     from graspkit.paths import default_model_path
 
-    return _body_of(str(model or default_model_path()))
+    p = Path(model or default_model_path()).resolve()
+    st = p.stat() if p.is_file() else None      # a missing file: BodyModel's own error below
+    # keyed by the file's time and size too: a model rewritten in place is another body
+    return _body_of(str(p), st.st_mtime_ns if st else 0, st.st_size if st else 0)
 
 
 @lru_cache(maxsize=2)
-def _body_of(model: str):
-    """_body for one model file."""
+def _body_of(model: str, mtime_ns: int, size: int):
+    """_body for one model file (as it was at mtime_ns, size)."""
     from graspkit.body import BodyModel
     from graspkit.body.markers import goal_vertices
     from graspkit.models.gnet import SparseBody

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import re
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -75,12 +76,15 @@ def default_body_digest() -> str:
     may change within a process; each file is loaded once)."""
     from graspkit.paths import default_model_path
 
-    return _body_digest(str(default_model_path()))
+    p = Path(default_model_path()).resolve()
+    st = p.stat() if p.is_file() else None      # a missing file: BodyModel's own error below
+    # keyed by the file's time and size too: a model rewritten in place is another body
+    return _body_digest(str(p), st.st_mtime_ns if st else 0, st.st_size if st else 0)
 
 
 @functools.lru_cache(maxsize=4)
-def _body_digest(path: str) -> str:
-    """BodyModel.digest() of the model file at path."""
+def _body_digest(path: str, mtime_ns: int, size: int) -> str:
+    """BodyModel.digest() of the model file at path (as it was at mtime_ns, size)."""
     from graspkit.body import BodyModel
 
     return BodyModel.from_file(path).digest()
@@ -105,7 +109,7 @@ def windows_source(kind: str, n: int, data: Path | None = None, body: str | None
     root = Path(data) if data else cache_dir().joinpath(*sub)
     if not root.is_dir():
         raise FileNotFoundError(f"data: no folder {root} (graspkit data make --kind {kind} --out {root})")
-    files = sorted(root.glob(f"{kind}_*.npz"))[:n]
+    files = sorted(f for f in root.glob(f"{kind}_*.npz") if re.fullmatch(rf"{kind}_\d+\.npz", f.name))[:n]
     if len(files) < n:
         raise FileNotFoundError(f"data: {root} holds {len(files)} {kind} clips, {n} wanted "
                                 f"(graspkit data make --kind {kind} --n {n})")

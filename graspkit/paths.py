@@ -90,10 +90,11 @@ STALE_TMP_S = 600.0          # s: a temporary file older than this beside its ta
 def sweep_stale_temps(path: Path) -> None:
     """Remove `path`'s temporary files (.<name>.*.tmp) older than STALE_TMP_S: left by a process killed while writing
     it (kill -9); a writer of this path at work now is not touched."""
+    import glob
     import time
 
     now = time.time()
-    for stale in Path(path).parent.glob(f".{Path(path).name}.*.tmp"):
+    for stale in Path(path).parent.glob(f".{glob.escape(Path(path).name)}.*.tmp"):
         try:
             if now - stale.stat().st_mtime > STALE_TMP_S:
                 stale.unlink()
@@ -118,6 +119,14 @@ def create_exclusive(path: str | os.PathLike, data: bytes | str) -> bool:
         return True
     except FileExistsError:
         return False
+    except OSError:                              # no hard links here (vfat, exFAT, some network mounts)
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
+        except FileExistsError:
+            return False
+        with os.fdopen(fd, "wb") as f:
+            f.write(data.encode() if isinstance(data, str) else data)
+        return True
     finally:
         tmp.unlink(missing_ok=True)
 

@@ -226,3 +226,20 @@ def test_an_npz_write_clears_a_killed_writers_temporary_files(tmp_path):
         os.utime(f, (time.time() - age, time.time() - age))
     write_npz_atomic(target, {"a": np.arange(3)})
     assert not stale.exists() and fresh.exists() and np.load(target)["a"].tolist() == [0, 1, 2]
+
+
+def test_create_exclusive_claims_once_also_without_hard_links(tmp_path, monkeypatch):
+    """create_exclusive writes a file whole unless it exists (False then, the file untouched); where the filesystem
+    has no hard links (vfat: os.link raises PermissionError) it falls back to O_EXCL instead of failing (a review)."""
+    from graspkit.paths import create_exclusive
+
+    a = tmp_path / "a.json"
+    assert create_exclusive(a, "one") and not create_exclusive(a, "two") and a.read_text() == "one"
+
+    def no_links(src, dst):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "link", no_links)
+    b = tmp_path / "b.json"
+    assert create_exclusive(b, "one") and not create_exclusive(b, "two") and b.read_text() == "one"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json", "b.json"]          # no temporary left

@@ -251,10 +251,12 @@ def _claim(out, seed, barrier, results):
 def test_two_runs_started_together_into_one_folder_do_not_both_claim_it(tmp_path):
     """Both saw no record and both wrote one (9 trials in 10, an independent check): the folder then held one seed's
     record and the other's files. The record is created exclusively now: exactly one of the two is refused, and the
-    record names the seed that was accepted. A folder of older files without a record gets no record vouching for
-    them (a warning instead)."""
+    record names the seed that was accepted. A folder of older files without a record is taken with a warning and
+    checked from then on (its record counts the files it did not check); a reach_far file is not an older reach file
+    (reach_* matched it, a review)."""
     import json
     import multiprocessing as mp
+    import warnings
 
     import pytest
 
@@ -281,4 +283,14 @@ def test_two_runs_started_together_into_one_folder_do_not_both_claim_it(tmp_path
     (old / "locomotion_000000.npz").write_bytes(b"")
     with pytest.warns(UserWarning, match="no record of the run that made them"):
         claim_folder(old, "locomotion", {"seed": 3, "model": None})
-    assert not (old / "graspkit_make_locomotion.json").exists()
+    assert json.loads((old / "graspkit_make_locomotion.json").read_text())["preexisting"] == 1
+    claim_folder(old, "locomotion", {"seed": 3, "model": None})               # the same run again: accepted
+    with pytest.raises(ValueError, match=r"\(seed: 3 there, 4 now\)"):          # checked from now on
+        claim_folder(old, "locomotion", {"seed": 4, "model": None})
+    other = tmp_path / "other"                       # reach_far files are not older reach files (reach_* matched them)
+    other.mkdir()
+    (other / "reach_far_000000.npz").write_bytes(b"")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        claim_folder(other, "reach", {"seed": 0, "model": None})
+    assert "preexisting" not in json.loads((other / "graspkit_make_reach.json").read_text())

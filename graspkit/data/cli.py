@@ -30,8 +30,9 @@ def claim_folder(out: Path, kind: str, settings: dict) -> None:
     refuse to add files made with other settings (another seed, body model, chunk or object list) to it: a resumed or
     extended run must be the same run. The record is created exclusively (of two runs started together into one new
     folder, the second is refused like a later one). A folder of files made before this record existed is taken as it
-    is, and no record is written for it (it would vouch for files it never checked)."""
+    is, with a warning, and the record notes how many files it did not check ("preexisting")."""
     import json
+    import re
     import warnings
 
     from graspkit.body import BodyModel
@@ -46,20 +47,22 @@ def claim_folder(out: Path, kind: str, settings: dict) -> None:
         settings["model"] = None if m == Path(default_model_path()).resolve() else str(m)
     want = {"kind": kind, **settings, "body": body}
     if not record.is_file():
-        older = sorted(Path(out).glob(f"{kind}_*.npz"))
-        if older:
+        older = [f for f in Path(out).glob(f"{kind}_*.npz") if re.fullmatch(rf"{kind}_\d{{6}}\.npz", f.name)]
+        if older:                                    # (reach_* would match reach_far_* too: the exact name)
             warnings.warn(f"--out: {out} holds {len(older)} {kind} files and no record of the run that made them: "
-                          "taken as they are, unchecked", stacklevel=2)
-            return
-        if create_exclusive(record, json.dumps(want, sort_keys=True)):
+                          "taken as they are, unchecked; this run's settings are recorded for the next", stacklevel=2)
+        # the record says how many files it did not check; later runs are checked against it
+        if create_exclusive(record, json.dumps({**want, "preexisting": len(older)} if older else want,
+                                               sort_keys=True)):
             return                                   # else another run created it meanwhile: its record decides
     try:
         have = json.loads(record.read_text())
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise ValueError(f"--out: {record} is damaged ({e}); remove it only if the folder's files were made "
-                         "with the settings given now") from None
+                         "with the settings given now (the next run records them, unchecked)") from None
     if not isinstance(have, dict):
         raise ValueError(f"--out: {record} holds a {type(have).__name__}, expected the settings of a run")
+    have.pop("preexisting", None)
     if "body" not in have:                      # a record written before the body's digest was kept
         want.pop("body")
     if have != want:
