@@ -135,12 +135,12 @@ def test_a_doc_block_names_what_the_library_has(path, index, block):
     assert checked, f"{path.name} block {index} calls no graspkit function this test can check"
 
 
-USUAL = {"bm", "torch", "np"}      # the setup every page assumes: a BodyModel `bm`, `import torch, numpy as np`
+USUAL = {"bm"}      # the setup every page assumes: a BodyModel `bm`
 
 
 @pytest.mark.parametrize("path", DOCS, ids=lambda p: p.name)
 def test_blocks_read_only_names_they_or_the_page_define(path):
-    """Every name a block reads is defined by the block, a block before it on the page, a builtin or USUAL (a block
+    """Every name a block reads is defined by the block, a block before it on the page, a builtin or USUAL (imports included; a block
     in docs/saga_motion.md read `Gamma_bar`, `betas` and a file name no reader has, an independent check); a block
     that opens with a comment calling itself a sketch is exempt (it says where its inputs come from)."""
     import builtins
