@@ -261,12 +261,9 @@ def default_data_folders() -> list:
 def _body(model: str | Path | None = None):
     """The body model (default: graspkit's, the file default_model_path() names now; hand mean not added: the files
     store absolute poses), GOAL's vertex sampler and a SparseBody over its 400 vertices (built once per model file)."""
-    from graspkit.paths import default_model_path
+    from graspkit.paths import default_model_path, file_stamp
 
-    p = Path(model or default_model_path()).resolve()
-    st = p.stat() if p.is_file() else None      # a missing file: BodyModel's own error below
-    # keyed by the file's time and size too: a model rewritten in place is another body
-    return _body_of(str(p), st.st_mtime_ns if st else 0, st.st_size if st else 0)
+    return _body_of(*file_stamp(model or default_model_path()))   # a model rewritten in place is another body
 
 
 @lru_cache(maxsize=2)

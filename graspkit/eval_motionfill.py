@@ -74,12 +74,9 @@ WINDOWS_VERSION = 1
 def default_body_digest() -> str:
     """BodyModel.digest() of graspkit's default body model (the file default_model_path() names now: GRASPKIT_MODEL
     may change within a process; each file is loaded once)."""
-    from graspkit.paths import default_model_path
+    from graspkit.paths import default_model_path, file_stamp
 
-    p = Path(default_model_path()).resolve()
-    st = p.stat() if p.is_file() else None      # a missing file: BodyModel's own error below
-    # keyed by the file's time and size too: a model rewritten in place is another body
-    return _body_digest(str(p), st.st_mtime_ns if st else 0, st.st_size if st else 0)
+    return _body_digest(*file_stamp(default_model_path()))    # a model rewritten in place is another body
 
 
 @functools.lru_cache(maxsize=4)

@@ -63,13 +63,26 @@ def sync_rename(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
         os.close(fd)
 
 
-def publish(tmp: Path, path: Path) -> Path:
-    """Give tmp the usual permissions (mkstemp makes it owner-only) and rename it onto path atomically (synced)."""
+def _usual_mode(tmp: Path) -> None:
+    """Give tmp the permissions a plain open() would (mkstemp makes it owner-only)."""
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o666 & ~umask)
+
+
+def publish(tmp: Path, path: Path) -> Path:
+    """Give tmp the usual permissions and rename it onto path atomically (synced)."""
+    _usual_mode(tmp)
     sync_rename(tmp, path)
     return path
+
+
+def file_stamp(path: str | os.PathLike) -> tuple[str, int, int]:
+    """(resolved path, mtime ns, size) of a file — (resolved path, 0, 0) when it is missing — a cache key that sees
+    the file rewritten in place or named by another relative path."""
+    p = Path(path).resolve()
+    st = p.stat() if p.is_file() else None
+    return str(p), st.st_mtime_ns if st else 0, st.st_size if st else 0
 
 
 def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
@@ -106,15 +119,14 @@ def create_exclusive(path: str | os.PathLike, data: bytes | str) -> bool:
     """Write data to path whole (a temporary file, the usual permissions, synced, then hard-linked) unless path exists;
     False when it did (another process created it first, even a moment before)."""
     path = Path(path)
+    payload = data.encode() if isinstance(data, str) else data
     tmp = temp_beside(path)
     try:
         with open(tmp, "wb") as f:
-            f.write(data.encode() if isinstance(data, str) else data)
+            f.write(payload)
             f.flush()
             os.fsync(f.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
+        _usual_mode(tmp)
         os.link(tmp, path)
         return True
     except FileExistsError:
@@ -125,7 +137,7 @@ def create_exclusive(path: str | os.PathLike, data: bytes | str) -> bool:
         except FileExistsError:
             return False
         with os.fdopen(fd, "wb") as f:
-            f.write(data.encode() if isinstance(data, str) else data)
+            f.write(payload)
         return True
     finally:
         tmp.unlink(missing_ok=True)

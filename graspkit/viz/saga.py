@@ -15,7 +15,7 @@ from matplotlib.figure import Figure
 from torch import Tensor
 
 from graspkit.checks import check_int, check_seed, check_type
-from graspkit.viz.explorers import slider_bounds, slider_value
+from graspkit.viz.explorers import bounded_value, slider_bounds, slider_value
 
 _BOXES = [  # (x, y, w, h, text, colour) of the WholeGrasp-VAE diagram (SAGA Fig. 3)
     (0.0, 2.6, 1.9, 0.7, "markers M (143x3)\n+ contacts C_M", "#3b6ea8"),
@@ -115,11 +115,8 @@ class LatentWalk:
             self.z = self._draw(check_seed(value))       # drawn first: a refused seed changes nothing
             self.seed = int(value)
         elif name in self.names:
-            v = slider_value(name, value)
-            if abs(v) > MAX_LATENT:
-                raise ValueError(f"{name}: expected a latent coordinate within ±{MAX_LATENT:g} (the prior is "
-                                 f"N(0, 1); the sliders span ±3), got {value!r}")
-            self.z[0, int(name[1:])] = v
+            self.z[0, int(name[1:])] = bounded_value(name, value, MAX_LATENT, "a latent coordinate",
+                                                     note="the prior is N(0, 1); the sliders span ±3")
         else:
             raise ValueError(f"name: expected one of {self.names}, got {name!r}")
         self.decode()
