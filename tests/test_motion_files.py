@@ -144,7 +144,7 @@ def test_rest_pose_joint_positions_are_the_regressed_shaped_mesh_plus_translatio
 def test_motion_refuses_layouts_it_would_scramble():
     """A (3, T) translation and (55, 3, T) poses were reshaped into scrambled frames (frame 0's translation became the
     first three x values), SMPL-H-width poses were blamed on `trans`, NaN poses were taken and then named `rot_mats`,
-    and slice(50, 20) gave a 0-frame clip (an independent check). Each is refused by name; (T, 165) poses still read
+    and slice(50, 20) or 0-frame arrays gave a 0-frame clip, whose duration was -1/fps (independent checks). Each is refused by name; (T, 165) poses still read
     as (T, 55, 3)."""
     T = 30
     poses, trans = np.zeros((T, 55, 3), np.float32), np.stack([np.linspace(0, 1, T), np.zeros(T), np.full(T, 0.9)], 1)
@@ -153,7 +153,8 @@ def test_motion_refuses_layouts_it_would_scramble():
                         ({"poses": np.zeros((T, 156))}, "^poses: expected"),
                         ({"poses": np.zeros((T, 63))}, "^poses: expected"),
                         ({"poses": np.full((T, 55, 3), np.nan)}, "^poses: contains NaN"),
-                        ({"trans": np.full((T, 3), np.inf)}, "^trans: contains NaN")):
+                        ({"trans": np.full((T, 3), np.inf)}, "^trans: contains NaN"),
+                        ({"poses": poses[:0], "trans": trans[:0]}, r"^poses: expected at least one frame")):
         with pytest.raises(ValueError, match=message):
             Motion(**{"poses": poses, "trans": trans, "betas": np.zeros(10), **kw})
     m = Motion(poses.reshape(T, 165), trans, np.zeros(10))

@@ -68,6 +68,8 @@ class Motion:
             raise ValueError(f"betas: expected one body's shape coefficients (K,), got shape {b.shape}")
         self.betas = b.reshape(-1)
         T = len(self.poses)
+        if T == 0:                                      # duration, slices and exports all need a frame
+            raise ValueError("poses: expected at least one frame, got 0 (T = 0)")
         self.fps = check_fps(self.fps)
         if len(self.trans) != T:
             raise ValueError(f"trans: {len(self.trans)} frames, poses has {T}")
