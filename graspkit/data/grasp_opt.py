@@ -10,10 +10,13 @@ Three stages, all batched over B grasps of one object (each with its own body sh
            whose vertices enter the object (signed distance < -1 mm), refined by bisection.
 3. polish  `polish`: Adam over the SMPL-X pose (spine, neck, head, right arm, fingers; the legs and pelvis keep the
            planner's stance, so both feet stay on the ground and the pelvis over the support) minimising
-              E = E_colli (SAGA Eq. 7, hand/arm vertices and object points vs the hand) + E_cont (SAGA Eq. 6: the
-                  palm and fingertip regions touch) + E_anchor (after GOAL Eq. 4: palm on the chosen spot, facing it)
-                  + E_q (GOAL Eq. 6: head towards the object) + E_theta (GOAL Eq. 5: coupling to the initial pose)
-                  + wrist / elbow range-of-motion penalties.
+              E = E_colli (after SAGA Eq. 7, hand/arm vertices and object points vs the hand) + E_cont (after SAGA
+                  Eq. 6: the palm and fingertip regions touch) + E_anchor (after GOAL Eq. 4: palm on the chosen spot,
+                  facing it) + E_q (after GOAL Eq. 6: head towards the object) + E_theta (after GOAL Eq. 5: coupling
+                  to the initial pose) + wrist / elbow range-of-motion penalties.
+           "After": this is graspkit's data generator, not a paper's model, and its terms are squared where the papers'
+           are not: Eq. 7's hinge max(-S, σ) becomes the squared penetration, Eq. 5's ‖θ − θ̂‖₂ the squared change,
+           and Eq. 6's ‖q − q̂‖₁ (against GNet's predicted q̂) 1 − cos(q, object − head) (no network here).
            Signed distances come from the object's SDF grid (graspkit.objects.SDFGrid: differentiable, < 0 inside).
 
 Skinning during the fit only touches the vertices that matter (`PartialBody`: the right arm and hand, 1,400 of
@@ -383,13 +386,13 @@ def close_fingers(pb: PartialBody, hm: HandModel, rot: Tensor, coeffs: Tensor, t
 class PolishWeights:
     """Weights of the polish energy terms (distances in mm inside the terms)."""
 
-    colli: float = 1.0        # SAGA Eq. 7, sum of squared penetrations (mm^2) of hand / arm vertices
-    colli_obj: float = 0.02   # SAGA Eq. 7, object points inside the hand (S(o, V_h) by nearest hand vertex + normal)
-    contact: float = 1.5      # SAGA Eq. 6, squared gap (mm^2) of each contact region's closest vertex
+    colli: float = 1.0        # after SAGA Eq. 7: sum of squared penetrations (mm^2) of hand / arm vertices
+    colli_obj: float = 0.02   # after SAGA Eq. 7: object points inside the hand (S(o, V_h), nearest hand vertex + normal)
+    contact: float = 1.5      # after SAGA Eq. 6, squared gap (mm^2) of each contact region's closest vertex
     anchor: float = 0.2       # after GOAL Eq. 4, palm centre to its target (mm^2)
     facing: float = 30.0      # palm normal against the surface normal, 1 + n . s
-    gaze: float = 20.0        # GOAL Eq. 6, 1 - cos(head direction, object)
-    prior: float = 200.0      # GOAL Eq. 5, squared rotation change (rad^2) of body joints
+    gaze: float = 20.0        # after GOAL Eq. 6 (no predicted q̂ here), 1 - cos(head direction, object)
+    prior: float = 200.0      # after GOAL Eq. 5 (squared), squared rotation change (rad^2) of body joints
     prior_fingers: float = 20.0
     limits: float = 500.0     # squared excess (rad^2) over the wrist / elbow-twist limits
 

@@ -11,6 +11,8 @@ pelvis, the body's heading along +y), re-computed at every autoregressive step:
     IAA         interaction-aware attention (§3.2, Eq. 1, w = 5): for each of the 400 vertices the offset d to its
                 closest object point weighted by exp(−w|d|), and exp(−w z) for its height z above the floor
                 (400 × 3 + 400) — vertices near the object (hands) and near the ground (feet) get the attention.
+                The floor term is graspkit's: Eq. 1's d is a body-to-object distance only; the same kernel on the
+                height is our reading of §3.2's "feet for walking", which the paper does not write as a formula.
                 `attention=False` (GOAL Tab. 2 "MNet-w/o-IAA") feeds the raw offsets instead.
 Output (Eq. 10): the next 10 frames as changes from frame t, in the same canonical frame:
     ΔΘ_{t:t+10} (10 × 333: 6D rotations added to frame t's, translations), Δv_{t:t+10} (10 × 400 × 3) and

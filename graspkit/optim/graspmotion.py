@@ -1,4 +1,5 @@
-"""GraspMotion-Opt (SAGA §3.4, Eq. 10-11, App. S.1-S.2, Alg. 2): fit SMPL-X bodies to an infilled marker sequence.
+"""GraspMotion-Opt (SAGA §3.4, Eq. 10-11, App. A.4 Eq. S.1-S.2, Alg. 2): fit SMPL-X bodies to an infilled marker
+sequence.
 
     E_basic  = sum_t (E_fit(Theta_t) + E^o_colli(Theta_t)) + sum_{t=T-4..T} E^o_cont(Theta_t)          (Eq. 10)
     E_g      = sum_t alpha_t sum_{m in V^p_B} 1(d(m, O) < sigma) (cos gamma_m - 1)^2, alpha_t = 1 - (t/T)^2  (Eq. 11)

@@ -10,7 +10,7 @@
 # | Basis Point Set code $\mathbf{b}^o \in \mathbb{R}^{1024}$ | GOAL Sec. 3.3, Eq. 2 | the object input of GNet (and the hand code $\mathbf{b}^h_g$ of MNet, Sec. 3.4, Eq. 9) |
 # | nearest distance $d(x, \mathcal{Y})$ and signed distance $S(x, \mathcal{Y})$ | SAGA Eq. 3, 6, 7 | consistency, contact and collision terms |
 # | contact maps $C_M$ (markers) and $C_O$ (object points) | SAGA Sec. 3.2 | what WholeGrasp-VAE predicts, what GraspPose-Opt pulls together |
-# | interpenetration volume and depth | SAGA Sec. 4 (Tab. 1), GOAL Sec. 4 | the physical-plausibility metrics |
+# | interpenetration volume and depth | SAGA Sec. 4 (Tab. 1: both), GOAL Sec. 4 (Tab. 1: the volume) | the physical-plausibility metrics |
 # | interaction-aware attention $I_w(\mathbf{d}) = e^{-w\mathbf{d}}$ | GOAL Sec. 3.2, Eq. 1 | weighting body-to-object distances (ablated for MNet in Tab. 2) |
 #
 # Everything lives in `graspkit.objects` (reference: `docs/objects.md`). World frame: **z up, metres**;
@@ -252,9 +252,9 @@ print(f"grid vs exact: sign agrees {np.mean(np.sign(fast) == np.sign(exact)):.2%
       f"median |error| {np.median(np.abs(fast - exact)) * 1000:.3f} mm, max {np.abs(fast - exact).max() * 1000:.2f} mm")
 
 # %% [markdown]
-# SAGA's Eq. 7 defines $S(x, \mathcal{Y})$ against a **point cloud**: the distance to the nearest point, signed by
-# that point's normal. graspkit has it too (`signed_distance_to_points`), and it is only as good as the cloud is
-# dense: against the mesh-exact value on the same query points,
+# SAGA's Eq. 7 defines $S(x, \mathcal{Y})$ against a **point cloud**: "the signed distance from point $x$ to point
+# cloud $\mathcal{Y}$", without saying how it is signed; graspkit signs the distance to the nearest point by
+# that point's normal (`signed_distance_to_points`), and it is only as good as the cloud is dense: against the mesh-exact value on the same query points,
 
 # %%
 for n in (2048, 8192):
@@ -362,9 +362,9 @@ for drop in (0.0, 0.01, 0.05):
 # %% [markdown]
 # ## 6 · Interpenetration volume and depth
 #
-# SAGA (Sec. 4, Tab. 1) and GOAL (Sec. 4) report how much body and object overlap: the **volume** of their
-# intersection (cm³) and the **depth**, the farthest a body vertex went inside the object (cm). graspkit's
-# `interpenetration(body, obj)` casts vertical rays on a 1 mm grid over the overlap of the two bounding
+# SAGA (Sec. 4, Tab. 1) reports how much body and object overlap by the **volume** of their intersection (cm³) and
+# the **depth**, the farthest a body vertex went inside the object (cm); GOAL (Sec. 4, Tab. 1) by the volume alone.
+# graspkit's `interpenetration(body, obj)` casts vertical rays on a 1 mm grid over the overlap of the two bounding
 # boxes, finds each mesh's inside intervals along every ray exactly (a running winding number over the signed
 # crossings: +1 entering, -1 leaving), and sums the length of their intersection; the depth is the most negative signed distance of a body vertex.
 #

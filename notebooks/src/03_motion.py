@@ -257,8 +257,9 @@ fig.tight_layout()
 # %% [markdown]
 # ## 8 · Is it skating? The metrics on the meshes
 #
-# WANDR counts a frame as foot skating when the mesh's **lowest vertex** moves more than 0.66 cm horizontally to
-# the next frame; GOAL counts "sliding" above 1 cm per frame (GRAB's captured motion: 6.7 %); SAGA counts frames where
+# WANDR counts a frame as foot skating when the mesh's **lowest vertex** moves more than 0.66 cm to the next frame
+# (the paper's words; graspkit measures the move horizontally, as the authors' evaluation code does, `docs/wandr.md`);
+# GOAL counts "sliding" above 1 cm per frame (GRAB's captured motion: 6.7 %); SAGA counts frames where
 # both heels are within 5 cm of the ground and both move faster than 75 mm/s. The histogram shows the lowest
 # vertex's motion per frame over a few clips of each kind. None of these looks above the feet: graspkit also reports
 # how fast any joint's rotation turns (a head that snapped round in one frame once passed every foot metric).

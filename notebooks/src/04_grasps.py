@@ -13,7 +13,7 @@
 # | reach | `graspkit.data.plan_reach` | walk to a stand-off, wrist onto the frame's wrist target: feet on the floor, pelvis over them, gaze on the object | lesson 03 |
 # | arm | `grasp_opt.solve_arm` | two-bone IK over 24 elbow swivels, forearm twist into the elbow: the hand also *turns* to the frame | — |
 # | fingers | `grasp_opt.close_fingers` | each digit closes from the open pre-shape until it touches | "closed until contact" |
-# | polish | `grasp_opt.polish` | Adam on the SMPL-X pose: collision, contact, anchor, head, coupling terms | SAGA Eq. 4–7, GOAL Eq. 4–8 |
+# | polish | `grasp_opt.polish` | Adam on the SMPL-X pose: collision, contact, anchor, head, coupling terms | after SAGA Eq. 6–7, GOAL Eq. 4–6 |
 # | labels, files | `grasp_make`, `grab` | SAGA's C_M / C_O, GOAL's vertices, offsets, q, BPS; GRAB-style `.npz` + PLY | SAGA §3.2, GOAL Eq. 2, 9 |
 
 # %%
@@ -92,12 +92,12 @@ plt.show()
 #
 # | term | what | from |
 # |---|---|---|
-# | $E_{colli}$ | $\sum_{b \in V^h_B} \max(-S(b, O), 0)^2$: hand/arm vertices inside the object (SDF grid) | SAGA Eq. 7, 1st term |
-# | $E_{colli,O}$ | object points inside the hand: $S(o, V^h_B)$ from the nearest hand vertex and its normal | SAGA Eq. 7, 2nd term |
-# | $E_{cont}$ | the closest vertex of each contact region (palm, five pads) on the surface | SAGA Eq. 6 |
+# | $E_{colli}$ | $\sum_{b \in V^h_B} \max(-S(b, O), 0)^2$: hand/arm vertices inside the object (SDF grid) | after SAGA Eq. 7, 1st term (squared; the paper's is a hinge) |
+# | $E_{colli,O}$ | object points inside the hand: $S(o, V^h_B)$ from the nearest hand vertex and its normal | after SAGA Eq. 7, 2nd term |
+# | $E_{cont}$ | the closest vertex of each contact region (palm, five pads) on the surface | after SAGA Eq. 6 |
 # | $E_{anchor}$, facing | palm centre on its target, palm normal against the surface normal | after GOAL Eq. 4 (offsets) |
-# | $E_q$ | $1 - \cos(q, \text{object} - \text{head})$ | GOAL Eq. 6 |
-# | $E_\theta$ | squared change of every rotation from its initial value (the arm is freer) | GOAL Eq. 5 |
+# | $E_q$ | $1 - \cos(q, \text{object} - \text{head})$ | after GOAL Eq. 6 (whose target is GNet's predicted $\hat q$, an L1 norm) |
+# | $E_\theta$ | squared change of every rotation from its initial value (the arm is freer) | after GOAL Eq. 5 (squared; the paper's norm is not) |
 #
 # (SAGA's foot–ground term $E^g_{cont}$ and GOAL's $E_f$, Eq. 7, hold by construction: the lower body is the
 # planner's standing pose, both feet flat on $z = 0$.)

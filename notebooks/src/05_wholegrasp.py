@@ -270,12 +270,13 @@ fig.tight_layout()
 # $E_{fit}$'s, and Adam's momentum carries the body on for ten-odd steps while its second moment slows $E_{fit}$'s
 # steps for hundreds; whole bodies ended up to 5 cm under or 13 cm above the floor. So $E^g_{cont}$ is on in stage 2
 # too, where $t$ is free: the soles hold the body's height (`GraspPoseConfig.stage2_ground`; `docs/saga.md`).
-# The paper's $|h(v)|$ over each foot's lowest 2 cm is least when their median is on the floor, which sinks the feet
-# about 1 cm; graspkit measures each sole vertex from its height at rest, $|h(v) - h_0(v)|$, so that a foot flat as
-# at rest costs nothing standing on the floor (`GraspPoseConfig.ground_rest`). A foot the markers turn (toes down,
-# heels up) still put its toes under the floor, since the L1 balances the two ends; a one-sided term on each body's
-# lowest sole vertex, $a_{floor}(-\min_v h(v))_+$ with GraspMotion-Opt's weight 1000 per metre, holds it on the floor
-# (`GraspPoseWeights.floor`; on the test objects' samples 17 of 30 bodies more than 1 mm under → none).
+# The paper's $|h(v)|$ over the feet vertices $V^f_B$ (graspkit takes each foot's lowest 2 cm) is least when their
+# median is on the floor, which sinks the feet about 1 cm; graspkit measures each sole vertex from its height at rest,
+# $|h(v) - h_0(v)|$, so that a foot flat as at rest costs nothing standing on the floor (`GraspPoseConfig.ground_rest`).
+# A foot the markers turn (toes down, heels up) still put its toes under the floor, since the L1 balances the two ends;
+# a one-sided term on each body's lowest sole vertex, $a_{floor}(-\min_v h(v))_+$ with GraspMotion-Opt's weight 1000 per
+# metre, holds it on the floor (`GraspPoseWeights.floor`; on the test objects' samples 17 of 30 bodies more than 1 mm
+# under → none).
 # The paper runs 300 + 400 + 500 Adam steps; **this lesson runs 100 + 150 + 150 (+ 30 polish) on two samples** to
 # stay within a minute (the evaluation below uses the paper's schedule and the full polish).
 

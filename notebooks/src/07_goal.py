@@ -221,7 +221,8 @@ print("kept the restart's run:", bool(pen.restarted[0]))
 # Both networks see the body's relation to the object through $I_w(\mathbf d) = e^{-w\mathbf d}$ with $w = 5$,
 # where **d** is the distance in metres from a body vertex to its closest object point: 1 at contact, 0.6 at 10 cm,
 # 0.08 at half a metre. MNet also attends to the floor (the same kernel of each vertex's height), so the feet matter
-# while walking. Coloured on the body along the ground-truth approach clip:
+# while walking: that term is graspkit's reading of §3.2's "feet for walking" (Eq. 1 itself takes only the
+# body-to-object distance). Coloured on the body along the ground-truth approach clip:
 
 # %%
 from scipy.spatial import cKDTree
