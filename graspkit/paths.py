@@ -91,28 +91,38 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
     tmp = temp_beside(path)
     try:
         tmp.write_bytes(data.encode() if isinstance(data, str) else data)
-        return publish(tmp, path)
+        publish(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    sweep_stale_temps(path)
+    return path
 
 
 STALE_TMP_S = 600.0          # s: a temporary file older than this beside its target was left by a killed writer
 
 
 def sweep_stale_temps(path: Path) -> None:
-    """Remove `path`'s temporary files (.<name>.*.tmp) older than STALE_TMP_S: left by a process killed while writing
-    it (kill -9); a writer of this path at work now is not touched."""
+    """Remove the temporary files (`temp_beside`'s .<name><ext>.<8 random>.tmp, or .<name><ext>.<8 random><ext> for
+    writers that need the suffix) of any file of path's type in path's folder that are older than STALE_TMP_S: left
+    by a process killed while writing (kill -9). Folder-wide, since a killed writer's own file may never be written
+    again (a resumed run rewrites it at once, while the temporary file is still young); a writer at work now, whose
+    temporary file is younger, is not touched."""
     import glob
     import time
 
+    path = Path(path)
+    ext, rand = glob.escape(path.suffix), "?" * 8            # tempfile's random part: 8 characters
+    patterns = ([f".*{ext}.{rand}.tmp", f".*{ext}.{rand}{ext}"] if path.suffix
+                else [f".{glob.escape(path.name)}.{rand}.tmp"])
     now = time.time()
-    for stale in Path(path).parent.glob(f".{glob.escape(Path(path).name)}.*.tmp"):
-        try:
-            if now - stale.stat().st_mtime > STALE_TMP_S:
-                stale.unlink()
-        except FileNotFoundError:
-            pass
+    for pattern in patterns:
+        for stale in path.parent.glob(pattern):
+            try:
+                if stale.is_file() and now - stale.stat().st_mtime > STALE_TMP_S:
+                    stale.unlink()
+            except FileNotFoundError:
+                pass
 
 
 def create_exclusive(path: str | os.PathLike, data: bytes | str) -> bool:

@@ -69,6 +69,23 @@ def test_damaged_motionfill_windows_are_made_again(tmp_path, monkeypatch):
     assert first.keys() == again.keys() and all(np.array_equal(first[k], again[k]) for k in first)
 
 
+def test_write_atomic_clears_killed_writers_temporary_files(tmp_path):
+    """JSON, CSV, PNG and GLB files go through write_atomic, which swept nothing: a writer killed there left its
+    .<name>.<random>.tmp for ever (an independent check). A write now removes those of the same type of file in the
+    folder older than STALE_TMP_S, and no younger one."""
+    import time
+
+    from graspkit.paths import STALE_TMP_S, write_atomic
+
+    stale, young, png = (tmp_path / ".a_eval.json.k2j4h5g6.tmp", tmp_path / ".b.json.k2j4h5g7.tmp",
+                         tmp_path / ".p.png.k2j4h5g8.tmp")
+    for f, age in ((stale, STALE_TMP_S + 1), (young, STALE_TMP_S - 60), (png, STALE_TMP_S + 1)):
+        f.write_bytes(b"{")
+        os.utime(f, (time.time() - age, time.time() - age))
+    write_atomic(tmp_path / "c.json", "{}")
+    assert not stale.exists() and young.exists() and png.exists() and (tmp_path / "c.json").read_text() == "{}"
+
+
 def test_write_atomic_replaces_not_rewrites_and_leaves_no_temporary(tmp_path):
     """write_atomic replaces the file by a rename: a hard link to the old file keeps the old bytes (an in-place write
     would change both), the new file gets the mode a plain open() gives, and a failed write leaves no temporary."""
@@ -213,19 +230,25 @@ def test_the_default_body_follows_graspkit_model_within_a_process(tmp_path, monk
 def test_an_npz_write_clears_a_killed_writers_temporary_files(tmp_path):
     """A process killed while writing a cache .npz left `.<name>.<random>.tmp` for ever (a 240 MB one in an independent
     check); the next write of that entry removes such files older than STALE_TMP_S, and leaves a fresh one (another
-    writer at work now) alone, as checkpoints do."""
+    writer at work now) alone, as checkpoints do. Folder-wide: a resumed `data make` rewrote the killed clip at once,
+    while its temporary file was young, and never again (another check), so a later write of *any* .npz there sweeps
+    it; other kinds of file and names that are not a temporary file's are left alone."""
     import time
 
     from graspkit.data.formats import write_npz_atomic
     from graspkit.paths import STALE_TMP_S
 
     target = tmp_path / "c.npz"
-    stale, fresh = tmp_path / ".c.npz.abc.tmp", tmp_path / ".c.npz.def.tmp"
-    for f, age in ((stale, STALE_TMP_S + 60), (fresh, 1)):
+    stale, fresh = tmp_path / ".c.npz.abc01234.tmp", tmp_path / ".c.npz.def01234.tmp"
+    other = tmp_path / ".reach_000001.npz.09v_eynp.tmp"               # another clip's, named as mkstemp names them
+    kept = [tmp_path / ".notes.txt.abc01234.tmp", tmp_path / ".c.npz.backup.tmp", tmp_path / "c.npz.abc01234.tmp"]
+    for f, age in [(stale, STALE_TMP_S + 60), (fresh, 1), (other, STALE_TMP_S + 60)] + [(k, 10 * STALE_TMP_S)
+                                                                                       for k in kept]:
         f.write_bytes(b"half")
         os.utime(f, (time.time() - age, time.time() - age))
     write_npz_atomic(target, {"a": np.arange(3)})
-    assert not stale.exists() and fresh.exists() and np.load(target)["a"].tolist() == [0, 1, 2]
+    assert not stale.exists() and not other.exists() and fresh.exists() and np.load(target)["a"].tolist() == [0, 1, 2]
+    assert all(k.exists() for k in kept)
 
 
 def test_create_exclusive_claims_once_also_without_hard_links(tmp_path, monkeypatch):

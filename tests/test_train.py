@@ -299,7 +299,7 @@ def test_a_run_writes_its_loss_curve_and_clears_a_killed_runs_temporary_files(tm
     from graspkit.paths import STALE_TMP_S
 
     ck = tmp_path / "run.pt"
-    stale, fresh = tmp_path / ".run.pt.abc.tmp", tmp_path / ".run.pt.def.tmp"
+    stale, fresh = tmp_path / ".run.pt.abc01234.tmp", tmp_path / ".run.pt.def01234.tmp"
     for f, age in ((stale, STALE_TMP_S + 60), (fresh, 1)):
         f.write_bytes(b"half")
         os.utime(f, (time.time() - age, time.time() - age))

@@ -185,6 +185,23 @@ def test_gif_frames_and_stride(body, ball, tmp_path):
     assert path.stat().st_mode & 0o777 == 0o666 & ~umask  # not mkstemp's owner-only mode
 
 
+def test_an_animation_clears_a_killed_exports_temporary_file(body, tmp_path):
+    """A `graspkit wandr --out` killed while its GIF was written left `.wandr_s0.gif.<random>.gif` for ever, through
+    reruns (an independent check: the animation's temporary file keeps the .gif suffix, which the .tmp sweep missed);
+    saving a GIF there now removes such files older than STALE_TMP_S and leaves a young one (a writer at work)."""
+    import time
+
+    from graspkit.paths import STALE_TMP_S
+
+    stale, young = tmp_path / ".wandr_s0.gif.50wbkvk3.gif", tmp_path / ".other.gif.abcd1234.gif"
+    for f, age in ((stale, STALE_TMP_S + 60), (young, 5)):
+        f.write_bytes(b"")
+        os.utime(f, (time.time() - age, time.time() - age))
+    anim = animate_fn(moving(body, 3), body.faces, views=("front",), size=1.0, dpi=20)
+    save_animation(anim, tmp_path / "wandr_s0.gif")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [young.name, "wandr_s0.gif"]
+
+
 def test_a_gif_plays_at_real_time(body, tmp_path):
     """GIF delays are whole 1/100 s: Pillow's one int(1000 / fps) delay played 30 fps at 30 ms a frame, 10 % fast (an
     independent check); the delays now alternate (30, 40, 30 ms) so that they add up to the clip's length."""

@@ -17,6 +17,7 @@ import numpy as np
 from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter, writers
 from tqdm.auto import tqdm
 
+from graspkit.paths import sweep_stale_temps
 from graspkit.viz.export import drawn_frames, publish, temp_beside
 from graspkit.viz.scene import (View, _mesh_polys, as_array, as_mesh, as_points, bounds_of, draw_ground, draw_meshes,
                                 draw_path, figure, set_equal, sphere, to_numpy)
@@ -184,7 +185,9 @@ def save_animation(anim: FuncAnimation, path: str | os.PathLike, fps: float | No
     try:
         with tqdm(total=n, unit="frame", desc=path.name, disable=not show, leave=False) as bar, mpl.rc_context(rc):
             anim.save(tmp, writer=writer, dpi=dpi, progress_callback=lambda i, total: bar.update(1))
-        return publish(tmp, path)
+        publish(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+    sweep_stale_temps(path)
+    return path
