@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import time
 import zipfile
 from collections.abc import Callable
@@ -74,14 +75,27 @@ class TrainConfig:
             raise ValueError(f"grad_clip: expected None or a positive norm, got {self.grad_clip!r}")
 
 
+def _canonical(obj: Any) -> Any:
+    """obj with every string in its plain dicts, lists and tuples interned: pickle writes a string once and then
+    refers back to it only when it is the same object, so equal values must be the same objects to give the same
+    bytes (a resumed run's history mixed unpickled keys with the code's and wrote other bytes than a run in one go)."""
+    if type(obj) is str:
+        return sys.intern(obj)
+    if type(obj) is dict:
+        return {_canonical(k): _canonical(v) for k, v in obj.items()}
+    if type(obj) in (list, tuple):
+        return type(obj)(_canonical(v) for v in obj)
+    return obj
+
+
 def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
     """Write a checkpoint atomically (temporary file, then rename); returns the path. The same state gives the same
-    bytes whatever the path (`file_key` hashes them)."""
+    bytes whatever the path and however its values were made (`file_key` hashes them)."""
     path = Path(path)
     tmp = temp_beside(path)
     try:
         with open(tmp, "wb") as fh:         # torch.save(state, <path>) names the archive's folder after the random temp
-            torch.save(state, fh)           # file; a file object gets torch's fixed name
+            torch.save(_canonical(state), fh)   # file; a file object gets torch's fixed name
         publish(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
