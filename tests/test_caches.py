@@ -86,6 +86,31 @@ def test_write_atomic_clears_killed_writers_temporary_files(tmp_path):
     assert not stale.exists() and young.exists() and png.exists() and (tmp_path / "c.json").read_text() == "{}"
 
 
+def test_a_body_build_writes_through_a_temporary_that_is_no_model_and_is_swept(tmp_path, monkeypatch):
+    """`graspkit body build` killed while writing left `.<name>.<pid>.tmp.npz` for ever, and `--model <folder>`
+    listed it among the folder's models (an independent check). Its temporary file is now a .tmp, and a build sweeps
+    a killed build's."""
+    import time
+
+    from graspkit.body.procedural import save_model_npz
+    from graspkit.paths import STALE_TMP_S
+
+    stale = tmp_path / ".b.npz.a1b2c3d4.tmp"
+    stale.write_bytes(b"half")
+    os.utime(stale, (time.time() - STALE_TMP_S - 5, time.time() - STALE_TMP_S - 5))
+    seen = []
+    real = np.savez_compressed
+
+    def savez(fh, **arrays):
+        seen.extend(sorted(p.name for p in tmp_path.glob("*.npz")))         # what a folder listing shows meanwhile
+        return real(fh, **arrays)
+
+    monkeypatch.setattr(np, "savez_compressed", savez)
+    save_model_npz({"x": np.arange(3)}, tmp_path / "b.npz")
+    assert seen == [] and sorted(p.name for p in tmp_path.iterdir()) == ["b.npz"]
+    assert np.load(tmp_path / "b.npz")["x"].tolist() == [0, 1, 2]
+
+
 def test_write_atomic_replaces_not_rewrites_and_leaves_no_temporary(tmp_path):
     """write_atomic replaces the file by a rename: a hard link to the old file keeps the old bytes (an in-place write
     would change both), the new file gets the mode a plain open() gives, and a failed write leaves no temporary."""

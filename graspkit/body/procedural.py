@@ -28,7 +28,7 @@ from graspkit.body._proc_remesh import SurfaceProjector, delaunay_flips, relax
 from graspkit.body._proc_sdf import Body, Lens, sample_grid, warp
 from graspkit.body.hand_poses import hand_pca
 from graspkit.body.skeleton import NUM_JOINTS, NUM_VERTICES, PARENTS, SMPLX_LANDMARK_VERTEX_IDS
-from graspkit.paths import sync_rename
+from graspkit.paths import publish, sweep_stale_temps, temp_beside
 
 __all__ = ["build_procedural_smplx", "save_model_npz", "part_of_vertex", "GRID_SPACING"]
 
@@ -217,13 +217,13 @@ def part_of_vertex(arrays: Mapping[str, np.ndarray]) -> np.ndarray:
 def save_model_npz(arrays: dict[str, np.ndarray], path: str | os.PathLike) -> Path:
     """Write arrays to a compressed .npz atomically (temporary file in the same folder, synced, then renamed)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp.npz")
+    tmp = temp_beside(path)          # .<name>.<random>.tmp: not a *.npz that a folder listing offers as a model
     try:
         with open(tmp, "wb") as fh:
             np.savez_compressed(fh, **arrays)
-        sync_rename(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+        publish(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    sweep_stale_temps(path)          # a killed build's
     return path
