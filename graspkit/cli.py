@@ -438,6 +438,8 @@ def check_out(path: Path, is_file: bool | None = None, flag: str = "--out") -> N
     if not is_file and path.exists() and not path.is_dir():
         raise ValueError(f"{flag}: {path} is a file; expected a folder")
     for p in (path.parent if is_file else path, *(path.parent if is_file else path).parents):
+        if p.is_symlink() and not p.exists():           # exists() follows the link: mkdir would say "File exists"
+            raise ValueError(f"{flag}: {p} is a symbolic link to {os.readlink(p)}, which does not exist")
         if p.exists():
             if not p.is_dir():
                 raise ValueError(f"{flag}: {p} is a file, so {path} cannot be written")
@@ -449,6 +451,17 @@ def check_out(path: Path, is_file: bool | None = None, flag: str = "--out") -> N
             except OSError as e:
                 raise ValueError(f"{flag}: {p} is not writable ({e.strerror})") from None
             return
+
+
+def check_cache() -> None:
+    """Before any work: graspkit's cache folder (`paths.cache_dir()`) can be written; ValueError naming
+    GRASPKIT_CACHE."""
+    from graspkit.paths import cache_dir
+
+    try:
+        check_out(cache_dir(), is_file=False, flag="GRASPKIT_CACHE")
+    except ValueError as e:
+        raise ValueError(f"{e} (graspkit's cache: set GRASPKIT_CACHE to a writable folder)") from None
 
 
 def check_counts(args: argparse.Namespace, **least: int) -> None:
@@ -543,6 +556,9 @@ def _main(argv: list[str] | None) -> int:
         check_folders(getattr(args, "data", None))   # every command's --data names a folder (or several)
         if getattr(args, "out", None) is not None:
             check_out(args.out, getattr(args, "out_is_file", None))
+        if args.command == "train" or (args.command == "data" and getattr(args, "data_command", None) == "make"
+                                       and args.out is None):
+            check_cache()                               # training states and default data folders live there
         if args.command == "train":
             from graspkit.train import RUNS
             RUNS.clear()

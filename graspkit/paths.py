@@ -33,11 +33,32 @@ def cache_dir() -> Path:
     return Path(env).expanduser() if env else Path.home() / ".cache" / "graspkit"
 
 
+def cannot_write(folder: Path, e: OSError) -> OSError:
+    """The OSError to raise when a file cannot be created in `folder`: it names the folder, and the cache's variable
+    when the folder is in graspkit's cache (a bare "[Errno 30] Read-only file system: '<cache>/sdf'" said neither)."""
+    hint = ""
+    try:
+        if Path(folder).resolve().is_relative_to(cache_dir().resolve()):
+            hint = f"; it is in graspkit's cache {cache_dir()}: set GRASPKIT_CACHE to a writable folder"
+    except OSError:
+        pass
+    return OSError(e.errno, f"cannot write in {folder}: {e.strerror or e}{hint}")
+
+
+def make_temp(path: Path, suffix: str = ".tmp") -> tuple[int, str]:
+    """tempfile.mkstemp's (fd, name) of a new temporary file beside `path` (.<name>.<8 random><suffix>), its folder
+    made first; an OSError naming the folder (`cannot_write`) when it cannot be created."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
+    except OSError as e:
+        raise cannot_write(path.parent, e) from None
+
+
 def temp_beside(path: Path, suffix: str = ".tmp") -> Path:
     """An empty temporary file of a unique name in path's folder (created), for writing before `publish`: two
     processes writing the same path never share a temporary file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
+    fd, tmp = make_temp(path, suffix)
     os.close(fd)
     return Path(tmp)
 

@@ -43,6 +43,32 @@ def test_a_damaged_sdf_grid_is_built_again(tmp_path, how):
         cached_sdf_grid("apple", 16, folder=tmp_path)                 # whole again: read, no warning
 
 
+def test_a_cache_that_cannot_be_written_still_gives_the_grid_and_names_itself(tmp_path, monkeypatch):
+    """With a read-only cache, `cached_sdf_grid` of a user's mesh built the grid and then threw it away with a bare
+    "[Errno 30] Read-only file system: '<cache>/sdf'" (an independent check): `graspkit saga --object box.obj` failed.
+    Now it warns and returns the grid it built (the same values as a fresh build); and a cache write that cannot be
+    made names the folder and GRASPKIT_CACHE. (Under a regular file no folder can be made, even by root.)"""
+    import trimesh
+
+    from graspkit.data.formats import write_npz_atomic
+    from graspkit.data.grasp_io import SDF_PADDING, cached_sdf_grid
+    from graspkit.objects.sdf import SDFGrid
+
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    monkeypatch.setenv("GRASPKIT_CACHE", str(blocker / "cache"))
+    box = trimesh.creation.box((0.07, 0.05, 0.12))
+    with pytest.warns(UserWarning, match=r"not kept for next time: .*cannot write in .*set GRASPKIT_CACHE"):
+        grid = cached_sdf_grid(box, 16)
+    want = SDFGrid.from_mesh(box, 16, SDF_PADDING)
+    assert np.array_equal(grid.values.numpy(), want.values.numpy()) and grid.values.shape == want.values.shape
+    with pytest.raises(OSError, match=rf"cannot write in {blocker / 'cache' / 'x'}: .*set GRASPKIT_CACHE"):
+        write_npz_atomic(blocker / "cache" / "x" / "y.npz", {"a": np.ones(2)})
+    with pytest.raises(OSError, match=r"cannot write in .*out: ") as e:
+        write_npz_atomic(blocker / "out" / "y.npz", {"a": np.ones(2)})      # not in the cache: no cache hint
+    assert "GRASPKIT_CACHE" not in str(e.value)
+
+
 def test_a_damaged_clip_set_is_made_again(tmp_path):
     import graspkit.data.wandr_dataset as W
     from graspkit.body import BodyModel

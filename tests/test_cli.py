@@ -273,6 +273,29 @@ def test_an_out_in_a_folder_that_takes_no_files_is_named_before_any_work():
     assert not (Path(tempfile.gettempdir()) / "graspkit_x").exists()
 
 
+def test_a_cache_or_out_that_cannot_be_written_is_named_before_the_work(tmp_path, monkeypatch, capsys):
+    """An independent check: with a read-only cache, `train pose_prior` built its data and trained an epoch before a
+    bare "[Errno 30] Read-only file system: '<cache>/runs'"; a dangling symbolic link as --out passed the check and
+    `saga` failed after its minute of work with "File exists". Both are refused up front, naming GRASPKIT_CACHE or
+    the link. (A cache under a regular file cannot take files even for root, to whom chmod means nothing.)"""
+    from graspkit.cli import main
+
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    monkeypatch.setenv("GRASPKIT_CACHE", str(blocker / "cache"))
+    for argv in (["train", "pose_prior", "--epochs", "1"], ["data", "make", "--kind", "reach", "--n", "1"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert f"GRASPKIT_CACHE: {blocker} is a file" in err and "set GRASPKIT_CACHE to a writable folder" in err
+    assert not list(tmp_path.rglob("*.pt")) and sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
+    dangling = tmp_path / "dangling"
+    dangling.symlink_to(tmp_path / "nowhere")
+    assert main(["data", "make", "--kind", "reach", "--n", "1", "--out", str(dangling)]) == 2
+    assert f"--out: {dangling} is a symbolic link to {tmp_path / 'nowhere'}, which does not exist" in capsys.readouterr().err
+    assert not (tmp_path / "cache").exists() and not (tmp_path / "nowhere").exists()
+
+
 def test_a_missing_shipped_checkpoint_says_when_data_stubs_is_not_there(tmp_path, monkeypatch, capsys):
     """Run from a plain (non-editable) install, data_stubs/ is not beside the package: the missing-checkpoint errors
     say so; a checkpoint of one's own, or a data_stubs/ that is there, gets the plain message."""

@@ -16,7 +16,6 @@ a warning), any number of `betas` (the first 10 are kept), `mocap_frame_rate` or
 from __future__ import annotations
 
 import os
-import tempfile
 import warnings
 import zipfile
 from collections.abc import Iterable
@@ -27,7 +26,7 @@ import torch
 
 from graspkit.data.motion import HANDS, Motion, check_fps
 from graspkit.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
-from graspkit.paths import sweep_stale_temps, sync_rename
+from graspkit.paths import make_temp, sweep_stale_temps, sync_rename
 
 FPS = 30.0
 NUM_BETAS = 10
@@ -90,8 +89,7 @@ def check_motion(motion: Motion) -> None:
 def write_npz_atomic(path: Path, arrays: dict[str, np.ndarray]) -> None:
     """A compressed .npz (as np.savez_compressed, but with fixed zip timestamps, so equal arrays give equal bytes)
     written to a temporary file beside `path` and renamed: readers never see a partial file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    fd, tmp = make_temp(path)
     try:
         with os.fdopen(fd, "wb") as f, zipfile.ZipFile(f, "w", compression=zipfile.ZIP_DEFLATED) as zf:
             for key, a in arrays.items():

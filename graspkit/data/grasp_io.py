@@ -44,7 +44,8 @@ def mesh_digest(obj: str | trimesh.Trimesh) -> str:
 def cached_sdf_grid(name: str | trimesh.Trimesh, resolution: int = 64, folder: Path | None = None) -> SDFGrid:
     """The SDF grid of catalogue object `name` (or of a mesh in its object frame): the grid shipped in
     data_stubs/sdf when there is one (then `folder` is not read), else read from `folder` (default `<cache>/sdf/`) or
-    built (seconds) and stored there atomically."""
+    built (seconds) and stored there atomically (where the folder cannot be written, a warning says so and the grid
+    is returned all the same)."""
     from graspkit.paths import cache_dir
 
     fname = _grid_filename(name, resolution)
@@ -62,7 +63,10 @@ def cached_sdf_grid(name: str | trimesh.Trimesh, resolution: int = 64, folder: P
     if grid is not None:
         return grid
     grid = SDFGrid.from_mesh(_mesh(name), resolution, SDF_PADDING)
-    _write_grid(path, grid)
+    try:
+        _write_grid(path, grid)
+    except OSError as e:                              # a read-only cache: the grid is what the caller needs
+        warnings.warn(f"the SDF grid is not kept for next time: {e}", UserWarning, stacklevel=2)
     return grid
 
 
