@@ -415,6 +415,11 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
         if not f.is_dir():
             raise FileNotFoundError(f"data: no folder {f}")
     grasps, approach = _holding(folders, "grasp_*.npz"), _holding(folders, "approach_*.npz")   # in any --data order
+    shipped = {"saga": (ck / "wholegrasp_eval.json", saga_rows), "saga_motion": (ck / "motionfill_eval.json",
+               saga_motion_rows), "goal": (ck / "goal_eval.json", goal_rows), "wandr": (ck / "wandr_eval.json", wandr_rows)}
+    for m in methods if reuse else ():                    # a damaged evaluation to reuse is named before any work
+        if m in shipped and shipped[m][0].is_file():
+            reused_rows(*shipped[m], m)
     out.mkdir(parents=True, exist_ok=True)                # after the checks: a refused run leaves no folder
     bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
     rows: list[Row] = []
@@ -477,17 +482,30 @@ def update(old: list[Row], new: list[Row]) -> list[Row]:
     return out + list(fresh.values())
 
 
+def reused_rows(shipped: Path, rows_of, method: str) -> list[Row]:
+    """A method's rows from its shipped evaluation JSON (`--reuse`); ValueError naming the file when it is damaged or
+    is not that method's evaluation."""
+    import json
+
+    try:
+        rows = rows_of(json.loads(shipped.read_text()))
+    except (UnicodeDecodeError, ValueError, KeyError, TypeError, IndexError, AttributeError) as e:
+        raise ValueError(f"--reuse: {shipped} is damaged or not {method}'s evaluation ({type(e).__name__}: {e}); "
+                         "restore it (git checkout) or run without --reuse") from None
+    if not rows:
+        raise ValueError(f"--reuse: {shipped} is damaged or not {method}'s evaluation (it holds none of its rows); "
+                         "restore it (git checkout) or run without --reuse")
+    for r in rows:
+        r.note += f" (from {shipped.name})"
+    return rows
+
+
 def _method(checkpoint: Path | tuple[Path, ...], out: Path, shipped: Path, reuse: bool, rows_of, run, method: str, table: str
             ) -> list[Row]:
     """A method's rows: from its shipped evaluation (`shipped`, when reuse and present), else by running its evaluator
     into `out`; a row naming the file when a checkpoint it loads (one path or several) is missing."""
-    import json
-
     if reuse and shipped.is_file():
-        rows = rows_of(json.loads(shipped.read_text()))
-        for r in rows:
-            r.note += f" (from {shipped.name})"
-        return rows
+        return reused_rows(shipped, rows_of, method)
     missing = [c for c in (checkpoint if isinstance(checkpoint, tuple) else (checkpoint,)) if not c.is_file()]
     if missing:
         return [Row(table, method, "graspkit", note=f"checkpoint missing: {missing[0]}")]
@@ -577,16 +595,22 @@ def read_csv(path: str | Path) -> list[Row]:
     """Rows back from a benchmark.csv (the inverse of to_csv)."""
     rows: dict[tuple[str, str, str], Row] = {}
     with open(path, newline="") as f:
-        r = csv.DictReader(f)
-        if r.fieldnames != ["table", "method", "source", "metric", "value", "note"]:
-            raise ValueError(f"path: {path} is not a graspkit benchmark.csv (columns {r.fieldnames})")
-        for line in r:
-            row = rows.setdefault((line["table"], line["method"], line["source"]),
-                                  Row(line["table"], line["method"], line["source"], note=line["note"]))
-            if line["metric"]:
-                try:
-                    row.values[line["metric"]] = float(line["value"])
-                except (TypeError, ValueError):
-                    raise ValueError(f"path: {path}, line {r.line_num}: {line['metric']} is not a number "
-                                     f"({line['value']!r})") from None
+        text = f.read()
+    if text and not text.endswith("\n"):                 # to_csv ends every line: a copy cut short does not
+        raise ValueError(f"path: {path} is cut short (its last line has no end); restore it or run without --update")
+    r = csv.DictReader(io.StringIO(text, newline=""))
+    if r.fieldnames != ["table", "method", "source", "metric", "value", "note"]:
+        raise ValueError(f"path: {path} is not a graspkit benchmark.csv (columns {r.fieldnames})")
+    for line in r:
+        if None in line or None in line.values():     # DictReader pads a short line with None, keeps extras under None
+            raise ValueError(f"path: {path}, line {r.line_num}: expected 6 fields (table, method, source, metric, "
+                             "value, note); restore it or run without --update")
+        row = rows.setdefault((line["table"], line["method"], line["source"]),
+                              Row(line["table"], line["method"], line["source"], note=line["note"]))
+        if line["metric"]:
+            try:
+                row.values[line["metric"]] = float(line["value"])
+            except (TypeError, ValueError):
+                raise ValueError(f"path: {path}, line {r.line_num}: {line['metric']} is not a number "
+                                 f"({line['value']!r})") from None
     return list(rows.values())

@@ -281,11 +281,16 @@ def _cmd_eval_all(args: argparse.Namespace) -> int:
             raise FileNotFoundError(f"--update: no benchmark.csv in --out {args.out} to update")
         old = read_csv(args.out / "benchmark.csv")
     rows = run_all(args.out, data=args.data, quick=args.quick, methods=methods, reuse=args.reuse)
-    if old is not None:
-        rows = update(old, rows)
-    print(markdown(rows))
-    for path in write_report(rows, args.out):
-        print(f"wrote {path}")
+    from graspkit.paths import locked
+
+    # read, merge and write under a lock, reading the file again: two updates started together each read it before
+    # the other wrote, and the later writer dropped the other's rows (an independent check)
+    with locked(args.out / ".benchmark.lock"):
+        if old is not None:
+            rows = update(read_csv(args.out / "benchmark.csv"), rows)
+        print(markdown(rows))
+        for path in write_report(rows, args.out):
+            print(f"wrote {path}")
     return 0
 
 

@@ -822,7 +822,14 @@ def main(argv: list[str] | None = None) -> int:
         flag = "--tab1-only" if a.tab1_only else "--saga-only" if a.saga_only else "--rollouts-only"
         if not out.is_file():
             raise FileNotFoundError(f"--out: no evaluation at {out} to update (run without {flag})")
-        folders, r = a.data or default_data_folders(), json.loads(out.read_text())
+        try:                                            # read now: the update is written after minutes of work
+            r = json.loads(out.read_text())
+        except (UnicodeDecodeError, ValueError) as e:
+            raise ValueError(f"--out: {out} is not a JSON file to update ({e})") from None
+        if not isinstance(r, dict) or (a.saga_only and not isinstance(r.get("sliding"), dict)):
+            raise ValueError(f"--out: {out} is not a GOAL evaluation to update with {flag} (expected an object"
+                             + (" with its 'sliding' rows" if a.saga_only else "") + f"); run without {flag}")
+        folders = a.data or default_data_folders()
         if a.tab1_only:
             new = tab1_results(folders, stubs, a.n_grasps, a.seed, rows=tuple(a.tab1_row) if a.tab1_row else None)
             if a.tab1_row:                                      # merge into the table and paired counts kept

@@ -4,6 +4,7 @@ from __future__ import annotations
 import os
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -172,6 +173,24 @@ def create_exclusive(path: str | os.PathLike, data: bytes | str) -> bool:
         return True
     finally:
         tmp.unlink(missing_ok=True)
+
+
+@contextmanager
+def locked(path: Path) -> Iterator[None]:
+    """Hold an exclusive lock on the file `path` (made if missing) for the block: processes that lock the same path
+    run their blocks one after another (fcntl.flock; where there is none, no lock is taken)."""
+    try:
+        import fcntl
+    except ImportError:                                 # not POSIX
+        yield
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
 
 
 def drop_damaged(paths: Sequence[Path], what: str = "files") -> list[Path]:

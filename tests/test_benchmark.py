@@ -203,6 +203,50 @@ def test_update_replaces_whole_rows_of_the_methods_run_and_keeps_the_others(tmp_
     assert len([r for r in rows if r.source != "graspkit"]) == len(paper_rows())
 
 
+def test_a_benchmark_csv_cut_short_or_a_damaged_evaluation_to_reuse_is_named(tmp_path):
+    """`eval --all --update` took a benchmark.csv cut inside its last number (47.835 read as 47) and wrote the cut
+    value into the new report; `--reuse` of a damaged shipped *_eval.json failed after the other methods' work with an
+    unnamed JSON error or a KeyError traceback (an independent check). Both are refused, naming the file; the reuse
+    check comes before any work (no --out folder made)."""
+    rows = [Row("motion", "WANDR", "graspkit", {"mean_jerk": 47.835}, "4 motions")]
+    out = tmp_path / "report"
+    write_report(rows, out)
+    good = (out / "benchmark.csv").read_text()
+    assert read_csv(out / "benchmark.csv")[0].values == {"mean_jerk": 47.835}
+    (out / "benchmark.csv").write_text(good[:good.index("47.835") + 2])
+    with pytest.raises(ValueError, match=r"benchmark.csv is cut short"):
+        read_csv(out / "benchmark.csv")
+    (out / "benchmark.csv").write_text(good.replace(",4 motions\n", "\n"))          # a line of 5 fields, ended
+    with pytest.raises(ValueError, match=r"benchmark.csv, line 2: expected 6 fields"):
+        read_csv(out / "benchmark.csv")
+    ck = tmp_path / "ck"
+    ck.mkdir()
+    for text in ('{"config": {"objects": ["mug"]}, "rows": {', "{}", "[]", ""):
+        (ck / "wholegrasp_eval.json").write_text(text)
+        with pytest.raises(ValueError, match=rf"--reuse: {ck / 'wholegrasp_eval.json'} is damaged or not saga's"):
+            run_all(tmp_path / "x", data=[STUBS / "grasps"], checkpoints=ck, methods=("gt", "saga"), reuse=True)
+        assert not (tmp_path / "x").exists()
+
+
+def test_two_updates_at_once_keep_each_others_rows(tmp_path, monkeypatch):
+    """Two `eval --all --update` runs into one --out each read benchmark.csv at their start; the later writer dropped
+    the rows the other had written meanwhile (an independent check). The file is read again, under a lock, when the
+    rows are merged and written."""
+    out = tmp_path / "report"
+    write_report([Row("grasp", "ground truth (synthetic)", "graspkit", {"contact_ratio": 0.9}, "old")], out)
+
+    def run_all(out_dir, **kw):                      # while this run works, another update lands in the file
+        other = read_csv(out / "benchmark.csv")
+        write_report(B.update(other, [Row("motion", "WANDR", "graspkit", {"sr": 0.99}, "the other run")]), out)
+        return [Row("grasp", "ground truth (synthetic)", "graspkit", {"contact_ratio": 1.0}, "this run")]
+
+    monkeypatch.setattr(B, "run_all", run_all)
+    assert main(["eval", "--all", "--update", "--methods", "gt", "--out", str(out)]) == 0
+    rows = {r.method: (r.values, r.note) for r in read_csv(out / "benchmark.csv")}
+    assert rows == {"ground truth (synthetic)": ({"contact_ratio": 1.0}, "this run"),
+                    "WANDR": ({"sr": 0.99}, "the other run")}
+
+
 def test_a_row_holds_one_protocol_the_common_motions_and_goals_saga_clips_get_rows_of_their_own(tmp_path, bm):
     """WANDR's own grid row keeps the grid's FS; its motion on the common goals is a row of its own, measured here
     again with the metrics' definition (the lowest vertex's horizontal step > 0.66 cm); GOAL's evaluation gives

@@ -137,6 +137,30 @@ def test_a_body_build_writes_through_a_temporary_that_is_no_model_and_is_swept(t
     assert np.load(tmp_path / "b.npz")["x"].tolist() == [0, 1, 2]
 
 
+def test_locked_blocks_run_one_after_another(tmp_path):
+    """`paths.locked` (around `eval --all --update`'s read-merge-write): blocks holding the same lock file never
+    overlap, whichever starts first."""
+    import threading
+    import time
+
+    from graspkit.paths import locked
+
+    events: list[tuple[str, int]] = []
+
+    def hold(k: int) -> None:
+        with locked(tmp_path / ".lock"):
+            events.append(("in", k))
+            time.sleep(0.2)
+            events.append(("out", k))
+
+    threads = [threading.Thread(target=hold, args=(k,)) for k in range(3)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert [e[0] for e in events] == ["in", "out"] * 3 and all(events[2 * i][1] == events[2 * i + 1][1] for i in range(3))
+
+
 def test_write_atomic_replaces_not_rewrites_and_leaves_no_temporary(tmp_path):
     """write_atomic replaces the file by a rename: a hard link to the old file keeps the old bytes (an in-place write
     would change both), the new file gets the mode a plain open() gives, and a failed write leaves no temporary."""

@@ -205,6 +205,30 @@ def test_rollouts_only_recomputes_the_rollouts_on_the_floor_and_keeps_sagas_row(
     assert "--max-frames: expected an integer >= 2, got 1" in capsys.readouterr().err
 
 
+def test_an_update_of_a_damaged_evaluation_is_refused_before_the_work(tmp_path, capsys, monkeypatch):
+    """`--saga-only` / `--tab1-only` / `--rollouts-only` read --out's JSON after their work: a file cut short gave an
+    unnamed "Expecting value", `{}` a KeyError traceback after SAGA's minutes-long row (an independent check). The
+    file is read first, and a bad one named."""
+    import graspkit.eval_goal as E
+
+    def no_work(*a, **k):
+        raise AssertionError("the work started")
+
+    for name in ("saga_sliding", "tab1_results", "rollout_results", "rollout_sequences"):
+        monkeypatch.setattr(E, name, no_work)
+    out = tmp_path / "goal_eval.json"
+    for text, flag, message in (('{"sliding": {"a": 0.5}, "tab1": {', "--saga-only", "is not a JSON file to update"),
+                                ("", "--tab1-only", "is not a JSON file to update"),
+                                ("{}", "--saga-only", "is not a GOAL evaluation to update with --saga-only"),
+                                ("[]", "--tab1-only", "is not a GOAL evaluation to update with --tab1-only"),
+                                ("[]", "--rollouts-only", "is not a GOAL evaluation")):
+        out.write_text(text)
+        assert E.main([flag, "--data", str(tmp_path), "--out", str(out)]) == 2, (text, flag)
+        err = capsys.readouterr().err
+        assert f"--out: {out} {message}" in err, (text, flag, err)
+        assert out.read_text() == text
+
+
 def _standing_r6() -> torch.Tensor:
     """The rest pose stood up in a z-up world (55, 6): the root turned +90 deg about x."""
     aa = torch.zeros(55, 3)
