@@ -244,6 +244,63 @@ def test_window_and_wandr_run_keys_see_content_not_only_sizes(tmp_path):
     same = ClipSet(*(t.clone() for t in (cs.p, cs.offsets, cs.rest, cs.betas, cs.goal, cs.goal_frame, cs.kind)),
                    list(cs.names))
     assert clipset_key(cs) != clipset_key(moved) and clipset_key(cs) == clipset_key(same)
+    fields = ("p", "offsets", "rest", "betas", "goal", "goal_frame", "kind")      # each one changes the training
+    changed = {"p": lambda t: t.index_put((torch.tensor([3]), torch.tensor([7])), torch.tensor(1e-4)),
+               "rest": lambda t: t + 0.01, "betas": lambda t: t.index_fill(1, torch.tensor([0]), 0.5),
+               "goal_frame": lambda t: torch.full_like(t, 5), "kind": lambda t: t.flip(0)}
+    keys = {clipset_key(cs)} | {clipset_key(ClipSet(*(changed[k](getattr(cs, k)) if k == f else getattr(cs, k)
+                                                      for k in fields), cs.names)) for f in changed}
+    keys.add(clipset_key(ClipSet(*(getattr(cs, k) for k in fields), ["a", "b"])))
+    assert len(keys) == 7                                    # the base, five arrays, the names: all distinct
+
+
+def test_window_sources_take_only_the_kinds_own_numbered_clips(tmp_path):
+    """`reach_*.npz` also matches reach_far_* and reach_near_* clips; the window set of "reach" counts and reads only
+    reach_<digits>.npz, so a folder short of them says so instead of filling up with far clips."""
+    import shutil
+
+    from graspkit.eval_motionfill import windows_source
+
+    src = sorted((DATA_STUBS / "motion" / "reach").glob("reach_0*.npz"))[0]
+    shutil.copy(src, tmp_path / "reach_000000.npz")
+    shutil.copy(src, tmp_path / "reach_far_000000.npz")
+    with pytest.raises(FileNotFoundError, match="holds 1 reach clips, 2 wanted"):
+        windows_source("reach", 2, tmp_path, body="b")
+    assert [f.name for f in windows_source("reach", 1, tmp_path, body="b")[2]] == ["reach_000000.npz"]
+
+
+@pytest.mark.parametrize("bad", ["one_node", "corners_equal", "nan", "corner_shape"])
+def test_a_grid_that_is_no_sdf_grid_is_refused_by_name(tmp_path, bad):
+    """A grid file is read only when SDFGrid can use it: 3-D values with at least 2 nodes a side (the cell is
+    (upper - lower) / (nodes - 1)), lower < upper, both (3,), all finite; otherwise ValueError naming the file."""
+    from graspkit.data import grasp_io
+    from graspkit.data.formats import write_npz_atomic
+
+    good = {"values": np.zeros((4, 4, 4), np.float32), "lower": -np.ones(3, np.float32),
+            "upper": np.ones(3, np.float32)}
+    write_npz_atomic(tmp_path / "ok.npz", good)
+    assert grasp_io._read_grid(tmp_path / "ok.npz").values.shape == (4, 4, 4)
+    bad_arrays = {"one_node": {"values": np.zeros((1, 4, 4), np.float32)}, "corners_equal": {"upper": -np.ones(3)},
+                  "nan": {"values": np.where(np.arange(64).reshape(4, 4, 4) == 21, np.nan, 0.0)},
+                  "corner_shape": {"lower": -np.ones(2, np.float32)}}[bad]
+    write_npz_atomic(tmp_path / "g.npz", {**good, **bad_arrays})
+    with pytest.raises(ValueError, match="g.npz: not an SDF grid"):
+        grasp_io._read_grid(tmp_path / "g.npz")
+
+
+def test_ship_sdf_grid_builds_from_the_mesh_whatever_the_cache_holds(tmp_path, monkeypatch):
+    """`ship_sdf_grid` writes a grid built from the mesh (compared with SDFGrid.from_mesh run here), not one of that
+    name that a cache holds (planted with values 1 cm off)."""
+    from graspkit.data import grasp_io
+    from graspkit.data.formats import write_npz_atomic
+    from graspkit.objects.sdf import SDFGrid
+
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
+    built = SDFGrid.from_mesh(grasp_io._mesh("apple"), 16, grasp_io.SDF_PADDING)
+    write_npz_atomic(tmp_path / "cache" / "sdf" / grasp_io._grid_filename("apple", 16),
+                     {"values": built.values.numpy() + 0.01, "lower": built.lower.numpy(), "upper": built.upper.numpy()})
+    with np.load(grasp_io.ship_sdf_grid("apple", 16, tmp_path / "ship"), allow_pickle=False) as z:
+        np.testing.assert_allclose(z["values"].astype(np.float32), built.values.numpy(), atol=3e-5)
 
 
 def test_foreign_shipped_and_run_files_are_named(tmp_path, monkeypatch):
@@ -300,6 +357,32 @@ def test_the_default_body_follows_graspkit_model_within_a_process(tmp_path, monk
     want = BodyModel.from_file(tall).digest()
     assert default_body_digest() == want != first
     assert _body()[0].digest() == BodyModel.from_file(tall, flat_hand_mean=True).digest() != bm0.digest()
+    size = tall.stat().st_size                        # rewritten in place at the same size: only the mtime tells
+    np.savez(tall, **{**arrays, "v_template": arrays["v_template"] * 0.9})
+    st = tall.stat()
+    os.utime(tall, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000))     # a later mtime, whatever the file system's tick
+    assert tall.stat().st_size == size
+    assert default_body_digest() == BodyModel.from_file(tall).digest() != want
+    assert _body()[0].digest() == BodyModel.from_file(tall, flat_hand_mean=True).digest()
+    monkeypatch.setenv("GRASPKIT_MODEL", str(tmp_path / "nope.npz"))            # named by the reader, not by stat()
+    with pytest.raises(ValueError, match="nope.npz: no such body-model file"):
+        default_body_digest()
+
+
+def test_file_stamp_sees_size_and_one_file_by_any_name(tmp_path, monkeypatch):
+    """paths.file_stamp (the body caches' key): (resolved path, mtime ns, size); a size change counts at the same
+    mtime (coarse-mtime file systems), a relative name is the same file, a missing file is (path, 0, 0)."""
+    from graspkit.paths import file_stamp
+
+    f = tmp_path / "m.npz"
+    f.write_bytes(b"a" * 10)
+    st, a = f.stat(), file_stamp(f)
+    f.write_bytes(b"a" * 11)
+    os.utime(f, ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert file_stamp(f) != a and file_stamp(f) == (str(f.resolve()), st.st_mtime_ns, 11)
+    monkeypatch.chdir(tmp_path)
+    assert file_stamp("m.npz") == file_stamp(tmp_path / "m.npz")
+    assert file_stamp("gone.npz") == (str((tmp_path / "gone.npz").resolve()), 0, 0)
 
 
 def test_an_npz_write_clears_a_killed_writers_temporary_files(tmp_path):
@@ -315,7 +398,7 @@ def test_an_npz_write_clears_a_killed_writers_temporary_files(tmp_path):
 
     target = tmp_path / "c.npz"
     stale, fresh = tmp_path / ".c.npz.abc01234.tmp", tmp_path / ".c.npz.def01234.tmp"
-    other = tmp_path / ".reach_000001.npz.09v_eynp.tmp"               # another clip's, named as mkstemp names them
+    other = tmp_path / ".reach[1]_000001.npz.09v_eynp.tmp"   # another clip's (glob characters in its name), as mkstemp
     kept = [tmp_path / ".notes.txt.abc01234.tmp", tmp_path / ".c.npz.backup.tmp", tmp_path / "c.npz.abc01234.tmp"]
     for f, age in [(stale, STALE_TMP_S + 60), (fresh, 1), (other, STALE_TMP_S + 60)] + [(k, 10 * STALE_TMP_S)
                                                                                        for k in kept]:
@@ -341,3 +424,6 @@ def test_create_exclusive_claims_once_also_without_hard_links(tmp_path, monkeypa
     b = tmp_path / "b.json"
     assert create_exclusive(b, "one") and not create_exclusive(b, "two") and b.read_text() == "one"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json", "b.json"]          # no temporary left
+    plain = tmp_path / "plain.json"                  # the mode a plain open() gives, not mkstemp's owner-only 0600
+    plain.write_text("x")
+    assert a.stat().st_mode & 0o777 == b.stat().st_mode & 0o777 == plain.stat().st_mode & 0o777

@@ -128,6 +128,11 @@ def test_a_value_past_the_sliders_bound_is_refused_and_the_state_kept(explorer):
         assert explorer.state.betas[[3, 9]].tolist() == [0.0, 0.0] and explorer.state.angles["left_elbow"] == 0.0
     v1, _ = explorer.update("beta0", 0.0)
     np.testing.assert_array_equal(v0, v1)
+    explorer.update("beta0", 10.0)                                   # the bound itself: 10 stds, as documented
+    with pytest.raises(ValueError, match="^beta0: expected a shape coefficient within ±10"):
+        explorer.update("beta0", 10.5)
+    assert explorer.state.betas[0] == 10.0
+    explorer.update("beta0", 0.0)
     with pytest.raises(ValueError, match="^name: unknown slider 'beta01'"):      # was read as beta1
         explorer.update("beta01", 1.0)
     for bad in (12, -1, 2.5):

@@ -684,3 +684,49 @@ def test_tab2_rows_come_from_their_own_checkpoints(tmp_path, monkeypatch):
     res = eg.evaluate([tmp_path], tmp_path, out=tmp_path / "goal_eval.json")
     got = {k: v["body"] for k, v in res["tab2"].items()}
     assert got == {"MNet": 1.0, "MNet-w/o-IAA": 2.0, "MNet-Pose": 3.0, "1 output frame": 4.0}
+
+
+@pytest.mark.parametrize("trainer", ["gnet", "mnet", "grabnet_smplx"])
+def test_a_training_run_is_keyed_by_the_body_it_is_trained_on(tmp_path, monkeypatch, trainer):
+    """GNet's, MNet's and the GrabNet-SMPLX baseline's labels are computed on the body GRASPKIT_MODEL names, so a run
+    started under one body must never resume under another: each run key holds that body's digest (compared here
+    with BodyModel.from_file of the file), and a taller body gives another key. The spy stops before any training."""
+    import graspkit.models.wholegrasp as W
+    import graspkit.train as T
+    from graspkit.body import BodyModel
+    from graspkit.eval_goal import run_train_gnet, run_train_mnet
+    from graspkit.paths import default_model_path
+
+    approach = tmp_path / "approach"                                   # clips of train- and val-split objects
+    for k, name in enumerate(("bottle", "can", "apple")):
+        save_grasp_sequence(approach / f"approach_{k:06d}.npz", _sequence(k, name))
+    sets = W.GrabNetTrainingSet                          # the stub grasps are all of training objects: "val" reads them
+    monkeypatch.setattr(W, "GrabNetTrainingSet", lambda root, split, *a, **k: sets(root, "train", *a, **k))
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def spy(*args, **settings):
+        seen.append(settings["body"])
+        raise Stop
+
+    monkeypatch.setattr(T, "run_path", spy)
+    with np.load(default_model_path(), allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    tall = tmp_path / "tall.npz"
+    np.savez(tall, **{**arrays, "v_template": arrays["v_template"] * 1.2})
+    run = {"gnet": lambda: run_train_gnet([DATA_STUBS / "grasps"], tmp_path / "o.pt", epochs=1, threads=1,
+                                          progress=False),
+           "mnet": lambda: run_train_mnet([approach], tmp_path / "o.pt", epochs=1, threads=1, progress=False),
+           "grabnet_smplx": lambda: W.train_grabnet_smplx(DATA_STUBS / "grasps", tmp_path / "o.pt", epochs=1,
+                                                          progress=False)}[trainer]
+    for model in (None, tall):
+        if model is not None:
+            monkeypatch.setenv("GRASPKIT_MODEL", str(model))
+        with pytest.raises(Stop):
+            run()
+        want = BodyModel.from_file(default_model_path(), flat_hand_mean=trainer != "grabnet_smplx").digest()
+        assert seen[-1] == want
+    assert seen[0] != seen[1]

@@ -284,7 +284,10 @@ def test_two_runs_started_together_into_one_folder_do_not_both_claim_it(tmp_path
     with pytest.warns(UserWarning, match="no record of the run that made them"):
         claim_folder(old, "locomotion", {"seed": 3, "model": None})
     assert json.loads((old / "graspkit_make_locomotion.json").read_text())["preexisting"] == 1
-    claim_folder(old, "locomotion", {"seed": 3, "model": None})               # the same run again: accepted
+    (old / "locomotion_000001.npz").write_bytes(b"")                  # a file of the recorded run
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                                # the record is there: no "no record" warning
+        claim_folder(old, "locomotion", {"seed": 3, "model": None})               # the same run again: accepted
     with pytest.raises(ValueError, match=r"\(seed: 3 there, 4 now\)"):          # checked from now on
         claim_folder(old, "locomotion", {"seed": 4, "model": None})
     other = tmp_path / "other"                       # reach_far files are not older reach files (reach_* matched them)

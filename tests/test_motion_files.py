@@ -154,7 +154,10 @@ def test_motion_refuses_layouts_it_would_scramble():
                         ({"poses": np.zeros((T, 63))}, "^poses: expected"),
                         ({"poses": np.full((T, 55, 3), np.nan)}, "^poses: contains NaN"),
                         ({"trans": np.full((T, 3), np.inf)}, "^trans: contains NaN"),
-                        ({"poses": poses[:0], "trans": trans[:0]}, r"^poses: expected at least one frame")):
+                        ({"poses": poses[:0], "trans": trans[:0]}, r"^poses: expected at least one frame"),
+                        ({"poses": poses[:1], "trans": trans[0]}, r"^trans: expected \(T, 3\)"),     # not trans[None]
+                        ({"trans": trans[:, :, None]}, r"^trans: expected \(T, 3\)"),
+                        ({"poses": np.zeros((T // 2, 55, 6))}, r"^poses: expected \(T, 55, 3\)")):  # 6D, not axis-angle
         with pytest.raises(ValueError, match=message):
             Motion(**{"poses": poses, "trans": trans, "betas": np.zeros(10), **kw})
     m = Motion(poses.reshape(T, 165), trans, np.zeros(10))

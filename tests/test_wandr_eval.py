@@ -290,6 +290,22 @@ def test_goal_reacher_moves_any_start_to_where_its_sliders_measure_from(bm):
     figs = plt.get_fignums()
     r.figure()
     assert plt.get_fignums() == figs
+    # each half of "canonical" alone: over the origin but facing -113°, and facing +x but 1 m away
+    c = start.canonical()
+    turned = dataclasses.replace(start, p_prev=start.p_prev.clone(), p=start.p.clone())
+    turned.p_prev[:2] -= pelvis0
+    turned.p[:2] -= pelvis0
+    moved = dataclasses.replace(c, p_prev=c.p_prev.clone(), p=c.p.clone())
+    moved.p_prev[0] += 1.0
+    moved.p[0] += 1.0
+    assert c.is_canonical() and not turned.is_canonical() and not moved.is_canonical()
+    for s in (turned, moved):
+        rs = E.GoalReacher(model, s, angle=0.0, distance=1.0, height=1.0, seconds=1.0)
+        Js = I.body_joints(rs.start.p[None], rs.start.rest)[0]
+        assert rs.start.is_canonical() and float(Js[I.PELVIS, :2].norm()) < 1e-4
+        torch.testing.assert_close(rs.goal[:2], torch.tensor([1.0, 0.0]) + Js[I.PELVIS, :2].float(), atol=1e-4, rtol=0)
+    for ok in (np.float32(0.01), np.int64(0), 0.02):                 # numpy scalars, from an array or a widget
+        E.GoalReacher(model, start, floor=ok)
     for bad in (True, -0.1, float("nan"), float("inf"), "1cm"):
         with pytest.raises(ValueError, match="^floor: expected None or a finite tolerance"):
             E.GoalReacher(model, start, floor=bad)

@@ -134,6 +134,8 @@ def test_the_walk_takes_what_sample_takes_and_refuses_what_it_refuses(walk):
     torch.manual_seed(0)
     with pytest.raises(ValueError, match=r"^model: expected the multi-task WholeGrasp-VAE"):
         LatentWalk(WholeGraspVAE(WholeGraspConfig(multitask=False)), p, n, 0.9)
+    with pytest.raises(TypeError, match=r"^model: expected a graspkit.models.wholegrasp.WholeGraspVAE"):
+        LatentWalk(walk.model.state_dict(), p, n, 0.9)                   # the weights, not the model
     twin = LatentWalk(walk.model, p.numpy(), n.numpy(), 0.9, dims=3, seed=walk.seed)
     walk.update("seed", walk.seed)
     torch.testing.assert_close(twin.grasp["markers"], walk.grasp["markers"], rtol=0, atol=0)
@@ -159,7 +161,9 @@ def test_the_object_panel_draws_green_only_the_hand_markers_in_contact(walk):
     cm[63:143:2] = 1.0                                       # every other hand marker in contact
     walk.grasp = {**walk.grasp, "markers": walk.points[:143].clone(), "marker_contact": cm}   # all near the object
     fig = walk.figure(size=2.0)
-    green = [c for c in fig.axes[1].collections
-             if np.allclose(c.get_facecolor()[:, :3], to_rgba(MARKER_IN_CONTACT)[:3]) and len(c.get_offsets())]
-    assert sum(len(c.get_offsets()) for c in green) == 40
+    def drawn(colour: str) -> int:
+        return sum(len(c.get_offsets()) for c in fig.axes[1].collections
+                   if len(c.get_offsets()) and np.allclose(c.get_facecolor()[:, :3], to_rgba(colour)[:3]))
+
+    assert drawn(MARKER_IN_CONTACT) == 40 and drawn("#3b6ea8") == 40     # the other 40 near ones in the first's blue
     walk.decode()
