@@ -82,10 +82,13 @@ Panel = tuple[str, np.ndarray, list, object]   # title, last-frame vertices (V,3
 def _write_clip(bm: BodyModel, motion, out_dir: Path, name: str, objects: dict, title: str,
                 goals=None) -> tuple[list[Path], Panel]:
     """A clip's GIF (front and side views), still of its last frame, npz, animated GLB and final-scene GLB; returns
-    the paths and the last frame for the overview."""
+    the paths and the last frame for the overview. An earlier run's files of the same name go first: a run stopped
+    part-way then leaves fewer files, not a set mixing two runs' (an independent check found one)."""
     from graspkit.viz import animate, save_animation, show_scene
     from graspkit.viz.export import export_motion, motion_vertices
 
+    for suffix in (".gif", ".png", ".npz", ".glb", "_final.glb"):
+        (out_dir / f"{name}{suffix}").unlink(missing_ok=True)
     v = motion_vertices(motion, bm)
     faces = bm.faces.numpy()
     objs = [(np.asarray(m.vertices), np.asarray(m.faces)) for m in objects.values()]

@@ -46,14 +46,41 @@ def cannot_write(folder: Path, e: OSError) -> OSError:
     return OSError(e.errno, f"cannot write in {folder}: {e.strerror or e}{hint}")
 
 
+def writes_to(path: str | os.PathLike) -> Path:
+    """The file that writing `path` replaces: a symbolic link's target (the link stays, as open() writes through
+    it; a rename onto the link replaced it by a file and left the target as it was), else path itself."""
+    p = Path(path)
+    return Path(os.path.realpath(p)) if p.is_symlink() else p
+
+
+TEMP_NAME_BYTES = 200        # the target's name in a temporary file's, at most: + 14 bytes stays under NAME_MAX (255)
+
+
 def make_temp(path: Path, suffix: str = ".tmp") -> tuple[int, str]:
-    """tempfile.mkstemp's (fd, name) of a new temporary file beside `path` (.<name>.<8 random><suffix>), its folder
-    made first; an OSError naming the folder (`cannot_write`) when it cannot be created."""
+    """tempfile.mkstemp's (fd, name) of a new temporary file beside `path` (or its link's target: `writes_to`),
+    .<name>.<8 random><suffix>, its folder made first; a long name is shortened before its extension (a 249-byte name
+    is legal, its temporary file's was not); an OSError naming the folder (`cannot_write`) when it cannot be made."""
+    path = writes_to(path)
+    name, ext = path.name, path.suffix
+    while len(name.encode()) > TEMP_NAME_BYTES:
+        name = name[:-len(ext) - 1] + ext if len(name) > len(ext) + 1 else name[:-1]
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        return tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=suffix)
+        return tempfile.mkstemp(dir=path.parent, prefix=f".{name}.", suffix=suffix)
     except OSError as e:
         raise cannot_write(path.parent, e) from None
+
+
+@contextmanager
+def naming_errors(path: Path) -> Iterator[None]:
+    """Re-raise an OSError of the block that names no file (a full disk's "[Errno 28] No space left on device" from
+    write()) with `path` in its message, so that one knows which disk filled up."""
+    try:
+        yield
+    except OSError as e:
+        if e.filename is None and str(path) not in str(e):
+            raise OSError(e.errno, f"{path}: {e.strerror or e}") from e
+        raise
 
 
 def temp_beside(path: Path, suffix: str = ".tmp") -> Path:
@@ -67,6 +94,7 @@ def temp_beside(path: Path, suffix: str = ".tmp") -> Path:
 def sync_rename(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
     """Flush tmp's bytes to disk, rename it onto path and flush the folder: after a power cut path holds the old
     file or the new one, never a renamed file whose data had not reached the disk."""
+    path = writes_to(path)
     fd = os.open(tmp, os.O_RDONLY)
     try:
         os.fsync(fd)
@@ -85,7 +113,7 @@ def sync_rename(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
         os.close(fd)
 
 
-def _usual_mode(tmp: Path) -> None:
+def usual_mode(tmp: Path) -> None:
     """Give tmp the permissions a plain open() would (mkstemp makes it owner-only)."""
     umask = os.umask(0)
     os.umask(umask)
@@ -93,8 +121,8 @@ def _usual_mode(tmp: Path) -> None:
 
 
 def publish(tmp: Path, path: Path) -> Path:
-    """Give tmp the usual permissions and rename it onto path atomically (synced)."""
-    _usual_mode(tmp)
+    """Give tmp the usual permissions and rename it onto path (a link's target) atomically (synced)."""
+    usual_mode(tmp)
     sync_rename(tmp, path)
     return path
 
@@ -112,8 +140,9 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
     path = Path(path)
     tmp = temp_beside(path)
     try:
-        tmp.write_bytes(data.encode() if isinstance(data, str) else data)
-        publish(tmp, path)
+        with naming_errors(path):
+            tmp.write_bytes(data.encode() if isinstance(data, str) else data)
+            publish(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
@@ -133,7 +162,7 @@ def sweep_stale_temps(path: Path) -> None:
     import glob
     import time
 
-    path = Path(path)
+    path = writes_to(path)
     ext, rand = glob.escape(path.suffix), "?" * 8            # tempfile's random part: 8 characters
     patterns = ([f".*{ext}.{rand}.tmp", f".*{ext}.{rand}{ext}"] if path.suffix
                 else [f".{glob.escape(path.name)}.{rand}.tmp"])
@@ -143,33 +172,43 @@ def sweep_stale_temps(path: Path) -> None:
             try:
                 if stale.is_file() and now - stale.stat().st_mtime > STALE_TMP_S:
                     stale.unlink()
-            except FileNotFoundError:
+            except OSError:          # gone meanwhile, or another user's in a shared folder: housekeeping, not our write
                 pass
 
 
 def create_exclusive(path: str | os.PathLike, data: bytes | str) -> bool:
     """Write data to path whole (a temporary file, the usual permissions, synced, then hard-linked) unless path exists;
     False when it did (another process created it first, even a moment before)."""
+    import errno
+
     path = Path(path)
     payload = data.encode() if isinstance(data, str) else data
     tmp = temp_beside(path)
     try:
-        with open(tmp, "wb") as f:
+        with naming_errors(path), open(tmp, "wb") as f:     # a full disk fails here, before path exists
             f.write(payload)
             f.flush()
             os.fsync(f.fileno())
-        _usual_mode(tmp)
-        os.link(tmp, path)
-        return True
-    except FileExistsError:
-        return False
-    except OSError:                              # no hard links here (vfat, exFAT, some network mounts)
+        usual_mode(tmp)
+        try:
+            os.link(tmp, path)
+            return True
+        except FileExistsError:
+            return False
+        except OSError as e:
+            if e.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK, errno.ENOSYS):
+                raise
+        # no hard links here (vfat, exFAT, some network mounts): O_EXCL, and no half-written file left behind
         try:
             fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
         except FileExistsError:
             return False
-        with os.fdopen(fd, "wb") as f:
-            f.write(payload)
+        try:
+            with naming_errors(path), os.fdopen(fd, "wb") as f:
+                f.write(payload)
+        except BaseException:
+            path.unlink(missing_ok=True)
+            raise
         return True
     finally:
         tmp.unlink(missing_ok=True)
@@ -234,7 +273,10 @@ def read_cache(path: Path, load: Callable[[Path], Any]) -> Any | None:
         return load(path)
     except (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as e:
         warnings.warn(f"{path}: a damaged cache file, made again ({str(e)[:200]})", UserWarning, stacklevel=3)
-        path.unlink(missing_ok=True)
+        try:
+            path.unlink(missing_ok=True)
+        except OSError as err:                          # a read-only cache: made again, and not kept (`cannot_write`)
+            warnings.warn(str(cannot_write(path.parent, err)), UserWarning, stacklevel=3)
         return None
 
 

@@ -38,7 +38,7 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 from tqdm.auto import tqdm
 
-from graspkit.paths import publish, sweep_stale_temps, temp_beside, write_atomic
+from graspkit.paths import naming_errors, publish, sweep_stale_temps, temp_beside, write_atomic
 
 StepFn = Callable[[torch.nn.Module, Any, int], dict[str, torch.Tensor]]
 
@@ -91,12 +91,21 @@ def _canonical(obj: Any) -> Any:
 def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
     """Write a checkpoint atomically (temporary file, then rename); returns the path. The same state gives the same
     bytes whatever the path and however its values were made (`file_key` hashes them)."""
+    import errno
+    import shutil
+
     path = Path(path)
     tmp = temp_beside(path)
     try:
-        with open(tmp, "wb") as fh:         # torch.save(state, <path>) names the archive's folder after the random temp
-            torch.save(_canonical(state), fh)   # file; a file object gets torch's fixed name
-        publish(tmp, path)
+        with naming_errors(path):
+            with open(tmp, "wb") as fh:     # torch.save(state, <path>) names the archive's folder after the random temp
+                try:                        # file; a file object gets torch's fixed name
+                    torch.save(_canonical(state), fh)
+                except RuntimeError as e:   # torch's zip writer reports a failed write ("unexpected pos ...") so
+                    free = shutil.disk_usage(tmp.parent).free
+                    raise OSError(errno.EIO, f"{path}: the checkpoint could not be written ({str(e)[:120]}); "
+                                  f"{free} bytes free there: is the disk full?") from None
+            publish(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

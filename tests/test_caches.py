@@ -427,3 +427,153 @@ def test_create_exclusive_claims_once_also_without_hard_links(tmp_path, monkeypa
     plain = tmp_path / "plain.json"                  # the mode a plain open() gives, not mkstemp's owner-only 0600
     plain.write_text("x")
     assert a.stat().st_mode & 0o777 == b.stat().st_mode & 0o777 == plain.stat().st_mode & 0o777
+
+
+def test_an_undeletable_stale_temporary_does_not_fail_a_finished_write(tmp_path, monkeypatch):
+    """In a shared cache another user's stale temporary file cannot be removed (EPERM): the sweep after a published
+    write raised it, and a grid that was written was reported as failed (an independent check). It is skipped."""
+    import time
+
+    from graspkit.data.formats import write_npz_atomic
+    from graspkit.paths import STALE_TMP_S
+
+    theirs = tmp_path / ".other.npz.abcd1234.tmp"
+    theirs.write_bytes(b"half")
+    os.utime(theirs, (time.time() - STALE_TMP_S - 60,) * 2)
+    real = Path.unlink
+
+    def unlink(self, missing_ok=False):
+        if self.name == theirs.name:
+            raise PermissionError(1, "Operation not permitted", str(self))
+        return real(self, missing_ok=missing_ok)
+
+    monkeypatch.setattr(Path, "unlink", unlink)
+    write_npz_atomic(tmp_path / "mine.npz", {"a": np.arange(2)})
+    assert np.load(tmp_path / "mine.npz")["a"].tolist() == [0, 1] and theirs.exists()
+
+
+@pytest.mark.parametrize("umask", [0o077, 0o002])
+def test_npz_files_follow_the_umask_as_every_other_file(tmp_path, umask):
+    """write_npz_atomic set 0644 whatever the umask (world-readable under umask 077, not group-writable in a shared
+    cache under 002), while every other writer follows it (an independent check)."""
+    from graspkit.data.formats import write_npz_atomic
+    from graspkit.paths import write_atomic
+
+    old = os.umask(umask)
+    try:
+        write_npz_atomic(tmp_path / "a.npz", {"a": np.ones(2)})
+        write_atomic(tmp_path / "b.json", "{}")
+        (tmp_path / "c.txt").write_text("plain open()")
+    finally:
+        os.umask(old)
+    modes = {p.name: p.stat().st_mode & 0o777 for p in tmp_path.iterdir()}
+    assert modes == dict.fromkeys(("a.npz", "b.json", "c.txt"), 0o666 & ~umask)
+
+
+def test_a_full_disk_names_the_file_and_leaves_nothing_half_written(tmp_path, monkeypatch):
+    """A full disk: torch's zip writer raised "RuntimeError: [enforce fail at inline_container.cc] unexpected pos"
+    (a traceback through the CLI, which reports OSErrors), other writes "[Errno 28] No space left on device" with no
+    path, and create_exclusive left a 0-byte run record that refused the folder as damaged once space was back (an
+    independent check, on a 120 kB tmpfs). Each names the file now, and no record is left."""
+    import errno
+
+    import torch
+
+    from graspkit.paths import create_exclusive, write_atomic
+    from graspkit.train import save_checkpoint
+
+    def full(*a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    def torch_full(obj, f, *a, **k):
+        raise RuntimeError("[enforce fail at inline_container.cc:672] . unexpected pos 68736 vs 68688")
+
+    monkeypatch.setattr(torch, "save", torch_full)
+    with pytest.raises(OSError, match=rf"^\[Errno 5\] {tmp_path / 'c.pt'}: the checkpoint could not be written .* "
+                                      "bytes free there: is the disk full"):
+        save_checkpoint(tmp_path / "c.pt", {"w": torch.ones(2)})
+    monkeypatch.setattr(Path, "write_bytes", full)
+    with pytest.raises(OSError, match=rf"^\[Errno 28\] {tmp_path / 'r.json'}: No space left on device"):
+        write_atomic(tmp_path / "r.json", "{}")
+    class FullFile:                                   # a file whose data never fit: write() raises ENOSPC
+        def __init__(self, f):
+            self.f = f
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.f.close()
+
+        def write(self, data):
+            full()
+
+    real_open, real_fdopen = open, os.fdopen
+    monkeypatch.setattr("graspkit.paths.open", lambda *a, **k: FullFile(real_open(*a, **k)), raising=False)
+    monkeypatch.setattr(os, "fdopen", lambda *a, **k: FullFile(real_fdopen(*a, **k)))
+    for links in (True, False):
+        if not links:                                                        # the O_EXCL fallback (vfat)
+            monkeypatch.setattr(os, "link", lambda a, b: (_ for _ in ()).throw(PermissionError(1, "no links")))
+        with pytest.raises(OSError, match=rf"{tmp_path / 'record.json'}: No space left on device"):
+            create_exclusive(tmp_path / "record.json", "{}")
+        assert not (tmp_path / "record.json").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_long_file_name_and_a_symbolic_link_are_written_as_open_would(tmp_path):
+    """A legal 249-byte --out name failed after the work ("File name too long": the temporary file's name is 14 bytes
+    longer), and --out naming a symbolic link replaced the link by a file and left its target as it was (an
+    independent check). The temporary name is shortened (and still swept); a link is written through."""
+    import time
+
+    import torch
+
+    from graspkit.data.formats import write_npz_atomic
+    from graspkit.paths import STALE_TMP_S, write_atomic
+    from graspkit.train import load_checkpoint, save_checkpoint
+
+    long = tmp_path / ("a" * 246 + ".pt")
+    save_checkpoint(long, {"w": torch.arange(3.0)})
+    assert load_checkpoint(long)["w"].tolist() == [0.0, 1.0, 2.0] and [p.name for p in tmp_path.iterdir()] == [long.name]
+    stale = tmp_path / (".a" + "a" * 196 + ".pt.abcd1234.tmp")              # a killed writer's, shortened the same way
+    stale.write_bytes(b"half")
+    os.utime(stale, (time.time() - STALE_TMP_S - 60,) * 2)
+    save_checkpoint(long, {"w": torch.arange(2.0)})
+    assert not stale.exists()
+    store = tmp_path / "store"
+    store.mkdir()
+    for name, write, read in (("m.npz", lambda p: write_npz_atomic(p, {"a": np.arange(4)}),
+                               lambda p: np.load(p)["a"].tolist() == [0, 1, 2, 3]),
+                              ("r.json", lambda p: write_atomic(p, "{}"), lambda p: p.read_text() == "{}"),
+                              ("w.pt", lambda p: save_checkpoint(p, {"w": torch.ones(1)}),
+                               lambda p: load_checkpoint(p)["w"].tolist() == [1.0])):
+        (store / name).write_text("old")
+        link = tmp_path / f"link_{name}"
+        link.symlink_to(store / name)
+        write(link)
+        assert link.is_symlink() and read(store / name) and read(link), name
+    assert sorted(p.name for p in store.iterdir()) == ["m.npz", "r.json", "w.pt"]          # no temporary left
+
+
+def test_a_damaged_entry_of_a_read_only_cache_is_made_again_not_a_crash(tmp_path, monkeypatch):
+    """read_cache removed a damaged entry before making it again; in a read-only cache the removal raised a bare
+    OSError (an independent check). It warns, naming the folder and GRASPKIT_CACHE, and the caller makes it again."""
+    from graspkit.paths import read_cache
+
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path))
+    bad = tmp_path / "sdf" / "g.npz"
+    bad.parent.mkdir()
+    bad.write_bytes(b"PK cut")
+    real = Path.unlink
+
+    def unlink(self, missing_ok=False):
+        if self == bad:
+            raise OSError(30, "Read-only file system")
+        return real(self, missing_ok=missing_ok)
+
+    monkeypatch.setattr(Path, "unlink", unlink)
+    with pytest.warns(UserWarning) as got:
+        assert read_cache(bad, lambda p: np.load(p, allow_pickle=False)["a"]) is None
+    text = [str(w.message) for w in got]
+    assert any("a damaged cache file, made again" in t for t in text)
+    assert any(f"cannot write in {bad.parent}: Read-only file system" in t and "GRASPKIT_CACHE" in t for t in text)

@@ -97,6 +97,29 @@ def test_demo_planner_stage_writes_clip_files_that_read_back(tmp_path):
     assert np.allclose(m.poses, sequence_motion(seq).poses, atol=1e-6) and np.allclose(m.trans, seq.trans, atol=1e-6)
 
 
+def test_a_clip_stopped_part_way_leaves_no_earlier_runs_files_beside_its_own(tmp_path, monkeypatch):
+    """`graspkit wandr` killed while writing left its new GIF and PNG beside the previous run's npz and GLBs, all valid
+    and of two goals (an independent check). An earlier run's files of the clip's name go before the first write."""
+    import graspkit.viz as V
+    from graspkit.body import BodyModel
+    from graspkit.data import load_motion
+    from graspkit.demo import _write_clip
+    from graspkit.paths import DATA_STUBS, default_model_path
+
+    names = [f"wandr_s0{s}" for s in (".gif", ".png", ".npz", ".glb", "_final.glb")]
+    for n in names + ["wandr_s1.gif"]:
+        (tmp_path / n).write_text("an earlier run's")
+
+    def killed(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(V, "save_animation", killed)
+    m = load_motion(sorted((DATA_STUBS / "motion" / "reach").glob("reach_0*.npz"))[0]).slice(0, 3)
+    with pytest.raises(KeyboardInterrupt):
+        _write_clip(BodyModel.from_file(default_model_path()), m, tmp_path, "wandr_s0", {}, "t")
+    assert [p.name for p in tmp_path.iterdir()] == ["wandr_s1.gif"]            # another clip's file is kept
+
+
 def test_demo_refuses_unknown_stages(tmp_path, capsys):
     from graspkit.cli import main
 

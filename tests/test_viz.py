@@ -325,6 +325,16 @@ def test_export_sequence_glb_round_trip(body, ball, tmp_path):
     third = load_sequence_glb(export_sequence_glb(frames, body.faces, tmp_path / "third.glb", stride=4))
     np.testing.assert_allclose(third[0], frames[[0, 4, 6]], atol=1e-5)   # the last frame always kept
     np.testing.assert_allclose(third[2], np.array([0, 4, 6]) / 30, atol=1e-6)
+    # a file cut short or empty is named (numpy's "buffer is smaller than requested size", a JSONDecodeError and a
+    # struct.error named none, an independent check)
+    data = path.read_bytes()
+    for n, message in ((len(data) // 2, "is cut short or padded"), (900, "is cut short or padded"),
+                       (0, "is not a glTF 2.0 binary file")):
+        cut = tmp_path / f"cut{n}.glb"
+        cut.write_bytes(data[:n])
+        for read in (read_glb, load_sequence_glb):
+            with pytest.raises(ValueError, match=f"^path: {cut} {message}"):
+                read(cut)
 
 
 def test_strided_animation_plays_at_real_time_and_stamps_clip_times():

@@ -28,7 +28,7 @@ from graspkit.body._proc_remesh import SurfaceProjector, delaunay_flips, relax
 from graspkit.body._proc_sdf import Body, Lens, sample_grid, warp
 from graspkit.body.hand_poses import hand_pca
 from graspkit.body.skeleton import NUM_JOINTS, NUM_VERTICES, PARENTS, SMPLX_LANDMARK_VERTEX_IDS
-from graspkit.paths import publish, sweep_stale_temps, temp_beside
+from graspkit.paths import naming_errors, publish, sweep_stale_temps, temp_beside
 
 __all__ = ["build_procedural_smplx", "save_model_npz", "part_of_vertex", "GRID_SPACING"]
 
@@ -219,9 +219,10 @@ def save_model_npz(arrays: dict[str, np.ndarray], path: str | os.PathLike) -> Pa
     path = Path(path)
     tmp = temp_beside(path)          # .<name>.<random>.tmp: not a *.npz that a folder listing offers as a model
     try:
-        with open(tmp, "wb") as fh:
+        with naming_errors(path), open(tmp, "wb") as fh:
             np.savez_compressed(fh, **arrays)
-        publish(tmp, path)
+        with naming_errors(path):
+            publish(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

@@ -26,7 +26,7 @@ import torch
 
 from graspkit.data.motion import HANDS, Motion, check_fps
 from graspkit.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
-from graspkit.paths import make_temp, sweep_stale_temps, sync_rename
+from graspkit.paths import make_temp, naming_errors, publish, sweep_stale_temps
 
 FPS = 30.0
 NUM_BETAS = 10
@@ -91,14 +91,14 @@ def write_npz_atomic(path: Path, arrays: dict[str, np.ndarray]) -> None:
     written to a temporary file beside `path` and renamed: readers never see a partial file."""
     fd, tmp = make_temp(path)
     try:
-        with os.fdopen(fd, "wb") as f, zipfile.ZipFile(f, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-            for key, a in arrays.items():
-                info = zipfile.ZipInfo(f"{key}.npy", date_time=(1980, 1, 1, 0, 0, 0))
-                info.compress_type = zipfile.ZIP_DEFLATED
-                with zf.open(info, "w", force_zip64=True) as member:
-                    np.lib.format.write_array(member, np.asanyarray(a), allow_pickle=False)
-        os.chmod(tmp, 0o644)
-        sync_rename(tmp, path)
+        with naming_errors(path):
+            with os.fdopen(fd, "wb") as f, zipfile.ZipFile(f, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+                for key, a in arrays.items():
+                    info = zipfile.ZipInfo(f"{key}.npy", date_time=(1980, 1, 1, 0, 0, 0))
+                    info.compress_type = zipfile.ZIP_DEFLATED
+                    with zf.open(info, "w", force_zip64=True) as member:
+                        np.lib.format.write_array(member, np.asanyarray(a), allow_pickle=False)
+            publish(Path(tmp), path)                  # the umask's permissions, as every other file graspkit writes
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

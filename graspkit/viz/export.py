@@ -242,18 +242,28 @@ def export_sequence_glb(vertices: Any, faces: Any, path: str | os.PathLike, fps:
 
 
 def read_glb(path: str | os.PathLike) -> tuple[dict[str, Any], bytes]:
-    """The JSON document and binary chunk of a GLB file."""
+    """The JSON document and binary chunk of a GLB file; ValueError naming the file when it is not one, or is cut
+    short (the header's total length against the file's)."""
     data = Path(path).read_bytes()
-    magic, version, _ = struct.unpack_from("<III", data, 0)
+    if len(data) < 20:
+        raise ValueError(f"path: {path} is not a glTF 2.0 binary file (only {len(data)} bytes)")
+    magic, version, total = struct.unpack_from("<III", data, 0)
     if magic != 0x46546C67 or version != 2:
         raise ValueError(f"path: {path} is not a glTF 2.0 binary file")
+    if total != len(data):
+        raise ValueError(f"path: {path} is cut short or padded ({len(data)} bytes; its header says {total})")
     n_json, _ = struct.unpack_from("<II", data, 12)
-    gltf = json.loads(data[20:20 + n_json])
     off = 20 + n_json
-    blob = b""
-    if off < len(data):
-        n_bin, _ = struct.unpack_from("<II", data, off)
-        blob = data[off + 8:off + 8 + n_bin]
+    try:
+        gltf = json.loads(data[20:off])
+        blob = b""
+        if off < len(data):
+            n_bin, _ = struct.unpack_from("<II", data, off)
+            blob = data[off + 8:off + 8 + n_bin]
+            if len(blob) != n_bin:
+                raise ValueError(f"its binary chunk holds {len(blob)} of {n_bin} bytes")
+    except (ValueError, struct.error) as e:
+        raise ValueError(f"path: {path} is a damaged glTF binary file ({e})") from None
     return gltf, blob
 
 
