@@ -68,7 +68,7 @@ def test_the_same_seed_gives_the_same_motion_and_polish_steps_are_checked(bm, mo
         synthesize("teapot", bm)
     with pytest.raises(ValueError, match="start_distance: .*at most 3"):      # 1e6 m ran, 31 km under the floor
         synthesize("camera", bm, start_distance=1e6)
-    with pytest.raises(ValueError, match="start: expected a Motion with at least one frame"):
+    with pytest.raises(ValueError, match="^poses: expected at least one frame"):       # refused by Motion itself
         synthesize("camera", bm, start=Motion(np.zeros((0, 55, 3)), np.zeros((0, 3)), np.zeros(10), 30.0))
 
 
