@@ -26,6 +26,7 @@ import csv
 import io
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -415,11 +416,11 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
         if not f.is_dir():
             raise FileNotFoundError(f"data: no folder {f}")
     grasps, approach = _holding(folders, "grasp_*.npz"), _holding(folders, "approach_*.npz")   # in any --data order
-    shipped = {"saga": (ck / "wholegrasp_eval.json", saga_rows), "saga_motion": (ck / "motionfill_eval.json",
-               saga_motion_rows), "goal": (ck / "goal_eval.json", goal_rows), "wandr": (ck / "wandr_eval.json", wandr_rows)}
-    for m in methods if reuse else ():                    # a damaged evaluation to reuse is named before any work
-        if m in shipped and shipped[m][0].is_file():
-            reused_rows(*shipped[m], m)
+    shipped = {"saga": "wholegrasp_eval.json", "saga_motion": "motionfill_eval.json", "goal": "goal_eval.json",
+               "wandr": "wandr_eval.json"}
+    rows_of = {"saga": saga_rows, "saga_motion": saga_motion_rows, "goal": goal_rows, "wandr": wandr_rows}
+    reused = {m: reused_rows(ck / shipped[m], rows_of[m], m) for m in methods      # read (and a damaged one named)
+              if reuse and m in shipped and (ck / shipped[m]).is_file()}           # before any work
     out.mkdir(parents=True, exist_ok=True)                # after the checks: a refused run leaves no folder
     bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
     rows: list[Row] = []
@@ -427,25 +428,25 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
     for m in steps:
         steps.set_postfix_str(m)
         t0 = time.perf_counter()
-        if m == "gt":
+        if m in reused:
+            new = reused[m]
+        elif m == "gt":
             new = [ground_truth_grasps(bm, folders, n=8 if quick else 200),
                    planner_motion(bm, folders, n=4 if quick else 40)]
         elif m == "saga":
-            new = _method((ck / "wholegrasp.pt", ck / "pose_prior.pt"), out / "saga_eval.json",
-                          ck / "wholegrasp_eval.json", reuse, saga_rows,
+            new = _method((ck / "wholegrasp.pt", ck / "pose_prior.pt"), out / "saga_eval.json", saga_rows,
                           lambda o: run_saga(grasps, o, quick, ck), "SAGA (WholeGrasp w/ opt.)", "grasp")
         elif m == "saga_motion":
-            new = _method(ck / "motionfill.pt", out / "motionfill_eval.json", ck / "motionfill_eval.json", reuse,
-                          saga_motion_rows, lambda o: run_saga_motion(approach, o, quick, ck),
-                          "SAGA (MotionFill, traj + local)", "motion")
+            new = _method(ck / "motionfill.pt", out / "motionfill_eval.json", saga_motion_rows,
+                          lambda o: run_saga_motion(approach, o, quick, ck), "SAGA (MotionFill, traj + local)",
+                          "motion")
         elif m == "motion":
             new = common_motion_rows(bm, folders, ck, k=2 if quick else 4)
         elif m == "goal":
-            new = _method((ck / "gnet.pt", ck / "mnet.pt"), out / "goal_eval.json", ck / "goal_eval.json", reuse,
-                          goal_rows,
+            new = _method((ck / "gnet.pt", ck / "mnet.pt"), out / "goal_eval.json", goal_rows,
                           lambda o: run_goal(folders, o, quick, ck), "GOAL (GNet + refinement)", "grasp")
         else:
-            new = _method(ck / "wandr.pt", out / "wandr_eval.json", ck / "wandr_eval.json", reuse, wandr_rows,
+            new = _method(ck / "wandr.pt", out / "wandr_eval.json", wandr_rows,
                           lambda o: run_wandr(ck / "wandr.pt", o, quick), "WANDR", "motion")
         for r in new:                                     # wall time of what ran here (a reused result took none)
             if "(from " not in r.note:
@@ -482,14 +483,14 @@ def update(old: list[Row], new: list[Row]) -> list[Row]:
     return out + list(fresh.values())
 
 
-def reused_rows(shipped: Path, rows_of, method: str) -> list[Row]:
+def reused_rows(shipped: Path, rows_of: Callable[[dict], list[Row]], method: str) -> list[Row]:
     """A method's rows from its shipped evaluation JSON (`--reuse`); ValueError naming the file when it is damaged or
-    is not that method's evaluation."""
+    is not that method's evaluation (a JSON that is no object, or lacks or misshapes what rows_of reads)."""
     import json
 
     try:
         rows = rows_of(json.loads(shipped.read_text()))
-    except (UnicodeDecodeError, ValueError, KeyError, TypeError, IndexError, AttributeError) as e:
+    except (ValueError, KeyError, TypeError, IndexError, AttributeError) as e:
         raise ValueError(f"--reuse: {shipped} is damaged or not {method}'s evaluation ({type(e).__name__}: {e}); "
                          "restore it (git checkout) or run without --reuse") from None
     if not rows:
@@ -500,12 +501,10 @@ def reused_rows(shipped: Path, rows_of, method: str) -> list[Row]:
     return rows
 
 
-def _method(checkpoint: Path | tuple[Path, ...], out: Path, shipped: Path, reuse: bool, rows_of, run, method: str, table: str
-            ) -> list[Row]:
-    """A method's rows: from its shipped evaluation (`shipped`, when reuse and present), else by running its evaluator
-    into `out`; a row naming the file when a checkpoint it loads (one path or several) is missing."""
-    if reuse and shipped.is_file():
-        return reused_rows(shipped, rows_of, method)
+def _method(checkpoint: Path | tuple[Path, ...], out: Path, rows_of: Callable[[dict], list[Row]],
+            run: Callable[[Path], dict], method: str, table: str) -> list[Row]:
+    """A method's rows by running its evaluator into `out`; a row naming the file when a checkpoint it loads (one path
+    or several) is missing."""
     missing = [c for c in (checkpoint if isinstance(checkpoint, tuple) else (checkpoint,)) if not c.is_file()]
     if missing:
         return [Row(table, method, "graspkit", note=f"checkpoint missing: {missing[0]}")]

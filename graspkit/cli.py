@@ -275,18 +275,19 @@ def _cmd_eval_all(args: argparse.Namespace) -> int:
     if not methods or unknown:
         raise ValueError(f"--methods: expected a comma-separated list of {', '.join(METHODS)}, got {args.methods!r}"
                          + (f" (unknown: {', '.join(unknown)})" if unknown else ""))
-    old = None
     if args.update:
         if not (args.out / "benchmark.csv").is_file():
             raise FileNotFoundError(f"--update: no benchmark.csv in --out {args.out} to update")
-        old = read_csv(args.out / "benchmark.csv")
+        read_csv(args.out / "benchmark.csv")           # a damaged one is named before the work
     rows = run_all(args.out, data=args.data, quick=args.quick, methods=methods, reuse=args.reuse)
+    from contextlib import nullcontext
+
     from graspkit.paths import locked
 
-    # read, merge and write under a lock, reading the file again: two updates started together each read it before
-    # the other wrote, and the later writer dropped the other's rows (an independent check)
-    with locked(args.out / ".benchmark.lock"):
-        if old is not None:
+    # --update reads, merges and writes under a lock (`.benchmark.lock` in --out), reading the file again: two updates
+    # started together each read it before the other wrote, and the later writer dropped the other's rows
+    with locked(args.out / ".benchmark.lock") if args.update else nullcontext():
+        if args.update:
             rows = update(read_csv(args.out / "benchmark.csv"), rows)
         print(markdown(rows))
         for path in write_report(rows, args.out):
@@ -437,6 +438,11 @@ def check_out(path: Path, is_file: bool | None = None, flag: str = "--out") -> N
     writable folder; ValueError naming `flag`."""
     path = Path(path)
     is_file = path.suffix in FILE_SUFFIXES if is_file is None else is_file
+    if is_file and path.is_symlink():                  # written through (paths.writes_to): check where it leads
+        target = Path(os.path.realpath(path))
+        if not target.exists() and not target.parent.is_dir():
+            raise ValueError(f"{flag}: {path} is a symbolic link to {os.readlink(path)}, whose folder does not exist")
+        path = target
     if is_file and path.is_dir():
         raise ValueError(f"{flag}: {path} is a folder; expected a file path" + (f" ending in {path.suffix}"
                                                                                  if path.suffix else ""))

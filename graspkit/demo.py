@@ -27,7 +27,7 @@ from tqdm import tqdm  # noqa: E402
 
 from graspkit.body import BodyModel  # noqa: E402
 from graspkit.body.poses import body_pose, y_up_to_z_up  # noqa: E402
-from graspkit.paths import DATA_STUBS, default_model_path, stub_hint  # noqa: E402
+from graspkit.paths import DATA_STUBS, default_model_path, stub_hint, writes_to  # noqa: E402
 from graspkit.viz.export import save_png  # noqa: E402
 from graspkit.viz.style import OBJECT  # noqa: E402
 
@@ -88,7 +88,7 @@ def _write_clip(bm: BodyModel, motion, out_dir: Path, name: str, objects: dict, 
     from graspkit.viz.export import export_motion, motion_vertices
 
     for suffix in (".gif", ".png", ".npz", ".glb", "_final.glb"):
-        (out_dir / f"{name}{suffix}").unlink(missing_ok=True)
+        writes_to(out_dir / f"{name}{suffix}").unlink(missing_ok=True)     # a link stays, to be written through
     v = motion_vertices(motion, bm)
     faces = bm.faces.numpy()
     objs = [(np.asarray(m.vertices), np.asarray(m.faces)) for m in objects.values()]

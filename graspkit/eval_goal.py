@@ -824,9 +824,12 @@ def main(argv: list[str] | None = None) -> int:
             raise FileNotFoundError(f"--out: no evaluation at {out} to update (run without {flag})")
         try:                                            # read now: the update is written after minutes of work
             r = json.loads(out.read_text())
-        except (UnicodeDecodeError, ValueError) as e:
+        except ValueError as e:
             raise ValueError(f"--out: {out} is not a JSON file to update ({e})") from None
-        if not isinstance(r, dict) or (a.saga_only and not isinstance(r.get("sliding"), dict)):
+        merged = ("sliding", "tab1", "tab1_paired", "rollouts", "saga")      # the parts an update reads or replaces
+        if (not isinstance(r, dict) or (a.saga_only and "sliding" not in r)
+                or any(k in r and not isinstance(r[k], dict) for k in merged)
+                or not isinstance(r.get("updates", []), list)):
             raise ValueError(f"--out: {out} is not a GOAL evaluation to update with {flag} (expected an object"
                              + (" with its 'sliding' rows" if a.saga_only else "") + f"); run without {flag}")
         folders = a.data or default_data_folders()

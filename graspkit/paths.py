@@ -1,6 +1,7 @@
 """Where graspkit finds its shipped files (data_stubs/) and writes caches."""
 from __future__ import annotations
 
+import math
 import os
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
@@ -53,17 +54,25 @@ def writes_to(path: str | os.PathLike) -> Path:
     return Path(os.path.realpath(p)) if p.is_symlink() else p
 
 
-TEMP_NAME_BYTES = 200        # the target's name in a temporary file's, at most: + 14 bytes stays under NAME_MAX (255)
+TEMP_NAME_BYTES = 200        # the target's name in a temporary file's, at most: with ".", ".", 8 random characters
+                             # and a suffix of up to 40 bytes it stays within NAME_MAX (255)
 
 
-def make_temp(path: Path, suffix: str = ".tmp") -> tuple[int, str]:
-    """tempfile.mkstemp's (fd, name) of a new temporary file beside `path` (or its link's target: `writes_to`),
-    .<name>.<8 random><suffix>, its folder made first; a long name is shortened before its extension (a 249-byte name
-    is legal, its temporary file's was not); an OSError naming the folder (`cannot_write`) when it cannot be made."""
-    path = writes_to(path)
+def temp_stem(path: Path) -> str:
+    """The part of path's name that its temporary files carry: the name, shortened before its extension to
+    TEMP_NAME_BYTES (a 249-byte name is legal, its temporary file's name was not)."""
     name, ext = path.name, path.suffix
     while len(name.encode()) > TEMP_NAME_BYTES:
         name = name[:-len(ext) - 1] + ext if len(name) > len(ext) + 1 else name[:-1]
+    return name
+
+
+def make_temp(path: Path, suffix: str = ".tmp") -> tuple[int, str]:
+    """tempfile.mkstemp's (fd, name) of a new temporary file .<temp_stem>.<8 random><suffix> beside `path` (or its
+    link's target: `writes_to`), its folder made first; an OSError naming the folder (`cannot_write`) when it cannot
+    be made."""
+    path = writes_to(path)
+    name = temp_stem(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         return tempfile.mkstemp(dir=path.parent, prefix=f".{name}.", suffix=suffix)
@@ -73,13 +82,14 @@ def make_temp(path: Path, suffix: str = ".tmp") -> tuple[int, str]:
 
 @contextmanager
 def naming_errors(path: Path) -> Iterator[None]:
-    """Re-raise an OSError of the block that names no file (a full disk's "[Errno 28] No space left on device" from
-    write()) with `path` in its message, so that one knows which disk filled up."""
+    """Re-raise a plain OSError of the block that names no file (a full disk's "[Errno 28] No space left on device"
+    from write()) with `path` as its file, so that one knows which disk filled up; other errors (a subclass, no
+    errno: Pillow's encoder errors, io.UnsupportedOperation) pass unchanged."""
     try:
         yield
     except OSError as e:
-        if e.filename is None and str(path) not in str(e):
-            raise OSError(e.errno, f"{path}: {e.strerror or e}") from e
+        if type(e) is OSError and e.errno is not None and e.filename is None:
+            raise OSError(e.errno, e.strerror, str(path)) from e
         raise
 
 
@@ -136,7 +146,8 @@ def file_stamp(path: str | os.PathLike) -> tuple[str, int, int]:
 
 
 def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
-    """Write data to path through a temporary file in the same folder, synced and renamed; returns the path."""
+    """Write data to path (a link's target) through a temporary file beside it, synced and renamed, with the umask's
+    permissions; a killed writer's stale temporary files there are swept after; returns the path."""
     path = Path(path)
     tmp = temp_beside(path)
     try:
@@ -151,22 +162,29 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
 
 
 STALE_TMP_S = 600.0          # s: a temporary file older than this beside its target was left by a killed writer
+_SWEPT: dict[tuple[str, str], float] = {}      # (folder, file type) -> when this process last swept it
 
 
 def sweep_stale_temps(path: Path) -> None:
     """Remove the temporary files (`temp_beside`'s .<name><ext>.<8 random>.tmp, or .<name><ext>.<8 random><ext> for
     writers that need the suffix) of any file of path's type in path's folder that are older than STALE_TMP_S: left
     by a process killed while writing (kill -9). Folder-wide, since a killed writer's own file may never be written
-    again (a resumed run rewrites it at once, while the temporary file is still young); a writer at work now, whose
-    temporary file is younger, is not touched."""
+    again (a resumed run rewrites it at once, while the temporary file is still young). A writer at work is told by
+    its file's age: graspkit's write as they go (a GIF's frames are kept in memory and its file made again by name at
+    the end, so even a render of over 10 minutes survives). A folder is swept at most once a minute per process, so
+    writing n files there stays linear in n."""
     import glob
     import time
 
     path = writes_to(path)
+    now = time.time()
+    key = (str(path.parent), path.suffix)
+    if now - _SWEPT.get(key, -math.inf) < 60.0:
+        return
+    _SWEPT[key] = now
     ext, rand = glob.escape(path.suffix), "?" * 8            # tempfile's random part: 8 characters
     patterns = ([f".*{ext}.{rand}.tmp", f".*{ext}.{rand}{ext}"] if path.suffix
-                else [f".{glob.escape(path.name)}.{rand}.tmp"])
-    now = time.time()
+                else [f".{glob.escape(temp_stem(path))}.{rand}.tmp"])
     for pattern in patterns:
         for stale in path.parent.glob(pattern):
             try:
@@ -179,8 +197,6 @@ def sweep_stale_temps(path: Path) -> None:
 def create_exclusive(path: str | os.PathLike, data: bytes | str) -> bool:
     """Write data to path whole (a temporary file, the usual permissions, synced, then hard-linked) unless path exists;
     False when it did (another process created it first, even a moment before)."""
-    import errno
-
     path = Path(path)
     payload = data.encode() if isinstance(data, str) else data
     tmp = temp_beside(path)
@@ -195,10 +211,9 @@ def create_exclusive(path: str | os.PathLike, data: bytes | str) -> bool:
             return True
         except FileExistsError:
             return False
-        except OSError as e:
-            if e.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK, errno.ENOSYS):
-                raise
-        # no hard links here (vfat, exFAT, some network mounts): O_EXCL, and no half-written file left behind
+        except OSError:          # no hard links here (vfat: EPERM, Windows' FAT: EINVAL, some CIFS mounts: EACCES)
+            pass
+        # O_EXCL instead, and no half-written file left behind
         try:
             fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o666)
         except FileExistsError:
@@ -223,9 +238,16 @@ def locked(path: Path) -> Iterator[None]:
     except ImportError:                                 # not POSIX
         yield
         return
+    import warnings
+
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "a") as fh:
-        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX)
+        except OSError as e:                            # some network mounts take no locks: go on without one
+            warnings.warn(f"{path}: no lock could be taken ({e.strerror}); going on without it", stacklevel=3)
+            yield
+            return
         try:
             yield
         finally:
@@ -275,7 +297,7 @@ def read_cache(path: Path, load: Callable[[Path], Any]) -> Any | None:
         warnings.warn(f"{path}: a damaged cache file, made again ({str(e)[:200]})", UserWarning, stacklevel=3)
         try:
             path.unlink(missing_ok=True)
-        except OSError as err:                          # a read-only cache: made again, and not kept (`cannot_write`)
+        except OSError as err:                          # a read-only cache: the caller's write will fail, named
             warnings.warn(str(cannot_write(path.parent, err)), UserWarning, stacklevel=3)
         return None
 

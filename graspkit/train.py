@@ -28,6 +28,7 @@ import os
 import sys
 import time
 import zipfile
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -76,13 +77,18 @@ class TrainConfig:
 
 
 def _canonical(obj: Any) -> Any:
-    """obj with every string in its plain dicts, lists and tuples interned: pickle writes a string once and then
-    refers back to it only when it is the same object, so equal values must be the same objects to give the same
-    bytes (a resumed run's history mixed unpickled keys with the code's and wrote other bytes than a run in one go)."""
+    """obj with every string in its dicts (state dicts' OrderedDicts and their _metadata too), lists and tuples
+    interned: pickle writes a string once and then refers back to it only when it is the same object, so equal
+    values must be the same objects to give the same bytes (a resumed run's history mixed unpickled keys with the
+    code's and wrote other bytes than a run in one go). Containers are copied: one shared by two entries is saved
+    twice."""
     if type(obj) is str:
         return sys.intern(obj)
-    if type(obj) is dict:
-        return {_canonical(k): _canonical(v) for k, v in obj.items()}
+    if type(obj) in (dict, OrderedDict):
+        out = type(obj)((_canonical(k), _canonical(v)) for k, v in obj.items())
+        if hasattr(obj, "_metadata"):                    # what nn.Module.state_dict() attaches
+            out._metadata = _canonical(obj._metadata)  # type: ignore[attr-defined]
+        return out
     if type(obj) in (list, tuple):
         return type(obj)(_canonical(v) for v in obj)
     return obj
@@ -102,9 +108,11 @@ def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
                 try:                        # file; a file object gets torch's fixed name
                     torch.save(_canonical(state), fh)
                 except RuntimeError as e:   # torch's zip writer reports a failed write ("unexpected pos ...") so
+                    if "inline_container" not in str(e) and "unexpected pos" not in str(e):
+                        raise
                     free = shutil.disk_usage(tmp.parent).free
-                    raise OSError(errno.EIO, f"{path}: the checkpoint could not be written ({str(e)[:120]}); "
-                                  f"{free} bytes free there: is the disk full?") from None
+                    raise OSError(errno.EIO, f"the checkpoint could not be written ({str(e)[:120]}); {free} bytes "
+                                  "free there: is the disk full?", str(path)) from e
             publish(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)

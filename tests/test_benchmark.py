@@ -569,7 +569,7 @@ def test_folders_are_found_by_what_they_hold_and_a_refused_run_writes_nothing(tm
     seen = {}
     monkeypatch.setattr(B, "run_saga", lambda folder, o, quick, ck: seen.setdefault("saga", folder) and {"rows": {}})
     monkeypatch.setattr(B, "run_saga_motion", lambda folder, o, quick, ck: seen.setdefault("motion", folder) and {})
-    monkeypatch.setattr(B, "_method", lambda ck, out, shipped, reuse, rows, run, *a: (run(out), [])[1])
+    monkeypatch.setattr(B, "_method", lambda ck, out, rows, run, *a: (run(out), [])[1])
     B.run_all(tmp_path / "o", data=[STUBS / "approach", STUBS / "grasps"], methods=("saga", "saga_motion"))
     assert seen == {"saga": STUBS / "grasps", "motion": STUBS / "approach"}
     monkeypatch.undo()

@@ -315,8 +315,17 @@ def test_a_cache_or_out_that_cannot_be_written_is_named_before_the_work(tmp_path
     dangling = tmp_path / "dangling"
     dangling.symlink_to(tmp_path / "nowhere")
     assert main(["data", "make", "--kind", "reach", "--n", "1", "--out", str(dangling)]) == 2
-    assert f"--out: {dangling} is a symbolic link to {tmp_path / 'nowhere'}, which does not exist" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert f"--out: {dangling} is a symbolic link to {tmp_path / 'nowhere'}, which does not exist" in err
     assert not (tmp_path / "cache").exists() and not (tmp_path / "nowhere").exists()
+    from graspkit.cli import check_out
+
+    lost, new = tmp_path / "lost.pt", tmp_path / "new.pt"          # a file --out is written through its link
+    lost.symlink_to(tmp_path / "gone" / "w.pt")
+    new.symlink_to(tmp_path / "w.pt")
+    with pytest.raises(ValueError, match=f"^--out: {lost} is a symbolic link to .*gone/w.pt, whose folder does not"):
+        check_out(lost, is_file=True)
+    check_out(new, is_file=True)                                       # its target's folder is there: fine
 
 
 def test_a_missing_shipped_checkpoint_says_when_data_stubs_is_not_there(tmp_path, monkeypatch, capsys):

@@ -221,7 +221,10 @@ def test_an_update_of_a_damaged_evaluation_is_refused_before_the_work(tmp_path, 
                                 ("", "--tab1-only", "is not a JSON file to update"),
                                 ("{}", "--saga-only", "is not a GOAL evaluation to update with --saga-only"),
                                 ("[]", "--tab1-only", "is not a GOAL evaluation to update with --tab1-only"),
-                                ("[]", "--rollouts-only", "is not a GOAL evaluation")):
+                                ("[]", "--rollouts-only", "is not a GOAL evaluation"),
+                                ('{"sliding": [0.5]}', "--rollouts-only", "is not a GOAL evaluation"),
+                                ('{"tab1": [1]}', "--tab1-only", "is not a GOAL evaluation"),
+                                ('{"sliding": {}, "updates": {}}', "--saga-only", "is not a GOAL evaluation")):
         out.write_text(text)
         assert E.main([flag, "--data", str(tmp_path), "--out", str(out)]) == 2, (text, flag)
         err = capsys.readouterr().err

@@ -144,8 +144,8 @@ def test_rest_pose_joint_positions_are_the_regressed_shaped_mesh_plus_translatio
 def test_motion_refuses_layouts_it_would_scramble():
     """A (3, T) translation and (55, 3, T) poses were reshaped into scrambled frames (frame 0's translation became the
     first three x values), SMPL-H-width poses were blamed on `trans`, NaN poses were taken and then named `rot_mats`,
-    and slice(50, 20) or 0-frame arrays gave a 0-frame clip, whose duration was -1/fps (independent checks). Each is refused by name; (T, 165) poses still read
-    as (T, 55, 3)."""
+    and slice(50, 20) or 0-frame arrays gave a 0-frame clip, whose duration was -1/fps (independent checks). Each is
+    refused by name; (T, 165) poses still read as (T, 55, 3)."""
     T = 30
     poses, trans = np.zeros((T, 55, 3), np.float32), np.stack([np.linspace(0, 1, T), np.zeros(T), np.full(T, 0.9)], 1)
     for kw, message in (({"trans": trans.T}, r"^trans: expected \(T, 3\)"),

@@ -229,6 +229,18 @@ def test_the_same_state_saved_twice_gives_the_same_bytes(tmp_path):
     state = {"model": {"w": torch.arange(6.0)}, "epoch": 3}
     a, b = save_checkpoint(tmp_path / "a.pt", state), save_checkpoint(tmp_path / "sub" / "b.pt", state)
     assert a.read_bytes() == b.read_bytes() and file_key(a) == file_key(b)
+    # equal values made as other objects (keys built at run time, as unpickled ones are), in plain and ordered dicts
+    from collections import OrderedDict
+
+    def built(word: str) -> str:
+        return "".join(list(word))
+
+    def rows(key) -> list:
+        return [OrderedDict([(key("loss"), 0.5), (key("epoch"), 1)]), {key("loss"): 0.25, key("epoch"): 2}]
+
+    c = save_checkpoint(tmp_path / "c.pt", {"history": rows(str)})
+    d = save_checkpoint(tmp_path / "d.pt", {"history": rows(built)})
+    assert c.read_bytes() == d.read_bytes()
 
 
 def test_kl_matches_torch_distributions_and_robust_kl_is_psi_of_it():

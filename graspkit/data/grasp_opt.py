@@ -387,7 +387,7 @@ class PolishWeights:
     """Weights of the polish energy terms (distances in mm inside the terms)."""
 
     colli: float = 1.0        # after SAGA Eq. 7: sum of squared penetrations (mm^2) of hand / arm vertices
-    colli_obj: float = 0.02   # after SAGA Eq. 7: object points inside the hand (S(o, V_h), nearest hand vertex + normal)
+    colli_obj: float = 0.02   # after SAGA Eq. 7: object points inside the hand (S(o, V_h): nearest vertex + normal)
     contact: float = 1.5      # after SAGA Eq. 6, squared gap (mm^2) of each contact region's closest vertex
     anchor: float = 0.2       # after GOAL Eq. 4, palm centre to its target (mm^2)
     facing: float = 30.0      # palm normal against the surface normal, 1 + n . s

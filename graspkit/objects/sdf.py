@@ -87,7 +87,8 @@ def signed_distance(points: Tensor | np.ndarray, mesh: MeshLike, check: bool = T
 
 def signed_distance_to_points(points: Tensor | np.ndarray, cloud: Tensor | np.ndarray,
                               normals: Tensor | np.ndarray) -> Tensor:
-    """SAGA Eq. 7's S(x, Y) for a point cloud Y with outward normals: |x - y*| signed by (x - y*) . n(y*).
+    """SAGA Eq. 7's S(x, Y) for a point cloud Y with outward normals: |x - y*| signed by (x - y*) . n(y*) (the paper
+    does not say how S is signed; by the nearest point's normal is graspkit's reading).
 
     y* is the nearest cloud point; points (N,3)|(B,N,3), cloud and normals (M,3)|(B,M,3) -> (N,)|(B,N),
     negative inside. Differentiable w.r.t. points and cloud. Exact only as the cloud gets dense; use

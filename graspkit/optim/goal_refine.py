@@ -34,11 +34,11 @@ moved rigidly by the one of `RESTART_SHIFTS` (0, and 2–8 cm along each axis) t
 and keeps the run with the lower full energy (E_pen's both sums included) — SAGA's restart (docs/saga.md) with a
 different second start.
 
-MNet refinement (Eq. 12–13), once the hand is within 10 cm of the goal hand: each hand vertex is moved towards its
-goal position along the straight line at MNet's average predicted hand speed, v_{t+1} = v_t + ‖v̇_t‖ l (Eq. 12,
-‖v̇_t‖ read as the mean of the hand vertices' speeds, not the length of their mean velocity, which is smaller for
-a turning hand; graspkit stops at the goal instead of overshooting it), and the frame's θ, γ are fitted to those
-hand vertices with E_MNet = λ_Θ E_Θ + λ_v^h E_v^h (Eq. 13): E_Θ couples to MNet's Θ̂ (squared), E_v^h = ‖v^h − v^h_{t+1}‖₁.
+MNet refinement (Eq. 12–13), once the hand is within 10 cm of the goal hand: each hand vertex is moved towards its goal
+position along the straight line at MNet's average predicted hand speed, v_{t+1} = v_t + ‖v̇_t‖ l (Eq. 12, ‖v̇_t‖ read
+as the mean of the hand vertices' speeds, not the length of their mean velocity, which is smaller for a turning hand;
+graspkit stops at the goal instead of overshooting it), and the frame's θ, γ are fitted to those hand vertices with
+E_MNet = λ_Θ E_Θ + λ_v^h E_v^h (Eq. 13): E_Θ couples to MNet's Θ̂ (squared), E_v^h = ‖v^h − v^h_{t+1}‖₁.
 """
 from __future__ import annotations
 

@@ -258,7 +258,9 @@ def read_glb(path: str | os.PathLike) -> tuple[dict[str, Any], bytes]:
         gltf = json.loads(data[20:off])
         blob = b""
         if off < len(data):
-            n_bin, _ = struct.unpack_from("<II", data, off)
+            n_bin, kind = struct.unpack_from("<II", data, off)
+            if kind != 0x004E4942:                      # "BIN\0": the only chunk glTF allows after the JSON
+                raise ValueError(f"the chunk after the JSON is of type {kind:#010x}, not BIN")
             blob = data[off + 8:off + 8 + n_bin]
             if len(blob) != n_bin:
                 raise ValueError(f"its binary chunk holds {len(blob)} of {n_bin} bytes")

@@ -252,9 +252,10 @@ print(f"grid vs exact: sign agrees {np.mean(np.sign(fast) == np.sign(exact)):.2%
       f"median |error| {np.median(np.abs(fast - exact)) * 1000:.3f} mm, max {np.abs(fast - exact).max() * 1000:.2f} mm")
 
 # %% [markdown]
-# SAGA's Eq. 7 defines $S(x, \mathcal{Y})$ against a **point cloud**: "the signed distance from point $x$ to point
-# cloud $\mathcal{Y}$", without saying how it is signed; graspkit signs the distance to the nearest point by
-# that point's normal (`signed_distance_to_points`), and it is only as good as the cloud is dense: against the mesh-exact value on the same query points,
+# SAGA's Eq. 7 defines $S(x, \mathcal{Y})$ against a **point cloud**: "the signed distance from point $x$ to point cloud
+# $\mathcal{Y}$", without saying how it is signed; graspkit signs the distance to the nearest point by that point's
+# normal (`signed_distance_to_points`), and it is only as good as the cloud is dense: against the mesh-exact value on
+# the same query points,
 
 # %%
 for n in (2048, 8192):
