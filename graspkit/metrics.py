@@ -378,10 +378,11 @@ def grasp_metrics(vertices: Any, faces: Any, obj: Any, threshold: float = GRASP_
 def contact_ratio(min_distances: Any, threshold: float = GRASP_CONTACT_THRESHOLD, volumes_cm3: Any = None) -> float:
     """Fraction of grasps in contact: min body-object signed distances (N,) <= threshold, or (with volumes_cm3 (N,),
     the interpenetration volumes) a volume > 0, the rule of grasp_metrics: an object poking through between body
-    vertices is in contact although no vertex is near it. Without volumes only the distances count."""
+    vertices is in contact although no vertex is near it. Without volumes only the distances count. Distances are
+    compared in their own precision, as marker_contact / object_contact do (float32 0.002 is in contact at 2 mm)."""
     def numbers(x: Any, name: str) -> np.ndarray:
         try:
-            a = _t(x).double().numpy()
+            a = _t(x).numpy()
         except (TypeError, ValueError) as e:
             raise ValueError(f"{name}: expected numbers, got {type(x).__name__}: {e}") from None
         if a.ndim != 1:

@@ -115,6 +115,19 @@ def test_contact_ratio_counts_a_volume_only_when_it_is_positive():
     assert M.contact_ratio([0.1, 0.1], volumes_cm3=[0.0, 0.3]) == 0.5
 
 
+def test_contact_ratio_compares_in_the_distances_own_precision():
+    """float32 0.002 read as float64 is 0.0020000000949949 > 2 mm: contact_ratio counted it out for float32 input and
+    in for float64 or a list (an independent check); it compares in the input's precision now, as numpy does and as
+    the contact maps do (marker_contact of a point at that distance), so every form gives 2 of 3."""
+    import torch
+
+    d = [0.001, M.GRASP_CONTACT_THRESHOLD, 0.5]
+    want = float(np.mean(np.array(d, np.float32) <= np.float32(M.GRASP_CONTACT_THRESHOLD)))
+    assert want == pytest.approx(2 / 3)
+    for x in (d, np.array(d), np.array(d, np.float32), torch.tensor(d), torch.tensor(d, dtype=torch.float64)):
+        assert M.contact_ratio(x) == pytest.approx(want), type(x)
+
+
 def test_contact_distance_finds_a_closer_vertex_outside_the_padded_box():
     """A 10 cm sphere: a vertex off its bounding-box corner (inside the 5 cm padded box) is ~9 cm from the surface,
     one 6 cm off its +x pole (outside the padded box) is 6 cm away: the answer is trimesh's 6 cm."""

@@ -158,6 +158,12 @@ def test_sample_is_deterministic_for_a_generator_and_returns_world_transform():
         model.sample(pts, nrm[:10])
     with pytest.raises(ValueError, match="n:"):
         model.sample(pts, nrm, n=0)
+    # a numpy count is a count (MotionFill and WANDR took it; this refused it), numpy points are named as such (the
+    # message said "expected shape (None, 3), got ndarray" of an array of that very shape: an independent check)
+    e = model.sample(pts, nrm, n=np.int64(4), generator=torch.Generator().manual_seed(1))
+    assert torch.equal(e.markers, a.markers)
+    with pytest.raises(ValueError, match=r"^object_points: expected a torch.Tensor of shape \(None, 3\) .*got ndarray"):
+        model.sample(pts.numpy(), nrm)
 
 
 def test_state_round_trip_and_bad_batches():

@@ -41,6 +41,7 @@ object-centred standardisation (checkpoints written before this option load with
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -205,10 +206,11 @@ class WholeGraspVAE(nn.Module):
     @staticmethod
     def _check(name: str, x: Tensor, shape: tuple[int | None, ...]) -> None:
         """ValueError naming `name` unless x matches shape (None = any size)."""
-        if not isinstance(x, Tensor) or x.dim() != len(shape) or any(s is not None and s != d
-                                                                     for s, d in zip(shape, x.shape)):
-            got = tuple(x.shape) if isinstance(x, Tensor) else type(x).__name__
-            raise ValueError(f"{name}: expected shape {shape} (None = any), got {got}")
+        if not isinstance(x, Tensor):                   # a numpy array's shape may be right: say what is wrong
+            raise ValueError(f"{name}: expected a torch.Tensor of shape {shape} (None = any), got "
+                             f"{type(x).__name__} (torch.as_tensor(x, dtype=torch.float32) makes one)")
+        if x.dim() != len(shape) or any(s is not None and s != d for s, d in zip(shape, x.shape)):
+            raise ValueError(f"{name}: expected shape {shape} (None = any), got {tuple(x.shape)}")
 
     def group(self, points: Tensor) -> list[Grouping | None]:
         """PointNet++ neighbourhoods of object points (B, P, 3), shared by the encoder and decoder branches."""
@@ -340,6 +342,7 @@ class WholeGraspVAE(nn.Module):
         check_sample_inputs(object_points, object_normals, n, self.obj_dec.sa[0].npoint,
                             object_height=object_height, centre=centre)
         check_generator(generator)
+        n = int(n)
         was = self.training
         self.eval()
         dev = self.out_markers.weight.device
@@ -637,7 +640,7 @@ def check_sample_inputs(points: Tensor, normals: Tensor, n: int, least: int, nam
     for name, x in extra.items():
         if name.endswith("height") and x is not None:
             check_height(x, name)
-    if isinstance(n, bool) or not isinstance(n, int):
+    if isinstance(n, bool) or not isinstance(n, numbers.Integral):     # numpy integers too, as the other samplers
         raise TypeError(f"n: expected an int number of samples, got {n!r}")
     if n < 1:
         raise ValueError(f"n: expected at least one sample, got {n}")
@@ -754,6 +757,7 @@ class GrabNetSMPLX(nn.Module):
                generator: torch.Generator | None = None) -> Tensor:
         """n parameter vectors (n, n_params) for one object (points, normals (P,3) in the object frame)."""
         check_sample_inputs(points, normals, n, self.obj_dec.sa[0].npoint, ("points", "normals"), height=height)
+        n = int(n)
         was = self.training
         self.eval()
         z = torch.randn(n, self.hparams["latent"], generator=generator)
