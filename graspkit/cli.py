@@ -442,7 +442,9 @@ def check_out(path: Path, is_file: bool | None = None, flag: str = "--out") -> N
         target = Path(os.path.realpath(path))
         if not target.exists() and not target.parent.is_dir():
             raise ValueError(f"{flag}: {path} is a symbolic link to {os.readlink(path)}, whose folder does not exist")
-        path = target
+        if target != path:
+            check_out(target, True, f"{flag} {path} -> {target}")          # names what the user gave
+            return
     if is_file and path.is_dir():
         raise ValueError(f"{flag}: {path} is a folder; expected a file path" + (f" ending in {path.suffix}"
                                                                                  if path.suffix else ""))

@@ -88,7 +88,9 @@ def _write_clip(bm: BodyModel, motion, out_dir: Path, name: str, objects: dict, 
     from graspkit.viz.export import export_motion, motion_vertices
 
     for suffix in (".gif", ".png", ".npz", ".glb", "_final.glb"):
-        writes_to(out_dir / f"{name}{suffix}").unlink(missing_ok=True)     # a link stays, to be written through
+        earlier = writes_to(out_dir / f"{name}{suffix}")                    # a link stays, to be written through
+        if earlier.is_file():
+            earlier.unlink()
     v = motion_vertices(motion, bm)
     faces = bm.faces.numpy()
     objs = [(np.asarray(m.vertices), np.asarray(m.faces)) for m in objects.values()]

@@ -827,11 +827,12 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as e:
             raise ValueError(f"--out: {out} is not a JSON file to update ({e})") from None
         merged = ("sliding", "tab1", "tab1_paired", "rollouts", "saga")      # the parts an update reads or replaces
-        if (not isinstance(r, dict) or (a.saga_only and "sliding" not in r)
-                or any(k in r and not isinstance(r[k], dict) for k in merged)
-                or not isinstance(r.get("updates", []), list)):
-            raise ValueError(f"--out: {out} is not a GOAL evaluation to update with {flag} (expected an object"
-                             + (" with its 'sliding' rows" if a.saga_only else "") + f"); run without {flag}")
+        bad = ("it is no JSON object" if not isinstance(r, dict) else
+               "it has no 'sliding' rows" if a.saga_only and "sliding" not in r else
+               next((f"its '{k}' is no object" for k in merged if k in r and not isinstance(r[k], dict)),
+                    "its 'updates' is no list" if not isinstance(r.get("updates", []), list) else None))
+        if bad:
+            raise ValueError(f"--out: {out} is not a GOAL evaluation to update with {flag} ({bad}); run without {flag}")
         folders = a.data or default_data_folders()
         if a.tab1_only:
             new = tab1_results(folders, stubs, a.n_grasps, a.seed, rows=tuple(a.tab1_row) if a.tab1_row else None)

@@ -84,12 +84,12 @@ def make_temp(path: Path, suffix: str = ".tmp") -> tuple[int, str]:
 def naming_errors(path: Path) -> Iterator[None]:
     """Re-raise a plain OSError of the block that names no file (a full disk's "[Errno 28] No space left on device"
     from write()) with `path` as its file, so that one knows which disk filled up; other errors (a subclass, no
-    errno: Pillow's encoder errors, io.UnsupportedOperation) pass unchanged."""
+    errno: Pillow's encoder errors, io.UnsupportedOperation; one naming its file) pass unchanged."""
     try:
         yield
     except OSError as e:
-        if type(e) is OSError and e.errno is not None and e.filename is None:
-            raise OSError(e.errno, e.strerror, str(path)) from e
+        if e.errno is not None and e.filename is None and type(e).__module__ == "builtins":   # (errno, strerror, file)
+            raise type(e)(e.errno, e.strerror, str(path)) from e
         raise
 
 
@@ -162,7 +162,7 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
 
 
 STALE_TMP_S = 600.0          # s: a temporary file older than this beside its target was left by a killed writer
-_SWEPT: dict[tuple[str, str], float] = {}      # (folder, file type) -> when this process last swept it
+_SWEPT: dict[tuple[str, str], float] = {}      # (folder, file type) -> time.monotonic() of this process's last sweep
 
 
 def sweep_stale_temps(path: Path) -> None:
@@ -170,18 +170,19 @@ def sweep_stale_temps(path: Path) -> None:
     writers that need the suffix) of any file of path's type in path's folder that are older than STALE_TMP_S: left
     by a process killed while writing (kill -9). Folder-wide, since a killed writer's own file may never be written
     again (a resumed run rewrites it at once, while the temporary file is still young). A writer at work is told by
-    its file's age: graspkit's write as they go (a GIF's frames are kept in memory and its file made again by name at
-    the end, so even a render of over 10 minutes survives). A folder is swept at most once a minute per process, so
-    writing n files there stays linear in n."""
+    its file's age: npz, checkpoint and JSON writers write as they go, and a GIF's file is made again by name at its
+    end; an .mp4 render slower than ~12 s a frame leaves its file untouched for 10 minutes (ffmpeg's lookahead) and
+    could lose it to another process's write there. A folder is swept at most once a minute per process and file
+    type, so writing n files there stays linear in n."""
     import glob
     import time
 
     path = writes_to(path)
-    now = time.time()
-    key = (str(path.parent), path.suffix)
-    if now - _SWEPT.get(key, -math.inf) < 60.0:
+    key = (str(path.parent.absolute()), path.suffix or temp_stem(path))
+    if time.monotonic() - _SWEPT.get(key, -math.inf) < 60.0:
         return
-    _SWEPT[key] = now
+    _SWEPT[key] = time.monotonic()
+    now = time.time()
     ext, rand = glob.escape(path.suffix), "?" * 8            # tempfile's random part: 8 characters
     patterns = ([f".*{ext}.{rand}.tmp", f".*{ext}.{rand}{ext}"] if path.suffix
                 else [f".{glob.escape(temp_stem(path))}.{rand}.tmp"])
@@ -232,7 +233,8 @@ def create_exclusive(path: str | os.PathLike, data: bytes | str) -> bool:
 @contextmanager
 def locked(path: Path) -> Iterator[None]:
     """Hold an exclusive lock on the file `path` (made if missing) for the block: processes that lock the same path
-    run their blocks one after another (fcntl.flock; where there is none, no lock is taken)."""
+    run their blocks one after another (fcntl.flock; where there is none, or a mount refuses it, the block runs
+    without a lock, with a warning in the latter case)."""
     try:
         import fcntl
     except ImportError:                                 # not POSIX
@@ -244,14 +246,15 @@ def locked(path: Path) -> Iterator[None]:
     with open(path, "a") as fh:
         try:
             fcntl.flock(fh, fcntl.LOCK_EX)
+            held = True
         except OSError as e:                            # some network mounts take no locks: go on without one
             warnings.warn(f"{path}: no lock could be taken ({e.strerror}); going on without it", stacklevel=3)
-            yield
-            return
+            held = False
         try:
             yield
         finally:
-            fcntl.flock(fh, fcntl.LOCK_UN)
+            if held:
+                fcntl.flock(fh, fcntl.LOCK_UN)
 
 
 def drop_damaged(paths: Sequence[Path], what: str = "files") -> list[Path]:

@@ -96,7 +96,8 @@ def _canonical(obj: Any) -> Any:
 
 def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
     """Write a checkpoint atomically (temporary file, then rename); returns the path. The same state gives the same
-    bytes whatever the path and however its values were made (`file_key` hashes them)."""
+    bytes whatever the path, also when its strings were made apart (unpickled, built at run time: `_canonical`), so
+    that `file_key` hashes the values."""
     import errno
     import shutil
 
@@ -108,7 +109,7 @@ def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
                 try:                        # file; a file object gets torch's fixed name
                     torch.save(_canonical(state), fh)
                 except RuntimeError as e:   # torch's zip writer reports a failed write ("unexpected pos ...") so
-                    if "inline_container" not in str(e) and "unexpected pos" not in str(e):
+                    if not any(s in str(e) for s in ("inline_container", "unexpected pos", "PytorchStreamWriter")):
                         raise
                     free = shutil.disk_usage(tmp.parent).free
                     raise OSError(errno.EIO, f"the checkpoint could not be written ({str(e)[:120]}); {free} bytes "

@@ -230,8 +230,14 @@ def test_a_benchmark_csv_cut_short_or_a_damaged_evaluation_to_reuse_is_named(tmp
 
 def test_two_updates_at_once_keep_each_others_rows(tmp_path, monkeypatch):
     """Two `eval --all --update` runs into one --out each read benchmark.csv at their start; the later writer dropped
-    the rows the other had written meanwhile (an independent check). The file is read again, under a lock, when the
-    rows are merged and written."""
+    the rows the other had written meanwhile (an independent check). The file is read again when the rows are merged
+    and written, inside `paths.locked` on --out's .benchmark.lock (taken only with --update; `locked` itself is tested
+    in test_caches)."""
+    import graspkit.paths as P
+
+    taken = []
+    real_locked = P.locked
+    monkeypatch.setattr(P, "locked", lambda path: taken.append(path) or real_locked(path))
     out = tmp_path / "report"
     write_report([Row("grasp", "ground truth (synthetic)", "graspkit", {"contact_ratio": 0.9}, "old")], out)
 
@@ -245,6 +251,9 @@ def test_two_updates_at_once_keep_each_others_rows(tmp_path, monkeypatch):
     rows = {r.method: (r.values, r.note) for r in read_csv(out / "benchmark.csv")}
     assert rows == {"ground truth (synthetic)": ({"contact_ratio": 1.0}, "this run"),
                     "WANDR": ({"sr": 0.99}, "the other run")}
+    assert taken == [out / ".benchmark.lock"]
+    assert main(["eval", "--all", "--methods", "gt", "--out", str(tmp_path / "fresh")]) == 0
+    assert taken == [out / ".benchmark.lock"] and not (tmp_path / "fresh" / ".benchmark.lock").exists()
 
 
 def test_a_row_holds_one_protocol_the_common_motions_and_goals_saga_clips_get_rows_of_their_own(tmp_path, bm):

@@ -603,7 +603,43 @@ def test_naming_errors_names_only_plain_errors_that_name_no_file(tmp_path):
             with naming_errors(tmp_path / "x.gif"):
                 raise raised
         assert e.value is raised
-    with pytest.raises(OSError) as e:
-        with naming_errors(tmp_path / "x.gif"):
-            raise OSError(28, "No space left on device")
-    assert type(e.value) is OSError and e.value.errno == 28 and e.value.filename == str(tmp_path / "x.gif")
+    for raised in (OSError(28, "No space left on device"), PermissionError(13, "Permission denied")):
+        with pytest.raises(OSError) as e:
+            with naming_errors(tmp_path / "x.gif"):
+                raise raised
+        assert type(e.value) is type(raised) and e.value.errno == raised.errno
+        assert e.value.filename == str(tmp_path / "x.gif")
+
+
+def test_a_folder_is_swept_once_a_minute_per_file_type_and_suffixless_names_by_their_own(tmp_path, monkeypatch):
+    """The folder-wide sweep runs at most once a minute per (folder, file type) in a process (writing n files there
+    stays linear in n); the next one after that minute sweeps again. Files without a suffix are swept by their own
+    (shortened) name, each under its own key (one name's write once skipped another's stale file, a review)."""
+    import time
+
+    import graspkit.paths as paths
+
+    clock = [1000.0]
+    monkeypatch.setattr(time, "monotonic", lambda: clock[0])
+    monkeypatch.setattr(paths, "_SWEPT", {})
+
+    def stale(name: str) -> Path:
+        f = tmp_path / name
+        f.write_bytes(b"half")
+        os.utime(f, (time.time() - paths.STALE_TMP_S - 60,) * 2)
+        return f
+
+    first = stale(".a.npz.abcd1234.tmp")
+    paths.sweep_stale_temps(tmp_path / "x.npz")
+    second = stale(".b.npz.abcd1234.tmp")
+    clock[0] += 30.0
+    paths.sweep_stale_temps(tmp_path / "x.npz")                      # within the minute: not again
+    assert not first.exists() and second.exists()
+    clock[0] += 31.0
+    paths.sweep_stale_temps(tmp_path / "x.npz")
+    assert not second.exists()
+    long = "b" * 230                                                 # no suffix, shortened in its temporary name
+    for name in ("A", long):
+        f = stale(f".{paths.temp_stem(tmp_path / name)}.abcd1234.tmp")
+        paths.sweep_stale_temps(tmp_path / name)
+        assert not f.exists(), name

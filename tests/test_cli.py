@@ -107,8 +107,12 @@ def test_a_clip_stopped_part_way_leaves_no_earlier_runs_files_beside_its_own(tmp
     from graspkit.paths import DATA_STUBS, default_model_path
 
     names = [f"wandr_s0{s}" for s in (".gif", ".png", ".npz", ".glb", "_final.glb")]
-    for n in names + ["wandr_s1.gif"]:
+    for n in names[1:] + ["wandr_s1.gif"]:
         (tmp_path / n).write_text("an earlier run's")
+    store = tmp_path / "store"                                # the GIF name a link into a store: the link stays
+    store.mkdir()
+    (store / "shared.gif").write_text("an earlier run's")
+    (tmp_path / names[0]).symlink_to(store / "shared.gif")
 
     def killed(*a, **k):
         raise KeyboardInterrupt
@@ -117,7 +121,8 @@ def test_a_clip_stopped_part_way_leaves_no_earlier_runs_files_beside_its_own(tmp
     m = load_motion(sorted((DATA_STUBS / "motion" / "reach").glob("reach_0*.npz"))[0]).slice(0, 3)
     with pytest.raises(KeyboardInterrupt):
         _write_clip(BodyModel.from_file(default_model_path()), m, tmp_path, "wandr_s0", {}, "t")
-    assert [p.name for p in tmp_path.iterdir()] == ["wandr_s1.gif"]            # another clip's file is kept
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["store", "wandr_s0.gif", "wandr_s1.gif"]   # another clip's
+    assert (tmp_path / "wandr_s0.gif").is_symlink() and not list(store.iterdir())        # file is kept, the link too
 
 
 def test_demo_refuses_unknown_stages(tmp_path, capsys):
@@ -326,16 +331,30 @@ def test_a_cache_or_out_that_cannot_be_written_is_named_before_the_work(tmp_path
     with pytest.raises(ValueError, match=f"^--out: {lost} is a symbolic link to .*gone/w.pt, whose folder does not"):
         check_out(lost, is_file=True)
     check_out(new, is_file=True)                                       # its target's folder is there: fine
+    folder = tmp_path / "adir.pt"                                      # a link to a folder: the link is named
+    (tmp_path / "dir").mkdir()
+    folder.symlink_to(tmp_path / "dir")
+    with pytest.raises(ValueError, match=f"^--out {folder} -> {tmp_path / 'dir'}: .* is a folder; expected a file"):
+        check_out(folder, is_file=True)
 
 
 def test_a_missing_shipped_checkpoint_says_when_data_stubs_is_not_there(tmp_path, monkeypatch, capsys):
     """Run from a plain (non-editable) install, data_stubs/ is not beside the package: the missing-checkpoint errors
     say so; a checkpoint of one's own, or a data_stubs/ that is there, gets the plain message."""
+    import importlib
+    import pkgutil
+
+    import graspkit
     import graspkit.paths as paths
     from graspkit.cli import main
     from graspkit.goal import synthesize as goal_synthesize
     from graspkit.saga import synthesize as saga_synthesize
 
+    # every module first imported now, not while DATA_STUBS is patched: one imported then (pose_prior, by saga's
+    # synthesize) kept the gone folder in its path constants for the rest of the worker's tests
+    for m in pkgutil.walk_packages(graspkit.__path__, "graspkit."):
+        if not m.name.endswith("__main__"):
+            importlib.import_module(m.name)
     gone = tmp_path / "site" / "data_stubs"
     monkeypatch.setattr(paths, "DATA_STUBS", gone)
     for synth, ck in ((goal_synthesize, "gnet.pt"), (saga_synthesize, "wholegrasp.pt")):

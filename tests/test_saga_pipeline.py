@@ -69,7 +69,11 @@ def test_the_same_seed_gives_the_same_motion_and_polish_steps_are_checked(bm, mo
     with pytest.raises(ValueError, match="start_distance: .*at most 3"):      # 1e6 m ran, 31 km under the floor
         synthesize("camera", bm, start_distance=1e6)
     with pytest.raises(ValueError, match="^poses: expected at least one frame"):       # refused by Motion itself
-        synthesize("camera", bm, start=Motion(np.zeros((0, 55, 3)), np.zeros((0, 3)), np.zeros(10), 30.0))
+        Motion(np.zeros((0, 55, 3)), np.zeros((0, 3)), np.zeros(10), 30.0)
+    emptied = Motion(np.zeros((1, 55, 3)), np.zeros((1, 3)), np.zeros(10), 30.0)
+    emptied.poses, emptied.trans = emptied.poses[:0], emptied.trans[:0]              # emptied after it was made
+    with pytest.raises(ValueError, match="start: expected a Motion with at least one frame"):
+        synthesize("camera", bm, start=emptied)
 
 
 def test_saga_command_names_a_bad_object(capsys):

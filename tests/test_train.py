@@ -241,6 +241,10 @@ def test_the_same_state_saved_twice_gives_the_same_bytes(tmp_path):
     c = save_checkpoint(tmp_path / "c.pt", {"history": rows(str)})
     d = save_checkpoint(tmp_path / "d.pt", {"history": rows(built)})
     assert c.read_bytes() == d.read_bytes()
+    net = torch.nn.Sequential(torch.nn.Linear(2, 2), torch.nn.LayerNorm(2))     # a state dict keeps its _metadata
+    back = load_checkpoint(save_checkpoint(tmp_path / "m.pt", {"model": net.state_dict()}))["model"]
+    assert back._metadata == net.state_dict()._metadata and list(back) == list(net.state_dict())
+    net.load_state_dict(back)
 
 
 def test_kl_matches_torch_distributions_and_robust_kl_is_psi_of_it():

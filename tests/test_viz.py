@@ -328,6 +328,12 @@ def test_export_sequence_glb_round_trip(body, ball, tmp_path):
     # a file cut short or empty is named (numpy's "buffer is smaller than requested size", a JSONDecodeError and a
     # struct.error named none, an independent check)
     data = path.read_bytes()
+    import struct                                            # a chunk of unknown type is skipped, as glTF 2.0 asks
+    n_json = struct.unpack_from("<I", data, 12)[0]
+    extra = struct.pack("<II", 4, 0x12345678) + b"abcd"
+    odd = data[:20 + n_json] + extra + data[20 + n_json:]
+    (tmp_path / "odd.glb").write_bytes(odd[:8] + struct.pack("<I", len(odd)) + odd[12:])
+    np.testing.assert_allclose(load_sequence_glb(tmp_path / "odd.glb")[0], frames, atol=1e-5)
     for n, message in ((len(data) // 2, "is cut short or padded"), (900, "is cut short or padded"),
                        (0, "is not a glTF 2.0 binary file")):
         cut = tmp_path / f"cut{n}.glb"

@@ -256,14 +256,16 @@ def read_glb(path: str | os.PathLike) -> tuple[dict[str, Any], bytes]:
     off = 20 + n_json
     try:
         gltf = json.loads(data[20:off])
-        blob = b""
-        if off < len(data):
-            n_bin, kind = struct.unpack_from("<II", data, off)
-            if kind != 0x004E4942:                      # "BIN\0": the only chunk glTF allows after the JSON
-                raise ValueError(f"the chunk after the JSON is of type {kind:#010x}, not BIN")
-            blob = data[off + 8:off + 8 + n_bin]
-            if len(blob) != n_bin:
-                raise ValueError(f"its binary chunk holds {len(blob)} of {n_bin} bytes")
+        blob = None
+        while off < len(data):                          # chunks of unknown type are skipped, as glTF 2.0 asks
+            n, kind = struct.unpack_from("<II", data, off)
+            chunk = data[off + 8:off + 8 + n]
+            if len(chunk) != n:
+                raise ValueError(f"a chunk holds {len(chunk)} of its {n} bytes")
+            if kind == 0x004E4942 and blob is None:     # "BIN\0"
+                blob = chunk
+            off += 8 + n
+        blob = blob or b""
     except (ValueError, struct.error) as e:
         raise ValueError(f"path: {path} is a damaged glTF binary file ({e})") from None
     return gltf, blob
