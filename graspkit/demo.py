@@ -95,7 +95,10 @@ def _write_clip(bm: BodyModel, motion, out_dir: Path, name: str, objects: dict, 
     faces = bm.faces.numpy()
     objs = [(np.asarray(m.vertices), np.asarray(m.faces)) for m in objects.values()]
     anim = animate(v, faces, objects=objs, goals=goals, title=title, max_frames=45, size=2.6)
-    paths = [save_animation(anim, out_dir / f"{name}.gif", progress=False)]
+    try:
+        paths = [save_animation(anim, out_dir / f"{name}.gif", progress=False)]
+    finally:                                          # also when the save fails or is interrupted: no figure left open
+        plt.close(anim._fig)
     fig = show_scene(meshes=[(v[-1], faces)] + [(ov, of, OBJECT) for ov, of in objs], title=f"{title}: last frame")
     paths.append(save_png(fig, out_dir / f"{name}.png", dpi=90))
     paths += list(export_motion(motion, bm, out_dir, name, objects=objects, stride=3).values())

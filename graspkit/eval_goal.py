@@ -278,12 +278,20 @@ def _body_of(model: str, mtime_ns: int, size: int):
     return bm, gv, SparseBody(bm, torch.as_tensor(gv.vertex_ids))
 
 
-@lru_cache(maxsize=1)
 def _head_body():
-    """A SparseBody over the head-direction pair (back of the head, nose) of the default body."""
+    """A SparseBody over the head-direction pair (back of the head, nose) of the default body (the file
+    default_model_path() names now, as `_body`: it kept the first one of the process, an independent check)."""
+    from graspkit.paths import default_model_path, file_stamp
+
+    return _head_body_of(*file_stamp(default_model_path()))
+
+
+@lru_cache(maxsize=2)
+def _head_body_of(model: str, mtime_ns: int, size: int):
+    """_head_body for one model file (as it was at mtime_ns, size)."""
     from graspkit.models.gnet import SparseBody
 
-    _, gv, body = _body()
+    _, gv, body = _body_of(model, mtime_ns, size)
     return SparseBody(body.bm, torch.tensor([gv.head_back, gv.head_front]))
 
 

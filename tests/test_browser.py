@@ -53,7 +53,9 @@ def lab(tmp_path_factory):
     for nb in (ROOT / "notebooks").glob("*.ipynb"):
         shutil.copy(nb, work / nb.name)
     port = _free_port()
-    env = {**os.environ, "JUPYTER_CONFIG_DIR": str(work / ".jupyter"), "JUPYTER_RUNTIME_DIR": str(work / ".rt")}
+    env = {**os.environ, "JUPYTER_CONFIG_DIR": str(work / ".jupyter"), "JUPYTER_RUNTIME_DIR": str(work / ".rt"),
+           "JUPYTER_DATA_DIR": str(work / ".data"), "IPYTHONDIR": str(work / ".ipython"),
+           "npm_config_cache": str(work / ".npm"), "npm_config_logs_max": "0"}   # nothing written into the home folder
     env.pop("MPLBACKEND", None)
     proc = subprocess.Popen(
         [sys.executable, "-m", "jupyterlab", "--no-browser", f"--port={port}", "--ip=127.0.0.1",

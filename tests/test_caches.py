@@ -352,7 +352,11 @@ def test_the_default_body_follows_graspkit_model_within_a_process(tmp_path, monk
     from graspkit.eval_motionfill import default_body_digest
     from graspkit.paths import default_model_path
 
+    from graspkit.data.reaching import _default_model
+    from graspkit.eval_goal import _head_body
+
     first, bm0 = default_body_digest(), _body()[0]
+    head0, planner0 = _head_body().bm.digest(), _default_model().digest()      # the first of the process, cached
     with np.load(default_model_path(), allow_pickle=False) as z:
         arrays = {k: z[k] for k in z.files}
     tall = tmp_path / "tall.npz"
@@ -361,6 +365,8 @@ def test_the_default_body_follows_graspkit_model_within_a_process(tmp_path, monk
     want = BodyModel.from_file(tall).digest()
     assert default_body_digest() == want != first
     assert _body()[0].digest() == BodyModel.from_file(tall, flat_hand_mean=True).digest() != bm0.digest()
+    assert _head_body().bm.digest() == _body()[0].digest() != head0          # GOAL's head labels and the planner's
+    assert _default_model().digest() == BodyModel.from_file(tall).digest() != planner0      # body followed too
     size = tall.stat().st_size                        # rewritten in place at the same size: only the mtime tells
     np.savez(tall, **{**arrays, "v_template": arrays["v_template"] * 0.9})
     st = tall.stat()

@@ -71,10 +71,12 @@ def test_approach_clips_place_the_object_in_the_world():
     assert c.goal_frame == int(seq.extras["grasp.goal_frame"]) and c.rot6d.shape == (seq.num_frames, 55, 6)
 
 
-def test_train_commands_write_loadable_half_precision_weights(tmp_path):
+def test_train_commands_write_loadable_half_precision_weights(tmp_path, monkeypatch):
     from graspkit.cli import main
     from graspkit.models.gnet import load_gnet
     from graspkit.models.mnet import load_mnet
+
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))    # the run states of data made here: not kept
 
     for k, name in enumerate(("bottle", "can", "apple")):                # train, train, validation objects
         save_grasp_sequence(tmp_path / f"approach_{k:06d}.npz", _sequence(k, name))
@@ -429,6 +431,7 @@ def test_mnet_ablation_trains_on_train_validates_on_val_and_ships_its_own_checkp
         return real(folders, split, *a, **k)
 
     monkeypatch.setattr(eg, "mnet_windows", spy)
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))    # the run states of data made here: not kept
     stubs = tmp_path / "stubs"
     stubs.mkdir()
     assert eg._cmd_train(_train_args(data, "no_iaa", goal_repeat=1, vel_noise=0.0), "mnet", stubs) == 0
@@ -437,11 +440,13 @@ def test_mnet_ablation_trains_on_train_validates_on_val_and_ships_its_own_checkp
     assert load_mnet(stubs / "mnet_no_iaa.pt").cfg.attention is False
 
 
-def test_grabnet_smplx_baseline_ships_without_offsets(tmp_path):
+def test_grabnet_smplx_baseline_ships_without_offsets(tmp_path, monkeypatch):
     """`graspkit train gnet --variant smplx` (Tab. 1's GrabNet-SMPL-X: a decoder of SMPL-X parameters only, no offsets)
     ships <checkpoints>/gnet_smplx.pt whose config has no offsets (gnet.pt untouched)."""
     import graspkit.eval_goal as eg
     from graspkit.models.gnet import load_gnet
+
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))    # the run states of data made here: not kept
 
     data = tmp_path / "data"
     data.mkdir()

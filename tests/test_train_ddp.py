@@ -1,4 +1,5 @@
 """The shared training loop under torchrun with DDP (gloo, two CPU processes): ranks keep identical weights."""
+import os
 import subprocess
 import sys
 import textwrap
@@ -32,7 +33,8 @@ def test_two_ranks_train_to_identical_weights(tmp_path):
     script = tmp_path / "worker.py"
     script.write_text(WORKER)
     r = subprocess.run([sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2",
-                        str(script), str(tmp_path)], capture_output=True, text=True, timeout=240)
+                        str(script), str(tmp_path)], capture_output=True, text=True, timeout=240,
+                       env={**os.environ, "TMPDIR": str(tmp_path)})    # torchelastic's error-file folder goes here
     assert r.returncode == 0, r.stderr[-3000:]
     a = torch.load(tmp_path / "rank0.pt", weights_only=True)
     b = torch.load(tmp_path / "rank1.pt", weights_only=True)

@@ -124,15 +124,22 @@ def choose_posture(shoulders: np.ndarray, target_z: float, arm: float) -> tuple[
     return float(LEVELS[k]), shoulders[k], float(np.sqrt(r_eff**2 - dzk**2))
 
 
-@lru_cache(maxsize=16)
 def _default_model():
-    """The default body model, loaded once per process."""
+    """The default body model: the file default_model_path() names now (GRASPKIT_MODEL set later in a process is
+    followed; a file rewritten in place is another body), loaded once per file."""
+    from graspkit.paths import default_model_path, file_stamp
+
+    return _model_of(*file_stamp(default_model_path()))
+
+
+@lru_cache(maxsize=2)
+def _model_of(model: str, mtime_ns: int, size: int):
+    """_default_model for one model file (as it was at mtime_ns, size)."""
     import torch
 
     from graspkit.body import BodyModel
-    from graspkit.paths import default_model_path
 
-    return BodyModel.from_file(default_model_path(), dtype=torch.float32)
+    return BodyModel.from_file(model, dtype=torch.float32)
 
 
 def _betas(betas, bm) -> np.ndarray:
