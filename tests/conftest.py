@@ -59,6 +59,14 @@ def one_thread():
     torch.set_num_threads(n)
 
 
+@pytest.fixture(autouse=True)
+def one_thread_each_test(one_thread):
+    """Back to one thread after each test: a command a test runs (`--threads 2` by default) left the rest of its module
+    on two, so which tests ran on two depended on their order (an independent check)."""
+    yield
+    torch.set_num_threads(1)
+
+
 @pytest.fixture(scope="module")
 def bm() -> BodyModel:
     """The shipped procedural humanoid (float32, hand mean added), one per test module; a module that needs another
