@@ -261,38 +261,33 @@ def default_data_folders() -> list:
 def _body(model: str | Path | None = None):
     """The body model (default: graspkit's, the file default_model_path() names now; hand mean not added: the files
     store absolute poses), GOAL's vertex sampler and a SparseBody over its 400 vertices (built once per model file)."""
-    from graspkit.paths import default_model_path, file_stamp
+    from graspkit.body import shared_body
 
-    return _body_of(*file_stamp(model or default_model_path()))   # a model rewritten in place is another body
+    return _goal_parts(shared_body(model, flat_hand_mean=True))     # follows GRASPKIT_MODEL and files rewritten
 
 
 @lru_cache(maxsize=2)
-def _body_of(model: str, mtime_ns: int, size: int):
-    """_body for one model file (as it was at mtime_ns, size)."""
-    from graspkit.body import BodyModel
+def _goal_parts(bm):
+    """_body for one shared body model."""
     from graspkit.body.markers import goal_vertices
     from graspkit.models.gnet import SparseBody
 
-    bm = BodyModel.from_file(model, flat_hand_mean=True)
     gv = goal_vertices(bm)
     return bm, gv, SparseBody(bm, torch.as_tensor(gv.vertex_ids))
 
 
-def _head_body():
-    """A SparseBody over the head-direction pair (back of the head, nose) of the default body (the file
-    default_model_path() names now, as `_body`: it kept the first one of the process, an independent check)."""
-    from graspkit.paths import default_model_path, file_stamp
-
-    return _head_body_of(*file_stamp(default_model_path()))
-
-
 @lru_cache(maxsize=2)
-def _head_body_of(model: str, mtime_ns: int, size: int):
-    """_head_body for one model file (as it was at mtime_ns, size)."""
+def _head_parts(bm):
+    """A SparseBody over the head-direction pair (back of the head, nose) of one shared body model."""
     from graspkit.models.gnet import SparseBody
 
-    _, gv, body = _body_of(model, mtime_ns, size)
+    _, gv, body = _goal_parts(bm)
     return SparseBody(body.bm, torch.tensor([gv.head_back, gv.head_front]))
+
+
+def _head_body():
+    """_head_parts of the default body (the file default_model_path() names now, as `_body`)."""
+    return _head_parts(_body()[0])
 
 
 def gnet_data(folders: Sequence[str | Path]) -> tuple[dict[str, Tensor], dict[str, Tensor] | None]:

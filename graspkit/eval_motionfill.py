@@ -74,17 +74,15 @@ WINDOWS_VERSION = 1
 def default_body_digest() -> str:
     """BodyModel.digest() of graspkit's default body model (the file default_model_path() names now: GRASPKIT_MODEL
     may change within a process; each file is loaded once)."""
-    from graspkit.paths import default_model_path, file_stamp
+    from graspkit.body import shared_body
 
-    return _body_digest(*file_stamp(default_model_path()))    # a model rewritten in place is another body
+    return _digest(shared_body())
 
 
-@functools.lru_cache(maxsize=4)
-def _body_digest(path: str, mtime_ns: int, size: int) -> str:
-    """BodyModel.digest() of the model file at path (as it was at mtime_ns, size)."""
-    from graspkit.body import BodyModel
-
-    return BodyModel.from_file(path).digest()
+@functools.lru_cache(maxsize=2)
+def _digest(bm: BodyModel) -> str:
+    """bm.digest() once per shared body (hashing every array takes ~0.1 s)."""
+    return bm.digest()
 
 
 def windows_source(kind: str, n: int, data: Path | None = None, body: str | None = None

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -438,3 +439,18 @@ class BodyModel(nn.Module):
         kind = "procedural humanoid" if self.is_procedural else "SMPL-X file"
         return (f"{kind} {self.source}: V={self.num_vertices}, betas={self.num_betas}, "
                 f"expression={self.num_expression}, use_pca={self.use_pca}, pose_correctives={self.has_posedirs}")
+
+
+def shared_body(path: str | os.PathLike | None = None, **kwargs: Any) -> BodyModel:
+    """BodyModel.from_file(path, **kwargs) (path default: the file default_model_path() names now), built once per
+    version of the file (resolved path, mtime, size) and kwargs, and shared: GRASPKIT_MODEL set later in a process, or
+    the file rewritten in place, gives the new body (per-process caches kept the first one). Do not modify it."""
+    from graspkit.paths import default_model_path, file_stamp
+
+    return _shared_body(file_stamp(path or default_model_path()), tuple(sorted(kwargs.items())))
+
+
+@lru_cache(maxsize=4)
+def _shared_body(stamp: tuple[str, int, int], kwargs: tuple[tuple[str, Any], ...]) -> BodyModel:
+    """shared_body for one file version (a missing file: its reader's error)."""
+    return BodyModel.from_file(stamp[0], **dict(kwargs))

@@ -100,7 +100,7 @@ class Motion:
 
     def slice(self, start: int, stop: int | None = None) -> "Motion":
         """Frames [start, stop) as a new Motion (goal_frame shifted; the goal dropped if it falls outside); an empty
-        range is refused (the constructor still takes T = 0, which the writers refuse)."""
+        range is refused, as the constructor refuses T = 0 (named by start and stop here)."""
         sl = slice(start, stop)
         goal, gf, hand = self.goal, self.goal_frame, self.hand
         first, last, _ = sl.indices(self.num_frames)       # a negative start counts from the end, as numpy's

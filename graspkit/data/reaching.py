@@ -26,7 +26,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -125,21 +124,10 @@ def choose_posture(shoulders: np.ndarray, target_z: float, arm: float) -> tuple[
 
 
 def _default_model():
-    """The default body model: the file default_model_path() names now (GRASPKIT_MODEL set later in a process is
-    followed; a file rewritten in place is another body), loaded once per file."""
-    from graspkit.paths import default_model_path, file_stamp
+    """The default body model (float32): the file default_model_path() names now (`shared_body`)."""
+    from graspkit.body import shared_body
 
-    return _model_of(*file_stamp(default_model_path()))
-
-
-@lru_cache(maxsize=2)
-def _model_of(model: str, mtime_ns: int, size: int):
-    """_default_model for one model file (as it was at mtime_ns, size)."""
-    import torch
-
-    from graspkit.body import BodyModel
-
-    return BodyModel.from_file(model, dtype=torch.float32)
+    return shared_body()
 
 
 def _betas(betas, bm) -> np.ndarray:
