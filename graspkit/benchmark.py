@@ -400,7 +400,7 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
 
     from graspkit.body import BodyModel
     from graspkit.eval_goal import default_data_folders
-    from graspkit.paths import DATA_STUBS, default_model_path
+    from graspkit.paths import DATA_STUBS, default_model_path, stub_hint
 
     unknown = set(methods) - set(METHODS)
     if unknown:
@@ -408,13 +408,13 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
     out = Path(out_dir)
     ck = Path(checkpoints) if checkpoints else DATA_STUBS / "checkpoints"
     if not ck.is_dir():
-        raise FileNotFoundError(f"checkpoints: no folder {ck}")
+        raise FileNotFoundError(f"checkpoints: no folder {ck}{stub_hint(ck)}")
     made = default_data_folders()                       # where `graspkit data make` writes by default
     folders = [Path(p) for p in data] if data else (made if any(any(p.glob("*.npz")) for p in made if p.is_dir())
                                                     else [DATA_STUBS / "grasps", DATA_STUBS / "approach"])
     for f in folders:
         if not f.is_dir():
-            raise FileNotFoundError(f"data: no folder {f}")
+            raise FileNotFoundError(f"data: no folder {f}{stub_hint(f)}")
     grasps, approach = _holding(folders, "grasp_*.npz"), _holding(folders, "approach_*.npz")   # in any --data order
     shipped = {"saga": "wholegrasp_eval.json", "saga_motion": "motionfill_eval.json", "goal": "goal_eval.json",
                "wandr": "wandr_eval.json"}
@@ -555,9 +555,9 @@ def figure(rows: list[Row]) -> Figure:
 
     keys = [(t, k) for t, ms in (("grasp", GRASP_METRICS), ("motion", MOTION_METRICS)) for k in ms
             if any(k in r.values for r in rows if r.table == t)]
-    ncol = 4
+    ncol = 3                                    # the methods' long names need the width: 4 columns clipped titles
     nrow = max(1, math.ceil(len(keys) / ncol))
-    fig, axes = plt.subplots(nrow, ncol, figsize=(15, 3.3 * nrow), squeeze=False)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(16, 3.4 * nrow), squeeze=False, layout="constrained")
     for ax in axes.flat[len(keys):]:
         ax.set_axis_off()
     for ax, (t, k) in zip(axes.flat, keys):
@@ -574,7 +574,6 @@ def figure(rows: list[Row]) -> Figure:
         ax.invert_yaxis()
         ax.set_title(f"{t}: " + (GRASP_METRICS | MOTION_METRICS)[k][0], fontsize=9)
         ax.tick_params(axis="x", labelsize=7)
-    fig.tight_layout()
     return fig
 
 

@@ -136,9 +136,10 @@ def _cmd_saga(args: argparse.Namespace) -> int:
     import torch
 
     from graspkit.demo import _write_clip
-    from graspkit.saga import synthesize
+    from graspkit.saga import check_checkpoints, synthesize
 
     _check_object(args.object)
+    check_checkpoints()                               # before the body, which a plain `pip install` has to build
     pose, free_joints = _object_pose(args.at), _free_joints(args.free_joints)
     _print_notes(object_range_notes(pose))
     bm = _body_model(args.model)
@@ -159,10 +160,11 @@ def _cmd_goal(args: argparse.Namespace) -> int:
     import torch
 
     from graspkit.demo import _write_clip
-    from graspkit.goal import synthesize
+    from graspkit.goal import check_checkpoints, synthesize
     from graspkit.models.mnet import STALL_FRAMES
 
     _check_object(args.object)
+    check_checkpoints()                               # before the body, which a plain `pip install` has to build
     check_counts(args, stall=0, max_frames=2)
     pose = _object_pose(args.at)
     _print_notes(object_range_notes(pose))
@@ -312,7 +314,7 @@ def _command_named(argv: list[str] | None) -> str | None:
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The argument parser of the `graspkit` command for the command line `argv` (None: sys.argv[1:]; the
     subcommands of data, train and eval are only added when argv names that command)."""
-    from graspkit.paths import default_model_path
+    from graspkit.paths import default_model_path, procedural_model_path
 
     named = _command_named(argv)
 
@@ -324,7 +326,8 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     body = sub.add_parser("body", help="the body model").add_subparsers(dest="body_command", required=True)
     b = body.add_parser("build", help="build the procedural SMPL-X-format humanoid")
     b.add_argument("--seed", type=int, default=0)
-    b.add_argument("--out", type=Path, default=default_model_path())
+    b.add_argument("--out", type=Path, default=procedural_model_path(), help="where to write it (default: graspkit's "
+                   "own file, never the one GRASPKIT_MODEL names: %(default)s)")
     b.set_defaults(func=_cmd_body_build, out_is_file=True)
     i = body.add_parser("info", help="describe a body-model file")
     i.add_argument("--model", type=Path, default=default_model_path())
@@ -471,10 +474,27 @@ def check_cache() -> None:
     GRASPKIT_CACHE."""
     from graspkit.paths import cache_dir
 
+    unset = not os.environ.get("GRASPKIT_CACHE")
+    flag = f"graspkit's cache {cache_dir()} (the default: GRASPKIT_CACHE is not set)" if unset else "GRASPKIT_CACHE"
     try:
-        check_out(cache_dir(), is_file=False, flag="GRASPKIT_CACHE")
+        check_out(cache_dir(), is_file=False, flag=flag)
     except ValueError as e:
-        raise ValueError(f"{e} (graspkit's cache: set GRASPKIT_CACHE to a writable folder)") from None
+        raise ValueError(f"{e} (set GRASPKIT_CACHE to a writable folder)") from None
+
+
+def check_train_out(out: Path | None) -> None:
+    """Before any training: an --out in data_stubs/checkpoints (None: the default there) needs the data_stubs/ of a
+    clone (a plain `pip install` has none, and graspkit does not write in its package folder) that can be written;
+    ValueError naming --out."""
+    from graspkit.paths import DATA_STUBS, shipped
+
+    if out is not None and not Path(out).resolve().is_relative_to(DATA_STUBS.resolve()):
+        return
+    if not shipped():
+        raise ValueError(f"--out: required here: the default, {DATA_STUBS / 'checkpoints'}, is data_stubs/ of a clone "
+                         "of graspkit's repository (installed with `pip install -e .`), and this graspkit has none")
+    if out is None:
+        check_out(DATA_STUBS / "checkpoints", is_file=False, flag="--out (default: data_stubs/checkpoints)")
 
 
 def check_counts(args: argparse.Namespace, **least: int) -> None:
@@ -567,6 +587,8 @@ def _main(argv: list[str] | None) -> int:
             raise ValueError(f"--seed: expected a non-negative integer below 2^63, got {args.seed}")
         check_counts(args, **dict.fromkeys(("threads", "epochs", "batch_size", "workers", "n", "chunk"), 1))
         check_folders(getattr(args, "data", None))   # every command's --data names a folder (or several)
+        if args.command == "train":
+            check_train_out(args.out)
         if getattr(args, "out", None) is not None:
             check_out(args.out, getattr(args, "out_is_file", None))
         if args.command == "train" or (args.command == "data" and getattr(args, "data_command", None) == "make"

@@ -14,6 +14,7 @@ A method whose shipped checkpoint is missing is skipped with a message naming th
 """
 from __future__ import annotations
 
+import os
 from functools import lru_cache
 from pathlib import Path
 
@@ -39,8 +40,11 @@ DEMO_BODIES = [("t_pose", 0.0), ("a_pose", 0.0), ("walk", 0.0), ("reach_high", 0
 
 
 def load_or_build_body(model_path: Path | None = None) -> BodyModel:
-    """The body model at model_path (default: the shipped humanoid; built and saved if it is missing)."""
+    """The body model at model_path (default: the shipped humanoid; built and saved if it is missing: in a plain
+    `pip install`, in the cache, paths.built_model_path(); a file GRASPKIT_MODEL names is never built)."""
     path = Path(model_path) if model_path else default_model_path()
+    if not path.exists() and model_path is None and os.environ.get("GRASPKIT_MODEL"):     # a typo: not built there
+        raise FileNotFoundError(f"GRASPKIT_MODEL: {path}: no such body-model file (expected an SMPL-X-format .npz)")
     if not path.exists() and model_path is None:
         from graspkit.body.procedural import build_procedural_smplx, save_model_npz
 
@@ -135,7 +139,8 @@ def _test_clip():
 
     seqs = split_sequences([DATA_STUBS / "approach"], "approach", "test")
     if not seqs:
-        raise FileNotFoundError(f"data_stubs: no test-split approach clip in {DATA_STUBS / 'approach'}")
+        raise FileNotFoundError(f"data_stubs: no test-split approach clip in {DATA_STUBS / 'approach'}"
+                                + stub_hint(DATA_STUBS / "approach"))
     return seqs[0], object_mesh_at(seqs[0], 0)
 
 
@@ -240,6 +245,14 @@ def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, .
     if bad:
         raise ValueError(f"stages (--stages): unknown {bad}; expected some of {list(STAGES)}")
     stages = tuple(dict.fromkeys(stages))                # each stage once, in the order given
+    missing = {s: [CHECKPOINTS / ck for ck in METHOD_STAGES[s][1] if not (CHECKPOINTS / ck).is_file()]
+               for s in stages if s != "body"}
+    if all(missing.get(s) for s in stages):              # nothing could be written: an error, not an empty folder
+        first = missing[stages[0]][0]
+        raise FileNotFoundError(f"stages (--stages): none of {', '.join(stages)} can run: {first} is missing "
+                                f"(train it with `graspkit train ...`, see README){stub_hint(first)}")
+    if "planner" in stages:
+        _test_clip()                                     # a missing sample clip named before the folder is made
     bm = load_or_build_body(model_path)                 # before the folder: a bad model file leaves nothing behind
     out_dir.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
@@ -255,11 +268,10 @@ def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, .
             scene = {f"body_{k}": (verts[k].numpy() + [1.0 * k, 0.0, 0.0], faces) for k in range(len(verts))}
             written += [path, export_scene(scene, out_dir / "body_poses_shapes.glb")]
             continue
-        fn, needs = METHOD_STAGES[stage]
-        missing = [CHECKPOINTS / ck for ck in needs if not (CHECKPOINTS / ck).is_file()]
-        if missing:
-            tqdm.write(f"demo: skipping {stage}: its checkpoint {missing[0]} is missing "
-                       f"(train it with `graspkit train ...`, see README){stub_hint(missing[0])}")
+        fn, _ = METHOD_STAGES[stage]
+        if missing[stage]:
+            tqdm.write(f"demo: skipping {stage}: its checkpoint {missing[stage][0]} is missing "
+                       f"(train it with `graspkit train ...`, see README){stub_hint(missing[stage][0])}")
             continue
         paths, panel = fn(bm, out_dir)
         written += paths

@@ -50,6 +50,16 @@ def default_start(centre: np.ndarray, distance: float, yaw_offset: float = 0.0) 
     return Start(x, y, float(np.arctan2(centre[1] - y, centre[0] - x)))
 
 
+def check_checkpoints(checkpoints: str | Path | None = None) -> Path:
+    """The folder `checkpoints` once GNet's and MNet's files are in it (else FileNotFoundError naming the first
+    missing; None: the shipped ones)."""
+    ck = Path(checkpoints) if checkpoints is not None else CHECKPOINTS
+    for f in ("gnet.pt", "mnet.pt"):
+        if not (ck / f).is_file():
+            raise FileNotFoundError(f"checkpoints: {ck / f} is missing (see docs/goal.md){stub_hint(ck / f)}")
+    return ck
+
+
 def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, start: Start | None = None,
                seed: int = 0, start_distance: float = 1.0, max_frames: int = 150,
                checkpoints: str | Path = CHECKPOINTS, penetration: bool = True,
@@ -83,10 +93,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     name, obj_mesh = as_object(name, "name")
     if start is not None and not isinstance(start, Start):
         raise ValueError(f"start: expected a graspkit.data.reaching.Start or None, got {type(start).__name__}")
-    ck = Path(checkpoints)
-    for f in ("gnet.pt", "mnet.pt"):
-        if not (ck / f).is_file():
-            raise FileNotFoundError(f"checkpoints: {ck / f} is missing (see docs/goal.md){stub_hint(ck / f)}")
+    ck = check_checkpoints(checkpoints)
     pose = object_pose if object_pose is not None else within_reach_pose(seed)
     centre = np.asarray(pose.translation, np.float64)
     mesh = apply_pose(pose, obj_mesh)

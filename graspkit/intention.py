@@ -200,8 +200,9 @@ def intention(wrist: Tensor, pelvis: Tensor, psi: Tensor, goal: Tensor, time_lef
     if not bool(torch.isfinite(goal).all()):     # a NaN goal would make I^r silently 0 (NaN > eps is False)
         raise ValueError("goal: contains NaN or Inf (expected world positions in metres)")
     for x, n, unit in ((wrist, "wrist", "a position in metres"), (pelvis, "pelvis", "a position in metres"),
-                       (psi, "psi", "a heading in radians")):     # past t_G the output is zeroed: a NaN body
-        if not bool(torch.isfinite(x).all()):                     # would pass unseen
+                       (psi, "psi", "a heading in radians"),      # past t_G the output is zeroed: a NaN body
+                       (goal_heading, "goal_heading", "a heading in radians")):     # would pass unseen
+        if x is not None and not bool(torch.isfinite(torch.as_tensor(x)).all()):
             raise ValueError(f"{n}: contains NaN or Inf (expected {unit})")
     if torch.isnan(time_left).any():        # NaN > 0 is False: it would read as "goal time passed", silently
         raise ValueError("time_left: contains NaN (expected seconds to the goal frame; <= 0 once it has passed)")
@@ -236,6 +237,9 @@ def intention_from_pose(p: Tensor, rest: Tensor, goal: Tensor, time_left: Tensor
                         goal_heading: Tensor | None = None, joints: Tensor | None = None) -> Tensor:
     """Intention (..., 7) of the body in pose p (..., 135) with rest joints (..., 22, 3) towards goal (..., 3);
     `joints` (..., 22, 3) may pass body_joints(p, rest) when already computed."""
+    for x, n in ((p, "p"), (rest, "rest"), (joints, "joints")):    # named here, not as the wrist derived from them
+        if isinstance(x, Tensor) and not bool(torch.isfinite(x).all()):
+            raise ValueError(f"{n}: contains NaN or Inf (expected a pose, or joint positions in metres)")
     J = body_joints(p, rest) if joints is None else joints
     return intention(J[..., WRIST, :], J[..., PELVIS, :], heading_of_pose(p), goal, time_left, goal_heading)
 

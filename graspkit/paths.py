@@ -14,18 +14,42 @@ DATA_STUBS = REPO_ROOT / "data_stubs"
 BODY_MODELS = DATA_STUBS / "body_models"
 
 
+def shipped() -> bool:
+    """Whether graspkit runs from a clone with its data_stubs/ (not from a plain `pip install`, which has none)."""
+    return (DATA_STUBS / "checkpoints").is_dir()
+
+
 def stub_hint(path: Path) -> str:
-    """What to add to a "missing" message about `path`: where data_stubs/ went when graspkit runs without it."""
-    if Path(path).resolve().is_relative_to(DATA_STUBS.resolve()) and not DATA_STUBS.is_dir():
+    """What to add to a "missing" message about `path`: where data_stubs/ went when graspkit runs without it, or how
+    the default body is made then."""
+    if shipped():
+        return ""
+    if Path(path).resolve().is_relative_to(DATA_STUBS.resolve()):
         return (f"; {DATA_STUBS} does not exist: the shipped checkpoints and samples come with a clone of graspkit's "
                 "repository, installed there with `pip install -e .`, not with a plain `pip install`")
+    if Path(path).resolve() == built_model_path().resolve():
+        return ("; without data_stubs/ (a plain `pip install`) graspkit's default body is built there by `graspkit "
+                "body build` (or set GRASPKIT_MODEL to an SMPL-X .npz)")
     return ""
 
 
+def built_model_path() -> Path:
+    """Where the procedural humanoid is built and kept when no data_stubs/ ships with graspkit: in the cache."""
+    return cache_dir() / "body_models" / "smplx" / "SMPLX_NEUTRAL.npz"
+
+
 def default_model_path() -> Path:
-    """The SMPL-X-format model to use: $GRASPKIT_MODEL if set, else the shipped procedural humanoid."""
+    """The SMPL-X-format model to use: $GRASPKIT_MODEL if set (`~` expanded), else procedural_model_path(): the shipped
+    procedural humanoid (in a plain `pip install`, without data_stubs/, the one built in the cache; nothing is written
+    into the installed package)."""
     env = os.environ.get("GRASPKIT_MODEL")
-    return Path(env) if env else BODY_MODELS / "smplx" / "SMPLX_NEUTRAL.npz"
+    return Path(env).expanduser() if env else procedural_model_path()
+
+
+def procedural_model_path() -> Path:
+    """graspkit's procedural humanoid, whatever GRASPKIT_MODEL says: the shipped file, or in a plain `pip install`
+    the one built in the cache (built_model_path()); where `graspkit body build` writes by default."""
+    return DATA_STUBS / "body_models" / "smplx" / "SMPLX_NEUTRAL.npz" if shipped() else built_model_path()
 
 
 def cache_dir() -> Path:

@@ -76,6 +76,17 @@ def default_start(grasp_pelvis: np.ndarray, centre: np.ndarray, betas: np.ndarra
     return plan.slice(0, 1)
 
 
+def check_checkpoints(checkpoints: str | Path | None = None) -> Path:
+    """The folder `checkpoints` once the four files SAGA needs are in it (else FileNotFoundError naming the first
+    missing; None: the shipped ones)."""
+    ck = Path(checkpoints) if checkpoints is not None else CHECKPOINTS
+    for f in ("wholegrasp.pt", "pose_prior.pt", "motionfill.pt", "motionfill_smooth_ae.pt"):
+        if not (ck / f).is_file():
+            raise FileNotFoundError(f"checkpoints: {ck / f} is missing (see docs/saga.md and docs/saga_motion.md)"
+                                    + stub_hint(ck / f))
+    return ck
+
+
 def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose: ObjectPose | None = None,
                start: Start | Motion | None = None, seed: int = 0, start_distance: float = 0.4,
                grasp_steps: tuple[int, int, int] = (300, 400, 500),
@@ -129,11 +140,7 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
                          f"{getattr(bm, 'dtype', type(bm).__name__)}")
     given = name                     # as the caller gave it: a catalogue name keeps its cached grid
     name, obj_mesh = as_object(name, "name")
-    ck = Path(checkpoints)
-    for f in ("wholegrasp.pt", "pose_prior.pt", "motionfill.pt", "motionfill_smooth_ae.pt"):
-        if not (ck / f).is_file():
-            raise FileNotFoundError(f"checkpoints: {ck / f} is missing (see docs/saga.md and docs/saga_motion.md)"
-                                    + stub_hint(ck / f))
+    ck = check_checkpoints(checkpoints)
     bm = bm if bm is not None else BodyModel.from_file(default_model_path())
     pose = object_pose if object_pose is not None else within_reach_pose(seed)
     R_o, centre = np.asarray(pose.rotation, np.float64), np.asarray(pose.translation, np.float64)

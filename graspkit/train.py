@@ -344,6 +344,7 @@ def plot_history(history: list[dict[str, float]], keys: list[str] | None = None,
     if all(h[k] > 0 for h in history for k in keys):
         ax.set_yscale("log")
     ax.set_xlabel("epoch")
+    ax.set_ylabel("loss")
     ax.legend(fontsize=7)
     return ax
 

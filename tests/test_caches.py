@@ -203,12 +203,12 @@ def test_drop_damaged_removes_only_archives_failing_their_checksums(tmp_path, ca
 
 def test_default_model_path_follows_graspkit_model(monkeypatch, tmp_path):
     """$GRASPKIT_MODEL names the model to use (default_model_path's docstring); unset, the shipped humanoid."""
-    from graspkit.paths import BODY_MODELS, default_model_path
+    from graspkit.paths import DATA_STUBS, default_model_path
 
     monkeypatch.setenv("GRASPKIT_MODEL", str(tmp_path / "m.npz"))
     assert default_model_path() == tmp_path / "m.npz"
     monkeypatch.delenv("GRASPKIT_MODEL")
-    assert default_model_path() == BODY_MODELS / "smplx" / "SMPLX_NEUTRAL.npz"
+    assert default_model_path() == DATA_STUBS / "body_models" / "smplx" / "SMPLX_NEUTRAL.npz"
 
 
 def test_window_and_wandr_run_keys_see_content_not_only_sizes(tmp_path):

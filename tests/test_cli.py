@@ -1,4 +1,5 @@
 """The `graspkit` console command: help, version and the body-model subcommands."""
+import os
 import subprocess
 import sys
 import tempfile
@@ -374,8 +375,50 @@ def test_a_missing_shipped_checkpoint_says_when_data_stubs_is_not_there(tmp_path
     assert main(["wandr", "--goal", "1", "0", "1", "--checkpoint", str(gone / "w.pt"), "--out", str(tmp_path)]) == 2
     assert f"{gone} does not exist" in capsys.readouterr().err
     assert paths.stub_hint(tmp_path / "mine.pt") == ""
-    gone.mkdir(parents=True)
+    gone.mkdir(parents=True)                    # a data_stubs/ folder alone (once made by a default `body build`)
+    assert "pip install -e ." in paths.stub_hint(gone / "checkpoints" / "w.pt")
+    (gone / "checkpoints").mkdir()
     assert paths.stub_hint(gone / "checkpoints" / "w.pt") == ""
+
+
+def test_a_plain_install_builds_the_default_body_in_the_cache_not_the_package(tmp_path, monkeypatch, capsys):
+    """Without data_stubs/ (a plain `pip install`), the default body is the one built in the cache: `body build`
+    writes it there, `body info` and the library's loaders name `graspkit body build` when it is missing, the
+    commands build it there (never in the installed package), and `saga` / `goal` refuse missing checkpoints before
+    building anything."""
+    import graspkit.body.procedural as procedural
+    import graspkit.goal as goal
+    import graspkit.paths as paths
+    import graspkit.saga as saga
+    from graspkit.body import BodyModel
+    from graspkit.cli import build_parser, main
+    from graspkit.demo import load_or_build_body
+
+    shipped_model = paths.default_model_path()
+    gone, cache = tmp_path / "site" / "data_stubs", tmp_path / "cache"
+    monkeypatch.setattr(paths, "DATA_STUBS", gone)
+    monkeypatch.setattr(saga, "CHECKPOINTS", gone / "checkpoints")     # as they are read at import
+    monkeypatch.setattr(goal, "CHECKPOINTS", gone / "checkpoints")
+    monkeypatch.setenv("GRASPKIT_CACHE", str(cache))
+    monkeypatch.delenv("GRASPKIT_MODEL", raising=False)
+    built = cache / "body_models" / "smplx" / "SMPLX_NEUTRAL.npz"
+    assert paths.default_model_path() == built
+    assert build_parser(["body", "build"]).parse_args(["body", "build"]).out == built
+    with pytest.raises(ValueError, match="graspkit body build"):
+        BodyModel.from_file(paths.default_model_path())
+    assert main(["body", "info"]) == 2 and "graspkit body build" in capsys.readouterr().err
+    for method in ("saga", "goal"):
+        assert main([method, "--object", "mug", "--out", str(tmp_path / "out")]) == 2
+        assert "pip install -e ." in capsys.readouterr().err
+    for model in ("wandr", "gnet"):                       # their default --out is in data_stubs/checkpoints
+        assert main(["train", model]) == 2 and "--out: required here" in capsys.readouterr().err
+    assert not cache.exists() and not (tmp_path / "site").exists() and not (tmp_path / "out").exists()
+    made = []                                   # the build itself (15 s) stood in for by the shipped file
+    monkeypatch.setattr(procedural, "build_procedural_smplx", lambda seed: seed)
+    monkeypatch.setattr(procedural, "save_model_npz",
+                        lambda model, path: made.append(path) or Path(path).parent.mkdir(parents=True) or
+                        Path(path).write_bytes(shipped_model.read_bytes()))
+    assert load_or_build_body().num_betas > 0 and made == [built] and not (tmp_path / "site").exists()
 
 
 def _mark_worker(folder: str) -> None:
@@ -643,3 +686,53 @@ def test_a_missing_model_file_given_by_name_is_not_built(tmp_path):
     with pytest.raises((ValueError, OSError)):
         load_or_build_body(tmp_path / "none.npz")
     assert not list(tmp_path.iterdir())
+
+
+def test_a_demo_that_can_write_nothing_fails_and_leaves_no_folder(tmp_path, monkeypatch):
+    """Every named stage skipped for its missing checkpoint exited 0 with an empty --out; a planner stage without its
+    sample clips left an empty folder behind: both are errors now, named before the folder is made."""
+    import graspkit.demo as D
+
+    monkeypatch.setattr(D, "CHECKPOINTS", tmp_path / "none")
+    with pytest.raises(FileNotFoundError, match="^stages \\(--stages\\): none of saga, wandr can run: .*wholegrasp.pt"):
+        D.run_demo(tmp_path / "out", stages=("saga", "wandr"))
+    monkeypatch.setattr(D, "DATA_STUBS", tmp_path / "gone")
+    D._test_clip.cache_clear()
+    try:
+        with pytest.raises(FileNotFoundError, match="no test-split approach clip"):
+            D.run_demo(tmp_path / "out", stages=("planner",))
+    finally:
+        D._test_clip.cache_clear()
+    assert not (tmp_path / "out").exists()
+
+
+def test_graspkit_model_is_never_built_over_or_written_by_body_build(tmp_path, monkeypatch, capsys):
+    """GRASPKIT_MODEL naming a missing file (a typo) built the procedural body there and ran on it; `body build`
+    without --out replaced the file GRASPKIT_MODEL names (a user's own SMPL-X model); a `~` in it was taken as a
+    folder named "~"; an unwritable default cache was reported as "GRASPKIT_CACHE: <home>", a variable not set."""
+    import graspkit.paths as paths
+    from graspkit.cli import build_parser, check_cache
+    from graspkit.demo import load_or_build_body
+
+    typo = tmp_path / "models" / "SMPLX_NEUTRL.npz"
+    monkeypatch.setenv("GRASPKIT_MODEL", str(typo))
+    with pytest.raises(FileNotFoundError, match=f"^GRASPKIT_MODEL: {typo}: no such body-model file"):
+        load_or_build_body()
+    assert not typo.parent.exists()
+    assert build_parser(["body", "build"]).parse_args(["body", "build"]).out == paths.procedural_model_path() != typo
+    monkeypatch.setenv("GRASPKIT_MODEL", "~/m/SMPLX_NEUTRAL.npz")
+    assert paths.default_model_path() == Path.home() / "m" / "SMPLX_NEUTRAL.npz"
+    monkeypatch.delenv("GRASPKIT_CACHE", raising=False)
+    home = tmp_path / "home"
+    home.mkdir()
+    home.chmod(0o500)
+    monkeypatch.setenv("HOME", str(home))
+    try:
+        if os.access(home, os.W_OK):                                   # root writes anywhere: the try-write decides
+            monkeypatch.setattr("graspkit.cli.tempfile.TemporaryFile", lambda dir: (_ for _ in ()).throw(
+                PermissionError(13, "Permission denied")))
+        with pytest.raises(ValueError, match="^graspkit's cache .*/home/.cache/graspkit \\(the default: GRASPKIT_CACHE "
+                                             "is not set\\): .* is not writable"):
+            check_cache()
+    finally:
+        home.chmod(0o700)

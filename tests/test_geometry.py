@@ -969,6 +969,19 @@ def test_sdf_grid_nodes_hold_the_exact_sdf_and_padding_zero_is_the_surface_box()
     np.testing.assert_allclose(grid(torch.tensor(nodes)).numpy(), want, atol=1e-9)
 
 
+def test_sdf_grid_built_in_slabs_with_a_bar_holds_the_same_values(monkeypatch, capsys):
+    """from_mesh(progress=True) (a user mesh's collision grid, minutes for a scan, was built without a word) evaluates
+    the nodes a few z layers at a time under a bar: the values are those of the one call, bit for bit."""
+    import graspkit.objects.sdf as S
+
+    ico = trimesh.creation.icosphere(2, 0.05)
+    whole = SDFGrid.from_mesh(ico, resolution=12)
+    monkeypatch.setattr(S, "SLAB_NODES", 300)                        # 12 x 12 nodes a layer: 2 layers a slab
+    slabs = SDFGrid.from_mesh(ico, resolution=12, progress=True)
+    assert torch.equal(whole.values, slabs.values) and torch.equal(whole.lower, slabs.lower)
+    assert "SDF grid (320 faces)" in capsys.readouterr().err
+
+
 def test_sdf_grid_far_outside_reads_about_the_true_distance_and_resolution_one_is_refused():
     """Outside its box the grid continues as sdf(clamped) + |p - clamped| (docstring), so a point 0.5 m off a 6 cm
     cube reads its exact distance to within a cell; a grid of one node has no spacing and is refused by name."""

@@ -116,6 +116,62 @@ def test_refiner_names_nan_predictions_mismatched_betas_and_bad_steps(setup):
         ref(hat, torch.zeros(2, 10), pts, GraspRefineWeights(lr=0.0))
 
 
+def test_refiner_names_empty_batches_a_nan_floor_and_bad_weights(setup):
+    """B = 0 failed in a reshape, an empty object was called "target", a NaN floor ran with E_f silently dropped (its
+    gradient is 0 at NaN), a NaN λ failed after a step as "query", a negative λ was taken: each is named up front."""
+    from graspkit.optim.goal_refine import PosedSDF
+    from graspkit.objects.sdf import SDFGrid
+
+    _, _, ref = setup
+    hat = {"rot6d": torch.zeros(2, 55, 6), "transl": torch.zeros(2, 3), "head_dir": torch.zeros(2, 3),
+           "hand_offsets": torch.zeros(2, 99, 3)}
+    pts = torch.zeros(5, 3)
+    with pytest.raises(ValueError, match="^hat: expected at least one sample"):
+        ref({k: v[:0] for k, v in hat.items()}, torch.zeros(1, 10), pts)
+    with pytest.raises(ValueError, match="^object_points: expected at least one point"):
+        ref(hat, torch.zeros(2, 10), torch.zeros(2, 0, 3))
+    for ground in (float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="^ground: expected a finite floor height"):
+            ref(hat, torch.zeros(2, 10), pts, ground=ground)
+    for bad in ({"d": float("nan")}, {"f": float("inf")}, {"theta": -1.0}, {"pen_object": -0.1}):
+        with pytest.raises(ValueError, match=f"^{next(iter(bad))}: expected a finite number >= 0"):
+            GraspRefineWeights(**bad)
+    grid = SDFGrid(torch.zeros(3, 3, 3), torch.full((3,), -1.0), torch.ones(3))
+    for R, t, name in ((2 * torch.eye(3)[None], torch.zeros(1, 3), "R"), (torch.diag(torch.tensor([1.0, 1, -1]))[None],
+                       torch.zeros(1, 3), "R"), (torch.full((1, 3, 3), float("nan")), torch.zeros(1, 3), "R"),
+                       (torch.eye(3)[None], torch.full((1, 3), float("nan")), "t")):
+        with pytest.raises(ValueError, match=f"^{name}: "):
+            PosedSDF([grid], R, t)
+
+
+def test_eq12_and_eq13_helpers_name_bad_inputs(setup):
+    """hand_step_targets and refine_frame checked nothing: a negative speed moved the hand away from its goal, a NaN
+    target vertex silently dropped out of the fit (|NaN|'s gradient is 0), steps -1 returned MNet's pose unrefined."""
+    bm, gv, _ = setup
+    now, goal = torch.zeros(1, 2, 3), torch.ones(1, 2, 3)
+    with pytest.raises(ValueError, match="^speed: expected speeds >= 0"):
+        hand_step_targets(now, goal, torch.tensor([-0.03]))
+    with pytest.raises(ValueError, match="^speed: contains NaN or Inf"):
+        hand_step_targets(now, goal, torch.tensor([float("nan")]))
+    with pytest.raises(ValueError, match="^hand_now, hand_goal: expected the same shape"):
+        hand_step_targets(now, goal[:, :1], torch.tensor([0.01]))
+    hand_body = SparseBody(bm, torch.as_tensor(gv.vertex_ids[gv.right_hand]))
+    r6, t, betas = axis_angle_to_rot6d(_grasp_pose()).float(), torch.zeros(1, 3), torch.zeros(1, 10)
+    target = hand_body(pose_rotmats(r6), betas, t)[0]
+    bad_target = target.clone()
+    bad_target[0, 0, 0] = float("nan")
+    with pytest.raises(ValueError, match="^hand_target: contains NaN or Inf"):
+        refine_frame(hand_body, r6, t, betas, bad_target)
+    with pytest.raises(ValueError, match="^hand_target: expected shape \\(1, "):
+        refine_frame(hand_body, r6, t, betas, target[:, :10])
+    with pytest.raises(ValueError, match="^rot6d_hat: expected shape"):
+        refine_frame(hand_body, r6[:0], t[:0], betas, target[:0])
+    with pytest.raises(ValueError, match="^weights.steps: expected an integer >= 0"):
+        refine_frame(hand_body, r6, t, betas, target, MotionRefineWeights(steps=-1))
+    with pytest.raises(ValueError, match="^weights.hand: expected a finite number >= 0"):
+        refine_frame(hand_body, r6, t, betas, target, MotionRefineWeights(hand=-1.0))
+
+
 def test_hand_step_targets_is_eq12_without_overshoot():
     now = torch.zeros(2, 1, 3)
     goal = torch.tensor([[[0.1, 0.0, 0.0]], [[0.0, 0.0, 0.02]]])

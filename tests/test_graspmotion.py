@@ -813,3 +813,5 @@ def test_fit_names_contact_maps_outside_0_1_and_too_many_betas(bm):
         opt.fit(m, b, foot_contact=torch.full((1, 5, 4), 7.0))
     with pytest.raises(ValueError, match="betas: expected at most the body model's 10"):
         opt.fit(m, torch.zeros(1, 300))
+    with pytest.raises(ValueError, match=r"^markers: expected at least one sequence \(B >= 1\)"):    # a reshape error
+        opt.fit(torch.zeros(0, 5, 79, 3), torch.zeros(0, 10))

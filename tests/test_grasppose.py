@@ -266,6 +266,17 @@ def test_bad_inputs_are_named(bm, prior):
         GraspPoseOpt(bm, prior, GraspPoseConfig(heuristic=True)).fit(torch.zeros(1, 143, 3), _dummy_object())
     with pytest.raises(ValueError, match=r"markers: expected at least one marker set \(B >= 1\), got 0"):
         opt.fit(torch.zeros(0, 143, 3), _dummy_object())
+    obj = _dummy_object()                  # NaN points ran every stage, then failed naming rot_mats, betas, transl
+    pts = obj.points.clone()
+    pts[3, 1] = float("nan")
+    with pytest.raises(ValueError, match="^points: contains NaN or Inf"):
+        GraspObject(pts, obj.normals, 1.0)
+    with pytest.raises(ValueError, match="^points: expected at least one point"):
+        GraspObject(torch.zeros(0, 3), torch.zeros(0, 3), 1.0)
+    with pytest.raises(ValueError, match="^height: nan, expected an object-centre height"):       # an IndexError
+        GraspObject(obj.points, obj.normals, float("nan"))
+    with pytest.raises(ValueError, match="^origin: contains NaN or Inf"):
+        GraspObject(obj.points, obj.normals, 1.0, origin=torch.full((3,), float("nan")))
     for steps in ((-1, 2, 2), (1, 2), (1, 2.5, 3), (True, 2, 2)):
         with pytest.raises(ValueError, match=r"steps: expected three step counts >= 0"):
             GraspPoseOpt(bm, prior, GraspPoseConfig(steps=steps)).fit(torch.zeros(1, 143, 3), _dummy_object())

@@ -229,6 +229,24 @@ def test_a_nan_time_left_goal_or_body_is_refused_not_read_as_goal_time_passed():
             _I([0.0, 0.0, 1.0], [0.0, float("inf"), 0.9], 0.0, [2.0, 1.0, 1.0], time_left)
         with pytest.raises(ValueError, match="psi: contains NaN"):
             _I([0.0, 0.0, 1.0], [0.0, 0.0, 0.9], float("nan"), [2.0, 1.0, 1.0], time_left)
+        with pytest.raises(ValueError, match="goal_heading: contains NaN"):      # past t_G it gave zeros silently
+            _I([0.0, 0.0, 1.0], [0.0, 0.0, 0.9], 0.0, [2.0, 1.0, 1.0], time_left, float("nan"))
+
+
+def test_a_nan_pose_is_named_as_the_pose_not_as_the_wrist_derived_from_it():
+    """intention_from_pose / condition named a NaN in p (or rest) "wrist", an argument the caller did not pass."""
+    p, rest = torch.zeros(1, 135, dtype=torch.float64), torch.zeros(1, 22, 3, dtype=torch.float64)
+    p[0, 3], p[0, 7] = 1.0, 1.0                                   # the identity root in 6D
+    goal, t = torch.tensor([[1.0, 0.0, 1.0]], dtype=torch.float64), torch.tensor([1.0], dtype=torch.float64)
+    assert torch.isfinite(I.intention_from_pose(p, rest, goal, t)).all()
+    bad = p.clone()
+    bad[0, 22] = float("nan")
+    with pytest.raises(ValueError, match="^p: contains NaN or Inf"):
+        I.intention_from_pose(bad, rest, goal, t)
+    with pytest.raises(ValueError, match="^p: contains NaN or Inf"):
+        I.condition(bad, torch.zeros(1, 135, dtype=torch.float64), rest, goal, t)
+    with pytest.raises(ValueError, match="^rest: contains NaN or Inf"):
+        I.intention_from_pose(p, rest * float("nan"), goal, t)
 
 
 def _start(bm, frame=5):

@@ -116,6 +116,9 @@ def test_optimise_latents_refuses_frames_and_waypoints_outside_the_motion(start)
                 optimise_latents(model, start, goal, t_goal=4, iters=0, **{name: bad})
     with pytest.raises(ValueError, match="z0: contains NaN"):
         optimise_latents(model, start, goal, t_goal=4, iters=0, z0=torch.full((1, 4, 4), float("nan")))
+    for bad in (float("inf"), float("nan"), 0.0, -0.1, True):    # inf failed after a step, as "wrist: ... NaN"
+        with pytest.raises(ValueError, match="^lr: expected a finite learning rate > 0"):
+            optimise_latents(model, start, goal, t_goal=4, iters=1, lr=bad)
     res = optimise_latents(model, start, goal, t_goal=4, waypoints=[(4, (0.5, 0.5))], iters=6, lr=0.3, w_goal=0.0,
                            w_norm=0.0, generator=torch.Generator().manual_seed(0))
     P = res.motion.joints[0, 4, I.PELVIS, :2]

@@ -79,7 +79,9 @@ def load_model_arrays(path: str | os.PathLike, allow_pickle: bool = False) -> di
         raise ModelFileError(f"{path}: is a directory; pass the body-model file itself (expected an SMPL-X-format "
                              f".npz such as SMPLX_NEUTRAL.npz; .npz files here: {found or 'none'})")
     if not path.is_file():
-        raise ModelFileError(f"{path}: no such body-model file (expected an SMPL-X-format .npz)")
+        from graspkit.paths import stub_hint
+
+        raise ModelFileError(f"{path}: no such body-model file (expected an SMPL-X-format .npz){stub_hint(path)}")
     with open(path, "rb") as fh:
         head = fh.read(6)
     pickled = head[:1] == b"\x80"

@@ -62,7 +62,7 @@ def cached_sdf_grid(name: str | trimesh.Trimesh, resolution: int = 64, folder: P
     grid = read_cache(path, _read_grid)               # a damaged cache file is removed and rebuilt
     if grid is not None:
         return grid
-    grid = SDFGrid.from_mesh(_mesh(name), resolution, SDF_PADDING)
+    grid = SDFGrid.from_mesh(_mesh(name), resolution, SDF_PADDING, progress=True)     # minutes for a scan
     try:
         _write_grid(path, grid)
     except OSError as e:                              # a read-only cache: the grid is what the caller needs

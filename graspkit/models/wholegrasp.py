@@ -608,7 +608,7 @@ def check_height(h: float | Tensor, name: str) -> None:
     GRASP_HEIGHTS); a height in millimetres would give markers metres away without a word."""
     t = torch.as_tensor(h, dtype=torch.float64)
     if t.numel() and not ((t >= 0) & (t <= MAX_METRES)).all():
-        bad = float(t[(t < 0) | (t > MAX_METRES)].reshape(-1)[0])
+        bad = float(t[~((t >= 0) & (t <= MAX_METRES))].reshape(-1)[0])          # NaN too
         raise ValueError(f"{name}: {bad:g}, expected an object-centre height in metres above the floor, 0 to "
                          f"{MAX_METRES:g} (the training data's {GRASP_HEIGHTS[0]}-{GRASP_HEIGHTS[1]} m)")
 

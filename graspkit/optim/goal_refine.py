@@ -51,7 +51,7 @@ import torch
 from torch import Tensor
 
 from graspkit.body.skeleton import JOINT_INDEX
-from graspkit.checks import check_int
+from graspkit.checks import check_finite, check_int, check_weight
 from graspkit.models.gnet import SparseBody, pose_rotmats
 from graspkit.objects.distance import nearest_neighbours
 from graspkit.objects.sdf import SDFGrid
@@ -99,6 +99,10 @@ class GraspRefineWeights:
     steps: int = 200
     lr: float = 3e-3
 
+    def __post_init__(self) -> None:
+        for name in ("d", "theta", "gamma", "q", "f", "pen", "pen_floor", "pen_object"):   # a negative λ rewards
+            check_weight(getattr(self, name), name)                                      # what its term removes
+
     def lambdas(self) -> dict[str, float]:
         """λ of each energy term, by the term's name in GraspRefiner.energy."""
         return {"d": self.d, "theta": self.theta, "gamma": self.gamma, "q": self.q, "f": self.f, "pen": self.pen,
@@ -125,6 +129,12 @@ class PosedSDF:
         if R.dim() != 3 or R.shape[1:] != (3, 3) or t.shape != (R.shape[0], 3) or len(grids) != R.shape[0]:
             raise ValueError(f"grids, R, t: expected B grids, R (B,3,3), t (B,3); got {len(grids)}, "
                              f"{tuple(R.shape)}, {tuple(t.shape)}")
+        check_finite(R, "R", "rotation matrices")
+        check_finite(t, "t", "translations in metres")
+        Rd = R.double()                        # a scale or a mirror would make the grid read another object
+        if not (torch.allclose(Rd @ Rd.transpose(1, 2), torch.eye(3, dtype=Rd.dtype).expand_as(Rd), atol=1e-4)
+                and bool((torch.linalg.det(Rd) > 0).all())):
+            raise ValueError("R: expected rotation matrices (orthonormal, determinant +1)")
         self.grids, self.R, self.t = grids, R.float(), t.float()
         groups: dict[int, list[int]] = {}
         for b, g in enumerate(grids):
@@ -254,6 +264,8 @@ class GraspRefiner:
                 raise ValueError(f"hat[{k!r}]: expected shape (B, {', '.join(map(str, shape))}), "
                                  f"got {None if k not in hat else tuple(hat[k].shape)}")
         B = hat["rot6d"].shape[0]
+        if B == 0:
+            raise ValueError("hat: expected at least one sample, got 0 rows")
         for k in ("rot6d", "transl", "head_dir", "hand_offsets"):
             if hat[k].shape[0] != B or not bool(torch.isfinite(hat[k]).all()):
                 raise ValueError(f"hat[{k!r}]: expected {B} finite rows (one per sample)")
@@ -264,6 +276,10 @@ class GraspRefiner:
         if not isinstance(object_points, Tensor) or object_points.shape[-1] != 3 or object_points.dim() not in (2, 3) \
                 or not bool(torch.isfinite(object_points).all()):
             raise ValueError("object_points: expected finite points (P, 3) or (B, P, 3) in metres")
+        if object_points.shape[-2] == 0:
+            raise ValueError(f"object_points: expected at least one point, got shape {tuple(object_points.shape)}")
+        if isinstance(ground, bool) or not isinstance(ground, (int, float)) or not math.isfinite(ground):
+            raise ValueError(f"ground: expected a finite floor height in metres, got {ground!r}")
         w = weights or GraspRefineWeights()
         check_int(w.steps, "weights.steps", least=0)
         if not (math.isfinite(w.lr) and w.lr > 0):
@@ -343,6 +359,14 @@ class GraspRefiner:
 def hand_step_targets(hand_now: Tensor, hand_goal: Tensor, speed: Tensor) -> Tensor:
     """Eq. 12: v_{t+1} = v_t + s l, l the unit vector to the goal, s (B,) the average hand speed (m/frame),
     not past the goal: hand vertices (B,N,3) -> (B,N,3)."""
+    if hand_now.shape != hand_goal.shape or hand_now.dim() != 3 or hand_now.shape[-1] != 3:
+        raise ValueError(f"hand_now, hand_goal: expected the same shape (B, N, 3), got {tuple(hand_now.shape)}, "
+                         f"{tuple(hand_goal.shape)}")
+    for x, n, what in ((hand_now, "hand_now", "positions in metres"), (hand_goal, "hand_goal", "positions in metres"),
+                       (speed, "speed", "speeds in m/frame")):
+        check_finite(x, n, what)
+    if bool((torch.as_tensor(speed) < 0).any()):
+        raise ValueError("speed: expected speeds >= 0 (m/frame; Eq. 12 steps towards the goal)")
     delta = hand_goal - hand_now
     dist = delta.norm(dim=-1, keepdim=True)
     step = torch.minimum(speed.reshape(-1, 1, 1).expand_as(dist), dist)
@@ -365,6 +389,18 @@ def refine_frame(hand_body: SparseBody, rot6d_hat: Tensor, transl_hat: Tensor, b
     """Eq. 13 for one frame: Θ (B,55,6), (B,3) fitted so that `hand_body`'s vertices (B,N,3) meet `hand_target`,
     coupled to MNet's Θ̂; returns the refined (rot6d, transl)."""
     w = weights or MotionRefineWeights()
+    check_int(w.steps, "weights.steps", least=0)
+    if not (math.isfinite(w.lr) and w.lr > 0):
+        raise ValueError(f"weights.lr: expected a learning rate > 0, got {w.lr!r}")
+    for name in ("theta", "transl", "hand"):
+        check_weight(getattr(w, name), f"weights.{name}")
+    B = rot6d_hat.shape[0] if rot6d_hat.dim() == 3 else -1
+    for x, n, shape in ((rot6d_hat, "rot6d_hat", (B, 55, 6)), (transl_hat, "transl_hat", (B, 3)),
+                        (hand_target, "hand_target", (B, hand_body.n, 3))):
+        if B < 1 or tuple(x.shape) != shape:
+            raise ValueError(f"{n}: expected shape {shape if B >= 1 else '(B >= 1, ...)'}, got {tuple(x.shape)}")
+        check_finite(x, n, "finite values")
+    check_finite(betas, "betas", "shape coefficients")
     rot6d_hat, transl_hat, hand_target = rot6d_hat.detach(), transl_hat.detach(), hand_target.detach()
     rot6d = rot6d_hat.clone().requires_grad_(True)
     transl = transl_hat.clone().requires_grad_(True)

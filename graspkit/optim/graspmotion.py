@@ -507,6 +507,8 @@ class GraspMotionOpt:
             got = tuple(markers.shape) if isinstance(markers, Tensor) else type(markers).__name__
             raise ValueError(f"markers: expected shape (B, T+1, {self.n_markers}, 3), got {got}")
         B, F = markers.shape[:2]
+        if B < 1:
+            raise ValueError("markers: expected at least one sequence (B >= 1), got 0")
         if F < 2:
             raise ValueError(f"markers: expected a sequence of at least 2 frames, got {F}")
         if not isinstance(betas, Tensor) or betas.dim() != 2:

@@ -233,6 +233,10 @@ class GraspObject:
                 raise ValueError("rotation: expected a rotation matrix (orthonormal, determinant +1)")
         if self.origin is not None and (self.origin.dim() not in (1, 2) or self.origin.shape[-1] != 3):
             raise ValueError(f"origin: expected shape (3,) or (B, 3), got {tuple(self.origin.shape)}")
+        for name in ("rotation", "origin"):
+            x = getattr(self, name)
+            if x is not None and not bool(torch.isfinite(x).all()):
+                raise ValueError(f"{name}: contains NaN or Inf")
         require_points_in_metres(self.points, "points")
         if not bool(torch.isfinite(self.normals).all()):
             raise ValueError("normals: contains NaN or Inf")

@@ -21,6 +21,7 @@ iterations; the best iterate is kept.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Sequence
 
@@ -83,6 +84,8 @@ def optimise_latents(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose
             raise ValueError(f"waypoints: expected (frame in [0, {frames}], (x, y)), got {w!r}")
         check_finite(xy, "waypoints", "finite (x, y) in metres")
     check_int(iters, "iters")
+    if isinstance(lr, bool) or not isinstance(lr, (int, float)) or not (math.isfinite(lr) and lr > 0):
+        raise ValueError(f"lr: expected a finite learning rate > 0, got {lr!r}")
     for v, name in ((w_norm, "w_norm"), (w_goal, "w_goal"), (w_way, "w_way")):
         check_weight(v, name)
     if z0 is not None:

@@ -424,7 +424,7 @@ for k, (faces, view, title) in enumerate([(body_f, (10, -90), "whole body"), (bo
     ax.view_init(*view)
     ax.set_axis_off()
     ax.set_title(title, fontsize=9)
-fig.colorbar(plt.cm.ScalarMappable(cmap="coolwarm"), cax=fig.add_subplot(grid_spec[2]))
+fig.colorbar(plt.cm.ScalarMappable(cmap="coolwarm"), cax=fig.add_subplot(grid_spec[2]), label=f"attention $e^{{-{IAA_WEIGHT:g}d}}$")
 ax = fig.add_subplot(grid_spec[4])
 d = np.linspace(0, 1, 200)
 for w in (1.0, IAA_WEIGHT, 20.0):

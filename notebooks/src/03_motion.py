@@ -23,6 +23,7 @@
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
+from scipy.spatial import ConvexHull
 
 from graspkit import metrics as M
 from graspkit import viz
@@ -71,8 +72,9 @@ for st in steps:
     side = ("left", "right")[st.side]
     R = np.array([[np.cos(st.yaw), -np.sin(st.yaw)], [np.sin(st.yaw), np.cos(st.yaw)]])
     pts = (sole[side][:, [2, 0]] - rig.feet[side].ref[[2, 0]]) @ R.T + st.xy   # canonical (z fwd, x left) -> world
-    ax.fill(*pts[[0, 9, 7, 8, 10, 0]].T, color="#3b6ea8" if st.side == 0 else "#c0504d", alpha=0.6)
-    ax.annotate(f"{st.t_land:.1f}", st.xy, fontsize=6, ha="center", va="center")
+    ax.fill(*pts[ConvexHull(pts).vertices].T, color="#3b6ea8" if st.side == 0 else "#c0504d", alpha=0.6)
+    ax.annotate(f"{st.t_land:.1f}", st.xy, fontsize=7, ha="center", va="bottom" if st.side == 0 else "top",
+                xytext=(0, 7 if st.side == 0 else -7), textcoords="offset points")
 ax.plot(*plan.xy.T, "k-", lw=1, label="root plan")
 ax.plot(*root[:, :2].T, color="#6a3d9a", lw=1, label="pelvis (with sway)")
 ax.set_aspect("equal"); ax.legend(fontsize=8); ax.set_title("footprints (blue left, red right; landing time in s)")
@@ -271,7 +273,7 @@ q = M.motion_quality(bm, clips)
 fig, ax = plt.subplots(figsize=(7, 3))
 ax.hist(100 * moves, bins=np.linspace(0, 1.2, 49), color="#3b6ea8")
 ax.axvline(100 * M.WANDR_SKATE_THRESHOLD, color="#d62728", label="WANDR threshold 0.66 cm")
-ax.set_yscale("log"); ax.set_xlabel("lowest vertex, horizontal motion per frame (cm)"); ax.legend(fontsize=8)
+ax.set_yscale("log"); ax.set_ylabel("frame pairs"); ax.set_xlabel("lowest vertex, horizontal motion per frame (cm)"); ax.legend(fontsize=8)
 fig.tight_layout()
 print(f"{q['clips']} clips, {q['frames']} frames: FS (WANDR) {100 * q['fs_wandr']:.2f} %, SAGA skating "
       f"{100 * q['skate_saga']:.2f} %, GOAL sliding {100 * q['slide_goal']:.2f} %, max penetration "

@@ -127,7 +127,7 @@ ax = fig.add_subplot(1, 4, 4)
 ax.semilogy([h["total"] for h in history], color="k", lw=2, label="total (weighted)")
 for key in ("colli", "colli_obj", "contact", "anchor", "prior"):
     ax.semilogy([max(h[key], 1e-3) for h in history], label=key)
-ax.set_xlabel("Adam step"); ax.set_title("energy: total and terms (unweighted)", fontsize=9); ax.legend(fontsize=7)
+ax.set_xlabel("Adam step"); ax.set_ylabel("energy"); ax.set_title("energy: total and terms (unweighted)", fontsize=9); ax.legend(fontsize=7)
 plt.tight_layout(); plt.show()
 for name, r in (("closed", closed), ("polished", res)):
     q = r.quality

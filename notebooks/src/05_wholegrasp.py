@@ -222,8 +222,8 @@ fig = plt.figure(figsize=(11, 4.4))
 for k in range(5):
     mk, c = grasps.markers[k].numpy(), grasps.marker_contact[k].numpy() > 0.5
     ax = fig.add_subplot(2, 5, k + 1, projection="3d", proj_type="ortho")
-    ax.view_init(10, -70); ax.set_axis_off()
-    ax.scatter(*obj_pts.T, s=1, c="0.5"); ax.scatter(*mk[~c].T, s=3, c="#3b6ea8"); ax.scatter(*mk[c].T, s=8, c=MARKER_IN_CONTACT)
+    ax.view_init(10, -70); ax.set_axis_off(); ax.computed_zorder = False     # the markers drawn over the object
+    ax.scatter(*obj_pts.T, s=1, c="0.5", alpha=0.3); ax.scatter(*mk[~c].T, s=3, c="#3b6ea8"); ax.scatter(*mk[c].T, s=8, c=MARKER_IN_CONTACT)
     viz.set_equal(ax, mk); ax.set_title(f"sample {k + 1}", fontsize=8)
     ax = fig.add_subplot(2, 5, 6 + k, projection="3d", proj_type="ortho")
     ax.view_init(30, -70); ax.set_axis_off()

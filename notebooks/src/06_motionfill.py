@@ -53,14 +53,14 @@ print(f"weights: {sum(p.numel() for p in model.parameters()):,}")
 # %%
 img, cond = model.image(torch.as_tensor(scene["local"])[None], torch.as_tensor(scene["contacts"])[None].float(),
                         torch.as_tensor(scene["vel"])[None])
-fig, axes = plt.subplots(1, 5, figsize=(15, 3.2))
+fig, axes = plt.subplots(1, 5, figsize=(15, 3.2), layout="constrained")
 titles = ["ch 0: local markers + contacts", "ch 1: v_x", "ch 2: v_y", "ch 3: v_gamma", "condition, ch 0"]
 for ax, x, t in zip(axes, [img[0, 0], img[0, 1], img[0, 2], img[0, 3], cond[0, 0]], titles):
-    ax.imshow(x.numpy(), aspect="auto", cmap="coolwarm", vmin=-2.5, vmax=2.5)
+    im = ax.imshow(x.numpy(), aspect="auto", cmap="coolwarm", vmin=-2.5, vmax=2.5)
     ax.set_title(t, fontsize=9)
     ax.set_xlabel("feature (79 x 3 + 4)")
 axes[0].set_ylabel("frame")
-plt.tight_layout()
+_ = fig.colorbar(im, ax=axes, label="normalised value (contacts: 0 / 1)", shrink=0.9)
 
 # %% [markdown]
 # ## Sampled trajectories, seen from above
@@ -71,17 +71,17 @@ plt.tight_layout()
 g = torch.Generator().manual_seed(0)
 s = model.sample(torch.as_tensor(interp(scene["traj"])).float(), torch.as_tensor(scene["local"]),
                  torch.as_tensor(scene["contacts"]).float(), n=8, generator=g)
-fig, ax = plt.subplots(figsize=(5, 5))
+fig, ax = plt.subplots(figsize=(7, 5))
 for k in range(8):
     ax.plot(s["traj"][k, :61, 0], s["traj"][k, :61, 1], lw=1, alpha=0.8)
 ax.plot(scene["traj"][:61, 0], scene["traj"][:61, 1], "k-", lw=2.5, label="ground truth")
 gb = interp(scene["traj"])
-ax.plot(gb[:61, 0], gb[:61, 1], "k--", lw=1, label="Γ̄ (straight line)")
+ax.plot(gb[:61, 0], gb[:61, 1], "k--", lw=1, label=r"$\bar\Gamma$ (straight line)")
 ax.scatter(*scene["points"][:, :2].T, s=1, c="tab:brown", label=scene["name"])
-ax.set_aspect("equal")
+ax.set_aspect("equal", adjustable="datalim")
 ax.set_xlabel("x (m)")
 ax.set_ylabel("y (m, forward at the start)")
-ax.legend(fontsize=8)
+ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1))
 print(f"sample spread at mid-motion: {float(s['traj'][:, 30, :2].std(0).norm()):.2f} m")
 
 # %% [markdown]
@@ -115,7 +115,7 @@ for k in ("fit", "contact", "skate", "heel", "foot_acc", "floor", "smooth", "pal
         ax.semilogy(st, [max(r[k], 1e-4) for r in log if k in r], label=k)
 ax.axvline(100, color="k", lw=0.5)
 ax.axvline(400, color="k", lw=0.5, ls=":")
-ax.set_xlabel("Adam step (stage 1 | stage 2 | polish)")
+ax.set_xlabel("Adam step (stage 1 | stage 2 | polish)"); ax.set_ylabel("energy")
 _ = ax.legend(fontsize=8, ncol=3)
 print({k: round(v, 3) if isinstance(v, float) else v for k, v in info["rows"][0].items()})
 

@@ -160,7 +160,7 @@ ax.plot(*Jw[11, 0, :2], "ko", label="frame i = 11 (the window's state)")
 for g, tg in zip(batch["goal"], batch["t_goal"]):
     ax.plot(g[0], g[1], "x", color="#d62728", ms=9, mew=2)
     ax.annotate(f"t_G = i + {int(tg)}", (g[0], g[1]), fontsize=7, xytext=(4, 4), textcoords="offset points")
-ax.set_aspect("equal")
+ax.set_aspect("equal"); ax.set_xlabel("x (m)"); ax.set_ylabel("y (m)")
 ax.legend(fontsize=7)
 ax.set_title("four hindsight goals drawn for one window (x)", fontsize=9)
 fig.tight_layout()

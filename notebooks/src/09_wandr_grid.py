@@ -94,7 +94,7 @@ ax.legend(fontsize=7)
 bx = fig.add_subplot(1, 2, 2)
 bx.hist(100 * res.dtg, bins=30, color="#7f7f7f")
 bx.axvline(10, color="#2ca02c", ls="--", label="10 cm")
-bx.set_xlabel("DTG (cm)")
+bx.set_xlabel("DTG (cm)"); bx.set_ylabel("motions")
 bx.legend(fontsize=8)
 fig.tight_layout()
 
@@ -178,6 +178,7 @@ for k, (gg, t) in enumerate(zip(path_goals, t_goals)):
     ax.annotate(f"goal {k + 1} ({gg[2]:.1f} m) by {t / 30:.0f} s", (gg[0], gg[1]), fontsize=7, xytext=(4, 4),
                 textcoords="offset points")
 ax.set_aspect("equal"); ax.legend(fontsize=7); ax.set_title("seen from above", fontsize=9)
+ax.set_xlabel("x (m)"); ax.set_ylabel("y (m)")
 bx.plot(np.arange(len(d)) / 30, 100 * d.numpy(), color="#e377c2")
 for t in t_goals:
     bx.axvline(t / 30, color="0.7", ls=":")
