@@ -8,7 +8,11 @@ Conventions
   back to R by Gram-Schmidt. Networks predict 6D; files store axis-angle; LBS uses matrices.
 
 All functions are stable at angle 0 (Taylor terms instead of sin(x)/x) and near pi (axis from the
-matrix through the quaternion, Shepperd's branch choice).
+matrix through the quaternion, Shepperd's branch choice). Limits an independent check measured (2026-12-06), kept
+because no caller meets them and a change would move every body's last bits: first derivatives only (the second
+derivative of the conversions to axis-angle is NaN at the identity; nothing in graspkit differentiates twice), and
+axis_angle_to_matrix's (1 - cos t) / t^2 loses digits for small t, so its float32 gradient there is good to ~1e-4
+(float64: ~1e-12).
 """
 from __future__ import annotations
 

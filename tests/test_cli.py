@@ -736,3 +736,28 @@ def test_graspkit_model_is_never_built_over_or_written_by_body_build(tmp_path, m
             check_cache()
     finally:
         home.chmod(0o700)
+
+
+
+def test_data_make_gets_its_body_before_making_its_folder(tmp_path, monkeypatch, capsys):
+    """In a plain `pip install` (no data_stubs/), `data make` failed on the missing default body only inside the
+    maker, leaving the new --out folder behind, empty: the body is now built (in the cache) or named first."""
+    import graspkit.body.procedural as procedural
+    import graspkit.paths as paths
+    from graspkit.cli import main
+
+    monkeypatch.setattr(paths, "DATA_STUBS", tmp_path / "site" / "data_stubs")
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
+    monkeypatch.delenv("GRASPKIT_MODEL", raising=False)
+
+    def build(seed):
+        raise RuntimeError("the default body is built first")
+
+    monkeypatch.setattr(procedural, "build_procedural_smplx", build)
+    out = tmp_path / "dm"
+    with pytest.raises(RuntimeError, match="the default body is built first"):
+        main(["data", "make", "--kind", "locomotion", "--n", "1", "--out", str(out)])
+    assert not out.exists()
+    assert main(["data", "make", "--kind", "locomotion", "--n", "1", "--model", str(tmp_path / "none.npz"),
+                 "--out", str(out)]) == 2
+    assert "--model: " in capsys.readouterr().err and not out.exists()

@@ -155,6 +155,13 @@ def make_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2, mode
 
 def _cmd_make(args: argparse.Namespace) -> int:
     """Run `graspkit data make`."""
+    from graspkit.body.model import ModelFileError
+    from graspkit.demo import load_or_build_body
+
+    try:                       # before any folder: the default body built if missing (a plain `pip install`)
+        load_or_build_body(args.model)
+    except ModelFileError as e:
+        raise ValueError(f"--model: {e}") from None
     n = args.n if args.n is not None else DEFAULT_N[args.kind]
     out = args.out
     if out is None:
