@@ -44,7 +44,7 @@ import math
 import numbers
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import torch
 from torch import Tensor, nn
@@ -352,9 +352,9 @@ class WholeGraspVAE(nn.Module):
         centre = torch.as_tensor(centre, dtype=torch.float32, device=dev)
         h = centre[2] if object_height is None else torch.as_tensor(object_height, dtype=torch.float32, device=dev)
         z = torch.randn(n, self.cfg.latent, generator=generator, device=dev)
-        p = (pts - centre).expand(n, -1, -1)
-        nrm = object_normals.to(dev, torch.float32).expand(n, -1, -1)
-        out = self.decode(z, p, nrm, h.reshape(1, 1).expand(n, 1))
+        p, nrm = pts - centre, object_normals.to(dev, torch.float32)
+        out = _in_chunks(lambda zc: self.decode(zc, p.expand(len(zc), -1, -1), nrm.expand(len(zc), -1, -1),
+                                                h.reshape(1, 1).expand(len(zc), 1)), z)
         self.train(was)
         return Grasps(out["markers"], out.get("marker_contact"), out.get("object_contact"), centre)
 
@@ -603,6 +603,20 @@ class HandPCA:
         return coeffs @ self.comps[side] + self.mean[side]
 
 
+SAMPLE_CHUNK = 128        # samples decoded at a time: ~3 MB each (the object decoded per sample), 1,000 passed 4 GB
+
+
+def _in_chunks(decode: Callable[[Tensor], Any], z: Tensor) -> Any:
+    """decode(z) of latents z (n, latent) SAMPLE_CHUNK rows at a time, joined (a tensor, or a dict of tensors); at most
+    one chunk (the usual n) is one call, bit for bit."""
+    parts = [decode(z[s:s + SAMPLE_CHUNK]) for s in range(0, max(len(z), 1), SAMPLE_CHUNK)]
+    if len(parts) == 1:
+        return parts[0]
+    if isinstance(parts[0], dict):
+        return {k: torch.cat([q[k] for q in parts]) for k in parts[0]}
+    return torch.cat(parts)
+
+
 def check_height(h: float | Tensor, name: str) -> None:
     """A ValueError naming `name` unless the object height(s) t_O are in [0, MAX_METRES] m (the data's 0.5-1.7 m:
     GRASP_HEIGHTS); a height in millimetres would give markers metres away without a word."""
@@ -761,8 +775,9 @@ class GrabNetSMPLX(nn.Module):
         was = self.training
         self.eval()
         z = torch.randn(n, self.hparams["latent"], generator=generator)
-        out = self.decode(z, points.float().expand(n, -1, -1), normals.float().expand(n, -1, -1),
-                          torch.full((n, 1), float(height)))
+        out = _in_chunks(lambda zc: self.decode(zc, points.float().expand(len(zc), -1, -1),
+                                                normals.float().expand(len(zc), -1, -1),
+                                                torch.full((len(zc), 1), float(height))), z)
         self.train(was)
         return out
 
