@@ -1,5 +1,6 @@
 """Objects of one's own (graspkit.objects.user): a trimesh or a mesh file checked and moved to the object frame, its
 collision grid against trimesh's exact signed distance, the errors a bad mesh gets, and SAGA end to end on it."""
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -368,3 +369,41 @@ def test_a_small_part_sunk_into_another_is_seen(side):
     with pytest.raises(ValueError, match="overlap"):
         as_object(trimesh.util.concatenate([ball, knob.copy().apply_translation((0.06, 0, 0))]))
     as_object(trimesh.util.concatenate([ball, knob.copy().apply_translation((0.07, 0, 0))]))
+
+
+def test_the_solid_check_reads_each_part_only_near_its_box_with_the_whole_meshs_winding_number():
+    """solid_problem sums each connected part's winding number at the points near that part's box only (a scan of
+    250 fragments took minutes against every face): the sum is the whole mesh's winding number at any point, also
+    where two parts overlap (2 inside both)."""
+    import trimesh
+
+    from graspkit.objects.sdf import winding_number
+    from graspkit.objects.user import _winding_by_part
+
+    a, b, c = (trimesh.creation.icosphere(2, r) for r in (0.05, 0.03, 0.02))
+    b.apply_translation([0.06, 0.0, 0.0])                  # overlaps a
+    c.apply_translation([0.0, 0.2, 0.0])                   # apart
+    mesh = trimesh.util.concatenate([a, b, c])
+    labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, node_count=len(mesh.faces))
+    assert len(np.unique(labels)) == 3
+    q = np.random.default_rng(0).uniform([-0.1, -0.1, -0.1], [0.15, 0.3, 0.1], (4000, 3))
+    q = np.concatenate([q, [[0.04, 0.0, 0.0], [0.0, 0.2, 0.0], [0.5, 0.5, 0.5]]])
+    by_part = _winding_by_part(q, mesh, labels, 1e-4)
+    np.testing.assert_allclose(by_part, winding_number(q, mesh).numpy(), atol=1e-9)
+    assert by_part[-3] == pytest.approx(2.0) and by_part[-2] == pytest.approx(1.0) and by_part[-1] == 0.0
+
+
+def test_a_mesh_of_many_faces_gets_a_note_on_what_will_be_slow(monkeypatch):
+    """A scan of 82k faces ran `graspkit saga` for over 3 minutes without a word (its 2 mm collision grid): above
+    MANY_FACES faces as_object says what grows with them and what to do."""
+    import trimesh
+
+    import graspkit.objects.user as U
+
+    ball = trimesh.creation.icosphere(3, 0.06)                 # 1,280 faces
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        U.as_object(ball)                                      # no note below the limit
+    monkeypatch.setattr(U, "MANY_FACES", 1000)
+    with pytest.warns(UserWarning, match="the mesh: 1,280 faces: the exact distances and the 2 mm collision grid"):
+        U.as_object(ball)

@@ -261,6 +261,13 @@ def interpenetration(body: MeshLike, obj: MeshLike, spacing: float = 1e-3, refin
     """SAGA / GOAL interpenetration of a body mesh and an object mesh: volume (cm^3) and depth (cm). The object must
     be closed; the body may have holes (a body mesh that is not watertight): columns through a hole count as empty.
     refine: rays per cell side along edges and vertical walls (1: one ray per column, as before 2026-11-30)."""
+    return penetration_with_depth(body, obj, None, spacing, refine)
+
+
+def penetration_with_depth(body: MeshLike, obj: MeshLike, depth_m: float | None, spacing: float = 1e-3,
+                           refine: int = REFINE) -> Penetration:
+    """`interpenetration`, with the depth (m) given when the caller measured it already (graspkit.metrics.grasp_metrics:
+    minus the body vertices' smallest signed distance, the same search; None: measured here)."""
     vb, fb = _closed_numpy(body, "body", allow_holes=True)
     vo, fo = _closed_numpy(obj, "obj")
     open_edges = holes(fb)
@@ -271,7 +278,7 @@ def interpenetration(body: MeshLike, obj: MeshLike, spacing: float = 1e-3, refin
     for v, f, name in ((vb, fb, "body"), (vo, fo, "obj")):
         require_metres(torch.from_numpy(v), torch.from_numpy(f), name)
     return Penetration(volume_cm3=_volume(vb, fb, vo, fo, spacing, _refine(refine)) * 1e6,
-                       depth_cm=_depth(vb, vo, fo) * 100.0)
+                       depth_cm=(_depth(vb, vo, fo) if depth_m is None else depth_m) * 100.0)
 
 
 def _refine(refine: int) -> int:

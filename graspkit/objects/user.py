@@ -35,6 +35,7 @@ SOLID_OFFSET = 1e-5      # how far behind / in front of the surface it looks, as
 MIN_BAD = 2              # samples that must disagree before a mesh is refused
 PART_SAMPLES = 64        # more samples on each connected part of a mesh of several (down to 4 * MIN_BAD when many)
 SOLID_PAIRS = 10_000_000  # at most this many (sample, face) pairs: fewer samples on meshes of over 20,000 faces
+MANY_FACES = 20_000      # above this a user mesh gets a note: its collision grid takes minutes (docs/objects.md)
 Y_UP_SUFFIXES = (".glb", ".gltf")   # glTF 2.0 is +y up by specification: turned to z up on reading
 Y_UP_TO_Z_UP = np.array([[1.0, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]])   # +90 deg about x: y -> z
 
@@ -93,6 +94,11 @@ def _noted(mesh: trimesh.Trimesh, what: str) -> trimesh.Trimesh:
     note = size_note(mesh)
     if note:
         warnings.warn(f"{what}: {note}", UserWarning, stacklevel=2)
+    if len(mesh.faces) > MANY_FACES:
+        warnings.warn(f"{what}: {len(mesh.faces):,} faces: the exact distances and the 2 mm collision grid that SAGA "
+                      "and GOAL build for it grow with the faces (about 1.5 min at 20,000, minutes more at 80,000; the "
+                      "grid is kept in the cache); a decimated copy (trimesh's simplify_quadric_decimation) runs as "
+                      "well", UserWarning, stacklevel=2)
     return mesh
 
 
@@ -138,10 +144,11 @@ def solid_problem(mesh: trimesh.Trimesh, samples: int = SOLID_SAMPLES) -> str:
     checks (the total volume is positive) but give signed distances of the wrong sign; a cavity (an inner surface
     facing inwards) is fine."""
     samples = min(samples, max(64, SOLID_PAIRS // len(mesh.faces)))      # bounded time on large meshes
+    labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, node_count=len(mesh.faces))
     pts, nrm = sample_surface(mesh, samples, seed=0)
-    pts, nrm = _part_samples(mesh, samples, pts, nrm)
+    pts, nrm = _part_samples(mesh, labels, samples, pts, nrm)
     eps = SOLID_OFFSET * float((mesh.bounds[1] - mesh.bounds[0]).max())
-    w = winding_number(np.concatenate([pts - eps * nrm, pts + eps * nrm]), mesh).numpy()
+    w = _winding_by_part(np.concatenate([pts - eps * nrm, pts + eps * nrm]), mesh, labels, 2 * eps)
     behind, front = w[:len(pts)], w[len(pts):]
     overlap, inverted = behind > 1.5, (behind < 0.5) | (front < -0.5)
     inner = (front > 0.5) & ~overlap           # solid on both sides: parts that touch along a shared face
@@ -160,11 +167,28 @@ def solid_problem(mesh: trimesh.Trimesh, samples: int = SOLID_SAMPLES) -> str:
             "its normals must point outward (that part's invert())")
 
 
-def _part_samples(mesh: trimesh.Trimesh, samples: int, pts: np.ndarray, nrm: np.ndarray
+def _winding_by_part(q: np.ndarray, mesh: trimesh.Trimesh, labels: np.ndarray, pad: float) -> np.ndarray:
+    """Winding number (n,) of the closed mesh at points q (n,3), summed over its connected parts (`labels` per face),
+    each part only at the points within `pad` of its box: outside, a closed part adds 0 (to rounding), and a scan of
+    hundreds of fragments took minutes against every face."""
+    parts = np.unique(labels)
+    if len(parts) < 2:
+        return winding_number(q, mesh).numpy()
+    w = np.zeros(len(q))
+    for k in parts:
+        faces = mesh.faces[labels == k]
+        corners = mesh.vertices[faces].reshape(-1, 3)
+        near = np.all((q >= corners.min(0) - pad) & (q <= corners.max(0) + pad), axis=1)
+        if near.any():
+            w[near] += winding_number(q[near], (mesh.vertices, faces)).numpy()
+    return w
+
+
+def _part_samples(mesh: trimesh.Trimesh, labels: np.ndarray, samples: int, pts: np.ndarray, nrm: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray]:
-    """The area-uniform samples (n,3) and normals, with PART_SAMPLES more on each connected part of a mesh of several
-    (seed 1): a small part (a knob sunk into a ball) gets too few area-uniform samples to be seen overlapping."""
-    labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, node_count=len(mesh.faces))
+    """The area-uniform samples (n,3) and normals, with PART_SAMPLES more on each connected part (`labels` per face) of
+    a mesh of several (seed 1): a small part (a knob sunk into a ball) gets too few area-uniform samples to be seen
+    overlapping."""
     parts = np.unique(labels)
     if len(parts) < 2:
         return pts, nrm
