@@ -1034,3 +1034,9 @@ def test_a_column_length_linear_in_y_is_integrated_exactly_on_oblong_cells():
     for spacing in (0.005, 0.003):
         assert intersection_volume(a, b, spacing=spacing) * 1e6 == pytest.approx(exact, rel=1e-4)
         assert intersection_volume(b, a, spacing=spacing) * 1e6 == pytest.approx(exact, rel=1e-4)
+
+
+def test_a_grid_too_big_to_build_is_refused_naming_resolution():
+    """resolution 5,000 failed in torch's allocator (or ran out of memory) without naming the argument."""
+    with pytest.raises(ValueError, match="^resolution: 5000 gives .* grid nodes, more than 100,000,000"):
+        SDFGrid.from_mesh(trimesh.creation.icosphere(1, 0.05), resolution=5000)

@@ -136,6 +136,7 @@ def contains(points: Tensor | np.ndarray, mesh: MeshLike) -> Tensor:
 
 
 SLAB_NODES = 200_000      # grid nodes a call of SDFGrid.from_mesh(progress=True), a step of its bar
+MAX_GRID_NODES = 100_000_000   # SDFGrid.from_mesh refuses more (its float64 nodes and distances alone take 8 GB)
 
 
 @dataclass
@@ -178,6 +179,9 @@ class SDFGrid:
         lo, hi = used.min(0).values - padding, used.max(0).values + padding
         h = (hi - lo).max() / (resolution - 1)
         n = torch.clamp(torch.ceil((hi - lo) / h - 1e-6).long() + 1, min=2)
+        if int(n.prod()) > MAX_GRID_NODES:
+            raise ValueError(f"resolution: {resolution} gives {int(n.prod()):,} grid nodes, more than {MAX_GRID_NODES:,} "
+                             "(8 GB of float64 distances while built); a 2 mm grid of a 40 cm object has ~10 million")
         hi = lo + (n - 1) * h  # cubic cells: stretch the box to whole cells
         axes = [lo[i] + h * torch.arange(int(n[i]), dtype=torch.float64) for i in range(3)]
         zz, yy, xx = torch.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
