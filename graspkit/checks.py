@@ -44,6 +44,18 @@ def check_positive(value: Any, name: str, most: float = math.inf, unit: str = "m
     return float(value)
 
 
+def check_real(value: Any, name: str, what: str, positive: bool = False) -> float:
+    """A finite real number (a Python or numpy number, or a one-element tensor), > 0 with `positive`; `what` says what
+    was expected."""
+    try:
+        v = float(value) if not isinstance(value, (bool, str, bytes)) else math.nan
+    except (TypeError, ValueError, RuntimeError):
+        v = math.nan
+    if not math.isfinite(v) or (positive and v <= 0):
+        raise ValueError(f"{name}: expected {what}, got {value!r}")
+    return v
+
+
 def check_weight(value: Any, name: str) -> float:
     """A finite real >= 0 (a loss weight)."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) or value < 0:

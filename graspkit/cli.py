@@ -326,8 +326,8 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     body = sub.add_parser("body", help="the body model").add_subparsers(dest="body_command", required=True)
     b = body.add_parser("build", help="build the procedural SMPL-X-format humanoid")
     b.add_argument("--seed", type=int, default=0)
-    b.add_argument("--out", type=Path, default=procedural_model_path(), help="where to write it (default: graspkit's "
-                   "own file, never the one GRASPKIT_MODEL names: %(default)s)")
+    b.add_argument("--out", type=Path, default=procedural_model_path(), help="where to write it (default: the "
+                   "procedural body's own file, rebuilt in place, never the one GRASPKIT_MODEL names: %(default)s)")
     b.set_defaults(func=_cmd_body_build, out_is_file=True)
     i = body.add_parser("info", help="describe a body-model file")
     i.add_argument("--model", type=Path, default=default_model_path())
@@ -483,8 +483,8 @@ def check_cache() -> None:
 
 
 def check_train_out(out: Path | None) -> None:
-    """Before any training: an --out in data_stubs/checkpoints (None: the default there) needs the data_stubs/ of a
-    clone (a plain `pip install` has none, and graspkit does not write in its package folder) that can be written;
+    """Before training (or python -m graspkit.eval_saga): an --out in data_stubs/checkpoints (None: the default there)
+    needs the data_stubs/ of a clone (a plain `pip install` has none, and graspkit does not write in its package folder) that can be written;
     ValueError naming --out."""
     from graspkit.paths import DATA_STUBS, shipped
 

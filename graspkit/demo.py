@@ -46,8 +46,17 @@ def load_or_build_body(model_path: Path | None = None) -> BodyModel:
     if not path.exists() and model_path is None and os.environ.get("GRASPKIT_MODEL"):     # a typo: not built there
         raise FileNotFoundError(f"GRASPKIT_MODEL: {path}: no such body-model file (expected an SMPL-X-format .npz)")
     if not path.exists() and model_path is None:
-        from graspkit.body.procedural import build_procedural_smplx, save_model_npz
+        import tempfile
 
+        from graspkit.body.procedural import build_procedural_smplx, save_model_npz
+        from graspkit.paths import cannot_write
+
+        try:                       # before the 20-40 s build: a folder it cannot be kept in is named first
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with tempfile.TemporaryFile(dir=path.parent):
+                pass
+        except OSError as e:
+            raise cannot_write(path.parent, e) from None
         save_model_npz(build_procedural_smplx(seed=0), path)
     return BodyModel.from_file(path)
 
@@ -245,14 +254,21 @@ def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, .
     if bad:
         raise ValueError(f"stages (--stages): unknown {bad}; expected some of {list(STAGES)}")
     stages = tuple(dict.fromkeys(stages))                # each stage once, in the order given
+    if not stages:
+        raise ValueError(f"stages (--stages): expected at least one of {list(STAGES)}")
     missing = {s: [CHECKPOINTS / ck for ck in METHOD_STAGES[s][1] if not (CHECKPOINTS / ck).is_file()]
-               for s in stages if s != "body"}
+               for s in stages if s not in ("body", "planner")}
+    if "planner" in stages:
+        try:
+            _test_clip()
+            missing["planner"] = []
+        except FileNotFoundError:
+            missing["planner"] = [DATA_STUBS / "approach"]
     if all(missing.get(s) for s in stages):              # nothing could be written: an error, not an empty folder
         first = missing[stages[0]][0]
+        what = "(its sample clips)" if stages[0] == "planner" else "(train it with `graspkit train ...`, see README)"
         raise FileNotFoundError(f"stages (--stages): none of {', '.join(stages)} can run: {first} is missing "
-                                f"(train it with `graspkit train ...`, see README){stub_hint(first)}")
-    if "planner" in stages:
-        _test_clip()                                     # a missing sample clip named before the folder is made
+                                f"{what}{stub_hint(first)}")
     bm = load_or_build_body(model_path)                 # before the folder: a bad model file leaves nothing behind
     out_dir.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
@@ -269,6 +285,10 @@ def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, .
             written += [path, export_scene(scene, out_dir / "body_poses_shapes.glb")]
             continue
         fn, _ = METHOD_STAGES[stage]
+        if missing[stage] and stage == "planner":
+            tqdm.write(f"demo: skipping planner: no test-split approach clip in {missing[stage][0]}"
+                       f"{stub_hint(missing[stage][0])}")
+            continue
         if missing[stage]:
             tqdm.write(f"demo: skipping {stage}: its checkpoint {missing[stage][0]} is missing "
                        f"(train it with `graspkit train ...`, see README){stub_hint(missing[stage][0])}")

@@ -36,7 +36,7 @@ from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_out, reports_error
 from graspkit.data.motionfill_dataset import (MotionFillDataset, MotionFillStats, load_windows, make_windows,
                                               save_windows, split_clips)
 from graspkit.models.motionfill import MotionFillConfig, MotionFillVAE
-from graspkit.paths import read_cache
+from graspkit.paths import read_cache, stub_hint
 from graspkit.train import load_checkpoint
 
 if TYPE_CHECKING:
@@ -770,7 +770,7 @@ def main(argv: list[str] | None = None) -> int:
                    if not baseline_path(b, args.checkpoints).is_file()]
         if missing:                                 # the table would show them as "(paper only)" without a word
             raise ValueError(f"--checkpoints: the Tab. 3 baselines are missing: {missing} "
-                             "(graspkit train motionfill_baseline, docs/saga_motion.md)")
+                             "(graspkit train motionfill_baseline, docs/saga_motion.md)" + stub_hint(Path(missing[0])))
         t0 = time.perf_counter()
         arr = windows("approach", args.clips, data=args.data)
         test = clip_split(arr)["test"]

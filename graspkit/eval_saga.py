@@ -37,7 +37,7 @@ import torch
 from torch import Tensor
 
 from graspkit.checks import positive_float
-from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_folders, check_out, reports_errors
+from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_folders, check_out, check_train_out, reports_errors
 from graspkit.optim.grasppose import ARM_JOINTS, GraspPoseConfig, GraspPoseWeights
 from graspkit.paths import DATA_STUBS, write_atomic
 
@@ -496,6 +496,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--finish", type=Path, default=None, help="only turn this .partial.json into --out and print it")
     args = ap.parse_args(argv)
     check_counts(args, placements=1, samples=1, gt=1, refine=1)
+    check_train_out(args.out)                         # its default is in data_stubs/: none in a plain `pip install`
     check_out(args.out, is_file=True)                 # before any work (the partial results are written beside it)
     if any(s < 0 for s in args.steps):
         raise ValueError(f"--steps: expected three step counts >= 0, got {args.steps}")

@@ -22,10 +22,14 @@ def shipped() -> bool:
 def stub_hint(path: Path) -> str:
     """What to add to a "missing" message about `path`: where data_stubs/ went when graspkit runs without it, or how
     the default body is made then."""
+    env = os.environ.get("GRASPKIT_MODEL")
+    if env and Path(env).expanduser().resolve() == Path(path).resolve():
+        return " (the file GRASPKIT_MODEL names)"
     if shipped():
         return ""
     if Path(path).resolve().is_relative_to(DATA_STUBS.resolve()):
-        return (f"; {DATA_STUBS} does not exist: the shipped checkpoints and samples come with a clone of graspkit's "
+        there = "does not exist" if not DATA_STUBS.is_dir() else "holds no shipped checkpoints"
+        return (f"; {DATA_STUBS} {there}: the shipped checkpoints and samples come with a clone of graspkit's "
                 "repository, installed there with `pip install -e .`, not with a plain `pip install`")
     if Path(path).resolve() == built_model_path().resolve():
         return ("; without data_stubs/ (a plain `pip install`) graspkit's default body is built there by `graspkit "

@@ -416,7 +416,7 @@ def test_a_plain_install_builds_the_default_body_in_the_cache_not_the_package(tm
     made = []                                   # the build itself (15 s) stood in for by the shipped file
     monkeypatch.setattr(procedural, "build_procedural_smplx", lambda seed: seed)
     monkeypatch.setattr(procedural, "save_model_npz",
-                        lambda model, path: made.append(path) or Path(path).parent.mkdir(parents=True) or
+                        lambda model, path: made.append(path) or Path(path).parent.mkdir(parents=True, exist_ok=True) or
                         Path(path).write_bytes(shipped_model.read_bytes()))
     assert load_or_build_body().num_betas > 0 and made == [built] and not (tmp_path / "site").exists()
 
@@ -688,7 +688,7 @@ def test_a_missing_model_file_given_by_name_is_not_built(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
-def test_a_demo_that_can_write_nothing_fails_and_leaves_no_folder(tmp_path, monkeypatch):
+def test_a_demo_that_can_write_nothing_fails_and_leaves_no_folder(tmp_path, monkeypatch, capsys):
     """Every named stage skipped for its missing checkpoint exited 0 with an empty --out; a planner stage without its
     sample clips left an empty folder behind: both are errors now, named before the folder is made."""
     import graspkit.demo as D
@@ -699,11 +699,17 @@ def test_a_demo_that_can_write_nothing_fails_and_leaves_no_folder(tmp_path, monk
     monkeypatch.setattr(D, "DATA_STUBS", tmp_path / "gone")
     D._test_clip.cache_clear()
     try:
-        with pytest.raises(FileNotFoundError, match="no test-split approach clip"):
+        with pytest.raises(FileNotFoundError, match="none of planner can run: .*gone/approach is missing \\(its sample"):
             D.run_demo(tmp_path / "out", stages=("planner",))
+        assert not (tmp_path / "out").exists()
+        monkeypatch.setattr(D, "body_gallery", lambda bm: (plt.figure(), torch.zeros(0, 3)))
+        monkeypatch.setattr("graspkit.viz.export.export_scene", lambda scene, path: path)
+        D.run_demo(tmp_path / "out", stages=("body", "planner"))          # the planner skipped, as a checkpoint is
+        assert "demo: skipping planner: no test-split approach clip" in capsys.readouterr().out
     finally:
         D._test_clip.cache_clear()
-    assert not (tmp_path / "out").exists()
+    with pytest.raises(ValueError, match="^stages \\(--stages\\): expected at least one"):
+        D.run_demo(tmp_path / "out2", stages=())
 
 
 def test_graspkit_model_is_never_built_over_or_written_by_body_build(tmp_path, monkeypatch, capsys):
@@ -761,3 +767,18 @@ def test_data_make_gets_its_body_before_making_its_folder(tmp_path, monkeypatch,
     assert main(["data", "make", "--kind", "locomotion", "--n", "1", "--model", str(tmp_path / "none.npz"),
                  "--out", str(out)]) == 2
     assert "--model: " in capsys.readouterr().err and not out.exists()
+
+
+def test_a_cache_that_cannot_keep_the_default_body_is_named_before_the_build(tmp_path, monkeypatch):
+    """In a plain `pip install` with an unwritable cache, the default body was built for 20-40 s and then failed."""
+    import graspkit.body.procedural as procedural
+    import graspkit.paths as paths
+    from graspkit.demo import load_or_build_body
+
+    monkeypatch.setattr(paths, "DATA_STUBS", tmp_path / "site" / "data_stubs")
+    (tmp_path / "afile").write_text("")
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "afile"))           # a file: nothing can be made under it
+    monkeypatch.delenv("GRASPKIT_MODEL", raising=False)
+    monkeypatch.setattr(procedural, "build_procedural_smplx", lambda seed: pytest.fail("built before the check"))
+    with pytest.raises(OSError, match="cannot write in .*afile/body_models/smplx.*set GRASPKIT_CACHE"):
+        load_or_build_body()

@@ -1040,3 +1040,24 @@ def test_a_grid_too_big_to_build_is_refused_naming_resolution():
     """resolution 5,000 failed in torch's allocator (or ran out of memory) without naming the argument."""
     with pytest.raises(ValueError, match="^resolution: 5000 gives .* grid nodes, more than 100,000,000"):
         SDFGrid.from_mesh(trimesh.creation.icosphere(1, 0.05), resolution=5000)
+
+
+@pytest.mark.parametrize("budget", [10_000_000, 1300, 60])     # one call; two clouds a call; one cloud in row chunks
+def test_nearest_neighbours_in_chunks_of_clouds_or_rows_matches_a_kd_tree(monkeypatch, budget):
+    """A big batch was cut into chunks of a few rows of every cloud (64 clouds of 20,000 points: 200 s against 9 s one
+    by one): now whole clouds a call while one fits in PAIR_BUDGET, else one cloud at a time; same indices either way,
+    and those of scipy's k-d tree."""
+    from scipy.spatial import cKDTree
+
+    import graspkit.objects.distance as D
+
+    g = torch.Generator().manual_seed(3)
+    q, t = torch.randn(7, 30, 3, generator=g, dtype=torch.float64), torch.randn(7, 20, 3, generator=g, dtype=torch.float64)
+    monkeypatch.setattr(D, "PAIR_BUDGET", budget)
+    d, i = D.nearest_neighbours(q, t)
+    for b in range(7):
+        kd_d, kd_i = cKDTree(t[b].numpy()).query(q[b].numpy())
+        np.testing.assert_array_equal(i[b].numpy(), kd_i)
+        np.testing.assert_allclose(d[b].numpy(), kd_d, atol=1e-12)
+    d1, i1 = D.nearest_neighbours(q, t[0])                     # one target for every cloud
+    assert torch.equal(i1, torch.stack([D.nearest_neighbours(q[b], t[0])[1] for b in range(7)]))

@@ -2,6 +2,7 @@
 Adam's first step, the model left as it was, batches that optimise each sequence as if alone, argument checks."""
 from types import SimpleNamespace
 
+import numpy as np
 import pytest
 import torch
 
@@ -116,9 +117,11 @@ def test_optimise_latents_refuses_frames_and_waypoints_outside_the_motion(start)
                 optimise_latents(model, start, goal, t_goal=4, iters=0, **{name: bad})
     with pytest.raises(ValueError, match="z0: contains NaN"):
         optimise_latents(model, start, goal, t_goal=4, iters=0, z0=torch.full((1, 4, 4), float("nan")))
-    for bad in (float("inf"), float("nan"), 0.0, -0.1, True):    # inf failed after a step, as "wrist: ... NaN"
+    for bad in (float("inf"), float("nan"), 0.0, -0.1, True, "0.1"):    # inf failed after a step, as "wrist: ... NaN"
         with pytest.raises(ValueError, match="^lr: expected a finite learning rate > 0"):
             optimise_latents(model, start, goal, t_goal=4, iters=1, lr=bad)
+    for good in (np.float32(0.05), torch.tensor(0.05)):          # numbers of numpy and torch are numbers
+        optimise_latents(model, start, goal, t_goal=4, iters=1, lr=good)
     res = optimise_latents(model, start, goal, t_goal=4, waypoints=[(4, (0.5, 0.5))], iters=6, lr=0.3, w_goal=0.0,
                            w_norm=0.0, generator=torch.Generator().manual_seed(0))
     P = res.motion.joints[0, 4, I.PELVIS, :2]

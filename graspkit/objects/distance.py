@@ -210,19 +210,19 @@ def nearest_neighbours(query: Tensor | np.ndarray, target: Tensor | np.ndarray,
     batch = max(len(q3), len(t3))
     q3, t3 = q3.expand(batch, -1, -1), t3.expand(batch, -1, -1)
     idx = torch.empty(q3.shape[:2], dtype=torch.int64, device=q3.device)
-    rows = max(1, PAIR_BUDGET // (batch * t3.shape[1]))
-    # a big batch in chunks of a few query rows each runs far slower per pair than one cloud at a time (64 clouds
-    # of 20,000 points against 1,024: 200 s against 9 s): then each cloud alone, with the rows the budget allows
-    each = batch > 1 and rows < min(64, q3.shape[1])
+    # within PAIR_BUDGET pairs a call: whole clouds together while one fits, else one cloud at a time in row chunks
+    # (a batch cut into chunks of a few rows of every cloud ran far slower per pair: 64 clouds of 20,000 points
+    # against 1,024 took 200 s against 9 s one by one)
+    N, M = q3.shape[1], t3.shape[1]
+    clouds = max(1, PAIR_BUDGET // max(N * M, 1))             # whole clouds a call (1: one, in row chunks)
+    rows = N if clouds > 1 else max(1, PAIR_BUDGET // max(M, 1))
     with torch.no_grad():
         qd, td = q3.detach().to(torch.float64), t3.detach().to(torch.float64)
         centre = td.mean(1, keepdim=True)          # cdist's |a|² + |b|² - 2ab rounds far from the origin: centre first
         qd, td = qd - centre, td - centre
-        for b in range(batch) if each else [slice(None)]:
-            b = slice(b, b + 1) if each else b
-            step = max(1, PAIR_BUDGET // t3.shape[1]) if each else rows
-            for s in range(0, q3.shape[1], step):
-                idx[b, s:s + step] = torch.cdist(qd[b, s:s + step], td[b]).argmin(-1)
+        for b in range(0, batch, clouds):
+            for s in range(0, N, rows):
+                idx[b:b + clouds, s:s + rows] = torch.cdist(qd[b:b + clouds, s:s + rows], td[b:b + clouds]).argmin(-1)
     nearest = torch.gather(t3, 1, idx[..., None].expand(-1, -1, 3))
     diff = q3 - nearest
     dist = (diff * diff).sum(-1) if squared else torch.linalg.vector_norm(diff, dim=-1)

@@ -51,7 +51,7 @@ import torch
 from torch import Tensor
 
 from graspkit.body.skeleton import JOINT_INDEX
-from graspkit.checks import check_finite, check_int, check_weight
+from graspkit.checks import check_finite, check_int, check_real, check_weight
 from graspkit.models.gnet import SparseBody, pose_rotmats
 from graspkit.objects.distance import nearest_neighbours
 from graspkit.objects.sdf import SDFGrid
@@ -278,8 +278,7 @@ class GraspRefiner:
             raise ValueError("object_points: expected finite points (P, 3) or (B, P, 3) in metres")
         if object_points.shape[-2] == 0:
             raise ValueError(f"object_points: expected at least one point, got shape {tuple(object_points.shape)}")
-        if isinstance(ground, bool) or not isinstance(ground, (int, float)) or not math.isfinite(ground):
-            raise ValueError(f"ground: expected a finite floor height in metres, got {ground!r}")
+        ground = check_real(ground, "ground", "a finite floor height in metres")
         w = weights or GraspRefineWeights()
         check_int(w.steps, "weights.steps", least=0)
         if not (math.isfinite(w.lr) and w.lr > 0):

@@ -21,7 +21,6 @@ iterations; the best iterate is kept.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Sequence
 
@@ -29,7 +28,7 @@ import torch
 from torch import Tensor
 
 from graspkit import intention as I
-from graspkit.checks import check_finite, check_generator, check_int, check_weight
+from graspkit.checks import check_finite, check_generator, check_int, check_real, check_weight
 from graspkit.models.blocks import evaluating
 from graspkit.models.wandr import Rollout, WandrCVAE, expand_starts, rollout
 
@@ -84,8 +83,7 @@ def optimise_latents(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose
             raise ValueError(f"waypoints: expected (frame in [0, {frames}], (x, y)), got {w!r}")
         check_finite(xy, "waypoints", "finite (x, y) in metres")
     check_int(iters, "iters")
-    if isinstance(lr, bool) or not isinstance(lr, (int, float)) or not (math.isfinite(lr) and lr > 0):
-        raise ValueError(f"lr: expected a finite learning rate > 0, got {lr!r}")
+    lr = check_real(lr, "lr", "a finite learning rate > 0", positive=True)
     for v, name in ((w_norm, "w_norm"), (w_goal, "w_goal"), (w_way, "w_way")):
         check_weight(v, name)
     if z0 is not None:
