@@ -459,13 +459,14 @@ def check_out(path: Path, is_file: bool | None = None, flag: str = "--out") -> N
         if p.exists():
             if not p.is_dir():
                 raise ValueError(f"{flag}: {p} is a file, so {path} cannot be written")
+            made = "" if p == path else f", so {path} cannot be made"      # the path may be a default not typed
             if not os.access(p, os.W_OK | os.X_OK):
-                raise ValueError(f"{flag}: {p} is not writable")
+                raise ValueError(f"{flag}: {p} is not writable{made}")
             try:                        # os.access says yes to root everywhere, also in /proc and /sys: try it
                 with tempfile.TemporaryFile(dir=p):
                     pass
             except OSError as e:
-                raise ValueError(f"{flag}: {p} is not writable ({e.strerror})") from None
+                raise ValueError(f"{flag}: {p} is not writable ({e.strerror}){made}") from None
             return
 
 
