@@ -485,8 +485,8 @@ def check_cache() -> None:
 
 def check_train_out(out: Path | None) -> None:
     """Before training (or python -m graspkit.eval_saga): an --out in data_stubs/checkpoints (None: the default there)
-    needs the data_stubs/ of a clone (a plain `pip install` has none, and graspkit does not write in its package folder) that can be written;
-    ValueError naming --out."""
+    needs the data_stubs/ of a clone (a plain `pip install` has none, and graspkit does not write in its package
+    folder) that can be written; ValueError naming --out."""
     from graspkit.paths import DATA_STUBS, shipped
 
     if out is not None and not Path(out).resolve().is_relative_to(DATA_STUBS.resolve()):

@@ -1052,7 +1052,8 @@ def test_nearest_neighbours_in_chunks_of_clouds_or_rows_matches_a_kd_tree(monkey
     import graspkit.objects.distance as D
 
     g = torch.Generator().manual_seed(3)
-    q, t = torch.randn(7, 30, 3, generator=g, dtype=torch.float64), torch.randn(7, 20, 3, generator=g, dtype=torch.float64)
+    q = torch.randn(7, 30, 3, generator=g, dtype=torch.float64)
+    t = torch.randn(7, 20, 3, generator=g, dtype=torch.float64)
     monkeypatch.setattr(D, "PAIR_BUDGET", budget)
     d, i = D.nearest_neighbours(q, t)
     for b in range(7):

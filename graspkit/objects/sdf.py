@@ -136,7 +136,7 @@ def contains(points: Tensor | np.ndarray, mesh: MeshLike) -> Tensor:
 
 
 SLAB_NODES = 200_000      # grid nodes a call of SDFGrid.from_mesh(progress=True), a step of its bar
-MAX_GRID_NODES = 100_000_000   # SDFGrid.from_mesh refuses more (its float64 nodes and distances alone take 8 GB)
+MAX_GRID_NODES = 100_000_000   # SDFGrid.from_mesh refuses more (its float64 nodes and distances take ~6 GB)
 
 
 @dataclass
@@ -180,8 +180,8 @@ class SDFGrid:
         h = (hi - lo).max() / (resolution - 1)
         n = torch.clamp(torch.ceil((hi - lo) / h - 1e-6).long() + 1, min=2)
         if int(n.prod()) > MAX_GRID_NODES:
-            raise ValueError(f"resolution: {resolution} gives {int(n.prod()):,} grid nodes, more than {MAX_GRID_NODES:,} "
-                             "(8 GB of float64 distances while built); a 2 mm grid of a 40 cm object has ~10 million")
+            raise ValueError(f"resolution: {resolution} gives {int(n.prod()):,} grid nodes, more than "
+                             f"{MAX_GRID_NODES:,} (several GB while built; a 2 mm grid of a 40 cm object: ~10 million)")
         hi = lo + (n - 1) * h  # cubic cells: stretch the box to whole cells
         axes = [lo[i] + h * torch.arange(int(n[i]), dtype=torch.float64) for i in range(3)]
         zz, yy, xx = torch.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
