@@ -56,6 +56,16 @@ def check_real(value: Any, name: str, what: str, positive: bool = False) -> floa
     return v
 
 
+def check_rotation(R: Any, name: str) -> None:
+    """Finite rotation matrices (..., 3, 3): orthonormal, determinant +1 (a scale, shear or mirror would make an object's
+    grid read another object)."""
+    check_finite(R, name, "rotation matrices")
+    Rd = torch.as_tensor(R).double()
+    if not (torch.allclose(Rd @ Rd.transpose(-1, -2), torch.eye(3, dtype=Rd.dtype).expand_as(Rd), atol=1e-4)
+            and bool((torch.linalg.det(Rd) > 0).all())):
+        raise ValueError(f"{name}: expected a rotation matrix (orthonormal, determinant +1)")
+
+
 def check_weight(value: Any, name: str) -> float:
     """A finite real >= 0 (a loss weight)."""
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) or value < 0:

@@ -11,7 +11,6 @@ from typing import Any
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 DATA_STUBS = REPO_ROOT / "data_stubs"
-BODY_MODELS = DATA_STUBS / "body_models"
 
 
 def shipped() -> bool:

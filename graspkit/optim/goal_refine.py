@@ -51,7 +51,7 @@ import torch
 from torch import Tensor
 
 from graspkit.body.skeleton import JOINT_INDEX
-from graspkit.checks import check_finite, check_int, check_real, check_weight
+from graspkit.checks import check_finite, check_int, check_real, check_rotation, check_weight
 from graspkit.models.gnet import SparseBody, pose_rotmats
 from graspkit.objects.distance import nearest_neighbours
 from graspkit.objects.sdf import SDFGrid
@@ -129,12 +129,8 @@ class PosedSDF:
         if R.dim() != 3 or R.shape[1:] != (3, 3) or t.shape != (R.shape[0], 3) or len(grids) != R.shape[0]:
             raise ValueError(f"grids, R, t: expected B grids, R (B,3,3), t (B,3); got {len(grids)}, "
                              f"{tuple(R.shape)}, {tuple(t.shape)}")
-        check_finite(R, "R", "rotation matrices")
+        check_rotation(R, "R")
         check_finite(t, "t", "translations in metres")
-        Rd = R.double()                        # a scale or a mirror would make the grid read another object
-        if not (torch.allclose(Rd @ Rd.transpose(1, 2), torch.eye(3, dtype=Rd.dtype).expand_as(Rd), atol=1e-4)
-                and bool((torch.linalg.det(Rd) > 0).all())):
-            raise ValueError("R: expected rotation matrices (orthonormal, determinant +1)")
         self.grids, self.R, self.t = grids, R.float(), t.float()
         groups: dict[int, list[int]] = {}
         for b, g in enumerate(grids):
@@ -389,8 +385,7 @@ def refine_frame(hand_body: SparseBody, rot6d_hat: Tensor, transl_hat: Tensor, b
     coupled to MNet's Θ̂; returns the refined (rot6d, transl)."""
     w = weights or MotionRefineWeights()
     check_int(w.steps, "weights.steps", least=0)
-    if not (math.isfinite(w.lr) and w.lr > 0):
-        raise ValueError(f"weights.lr: expected a learning rate > 0, got {w.lr!r}")
+    check_real(w.lr, "weights.lr", "a learning rate > 0", positive=True)
     for name in ("theta", "transl", "hand"):
         check_weight(getattr(w, name), f"weights.{name}")
     B = rot6d_hat.shape[0] if rot6d_hat.dim() == 3 else -1

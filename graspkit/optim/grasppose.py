@@ -102,7 +102,7 @@ from torch import Tensor
 from tqdm.auto import tqdm
 
 from graspkit.body.markers import foot_vertices, saga_markers, sole_rest_heights, vertex_normals
-from graspkit.checks import check_bool, check_int, check_probabilities, check_weight
+from graspkit.checks import check_bool, check_finite, check_int, check_probabilities, check_rotation, check_weight
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX, JOINT_NAMES
 from graspkit.metrics import joint_limit_excess
 from graspkit.models.gnet import SparseBody
@@ -225,18 +225,12 @@ class GraspObject:
                              f"got {tuple(self.normals.shape)}")
         if self.rotation is not None and tuple(self.rotation.shape[-2:]) != (3, 3):
             raise ValueError(f"rotation: expected shape (3, 3) or (B, 3, 3), got {tuple(self.rotation.shape)}")
-        if self.rotation is not None:          # a scale or shear would make the grid read another object
-            R = self.rotation.double()
-            eye = torch.eye(3, dtype=R.dtype)
-            if not (torch.allclose(R @ R.transpose(-1, -2), eye.expand_as(R), atol=1e-4)
-                    and bool((torch.linalg.det(R) > 0).all())):
-                raise ValueError("rotation: expected a rotation matrix (orthonormal, determinant +1)")
+        if self.rotation is not None:
+            check_rotation(self.rotation, "rotation")
         if self.origin is not None and (self.origin.dim() not in (1, 2) or self.origin.shape[-1] != 3):
             raise ValueError(f"origin: expected shape (3,) or (B, 3), got {tuple(self.origin.shape)}")
-        for name in ("rotation", "origin"):
-            x = getattr(self, name)
-            if x is not None and not bool(torch.isfinite(x).all()):
-                raise ValueError(f"{name}: contains NaN or Inf")
+        if self.origin is not None:
+            check_finite(self.origin, "origin", "the mesh origin's place in metres")
         require_points_in_metres(self.points, "points")
         if not bool(torch.isfinite(self.normals).all()):
             raise ValueError("normals: contains NaN or Inf")
