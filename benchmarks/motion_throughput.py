@@ -60,7 +60,7 @@ def quality(bm, n: int) -> None:
           "joint limits (deg beyond) |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for kind, gen in GENERATORS.items():
-        q = M.motion_quality(bm, (gen(clip_seed(0, kind, i), bm) for i in range(n)))
+        q = M.motion_quality(bm, (gen(clip_seed(0, kind, i), bm) for i in range(n)), progress=True)
         print(f"| {kind} | {q['clips']} | {q['frames']} | {100 * q['fs_wandr']:.2f} % | {100 * q['skate_saga']:.2f} % | "
               f"{100 * q['slide_goal']:.2f} % | {100 * q['penetration_max']:.2f} / {100 * q['penetration_mean']:.3f} | "
               f"{q['max_joint_speed']:.2f} ({q['max_joint_speed_at']}) | {q['max_joint_turn']:.0f} ({q['max_joint_turn_at']}) | "
