@@ -184,6 +184,13 @@ def test_pca_hand_pose_expects_num_pca_comps():
         bm(left_hand_pose=torch.zeros(2, 45))
 
 
+def test_a_path_given_to_the_constructor_points_to_from_file(tmp_path):
+    with pytest.raises(TypeError, match=r"arrays: expected a mapping .* got PosixPath; .* BodyModel.from_file"):
+        BodyModel(tmp_path / "model.npz")
+    with pytest.raises(TypeError, match=r"arrays: expected a mapping .* got list$"):
+        BodyModel([1, 2])
+
+
 def test_file_errors_name_file_and_key(tmp_path):
     arr = random_smplx_arrays(num_vertices=50, num_faces=20, seed=8)
     missing = {k: v for k, v in arr.items() if k != "weights"}

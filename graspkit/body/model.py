@@ -183,6 +183,9 @@ class BodyModel(nn.Module):
                  use_pca: bool = False, num_pca_comps: int = 6, flat_hand_mean: bool = False,
                  dtype: torch.dtype = torch.float32, source: str = "<arrays>") -> None:
         super().__init__()
+        if not isinstance(arrays, Mapping):
+            hint = "; to load a model file use BodyModel.from_file(path)" if isinstance(arrays, (str, os.PathLike)) else ""
+            raise TypeError(f"arrays: expected a mapping of SMPL-X arrays (name -> array), got {type(arrays).__name__}{hint}")
         validate_model_arrays(arrays, source)
         for name, v in (("num_betas", num_betas), ("num_expression", num_expression), ("num_pca_comps", num_pca_comps)):
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)):

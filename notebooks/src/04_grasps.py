@@ -190,10 +190,15 @@ print(f"APD of the markers over {len(res6)} grasps: {M.apd(ms):.2f} m (the perso
 print("types:", [r.task.grasp_type for r in res6], "| contact:", [bool(r.quality["contact"]) for r in res6])
 omesh = apply_pose(pose, mug)
 colors = plt.get_cmap("tab10").colors
-fig, axes = viz.figure(("top", (25, -100)), size=4.2, title="five grasps of one placement (one colour each)")
-for ax in axes:
+fig, axes = viz.figure(("top", (25, -100), (60, -100)), size=3.8, title="five grasps of one placement (one colour each)")
+for ax in axes[:2]:
     viz.draw_meshes(ax, [(v, faces, colors[k]) for k, v in enumerate(V6)] + [(omesh.vertices, omesh.faces, viz.OBJECT)])
     viz.set_equal(ax, np.concatenate([v[::10] for v in V6]), pad=0.02)
+centre = omesh.vertices.mean(0)                  # the close-up keeps only faces near the mug, or the bodies hide it
+near = [(v, faces[np.linalg.norm(v[faces].mean(1) - centre, axis=1) < 0.13], colors[k]) for k, v in enumerate(V6)]
+viz.draw_meshes(axes[2], near + [(omesh.vertices, omesh.faces, viz.OBJECT)])
+viz.set_equal(axes[2], omesh.vertices, pad=0.06)
+axes[2].set_title("close-up: the mug and the body within 13 cm of it", fontsize=9)
 plt.show()
 
 # %% [markdown]
