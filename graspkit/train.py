@@ -39,6 +39,7 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 from tqdm.auto import tqdm
 
+from graspkit.optim.step import with_autograd
 from graspkit.paths import naming_errors, publish, sweep_stale_temps, temp_beside, write_atomic
 
 StepFn = Callable[[torch.nn.Module, Any, int], dict[str, torch.Tensor]]
@@ -362,6 +363,7 @@ def write_history_plot(path: str | Path, history: list[dict[str, float]]) -> Pat
     return write_atomic(path, buf.getvalue())
 
 
+@with_autograd
 def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig,
         checkpoint: str | Path | None = None, extra: dict[str, Any] | None = None,
         val_dataset: Dataset | None = None,

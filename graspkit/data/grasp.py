@@ -43,6 +43,7 @@ from graspkit.data.reaching import Start, plan_reach
 from graspkit.data.rig import build_rig
 from graspkit.objects.catalogue import SPECS, TEST_OBJECTS, list_objects, make_object
 from graspkit.objects.placement import ObjectPose, sample_object_pose
+from graspkit.optim.step import with_autograd
 from graspkit.rotations import axis_angle_to_matrix
 
 if TYPE_CHECKING:
@@ -526,6 +527,7 @@ class GraspFitter:
                 "grasp_frame": f}
         return local, plan.trans[f].astype(np.float64), plan, float(resid[0]), info
 
+    @with_autograd
     def fit(self, tasks: list[GraspTask], history: list | None = None, polish_steps: int | None = None
             ) -> list[GraspResult]:
         """Fit B grasps of ONE object (batched), returning them with quality figures (see `evaluate`)."""

@@ -74,8 +74,15 @@ class SparseBody(nn.Module):
         self.register_buffer("weights_t", bm.lbs_weights[ids].T.contiguous())
 
     def forward(self, rot: Tensor, betas: Tensor, transl: Tensor) -> tuple[Tensor, Tensor]:
-        """rot (B,55,3,3), betas (B,k), transl (B,3) -> vertices (B,n,3), joints (B,55,3)."""
+        """rot (B,55,3,3), betas (B or 1, k <= num_betas), transl (B,3) -> vertices (B,n,3), joints (B,55,3)."""
         bm, B = self.bm, rot.shape[0]
+        if rot.dim() != 4 or rot.shape[1:] != (NUM_JOINTS, 3, 3) or B == 0:
+            raise ValueError(f"rot: expected (B, {NUM_JOINTS}, 3, 3) with B >= 1, got {tuple(rot.shape)}")
+        if betas.dim() != 2 or betas.shape[0] not in (1, B) or betas.shape[1] > bm.num_betas:
+            raise ValueError(f"betas: expected (B or 1, k) with k <= {bm.num_betas} (the model's shape components; "
+                             f"more would be read as expression), got {tuple(betas.shape)} for B = {B}")
+        if transl.shape not in ((B, 3), (1, 3)):
+            raise ValueError(f"transl: expected ({B}, 3) or (1, 3), got {tuple(transl.shape)}")
         rot = rot.to(bm.dtype)
         coeffs = torch.zeros(B, bm.num_betas + bm.num_expression, dtype=bm.dtype, device=rot.device)
         coeffs[:, :betas.shape[1]] = betas.to(bm.dtype)

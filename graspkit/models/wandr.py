@@ -399,7 +399,8 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
             frames: int, z: Tensor | None = None, generator: torch.Generator | None = None,
             keep: bool = True, on_frame: FrameHook | None = None, goal_heading: Tensor | None = None,
             floor: float | None = None, lift: bool = False) -> Rollout:
-    """WANDR §3.5: from starts p_prev, p0 (B, 135) with rest joints (B, 22, 3), generate `frames` more frames.
+    """WANDR §3.5: from starts p_prev, p0 (B, 135) with rest joints (B, 22, 3), generate `frames` more frames (in the
+    model's dtype: other float inputs are cast to it).
 
     goal (B, 3) or per frame (B, frames+1, 3); t_goal the goal frame (int, (B,) or per frame (B, frames+1)) counted
     from the start (frame 0). Each frame: intention from the current pose (inference form of I^r), z from N(0, I) drawn
@@ -430,6 +431,10 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
     check_floor(floor)
     if not isinstance(lift, bool):
         raise ValueError(f"lift: expected True or False, got {lift!r}")
+    dtype = model.decoder[0].weight.dtype                  # the model's: float64 poses on a float32 model are cast
+    p_prev, p0, rest = p_prev.to(dtype), p0.to(dtype), rest.to(dtype)
+    z = None if z is None else z.to(dtype)
+    goal_heading = None if goal_heading is None else goal_heading.to(dtype)
     goals = _per_frame(goal, B, T, 3, "goal").to(p0.dtype)
     tg = _per_frame(torch.as_tensor(t_goal), B, T, None, "t_goal")
     if not bool(torch.isfinite(goals).all()):

@@ -38,6 +38,8 @@ def bps_encode(points: Tensor | np.ndarray, basis: Tensor,
     the points. Unbatched input gives (K,) and (K,3).
     """
     pts = as_points(points, "points")
+    if pts.dim() > 3:
+        raise ValueError(f"points: expected (N, 3) or (B, N, 3), got {tuple(pts.shape)}")
     b = as_points(basis, "basis").to(pts.dtype)
     if b.dim() != 2:
         raise ValueError(f"basis: expected (K, 3), got {tuple(b.shape)}")

@@ -120,7 +120,8 @@ def apply_pose(pose: ObjectPose, x: trimesh.Trimesh | np.ndarray | Tensor,
                ) -> trimesh.Trimesh | np.ndarray | Tensor | tuple[np.ndarray | Tensor, np.ndarray | Tensor]:
     """Move a mesh (copy), or points (..., 3) [and their normals (..., 3)] by `pose`; normals rotate only.
 
-    numpy in -> numpy out, torch in -> torch out (same dtype/device, differentiable).
+    numpy (or a list) in -> numpy float64 out, torch in -> torch out (same dtype/device, differentiable; an integer
+    tensor comes out in the default float dtype).
     """
     if isinstance(x, trimesh.Trimesh):
         if normals is not None:
@@ -138,7 +139,14 @@ def apply_pose(pose: ObjectPose, x: trimesh.Trimesh | np.ndarray | Tensor,
 
 
 def _transform(x: Array, rot: np.ndarray, trans: np.ndarray | None, name: str) -> Array:
-    """x @ R^T (+ t) for numpy arrays or torch tensors of shape (..., 3)."""
+    """x @ R^T (+ t) for numpy arrays or torch tensors of shape (..., 3); integer tensors become float32."""
+    if isinstance(x, Tensor) and not x.is_floating_point():
+        x = x.to(torch.get_default_dtype())             # else the pose would be cast to integers: zeros
+    elif not isinstance(x, Tensor):
+        try:
+            x = np.asarray(x, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name}: expected an array of numbers of shape (..., 3), got {type(x).__name__}") from None
     if x.shape[-1:] != (3,):
         raise ValueError(f"{name}: expected shape (..., 3), got {tuple(x.shape)}")
     if isinstance(x, Tensor):

@@ -55,6 +55,7 @@ from graspkit.checks import check_finite, check_int, check_real, check_rotation,
 from graspkit.models.gnet import SparseBody, pose_rotmats
 from graspkit.objects.distance import nearest_neighbours
 from graspkit.objects.sdf import SDFGrid
+from graspkit.optim.step import with_autograd
 
 if TYPE_CHECKING:
     from graspkit.body import BodyModel
@@ -248,6 +249,7 @@ class GraspRefiner:
                 e["pen_object"] = torch.relu(-so).sum(-1)
         return e
 
+    @with_autograd
     def __call__(self, hat: dict[str, Tensor], betas: Tensor, object_points: Tensor,
                  weights: GraspRefineWeights | None = None, ground: float = 0.0,
                  sdf: PosedSDF | None = None) -> RefinedGrasp:
@@ -265,10 +267,11 @@ class GraspRefiner:
         for k in ("rot6d", "transl", "head_dir", "hand_offsets"):
             if hat[k].shape[0] != B or not bool(torch.isfinite(hat[k]).all()):
                 raise ValueError(f"hat[{k!r}]: expected {B} finite rows (one per sample)")
+        nb = self.body.bm.num_betas
         if not isinstance(betas, Tensor) or betas.dim() != 2 or betas.shape[0] not in (1, B) \
-                or not bool(torch.isfinite(betas).all()):
+                or betas.shape[1] > nb or not bool(torch.isfinite(betas).all()):
             got = tuple(betas.shape) if isinstance(betas, Tensor) else type(betas).__name__
-            raise ValueError(f"betas: expected finite shape coefficients (1 or {B}, num_betas), got {got}")
+            raise ValueError(f"betas: expected finite shape coefficients (1 or {B}, k <= {nb}), got {got}")
         if not isinstance(object_points, Tensor) or object_points.shape[-1] != 3 or object_points.dim() not in (2, 3) \
                 or not bool(torch.isfinite(object_points).all()):
             raise ValueError("object_points: expected finite points (P, 3) or (B, P, 3) in metres")
@@ -379,6 +382,7 @@ class MotionRefineWeights:
     lr: float = 2e-3
 
 
+@with_autograd
 def refine_frame(hand_body: SparseBody, rot6d_hat: Tensor, transl_hat: Tensor, betas: Tensor, hand_target: Tensor,
                  weights: MotionRefineWeights | None = None) -> tuple[Tensor, Tensor]:
     """Eq. 13 for one frame: Θ (B,55,6), (B,3) fitted so that `hand_body`'s vertices (B,N,3) meet `hand_target`,

@@ -116,7 +116,7 @@ from graspkit.checks import check_bool, check_int, check_probabilities, check_st
 from graspkit.models.gnet import SparseBody
 from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, _nearest, body_joint_ids, free_joint_excess,
                                      hand_vertex_ids, kabsch, with_free_joints)
-from graspkit.optim.step import energy_step
+from graspkit.optim.step import energy_step, with_autograd
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
 from graspkit.train import load_checkpoint, state_dict_problem
 
@@ -161,6 +161,7 @@ class MarkerDiffAE(nn.Module):
         return m.eval()
 
 
+@with_autograd
 def train_smooth_ae(markers: np.ndarray, epochs: int = 30, seed: int = 0, out: str | Path | None = SMOOTH_AE_PATH,
                     batch_size: int = 64, lr: float = 2e-3) -> tuple[MarkerDiffAE, list[float]]:
     """Train S.1's autoencoder on marker windows (N, T+1, M, 3) (reconstruction L1 of the differences); save it."""
@@ -494,6 +495,7 @@ class GraspMotionOpt:
         return (alpha[None, :, None] * (on * (cos - 1) ** 2).view(B, F, -1)).sum((1, 2))
 
     # ------------------------------------------------------------------ Alg. 2
+    @with_autograd
     def fit(self, markers: Tensor, betas: Tensor, foot_contact: Tensor | None = None, obj: GraspObject | None = None,
             object_contact: Tensor | None = None, progress: bool = True, floor: Tensor | None = None,
             marker_contact: Tensor | None = None, start: Tensor | None = None) -> GraspMotionResult:

@@ -109,7 +109,7 @@ from graspkit.models.gnet import SparseBody
 from graspkit.models.wholegrasp import check_height
 from graspkit.objects.distance import require_points_in_metres, require_unit_normals
 from graspkit.objects.sdf import SDFGrid
-from graspkit.optim.step import energy_step
+from graspkit.optim.step import energy_step, with_autograd
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
 
 if TYPE_CHECKING:
@@ -552,6 +552,7 @@ class GraspPoseOpt:
         return torch.relu(-sd - w.sigma_b).sum(-1)
 
     # ------------------------------------------------------------------ Alg. 1
+    @with_autograd
     def fit(self, markers: Tensor, obj: GraspObject, marker_contact: Tensor | None = None,
             object_contact: Tensor | None = None, progress: bool = True, init: dict[str, Tensor] | None = None,
             stages: tuple[int, ...] = (1, 2, 3)) -> GraspPoseResult:

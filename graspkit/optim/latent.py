@@ -31,6 +31,7 @@ from graspkit import intention as I
 from graspkit.checks import check_finite, check_generator, check_int, check_real, check_weight
 from graspkit.models.blocks import evaluating
 from graspkit.models.wandr import Rollout, WandrCVAE, expand_starts, rollout
+from graspkit.optim.step import with_autograd
 
 if TYPE_CHECKING:
     from graspkit.body import BodyModel
@@ -59,6 +60,7 @@ def latent_loss(out: Rollout, z: Tensor, goal: Tensor, t_goal: int, waypoints: S
     return {"loss": w_norm * norm + w_goal * g + w_way * way, "norm": norm, "goal": g, "way": way}
 
 
+@with_autograd
 def optimise_latents(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal: Sequence[float] | Tensor,
                      t_goal: int, frames: int | None = None, n: int = 1,
                      waypoints: Sequence[tuple[int, Sequence[float]]] = (), z0: Tensor | None = None, iters: int = 40,
