@@ -11,7 +11,7 @@ Motion metrics (this section) take world vertices / joints in the z-up frame, me
 | ground penetration | SAGA Sec. 4.2 (non-collision), GOAL Sec. 3.3 (Eq. 7's lowest vertex) | depth of the lowest vertex below the ground plane z = 0 |
 | non-collision score | SAGA Sec. 4.2 | share of body mesh vertices above the ground (GRAB 0.9771, SAGA 0.9743), per frame |
 | joint speed, jerk | smoothness | finite differences of joint positions (body joints 0..21) |
-| joint limits | human range of motion | rotation of each joint beyond the ranges in `JOINT_LIMITS_DEG` |
+| joint limits | human range of motion | rotation of each joint beyond the ranges in `JOINT_LIMITS_DEG`, `HINGES` and `FINGER_LIMIT_DEG` |
 
 Two readings are graspkit's, where the papers leave room:
 - "The lowest vertex moves" is measured on the same vertex from frame t to t+1 (the vertex that is lowest at t). Taking
@@ -55,7 +55,9 @@ TURN_JOINTS = slice(0, 25)           # body, jaw and eyes: how fast they turn (a
 
 # Human range of motion, degrees (adult norms, e.g. Soucie et al. 2011; AAOS). Hinge joints: signed flexion
 # about the hinge axis (canonical frame) and the largest rotation off that axis; other joints: the
-# largest total rotation from the rest pose (the T-pose for shoulders: arms down is ~75 deg there).
+# largest total rotation from the rest pose (the T-pose for shoulders: arms down is ~75 deg there); every finger
+# joint (SMPL-X joints 25-54): FINGER_LIMIT_DEG of total rotation.
+FINGER_LIMIT_DEG = 100.0
 HINGES = {  # joint: (axis, flexion min, flexion max, off-axis max)
     "left_knee": ((1, 0, 0), -10, 155, 35), "right_knee": ((1, 0, 0), -10, 155, 35),
     "left_elbow": ((0, -1, 0), -10, 155, 95), "right_elbow": ((0, 1, 0), -10, 155, 95),
@@ -231,7 +233,7 @@ def joint_limit_excess(poses: torch.Tensor) -> torch.Tensor:
         flex = torch.rad2deg(p[:, j] @ a)
         rest = torch.rad2deg((p[:, j] - (p[:, j] @ a)[:, None] * a).norm(dim=-1))
         out[:, j] = torch.clamp(lo - flex, min=0) + torch.clamp(flex - hi, min=0) + torch.clamp(rest - off, min=0)
-    finger = torch.clamp(ang[:, 25:] - 100.0, min=0)
+    finger = torch.clamp(ang[:, 25:] - FINGER_LIMIT_DEG, min=0)
     out[:, 25:] = finger
     return out
 

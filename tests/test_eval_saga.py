@@ -408,3 +408,21 @@ def test_single_row_holds_the_single_models_bodies(tmp_path, monkeypatch):
     assert single_states and rows["WholeGrasp-single w/o opt."]["n"] == 2
     assert rows["WholeGrasp w/o opt."]["apd"] > 0.01
     assert rows["WholeGrasp-single w/o opt."]["apd"] < 1e-4
+
+
+def test_lesson_examples_round_trip_through_float16(tmp_path):
+    """save_examples writes the lesson's grasps (float16, weights-only) and load_examples reads back the same
+    placements as load_placements gives, to float16's rounding; a split with no grasps is named."""
+    out = ES.save_examples(DATA_STUBS / "grasps", tmp_path / "ex.pt", per_object=3, split="test")
+    back = ES.load_examples(out)
+    want = load_placements(DATA_STUBS / "grasps", "mug", 3, split="test")
+    assert [p.name for p in back] == ["mug"] * 3
+    for a, b in zip(back, want):
+        torch.testing.assert_close(a.markers, b.markers, atol=2e-3, rtol=1e-3)
+        torch.testing.assert_close(a.points, b.points, atol=2e-3, rtol=1e-3)
+        torch.testing.assert_close(a.rotation, b.rotation)                     # kept in full precision
+        assert a.height == pytest.approx(b.height, abs=1e-3)
+        assert torch.equal(a.marker_contact, b.marker_contact.half().float())
+    with pytest.raises(ValueError, match="root: no val grasps in"):
+        ES.save_examples(DATA_STUBS / "grasps", tmp_path / "none.pt", split="val")
+    assert not (tmp_path / "none.pt").exists()

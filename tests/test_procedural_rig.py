@@ -223,7 +223,7 @@ def test_joint_regressor_refuses_a_joint_outside_the_vertices():
 def _bases():
     """shape_basis (V, 3, 10) and expression_basis (V, 3, 10) of the shipped mesh and weights, seed 0's skeleton."""
     a, P, J0, E0 = _shipped()
-    return shape_basis(a["v_template"], a["weights"], J0, E0), expression_basis(a["v_template"], a["weights"], J0)
+    return shape_basis(a["v_template"], a["weights"], J0, E0), expression_basis(a["v_template"], a["weights"])
 
 
 def test_shape_and_expression_bases_of_a_mirrored_body_are_mirrored():
@@ -234,7 +234,7 @@ def test_shape_and_expression_bases_of_a_mirrored_body_are_mirrored():
     vs, fs, n, ids = _mirrored_half()
     w = a["weights"][ids]
     ws = np.concatenate([w, w[:, PERM]])
-    S = np.concatenate([shape_basis(vs, ws, J0, E0), expression_basis(vs, ws, J0)], 2)
+    S = np.concatenate([shape_basis(vs, ws, J0, E0), expression_basis(vs, ws)], 2)
     assert np.abs(S[:n]).max((0, 1)).min() > 0                       # every component moves the left half
     np.testing.assert_allclose(S[n:], S[:n] * MX[None, :, None], atol=1e-12)
 

@@ -15,7 +15,7 @@ from graspkit.body._proc_sdf import Body, Ellipsoid, Floor, Lens, Loft, Prim, Ro
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
 
 J = JOINT_INDEX
-SOLE_Y, HEAD_TOP_Y = -1.30, 0.40
+SOLE_Y = -1.30
 
 
 def mirror_joint(j: int) -> int:

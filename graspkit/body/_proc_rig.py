@@ -250,8 +250,8 @@ def shape_basis(v: np.ndarray, w: np.ndarray, joints: np.ndarray, ends: np.ndarr
     out[:, :, 3] = _affine_blend(v, w, f, lin, np.zeros_like(joints))
 
     # 4 arm length, 5 leg length: bones stretch 4 % (arms) / 4.5 % (legs) per unit along their axes
-    out[:, :, 4] = _limb_stretch(v, w, joints, ends, ("shoulder", "elbow"), "wrist", 0.04, _arm_joints)
-    out[:, :, 5] = _limb_stretch(v, w, joints, ends, ("hip", "knee"), "ankle", 0.045, _leg_joints)
+    out[:, :, 4] = _limb_stretch(v, w, joints, ("shoulder", "elbow"), "wrist", 0.04, _arm_joints)
+    out[:, :, 5] = _limb_stretch(v, w, joints, ("hip", "knee"), "ankle", 0.045, _leg_joints)
 
     # 6 torso length: the trunk between pelvis and neck stretches 5 % per unit; everything above moves up
     f[:], lin[:] = 0.0, 0.0
@@ -315,7 +315,7 @@ def _affine_blend(v: np.ndarray, w: np.ndarray, t: np.ndarray, A: np.ndarray, o:
     return np.einsum("vk,vki->vi", w, per)
 
 
-def _limb_stretch(v, w, joints, ends, bones: tuple[str, str], distal: str, a: float, joints_of) -> np.ndarray:
+def _limb_stretch(v, w, joints, bones: tuple[str, str], distal: str, a: float, joints_of) -> np.ndarray:
     """Displacement (V,3) stretching the two bones of each limb by factor a; distal parts translate."""
     t = np.zeros((NUM_JOINTS, 3))
     A = np.zeros((NUM_JOINTS, 3, 3))
@@ -332,7 +332,7 @@ def _limb_stretch(v, w, joints, ends, bones: tuple[str, str], distal: str, a: fl
     return _affine_blend(v, w, t, A, joints)
 
 
-def expression_basis(v: np.ndarray, w: np.ndarray, joints: np.ndarray) -> np.ndarray:
+def expression_basis(v: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Ten face-only expression components (V, 3, 10): smooth compact bumps of a few millimetres."""
     face = _smoothstep((w[:, [J["head"], J["jaw"]]].sum(1) - 0.3) / 0.5) * _smoothstep((v[:, 2] + 0.01) / 0.04)
 

@@ -189,7 +189,7 @@ def build_procedural_smplx(seed: int = 0, progress: bool = True, grid_spacing: f
     _say(progress, t0, "skinning weights and joint regressor")
     posedirs = fit_correctives(v, f, weights, joints, body)
     _say(progress, t0, "pose correctives (elbows, knees, hips)")
-    shapedirs = np.concatenate([shape_basis(v, weights, joints, ends), expression_basis(v, weights, joints)], 2)
+    shapedirs = np.concatenate([shape_basis(v, weights, joints, ends), expression_basis(v, weights)], 2)
     lmk_f, lmk_b = _surface_points(v, f, face_landmark_targets())
     ct = contour_targets()
     dyn_f, dyn_b = _surface_points(v, f, ct.reshape(-1, 3))

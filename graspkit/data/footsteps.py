@@ -156,7 +156,7 @@ def _clamp_footprint(xy: np.ndarray, other: np.ndarray, heading: float, side: in
 
 
 # ----------------------------------------------------------------------------- rigid foot motion
-def _flat(xy: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+def _flat(yaw: np.ndarray) -> np.ndarray:
     """Foot rotations (...,3,3) of flat feet with yaws (...)."""
     return rot_z(yaw) @ R_BASE
 
@@ -170,7 +170,7 @@ def _place(R_flat: np.ndarray, xy: np.ndarray, foot: FootGeometry, point: np.nda
 def _pivot_state(xy, yaw, foot: FootGeometry, pitch):
     """Foot rotation and ankle position (...,3,3), (...,3) for pitch (...) (>0 heel up about the ball, <0 toes up about the heel)."""
     pitch = np.asarray(pitch, np.float64)
-    R_flat = _flat(xy, yaw)
+    R_flat = _flat(yaw)
     R = R_flat @ rot_x(pitch)
     heel_up = (pitch > 0)[..., None]
     pivot = np.where(heel_up, foot.ball, foot.heel)

@@ -30,7 +30,7 @@ from graspkit.paths import make_temp, naming_errors, publish, sweep_stale_temps
 
 FPS = 30.0
 NUM_BETAS = 10
-SMPLH_BODY, SMPLH_HAND = 22, 30
+SMPLH_BODY = 22                   # SMPL-H: 22 body joints, then 30 hand joints (SMPL-X has jaw and eyes between)
 
 
 class SequenceFileError(ValueError):
@@ -156,7 +156,7 @@ def to_smplx_poses(poses: np.ndarray, path: Path | str = "<array>") -> np.ndarra
     p = poses.reshape(T, 52, 3)
     out = np.zeros((T, 55, 3), poses.dtype)
     out[:, :SMPLH_BODY] = p[:, :SMPLH_BODY]
-    out[:, 25:] = p[:, SMPLH_BODY:]
+    out[:, 25:] = p[:, SMPLH_BODY:]                 # SMPL-X joints 25-54: the hands
     return out
 
 
@@ -250,7 +250,9 @@ def _scalar(a: np.ndarray, key: str, path: Path) -> float:
 
 def resample(poses: np.ndarray, trans: np.ndarray, src_fps: float, fps: float, contacts: np.ndarray | None = None,
              goal_frame: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, int | None]:
-    """Resample (T,55,3) axis-angle poses (slerp), (T,3) translations (linear), contacts (nearest) from src_fps to fps."""
+    """Resample (T,55,3) axis-angle poses (slerp), (T,3) translations (linear), contacts (T,4) (nearest) from src_fps
+    to fps -> (poses (n,55,3), trans (n,3), contacts (n,4) or None, goal_frame rescaled to the new rate (rounded,
+    at most the last frame) or None)."""
     T = len(poses)
     n = int(np.floor((T - 1) * fps / src_fps + 1e-9)) + 1
     f = np.arange(n) * src_fps / fps                       # fractional source frame of each new frame

@@ -123,12 +123,10 @@ class HandModel:
         from graspkit.body.markers import _Rest, vertex_normals
         v = torch.as_tensor(_Rest(bm, "mean").v, dtype=bm.dtype)[None]
         n = vertex_normals(v, bm.faces)[0].numpy()
-        rest = v[0].numpy()
         self.pad_ids = {}
         for f, js in FINGER_JOINTS.items():
             dist = np.flatnonzero(part == js[2])
             self.pad_ids[f] = dist[np.argsort(n[dist, 1])[:max(4, len(dist) // 3)]]
-        self.rest_vertices = rest
         # vertices used by the polish: hand + forearm + upper arm (order: hand first)
         self.fit_ids = np.concatenate([self.hand_ids, self.arm_ids])
         pos = {int(v): k for k, v in enumerate(self.fit_ids)}

@@ -19,7 +19,7 @@ the first frame's pelvis, x the horizontal left->right shoulder direction, y for
   in-between motion); the velocity channels stay, as they come from TrajFill at inference.
 
 Normalisation statistics (mean, std per marker coordinate and per velocity component) come from the training
-split only and travel with a checkpoint (`MotionFillStats.to_dict`).
+split only and travel with a checkpoint as the model's buffers (`MotionFillVAE.set_stats`).
 """
 from __future__ import annotations
 
@@ -180,15 +180,6 @@ class MotionFillStats:
         vel = torch.as_tensor(arrays["vel"]).flatten(0, 1).double()
         f = lambda x: x.float()  # noqa: E731
         return cls(f(loc.mean(0)), f(loc.std(0).clamp_min(1e-3)), f(vel.mean(0)), f(vel.std(0).clamp_min(1e-3)))
-
-    def to_dict(self) -> dict[str, torch.Tensor]:
-        """Tensors for a checkpoint's `extra`."""
-        return dict(self.__dict__)
-
-    @classmethod
-    def from_dict(cls, d: dict[str, torch.Tensor]) -> "MotionFillStats":
-        """Back from `to_dict`."""
-        return cls(**{k: torch.as_tensor(d[k]) for k in ("marker_mean", "marker_std", "vel_mean", "vel_std")})
 
 
 def motion_image(local: torch.Tensor, contacts: torch.Tensor, vel: torch.Tensor, stats: MotionFillStats) -> torch.Tensor:

@@ -226,7 +226,9 @@ class PoseNet(_Baseline):
         return {"hidden": self.hidden, "layers": self.layers}
 
     def infill(self, local: Tensor, contacts: Tensor, vel: Tensor) -> Tensor:
-        """Channel 0 (B, 61, 241): per-frame LSTM read-out as a residual over the blend of frames 0 and T."""
+        """Channel 0 (B, 61, 241): per-frame LSTM read-out as a residual over the blend of frames 0 and T; PoseNet reads
+        no contacts (its inputs: the end frames' markers, the velocities, t/T), so its contact logits at frames 0 and T
+        are predicted, not the given ones."""
         x = self.normalise(local)
         B = x.shape[0]
         t = torch.linspace(0, 1, NUM_FRAMES, dtype=x.dtype)[None, :, None].expand(B, -1, 1)
@@ -299,7 +301,8 @@ class RoutePoseNet(nn.Module):
     @torch.no_grad()
     def predict(self, traj_interp: Tensor, local: Tensor, contacts: Tensor, n: int = 1,
                 generator: torch.Generator | None = None, traj: Tensor | None = None) -> dict[str, Tensor]:
-        """As `MotionFillVAE.sample` with traj=None (a given `traj` replaces RouteNet's); one deterministic output."""
+        """As `MotionFillVAE.sample` with traj=None (a given `traj` replaces RouteNet's); one deterministic output; the
+        contacts are not read (PoseNet takes none)."""
         route = self.route.predict(traj_interp)["traj"][0] if traj is None else traj
         return self.pose.predict(traj_interp, local, contacts, traj=route)
 

@@ -72,7 +72,8 @@ class LatentWalk:
     def __init__(self, model: Any, points: Tensor, normals: Tensor, height: float, dims: int = 4,
                  seed: int = 0) -> None:
         """model: the multi-task WholeGrasp-VAE (the walk shows its contact maps); points, normals (P,3) tensors or
-        arrays centred at the object (SAGA A.3), height t_O in metres, as `WholeGraspVAE.sample` takes them."""
+        arrays in the object frame, centred at the object (SAGA A.3; `WholeGraspVAE.sample` takes world points and
+        centres them itself, this walk decodes them as given), height t_O in metres."""
         from graspkit.models.wholegrasp import WholeGraspVAE, check_sample_inputs
 
         check_type(model, WholeGraspVAE, "model", what="graspkit.models.wholegrasp.WholeGraspVAE")
