@@ -606,7 +606,8 @@ def _main(argv: list[str] | None) -> int:
         print(f"graspkit: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("graspkit: interrupted (data make and train pick up where they stopped when run again)", file=sys.stderr)
+        # a new line first: a progress bar's line is still open
+        print("\ngraspkit: interrupted (data make and train pick up where they stopped when run again)", file=sys.stderr)
         return 130
 
 

@@ -332,20 +332,37 @@ def read_cache(path: Path, load: Callable[[Path], Any]) -> Any | None:
         return None
 
 
+def _pool_worker_init(initializer: Callable[..., None] | None, initargs: tuple) -> None:
+    """A pool worker ignores Ctrl-C (the terminal sends it to the whole process group): the parent handles it."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if initializer is not None:
+        initializer(*initargs)
+
+
 def pool_results(calls: Sequence[tuple[Callable[..., Any], tuple]], workers: int,
                  initializer: Callable[..., None] | None = None, initargs: tuple = ()) -> Iterator[Any]:
     """Results of calls [(fn, args), ...] run on a pool of `workers` processes, in the order they complete. On any
-    error, Ctrl-C included, the calls still queued are cancelled before the error is raised (a pool used in a plain
-    `with` block runs every queued call first: Ctrl-C on `data make` went on for minutes)."""
+    error, Ctrl-C included, the queued calls are cancelled and the workers stopped before the error is raised (a
+    pool in a plain `with` block runs every queued call first, and a worker that took Ctrl-C as its call's error
+    went on with the next: `data make` wrote files for a minute after Ctrl-C). A stopped worker's temporary file is
+    swept by the next writer in its folder (sweep_stale_temps)."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     # never more processes than calls: `--workers 500` for 3 clips starts 3 (each process loads torch and a body)
-    ex = ProcessPoolExecutor(max_workers=max(1, min(workers, len(calls))), initializer=initializer, initargs=initargs)
+    ex = ProcessPoolExecutor(max_workers=max(1, min(workers, len(calls))), initializer=_pool_worker_init,
+                             initargs=(initializer, initargs))
+    futures: list = []
     try:
         futures = [ex.submit(fn, *args) for fn, args in calls]
         for f in as_completed(futures):
             yield f.result()
     except BaseException:
+        for f in futures:
+            f.cancel()
+        for p in list((getattr(ex, "_processes", None) or {}).values()):   # calls already handed to a worker
+            p.terminate()
         ex.shutdown(wait=True, cancel_futures=True)
         raise
     ex.shutdown(wait=True)

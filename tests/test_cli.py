@@ -437,6 +437,38 @@ def test_a_pool_starts_no_more_processes_than_calls(tmp_path):
     assert got == [1, 2] and 1 <= len(list(tmp_path.glob("worker_*"))) <= 2
 
 
+def _slow_write(i: int, folder: str) -> int:
+    """A pool call: fails at once for i = 0, else writes its file after 3 s."""
+    import time
+
+    if i == 0:
+        raise ValueError("call 0 failed")
+    time.sleep(3.0)
+    Path(folder, f"call_{i}").touch()
+    return i
+
+
+def _sigint_handler() -> bool:
+    """A pool call: whether this worker ignores Ctrl-C."""
+    import signal
+
+    return signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+
+
+def test_a_pool_stops_its_workers_on_an_error_and_leaves_ctrl_c_to_the_parent(tmp_path):
+    """An error (Ctrl-C reaches the parent the same way) cancels the queued calls and stops the running ones: the
+    workers had taken Ctrl-C as one call's error and gone on with the queued calls, writing files for a minute."""
+    import time
+
+    from graspkit.paths import pool_results
+
+    assert list(pool_results([(_sigint_handler, ())], 1)) == [True]
+    with pytest.raises(ValueError, match="call 0 failed"):
+        list(pool_results([(_slow_write, (i, str(tmp_path))) for i in range(8)], 2))
+    time.sleep(4.0)                                           # past when a running call 1 would have written
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_the_evaluators_check_out_before_any_work(tmp_path, capsys):
     """python -m graspkit.eval_saga / eval_goal: an --out that cannot be written is refused at once, naming --out
     (it had run the whole evaluation first, then failed on a temporary file, once leaving one at /)."""
