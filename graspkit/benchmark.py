@@ -401,6 +401,7 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
     from graspkit.body import BodyModel
     from graspkit.eval_goal import default_data_folders
     from graspkit.paths import DATA_STUBS, default_model_path, stub_hint
+    from graspkit.progress import hidden
 
     unknown = set(methods) - set(METHODS)
     if unknown:
@@ -424,7 +425,7 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
     out.mkdir(parents=True, exist_ok=True)                # after the checks: a refused run leaves no folder
     bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
     rows: list[Row] = []
-    steps = tqdm(list(methods), desc="eval --all", unit="method")
+    steps = tqdm(list(methods), desc="eval --all", unit="method", disable=hidden())
     for m in steps:
         steps.set_postfix_str(m)
         t0 = time.perf_counter()

@@ -321,6 +321,8 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="graspkit", description="graspkit: whole-body motion synthesis towards "
                                 "objects and goals (SAGA, GOAL, WANDR), at workbook scale.")
     p.add_argument("--version", action="version", version=f"graspkit {__version__}")
+    p.add_argument("--quiet", action="store_true", help="no progress bars or progress lines on stderr (before the "
+                   "command: graspkit --quiet train ...; the library's switch is the environment's TQDM_DISABLE=1)")
     sub = p.add_subparsers(dest="command", required=True)
 
     body = sub.add_parser("body", help="the body model").add_subparsers(dest="body_command", required=True)
@@ -541,7 +543,7 @@ def as_flags(**flags: str) -> Iterator[None]:
 
 def reports_errors(prog: str) -> Callable[[Callable[..., int]], Callable[..., int]]:
     """Decorate a module's `main(argv)` so that a bad input (ValueError, OSError) ends as the graspkit command's do:
-    `<prog>: error: <message>` on stderr and exit status 2, no traceback."""
+    `<prog>: error: <message>` on stderr and exit status 2, no traceback; Ctrl-C as one line and exit status 130."""
     def wrap(main: Callable[..., int]) -> Callable[..., int]:
         @functools.wraps(main)
         def run(argv: list[str] | None = None) -> int:
@@ -550,6 +552,9 @@ def reports_errors(prog: str) -> Callable[[Callable[..., int]], Callable[..., in
             except (ValueError, OSError) as e:
                 print(f"{prog}: error: {e}", file=sys.stderr)
                 return 2
+            except KeyboardInterrupt:
+                print(f"\n{prog}: interrupted", file=sys.stderr)
+                return 130
         return run
     return wrap
 
@@ -580,9 +585,32 @@ def main(argv: list[str] | None = None) -> int:
         return _main(argv)
 
 
+@contextlib.contextmanager
+def _quiet(on: bool) -> Iterator[None]:
+    """TQDM_DISABLE=1 while a command runs (graspkit.progress: every bar and progress line off), as it was after."""
+    from graspkit.progress import QUIET_ENV
+
+    old = os.environ.get(QUIET_ENV)
+    if on:
+        os.environ[QUIET_ENV] = "1"
+    try:
+        yield
+    finally:
+        if on and old is None:
+            os.environ.pop(QUIET_ENV, None)
+        elif on:
+            os.environ[QUIET_ENV] = old
+
+
 def _main(argv: list[str] | None) -> int:
     """`main` with graspkit's warnings shown as notes."""
     args = build_parser(argv).parse_args(argv)
+    with _quiet(args.quiet):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Run a parsed command: its checks, then its function; errors and Ctrl-C as one line and an exit status."""
     try:
         if getattr(args, "seed", None) is not None and not 0 <= args.seed < 2**63:
             raise ValueError(f"--seed: expected a non-negative integer below 2^63, got {args.seed}")

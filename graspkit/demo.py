@@ -15,6 +15,7 @@ A method whose shipped checkpoint is missing is skipped with a message naming th
 from __future__ import annotations
 
 import os
+import sys
 from functools import lru_cache
 from pathlib import Path
 
@@ -29,6 +30,7 @@ from tqdm import tqdm  # noqa: E402
 from graspkit.body import BodyModel  # noqa: E402
 from graspkit.body.poses import body_pose, y_up_to_z_up  # noqa: E402
 from graspkit.paths import DATA_STUBS, default_model_path, stub_hint, writes_to  # noqa: E402
+from graspkit.progress import hidden  # noqa: E402
 from graspkit.viz.export import save_png  # noqa: E402
 from graspkit.viz.style import OBJECT  # noqa: E402
 
@@ -273,7 +275,7 @@ def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, .
     out_dir.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
     panels: list[Panel] = []
-    steps = tqdm(list(stages), desc="demo", unit="stage")
+    steps = tqdm(list(stages), desc="demo", unit="stage", disable=hidden())
     for stage in steps:
         steps.set_postfix_str(stage)
         if stage == "body":
@@ -287,11 +289,12 @@ def run_demo(out_dir: Path, model_path: Path | None = None, stages: tuple[str, .
         fn, _ = METHOD_STAGES[stage]
         if missing[stage] and stage == "planner":
             tqdm.write(f"demo: skipping planner: no test-split approach clip in {missing[stage][0]}"
-                       f"{stub_hint(missing[stage][0])}")
+                       f"{stub_hint(missing[stage][0])}", file=sys.stderr)
             continue
         if missing[stage]:
             tqdm.write(f"demo: skipping {stage}: its checkpoint {missing[stage][0]} is missing "
-                       f"(train it with `graspkit train ...`, see README){stub_hint(missing[stage][0])}")
+                       f"(train it with `graspkit train ...`, see README){stub_hint(missing[stage][0])}",
+                       file=sys.stderr)
             continue
         paths, panel = fn(bm, out_dir)
         written += paths

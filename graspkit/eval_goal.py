@@ -640,25 +640,32 @@ def start_distance(clip: ApproachClip) -> float:
 
 def evaluate(folders: Sequence[str | Path] | None = None, stubs: str | Path | None = None, n_grasps: int = 60,
              n_rollouts: int = 24, window_stride: int = 5, seed: int = 0, out: str | Path | None = None,
-             max_frames: int = 300) -> dict:
+             max_frames: int = 300, progress: bool = True) -> dict:
     """GOAL Tab. 1, Tab. 2 and foot sliding on the test objects with the shipped checkpoints (MNet's rollouts up to
-    `max_frames` each); written as JSON."""
+    `max_frames` each); written as JSON. `progress`: a bar over the four phases (minutes each at the defaults)."""
     import json
     import time
     from pathlib import Path
 
+    from tqdm.auto import tqdm
+
     from graspkit.models.gnet import load_gnet
     from graspkit.models.mnet import MNetConfig, load_mnet
     from graspkit.paths import DATA_STUBS
+    from graspkit.progress import hidden
     from graspkit.viz.export import write_atomic
 
     folders = folders or default_data_folders()
     stubs = Path(stubs or DATA_STUBS / "checkpoints")
+    bar = tqdm(total=4, desc="GOAL eval", unit="phase", disable=hidden(progress))
+    bar.set_postfix_str("Tab. 1: GNet samples, refined")
     bm, gv, body = _body()
     res: dict = {"paper": {"tab1": PAPER_TAB1, "tab2": PAPER_TAB2, "sliding": PAPER_SLIDING},
                  "config": {"n_grasps": n_grasps, "n_rollouts": n_rollouts, "window_stride": window_stride,
                             "seed": seed, "max_frames": max_frames, "threads": torch.get_num_threads()}}
     res.update(tab1_results(folders, stubs, n_grasps, seed))
+    bar.update()
+    bar.set_postfix_str("Tab. 2: MNet, teacher-forced")
     gnet = load_gnet(stubs / "gnet.pt")
     # Tab. 2: teacher-forced 10-frame horizon on the test clips' windows
     t1 = time.perf_counter()
@@ -673,11 +680,17 @@ def evaluate(folders: Sequence[str | Path] | None = None, stubs: str | Path | No
         res["tab2"][name] = {"body": e.body, "hand": e.hand, "feet": e.feet}
     res["tab2_windows"] = len(idx)
     res["tab2_seconds"] = time.perf_counter() - t1
+    bar.update()
+    bar.set_postfix_str("rollouts: MNet from the clips' starts")
     seqs = rollout_sequences(folders, n_rollouts)
     res.update(rollout_results(seqs, stubs, gnet, seed, max_frames))
     out = Path(out or stubs / "goal_eval.json")
     write_atomic(out, json.dumps(res, indent=1, default=float))      # GOAL's tables first: SAGA's row takes minutes
+    bar.update()
+    bar.set_postfix_str("SAGA's rows: synthesize per clip")
     write_atomic(out, json.dumps(add_saga_rows(res, seqs, seed), indent=1, default=float))
+    bar.update()
+    bar.close()
     return res
 
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import time
+import warnings
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -242,6 +243,7 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
     from graspkit.models.wholegrasp import GRABNET_SMPLX_PATH, GrabNetSMPLX, HandPCA, WholeGraspVAE, load_wholegrasp
     from graspkit.optim.grasppose import GraspPoseConfig, GraspPoseOpt
     from graspkit.paths import default_model_path
+    from graspkit.progress import hidden
     from graspkit.train import load_checkpoint
 
     cfg = cfg or EvalConfig()
@@ -261,8 +263,8 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
     if grabnet_only and grabnet is None:
         raise FileNotFoundError(f"checkpoints: no {grabnet_path.name} in {ck} (`graspkit train grabnet_smplx`)")
     if missing:
-        print(f"checkpoints: no {' or '.join(missing)} in {ck} (`graspkit train wholegrasp_single` / "
-              "`graspkit train grabnet_smplx` make them): their rows are left out")
+        warnings.warn(f"checkpoints: no {' or '.join(missing)} in {ck} (`graspkit train wholegrasp_single` / "
+                      "`graspkit train grabnet_smplx` make them): their rows are left out", UserWarning, stacklevel=2)
     pca = HandPCA(bm)
     base_cfg = GraspPoseConfig(steps=cfg.steps, free_joints=tuple(cfg.free_joints), restart_sunk=cfg.restart_sunk,
                                stage2_collision=cfg.stage2_collision, stage2_ground=cfg.stage2_ground,
@@ -283,7 +285,7 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
             acc[key]["apd"].append(summary["apd"])
         per_object.setdefault(name, {})[key] = summary
 
-    for oi, name in enumerate(tqdm(cfg.objects, desc="SAGA eval", disable=not progress)):
+    for oi, name in enumerate(tqdm(cfg.objects, desc="SAGA eval", disable=hidden(progress))):
         pls = load_placements(root, name, max(cfg.placements, cfg.gt_grasps))
         gts, pls = pls[:cfg.gt_grasps], pls[:cfg.placements]
         sdf = collision_sdf_grid(name)

@@ -363,11 +363,15 @@ class GridMeter:
 
 def evaluate_grid(model: WandrCVAE, starts: Sequence[I.StartPose], bm: BodyModel, n: int = 5, seed: int = 0,
                   goals: Tensor | None = None, cells: np.ndarray | None = None, t_goal: int = T_GOAL,
-                  frames: int | None = None, floor: float | None = None, lift: bool = False) -> GridResult:
+                  frames: int | None = None, floor: float | None = None, lift: bool = False,
+                  progress: bool = False) -> GridResult:
     """Roll the model out on the grid (or `goals` (G, 3) with their `cells` rows) from every start, n samples each,
     all in one batch (torch.Generator seeded with `seed`), measuring on the fly; floor, lift: `rollout`'s floor
-    constraints (off: the paper's rollout)."""
+    constraints (off: the paper's rollout); progress: a bar over the frames (the full grid: about a minute)."""
+    from tqdm.auto import tqdm
+
     from graspkit.models.wandr import expand_starts, rollout
+    from graspkit.progress import hidden
 
     if goals is None:
         goals, cells = grid_goals()
@@ -376,9 +380,15 @@ def evaluate_grid(model: WandrCVAE, starts: Sequence[I.StartPose], bm: BodyModel
     low = LowVertices(bm, torch.stack([s.betas for s in starts]), torch.stack([s.full_pose for s in starts]))
     meter = GridMeter(low, idx[:, 0], rest, g, t_goal)
     gen = torch.Generator().manual_seed(seed)
-    with torch.no_grad(), evaluating(model):
-        rollout(model, pp, p0, rest, g, t_goal, frames if frames is not None else t_goal, generator=gen, keep=False,
-                on_frame=meter, floor=floor, lift=lift)
+    F = frames if frames is not None else t_goal
+    with tqdm(total=F + 1, desc="WANDR grid", unit="frame", disable=hidden(progress)) as bar:
+        def on_frame(k: int, *state: Tensor) -> None:
+            meter(k, *state)
+            bar.update()
+
+        with torch.no_grad(), evaluating(model):
+            rollout(model, pp, p0, rest, g, t_goal, F, generator=gen, keep=False, on_frame=on_frame, floor=floor,
+                    lift=lift)
     return _result(meter, idx, cells)
 
 
@@ -765,10 +775,10 @@ def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = F
             raise ValueError("lift: not supported for VAE + opt (its latents are optimised without the constraint)")
         row = f"{row} + lift (not the paper's)"
     if model.cfg.intention:
-        res = evaluate_grid(model, starts, bm, n=n, seed=seed, floor=floor, lift=lift)
+        res = evaluate_grid(model, starts, bm, n=n, seed=seed, floor=floor, lift=lift, progress=True)
     else:                                  # "VAE + opt": no intention to steer, latents optimised per goal
         from graspkit.optim.latent import evaluate_vae_opt
-        res = evaluate_vae_opt(model, starts, bm, seed=seed)
+        res = evaluate_vae_opt(model, starts, bm, seed=seed, progress=True)
     out = {"row": row, "config": {"checkpoint": str(checkpoint), "n": n, "seed": seed, "threads": threads,
                                   "floor": floor, "lift": lift, "starts": [s.source for s in starts]},
            "summary": summary(res), "seconds": time.perf_counter() - t0,

@@ -63,14 +63,16 @@ def check_checkpoints(checkpoints: str | Path | None = None) -> Path:
 def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, start: Start | None = None,
                seed: int = 0, start_distance: float = 1.0, max_frames: int = 150,
                checkpoints: str | Path = CHECKPOINTS, penetration: bool = True,
-               model: str | Path | None = None, stall: int | None = STALL_FRAMES) -> GoalResult:
+               model: str | Path | None = None, stall: int | None = STALL_FRAMES, progress: bool = True) -> GoalResult:
     """GOAL for object `name` (a catalogue name, a mesh file or a trimesh.Trimesh, closed and in metres): one
     refined GNet grasp and MNet's approach into it from a standing start, seeded (the same seed and torch thread
     count give the same numbers; another thread count can move the result, the command uses 1). `penetration`: the
     refinement adds graspkit's E_pen on the object's collision grid (False: GOAL's Eq. 4-8 alone; docs/goal.md);
     `model`: an SMPL-X .npz for the body (default: graspkit's procedural one, which the networks were trained on);
     `stall`: MNet's stall window in frames (`mnet.rollout`; None: GOAL's rollout, which may stop with the hand
-    10-25 cm short)."""
+    10-25 cm short); `progress`: a bar over the stages (half a minute in all on two cores)."""
+    from tqdm.auto import tqdm
+
     from graspkit.data.grasp_io import object_collision_grid
     from graspkit.data.reaching import plan_reach
     from graspkit.eval_goal import _body, gnet_goal, sliding
@@ -81,6 +83,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     from graspkit.objects.placement import apply_pose, within_reach_pose
     from graspkit.objects.sampling import sample_surface
     from graspkit.objects.user import as_object
+    from graspkit.progress import hidden
     from graspkit.rotations import axis_angle_to_rot6d, matrix_to_axis_angle, rot6d_to_matrix
 
     check_int(seed, "seed")
@@ -93,7 +96,10 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     name, obj_mesh = as_object(name, "name")
     if start is not None and not isinstance(start, Start):
         raise ValueError(f"start: expected a graspkit.data.reaching.Start or None, got {type(start).__name__}")
+    check_bool(progress, "progress")
     ck = check_checkpoints(checkpoints)
+    bar = tqdm(total=3, desc="GOAL", unit="stage", disable=hidden(progress))
+    bar.set_postfix_str("body, start, collision grid")
     pose = object_pose if object_pose is not None else within_reach_pose(seed)
     centre = np.asarray(pose.translation, np.float64)
     mesh = apply_pose(pose, obj_mesh)
@@ -107,10 +113,15 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     s = (axis_angle_to_rot6d(torch.as_tensor(first.poses[0], dtype=torch.float64)).float(),
          torch.as_tensor(first.trans[0]).float())
     g = torch.Generator().manual_seed(seed)
-    sdf = (object_collision_grid(given, obj_mesh), pose.rotation, pose.translation) if penetration else None
+    sdf = (object_collision_grid(given, obj_mesh, progress), pose.rotation, pose.translation) if penetration else None
+    bar.set_postfix_str("GNet grasp, refined (Eq. 4-8)")
     goal = gnet_goal(load_gnet(ck / "gnet.pt"), s, betas, pts, c, generator=g, sdf=sdf, model=model)[:2]
+    bar.update()
+    bar.set_postfix_str("MNet approach (Eq. 9-13)")
     r = rollout(load_mnet(ck / "mnet.pt"), body, s, goal, betas, pts, c, bps_basis(), max_frames=max_frames,
                 floor=0.0, stall=stall)      # graspkit's floor step and stall rule (not GOAL's): docs/goal.md
+    bar.update()
+    bar.set_postfix_str("figures")
 
     to_motion = lambda r6, t: Motion(matrix_to_axis_angle(rot6d_to_matrix(r6.double())).numpy(),  # noqa: E731
                                      t.detach().double().numpy(), betas.double().numpy(), 30.0)
@@ -119,4 +130,6 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     slid, pairs = sliding(lv)
     metrics = {**grasp_and_end_figures(gv, lv[-1], bm.faces, mesh), "frames": float(motion.num_frames),
                "sliding": slid / max(pairs, 1), **floor_figures(lv)}
+    bar.update()
+    bar.close()
     return GoalResult(name, pose, mesh, grasp, motion, bool(r.reached), metrics)

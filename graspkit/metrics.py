@@ -35,6 +35,7 @@ from scipy.spatial.distance import pdist
 from tqdm.auto import tqdm
 
 from graspkit.body.skeleton import JOINT_INDEX, JOINT_NAMES, NUM_JOINTS
+from graspkit.progress import hidden
 from graspkit.rotations import axis_angle_to_matrix
 
 if TYPE_CHECKING:
@@ -275,7 +276,7 @@ def motion_quality(bm: BodyModel, motions: Sequence[Motion], chunk: int = 96, pr
     pen_max = pen_sum = jerk_sum = 0.0
     jerk_n = 0
     speed = turn = limit = (0.0, "")                                     # the largest value so far and where
-    for k, m in enumerate(tqdm(motions, desc="motion quality", unit="clip", disable=not progress)):
+    for k, m in enumerate(tqdm(motions, desc="motion quality", unit="clip", disable=hidden(progress))):
         clips += 1
         fs = n = 0                                                       # this motion's skating pairs and pairs
         for start, v in m.iter_vertices(bm, chunk=chunk, overlap=1):   # chunks share one frame: every pair once

@@ -161,7 +161,7 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
         gcfg = replace(gcfg, polish=(int(polish_steps[0]), gcfg.polish[1]))
         mcfg = replace(mcfg, polish=(int(polish_steps[1]), mcfg.polish[1]))
     opt = GraspPoseOpt(bm, prior, gcfg if free_joints is None else replace(gcfg, free_joints=tuple(free_joints)))
-    grid = object_collision_grid(given, obj_mesh)
+    grid = object_collision_grid(given, obj_mesh, progress)
     res = opt.fit(s.markers, GraspObject(P, N, float(centre[2]), grid, R_t), s.marker_contact, s.object_contact,
                   progress=progress).to_world(torch.as_tensor(centre).float())
     mesh = apply_pose(pose, obj_mesh)

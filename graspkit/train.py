@@ -41,6 +41,7 @@ from tqdm.auto import tqdm
 
 from graspkit.optim.step import with_autograd
 from graspkit.paths import naming_errors, publish, sweep_stale_temps, temp_beside, write_atomic
+from graspkit.progress import hidden
 
 StepFn = Callable[[torch.nn.Module, Any, int], dict[str, torch.Tensor]]
 
@@ -435,7 +436,7 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
             return history
     no_single = _has_batchnorm(model)
     t0 = time.perf_counter()
-    bar = tqdm(desc=type(model).__name__, unit="epoch", disable=not progress or world[1] != 0, initial=start,
+    bar = tqdm(desc=type(model).__name__, unit="epoch", disable=hidden(progress) or world[1] != 0, initial=start,
                total=cfg.epochs)
     for epoch in range(start, cfg.epochs):
         model.train()

@@ -161,7 +161,8 @@ def test_demo_skips_a_stage_for_any_checkpoint_it_loads(tmp_path, monkeypatch, c
     monkeypatch.setattr(D, "overview", lambda panels, faces: None)
     monkeypatch.setattr(D, "save_png", lambda fig, path, dpi=None: path)
     D.run_demo(tmp_path / "out", stages=("planner", "saga", "saga_motion", "goal", "wandr"))
-    err = "".join(capsys.readouterr())                            # tqdm.write prints to stdout
+    out, err = capsys.readouterr()
+    assert "skipping" not in out                                 # notices on stderr: stdout keeps the written files
     assert ran == ["planner"]
     for stage, f in (("saga", "pose_prior.pt"), ("saga_motion", "pose_prior.pt"), ("goal", "gnet.pt"),
                      ("wandr", "wandr.pt")):
@@ -737,7 +738,7 @@ def test_a_demo_that_can_write_nothing_fails_and_leaves_no_folder(tmp_path, monk
         monkeypatch.setattr(D, "body_gallery", lambda bm: (plt.figure(), torch.zeros(0, 3)))
         monkeypatch.setattr("graspkit.viz.export.export_scene", lambda scene, path: path)
         D.run_demo(tmp_path / "out", stages=("body", "planner"))          # the planner skipped, as a checkpoint is
-        assert "demo: skipping planner: no test-split approach clip" in capsys.readouterr().out
+        assert "demo: skipping planner: no test-split approach clip" in capsys.readouterr().err
     finally:
         D._test_clip.cache_clear()
     with pytest.raises(ValueError, match="^stages \\(--stages\\): expected at least one"):
@@ -814,3 +815,16 @@ def test_a_cache_that_cannot_keep_the_default_body_is_named_before_the_build(tmp
     monkeypatch.setattr(procedural, "build_procedural_smplx", lambda seed: pytest.fail("built before the check"))
     with pytest.raises(OSError, match="cannot write in .*afile/body_models/smplx.*set GRASPKIT_CACHE"):
         load_or_build_body()
+
+
+def test_module_commands_end_ctrl_c_with_one_line(capsys):
+    """python -m graspkit.eval_goal (eval_saga, eval_motionfill) printed a 40-line KeyboardInterrupt traceback on
+    Ctrl-C where `graspkit ...` prints one line."""
+    from graspkit.cli import reports_errors
+
+    @reports_errors("python -m graspkit.eval_x")
+    def main(argv=None):
+        raise KeyboardInterrupt
+
+    assert main([]) == 130
+    assert capsys.readouterr().err == "\npython -m graspkit.eval_x: interrupted\n"

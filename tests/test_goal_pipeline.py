@@ -18,14 +18,17 @@ def test_default_start_faces_the_object_from_the_given_distance():
         assert np.isclose(np.angle(np.exp(1j * (s.heading - to_obj))), 0.0, atol=1e-12)
 
 
-def test_one_call_from_an_object_of_ones_own_to_a_grasp_and_an_approach():
+def test_one_call_from_an_object_of_ones_own_to_a_grasp_and_an_approach(capsys):
     """A capsule no model saw: the goal grasp touches it (trimesh), the motion starts where the start body stands
-    (1 m from the object, on the floor), ends at the grasp when reached, and the same seed gives the same motion."""
+    (1 m from the object, on the floor), ends at the grasp when reached, and the same seed gives the same motion;
+    a bar over the stages on stderr, none with progress=False."""
     from graspkit.eval_goal import _body
 
     mesh = trimesh.creation.capsule(height=0.14, radius=0.035)
     pose = ObjectPose.from_yaw(0.3, np.array([0.2, -0.5, 0.9]))
     r = synthesize(mesh, object_pose=pose, seed=0, max_frames=120)
+    out, err = capsys.readouterr()
+    assert out == "" and "GOAL" in err
     bm = _body()[0]
     np.testing.assert_allclose(np.asarray(r.mesh.vertices).mean(0), pose.translation, atol=1e-9)
     q = trimesh.proximity.ProximityQuery(r.mesh)
@@ -45,7 +48,9 @@ def test_one_call_from_an_object_of_ones_own_to_a_grasp_and_an_approach():
     hand_end = v[-1].double().numpy()
     assert np.abs(np.linalg.norm(hand_end - gv, axis=-1)).min() < 0.01         # the motion ends in the grasp
     # seeded: the same call twice gives the same numbers (a short one: Eq. 4-8 alone, a few frames)
-    a, b = (synthesize(mesh, object_pose=pose, seed=0, max_frames=12, penetration=False) for _ in range(2))
+    a, b = (synthesize(mesh, object_pose=pose, seed=0, max_frames=12, penetration=False, progress=False)
+            for _ in range(2))
+    assert capsys.readouterr() == ("", "")
     np.testing.assert_array_equal(a.motion.poses, b.motion.poses)
     np.testing.assert_array_equal(a.grasp.poses, b.grasp.poses)
 

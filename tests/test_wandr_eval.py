@@ -347,6 +347,7 @@ class _Replay:
     def __init__(self, deltas):
         self.deltas, self.k = deltas, 0
         self.cfg = type("Cfg", (), {"latent": 2})()
+        self.dtype = torch.float32 if deltas is None else deltas.dtype
 
     def eval(self):
         return self

@@ -1,5 +1,6 @@
 """WANDR's latent optimisation (Sup. B.3, C.2; graspkit.optim.latent) on tiny random models: the loss terms by hand,
 Adam's first step, the model left as it was, batches that optimise each sequence as if alone, argument checks."""
+import os
 from types import SimpleNamespace
 
 import numpy as np
@@ -164,3 +165,22 @@ def test_optimise_latents_batches_starts_goals_and_samples_start_major(two_start
     for b, (s, g, _) in enumerate(want.tolist()):
         torch.testing.assert_close(res.motion.p[b, 0], two_starts[s].p.float())
         torch.testing.assert_close(res.motion.goal[b, 0], goals[g])
+
+
+def test_latent_optimisation_shows_a_bar_that_one_switch_turns_off(start, capsys, monkeypatch):
+    """progress=True draws a bar over the iterations on stderr; TQDM_DISABLE=1 (what `graspkit --quiet` sets) turns it
+    off; stdout stays empty either way."""
+    from graspkit import cli
+
+    model, goal = _tiny(), torch.tensor([0.6, 0.2, 1.0])
+    optimise_latents(model, start, goal, t_goal=3, iters=2, progress=True, generator=torch.Generator().manual_seed(0))
+    out, err = capsys.readouterr()
+    assert out == "" and "latent optimisation" in err
+    monkeypatch.setenv("TQDM_DISABLE", "1")
+    optimise_latents(model, start, goal, t_goal=3, iters=2, progress=True, generator=torch.Generator().manual_seed(0))
+    assert capsys.readouterr() == ("", "")
+    monkeypatch.delenv("TQDM_DISABLE")
+    with cli._quiet(True):
+        optimise_latents(model, start, goal, t_goal=3, iters=2, progress=True)
+    assert capsys.readouterr() == ("", "") and "TQDM_DISABLE" not in os.environ
+    assert cli.build_parser(["--quiet", "body", "info"]).parse_args(["--quiet", "body", "info"]).quiet

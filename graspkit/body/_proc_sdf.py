@@ -12,9 +12,12 @@ fingers at ~1.8 mm while the trunk is sampled at ~4.5 mm.
 from __future__ import annotations
 
 import copy
+import sys
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from graspkit.progress import hidden
 
 EPS = 1e-12
 
@@ -392,8 +395,9 @@ def sample_grid(body: Body, lenses: list[Lens], h: float, progress: bool = False
             D[sel] = smin(D[sel], di, prim.k)
     low = np.nonzero(blo[:, 1] < body.floor.level + 0.05)[0]
     D[low] = smax(D[low], body.floor.level - X[1, low], body.floor.k)
-    if progress:
-        print(f"  grid {tuple(int(k) for k in n)} = {np.prod(n) / 1e6:.1f}M nodes, spacing {h * 1e3:.1f} mm (u space)")
+    if not hidden(progress):
+        print(f"  grid {tuple(int(k) for k in n)} = {np.prod(n) / 1e6:.1f}M nodes, spacing {h * 1e3:.1f} mm (u space)",
+              file=sys.stderr)
     B = BLOCK
     field_ = D.reshape(*nb, B, B, B).transpose(0, 3, 1, 4, 2, 5).reshape(tuple(n))
     return field_, u0

@@ -14,6 +14,7 @@ Deterministic: the same seed gives byte-identical arrays; the seed varies a few 
 from __future__ import annotations
 
 import os
+import sys
 import time
 from pathlib import Path
 from typing import Mapping
@@ -29,6 +30,7 @@ from graspkit.body._proc_sdf import Body, Lens, sample_grid, warp
 from graspkit.body.hand_poses import hand_pca
 from graspkit.body.skeleton import NUM_JOINTS, NUM_VERTICES, PARENTS, SMPLX_LANDMARK_VERTEX_IDS
 from graspkit.paths import naming_errors, publish, sweep_stale_temps, temp_beside
+from graspkit.progress import hidden
 
 __all__ = ["build_procedural_smplx", "save_model_npz", "part_of_vertex", "GRID_SPACING"]
 
@@ -38,9 +40,9 @@ ROOT_PARENT = 4294967295     # the root's parent in the real files' kintree_tabl
 
 
 def _say(progress: bool, t0: float, msg: str) -> None:
-    """Print a progress line with the elapsed time."""
-    if progress:
-        print(f"[{time.perf_counter() - t0:6.1f} s] {msg}", flush=True)
+    """Print a progress line with the elapsed time (on stderr, as the bars: stdout keeps the results)."""
+    if not hidden(progress):
+        print(f"[{time.perf_counter() - t0:6.1f} s] {msg}", file=sys.stderr, flush=True)
 
 
 def mesh_problems(v: np.ndarray, f: np.ndarray, intersections: bool = True) -> list[str]:

@@ -128,6 +128,8 @@ def make_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2, mode
     """Write clips 0..n-1 of `kind` that are not there yet; returns all n paths."""
     from tqdm import tqdm
 
+    from graspkit.progress import hidden
+
     if kind not in KINDS:
         raise ValueError(f"kind: expected one of {KINDS}, got {kind!r}")
     for name, value, least in (("n", n, 0), ("workers", workers, 1)):
@@ -139,7 +141,7 @@ def make_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2, mode
     claim_folder(out, kind, {"seed": seed, "model": model})
     drop_damaged([clip_path(out, kind, i) for i in range(n)], f"{kind} clips")
     todo = [i for i in range(n) if not clip_path(out, kind, i).exists()]
-    bar = tqdm(total=n, initial=n - len(todo), desc=f"{kind} clips", unit="clip", disable=not progress)
+    bar = tqdm(total=n, initial=n - len(todo), desc=f"{kind} clips", unit="clip", disable=hidden(progress))
     if workers == 1:
         _init_worker(model)
         for i in todo:

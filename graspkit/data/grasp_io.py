@@ -41,11 +41,12 @@ def mesh_digest(obj: str | trimesh.Trimesh) -> str:
     return h.hexdigest()[:12]
 
 
-def cached_sdf_grid(name: str | trimesh.Trimesh, resolution: int = 64, folder: Path | None = None) -> SDFGrid:
+def cached_sdf_grid(name: str | trimesh.Trimesh, resolution: int = 64, folder: Path | None = None,
+                    progress: bool = True) -> SDFGrid:
     """The SDF grid of catalogue object `name` (or of a mesh in its object frame): the grid shipped in
     data_stubs/sdf when there is one (then `folder` is not read), else read from `folder` (default `<cache>/sdf/`) or
-    built (seconds) and stored there atomically (where the folder cannot be written, a warning says so and the grid
-    is returned all the same)."""
+    built (seconds; minutes for a scan, with a bar unless `progress` is False) and stored there atomically (where the
+    folder cannot be written, a warning says so and the grid is returned all the same)."""
     from graspkit.paths import cache_dir
 
     fname = _grid_filename(name, resolution)
@@ -62,7 +63,7 @@ def cached_sdf_grid(name: str | trimesh.Trimesh, resolution: int = 64, folder: P
     grid = read_cache(path, _read_grid)               # a damaged cache file is removed and rebuilt
     if grid is not None:
         return grid
-    grid = SDFGrid.from_mesh(_mesh(name), resolution, SDF_PADDING, progress=True)     # minutes for a scan
+    grid = SDFGrid.from_mesh(_mesh(name), resolution, SDF_PADDING, progress=progress)     # minutes for a scan
     try:
         _write_grid(path, grid)
     except OSError as e:                              # a read-only cache: the grid is what the caller needs
@@ -108,19 +109,19 @@ def resolution_for(name: str | trimesh.Trimesh, cell: float, minimum: int = 64) 
     return max(minimum, math.ceil(longest / cell - 1e-9) + 1)
 
 
-def collision_sdf_grid(name: str | trimesh.Trimesh, folder: Path | None = None) -> SDFGrid:
+def collision_sdf_grid(name: str | trimesh.Trimesh, folder: Path | None = None, progress: bool = True) -> SDFGrid:
     """The SDF grid of object `name` (or of a mesh in its object frame) that GraspPose-Opt's collision terms use:
     cells of at most COLLISION_CELL."""
-    return cached_sdf_grid(name, resolution_for(name, COLLISION_CELL), folder)
+    return cached_sdf_grid(name, resolution_for(name, COLLISION_CELL), folder, progress)
 
 
-def object_collision_grid(obj: object, mesh: trimesh.Trimesh) -> SDFGrid:
+def object_collision_grid(obj: object, mesh: trimesh.Trimesh, progress: bool = True) -> SDFGrid:
     """The collision grid for an object as a user gave it (`obj`: what objects.user.as_object took, `mesh`: the mesh
     it returned): a catalogue name keeps its name's grid (cached, or shipped in data_stubs/sdf), anything else the
     mesh's own."""
     from graspkit.objects.catalogue import list_objects
 
-    return collision_sdf_grid(obj if isinstance(obj, str) and obj in list_objects() else mesh)
+    return collision_sdf_grid(obj if isinstance(obj, str) and obj in list_objects() else mesh, progress=progress)
 
 
 def ship_sdf_grid(name: str, resolution: int, folder: Path = DATA_STUBS / "sdf") -> Path:

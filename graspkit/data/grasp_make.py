@@ -299,6 +299,8 @@ def make_grasp_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2
         raise ValueError(f"objects: unknown {bad}; valid names are {list(OBJECT_ORDER)}")
     from tqdm import tqdm
 
+    from graspkit.progress import hidden
+
     if kind not in KINDS:
         raise ValueError(f"kind: expected one of {KINDS}, got {kind!r}")
     for name, value, least in (("n", n, 0), ("workers", workers, 1), ("chunk", chunk, 1)):
@@ -314,7 +316,7 @@ def make_grasp_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2
     missing = [i for i in range(n) if not file_path(out, kind, i).exists()]
     chunks = sorted({i // chunk for i in missing})
     done = n - len(missing)
-    bar = tqdm(total=n, initial=done, desc=f"{kind} files", unit=kind, disable=not progress)
+    bar = tqdm(total=n, initial=done, desc=f"{kind} files", unit=kind, disable=hidden(progress))
     if workers == 1 or len(chunks) <= 1:
         _init_worker(model)
         for c in chunks:

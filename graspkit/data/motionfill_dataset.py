@@ -37,6 +37,7 @@ from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.checks import check_int, seeded_rng
 from graspkit.data.formats import npz_arrays, open_npz
 from graspkit.data.motion import Motion, canonicalize
+from graspkit.progress import hidden
 
 if TYPE_CHECKING:
     from graspkit.body import BodyModel
@@ -113,7 +114,7 @@ def make_windows(motions: list[Motion], bm: BodyModel, stride: int | None = 30, 
     mk = saga_sparse_markers(bm)
     foot_cols = [mk.names.index(n) for n in FOOT_MARKERS]
     out: dict[str, list[np.ndarray]] = {k: [] for k in ("traj", "markers", "local", "vel", "contacts", "clip")}
-    for ci, m in enumerate(tqdm(motions, desc="MotionFill windows", unit="clip", disable=not progress)):
+    for ci, m in enumerate(tqdm(motions, desc="MotionFill windows", unit="clip", disable=hidden(progress))):
         if abs(m.fps - 30.0) > 1e-6:
             raise ValueError(f"motions[{ci}]: expected 30 fps, got {m.fps} (resample with data.load_motion)")
         joints = m.joint_positions(bm)

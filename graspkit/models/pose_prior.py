@@ -165,11 +165,12 @@ def pose_training_set(n_clips: int = 300, seed: int = 0, extra: np.ndarray | Non
     from graspkit.body import BodyModel
     from graspkit.data import generate_locomotion, generate_reach
     from graspkit.paths import default_model_path
+    from graspkit.progress import hidden
 
     bm = bm or BodyModel.from_file(default_model_path())
     seeds = np.random.SeedSequence(seed).generate_state(2 * n_clips)
     clips = []
-    for i in tqdm(range(2 * n_clips), desc="pose-prior clips", disable=not progress):
+    for i in tqdm(range(2 * n_clips), desc="pose-prior clips", disable=hidden(progress)):
         gen = generate_locomotion if i % 2 == 0 else generate_reach
         clips.append(gen(int(seeds[i]), bm))
     poses = body_poses_from_motions(clips, stride)

@@ -135,6 +135,11 @@ class WandrCVAE(nn.Module):
         self.head = GaussianHead(cfg.hidden, cfg.latent)
         self.decoder = _mlp(cfg.latent + self.cond_dim, cfg.hidden, cfg.dec_layers, I.DELTA_DIM, cfg.dropout)
 
+    @property
+    def dtype(self) -> torch.dtype:
+        """The weights' dtype (float32 unless the caller converted the model): rollouts run in it."""
+        return self.decoder[0].weight.dtype
+
     def condition(self, state: Tensor, inten: Tensor) -> Tensor:
         """Normalised condition (B, cond_dim) from raw state (B, 268) and intention (B, 7); dropped parts removed."""
         s = (state - self.state_mean) / self.state_std
@@ -431,7 +436,7 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
     check_floor(floor)
     if not isinstance(lift, bool):
         raise ValueError(f"lift: expected True or False, got {lift!r}")
-    dtype = model.decoder[0].weight.dtype                  # the model's: float64 poses on a float32 model are cast
+    dtype = model.dtype                                    # float64 poses on a float32 model are cast
     p_prev, p0, rest = p_prev.to(dtype), p0.to(dtype), rest.to(dtype)
     z = None if z is None else z.to(dtype)
     goal_heading = None if goal_heading is None else goal_heading.to(dtype)
@@ -533,7 +538,7 @@ def generate(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal:
     The model runs in eval mode (no dropout) and is left in the mode it came in."""
     check_generator(generator)
     pp, p0, rest, g, idx = expand_starts(start, goal, n)
-    dtype = model.decoder[0].weight.dtype                  # float32 unless the caller converted the model
+    dtype = model.dtype                                    # float32 unless the caller converted the model
     pp, p0, rest, g = (x.to(dtype) for x in (pp, p0, rest, g))
     try:
         tg = torch.as_tensor(t_goal)

@@ -31,6 +31,7 @@ from tqdm import tqdm
 from graspkit.objects.distance import (EDGE_AB, EDGE_CA, VERT_A, VERT_C, MeshLike, as_points, edge_ids, mesh_arrays,
                                        nearest_neighbours, point_mesh_distance, require_closed,
                                        require_metres)
+from graspkit.progress import hidden
 
 
 def pseudo_normals(verts: Tensor, faces: Tensor) -> tuple[Tensor, Tensor, Tensor]:
@@ -190,7 +191,7 @@ class SDFGrid:
         per = max(1, SLAB_NODES // layer) if progress else zz.shape[0]     # z layers a call
         values = torch.cat([signed_distance(nodes[k * layer:(k + per) * layer], (v, faces), check=False)
                             for k in tqdm(range(0, zz.shape[0], per), desc=f"SDF grid ({len(faces)} faces)",
-                                          unit="slab", disable=zz.shape[0] <= per, leave=False)]).reshape(zz.shape)
+                                          unit="slab", disable=zz.shape[0] <= per or hidden(), leave=False)]).reshape(zz.shape)
         return SDFGrid(values.to(dtype), lo.to(dtype), hi.to(dtype))
 
     def to(self, device: torch.device | str | None = None, dtype: torch.dtype | None = None) -> SDFGrid:

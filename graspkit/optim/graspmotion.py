@@ -117,6 +117,7 @@ from graspkit.models.gnet import SparseBody
 from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, _nearest, body_joint_ids, free_joint_excess,
                                      hand_vertex_ids, kabsch, with_free_joints)
 from graspkit.optim.step import energy_step, with_autograd
+from graspkit.progress import hidden
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
 from graspkit.train import load_checkpoint, state_dict_problem
 
@@ -559,7 +560,7 @@ class GraspMotionOpt:
         log: list[dict[str, float]] = []
         energies: dict[str, dict[str, Tensor]] = {}
         n_polish, lr_polish = self.cfg.polish
-        bar = tqdm(total=sum(self.cfg.steps) + n_polish, desc="GraspMotion-Opt", disable=not progress)
+        bar = tqdm(total=sum(self.cfg.steps) + n_polish, desc="GraspMotion-Opt", disable=hidden(progress))
         step = 0
         for stage, n in ((1, self.cfg.steps[0]), (2, self.cfg.steps[1] + n_polish)):
             # with a start body, stage 2 leaves frame 0 where stage 1 fitted it: S.2's planted feet would otherwise

@@ -110,6 +110,7 @@ from graspkit.models.wholegrasp import check_height
 from graspkit.objects.distance import require_points_in_metres, require_unit_normals
 from graspkit.objects.sdf import SDFGrid
 from graspkit.optim.step import energy_step, with_autograd
+from graspkit.progress import hidden
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
 
 if TYPE_CHECKING:
@@ -604,7 +605,7 @@ class GraspPoseOpt:
         restart = 3 in stages and self._restarts()
         total = sum(self.cfg.steps[s - 1] for s in stages) + (n_polish if 3 in stages else 0)
         total += (self.cfg.steps[2] + n_polish) if restart else 0
-        bar = tqdm(total=total, desc="GraspPose-Opt", disable=not progress)
+        bar = tqdm(total=total, desc="GraspPose-Opt", disable=hidden(progress))
         step = 0
         for stage in stages:
             if stage == 3:

@@ -26,12 +26,14 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 import torch
 from torch import Tensor
+from tqdm.auto import tqdm
 
 from graspkit import intention as I
 from graspkit.checks import check_finite, check_generator, check_int, check_real, check_weight
 from graspkit.models.blocks import evaluating
 from graspkit.models.wandr import Rollout, WandrCVAE, expand_starts, rollout
 from graspkit.optim.step import with_autograd
+from graspkit.progress import hidden
 
 if TYPE_CHECKING:
     from graspkit.body import BodyModel
@@ -65,11 +67,13 @@ def optimise_latents(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose
                      t_goal: int, frames: int | None = None, n: int = 1,
                      waypoints: Sequence[tuple[int, Sequence[float]]] = (), z0: Tensor | None = None, iters: int = 40,
                      lr: float = 0.05, w_norm: float = 0.01, w_goal: float = 1.0, w_way: float = 1.0,
-                     generator: torch.Generator | None = None) -> LatentResult:
+                     generator: torch.Generator | None = None, progress: bool = False) -> LatentResult:
     """Optimise the per-frame latents of motions from `start` (one or more) towards goals (3,) or (G, 3) (the wrist
     there at frame t_goal), n each (B = S * G * n, start-major as `generate`), the pelvis over `waypoints`
     [(frame, (x, y))]. z0 (B, frames, latent), or random N(0, I) from `generator` (the latents of a plain rollout).
-    Adam is element-wise and the loss a sum over sequences, so a batch optimises each sequence independently."""
+    Adam is element-wise and the loss a sum over sequences, so a batch optimises each sequence independently.
+    progress: a bar over the iterations (each a rollout and its backward pass: 50 goals of 120 frames, 40 iterations
+    take two minutes on two cores)."""
     check_int(t_goal, "t_goal", least=1)
     check_generator(generator)
     frames = t_goal if frames is None else check_int(frames, "frames", least=1)
@@ -92,15 +96,15 @@ def optimise_latents(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose
         check_finite(z0, "z0", "latents")
     with evaluating(model):
         return _optimise(model, start, goal, t_goal, frames, n, waypoints, z0, iters, lr, w_norm, w_goal, w_way,
-                         generator)
+                         generator, progress)
 
 
 def _optimise(model: WandrCVAE, start, goal, t_goal: int, frames: int, n: int, waypoints, z0: Tensor | None,
               iters: int, lr: float, w_norm: float, w_goal: float, w_way: float,
-              generator: torch.Generator | None) -> LatentResult:
+              generator: torch.Generator | None, progress: bool = False) -> LatentResult:
     """`optimise_latents` after its checks, the model in eval mode."""
     pp, p0, rest, g, idx = expand_starts(start, torch.as_tensor(goal, dtype=torch.float32).reshape(-1, 3), n)
-    dtype = model.decoder[0].weight.dtype                  # float32 unless the caller converted the model (as generate)
+    dtype = model.dtype                                    # float32 unless the caller converted the model (as generate)
     pp, p0, rest, g = (x.to(dtype) for x in (pp, p0, rest, g))
     B, L = len(g), model.cfg.latent
     z = (torch.randn(B, frames, L, generator=generator) if z0 is None else z0.detach().clone()).to(dtype)
@@ -114,7 +118,7 @@ def _optimise(model: WandrCVAE, start, goal, t_goal: int, frames: int, n: int, w
     for q in model.parameters():
         q.requires_grad_(False)
     try:
-        for it in range(iters + 1):
+        for it in tqdm(range(iters + 1), desc="latent optimisation", unit="iter", disable=hidden(progress)):
             out = rollout(model, pp, p0, rest, g, t_goal, frames, z=z)
             terms = latent_loss(out, z, g, t_goal, waypoints, w_norm, w_goal, w_way)
             history.append({k: float(v.detach().mean()) for k, v in terms.items()})
@@ -136,10 +140,11 @@ def _optimise(model: WandrCVAE, start, goal, t_goal: int, frames: int, n: int, w
 
 
 def evaluate_vae_opt(model: WandrCVAE, starts: Sequence[I.StartPose], bm: BodyModel, seed: int = 0, n_starts: int = 2,
-                     iters: int = 30, chunk: int = 125, **kw: Any) -> GridResult:
+                     iters: int = 30, chunk: int = 125, progress: bool = False, **kw: Any) -> GridResult:
     """Tab. 2's "VAE + opt" on the goal grid: a model without intention, latents optimised from random draws towards
     each goal (L_norm + L_goal at t_G), scored as evaluate_grid scores WANDR. Cost: every iteration is a rollout and its
-    backward pass, so this runs on the first `n_starts` starts with one sample per goal (documented in docs/wandr.md)."""
+    backward pass, so this runs on the first `n_starts` starts with one sample per goal (documented in docs/wandr.md);
+    progress: a bar over the (start, chunk of goals) optimisations."""
     import numpy as np
 
     from graspkit.eval_wandr import T_GOAL, GridResult, evaluate_motions, grid_goals
@@ -147,14 +152,15 @@ def evaluate_vae_opt(model: WandrCVAE, starts: Sequence[I.StartPose], bm: BodyMo
     goals, cells = grid_goals()
     gen = torch.Generator().manual_seed(seed)
     parts = []
-    for s_i, s in enumerate(starts[:n_starts]):
-        for lo in range(0, len(goals), chunk):
-            res = optimise_latents(model, s, goals[lo:lo + chunk], T_GOAL, iters=iters, generator=gen, **kw)
-            m = res.motion
-            idx = res.motion.info["index"].clone()
-            idx[:, 0], idx[:, 1] = s_i, idx[:, 1] + lo
-            parts.append(evaluate_motions(m.p, m.rest, m.goal[:, 0], s.betas[None].expand(len(idx), -1), bm, T_GOAL,
-                                          cells, idx, s.full_pose))      # cells by goal: idx's goal column
+    jobs = [(s_i, lo) for s_i in range(len(starts[:n_starts])) for lo in range(0, len(goals), chunk)]
+    for s_i, lo in tqdm(jobs, desc="VAE + opt", unit="batch", disable=hidden(progress)):
+        s = starts[s_i]
+        res = optimise_latents(model, s, goals[lo:lo + chunk], T_GOAL, iters=iters, generator=gen, **kw)
+        m = res.motion
+        idx = res.motion.info["index"].clone()
+        idx[:, 0], idx[:, 1] = s_i, idx[:, 1] + lo
+        parts.append(evaluate_motions(m.p, m.rest, m.goal[:, 0], s.betas[None].expand(len(idx), -1), bm, T_GOAL,
+                                      cells, idx, s.full_pose))      # cells by goal: idx's goal column
     cat = lambda k: np.concatenate([getattr(p, k) for p in parts])  # noqa: E731
     return GridResult(cat("start"), cat("goal_index"), cat("sample"), cat("cell"), cat("dtg"), cat("reach_frame"),
                       cat("fs"), cat("error_at_goal"), {"iters": iters, "starts": n_starts})

@@ -18,6 +18,7 @@ from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter, writ
 from tqdm.auto import tqdm
 
 from graspkit.paths import naming_errors, sweep_stale_temps
+from graspkit.progress import hidden
 from graspkit.viz.export import drawn_frames, publish, temp_beside
 from graspkit.viz.scene import (View, _mesh_polys, as_array, as_mesh, as_points, bounds_of, draw_ground, draw_meshes,
                                 draw_path, figure, set_equal, sphere, to_numpy)
@@ -183,7 +184,7 @@ def save_animation(anim: FuncAnimation, path: str | os.PathLike, fps: float | No
     show = progress if progress is not None else n >= 100
     tmp = temp_beside(path, suffix)  # writers pick the format from the suffix
     try:
-        with naming_errors(path), tqdm(total=n, unit="frame", desc=path.name, disable=not show, leave=False) as bar, \
+        with naming_errors(path), tqdm(total=n, unit="frame", desc=path.name, disable=hidden(show), leave=False) as bar, \
                 mpl.rc_context(rc):
             anim.save(tmp, writer=writer, dpi=dpi, progress_callback=lambda i, total: bar.update(1))
             publish(tmp, path)
