@@ -179,6 +179,32 @@ def pose_training_set(n_clips: int = 300, seed: int = 0, extra: np.ndarray | Non
     return np.concatenate([poses, mirror_body_pose(poses)])
 
 
+def heldout_clip_poses(n_clips: int = 20, seed: int = 0, bm: BodyModel | None = None, stride: int = 4) -> np.ndarray:
+    """Body poses (n, 21, 3), mirrored too, of n_clips locomotion + n_clips reaching clips that no training run of
+    the prior sees: their seeds come from SeedSequence([seed, 1]), the training clips' from SeedSequence(seed)."""
+    from graspkit.body import BodyModel
+    from graspkit.data import generate_locomotion, generate_reach
+    from graspkit.paths import default_model_path
+
+    bm = bm or BodyModel.from_file(default_model_path())
+    seeds = np.random.SeedSequence([seed, 1]).generate_state(2 * n_clips)
+    clips = [(generate_locomotion if i % 2 == 0 else generate_reach)(int(s), bm) for i, s in enumerate(seeds)]
+    poses = body_poses_from_motions(clips, stride)
+    return np.concatenate([poses, mirror_body_pose(poses)])
+
+
+@torch.no_grad()
+def angle_error(model: PosePrior, body_pose: np.ndarray | Tensor) -> float:
+    """Mean angle (degrees) between each joint's rotation in body poses (n, 21, 3) and its round trip through the prior
+    (encoder mean -> decoder), over the n x 21 joints: the figure the training logs as angle_error_deg."""
+    x = torch.as_tensor(np.asarray(body_pose, np.float32)).reshape(-1, NUM_BODY_JOINTS * 3)
+    if len(x) == 0:
+        raise ValueError("body_pose: expected at least one pose (n, 21, 3)")
+    R = model.decode_rotmats(model.posterior(x)[0])
+    cos = ((R * axis_angle_to_matrix(x.view(-1, NUM_BODY_JOINTS, 3))).sum((-1, -2)) - 1) / 2
+    return float(torch.rad2deg(torch.acos(cos.clamp(-1, 1))).mean())
+
+
 def train_pose_prior(out: str | Path = POSE_PRIOR_PATH, poses: np.ndarray | None = None, epochs: int = 30,
                      batch_size: int = 256, lr: float = 2e-3, seed: int = 0, n_clips: int = 200,
                      val_fraction: float = 0.05, progress: bool = True, half: bool = True,
