@@ -142,7 +142,8 @@ def test_show_scene(body, ball, tmp_path):
         np.testing.assert_allclose(a / a[2], r / r[2], rtol=1e-6)
         assert ax.get_zlim()[0] <= 0.0 and ax.get_zlim()[1] >= body.bounds[1, 2]
     fig.savefig(tmp_path / "scene.png", dpi=50)
-    assert Image.open(tmp_path / "scene.png").size[0] > 0
+    with Image.open(tmp_path / "scene.png") as im:
+        assert im.size[0] > 0
 
 
 @pytest.mark.parametrize("call, name", [
