@@ -590,15 +590,17 @@ def _quiet(on: bool) -> Iterator[None]:
     """TQDM_DISABLE=1 while a command runs (graspkit.progress: every bar and progress line off), as it was after."""
     from graspkit.progress import QUIET_ENV
 
+    if not on:
+        yield
+        return
     old = os.environ.get(QUIET_ENV)
-    if on:
-        os.environ[QUIET_ENV] = "1"
+    os.environ[QUIET_ENV] = "1"
     try:
         yield
     finally:
-        if on and old is None:
+        if old is None:
             os.environ.pop(QUIET_ENV, None)
-        elif on:
+        else:
             os.environ[QUIET_ENV] = old
 
 
