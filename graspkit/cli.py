@@ -321,8 +321,9 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="graspkit", description="graspkit: whole-body motion synthesis towards "
                                 "objects and goals (SAGA, GOAL, WANDR), at workbook scale.")
     p.add_argument("--version", action="version", version=f"graspkit {__version__}")
-    p.add_argument("--quiet", action="store_true", help="no progress bars or progress lines on stderr (before the "
-                   "command: graspkit --quiet train ...; the library's switch is the environment's TQDM_DISABLE=1)")
+    p.add_argument("--quiet", action="store_true", dest="quiet_all",   # data make's own --quiet would overwrite `quiet`
+                   help="no progress bars or progress lines (before the command: graspkit --quiet train ...; the "
+                   "library's switch is the environment's TQDM_DISABLE=1)")
     sub = p.add_subparsers(dest="command", required=True)
 
     body = sub.add_parser("body", help="the body model").add_subparsers(dest="body_command", required=True)
@@ -543,12 +544,14 @@ def as_flags(**flags: str) -> Iterator[None]:
 
 def reports_errors(prog: str) -> Callable[[Callable[..., int]], Callable[..., int]]:
     """Decorate a module's `main(argv)` so that a bad input (ValueError, OSError) ends as the graspkit command's do:
-    `<prog>: error: <message>` on stderr and exit status 2, no traceback; Ctrl-C as one line and exit status 130."""
+    `<prog>: error: <message>` on stderr and exit status 2, no traceback; Ctrl-C as one line and exit status 130;
+    graspkit's warnings as `<prog>: note: ...` lines."""
     def wrap(main: Callable[..., int]) -> Callable[..., int]:
         @functools.wraps(main)
         def run(argv: list[str] | None = None) -> int:
             try:
-                return int(main(argv) or 0)
+                with notes(prog):
+                    return int(main(argv) or 0)
             except (ValueError, OSError) as e:
                 print(f"{prog}: error: {e}", file=sys.stderr)
                 return 2
@@ -569,19 +572,27 @@ def print_run_logs() -> None:
               f"{run.with_suffix('.png').name} beside it")
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the `graspkit` console command (graspkit's own warnings show as `graspkit: note: ...` lines)."""
+@contextlib.contextmanager
+def notes(prog: str) -> Iterator[None]:
+    """graspkit's own warnings shown as `<prog>: note: ...` lines on stderr while the block runs (others as Python
+    shows them)."""
     with warnings.catch_warnings():
         shown = warnings.showwarning
 
         def note(message: Warning | str, category: type[Warning], filename: str, lineno: int,
                  file: TextIO | None = None, line: str | None = None) -> None:
             if "graspkit" in Path(filename).parts:
-                print(f"graspkit: note: {message}", file=sys.stderr)
+                print(f"{prog}: note: {message}", file=sys.stderr)
             else:
                 shown(message, category, filename, lineno, file, line)
 
         warnings.showwarning = note
+        yield
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the `graspkit` console command (graspkit's own warnings show as `graspkit: note: ...` lines)."""
+    with notes("graspkit"):
         return _main(argv)
 
 
@@ -607,7 +618,7 @@ def _quiet(on: bool) -> Iterator[None]:
 def _main(argv: list[str] | None) -> int:
     """`main` with graspkit's warnings shown as notes."""
     args = build_parser(argv).parse_args(argv)
-    with _quiet(args.quiet):
+    with _quiet(args.quiet_all):
         return _run(args)
 
 

@@ -657,40 +657,40 @@ def evaluate(folders: Sequence[str | Path] | None = None, stubs: str | Path | No
 
     folders = folders or default_data_folders()
     stubs = Path(stubs or DATA_STUBS / "checkpoints")
-    bar = tqdm(total=4, desc="GOAL eval", unit="phase", disable=hidden(progress))
-    bar.set_postfix_str("Tab. 1: GNet samples, refined")
-    bm, gv, body = _body()
-    res: dict = {"paper": {"tab1": PAPER_TAB1, "tab2": PAPER_TAB2, "sliding": PAPER_SLIDING},
-                 "config": {"n_grasps": n_grasps, "n_rollouts": n_rollouts, "window_stride": window_stride,
-                            "seed": seed, "max_frames": max_frames, "threads": torch.get_num_threads()}}
-    res.update(tab1_results(folders, stubs, n_grasps, seed))
-    bar.update()
-    bar.set_postfix_str("Tab. 2: MNet, teacher-forced")
-    gnet = load_gnet(stubs / "gnet.pt")
-    # Tab. 2: teacher-forced 10-frame horizon on the test clips' windows
-    t1 = time.perf_counter()
-    windows = mnet_windows(folders, "test", MNetConfig(), stride=window_stride)
-    idx = torch.arange(len(windows))
-    res["tab2"] = {}
-    for variant, name in (("mnet", "MNet"), ("no_iaa", "MNet-w/o-IAA"), ("pose", "MNet-Pose"), ("1frame", "1 output frame")):
-        path = stubs / ("mnet.pt" if variant == "mnet" else f"mnet_{variant}.pt")
-        if not path.is_file():
-            continue
-        e = teacher_forced_v2v(load_mnet(path), windows, bm, idx)
-        res["tab2"][name] = {"body": e.body, "hand": e.hand, "feet": e.feet}
-    res["tab2_windows"] = len(idx)
-    res["tab2_seconds"] = time.perf_counter() - t1
-    bar.update()
-    bar.set_postfix_str("rollouts: MNet from the clips' starts")
-    seqs = rollout_sequences(folders, n_rollouts)
-    res.update(rollout_results(seqs, stubs, gnet, seed, max_frames))
-    out = Path(out or stubs / "goal_eval.json")
-    write_atomic(out, json.dumps(res, indent=1, default=float))      # GOAL's tables first: SAGA's row takes minutes
-    bar.update()
-    bar.set_postfix_str("SAGA's rows: synthesize per clip")
-    write_atomic(out, json.dumps(add_saga_rows(res, seqs, seed), indent=1, default=float))
-    bar.update()
-    bar.close()
+    with tqdm(total=4, desc="GOAL eval", unit="phase", disable=hidden(progress)) as bar:
+        bar.set_postfix_str("Tab. 1: GNet samples, refined")
+        bm, gv, body = _body()
+        res: dict = {"paper": {"tab1": PAPER_TAB1, "tab2": PAPER_TAB2, "sliding": PAPER_SLIDING},
+                     "config": {"n_grasps": n_grasps, "n_rollouts": n_rollouts, "window_stride": window_stride,
+                                "seed": seed, "max_frames": max_frames, "threads": torch.get_num_threads()}}
+        res.update(tab1_results(folders, stubs, n_grasps, seed))
+        bar.update()
+        bar.set_postfix_str("Tab. 2: MNet, teacher-forced")
+        gnet = load_gnet(stubs / "gnet.pt")
+        # Tab. 2: teacher-forced 10-frame horizon on the test clips' windows
+        t1 = time.perf_counter()
+        windows = mnet_windows(folders, "test", MNetConfig(), stride=window_stride)
+        idx = torch.arange(len(windows))
+        res["tab2"] = {}
+        for variant, name in (("mnet", "MNet"), ("no_iaa", "MNet-w/o-IAA"), ("pose", "MNet-Pose"),
+                              ("1frame", "1 output frame")):
+            path = stubs / ("mnet.pt" if variant == "mnet" else f"mnet_{variant}.pt")
+            if not path.is_file():
+                continue
+            e = teacher_forced_v2v(load_mnet(path), windows, bm, idx)
+            res["tab2"][name] = {"body": e.body, "hand": e.hand, "feet": e.feet}
+        res["tab2_windows"] = len(idx)
+        res["tab2_seconds"] = time.perf_counter() - t1
+        bar.update()
+        bar.set_postfix_str("rollouts: MNet from the clips' starts")
+        seqs = rollout_sequences(folders, n_rollouts)
+        res.update(rollout_results(seqs, stubs, gnet, seed, max_frames))
+        out = Path(out or stubs / "goal_eval.json")
+        write_atomic(out, json.dumps(res, indent=1, default=float))  # GOAL's tables first: SAGA's row takes minutes
+        bar.update()
+        bar.set_postfix_str("SAGA's rows: synthesize per clip")
+        write_atomic(out, json.dumps(add_saga_rows(res, seqs, seed), indent=1, default=float))
+        bar.update()
     return res
 
 

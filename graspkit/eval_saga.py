@@ -576,6 +576,7 @@ def _cmd_train(args: argparse.Namespace, name: str) -> int:
 
     torch.set_num_threads(args.threads)
     if name == "pose_prior":
+        from graspkit.data.grasp_datasets import grasp_files
         from graspkit.models.pose_prior import (POSE_PRIOR_PATH, angle_error, heldout_clip_poses, load_pose_prior,
                                                 pose_training_set, train_pose_prior)
 
@@ -590,12 +591,9 @@ def _cmd_train(args: argparse.Namespace, name: str) -> int:
         # the logged "val" rows are a row split of the tiled, mirrored array (copies of training rows among them):
         # the held-out figures are on clips of another seed stream and on the validation objects' grasps
         prior = load_pose_prior(args.out or POSE_PRIOR_PATH)
-        held = f"held-out clips {angle_error(prior, heldout_clip_poses(20, args.seed)):.2f}"
-        try:
-            val = grasp_body_poses(args.data, split="val") if args.data else None
-        except ValueError:                              # a folder without validation-object grasps
-            val = None
-        if val is not None:
+        held = f"held-out clips {angle_error(prior, heldout_clip_poses(100, args.seed)):.2f}"
+        if args.data and grasp_files(args.data, "grasp", split="val"):
+            val = grasp_body_poses(args.data, split="val")
             held += f", validation-object grasps {angle_error(prior, val):.2f} ({len(val)})"
         print(f"wrote {args.out or POSE_PRIOR_PATH}: {len(hist)} epochs in {time.perf_counter() - t0:.0f} s; joint "
               f"angle error (deg): row split {hist[-1]['val_angle_error_deg']:.2f}, {held}")

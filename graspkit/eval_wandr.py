@@ -46,6 +46,7 @@ from graspkit.data.reaching import EVAL_DISTANCES, EVAL_FRAMES, EVAL_HEIGHTS, St
 from graspkit.data.wandr_dataset import FOOT_JOINTS, shaped_rest
 from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS
 from graspkit.models.blocks import evaluating
+from graspkit.progress import hidden
 
 if TYPE_CHECKING:
     import argparse
@@ -371,7 +372,6 @@ def evaluate_grid(model: WandrCVAE, starts: Sequence[I.StartPose], bm: BodyModel
     from tqdm.auto import tqdm
 
     from graspkit.models.wandr import expand_starts, rollout
-    from graspkit.progress import hidden
 
     if goals is None:
         goals, cells = grid_goals()
@@ -825,7 +825,7 @@ def _train_selecting(model, train, cfg, ck, stride, progress, folder, bm) -> tup
             rec["best"], rec["model"] = score["epoch"], {k: v.clone() for k, v in model.state_dict().items()}
         rec["scores"].append(score)
         save_checkpoint(rec_path, rec)
-        if progress:
+        if not hidden(progress):
             print(f"epoch {score['epoch']}: validation SR {score['SR']:.1f} %, FS {score['FS']:.1f} %, "
                   f"DTG {score['DTG']:.1f} cm (best: epoch {rec['best']})", flush=True)
     if not history:                         # everything was done before: the history is in the training state

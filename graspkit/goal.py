@@ -98,38 +98,38 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
         raise ValueError(f"start: expected a graspkit.data.reaching.Start or None, got {type(start).__name__}")
     check_bool(progress, "progress")
     ck = check_checkpoints(checkpoints)
-    bar = tqdm(total=3, desc="GOAL", unit="stage", disable=hidden(progress))
-    bar.set_postfix_str("body, start, collision grid")
-    pose = object_pose if object_pose is not None else within_reach_pose(seed)
-    centre = np.asarray(pose.translation, np.float64)
-    mesh = apply_pose(pose, obj_mesh)
-    pts = torch.as_tensor(apply_pose(pose, sample_surface(obj_mesh, 2048, seed=0)[0])).float()
-    c = torch.as_tensor(centre).float()
+    with tqdm(total=3, desc="GOAL", unit="stage", disable=hidden(progress)) as bar:
+        bar.set_postfix_str("body, start, collision grid")
+        pose = object_pose if object_pose is not None else within_reach_pose(seed)
+        centre = np.asarray(pose.translation, np.float64)
+        mesh = apply_pose(pose, obj_mesh)
+        pts = torch.as_tensor(apply_pose(pose, sample_surface(obj_mesh, 2048, seed=0)[0])).float()
+        c = torch.as_tensor(centre).float()
 
-    bm, _, body = _body(model)                   # flat hand mean: poses are absolute, as in the data files
-    st = start if start is not None else default_start(centre, start_distance)
-    first = plan_reach(st, centre, 60, seed=seed, bm=bm).slice(0, 1)
-    betas = torch.as_tensor(first.betas[:10]).float()
-    s = (axis_angle_to_rot6d(torch.as_tensor(first.poses[0], dtype=torch.float64)).float(),
-         torch.as_tensor(first.trans[0]).float())
-    g = torch.Generator().manual_seed(seed)
-    sdf = (object_collision_grid(given, obj_mesh, progress), pose.rotation, pose.translation) if penetration else None
-    bar.set_postfix_str("GNet grasp, refined (Eq. 4-8)")
-    goal = gnet_goal(load_gnet(ck / "gnet.pt"), s, betas, pts, c, generator=g, sdf=sdf, model=model)[:2]
-    bar.update()
-    bar.set_postfix_str("MNet approach (Eq. 9-13)")
-    r = rollout(load_mnet(ck / "mnet.pt"), body, s, goal, betas, pts, c, bps_basis(), max_frames=max_frames,
-                floor=0.0, stall=stall)      # graspkit's floor step and stall rule (not GOAL's): docs/goal.md
-    bar.update()
-    bar.set_postfix_str("figures")
+        bm, _, body = _body(model)                   # flat hand mean: poses are absolute, as in the data files
+        st = start if start is not None else default_start(centre, start_distance)
+        first = plan_reach(st, centre, 60, seed=seed, bm=bm).slice(0, 1)
+        betas = torch.as_tensor(first.betas[:10]).float()
+        s = (axis_angle_to_rot6d(torch.as_tensor(first.poses[0], dtype=torch.float64)).float(),
+             torch.as_tensor(first.trans[0]).float())
+        g = torch.Generator().manual_seed(seed)
+        grid = object_collision_grid(given, obj_mesh, progress) if penetration else None
+        sdf = (grid, pose.rotation, pose.translation) if penetration else None
+        bar.set_postfix_str("GNet grasp, refined (Eq. 4-8)")
+        goal = gnet_goal(load_gnet(ck / "gnet.pt"), s, betas, pts, c, generator=g, sdf=sdf, model=model)[:2]
+        bar.update()
+        bar.set_postfix_str("MNet approach (Eq. 9-13)")
+        r = rollout(load_mnet(ck / "mnet.pt"), body, s, goal, betas, pts, c, bps_basis(), max_frames=max_frames,
+                    floor=0.0, stall=stall)      # graspkit's floor step and stall rule (not GOAL's): docs/goal.md
+        bar.update()
+        bar.set_postfix_str("figures")
 
-    to_motion = lambda r6, t: Motion(matrix_to_axis_angle(rot6d_to_matrix(r6.double())).numpy(),  # noqa: E731
-                                     t.detach().double().numpy(), betas.double().numpy(), 30.0)
-    grasp, motion = to_motion(goal[0][None], goal[1][None]), to_motion(r.rot6d, r.transl)
-    gv, lv = grasp.vertices(bm)[0], motion.vertices(bm)
-    slid, pairs = sliding(lv)
-    metrics = {**grasp_and_end_figures(gv, lv[-1], bm.faces, mesh), "frames": float(motion.num_frames),
-               "sliding": slid / max(pairs, 1), **floor_figures(lv)}
-    bar.update()
-    bar.close()
+        to_motion = lambda r6, t: Motion(matrix_to_axis_angle(rot6d_to_matrix(r6.double())).numpy(),  # noqa: E731
+                                         t.detach().double().numpy(), betas.double().numpy(), 30.0)
+        grasp, motion = to_motion(goal[0][None], goal[1][None]), to_motion(r.rot6d, r.transl)
+        gv, lv = grasp.vertices(bm)[0], motion.vertices(bm)
+        slid, pairs = sliding(lv)
+        metrics = {**grasp_and_end_figures(gv, lv[-1], bm.faces, mesh), "frames": float(motion.num_frames),
+                   "sliding": slid / max(pairs, 1), **floor_figures(lv)}
+        bar.update()
     return GoalResult(name, pose, mesh, grasp, motion, bool(r.reached), metrics)

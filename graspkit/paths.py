@@ -332,38 +332,67 @@ def read_cache(path: Path, load: Callable[[Path], Any]) -> Any | None:
         return None
 
 
+class _Stopped(BaseException):
+    """Raised in a pool worker's call by the parent's SIGTERM: the call's own cleanup runs (a writer removes its
+    temporary file), then the worker exits."""
+
+
+_IN_CALL = False                                        # a pool worker: whether it is running a call now
+
+
+def _on_sigterm(signum: int, frame: Any) -> None:
+    """A pool worker's SIGTERM: stop the running call through its cleanup, or exit at once when idle."""
+    if _IN_CALL:
+        raise _Stopped
+    os._exit(143)
+
+
 def _pool_worker_init(initializer: Callable[..., None] | None, initargs: tuple) -> None:
-    """A pool worker ignores Ctrl-C (the terminal sends it to the whole process group): the parent handles it."""
+    """A pool worker ignores Ctrl-C (the terminal sends it to the whole process group: the parent handles it) and
+    stops on the parent's SIGTERM through the running call's cleanup."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _on_sigterm)
     if initializer is not None:
         initializer(*initargs)
+
+
+def _pool_call(fn: Callable[..., Any], args: tuple) -> Any:
+    """fn(*args) in a pool worker; stopped by SIGTERM, the worker exits once the call's cleanup has run."""
+    global _IN_CALL
+    try:
+        _IN_CALL = True
+        try:
+            return fn(*args)
+        finally:
+            _IN_CALL = False
+    except _Stopped:                                    # also when the signal lands in the finally above
+        os._exit(143)
 
 
 def pool_results(calls: Sequence[tuple[Callable[..., Any], tuple]], workers: int,
                  initializer: Callable[..., None] | None = None, initargs: tuple = ()) -> Iterator[Any]:
     """Results of calls [(fn, args), ...] run on a pool of `workers` processes, in the order they complete. On any
-    error, Ctrl-C included, the queued calls are cancelled and the workers stopped before the error is raised (a
-    pool in a plain `with` block runs every queued call first, and a worker that took Ctrl-C as its call's error
-    went on with the next: `data make` wrote files for a minute after Ctrl-C). A stopped worker's temporary file is
-    swept by the next writer in its folder (sweep_stale_temps)."""
+    error, Ctrl-C included, the workers are stopped before the error is raised, their running calls through their
+    cleanup (no temporary file left), the queued calls not started (a pool in a plain `with` block runs every queued
+    call first, and a worker that took Ctrl-C as its call's error went on with the next: `data make` wrote files for
+    a minute after Ctrl-C)."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     # never more processes than calls: `--workers 500` for 3 clips starts 3 (each process loads torch and a body)
     ex = ProcessPoolExecutor(max_workers=max(1, min(workers, len(calls))), initializer=_pool_worker_init,
                              initargs=(initializer, initargs))
-    futures: list = []
     try:
-        futures = [ex.submit(fn, *args) for fn, args in calls]
+        futures = [ex.submit(_pool_call, fn, args) for fn, args in calls]
         for f in as_completed(futures):
             yield f.result()
     except BaseException:
-        for f in futures:
-            f.cancel()
-        for p in list((getattr(ex, "_processes", None) or {}).values()):   # calls already handed to a worker
+        # stop the workers and let the pool fail the calls left: cancelling them here as well races the pool's own
+        # failing of them on Python 3.11 (an InvalidStateError traceback from its thread)
+        for p in list((getattr(ex, "_processes", None) or {}).values()):
             p.terminate()
-        ex.shutdown(wait=True, cancel_futures=True)
+        ex.shutdown(wait=True)
         raise
     ex.shutdown(wait=True)
 

@@ -49,6 +49,12 @@ def random_model_dir(tmp_path_factory) -> Path:
     return root
 
 
+@pytest.fixture(autouse=True)
+def bars_as_the_calls_say(monkeypatch):
+    """No TQDM_DISABLE from the shell or CI: the tests that check a bar is drawn (or not) set it themselves."""
+    monkeypatch.delenv("TQDM_DISABLE", raising=False)
+
+
 @pytest.fixture(autouse=True, scope="module")
 def one_thread():
     """One torch thread in every test module (restored afterwards): the machine's two cores are shared, and the many

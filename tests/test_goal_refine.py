@@ -106,7 +106,7 @@ def test_refiner_names_nan_predictions_mismatched_betas_and_bad_steps(setup):
         ref({**hat, "hand_offsets": torch.full((2, 99, 3), float("nan"))}, torch.zeros(2, 10), pts)
     with pytest.raises(ValueError, match="hat\\['transl'\\]: expected 2 finite rows"):
         ref({**hat, "transl": torch.zeros(3, 3)}, torch.zeros(2, 10), pts)
-    with pytest.raises(ValueError, match="betas: expected finite shape coefficients \\(1 or 2"):
+    with pytest.raises(ValueError, match="betas: expected finite shape coefficients \\(1 or B = 2"):
         ref(hat, torch.zeros(3, 10), pts)
     with pytest.raises(ValueError, match="object_points: expected finite points"):
         ref(hat, torch.zeros(2, 10), torch.full((5, 3), float("nan")))

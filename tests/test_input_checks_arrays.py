@@ -54,7 +54,8 @@ def test_grasp_refiner_names_betas_wider_than_the_model(bm):
     ref = GraspRefiner(bm, goal_vertices(bm))
     hat = {"rot6d": torch.zeros(1, 55, 6), "transl": torch.zeros(1, 3), "head_dir": torch.zeros(1, 3),
            "hand_offsets": torch.zeros(1, 99, 3)}
-    with pytest.raises(ValueError, match=rf"^betas: expected finite shape coefficients \(1 or 1, k <= {bm.num_betas}\)"):
+    want = rf"^betas: expected finite shape coefficients \(1 or B = 1, k <= {bm.num_betas}\)"
+    with pytest.raises(ValueError, match=want):
         ref(hat, torch.zeros(1, 16), torch.zeros(50, 3))
 
 

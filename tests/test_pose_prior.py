@@ -173,8 +173,17 @@ def test_held_out_figures_use_other_clips_and_match_scipy(held_out_poses, tmp_pa
     monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
     monkeypatch.setattr(P, "pose_training_set", lambda n, seed, extra=None: small)
     monkeypatch.setattr(P, "heldout_clip_poses", lambda n, seed: held_out_poses.numpy())
-    assert cli.main(["train", "pose_prior", "--epochs", "1", "--out", str(tmp_path / "p.pt"),
-                     "--data", str(DATA_STUBS / "grasps")]) == 0
+    data = tmp_path / "grasps"                   # the shipped training grasps and one relabelled as the apple's
+    data.mkdir()
+    for f in sorted((DATA_STUBS / "grasps").glob("grasp_*.npz")):
+        with np.load(f, allow_pickle=False) as z:
+            a = {k: z[k] for k in z.files}
+        if str(a["obj_name"]) == "pitcher":
+            np.savez(data / f.name, **a)
+    np.savez(data / "grasp_009999.npz", **dict(a, obj_name=np.array("apple")))
+    assert cli.main(["train", "pose_prior", "--epochs", "1", "--out", str(tmp_path / "p.pt"), "--data", str(data)]) == 0
     line = [s for s in capsys.readouterr().out.splitlines() if s.startswith("wrote")][0]
-    held = P.angle_error(load_pose_prior(tmp_path / "p.pt"), held_out_poses)
+    prior = load_pose_prior(tmp_path / "p.pt")
+    held, val = P.angle_error(prior, held_out_poses), P.angle_error(prior, a["body.params.body_pose"].reshape(1, 21, 3))
     assert "joint angle error (deg): row split" in line and f"held-out clips {held:.2f}" in line
+    assert f"validation-object grasps {val:.2f} (1)" in line

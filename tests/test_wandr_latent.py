@@ -183,4 +183,7 @@ def test_latent_optimisation_shows_a_bar_that_one_switch_turns_off(start, capsys
     with cli._quiet(True):
         optimise_latents(model, start, goal, t_goal=3, iters=2, progress=True)
     assert capsys.readouterr() == ("", "") and "TQDM_DISABLE" not in os.environ
-    assert cli.build_parser(["--quiet", "body", "info"]).parse_args(["--quiet", "body", "info"]).quiet
+    for argv in (["--quiet", "body", "info"], ["--quiet", "data", "make", "--kind", "reach"]):   # data make has its own
+        assert cli.build_parser(argv).parse_args(argv).quiet_all                                 # --quiet, which kept
+    argv = ["data", "make", "--kind", "reach", "--quiet"]                                        # the default False
+    assert cli.build_parser(argv).parse_args(argv).quiet

@@ -139,7 +139,8 @@ def apply_pose(pose: ObjectPose, x: trimesh.Trimesh | np.ndarray | Tensor,
 
 
 def _transform(x: Array, rot: np.ndarray, trans: np.ndarray | None, name: str) -> Array:
-    """x @ R^T (+ t) for numpy arrays or torch tensors of shape (..., 3); integer tensors become float32."""
+    """x @ R^T (+ t) for numpy arrays (float64) or torch tensors (their dtype; integer ones the default float dtype) of
+    shape (..., 3)."""
     if isinstance(x, Tensor) and not x.is_floating_point():
         x = x.to(torch.get_default_dtype())             # else the pose would be cast to integers: zeros
     elif not isinstance(x, Tensor):
@@ -153,6 +154,5 @@ def _transform(x: Array, rot: np.ndarray, trans: np.ndarray | None, name: str) -
         r = torch.as_tensor(rot, dtype=x.dtype, device=x.device)
         out = x @ r.T
         return out if trans is None else out + torch.as_tensor(trans, dtype=x.dtype, device=x.device)
-    x = np.asarray(x, dtype=np.float64)
     out = x @ rot.T
     return out if trans is None else out + trans

@@ -189,9 +189,10 @@ class SDFGrid:
         nodes = torch.stack([xx, yy, zz], -1).reshape(-1, 3)
         layer = zz.shape[1] * zz.shape[2]
         per = max(1, SLAB_NODES // layer) if progress else zz.shape[0]     # z layers a call
+        slabs = tqdm(range(0, zz.shape[0], per), desc=f"SDF grid ({len(faces)} faces)", unit="slab",
+                     disable=zz.shape[0] <= per or hidden(), leave=False)
         values = torch.cat([signed_distance(nodes[k * layer:(k + per) * layer], (v, faces), check=False)
-                            for k in tqdm(range(0, zz.shape[0], per), desc=f"SDF grid ({len(faces)} faces)",
-                                          unit="slab", disable=zz.shape[0] <= per or hidden(), leave=False)]).reshape(zz.shape)
+                            for k in slabs]).reshape(zz.shape)
         return SDFGrid(values.to(dtype), lo.to(dtype), hi.to(dtype))
 
     def to(self, device: torch.device | str | None = None, dtype: torch.dtype | None = None) -> SDFGrid:

@@ -271,7 +271,7 @@ class GraspRefiner:
         if not isinstance(betas, Tensor) or betas.dim() != 2 or betas.shape[0] not in (1, B) \
                 or betas.shape[1] > nb or not bool(torch.isfinite(betas).all()):
             got = tuple(betas.shape) if isinstance(betas, Tensor) else type(betas).__name__
-            raise ValueError(f"betas: expected finite shape coefficients (1 or {B}, k <= {nb}), got {got}")
+            raise ValueError(f"betas: expected finite shape coefficients (1 or B = {B}, k <= {nb}), got {got}")
         if not isinstance(object_points, Tensor) or object_points.shape[-1] != 3 or object_points.dim() not in (2, 3) \
                 or not bool(torch.isfinite(object_points).all()):
             raise ValueError("object_points: expected finite points (P, 3) or (B, P, 3) in metres")
