@@ -368,7 +368,7 @@ def evaluate_grid(model: WandrCVAE, starts: Sequence[I.StartPose], bm: BodyModel
                   progress: bool = False) -> GridResult:
     """Roll the model out on the grid (or `goals` (G, 3) with their `cells` rows) from every start, n samples each,
     all in one batch (torch.Generator seeded with `seed`), measuring on the fly; floor, lift: `rollout`'s floor
-    constraints (off: the paper's rollout); progress: a bar over the frames (the full grid: about a minute)."""
+    constraints (off: the paper's rollout); progress: a bar over the frames (the full grid: 15-30 s on two cores)."""
     from tqdm.auto import tqdm
 
     from graspkit.models.wandr import expand_starts, rollout
