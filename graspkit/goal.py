@@ -25,7 +25,7 @@ from graspkit.data.motion import Motion
 from graspkit.data.reaching import Start
 from graspkit.models.mnet import STALL_FRAMES, check_stall
 from graspkit.objects.placement import ObjectPose
-from graspkit.paths import stub_hint
+from graspkit.paths import require_checkpoints
 from graspkit.saga import CHECKPOINTS
 
 
@@ -53,11 +53,8 @@ def default_start(centre: np.ndarray, distance: float, yaw_offset: float = 0.0) 
 def check_checkpoints(checkpoints: str | Path | None = None) -> Path:
     """The folder `checkpoints` once GNet's and MNet's files are in it (else FileNotFoundError naming the first
     missing; None: the shipped ones)."""
-    ck = Path(checkpoints) if checkpoints is not None else CHECKPOINTS
-    for f in ("gnet.pt", "mnet.pt"):
-        if not (ck / f).is_file():
-            raise FileNotFoundError(f"checkpoints: {ck / f} is missing (see docs/goal.md){stub_hint(ck / f)}")
-    return ck
+    return require_checkpoints(checkpoints if checkpoints is not None else CHECKPOINTS, ("gnet.pt", "mnet.pt"),
+                               "docs/goal.md")
 
 
 def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, start: Start | None = None,

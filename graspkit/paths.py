@@ -36,6 +36,16 @@ def stub_hint(path: Path) -> str:
     return ""
 
 
+def require_checkpoints(folder: str | os.PathLike, names: Sequence[str], docs: str) -> Path:
+    """`folder` as a Path once each file of `names` is in it, else a FileNotFoundError naming the first missing and the
+    docs that say how it is made."""
+    ck = Path(folder)
+    for f in names:
+        if not (ck / f).is_file():
+            raise FileNotFoundError(f"checkpoints: {ck / f} is missing (see {docs}){stub_hint(ck / f)}")
+    return ck
+
+
 def built_model_path() -> Path:
     """Where the procedural humanoid is built and kept when no data_stubs/ ships with graspkit: in the cache."""
     return cache_dir() / "body_models" / "smplx" / "SMPLX_NEUTRAL.npz"

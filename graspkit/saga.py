@@ -22,7 +22,7 @@ from graspkit.checks import check_bool, check_int, check_positive, check_steps, 
 from graspkit.data.motion import Motion
 from graspkit.data.reaching import Start
 from graspkit.objects.placement import ObjectPose
-from graspkit.paths import DATA_STUBS, stub_hint
+from graspkit.paths import DATA_STUBS, require_checkpoints
 
 if TYPE_CHECKING:
     from graspkit.body import BodyModel
@@ -79,12 +79,9 @@ def default_start(grasp_pelvis: np.ndarray, centre: np.ndarray, betas: np.ndarra
 def check_checkpoints(checkpoints: str | Path | None = None) -> Path:
     """The folder `checkpoints` once the four files SAGA needs are in it (else FileNotFoundError naming the first
     missing; None: the shipped ones)."""
-    ck = Path(checkpoints) if checkpoints is not None else CHECKPOINTS
-    for f in ("wholegrasp.pt", "pose_prior.pt", "motionfill.pt", "motionfill_smooth_ae.pt"):
-        if not (ck / f).is_file():
-            raise FileNotFoundError(f"checkpoints: {ck / f} is missing (see docs/saga.md and docs/saga_motion.md)"
-                                    + stub_hint(ck / f))
-    return ck
+    return require_checkpoints(checkpoints if checkpoints is not None else CHECKPOINTS,
+                               ("wholegrasp.pt", "pose_prior.pt", "motionfill.pt", "motionfill_smooth_ae.pt"),
+                               "docs/saga.md and docs/saga_motion.md")
 
 
 def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose: ObjectPose | None = None,

@@ -474,8 +474,7 @@ def rollout(mnet: MNet, body: SparseBody, start: tuple[Tensor, Tensor], goal: tu
                 else:
                     speed = (verts(r, t)[:, :c.n_hand] - vs[-1][None, :c.n_hand]).norm(dim=-1).mean(1)
                 target = hand_step_targets(vs[-1][None, :c.n_hand], goal_hand, speed.clamp_min(min_speed))
-                with torch.enable_grad():
-                    r, t = refine_frame(hand_body, r, t, betas, target, refine_weights or MotionRefineWeights())
+                r, t = refine_frame(hand_body, r, t, betas, target, refine_weights or MotionRefineWeights())
             t = on_floor(r, t)
             rs.append(r[0])
             ts.append(t[0])

@@ -156,10 +156,9 @@ def body_poses_from_motions(motions: list, stride: int = 4) -> np.ndarray:
     return np.concatenate([m.poses[::stride, 1:22] for m in motions]).astype(np.float32)
 
 
-def pose_training_set(n_clips: int = 300, seed: int = 0, extra: np.ndarray | None = None,
-                      bm: BodyModel | None = None, stride: int = 4, progress: bool = True) -> np.ndarray:
-    """Body poses (n, 21, 3) for the prior: frames of n_clips locomotion + n_clips reaching clips generated in
-    memory from `seed` (graspkit.data), plus `extra` poses (n', 21, 3), all also mirrored left/right."""
+def _clip_poses(seeds: np.ndarray, bm: BodyModel | None, stride: int, progress: bool = False) -> np.ndarray:
+    """Body poses (n, 21, 3) of clips made in memory from `seeds` (locomotion, reaching, in turn), every `stride`-th
+    frame."""
     from tqdm.auto import tqdm
 
     from graspkit.body import BodyModel
@@ -168,12 +167,16 @@ def pose_training_set(n_clips: int = 300, seed: int = 0, extra: np.ndarray | Non
     from graspkit.progress import hidden
 
     bm = bm or BodyModel.from_file(default_model_path())
-    seeds = np.random.SeedSequence(seed).generate_state(2 * n_clips)
-    clips = []
-    for i in tqdm(range(2 * n_clips), desc="pose-prior clips", disable=hidden(progress)):
-        gen = generate_locomotion if i % 2 == 0 else generate_reach
-        clips.append(gen(int(seeds[i]), bm))
-    poses = body_poses_from_motions(clips, stride)
+    clips = [(generate_locomotion if i % 2 == 0 else generate_reach)(int(s), bm)
+             for i, s in enumerate(tqdm(seeds, desc="pose-prior clips", disable=hidden(progress)))]
+    return body_poses_from_motions(clips, stride)
+
+
+def pose_training_set(n_clips: int = 300, seed: int = 0, extra: np.ndarray | None = None,
+                      bm: BodyModel | None = None, stride: int = 4, progress: bool = True) -> np.ndarray:
+    """Body poses (n, 21, 3) for the prior: frames of n_clips locomotion + n_clips reaching clips generated in
+    memory from `seed` (graspkit.data), plus `extra` poses (n', 21, 3), all also mirrored left/right."""
+    poses = _clip_poses(np.random.SeedSequence(seed).generate_state(2 * n_clips), bm, stride, progress)
     if extra is not None:
         poses = np.concatenate([poses, np.asarray(extra, np.float32).reshape(-1, NUM_BODY_JOINTS, 3)])
     return np.concatenate([poses, mirror_body_pose(poses)])
@@ -182,14 +185,7 @@ def pose_training_set(n_clips: int = 300, seed: int = 0, extra: np.ndarray | Non
 def heldout_clip_poses(n_clips: int = 20, seed: int = 0, bm: BodyModel | None = None, stride: int = 4) -> np.ndarray:
     """Body poses (n, 21, 3), mirrored too, of n_clips locomotion + n_clips reaching clips that no training run of
     the prior sees: their seeds come from SeedSequence([seed, 1]), the training clips' from SeedSequence(seed)."""
-    from graspkit.body import BodyModel
-    from graspkit.data import generate_locomotion, generate_reach
-    from graspkit.paths import default_model_path
-
-    bm = bm or BodyModel.from_file(default_model_path())
-    seeds = np.random.SeedSequence([seed, 1]).generate_state(2 * n_clips)
-    clips = [(generate_locomotion if i % 2 == 0 else generate_reach)(int(s), bm) for i, s in enumerate(seeds)]
-    poses = body_poses_from_motions(clips, stride)
+    poses = _clip_poses(np.random.SeedSequence([seed, 1]).generate_state(2 * n_clips), bm, stride)
     return np.concatenate([poses, mirror_body_pose(poses)])
 
 

@@ -42,7 +42,6 @@ E_MNet = λ_Θ E_Θ + λ_v^h E_v^h (Eq. 13): E_Θ couples to MNet's Θ̂ (square
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -280,8 +279,7 @@ class GraspRefiner:
         ground = check_real(ground, "ground", "a finite floor height in metres")
         w = weights or GraspRefineWeights()
         check_int(w.steps, "weights.steps", least=0)
-        if not (math.isfinite(w.lr) and w.lr > 0):
-            raise ValueError(f"weights.lr: expected a learning rate > 0, got {w.lr!r}")
+        check_real(w.lr, "weights.lr", "a learning rate > 0", positive=True)
         if any(not 0 < x < 0.05 for x in w.inner_depths):
             raise ValueError(f"weights.inner_depths: expected depths in metres in (0, 0.05), got {w.inner_depths}")
         if sdf is not None and len(sdf) != hat["rot6d"].shape[0]:
