@@ -90,8 +90,9 @@ def fit_correctives(v: np.ndarray, f: np.ndarray, weights: np.ndarray, joints: n
 
 def radial_target(x: np.ndarray, centre: np.ndarray, axis: np.ndarray, body: Body,
                   pose: tuple[np.ndarray, np.ndarray], max_move: float,
-                  n_grid: int = 48, reach: float = 1.5) -> np.ndarray:
-    """Points (N,3) moved onto the posed zero level set along the ray from the rotation axis (through centre).
+                  n_grid: int = 48, reach: float = 1.5) -> tuple[np.ndarray, np.ndarray]:
+    """Points (N,3) moved onto the posed zero level set along the ray from the rotation axis (through centre),
+    and which of them moved (N,) bool.
 
     Only the distance rho from the axis changes, so the angular order of the vertices around the joint
     (hence the orientation of the triangles in the crease) is kept. The root nearest to the current

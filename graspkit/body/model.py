@@ -179,6 +179,25 @@ def _split_shapedirs(shapedirs: np.ndarray, num_betas: int, num_expression: int)
 class BodyModel(nn.Module):
     """An SMPL-X body: any omitted argument of forward() is zeros; batch size from the given arguments."""
 
+    # buffers, registered in __init__ (declared for type checkers)
+    v_template: Tensor
+    _v_template_cm: Tensor
+    shape_basis: Tensor
+    J_template: Tensor
+    J_basis: Tensor
+    J_regressor: Tensor
+    _pose_rows: Tensor
+    posedirs: Tensor
+    _posedirs_used: Tensor
+    lbs_weights: Tensor
+    _weights_t: Tensor
+    faces: Tensor
+    parents: Tensor
+    left_hand_components: Tensor
+    right_hand_components: Tensor
+    hands_mean: Tensor
+    pose_mean: Tensor
+
     def __init__(self, arrays: Mapping[str, np.ndarray], *, num_betas: int = 10, num_expression: int = 10,
                  use_pca: bool = False, num_pca_comps: int = 6, flat_hand_mean: bool = False,
                  dtype: torch.dtype = torch.float32, source: str = "<arrays>") -> None:

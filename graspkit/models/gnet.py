@@ -58,6 +58,13 @@ GNET_KEYS = ("rot6d", "transl", "betas", "verts", "head_dir", "obj_transl", "bps
 class SparseBody(nn.Module):
     """SMPL-X LBS of a BodyModel evaluated at `vertex_ids` only (exactly the full model's vertices there)."""
 
+    # buffers, registered in __init__ (declared for type checkers)
+    ids: Tensor
+    v_cm: Tensor
+    basis: Tensor
+    posedirs: Tensor
+    weights_t: Tensor
+
     def __init__(self, bm: BodyModel, vertex_ids: Tensor | np.ndarray | Sequence[int]) -> None:
         super().__init__()
         ids = torch.as_tensor(vertex_ids, dtype=torch.long).reshape(-1)
@@ -117,6 +124,10 @@ MIN_STD = 1e-3     # Standardiser's floor on a feature's std
 
 class Standardiser(nn.Module):
     """Feature-wise (x - mean) / std with statistics kept as buffers (saved with the weights): (B,D) -> (B,D)."""
+
+    # buffers, registered in __init__ (declared for type checkers)
+    mean: Tensor
+    std: Tensor
 
     def __init__(self, dim: int) -> None:
         super().__init__()

@@ -132,6 +132,9 @@ def dct_basis(frames: int, k: int) -> Tensor:
 class TrajFill(nn.Module):
     """CVAE over root trajectories (B, 62, 4) conditioned on the straight trajectory Gamma_bar (B, 62, 4)."""
 
+    # buffers, registered in __init__ (declared for type checkers)
+    dct: Tensor
+
     def __init__(self, latent: int = 512, frames: int = NUM_ROOT, enc: int | None = None,
                  widths: tuple[int, int] | None = None, basis: int = 0) -> None:
         super().__init__()
@@ -351,6 +354,12 @@ def traj_velocity(traj: Tensor) -> Tensor:
 
 class MotionFillVAE(nn.Module):
     """TrajFill + LocalMotionFill with their normalisation statistics (buffers: marker_mean/std, vel_mean/std)."""
+
+    # buffers, registered in __init__ (declared for type checkers)
+    marker_mean: Tensor
+    marker_std: Tensor
+    vel_mean: Tensor
+    vel_std: Tensor
 
     def __init__(self, cfg: MotionFillConfig | None = None) -> None:
         super().__init__()

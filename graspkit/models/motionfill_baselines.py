@@ -62,6 +62,12 @@ def blend(x: Tensor) -> Tensor:
 class _Baseline(nn.Module):
     """Shared parts: normalisation buffers, the markers' normalisation, state round trip, the Eq. 8 local loss."""
 
+    # buffers, registered in __init__ (declared for type checkers)
+    marker_mean: Tensor
+    marker_std: Tensor
+    vel_mean: Tensor
+    vel_std: Tensor
+
     kind = ""
 
     def __init__(self) -> None:

@@ -121,6 +121,15 @@ def _default_stats() -> dict[str, Tensor]:
 class WandrCVAE(nn.Module):
     """The c-VAE: encoder (d_i, c_i) -> q(z), decoder (z, c_i) -> d̂_i; c_i = normalised (state, kept intention)."""
 
+    # buffers, registered in __init__ (declared for type checkers)
+    delta_mean: Tensor
+    delta_std: Tensor
+    state_mean: Tensor
+    state_std: Tensor
+    intention_mean: Tensor
+    intention_std: Tensor
+    intention_keep: Tensor
+
     def __init__(self, cfg: WandrConfig | None = None, stats: dict[str, Tensor] | None = None) -> None:
         super().__init__()
         self.cfg = cfg = cfg or WandrConfig()

@@ -150,6 +150,12 @@ def consistency_loss(markers_pred: Tensor, markers: Tensor | None, contact_pred_
 class WholeGraspVAE(nn.Module):
     """SAGA's WholeGrasp-VAE (multi-task) or WholeGrasp-single (cfg.multitask=False); see the module docstring."""
 
+    # buffers, registered in __init__ (declared for type checkers)
+    marker_mean: Tensor
+    marker_std: Tensor
+    marker_slope: Tensor
+    height_mean: Tensor
+
     def __init__(self, cfg: WholeGraspConfig | None = None) -> None:
         super().__init__()
         self.cfg = cfg = cfg or WholeGraspConfig()
@@ -697,6 +703,10 @@ class GrabNetSMPLX(nn.Module):
 
     Loss (GrabNet-style): L1 of the markers the parameters pose (143, summed, as WholeGrasp's) + L1 of the
     parameters (mean) + lambda_KL KL, lambda_KL rising linearly to 0.2 as WholeGrasp's."""
+
+    # buffers, registered in __init__ (declared for type checkers)
+    param_mean: Tensor
+    param_std: Tensor
 
     def __init__(self, hidden: int = 256, latent: int = 16, nsample: int = 8, object_feature: int = 128,
                  kl_final: float = 0.2, body_space: str = "prior", prior: Any = None,

@@ -133,6 +133,9 @@ FOOT_PARTS = ("left_heel", "left_toe", "right_heel", "right_toe")
 class MarkerDiffAE(nn.Module):
     """Temporal-convolution autoencoder of marker differences (S.1, after LEMO): (B, T, M*3) -> latents (B, T, d)."""
 
+    # buffers, registered in __init__ (declared for type checkers)
+    scale: Tensor
+
     def __init__(self, n_in: int = 79 * 3, hidden: int = 128, latent: int = 32) -> None:
         super().__init__()
         self.n_in, self.hidden, self.latent_dim = n_in, hidden, latent
