@@ -361,6 +361,20 @@ def test_sampled_contacts_are_probabilities():
     assert ((c > 0.01) & (c < 0.99)).any()
 
 
+def test_sample_refuses_contacts_outside_0_1_and_local_markers_in_millimetres():
+    """sample() took contact labels of 5 and local markers in millimetres (returning markers 923 m away) without a
+    word, where the loss and WholeGraspVAE.sample refuse them (an independent check); a bool mask stays accepted."""
+    m = MotionFillVAE().eval()
+    b = _batch_with_markers()
+    args = b["traj_interp"][0], b["local"][0], b["contacts"][0]
+    with pytest.raises(ValueError, match=r"contacts: expected contact probabilities in \[0, 1\]"):
+        m.sample(args[0], args[1], torch.full_like(args[2], 5.0))
+    with pytest.raises(ValueError, match="local: largest side .* metres"):
+        m.sample(args[0], args[1] * 1000, args[2])
+    s = m.sample(args[0], args[1], args[2] > 0.5, 1, torch.Generator().manual_seed(1))
+    assert s["markers"].shape == (1, *args[1].shape)
+
+
 def test_sampled_markers_follow_the_given_trajectory():
     """sample(traj=...) places the sampled local markers along the given trajectory: markers = global_motion(local,
     traj) (the data module's inverse of local_motion), not along the straight Gamma_bar."""

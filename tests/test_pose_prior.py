@@ -62,6 +62,12 @@ def test_untrained_and_bad_inputs():
         prior.encode(torch.zeros(2, 60))
     with pytest.raises(ValueError, match="z"):
         prior.decode(torch.zeros(2, 31))
+    with pytest.raises(ValueError, match="z: contains NaN"):          # NaN poses came back silently
+        prior.decode(torch.full((2, 32), float("nan")))
+    with pytest.raises(ValueError, match="body_pose: contains NaN"):
+        prior.encode(torch.full((2, 63), float("nan")))
+    z64 = torch.randn(2, 32, dtype=torch.float64)                      # failed inside the MLP on a dtype mismatch
+    torch.testing.assert_close(prior.eval().decode(z64), prior.decode(z64.float()), rtol=0, atol=0)
     out = prior.loss(torch.zeros(4, 63))
     assert set(out) >= {"loss", "rec", "kl"} and torch.isfinite(out["loss"])
     again = PosePrior.from_state(prior.state())

@@ -47,8 +47,9 @@ import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
-from graspkit.checks import check_generator, check_labels
+from graspkit.checks import check_generator, check_labels, check_probabilities
 from graspkit.models.blocks import GaussianHead, ResBlock, kl_standard_normal, reparameterize, robust_kl
+from graspkit.objects.distance import require_points_in_metres
 
 T = 60
 NUM_ROOT = T + 2          # root states Gamma_{0:T+1}
@@ -465,6 +466,8 @@ class MotionFillVAE(nn.Module):
                 raise ValueError(f"{name}: expected finite real values (no NaN or Inf)")
         traj_interp, local, contacts = (torch.as_tensor(x) for x in (traj_interp, local, contacts))
         traj = None if traj is None else torch.as_tensor(traj)
+        require_points_in_metres(local[[0, -1]].double(), "local", "local markers are metres from the root")
+        check_probabilities(contacts[[0, -1]].double(), "contacts")
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise ValueError(f"n: expected a whole number >= 1 of samples, got {n!r}")
         check_generator(generator)

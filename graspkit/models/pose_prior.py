@@ -23,6 +23,7 @@ import torch
 from torch import Tensor, nn
 
 from graspkit.body.skeleton import JOINT_NAMES
+from graspkit.checks import check_finite
 from graspkit.models.blocks import GaussianHead, kl_standard_normal, reparameterize
 from graspkit.paths import DATA_STUBS
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
@@ -72,11 +73,13 @@ class PosePrior(nn.Module):
                 (63,), (21, 3)):
             got = tuple(body_pose.shape) if isinstance(body_pose, Tensor) else type(body_pose).__name__
             raise ValueError(f"body_pose: expected shape (B, 63) or (B, 21, 3), got {got}")
+        check_finite(body_pose, "body_pose", "axis-angle rotations in radians")
         return body_pose.reshape(-1, NUM_BODY_JOINTS, 3)
 
     def posterior(self, body_pose: Tensor) -> tuple[Tensor, Tensor]:
         """q(z | pose): (B, 63) axis-angle -> mean, log-variance (B, latent)."""
-        x = matrix_to_rot6d(axis_angle_to_matrix(self._check_pose(body_pose).float())).reshape(len(body_pose), -1)
+        pose = self._check_pose(body_pose).to(self.enc[0].weight.dtype)
+        x = matrix_to_rot6d(axis_angle_to_matrix(pose)).reshape(len(body_pose), -1)
         return self.head(self.act(self.enc(x)))
 
     def encode(self, body_pose: Tensor) -> Tensor:
@@ -88,10 +91,12 @@ class PosePrior(nn.Module):
         if not isinstance(z, Tensor) or z.dim() != 2 or z.shape[1] != self.cfg.latent:
             got = tuple(z.shape) if isinstance(z, Tensor) else type(z).__name__
             raise ValueError(f"z: expected shape (B, {self.cfg.latent}), got {got}")
-        return rot6d_to_matrix(self.dec(z).view(len(z), NUM_BODY_JOINTS, 6))
+        w = self.dec[0].weight
+        return rot6d_to_matrix(self.dec(z.to(w.dtype)).view(len(z), NUM_BODY_JOINTS, 6))
 
     def decode(self, z: Tensor) -> Tensor:
         """Latent (B, latent) -> SMPL-X body_pose (B, 63) axis-angle."""
+        check_finite(z, "z", "a latent code")
         return matrix_to_axis_angle(self.decode_rotmats(z)).reshape(len(z), -1)
 
     def loss(self, body_pose: Tensor, generator: torch.Generator | None = None) -> dict[str, Tensor]:
@@ -99,7 +104,7 @@ class PosePrior(nn.Module):
         mu, logvar = self.posterior(body_pose)
         z = reparameterize(mu, logvar, generator) if self.training else mu
         R = self.decode_rotmats(z)
-        target = axis_angle_to_matrix(self._check_pose(body_pose).float())
+        target = axis_angle_to_matrix(self._check_pose(body_pose).to(R.dtype))
         rec = (R - target).pow(2).sum((1, 2, 3)).mean()
         kl = kl_standard_normal(mu, logvar)
         with torch.no_grad():

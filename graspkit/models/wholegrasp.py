@@ -702,7 +702,8 @@ class GrabNetSMPLX(nn.Module):
     generated).
 
     Loss (GrabNet-style): L1 of the markers the parameters pose (143, summed, as WholeGrasp's) + L1 of the
-    parameters (mean) + lambda_KL KL, lambda_KL rising linearly to 0.2 as WholeGrasp's."""
+    parameters (mean) + lambda_KL Psi(KL), lambda_KL rising linearly to 0.2 and Psi SAGA's robust KL (Eq. 2), both as
+    WholeGrasp's, so that the two CVAEs differ in what they generate, not in how their latent is regularised."""
 
     # buffers, registered in __init__ (declared for type checkers)
     param_mean: Tensor
