@@ -604,10 +604,30 @@ def test_a_start_pose_outside_what_training_moved_is_warned_about(setup):
             warnings.simplefilter("always")
             M.rollout(net, body, (r6, t0), (r6, t0 + torch.tensor([0.0, 0.5, 0.0])), betas, obj, obj.mean(0),
                       bps_basis(), max_frames=2)
-        return [str(x.message) for x in w if "training stds" in str(x.message)]
+        return [(str(x.message), x.filename) for x in w if "training stds" in str(x.message)]
 
     assert warned(poses) == []
     jaw = poses.clone()
     jaw[J["jaw"], 0] += 0.05
-    [msg] = warned(jaw)
+    [(msg, where)] = warned(jaw)
     assert msg.startswith("start: the pose features of jaw lie more than 5 training stds")
+    assert where == __file__                       # the warning points at the caller's line, past the wrappers
+
+
+def test_rollout_and_horizon_leave_the_models_mode_as_they_found_it(setup):
+    """rollout / predict_horizon ran MNet in eval mode and left a training caller's model in it (an independent
+    check): they now restore the mode they found."""
+    from graspkit.data.reaching import Start, plan_reach
+
+    bm, _, body = setup
+    net = M.MNet(M.MNetConfig()).train()
+    first = plan_reach(Start(0.0, 0.0, math.pi / 2), (0.0, 1.0, 1.0), 60, seed=0, bm=bm).slice(0, 1)
+    r6 = axis_angle_to_rot6d(torch.as_tensor(first.poses[0], dtype=torch.float64)).float()
+    t0 = torch.as_tensor(first.trans[0]).float()
+    obj = torch.randn(64, 3, generator=torch.Generator().manual_seed(0)) * 0.04 + torch.tensor([0.0, 0.7, 0.9])
+    seen = []
+    forward = net.forward
+    net.forward = lambda *a, **k: (seen.append(net.training), forward(*a, **k))[1]
+    M.rollout(net, body, (r6, t0), (r6, t0 + torch.tensor([0.0, 0.5, 0.0])), torch.as_tensor(first.betas[:10]).float(),
+              obj, obj.mean(0), bps_basis(), max_frames=2, refine=False)
+    assert seen and not any(seen) and net.training

@@ -6,8 +6,10 @@ with KL(q(z|.) || N(0, I)); SAGA wraps the KL in the robust function Psi(s) = sq
 """
 from __future__ import annotations
 
-from collections.abc import Iterator
+import functools
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import Any, TypeVar
 
 import torch
 from torch import nn
@@ -26,6 +28,18 @@ def evaluating(model: nn.Module) -> Iterator[nn.Module]:
     finally:
         if was is not None:
             model.train(was)
+
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def in_eval_mode(fn: F) -> F:
+    """Decorator: fn(model, ...) runs with its first argument in eval mode, and the model's mode is restored after."""
+    @functools.wraps(fn)
+    def wrapped(model: nn.Module, *args: Any, **kwargs: Any) -> Any:
+        with evaluating(model):
+            return fn(model, *args, **kwargs)
+    return wrapped  # type: ignore[return-value]
 
 
 class ResBlock(nn.Module):

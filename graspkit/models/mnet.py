@@ -41,7 +41,7 @@ from torch import Tensor, nn
 
 from graspkit.body.skeleton import JOINT_NAMES
 from graspkit.checks import check_int
-from graspkit.models.blocks import ResBlock
+from graspkit.models.blocks import ResBlock, in_eval_mode
 from graspkit.models.gnet import NUM_JOINTS, POSE_DIM, Standardiser
 from graspkit.objects.bps import bps_encode
 from graspkit.objects.contact import IAA_WEIGHT
@@ -338,10 +338,11 @@ def _warn_untrained_start(mnet: MNet, s: MNetState, basis: Tensor, sigma: float 
                       "where the training clips held them (they never moved there, std at the 1e-3 floor); MNet can "
                       "then go astray (docs/goal.md). The planner's start for graspkit's body does not warn; another "
                       "body's proportions, or a start posed by hand, can",
-                      stacklevel=4)   # past rollout and its no_grad wrapper: the caller
+                      stacklevel=5)   # past rollout and its no_grad and eval-mode wrappers: the caller
 
 
 @torch.no_grad()
+@in_eval_mode
 def predict_horizon(mnet: MNet, body: SparseBody, s: MNetState, object_points: Tensor, basis: Tensor, horizon: int = 10
                     ) -> tuple[Tensor, Tensor]:
     """Autoregress from state s (B samples) until `horizon` frames exist (one step for a 10-frame MNet, ten for a
@@ -349,7 +350,6 @@ def predict_horizon(mnet: MNet, body: SparseBody, s: MNetState, object_points: T
     from graspkit.models.gnet import pose_rotmats
     from graspkit.optim.goal_refine import hand_object_offsets
 
-    mnet.eval()
     rs, ts, fr, ft = list(s.rot6d.unbind(1)), list(s.transl.unbind(1)), [], []
     v_prev, v_now = s.verts_prev, s.verts
     B = s.betas.shape[0]
@@ -403,6 +403,7 @@ def _check_rollout_inputs(start: Any, goal: Any, betas: Any, max_frames: Any, re
 
 
 @torch.no_grad()
+@in_eval_mode
 def rollout(mnet: MNet, body: SparseBody, start: tuple[Tensor, Tensor], goal: tuple[Tensor, Tensor], betas: Tensor,
             object_points: Tensor, obj_centre: Tensor, basis: Tensor, max_frames: int = 300, refine: bool = True,
             reach_tol: float = 0.01, min_speed: float = 0.003, refine_weights: MotionRefineWeights | None = None,
@@ -425,7 +426,6 @@ def rollout(mnet: MNet, body: SparseBody, start: tuple[Tensor, Tensor], goal: tu
 
     check_stall(stall)
     _check_rollout_inputs(start, goal, betas, max_frames, reach_tol, min_speed, floor)
-    mnet.eval()
     c = mnet.cfg
     betas = betas.reshape(1, -1).float()
     root = rest_root(body.bm, betas)
