@@ -30,6 +30,7 @@ from torch import Tensor
 from graspkit.checks import count_type, nonneg_float, positive_float, seeded_rng
 from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_folders, check_out, reports_errors
 from graspkit.metrics import GOAL_GRAB_SLIDING
+from graspkit.models.blocks import in_eval_mode
 from graspkit.models.gnet import pose_rotmats
 from graspkit.models.mnet import STALL_FRAMES, MNet, MNetWindows, predict_horizon
 from graspkit.rotations import rotation_about_z
@@ -86,12 +87,12 @@ class V2V:
 
 
 @torch.no_grad()
+@in_eval_mode
 def teacher_forced_v2v(mnet: MNet, windows: MNetWindows, bm: BodyModel, index: Tensor, horizon: int = 10,
                        chunk: int = 32) -> V2V:
     """Tab. 2 protocol: from the true past 5 frames of windows `index`, predict `horizon` frames (one step of a
     10-frame MNet, ten autoregressive steps of a 1-frame one, no refinement), build the SMPL-X meshes of the predicted
     and true frames, and average the per-vertex distances (mm) over the body, the right hand and the feet."""
-    mnet.eval()
     hand, feet = torch.as_tensor(right_hand_ids(bm)), torch.as_tensor(feet_ids(bm))
     sums, n = np.zeros(3), 0
     for i in range(0, len(index), chunk):

@@ -54,8 +54,8 @@ from graspkit.objects.distance import MAX_METRES, nearest_neighbours, require_po
 from graspkit.objects.placement import GRASP_HEIGHTS
 from graspkit.objects.sdf import signed_distance_to_points
 from graspkit.paths import DATA_STUBS
-from graspkit.models.blocks import (GaussianHead, ResBlock, annealed_kl_weight, kl_standard_normal, reparameterize,
-                                   robust_kl)
+from graspkit.models.blocks import (GaussianHead, ResBlock, annealed_kl_weight, in_eval_mode, kl_standard_normal,
+                                   reparameterize, robust_kl)
 from graspkit.models.pointnet2 import (FeaturePropagation, Grouping, PointNet2Encoder, gather, groupings_from_tensors,
                                        groupings_to_tensors, interpolation_weights)
 
@@ -496,10 +496,10 @@ def contact_auc(scores: Tensor, labels: Tensor) -> float:
 
 
 @torch.no_grad()
+@in_eval_mode
 def reconstruction_metrics(model: WholeGraspVAE, data: WholeGraspTrainingSet, batch_size: int = 32
                            ) -> dict[str, float]:
     """Validation figures of the posterior mean: marker error (cm, mean per marker), contact AUCs of C_M and C_O."""
-    model.eval()
     err, cm, cm_t, co, co_t = [], [], [], [], []
     for i in range(0, len(data), batch_size):
         b = {k: v[i:i + batch_size] for k, v in data.data.items()}
