@@ -14,8 +14,9 @@ Intention (§3.2; its three unnumbered formulas), each expressed in the body's h
                                                     current one (training: the body's heading at t_G; inference: the
                                                     direction from the pelvis to the goal); no time term;
               I^p = 2 (1 - e^{-|Δ|}) Δ / |Δ|,  Δ = (G - P_i)^xy    pelvis: ground-plane offset saturating at norm 2.
-              Degenerate cases: a goal straight above/below the pelvis (|Δ| < 1e-6) gives I^p = 0 (its limit) and
-              I^r = 0 (no direction to turn to); at or past t_G (no time left) the whole intention is zero.
+              Degenerate cases: a goal straight above/below the pelvis (|Δ| < 1e-6) gives I^p = 0 (its limit) and,
+              in the inference form, I^r = 0 (no direction to turn to; the training form's I^r is the turn to the
+              heading at t_G wherever G is); at or past t_G (no time left) the whole intention is zero.
 
 World conventions as graspkit's (z up, metres, 30 fps); the body's canonical frame is SMPL-X's (y up, facing +z), so the
 heading ψ is the angle of the root's canonical +z axis projected on the ground, from world +x.

@@ -87,6 +87,20 @@ def test_two_bone_ik_soft_limit_bends_gradually_as_a_target_sweeps_into_reach():
     assert soft.max() < 0.25 * hard.max()
 
 
+def test_two_bone_ik_names_a_pole_along_the_reach_and_a_target_at_the_root():
+    """Both left the bend plane undefined and returned matrices with determinant 0 without a word (an independent
+    check); a pole slightly off the reach still solves, with proper rotations."""
+    b, bend = np.array([0, -0.4, 0.0]), np.array([0, 0, 1.0])
+    with pytest.raises(ValueError, match="pole: expected a direction not parallel"):
+        two_bone_ik(np.zeros(3), np.array([0, 0, -0.5]), np.array([0, 0, 1.0]), b, b, bend)
+    with pytest.raises(ValueError, match="target: expected a target away from root"):
+        two_bone_ik(np.ones(3), np.ones(3), np.array([0, 0, 1.0]), b, b, bend)
+    R1, R2, _ = two_bone_ik(np.zeros(3), np.array([0, 0, -0.5]), np.array([1e-6, 0, 1.0]), b, b, bend)
+    for R in (R1, R2):
+        np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-9)
+        assert abs(np.linalg.det(R) - 1) < 1e-9
+
+
 def test_smoothstep_and_wrap_angle():
     u = np.linspace(-0.5, 1.5, 201)
     s = smoothstep(u)

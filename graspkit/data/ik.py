@@ -93,9 +93,9 @@ def two_bone_ik(root: np.ndarray, target: np.ndarray, pole: np.ndarray, bone1: n
     """Global rotations of both bones and the middle-joint position for a chain root -> mid -> end.
 
     root, target, pole (..., 3): world root position, wanted end position, direction the middle joint
-    should bend towards (not parallel to target - root: the bend plane is then undefined and R1, R2 are not
-    rotations); bone1, bone2 (3,) or (..., 3): rest vectors root->mid and mid->end; bend (3,):
-    rest direction in which the middle joint moves when the chain flexes (knee: forward, elbow: backward).
+    should bend towards (not parallel to target - root, and target not at root: a ValueError names them, the
+    bend plane being undefined there); bone1, bone2 (3,) or (..., 3): rest vectors root->mid and mid->end;
+    bend (3,): rest direction in which the middle joint moves when the chain flexes (knee: forward, elbow: backward).
     Returns R1, R2 (..., 3, 3) (rest -> posed, global) and mid (..., 3). A target beyond
     max_stretch * (l1 + l2) (or closer than |l1 - l2|) is reached as far as the chain allows. soft > 0: the last
     soft * (l1 + l2) before full stretch is approached exponentially (the end stops short of the target there). The
@@ -110,9 +110,14 @@ def two_bone_ik(root: np.ndarray, target: np.ndarray, pole: np.ndarray, bone1: n
         w = soft * (l1 + l2)
         d = np.where(d > reach - w, reach - w * np.exp(-np.maximum(d - reach + w, 0.0) / w), d)
     d_cl = np.clip(d, np.abs(l1 - l2) + 1e-6, reach)
+    if (np.linalg.norm(d_vec, axis=-1) < 1e-9).any():
+        raise ValueError("target: expected a target away from root (the reach direction is undefined there)")
     ahat = normalize(d_vec)
     cos_a = np.clip((l1**2 + d_cl**2 - l2**2) / (2 * l1 * d_cl), -1.0, 1.0)      # law of cosines at the root
-    p_perp = normalize(pole - (pole * ahat).sum(-1, keepdims=True) * ahat)
+    p_perp = pole - (pole * ahat).sum(-1, keepdims=True) * ahat
+    if (np.linalg.norm(p_perp, axis=-1) <= 1e-9 * np.linalg.norm(pole, axis=-1)).any():
+        raise ValueError("pole: expected a direction not parallel to target - root (the bend plane is undefined)")
+    p_perp = normalize(p_perp)
     mid = root + l1[..., None] * (cos_a[..., None] * ahat + np.sqrt(1 - cos_a**2)[..., None] * p_perp)
     end = root + d_cl[..., None] * ahat
     rest1, rest2 = frame(np.broadcast_to(bone1, mid.shape), np.broadcast_to(bend, mid.shape)), \

@@ -89,8 +89,9 @@ print(f"forward step per frame (d^t_x): mean {100 * d[:, 0].mean():.2f} cm -> {3
 #   at a norm of 2 so that far goals do not blow up the input.
 #
 # All three are expressed in the body's heading frame. At and after $t_G$ the intention is zero; with the goal straight
-# above the pelvis, $I^p$ takes its limit 0 and $I^r$ is 0. Here the reaching clip's features, frame by frame, and the
-# arrows on the body at three frames (pink: wrist, cyan: pelvis, yellow: orientation; drawn in the world frame).
+# above the pelvis, $I^p$ takes its limit 0 and, at inference (no direction to turn to), $I^r$ is 0. Here the reaching
+# clip's features, frame by frame, and the arrows on the body at three frames (pink: wrist, cyan: pelvis, yellow:
+# orientation; drawn in the world frame).
 
 # %%
 pr = I.pose_from_axis_angle(torch.as_tensor(reach.trans), torch.as_tensor(reach.poses))
@@ -150,13 +151,14 @@ fig.tight_layout()
 clips = W.load_clips(W.list_clips(CLIPS), bm)
 ds = W.WindowDataset(clips, max_steps=10)
 walk_id = clips.names.index("locomotion/locomotion_000003.npz")
-items = torch.tensor([[walk_id, 10]] * 4)
+i = 10                                       # the window's state is frame i (its items hold frames i-1 .. i+11)
+items = torch.tensor([[walk_id, i]] * 4)
 batch = W.make_batch(clips, items, steps=10, generator=torch.Generator().manual_seed(3))
 Jw = I.body_joints(clips.clip(walk_id), clips.rest[walk_id])
 fig, ax = plt.subplots(figsize=(4.5, 5))
 ax.plot(Jw[:, 0, 0], Jw[:, 0, 1], color="#6a3d9a", label="pelvis path")
 ax.plot(Jw[:, I.WRIST, 0], Jw[:, I.WRIST, 1], color="#e377c2", lw=0.8, label="right wrist path")
-ax.plot(*Jw[11, 0, :2], "ko", label="frame i = 11 (the window's state)")
+ax.plot(*Jw[i, 0, :2], "ko", label=f"frame i = {i} (the window's state)")
 for g, tg in zip(batch["goal"], batch["t_goal"]):
     ax.plot(g[0], g[1], "x", color="#d62728", ms=9, mew=2)
     ax.annotate(f"t_G = i + {int(tg)}", (g[0], g[1]), fontsize=7, xytext=(4, 4), textcoords="offset points")
