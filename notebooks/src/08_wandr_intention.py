@@ -302,7 +302,7 @@ out = M.generate(wandr, start, goal, t_goal=120, n=8, generator=torch.Generator(
 dist = (out.joints[:, :, I.WRIST] - goal[0]).norm(dim=-1)              # (8, 121)
 best = int(dist.min(1).values.argmin())
 k = int(dist[best].argmin())
-print(f"start {start.source}; closest per sample (cm): {np.round(100 * dist.min(1).values.numpy()).astype(int)}")
+print(f"start {start.source}; closest per sample (mm): {np.round(1000 * dist.min(1).values.numpy()).astype(int)}")
 print(f"sample {best}: closest {100 * dist[best, k]:.1f} cm at {k / 30:.1f} s; at t_G (4.0 s): {100 * dist[best, -1]:.1f} cm; "
       f"pelvis moved {out.joints[best, -1, 0, :2].norm():.2f} m")
 fig, ax = plt.subplots(figsize=(6, 2.4))
