@@ -85,7 +85,7 @@ for r in (gt, plan):
     cols = GRASP_METRICS if r.table == "grasp" else MOTION_METRICS
     print(f"{r.method} ({r.note}):")
     for k, v in r.values.items():
-        print(f"    {cols[k][0]:28s} {v:8.3f}")
+        print(f"    {cols[k][0]:28s} {v:8.2f}")     # 2 decimals hold under other kernels
 
 # %% [markdown]
 # ## One metric up close: the feet
