@@ -75,6 +75,8 @@ def test_gnet_sample_rejects_nan_bad_z_and_unbatched_inputs(gnet):
         gnet.sample(bps, ot, be, z=torch.zeros(2, 16, dtype=torch.long))
     with pytest.raises(ValueError, match=r"bps: expected a tensor of shape \(B, 1024\)"):
         gnet.sample(bps[0], ot[0], be[0])
+    with pytest.raises(ValueError, match="bps: expected distances >= 0"):     # a sign slip was sampled from
+        gnet.sample(-bps, ot, be)
 
 
 # ------------------------------------------------------------------------------------------------ WholeGrasp-VAE

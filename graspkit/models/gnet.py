@@ -283,6 +283,9 @@ class GNet(nn.Module):
         B = len(bps) if isinstance(bps, Tensor) and bps.dim() == 2 else "B"
         bps, obj_transl, betas = (self._sample_input(name, x, (B, width)) for name, x, width in
                                   (("bps", bps, cfg.n_bps), ("obj_transl", obj_transl, 3), ("betas", betas, cfg.n_betas)))
+        if bool((bps < 0).any()):
+            raise ValueError(f"bps: expected distances >= 0 (m) from the basis points to the object, got a minimum of "
+                             f"{float(bps.min()):g}")
         if z is not None:
             z = self._sample_input("z", z, (B, cfg.latent))
         far = torch.nonzero(self.norm_cond.untrained(self.condition(bps, obj_transl, betas))).flatten().tolist()
