@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -160,3 +162,16 @@ def count_type(least: int) -> Callable[[str], int]:
         return v
     parse.__name__ = f"integer >= {least}"
     return parse
+
+
+_INSIDE = (os.path.dirname(os.path.abspath(__file__)) + os.sep, os.path.dirname(os.path.abspath(torch.__file__)) + os.sep)
+
+
+def user_stacklevel() -> int:
+    """warnings.warn's stacklevel that points at the first frame outside graspkit and torch (the user's line, past
+    graspkit's own callers and torch's no_grad wrappers): call it as warnings.warn(msg, stacklevel=user_stacklevel())."""
+    frame, level = sys._getframe(1), 1
+    while frame.f_back is not None and os.path.abspath(frame.f_code.co_filename).startswith(_INSIDE):
+        frame, level = frame.f_back, level + 1
+    return level
+

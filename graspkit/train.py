@@ -39,6 +39,7 @@ import torch
 from torch.utils.data import DataLoader, Dataset
 from tqdm.auto import tqdm
 
+from graspkit.models.blocks import evaluating
 from graspkit.optim.step import with_autograd
 from graspkit.paths import naming_errors, publish, sweep_stale_temps, temp_beside, write_atomic
 from graspkit.progress import hidden
@@ -311,11 +312,10 @@ def _add_logs(sums: dict[str, float], logs: dict[str, Any], weight: int) -> None
 def evaluate(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig, epoch: int = 0
              ) -> dict[str, float]:
     """Per-sample mean of step's logs over `dataset` (each batch's means weighted by its size, so a short last
-    batch counts as its samples) in eval mode, without gradients (fixed order)."""
-    model.eval()
+    batch counts as its samples) in eval mode (the model's mode restored after), without gradients (fixed order)."""
     sums: dict[str, float] = {}
     n = 0
-    with torch.no_grad():
+    with torch.no_grad(), evaluating(model):
         for batch in DataLoader(dataset, batch_size=cfg.batch_size, shuffle=False):
             w = batch_len(batch) or 1
             _add_logs(sums, step(model, batch, epoch), w)

@@ -50,6 +50,26 @@ def test_solve_arm_puts_the_wrist_on_target_with_the_hand_rotation(bm):
         assert abs(angle - resid[k]) < 1e-6 and resid[k] < np.pi
 
 
+def test_solve_arm_solves_a_wrist_straight_below_the_shoulder(bm):
+    """Its swivel poles came from world-down, all zero for an arm hanging straight down: two_bone_ik refused them
+    (and before that returned determinant-0 matrices). Now the wrist lands there with proper rotations, in a batch
+    with an ordinary reach."""
+    rig = build_rig(bm)
+    local = np.broadcast_to(np.eye(3), (1, 55, 3, 3)).copy()
+    Rg, pos = forward_kinematics(rig, local, rig.joints[:1])
+    sh0 = pos[0, J["right_shoulder"]]
+    targets = sh0 + np.array([[0.0, 0.0, -0.8], [-0.6, 0.2, 0.4]]) * rig.arm_length
+    hands = np.broadcast_to(np.eye(3), (2, 3, 3))
+    sh, el, wr, resid = go.solve_arm(Rg[0, J["right_collar"]], sh0, rig.joints, targets, hands)
+    for k in range(2):
+        for R in (sh[k], el[k], wr[k]):
+            assert np.allclose(R @ R.T, np.eye(3), atol=1e-9) and abs(np.linalg.det(R) - 1) < 1e-9
+        loc = local.copy()
+        loc[0, J["right_shoulder"]], loc[0, J["right_elbow"]], loc[0, J["right_wrist"]] = sh[k], el[k], wr[k]
+        _, pk = forward_kinematics(rig, loc, rig.joints[:1])
+        assert np.allclose(pk[0, J["right_wrist"]], targets[k], atol=1e-6)
+
+
 def test_hand_shapes_use_the_hand_pose_conventions(bm):
     """hand_pose_from_angles with a template's angles reproduces graspkit.body.hand_poses.template_pose."""
     axes = hand_axes(build_rig(bm).joints, "right")

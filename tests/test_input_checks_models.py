@@ -339,6 +339,7 @@ def test_wandr_warns_about_a_start_whose_still_joints_moved(wandr):
         with warnings.catch_warnings(record=True) as w:
             warnings.simplefilter("always")
             generate(model, start, torch.tensor([1.0, 0.5, 1.0]), 3, generator=torch.Generator().manual_seed(0))
+        assert all(x.filename == __file__ for x in w if "training stds" in str(x.message))   # the caller's line
         return [str(x.message) for x in w if "training stds" in str(x.message)]
 
     starts = starts_from_meta(model.meta)
@@ -365,6 +366,7 @@ def test_gnet_warns_about_an_object_translation_its_frame_never_has():
         with warnings.catch_warnings(record=True) as w:
             warnings.simplefilter("always")
             net.sample(bps, torch.tensor([ot]), torch.zeros(1, 10), generator=torch.Generator().manual_seed(0))
+        assert all(x.filename == __file__ for x in w if "training stds" in str(x.message))   # not torch's wrapper
         return [str(x.message) for x in w if "training stds" in str(x.message)]
 
     assert messages([0.0, 0.0, 0.8]) == []

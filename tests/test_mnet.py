@@ -298,9 +298,10 @@ def test_horizon_prediction_of_a_standing_mnet_is_the_current_pose(setup):
     from graspkit.models.mnet import MNetWindows
     bm, gv, body = setup
     w = MNetWindows(_reach_clips(1), body, bps_basis())
-    net = MNet(MNetConfig(n_future=1))
+    net = MNet(MNetConfig(n_future=1)).train()
     idx = torch.tensor([40])
-    got = teacher_forced_v2v(net, w, bm, idx, horizon=10)
+    got = teacher_forced_v2v(mnet=net, windows=w, bm=bm, index=idx, horizon=10)   # keywords pass the eval wrapper
+    assert net.training                                    # it and predict_horizon restore the mode they found
     t = int(w.windows[40])
     now = bm.forward_rotmats(pose_rotmats(w.rot6d[t:t + 1]), betas=w.betas[:1], transl=w.transl[t:t + 1]).vertices
     fut = bm.forward_rotmats(pose_rotmats(w.rot6d[t + 1:t + 11]), betas=w.betas[:1].expand(10, -1),

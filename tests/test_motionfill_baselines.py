@@ -87,6 +87,11 @@ def test_predict_refuses_non_finite_inputs_as_the_vae_does():
         loc[0, 0, 0] = float("inf")
         with pytest.raises(ValueError, match="local: expected finite real values"):
             m.predict(w["traj_interp"][0], loc, w["contacts"][0], traj=w["traj"][0])
+        # as MotionFillVAE.sample: markers in mm came back ~850 m away, contacts of 5 were read (an independent check)
+        with pytest.raises(ValueError, match="local: largest side .* metres"):
+            m.predict(w["traj_interp"][0], w["local"][0] * 1000, w["contacts"][0], traj=w["traj"][0])
+        with pytest.raises(ValueError, match=r"contacts: expected contact probabilities in \[0, 1\]"):
+            m.predict(w["traj_interp"][0], w["local"][0], w["contacts"][0] * 0 + 5, traj=w["traj"][0])
 
 
 def test_deterministic_outputs_keep_the_known_frames():

@@ -62,6 +62,8 @@ def test_untrained_and_bad_inputs():
         prior.encode(torch.zeros(2, 60))
     with pytest.raises(ValueError, match="z"):
         prior.decode(torch.zeros(2, 31))
+    with pytest.raises(ValueError, match=r"z: expected shape \(B, 32\), got NoneType"):
+        prior.decode(None)
     with pytest.raises(ValueError, match="z: contains NaN"):          # NaN poses came back silently
         prior.decode(torch.full((2, 32), float("nan")))
     with pytest.raises(ValueError, match="body_pose: contains NaN"):

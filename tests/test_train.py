@@ -162,6 +162,9 @@ def test_logged_terms_are_per_sample_means_with_a_short_last_batch():
     cfg = TrainConfig(epochs=1, batch_size=64, lr=1e-3)
     value = lambda m, b, e: {"loss": b[0].mean()}                  # noqa: E731  a batch's mean of 0..69
     assert evaluate(torch.nn.Linear(1, 1), value, data, cfg)["loss"] == pytest.approx(34.5)   # not (31.5 + 66.5) / 2
+    seen, net = [], torch.nn.Linear(1, 1).train()
+    evaluate(net, lambda m, b, e: seen.append(m.training) or {"loss": b[0].mean()}, data, cfg)
+    assert seen == [False, False] and net.training              # in eval mode inside, the caller's mode after
     model = torch.nn.Linear(1, 1)
     hist = fit(model, lambda m, b, e: {"loss": m(b[0]).mean() * 0 + b[0].mean()}, data, cfg, progress=False)
     assert hist[0]["loss"] == pytest.approx(34.5)

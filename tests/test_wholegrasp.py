@@ -474,8 +474,9 @@ def test_reconstruction_marker_error_is_the_mean_distance_in_cm():
         def __len__(self):
             return 2
 
-    res = reconstruction_metrics(model, Data())
+    res = reconstruction_metrics(model.train(), Data())
     assert abs(res["marker_error_cm"] - 7.5) < 1e-4
+    assert model.training                                  # the caller's mode restored
 
 
 def _eq3_numpy(mp, m, cm, pts, co, nrm=None):

@@ -253,7 +253,10 @@ def solve_arm(collar_rot: np.ndarray, shoulder: np.ndarray, rest_joints: np.ndar
     b2 = rest_joints[J["right_wrist"]] - rest_joints[J["right_elbow"]]
     axis = normalize(W - shoulder)                                             # (M,3)
     down = np.array([0.0, 0.0, -1.0])
-    p0 = normalize(down - (axis @ down)[:, None] * axis)
+    # the swivel circle is searched whole, so any reference off the arm's line will do where the arm points straight
+    # down or up (down itself would give zero poles there)
+    ref = np.where((np.abs(axis @ down) > 1 - 1e-9)[:, None], np.array([1.0, 0.0, 0.0]), down)
+    p0 = normalize(ref - (axis * ref).sum(-1, keepdims=True) * axis)
     p1 = np.cross(axis, p0)
     phis = np.linspace(-np.pi, np.pi, n_swivel, endpoint=False)
     poles = np.cos(phis)[None, :, None] * p0[:, None] + np.sin(phis)[None, :, None] * p1[:, None]   # (M,n,3)

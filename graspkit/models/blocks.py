@@ -7,6 +7,7 @@ with KL(q(z|.) || N(0, I)); SAGA wraps the KL in the robust function Psi(s) = sq
 from __future__ import annotations
 
 import functools
+import inspect
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any, TypeVar
@@ -34,11 +35,17 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 
 def in_eval_mode(fn: F) -> F:
-    """Decorator: fn(model, ...) runs with its first argument in eval mode, and the model's mode is restored after."""
+    """Decorator: fn(model, ...) runs with its first argument (positional or by its name) in eval mode, and the
+    model's mode is restored after."""
+    name = next(iter(inspect.signature(fn).parameters))
+
     @functools.wraps(fn)
-    def wrapped(model: nn.Module, *args: Any, **kwargs: Any) -> Any:
+    def wrapped(*args: Any, **kwargs: Any) -> Any:
+        model = args[0] if args else kwargs.get(name)
+        if model is None:                               # let fn's own signature name what is missing
+            return fn(*args, **kwargs)
         with evaluating(model):
-            return fn(model, *args, **kwargs)
+            return fn(*args, **kwargs)
     return wrapped  # type: ignore[return-value]
 
 

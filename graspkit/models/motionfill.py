@@ -353,6 +353,13 @@ def traj_velocity(traj: Tensor) -> Tensor:
     return torch.stack([dx, dy, dg], -1)
 
 
+def check_known_frames(local: Tensor, contacts: Tensor) -> None:
+    """The frames 0 and T that infilling reads: local markers (61,79,3) in metres from the root and contacts (61,4)
+    in [0, 1]; a ValueError naming local / contacts otherwise (markers in mm came back hundreds of metres away)."""
+    require_points_in_metres(torch.as_tensor(local)[[0, -1]].double(), "local", "local markers are metres from the root")
+    check_probabilities(torch.as_tensor(contacts)[[0, -1]].double(), "contacts")
+
+
 class MotionFillVAE(nn.Module):
     """TrajFill + LocalMotionFill with their normalisation statistics (buffers: marker_mean/std, vel_mean/std)."""
 
@@ -466,8 +473,7 @@ class MotionFillVAE(nn.Module):
                 raise ValueError(f"{name}: expected finite real values (no NaN or Inf)")
         traj_interp, local, contacts = (torch.as_tensor(x) for x in (traj_interp, local, contacts))
         traj = None if traj is None else torch.as_tensor(traj)
-        require_points_in_metres(local[[0, -1]].double(), "local", "local markers are metres from the root")
-        check_probabilities(contacts[[0, -1]].double(), "contacts")
+        check_known_frames(local, contacts)
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise ValueError(f"n: expected a whole number >= 1 of samples, got {n!r}")
         check_generator(generator)

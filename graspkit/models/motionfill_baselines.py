@@ -38,7 +38,8 @@ import torch
 from torch import Tensor, nn
 from torch.nn import functional as F
 
-from graspkit.models.motionfill import FEATURES, NUM_FRAMES, NUM_MARKERS, NUM_ROOT, T, traj_velocity
+from graspkit.models.motionfill import (FEATURES, NUM_FRAMES, NUM_MARKERS, NUM_ROOT, T, check_known_frames,
+                                       traj_velocity)
 
 L_MARKERS, L_MARKERS_VEL, L_CONTACTS = 1.0, 0.5, 1.0     # Eq. 8's l3, l4, l2
 L_TRAJ, L_TRAJ_VEL = 1.0, 0.05                           # Eq. 8's trajectory term and l1
@@ -138,6 +139,7 @@ class _Baseline(nn.Module):
         _check("traj_interp", traj_interp, (NUM_ROOT, 4))
         _check("local", local, (NUM_FRAMES, NUM_MARKERS, 3))
         _check("contacts", contacts, (NUM_FRAMES, 4))
+        check_known_frames(local, contacts)
         route = traj_interp if traj is None else traj
         _check("traj", route, (NUM_ROOT, 4))
         return self._decode(route.float().reshape(1, NUM_ROOT, 4), local, contacts)

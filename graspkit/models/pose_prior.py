@@ -86,17 +86,22 @@ class PosePrior(nn.Module):
         """Posterior mean (B, latent) of body poses (B, 63)."""
         return self.posterior(body_pose)[0]
 
-    def decode_rotmats(self, z: Tensor) -> Tensor:
-        """Latent (B, latent) -> body-joint rotation matrices (B, 21, 3, 3)."""
+    def _check_z(self, z: Tensor) -> Tensor:
+        """z itself if it is a (B, latent) tensor; ValueError naming z otherwise."""
         if not isinstance(z, Tensor) or z.dim() != 2 or z.shape[1] != self.cfg.latent:
             got = tuple(z.shape) if isinstance(z, Tensor) else type(z).__name__
             raise ValueError(f"z: expected shape (B, {self.cfg.latent}), got {got}")
+        return z
+
+    def decode_rotmats(self, z: Tensor) -> Tensor:
+        """Latent (B, latent) -> body-joint rotation matrices (B, 21, 3, 3)."""
+        self._check_z(z)
         w = self.dec[0].weight
         return rot6d_to_matrix(self.dec(z.to(w.dtype)).view(len(z), NUM_BODY_JOINTS, 6))
 
     def decode(self, z: Tensor) -> Tensor:
         """Latent (B, latent) -> SMPL-X body_pose (B, 63) axis-angle."""
-        check_finite(z, "z", "a latent code")
+        check_finite(self._check_z(z), "z", "a latent code")
         return matrix_to_axis_angle(self.decode_rotmats(z)).reshape(len(z), -1)
 
     def loss(self, body_pose: Tensor, generator: torch.Generator | None = None) -> dict[str, Tensor]:

@@ -131,10 +131,10 @@ fig.tight_layout()
 # %%
 held = E.summary(E.evaluate_grid(model, starts[:2], bm, n=1, seed=0, floor=0.0))
 lifted = E.summary(E.evaluate_grid(model, starts[:2], bm, n=1, seed=0, lift=True))
-# FS to the whole percent: one skating frame more is 0.0017 points, and lift's 7.2485 % sits 0.9 of a frame from 7.25
+# FS and sunk to the whole percent: one frame more is 0.0017 points, and lift's FS 7.2485 % sat 0.9 of a frame from 7.25
 for name, r in (("as generated", s), ("floor = 0", held), ("lift", lifted)):
     print(f"{name:12s} SR {r['SR']:5.1f} %  SR_grounded {r['SR_grounded']:5.1f} %  floating {r['floating']:3.1f} %  "
-          f"sunk {r['sunk']:4.1f} % of frames  SR_not_sunk {r['SR_not_sunk']:5.1f} %  FS {r['FS']:2.0f} %")
+          f"sunk {r['sunk']:2.0f} % of frames  SR_not_sunk {r['SR_not_sunk']:5.1f} %  FS {r['FS']:2.0f} %")
 
 # %% [markdown]
 # ## 3 · Time control (Sup. C.1)
@@ -252,8 +252,8 @@ with torch.no_grad():
     other, zero = (M.rollout(model, start.p_prev[None], start.p[None], start.rest[None], goal[None], 120, 120, z=z)
                    for z in (z1, torch.zeros_like(z1)))
 gap = lambda a, b: 100 * float((a.joints[0, :, 0] - b.joints[0, :, 0]).detach().norm(dim=-1).max())
-print(f"pelvis paths over 4 s: other latents differ by at most {gap(plain, other):.1f} cm, z = 0 by "
-      f"{gap(plain, zero):.1f} cm")
+print(f"pelvis paths over 4 s: other latents differ by at most {10 * gap(plain, other):.0f} mm, z = 0 by "
+      f"{10 * gap(plain, zero):.0f} mm")
 
 # %% [markdown]
 # A few centimetres over a walk of nearly two metres: the c-VAE has become an almost deterministic regressor of
