@@ -19,7 +19,7 @@ setup() {
 }
 
 case "${1:-}" in
-  demo) setup; shift; "$VENV/bin/graspkit" demo --out outputs/demo "$@" ;;
+  demo) setup; shift; MPLBACKEND="${MPLBACKEND:-Agg}" "$VENV/bin/graspkit" demo --out outputs/demo "$@" ;;
   test) setup; shift
         export MPLBACKEND=Agg
         # two workers (the machine's two cores), each test module and each notebook whole on one of them

@@ -19,20 +19,17 @@ import sys
 from functools import lru_cache
 from pathlib import Path
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+import torch
+from tqdm import tqdm
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import torch  # noqa: E402
-from tqdm import tqdm  # noqa: E402
-
-from graspkit.body import BodyModel  # noqa: E402
-from graspkit.body.poses import body_pose, y_up_to_z_up  # noqa: E402
-from graspkit.paths import DATA_STUBS, default_model_path, stub_hint, writes_to  # noqa: E402
-from graspkit.progress import hidden  # noqa: E402
-from graspkit.viz.export import save_png  # noqa: E402
-from graspkit.viz.style import OBJECT  # noqa: E402
+from graspkit.body import BodyModel
+from graspkit.body.poses import body_pose, y_up_to_z_up
+from graspkit.paths import DATA_STUBS, default_model_path, stub_hint, writes_to
+from graspkit.progress import hidden
+from graspkit.viz.export import save_png
+from graspkit.viz.style import OBJECT
 
 STAGES = ("body", "planner", "saga", "saga_motion", "goal", "wandr")
 CHECKPOINTS = DATA_STUBS / "checkpoints"

@@ -34,6 +34,7 @@ from graspkit.models.blocks import in_eval_mode
 from graspkit.models.gnet import pose_rotmats
 from graspkit.models.mnet import STALL_FRAMES, MNet, MNetWindows, predict_horizon
 from graspkit.rotations import rotation_about_z
+from graspkit.state import keeps_torch_state
 
 if TYPE_CHECKING:
     import argparse
@@ -301,6 +302,7 @@ def gnet_data(folders: Sequence[str | Path]) -> tuple[dict[str, Tensor], dict[st
     return gnet_samples(train), (gnet_samples(val) if val else None)
 
 
+@keeps_torch_state
 def run_train_gnet(folders: Sequence[str | Path], out: str | Path, variant: str = "gnet", epochs: int = 60,
                    time_limit_s: float | None = 600.0, seed: int = 0, threads: int = 2,
                    run_dir: str | Path | None = None, progress: bool = True, kl: float | None = None) -> dict:
@@ -343,6 +345,7 @@ def mnet_windows(folders: Sequence[str | Path], split: str, cfg: MNetConfig | No
     return MNetWindows(approach_clips(seqs), body, bps_basis(), cfg, stride=stride, goal_repeat=goal_repeat)
 
 
+@keeps_torch_state
 def run_train_mnet(folders: Sequence[str | Path], out: str | Path, variant: str = "mnet", epochs: int = 20,
                    time_limit_s: float | None = 600.0, seed: int = 0, threads: int = 2, stride: int = 1,
                    run_dir: str | Path | None = None, progress: bool = True,

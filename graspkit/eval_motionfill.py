@@ -37,6 +37,7 @@ from graspkit.data.motionfill_dataset import (MotionFillDataset, MotionFillStats
                                               save_windows, split_clips)
 from graspkit.models.motionfill import MotionFillConfig, MotionFillVAE
 from graspkit.paths import read_cache, stub_hint
+from graspkit.state import keeps_torch_state
 from graspkit.train import load_checkpoint
 
 if TYPE_CHECKING:
@@ -173,6 +174,7 @@ def load_motionfill(path: str | Path = CHECKPOINT) -> MotionFillVAE:
         raise ValueError(f"checkpoint {path}: {str(e).removeprefix('state: ')}") from None
 
 
+@keeps_torch_state
 def train_stage(stage: str, epochs: int, out: Path, init: Path | None = None, seed: int = 0,
                 time_limit_s: float | None = 540.0, clips: dict[str, int] | None = None, batch_size: int = 32,
                 lr: float = 1e-3, progress: bool = True, data: Path | None = None, reduction: str | None = None,
@@ -240,6 +242,7 @@ def baseline_path(name: str, folder: str | Path = BASELINE_DIR) -> Path:
     return Path(folder) / f"motionfill_{name}.pt"
 
 
+@keeps_torch_state
 def train_baseline(name: str, epochs: int, out: Path | None = None, seed: int = 0, time_limit_s: float | None = 300.0,
                    lr: float = 1e-3, batch_size: int = 32, clips: dict[str, int] | None = None,
                    stats_from: Path | None = CHECKPOINT, data: Path | None = None, progress: bool = True

@@ -41,6 +41,7 @@ from graspkit.checks import positive_float
 from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_folders, check_out, check_train_out, reports_errors
 from graspkit.optim.grasppose import ARM_JOINTS, GraspPoseConfig, GraspPoseWeights
 from graspkit.paths import DATA_STUBS, write_atomic
+from graspkit.state import keeps_torch_state
 
 if TYPE_CHECKING:
     from graspkit.body import BodyModel
@@ -228,6 +229,7 @@ def fit_variants(opt: GraspPoseOpt, markers: Tensor, obj: GraspObject, mc: Tenso
     return out
 
 
+@keeps_torch_state
 def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = True,
              out: str | Path | None = RESULTS_PATH, checkpoints: str | Path = DATA_STUBS / "checkpoints",
              grabnet_only: bool = False) -> dict[str, Any]:

@@ -47,6 +47,7 @@ from graspkit.data.wandr_dataset import FOOT_JOINTS, shaped_rest
 from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS
 from graspkit.models.blocks import evaluating
 from graspkit.progress import hidden
+from graspkit.state import keeps_torch_state
 
 if TYPE_CHECKING:
     import argparse
@@ -612,6 +613,7 @@ def clipset_key(clips: ClipSet) -> str:
     return h.hexdigest()
 
 
+@keeps_torch_state
 def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str | None = None, epochs: int = 6,
                     time_limit: float | None = None, seed: int = 0, threads: int = 2, batch_size: int = 512,
                     lr: float = 1e-3, progress: bool = True, max_steps: int = 10, ramp_epochs: int = 4,
@@ -745,6 +747,7 @@ def _stage_record(meta: dict[str, Any], history: Sequence[dict], max_steps: int)
     return {**{k: meta[k] for k in keys if k in meta}, "max_steps": int(max_steps), "history": list(history)}
 
 
+@keeps_torch_state
 def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = False, threads: int = 2,
                    clips_folder: str | None = None, floor: float | None = None, lift: bool = False) -> dict[str, Any]:
     """Evaluate a checkpoint on the full grid from its held-out starts; SR / FS / DTG and the Fig. 5 breakdowns; with

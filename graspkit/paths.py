@@ -160,11 +160,24 @@ def sync_rename(tmp: str | os.PathLike, path: str | os.PathLike) -> None:
         os.close(fd)
 
 
+def _umask() -> int:
+    """The process's umask, read where Linux shows it; elsewhere set and put back (os.umask is the only other way), with
+    0o022 meanwhile, not 0, so that a file another thread makes in that instant is not world-writable."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def usual_mode(tmp: Path) -> None:
     """Give tmp the permissions a plain open() would (mkstemp makes it owner-only)."""
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
+    os.chmod(tmp, 0o666 & ~_umask())
 
 
 def publish(tmp: Path, path: Path) -> Path:

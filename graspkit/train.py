@@ -43,6 +43,7 @@ from graspkit.models.blocks import evaluating
 from graspkit.optim.step import with_autograd
 from graspkit.paths import naming_errors, publish, sweep_stale_temps, temp_beside, write_atomic
 from graspkit.progress import hidden
+from graspkit.state import keeps_torch_state
 
 StepFn = Callable[[torch.nn.Module, Any, int], dict[str, torch.Tensor]]
 
@@ -365,6 +366,7 @@ def write_history_plot(path: str | Path, history: list[dict[str, float]]) -> Pat
 
 
 @with_autograd
+@keeps_torch_state
 def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig,
         checkpoint: str | Path | None = None, extra: dict[str, Any] | None = None,
         val_dataset: Dataset | None = None,

@@ -5,6 +5,7 @@ import torch
 from matplotlib.colors import to_rgba
 
 from graspkit.body.markers import saga_markers
+from graspkit.models.blocks import evaluating
 from graspkit.models.wholegrasp import WholeGraspVAE
 from graspkit.viz.saga import CONTACT_LEVEL, MARKER_IN_CONTACT, LatentWalk
 
@@ -20,7 +21,8 @@ def walk():
 def test_update_sets_one_latent_coordinate_and_decodes_it(walk):
     numbers = walk.update("z1", 1.5)
     assert walk.z[0, 1] == 1.5 and walk.names == ["z0", "z1", "z2", "seed"]
-    with torch.no_grad():
+    assert walk.model.training                       # decoded in eval mode, the caller's model left as it was
+    with torch.no_grad(), evaluating(walk.model):
         out = walk.model.decode(walk.z.clone(), walk.points[None], walk.normals[None], torch.tensor([[0.9]]))
     torch.testing.assert_close(walk.grasp["markers"], out["markers"][0])
     assert numbers["markers_in_contact"] == int((out["marker_contact"][0] > CONTACT_LEVEL).sum())

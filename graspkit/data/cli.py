@@ -16,6 +16,7 @@ import numpy as np
 
 from graspkit.cli import DATA_HELP
 from graspkit.paths import drop_damaged, pool_results
+from graspkit.state import keeps_torch_state
 
 KINDS = ("locomotion", "reach", "reach_far", "reach_chain", "reach_near")   # reach_far: room-scale CIRCLE-style tasks
 # (WANDR's grid); reach_chain: room-scale, starting from a finished reach; reach_near: near goals, floor or overhead
@@ -123,6 +124,7 @@ def make_clip(kind: str, seed: int, index: int, out: str) -> str:
     return str(save_motion(clip_path(Path(out), kind, index), m))
 
 
+@keeps_torch_state
 def make_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2, model: str | None = None,
                  progress: bool = True) -> list[Path]:
     """Write clips 0..n-1 of `kind` that are not there yet; returns all n paths."""

@@ -37,6 +37,7 @@ from graspkit.objects.contact import OBJECT_CONTACT_THRESHOLD, marker_contact
 from graspkit.objects.distance import nearest_neighbours, point_mesh_distance
 from graspkit.objects.placement import ObjectPose, apply_pose
 from graspkit.paths import default_model_path, drop_damaged, pool_results
+from graspkit.state import keeps_torch_state
 
 if TYPE_CHECKING:
     from graspkit.body import BodyModel
@@ -287,6 +288,7 @@ def _run(kind: str, seed: int, chunk: int, out: str, n: int, size: int, objects:
     return len(write_chunk(_FITTER, kind, seed, chunk, Path(out), n, size, objects))
 
 
+@keeps_torch_state
 def make_grasp_dataset(kind: str, n: int, seed: int, out: Path, workers: int = 2, model: str | None = None,
                        progress: bool = True, chunk: int = CHUNK, objects: tuple[str, ...] | None = None) -> list[Path]:
     """Write items 0..n-1 of `kind` ('grasp' or 'approach') that are not there yet; returns all n paths.

@@ -39,6 +39,7 @@ from graspkit.checks import check_generator, user_stacklevel
 from graspkit.models.blocks import GaussianHead, ResBlock, kl_standard_normal, reparameterize
 from graspkit.objects.contact import IAA_WEIGHT
 from graspkit.rotations import rot6d_to_matrix
+from graspkit.state import keeps_torch_state
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -382,6 +383,7 @@ def load_gnet(path: str | Path) -> GNet:
     return load_into(GNet(GNetConfig(**config)), state, path, "a GNet checkpoint").eval()
 
 
+@keeps_torch_state
 def train_gnet(train: dict[str, Tensor], val: dict[str, Tensor] | None, body: SparseBody,
                cfg: GNetConfig | None = None, weights: GNetLossWeights | None = None,
                train_cfg: TrainConfig | None = None, checkpoint: str | Path | None = None,

@@ -46,6 +46,7 @@ from graspkit.models.gnet import NUM_JOINTS, POSE_DIM, Standardiser
 from graspkit.objects.bps import bps_encode
 from graspkit.objects.contact import IAA_WEIGHT
 from graspkit.rotations import matrix_to_rot6d, rot6d_to_matrix, rotation_about_z
+from graspkit.state import keeps_torch_state
 
 if TYPE_CHECKING:
     from graspkit.body import BodyModel
@@ -601,6 +602,7 @@ def feet_positions(body: SparseBody) -> list[int]:
     return [i for i, v in enumerate(body.ids.tolist()) if v in feet]
 
 
+@keeps_torch_state
 def train_mnet(train: MNetWindows, val: MNetWindows | None, cfg: MNetConfig | None = None,
                weights: MNetLossWeights | None = None, train_cfg: TrainConfig | None = None,
                checkpoint: str | Path | None = None, time_limit_s: float | None = None,

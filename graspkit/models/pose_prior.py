@@ -27,6 +27,7 @@ from graspkit.checks import check_finite
 from graspkit.models.blocks import GaussianHead, kl_standard_normal, reparameterize
 from graspkit.paths import DATA_STUBS
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
+from graspkit.state import keeps_torch_state
 
 if TYPE_CHECKING:
     from graspkit.body import BodyModel
@@ -211,6 +212,7 @@ def angle_error(model: PosePrior, body_pose: np.ndarray | Tensor) -> float:
     return float(torch.rad2deg(torch.acos(cos.clamp(-1, 1))).mean())
 
 
+@keeps_torch_state
 def train_pose_prior(out: str | Path = POSE_PRIOR_PATH, poses: np.ndarray | None = None, epochs: int = 30,
                      batch_size: int = 256, lr: float = 2e-3, seed: int = 0, n_clips: int = 200,
                      val_fraction: float = 0.05, progress: bool = True, half: bool = True,

@@ -58,6 +58,7 @@ from graspkit.models.blocks import (GaussianHead, ResBlock, annealed_kl_weight, 
                                    reparameterize, robust_kl)
 from graspkit.models.pointnet2 import (FeaturePropagation, Grouping, PointNet2Encoder, gather, groupings_from_tensors,
                                        groupings_to_tensors, interpolation_weights)
+from graspkit.state import keeps_torch_state
 
 if TYPE_CHECKING:
     from graspkit.body import BodyModel
@@ -515,6 +516,7 @@ def reconstruction_metrics(model: WholeGraspVAE, data: WholeGraspTrainingSet, ba
     return res
 
 
+@keeps_torch_state
 def train_wholegrasp(root: str | Path, out: str | Path | None = None, multitask: bool = True, epochs: int = 12,
                      batch_size: int = 32, lr: float = 1e-3, seed: int = 0, time_limit_s: float | None = 600.0,
                      threads: int | None = 1, progress: bool = True, half: bool = True,
@@ -891,6 +893,7 @@ def turn_params(params: Tensor, root_joint: Tensor, Q: Tensor) -> Tensor:
     return p
 
 
+@keeps_torch_state
 def train_grabnet_smplx(root: str | Path, out: str | Path | None = None, epochs: int = 12, batch_size: int = 32,
                         lr: float = 1e-3, seed: int = 0, time_limit_s: float | None = 600.0, threads: int | None = 1,
                         progress: bool = True, half: bool = True, augment_yaw: bool = False,

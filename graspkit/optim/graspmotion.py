@@ -102,6 +102,7 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -119,6 +120,7 @@ from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, _nearest, body_jo
 from graspkit.optim.step import energy_step, with_autograd
 from graspkit.progress import hidden
 from graspkit.rotations import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_rot6d, rot6d_to_matrix
+from graspkit.state import keeps_torch_state
 from graspkit.train import load_checkpoint, state_dict_problem
 
 if TYPE_CHECKING:
@@ -166,6 +168,7 @@ class MarkerDiffAE(nn.Module):
 
 
 @with_autograd
+@keeps_torch_state
 def train_smooth_ae(markers: np.ndarray, epochs: int = 30, seed: int = 0, out: str | Path | None = SMOOTH_AE_PATH,
                     batch_size: int = 64, lr: float = 2e-3) -> tuple[MarkerDiffAE, list[float]]:
     """Train S.1's autoencoder on marker windows (N, T+1, M, 3) (reconstruction L1 of the differences); save it."""
@@ -321,11 +324,9 @@ class GraspMotionOpt:
                  config: GraspMotionConfig | None = None) -> None:
         if bm.flat_hand_mean:
             raise ValueError("bm: build the BodyModel with flat_hand_mean=False (hand PCA about the mean hand)")
-        self.bm, self.prior, self.ae = bm, prior.eval(), smooth_ae
-        for m in (self.prior, self.ae):
-            if m is not None:
-                for p in m.parameters():
-                    p.requires_grad_(False)
+        # frozen copies: the caller's prior and autoencoder keep their mode and gradients
+        self.bm, self.prior = bm, copy.deepcopy(prior).eval().requires_grad_(False)
+        self.ae = None if smooth_ae is None else copy.deepcopy(smooth_ae).requires_grad_(False)
         self.cfg = config or GraspMotionConfig()
         self.free_ids = body_joint_ids(self.cfg.free_joints)
         ms = saga_sparse_markers(bm)

@@ -401,9 +401,7 @@ class GraspPoseOpt:
 
     def __init__(self, bm: BodyModel, prior: PosePrior, config: GraspPoseConfig | None = None,
                  hand_contact_prior: Tensor | None = None) -> None:
-        self.bm, self.prior = bm, prior.eval()
-        for p in self.prior.parameters():
-            p.requires_grad_(False)
+        self.bm, self.prior = bm, copy.deepcopy(prior).eval().requires_grad_(False)   # frozen; the caller's untouched
         self.cfg = config or GraspPoseConfig()
         self.free_ids = body_joint_ids(self.cfg.free_joints)
         ms = saga_markers(bm)

@@ -15,6 +15,7 @@ from matplotlib.figure import Figure
 from torch import Tensor
 
 from graspkit.checks import check_int, check_seed, check_type
+from graspkit.models.blocks import evaluating
 from graspkit.viz.explorers import bounded_value, slider_bounds, slider_value
 
 _BOXES = [  # (x, y, w, h, text, colour) of the WholeGrasp-VAE diagram (SAGA Fig. 3)
@@ -86,7 +87,7 @@ class LatentWalk:
         points, normals = (torch.as_tensor(x) if isinstance(x, np.ndarray) else x for x in (points, normals))
         height = slider_value("height", height)
         check_sample_inputs(points, normals, 1, model.obj_dec.sa[0].npoint, ("points", "normals"), height=height)
-        self.model, self.points, self.normals = model.eval(), points.float(), normals.float()
+        self.model, self.points, self.normals = model, points.float(), normals.float()
         self.height = height
         self.dims = dims
         self.seed = check_seed(seed)
@@ -106,7 +107,8 @@ class LatentWalk:
     @torch.no_grad()
     def decode(self) -> dict[str, Tensor]:
         """Markers (143,3), marker contacts (143,), object contacts (P,) for the current z."""
-        out = self.model.decode(self.z, self.points[None], self.normals[None], torch.tensor([[float(self.height)]]))
+        with evaluating(self.model):                    # the caller's model keeps its mode
+            out = self.model.decode(self.z, self.points[None], self.normals[None], torch.tensor([[float(self.height)]]))
         self.grasp = {k: v[0] for k, v in out.items()}
         return self.grasp
 

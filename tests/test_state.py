@@ -1,0 +1,69 @@
+"""Library calls give the caller's global state back (an independent check of 2026-12-06 found training consuming and
+reseeding torch's global generator, evaluators leaving their thread count, optimisers freezing the caller's pose
+prior, an explorer switching the caller's model to eval mode and `import graspkit.demo` switching the backend)."""
+import subprocess
+import sys
+
+import torch
+from torch.utils.data import TensorDataset
+
+from graspkit.models.pose_prior import PosePrior
+from graspkit.state import kept_torch_state
+from graspkit.train import TrainConfig, fit
+
+
+def test_kept_torch_state_restores_the_generator_and_the_thread_count():
+    threads = torch.get_num_threads()
+    torch.manual_seed(5)
+    want = torch.rand(3)
+    torch.manual_seed(5)
+    with kept_torch_state():
+        torch.manual_seed(123)
+        torch.rand(10)
+        torch.set_num_threads(threads + 1)
+    assert torch.get_num_threads() == threads
+    assert torch.equal(torch.rand(3), want)
+
+
+def test_fit_trains_as_seeded_and_leaves_the_callers_generator_and_threads():
+    x = torch.linspace(-1, 1, 32)[:, None]
+    data = TensorDataset(x, 3 * x)
+    step = lambda m, b, e: {"loss": (m(b[0]) - b[1]).pow(2).mean()}              # noqa: E731
+    threads = torch.get_num_threads()
+    runs = []
+    for caller_seed in (1, 2):
+        torch.manual_seed(caller_seed)
+        before = torch.random.get_rng_state()
+        model = torch.nn.Linear(1, 1)
+        torch.manual_seed(caller_seed)
+        fit(model, step, data, TrainConfig(epochs=2, batch_size=8, lr=0.1, seed=7, num_threads=threads + 1),
+            progress=False)
+        assert torch.equal(torch.random.get_rng_state(), before) and torch.get_num_threads() == threads
+        runs.append(model.weight.detach().clone())
+    assert not torch.equal(runs[0], runs[1])        # the initial weights came from the caller's seed
+    torch.manual_seed(1)                            # and the training from its own: the same again
+    model = torch.nn.Linear(1, 1)
+    fit(model, step, data, TrainConfig(epochs=2, batch_size=8, lr=0.1, seed=7), progress=False)
+    assert torch.equal(model.weight, runs[0])
+
+
+def test_grasp_optimisers_leave_the_callers_prior_trainable():
+    from graspkit.body import BodyModel
+    from graspkit.optim.graspmotion import GraspMotionOpt
+    from graspkit.optim.grasppose import GraspPoseOpt
+    from graspkit.paths import default_model_path
+
+    prior = PosePrior().train()
+    for make in (lambda: GraspPoseOpt(BodyModel.from_file(default_model_path()), prior),
+                 lambda: GraspMotionOpt(BodyModel.from_file(default_model_path()), prior)):
+        opt = make()
+        assert prior.training and all(p.requires_grad for p in prior.parameters())
+        assert not opt.prior.training and not any(p.requires_grad for p in opt.prior.parameters())
+        assert all(torch.equal(a, b) for a, b in zip(opt.prior.state_dict().values(), prior.state_dict().values()))
+
+
+def test_importing_the_demo_leaves_the_matplotlib_backend():
+    code = ("import matplotlib; matplotlib.use('svg'); import graspkit.demo; "
+            "print(matplotlib.get_backend())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "svg"
