@@ -179,7 +179,7 @@ def _to_heading_frame(v: Tensor, psi: Tensor) -> Tensor:
     return torch.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], dim=-1)
 
 
-def intention(wrist: Tensor, pelvis: Tensor, psi: Tensor, goal: Tensor, time_left: Tensor,
+def intention(wrist: Tensor, pelvis: Tensor, psi: Tensor | float, goal: Tensor, time_left: Tensor | float,
               goal_heading: Tensor | None = None) -> Tensor:
     """WANDR §3.2 intention I = (I^w, I^r, I^p) (..., 7) in the heading frame of the body.
 

@@ -150,7 +150,7 @@ def rot6d_to_axis_angle(d6: Tensor) -> Tensor:
     return matrix_to_axis_angle(rot6d_to_matrix(d6))
 
 
-def rotation_about_z(angle: Tensor) -> Tensor:
+def rotation_about_z(angle: Tensor | float) -> Tensor:
     """Rotations about the world's vertical z axis: angles (...) in radians (a tensor, or a number) -> (..., 3, 3)."""
     angle = angle if isinstance(angle, Tensor) else torch.as_tensor(angle, dtype=torch.get_default_dtype())
     c, s = torch.cos(angle), torch.sin(angle)

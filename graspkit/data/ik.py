@@ -127,12 +127,12 @@ def two_bone_ik(root: np.ndarray, target: np.ndarray, pole: np.ndarray, bone1: n
     return R1, R2, mid
 
 
-def smoothstep(u: np.ndarray) -> np.ndarray:
+def smoothstep(u: np.ndarray | float) -> np.ndarray | float:
     """Minimum-jerk ramp 10u^3 - 15u^4 + 6u^5 on [0, 1] (clipped outside): zero velocity and acceleration at both ends."""
     u = np.clip(u, 0.0, 1.0)
     return u**3 * (10 - 15 * u + 6 * u**2)
 
 
-def wrap_angle(a: np.ndarray | float) -> np.ndarray:
+def wrap_angle(a: np.ndarray | float) -> np.ndarray | float:
     """Angles wrapped to (-pi, pi]."""
     return np.pi - np.mod(np.pi - np.asarray(a, np.float64), 2 * np.pi)

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numbers
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
@@ -567,7 +567,7 @@ def generate(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal:
     return out
 
 
-def goal_schedule(goals: Tensor, t_goals: Sequence[int], frames: int) -> tuple[Tensor, Tensor]:
+def goal_schedule(goals: Tensor, t_goals: Iterable[int] | Tensor, frames: int) -> tuple[Tensor, Tensor]:
     """Several goals in a row (Sup. C.2, Fig. S.2): goal k is active from t_{k-1} + 1 to its frame t_k. Returns the goal
     (frames+1, 3) and goal frame (frames+1,) per frame, for `rollout` (expand to (B, T, ...)).
 

@@ -19,6 +19,7 @@ cell beyond one cell from the surface. 10k queries: exact ~0.18 s, grid ~1 ms (2
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -199,7 +200,7 @@ class SDFGrid:
         """A copy on another device and/or in another dtype (do this once, not per query)."""
         return SDFGrid(*(t.to(device=device, dtype=dtype) for t in (self.values, self.lower, self.upper)))
 
-    def __call__(self, points: Tensor | np.ndarray) -> Tensor:
+    def __call__(self, points: Tensor | np.ndarray | Sequence[Sequence[float]]) -> Tensor:
         """Interpolated signed distance (...,) at points (..., 3); differentiable w.r.t. the points."""
         if not isinstance(points, Tensor):
             try:
