@@ -53,7 +53,7 @@ def bounded_value(name: str, value: Any, most: float, what: str, unit: str = "",
     return v
 
 
-def slider_bounds(value: float | Tensor, low: float, high: float) -> dict[str, float]:
+def slider_bounds(value: float | torch.Tensor, low: float, high: float) -> dict[str, float]:
     """A slider's value, min and max: the range [low, high] widened to hold `value` (ipywidgets clamps a value
     outside its range, and the slider would then show a number the explorer does not hold)."""
     v = float(value)
