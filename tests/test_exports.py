@@ -93,6 +93,10 @@ def test_bad_name_is_refused(exported, tmp_path):
     with pytest.raises(ValueError, match="objects: 'body' is the body mesh's name"):   # it replaced the body
         export_motion(m, bm, tmp_path, "x", objects={"body": box})
     assert not list(tmp_path.iterdir())                          # refused before any file
+    (tmp_path / "y.glb").mkdir()                                 # it wrote y.npz, then failed on the glb
+    with pytest.raises(ValueError, match="y.glb is a folder"):
+        export_motion(m, bm, tmp_path, "y")
+    assert [p.name for p in tmp_path.iterdir()] == ["y.glb"]
 
 
 # The animated GLB plays the input frames at their times, and its header follows the glTF 2.0 binary layout (total

@@ -17,7 +17,7 @@ from PIL import Image  # noqa: E402
 from graspkit import viz  # noqa: E402
 from graspkit.viz import animate as animate_fn  # noqa: E402
 from graspkit.viz.animate import save_animation, to_html  # noqa: E402
-from graspkit.viz.scene import sphere  # noqa: E402
+from graspkit.viz.scene import show_scene, sphere  # noqa: E402
 from graspkit.viz.export import (Z_UP_TO_Y_UP, export_scene, export_sequence_glb, load_sequence_glb,  # noqa: E402
                                   read_glb)
 
@@ -126,6 +126,19 @@ def test_ground_lines_every_step_on_a_room_and_bounded_on_a_far_scene():
     assert len(far.get_segments()) <= 2 * (MAX_GROUND_LINES + 1)
     with pytest.raises(ValueError, match="extent"):
         viz.draw_ground(ax, (0, float("inf"), 0, 1))
+
+
+def test_show_scene_closes_its_figure_when_a_check_fails_and_names_nan_goals(ball):
+    """A wrong mesh_values length or an unknown cmap, found while drawing, left the figure open; NaN goals were
+    refused as `extent` (an independent check)."""
+    v, f = ball.vertices, ball.faces
+    before = plt.get_fignums()
+    for kw in ({"mesh_values": [np.zeros(3)]}, {"cmap": "no_such_cmap", "mesh_values": [np.zeros(len(v))]}):
+        with pytest.raises(ValueError):
+            show_scene([(v, f)], **kw)
+    with pytest.raises(ValueError, match="goals: contains NaN"):
+        show_scene([(v, f)], goals=np.array([[np.nan, 0.0, 0.0]]))
+    assert plt.get_fignums() == before
 
 
 def test_show_scene(body, ball, tmp_path):

@@ -315,6 +315,9 @@ def export_motion(motion: Motion, bm: BodyModel, folder: str | os.PathLike, name
     if not np.isfinite(v).all():
         raise ValueError("motion: its mesh vertices on bm contain NaN or Inf")
     faces = np.asarray(bm.faces, np.int64)
+    for target in (folder / f"{name}.npz", folder / f"{name}.glb", folder / f"{name}_final.glb"):
+        if target.is_dir():
+            raise ValueError(f"name: {target} is a folder; expected a file there (or none)")
     out = {"npz": save_motion(folder / f"{name}.npz", motion, amass_keys=True),
            "glb": export_sequence_glb(v, faces, folder / f"{name}.glb", fps=motion.fps, objects=objects,
                                       stride=stride),

@@ -325,46 +325,53 @@ def show_scene(meshes: Sequence[Mesh] = (), points: Any = None, values: Any = No
     for a, name in ((points, "points"), (markers, "markers"), (goals, "goals")):
         if a is not None:
             extent.append(as_points(a, name))
+            if not np.isfinite(extent[-1]).all():
+                raise ValueError(f"{name}: contains NaN or Inf (expected positions in metres)")
     if arrows is not None:
         o, d = np.broadcast_arrays(as_points(arrows[0], "origins"), as_points(arrows[1], "vectors"))
         extent += [o, o + d]
     if not extent:
         raise ValueError("show_scene: nothing to draw")
     fig, axes = figure(views, size, title, axis=axis)
-    lo, hi = bounds_of(*extent)
-    if goals is not None:
-        lo, hi = lo - goal_radius, hi + goal_radius
-    ground_box = None
-    if ground:  # a grid a quarter of the scene wider, on z = 0 (or under the lowest point)
-        m, gz = 0.25 * max(float((hi - lo)[:2].max()), 0.4), min(0.0, float(lo[2]))
-        ground_box = (lo[0] - m, hi[0] + m, lo[1] - m, hi[1] + m)
-        lo, hi = np.minimum(lo, [ground_box[0], ground_box[2], gz]), np.maximum(hi, [ground_box[1], ground_box[3], gz])
-    sc = None
-    for ax in axes:
-        polys = list(meshes)
-        mv = None if mesh_values is None else list(mesh_values)
-        if goals is not None:  # goals join the mesh collection so that they are depth-sorted with the body
-            polys += [(*sphere(c, goal_radius), GOAL) for c in as_points(goals, "goals")]
-            mv = None if mv is None else mv + [None] * (len(polys) - len(mv))
-        if ground_box is not None:
-            draw_ground(ax, ground_box, z=gz)
-        if polys:
-            draw_meshes(ax, polys, values=mv, cmap=cmap)
-        for p in paths:
-            draw_path(ax, p)
-        if points is not None:
-            sc = draw_points(ax, points, values, cmap=cmap, colorbar=False)
-        if markers is not None:
-            draw_markers(ax, markers, labels)
-        if arrows is not None:
-            draw_arrows(ax, *arrows)
-        set_equal(ax, np.stack([lo, hi]), pad=0.0, zoom=zoom)
-    if (points is not None and values is not None) or mesh_values is not None:
-        mappable = sc if sc is not None and values is not None else plt.cm.ScalarMappable(
-            Normalize(0, 1), plt.get_cmap(cmap if cmap is not None else CONTACT_CMAP))
-        w = fig.get_figwidth()  # keep ~0.9 inch on the right for the bar, its ticks and its label
-        fig.subplots_adjust(right=1.0 - 1.0 / w)
-        cb = fig.colorbar(mappable, cax=fig.add_axes((1.0 - 0.85 / w, 0.2, 0.12 / w, 0.55)))
-        if colorbar_label:
-            cb.set_label(colorbar_label)
+    try:   # a check that fails while drawing (mesh_values, cmap) closes the figure it opened
+        lo, hi = bounds_of(*extent)
+        if goals is not None:
+            lo, hi = lo - goal_radius, hi + goal_radius
+        ground_box = None
+        if ground:  # a grid a quarter of the scene wider, on z = 0 (or under the lowest point)
+            m, gz = 0.25 * max(float((hi - lo)[:2].max()), 0.4), min(0.0, float(lo[2]))
+            ground_box = (lo[0] - m, hi[0] + m, lo[1] - m, hi[1] + m)
+            lo = np.minimum(lo, [ground_box[0], ground_box[2], gz])
+            hi = np.maximum(hi, [ground_box[1], ground_box[3], gz])
+        sc = None
+        for ax in axes:
+            polys = list(meshes)
+            mv = None if mesh_values is None else list(mesh_values)
+            if goals is not None:  # goals join the mesh collection so that they are depth-sorted with the body
+                polys += [(*sphere(c, goal_radius), GOAL) for c in as_points(goals, "goals")]
+                mv = None if mv is None else mv + [None] * (len(polys) - len(mv))
+            if ground_box is not None:
+                draw_ground(ax, ground_box, z=gz)
+            if polys:
+                draw_meshes(ax, polys, values=mv, cmap=cmap)
+            for p in paths:
+                draw_path(ax, p)
+            if points is not None:
+                sc = draw_points(ax, points, values, cmap=cmap, colorbar=False)
+            if markers is not None:
+                draw_markers(ax, markers, labels)
+            if arrows is not None:
+                draw_arrows(ax, *arrows)
+            set_equal(ax, np.stack([lo, hi]), pad=0.0, zoom=zoom)
+        if (points is not None and values is not None) or mesh_values is not None:
+            mappable = sc if sc is not None and values is not None else plt.cm.ScalarMappable(
+                Normalize(0, 1), plt.get_cmap(cmap if cmap is not None else CONTACT_CMAP))
+            w = fig.get_figwidth()  # keep ~0.9 inch on the right for the bar, its ticks and its label
+            fig.subplots_adjust(right=1.0 - 1.0 / w)
+            cb = fig.colorbar(mappable, cax=fig.add_axes((1.0 - 0.85 / w, 0.2, 0.12 / w, 0.55)))
+            if colorbar_label:
+                cb.set_label(colorbar_label)
+    except BaseException:
+        plt.close(fig)
+        raise
     return fig
