@@ -16,7 +16,8 @@ _ROWS = [
 
 
 def pipeline_diagram(width: float = 12.0) -> Figure:
-    """The three methods as rows of boxes (input -> model -> optimiser -> output); returns the Figure."""
+    """The three methods as rows of boxes (input -> model -> optimiser -> output); returns the Figure (a pyplot one,
+    shown inline in a notebook; plt.close(fig) when done with it outside one)."""
     fig, ax = plt.subplots(figsize=(width, width * 0.36))
     ax.set_xlim(0, 10.4)
     ax.set_ylim(0, 3.3)

@@ -319,7 +319,8 @@ def show_scene(meshes: Sequence[Mesh] = (), points: Any = None, values: Any = No
                mesh_values: Sequence[Any] | None = None, axis: bool = False, zoom: float = 1.2) -> Figure:
     """One scene in several views: meshes [(V,3), (F,3)[, color]], points (N,3) coloured by values (N,),
     markers (M,3) with labels, arrows (origins, vectors), goal spheres (G,3), paths [(T,3)], ground grid.
-    mesh_values: per-mesh per-vertex scalars (contact maps) or None; returns the Figure."""
+    mesh_values: per-mesh per-vertex scalars (contact maps) or None; returns the Figure, a pyplot one (a notebook shows
+    it inline; in a loop, plt.close(fig) after saving it, or pyplot keeps every one open)."""
     meshes = [(*as_mesh(m[0], m[1], f"meshes[{k}]"), *m[2:]) for k, m in enumerate(meshes)]
     extent: list[Any] = [m[0] for m in meshes] + [as_points(p, f"paths[{k}]") for k, p in enumerate(paths)]
     for a, name in ((points, "points"), (markers, "markers"), (goals, "goals")):
