@@ -164,12 +164,17 @@ def count_type(least: int) -> Callable[[str], int]:
     return parse
 
 
-_INSIDE = (os.path.dirname(os.path.abspath(__file__)) + os.sep, os.path.dirname(os.path.abspath(torch.__file__)) + os.sep)
+class GraspkitWarning(UserWarning):
+    """graspkit's own warnings (the command line shows them as `graspkit: note: ...` lines)."""
+
+
+_INSIDE = tuple(os.path.dirname(os.path.abspath(m.__file__)) + os.sep for m in (sys.modules[__name__], torch))
 
 
 def user_stacklevel() -> int:
     """warnings.warn's stacklevel that points at the first frame outside graspkit and torch (the user's line, past
-    graspkit's own callers and torch's no_grad wrappers): call it as warnings.warn(msg, stacklevel=user_stacklevel())."""
+    graspkit's own callers and torch's no_grad wrappers), for
+    warnings.warn(msg, GraspkitWarning, stacklevel=user_stacklevel())."""
     frame, level = sys._getframe(1), 1
     while frame.f_back is not None and os.path.abspath(frame.f_code.co_filename).startswith(_INSIDE):
         frame, level = frame.f_back, level + 1

@@ -37,7 +37,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from graspkit.checks import positive_float
+from graspkit.checks import GraspkitWarning, positive_float, user_stacklevel
 from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_folders, check_out, check_train_out, reports_errors
 from graspkit.optim.grasppose import ARM_JOINTS, GraspPoseConfig, GraspPoseWeights
 from graspkit.paths import DATA_STUBS, write_atomic
@@ -266,7 +266,8 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
         raise FileNotFoundError(f"checkpoints: no {grabnet_path.name} in {ck} (`graspkit train grabnet_smplx`)")
     if missing:
         warnings.warn(f"checkpoints: no {' or '.join(missing)} in {ck} (`graspkit train wholegrasp_single` / "
-                      "`graspkit train grabnet_smplx` make them): their rows are left out", UserWarning, stacklevel=2)
+                      "`graspkit train grabnet_smplx` make them): their rows are left out", GraspkitWarning,
+                      stacklevel=user_stacklevel())
     pca = HandPCA(bm)
     base_cfg = GraspPoseConfig(steps=cfg.steps, free_joints=tuple(cfg.free_joints), restart_sunk=cfg.restart_sunk,
                                stage2_collision=cfg.stage2_collision, stage2_ground=cfg.stage2_ground,

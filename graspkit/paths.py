@@ -175,6 +175,16 @@ def _umask() -> int:
     return mask
 
 
+def _warn(message: str) -> None:
+    """A GraspkitWarning pointing at the first line outside graspkit (graspkit.checks imported here, when needed:
+    this module stays free of torch)."""
+    import warnings
+
+    from graspkit.checks import GraspkitWarning, user_stacklevel
+
+    warnings.warn(message, GraspkitWarning, stacklevel=user_stacklevel())
+
+
 def usual_mode(tmp: Path) -> None:
     """Give tmp the permissions a plain open() would (mkstemp makes it owner-only)."""
     os.chmod(tmp, 0o666 & ~_umask())
@@ -290,7 +300,6 @@ def locked(path: Path) -> Iterator[None]:
     except ImportError:                                 # not POSIX
         yield
         return
-    import warnings
 
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "a") as fh:
@@ -298,7 +307,7 @@ def locked(path: Path) -> Iterator[None]:
             fcntl.flock(fh, fcntl.LOCK_EX)
             held = True
         except OSError as e:                            # some network mounts take no locks: go on without one
-            warnings.warn(f"{path}: no lock could be taken ({e.strerror}); going on without it", stacklevel=3)
+            _warn(f"{path}: no lock could be taken ({e.strerror}); going on without it")
             held = False
         try:
             yield
@@ -337,7 +346,6 @@ def read_cache(path: Path, load: Callable[[Path], Any]) -> Any | None:
     """load(path) for a cache file; None when there is none, or when it is damaged (a copy cut short, a changed byte:
     `load` raises ValueError, OSError or a zip / zlib error), which is then removed with a warning so that the caller
     makes it again."""
-    import warnings
     import zipfile
     import zlib
 
@@ -347,11 +355,11 @@ def read_cache(path: Path, load: Callable[[Path], Any]) -> Any | None:
     try:
         return load(path)
     except (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as e:
-        warnings.warn(f"{path}: a damaged cache file, made again ({str(e)[:200]})", UserWarning, stacklevel=3)
+        _warn(f"{path}: a damaged cache file, made again ({str(e)[:200]})")
         try:
             path.unlink(missing_ok=True)
         except OSError as err:                          # a read-only cache: the caller's write will fail, named
-            warnings.warn(str(cannot_write(path.parent, err)), UserWarning, stacklevel=3)
+            _warn(str(cannot_write(path.parent, err)))
         return None
 
 

@@ -311,16 +311,15 @@ def test_an_object_outside_the_trained_sizes_is_taken_with_a_warning(tmp_path):
 def test_the_command_shows_the_size_warning_once_as_a_note(tmp_path, capsys, monkeypatch):
     """`graspkit goal --object small.ply`: the mesh is checked before the run and again inside it; the warning
     shows once, as a `graspkit: note:` line (the run itself is stopped at the first place a body is built)."""
-    import graspkit.goal
+    import graspkit.eval_goal
     from graspkit.cli import main
 
     trimesh.creation.icosphere(radius=0.02).export(tmp_path / "small.ply")
 
     def stop(*a, **k):
-        as_object(tmp_path / "small.ply", "name")       # what synthesize does first
         raise ValueError("stopped here")
 
-    monkeypatch.setattr(graspkit.goal, "synthesize", stop)
+    monkeypatch.setattr(graspkit.eval_goal, "_body", stop)   # synthesize has checked the mesh again by then
     assert main(["goal", "--object", str(tmp_path / "small.ply"), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert err.count("graspkit: note: ") == 1 and "small.ply: its largest side is 4.0 cm, below" in err, err

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from graspkit.checks import GraspkitWarning, user_stacklevel
 from graspkit.cli import DATA_HELP
 from graspkit.paths import drop_damaged, pool_results
 from graspkit.state import keeps_torch_state
@@ -51,7 +52,8 @@ def claim_folder(out: Path, kind: str, settings: dict) -> None:
         older = [f for f in Path(out).glob(f"{kind}_*.npz") if re.fullmatch(rf"{kind}_\d{{6}}\.npz", f.name)]
         if older:                                    # (reach_* would match reach_far_* too: the exact name)
             warnings.warn(f"--out: {out} holds {len(older)} {kind} files and no record of the run that made them: "
-                          "taken as they are, unchecked; this run's settings are recorded for the next", stacklevel=2)
+                          "taken as they are, unchecked; this run's settings are recorded for the next",
+                          GraspkitWarning, stacklevel=user_stacklevel())
         # the record says how many files it did not check; later runs are checked against it
         if create_exclusive(record, json.dumps({**want, "preexisting": len(older)} if older else want,
                                                sort_keys=True)):

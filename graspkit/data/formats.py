@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from graspkit.checks import GraspkitWarning, user_stacklevel
 from graspkit.data.motion import HANDS, Motion, check_fps
 from graspkit.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
 from graspkit.paths import make_temp, naming_errors, publish, sweep_stale_temps
@@ -197,7 +198,7 @@ def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
             if raw.ndim == 2 and raw.shape[1] == 156 and np.abs(b).max(initial=0.0) > 0:
                 warnings.warn(f"{path}: an SMPL+H file's betas are read as SMPL-X betas (another shape space: the body "
                               "is only roughly the subject's); pass betas of your own to the Motion for a fitted shape",
-                              UserWarning, stacklevel=2)
+                              GraspkitWarning, stacklevel=user_stacklevel())
         gender = _string(_get(npz, "gender", path)) if "gender" in npz.files else "neutral"
         contacts = None
         if "contacts" in npz.files:

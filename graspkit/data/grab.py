@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from graspkit.checks import GraspkitWarning, user_stacklevel
 from graspkit.data.formats import SequenceFileError, resample, write_npz_atomic
 from graspkit.data.motion import check_fps
 
@@ -237,8 +238,8 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
     trans = per_frame("body.params.transl", 3)
     if "body.vtemp" in a and "body.betas" not in a:
         warnings.warn(f"{path}: the subject's shape is a template mesh (body.vtemp, GRAB's), not betas: the body is "
-                      "posed with betas 0 (the average shape); extras['body.vtemp'] keeps its path", UserWarning,
-                      stacklevel=2)
+                      "posed with betas 0 (the average shape); extras['body.vtemp'] keeps its path", GraspkitWarning,
+                      stacklevel=user_stacklevel())
     betas = np.zeros(10)
     if "body.betas" in a:
         b = np.asarray(a["body.betas"], np.float64).reshape(-1)

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 import trimesh
 
+from graspkit.checks import GraspkitWarning, user_stacklevel
 from graspkit.objects.catalogue import make_object
 from graspkit.objects.sdf import SDFGrid
 from graspkit.paths import DATA_STUBS, read_cache
@@ -58,7 +59,8 @@ def cached_sdf_grid(name: str | trimesh.Trimesh, resolution: int = 64, folder: P
             return _read_grid(stub)
         except ValueError as e:
             warnings.warn(f"{stub}: the shipped grid cannot be read ({str(e)[:200]}; a Git LFS pointer?); the cache's or "
-                          "a new build is used, whose last bits differ (restore data_stubs: git checkout)", stacklevel=2)
+                          "a new build is used, whose last bits differ (restore data_stubs: git checkout)",
+                          GraspkitWarning, stacklevel=user_stacklevel())
     path = (Path(folder) if folder is not None else cache_dir() / "sdf") / fname
     grid = read_cache(path, _read_grid)               # a damaged cache file is removed and rebuilt
     if grid is not None:
@@ -67,7 +69,7 @@ def cached_sdf_grid(name: str | trimesh.Trimesh, resolution: int = 64, folder: P
     try:
         _write_grid(path, grid)
     except OSError as e:                              # a read-only cache: the grid is what the caller needs
-        warnings.warn(f"the SDF grid is not kept for next time: {e}", UserWarning, stacklevel=2)
+        warnings.warn(f"the SDF grid is not kept for next time: {e}", GraspkitWarning, stacklevel=user_stacklevel())
     return grid
 
 

@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING
 import torch
 from torch import Tensor, nn
 
-from graspkit.checks import check_generator, user_stacklevel
+from graspkit.checks import GraspkitWarning, check_generator, user_stacklevel
 from graspkit.models.blocks import GaussianHead, ResBlock, kl_standard_normal, reparameterize
 from graspkit.objects.contact import IAA_WEIGHT
 from graspkit.rotations import rot6d_to_matrix
@@ -294,7 +294,8 @@ class GNet(nn.Module):
             names = sorted({"bps" if i < cfg.n_bps else "obj_transl" if i < cfg.n_bps + 3 else "betas" for i in far})
             warnings.warn(f"{', '.join(names)}: values more than 5 training stds from where the training data held "
                           "them (std at the 1e-3 floor; GNet's frame puts the object at x = y = 0, so obj_transl is "
-                          "(0, 0, height)); the decoder has never seen such a condition", stacklevel=user_stacklevel())
+                          "(0, 0, height)); the decoder has never seen such a condition", GraspkitWarning,
+                          stacklevel=user_stacklevel())
         was = self.training
         self.eval()
         if z is None:

@@ -40,7 +40,7 @@ from scipy.spatial import cKDTree
 from torch import Tensor, nn
 
 from graspkit.body.skeleton import JOINT_NAMES
-from graspkit.checks import check_int, user_stacklevel
+from graspkit.checks import GraspkitWarning, check_int, user_stacklevel
 from graspkit.models.blocks import ResBlock, in_eval_mode
 from graspkit.models.gnet import NUM_JOINTS, POSE_DIM, Standardiser
 from graspkit.objects.bps import bps_encode
@@ -339,7 +339,7 @@ def _warn_untrained_start(mnet: MNet, s: MNetState, basis: Tensor, sigma: float 
                       "where the training clips held them (they never moved there, std at the 1e-3 floor); MNet can "
                       "then go astray (docs/goal.md). The planner's start for graspkit's body does not warn; another "
                       "body's proportions, or a start posed by hand, can",
-                      stacklevel=user_stacklevel())
+                      GraspkitWarning, stacklevel=user_stacklevel())
 
 
 @torch.no_grad()

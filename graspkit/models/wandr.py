@@ -43,7 +43,7 @@ from torch import Tensor, nn
 
 from graspkit import intention as I
 from graspkit.body.skeleton import JOINT_NAMES
-from graspkit.checks import check_finite, check_generator, check_int, user_stacklevel
+from graspkit.checks import GraspkitWarning, check_finite, check_generator, check_int, user_stacklevel
 from graspkit.data.wandr_dataset import (FOOT_JOINTS, GOAL_FRAMES, STD_FLOOR, ClipSet, WindowDataset, lowest_foot,
                                          make_batch)
 from graspkit.models.blocks import GaussianHead, evaluating, kl_standard_normal
@@ -465,7 +465,7 @@ def rollout(model: WandrCVAE, p_prev: Tensor, p0: Tensor, rest: Tensor, goal: Te
                       "the training clips held them (they never moved there, std at the 1e-3 floor); the shipped "
                       "model then reaches far less often (a left wrist turned 0.1 rad: SR 99.5 -> 6 %, docs/wandr.md). "
                       "Start from a pose of the training distribution (eval_wandr.starts_from_meta, or the planner's)",
-                      stacklevel=user_stacklevel())
+                      GraspkitWarning, stacklevel=user_stacklevel())
     ps, js = [], []
     low0 = None
     for k in range(T):

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from graspkit.checks import GraspkitWarning, user_stacklevel
 from graspkit.objects.distance import MeshLike, holes, mesh_arrays, require_closed, require_metres
 from graspkit.objects.sdf import signed_distance
 
@@ -274,7 +275,7 @@ def penetration_with_depth(body: MeshLike, obj: MeshLike, depth_m: float | None,
     if open_edges:                              # shown once per mesh topology (Python's default warning filter)
         warnings.warn(f"interpenetration: the body mesh is not closed ({open_edges}): a column "
                       "through a hole counts as empty, so the volume inside the object can be under-counted (the depth "
-                      "is not affected)", stacklevel=2)
+                      "is not affected)", GraspkitWarning, stacklevel=user_stacklevel())
     for v, f, name in ((vb, fb, "body"), (vo, fo, "obj")):
         require_metres(torch.from_numpy(v), torch.from_numpy(f), name)
     return Penetration(volume_cm3=_volume(vb, fb, vo, fo, spacing, _refine(refine)) * 1e6,

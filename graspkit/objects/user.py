@@ -18,6 +18,7 @@ import numpy as np
 import torch
 import trimesh
 
+from graspkit.checks import GraspkitWarning, user_stacklevel
 from graspkit.objects.catalogue import list_objects, make_object
 from graspkit.objects.distance import require_closed, require_face_areas
 from graspkit.objects.sampling import sample_surface
@@ -93,12 +94,12 @@ def _noted(mesh: trimesh.Trimesh, what: str) -> trimesh.Trimesh:
     (`size_note`; attributed to as_object, so that the same mesh checked twice in one run warns once)."""
     note = size_note(mesh)
     if note:
-        warnings.warn(f"{what}: {note}", UserWarning, stacklevel=2)
+        warnings.warn(f"{what}: {note}", GraspkitWarning, stacklevel=user_stacklevel())
     if len(mesh.faces) > MANY_FACES:
         warnings.warn(f"{what}: {len(mesh.faces):,} faces: the exact distances and the 2 mm collision grid that SAGA "
                       "and GOAL build for it grow with the faces (about 1.5 min at 20,000, minutes more at 80,000; the "
                       "grid is kept in the cache); a decimated copy (trimesh's simplify_quadric_decimation) runs as "
-                      "well", UserWarning, stacklevel=2)
+                      "well", GraspkitWarning, stacklevel=user_stacklevel())
     return mesh
 
 
