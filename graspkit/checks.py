@@ -168,7 +168,8 @@ class GraspkitWarning(UserWarning):
     """graspkit's own warnings (the command line shows them as `graspkit: note: ...` lines)."""
 
 
-_INSIDE = tuple(os.path.dirname(os.path.abspath(m.__file__)) + os.sep for m in (sys.modules[__name__], torch))
+_INSIDE = (os.path.dirname(os.path.abspath(__file__)) + os.sep,              # graspkit's folder, torch's
+           os.path.dirname(os.path.abspath(torch.__file__)) + os.sep)
 
 
 def user_stacklevel() -> int:

@@ -114,8 +114,7 @@ class PosePrior(nn.Module):
         rec = (R - target).pow(2).sum((1, 2, 3)).mean()
         kl = kl_standard_normal(mu, logvar)
         with torch.no_grad():
-            cos = ((R * target).sum((-1, -2)) - 1) / 2
-            err = torch.rad2deg(torch.acos(cos.clamp(-1, 1))).mean()
+            err = _mean_angle_deg(R, target)
         return {"loss": rec + self.cfg.kl_weight * kl, "rec": rec, "kl": kl, "angle_error_deg": err}
 
     def state(self) -> dict[str, Any]:
@@ -208,8 +207,13 @@ def angle_error(model: PosePrior, body_pose: np.ndarray | Tensor) -> float:
     if len(x) == 0:
         raise ValueError("body_pose: expected at least one pose (n, 21, 3)")
     R = model.decode_rotmats(model.posterior(x)[0])
-    cos = ((R * axis_angle_to_matrix(x.view(-1, NUM_BODY_JOINTS, 3))).sum((-1, -2)) - 1) / 2
-    return float(torch.rad2deg(torch.acos(cos.clamp(-1, 1))).mean())
+    return float(_mean_angle_deg(R, axis_angle_to_matrix(x.view(-1, NUM_BODY_JOINTS, 3))))
+
+
+def _mean_angle_deg(R: Tensor, target: Tensor) -> Tensor:
+    """Mean geodesic angle (degrees) between rotation matrices R and target (..., 3, 3)."""
+    cos = ((R * target).sum((-1, -2)) - 1) / 2
+    return torch.rad2deg(torch.acos(cos.clamp(-1, 1))).mean()
 
 
 @keeps_torch_state
