@@ -59,7 +59,7 @@ def paper_ratio_table(rows: list[Row]) -> str:
                 continue
             q = o.values[k] / v if v else math.inf
             name = o.method if o.method == p.method else f"{o.method} vs {p.method}"
-            lines.append(f"| {name} | {k} | {o.values[k]:.3g} | {v:.3g} | {p.source} | {q:.2f}× |")
+            lines.append(f"| {name} | {k} | {o.values[k]:.3g} | {v:g} | {p.source} | {q:.2f}× |")
     return "\n".join(lines)
 
 

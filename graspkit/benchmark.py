@@ -514,11 +514,11 @@ def _method(checkpoint: Path | tuple[Path, ...], out: Path, rows_of: Callable[[d
 
 # ---------------------------------------------------------------------------------------------------------- report
 
-def _fmt(v: float | None) -> str:
-    """A table cell: 3 significant figures, '—' for missing."""
+def _fmt(v: float | None, exact: bool = False) -> str:
+    """A table cell: 3 significant figures (`exact`: as published, up to 6, for a paper's figure), '—' for missing."""
     if v is None or (isinstance(v, float) and math.isnan(v)):
         return "—"
-    return f"{v:.3g}"
+    return f"{v:g}" if exact else f"{v:.3g}"
 
 
 def markdown(rows: list[Row]) -> str:
@@ -531,7 +531,7 @@ def markdown(rows: list[Row]) -> str:
         lines = [f"### {table} quality", "", head, "|" + "---|" * (len(cols) + 3)]
         for r in sel:
             src = "graspkit (ours)" if r.source == "graspkit" else f"paper: {r.source}"
-            cells = " | ".join(_fmt(r.values.get(k)) for k in cols)
+            cells = " | ".join(_fmt(r.values.get(k), exact=r.source != "graspkit") for k in cols)
             lines.append(f"| {r.method} | {src} | {cells} | {r.note} |")
         parts.append("\n".join(lines))
     return "\n\n".join(parts) + "\n"

@@ -32,6 +32,7 @@ counts only the frames where it is not.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Sequence
 
@@ -562,10 +563,22 @@ def table(rows: dict[str, dict[str, float]], paper: dict[str, tuple[float, float
     out = ["| method | SR % (ours) | FS % (ours) | DTG cm (ours) | SR % (paper) | FS % (paper) | DTG cm (paper) |",
            "|---|---|---|---|---|---|---|"]
     for name, s in rows.items():
-        p = paper.get(name)
+        base = paper_row(name, paper)
+        p = paper.get(base) if base else None
         ref = " | ".join(f"{x:g}" for x in p) if p else "— | — | —"
-        out.append(f"| {name} | {s['SR']:.1f} | {s['FS']:.1f} | {s['DTG']:.1f} | {ref} |")
+        label = name if base in (None, name) else f"{name} (paper: {base})"
+        out.append(f"| {label} | {s['SR']:.1f} | {s['FS']:.1f} | {s['DTG']:.1f} | {ref} |")
     return "\n".join(out)
+
+
+def paper_row(name: str, paper: dict[str, tuple[float, float, float]] = PAPER) -> str | None:
+    """The paper's row a row name stands for: itself, or its variant's row without graspkit's suffixes (a data
+    choice "[reach clips]", "+ floor constraint ...", "+ lift ..."); None where the paper has no such row."""
+    if name in paper:
+        return name
+    base = re.sub(r"( \+ (floor constraint|lift) .*)$", "", name)
+    base = re.sub(r" \[[^\]]*\]$", "", base)
+    return base if base in paper else None
 
 
 # ----------------------------------------------------------------------------------------------------- variants, CLI

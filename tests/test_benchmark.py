@@ -541,6 +541,16 @@ def test_markdown_lists_ours_before_the_papers_rows():
     assert "graspkit (ours)" in grasp[0] and all("paper:" in x for x in grasp[1:])
 
 
+def test_markdown_prints_the_papers_figures_as_published_and_ours_to_3_figures():
+    """A paper's cell keeps every digit it was published with (14.15 cm³, 149.2 cm); ours are rounded to 3."""
+    ours = Row("grasp", "ground truth (synthetic)", "graspkit", {"volume_cm3": 14.15}, "")
+    cells = {x.split(" | ")[0] + " | " + x.split(" | ")[1]: x.split(" | ")
+             for x in markdown(paper_rows() + [ours]).splitlines() if x.startswith("| ")}
+    assert cells["| GrabNet-SMPLX | paper: SAGA Tab. 1"][3] == "14.15"
+    assert "149.2" in cells["| GOAL (on WANDR's grid) | paper: WANDR Tab. 1"]
+    assert cells["| ground truth (synthetic) | graspkit (ours)"][3] == "14.2"
+
+
 def test_papers_saga_rows_are_saga_tables_1_and_2():
     """The benchmark's SAGA figures are eval_saga's transcriptions of Tab. 1 (ours, GrabNet-SMPLX) and Tab. 2 (GT)."""
     from graspkit.eval_saga import PAPER_TAB1, PAPER_TAB2

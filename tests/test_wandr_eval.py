@@ -738,6 +738,19 @@ def test_variants_match_their_tables_rows_and_the_papers_figures():
     assert E.PAPER == paper
 
 
+def test_table_puts_the_papers_figures_beside_a_variants_row_with_graspkits_suffixes():
+    """A row named by `--kinds` ("[reach clips]") or by the floor / lift constraints gets its variant's paper figures
+    and says which paper row they are; a row the paper does not have gets dashes."""
+    s = {"SR": 99.5, "FS": 6.5, "DTG": 2.2}
+    lines = {ln.split(" | ")[0]: ln for ln in E.table({"WANDR [reach clips]": s, "WANDR (I^w + I^p) [reach clips] + lift "
+                                                        "(not the paper's)": s, "WANDR": s, "mine": s}).splitlines()}
+    assert lines["| WANDR [reach clips] (paper: WANDR)"].endswith("| 32 | 16 | 24.8 |")
+    assert lines["| WANDR (I^w + I^p) [reach clips] + lift (not the paper's) (paper: WANDR (I^w + I^p))"].endswith(
+        "| 18 | 17 | 44.9 |")
+    assert lines["| WANDR"].endswith("| 32 | 16 | 24.8 |")
+    assert lines["| mine"].endswith("| — | — | — |")
+
+
 def test_start_poses_round_trip_through_a_checkpoints_meta(bm):
     """starts_to_meta then starts_from_meta gives the same start poses back (p_prev before p); a meta without them
     is refused by name."""

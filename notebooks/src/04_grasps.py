@@ -285,5 +285,6 @@ print(f"{t['grasps']} grasps: contact ratio {t['contact_ratio']:.2f}, volume mea
 #    volume and draw the body vertices inside the object (`graspkit.objects.signed_distance(vb, ob) < 0`): which
 #    fingers are they on, and would the hand have to open or close by a millimetre or two to remove them?
 # 3. GOAL Tab. 1 reports GRAB's captured grasps at 1.95 cm³ and SAGA Tab. 2 at 2.04 cm³; the synthetic grasps are
-#    far shallower. Which of the two methods' penetration targets (GOAL's "≤ 1.15× the ground truth", docs/goal.md,
-#    against SAGA's absolute ≤ 0.5 cm³) becomes harder to meet because of that?
+#    far shallower. Which of graspkit's two penetration targets (set in its issues, after the papers' figures, not by
+#    the papers: GOAL's relative "≤ 1.15× the ground truth", docs/goal.md, against SAGA's absolute ≤ 0.5 cm³) becomes
+#    harder to meet because of that?

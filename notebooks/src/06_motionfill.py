@@ -194,7 +194,7 @@ print(table(ev["rows"]))
 # After GraspMotion-Opt, on two clips of each test object: SAGA's skating of the sampled and of the fitted markers,
 # the end grasp, and the **non-collision score** (§4.2: the share of mesh vertices above the ground; the paper reports
 # 0.9743 for its motions and 0.9771 for GRAB). The optimisation brings the skating down to the ground truth's level
-# (SAGA's target: no more than 2 points above it); the last two columns show that the heels get there without
+# (graspkit's target, set in its issue; SAGA sets none: no more than 2 points above it); the last two columns show that the heels get there without
 # jumping (99th percentile of the heel markers' acceleration, m/s²; the clips' own beside it). The end grasps keep out
 # of their objects through both sums of Eq. 7 — hand vertices inside the object, read from its 2 mm collision grid,
 # and object points inside the hand — with which the mean penetration fell from about 6.8 to 2.1 cm³ (a mug's handle

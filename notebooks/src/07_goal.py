@@ -44,7 +44,7 @@ bm, gv, body = eval_goal._body()          # the procedural SMPL-X body, GOAL's 4
 faces = bm.faces.numpy()
 gnet = load_gnet(DATA_STUBS / "checkpoints" / "gnet.pt")
 mnet = load_mnet(DATA_STUBS / "checkpoints" / "mnet.pt")
-print(f"GNet {count_parameters(gnet) / 1e6:.2f} M parameters, MNet {count_parameters(mnet) / 1e6:.2f} M (GOAL's MNet: ~117 M)")
+print(f"GNet {count_parameters(gnet) / 1e6:.2f} M parameters, MNet {count_parameters(mnet) / 1e6:.2f} M (GOAL's MNet: ~117 M by graspkit's issue; GOAL gives no count)")
 
 seq = load_grasp_sequence(DATA_STUBS / "approach" / "approach_000001.npz")   # a mug: one of GRAB's test objects
 clip = eval_goal.approach_clips([seq])[0]
@@ -261,7 +261,7 @@ plt.show()
 # `docs/goal.md`). It turns towards the mug and walks up to it, then slows with the hand about 12–14 cm from the
 # goal hand, just outside the 10 cm at which the Eq. 12–13 refinement takes over, and left alone it stays there
 # (in 4 s it ends 13.0 cm off; given 300 frames, as in the evaluation of section 6, about half of the test
-# rollouts never get within 10 cm). GOAL's ~117 M-parameter MNet, trained on GRAB, is not reported to stall.
+# rollouts never get within 10 cm). GOAL's far larger MNet, trained on GRAB, is not reported to stall.
 #
 # So graspkit adds two steps GOAL does not have (`docs/goal.md`, "The rollout and its refinement"; `None` gives the
 # paper's rollout for either):
