@@ -54,7 +54,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     try:
         written = run_demo(Path(args.out), model_path=args.model, stages=stages)
     except ModelFileError as e:
-        raise ValueError(f"--model: {e}") from None
+        raise ValueError(f"{_model_source(args.model)}: {e}") from None
     for path in written:
         print(f"wrote {path}")
     return 0
@@ -120,15 +120,23 @@ def _free_joints(names: list[str]) -> tuple[str, ...]:
     return joints
 
 
+def _model_source(path: Path | None) -> str:
+    """Where a body model path came from, for an error: --model, or the GRASPKIT_MODEL variable."""
+    import os
+
+    return "--model" if path is not None or not os.environ.get("GRASPKIT_MODEL") else "GRASPKIT_MODEL"
+
+
 def _body_model(path: Path | None):
-    """The body model of --model (None: the shipped humanoid, built if missing); a bad file names --model."""
+    """The body model of --model (None: $GRASPKIT_MODEL or the shipped humanoid, built if missing); a bad file names
+    where its path came from."""
     from graspkit.body.model import ModelFileError
     from graspkit.demo import load_or_build_body
 
     try:
         return load_or_build_body(path)
     except ModelFileError as e:
-        raise ValueError(f"--model: {e}") from None
+        raise ValueError(f"{_model_source(path)}: {e}") from None
 
 
 def _cmd_saga(args: argparse.Namespace) -> int:

@@ -57,14 +57,30 @@ def approach_motions(root: str | Path, n: int | None = None) -> tuple[list, list
     files = sorted(Path(root).glob("approach_*.npz"))[:n]
     motions, names = [], []
     for f in files:
-        with np.load(f, allow_pickle=False) as a:
-            if "grasp.accepted" in a.files and not bool(a["grasp.accepted"]):
-                continue
-            g = int(a["grasp.goal_frame"])
-            motions.append(Motion(a["body.params.fullpose"][:g + 1].reshape(-1, 55, 3), a["body.params.transl"][:g + 1],
-                                  a["body.betas"], 30.0, contacts=a["contact.feet"][:g + 1].astype(bool)))
-            names.append(str(a["obj_name"]))
+        a = _approach_arrays(f, APPROACH_KEYS)
+        if "grasp.accepted" in a and not bool(a["grasp.accepted"]):
+            continue
+        g = int(a["grasp.goal_frame"])
+        motions.append(Motion(a["body.params.fullpose"][:g + 1].reshape(-1, 55, 3), a["body.params.transl"][:g + 1],
+                              a["body.betas"], 30.0, contacts=a["contact.feet"][:g + 1].astype(bool)))
+        names.append(str(a["obj_name"]))
     return motions, names
+
+
+APPROACH_KEYS = ("obj_name", "body.params.fullpose", "body.params.transl", "body.betas", "grasp.goal_frame",
+                 "contact.feet")
+
+
+def _approach_arrays(path: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """An approach clip's arrays `keys` (and 'grasp.accepted' where the file has it), checked by check_arrays: a
+    ValueError naming the file for a damaged one, a missing key, NaN or a goal frame outside the clip."""
+    from graspkit.data.formats import npz_arrays, open_npz
+    from graspkit.data.grasp_datasets import check_arrays
+
+    with open_npz(path, "an approach clip (graspkit data make --kind approach)") as z:
+        a = npz_arrays(z, [k for k in (*keys, "grasp.accepted") if k in z.files], path)
+    check_arrays(a, keys, path)
+    return a
 
 
 # The window code's version, part of every cached window set's name: raise it when make_windows (or what `windows`
@@ -303,12 +319,14 @@ def load_baselines(folder: str | Path = BASELINE_DIR) -> dict[str, Any]:
     """Tab. 3's trained baselines {cnn_ae, posenet, routenet} from <folder>/motionfill_<name>.pt (weights_only);
     missing files are left out."""
     from graspkit.models.motionfill_baselines import BASELINES, baseline_from_state
+    from graspkit.train import build_named
 
     out = {}
     for name in BASELINES:
         path = baseline_path(name, folder)
         if path.is_file():
-            out[name] = baseline_from_state(load_checkpoint(path))
+            state = load_checkpoint(path)
+            out[name] = build_named(path, f"a MotionFill {name} baseline", lambda: baseline_from_state(state))
     return out
 
 
@@ -680,8 +698,8 @@ def held_out_clips(folder: str | Path, per_object: int = 1) -> list[Path]:
         raise ValueError(f"per_object: expected a whole number >= 1, got {per_object}")
     taken: dict[str, list[Path]] = {}
     for f in sorted(Path(folder).glob("approach_*.npz")):
-        with np.load(f, allow_pickle=False) as a:
-            name, ok = str(a["obj_name"]), bool(a["grasp.accepted"])
+        a = _approach_arrays(f, ("obj_name", "grasp.accepted"))
+        name, ok = str(a["obj_name"]), bool(a["grasp.accepted"])
         if ok and name in TEST_OBJECTS and len(taken.setdefault(name, [])) < per_object:
             taken[name].append(f)
     if not any(taken.values()):
@@ -720,6 +738,8 @@ def update_json(path: Path, **sections: Any) -> dict[str, Any]:
     from graspkit.viz.export import write_atomic
 
     doc = json.loads(path.read_text()) if path.is_file() else {}
+    if not isinstance(doc, dict):
+        raise ValueError(f"path: {path} holds a JSON {type(doc).__name__}, expected an object to update")
     doc.update(sections)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(path, json.dumps(doc, indent=1))
@@ -761,9 +781,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.out.is_file():                      # update_json reads it after the work: refuse a bad one now
             import json
             try:
-                json.loads(args.out.read_text())
+                doc = json.loads(args.out.read_text())
             except (UnicodeDecodeError, ValueError) as e:
                 raise ValueError(f"--out: {args.out} is not a JSON file to update ({e})") from None
+            if not isinstance(doc, dict):
+                raise ValueError(f"--out: {args.out} holds a JSON {type(doc).__name__}, expected an object to update")
     torch.set_num_threads(args.threads)
     data = args.data or cache_dir() / "grasps" / "approach"
     if args.part == "tab3":

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 import warnings
 from dataclasses import asdict, dataclass, replace
@@ -108,17 +109,29 @@ class Placement:
     body: dict[str, Tensor]   # ground-truth SMPL-X parameters (object frame): fullpose (55,3) absolute, transl, betas
 
 
+class NoGraspsError(ValueError):
+    """No accepted grasp of an object in a folder (load_placements)."""
+
+
+PLACEMENT_KEYS = ("obj_name", "object.params.global_orient", "object.params.transl", "object.points", "object.normals",
+                  "object.height", "saga.markers", "contact.markers", "contact.object", "body.params.fullpose",
+                  "body.params.transl", "body.betas")
+
+
 def load_placements(root: str | Path, name: str, n: int, split: str = "test") -> list[Placement]:
-    """The first n accepted grasps of object `name` (of `split`) in `root` as placements."""
+    """The first n accepted grasps of object `name` (of `split`) in `root` as placements; each file read is checked
+    (a ValueError naming it), NoGraspsError when there is none."""
     from graspkit.data.grab import read_arrays
-    from graspkit.data.grasp_datasets import grasp_files
+    from graspkit.data.grasp_datasets import check_arrays, grasp_files
     from graspkit.rotations import axis_angle_to_matrix
 
     out = []
     for p in grasp_files(root, "grasp", split=split):
         a = read_arrays(p)
+        check_arrays(a, ("obj_name",), p)
         if str(a["obj_name"]) != name:
             continue
+        check_arrays(a, PLACEMENT_KEYS, p)
         R = axis_angle_to_matrix(torch.as_tensor(a["object.params.global_orient"][0], dtype=torch.float64)).float()
         t = torch.as_tensor(a["object.params.transl"][0]).float()
         out.append(Placement(
@@ -131,19 +144,19 @@ def load_placements(root: str | Path, name: str, n: int, split: str = "test") ->
         if len(out) == n:
             break
     if not out:
-        raise ValueError(f"root: no accepted {split} grasps of {name!r} in {root}")
+        raise NoGraspsError(f"root: no accepted {split} grasps of {name!r} in {root}")
     return out
 
 
 def hand_contact_prior(root: str | Path, split: str = "train") -> Tensor:
     """S.3's C_H: per body vertex, the share of `split` grasps in which it touches the object (V,)."""
-    from graspkit.data.grab import read_arrays
-    from graspkit.data.grasp_datasets import grasp_files
+    from graspkit.data.grasp_datasets import grasp_files, read_checked
 
     files = grasp_files(root, "grasp", split=split)
     if not files:
         raise ValueError(f"root: no {split} grasps in {root}")
-    return torch.as_tensor(np.mean([read_arrays(p)["contact.body"][0] for p in files], 0)).float()
+    return torch.as_tensor(np.mean([read_checked(p, ("body.params.fullpose", "contact.body"))["contact.body"][0]
+                                    for p in files], 0)).float()
 
 
 def body_rows(bm: BodyModel, vertices: Tensor, placements: list[Placement], per: int,
@@ -242,11 +255,12 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
     from graspkit.body.markers import saga_markers
     from graspkit.data.grasp_io import collision_sdf_grid
     from graspkit.models.pose_prior import load_pose_prior
-    from graspkit.models.wholegrasp import GRABNET_SMPLX_PATH, GrabNetSMPLX, HandPCA, WholeGraspVAE, load_wholegrasp
+    from graspkit.models.wholegrasp import (GRABNET_SMPLX_PATH, HandPCA, WholeGraspVAE, load_grabnet_smplx,
+                                            load_wholegrasp)
     from graspkit.optim.grasppose import GraspPoseConfig, GraspPoseOpt
     from graspkit.paths import default_model_path
     from graspkit.progress import hidden
-    from graspkit.train import load_checkpoint
+    from graspkit.train import build_named, load_checkpoint
 
     cfg = cfg or EvalConfig()
     torch.set_num_threads(cfg.threads)
@@ -259,8 +273,9 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
     # the baselines are not shipped (size budget): without their weights their rows are left out, not the run
     single_path, grabnet_path = ck / "wholegrasp_single.pt", ck / GRABNET_SMPLX_PATH.name
     single_state = load_checkpoint(single_path) if single_path.is_file() else None
-    single = None if single_state is None else WholeGraspVAE.from_state(single_state)
-    grabnet = GrabNetSMPLX.from_state(load_checkpoint(grabnet_path)) if grabnet_path.is_file() else None
+    single = None if single_state is None else build_named(
+        single_path, "a WholeGrasp-single checkpoint", lambda: WholeGraspVAE.from_state(single_state))
+    grabnet = load_grabnet_smplx(grabnet_path) if grabnet_path.is_file() else None
     missing = [q.name for q, m in ((single_path, single), (grabnet_path, grabnet)) if m is None]
     if grabnet_only and grabnet is None:
         raise FileNotFoundError(f"checkpoints: no {grabnet_path.name} in {ck} (`graspkit train grabnet_smplx`)")
@@ -408,11 +423,31 @@ def finish_partial(partial: str | Path, out: str | Path = RESULTS_PATH) -> dict[
     if not isinstance(part, dict) or not {"config", "per_object"} <= set(part):
         raise ValueError(f"partial: {partial} has no 'config' and 'per_object' (expected an interrupted run's "
                          ".partial.json)")
+    _check_per_object(part["config"], part["per_object"], partial)
     cfg = dict(part["config"], objects=list(part["per_object"]))
-    result = {"config": cfg, "seconds": part.get("seconds", float("nan")), "rows": rows_from_objects(part["per_object"]),
+    result = {"config": cfg, "seconds": part.get("seconds"), "rows": rows_from_objects(part["per_object"]),
               "per_object": part["per_object"], "interrupted": True}
     _write_json(out, result)
     return result
+
+
+def _check_per_object(config: Any, per_object: Any, path: Path) -> None:
+    """ValueError naming `path` unless config is a dict and per_object maps objects to rows {method: {'n': count >= 1,
+    and the numbers table1 reads}}, as `evaluate` writes them."""
+    def number(v: Any) -> bool:
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+    if not isinstance(config, dict):
+        raise ValueError(f"partial: {path}: 'config' is a {type(config).__name__}, expected an object")
+    if not isinstance(per_object, dict):
+        raise ValueError(f"partial: {path}: 'per_object' is a {type(per_object).__name__}, expected an object")
+    for obj, rows in per_object.items():
+        for method, r in (rows.items() if isinstance(rows, dict) else [("?", rows)]):
+            ok = isinstance(r, dict) and isinstance(r.get("n"), int) and r["n"] >= 1 and all(
+                number(r.get(m)) for m in ("contact_ratio", "volume_cm3", "depth_cm"))
+            if not ok:
+                raise ValueError(f"partial: {path}: the row of {method!r} on {obj!r} is not one `evaluate` writes "
+                                 "(expected n >= 1 and the numbers contact_ratio, volume_cm3, depth_cm)")
 
 
 def _absolute_rotmats(fullpose: Tensor) -> Tensor:
@@ -424,7 +459,18 @@ def _absolute_rotmats(fullpose: Tensor) -> Tensor:
 
 def _write_json(path: str | Path, obj: Any) -> Path:
     """Atomic JSON write (temporary file, then rename)."""
-    return write_atomic(path, json.dumps(obj, indent=1))
+    return write_atomic(path, json.dumps(_finite_or_null(obj), indent=1, allow_nan=False))
+
+
+def _finite_or_null(obj: Any) -> Any:
+    """obj with every NaN or infinite float as None (null: strict JSON has no NaN, and readers such as jq refuse it)."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _finite_or_null(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite_or_null(v) for v in obj]
+    return obj
 
 
 def load_results(path: str | Path = RESULTS_PATH) -> dict[str, Any]:
@@ -432,7 +478,14 @@ def load_results(path: str | Path = RESULTS_PATH) -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"path: no evaluation results at {path} (run python -m graspkit.eval_saga)")
-    return json.loads(path.read_text())
+    try:
+        doc = json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ValueError(f"path: {path} is not JSON ({e})") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("rows"), dict) or not doc["rows"]:
+        raise ValueError(f"path: {path} is not a SAGA evaluation (expected an object with the 'rows' "
+                         "`python -m graspkit.eval_saga` writes)")
+    return doc
 
 
 def _fmt(x: float | None, nd: int = 2) -> str:
@@ -615,14 +668,14 @@ def _cmd_train(args: argparse.Namespace, name: str) -> int:
 
 def grasp_body_poses(root: str | Path, split: str = "train") -> np.ndarray:
     """Body poses (n, 21, 3) of the grasps of one split (extra training poses for the pose prior)."""
-    from graspkit.data.grab import read_arrays
-    from graspkit.data.grasp_datasets import grasp_files
+    from graspkit.data.grasp_datasets import grasp_files, read_checked
 
     files = grasp_files(root, "grasp", split=split)
     if not files:
         raise ValueError(f"--data: no grasp files of the {split} split in {root} (expected grasp_*.npz, made by "
                          "`graspkit data make --kind grasp`)")
-    return np.stack([read_arrays(p)["body.params.body_pose"][0].reshape(21, 3) for p in files]).astype(np.float32)
+    keys = ("body.params.fullpose", "body.params.body_pose")
+    return np.stack([read_checked(p, keys)["body.params.body_pose"][0].reshape(21, 3) for p in files]).astype(np.float32)
 
 
 # ------------------------------------------------------------------------------------------------ lesson examples
@@ -639,7 +692,7 @@ def save_examples(root: str | Path, path: str | Path = EXAMPLES_PATH, per_object
     for name in SPLITS[split]:
         try:
             found = load_placements(root, name, per_object, split)
-        except ValueError:
+        except NoGraspsError:
             continue                                     # no grasp of this object in the folder
         for p in found:
             row = {"points": p.points, "normals": p.normals, "height": torch.tensor(p.height),
@@ -660,6 +713,11 @@ def load_examples(path: str | Path = EXAMPLES_PATH) -> list[Placement]:
     from graspkit.train import load_checkpoint
 
     s = load_checkpoint(path)
+    keys = ("names", "points", "normals", "height", "rotation", "markers", "marker_contact", "object_contact",
+            "fullpose", "transl", "betas")
+    missing = [k for k in keys if k not in s]
+    if missing:
+        raise ValueError(f"path: {path} is not a lesson-examples checkpoint of save_examples (no {missing[0]!r})")
     return [Placement(n, s["points"][i].float(), s["normals"][i].float(), float(s["height"][i]),
                       s["rotation"][i].float(), s["markers"][i].float(), s["marker_contact"][i].float(),
                       s["object_contact"][i].float(),

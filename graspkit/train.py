@@ -32,7 +32,7 @@ from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 import torch
@@ -46,6 +46,7 @@ from graspkit.progress import hidden
 from graspkit.state import keeps_torch_state
 
 StepFn = Callable[[torch.nn.Module, Any, int], dict[str, torch.Tensor]]
+M = TypeVar("M")
 
 
 RUNS: list[Path] = []        # the training states `fit` wrote in this process (`graspkit train` names their logs)
@@ -227,6 +228,17 @@ def load_into(model: torch.nn.Module, weights: dict[str, Any], path: str | Path,
     return model
 
 
+def build_named(path: str | Path, what: str, build: Callable[[], M]) -> M:
+    """build() (a model made from checkpoint `path`'s config and weights); a ValueError naming the file and `what` it
+    should hold when a config value or a weight does not fit (a wrong type fails deep inside torch otherwise)."""
+    try:
+        return build()
+    except (TypeError, ValueError, KeyError, AttributeError, RuntimeError) as e:
+        if str(path) in str(e):
+            raise
+        raise ValueError(f"checkpoint {path}: not {what} ({type(e).__name__}: {e})") from None
+
+
 def check_config(config: Any, config_cls: type, path: str | Path, what: str) -> None:
     """ValueError naming checkpoint `path` unless `config` is a dict whose entries are fields of dataclass
     `config_cls` (a checkpoint of another model would otherwise fail inside the constructor, unnamed)."""
@@ -395,6 +407,9 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
                          f"one sample; expected at least 2, got {cfg.batch_size}")
     if time_limit_s is not None and not (isinstance(time_limit_s, (int, float)) and time_limit_s > 0):
         raise ValueError(f"time_limit_s: expected None or a positive number of seconds, got {time_limit_s!r}")
+    if checkpoint is not None and (Path(checkpoint).is_dir() or Path(checkpoint).parent.is_file()):
+        what = "a folder" if Path(checkpoint).is_dir() else f"in {Path(checkpoint).parent}, which is a file"
+        raise ValueError(f"checkpoint: {checkpoint} is {what}; expected the path of a checkpoint file (.pt)")
     if cfg.num_threads:
         torch.set_num_threads(cfg.num_threads)
     world = _distributed()

@@ -440,7 +440,7 @@ def test_a_pool_starts_no_more_processes_than_calls(tmp_path):
 
 def _slow_write(i: int, folder: str) -> int:
     """A pool call: fails after 0.5 s for i = 0, else writes its file as graspkit's writers do, through a temporary
-    file it removes when stopped, the write taking 3 s."""
+    file it removes when stopped, the write taking 10 s (a slack that a loaded machine needs to stop it first)."""
     import time
 
     if i == 0:
@@ -449,7 +449,7 @@ def _slow_write(i: int, folder: str) -> int:
     tmp = Path(folder, f".call_{i}.tmp")
     tmp.touch()
     try:
-        time.sleep(3.0)
+        time.sleep(10.0)
         tmp.rename(Path(folder, f"call_{i}"))
     except BaseException:
         tmp.unlink()

@@ -78,7 +78,7 @@ def test_an_unknown_object_and_a_goal_frame_outside_the_clip_are_named(tmp_path)
         WholeGraspDataset(root, split=None)
     (tmp_path / "b").mkdir()
     root = _copy_with(tmp_path / "b", "approach", **{"grasp.goal_frame": np.array(-3)})
-    with pytest.raises(ValueError, match=r"approach_000000\.npz: key 'grasp.goal_frame' is -3, expected a frame"):
+    with pytest.raises(ValueError, match=r"approach_000000\.npz: key 'grasp.goal_frame' is -3, expected a whole frame number in \[0, 80\)"):
         ApproachDataset(root, split=None)
 
 

@@ -31,6 +31,7 @@ from graspkit.paths import make_temp, naming_errors, publish, sweep_stale_temps
 
 FPS = 30.0
 NUM_BETAS = 10
+SOURCE_FPS_RANGE = (1.0, 10_000.0)  # a stored capture rate outside it is a damaged value (or a frame period) and refused
 SMPLH_BODY = 22                   # SMPL-H: 22 body joints, then 30 hand joints (SMPL-X has jaw and eyes between)
 
 
@@ -106,6 +107,30 @@ def write_npz_atomic(path: Path, arrays: dict[str, np.ndarray]) -> None:
     sweep_stale_temps(path)
 
 
+def npz_load_error(path: Path, e: Exception) -> str:
+    """Why np.load refused `path`, from its first bytes: numpy calls any file that is no zip or .npy a pickle."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError:
+        head = b""
+    if head.startswith(b"PK"):
+        return f"a damaged zip archive ({type(e).__name__}: {e})"
+    if head[:1] == b"\x80":
+        return "a pickle, which graspkit does not read"
+    return f"not an .npz archive (it starts with {head!r})" if head else "an empty file"
+
+
+def check_source_rate(src: float, key: str, path: Path | str) -> float:
+    """A stored capture rate (frames per second) within SOURCE_FPS_RANGE, or a SequenceFileError naming file and key
+    (resampling from a rate of 0.03 would make a clip a thousand times longer)."""
+    lo, hi = SOURCE_FPS_RANGE
+    if not (np.isfinite(src) and lo <= src <= hi):
+        raise SequenceFileError(f"{path}: key {key!r} is {src}, expected a frame rate between {lo:g} and {hi:g} frames "
+                                "per second (a frame period stored in its place, or a damaged value?)")
+    return src
+
+
 def open_npz(path: str | os.PathLike, what: str = "an .npz file") -> np.lib.npyio.NpzFile:
     """An .npz archive opened without pickle (use it in a `with`); a ValueError naming the file when it is missing,
     unreadable or a single array rather than an archive."""
@@ -115,7 +140,7 @@ def open_npz(path: str | os.PathLike, what: str = "an .npz file") -> np.lib.npyi
     try:
         npz = np.load(path, allow_pickle=False)
     except Exception as e:              # empty, truncated, not a zip, a pickle: numpy raises several kinds
-        raise ValueError(f"{path}: not a readable .npz file, expected {what} ({type(e).__name__}: {e})") from None
+        raise ValueError(f"{path}: not a readable .npz file, expected {what} ({npz_load_error(path, e)})") from None
     if not isinstance(npz, np.lib.npyio.NpzFile):
         raise ValueError(f"{path}: a single array, expected {what} (an .npz archive)")
     return npz
@@ -141,9 +166,11 @@ def _get(npz, key: str, path: Path) -> np.ndarray:
     return np.asarray(npz_arrays(npz, [key], path)[key])
 
 
-def _string(a: np.ndarray) -> str:
-    """A numpy scalar string or bytes as str."""
-    v = a.item() if a.shape == () else a.reshape(-1)[0]
+def _string(a: np.ndarray, key: str, path: Path) -> str:
+    """A stored string or bytes (any shape of size 1) as str, or a SequenceFileError naming the file and key."""
+    if a.size != 1 or a.dtype.kind not in "US":
+        raise SequenceFileError(f"{path}: key {key!r} holds {a.size} {a.dtype} value(s), expected one string")
+    v = a.reshape(-1)[0]
     return v.decode() if isinstance(v, bytes) else str(v)
 
 
@@ -173,7 +200,7 @@ def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
     try:
         npz = np.load(path, allow_pickle=False)
     except Exception as e:
-        raise SequenceFileError(f"{path}: not a readable .npz file ({e})") from None
+        raise SequenceFileError(f"{path}: not a readable .npz file ({npz_load_error(path, e)})") from None
     if not isinstance(npz, np.lib.npyio.NpzFile):
         raise SequenceFileError(f"{path}: expected an .npz archive of arrays, got a single array")
     with npz:
@@ -188,9 +215,7 @@ def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
         if not rate_keys:
             raise SequenceFileError(f"{path}: no frame rate: expected a key 'mocap_frame_rate' (AMASS SMPL-X, "
                                     "graspkit) or 'mocap_framerate' (AMASS SMPL-H)")
-        src = _scalar(_get(npz, rate_keys[0], path), rate_keys[0], path)
-        if not np.isfinite(src) or src <= 0:
-            raise SequenceFileError(f"{path}: key {rate_keys[0]!r} is {src}, expected a positive frame rate")
+        src = check_source_rate(_scalar(_get(npz, rate_keys[0], path), rate_keys[0], path), rate_keys[0], path)
         betas = np.zeros(NUM_BETAS)
         if "betas" in npz.files:
             b = _numbers(_get(npz, "betas", path), "betas", path).reshape(-1)[:NUM_BETAS]
@@ -199,7 +224,7 @@ def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
                 warnings.warn(f"{path}: an SMPL+H file's betas are read as SMPL-X betas (another shape space: the body "
                               "is only roughly the subject's); pass betas of your own to the Motion for a fitted shape",
                               GraspkitWarning, stacklevel=user_stacklevel())
-        gender = _string(_get(npz, "gender", path)) if "gender" in npz.files else "neutral"
+        gender = _string(_get(npz, "gender", path), "gender", path) if "gender" in npz.files else "neutral"
         contacts = None
         if "contacts" in npz.files:
             c = np.asarray(_get(npz, "contacts", path))
@@ -214,7 +239,7 @@ def load_motion(path: str | os.PathLike, fps: float | None = FPS) -> Motion:
             if gf != int(gf):
                 raise SequenceFileError(f"{path}: key 'goal_frame' is {gf}, expected a whole frame number")
             gf = int(gf)
-            hand = _string(_get(npz, "hand", path)) if "hand" in npz.files else "right"
+            hand = _string(_get(npz, "hand", path), "hand", path) if "hand" in npz.files else "right"
             if goal.shape != (3,):
                 raise SequenceFileError(f"{path}: key 'goal' has shape {goal.shape}, expected (3,)")
             if hand not in HANDS:

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from graspkit.checks import GraspkitWarning, user_stacklevel
-from graspkit.data.formats import SequenceFileError, resample, write_npz_atomic
+from graspkit.data.formats import SequenceFileError, check_source_rate, npz_load_error, resample, write_npz_atomic
 from graspkit.data.motion import check_fps
 
 BODY_PARTS = (("global_orient", 0, 1), ("body_pose", 1, 22), ("jaw_pose", 22, 23), ("leye_pose", 23, 24),
@@ -153,7 +153,7 @@ def read_arrays(path: str | os.PathLike, allow_pickle: bool = False) -> dict[str
     try:
         npz = np.load(path, allow_pickle=allow_pickle)
     except Exception as e:
-        raise SequenceFileError(f"{path}: not a readable .npz file ({e})") from None
+        raise SequenceFileError(f"{path}: not a readable .npz file ({npz_load_error(path, e)})") from None
     if not isinstance(npz, np.lib.npyio.NpzFile):
         raise SequenceFileError(f"{path}: expected an .npz archive of arrays, got a single array")
     out: dict[str, np.ndarray] = {}
@@ -199,26 +199,38 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
             raise SequenceFileError(f"{path}: missing key {key!r}")
         return a[key]
 
+    def numbers(key: str) -> np.ndarray:
+        v = np.asarray(get(key))
+        if v.dtype.kind not in "biuf":
+            raise SequenceFileError(f"{path}: key {key!r} holds {v.dtype} values, expected numbers")
+        return v.astype(np.float64)
+
     def per_frame(key: str, width: int) -> np.ndarray:
-        v = np.asarray(get(key), np.float64)
+        v = numbers(key)
         if len(v.shape) == 0 or v.shape[0] != T or v.size != T * width:
             raise SequenceFileError(f"{path}: key {key!r} has shape {v.shape}, expected ({T}, {width})")
         return v.reshape(T, width)
 
-    flat = bool(a["body.flat_hand_mean"]) if "body.flat_hand_mean" in a else False
+    flat = False
+    if "body.flat_hand_mean" in a:
+        f = a["body.flat_hand_mean"]
+        if f.size != 1 or f.dtype.kind not in "biu":
+            raise SequenceFileError(f"{path}: key 'body.flat_hand_mean' holds {f.size} {f.dtype} value(s), expected one "
+                                    "boolean")
+        flat = bool(f.reshape(-1)[0])
     if "body.params.fullpose" in a:
         if hands_mean is not None and not flat:
             raise ValueError(f"hands_mean: {path} has 'body.params.fullpose', smplx's full_pose, which already holds "
                              "the hand mean (smplx adds it; GOAL feeds GRAB's fullpose to flat_hand_mean=True layers); "
                              "leave hands_mean out (it is for per-part hand poses stored relative to the mean)")
-        full = np.asarray(get("body.params.fullpose"), np.float64)
+        full = numbers("body.params.fullpose")
         if full.ndim != 2 or full.shape[1] != 165:
             raise SequenceFileError(f"{path}: key 'body.params.fullpose' has shape {full.shape}, expected (T, 165)")
         poses = full.reshape(-1, 55, 3)
     else:
         parts = []
         for name, lo, hi in BODY_PARTS:
-            p = np.asarray(get(f"body.params.{name}"), np.float64)
+            p = numbers(f"body.params.{name}")
             if p.ndim != 2 or (parts and len(p) != len(parts[0])):
                 n = len(parts[0]) if parts else "T"
                 raise SequenceFileError(f"{path}: key 'body.params.{name}' has shape {p.shape}, "
@@ -242,19 +254,21 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
                       stacklevel=user_stacklevel())
     betas = np.zeros(10)
     if "body.betas" in a:
-        b = np.asarray(a["body.betas"], np.float64).reshape(-1)
+        b = numbers("body.betas").reshape(-1)
         if not np.isfinite(b).all():
             raise SequenceFileError(f"{path}: key 'body.betas' contains NaN or Inf")
         betas[:min(10, len(b))] = b[:10]
     rate = np.asarray(a.get("framerate", np.array(30.0)))
     src = float(rate.reshape(-1)[0]) if rate.size == 1 and rate.dtype.kind in "iuf" else float("nan")
-    if not (np.isfinite(src) and src > 0):
-        shown = src if rate.size == 1 and rate.dtype.kind in "iuf" else f"of shape {rate.shape} ({rate.dtype})"
-        raise SequenceFileError(f"{path}: key 'framerate' is {shown}, expected a finite positive frame rate")
+    if not (rate.size == 1 and rate.dtype.kind in "iuf"):
+        raise SequenceFileError(f"{path}: key 'framerate' is of shape {rate.shape} ({rate.dtype}), expected one number")
+    check_source_rate(src, "framerate", path)
     o_t = per_frame("object.params.transl", 3)
     o_r = per_frame("object.params.global_orient", 3)
     contacts = {k[len("contact."):]: np.asarray(v) for k, v in a.items() if k.startswith("contact.")}
     for k, c in contacts.items():
+        if c.ndim == 0 or c.dtype.kind not in "biuf":
+            raise SequenceFileError(f"{path}: key 'contact.{k}' holds {c.shape} {c.dtype}, expected a number per frame")
         if len(c) != T:
             raise SequenceFileError(f"{path}: key 'contact.{k}' has {len(c)} frames, expected {T}")
     for key in ("object.points", "object.normals"):
@@ -268,6 +282,12 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
                      ("object.params.global_orient", o_r), *numeric):
         if not np.isfinite(arr).all():
             raise SequenceFileError(f"{path}: key {key!r} contains NaN or Inf")
+    for k in sorted(FRAME_EXTRAS & set(a)):       # frame numbers: whole, within the clip
+        f = a[k]
+        if f.size != 1 or f.dtype.kind not in "iuf" or not np.isfinite(f).all() or float(f.reshape(())) % 1 \
+                or not 0 <= float(f.reshape(())) < T:
+            shown = f.reshape(()).item() if f.size == 1 else f"of shape {f.shape}"
+            raise SequenceFileError(f"{path}: key {k!r} is {shown}, expected a whole frame number in [0, {T})")
     frame_scale = None
     if fps is not None and abs(src - fps) > 1e-6 and T > 1:
         n_old, frame_scale = T, fps / src

@@ -63,24 +63,45 @@ SHAPES: dict[str, tuple[int | str | None, ...]] = {
     "object.normals": (None, 3), "object.height": (), "saga.markers": (143, 3), "contact.markers": ("T", 143),
     "contact.object": ("T", None), "contact.feet": ("T", 4), "grasp.goal_frame": (),
     "goal.vertices": (400, 3), "goal.offsets": (400, 3), "goal.hand_offsets": (99, 3), "goal.head_direction": (3,),
-    "goal.bps_object": (1024,), "goal.bps_hand": (1024,), "goal.right_hand": (99,), "goal.vertex_ids": (400,)}
+    "goal.bps_object": (1024,), "goal.bps_hand": (1024,), "goal.right_hand": (99,), "goal.vertex_ids": (400,),
+    "body.params.body_pose": ("T", 63), "contact.body": ("T", None), "obj_name": ()}
+STRING_KEYS = {"obj_name"}
+
+
+def read_checked(path: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """A graspkit data file's arrays (read_arrays), `keys` checked by check_arrays."""
+    a = read_arrays(path)
+    check_arrays(a, keys, path)
+    return a
 
 
 def check_arrays(a: dict[str, np.ndarray], keys: tuple[str, ...], path: Path) -> None:
     """ValueError naming `path` and the key when one of `keys` is missing from a file's arrays `a`, has another shape
-    than SHAPES gives, or holds a NaN or an inf (a model trained on it would learn NaN weights without any other
-    sign)."""
+    than SHAPES gives, holds no numbers (a string where STRING_KEYS do not list it), a NaN or an inf (a model trained
+    on it would learn NaN weights without any other sign), a contact label other than 0 / 1, or a goal frame outside
+    the clip."""
     T = len(a["body.params.fullpose"]) if "body.params.fullpose" in a else None
     for k in keys:
         if k not in a:
             raise ValueError(f"{path}: missing key {k!r} (expected a file of `graspkit data make`)")
         v = a[k]
+        if v.dtype.kind not in ("US" if k in STRING_KEYS else "biuf"):
+            raise ValueError(f"{path}: key {k!r} holds {v.dtype} values, expected "
+                             + ("a string" if k in STRING_KEYS else "numbers"))
         want = tuple(T if d == "T" else d for d in SHAPES.get(k, (None,) * v.ndim))
         if v.ndim != len(want) or any(d is not None and d != n for d, n in zip(want, v.shape)):
             shown = "(" + ", ".join("any" if d is None else str(d) for d in want) + ("," if len(want) == 1 else "") + ")"
             raise ValueError(f"{path}: key {k!r} has shape {v.shape}, expected {shown}")
         if v.dtype.kind in "fc" and not np.isfinite(v).all():
             raise ValueError(f"{path}: key {k!r} holds {int((~np.isfinite(v)).sum())} NaN or infinite values")
+    for k in keys:
+        if k.startswith("contact.") and not np.isin(a[k], (0, 1)).all():
+            raise ValueError(f"{path}: key {k!r} holds values other than 0 and 1, expected contact labels")
+    if "grasp.goal_frame" in keys and T is not None:
+        g = float(a["grasp.goal_frame"])
+        if g % 1 or not 0 <= g < T:
+            raise ValueError(f"{path}: key 'grasp.goal_frame' is {a['grasp.goal_frame']}, expected a whole frame "
+                             f"number in [0, {T})")
     if "goal.right_hand" in keys and not ((a["goal.right_hand"] >= 0) & (a["goal.right_hand"] < 400)).all():
         raise ValueError(f"{path}: key 'goal.right_hand' holds positions outside [0, 400)")
 

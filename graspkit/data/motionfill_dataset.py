@@ -240,4 +240,11 @@ def load_windows(path: str | Path) -> dict[str, np.ndarray]:
         missing = {"traj", "markers", "local", "vel", "contacts", "clip"} - set(z.files)
         if missing:
             raise ValueError(f"{path}: not a MotionFill windows file, missing {sorted(missing)}")
-        return npz_arrays(z, z.files, path)
+        a = npz_arrays(z, z.files, path)
+    n = len(a["clip"]) if a["clip"].ndim == 1 else -1
+    ndim = {"traj": 3, "markers": 4, "local": 4, "vel": 3, "contacts": 3}
+    for k, d in ndim.items():
+        if a[k].ndim != d or len(a[k]) != n or a[k].dtype.kind not in "biuf" or not np.isfinite(a[k]).all():
+            raise ValueError(f"{path}: key {k!r} is {a[k].dtype} of shape {a[k].shape}, expected {d} dimensions of "
+                             f"finite numbers with one row per window ({n}, from 'clip')")
+    return a

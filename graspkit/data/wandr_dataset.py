@@ -374,8 +374,32 @@ def load_clipset(path: str | Path) -> ClipSet:
         if missing:
             raise ValueError(f"{path}: missing keys {missing}")
         a = npz_arrays(z, _CLIPSET_KEYS + ("names",), path)
-        t = {k: torch.from_numpy(a[k].copy()) for k in _CLIPSET_KEYS}
-        return ClipSet(names=[str(n) for n in a["names"]], **t)
+    _check_clipset(a, path)
+    t = {k: torch.from_numpy(a[k].copy()) for k in _CLIPSET_KEYS}
+    return ClipSet(names=[str(n) for n in a["names"]], **t)
+
+
+def _check_clipset(a: dict[str, np.ndarray], path: Path) -> None:
+    """ValueError naming `path` unless save_clipset's arrays agree: p (N, 135) finite, offsets rising from 0 to N,
+    one row per clip in the others (finite; goal frames -1 or inside the clip), distinct names."""
+    p, off = a["p"], a["offsets"]
+    if p.ndim != 2 or p.shape[1] != 135 or p.dtype.kind != "f" or not np.isfinite(p).all():
+        raise ValueError(f"{path}: key 'p' is {p.dtype} of shape {p.shape}, expected finite poses (N, 135)")
+    if off.ndim != 1 or off.dtype.kind not in "iu" or len(off) < 1 or off[0] != 0 or off[-1] != len(p) \
+            or (np.diff(off) < 0).any():
+        raise ValueError(f"{path}: key 'offsets' is not whole numbers rising from 0 to {len(p)} (the frames of 'p')")
+    C = len(off) - 1
+    want = {"rest": (C, 22, 3), "betas": (C, 10), "goal": (C, 3), "goal_frame": (C,), "kind": (C,), "names": (C,)}
+    for k, shape in want.items():
+        if a[k].shape != shape or a[k].dtype.kind not in ("US" if k == "names" else "iuf") \
+                or (a[k].dtype.kind == "f" and not np.isfinite(a[k]).all()):
+            raise ValueError(f"{path}: key {k!r} is {a[k].dtype} of shape {a[k].shape}, expected {shape} "
+                             + ("strings" if k == "names" else "finite numbers"))
+    gf, lengths = a["goal_frame"], np.diff(off)
+    if ((gf != -1) & ((gf < 0) | (gf >= lengths))).any() or not np.isin(a["kind"], (0, 1)).all():
+        raise ValueError(f"{path}: a goal frame outside its clip or a kind other than 0 / 1")
+    if len(set(a["names"].tolist())) != C:
+        raise ValueError(f"{path}: key 'names' names a clip twice")
 
 
 # The clip code's version, part of every cached ClipSet's name: raise it when load_clips would give other arrays for

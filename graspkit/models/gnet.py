@@ -372,16 +372,19 @@ def load_weights(path: str | Path, kind: str, config_cls: type | None = None) ->
         raise ValueError(f"{path}: no {kind} config inside (expected a checkpoint written by graspkit)")
     if config_cls is not None:
         check_config(config, config_cls, path, f"a {kind} checkpoint")
+    if not all(torch.is_tensor(v) for v in ck["model"].values()):
+        raise ValueError(f"{path}: not a {kind} checkpoint (its 'model' holds values other than tensors)")
     state = {k: v.float() if v.is_floating_point() else v for k, v in ck["model"].items()}
     return state, config
 
 
 def load_gnet(path: str | Path) -> GNet:
     """A GNet from a shipped (or training) checkpoint, in float32 and eval mode."""
-    from graspkit.train import load_into
+    from graspkit.train import build_named, load_into
 
     state, config = load_weights(path, "gnet", GNetConfig)
-    return load_into(GNet(GNetConfig(**config)), state, path, "a GNet checkpoint").eval()
+    return build_named(path, "a GNet checkpoint",
+                       lambda: load_into(GNet(GNetConfig(**config)), state, path, "a GNet checkpoint")).eval()
 
 
 @keeps_torch_state

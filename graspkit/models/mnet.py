@@ -634,7 +634,8 @@ def train_mnet(train: MNetWindows, val: MNetWindows | None, cfg: MNetConfig | No
 def load_mnet(path: str | Path) -> MNet:
     """An MNet from a shipped (or training) checkpoint, in float32 and eval mode."""
     from graspkit.models.gnet import load_weights
-    from graspkit.train import load_into
+    from graspkit.train import build_named, load_into
 
     state, config = load_weights(path, "mnet", MNetConfig)
-    return load_into(MNet(MNetConfig(**config)), state, path, "an MNet checkpoint").eval()
+    return build_named(path, "an MNet checkpoint",
+                       lambda: load_into(MNet(MNetConfig(**config)), state, path, "an MNet checkpoint")).eval()

@@ -47,7 +47,7 @@ from graspkit.checks import GraspkitWarning, check_finite, check_generator, chec
 from graspkit.data.wandr_dataset import (FOOT_JOINTS, GOAL_FRAMES, STD_FLOOR, ClipSet, WindowDataset, lowest_foot,
                                          make_batch)
 from graspkit.models.blocks import GaussianHead, evaluating, kl_standard_normal
-from graspkit.train import TrainConfig, check_config, fit, load_checkpoint, load_into, save_checkpoint
+from graspkit.train import TrainConfig, build_named, check_config, fit, load_checkpoint, load_into, save_checkpoint
 
 FULL_INTENTION = ("wrist", "orientation", "pelvis")
 FEET = FOOT_JOINTS                                   # ankles and feet: the foot-velocity, contact and floor terms
@@ -352,8 +352,11 @@ def load_wandr(path: str | Path) -> WandrCVAE:
     if not isinstance(cfg, dict) or not isinstance(state.get("model"), dict):
         raise ValueError(f"checkpoint {path}: not a WANDR checkpoint (no 'wandr_config' / 'model')")
     check_config(cfg, WandrConfig, path, "a WANDR checkpoint")
+    if not all(torch.is_tensor(v) for v in state["model"].values()):
+        raise ValueError(f"checkpoint {path}: not a WANDR checkpoint (its 'model' holds values other than tensors)")
     weights = {k: v.float() if v.is_floating_point() else v for k, v in state["model"].items()}
-    model = load_into(WandrCVAE(WandrConfig(**cfg)), weights, path, "a WANDR checkpoint")
+    model = build_named(path, "a WANDR checkpoint",
+                        lambda: load_into(WandrCVAE(WandrConfig(**cfg)), weights, path, "a WANDR checkpoint"))
     model.meta = state.get("meta", {})
     model.history = state.get("history", [])
     return model.eval()

@@ -586,8 +586,8 @@ def load_wholegrasp(path: str | Path | None = None, multitask: bool = True) -> W
         raise ValueError(f"{path}: not a WholeGrasp-VAE checkpoint ({what}; expected what train_wholegrasp writes)")
     try:
         return WholeGraspVAE.from_state(state)
-    except (ValueError, RuntimeError) as e:     # another model's config or weights
-        raise ValueError(f"{path}: not a WholeGrasp-VAE checkpoint ({e})") from None
+    except (ValueError, RuntimeError, TypeError, KeyError, AttributeError) as e:  # another model's config or weights
+        raise ValueError(f"{path}: not a WholeGrasp-VAE checkpoint ({type(e).__name__}: {e})") from None
 
 
 # ------------------------------------------------------------------------------------------------ GrabNet-SMPLX
@@ -809,11 +809,26 @@ class GrabNetSMPLX(nn.Module):
     @classmethod
     def from_state(cls, state: dict[str, Any]) -> "GrabNetSMPLX":
         """Rebuild from `state()` (or a fit checkpoint whose extra holds model_config)."""
-        cfg = dict(state.get("model_config") or state.get("extra", {}).get("model_config"))
+        cfg = state.get("model_config") or state.get("extra", {}).get("model_config")
+        if not isinstance(cfg, dict):
+            raise ValueError("state: no GrabNet-SMPLX config in it (expected key 'model_config' or "
+                             "extra['model_config'])")
+        cfg = dict(cfg)
         cfg.setdefault("body_space", "rot6d")     # checkpoints made before the pose-prior space
         model = cls(**cfg)
         model.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in state["model"].items()})
         return model.eval()
+
+
+def load_grabnet_smplx(path: str | Path = GRABNET_SMPLX_PATH) -> GrabNetSMPLX:
+    """A trained GrabNet-SMPLX baseline (`graspkit train grabnet_smplx`), eval mode; a ValueError naming the file
+    when it holds another model."""
+    from graspkit.train import build_named, load_checkpoint
+
+    state = load_checkpoint(path)
+    if "kind" in state:
+        raise ValueError(f"{path}: not a GrabNet-SMPLX checkpoint (a {state['kind']!r} checkpoint)")
+    return build_named(path, "a GrabNet-SMPLX checkpoint", lambda: GrabNetSMPLX.from_state(state))
 
 
 def rest_root_joint(bm: BodyModel, betas: Tensor) -> Tensor:

@@ -279,21 +279,44 @@ def load_sequence_glb(path: str | os.PathLike, name: str = "body",
     def arr(i: int) -> np.ndarray:
         acc = gltf["accessors"][i]
         view = gltf["bufferViews"][acc["bufferView"]]
-        dtype = np.uint32 if acc["componentType"] == _UINT else np.float32
-        a = np.frombuffer(blob, dtype, acc["count"] * (3 if acc["type"] == "VEC3" else 1), view["byteOffset"])
+        if acc.get("componentType") not in _COMPONENTS or acc.get("type") not in _WIDTH:
+            raise ValueError(f"accessor {i} holds {acc.get('type')} of component type {acc.get('componentType')}, "
+                             f"expected SCALAR or VEC3 of {sorted(_COMPONENTS)}")
+        dtype = np.dtype(_COMPONENTS[acc["componentType"]])
+        n = acc["count"] * _WIDTH[acc["type"]]
+        if "sparse" in acc or view.get("byteStride") not in (None, _WIDTH[acc["type"]] * dtype.itemsize):
+            raise ValueError(f"accessor {i} is sparse or interleaved, which this reader does not take")
+        start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+        if start + n * dtype.itemsize > view.get("byteOffset", 0) + view["byteLength"]:
+            raise ValueError(f"accessor {i} reaches past its buffer view")
+        a = np.frombuffer(blob, dtype, n, start)
         return a.reshape(-1, 3) if acc["type"] == "VEC3" else a
 
-    k = next((i for i, m in enumerate(gltf["meshes"]) if m["name"] == name), None)
-    if k is None:
-        raise ValueError(f"name: no mesh {name!r} in {path}")
-    prim = gltf["meshes"][k]["primitives"][0]
-    base = arr(prim["attributes"]["POSITION"]).astype(np.float64)
-    frames = [base] + [base + arr(t["POSITION"]) for t in prim.get("targets", [])]
-    times = np.zeros(1)
-    for anim in gltf.get("animations", []):
-        times = arr(anim["samplers"][0]["input"]).astype(np.float64)
+    try:
+        k = next((i for i, m in enumerate(gltf.get("meshes", [])) if m.get("name") == name), None)
+        if k is None:
+            raise LookupError(f"name: no mesh {name!r} in {path}")
+        prim = gltf["meshes"][k]["primitives"][0]
+        base = arr(prim["attributes"]["POSITION"]).astype(np.float64)
+        frames = [base] + [base + arr(t["POSITION"]) for t in prim.get("targets", [])]
+        times = np.zeros(1)
+        for anim in gltf.get("animations", []):
+            times = arr(anim["samplers"][0]["input"]).astype(np.float64)
+        faces = arr(prim["indices"]).reshape(-1, 3).astype(np.int64)
+    except LookupError as e:
+        if str(e).startswith("name:"):
+            raise ValueError(str(e)) from None
+        raise ValueError(f"path: {path} is not a sequence GLB as export_sequence_glb writes it (missing {e})") from None
+    except (ValueError, TypeError) as e:
+        raise ValueError(f"path: {path} is not a sequence GLB as export_sequence_glb writes it ({e})") from None
     rot = Z_UP_TO_Y_UP if y_up else np.eye(3)
-    return np.stack(frames) @ rot, arr(prim["indices"]).reshape(-1, 3).astype(np.int64), times
+    return np.stack(frames) @ rot, faces, times
+
+
+# glTF 2.0 accessor component types (5121 unsigned byte, 5123 unsigned short, 5125 unsigned int, 5126 float) and the
+# number of components in an item of each accessor type this reader takes
+_COMPONENTS = {5121: np.uint8, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
+_WIDTH = {"SCALAR": 1, "VEC3": 3}
 
 
 def export_motion(motion: Motion, bm: BodyModel, folder: str | os.PathLike, name: str,
