@@ -6,6 +6,7 @@ import math
 import numbers
 import os
 import sys
+import warnings
 from collections.abc import Callable
 from typing import Any
 
@@ -81,12 +82,21 @@ def check_finite(x: Any, name: str, what: str) -> None:
         raise ValueError(f"{name}: contains NaN or Inf (expected {what})")
 
 
+BETA_RANGE = 2.0   # shape coefficients the body was checked for (docs/body_model.md) and the training data drew
+
+
 def check_betas(betas: Any, least: int) -> np.ndarray:
-    """Shape coefficients as a float64 1-D array of at least `least` finite values."""
+    """Shape coefficients as a float64 1-D array of at least `least` finite values; a GraspkitWarning for one beyond
+    ±BETA_RANGE."""
     b = np.asarray(betas, np.float64)
     if b.ndim != 1 or len(b) < least or not np.isfinite(b).all():
         raise ValueError(f"betas: expected at least {least} finite shape coefficients (a 1-D array), got shape "
                          f"{np.shape(betas)}{'' if np.isfinite(b).all() else ' with NaN or Inf'}")
+    k = int(np.abs(b).argmax()) if len(b) else 0
+    if len(b) and abs(b[k]) > BETA_RANGE:
+        warnings.warn(f"betas: coefficient {k} is {b[k]:g}, outside the ±{BETA_RANGE:g} the body was checked for and "
+                      "the training data drew (docs/body_model.md); expect an odd body (all ten at -5: 0.94 m tall, "
+                      "2 L) and the models to do worse", GraspkitWarning, stacklevel=user_stacklevel())
     return b
 
 

@@ -191,34 +191,18 @@ def _cmd_goal(args: argparse.Namespace) -> int:
     return 0
 
 
-WANDR_MAX_SECONDS = 8.0       # the goal grid's horizon (§4.2): what the shipped model is trained and measured for
-WANDR_MAX_HEIGHT = 1.9        # m: the highest goals of the training clips (room-scale, docs/data.md); the grid's: 1.8
-WANDR_MAX_SPEED = 1.5         # m/s: the fastest walk of the training clips (the hurried room-scale tasks, docs/data.md)
 WANDR_GOAL_LIMIT = 50.0       # m: the farthest goal `graspkit wandr` takes (30 s at 1.5 m/s is 45 m), and --at's X, Y
 AT_HEIGHT_LIMIT = 3.0         # m: the highest object centre `graspkit saga/goal --at` takes
 
 
 def wandr_range_notes(goal: Sequence[float], seconds: float) -> list[str]:
-    """Warnings when a goal (start frame: the pelvis above the origin) and time to it leave the range the shipped
-    WANDR model was trained and evaluated on: beyond 8 s, faster than 1.5 m/s on the ground, below the floor or above
-    the highest training goals (1.9 m)."""
+    """graspkit.models.wandr.range_notes for a goal in the start's frame (the pelvis above the origin)."""
     import math
 
+    from graspkit.models.wandr import range_notes
+
     x, y, z = (float(v) for v in goal)
-    notes = []
-    if seconds > WANDR_MAX_SECONDS:
-        notes.append(f"{seconds:g} s is past the {WANDR_MAX_SECONDS:g} s the model was trained and evaluated for; "
-                     "past it the body tends to drift and lift off the floor (docs/wandr.md)")
-    if math.hypot(x, y) / seconds > WANDR_MAX_SPEED:
-        notes.append(f"the goal is {math.hypot(x, y):.1f} m away: {math.hypot(x, y) / seconds:.1f} m/s on average, "
-                     f"faster than the {WANDR_MAX_SPEED:g} m/s walks of the training clips; expect a poor motion")
-    if z < 0:
-        notes.append(f"the goal is {-z:.2f} m below the floor; the wrist cannot reach it")
-    elif z > WANDR_MAX_HEIGHT:
-        notes.append(f"the goal is {z:.2f} m high, above the {WANDR_MAX_HEIGHT:g} m of the highest training goals "
-                     "(the evaluation grid's highest: 1.8 m); expect the wrist to fall short and the feet to leave "
-                     "the floor")
-    return notes
+    return list(range_notes(math.hypot(x, y), z, seconds).values())
 
 
 def _cmd_wandr(args: argparse.Namespace) -> int:
@@ -247,7 +231,11 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
     goal = torch.tensor(args.goal, dtype=torch.float32)
     _print_notes(wandr_range_notes(args.goal, frames / 30.0))
     torch.set_num_threads(args.threads)
-    motion = wandr_motions(args.checkpoint, goal[None], frames, seed=args.seed, lift=args.lift)[0]
+    from graspkit.models.wandr import RangeWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RangeWarning)           # printed above, from the goal as given
+        motion = wandr_motions(args.checkpoint, goal[None], frames, seed=args.seed, lift=args.lift)[0]
     bm = _body_model(args.model)
     sv, sf = sphere(goal.numpy(), 0.05)
     args.out.mkdir(parents=True, exist_ok=True)

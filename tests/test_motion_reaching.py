@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from graspkit.checks import GraspkitWarning
 from graspkit import metrics as M
 from graspkit.body.skeleton import JOINT_INDEX as J
 from graspkit.data import Start, evaluation_goals, generate_reach, plan_reach
@@ -469,7 +470,8 @@ def test_an_unreachable_goal_is_stored_where_the_wrist_went_and_a_floor_goal_sta
         betas = np.zeros(10)
         betas[0] = b0
         goal = np.array([0.9, -0.4, 0.0])
-        m = plan_reach(Start(0, 0, 0.3), goal, 100, betas=betas, seed=2, bm=bm, hold_frames=0)
+        with pytest.warns(GraspkitWarning, match="outside the ±2"):       # bodies past the checked shapes
+            m = plan_reach(Start(0, 0, 0.3), goal, 100, betas=betas, seed=2, bm=bm, hold_frames=0)
         np.testing.assert_allclose(_goal_as_reached(m, bm).goal, goal, atol=1e-9)
 
 

@@ -66,14 +66,25 @@ def root_states(joints: np.ndarray) -> np.ndarray:
 
 
 def interpolated_trajectory(traj: np.ndarray) -> np.ndarray:
-    """Γ̄ (..., T+2, 4): linear interpolation Γ_0 -> Γ_T over frames 0..T and one more step past Γ_T (TrajFill, §3.3)."""
+    """Γ̄ (..., T+2, 4): linear interpolation Γ_0 -> Γ_T over frames 0..T and one more step past Γ_T (TrajFill, §3.3),
+    from a window's root states traj (..., T+2, 4) (only frames 0 and T are read)."""
+    _check_root_states(traj, "traj")
     g0, gT = traj[..., 0:1, :], traj[..., T:T + 1, :]
     s = np.arange(NUM_ROOT, dtype=traj.dtype)[:, None] / T       # 0 .. 1 at T, 61/60 at T+1
     return g0 + s * (gT - g0)
 
 
+def _check_root_states(traj: np.ndarray, name: str) -> None:
+    """ValueError naming `name` unless it holds a window's root states (..., T+2, 4) (a longer trajectory would be read
+    at frame T, not its end)."""
+    if np.ndim(traj) < 2 or np.shape(traj)[-2:] != (NUM_ROOT, 4):
+        raise ValueError(f"{name}: expected a window's root states (..., {NUM_ROOT}, 4) (x, y, cos γ, sin γ for frames "
+                         f"0..{T + 1}), got shape {np.shape(traj)}")
+
+
 def local_motion(markers: np.ndarray, traj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Canonical markers (T+1, M, 3) and Γ (T+2, 4) -> local markers (T+1, M, 3), root velocities (T+1, 3)."""
+    _check_root_states(traj, "traj")
     g = np.arctan2(traj[:, 3], traj[:, 2])
     R = _rot2(-g[:NUM_FRAMES])                                     # world -> heading frame
     rel = markers.copy()
@@ -86,6 +97,7 @@ def local_motion(markers: np.ndarray, traj: np.ndarray) -> tuple[np.ndarray, np.
 
 def global_motion(local: np.ndarray, traj: np.ndarray) -> np.ndarray:
     """Inverse of `local_motion`: local markers (..., T+1, M, 3) and Γ (..., T+2, 4) -> canonical markers."""
+    _check_root_states(traj, "traj")
     g = np.arctan2(traj[..., :NUM_FRAMES, 3], traj[..., :NUM_FRAMES, 2])
     out = local.copy()
     out[..., :2] = np.einsum("...tij,...tmj->...tmi", _rot2(g), local[..., :2]) + traj[..., :NUM_FRAMES, None, :2]

@@ -563,11 +563,56 @@ def generate(model: WandrCVAE, start: I.StartPose | Sequence[I.StartPose], goal:
     if tg.dim() == 1:
         tg = tg[idx[:, 1]]
     frames = int(tg.max()) if frames is None else check_int(frames, "frames", least=1)
+    _warn_out_of_range(p0, g, tg.expand(len(g)) if tg.dim() == 0 else tg)
     with evaluating(model):
         out = rollout(model, pp, p0, rest, g, tg, frames, generator=generator, keep=keep, on_frame=on_frame,
                       floor=floor, lift=lift)
     out.info["index"] = idx
     return out
+
+
+MAX_SECONDS = 8.0       # the goal grid's horizon (§4.2): what the shipped model is trained and measured for
+MAX_HEIGHT = 1.9        # m: the highest goals of the training clips (room-scale, docs/data.md); the grid's: 1.8
+MAX_SPEED = 1.5         # m/s: the fastest walk of the training clips (the hurried room-scale tasks, docs/data.md)
+
+
+class RangeWarning(GraspkitWarning):
+    """A goal outside the range the shipped model was trained and evaluated on (range_notes)."""
+
+
+def range_notes(distance: float, height: float, seconds: float) -> dict[str, str]:
+    """What to expect, by kind ('time', 'speed', 'below', 'above'), when a goal `distance` m away on the ground and
+    `height` m above the floor, due in `seconds`, leaves the range the shipped model was trained and evaluated on:
+    beyond 8 s, faster than 1.5 m/s, below the floor or above the highest training goals (1.9 m); {} inside it."""
+    notes = {}
+    if seconds > MAX_SECONDS:
+        notes["time"] = (f"{seconds:g} s is past the {MAX_SECONDS:g} s the model was trained and evaluated for; past it "
+                         "the body drifts and lifts off the floor, by metres on a long walk (docs/wandr.md, \"Out of "
+                         "range\")")
+    if distance / seconds > MAX_SPEED:
+        notes["speed"] = (f"the goal is {distance:.1f} m away: {distance / seconds:.1f} m/s on average, faster than the "
+                          f"{MAX_SPEED:g} m/s walks of the training clips; expect a poor motion")
+    if height < 0:
+        notes["below"] = f"the goal is {-height:.2f} m below the floor; the wrist cannot reach it"
+    elif height > MAX_HEIGHT:
+        notes["above"] = (f"the goal is {height:.2f} m high, above the {MAX_HEIGHT:g} m of the highest training goals "
+                          "(the evaluation grid's highest: 1.8 m); expect the wrist to fall short and the feet to "
+                          "leave the floor")
+    return notes
+
+
+def _warn_out_of_range(p0: Tensor, goal: Tensor, t_goal: Tensor) -> None:
+    """A GraspkitWarning for each kind of range_notes that a start-goal pair of the batch (p0 (B, 135), goal (B, 3),
+    t_goal (B,) frames) meets, naming its worst pair."""
+    dist = torch.linalg.vector_norm(goal[:, :2].double() - p0[:, :2].double(), dim=-1)
+    sec = t_goal.double() / I.FPS
+    worst = {"time": sec.argmax(), "speed": (dist / sec).argmax(), "below": goal[:, 2].argmin(),
+             "above": goal[:, 2].argmax()}
+    for kind, b in worst.items():
+        note = range_notes(float(dist[b]), float(goal[b, 2]), float(sec[b])).get(kind)
+        if note:
+            which = f"sequence {int(b)} of the batch: " if len(goal) > 1 else ""
+            warnings.warn(which + note, RangeWarning, stacklevel=user_stacklevel())
 
 
 def goal_schedule(goals: Tensor, t_goals: Iterable[int] | Tensor, frames: int) -> tuple[Tensor, Tensor]:
@@ -601,4 +646,4 @@ def goal_schedule(goals: Tensor, t_goals: Iterable[int] | Tensor, frames: int) -
 
 
 __all__ = ["WandrConfig", "WandrCVAE", "training_losses", "train_wandr", "save_wandr", "load_wandr", "Rollout",
-           "rollout", "generate", "expand_starts", "goal_schedule", "FULL_INTENTION"]
+           "rollout", "generate", "expand_starts", "goal_schedule", "range_notes", "RangeWarning", "FULL_INTENTION"]

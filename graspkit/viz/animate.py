@@ -95,7 +95,7 @@ def animate(frames: Any, faces: Any, objects: Sequence[tuple[Any, ...]] = (), go
     colls = []
     for ax in axes:
         if ground:
-            draw_ground(ax, box, z=min(0.0, float(lo[2])))
+            draw_ground(ax, box, z=0.0)              # the floor, whatever sinks under it
         for p in paths:
             draw_path(ax, p)
         colls.append(draw_meshes(ax, []))

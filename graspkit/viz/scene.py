@@ -339,8 +339,8 @@ def show_scene(meshes: Sequence[Mesh] = (), points: Any = None, values: Any = No
         if goals is not None:
             lo, hi = lo - goal_radius, hi + goal_radius
         ground_box = None
-        if ground:  # a grid a quarter of the scene wider, on z = 0 (or under the lowest point)
-            m, gz = 0.25 * max(float((hi - lo)[:2].max()), 0.4), min(0.0, float(lo[2]))
+        if ground:  # a grid a quarter of the scene wider, on the floor z = 0 (a body under it shows through)
+            m, gz = 0.25 * max(float((hi - lo)[:2].max()), 0.4), 0.0
             ground_box = (lo[0] - m, hi[0] + m, lo[1] - m, hi[1] + m)
             lo = np.minimum(lo, [ground_box[0], ground_box[2], gz])
             hi = np.maximum(hi, [ground_box[1], ground_box[3], gz])

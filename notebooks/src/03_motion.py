@@ -249,8 +249,9 @@ evalg = np.stack([grid[:, 2], grid[:, 0], grid[:, 1]], 1)
 names = ["distance (m)", "angle (deg)", "height (m)"]
 fig, axes = plt.subplots(1, 3, figsize=(12, 3.6))
 for ax, (i, j) in zip(axes, [(0, 1), (0, 2), (1, 2)]):
-    ax.hist2d(np.r_[circle[:, i], hindsight[:, i]], np.r_[circle[:, j], hindsight[:, j]], bins=30, cmap="Blues",
-              range=[[0, 5.2] if i == 0 else [0, 360], [0, 360] if j == 1 else [0, 1.9]])
+    *_, im = ax.hist2d(np.r_[circle[:, i], hindsight[:, i]], np.r_[circle[:, j], hindsight[:, j]], bins=30,
+                       cmap="Blues", range=[[0, 5.2] if i == 0 else [0, 360], [0, 360] if j == 1 else [0, 1.9]])
+    fig.colorbar(im, ax=ax, pad=0.02).set_label("goals per bin", fontsize=8)
     ax.scatter(evalg[:, i], evalg[:, j], marker="x", color="#d62728", s=18)
     ax.set_xlabel(names[i]); ax.set_ylabel(names[j])
 fig.suptitle("training goals (density: CIRCLE-style goals + AMASS-style hindsight goals) and WANDR's evaluation goals (x)")

@@ -162,6 +162,9 @@ ax = fig.add_subplot(1, 2, 1, projection="3d")
 closeup(ax, v, o, values=closeness)
 viz.draw_markers(ax, markers[cm], color="#2ca02c")
 ax.set_axis_off(); ax.set_title(f"{seq.object_name}: hand contact, C_M (green, {cm.sum()} of 143)", fontsize=9)
+cb = fig.colorbar(plt.cm.ScalarMappable(plt.Normalize(0, 1), plt.get_cmap(viz.CONTACT_CMAP)), ax=ax, shrink=0.6,
+                  pad=0.02)
+cb.set_label("closeness 1 − d / 1 cm", fontsize=8)
 ax = fig.add_subplot(1, 2, 2, projection="3d")
 viz.draw_points(ax, pts, a["contact.object"][0].astype(float), size=4)
 viz.set_equal(ax, pts, pad=0.01); ax.set_axis_off()
@@ -224,7 +227,7 @@ print(f"{aseq.num_frames} frames, goal frame {g}, start: {aseq.extras['grasp.sta
 fig, ax = plt.subplots(figsize=(7, 1.6))
 ax.imshow(clip.contacts.T, aspect="auto", cmap="Greys", interpolation="nearest")
 ax.axvline(g, color="#c0504d"); ax.set_yticks(range(4), ["l heel", "l toe", "r heel", "r toe"], fontsize=7)
-ax.set_xlabel("frame (red: goal frame)"); ax.set_title("foot contact labels", fontsize=9)
+ax.set_xlabel("frame (red: goal frame)"); ax.set_title("foot contact labels (black: in contact)", fontsize=9)
 plt.show()
 
 # %%

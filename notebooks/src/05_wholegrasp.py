@@ -230,8 +230,8 @@ for k in range(5):
     viz.draw_points(ax, obj_pts, values=grasps.object_contact[k], size=3, colorbar=False)
     ax.scatter(*mk[63:][np.linalg.norm(mk[63:], axis=1) < 0.15].T, s=6, c=MARKER_IN_CONTACT)
     viz.set_equal(ax, obj_pts.numpy())
-fig.suptitle("top: whole-body markers (green: C_M > 0.5); bottom: C_O on the mug (shaded by probability, red = 1) and "
-             "the hand markers nearby", fontsize=9)
+fig.suptitle("top: whole-body markers (green: C_M > 0.5); bottom: C_O on the mug (shaded by probability: darker is "
+             "likelier, none above 0.5 here, §8) and the hand markers nearby", fontsize=9)
 fig.tight_layout()
 
 # %% [markdown]

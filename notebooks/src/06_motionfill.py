@@ -159,7 +159,8 @@ ax2.plot(d.min(-1).values.min(-1).values.numpy() * 100, "g--", label="palm to ob
 ax.set_xlabel("frame")
 ax.set_ylabel("angle (deg)")
 ax2.set_ylabel("distance (cm)", color="g")
-_ = ax.legend(fontsize=8, loc="upper center")
+_ = ax.legend(ax.get_lines() + ax2.get_lines(), [ln.get_label() for ln in ax.get_lines() + ax2.get_lines()],
+              fontsize=8, loc="upper center")
 
 # %%
 # NBVAL_IGNORE_OUTPUT

@@ -73,6 +73,7 @@ for k, (p, code, title) in enumerate(zip((pts, pts @ turn.T), codes, ("the test 
     ax.computed_zorder = False                      # draw the mug over the basis points, not sorted by depth
     sc = ax.scatter(*basis.T, s=2, c=code, cmap="viridis_r", vmin=0, vmax=0.12, alpha=0.35)
     ax.scatter(*p[::2].T, s=2, c="k")
+    viz.set_equal(ax, basis.numpy(), pad=0.0)      # one metric scale: the 0.15 m ball is round
     ax.set_title(title, fontsize=9)
     ax.set_axis_off()
 ax = fig.add_subplot(1, 3, 3)

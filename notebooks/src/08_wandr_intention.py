@@ -163,7 +163,7 @@ for g, tg in zip(batch["goal"], batch["t_goal"]):
     ax.plot(g[0], g[1], "x", color="#d62728", ms=9, mew=2)
     ax.annotate(f"t_G = i + {int(tg)}", (g[0], g[1]), fontsize=7, xytext=(4, 4), textcoords="offset points")
 ax.set_aspect("equal"); ax.set_xlabel("x (m)"); ax.set_ylabel("y (m)")
-ax.legend(fontsize=7)
+ax.legend(fontsize=7, loc="lower right")
 ax.set_title("four hindsight goals drawn for one window (x)", fontsize=9)
 fig.tight_layout()
 print(f"{len(clips)} sample clips, {len(ds)} training windows of 10 rollout steps; kinds: "
@@ -265,10 +265,14 @@ for k, st in enumerate(meta["stages"], 1):
 first = meta["stages"][0]
 hist = first["history"]                                 # the first stage's epochs
 keys = [k for k in ("rec", "kl", "joint_cm2", "contact_mm2") if k in hist[0]]   # contact: the planted-foot term
+TERMS = {"rec": ("L_rec (delta reconstruction)", "normalised units²"), "kl": ("KL (before α = 1e-2)", "nats"),
+         "joint_cm2": ("L_J (joints of the integrated pose)", "cm²"),
+         "contact_mm2": ("planted-foot term (graspkit's)", "mm² per frame")}
 fig, axs = plt.subplots(1, len(keys) + 1, figsize=(3 * len(keys) + 3, 2.4))
 for ax, key in zip(axs, keys):
     ax.plot([h["epoch"] for h in hist], [h[key] for h in hist], "o-")
-    ax.set_title(key, fontsize=9)
+    ax.set_title(TERMS[key][0], fontsize=9)
+    ax.set_ylabel(TERMS[key][1], fontsize=8)
     ax.set_xlabel("epoch")
 val = first.get("val", [])
 axs[-1].plot([v["epoch"] for v in val], [v["SR"] for v in val], "o-", color="#2ca02c")
