@@ -57,7 +57,7 @@ def approach_motions(root: str | Path, n: int | None = None) -> tuple[list, list
     files = sorted(Path(root).glob("approach_*.npz"))[:n]
     motions, names = [], []
     for f in files:
-        a = _approach_arrays(f, APPROACH_KEYS)
+        a = _approach_arrays(f, WINDOW_KEYS)
         if "grasp.accepted" in a and not bool(a["grasp.accepted"]):
             continue
         g = int(a["grasp.goal_frame"])
@@ -67,8 +67,8 @@ def approach_motions(root: str | Path, n: int | None = None) -> tuple[list, list
     return motions, names
 
 
-APPROACH_KEYS = ("obj_name", "body.params.fullpose", "body.params.transl", "body.betas", "grasp.goal_frame",
-                 "contact.feet")
+WINDOW_KEYS = ("obj_name", "body.params.fullpose", "body.params.transl", "body.betas", "grasp.goal_frame",
+               "contact.feet")   # what approach_motions reads of a clip (approach_scene reads APPROACH_KEYS)
 
 
 def _approach_arrays(path: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:

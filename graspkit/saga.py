@@ -32,6 +32,9 @@ if TYPE_CHECKING:
 CHECKPOINTS = DATA_STUBS / "checkpoints"
 MAX_START_DISTANCE = 3.0     # m: the farthest start taken; MotionFill fills 2 s, so past WALK_START_DISTANCE it runs
 WALK_START_DISTANCE = 1.0    # m: a start farther from the grasp than this gets a note (measured: 1.5 m peaks at 2.3 m/s)
+_RUN_NOTE = (f"covered in MotionFill's 2 s that is a run, not a walk (1.5 m: the pelvis peaks at 2.3 m/s; 3 m: 4.4 m/s "
+             "with both feet off the floor; the training approaches start a median 0.38 m away); keep the start within "
+             f"{WALK_START_DISTANCE:g} m of the grasp's pelvis for a walk (docs/saga_motion.md)")
 
 
 @dataclass
@@ -98,7 +101,9 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
     (it runs on torch's current threads; another count rounds the optimisers' sums differently; the command uses 1).
 
     object_pose: where the object is (default: drawn by `within_reach_pose(seed)` in front of the origin);
-    start: a Start (x, y, heading: a standing body there) or a one-frame Motion (any body) or None (see module doc).
+    start: a Start (x, y, heading: a standing body there) or a one-frame Motion (any body) or None: a standing body
+    `start_distance` m (at most 3) from the grasp's pelvis, facing the object (see module doc). MotionFill fills 2 s:
+    a start more than 1 m from the grasp's pelvis gets a warning (it makes a run, docs/saga_motion.md).
     free_joints: the body joints freed on top of the pose prior in GraspPose-Opt and GraspMotion-Opt
     (`GraspPoseConfig.free_joints`, `GraspMotionConfig.free_joints`; None: their default, the arm chains; () is
     Alg. 1's and Alg. 2's prior latent alone; docs/saga.md, docs/saga_motion.md).
@@ -126,11 +131,8 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
 
     check_int(seed, "seed")
     check_positive(start_distance, "start_distance", most=MAX_START_DISTANCE)
-    if start_distance > WALK_START_DISTANCE:
-        warnings.warn(f"start_distance: {start_distance:g} m to cover in MotionFill's 2 s is a run, not a walk (1.5 m: "
-                      "the pelvis peaks at 2.3 m/s; 3 m: 4.4 m/s with both feet off the floor; the training approaches "
-                      f"start a median 0.38 m away); keep it within {WALK_START_DISTANCE:g} m for a walk",
-                      GraspkitWarning, stacklevel=user_stacklevel())
+    if start is None and start_distance > WALK_START_DISTANCE:
+        warnings.warn(f"start_distance: {start_distance:g} m; {_RUN_NOTE}", GraspkitWarning, stacklevel=user_stacklevel())
     grasp_steps, motion_steps = check_steps(grasp_steps, "grasp_steps", 3), check_steps(motion_steps, "motion_steps", 2)
     if polish_steps is not None:
         polish_steps = check_steps(polish_steps, "polish_steps", 2)
@@ -189,6 +191,11 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
     else:                                                  # a Motion (checked at the top)
         st = start.slice(0, 1)
     st = Motion(st.poses, st.trans, betas, 30.0)         # the grasp's shape: beta is fixed in GraspMotion-Opt
+    if start is not None:                                  # start_distance was checked at the top
+        away = float(np.linalg.norm(st.joint_positions(bm)[0, 0, :2] - grasp_body.joint_positions(bm)[0, 0, :2]))
+        if away > WALK_START_DISTANCE:
+            warnings.warn(f"start: its pelvis is {away:.2f} m from the grasp's; {_RUN_NOTE}", GraspkitWarning,
+                          stacklevel=user_stacklevel())
 
     # stage 2: the window from the start (frame 0) to the grasp (frame T); only those two frames are known
     T = 60

@@ -63,7 +63,7 @@ def test_saga_warns_for_a_start_too_far_for_a_two_second_walk():
     """3 m in MotionFill's 2 s peaked at 4.4 m/s with both feet off the floor; the warning comes before any work."""
     from graspkit.saga import synthesize
 
-    with pytest.warns(GraspkitWarning, match=r"start_distance: 1\.5 m .* is a run, not a walk"), \
+    with pytest.warns(GraspkitWarning, match=r"start_distance: 1\.5 m; covered in MotionFill's 2 s that is a run"), \
             pytest.raises(ValueError, match="grasp_steps"):
         synthesize("mug", start_distance=1.5, grasp_steps=(0,))
 
@@ -103,3 +103,14 @@ def test_the_floor_grid_is_at_z_0_under_a_body_that_sinks(draw):
     assert grids and all(np.allclose(np.asarray(s)[:, 2], 0.0) for g in grids for s in g._segments3d)
     assert min(ax.get_zlim()[0] for ax in fig.axes if hasattr(ax, "get_zlim")) <= -0.34
     plt.close(fig)
+
+
+def test_saga_warns_for_a_given_start_too_far_for_a_two_second_walk():
+    """A Start 3 m away ran at 6 m/s without a word (only start_distance was checked)."""
+    from graspkit.data import Start
+    from graspkit.saga import synthesize
+
+    kw = dict(grasp_steps=(1, 1, 1), motion_steps=(1, 1), polish_steps=(1, 1), progress=False)
+    with pytest.warns(GraspkitWarning, match=r"start: its pelvis is [34]\.\d\d m from the grasp's; covered in"):
+        far = synthesize("mug", start=Start(3.0, 0.0, 0.0), **kw)
+    assert far.motion.num_frames == 61

@@ -381,7 +381,7 @@ def load_clipset(path: str | Path) -> ClipSet:
 
 def _check_clipset(a: dict[str, np.ndarray], path: Path) -> None:
     """ValueError naming `path` unless save_clipset's arrays agree: p (N, 135) finite, offsets rising from 0 to N,
-    one row per clip in the others (finite; goal frames -1 or inside the clip), distinct names."""
+    one row per clip in the others (finite; goal frames -1 or inside the clip)."""
     p, off = a["p"], a["offsets"]
     if p.ndim != 2 or p.shape[1] != 135 or p.dtype.kind != "f" or not np.isfinite(p).all():
         raise ValueError(f"{path}: key 'p' is {p.dtype} of shape {p.shape}, expected finite poses (N, 135)")
@@ -398,8 +398,6 @@ def _check_clipset(a: dict[str, np.ndarray], path: Path) -> None:
     gf, lengths = a["goal_frame"], np.diff(off)
     if ((gf != -1) & ((gf < 0) | (gf >= lengths))).any() or not np.isin(a["kind"], (0, 1)).all():
         raise ValueError(f"{path}: a goal frame outside its clip or a kind other than 0 / 1")
-    if len(set(a["names"].tolist())) != C:
-        raise ValueError(f"{path}: key 'names' names a clip twice")
 
 
 # The clip code's version, part of every cached ClipSet's name: raise it when load_clips would give other arrays for
