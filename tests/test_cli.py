@@ -447,12 +447,12 @@ def _slow_write(i: int, folder: str) -> int:
         time.sleep(0.5)
         raise ValueError("call 0 failed")
     tmp = Path(folder, f".call_{i}.tmp")
-    tmp.touch()
-    try:
+    try:                               # made inside the try: a stop landing just after the touch still removes it
+        tmp.touch()
         time.sleep(10.0)
         tmp.rename(Path(folder, f"call_{i}"))
     except BaseException:
-        tmp.unlink()
+        tmp.unlink(missing_ok=True)
         raise
     return i
 

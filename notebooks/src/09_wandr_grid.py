@@ -89,7 +89,10 @@ ax.scatter(*g[~ok].T, c="#d62728", marker="x", s=18, label="missed")
 ax.quiver(0, 0, 0, 0.8, 0, 0, color="k")
 ax.view_init(35, -60)
 ax.set_xlabel("x (m)"); ax.set_ylabel("y (m)"); ax.set_zlabel("z (m)")
-ax.set_box_aspect((1, 1, 2.5 * 1.8 / 10))             # heights drawn 2.5x the distances' scale, said in the title
+xy = np.vstack([g[:, :2], np.zeros((1, 2))])              # the goals and the start (the arrow at the origin)
+mid, half = (xy.max(0) + xy.min(0)) / 2, (xy.max(0) - xy.min(0)).max() / 2 + 0.3
+ax.set_xlim(mid[0] - half, mid[0] + half); ax.set_ylim(mid[1] - half, mid[1] + half); ax.set_zlim(0, 1.8)
+ax.set_box_aspect((2 * half, 2 * half, 2.5 * 1.8))       # x and y at one scale, heights at 2.5 times it
 ax.set_title(f"start 0 ({starts[0].source}): 125 goals (height ×2.5)", fontsize=9)
 ax.legend(fontsize=7)
 bx = fig.add_subplot(1, 2, 2)
