@@ -96,7 +96,7 @@ def check_betas(betas: Any, least: int) -> np.ndarray:
     if len(b) and abs(b[k]) > BETA_RANGE:
         warnings.warn(f"betas: coefficient {k} is {b[k]:g}, outside the ±{BETA_RANGE:g} the body was checked for and "
                       "the training data drew (docs/body_model.md); expect an odd body (all ten at -5: 0.94 m tall, "
-                      "2 L) and the models to do worse", GraspkitWarning, stacklevel=user_stacklevel())
+                      "2 L) and the models to do worse", ShapeWarning, stacklevel=user_stacklevel())
     return b
 
 
@@ -176,6 +176,10 @@ def count_type(least: int) -> Callable[[str], int]:
 
 class GraspkitWarning(UserWarning):
     """graspkit's own warnings (the command line shows them as `graspkit: note: ...` lines)."""
+
+
+class ShapeWarning(GraspkitWarning):
+    """Shape coefficients beyond ±BETA_RANGE (check_betas)."""
 
 
 _INSIDE = (os.path.dirname(os.path.abspath(__file__)) + os.sep,              # graspkit's folder, torch's

@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import torch
 
-from graspkit.checks import (GraspkitWarning, check_bool, check_int, check_positive, check_steps, check_type,
-                             user_stacklevel)
+from graspkit.checks import (GraspkitWarning, ShapeWarning, check_bool, check_int, check_positive, check_steps,
+                             check_type, user_stacklevel)
 from graspkit.data.motion import Motion
 from graspkit.data.reaching import Start
 from graspkit.objects.placement import ObjectPose
@@ -179,15 +179,18 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
     gtransl, betas = pr["transl"][0].detach().double().numpy(), pr["betas"][0].detach().double().numpy()
     grasp_body = Motion(gpose[None], gtransl[None], betas, 30.0)
 
-    # the start body
+    # the start body, in the grasp's shape: GraspPose-Opt fits betas without a bound (the mug's ends at -2.8 in one
+    # coefficient), so the planner's note on betas past ±2 would blame the caller for them
     if start is None or isinstance(start, Start):
         pelvis = grasp_body.joint_positions(bm)[0, 0]
-        if isinstance(start, Start):
-            from graspkit.data.reaching import plan_reach
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ShapeWarning)
+            if isinstance(start, Start):
+                from graspkit.data.reaching import plan_reach
 
-            st = plan_reach(start, centre, 60, betas=betas, seed=seed, bm=bm).slice(0, 1)
-        else:
-            st = default_start(pelvis, centre, betas, start_distance, bm, seed)
+                st = plan_reach(start, centre, 60, betas=betas, seed=seed, bm=bm).slice(0, 1)
+            else:
+                st = default_start(pelvis, centre, betas, start_distance, bm, seed)
     else:                                                  # a Motion (checked at the top)
         st = start.slice(0, 1)
     st = Motion(st.poses, st.trans, betas, 30.0)         # the grasp's shape: beta is fixed in GraspMotion-Opt

@@ -253,7 +253,9 @@ def test_a_clip_set_or_window_file_that_does_not_add_up_is_refused(tmp_path):
     for k, v, said in (("p", np.full((10, 135), np.nan, np.float32), "key 'p'"),
                        ("offsets", np.array([0, 4, 100]), "key 'offsets'"),
                        ("names", np.array(["a"]), "key 'names' is <U1 of shape"),
-                       ("goal_frame", np.array([-1, 6]), "a goal frame outside its clip")):
+                       ("goal_frame", np.array([-1, 6]), r"key 'goal_frame' is 6 for clip 1 \(b\), expected -1 \(no "
+                        r"goal\) or a frame in \[0, 6\)"),
+                       ("kind", np.array([0, 2]), r"key 'kind' is 2 for clip 1 \(b\), expected 0")):
         bad = tmp_path / f"bad_{k}.npz"
         np.savez(bad, **{**arrays, k: v})
         with pytest.raises(ValueError, match=rf"{bad.name}: {said}"):

@@ -81,17 +81,25 @@ def test_interpolated_trajectory_takes_a_windows_root_states_only():
             interpolated_trajectory(np.zeros((n, 4)))
     with pytest.raises(ValueError, match=r"traj: expected a window's root states"):
         global_motion(np.zeros((61, 3, 3)), np.zeros((61, 4)))
+    from graspkit.data.motionfill_dataset import local_motion
+
+    with pytest.raises(ValueError, match=r"traj: expected a window's root states .*got shape \(2, 62, 4\)"):
+        local_motion(np.zeros((61, 79, 3)), np.zeros((2, NUM_ROOT, 4)))        # one window, not a batch
+    with pytest.raises(ValueError, match=r"markers: expected one window's canonical markers \(61, M, 3\)"):
+        local_motion(np.zeros((2, 61, 79, 3)), traj)
 
 
-@pytest.mark.parametrize("draw", ["show_scene", "animate"])
-def test_the_floor_grid_is_at_z_0_under_a_body_that_sinks(draw):
-    """The grid was drawn under the lowest point, so a body 34 cm through the floor looked as if standing on it."""
+@pytest.mark.parametrize("draw, low, floor", [("show_scene", -0.34, 0.0), ("animate", -0.34, 0.0),
+                                              ("show_scene", -1.3, -1.3), ("animate", -1.3, -1.3)])
+def test_the_floor_grid_is_at_z_0_under_a_body_that_sinks(draw, low, floor):
+    """The grid was drawn under the lowest point, so a body 34 cm through the floor looked as if standing on it; a
+    scene not set on the floor (a body centred at its pelvis, feet at -1.3 m) keeps the grid under it."""
     import matplotlib.pyplot as plt
 
     from graspkit import viz
     from graspkit.viz.scene import LAYERS
 
-    box = np.array([[x, y, z] for x in (0, 0.3) for y in (0, 0.3) for z in (-0.34, 1.4)])
+    box = np.array([[x, y, z] for x in (0, 0.3) for y in (0, 0.3) for z in (low, 0.4)])
     faces = np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],
                       [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]])
     if draw == "show_scene":
@@ -100,8 +108,8 @@ def test_the_floor_grid_is_at_z_0_under_a_body_that_sinks(draw):
         anim = viz.animate(box[None].repeat(2, 0), faces, views=("front",), max_frames=None, close=False)
         fig = anim._fig
     grids = [c for ax in fig.axes for c in ax.collections if c.get_zorder() == LAYERS["ground"]]
-    assert grids and all(np.allclose(np.asarray(s)[:, 2], 0.0) for g in grids for s in g._segments3d)
-    assert min(ax.get_zlim()[0] for ax in fig.axes if hasattr(ax, "get_zlim")) <= -0.34
+    assert grids and all(np.allclose(np.asarray(s)[:, 2], floor) for g in grids for s in g._segments3d)
+    assert min(ax.get_zlim()[0] for ax in fig.axes if hasattr(ax, "get_zlim")) <= low + 1e-9
     plt.close(fig)
 
 

@@ -74,17 +74,20 @@ def interpolated_trajectory(traj: np.ndarray) -> np.ndarray:
     return g0 + s * (gT - g0)
 
 
-def _check_root_states(traj: np.ndarray, name: str) -> None:
-    """ValueError naming `name` unless it holds a window's root states (..., T+2, 4) (a longer trajectory would be read
-    at frame T, not its end)."""
-    if np.ndim(traj) < 2 or np.shape(traj)[-2:] != (NUM_ROOT, 4):
+def _check_root_states(traj: np.ndarray, name: str, batch: bool = True) -> None:
+    """ValueError naming `name` unless it holds a window's root states (..., T+2, 4) (batch=False: exactly one window,
+    (T+2, 4)); a longer trajectory would be read at frame T, not its end."""
+    if np.ndim(traj) < 2 or np.shape(traj)[-2:] != (NUM_ROOT, 4) or (not batch and np.ndim(traj) != 2):
         raise ValueError(f"{name}: expected a window's root states (..., {NUM_ROOT}, 4) (x, y, cos γ, sin γ for frames "
                          f"0..{T + 1}), got shape {np.shape(traj)}")
 
 
 def local_motion(markers: np.ndarray, traj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Canonical markers (T+1, M, 3) and Γ (T+2, 4) -> local markers (T+1, M, 3), root velocities (T+1, 3)."""
-    _check_root_states(traj, "traj")
+    _check_root_states(traj, "traj", batch=False)
+    if np.ndim(markers) != 3 or np.shape(markers)[0] != NUM_FRAMES or np.shape(markers)[2] != 3:
+        raise ValueError(f"markers: expected one window's canonical markers ({NUM_FRAMES}, M, 3), got shape "
+                         f"{np.shape(markers)}")
     g = np.arctan2(traj[:, 3], traj[:, 2])
     R = _rot2(-g[:NUM_FRAMES])                                     # world -> heading frame
     rel = markers.copy()

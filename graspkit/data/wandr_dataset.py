@@ -396,8 +396,12 @@ def _check_clipset(a: dict[str, np.ndarray], path: Path) -> None:
             raise ValueError(f"{path}: key {k!r} is {a[k].dtype} of shape {a[k].shape}, expected {shape} "
                              + ("strings" if k == "names" else "finite numbers"))
     gf, lengths = a["goal_frame"], np.diff(off)
-    if ((gf != -1) & ((gf < 0) | (gf >= lengths))).any() or not np.isin(a["kind"], (0, 1)).all():
-        raise ValueError(f"{path}: a goal frame outside its clip or a kind other than 0 / 1")
+    for c in np.flatnonzero((gf != -1) & ((gf < 0) | (gf >= lengths)))[:1]:
+        raise ValueError(f"{path}: key 'goal_frame' is {gf[c]} for clip {c} ({a['names'][c]}), expected -1 (no goal) "
+                         f"or a frame in [0, {lengths[c]})")
+    for c in np.flatnonzero(~np.isin(a["kind"], (0, 1)))[:1]:
+        raise ValueError(f"{path}: key 'kind' is {a['kind'][c]} for clip {c} ({a['names'][c]}), expected 0 (locomotion) "
+                         "or 1 (reach)")
 
 
 # The clip code's version, part of every cached ClipSet's name: raise it when load_clips would give other arrays for

@@ -21,7 +21,7 @@ from graspkit.paths import naming_errors, sweep_stale_temps
 from graspkit.progress import hidden
 from graspkit.viz.export import drawn_frames, publish, temp_beside
 from graspkit.viz.scene import (View, _mesh_polys, as_array, as_mesh, as_points, bounds_of, draw_ground, draw_meshes,
-                                draw_path, figure, set_equal, sphere, to_numpy)
+                                draw_path, figure, floor_height, set_equal, sphere, to_numpy)
 from graspkit.viz.style import GOAL, OBJECT, SKIN
 
 
@@ -84,18 +84,19 @@ def animate(frames: Any, faces: Any, objects: Sequence[tuple[Any, ...]] = (), go
         objs.append((ov[ticks] if ov.ndim == 3 else ov[None], item[1], item[2] if len(item) > 2 else OBJECT))
     goal_meshes = [(*sphere(c, goal_radius), GOAL) for c in as_points(goals, "goals")] if goals is not None else []
 
-    extent = [np.stack(body)] + [o[0] for o in objs] + [m[0] for m in goal_meshes] + [to_numpy(p) for p in paths]
-    lo, hi = bounds_of(*extent)
+    things = [np.stack(body)] + [o[0] for o in objs] + [to_numpy(p) for p in paths]     # what stands on the floor
+    lo, hi = bounds_of(*things, *[m[0] for m in goal_meshes])
+    gz = floor_height(*things)
     fig, axes = figure(views, size, title=title or " ", dpi=dpi)
     if ground:
         m = 0.25 * max(float((hi - lo)[:2].max()), 0.4)
         box = (lo[0] - m, hi[0] + m, lo[1] - m, hi[1] + m)
-        lo = np.minimum(lo, [box[0], box[2], min(0.0, lo[2])])
-        hi = np.maximum(hi, [box[1], box[3], 0.0])
+        lo = np.minimum(lo, [box[0], box[2], gz])
+        hi = np.maximum(hi, [box[1], box[3], gz])
     colls = []
     for ax in axes:
         if ground:
-            draw_ground(ax, box, z=0.0)              # the floor, whatever sinks under it
+            draw_ground(ax, box, z=gz)
         for p in paths:
             draw_path(ax, p)
         colls.append(draw_meshes(ax, []))

@@ -266,6 +266,17 @@ def bounds_of(*arrays: Any) -> np.ndarray:
     return np.stack([allp.min(0), allp.max(0)])
 
 
+FLOOR_SINK = 0.5   # m: a scene whose lowest point is no deeper than this under z = 0 stands on the floor z = 0
+
+
+def floor_height(*points: Any) -> float:
+    """Where the ground grid goes for a scene of points (..., 3): the floor z = 0 when the scene stands on it (a body
+    sinking up to FLOOR_SINK under it is drawn through it, not on it), else just under the lowest point (a scene not
+    set on a floor, such as a body centred at its pelvis)."""
+    lowest = float(bounds_of(*points)[0][2])
+    return 0.0 if lowest >= -FLOOR_SINK else lowest
+
+
 def set_equal(ax: Axes3D, *points: Any, pad: float = 0.05, zoom: float = 1.0) -> np.ndarray:
     """Equal metric scale on all axes over points (..., 3) (several arrays, or bounds (2,3)): limits get a
     pad (metres) and the box aspect equals the padded ranges; returns the limits (2, 3)."""
@@ -328,6 +339,7 @@ def show_scene(meshes: Sequence[Mesh] = (), points: Any = None, values: Any = No
             extent.append(as_points(a, name))
             if not np.isfinite(extent[-1]).all():
                 raise ValueError(f"{name}: contains NaN or Inf (expected positions in metres)")
+    things = extent[:-1] if goals is not None else extent          # what stands on the floor: not the goals
     if arrows is not None:
         o, d = np.broadcast_arrays(as_points(arrows[0], "origins"), as_points(arrows[1], "vectors"))
         extent += [o, o + d]
@@ -339,8 +351,8 @@ def show_scene(meshes: Sequence[Mesh] = (), points: Any = None, values: Any = No
         if goals is not None:
             lo, hi = lo - goal_radius, hi + goal_radius
         ground_box = None
-        if ground:  # a grid a quarter of the scene wider, on the floor z = 0 (a body under it shows through)
-            m, gz = 0.25 * max(float((hi - lo)[:2].max()), 0.4), 0.0
+        if ground:  # a grid a quarter of the scene wider, on the floor (floor_height)
+            m, gz = 0.25 * max(float((hi - lo)[:2].max()), 0.4), floor_height(*things or extent)
             ground_box = (lo[0] - m, hi[0] + m, lo[1] - m, hi[1] + m)
             lo = np.minimum(lo, [ground_box[0], ground_box[2], gz])
             hi = np.maximum(hi, [ground_box[1], ground_box[3], gz])
