@@ -63,9 +63,13 @@ def test_saga_warns_for_a_start_too_far_for_a_two_second_walk():
     """3 m in MotionFill's 2 s peaked at 4.4 m/s with both feet off the floor; the warning comes before any work."""
     from graspkit.saga import synthesize
 
-    with pytest.warns(GraspkitWarning, match=r"start_distance: 1\.5 m; covered in MotionFill's 2 s that is a run"), \
+    with pytest.warns(GraspkitWarning, match=r"start_distance: 2 m; covered in MotionFill's 2 s that is a run"), \
             pytest.raises(ValueError, match="grasp_steps"):
-        synthesize("mug", start_distance=1.5, grasp_steps=(0,))
+        synthesize("mug", start_distance=2.0, grasp_steps=(0,))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match="grasp_steps"):
+            synthesize("mug", start_distance=1.5, grasp_steps=(0,))
 
 
 def test_interpolated_trajectory_takes_a_windows_root_states_only():
@@ -107,6 +111,7 @@ def test_the_floor_grid_is_at_z_0_under_a_body_that_sinks(draw, low, floor):
     else:
         anim = viz.animate(box[None].repeat(2, 0), faces, views=("front",), max_frames=None, close=False)
         fig = anim._fig
+        anim._draw_was_started = True           # not rendered on purpose: matplotlib would warn when it goes
     grids = [c for ax in fig.axes for c in ax.collections if c.get_zorder() == LAYERS["ground"]]
     assert grids and all(np.allclose(np.asarray(s)[:, 2], floor) for g in grids for s in g._segments3d)
     assert min(ax.get_zlim()[0] for ax in fig.axes if hasattr(ax, "get_zlim")) <= low + 1e-9
