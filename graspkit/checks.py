@@ -86,8 +86,8 @@ BETA_RANGE = 2.0   # shape coefficients the body was checked for (docs/body_mode
 
 
 def check_betas(betas: Any, least: int) -> np.ndarray:
-    """Shape coefficients as a float64 1-D array of at least `least` finite values; a GraspkitWarning for one beyond
-    ±BETA_RANGE."""
+    """Shape coefficients as a float64 1-D array of at least `least` finite values; a ShapeWarning (a GraspkitWarning)
+    for one beyond ±BETA_RANGE."""
     b = np.asarray(betas, np.float64)
     if b.ndim != 1 or len(b) < least or not np.isfinite(b).all():
         raise ValueError(f"betas: expected at least {least} finite shape coefficients (a 1-D array), got shape "

@@ -181,8 +181,8 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
 
     # the start body, in the grasp's shape: GraspPose-Opt fits betas without a bound (the mug's ends at -2.8 in one
     # coefficient), so the planner's note on betas past ±2 would blame the caller for them
+    pelvis = grasp_body.joint_positions(bm)[0, 0]
     if start is None or isinstance(start, Start):
-        pelvis = grasp_body.joint_positions(bm)[0, 0]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ShapeWarning)
             if isinstance(start, Start):
@@ -195,7 +195,7 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
         st = start.slice(0, 1)
     st = Motion(st.poses, st.trans, betas, 30.0)         # the grasp's shape: beta is fixed in GraspMotion-Opt
     if start is not None:                                  # start_distance was checked at the top
-        away = float(np.linalg.norm(st.joint_positions(bm)[0, 0, :2] - grasp_body.joint_positions(bm)[0, 0, :2]))
+        away = float(np.linalg.norm(st.joint_positions(bm)[0, 0, :2] - pelvis[:2]))
         if away > WALK_START_DISTANCE:
             warnings.warn(f"start: its pelvis is {away:.2f} m from the grasp's; {_RUN_NOTE}", GraspkitWarning,
                           stacklevel=user_stacklevel())

@@ -602,7 +602,7 @@ def range_notes(distance: float, height: float, seconds: float) -> dict[str, str
 
 
 def _warn_out_of_range(p0: Tensor, goal: Tensor, t_goal: Tensor) -> None:
-    """A GraspkitWarning for each kind of range_notes that a start-goal pair of the batch (p0 (B, 135), goal (B, 3),
+    """A RangeWarning for each kind of range_notes that a start-goal pair of the batch (p0 (B, 135), goal (B, 3),
     t_goal (B,) frames) meets, naming its worst pair."""
     dist = torch.linalg.vector_norm(goal[:, :2].double() - p0[:, :2].double(), dim=-1)
     sec = t_goal.double() / I.FPS
