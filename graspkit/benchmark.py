@@ -225,14 +225,11 @@ def run_saga(root: Path, out: Path, quick: bool, checkpoints: Path) -> dict:
 
 def run_saga_motion(approach: Path, out: Path, quick: bool, checkpoints: Path) -> dict:
     """graspkit.eval_motionfill's Tab. 3 on the test-object approach windows in `approach` (quick: 3 samples)."""
-    import json
-
     from graspkit.body import BodyModel
     from graspkit.data.grasp import split_of
     from graspkit.data.motionfill_dataset import make_windows
     from graspkit.eval_motionfill import approach_motions, evaluate, load_motionfill
-    from graspkit.paths import default_model_path
-    from graspkit.viz.export import write_atomic
+    from graspkit.paths import default_model_path, write_json
 
     motions, names = approach_motions(approach)
     if not motions:
@@ -244,7 +241,7 @@ def run_saga_motion(approach: Path, out: Path, quick: bool, checkpoints: Path) -
     n = 3 if quick else 10
     rows = evaluate(load_motionfill(checkpoints / "motionfill.pt"), arr, test, n=n)
     res = {"rows": rows, "test_windows": int(np.isin(arr["clip"], test).sum()), "samples": n}
-    write_atomic(out, json.dumps(res, indent=1))
+    write_json(out, res)
     return res
 
 
@@ -258,13 +255,11 @@ def run_goal(folders: list[Path], out: Path, quick: bool, checkpoints: Path) -> 
 
 def run_wandr(checkpoint: Path, out: Path, quick: bool) -> dict:
     """graspkit.eval_wandr's goal grid (quick: one sample per start and goal), with the planner; saved as JSON."""
-    import json
-
     from graspkit.eval_wandr import run_eval_wandr
-    from graspkit.viz.export import write_atomic
+    from graspkit.paths import write_json
 
     res = run_eval_wandr(str(checkpoint), n=1 if quick else 5, planner=True, threads=torch.get_num_threads())
-    write_atomic(out, json.dumps(res, indent=1, default=float))
+    write_json(out, res)
     return res
 
 

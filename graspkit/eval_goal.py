@@ -647,7 +647,6 @@ def evaluate(folders: Sequence[str | Path] | None = None, stubs: str | Path | No
              max_frames: int = 300, progress: bool = True) -> dict:
     """GOAL Tab. 1, Tab. 2 and foot sliding on the test objects with the shipped checkpoints (MNet's rollouts up to
     `max_frames` each); written as JSON. `progress`: a bar over the four phases (minutes each at the defaults)."""
-    import json
     import time
     from pathlib import Path
 
@@ -657,7 +656,7 @@ def evaluate(folders: Sequence[str | Path] | None = None, stubs: str | Path | No
     from graspkit.models.mnet import MNetConfig, load_mnet
     from graspkit.paths import DATA_STUBS
     from graspkit.progress import hidden
-    from graspkit.viz.export import write_atomic
+    from graspkit.paths import write_json
 
     folders = folders or default_data_folders()
     stubs = Path(stubs or DATA_STUBS / "checkpoints")
@@ -690,10 +689,10 @@ def evaluate(folders: Sequence[str | Path] | None = None, stubs: str | Path | No
         seqs = rollout_sequences(folders, n_rollouts)
         res.update(rollout_results(seqs, stubs, gnet, seed, max_frames))
         out = Path(out or stubs / "goal_eval.json")
-        write_atomic(out, json.dumps(res, indent=1, default=float))  # GOAL's tables first: SAGA's row takes minutes
+        write_json(out, res)                   # GOAL's tables first: SAGA's row takes minutes
         bar.update()
         bar.set_postfix_str("SAGA's rows: synthesize per clip")
-        write_atomic(out, json.dumps(add_saga_rows(res, seqs, seed), indent=1, default=float))
+        write_json(out, add_saga_rows(res, seqs, seed))
         bar.update()
     return res
 
@@ -834,8 +833,7 @@ def main(argv: list[str] | None = None) -> int:
         check_out(a.out, is_file=True)                # before any work
     torch.set_num_threads(a.threads)
     if a.tab1_only or a.saga_only or a.rollouts_only:          # update one part of an existing evaluation
-        from graspkit.paths import DATA_STUBS
-        from graspkit.viz.export import write_atomic
+        from graspkit.paths import DATA_STUBS, write_json
 
         stubs = Path(a.checkpoints or DATA_STUBS / "checkpoints")
         out = Path(a.out or stubs / "goal_eval.json")
@@ -876,7 +874,7 @@ def main(argv: list[str] | None = None) -> int:
         r.setdefault("updates", []).append({"flag": flag, "n_grasps": a.n_grasps, "n_rollouts": a.n_rollouts,
                                             "seed": a.seed, "max_frames": a.max_frames,
                                             "threads": torch.get_num_threads()})     # what changed the file since
-        write_atomic(out, json.dumps(r, indent=1, default=float))
+        write_json(out, r)
         print(json.dumps(shown, indent=1))
         return 0
     r = evaluate(a.data, a.checkpoints, a.n_grasps, a.n_rollouts, a.window_stride, a.seed, a.out, a.max_frames)

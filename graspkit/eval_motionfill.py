@@ -712,8 +712,8 @@ def write_example(files: list[Path], out: Path, seed: int = 0) -> dict[str, Any]
     """Lesson 06's worked example: GraspMotion-Opt on `files` (batched); the first clip's sample, fit and contacts to
     `out`.npz, every clip's row, the step log and how it was made to `out`.json."""
     import io
-    import json
 
+    from graspkit.paths import write_json
     from graspkit.viz.export import write_atomic
 
     ev = graspmotion_eval(load_motionfill(), files, seed=seed)
@@ -727,7 +727,7 @@ def write_example(files: list[Path], out: Path, seed: int = 0) -> dict[str, Any]
             "made_by": f"python -m graspkit.eval_motionfill example (graspmotion_eval(load_motionfill(), "
                        f"{[f.name for f in files]}, seed={seed}) with the default GraspMotionConfig)"}
     write_atomic(out.with_suffix(".npz"), buf.getvalue())
-    write_atomic(out.with_suffix(".json"), json.dumps(info, indent=1))
+    write_json(out.with_suffix(".json"), info)
     return info
 
 
@@ -735,14 +735,14 @@ def update_json(path: Path, **sections: Any) -> dict[str, Any]:
     """Replace `sections` of the JSON file at `path` (created if missing, other keys kept; written atomically)."""
     import json
 
-    from graspkit.viz.export import write_atomic
+    from graspkit.paths import write_json
 
     doc = json.loads(path.read_text()) if path.is_file() else {}
     if not isinstance(doc, dict):
         raise ValueError(f"path: {path} holds a JSON {type(doc).__name__}, expected an object to update")
     doc.update(sections)
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_atomic(path, json.dumps(doc, indent=1))
+    write_json(path, doc)
     return doc
 
 

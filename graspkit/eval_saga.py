@@ -41,7 +41,7 @@ from torch import Tensor
 from graspkit.checks import GraspkitWarning, positive_float, user_stacklevel
 from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_folders, check_out, check_train_out, reports_errors
 from graspkit.optim.grasppose import ARM_JOINTS, GraspPoseConfig, GraspPoseWeights
-from graspkit.paths import DATA_STUBS, write_atomic
+from graspkit.paths import DATA_STUBS, write_json
 from graspkit.state import keeps_torch_state
 
 if TYPE_CHECKING:
@@ -371,14 +371,14 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
         add("GT + E_colli", rows["fit_g_colli"][nw:])
         add("GT + E_cont", rows["full"][nw:])
         if out is not None:                                # partial results survive an interrupted run
-            _write_json(Path(out).with_suffix(".partial.json"),
+            write_json(Path(out).with_suffix(".partial.json"),
                         {"config": asdict(cfg), "seconds": time.perf_counter() - t0, "per_object": per_object})
     result = {"config": asdict(cfg), "seconds": time.perf_counter() - t0,
               "rows": {k: {**summarise(a["rows"]), **({"apd": float(np.mean(a["apd"]))} if a["apd"] else {})}
                        for k, a in acc.items()},
               "per_object": per_object}
     if out is not None:
-        _write_json(out, result)
+        write_json(out, result)
         Path(out).with_suffix(".partial.json").unlink(missing_ok=True)    # only an interrupted run leaves one
     return result
 
@@ -427,7 +427,7 @@ def finish_partial(partial: str | Path, out: str | Path = RESULTS_PATH) -> dict[
     cfg = dict(part["config"], objects=list(part["per_object"]))
     result = {"config": cfg, "seconds": part.get("seconds"), "rows": rows_from_objects(part["per_object"]),
               "per_object": part["per_object"], "interrupted": True}
-    _write_json(out, result)
+    write_json(out, result)
     return result
 
 
@@ -455,22 +455,6 @@ def _absolute_rotmats(fullpose: Tensor) -> Tensor:
     from graspkit.rotations import axis_angle_to_matrix
 
     return axis_angle_to_matrix(fullpose)
-
-
-def _write_json(path: str | Path, obj: Any) -> Path:
-    """Atomic JSON write (temporary file, then rename)."""
-    return write_atomic(path, json.dumps(_finite_or_null(obj), indent=1, allow_nan=False))
-
-
-def _finite_or_null(obj: Any) -> Any:
-    """obj with every NaN or infinite float as None (null: strict JSON has no NaN, and readers such as jq refuse it)."""
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {k: _finite_or_null(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite_or_null(v) for v in obj]
-    return obj
 
 
 def load_results(path: str | Path = RESULTS_PATH) -> dict[str, Any]:

@@ -221,6 +221,27 @@ def write_atomic(path: str | os.PathLike, data: bytes | str) -> Path:
     return path
 
 
+def write_json(path: str | os.PathLike, obj: Any) -> Path:
+    """obj as indented strict JSON at path, atomically: NaN and infinities become null (readers such as jq refuse
+    them), numpy numbers plain numbers."""
+    import json
+
+    return write_atomic(path, json.dumps(_finite_or_null(obj), indent=1, allow_nan=False))
+
+
+def _finite_or_null(obj: Any) -> Any:
+    """obj with numpy numbers as Python ones and every NaN or infinite float as None."""
+    if hasattr(obj, "item") and getattr(obj, "shape", None) == ():      # a numpy scalar or 0-d array
+        obj = obj.item()
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite_or_null(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite_or_null(v) for v in obj]
+    return obj
+
+
 STALE_TMP_S = 600.0          # s: a temporary file older than this beside its target was left by a killed writer
 _SWEPT: dict[tuple[str, str], float] = {}      # (folder, file type) -> time.monotonic() of this process's last sweep
 

@@ -191,7 +191,8 @@ def test_a_json_to_update_that_is_no_object_is_refused(tmp_path):
 
 def test_finishing_a_partial_of_another_layout_is_refused_and_no_json_holds_nan(tmp_path):
     """finish_partial wrote `"seconds": NaN` (no strict JSON reader takes it) and crashed in table1 after."""
-    from graspkit.eval_saga import _write_json, finish_partial
+    from graspkit.eval_saga import finish_partial
+    from graspkit.paths import write_json
 
     part = tmp_path / "x.partial.json"
     part.write_text(json.dumps({"config": {}, "per_object": {"mug": {"WholeGrasp w/ opt. (Ours)": {"n": 4,
@@ -204,7 +205,7 @@ def test_finishing_a_partial_of_another_layout_is_refused_and_no_json_holds_nan(
     finish_partial(part, tmp_path / "out.json")
     doc = json.loads((tmp_path / "out.json").read_text(), parse_constant=lambda c: pytest.fail(f"{c} in the JSON"))
     assert doc["seconds"] is None and doc["rows"]["WholeGrasp w/ opt. (Ours)"]["contact_ratio"] == 0.5
-    _write_json(tmp_path / "nan.json", {"a": [float("nan"), 1.0], "b": float("inf")})
+    write_json(tmp_path / "nan.json", {"a": [float("nan"), 1.0], "b": float("inf")})
     assert json.loads((tmp_path / "nan.json").read_text()) == {"a": [None, 1.0], "b": None}
 
 

@@ -34,7 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from graspkit.checks import GraspkitWarning, user_stacklevel
-from graspkit.data.formats import SequenceFileError, check_source_rate, npz_load_error, resample, write_npz_atomic
+from graspkit.data.formats import (SequenceFileError, _numbers, _scalar, check_source_rate, npz_load_error, resample,
+                                   write_npz_atomic)
 from graspkit.data.motion import check_fps
 
 BODY_PARTS = (("global_orient", 0, 1), ("body_pose", 1, 22), ("jaw_pose", 22, 23), ("leye_pose", 23, 24),
@@ -200,10 +201,7 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
         return a[key]
 
     def numbers(key: str) -> np.ndarray:
-        v = np.asarray(get(key))
-        if v.dtype.kind not in "biuf":
-            raise SequenceFileError(f"{path}: key {key!r} holds {v.dtype} values, expected numbers")
-        return v.astype(np.float64)
+        return _numbers(get(key), key, path)
 
     def per_frame(key: str, width: int) -> np.ndarray:
         v = numbers(key)
@@ -258,11 +256,7 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
         if not np.isfinite(b).all():
             raise SequenceFileError(f"{path}: key 'body.betas' contains NaN or Inf")
         betas[:min(10, len(b))] = b[:10]
-    rate = np.asarray(a.get("framerate", np.array(30.0)))
-    src = float(rate.reshape(-1)[0]) if rate.size == 1 and rate.dtype.kind in "iuf" else float("nan")
-    if not (rate.size == 1 and rate.dtype.kind in "iuf"):
-        raise SequenceFileError(f"{path}: key 'framerate' is of shape {rate.shape} ({rate.dtype}), expected one number")
-    check_source_rate(src, "framerate", path)
+    src = check_source_rate(_scalar(a.get("framerate", np.array(30.0)), "framerate", path), "framerate", path)
     o_t = per_frame("object.params.transl", 3)
     o_r = per_frame("object.params.global_orient", 3)
     contacts = {k[len("contact."):]: np.asarray(v) for k, v in a.items() if k.startswith("contact.")}
