@@ -28,6 +28,8 @@ from graspkit.paths import DATA_STUBS, require_checkpoints
 
 if TYPE_CHECKING:
     from graspkit.body import BodyModel
+    from graspkit.optim.graspmotion import GraspMotionConfig
+    from graspkit.optim.grasppose import GraspObject, GraspPoseConfig
 
 CHECKPOINTS = DATA_STUBS / "checkpoints"
 MAX_START_DISTANCE = 3.0     # m: the farthest start taken; MotionFill fills 2 s, so past WALK_START_DISTANCE it runs
@@ -114,28 +116,45 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
     frame").
     """
     from graspkit.body import BodyModel
-    from graspkit.body.markers import saga_sparse_markers
     from graspkit.data.grasp_io import object_collision_grid
-    from graspkit.data.motion import canonicalize
-    from graspkit.data.motionfill_dataset import make_windows
-    from graspkit.eval_motionfill import heel_columns, interp, load_motionfill, skating
-    from graspkit.metrics import floor_figures, grasp_and_end_figures
     from graspkit.models.pose_prior import load_pose_prior
     from graspkit.models.wholegrasp import load_wholegrasp
     from graspkit.objects.placement import apply_pose, within_reach_pose
-    from graspkit.objects.sampling import sample_surface
     from graspkit.objects.user import as_object
-    from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, load_smooth_ae
-    from graspkit.optim.grasppose import GraspObject, GraspPoseConfig, GraspPoseOpt
+    from graspkit.optim.grasppose import GraspObject
     from graspkit.paths import default_model_path
 
+    _check_args(bm, start, seed, start_distance, object_pose, hold_start)
+    gcfg, mcfg = _configs(grasp_steps, motion_steps, free_joints, polish_steps)
+    given = name                     # as the caller gave it: a catalogue name keeps its cached grid
+    name, obj_mesh = as_object(name, "name")
+    ck = check_checkpoints(checkpoints)
+    bm = bm if bm is not None else BodyModel.from_file(default_model_path())
+    pose = object_pose if object_pose is not None else within_reach_pose(seed)
+    g = torch.Generator().manual_seed(seed)
+    R_o, centre = np.asarray(pose.rotation, np.float64), np.asarray(pose.translation, np.float64)
+    P, N = _object_points(obj_mesh, R_o)
+    prior = load_pose_prior(ck / "pose_prior.pt")
+    s = load_wholegrasp(ck / "wholegrasp.pt").sample(P, N, float(centre[2]), 1, g, centre=torch.zeros(3))
+    obj = GraspObject(P, N, float(centre[2]), object_collision_grid(given, obj_mesh, progress),
+                      torch.as_tensor(R_o).float())
+    res, grasp_body = _grasp_stage(s, obj, centre, bm, prior, gcfg, progress)
+    st = _start_body(start, grasp_body, centre, start_distance, bm, seed)
+    motion, markers_w, contacts, fitted = _motion_stage(ck, bm, prior, obj, R_o, centre, grasp_body, st, s, mcfg,
+                                                         g, hold_start, progress)
+    mesh = apply_pose(pose, obj_mesh)
+    return SagaResult(name, pose, mesh, res, motion, st, markers_w, contacts,
+                      _figures(res, motion, markers_w, fitted, mesh, bm))
+
+
+def _check_args(bm: BodyModel | None, start: Start | Motion | None, seed: int, start_distance: float,
+                object_pose: ObjectPose | None, hold_start: bool) -> None:
+    """synthesize's arguments that its configs do not check (ValueError / TypeError naming the argument)."""
     check_int(seed, "seed")
     check_positive(start_distance, "start_distance", most=MAX_START_DISTANCE)
     if start is None and start_distance > WALK_START_DISTANCE:
-        warnings.warn(f"start_distance: {start_distance:g} m; {_RUN_NOTE}", GraspkitWarning, stacklevel=user_stacklevel())
-    grasp_steps, motion_steps = check_steps(grasp_steps, "grasp_steps", 3), check_steps(motion_steps, "motion_steps", 2)
-    if polish_steps is not None:
-        polish_steps = check_steps(polish_steps, "polish_steps", 2)
+        warnings.warn(f"start_distance: {start_distance:g} m; {_RUN_NOTE}", GraspkitWarning,
+                      stacklevel=user_stacklevel())
     check_bool(hold_start, "hold_start")
     check_type(object_pose, ObjectPose, "object_pose", optional=True)
     if start is not None and not isinstance(start, (Start, Motion)):
@@ -145,44 +164,60 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
     if bm is not None and getattr(bm, "dtype", None) != torch.float32:
         raise ValueError(f"bm: expected a float32 BodyModel (the networks and optimisers run in float32), got "
                          f"{getattr(bm, 'dtype', type(bm).__name__)}")
-    given = name                     # as the caller gave it: a catalogue name keeps its cached grid
-    name, obj_mesh = as_object(name, "name")
-    ck = check_checkpoints(checkpoints)
-    bm = bm if bm is not None else BodyModel.from_file(default_model_path())
-    pose = object_pose if object_pose is not None else within_reach_pose(seed)
-    R_o, centre = np.asarray(pose.rotation, np.float64), np.asarray(pose.translation, np.float64)
-    pts, nrm = sample_surface(obj_mesh, 2048, seed=0)      # as graspkit.data.grasp.object_points for the catalogue
-    R_t = torch.as_tensor(R_o).float()
-    P, N = torch.as_tensor(pts).float() @ R_t.T, torch.as_tensor(nrm).float() @ R_t.T   # object frame (world axes)
-    g = torch.Generator().manual_seed(seed)
 
-    # stage 1: WholeGrasp-VAE + GraspPose-Opt (object frame), then into the world
-    wg = load_wholegrasp(ck / "wholegrasp.pt")
-    prior = load_pose_prior(ck / "pose_prior.pt")
-    s = wg.sample(P, N, float(centre[2]), 1, g, centre=torch.zeros(3))
-    gcfg = GraspPoseConfig(steps=grasp_steps)
-    mcfg = GraspMotionConfig(steps=motion_steps)
-    if free_joints is not None:
-        mcfg = replace(mcfg, free_joints=tuple(free_joints))
+
+def _configs(grasp_steps: tuple[int, int, int], motion_steps: tuple[int, int], free_joints: tuple[str, ...] | None,
+             polish_steps: tuple[int, int] | None) -> tuple[GraspPoseConfig, GraspMotionConfig]:
+    """GraspPose-Opt's and GraspMotion-Opt's configs from synthesize's step counts and freed joints (checked)."""
+    from graspkit.optim.graspmotion import GraspMotionConfig
+    from graspkit.optim.grasppose import GraspPoseConfig
+
+    gcfg = GraspPoseConfig(steps=check_steps(grasp_steps, "grasp_steps", 3))
+    mcfg = GraspMotionConfig(steps=check_steps(motion_steps, "motion_steps", 2))
     if polish_steps is not None:
+        polish_steps = check_steps(polish_steps, "polish_steps", 2)
         gcfg = replace(gcfg, polish=(int(polish_steps[0]), gcfg.polish[1]))
         mcfg = replace(mcfg, polish=(int(polish_steps[1]), mcfg.polish[1]))
-    opt = GraspPoseOpt(bm, prior, gcfg if free_joints is None else replace(gcfg, free_joints=tuple(free_joints)))
-    grid = object_collision_grid(given, obj_mesh, progress)
-    res = opt.fit(s.markers, GraspObject(P, N, float(centre[2]), grid, R_t), s.marker_contact, s.object_contact,
-                  progress=progress).to_world(torch.as_tensor(centre).float())
-    mesh = apply_pose(pose, obj_mesh)
+    if free_joints is not None:
+        gcfg, mcfg = replace(gcfg, free_joints=tuple(free_joints)), replace(mcfg, free_joints=tuple(free_joints))
+    return gcfg, mcfg
+
+
+def _object_points(obj_mesh: Any, R_o: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
+    """The object's 2048 surface points and normals (2048,3) in the object frame: centred at the mesh origin, turned
+    by its world rotation R_o (3,3)."""
+    from graspkit.objects.sampling import sample_surface
+
+    pts, nrm = sample_surface(obj_mesh, 2048, seed=0)      # as graspkit.data.grasp.object_points for the catalogue
+    R_t = torch.as_tensor(R_o).float()
+    return torch.as_tensor(pts).float() @ R_t.T, torch.as_tensor(nrm).float() @ R_t.T
+
+
+def _grasp_stage(s: Any, obj: GraspObject, centre: np.ndarray, bm: BodyModel, prior: Any, gcfg: GraspPoseConfig,
+                 progress: bool) -> tuple[Any, Motion]:
+    """Stage 1 (§3.2, Alg. 1): GraspPose-Opt fits the WholeGrasp-VAE sample `s` in the object frame; the fit moved
+    into the world (the object's centre (3,) there) and the grasp body as a one-frame Motion (world)."""
+    from graspkit.optim.grasppose import GraspPoseOpt
+
+    res = GraspPoseOpt(bm, prior, gcfg).fit(s.markers, obj, s.marker_contact, s.object_contact,
+                                            progress=progress).to_world(torch.as_tensor(centre).float())
     pr = res.params
     gpose = torch.cat([pr["global_orient"][:, None], pr["body_pose"].view(1, 21, 3), pr["jaw_pose"][:, None],
                        pr["leye_pose"][:, None], pr["reye_pose"][:, None], pr["left_hand_pose"].view(1, 15, 3),
                        pr["right_hand_pose"].view(1, 15, 3)], 1)[0].detach().double().numpy()
     gtransl, betas = pr["transl"][0].detach().double().numpy(), pr["betas"][0].detach().double().numpy()
-    grasp_body = Motion(gpose[None], gtransl[None], betas, 30.0)
+    return res, Motion(gpose[None], gtransl[None], betas, 30.0)
 
-    # the start body, in the grasp's shape: GraspPose-Opt fits betas without a bound (the mug's ends at -2.8 in one
-    # coefficient), so the planner's note on betas past ±2 would blame the caller for them
+
+def _start_body(start: Start | Motion | None, grasp_body: Motion, centre: np.ndarray, start_distance: float,
+                bm: BodyModel, seed: int) -> Motion:
+    """The start body (one frame, world) in the grasp body's shape, from synthesize's `start` (module doc); a
+    warning when a given start stands farther than WALK_START_DISTANCE from the grasp's pelvis."""
     pelvis = grasp_body.joint_positions(bm)[0, 0]
+    betas = grasp_body.betas
     if start is None or isinstance(start, Start):
+        # GraspPose-Opt fits betas without a bound (the mug's ends at -2.8 in one coefficient), so the planner's
+        # note on betas past ±2 would blame the caller for them
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ShapeWarning)
             if isinstance(start, Start):
@@ -191,17 +226,33 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
                 st = plan_reach(start, centre, 60, betas=betas, seed=seed, bm=bm).slice(0, 1)
             else:
                 st = default_start(pelvis, centre, betas, start_distance, bm, seed)
-    else:                                                  # a Motion (checked at the top)
+    else:                                                  # a Motion (checked by _check_args)
         st = start.slice(0, 1)
     st = Motion(st.poses, st.trans, betas, 30.0)         # the grasp's shape: beta is fixed in GraspMotion-Opt
-    if start is not None:                                  # start_distance was checked at the top
+    if start is not None:                                  # start_distance was checked by _check_args
         away = float(np.linalg.norm(st.joint_positions(bm)[0, 0, :2] - pelvis[:2]))
         if away > WALK_START_DISTANCE:
             warnings.warn(f"start: its pelvis is {away:.2f} m from the grasp's; {_RUN_NOTE}", GraspkitWarning,
                           stacklevel=user_stacklevel())
+    return st
 
-    # stage 2: the window from the start (frame 0) to the grasp (frame T); only those two frames are known
-    T = 60
+
+def _motion_stage(ck: Path, bm: BodyModel, prior: Any, obj: GraspObject, R_o: np.ndarray, centre: np.ndarray,
+                  grasp_body: Motion, st: Motion, s: Any, mcfg: GraspMotionConfig, g: torch.Generator, hold_start: bool,
+                  progress: bool) -> tuple[Motion, torch.Tensor, torch.Tensor, np.ndarray]:
+    """Stage 2 (§3.3-3.4): the window from the start (frame 0) to the grasp (frame T), of which only those two frames
+    are known, infilled by a MotionFill-VAE sample and fitted by GraspMotion-Opt (Alg. 2) in the window's canonical
+    frame; the motion (T+1 frames, world), the sampled markers (T+1,79,3) in the world, their foot contacts (T+1,4)
+    and the fitted markers (T+1,79,3) in the world. `s` is stage 1's WholeGrasp sample (its contact maps)."""
+    from graspkit.body.markers import saga_sparse_markers
+    from graspkit.data.motion import canonicalize
+    from graspkit.data.motionfill_dataset import make_windows
+    from graspkit.eval_motionfill import interp, load_motionfill
+    from graspkit.optim.graspmotion import GraspMotionOpt, load_smooth_ae
+    from graspkit.optim.grasppose import GraspObject
+
+    T, betas = 60, grasp_body.betas
+    gpose, gtransl = grasp_body.poses[0], grasp_body.trans[0]
     clip = Motion(np.concatenate([st.poses[:1], np.repeat(gpose[None], T, 0)]),
                   np.concatenate([st.trans[:1], np.repeat(gtransl[None], T, 0)]), betas, 30.0)
     win = make_windows([clip], bm, align_end=True, progress=False, start_at_rest=True)   # frame 0 stands; 0 -> 1 is a jump
@@ -211,28 +262,34 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
     smp = mf.sample(torch.as_tensor(interp(win["traj"][0])).float(), torch.as_tensor(win["local"][0]),
                     torch.as_tensor(win["contacts"][0]).float(), 1, g)
     to_c = lambda x: (np.asarray(x, np.float64) - o_c) @ R_c.T  # noqa: E731
-    obj = GraspObject(torch.as_tensor(to_c(P.double().numpy() + centre)).float()[None],
-                      torch.as_tensor(N.double().numpy() @ R_c.T).float()[None], 0.0, grid,
-                      torch.as_tensor(R_c @ R_o).float(), torch.as_tensor(to_c(centre)).float())
+    cobj = GraspObject(torch.as_tensor(to_c(obj.points.double().numpy() + centre)).float()[None],
+                       torch.as_tensor(obj.normals.double().numpy() @ R_c.T).float()[None], 0.0, obj.sdf,
+                       torch.as_tensor(R_c @ R_o).float(), torch.as_tensor(to_c(centre)).float())
     mopt = GraspMotionOpt(bm, prior, load_smooth_ae(ck / "motionfill_smooth_ae.pt"), mcfg)
     start_markers = None                             # frame 0's target: the start body's markers in the sample's frame
     if hold_start:
         start_markers = torch.as_tensor(to_c(saga_sparse_markers(bm).select(st.vertices(bm))[0].double().numpy()))
-    mres = mopt.fit(smp["markers"], torch.as_tensor(betas[None, :10]).float(), smp["contacts"], obj,
+    mres = mopt.fit(smp["markers"], torch.as_tensor(betas[None, :10]).float(), smp["contacts"], cobj,
                     s.object_contact.float(), progress=progress, floor=torch.tensor([to_c(np.zeros(3))[2]]).float(),
                     marker_contact=s.marker_contact.float(),
                     start=None if start_markers is None else start_markers.float()[None])
     poses_w, transl_w = rigid_params(mres.params["poses"][0].view(-1, 55, 3).double().numpy(),
                                      mres.params["transl"][0].double().numpy(), betas, R_c.T, o_c, bm)
-    motion = Motion(poses_w, transl_w, betas, 30.0)
     markers_w = torch.as_tensor(smp["markers"][0].double().numpy() @ R_c + o_c).float()
-
-    # figures: the grasp body and the motion's last frame against the object; SAGA's skating of the fitted markers
-    last = motion.vertices(bm, T, T + 1)[0]
     fitted = mres.markers[0].double().numpy() @ R_c + o_c
+    return Motion(poses_w, transl_w, betas, 30.0), markers_w, smp["contacts"][0], fitted
+
+
+def _figures(res: Any, motion: Motion, markers_w: torch.Tensor, fitted: np.ndarray, mesh: Any,
+             bm: BodyModel) -> dict[str, float]:
+    """The grasp body and the motion's last frame against the object (world), the grasp body's lowest vertex, SAGA's
+    skating of the sampled and the fitted markers, and the motion's floor figures."""
+    from graspkit.eval_motionfill import heel_columns, skating
+    from graspkit.metrics import floor_figures, grasp_and_end_figures
+
+    last = motion.vertices(bm, motion.num_frames - 1, motion.num_frames)[0]
     heels = heel_columns()
-    metrics = {**grasp_and_end_figures(res.vertices[0], last, bm.faces, mesh),
-               "grasp_floor_cm": 100 * float(res.vertices[0, :, 2].min()),      # the grasp body's lowest vertex
-               "skating_sample": skating(markers_w.double().numpy()[None], np.zeros(1), heels),
-               "skating_opt": skating(fitted[None], np.zeros(1), heels), **floor_figures(motion.vertices(bm))}
-    return SagaResult(name, pose, mesh, res, motion, st, markers_w, smp["contacts"][0], metrics)
+    return {**grasp_and_end_figures(res.vertices[0], last, bm.faces, mesh),
+            "grasp_floor_cm": 100 * float(res.vertices[0, :, 2].min()),      # the grasp body's lowest vertex
+            "skating_sample": skating(markers_w.double().numpy()[None], np.zeros(1), heels),
+            "skating_opt": skating(fitted[None], np.zeros(1), heels), **floor_figures(motion.vertices(bm))}
