@@ -397,19 +397,7 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
     model methods other than `forward` (DDP synchronises only what runs through it): such a model is refused under
     an initialised process group instead of training out of step.
     """
-    if len(dataset) == 0:
-        raise ValueError("dataset: empty")
-    if _has_batchnorm(model) and len(dataset) < 2:
-        raise ValueError(f"dataset: {type(model).__name__} has BatchNorm layers, which need at least 2 samples to "
-                         f"train on; got {len(dataset)}")
-    if _has_batchnorm(model) and cfg.batch_size < 2:
-        raise ValueError(f"batch_size: {type(model).__name__} has BatchNorm layers, which cannot train on batches of "
-                         f"one sample; expected at least 2, got {cfg.batch_size}")
-    if time_limit_s is not None and not (isinstance(time_limit_s, (int, float)) and time_limit_s > 0):
-        raise ValueError(f"time_limit_s: expected None or a positive number of seconds, got {time_limit_s!r}")
-    if checkpoint is not None and (Path(checkpoint).is_dir() or Path(checkpoint).parent.is_file()):
-        what = "a folder" if Path(checkpoint).is_dir() else f"in {Path(checkpoint).parent}, which is a file"
-        raise ValueError(f"checkpoint: {checkpoint} is {what}; expected the path of a checkpoint file (.pt)")
+    _check_fit(model, dataset, cfg, checkpoint, time_limit_s)
     if cfg.num_threads:
         torch.set_num_threads(cfg.num_threads)
     world = _distributed()
@@ -424,30 +412,7 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
     history: list[dict[str, float]] = []
     start = 0
     if checkpoint is not None and Path(checkpoint).is_file():
-        try:
-            state = load_checkpoint(checkpoint)
-        except ValueError as e:                  # a run file cut short by a full disk, say: every rerun would stop here
-            raise ValueError(f"{e}; delete it (graspkit's run file) or pass another path to train anew") from None
-        if not all(k in state for k in ("model", "optimizer", "scheduler", "history", "epoch", "rng")):
-            raise ValueError(f"checkpoint {checkpoint}: not a training state of graspkit.train.fit (a weights file?); "
-                             "delete it (graspkit's run file) or pass another path to train anew")
-        ours = {k: tuple(v.shape) for k, v in model.state_dict().items()}
-        theirs = {k: tuple(v.shape) for k, v in state["model"].items()}
-        if ours != theirs:
-            raise ValueError(f"checkpoint {checkpoint}: holds another network than {type(model).__name__} (its weights "
-                             f"differ in {sorted(set(ours.items()) ^ set(theirs.items()))[:3]}...); delete "
-                             "it (graspkit's run file) or pass another path to train anew")
-        saved = {k: v for k, v in state.get("config", {}).items() if k not in ("num_threads", "extra")}
-        now = {k: v for k, v in asdict(cfg).items() if k not in ("num_threads", "extra")}
-        if saved and saved != now:
-            differ = ", ".join(f"{k} {saved.get(k)!r} there, {now[k]!r} here" for k in now if saved.get(k) != now[k])
-            raise ValueError(f"checkpoint {checkpoint}: a run with other settings ({differ}); delete it (graspkit's "
-                             "run file) or pass another path to train anew")
-        model.load_state_dict(state["model"])
-        opt.load_state_dict(state["optimizer"])
-        sched.load_state_dict(state["scheduler"])
-        history, start = list(state["history"]), int(state["epoch"])
-        torch.set_rng_state(state["rng"])
+        history, start = _resume(checkpoint, model, opt, sched, cfg)
         if stop_at is not None and start >= stop_at:         # already there (a run killed after saving that epoch)
             model.eval()
             return history
@@ -456,26 +421,8 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
     bar = tqdm(desc=type(model).__name__, unit="epoch", disable=hidden(progress) or world[1] != 0, initial=start,
                total=cfg.epochs)
     for epoch in range(start, cfg.epochs):
-        model.train()
-        sums: dict[str, float] = {}
-        n = 0
-        for batch in _loader(dataset, cfg, epoch, world, no_single):
-            logs = step(net, batch, epoch)
-            opt.zero_grad(set_to_none=True)
-            logs["loss"].backward()
-            if cfg.grad_clip:
-                torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
-            opt.step()
-            w = batch_len(batch) or 1
-            _add_logs(sums, logs, w)
-            n += w
+        history.append({"epoch": epoch + 1, **_train_epoch(net, step, dataset, cfg, epoch, opt, world, no_single)})
         sched.step()
-        if world[0]:                                      # every rank's samples, not rank 0's shard alone
-            keys = sorted(sums)
-            t = torch.tensor([sums[k] for k in keys] + [n], dtype=torch.float64)
-            torch.distributed.all_reduce(t)
-            sums, n = dict(zip(keys, t[:-1].tolist())), t[-1].item()
-        history.append({"epoch": epoch + 1, **{k: v / n for k, v in sums.items()}})
         if val_dataset is not None:
             history[-1].update({f"val_{k}": v for k, v in evaluate(model, step, val_dataset, cfg, epoch).items()})
         bar.set_postfix(loss=f"{history[-1]['loss']:.4f}", refresh=False)
@@ -501,3 +448,77 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
         torch.distributed.barrier()      # no rank leaves (and tears down gloo) while rank 0 still writes
     model.eval()
     return history
+
+
+def _check_fit(model: torch.nn.Module, dataset: Dataset, cfg: TrainConfig, checkpoint: str | Path | None,
+               time_limit_s: float | None) -> None:
+    """fit's arguments, before anything trains (ValueError naming the argument and what was expected)."""
+    if len(dataset) == 0:
+        raise ValueError("dataset: empty")
+    if _has_batchnorm(model) and len(dataset) < 2:
+        raise ValueError(f"dataset: {type(model).__name__} has BatchNorm layers, which need at least 2 samples to "
+                         f"train on; got {len(dataset)}")
+    if _has_batchnorm(model) and cfg.batch_size < 2:
+        raise ValueError(f"batch_size: {type(model).__name__} has BatchNorm layers, which cannot train on batches of "
+                         f"one sample; expected at least 2, got {cfg.batch_size}")
+    if time_limit_s is not None and not (isinstance(time_limit_s, (int, float)) and time_limit_s > 0):
+        raise ValueError(f"time_limit_s: expected None or a positive number of seconds, got {time_limit_s!r}")
+    if checkpoint is not None and (Path(checkpoint).is_dir() or Path(checkpoint).parent.is_file()):
+        what = "a folder" if Path(checkpoint).is_dir() else f"in {Path(checkpoint).parent}, which is a file"
+        raise ValueError(f"checkpoint: {checkpoint} is {what}; expected the path of a checkpoint file (.pt)")
+
+
+def _resume(checkpoint: str | Path, model: torch.nn.Module, opt: torch.optim.Optimizer,
+            sched: torch.optim.lr_scheduler.LRScheduler, cfg: TrainConfig) -> tuple[list[dict[str, float]], int]:
+    """Load fit's training state from `checkpoint` into model, opt, sched and torch's RNG; its history and epoch.
+    Refuses (ValueError naming the file) a damaged file, a weights file, another network or other settings."""
+    try:
+        state = load_checkpoint(checkpoint)
+    except ValueError as e:                  # a run file cut short by a full disk, say: every rerun would stop here
+        raise ValueError(f"{e}; delete it (graspkit's run file) or pass another path to train anew") from None
+    if not all(k in state for k in ("model", "optimizer", "scheduler", "history", "epoch", "rng")):
+        raise ValueError(f"checkpoint {checkpoint}: not a training state of graspkit.train.fit (a weights file?); "
+                         "delete it (graspkit's run file) or pass another path to train anew")
+    ours = {k: tuple(v.shape) for k, v in model.state_dict().items()}
+    theirs = {k: tuple(v.shape) for k, v in state["model"].items()}
+    if ours != theirs:
+        raise ValueError(f"checkpoint {checkpoint}: holds another network than {type(model).__name__} (its weights "
+                         f"differ in {sorted(set(ours.items()) ^ set(theirs.items()))[:3]}...); delete "
+                         "it (graspkit's run file) or pass another path to train anew")
+    saved = {k: v for k, v in state.get("config", {}).items() if k not in ("num_threads", "extra")}
+    now = {k: v for k, v in asdict(cfg).items() if k not in ("num_threads", "extra")}
+    if saved and saved != now:
+        differ = ", ".join(f"{k} {saved.get(k)!r} there, {now[k]!r} here" for k in now if saved.get(k) != now[k])
+        raise ValueError(f"checkpoint {checkpoint}: a run with other settings ({differ}); delete it (graspkit's "
+                         "run file) or pass another path to train anew")
+    model.load_state_dict(state["model"])
+    opt.load_state_dict(state["optimizer"])
+    sched.load_state_dict(state["scheduler"])
+    torch.set_rng_state(state["rng"])
+    return list(state["history"]), int(state["epoch"])
+
+
+def _train_epoch(net: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig, epoch: int,
+                 opt: torch.optim.Optimizer, world: tuple[bool, int, int], no_single: bool) -> dict[str, float]:
+    """One epoch of `step` over the dataset's batches (AdamW, gradients clipped at cfg.grad_clip); the logged terms'
+    per-sample means (each batch's means weighted by its size; under DDP over every rank's samples)."""
+    model = net.module if isinstance(net, torch.nn.parallel.DistributedDataParallel) else net
+    model.train()
+    sums: dict[str, float] = {}
+    n = 0
+    for batch in _loader(dataset, cfg, epoch, world, no_single):
+        logs = step(net, batch, epoch)
+        opt.zero_grad(set_to_none=True)
+        logs["loss"].backward()
+        if cfg.grad_clip:
+            torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.grad_clip)
+        opt.step()
+        w = batch_len(batch) or 1
+        _add_logs(sums, logs, w)
+        n += w
+    if world[0]:                                      # every rank's samples, not rank 0's shard alone
+        keys = sorted(sums)
+        t = torch.tensor([sums[k] for k in keys] + [n], dtype=torch.float64)
+        torch.distributed.all_reduce(t)
+        sums, n = dict(zip(keys, t[:-1].tolist())), t[-1].item()
+    return {k: v / n for k, v in sums.items()}
