@@ -195,13 +195,8 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
         check_fps(fps, where=" (or None)")
     a = read_arrays(path, allow_pickle)
 
-    def get(key: str) -> np.ndarray:
-        if key not in a:
-            raise SequenceFileError(f"{path}: missing key {key!r}")
-        return a[key]
-
     def numbers(key: str) -> np.ndarray:
-        return _numbers(get(key), key, path)
+        return _key_numbers(a, key, path)
 
     def per_frame(key: str, width: int) -> np.ndarray:
         v = numbers(key)
@@ -209,42 +204,8 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
             raise SequenceFileError(f"{path}: key {key!r} has shape {v.shape}, expected ({T}, {width})")
         return v.reshape(T, width)
 
-    flat = False
-    if "body.flat_hand_mean" in a:
-        f = a["body.flat_hand_mean"]
-        if f.size != 1 or f.dtype.kind not in "biu":
-            raise SequenceFileError(f"{path}: key 'body.flat_hand_mean' holds {f.size} {f.dtype} value(s), expected one "
-                                    "boolean")
-        flat = bool(f.reshape(-1)[0])
-    if "body.params.fullpose" in a:
-        if hands_mean is not None and not flat:
-            raise ValueError(f"hands_mean: {path} has 'body.params.fullpose', smplx's full_pose, which already holds "
-                             "the hand mean (smplx adds it; GOAL feeds GRAB's fullpose to flat_hand_mean=True layers); "
-                             "leave hands_mean out (it is for per-part hand poses stored relative to the mean)")
-        full = numbers("body.params.fullpose")
-        if full.ndim != 2 or full.shape[1] != 165:
-            raise SequenceFileError(f"{path}: key 'body.params.fullpose' has shape {full.shape}, expected (T, 165)")
-        poses = full.reshape(-1, 55, 3)
-    else:
-        parts = []
-        for name, lo, hi in BODY_PARTS:
-            p = numbers(f"body.params.{name}")
-            if p.ndim != 2 or (parts and len(p) != len(parts[0])):
-                n = len(parts[0]) if parts else "T"
-                raise SequenceFileError(f"{path}: key 'body.params.{name}' has shape {p.shape}, "
-                                        f"expected ({n}, {3 * (hi - lo)})")
-            if p.shape[-1] != 3 * (hi - lo):
-                raise SequenceFileError(f"{path}: key 'body.params.{name}' has {p.shape[-1]} values per frame, "
-                                        f"expected {3 * (hi - lo)} (PCA hand poses need 'body.params.fullpose')")
-            parts.append(p.reshape(len(p), hi - lo, 3))
-        poses = np.concatenate(parts, 1)
+    poses = _body_poses(a, path, hands_mean)
     T = len(poses)
-    if hands_mean is not None and not flat:
-        hm = np.asarray(hands_mean, np.float64)
-        if hm.size != 90 or not np.isfinite(hm).all():
-            raise ValueError(f"hands_mean: expected 90 finite values (left then right hand), got shape {hm.shape}")
-        poses = poses.copy()
-        poses[:, 25:55] += hm.reshape(30, 3)
     trans = per_frame("body.params.transl", 3)
     if "body.vtemp" in a and "body.betas" not in a:
         warnings.warn(f"{path}: the subject's shape is a template mesh (body.vtemp, GRAB's), not betas: the body is "
@@ -260,28 +221,8 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
     o_t = per_frame("object.params.transl", 3)
     o_r = per_frame("object.params.global_orient", 3)
     contacts = {k[len("contact."):]: np.asarray(v) for k, v in a.items() if k.startswith("contact.")}
-    for k, c in contacts.items():
-        if c.ndim == 0 or c.dtype.kind not in "biuf":
-            raise SequenceFileError(f"{path}: key 'contact.{k}' holds {c.shape} {c.dtype}, expected a number per frame")
-        if len(c) != T:
-            raise SequenceFileError(f"{path}: key 'contact.{k}' has {len(c)} frames, expected {T}")
-    for key in ("object.points", "object.normals"):
-        if key in a and (a[key].dtype.kind not in "iuf" or a[key].ndim != 2 or a[key].shape[1] != 3):
-            raise SequenceFileError(f"{path}: key {key!r} has shape {a[key].shape} ({a[key].dtype}), expected (P, 3)")
-    if ("object.points" in a) != ("object.normals" in a):
-        raise SequenceFileError(f"{path}: has only one of 'object.points' and 'object.normals', expected both or neither")
-    numeric = [(f"contact.{k}", c) for k, c in contacts.items() if c.dtype.kind == "f"]
-    numeric += [(k, a[k]) for k in ("object.points", "object.normals") if k in a]
-    for key, arr in (("poses", poses), ("body.params.transl", trans), ("object.params.transl", o_t),
-                     ("object.params.global_orient", o_r), *numeric):
-        if not np.isfinite(arr).all():
-            raise SequenceFileError(f"{path}: key {key!r} contains NaN or Inf")
-    for k in sorted(FRAME_EXTRAS & set(a)):       # frame numbers: whole, within the clip
-        f = a[k]
-        if f.size != 1 or f.dtype.kind not in "iuf" or not np.isfinite(f).all() or float(f.reshape(())) % 1 \
-                or not 0 <= float(f.reshape(())) < T:
-            shown = f.reshape(()).item() if f.size == 1 else f"of shape {f.shape}"
-            raise SequenceFileError(f"{path}: key {k!r} is {shown}, expected a whole frame number in [0, {T})")
+    _check_sequence(a, path, T, {"poses": poses, "body.params.transl": trans, "object.params.transl": o_t,
+                                 "object.params.global_orient": o_r}, contacts)
     frame_scale = None
     if fps is not None and abs(src - fps) > 1e-6 and T > 1:
         n_old, frame_scale = T, fps / src
@@ -305,6 +246,82 @@ def load_grasp_sequence(path: str | os.PathLike, allow_pickle: bool = False, han
     return GraspSequence(poses, trans, betas, src, _str(a.get("obj_name")), o_t, o_r, mesh,
                          contacts, extras, a.get("object.points"), a.get("object.normals"), _str(a.get("gender"), "neutral"),
                          _str(a.get("sbj_id"), ""), _str(a.get("motion_intent"), ""))
+
+
+def _key_numbers(a: dict[str, np.ndarray], key: str, path: Path) -> np.ndarray:
+    """a[key] as numbers (formats._numbers); SequenceFileError naming `path` and the key when it is missing."""
+    if key not in a:
+        raise SequenceFileError(f"{path}: missing key {key!r}")
+    return _numbers(a[key], key, path)
+
+
+def _body_poses(a: dict[str, np.ndarray], path: Path, hands_mean: np.ndarray | None) -> np.ndarray:
+    """The absolute SMPL-X poses (T,55,3) of a GRAB-style file's arrays `a`: 'body.params.fullpose', or the per-part
+    poses with `hands_mean` (90,) added to hands stored relative to the mean (not to `body.flat_hand_mean` files)."""
+    flat = False
+    if "body.flat_hand_mean" in a:
+        f = a["body.flat_hand_mean"]
+        if f.size != 1 or f.dtype.kind not in "biu":
+            raise SequenceFileError(f"{path}: key 'body.flat_hand_mean' holds {f.size} {f.dtype} value(s), expected one "
+                                    "boolean")
+        flat = bool(f.reshape(-1)[0])
+    if "body.params.fullpose" in a:
+        if hands_mean is not None and not flat:
+            raise ValueError(f"hands_mean: {path} has 'body.params.fullpose', smplx's full_pose, which already holds "
+                             "the hand mean (smplx adds it; GOAL feeds GRAB's fullpose to flat_hand_mean=True layers); "
+                             "leave hands_mean out (it is for per-part hand poses stored relative to the mean)")
+        full = _key_numbers(a, "body.params.fullpose", path)
+        if full.ndim != 2 or full.shape[1] != 165:
+            raise SequenceFileError(f"{path}: key 'body.params.fullpose' has shape {full.shape}, expected (T, 165)")
+        poses = full.reshape(-1, 55, 3)
+    else:
+        parts = []
+        for name, lo, hi in BODY_PARTS:
+            p = _key_numbers(a, f"body.params.{name}", path)
+            if p.ndim != 2 or (parts and len(p) != len(parts[0])):
+                n = len(parts[0]) if parts else "T"
+                raise SequenceFileError(f"{path}: key 'body.params.{name}' has shape {p.shape}, "
+                                        f"expected ({n}, {3 * (hi - lo)})")
+            if p.shape[-1] != 3 * (hi - lo):
+                raise SequenceFileError(f"{path}: key 'body.params.{name}' has {p.shape[-1]} values per frame, "
+                                        f"expected {3 * (hi - lo)} (PCA hand poses need 'body.params.fullpose')")
+            parts.append(p.reshape(len(p), hi - lo, 3))
+        poses = np.concatenate(parts, 1)
+    if hands_mean is not None and not flat:
+        hm = np.asarray(hands_mean, np.float64)
+        if hm.size != 90 or not np.isfinite(hm).all():
+            raise ValueError(f"hands_mean: expected 90 finite values (left then right hand), got shape {hm.shape}")
+        poses = poses.copy()
+        poses[:, 25:55] += hm.reshape(30, 3)
+    return poses
+
+
+def _check_sequence(a: dict[str, np.ndarray], path: Path, T: int, arrays: dict[str, np.ndarray],
+                    contacts: dict[str, np.ndarray]) -> None:
+    """SequenceFileError naming `path` and the key unless the contact labels have T frames, the object's points and
+    normals are (P,3) and come together, `arrays` (named by their keys) and the numbers are finite, and the frame
+    numbers (FRAME_EXTRAS) are whole and within [0, T)."""
+    for k, c in contacts.items():
+        if c.ndim == 0 or c.dtype.kind not in "biuf":
+            raise SequenceFileError(f"{path}: key 'contact.{k}' holds {c.shape} {c.dtype}, expected a number per frame")
+        if len(c) != T:
+            raise SequenceFileError(f"{path}: key 'contact.{k}' has {len(c)} frames, expected {T}")
+    for key in ("object.points", "object.normals"):
+        if key in a and (a[key].dtype.kind not in "iuf" or a[key].ndim != 2 or a[key].shape[1] != 3):
+            raise SequenceFileError(f"{path}: key {key!r} has shape {a[key].shape} ({a[key].dtype}), expected (P, 3)")
+    if ("object.points" in a) != ("object.normals" in a):
+        raise SequenceFileError(f"{path}: has only one of 'object.points' and 'object.normals', expected both or neither")
+    numeric = [(f"contact.{k}", c) for k, c in contacts.items() if c.dtype.kind == "f"]
+    numeric += [(k, a[k]) for k in ("object.points", "object.normals") if k in a]
+    for key, arr in (*arrays.items(), *numeric):
+        if not np.isfinite(arr).all():
+            raise SequenceFileError(f"{path}: key {key!r} contains NaN or Inf")
+    for k in sorted(FRAME_EXTRAS & set(a)):       # frame numbers: whole, within the clip
+        f = a[k]
+        if f.size != 1 or f.dtype.kind not in "iuf" or not np.isfinite(f).all() or float(f.reshape(())) % 1 \
+                or not 0 <= float(f.reshape(())) < T:
+            shown = f.reshape(()).item() if f.size == 1 else f"of shape {f.shape}"
+            raise SequenceFileError(f"{path}: key {k!r} is {shown}, expected a whole frame number in [0, {T})")
 
 
 def _mesh_path_for(mesh: str, folder: Path) -> str:
