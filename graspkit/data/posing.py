@@ -158,7 +158,6 @@ def pose_body(rig: Rig, plan: RootPlan, tracks: FootTracks, style: Style, contro
     """Local rotations as axis-angle (T,55,3), pelvis positions (T,3) and extras (joint positions (T,55,3), ...)."""
     T, fps = plan.num_frames, plan.fps
     c = controls or Controls.zeros(T)
-    sc = rig.scale
     heading = np.unwrap(plan.heading)
     fwd, left = _heading_vectors(heading)
     speed = gaussian_filter1d(plan.speed(), 0.2 * fps, mode="nearest")
@@ -171,7 +170,37 @@ def pose_body(rig: Rig, plan: RootPlan, tracks: FootTracks, style: Style, contro
         w = np.clip(w + c.weight_shift * gaussian_filter1d(both.astype(float), 0.15 * fps, mode="nearest"), 0, 1)
     w = gaussian_filter1d(w, 0.08 * fps, mode="nearest")
 
-    # ---- pelvis
+    R_pelvis, root, roll, tilt = _pelvis(rig, plan, tracks, style, c, heading, speed, walking, sep, w)
+    local = np.broadcast_to(np.eye(3), (T, NUM_JOINTS, 3, 3)).copy()
+    local[:, 0] = R_pelvis
+    _spine(local, style, c, sep, roll, tilt)
+    _legs(rig, local, root, R_pelvis, tracks, fwd, left)
+    _arms(local, style, c, walking, sep, rig.scale)
+    _head(rig, local, root, heading, style, c)
+    # ---- hands
+    open_ = c.hand_open if c.hand_open is not None else np.zeros(T)
+    local[:, 25:40] = hand_pose("left", np.full(T, style.finger_curl))
+    local[:, 40:55] = hand_pose("right", style.finger_curl * (1 - 0.75 * open_), spread=open_)
+
+    Rg, pos = forward_kinematics(rig, local, root)
+    # ---- right arm: blend into IK onto the reach target
+    if c.reach_target is not None and c.reach_weight is not None and np.any(c.reach_weight > 0):
+        _reach_arm(rig, local, Rg, pos, c)
+        if c.support_weight is not None and np.any(c.support_weight > 0):
+            _support_arm(rig, local, Rg, pos, c.support_weight)
+        Rg, pos = forward_kinematics(rig, local, root)
+    aa = matrix_axis_angle(local)
+    return aa, root, {"joints": pos, "global_rot": Rg}
+
+
+def _pelvis(rig: Rig, plan: RootPlan, tracks: FootTracks, style: Style, c: Controls, heading: np.ndarray,
+            speed: np.ndarray, walking: np.ndarray, sep: np.ndarray, w: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The pelvis's world rotation (T,3,3) and position (T,3), and its roll and tilt (T,): sway towards the loaded
+    foot (weight w), pelvic rotation with the stride (sep), lean with the speed, knees bent while walking, and no
+    higher than both legs reach their ankles."""
+    T, fps, sc = plan.num_frames, plan.fps, rig.scale
+    fwd, left = _heading_vectors(heading)
     lat = ((tracks.xy[0] - tracks.xy[1]) * left[:, :2]).sum(-1)                  # stance width
     lat = np.clip(lat, 0.0, 0.3 * sc)                                            # (wide side steps sway no further)
     sway = style.sway * (w - 0.5) * lat
@@ -194,10 +223,12 @@ def pose_body(rig: Rig, plan: RootPlan, tracks: FootTracks, style: Style, contro
     height = np.maximum(_lower_envelope(h_nom, h_max, fps), np.minimum(h_nom, 0.5 * rig.pelvis_height))
     root = np.concatenate([xy, height[:, None]], 1)
 
-    local = np.broadcast_to(np.eye(3), (T, NUM_JOINTS, 3, 3)).copy()
-    local[:, 0] = R_pelvis
+    return R_pelvis, root, roll, tilt
 
-    # ---- spine: counter-rotation, upright against obliquity and lean, plus the reach posture
+
+def _spine(local: np.ndarray, style: Style, c: Controls, sep: np.ndarray, roll: np.ndarray, tilt: np.ndarray) -> None:
+    """Into local (T,55,3,3): the spine's counter-rotation, upright against obliquity and lean, plus the reach
+    posture."""
     counter = (style.pelvic_rotation * 1.6) * sep
     spine_yaw = counter + c.spine_twist
     spine_roll = -0.8 * roll - c.spine_side
@@ -205,7 +236,10 @@ def pose_body(rig: Rig, plan: RootPlan, tracks: FootTracks, style: Style, contro
     for j, k in (("spine1", 0.35), ("spine2", 0.35), ("spine3", 0.3)):
         local[:, J[j]] = rot_y(k * spine_yaw) @ rot_z(k * spine_roll) @ rot_x(k * spine_pitch)
 
-    # ---- legs
+
+def _legs(rig: Rig, local: np.ndarray, root: np.ndarray, R_pelvis: np.ndarray, tracks: FootTracks, fwd: np.ndarray,
+          left: np.ndarray) -> None:
+    """Into local (T,55,3,3): hips, knees, ankles and toes by two-bone IK from the pelvis onto the foot tracks."""
     Rg_pelvis = R_pelvis
     for s, side in enumerate(SIDES):
         hip = root + (R_pelvis @ (rig.joints[J[f"{side}_hip"]] - rig.joints[0]))
@@ -219,7 +253,11 @@ def pose_body(rig: Rig, plan: RootPlan, tracks: FootTracks, style: Style, contro
         local[:, J[f"{side}_ankle"]] = tr(R_shin) @ tracks.R_foot[s]
         local[:, J[f"{side}_foot"]] = tr(tracks.R_foot[s]) @ tracks.R_toe[s]
 
-    # ---- arms swing against the legs (the left arm forward when the right foot is ahead); arms lag a little
+
+def _arms(local: np.ndarray, style: Style, c: Controls, walking: np.ndarray, sep: np.ndarray, sc: float) -> None:
+    """Into local (T,55,3,3): the arms swing against the legs (the left arm forward when the right foot is ahead),
+    lagging two frames; the right collar's raise."""
+    T = len(local)
     amp = style.arm_swing * np.clip(walking, 0.15, 1.0)
     raw = np.clip(-sep / (0.7 * sc), -1.15, 1.15)
     sig = np.concatenate([np.full(min(2, T), raw[0]), raw[:max(T - 2, 0)]])   # the arms lag two frames
@@ -232,7 +270,10 @@ def pose_body(rig: Rig, plan: RootPlan, tracks: FootTracks, style: Style, contro
     # right collar: elevation lifts the shoulder (about -z for the right side); depression also protracts it
     local[:, J["right_collar"]] = rot_y(0.8 * np.maximum(-c.collar_raise, 0.0)) @ rot_z(-c.collar_raise)
 
-    # ---- head: look along the path (slightly down) or at a gaze point
+
+def _head(rig: Rig, local: np.ndarray, root: np.ndarray, heading: np.ndarray, style: Style, c: Controls) -> None:
+    """Into local (T,55,3,3): neck and head look along the path (slightly down), or at a gaze point."""
+    T = len(local)
     Rg, pos = forward_kinematics(rig, local, root)
     look_h = heading + (c.look_yaw if c.look_yaw is not None else 0.0)
     look = _heading_vectors(look_h)[0] * np.cos(style.head_pitch) - np.array([0, 0, 1.0]) * np.sin(style.head_pitch)
@@ -247,21 +288,6 @@ def pose_body(rig: Rig, plan: RootPlan, tracks: FootTracks, style: Style, contro
         gyaw, gpitch = (1 - gw) * gyaw + gw * tyaw, (1 - gw) * gpitch + gw * tpitch
     local[:, J["neck"]] = rot_y(0.4 * gyaw) @ rot_x(0.4 * gpitch)
     local[:, J["head"]] = rot_y(0.6 * gyaw) @ rot_x(0.6 * gpitch)
-
-    # ---- hands
-    open_ = c.hand_open if c.hand_open is not None else np.zeros(T)
-    local[:, 25:40] = hand_pose("left", np.full(T, style.finger_curl))
-    local[:, 40:55] = hand_pose("right", style.finger_curl * (1 - 0.75 * open_), spread=open_)
-
-    Rg, pos = forward_kinematics(rig, local, root)
-    # ---- right arm: blend into IK onto the reach target
-    if c.reach_target is not None and c.reach_weight is not None and np.any(c.reach_weight > 0):
-        _reach_arm(rig, local, Rg, pos, c)
-        if c.support_weight is not None and np.any(c.support_weight > 0):
-            _support_arm(rig, local, Rg, pos, c.support_weight)
-        Rg, pos = forward_kinematics(rig, local, root)
-    aa = matrix_axis_angle(local)
-    return aa, root, {"joints": pos, "global_rot": Rg}
 
 
 def _arm_ik(rig: Rig, local: np.ndarray, Rg: np.ndarray, pos: np.ndarray, side: str, target: np.ndarray,
