@@ -82,6 +82,13 @@ def test_farthest_point_sampling_against_brute_force():
     idx = farthest_point_sampling(pts, 10)
     d = np.linalg.norm(pts[:, None] - pts[idx[:5]][None], axis=2).min(1)
     assert idx[5] == np.argmax(d)
+    assert farthest_point_sampling(pts, 3, start=7)[0] == 7
+    for kw, name in ((dict(n=0), "n"), (dict(n=2.0), "n"), (dict(n=201), "n"), (dict(n=3, start=-1), "start"),
+                     (dict(n=3, start=200), "start")):
+        with pytest.raises(ValueError, match=f"^{name}:"):
+            farthest_point_sampling(pts, **kw)
+    with pytest.raises(ValueError, match="^points:"):
+        farthest_point_sampling(np.r_[pts, [[np.nan, 0, 0]]], 3)
 
 
 def test_vertex_normals_point_outwards_on_a_sphere_and_up_on_a_plane():

@@ -154,3 +154,42 @@ def test_encoder_default_nsample_is_16():
     assert [sa.nsample for sa in enc.sa[:2]] == [16, 16]
     g = enc.group(torch.rand(1, 300, 3, generator=torch.Generator().manual_seed(0)))
     assert g[0].neighbours.shape == (1, 256, 16) and g[1].neighbours.shape == (1, 128, 16)
+
+
+def test_neighbours_of_a_float32_cloud_far_from_the_origin_are_those_of_the_same_cloud_at_it():
+    """cdist's |a|^2 + |b|^2 - 2ab cancels far from the origin (1,000 m out, float32 neighbours came from 27 cm away):
+    ball query and the 3-NN weights measure about the cloud, so a shift changes neither (truth: float64 at 0)."""
+    from graspkit.models.pointnet2 import interpolation_weights
+    g = torch.Generator().manual_seed(5)
+    x = torch.randn(1, 2048, 3, generator=g, dtype=torch.float64) * 0.05
+    c = x[:, :64]
+    want_ball = ball_query(x, c, 0.02, 16)
+    want_idx, want_w = interpolation_weights(x[:, :300], x[:, 300:400])
+    for shift in (10.0, 1000.0):
+        off = torch.tensor([shift, -shift, 0.5 * shift], dtype=torch.float64)
+        xf = (x + off).float()                       # the float32 cloud far out; its rounding is the input's own
+        ball = ball_query(xf, xf[:, :64], 0.02, 16)
+        d_got = (xf[:, :64, None] - gather(xf, ball)).double().norm(dim=-1)
+        assert d_got.max() <= 0.02 + 1e-4                                 # nobody from outside the ball
+        same = [sorted(a.tolist()) == sorted(b.tolist()) for a, b in zip(ball[0], want_ball[0])]
+        assert np.mean(same) > 0.9                                          # (float32 input rounding: 61 µm at 1 km)
+        idx, w = interpolation_weights(xf[:, :300], xf[:, 300:400])
+        assert (idx.sort(-1).values == want_idx.sort(-1).values).float().mean() > 0.97
+        assert (w.double().sort(-1).values - want_w.sort(-1).values).abs().max() < (0.02 if shift > 100 else 1e-3)
+
+
+def test_sampling_and_grouping_refuse_bad_arguments_by_name():
+    x = torch.rand(1, 20, 3, generator=torch.Generator().manual_seed(0))
+    for kw, name in ((dict(radius=float("nan"), k=4), "radius"), (dict(radius=float("inf"), k=4), "radius"),
+                     (dict(radius=0.1, k=2.5), "k"), (dict(radius=0.1, k=True), "k"), (dict(radius=0.1, k=0), "k")):
+        with pytest.raises(ValueError, match=f"^{name}:"):
+            ball_query(x, x[:, :3], **kw)
+    bad = x.clone()
+    bad[0, 4, 1] = float("nan")
+    with pytest.raises(ValueError, match="^xyz: contains NaN"):
+        ball_query(bad, x[:, :3], 0.1, 4)
+    with pytest.raises(ValueError, match="^xyz: contains NaN"):
+        farthest_point_sample(bad, 3)
+    for n in (2.0, 0, True):
+        with pytest.raises(ValueError, match="^n:"):
+            farthest_point_sample(x, n)

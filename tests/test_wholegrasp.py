@@ -650,3 +650,17 @@ def test_the_kl_weight_is_annealed_over_valid_epochs_only_and_bool_labels_are_na
         model({**batch, "marker_contact": batch["marker_contact"] > 0.5})
     with pytest.raises(ValueError, match="object_contact: expected float contact labels"):
         model({**batch, "object_contact": batch["object_contact"] * 2})
+
+
+def test_eq3_distances_of_float32_points_far_from_the_origin_are_those_near_it():
+    """SAGA's d(x, Y) through cdist's |a|^2 + |b|^2 - 2ab read a touching marker 25 cm away 1,000 m out in float32:
+    the distances are now taken about the object's mean (truth: float64 on the same rounded inputs)."""
+    g = torch.Generator().manual_seed(3)
+    for shift in (10.0, 1000.0):
+        pts = (torch.randn(1, 400, 3, generator=g, dtype=torch.float64) * 0.05 + shift).float()
+        mk = (pts[:, :50].double() + torch.randn(1, 50, 3, generator=g, dtype=torch.float64) * 0.01).float()
+        want = torch.cdist(mk.double() - shift, pts.double() - shift).pow(2)
+        d_m, d_o = consistency_distances(mk, pts)
+        assert (d_m.double() - want.min(2).values).abs().max() < 1e-6            # m²: a 1-mm error at 1 cm reads 2e-5
+        assert (d_o.double() - want.min(1).values).abs().max() < 1e-6
+        assert (squared_min_distance(mk, pts).double() - want.min(2).values).abs().max() < 1e-6

@@ -15,15 +15,27 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import math
+import numbers
+
 import torch
 from torch import Tensor, nn
 
+from graspkit.objects.distance import centred_cdist
+
 
 def _check_points(xyz: Tensor, name: str = "xyz") -> None:
-    """Raise a ValueError naming `name` unless xyz is (B, N, 3)."""
+    """Raise a ValueError naming `name` unless xyz is (B, N, 3) and finite."""
     if not isinstance(xyz, Tensor) or xyz.dim() != 3 or xyz.shape[-1] != 3:
         shape = tuple(xyz.shape) if isinstance(xyz, Tensor) else type(xyz).__name__
         raise ValueError(f"{name}: expected a tensor of shape (B, N, 3), got {shape}")
+    if not torch.isfinite(xyz).all():
+        raise ValueError(f"{name}: contains NaN or Inf")
+
+
+def _is_count(n: object) -> bool:
+    """Whether n is a whole number (an int, not a bool)."""
+    return isinstance(n, numbers.Integral) and not isinstance(n, bool)
 
 
 def farthest_point_sample(xyz: Tensor, n: int, generator: torch.Generator | None = None) -> Tensor:
@@ -33,7 +45,7 @@ def farthest_point_sample(xyz: Tensor, n: int, generator: torch.Generator | None
     """
     _check_points(xyz)
     B, N, _ = xyz.shape
-    if not 1 <= n <= N:
+    if not _is_count(n) or not 1 <= n <= N:
         raise ValueError(f"n: expected 1..{N} samples (xyz has {N} points), got {n}")
     idx = torch.empty(B, n, dtype=torch.long, device=xyz.device)
     if generator is None:
@@ -60,11 +72,13 @@ def ball_query(xyz: Tensor, centres: Tensor, radius: float, k: int) -> Tensor:
     """
     _check_points(xyz)
     _check_points(centres, "centres")
-    if radius <= 0 or k < 1:
-        raise ValueError(f"radius, k: expected radius > 0 and k >= 1, got {radius}, {k}")
+    if not isinstance(radius, numbers.Real) or not math.isfinite(radius) or radius <= 0:
+        raise ValueError(f"radius: expected a positive number of metres, got {radius!r}")
+    if not _is_count(k) or k < 1:
+        raise ValueError(f"k: expected a whole number >= 1, got {k!r}")
     N = xyz.shape[1]
     with torch.no_grad():
-        d2 = torch.cdist(centres, xyz).pow(2)                                 # (B, S, N)
+        d2 = centred_cdist(centres, xyz).pow(2)                               # (B, S, N)
         kk = min(k, N)
         d, idx = d2.topk(kk, dim=-1, largest=False, sorted=True)
         idx = torch.where(d <= radius * radius, idx, idx[..., :1].expand_as(idx))
@@ -187,9 +201,10 @@ class FeaturePropagation(nn.Module):
 
 def interpolation_weights(xyz1: Tensor, xyz2: Tensor, k: int = 3) -> tuple[Tensor, Tensor]:
     """The k nearest coarse points of every fine point and their normalised inverse-squared-distance weights:
-    (B,N,3), (B,S,3) -> indices (B,N,k), weights (B,N,k). Invariant to rigid motions of the cloud."""
+    (B,N,3), (B,S,3) -> indices (B,N,k), weights (B,N,k). Invariant to rigid motions of the cloud (to rounding:
+    the distances are taken about the coarse cloud's mean)."""
     with torch.no_grad():
-        d, idx = torch.cdist(xyz1, xyz2).topk(min(k, xyz2.shape[1]), dim=-1, largest=False)
+        d, idx = centred_cdist(xyz1, xyz2).topk(min(k, xyz2.shape[1]), dim=-1, largest=False)
         w = 1.0 / (d.pow(2) + 1e-8)
     return idx, w / w.sum(-1, keepdim=True)
 

@@ -50,7 +50,8 @@ import torch
 from torch import Tensor, nn
 
 from graspkit.checks import check_generator, check_labels
-from graspkit.objects.distance import MAX_METRES, nearest_neighbours, require_points_in_metres, require_unit_normals
+from graspkit.objects.distance import (MAX_METRES, centred_cdist, nearest_neighbours, require_points_in_metres,
+                                      require_unit_normals)
 from graspkit.objects.placement import GRASP_HEIGHTS
 from graspkit.objects.sdf import signed_distance_to_points
 from graspkit.paths import DATA_STUBS
@@ -110,7 +111,7 @@ class Grasps:
 
 def squared_min_distance(x: Tensor, y: Tensor) -> Tensor:
     """SAGA's d(x, Y) = min_y |x - y|^2 for every x: x (B, N, 3), y (B, M, 3) -> (B, N)."""
-    return torch.cdist(x, y).pow(2).min(-1).values
+    return centred_cdist(x, y).pow(2).min(-1).values
 
 
 def weighted_bce(prob: Tensor, target: Tensor, pos_weight: float) -> Tensor:
@@ -124,7 +125,7 @@ def consistency_distances(markers: Tensor, points: Tensor, normals: Tensor | Non
     """Eq. 3's d(m, O) (B,N) and d(o, M) (B,P) for markers (B,N,3), points (B,P,3): squared and unsigned as printed
     (normals None), or, with the object normals (B,P,3), Euclidean with d(m, O) signed (negative inside)."""
     if normals is None:
-        D = torch.cdist(markers, points).pow(2)                                # (B, N, P): both directions at once
+        D = centred_cdist(markers, points).pow(2)                              # (B, N, P): both directions at once
         return D.min(2).values, D.min(1).values
     return signed_distance_to_points(markers, points, normals), nearest_neighbours(points, markers)[0]
 

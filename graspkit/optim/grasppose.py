@@ -107,7 +107,7 @@ from graspkit.body.skeleton import FINGERS, JOINT_INDEX, JOINT_NAMES
 from graspkit.metrics import joint_limit_excess
 from graspkit.models.gnet import SparseBody
 from graspkit.models.wholegrasp import check_height
-from graspkit.objects.distance import require_points_in_metres, require_unit_normals
+from graspkit.objects.distance import centred_cdist, require_points_in_metres, require_unit_normals
 from graspkit.objects.sdf import SDFGrid
 from graspkit.optim.step import energy_step, with_autograd
 from graspkit.progress import hidden
@@ -372,7 +372,7 @@ def _nearest(q: Tensor, t: Tensor, idx: Tensor | None = None) -> tuple[Tensor, T
     With `idx` the pairs are taken as given (held correspondences)."""
     if idx is None:
         with torch.no_grad():
-            idx = torch.cdist(q.detach(), t.detach()).argmin(-1)
+            idx = centred_cdist(q.detach(), t.detach()).argmin(-1)
     near = torch.gather(t, 1, idx.unsqueeze(-1).expand(-1, -1, 3))
     return (q - near).pow(2).sum(-1), idx
 
