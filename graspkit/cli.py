@@ -11,7 +11,7 @@ import tempfile
 import warnings
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from graspkit import __version__
 
@@ -31,8 +31,13 @@ def _cmd_body_build(args: argparse.Namespace) -> int:
 def _cmd_body_info(args: argparse.Namespace) -> int:
     """Print what a body-model file holds."""
     from graspkit.body import BodyModel
+    from graspkit.body.model import ModelFileError
+    from graspkit.paths import default_model_path
 
-    bm = BodyModel.from_file(args.model)
+    try:
+        bm = BodyModel.from_file(args.model if args.model is not None else default_model_path())
+    except ModelFileError as e:
+        raise ValueError(f"{_model_source(args.model)}: {e}") from None
     out = bm()
     v = out.vertices[0]
     print(bm.extra_repr())
@@ -60,13 +65,25 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_object(obj: str) -> None:
-    """Check --object (a catalogue name or a mesh file) before a pipeline starts, so that an error names the option."""
+def _check_object(obj: str, outputs: str) -> None:
+    """Check --object (a catalogue name or a mesh file) before a pipeline starts, so that an error names the option;
+    `outputs`: the output files' name with {name} for the object's (a mesh file's stem), which must fit a file name."""
     from graspkit.objects.catalogue import list_objects
     from graspkit.objects.user import as_object
 
-    if obj not in list_objects():
-        as_object(obj, "--object")
+    if obj in list_objects():
+        return
+    name, _ = as_object(obj, "--object")
+    longest = outputs.format(name=name) + "_final.glb"
+    if len(longest.encode()) > 255:
+        raise ValueError(f"--object: {obj}: the outputs' names ({longest[:40]}...) would be {len(longest.encode())} "
+                         "bytes, past the file system's 255; give the mesh file a shorter name")
+
+
+def _scene_objects(name: str, mesh: object) -> dict[str, object]:
+    """The exported scene's objects: the object under its name, or 'body_object' for a mesh file named body.*
+    (the body mesh has that name)."""
+    return {"body_object" if name == "body" else name: mesh}
 
 
 def _object_pose(at: list[float] | None):
@@ -88,13 +105,18 @@ def _object_pose(at: list[float] | None):
     return ObjectPose.from_yaw(np.deg2rad(at[3]), np.array(at[:3]))
 
 
-def object_range_notes(pose: ObjectPose | None) -> list[str]:
+def object_range_notes(pose: ObjectPose | None, obj: str | None = None) -> list[str]:
     """Warnings when an object placed with --at (an ObjectPose, or None: drawn in range) has its centre outside the
-    0.5-1.7 m heights of the grasp and approach data the SAGA and GOAL networks were trained on."""
-    from graspkit.objects.placement import GRASP_HEIGHTS
+    0.5-1.7 m heights of the grasp and approach data the SAGA and GOAL networks were trained on; with --object `obj`,
+    a ValueError naming --at when the object at that pose sinks into the floor."""
+    from graspkit.objects.placement import GRASP_HEIGHTS, floor_note
+    from graspkit.objects.user import as_object
 
     if pose is None:
         return []
+    note = None if obj is None else floor_note(pose, as_object(obj, "--object")[1])
+    if note:
+        raise ValueError(f"--at: {note.removeprefix('object_pose: ')}")
     z, (lo, hi) = float(pose.translation[2]), GRASP_HEIGHTS
     if lo <= z <= hi:
         return []
@@ -146,16 +168,16 @@ def _cmd_saga(args: argparse.Namespace) -> int:
     from graspkit.demo import _write_clip
     from graspkit.saga import check_checkpoints, synthesize
 
-    _check_object(args.object)
+    _check_object(args.object, f"saga_{{name}}_s{args.seed}")
     check_checkpoints()                               # before the body, which a plain `pip install` has to build
     pose, free_joints = _object_pose(args.at), _free_joints(args.free_joints)
-    _print_notes(object_range_notes(pose))
+    _print_notes(object_range_notes(pose, args.object))
     bm = _body_model(args.model)
     torch.set_num_threads(args.threads)
     r = synthesize(args.object, bm, object_pose=pose, seed=args.seed, free_joints=free_joints,
                    hold_start=args.hold_start)
     args.out.mkdir(parents=True, exist_ok=True)
-    paths, _ = _write_clip(bm, r.motion, args.out, f"saga_{r.name}_s{args.seed}", {r.name: r.mesh},
+    paths, _ = _write_clip(bm, r.motion, args.out, f"saga_{r.name}_s{args.seed}", _scene_objects(r.name, r.mesh),
                            f"SAGA: {r.name}")
     print(", ".join(f"{k} {v:.3f}" for k, v in r.metrics.items()))
     for path in paths:
@@ -171,18 +193,19 @@ def _cmd_goal(args: argparse.Namespace) -> int:
     from graspkit.goal import check_checkpoints, synthesize
     from graspkit.models.mnet import STALL_FRAMES
 
-    _check_object(args.object)
+    _check_object(args.object, f"goal_{{name}}_s{args.seed}")
     check_checkpoints()                               # before the body, which a plain `pip install` has to build
     check_counts(args, stall=0, max_frames=2)
     pose = _object_pose(args.at)
-    _print_notes(object_range_notes(pose))
+    _print_notes(object_range_notes(pose, args.object))
     bm = _body_model(args.model)                      # a bad --model fails here, before any work
     torch.set_num_threads(args.threads)
     r = synthesize(args.object, object_pose=pose, seed=args.seed, max_frames=args.max_frames,
                    model=str(args.model) if args.model else None,
                    stall=STALL_FRAMES if args.stall is None else args.stall or None)
     args.out.mkdir(parents=True, exist_ok=True)
-    paths, _ = _write_clip(bm, r.motion, args.out, f"goal_{r.name}_s{args.seed}", {r.name: r.mesh}, f"GOAL: {r.name}")
+    paths, _ = _write_clip(bm, r.motion, args.out, f"goal_{r.name}_s{args.seed}", _scene_objects(r.name, r.mesh),
+                           f"GOAL: {r.name}")
     print(f"goal grasp {'reached' if r.reached else 'not reached'} (hand vertices within 1 cm of the goal hand's "
           f"on average) in {r.motion.num_frames} frames; "
           + ", ".join(f"{k} {v:.3f}" for k, v in r.metrics.items()))
@@ -310,7 +333,7 @@ def _command_named(argv: list[str] | None) -> str | None:
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The argument parser of the `graspkit` command for the command line `argv` (None: sys.argv[1:]; the
     subcommands of data, train and eval are only added when argv names that command)."""
-    from graspkit.paths import default_model_path, procedural_model_path
+    from graspkit.paths import procedural_model_path
 
     named = _command_named(argv)
 
@@ -329,7 +352,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                    "procedural body's own file, rebuilt in place, never the one GRASPKIT_MODEL names: %(default)s)")
     b.set_defaults(func=_cmd_body_build, out_is_file=True)
     i = body.add_parser("info", help="describe a body-model file")
-    i.add_argument("--model", type=Path, default=default_model_path())
+    i.add_argument("--model", type=Path, default=None, help="default: $GRASPKIT_MODEL, else the procedural humanoid")
     i.set_defaults(func=_cmd_body_info)
 
     d = sub.add_parser("demo", help="run the main job and write its figures to --out")
@@ -437,8 +460,15 @@ FILE_SUFFIXES = (".npz", ".pt", ".json", ".csv")      # an --out with one of the
 def check_out(path: Path, is_file: bool | None = None, flag: str = "--out") -> None:
     """Before any work: `path` (a file when is_file, a folder when not; None: a file if its suffix is in
     FILE_SUFFIXES) can be written, i.e. it is not the other kind of thing and its nearest existing ancestor is a
-    writable folder; ValueError naming `flag`."""
-    path = Path(path)
+    writable folder; ValueError naming `flag` (also for a path the system refuses to look at: a name past 255 bytes)."""
+    try:
+        _check_out(Path(path), is_file, flag)
+    except OSError as e:
+        raise ValueError(f"{flag}: {path}: {e.strerror or e}") from None
+
+
+def _check_out(path: Path, is_file: bool | None, flag: str) -> None:
+    """check_out's checks (an OSError of the file system passes)."""
     is_file = path.suffix in FILE_SUFFIXES if is_file is None else is_file
     if is_file and path.is_symlink():                  # written through (paths.writes_to): check where it leads
         target = Path(os.path.realpath(path))
@@ -519,7 +549,11 @@ def check_file(path: Path, flag: str, what: str = "a checkpoint file", see: str 
     from graspkit.paths import stub_hint
 
     path = Path(path)
-    if not path.is_file():
+    try:
+        found = path.is_file()
+    except OSError as e:                                 # a name past 255 bytes, say
+        raise ValueError(f"{flag}: {path}: {e.strerror or e}") from None
+    if not found:
         problem = f"is a folder, expected {what}" if path.is_dir() else "is missing"
         raise FileNotFoundError(f"{flag}: {path} {problem}" + (f" (see {see})" if see else "") + stub_hint(path))
 
@@ -615,14 +649,51 @@ def _quiet(on: bool) -> Iterator[None]:
 
 def _main(argv: list[str] | None) -> int:
     """`main` with graspkit's warnings shown as notes."""
-    args = build_parser(argv).parse_args(argv)
+    try:
+        parser = build_parser(argv)          # defaults read GRASPKIT_CACHE / GRASPKIT_MODEL
+    except ValueError as e:
+        print(f"graspkit: error: {e}", file=sys.stderr)
+        return 2
+    args = parser.parse_args(argv)
+    typed = _raw_out(sys.argv[1:] if argv is None else argv)
+    if getattr(args, "out_is_file", False) and typed.endswith(("/", os.sep)):
+        print(f"graspkit: error: --out: {typed} names a folder; this command writes one file: expected its path",
+              file=sys.stderr)
+        return 2
     with _quiet(args.quiet_all):
         return _run(args)
+
+
+def _raw_out(argv: list[str]) -> str:
+    """--out's value as typed (argparse's Path drops a trailing '/': `--out newdir/` became a file named newdir)."""
+    out = ""
+    for i, a in enumerate(argv):
+        if a == "--out" and i + 1 < len(argv):
+            out = argv[i + 1]
+        elif a.startswith("--out="):
+            out = a[len("--out="):]
+    return out
+
+
+def _expand_user(args: argparse.Namespace) -> None:
+    """`~` and `~user` expanded in every path argument, as in GRASPKIT_CACHE: `--out=~/x` (the shell leaves a `~`
+    after `=` alone) wrote into a folder named `~` in the working folder."""
+    def expand(p: Any, name: str) -> Any:
+        if not isinstance(p, Path) or not p.parts or not p.parts[0].startswith("~"):
+            return p
+        try:
+            return p.expanduser()
+        except RuntimeError as e:
+            raise ValueError(f"--{name.replace('_', '-')}: {p}: {e}") from None
+
+    for name, value in vars(args).items():
+        setattr(args, name, [expand(v, name) for v in value] if isinstance(value, list) else expand(value, name))
 
 
 def _run(args: argparse.Namespace) -> int:
     """Run a parsed command: its checks, then its function; errors and Ctrl-C as one line and an exit status."""
     try:
+        _expand_user(args)
         if getattr(args, "seed", None) is not None and not 0 <= args.seed < 2**63:
             raise ValueError(f"--seed: expected a non-negative integer below 2^63, got {args.seed}")
         check_counts(args, **dict.fromkeys(("threads", "epochs", "batch_size", "workers", "n", "chunk"), 1))

@@ -118,14 +118,14 @@ def _files(folder, kind: str, split: str | None) -> list:
     from pathlib import Path
 
     from graspkit.data.grab import load_grasp_sequence
-    from graspkit.data.grasp import split_of
+    from graspkit.data.grasp import file_split
 
     paths = sorted(Path(folder).glob(f"{kind}_*.npz"))
     if not paths:
         raise FileNotFoundError(f"folder: no {kind}_*.npz files in {folder} (make them with "
                                 f"`graspkit data make --kind {kind}`)")
-    seqs = [load_grasp_sequence(p) for p in paths]
-    return [s for s in seqs if split is None or split_of(s.object_name) == split]
+    seqs = [(p, load_grasp_sequence(p)) for p in paths]
+    return [s for p, s in seqs if split is None or file_split(s.object_name, p) == split]
 
 
 def object_points_world(seq: GraspSequence, frame: int = 0) -> Tensor:

@@ -49,12 +49,19 @@ STAGES = {"local": ("locomotion", ("local",), "truth"), "traj": ("approach", ("t
 DEFAULT_CLIPS = {"locomotion": 160, "reach": 600, "approach": 144}
 
 
+def clip_files(root: str | Path, kind: str) -> list[Path]:
+    """The clips `data make --kind kind` writes in root (<kind>_<digits>.npz), sorted: other files there (a copy
+    named approach_000000_old.npz) are not clips of the set."""
+    return sorted(f for f in Path(root).glob(f"{kind}_*.npz") if re.fullmatch(rf"{re.escape(kind)}_\d+\.npz", f.name))
+
+
 def approach_motions(root: str | Path, n: int | None = None) -> tuple[list, list[str]]:
-    """Approach-and-grasp clips (graspkit data make --kind approach) as Motions cut at the goal frame (the grasp is
-    frame T of the window), and their object names; accepted grasps only."""
+    """The first n approach-and-grasp clips in root (graspkit data make --kind approach: `clip_files`) as Motions
+    cut at the goal frame (the grasp is frame T of the window), and their object names; accepted grasps only."""
+    from graspkit.data.grasp import file_split
     from graspkit.data.motion import Motion
 
-    files = sorted(Path(root).glob("approach_*.npz"))[:n]
+    files = clip_files(root, "approach")[:n]
     motions, names = [], []
     for f in files:
         a = _approach_arrays(f, WINDOW_KEYS)
@@ -64,6 +71,7 @@ def approach_motions(root: str | Path, n: int | None = None) -> tuple[list, list
         motions.append(Motion(a["body.params.fullpose"][:g + 1].reshape(-1, 55, 3), a["body.params.transl"][:g + 1],
                               a["body.betas"], 30.0, contacts=a["contact.feet"][:g + 1].astype(bool)))
         names.append(str(a["obj_name"]))
+        file_split(names[-1], f)                       # the windows' split is by object: a foreign name is f's error
     return motions, names
 
 
@@ -121,7 +129,7 @@ def windows_source(kind: str, n: int, data: Path | None = None, body: str | None
     root = Path(data) if data else cache_dir().joinpath(*sub)
     if not root.is_dir():
         raise FileNotFoundError(f"data: no folder {root} (graspkit data make --kind {kind} --out {root})")
-    files = sorted(f for f in root.glob(f"{kind}_*.npz") if re.fullmatch(rf"{kind}_\d+\.npz", f.name))[:n]
+    files = clip_files(root, kind)[:n]
     if len(files) < n:
         raise FileNotFoundError(f"data: {root} holds {len(files)} {kind} clips, {n} wanted "
                                 f"(graspkit data make --kind {kind} --n {n})")
@@ -158,8 +166,7 @@ def windows(kind: str, n: int, bm: BodyModel | None = None, data: Path | None = 
         from graspkit.data.grasp import split_of
 
         arr["split"] = np.array([("train", "val", "test").index(split_of(names[c])) for c in arr["clip"]], np.int64)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    save_windows(out, arr)
+    save_windows(out, arr)                     # (its folder made there; an unwritable cache named)
     return arr
 
 
@@ -354,7 +361,7 @@ def add_motionfill_train_commands(train_sub: argparse._SubParsersAction) -> None
                    help="LocalMotionFill's network for a new model (stage local): convolutions over time reading each "
                    "frame of the motion image whole (default) or 2-D convolutions over the image (LEMO); with --init, "
                    "the checkpoint's")
-    p.set_defaults(func=_cmd_train)
+    p.set_defaults(func=_cmd_train, out_is_file=True)
     b = train_sub.add_parser("motionfill_baseline", help="train one of SAGA Tab. 3's deterministic infilling "
                              "baselines (CNN-AE, PoseNet, RouteNet)")
     b.add_argument("--model", choices=list(BASELINE_DATA), required=True)
@@ -391,9 +398,14 @@ def _cmd_train(args: argparse.Namespace) -> int:
     if args.stage == "smooth_ae":
         from graspkit.optim.graspmotion import SMOOTH_AE_PATH, train_smooth_ae
 
-        if args.lr is not None or args.time_limit is not None:
-            raise ValueError("--lr, --time-limit: --stage smooth_ae trains S.1's small autoencoder in its own loop "
-                             "(Adam, lr 2e-3, every epoch; not graspkit.train.fit: no resume, no CSV); leave them out")
+        unused = [flag for flag, v in (("--lr", args.lr), ("--time-limit", args.time_limit), ("--init", args.init),
+                                       ("--reduction", args.reduction), ("--local-arch", args.local_arch),
+                                       ("--clips", args.clips)) if v is not None]
+        if unused:
+            raise ValueError(f"{', '.join(unused)}: --stage smooth_ae trains S.1's small autoencoder in its own loop "
+                             "(Adam, lr 2e-3, every epoch; not graspkit.train.fit: no resume, no CSV) on the windows "
+                             f"of {DEFAULT_CLIPS['locomotion']} locomotion and {DEFAULT_CLIPS['approach']} approach "
+                             "clips, from scratch; leave them out")
 
         out = args.out if args.out != CHECKPOINT else SMOOTH_AE_PATH
         marks = []
@@ -801,8 +813,10 @@ def main(argv: list[str] | None = None) -> int:
         test = clip_split(arr)["test"]
         rows = evaluate(load_motionfill(args.checkpoints / "motionfill.pt"), arr, test, n=10, seed=args.seed,
                         baselines=load_baselines(args.checkpoints))
+        where = (f"<cache>/grasps/approach (graspkit data make --kind approach --n {args.clips} --seed 0)"
+                 if args.data is None else str(data))      # not this machine's cache folder: a shipped file says it
         protocol = (f"windows ending at the grasp of the six GRAB test objects among the first {args.clips} clips of "
-                    f"{data}{' (graspkit data make --kind approach --n 272 --seed 0)' if args.data is None else ''}; "
+                    f"{where}; "
                     f"n = 10 samples, seed {args.seed}; baselines from load_baselines({args.checkpoints.name}); "
                     "PSKL leaves out coordinates that never accelerate (the linear rows' z: pskl_still_share)")
         doc = update_json(args.out, rows=rows, test_windows=int(np.isin(arr["clip"], test).sum()), protocol=protocol)

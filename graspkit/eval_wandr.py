@@ -33,6 +33,8 @@ from __future__ import annotations
 
 import math
 import re
+import shlex
+from pathlib import Path
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Sequence
 
@@ -573,10 +575,12 @@ def table(rows: dict[str, dict[str, float]], paper: dict[str, tuple[float, float
 
 def paper_row(name: str, paper: dict[str, tuple[float, float, float]] = PAPER) -> str | None:
     """The paper's row a row name stands for: itself, or its variant's row without graspkit's suffixes (a data
-    choice "[reach clips]", "+ floor constraint ...", "+ lift ..."); None where the paper has no such row."""
+    choice "[reach clips]", "+ floor constraint ...", "+ lift ...", a second checkpoint's "#2"); None where the paper
+    has no such row."""
     if name in paper:
         return name
-    base = re.sub(r"( \+ (floor constraint|lift) .*)$", "", name)
+    base = re.sub(r" #\d+$", "", name)                 # another checkpoint of the variant (`graspkit eval wandr`)
+    base = re.sub(r"( \+ (floor constraint|lift) .*)$", "", base)
     base = re.sub(r" \[[^\]]*\]$", "", base)
     return base if base in paper else None
 
@@ -722,7 +726,7 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
         + ([(f" --contact-weight {contact_weight:g}", f"_c{contact_weight:g}")] if contact_weight else []) \
         + ([(f" --floor-weight {floor_weight:g}", f"_h{floor_weight:g}")] if floor_weight else []) \
         + ([(" --select-val", "_val")] if select_val else []) \
-        + ([(f" --init {init}", f"_i{file_key(init)}")] if init is not None else []) \
+        + ([(f" --init {shlex.quote(str(init))}", f"_i{file_key(init)}")] if init is not None else []) \
         + ([(f" --window-stride {window_stride}", f"_w{window_stride}")] if window_stride is not None else []) \
         + ([(f" --kinds {','.join(v['kinds'])}", f"_k{''.join(k[0] for k in v['kinds'])}")]
            if v["kinds"] != VARIANTS[variant]["kinds"] else [])
@@ -874,9 +878,13 @@ def _cmd_train(args) -> int:
     return 0
 
 
+CACHE_CLIPS = Path("<cache>/motion")   # `eval wandr --clips` alone: the cache's clips, resolved when the command runs
+
+
 def _cmd_eval(args) -> int:
     """`graspkit eval wandr`."""
     from graspkit.cli import as_flags, check_file, check_folders
+    from graspkit.paths import cache_dir
 
     from graspkit.models.wandr import check_floor
 
@@ -886,14 +894,20 @@ def _cmd_eval(args) -> int:
         raise ValueError(f"--floor: expected a finite tolerance >= 0 in metres, got {args.floor}") from None
     for ck in args.checkpoint:                         # every one before the first is evaluated
         check_file(ck, "--checkpoint")
+    if args.clips == CACHE_CLIPS:                      # --clips alone (resolved here: GRASPKIT_CACHE may be bad)
+        args.clips = cache_dir() / "motion"
     check_folders(args.clips, "--clips")
     rows, extra = {}, {}
     for ck in args.checkpoint:
         with as_flags(clips_folder="--clips"):         # a folder without reaching clips
             r = run_eval_wandr(ck, args.n, args.seed, planner=args.planner and not extra, threads=args.threads,
                                clips_folder=args.clips, floor=args.floor, lift=args.lift)
-        rows[r["row"]] = r["summary"]
-        print(f"{ck}: {r['row']}: SR {r['summary']['SR']:.1f} %, FS {r['summary']['FS']:.1f} %, "
+        row, k = r["row"], 1
+        while row in rows:                             # a variant's checkpoints (two seeds, say): one row each
+            k += 1
+            row = f"{r['row']} #{k}"
+        rows[row] = r["summary"]
+        print(f"{ck}: {row}: SR {r['summary']['SR']:.1f} %, FS {r['summary']['FS']:.1f} %, "
               f"DTG {r['summary']['DTG']:.1f} cm ({r['summary']['rollouts']} rollouts, {r['seconds']:.0f} s)")
         if "SR_grounded" in r["summary"]:
             print(f"  not the paper's: SR with a foot on the floor {r['summary']['SR_grounded']:.1f} %, frames with "
@@ -913,11 +927,8 @@ def _cmd_eval(args) -> int:
 
 def add_wandr_commands(train_sub: argparse._SubParsersAction, eval_sub: argparse._SubParsersAction) -> None:
     """`graspkit train wandr` and `graspkit eval wandr`."""
-    from pathlib import Path
-
     from graspkit.cli import TIME_LIMIT_HELP
     from graspkit.data.wandr_dataset import GOAL_FRAMES
-    from graspkit.paths import cache_dir
 
     t = train_sub.add_parser("wandr", help="train WANDR (or a Tab. 1 / Tab. 2 ablation) on the procedural clips")
     t.add_argument("--variant", choices=list(VARIANTS), default="wandr")
@@ -982,7 +993,7 @@ def add_wandr_commands(train_sub: argparse._SubParsersAction, eval_sub: argparse
                    help="raise a body whose lowest foot joint is below its start height back to it while generating "
                         "(against sinking into the floor; not in the paper; docs/wandr.md)")
     e.add_argument("--threads", type=int, default=2)
-    e.add_argument("--clips", type=Path, nargs="?", const=cache_dir() / "motion", default=None,
+    e.add_argument("--clips", type=Path, nargs="?", const=CACHE_CLIPS, default=None,
                    help="also roll out towards the test-split reaching clips' own goals, at their own goal frames "
                         "(folder with reach/ [reach_far/]; default: <cache>/motion)")
     e.set_defaults(func=_cmd_eval)

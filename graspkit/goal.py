@@ -77,7 +77,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     from graspkit.models.gnet import load_gnet
     from graspkit.models.mnet import load_mnet, rollout
     from graspkit.objects.bps import bps_basis
-    from graspkit.objects.placement import apply_pose, within_reach_pose
+    from graspkit.objects.placement import apply_pose, warn_floor, within_reach_pose
     from graspkit.objects.sampling import sample_surface
     from graspkit.objects.user import as_object
     from graspkit.progress import hidden
@@ -98,6 +98,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     with tqdm(total=3, desc="GOAL", unit="stage", disable=hidden(progress)) as bar:
         bar.set_postfix_str("body, start, collision grid")
         pose = object_pose if object_pose is not None else within_reach_pose(seed)
+        warn_floor(pose, obj_mesh)
         centre = np.asarray(pose.translation, np.float64)
         mesh = apply_pose(pose, obj_mesh)
         pts = torch.as_tensor(apply_pose(pose, sample_surface(obj_mesh, 2048, seed=0)[0])).float()

@@ -56,7 +56,7 @@ def default_model_path() -> Path:
     procedural humanoid (in a plain `pip install`, without data_stubs/, the one built in the cache; nothing is written
     into the installed package)."""
     env = os.environ.get("GRASPKIT_MODEL")
-    return Path(env).expanduser() if env else procedural_model_path()
+    return _expanded(env, "GRASPKIT_MODEL") if env else procedural_model_path()
 
 
 def procedural_model_path() -> Path:
@@ -69,7 +69,22 @@ def cache_dir() -> Path:
     """Folder for generated training sets and outputs of long jobs: $GRASPKIT_CACHE (`~` expanded; set but empty
     counts as unset, not as the working folder) or ~/.cache/graspkit."""
     env = os.environ.get("GRASPKIT_CACHE")
-    return Path(env).expanduser() if env else Path.home() / ".cache" / "graspkit"
+    if env:
+        return _expanded(env, "GRASPKIT_CACHE")
+    try:
+        return Path.home() / ".cache" / "graspkit"
+    except RuntimeError:                 # no HOME and no passwd entry (a container's uid)
+        raise ValueError("GRASPKIT_CACHE: not set, and this user has no home folder for the default "
+                         "~/.cache/graspkit; set GRASPKIT_CACHE to a writable folder") from None
+
+
+def _expanded(value: str, variable: str) -> Path:
+    """The path an environment variable names, `~` and `~user` expanded; ValueError naming the variable when they
+    cannot be (an unknown user: pathlib's RuntimeError)."""
+    try:
+        return Path(value).expanduser()
+    except RuntimeError as e:
+        raise ValueError(f"{variable}: {value}: {e} (`~` or `~user` names no home folder here)") from None
 
 
 def cannot_write(folder: Path, e: OSError) -> OSError:

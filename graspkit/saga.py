@@ -119,7 +119,7 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
     from graspkit.data.grasp_io import object_collision_grid
     from graspkit.models.pose_prior import load_pose_prior
     from graspkit.models.wholegrasp import load_wholegrasp
-    from graspkit.objects.placement import apply_pose, within_reach_pose
+    from graspkit.objects.placement import apply_pose, warn_floor, within_reach_pose
     from graspkit.objects.user import as_object
     from graspkit.optim.grasppose import GraspObject
     from graspkit.paths import default_model_path
@@ -131,6 +131,7 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
     ck = check_checkpoints(checkpoints)
     bm = bm if bm is not None else BodyModel.from_file(default_model_path())
     pose = object_pose if object_pose is not None else within_reach_pose(seed)
+    warn_floor(pose, obj_mesh)
     g = torch.Generator().manual_seed(seed)
     R_o, centre = np.asarray(pose.rotation, np.float64), np.asarray(pose.translation, np.float64)
     P, N = _object_points(obj_mesh, R_o)

@@ -854,3 +854,87 @@ def test_module_commands_end_ctrl_c_with_one_line(capsys):
 
     assert noting([]) == 0
     assert capsys.readouterr().err == "python -m graspkit.eval_x: note: checkpoints: no x.pt\n"
+
+
+def test_goal_on_a_mesh_file_named_body_writes_the_whole_set(tmp_path, monkeypatch, capsys):
+    """A mesh file body.obj (stem 'body', the body mesh's name in the exports) ran the whole pipeline and then
+    stopped with 'objects: ...' after the GIF and PNG, a half-written set; a stem too long for the outputs' names
+    failed with a bare ENAMETOOLONG after the run: it is refused up front, naming --object."""
+    import types
+
+    import numpy as np
+    import trimesh
+
+    import graspkit.goal
+    from graspkit.cli import main
+    from graspkit.data.motion import Motion
+
+    box = trimesh.creation.box((0.08, 0.08, 0.12))
+    box.export(tmp_path / "body.obj")
+    calls = []
+
+    def fake(obj, **k):
+        calls.append(obj)
+        trans = np.tile([0.0, 0.0, 0.9], (3, 1))
+        return types.SimpleNamespace(name="body", mesh=box, motion=Motion(np.zeros((3, 55, 3)), trans, np.zeros(10), 30.0),
+                                     reached=True, metrics={})
+    monkeypatch.setattr(graspkit.goal, "synthesize", fake)
+    out = tmp_path / "out"
+    assert main(["goal", "--object", str(tmp_path / "body.obj"), "--out", str(out)]) == 0
+    names = sorted(p.name for p in out.iterdir())
+    assert [n for n in names if n.endswith((".gif", ".png", ".npz", ".glb"))] == [
+        "goal_body_s0.gif", "goal_body_s0.glb", "goal_body_s0.npz", "goal_body_s0.png", "goal_body_s0_final.glb"]
+    long = tmp_path / ("b" * 240 + ".obj")
+    box.export(long)
+    capsys.readouterr()
+    assert main(["goal", "--object", str(long), "--out", str(out)]) == 2
+    assert "--object" in capsys.readouterr().err and len(calls) == 1
+
+
+@pytest.mark.parametrize("argv, env, message", [
+    # argparse's Path dropped the slash: a 2.6 MB body file named `newdir` was written
+    (["body", "build", "--out", "{tmp}/newdir/"], {}, "--out: {tmp}/newdir/ names a folder; this command writes one"),
+    (["train", "pose_prior", "--out={tmp}/runs/"], {}, "--out: {tmp}/runs/ names a folder"),
+    # a name past 255 bytes: a bare "[Errno 36] File name too long" that named no option
+    (["wandr", "--goal", "1", "0", "1", "--out", "{tmp}/" + "a" * 300], {}, "--out: {tmp}/aaa"),
+    (["wandr", "--goal", "1", "0", "1", "--checkpoint", "{tmp}/" + "c" * 300 + ".pt", "--out", "{tmp}/o"], {},
+     "--checkpoint: {tmp}/ccc"),
+    (["goal", "--object", "{tmp}/" + "m" * 300 + ".obj", "--out", "{tmp}/o"], {}, "--object: {tmp}/mmm"),
+    # `~user` of no one: a RuntimeError traceback, even for --version with GRASPKIT_MODEL
+    (["body", "info"], {"GRASPKIT_MODEL": "~nosuchuser_gk/x.npz"}, "GRASPKIT_MODEL: ~nosuchuser_gk/x.npz: "),
+    (["data", "make", "--kind", "locomotion", "--n", "1"], {"GRASPKIT_CACHE": "~nosuchuser_gk/c"},
+     "GRASPKIT_CACHE: ~nosuchuser_gk/c: "),
+    (["wandr", "--goal", "1", "0", "1", "--out=~nosuchuser_gk/o"], {}, "--out: ~nosuchuser_gk/o: "),
+    # body info's own --model named
+    (["body", "info", "--model", "{tmp}/none.npz"], {}, "--model: {tmp}/none.npz"),
+])
+def test_path_arguments_are_refused_by_name(tmp_path, monkeypatch, capsys, argv, env, message):
+    from graspkit.cli import main
+
+    for k, v in env.items():
+        monkeypatch.setenv(k, v)
+    assert main([a.format(tmp=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert message.format(tmp=tmp_path) in err and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == []                   # nothing written
+
+
+def test_version_and_help_survive_a_bad_model_variable(monkeypatch, capsys):
+    from graspkit.cli import main
+
+    monkeypatch.setenv("GRASPKIT_MODEL", "~nosuchuser_gk/x.npz")
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0 and "graspkit" in capsys.readouterr().out
+
+
+def test_a_tilde_in_a_path_argument_is_the_home_folder(tmp_path, monkeypatch):
+    """`--out=~/x` (the shell leaves `~` after `=` alone) wrote into a folder named `~` in the working folder."""
+    import argparse
+
+    from graspkit.cli import _expand_user
+
+    monkeypatch.setenv("HOME", str(tmp_path))
+    args = argparse.Namespace(out=Path("~/x"), data=[Path("~/d"), Path("rel/~y")], seed=3, name="~z")
+    _expand_user(args)
+    assert args.out == tmp_path / "x" and args.data == [tmp_path / "d", Path("rel/~y")] and args.name == "~z"

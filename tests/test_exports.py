@@ -280,3 +280,27 @@ def test_sequence_glb_static_objects_are_turned_y_up_and_coloured(tmp_path):
     assert _close_rgba(col["cup"], to_rgba(OBJECT))
     assert _close_rgba(col["plate"], to_rgba("tab:green"))
     assert _close_rgba(col["body"], to_rgba(SKIN))
+
+
+def test_writers_refuse_a_file_name_of_another_format(tmp_path):
+    """export_sequence_glb wrote binary GLB into seq.gltf (JSON text by the glTF specification: trimesh and
+    `graspkit goal --object` could not read it back), save_png PNG bytes into fig.jpg, save_motion an npz into
+    clip.json; each now refuses, naming `path`, and writes nothing."""
+    import matplotlib.pyplot as plt
+
+    from graspkit.data.formats import save_motion
+    from graspkit.data.motion import Motion
+    from graspkit.viz.export import export_sequence_glb, save_png
+
+    tri = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]] * 2)
+    for name in ("seq.gltf", "seq.png", "seq"):
+        with pytest.raises(ValueError, match=r"^path: expected a file ending in \.glb"):
+            export_sequence_glb(tri, [[0, 1, 2]], tmp_path / name)
+    assert export_sequence_glb(tri, [[0, 1, 2]], tmp_path / "seq.GLB").read_bytes()[:4] == b"glTF"
+    with pytest.raises(ValueError, match=r"^path: expected a file ending in \.png"):
+        save_png(plt.figure(figsize=(1, 1)), tmp_path / "fig.jpg")
+    m = Motion(np.zeros((2, 55, 3)), np.zeros((2, 3)), np.zeros(10), 30.0)
+    with pytest.raises(ValueError, match=r"^path: expected a file ending in \.npz"):
+        save_motion(tmp_path / "clip.json", m)
+    plt.close("all")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["seq.GLB"]

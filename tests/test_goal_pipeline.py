@@ -82,6 +82,9 @@ def test_goal_and_wandr_commands_name_bad_arguments(tmp_path, capsys):
                                 ("goal", ["--max-frames", "1"], "--max-frames: expected an integer >= 2, got 1"),
                                 ("goal", ["--at", "0", "0.7", "-0.5", "0"], "--at: the object's centre is 0.5 m below"),
                                 ("saga", ["--at", "0", "0.7", "-0.5", "0"], "--at: the object's centre is 0.5 m below"),
+                                # a centre above the floor: the mug's lower half under it (an independent check)
+                                ("goal", ["--at", "0", "0.7", "0.02", "0"], "--at: the object reaches 2.7 cm under"),
+                                ("saga", ["--at", "0", "0.7", "0.02", "0"], "cm under the floor (z = 0)"),
                                 ("saga", ["--free-joints", "knee"], "--free-joints: expected 'arms', 'none' or distinct"),
                                 ("saga", ["--free-joints", "arms", "left_elbow"], "got arms left_elbow")):
         assert main([cmd, "--object", "mug", *extra, "--out", str(tmp_path / "x")]) == 2

@@ -224,3 +224,27 @@ def test_resampling_moves_the_goal_frame_with_the_frames(tmp_path):
         g = int(s.extras["grasp.goal_frame"])
         assert g == want and g < s.num_frames
         np.testing.assert_allclose(s.poses[g], seq.poses[46], atol=1e-5)      # the same instant of the clip
+
+
+def test_a_clip_of_an_object_outside_the_catalogue_is_named_by_its_file(tmp_path):
+    """The splits are by catalogue object: a clip whose obj_name is 'teapot' failed with "name: unknown object" (split_of's
+    parameter), naming neither the file nor the key, among hundreds of clips; every reader that splits names both."""
+    import shutil
+
+    from graspkit.data.grasp_datasets import grasp_files
+    from graspkit.eval_goal import _files
+    from graspkit.eval_motionfill import approach_motions
+    from graspkit.paths import DATA_STUBS
+
+    for i in range(2):
+        shutil.copy(DATA_STUBS / "approach" / f"approach_00000{i}.npz", tmp_path)
+    bad = tmp_path / "approach_000001.npz"
+    with np.load(bad, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["obj_name"] = np.array("teapot")
+    np.savez(bad, **arrays)
+    for read in (lambda: grasp_files(tmp_path, "approach", split="train"), lambda: _files(tmp_path, "approach", "test"),
+                 lambda: approach_motions(tmp_path)):
+        with pytest.raises(SequenceFileError, match=r"approach_000001\.npz: key 'obj_name' is 'teapot', expected a catalogue"):
+            read()
+    assert len(grasp_files(tmp_path, "approach")) == 2                  # no split asked: no object needed

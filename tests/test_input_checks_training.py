@@ -170,7 +170,12 @@ def test_module_commands_report_bad_input_without_a_traceback(tmp_path, capsys, 
     (["train", "wholegrasp", "--time-limit", "-1", "--out", "{tmp}/demo/w.pt"], "argument --time-limit: expected a "
                                                                                "finite number > 0, got -1"),
     (["train", "motionfill", "--stage", "smooth_ae", "--lr", "0.1", "--out", "{tmp}/demo/s.pt"],
-     "--lr, --time-limit: --stage smooth_ae trains"),
+     "--lr: --stage smooth_ae trains"),
+    # options smooth_ae does not use were ignored: --clips 3 trained on the default 160 clips without a word
+    (["train", "motionfill", "--stage", "smooth_ae", "--clips", "3", "--init", str(CK / "motionfill.pt"), "--out",
+      "{tmp}/demo/s.pt"], "--init, --clips: --stage smooth_ae trains"),
+    # an existing folder as --out passed the check, trained, then failed on renaming a temporary file onto it
+    (["train", "motionfill", "--stage", "local", "--out", "{tmp}"], "--out: "),
     (["train", "wandr", "--lr", "-1", "--out", "{tmp}/demo/w.pt"], "argument --lr: expected a finite number > 0"),
     (["train", "motionfill_baseline", "--model", "cnn_ae", "--lr", "0", "--out", "{tmp}/demo/b.pt"],
      "argument --lr: expected a finite number > 0"),

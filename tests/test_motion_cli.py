@@ -297,3 +297,43 @@ def test_two_runs_started_together_into_one_folder_do_not_both_claim_it(tmp_path
         warnings.simplefilter("error")
         claim_folder(other, "reach", {"seed": 0, "model": None})
     assert "preexisting" not in json.loads((other / "graspkit_make_reach.json").read_text())
+
+
+def test_a_folder_takes_the_same_body_from_another_path(tmp_path, monkeypatch):
+    """The record compared the model's absolute path beside its digest: the same file moved, or the folder extended
+    on another machine, was refused. The digest decides now (another body is still refused, the test above)."""
+    import shutil
+
+    import pytest
+
+    from graspkit.data.cli import claim_folder
+    from graspkit.paths import default_model_path
+
+    a, b = tmp_path / "a" / "m.npz", tmp_path / "b" / "m.npz"
+    for p in (a, b):
+        p.parent.mkdir()
+        shutil.copy(default_model_path(), p)
+    out = tmp_path / "clips"
+    out.mkdir()
+    claim_folder(out, "reach", {"seed": 7, "model": str(a)})
+    claim_folder(out, "reach", {"seed": 7, "model": str(b)})
+    monkeypatch.setenv("GRASPKIT_MODEL", str(b))
+    claim_folder(out, "reach", {"seed": 7, "model": None})
+    with pytest.raises(ValueError, match=r"seed: 7 there, 8 now"):
+        claim_folder(out, "reach", {"seed": 8, "model": str(b)})
+
+
+def test_wandr_reads_only_the_clips_of_each_folder_kind(tmp_path):
+    """A reach clip written into locomotion/ (`data make --kind reach --out .../locomotion`) was listed among the
+    locomotion clips, while MotionFill's reader skipped it; both take <kind>_<digits>.npz now."""
+    import shutil
+
+    from graspkit.data.wandr_dataset import list_clips
+    from graspkit.paths import DATA_STUBS
+
+    (tmp_path / "locomotion").mkdir()
+    shutil.copy(DATA_STUBS / "motion" / "locomotion" / "locomotion_000000.npz", tmp_path / "locomotion")
+    shutil.copy(DATA_STUBS / "motion" / "reach" / "reach_000000.npz", tmp_path / "locomotion")
+    shutil.copy(DATA_STUBS / "motion" / "locomotion" / "locomotion_000001.npz",
+                tmp_path / "locomotion" / "locomotion_000001_old.npz")
+    assert [p.name for p in list_clips(tmp_path, kinds=("locomotion",))] == ["locomotion_000000.npz"]

@@ -671,3 +671,26 @@ def test_heel_jerkiness_names_short_or_non_finite_markers():
     with pytest.raises(ValueError, match="markers: contains NaN"):
         heel_jerkiness(bad, [0, 1])
     assert heel_jerkiness(np.zeros((3, 4, 3)), [0, 1]) == {"heel_speed_max": 0.0, "heel_acc_p99": 0.0}
+
+
+def test_approach_windows_are_read_from_the_clips_their_cache_is_named_by(tmp_path, monkeypatch):
+    """A stray approach_000000_old.npz (another clip's copy) in the folder: approach_motions read it as the second
+    clip while the windows' cache key listed approach_000001.npz, so a cached set outlived the stray file's removal."""
+    import shutil
+
+    from graspkit.data.grab import load_grasp_sequence
+    from graspkit.eval_motionfill import approach_motions, windows_source
+
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
+    folder = tmp_path / "approach"
+    folder.mkdir()
+    for i in (0, 1):
+        shutil.copy(DATA_STUBS / "approach" / f"approach_00000{i}.npz", folder)
+    shutil.copy(DATA_STUBS / "approach" / "approach_000002.npz", folder / "approach_000000_old.npz")
+    _, _, files = windows_source("approach", 2, folder)
+    assert [f.name for f in files] == ["approach_000000.npz", "approach_000001.npz"]
+    motions, names = approach_motions(folder, 2)
+    assert len(motions) == 2
+    for m, f in zip(motions, files):                  # the files the key lists, cut at their goal frames
+        full = load_grasp_sequence(f)
+        np.testing.assert_allclose(m.poses, full.poses[:m.num_frames], atol=1e-6)

@@ -406,3 +406,14 @@ def test_a_mesh_of_many_faces_gets_a_note_on_what_will_be_slow(monkeypatch):
     monkeypatch.setattr(U, "MANY_FACES", 1000)
     with pytest.warns(UserWarning, match="the mesh: 1,280 faces: the exact distances and the 2 mm collision grid"):
         U.as_object(ball)
+
+
+def test_solids_that_touch_along_a_face_are_told_to_be_joined(tmp_path):
+    """Two boxes touching face to face, concatenated and saved: the file's error said "not closed" with a hint to fill
+    holes it does not have (edges shared by four faces); it names those edges and the union that mends them."""
+    a = trimesh.creation.box((0.06, 0.04, 0.04))
+    b = trimesh.creation.box((0.04, 0.04, 0.04))
+    b.apply_translation([0.05, 0.0, 0.0])
+    trimesh.util.concatenate([a, b]).export(tmp_path / "L.stl")
+    with pytest.raises(ValueError, match=r"4 edges are shared by more than two faces: .*boolean union"):
+        as_object(tmp_path / "L.stl", "--object")

@@ -994,3 +994,26 @@ def test_goal_rows_name_a_bad_schedule():
                      (dict(leg_frames=1), "leg_frames")):
         with pytest.raises(ValueError, match=f"{name}: expected an integer"):
             E.evaluate_goal_rows(None, start, **kw)
+
+
+def test_eval_wandr_keeps_a_row_per_checkpoint_of_one_variant(tmp_path, monkeypatch, capsys):
+    """Two checkpoints of one variant (two seeds) shared the row name their meta gives: the table kept the last one's
+    figures alone. Each gets its row; the second ('#2') still stands beside the paper's figures for the variant."""
+    import graspkit.eval_wandr as EW
+    from graspkit.cli import main
+
+    sr = iter([99.5, 4.9])
+
+    def fake(ck, *a, **k):
+        s = {"SR": next(sr), "FS": 50.0, "DTG": 60.0, "rollouts": 10}
+        return {"row": "WANDR [reach clips]", "summary": s, "breakdown": {}, "seconds": 1.0}
+    monkeypatch.setattr(EW, "run_eval_wandr", fake)
+    cks = []
+    for name in ("a.pt", "b.pt"):
+        (tmp_path / name).write_bytes(b"x")
+        cks += ["--checkpoint", str(tmp_path / name)]
+    assert main(["eval", "wandr", *cks, "--clips", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    table = out[out.index("|"):]
+    assert "99.5" in table and "4.9" in table and "WANDR [reach clips] #2" in table
+    assert EW.paper_row("WANDR [reach clips] #2") == EW.paper_row("WANDR [reach clips]") == "WANDR"

@@ -53,6 +53,8 @@ def save_motion(path: str | os.PathLike, motion: Motion, amass_keys: bool = Fals
     """Write a Motion as an AMASS-style .npz (plus goal keys for reaching clips), atomically; returns the path.
     amass_keys: also write AMASS's per-part keys (`amass_split_keys`; the exports for other tools do)."""
     path = Path(path)
+    if path.suffix.lower() != ".npz":
+        raise ValueError(f"path: expected a file ending in .npz (the format written), got {path.name!r}")
     check_motion(motion)
     betas = np.zeros(NUM_BETAS, np.float32)   # fewer than 10 betas: zero-padded, as load_motion reads them
     betas[:min(NUM_BETAS, len(motion.betas))] = motion.betas[:NUM_BETAS]

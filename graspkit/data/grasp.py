@@ -72,6 +72,18 @@ def split_of(name: str) -> str:
     raise ValueError(f"name: unknown object {name!r}; valid names are {list_objects()}")
 
 
+def file_split(name: str, path: object) -> str:
+    """split_of for the obj_name of the file at `path`: a name outside the catalogue is that file's error
+    (SequenceFileError naming it and the key; the splits are GRAB's, by catalogue object)."""
+    from graspkit.data.formats import SequenceFileError
+
+    try:
+        return split_of(name)
+    except ValueError:
+        raise SequenceFileError(f"{path}: key 'obj_name' is {name!r}, expected a catalogue object (the train/val/test "
+                                f"splits are by object): {list_objects()}") from None
+
+
 # ----------------------------------------------------------------------------- graspable parts
 @dataclass(frozen=True)
 class Part:

@@ -20,7 +20,7 @@ from torch.utils.data import Dataset
 
 from graspkit.data.formats import npz_arrays, open_npz
 from graspkit.data.grab import read_arrays
-from graspkit.data.grasp import SPLITS, split_of
+from graspkit.data.grasp import SPLITS, file_split
 from graspkit.rotations import axis_angle_to_matrix, axis_angle_to_rot6d
 
 if TYPE_CHECKING:
@@ -46,7 +46,7 @@ def grasp_files(root: str | os.PathLike, kind: str = "grasp", split: str | None 
             a = npz_arrays(z, ["obj_name"] + (["grasp.accepted"] if "grasp.accepted" in z.files else []), p)
             name = str(a["obj_name"])
             ok = bool(a["grasp.accepted"]) if "grasp.accepted" in a else True
-        if (split is None or split_of(name) == split) and (ok or not accepted_only):
+        if (split is None or file_split(name, p) == split) and (ok or not accepted_only):
             out.append(p)
     return out
 

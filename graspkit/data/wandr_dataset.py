@@ -25,6 +25,7 @@ goals, normalisation statistics, deterministic splits and the held-out start pos
 from __future__ import annotations
 
 import hashlib
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
@@ -106,17 +107,18 @@ class ClipSet:
 
 
 def list_clips(folder: str | Path, kinds: Sequence[str] = KINDS, limit: int | None = None) -> list[Path]:
-    """The clip files `<folder>/<sub>/*.npz` (sorted) of the sub-folders `kinds` (of locomotion, reach and the opt-in
-    reach_far, reach_chain and reach_near; a missing one is skipped), at most `limit` per sub-folder."""
+    """The clip files `<folder>/<sub>/<sub>_<digits>.npz` (sorted; what `graspkit data make --kind <sub>` writes, so a
+    reach clip written into locomotion/ is not taken for locomotion) of the sub-folders `kinds` (of locomotion, reach
+    and the opt-in reach_far, reach_chain and reach_near; a missing one is skipped), at most `limit` per sub-folder."""
     folder = Path(folder)
     out: list[Path] = []
     for kind in kinds:
         if kind not in FOLDERS:
             raise ValueError(f"kinds: expected names from {tuple(FOLDERS)}, got {kind!r}")
-        files = sorted((folder / kind).glob("*.npz"))
+        files = sorted(f for f in (folder / kind).glob(f"{kind}_*.npz") if re.fullmatch(rf"{kind}_\d+\.npz", f.name))
         out += files[:limit] if limit is not None else files
     if not out:
-        raise FileNotFoundError(f"folder: no clips under {folder}/{{{','.join(kinds)}}}/*.npz "
+        raise FileNotFoundError(f"folder: no clips under {folder}/{{{','.join(kinds)}}}/<kind>_<digits>.npz "
                                 "(make them with `graspkit data make --kind locomotion` and `--kind reach`)")
     return out
 

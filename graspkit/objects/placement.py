@@ -6,6 +6,7 @@ metres. A pose maps object-frame coordinates to the world: x_world = R @ x_obj +
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from typing import TypeVar, overload
 
@@ -14,7 +15,7 @@ import torch
 import trimesh
 from torch import Tensor
 
-from graspkit.checks import seeded_rng
+from graspkit.checks import GraspkitWarning, seeded_rng, user_stacklevel
 
 Array = TypeVar("Array", np.ndarray, Tensor)
 
@@ -99,6 +100,27 @@ def sample_object_pose(
     yaw = np.deg2rad(rng.uniform(*yaw_range_deg))
     t = np.array([start[0] + dist * np.cos(bearing), start[1] + dist * np.sin(bearing), height])
     return ObjectPose.from_yaw(yaw, t)
+
+
+FLOOR_TOLERANCE = 0.002   # m: an object placed lower than this under the floor (z = 0) sinks into it
+
+
+def floor_note(pose: ObjectPose, mesh: trimesh.Trimesh) -> str | None:
+    """A note when the mesh at `pose` reaches more than FLOOR_TOLERANCE under the floor z = 0 (a centre above the
+    floor does not make the object so: an upright 18 cm capsule centred 5 cm up sinks 4 cm), else None."""
+    lowest = float(apply_pose(pose, mesh).bounds[0, 2])
+    if lowest >= -FLOOR_TOLERANCE:
+        return None
+    return (f"object_pose: the object reaches {-100 * lowest:.1f} cm under the floor (z = 0): its lowest point is "
+            f"{float(pose.translation[2]) - lowest:.3f} m below its centre, so a centre at least that high keeps it "
+            "on or above the floor")
+
+
+def warn_floor(pose: ObjectPose, mesh: trimesh.Trimesh) -> None:
+    """floor_note as a GraspkitWarning (saga.synthesize and goal.synthesize: the run goes on)."""
+    note = floor_note(pose, mesh)
+    if note:
+        warnings.warn(note, GraspkitWarning, stacklevel=user_stacklevel())
 
 
 def within_reach_pose(seed: int) -> ObjectPose:

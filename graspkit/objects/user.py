@@ -55,9 +55,13 @@ def as_object(obj: str | Path | trimesh.Trimesh, argument: str = "obj") -> tuple
         return str(obj.metadata.get("name") or "object"), _noted(_checked(obj.copy(), argument), "the mesh")
     if isinstance(obj, (str, Path)):
         path = Path(obj)       # a catalogue name as a str is the catalogue object, even beside a file of that name
-        if str(obj) in list_objects() and (isinstance(obj, str) or not path.is_file()):
+        try:
+            found = path.is_file()
+        except OSError as e:                             # a name past 255 bytes, say
+            raise ValueError(f"{argument}: {path}: {e.strerror or e}") from None
+        if str(obj) in list_objects() and (isinstance(obj, str) or not found):
             return str(obj), make_object(str(obj))
-        if path.is_file():
+        if found:
             try:            # unprocessed first: processing would drop NaN vertices and their faces without a word
                 mesh = trimesh.load(path, force="mesh", process=False)
             except Exception as e:   # trimesh raises many kinds for unreadable files
@@ -113,8 +117,12 @@ def _checked(mesh: trimesh.Trimesh, argument: str) -> trimesh.Trimesh:
     if not mesh.is_watertight:                                  # closure test, which such faces fail with a wrong hint
         merged = mesh.copy()
         merged.merge_vertices()
+        many = int((np.unique(merged.edges_sorted, axis=0, return_counts=True)[1] > 2).sum())
         hint = ("its faces do not share vertices where they meet: trimesh's merge_vertices() joins them" if
-                merged.is_watertight else "trimesh's fill_holes() or a remesh may fix it")
+                merged.is_watertight else
+                f"{many} edges are shared by more than two faces: solids that meet along an edge or a face, which a "
+                "boolean union (trimesh.boolean.union) makes one surface" if many else
+                "trimesh's fill_holes() or a remesh may fix it")
         raise ValueError(f"{argument}: the mesh is not closed (watertight); signed distances, contact and "
                          f"penetration need a closed surface ({hint})")
     if not mesh.is_winding_consistent:
