@@ -90,12 +90,13 @@ class Row:
 
 def split_sequences(folders: list[Path], kind: str, split: str) -> list:
     """GRAB-style sequences of `kind` whose object is in `split`, from every folder that has such files."""
+    from graspkit.data.formats import clip_files
     from graspkit.data.grab import load_grasp_sequence
     from graspkit.data.grasp import file_split
 
     out = []
     for f in folders:
-        for p in sorted(Path(f).glob(f"{kind}_*.npz")):
+        for p in clip_files(f, kind):
             s = load_grasp_sequence(p)
             if file_split(s.object_name, p) == split and bool(s.extras.get("grasp.accepted", True)):
                 out.append(s)

@@ -38,6 +38,8 @@ def _cmd_body_info(args: argparse.Namespace) -> int:
         bm = BodyModel.from_file(args.model if args.model is not None else default_model_path())
     except ModelFileError as e:
         raise ValueError(f"{_model_source(args.model)}: {e}") from None
+    except OSError as e:                                 # a name past 255 bytes, say
+        raise ValueError(f"{_model_source(args.model)}: {args.model}: {e.strerror or e}") from None
     out = bm()
     v = out.vertices[0]
     print(bm.extra_repr())
@@ -159,6 +161,8 @@ def _body_model(path: Path | None):
         return load_or_build_body(path)
     except ModelFileError as e:
         raise ValueError(f"{_model_source(path)}: {e}") from None
+    except OSError as e:                                 # a name past 255 bytes, say
+        raise ValueError(f"{_model_source(path)}: {path}: {e.strerror or e}") from None
 
 
 def _cmd_saga(args: argparse.Namespace) -> int:
@@ -538,7 +542,11 @@ def check_counts(args: argparse.Namespace, **least: int) -> None:
 def check_folders(paths: Path | list[Path] | None, flag: str = "--data") -> None:
     """FileNotFoundError naming `flag` unless each of `paths` (one, a list, or None: nothing to check) is a folder."""
     for d in paths if isinstance(paths, list) else [] if paths is None else [paths]:
-        if not Path(d).is_dir():
+        try:
+            found = Path(d).is_dir()
+        except OSError as e:                             # a name past 255 bytes, say
+            raise ValueError(f"{flag}: {d}: {e.strerror or e}") from None
+        if not found:
             what = "is a file, expected a folder" if Path(d).exists() else "no such folder"
             raise FileNotFoundError(f"{flag}: {d}: {what} (make the data with `graspkit data make`, docs/data.md)")
 
@@ -655,27 +663,30 @@ def _main(argv: list[str] | None) -> int:
         print(f"graspkit: error: {e}", file=sys.stderr)
         return 2
     args = parser.parse_args(argv)
-    typed = _raw_out(sys.argv[1:] if argv is None else argv)
-    if getattr(args, "out_is_file", False) and typed.endswith(("/", os.sep)):
-        print(f"graspkit: error: --out: {typed} names a folder; this command writes one file: expected its path",
-              file=sys.stderr)
-        return 2
+    if getattr(args, "out_is_file", False):
+        try:
+            refuse_folder_out(argv)
+        except ValueError as e:
+            print(f"graspkit: error: {e}", file=sys.stderr)
+            return 2
     with _quiet(args.quiet_all):
         return _run(args)
 
 
-def _raw_out(argv: list[str]) -> str:
-    """--out's value as typed (argparse's Path drops a trailing '/': `--out newdir/` became a file named newdir)."""
-    out = ""
-    for i, a in enumerate(argv):
-        if a == "--out" and i + 1 < len(argv):
-            out = argv[i + 1]
-        elif a.startswith("--out="):
-            out = a[len("--out="):]
-    return out
+def refuse_folder_out(argv: list[str] | None) -> None:
+    """ValueError naming --out when the command line `argv` (None: sys.argv[1:]) types it with a trailing separator
+    for a command that writes one file: argparse's Path drops the '/', and `--out newdir/` became a file newdir."""
+    argv = sys.argv[1:] if argv is None else argv
+    typed = ""
+    for i, a in enumerate(argv):             # --out, --out=X and argparse's abbreviations (--ou X, --ou=X)
+        key, eq, value = a.partition("=")
+        if len(key) >= 3 and "--out".startswith(key):
+            typed = value if eq else (argv[i + 1] if i + 1 < len(argv) else "")
+    if typed.endswith(("/", os.sep)):
+        raise ValueError(f"--out: {typed} names a folder; this command writes one file: expected its path")
 
 
-def _expand_user(args: argparse.Namespace) -> None:
+def expand_user_paths(args: argparse.Namespace) -> None:
     """`~` and `~user` expanded in every path argument, as in GRASPKIT_CACHE: `--out=~/x` (the shell leaves a `~`
     after `=` alone) wrote into a folder named `~` in the working folder."""
     def expand(p: Any, name: str) -> Any:
@@ -693,7 +704,7 @@ def _expand_user(args: argparse.Namespace) -> None:
 def _run(args: argparse.Namespace) -> int:
     """Run a parsed command: its checks, then its function; errors and Ctrl-C as one line and an exit status."""
     try:
-        _expand_user(args)
+        expand_user_paths(args)
         if getattr(args, "seed", None) is not None and not 0 <= args.seed < 2**63:
             raise ValueError(f"--seed: expected a non-negative integer below 2^63, got {args.seed}")
         check_counts(args, **dict.fromkeys(("threads", "epochs", "batch_size", "workers", "n", "chunk"), 1))

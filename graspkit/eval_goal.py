@@ -28,7 +28,8 @@ from scipy.spatial import cKDTree
 from torch import Tensor
 
 from graspkit.checks import count_type, nonneg_float, positive_float, seeded_rng
-from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_folders, check_out, reports_errors
+from graspkit.cli import (TIME_LIMIT_HELP, check_counts, check_folders, check_out, expand_user_paths, refuse_folder_out,
+                          reports_errors)
 from graspkit.metrics import GOAL_GRAB_SLIDING
 from graspkit.models.blocks import in_eval_mode
 from graspkit.models.gnet import pose_rotmats
@@ -114,13 +115,13 @@ def teacher_forced_v2v(mnet: MNet, windows: MNetWindows, bm: BodyModel, index: T
 # ------------------------------------------------------------------------------------------- data (graspkit.data.grab files)
 
 def _files(folder, kind: str, split: str | None) -> list:
-    """GRAB-style files `<folder>/<kind>_*.npz` whose object is in `split` ('train', 'val', 'test' or None: all)."""
-    from pathlib import Path
-
+    """GRAB-style files `<folder>/<kind>_<digits>.npz` whose object is in `split` ('train', 'val', 'test' or None:
+    all)."""
+    from graspkit.data.formats import clip_files
     from graspkit.data.grab import load_grasp_sequence
     from graspkit.data.grasp import file_split
 
-    paths = sorted(Path(folder).glob(f"{kind}_*.npz"))
+    paths = clip_files(folder, kind)
     if not paths:
         raise FileNotFoundError(f"folder: no {kind}_*.npz files in {folder} (make them with "
                                 f"`graspkit data make --kind {kind}`)")
@@ -825,6 +826,8 @@ def main(argv: list[str] | None = None) -> int:
     only.add_argument("--rollouts-only", action="store_true",
                       help="recompute only the MNet rollouts and GOAL's sliding rows in an existing JSON (SAGA's kept)")
     a = p.parse_args(argv)
+    refuse_folder_out(argv)
+    expand_user_paths(a)
     if a.tab1_row and not a.tab1_only:
         raise ValueError("--tab1-row: only with --tab1-only (it names a row of Tab. 1 to measure again)")
     check_counts(a, n_grasps=0, n_rollouts=1, max_frames=2, window_stride=1, threads=1, seed=0)

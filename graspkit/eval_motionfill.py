@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import functools
-import re
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -32,7 +31,8 @@ import numpy as np
 import torch
 
 from graspkit.checks import positive_float
-from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_out, reports_errors
+from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_out, expand_user_paths, refuse_folder_out, reports_errors
+from graspkit.data.formats import clip_files
 from graspkit.data.motionfill_dataset import (MotionFillDataset, MotionFillStats, load_windows, make_windows,
                                               save_windows, split_clips)
 from graspkit.models.motionfill import MotionFillConfig, MotionFillVAE
@@ -47,12 +47,6 @@ CHECKPOINT = Path(__file__).resolve().parent.parent / "data_stubs" / "checkpoint
 STAGES = {"local": ("locomotion", ("local",), "truth"), "traj": ("approach", ("traj",), "truth"),
           "finetune": ("approach", ("traj", "local"), "predicted")}
 DEFAULT_CLIPS = {"locomotion": 160, "reach": 600, "approach": 144}
-
-
-def clip_files(root: str | Path, kind: str) -> list[Path]:
-    """The clips `data make --kind kind` writes in root (<kind>_<digits>.npz), sorted: other files there (a copy
-    named approach_000000_old.npz) are not clips of the set."""
-    return sorted(f for f in Path(root).glob(f"{kind}_*.npz") if re.fullmatch(rf"{re.escape(kind)}_\d+\.npz", f.name))
 
 
 def approach_motions(root: str | Path, n: int | None = None) -> tuple[list, list[str]]:
@@ -709,7 +703,7 @@ def held_out_clips(folder: str | Path, per_object: int = 1) -> list[Path]:
     if int(per_object) != per_object or per_object < 1:
         raise ValueError(f"per_object: expected a whole number >= 1, got {per_object}")
     taken: dict[str, list[Path]] = {}
-    for f in sorted(Path(folder).glob("approach_*.npz")):
+    for f in clip_files(folder, "approach"):
         a = _approach_arrays(f, ("obj_name", "grasp.accepted"))
         name, ok = str(a["obj_name"]), bool(a["grasp.accepted"])
         if ok and name in TEST_OBJECTS and len(taken.setdefault(name, [])) < per_object:
@@ -781,6 +775,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--per-object", type=int, default=2, help="graspmotion: accepted clips per test object")
     p.add_argument("--threads", type=int, default=1)
     args = p.parse_args(argv)
+    if args.part != "example":                       # (example's --out is a stem for two files)
+        refuse_folder_out(argv)
+    expand_user_paths(args)
     check_counts(args, clips=1, per_object=1, threads=1, seed=0)
     if args.part == "example":
         out = (args.out or CHECKPOINT.parent / "motionfill_examples")

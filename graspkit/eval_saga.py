@@ -39,7 +39,8 @@ import torch
 from torch import Tensor
 
 from graspkit.checks import GraspkitWarning, positive_float, user_stacklevel
-from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_folders, check_out, check_train_out, reports_errors
+from graspkit.cli import (TIME_LIMIT_HELP, check_counts, check_folders, check_out, check_train_out, expand_user_paths,
+                          refuse_folder_out, reports_errors)
 from graspkit.optim.grasppose import ARM_JOINTS, GraspPoseConfig, GraspPoseWeights
 from graspkit.paths import DATA_STUBS, write_json
 from graspkit.state import keeps_torch_state
@@ -537,6 +538,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="only the GrabNet-SMPLX row (no optimisation; the same draws as the full run)")
     ap.add_argument("--finish", type=Path, default=None, help="only turn this .partial.json into --out and print it")
     args = ap.parse_args(argv)
+    refuse_folder_out(argv)
+    expand_user_paths(args)
     check_counts(args, placements=1, samples=1, gt=1, refine=1)
     check_train_out(args.out)                         # its default is in data_stubs/: none in a plain `pip install`
     check_out(args.out, is_file=True)                 # before any work (the partial results are written beside it)

@@ -45,6 +45,7 @@ from torch import Tensor
 from graspkit import intention as I
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.checks import check_int, check_seed, check_type, count_type, nonneg_float, positive_float, seeded_rng
+from graspkit.data.formats import clip_files
 from graspkit.data.reaching import EVAL_DISTANCES, EVAL_FRAMES, EVAL_HEIGHTS, Start, evaluation_goals
 from graspkit.data.wandr_dataset import FOOT_JOINTS, shaped_rest
 from graspkit.metrics import SAGA_SKATE_HEEL_HEIGHT, WANDR_SKATE_THRESHOLD, WANDR_SUCCESS_RADIUS
@@ -777,7 +778,7 @@ def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = F
     from graspkit.models.wandr import load_wandr
     from graspkit.paths import default_model_path
 
-    if clips_folder is not None and not any(any(Path(clips_folder, s).glob("*.npz")) for s in ("reach", "reach_far")):
+    if clips_folder is not None and not any(clip_files(Path(clips_folder, s), s) for s in ("reach", "reach_far")):
         raise FileNotFoundError(f"clips_folder: no reaching clips in {clips_folder}/reach or reach_far "
                                 f"(graspkit data make --kind reach --out {clips_folder}/reach)")
     torch.set_num_threads(threads)
@@ -810,7 +811,7 @@ def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = F
 
         out["clips"] = {}
         for sub in ("reach", "reach_far"):
-            if not any(Path(clips_folder, sub).glob("*.npz")):
+            if not clip_files(Path(clips_folder, sub), sub):
                 continue
             cs = cached_clips(clips_folder, bm, kinds=(sub,))
             out["clips"][sub] = evaluate_clips(model, cs.subset(split_clips(cs.names)["test"]), seed=seed)

@@ -87,6 +87,14 @@ def _expanded(value: str, variable: str) -> Path:
         raise ValueError(f"{variable}: {value}: {e} (`~` or `~user` names no home folder here)") from None
 
 
+def check_suffix(path: str | os.PathLike, *suffixes: str) -> None:
+    """ValueError naming `path` unless its file name ends in one of `suffixes` (any case): a writer's bytes are that
+    format, and a file named for another (seq.gltf holding binary GLB, clip.json an npz) is read by nothing."""
+    if Path(path).suffix.lower() not in suffixes:
+        raise ValueError(f"path: expected a file ending in {' or '.join(suffixes)} (the format written), got "
+                         f"{Path(path).name!r}")
+
+
 def cannot_write(folder: Path, e: OSError) -> OSError:
     """The OSError to raise when a file cannot be created in `folder`: it names the folder, and the cache's variable
     when the folder is in graspkit's cache (a bare "[Errno 30] Read-only file system: '<cache>/sdf'" said neither)."""

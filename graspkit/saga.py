@@ -124,8 +124,12 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
     from graspkit.optim.grasppose import GraspObject
     from graspkit.paths import default_model_path
 
-    _check_args(bm, start, seed, start_distance, object_pose, hold_start)
+    check_int(seed, "seed")
+    check_positive(start_distance, "start_distance", most=MAX_START_DISTANCE)
+    if start is None and start_distance > WALK_START_DISTANCE:
+        warnings.warn(f"start_distance: {start_distance:g} m; {_RUN_NOTE}", GraspkitWarning, stacklevel=user_stacklevel())
     gcfg, mcfg = _configs(grasp_steps, motion_steps, free_joints, polish_steps)
+    _check_args(bm, start, object_pose, hold_start)
     given = name                     # as the caller gave it: a catalogue name keeps its cached grid
     name, obj_mesh = as_object(name, "name")
     ck = check_checkpoints(checkpoints)
@@ -148,14 +152,9 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
                       _figures(res, motion, markers_w, fitted, mesh, bm))
 
 
-def _check_args(bm: BodyModel | None, start: Start | Motion | None, seed: int, start_distance: float,
-                object_pose: ObjectPose | None, hold_start: bool) -> None:
-    """synthesize's arguments that its configs do not check (ValueError / TypeError naming the argument)."""
-    check_int(seed, "seed")
-    check_positive(start_distance, "start_distance", most=MAX_START_DISTANCE)
-    if start is None and start_distance > WALK_START_DISTANCE:
-        warnings.warn(f"start_distance: {start_distance:g} m; {_RUN_NOTE}", GraspkitWarning,
-                      stacklevel=user_stacklevel())
+def _check_args(bm: BodyModel | None, start: Start | Motion | None, object_pose: ObjectPose | None,
+                hold_start: bool) -> None:
+    """synthesize's body, start, object pose and hold_start (ValueError / TypeError naming the argument)."""
     check_bool(hold_start, "hold_start")
     check_type(object_pose, ObjectPose, "object_pose", optional=True)
     if start is not None and not isinstance(start, (Start, Motion)):

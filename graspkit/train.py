@@ -41,7 +41,7 @@ from tqdm.auto import tqdm
 
 from graspkit.models.blocks import evaluating
 from graspkit.optim.step import with_autograd
-from graspkit.paths import naming_errors, publish, sweep_stale_temps, temp_beside, write_atomic
+from graspkit.paths import check_suffix, naming_errors, publish, sweep_stale_temps, temp_beside, write_atomic
 from graspkit.progress import hidden
 from graspkit.state import keeps_torch_state
 
@@ -107,6 +107,7 @@ def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
     import shutil
 
     path = Path(path)
+    check_suffix(path, ".pt", ".pth")
     tmp = temp_beside(path)
     try:
         with naming_errors(path):
@@ -339,6 +340,7 @@ def evaluate(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainC
 def write_history_csv(path: str | Path, history: list[dict[str, float]]) -> Path:
     """Per-epoch logs (train and val_ columns) to a CSV file, written atomically."""
     path = Path(path)
+    check_suffix(path, ".csv")
     keys = list(dict.fromkeys(k for h in history for k in h))
     return write_atomic(path, ",".join(keys) + "\n" + "".join(",".join(f"{h.get(k, float('nan')):.6g}" for k in keys)
                                                               + "\n" for h in history))
@@ -370,6 +372,7 @@ def write_history_plot(path: str | Path, history: list[dict[str, float]]) -> Pat
 
     from matplotlib.figure import Figure
 
+    check_suffix(path, ".png")
     fig = Figure(figsize=(5, 3), layout="constrained")
     plot_history(history, ["loss"], ax=fig.add_subplot())
     buf = io.BytesIO()

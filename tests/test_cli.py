@@ -895,6 +895,9 @@ def test_goal_on_a_mesh_file_named_body_writes_the_whole_set(tmp_path, monkeypat
     # argparse's Path dropped the slash: a 2.6 MB body file named `newdir` was written
     (["body", "build", "--out", "{tmp}/newdir/"], {}, "--out: {tmp}/newdir/ names a folder; this command writes one"),
     (["train", "pose_prior", "--out={tmp}/runs/"], {}, "--out: {tmp}/runs/ names a folder"),
+    (["body", "build", "--ou", "{tmp}/newdir/"], {}, "--out: {tmp}/newdir/ names a folder"),   # argparse's prefix
+    (["train", "pose_prior", "--data", "{tmp}/" + "d" * 300, "--out", "{tmp}/p.pt"], {}, "--data: {tmp}/ddd"),
+    (["saga", "--object", "mug", "--model", "{tmp}/" + "m" * 300 + ".npz", "--out", "{tmp}/o"], {}, "--model: "),
     # a name past 255 bytes: a bare "[Errno 36] File name too long" that named no option
     (["wandr", "--goal", "1", "0", "1", "--out", "{tmp}/" + "a" * 300], {}, "--out: {tmp}/aaa"),
     (["wandr", "--goal", "1", "0", "1", "--checkpoint", "{tmp}/" + "c" * 300 + ".pt", "--out", "{tmp}/o"], {},
@@ -932,9 +935,51 @@ def test_a_tilde_in_a_path_argument_is_the_home_folder(tmp_path, monkeypatch):
     """`--out=~/x` (the shell leaves `~` after `=` alone) wrote into a folder named `~` in the working folder."""
     import argparse
 
-    from graspkit.cli import _expand_user
+    from graspkit.cli import expand_user_paths
 
     monkeypatch.setenv("HOME", str(tmp_path))
     args = argparse.Namespace(out=Path("~/x"), data=[Path("~/d"), Path("rel/~y")], seed=3, name="~z")
-    _expand_user(args)
+    expand_user_paths(args)
     assert args.out == tmp_path / "x" and args.data == [tmp_path / "d", Path("rel/~y")] and args.name == "~z"
+
+
+def test_module_commands_refuse_a_folder_out_and_expand_a_tilde(tmp_path, monkeypatch, capsys):
+    """`python -m graspkit.eval_goal --out DIR/` wrote its JSON as a file named DIR after the whole evaluation; a mesh
+    file given as --object=~/cup.obj (the shell leaves that `~` alone) was not found."""
+    import trimesh
+
+    from graspkit import eval_goal, eval_saga
+    from graspkit.objects.user import as_object
+
+    for main in (eval_goal.main, eval_saga.main):
+        assert main(["--out", f"{tmp_path}/res/"]) == 2
+        assert f"--out: {tmp_path}/res/ names a folder" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.setenv("HOME", str(tmp_path))
+    trimesh.creation.box((0.08, 0.06, 0.1)).export(tmp_path / "cup.obj")
+    assert as_object("~/cup.obj", "--object")[0] == "cup"
+
+
+def test_eval_wandr_clips_without_a_clip_and_a_sunk_task_are_told_first(tmp_path, capsys):
+    """`eval wandr --clips DIR` whose reach/ held only reach_000000_old.npz ran the whole grid, then failed naming
+    `folder`; sample_grasp_task on a mug centred on the floor fitted a half-buried object without a word."""
+    import shutil
+    import warnings
+
+    import numpy as np
+
+    from graspkit.checks import GraspkitWarning
+    from graspkit.cli import main
+    from graspkit.data.grasp import sample_grasp_task
+    from graspkit.objects.placement import ObjectPose
+    from graspkit.paths import DATA_STUBS
+
+    (tmp_path / "reach").mkdir()
+    shutil.copy(DATA_STUBS / "motion" / "reach" / "reach_000000.npz", tmp_path / "reach" / "reach_000000_old.npz")
+    assert main(["eval", "wandr", "--checkpoint", str(DATA_STUBS / "checkpoints" / "wandr.pt"), "--clips",
+                 str(tmp_path)]) == 2
+    assert "--clips" in capsys.readouterr().err
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        sample_grasp_task(np.random.default_rng(0), "mug", object_pose=ObjectPose.from_yaw(0.0, np.array([0, -0.6, 0.0])))
+    assert any(issubclass(w.category, GraspkitWarning) and "under the floor" in str(w.message) for w in caught)

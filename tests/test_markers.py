@@ -87,8 +87,10 @@ def test_farthest_point_sampling_against_brute_force():
                      (dict(n=3, start=200), "start")):
         with pytest.raises(ValueError, match=f"^{name}:"):
             farthest_point_sampling(pts, **kw)
-    with pytest.raises(ValueError, match="^points:"):
+    with pytest.raises(ValueError, match="^points: contain NaN"):
         farthest_point_sampling(np.r_[pts, [[np.nan, 0, 0]]], 3)
+    grid = np.arange(30).reshape(10, 3)                       # integer coordinates are points too
+    assert farthest_point_sampling(grid, 2).tolist() == [0, 9]
 
 
 def test_vertex_normals_point_outwards_on_a_sphere_and_up_on_a_plane():

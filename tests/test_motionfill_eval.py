@@ -691,6 +691,17 @@ def test_approach_windows_are_read_from_the_clips_their_cache_is_named_by(tmp_pa
     assert [f.name for f in files] == ["approach_000000.npz", "approach_000001.npz"]
     motions, names = approach_motions(folder, 2)
     assert len(motions) == 2
+    # the other readers of a folder of clips: the held-out clips, the grasp datasets, GOAL's and the benchmark's
+    from graspkit.benchmark import split_sequences
+    from graspkit.data.grasp_datasets import grasp_files
+    from graspkit.eval_goal import _files
+    from graspkit.eval_motionfill import held_out_clips
+
+    assert [f.name for f in grasp_files(folder, "approach")] == [f.name for f in files]
+    assert len(_files(folder, "approach", None)) == 2
+    assert "approach_000000_old.npz" not in [f.name for f in held_out_clips(folder, 5)]
+    assert len(split_sequences([folder], "approach", "test")) + len(split_sequences([folder], "approach", "train")) \
+        + len(split_sequences([folder], "approach", "val")) <= 2
     for m, f in zip(motions, files):                  # the files the key lists, cut at their goal frames
         full = load_grasp_sequence(f)
         np.testing.assert_allclose(m.poses, full.poses[:m.num_frames], atol=1e-6)

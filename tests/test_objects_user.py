@@ -415,5 +415,5 @@ def test_solids_that_touch_along_a_face_are_told_to_be_joined(tmp_path):
     b = trimesh.creation.box((0.04, 0.04, 0.04))
     b.apply_translation([0.05, 0.0, 0.0])
     trimesh.util.concatenate([a, b]).export(tmp_path / "L.stl")
-    with pytest.raises(ValueError, match=r"4 edges are shared by more than two faces: .*boolean union"):
+    with pytest.raises(ValueError, match=r"4 edges are used by more than two faces: .*boolean union"):
         as_object(tmp_path / "L.stl", "--object")

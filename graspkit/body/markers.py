@@ -254,8 +254,11 @@ def saga_sparse_markers(bm: BodyModel) -> MarkerSet:
 def farthest_point_sampling(points: np.ndarray, n: int, start: int = 0) -> np.ndarray:
     """Indices (n,) of points (N,3) chosen greedily farthest from those already chosen, from `start`; deterministic."""
     points = np.asarray(points)
-    if points.ndim != 2 or points.shape[1] != 3 or points.dtype.kind != "f" or not np.isfinite(points).all():
-        raise ValueError(f"points: expected finite points of shape (N, 3), got shape {points.shape}")
+    if points.ndim != 2 or points.shape[1] != 3 or points.dtype.kind not in "iuf":
+        raise ValueError(f"points: expected an array of numbers of shape (N, 3), got {points.dtype} of shape "
+                         f"{points.shape}")
+    if not np.isfinite(points).all():
+        raise ValueError("points: contain NaN or Inf")
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= len(points):
         raise ValueError(f"n: expected a whole number of samples in 1..{len(points)}, got {n!r}")
     if isinstance(start, bool) or not isinstance(start, (int, np.integer)) or not 0 <= start < len(points):

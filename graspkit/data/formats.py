@@ -27,7 +27,7 @@ import torch
 from graspkit.checks import GraspkitWarning, user_stacklevel
 from graspkit.data.motion import HANDS, Motion, check_fps
 from graspkit.rotations import axis_angle_to_quaternion, quaternion_to_axis_angle
-from graspkit.paths import make_temp, naming_errors, publish, sweep_stale_temps
+from graspkit.paths import check_suffix, make_temp, naming_errors, publish, sweep_stale_temps
 
 FPS = 30.0
 NUM_BETAS = 10
@@ -49,12 +49,20 @@ def amass_split_keys(poses: np.ndarray, fps: float, num_betas: int = NUM_BETAS) 
             "pose_hand": p[:, 75:], "num_betas": np.array(num_betas), "mocap_time_length": np.array(T / fps)}
 
 
+
+def clip_files(root: str | os.PathLike, kind: str) -> list[Path]:
+    """The clips `graspkit data make --kind kind` writes in root (<kind>_<digits>.npz), sorted: other files there (a
+    copy named approach_000000_old.npz, a reach clip in locomotion/) are not clips of the set; every reader of a
+    folder of clips takes these alone."""
+    import re
+
+    return sorted(f for f in Path(root).glob(f"{kind}_*.npz") if re.fullmatch(rf"{re.escape(kind)}_\d+\.npz", f.name))
+
 def save_motion(path: str | os.PathLike, motion: Motion, amass_keys: bool = False) -> Path:
     """Write a Motion as an AMASS-style .npz (plus goal keys for reaching clips), atomically; returns the path.
     amass_keys: also write AMASS's per-part keys (`amass_split_keys`; the exports for other tools do)."""
     path = Path(path)
-    if path.suffix.lower() != ".npz":
-        raise ValueError(f"path: expected a file ending in .npz (the format written), got {path.name!r}")
+    check_suffix(path, ".npz")
     check_motion(motion)
     betas = np.zeros(NUM_BETAS, np.float32)   # fewer than 10 betas: zero-padded, as load_motion reads them
     betas[:min(NUM_BETAS, len(motion.betas))] = motion.betas[:NUM_BETAS]

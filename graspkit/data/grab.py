@@ -37,6 +37,7 @@ from graspkit.checks import GraspkitWarning, user_stacklevel
 from graspkit.data.formats import (SequenceFileError, _numbers, _scalar, check_source_rate, npz_load_error, resample,
                                    write_npz_atomic)
 from graspkit.data.motion import check_fps
+from graspkit.paths import check_suffix
 
 BODY_PARTS = (("global_orient", 0, 1), ("body_pose", 1, 22), ("jaw_pose", 22, 23), ("leye_pose", 23, 24),
               ("reye_pose", 24, 25), ("left_hand_pose", 25, 40), ("right_hand_pose", 40, 55))
@@ -126,6 +127,7 @@ def save_grasp_sequence(path: str | os.PathLike, seq: GraspSequence, model: str 
     """Write a GraspSequence as a GRAB-style .npz without pickle, atomically (equal content gives equal bytes);
     `model` names the body model the poses are for (`body.model`)."""
     path = Path(path)
+    check_suffix(path, ".npz")
     check_fps(seq.fps, "seq.fps")
     a = to_arrays(seq, model)
     a["object.object_mesh"] = np.array(_mesh_path_for(seq.object_mesh, path.parent))

@@ -42,7 +42,7 @@ from graspkit.data.posing import forward_kinematics
 from graspkit.data.reaching import Start, plan_reach
 from graspkit.data.rig import build_rig
 from graspkit.objects.catalogue import SPECS, TEST_OBJECTS, list_objects, make_object
-from graspkit.objects.placement import ObjectPose, sample_object_pose
+from graspkit.objects.placement import ObjectPose, sample_object_pose, warn_floor
 from graspkit.optim.step import with_autograd
 from graspkit.rotations import axis_angle_to_matrix
 
@@ -402,6 +402,7 @@ def sample_grasp_task(rng: np.random.Generator, name: str, grasp_type: str | Non
         rng, distance_range=(lo, max(lo, start_distance[1])), bearing_range_deg=(-10.0, 10.0))
     start = Start(0.0, 0.0, -np.pi / 2)
     if object_pose is not None:        # a given placement: the person starts facing it (within +-10 deg)
+        warn_floor(object_pose, make_object(name))
         d = rng.uniform(lo, max(lo, start_distance[1]))
         ang = rng.uniform(0, 2 * np.pi)
         xy = pose.translation[:2] + d * np.array([np.cos(ang), np.sin(ang)])

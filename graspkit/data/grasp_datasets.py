@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from graspkit.data.formats import npz_arrays, open_npz
+from graspkit.data.formats import clip_files, npz_arrays, open_npz
 from graspkit.data.grab import read_arrays
 from graspkit.data.grasp import SPLITS, file_split
 from graspkit.rotations import axis_angle_to_matrix, axis_angle_to_rot6d
@@ -39,7 +39,7 @@ def grasp_files(root: str | os.PathLike, kind: str = "grasp", split: str | None 
     if not root.is_dir():
         raise FileNotFoundError(f"root: no such folder {root} (make the data with `graspkit data make --kind {kind}`)")
     out = []
-    for p in sorted(root.glob(f"{kind}_*.npz")):
+    for p in clip_files(root, kind):
         with open_npz(p, f"{'an' if kind[0] in 'aeiou' else 'a'} {kind} file (graspkit data make --kind {kind})") as z:
             if "obj_name" not in z.files:
                 raise ValueError(f"{p}: missing key 'obj_name' (expected a {kind} file of graspkit data make)")

@@ -244,7 +244,9 @@ class MotionFillDataset(Dataset):
 def save_windows(path: str | Path, arrays: dict[str, np.ndarray]) -> Path:
     """Windows to an .npz, atomically."""
     from graspkit.data.formats import write_npz_atomic
+    from graspkit.paths import check_suffix
 
+    check_suffix(path, ".npz")
     write_npz_atomic(Path(path), arrays)
     return Path(path)
 

@@ -25,7 +25,6 @@ goals, normalisation statistics, deterministic splits and the held-out start pos
 from __future__ import annotations
 
 import hashlib
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Sequence
@@ -38,7 +37,7 @@ from torch.utils.data import Dataset
 from graspkit import intention as I
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.checks import check_int
-from graspkit.data.formats import load_motion, member_crcs, npz_arrays, open_npz
+from graspkit.data.formats import clip_files, load_motion, member_crcs, npz_arrays, open_npz
 from graspkit.data.motion import Motion
 from graspkit.paths import read_cache
 
@@ -115,7 +114,7 @@ def list_clips(folder: str | Path, kinds: Sequence[str] = KINDS, limit: int | No
     for kind in kinds:
         if kind not in FOLDERS:
             raise ValueError(f"kinds: expected names from {tuple(FOLDERS)}, got {kind!r}")
-        files = sorted(f for f in (folder / kind).glob(f"{kind}_*.npz") if re.fullmatch(rf"{kind}_\d+\.npz", f.name))
+        files = clip_files(folder / kind, kind)
         out += files[:limit] if limit is not None else files
     if not out:
         raise FileNotFoundError(f"folder: no clips under {folder}/{{{','.join(kinds)}}}/<kind>_<digits>.npz "
@@ -343,7 +342,7 @@ def test_start_names(clips_folder: str | Path, n: int = 6, seed: int = 0, split:
     selection's), alternating locomotion and reach."""
     per_kind = []
     for kind in KINDS:
-        files = sorted(Path(clips_folder, kind).glob("*.npz"))
+        files = clip_files(Path(clips_folder, kind), kind)
         per_kind.append([f"{kind}/{f.name}" for f in files if split_of(f"{kind}/{f.name}", seed) == split])
     out = [nm for pair in zip(*per_kind) for nm in pair][:n]
     if len(out) < n:

@@ -46,7 +46,7 @@ def farthest_point_sample(xyz: Tensor, n: int, generator: torch.Generator | None
     _check_points(xyz)
     B, N, _ = xyz.shape
     if not _is_count(n) or not 1 <= n <= N:
-        raise ValueError(f"n: expected 1..{N} samples (xyz has {N} points), got {n}")
+        raise ValueError(f"n: expected a whole number of samples in 1..{N} (xyz has {N} points), got {n!r}")
     idx = torch.empty(B, n, dtype=torch.long, device=xyz.device)
     if generator is None:
         far = torch.zeros(B, dtype=torch.long, device=xyz.device)

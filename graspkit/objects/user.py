@@ -56,9 +56,10 @@ def as_object(obj: str | Path | trimesh.Trimesh, argument: str = "obj") -> tuple
     if isinstance(obj, (str, Path)):
         path = Path(obj)       # a catalogue name as a str is the catalogue object, even beside a file of that name
         try:
+            path = path.expanduser()                     # `--object=~/cup.obj`: the shell leaves that `~` alone
             found = path.is_file()
-        except OSError as e:                             # a name past 255 bytes, say
-            raise ValueError(f"{argument}: {path}: {e.strerror or e}") from None
+        except (OSError, RuntimeError) as e:             # a name past 255 bytes; `~user` of no one
+            raise ValueError(f"{argument}: {obj}: {getattr(e, 'strerror', None) or e}") from None
         if str(obj) in list_objects() and (isinstance(obj, str) or not found):
             return str(obj), make_object(str(obj))
         if found:
@@ -120,8 +121,9 @@ def _checked(mesh: trimesh.Trimesh, argument: str) -> trimesh.Trimesh:
         many = int((np.unique(merged.edges_sorted, axis=0, return_counts=True)[1] > 2).sum())
         hint = ("its faces do not share vertices where they meet: trimesh's merge_vertices() joins them" if
                 merged.is_watertight else
-                f"{many} edges are shared by more than two faces: solids that meet along an edge or a face, which a "
-                "boolean union (trimesh.boolean.union) makes one surface" if many else
+                f"{many} edges are used by more than two faces: parts that meet along an edge or a face, or a fin; "
+                "parts that overlap or share a face become one surface by a boolean union (trimesh.boolean.union), "
+                "parts that touch along an edge alone must first be moved apart or into each other" if many else
                 "trimesh's fill_holes() or a remesh may fix it")
         raise ValueError(f"{argument}: the mesh is not closed (watertight); signed distances, contact and "
                          f"penetration need a closed surface ({hint})")

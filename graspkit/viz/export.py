@@ -25,7 +25,7 @@ from matplotlib.colors import to_rgba
 from trimesh.visual import TextureVisuals
 from trimesh.visual.material import PBRMaterial
 
-from graspkit.paths import publish, temp_beside, write_atomic  # noqa: F401 (re-exported: callers import them here)
+from graspkit.paths import check_suffix, publish, temp_beside, write_atomic  # noqa: F401 (re-exported: callers import them here)
 from graspkit.viz.scene import as_array, as_mesh
 from graspkit.viz.style import OBJECT, SEQUENCE, SKIN
 
@@ -98,14 +98,9 @@ def png_bytes(fig: Any, dpi: float | None = None) -> bytes:
 
 def save_png(fig: Any, path: str | os.PathLike, dpi: float | None = None) -> Path:
     """Write a matplotlib figure as a PNG atomically (rendered in memory, then a temporary file renamed); closes it."""
-    _check_suffix(path, ".png")
+    check_suffix(path, ".png")
     return write_atomic(Path(path), png_bytes(fig, dpi))
 
-
-def _check_suffix(path: str | os.PathLike, suffix: str) -> None:
-    """ValueError naming `path` unless its file name ends in `suffix` (any case): the bytes written are that format."""
-    if Path(path).suffix.lower() != suffix:
-        raise ValueError(f"path: expected a file ending in {suffix} (the format written), got {Path(path).name!r}")
 
 
 def export_scene(meshes: Mapping[str, Any], path: str | os.PathLike, colors: Mapping[str, Any] | None = None,
@@ -218,7 +213,7 @@ def export_sequence_glb(vertices: Any, faces: Any, path: str | os.PathLike, fps:
     `stride`-th, and always the last, so the clip ends where the motion ends), so viewers (Blender: shape keys;
     three.js, gltf viewers) play it. Size ~ 12 * T * V bytes (10k vertices, 300 frames: 36 MB): use stride.
     trimesh loads the file as the static frame 0. Returns the path."""
-    _check_suffix(path, ".glb")          # a .gltf is JSON text by the glTF 2.0 specification
+    check_suffix(path, ".glb")          # a .gltf is JSON text by the glTF 2.0 specification
     verts = as_array(vertices, "vertices", (None, None, 3))
     f = as_array(faces, "faces", (None, 3), dtype=np.int64)
     _check_stride_fps(stride, fps)
