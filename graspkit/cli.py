@@ -39,7 +39,8 @@ def _cmd_body_info(args: argparse.Namespace) -> int:
     except ModelFileError as e:
         raise ValueError(f"{_model_source(args.model)}: {e}") from None
     except OSError as e:                                 # a name past 255 bytes, say
-        raise ValueError(f"{_model_source(args.model)}: {args.model}: {e.strerror or e}") from None
+        raise ValueError(f"{_model_source(args.model)}: {args.model or os.environ.get('GRASPKIT_MODEL')}: "
+                         f"{e.strerror or e}") from None
     out = bm()
     v = out.vertices[0]
     print(bm.extra_repr())
@@ -162,7 +163,7 @@ def _body_model(path: Path | None):
     except ModelFileError as e:
         raise ValueError(f"{_model_source(path)}: {e}") from None
     except OSError as e:                                 # a name past 255 bytes, say
-        raise ValueError(f"{_model_source(path)}: {path}: {e.strerror or e}") from None
+        raise ValueError(f"{_model_source(path)}: {path or os.environ.get('GRASPKIT_MODEL')}: {e.strerror or e}") from None
 
 
 def _cmd_saga(args: argparse.Namespace) -> int:
@@ -689,11 +690,13 @@ def refuse_folder_out(argv: list[str] | None) -> None:
 def expand_user_paths(args: argparse.Namespace) -> None:
     """`~` and `~user` expanded in every path argument, as in GRASPKIT_CACHE: `--out=~/x` (the shell leaves a `~`
     after `=` alone) wrote into a folder named `~` in the working folder."""
+    from graspkit.paths import expand_home
+
     def expand(p: Any, name: str) -> Any:
-        if not isinstance(p, Path) or not p.parts or not p.parts[0].startswith("~"):
+        if not isinstance(p, Path):
             return p
         try:
-            return p.expanduser()
+            return expand_home(p)
         except RuntimeError as e:
             raise ValueError(f"--{name.replace('_', '-')}: {p}: {e}") from None
 

@@ -87,6 +87,16 @@ def _expanded(value: str, variable: str) -> Path:
         raise ValueError(f"{variable}: {value}: {e} (`~` or `~user` names no home folder here)") from None
 
 
+def expand_home(path: str | os.PathLike) -> Path:
+    """`path` with a leading `~` or `~user` expanded as a shell would (`--out=~/x`: the shell leaves a `~` after `=`),
+    unless its first part is a file or folder here whose name starts with `~` (`./~res/x.obj`: Path drops the `./`);
+    RuntimeError (pathlib's) for `~user` of no one."""
+    p = Path(path)
+    if not p.parts or not p.parts[0].startswith("~") or (p.parts[0] != "~" and Path(p.parts[0]).exists()):
+        return p
+    return p.expanduser()
+
+
 def check_suffix(path: str | os.PathLike, *suffixes: str) -> None:
     """ValueError naming `path` unless its file name ends in one of `suffixes` (any case): a writer's bytes are that
     format, and a file named for another (seq.gltf holding binary GLB, clip.json an npz) is read by nothing."""

@@ -107,7 +107,6 @@ def save_checkpoint(path: str | Path, state: dict[str, Any]) -> Path:
     import shutil
 
     path = Path(path)
-    check_suffix(path, ".pt", ".pth")
     tmp = temp_beside(path)
     try:
         with naming_errors(path):

@@ -958,10 +958,14 @@ def test_module_commands_refuse_a_folder_out_and_expand_a_tilde(tmp_path, monkey
     monkeypatch.setenv("HOME", str(tmp_path))
     trimesh.creation.box((0.08, 0.06, 0.1)).export(tmp_path / "cup.obj")
     assert as_object("~/cup.obj", "--object")[0] == "cup"
+    (tmp_path / "~res").mkdir()                   # a folder whose name starts with `~` is that folder, not a home
+    trimesh.creation.box((0.08, 0.06, 0.1)).export(tmp_path / "~res" / "box.obj")
+    monkeypatch.chdir(tmp_path)
+    assert as_object("./~res/box.obj", "--object")[0] == "box"
 
 
 def test_eval_wandr_clips_without_a_clip_and_a_sunk_task_are_told_first(tmp_path, capsys):
-    """`eval wandr --clips DIR` whose reach/ held only reach_000000_old.npz ran the whole grid, then failed naming
+    """`eval wandr --clips DIR` whose reach/ held no reach clip but another .npz ran the whole grid, then failed naming
     `folder`; sample_grasp_task on a mug centred on the floor fitted a half-buried object without a word."""
     import shutil
     import warnings
@@ -975,7 +979,7 @@ def test_eval_wandr_clips_without_a_clip_and_a_sunk_task_are_told_first(tmp_path
     from graspkit.paths import DATA_STUBS
 
     (tmp_path / "reach").mkdir()
-    shutil.copy(DATA_STUBS / "motion" / "reach" / "reach_000000.npz", tmp_path / "reach" / "reach_000000_old.npz")
+    shutil.copy(DATA_STUBS / "motion" / "locomotion" / "locomotion_000000.npz", tmp_path / "reach")
     assert main(["eval", "wandr", "--checkpoint", str(DATA_STUBS / "checkpoints" / "wandr.pt"), "--clips",
                  str(tmp_path)]) == 2
     assert "--clips" in capsys.readouterr().err

@@ -302,17 +302,14 @@ def test_writers_refuse_a_file_name_of_another_format(tmp_path):
     m = Motion(np.zeros((2, 55, 3)), np.zeros((2, 3)), np.zeros(10), 30.0)
     with pytest.raises(ValueError, match=r"^path: expected a file ending in \.npz"):
         save_motion(tmp_path / "clip.json", m)
-    from graspkit.body.procedural import save_model_npz
     from graspkit.data.grab import load_grasp_sequence, save_grasp_sequence
     from graspkit.data.motionfill_dataset import save_windows
     from graspkit.paths import DATA_STUBS
-    from graspkit.train import save_checkpoint, write_history_csv, write_history_plot
+    from graspkit.train import write_history_csv, write_history_plot
 
     seq = load_grasp_sequence(DATA_STUBS / "grasps" / "grasp_000000.npz")
     for write, name, suffix in ((lambda p: save_grasp_sequence(p, seq), "s.json", ".npz"),
                                 (lambda p: save_windows(p, {"a": np.zeros(2)}), "w.pt", ".npz"),
-                                (lambda p: save_model_npz({"a": np.zeros(2)}, p), "m.pkl", ".npz"),
-                                (lambda p: save_checkpoint(p, {"w": torch.ones(2)}), "c.npz", ".pt or .pth"),
                                 (lambda p: write_history_csv(p, [{"epoch": 1, "loss": 1.0}]), "h.png", ".csv"),
                                 (lambda p: write_history_plot(p, [{"epoch": 1, "loss": 1.0}]), "h.csv", ".png")):
         with pytest.raises(ValueError, match=rf"^path: expected a file ending in {suffix} "):

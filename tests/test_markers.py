@@ -90,7 +90,8 @@ def test_farthest_point_sampling_against_brute_force():
     with pytest.raises(ValueError, match="^points: contain NaN"):
         farthest_point_sampling(np.r_[pts, [[np.nan, 0, 0]]], 3)
     grid = np.arange(30).reshape(10, 3)                       # integer coordinates are points too
-    assert farthest_point_sampling(grid, 2).tolist() == [0, 9]
+    for dtype in (np.int64, np.uint8):                        # (unsigned differences wrapped)
+        assert farthest_point_sampling(grid.astype(dtype), 3).tolist() == farthest_point_sampling(grid * 1.0, 3).tolist()
 
 
 def test_vertex_normals_point_outwards_on_a_sphere_and_up_on_a_plane():

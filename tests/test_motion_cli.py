@@ -325,7 +325,8 @@ def test_a_folder_takes_the_same_body_from_another_path(tmp_path, monkeypatch):
 
 def test_wandr_reads_only_the_clips_of_each_folder_kind(tmp_path):
     """A reach clip written into locomotion/ (`data make --kind reach --out .../locomotion`) was listed among the
-    locomotion clips, while MotionFill's reader skipped it; both take <kind>_<digits>.npz now."""
+    locomotion clips, while MotionFill's reader skipped it; both take locomotion_*.npz there now (one's own names
+    after the prefix too)."""
     import shutil
 
     from graspkit.data.wandr_dataset import list_clips
@@ -336,4 +337,5 @@ def test_wandr_reads_only_the_clips_of_each_folder_kind(tmp_path):
     shutil.copy(DATA_STUBS / "motion" / "reach" / "reach_000000.npz", tmp_path / "locomotion")
     shutil.copy(DATA_STUBS / "motion" / "locomotion" / "locomotion_000001.npz",
                 tmp_path / "locomotion" / "locomotion_000001_old.npz")
-    assert [p.name for p in list_clips(tmp_path, kinds=("locomotion",))] == ["locomotion_000000.npz"]
+    assert [p.name for p in list_clips(tmp_path, kinds=("locomotion",))] == ["locomotion_000000.npz",
+                                                                              "locomotion_000001_old.npz"]

@@ -674,12 +674,17 @@ def test_heel_jerkiness_names_short_or_non_finite_markers():
 
 
 def test_approach_windows_are_read_from_the_clips_their_cache_is_named_by(tmp_path, monkeypatch):
-    """A stray approach_000000_old.npz (another clip's copy) in the folder: approach_motions read it as the second
-    clip while the windows' cache key listed approach_000001.npz, so a cached set outlived the stray file's removal."""
+    """A clip of one's own naming, approach_000000_old.npz, in the folder: approach_motions read it as the second clip
+    while the windows' cache key listed approach_000001.npz, so a cached set outlived the file's removal. Every reader
+    of the folder and the key now take the same files (`formats.clip_files`: approach_*.npz, not another kind's)."""
     import shutil
 
+    from graspkit.benchmark import split_sequences
+    from graspkit.data.formats import clip_files
     from graspkit.data.grab import load_grasp_sequence
-    from graspkit.eval_motionfill import approach_motions, windows_source
+    from graspkit.data.grasp_datasets import grasp_files
+    from graspkit.eval_goal import _files
+    from graspkit.eval_motionfill import approach_motions, held_out_clips, windows_source
 
     monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
     folder = tmp_path / "approach"
@@ -687,21 +692,17 @@ def test_approach_windows_are_read_from_the_clips_their_cache_is_named_by(tmp_pa
     for i in (0, 1):
         shutil.copy(DATA_STUBS / "approach" / f"approach_00000{i}.npz", folder)
     shutil.copy(DATA_STUBS / "approach" / "approach_000002.npz", folder / "approach_000000_old.npz")
+    shutil.copy(DATA_STUBS / "grasps" / "grasp_000000.npz", folder)          # another kind's file: no approach clip
+    listed = ["approach_000000.npz", "approach_000000_old.npz", "approach_000001.npz"]
+    assert [f.name for f in clip_files(folder, "approach")] == listed
     _, _, files = windows_source("approach", 2, folder)
-    assert [f.name for f in files] == ["approach_000000.npz", "approach_000001.npz"]
+    assert [f.name for f in files] == listed[:2]
     motions, names = approach_motions(folder, 2)
     assert len(motions) == 2
-    # the other readers of a folder of clips: the held-out clips, the grasp datasets, GOAL's and the benchmark's
-    from graspkit.benchmark import split_sequences
-    from graspkit.data.grasp_datasets import grasp_files
-    from graspkit.eval_goal import _files
-    from graspkit.eval_motionfill import held_out_clips
-
-    assert [f.name for f in grasp_files(folder, "approach")] == [f.name for f in files]
-    assert len(_files(folder, "approach", None)) == 2
-    assert "approach_000000_old.npz" not in [f.name for f in held_out_clips(folder, 5)]
-    assert len(split_sequences([folder], "approach", "test")) + len(split_sequences([folder], "approach", "train")) \
-        + len(split_sequences([folder], "approach", "val")) <= 2
     for m, f in zip(motions, files):                  # the files the key lists, cut at their goal frames
         full = load_grasp_sequence(f)
         np.testing.assert_allclose(m.poses, full.poses[:m.num_frames], atol=1e-6)
+    assert [f.name for f in grasp_files(folder, "approach")] == listed
+    assert len(_files(folder, "approach", None)) == 3
+    assert {f.name for f in held_out_clips(folder, 5)} <= set(listed)
+    assert sum(len(split_sequences([folder], "approach", s)) for s in ("train", "val", "test")) == 3

@@ -257,6 +257,8 @@ def farthest_point_sampling(points: np.ndarray, n: int, start: int = 0) -> np.nd
     if points.ndim != 2 or points.shape[1] != 3 or points.dtype.kind not in "iuf":
         raise ValueError(f"points: expected an array of numbers of shape (N, 3), got {points.dtype} of shape "
                          f"{points.shape}")
+    if points.dtype.kind in "iu":           # (unsigned differences would wrap)
+        points = points.astype(np.float64)
     if not np.isfinite(points).all():
         raise ValueError("points: contain NaN or Inf")
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= len(points):

@@ -29,7 +29,7 @@ from graspkit.body._proc_remesh import SurfaceProjector, delaunay_flips, relax
 from graspkit.body._proc_sdf import Body, Lens, sample_grid, warp
 from graspkit.body.hand_poses import hand_pca
 from graspkit.body.skeleton import NUM_JOINTS, NUM_VERTICES, PARENTS, SMPLX_LANDMARK_VERTEX_IDS
-from graspkit.paths import check_suffix, naming_errors, publish, sweep_stale_temps, temp_beside
+from graspkit.paths import naming_errors, publish, sweep_stale_temps, temp_beside
 from graspkit.progress import hidden
 
 __all__ = ["build_procedural_smplx", "save_model_npz", "part_of_vertex", "GRID_SPACING"]
@@ -219,7 +219,6 @@ def part_of_vertex(arrays: Mapping[str, np.ndarray]) -> np.ndarray:
 def save_model_npz(arrays: dict[str, np.ndarray], path: str | os.PathLike) -> Path:
     """Write arrays to a compressed .npz atomically (temporary file in the same folder, synced, then renamed)."""
     path = Path(path)
-    check_suffix(path, ".npz")
     tmp = temp_beside(path)          # .<name>.<random>.tmp: not a *.npz that a folder listing offers as a model
     try:
         with naming_errors(path), open(tmp, "wb") as fh:

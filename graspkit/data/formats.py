@@ -50,13 +50,15 @@ def amass_split_keys(poses: np.ndarray, fps: float, num_betas: int = NUM_BETAS) 
 
 
 
-def clip_files(root: str | os.PathLike, kind: str) -> list[Path]:
-    """The clips `graspkit data make --kind kind` writes in root (<kind>_<digits>.npz), sorted: other files there (a
-    copy named approach_000000_old.npz, a reach clip in locomotion/) are not clips of the set; every reader of a
-    folder of clips takes these alone."""
-    import re
+CLIP_KINDS = ("locomotion", "reach", "reach_far", "reach_chain", "reach_near", "grasp", "approach")
 
-    return sorted(f for f in Path(root).glob(f"{kind}_*.npz") if re.fullmatch(rf"{re.escape(kind)}_\d+\.npz", f.name))
+
+def clip_files(root: str | os.PathLike, kind: str) -> list[Path]:
+    """The `kind` files in root, <kind>_*.npz sorted (`graspkit data make` names them <kind>_<digits>.npz; one's own
+    GRAB-style files may carry any name after the prefix), not another kind's (a reach clip in locomotion/, a
+    reach_far_* beside reach_*): every reader of a folder of clips, and every cache key of one, takes these."""
+    longer = [k for k in CLIP_KINDS if k != kind and k.startswith(f"{kind}_")]
+    return sorted(f for f in Path(root).glob(f"{kind}_*.npz") if not f.name.startswith(tuple(f"{k}_" for k in longer)))
 
 def save_motion(path: str | os.PathLike, motion: Motion, amass_keys: bool = False) -> Path:
     """Write a Motion as an AMASS-style .npz (plus goal keys for reaching clips), atomically; returns the path.

@@ -23,6 +23,7 @@ from graspkit.objects.catalogue import list_objects, make_object
 from graspkit.objects.distance import require_closed, require_face_areas
 from graspkit.objects.sampling import sample_surface
 from graspkit.objects.sdf import winding_number
+from graspkit.paths import expand_home
 
 # m: the largest side a hand-held object may have. The grasp models were trained on objects of 8-41 cm (the
 # catalogue); 0.6 m leaves room for larger ones and still tells metres from millimetres or centimetres.
@@ -56,7 +57,7 @@ def as_object(obj: str | Path | trimesh.Trimesh, argument: str = "obj") -> tuple
     if isinstance(obj, (str, Path)):
         path = Path(obj)       # a catalogue name as a str is the catalogue object, even beside a file of that name
         try:
-            path = path.expanduser()                     # `--object=~/cup.obj`: the shell leaves that `~` alone
+            path = expand_home(path)                     # `--object=~/cup.obj`: the shell leaves that `~` alone
             found = path.is_file()
         except (OSError, RuntimeError) as e:             # a name past 255 bytes; `~user` of no one
             raise ValueError(f"{argument}: {obj}: {getattr(e, 'strerror', None) or e}") from None
