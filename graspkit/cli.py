@@ -68,19 +68,18 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_object(obj: str, outputs: str) -> None:
-    """Check --object (a catalogue name or a mesh file) before a pipeline starts, so that an error names the option;
-    `outputs`: the output files' name with {name} for the object's (a mesh file's stem), which must fit a file name."""
-    from graspkit.objects.catalogue import list_objects
+def _check_object(obj: str, outputs: str) -> Any:
+    """--object's mesh (a catalogue name or a mesh file), read before a pipeline starts so that an error names the
+    option; `outputs`: the output files' name with {name} for the object's (a mesh file's stem), which must fit a file
+    name."""
     from graspkit.objects.user import as_object
 
-    if obj in list_objects():
-        return
-    name, _ = as_object(obj, "--object")
+    name, mesh = as_object(obj, "--object")
     longest = outputs.format(name=name) + "_final.glb"
     if len(longest.encode()) > 255:
         raise ValueError(f"--object: {obj}: the outputs' names ({longest[:40]}...) would be {len(longest.encode())} "
                          "bytes, past the file system's 255; give the mesh file a shorter name")
+    return mesh
 
 
 def _scene_objects(name: str, mesh: object) -> dict[str, object]:
@@ -108,16 +107,15 @@ def _object_pose(at: list[float] | None):
     return ObjectPose.from_yaw(np.deg2rad(at[3]), np.array(at[:3]))
 
 
-def object_range_notes(pose: ObjectPose | None, obj: str | None = None) -> list[str]:
+def object_range_notes(pose: ObjectPose | None, mesh: Any = None) -> list[str]:
     """Warnings when an object placed with --at (an ObjectPose, or None: drawn in range) has its centre outside the
-    0.5-1.7 m heights of the grasp and approach data the SAGA and GOAL networks were trained on; with --object `obj`,
-    a ValueError naming --at when the object at that pose sinks into the floor."""
+    0.5-1.7 m heights of the grasp and approach data the SAGA and GOAL networks were trained on; with the object's
+    `mesh`, a ValueError naming --at when the object at that pose sinks into the floor."""
     from graspkit.objects.placement import GRASP_HEIGHTS, floor_note
-    from graspkit.objects.user import as_object
 
     if pose is None:
         return []
-    note = None if obj is None else floor_note(pose, as_object(obj, "--object")[1])
+    note = None if mesh is None else floor_note(pose, mesh)
     if note:
         raise ValueError(f"--at: {note.removeprefix('object_pose: ')}")
     z, (lo, hi) = float(pose.translation[2]), GRASP_HEIGHTS
@@ -173,10 +171,10 @@ def _cmd_saga(args: argparse.Namespace) -> int:
     from graspkit.demo import _write_clip
     from graspkit.saga import check_checkpoints, synthesize
 
-    _check_object(args.object, f"saga_{{name}}_s{args.seed}")
+    mesh = _check_object(args.object, f"saga_{{name}}_s{args.seed}")
     check_checkpoints()                               # before the body, which a plain `pip install` has to build
     pose, free_joints = _object_pose(args.at), _free_joints(args.free_joints)
-    _print_notes(object_range_notes(pose, args.object))
+    _print_notes(object_range_notes(pose, mesh))
     bm = _body_model(args.model)
     torch.set_num_threads(args.threads)
     r = synthesize(args.object, bm, object_pose=pose, seed=args.seed, free_joints=free_joints,
@@ -198,11 +196,11 @@ def _cmd_goal(args: argparse.Namespace) -> int:
     from graspkit.goal import check_checkpoints, synthesize
     from graspkit.models.mnet import STALL_FRAMES
 
-    _check_object(args.object, f"goal_{{name}}_s{args.seed}")
+    mesh = _check_object(args.object, f"goal_{{name}}_s{args.seed}")
     check_checkpoints()                               # before the body, which a plain `pip install` has to build
     check_counts(args, stall=0, max_frames=2)
     pose = _object_pose(args.at)
-    _print_notes(object_range_notes(pose, args.object))
+    _print_notes(object_range_notes(pose, mesh))
     bm = _body_model(args.model)                      # a bad --model fails here, before any work
     torch.set_num_threads(args.threads)
     r = synthesize(args.object, object_pose=pose, seed=args.seed, max_frames=args.max_frames,
