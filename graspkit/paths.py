@@ -82,7 +82,7 @@ def _expanded(value: str, variable: str) -> Path:
     """The path an environment variable names, `~` and `~user` expanded; ValueError naming the variable when they
     cannot be (an unknown user: pathlib's RuntimeError)."""
     try:
-        return Path(value).expanduser()
+        return expand_home(value)
     except RuntimeError as e:
         raise ValueError(f"{variable}: {value}: {e} (`~` or `~user` names no home folder here)") from None
 

@@ -117,7 +117,8 @@ def floor_note(pose: ObjectPose, mesh: trimesh.Trimesh) -> str | None:
 
 
 def warn_floor(pose: ObjectPose, mesh: trimesh.Trimesh) -> None:
-    """floor_note as a GraspkitWarning (saga.synthesize and goal.synthesize: the run goes on)."""
+    """floor_note as a GraspkitWarning (saga.synthesize, goal.synthesize and data.grasp.sample_grasp_task with a given
+    pose: the run goes on)."""
     note = floor_note(pose, mesh)
     if note:
         warnings.warn(note, GraspkitWarning, stacklevel=user_stacklevel())
