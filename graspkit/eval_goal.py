@@ -115,8 +115,8 @@ def teacher_forced_v2v(mnet: MNet, windows: MNetWindows, bm: BodyModel, index: T
 # ------------------------------------------------------------------------------------------- data (graspkit.data.grab files)
 
 def _files(folder, kind: str, split: str | None) -> list:
-    """GRAB-style files `<folder>/<kind>_<digits>.npz` whose object is in `split` ('train', 'val', 'test' or None:
-    all)."""
+    """GRAB-style files `<folder>/<kind>_*.npz` (`formats.clip_files`) whose object is in `split` ('train', 'val',
+    'test' or None: all)."""
     from graspkit.data.formats import clip_files
     from graspkit.data.grab import load_grasp_sequence
     from graspkit.data.grasp import file_split
