@@ -655,9 +655,8 @@ def evaluate(folders: Sequence[str | Path] | None = None, stubs: str | Path | No
 
     from graspkit.models.gnet import load_gnet
     from graspkit.models.mnet import MNetConfig, load_mnet
-    from graspkit.paths import DATA_STUBS
+    from graspkit.paths import DATA_STUBS, write_json
     from graspkit.progress import hidden
-    from graspkit.paths import write_json
 
     folders = folders or default_data_folders()
     stubs = Path(stubs or DATA_STUBS / "checkpoints")

@@ -35,6 +35,7 @@ import torch
 from graspkit.body.markers import goal_vertices
 from graspkit.body.skeleton import JOINT_INDEX, SMPLX_LANDMARK_VERTEX_IDS
 from graspkit.data import grasp_opt as go
+from graspkit.data.formats import SequenceFileError
 from graspkit.data.ik import frame, normalize
 from graspkit.data.locomotion import sample_betas
 from graspkit.data.motion import Motion
@@ -75,8 +76,6 @@ def split_of(name: str) -> str:
 def file_split(name: str, path: object) -> str:
     """split_of for the obj_name of the file at `path`: a name outside the catalogue is that file's error
     (SequenceFileError naming it and the key; the splits are GRAB's, by catalogue object)."""
-    from graspkit.data.formats import SequenceFileError
-
     try:
         return split_of(name)
     except ValueError:
