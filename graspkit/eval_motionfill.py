@@ -179,6 +179,7 @@ def shipped_state(model: MotionFillVAE) -> dict[str, Any]:
     return st
 
 
+@keeps_torch_state
 def load_motionfill(path: str | Path = CHECKPOINT) -> MotionFillVAE:
     """A trained MotionFill-VAE (eval mode) from a shipped or a run checkpoint (weights_only)."""
     path = Path(path)
@@ -316,6 +317,7 @@ def train_baseline(name: str, epochs: int, out: Path | None = None, seed: int = 
     return model, history
 
 
+@keeps_torch_state
 def load_baselines(folder: str | Path = BASELINE_DIR) -> dict[str, Any]:
     """Tab. 3's trained baselines {cnn_ae, posenet, routenet} from <folder>/motionfill_<name>.pt (weights_only);
     missing files are left out."""

@@ -1,8 +1,9 @@
 """Give the caller's global torch state back after a library call that sets its own.
 
-Training seeds torch's global generator (weights' initialisation, dropout) and the commands fix their thread count;
-a function that does either as a library call restores both when it returns, so that a notebook's later draws and
-timings do not depend on having called it (the training itself is unchanged: it seeds as before).
+Training seeds torch's global generator (weights' initialisation, dropout), building a model to load a checkpoint
+into draws initial weights from it, and the commands fix their thread count; a function that does any of these as a
+library call (fit, the evaluators, every load_* of a checkpoint) restores both when it returns, so that a notebook's
+later draws and timings do not depend on having called it (the training itself is unchanged: it seeds as before).
 """
 from __future__ import annotations
 

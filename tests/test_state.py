@@ -4,6 +4,7 @@ prior, an explorer switching the caller's model to eval mode and `import graspki
 import subprocess
 import sys
 
+import pytest
 import torch
 from torch.utils.data import TensorDataset
 
@@ -67,3 +68,30 @@ def test_importing_the_demo_leaves_the_matplotlib_backend():
             "print(matplotlib.get_backend())")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "svg"
+
+
+LOADERS = [("graspkit.models.wholegrasp", "load_wholegrasp", None),
+           ("graspkit.models.pose_prior", "load_pose_prior", None),
+           ("graspkit.optim.graspmotion", "load_smooth_ae", None),
+           ("graspkit.eval_motionfill", "load_motionfill", None),
+           ("graspkit.eval_motionfill", "load_baselines", None),
+           ("graspkit.models.gnet", "load_gnet", "gnet.pt"),
+           ("graspkit.models.mnet", "load_mnet", "mnet.pt"),
+           ("graspkit.models.wandr", "load_wandr", "wandr.pt")]
+
+
+@pytest.mark.parametrize("module,name,file", LOADERS, ids=[n for _, n, _ in LOADERS])
+def test_loading_a_shipped_checkpoint_leaves_the_callers_generator(module, name, file):
+    # building the module initialises its weights from the global generator before the checkpoint overwrites them:
+    # a notebook's later draws would then depend on whether (and how often) it loaded a model first
+    import importlib
+
+    from graspkit.paths import DATA_STUBS
+
+    load = getattr(importlib.import_module(module), name)
+    args = () if file is None else (DATA_STUBS / "checkpoints" / file,)
+    torch.manual_seed(3)
+    want = torch.rand(4)
+    torch.manual_seed(3)
+    load(*args)
+    assert torch.equal(torch.rand(4), want)

@@ -378,6 +378,7 @@ def load_weights(path: str | Path, kind: str, config_cls: type | None = None) ->
     return state, config
 
 
+@keeps_torch_state
 def load_gnet(path: str | Path) -> GNet:
     """A GNet from a shipped (or training) checkpoint, in float32 and eval mode."""
     from graspkit.train import build_named, load_into

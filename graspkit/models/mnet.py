@@ -631,6 +631,7 @@ def train_mnet(train: MNetWindows, val: MNetWindows | None, cfg: MNetConfig | No
     return net, hist
 
 
+@keeps_torch_state
 def load_mnet(path: str | Path) -> MNet:
     """An MNet from a shipped (or training) checkpoint, in float32 and eval mode."""
     from graspkit.models.gnet import load_weights

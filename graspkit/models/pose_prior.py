@@ -136,6 +136,7 @@ class PosePrior(nn.Module):
         return model
 
 
+@keeps_torch_state
 def load_pose_prior(path: str | Path | None = None) -> PosePrior:
     """The pose prior of a checkpoint (default: the shipped one), in eval mode, weights loaded without pickle."""
     from graspkit.train import load_checkpoint

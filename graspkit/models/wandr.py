@@ -47,6 +47,7 @@ from graspkit.checks import GraspkitWarning, check_finite, check_generator, chec
 from graspkit.data.wandr_dataset import (FOOT_JOINTS, GOAL_FRAMES, STD_FLOOR, ClipSet, WindowDataset, lowest_foot,
                                          make_batch)
 from graspkit.models.blocks import GaussianHead, evaluating, kl_standard_normal
+from graspkit.state import keeps_torch_state
 from graspkit.train import TrainConfig, build_named, check_config, fit, load_checkpoint, load_into, save_checkpoint
 
 FULL_INTENTION = ("wrist", "orientation", "pelvis")
@@ -345,6 +346,7 @@ def save_wandr(path: str | Path, model: WandrCVAE, history: Sequence[dict] = (),
                                   "meta": dict(meta or {})})
 
 
+@keeps_torch_state
 def load_wandr(path: str | Path) -> WandrCVAE:
     """A WandrCVAE from save_wandr's file or a `train_wandr` checkpoint (weights_only load); in eval mode."""
     state = load_checkpoint(path)

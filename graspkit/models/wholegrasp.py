@@ -576,6 +576,7 @@ def _data_key(root: str | Path) -> dict[str, Any]:
     return {"root": str(Path(root).resolve()), "files": files_key(root, "grasp_*.npz")}
 
 
+@keeps_torch_state
 def load_wholegrasp(path: str | Path | None = None, multitask: bool = True) -> WholeGraspVAE:
     """A trained WholeGrasp-VAE (default: the shipped checkpoint; multitask=False: WholeGrasp-single), eval mode."""
     from graspkit.train import load_checkpoint
@@ -821,6 +822,7 @@ class GrabNetSMPLX(nn.Module):
         return model.eval()
 
 
+@keeps_torch_state
 def load_grabnet_smplx(path: str | Path = GRABNET_SMPLX_PATH) -> GrabNetSMPLX:
     """A trained GrabNet-SMPLX baseline (`graspkit train grabnet_smplx`), eval mode; a ValueError naming the file
     when it holds another model."""

@@ -200,6 +200,7 @@ def train_smooth_ae(markers: np.ndarray, epochs: int = 30, seed: int = 0, out: s
     return ae, hist
 
 
+@keeps_torch_state
 def load_smooth_ae(path: str | Path = SMOOTH_AE_PATH) -> MarkerDiffAE:
     """The shipped S.1 autoencoder (weights_only)."""
     if not Path(path).is_file():
