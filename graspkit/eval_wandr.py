@@ -663,27 +663,13 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
 
     from graspkit.body import BodyModel
     from graspkit.data import load_motion
-    from graspkit.data.wandr_dataset import (FOLDERS, KINDS, cached_clips, compute_stats, held_out_starts,
-                                             split_clips, test_start_names)
-    from graspkit.models.wandr import WandrConfig, WandrCVAE, load_wandr, save_wandr, train_wandr
+    from graspkit.data.wandr_dataset import (FOLDERS, cached_clips, compute_stats, held_out_starts, split_clips,
+                                             test_start_names)
+    from graspkit.models.wandr import WandrConfig, WandrCVAE, save_wandr, train_wandr
     from graspkit.paths import DATA_STUBS, cache_dir, default_model_path
-    from graspkit.train import TrainConfig, file_key
+    from graspkit.train import TrainConfig
 
-    if variant not in VARIANTS:
-        raise ValueError(f"variant: expected one of {list(VARIANTS)}, got {variant!r}")
-    if stride_scale < 1:
-        raise ValueError(f"stride_scale: expected >= 1, got {stride_scale}")
-    if window_stride is not None and window_stride < 1:
-        raise ValueError(f"window_stride: expected >= 1, got {window_stride}")
-    if select_val and time_limit is not None:
-        raise ValueError("time_limit: not supported with select_val (every epoch is trained and scored)")
-    v = dict(VARIANTS[variant])
-    if kinds is not None:
-        chosen = tuple(k for k in KINDS if k in kinds)
-        if not chosen or len(chosen) != len(set(kinds)):
-            raise ValueError(f"kinds: expected a non-empty subset of {KINDS}, got {kinds!r}")
-        if chosen != v["kinds"]:
-            v["kinds"], v["row"] = chosen, f"{v['row']} [{' + '.join(chosen)} clips]"
+    v = _variant_settings(variant, kinds, stride_scale, window_stride, select_val, time_limit)
     folder = Path(folder) if folder else cache_dir() / "motion"
     out = Path(out) if out else DATA_STUBS / "checkpoints" / f"{variant}.pt"
     torch.set_num_threads(threads)
@@ -703,36 +689,17 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
                                    rollout_latent=rollout_latent, alpha_kl=alpha_kl, goal_frame=goal_frame,
                                    w_foot=foot_weight, w_contact=contact_weight, w_floor=floor_weight,
                                    rollout_grad=rollout_grad, step_stride=step_stride), stats)
-    if init is not None:
-        init_model = load_wandr(init)
-        keys = ("latent", "hidden", "enc_layers", "dec_layers", "intention")
-        shape = lambda c: {k: getattr(c, k) for k in keys}     # noqa: E731 - the network's shape of a config
-        if shape(init_model.cfg) != shape(model.cfg):
-            raise ValueError(f"init: {init} has another network ({shape(init_model.cfg)}) than this command's "
-                             f"({shape(model.cfg)})")
-        model.load_state_dict(init_model.state_dict())        # weights and the statistics it was trained with
+    init_model = None if init is None else _start_from(model, init)
     stride = {k: stride_scale * (s // 2 if len(v["kinds"]) == 1 else s) for k, s in STRIDE.items()}   # one kind: same epoch size
     if window_stride is not None:
         stride = {k: window_stride for k in STRIDE}
     cfg = TrainConfig(epochs=epochs, batch_size=batch_size, lr=lr, seed=seed, num_threads=threads)
-    data_key = clipset_key(train)                                # other clips (or goals) never resume this run
-    # the experiment flags away from their defaults: (command-line text, run-name part); the data key covers reach_far
-    flags = [(f" --{k.replace('_', '-')}", "") for k in extra] \
-        + ([(f" --rollout-latent {rollout_latent}", "_zpost")] if rollout_latent != "prior" else []) \
-        + ([(f" --alpha-kl {alpha_kl:g}", f"_a{alpha_kl:g}")] if alpha_kl != 1e-2 else []) \
-        + ([(f" --rollout-grad {rollout_grad}", f"_rg{rollout_grad}")] if rollout_grad != "through" else []) \
-        + ([(f" --step-stride {step_stride}", f"_ss{step_stride}")] if step_stride != 1 else []) \
-        + ([(f" --goal-frame {goal_frame}", f"_g{goal_frame}")] if goal_frame != "reach" else []) \
-        + ([(f" --foot-weight {foot_weight:g}", f"_f{foot_weight:g}")] if foot_weight else []) \
-        + ([(f" --contact-weight {contact_weight:g}", f"_c{contact_weight:g}")] if contact_weight else []) \
-        + ([(f" --floor-weight {floor_weight:g}", f"_h{floor_weight:g}")] if floor_weight else []) \
-        + ([(" --select-val", "_val")] if select_val else []) \
-        + ([(f" --init {shlex.quote(str(init))}", f"_i{file_key(init)}")] if init is not None else []) \
-        + ([(f" --window-stride {window_stride}", f"_w{window_stride}")] if window_stride is not None else []) \
-        + ([(f" --kinds {','.join(v['kinds'])}", f"_k{''.join(k[0] for k in v['kinds'])}")]
-           if v["kinds"] != VARIANTS[variant]["kinds"] else [])
-    tag = (f"e{epochs}_b{batch_size}_lr{lr:g}_m{max_steps}_r{ramp_epochs}_x{stride_scale}_d{data_key}"
-           + "".join(t for _, t in flags))
+    flags = _experiment_flags(variant, v, extra, rollout_latent=rollout_latent, alpha_kl=alpha_kl,
+                              rollout_grad=rollout_grad, step_stride=step_stride, goal_frame=goal_frame,
+                              foot_weight=foot_weight, contact_weight=contact_weight, floor_weight=floor_weight,
+                              select_val=select_val, init=init, window_stride=window_stride)
+    tag = (f"e{epochs}_b{batch_size}_lr{lr:g}_m{max_steps}_r{ramp_epochs}_x{stride_scale}_d{clipset_key(train)}"
+           + "".join(t for _, t in flags))                       # other clips (or goals) never resume this run
     ck = cache_dir() / "wandr" / f"train_{variant}_s{seed}_{tag}.pt"
     cpu0, t1 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
     if select_val:
@@ -749,13 +716,76 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
                        f"--lr {lr:g} --max-steps {max_steps} --ramp-epochs {ramp_epochs} --stride-scale {stride_scale} "
                        f"--seed {seed} --threads {threads}" + "".join(c for c, _ in flags),
             "load_avg_end": float(__import__("os").getloadavg()[0]), "starts": starts_to_meta(starts),
-            **({"init": str(init), "init_command": init_model.meta.get("command", "")} if init is not None else {}),
+            **({"init": str(init), "init_command": init_model.meta.get("command", "")} if init_model else {}),
             **({"val": val["scores"], "selected_epoch": val["best"]} if val else {})}
-    earlier = [] if init is None else (init_model.meta.get("stages")
-                                       or [_stage_record(init_model.meta, init_model.history, init_model.cfg.max_steps)])
+    earlier = [] if init_model is None else (init_model.meta.get("stages") or [
+        _stage_record(init_model.meta, init_model.history, init_model.cfg.max_steps)])
     meta["stages"] = earlier + [_stage_record(meta, history, max_steps)]
     save_wandr(out, model, history, meta)
     return {"out": out, **{k: meta[k] for k in ("epochs", "train_wall_s", "train_cpu_s")}, "history": history}
+
+
+def _variant_settings(variant: str, kinds: Sequence[str] | None, stride_scale: int, window_stride: int | None,
+                      select_val: bool, time_limit: float | None) -> dict[str, Any]:
+    """run_train_wandr's arguments checked before any data loads; the variant's settings (VARIANTS) with `kinds`
+    (the clip kinds to train on) in place of its own, its row named by them."""
+    from graspkit.data.wandr_dataset import KINDS
+
+    if variant not in VARIANTS:
+        raise ValueError(f"variant: expected one of {list(VARIANTS)}, got {variant!r}")
+    if stride_scale < 1:
+        raise ValueError(f"stride_scale: expected >= 1, got {stride_scale}")
+    if window_stride is not None and window_stride < 1:
+        raise ValueError(f"window_stride: expected >= 1, got {window_stride}")
+    if select_val and time_limit is not None:
+        raise ValueError("time_limit: not supported with select_val (every epoch is trained and scored)")
+    v = dict(VARIANTS[variant])
+    if kinds is not None:
+        chosen = tuple(k for k in KINDS if k in kinds)
+        if not chosen or len(chosen) != len(set(kinds)):
+            raise ValueError(f"kinds: expected a non-empty subset of {KINDS}, got {kinds!r}")
+        if chosen != v["kinds"]:
+            v["kinds"], v["row"] = chosen, f"{v['row']} [{' + '.join(chosen)} clips]"
+    return v
+
+
+def _start_from(model: WandrCVAE, init: str) -> WandrCVAE:
+    """Load the WANDR checkpoint `init`'s weights and normalisation statistics into `model` (a ValueError naming it
+    when its network has another shape or intention); returns the loaded init model (its meta and history)."""
+    from graspkit.models.wandr import load_wandr
+
+    init_model = load_wandr(init)
+    keys = ("latent", "hidden", "enc_layers", "dec_layers", "intention")
+    shape = lambda c: {k: getattr(c, k) for k in keys}         # noqa: E731 - the network's shape of a config
+    if shape(init_model.cfg) != shape(model.cfg):
+        raise ValueError(f"init: {init} has another network ({shape(init_model.cfg)}) than this command's "
+                         f"({shape(model.cfg)})")
+    model.load_state_dict(init_model.state_dict())            # weights and the statistics it was trained with
+    return init_model
+
+
+def _experiment_flags(variant: str, v: dict[str, Any], extra: tuple[str, ...], *, rollout_latent: str,
+                      alpha_kl: float, rollout_grad: str, step_stride: int, goal_frame: str, foot_weight: float,
+                      contact_weight: float, floor_weight: float, select_val: bool, init: str | None,
+                      window_stride: int | None) -> list[tuple[str, str]]:
+    """The experiment flags away from their defaults, each as (command-line text, run-name part); the run name's
+    data key covers the opt-in clip folders (`extra`), so they add no name part."""
+    from graspkit.train import file_key
+
+    return [(f" --{k.replace('_', '-')}", "") for k in extra] \
+        + ([(f" --rollout-latent {rollout_latent}", "_zpost")] if rollout_latent != "prior" else []) \
+        + ([(f" --alpha-kl {alpha_kl:g}", f"_a{alpha_kl:g}")] if alpha_kl != 1e-2 else []) \
+        + ([(f" --rollout-grad {rollout_grad}", f"_rg{rollout_grad}")] if rollout_grad != "through" else []) \
+        + ([(f" --step-stride {step_stride}", f"_ss{step_stride}")] if step_stride != 1 else []) \
+        + ([(f" --goal-frame {goal_frame}", f"_g{goal_frame}")] if goal_frame != "reach" else []) \
+        + ([(f" --foot-weight {foot_weight:g}", f"_f{foot_weight:g}")] if foot_weight else []) \
+        + ([(f" --contact-weight {contact_weight:g}", f"_c{contact_weight:g}")] if contact_weight else []) \
+        + ([(f" --floor-weight {floor_weight:g}", f"_h{floor_weight:g}")] if floor_weight else []) \
+        + ([(" --select-val", "_val")] if select_val else []) \
+        + ([(f" --init {shlex.quote(str(init))}", f"_i{file_key(init)}")] if init is not None else []) \
+        + ([(f" --window-stride {window_stride}", f"_w{window_stride}")] if window_stride is not None else []) \
+        + ([(f" --kinds {','.join(v['kinds'])}", f"_k{''.join(k[0] for k in v['kinds'])}")]
+           if v["kinds"] != VARIANTS[variant]["kinds"] else [])
 
 
 def _stage_record(meta: dict[str, Any], history: Sequence[dict], max_steps: int) -> dict[str, Any]:
