@@ -30,6 +30,7 @@ import json
 import math
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -253,22 +254,76 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
     from tqdm.auto import tqdm
 
     from graspkit.body import BodyModel
-    from graspkit.body.markers import saga_markers
     from graspkit.data.grasp_io import collision_sdf_grid
-    from graspkit.models.pose_prior import load_pose_prior
-    from graspkit.models.wholegrasp import (GRABNET_SMPLX_PATH, HandPCA, WholeGraspVAE, load_grabnet_smplx,
-                                            load_wholegrasp)
-    from graspkit.optim.grasppose import GraspPoseConfig, GraspPoseOpt
     from graspkit.paths import default_model_path
     from graspkit.progress import hidden
-    from graspkit.train import build_named, load_checkpoint
 
     cfg = cfg or EvalConfig()
     torch.set_num_threads(cfg.threads)
     t0 = time.perf_counter()
     bm = BodyModel.from_file(default_model_path())
+    m = _eval_models(bm, cfg, Path(checkpoints), grabnet_only)
+    acc: dict[str, dict[str, list]] = {}
+    per_object: dict[str, dict[str, dict[str, float]]] = {}
+    for oi, name in enumerate(tqdm(cfg.objects, desc="SAGA eval", disable=hidden(progress))):
+        pls = load_placements(root, name, max(cfg.placements, cfg.gt_grasps))
+        gts, pls = pls[:cfg.gt_grasps], pls[:cfg.placements]
+
+        def add(key: str, rows: list[dict[str, float]], markers: Tensor | None = None, per: int = 1) -> None:
+            """Object `name`'s rows (and final markers, `per` a placement, for APD) of table row `key`."""
+            acc.setdefault(key, {"rows": [], "apd": []})
+            acc[key]["rows"] += rows
+            summary = summarise(rows, markers, per)
+            if "apd" in summary:
+                acc[key]["apd"].append(summary["apd"])
+            per_object.setdefault(name, {})[key] = summary
+
+        # seeded by the object's place in the default list, so a run on some objects draws what the full run draws
+        g = torch.Generator().manual_seed(cfg.seed * 1000 + _object_index(name, oi))
+        draws = _draw(m, pls, cfg.samples, g)
+        if grabnet_only:
+            add("GrabNet-SMPLX", *_grabnet_rows(bm, m.grabnet, draws["grabnet"], m.pca, pls, cfg.samples, m.ids,
+                                                cfg.refine), cfg.samples)
+            continue
+        _object_rows(bm, m, cfg, pls, gts, draws, collision_sdf_grid(name), add)
+        if out is not None:                                # partial results survive an interrupted run
+            write_json(Path(out).with_suffix(".partial.json"),
+                        {"config": asdict(cfg), "seconds": time.perf_counter() - t0, "per_object": per_object})
+    result = {"config": asdict(cfg), "seconds": time.perf_counter() - t0,
+              "rows": {k: {**summarise(a["rows"]), **({"apd": float(np.mean(a["apd"]))} if a["apd"] else {})}
+                       for k, a in acc.items()},
+              "per_object": per_object}
+    if out is not None:
+        write_json(out, result)
+        Path(out).with_suffix(".partial.json").unlink(missing_ok=True)    # only an interrupted run leaves one
+    return result
+
+
+@dataclass
+class _EvalModels:
+    """What `evaluate` runs: the samplers (WholeGrasp-single and GrabNet-SMPLX None without their weights), the hand
+    PCA, the marker vertex ids (143,) and GraspPose-Opt, plain and with the heuristic hand contacts (S.3/S.4)."""
+    wg: Any
+    single: Any
+    grabnet: Any
+    pca: Any
+    ids: Tensor
+    opt: GraspPoseOpt
+    opt_h: GraspPoseOpt
+    heuristic: bool                                  # WholeGrasp-single's checkpoint holds its hand contact prior
+
+
+def _eval_models(bm: BodyModel, cfg: EvalConfig, ck: Path, grabnet_only: bool) -> _EvalModels:
+    """The models of the checkpoints in folder `ck`; a warning names the baselines whose weights are missing (a
+    FileNotFoundError for GrabNet-SMPLX's when grabnet_only)."""
+    from graspkit.body.markers import saga_markers
+    from graspkit.models.pose_prior import load_pose_prior
+    from graspkit.models.wholegrasp import (GRABNET_SMPLX_PATH, HandPCA, WholeGraspVAE, load_grabnet_smplx,
+                                            load_wholegrasp)
+    from graspkit.optim.grasppose import GraspPoseOpt
+    from graspkit.train import build_named, load_checkpoint
+
     ids = torch.as_tensor(saga_markers(bm).vertex_ids)
-    ck = Path(checkpoints)
     prior = load_pose_prior(ck / "pose_prior.pt") if (ck / "pose_prior.pt").is_file() else load_pose_prior()
     wg = load_wholegrasp(ck / "wholegrasp.pt")
     # the baselines are not shipped (size budget): without their weights their rows are left out, not the run
@@ -284,7 +339,6 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
         warnings.warn(f"checkpoints: no {' or '.join(missing)} in {ck} (`graspkit train wholegrasp_single` / "
                       "`graspkit train grabnet_smplx` make them): their rows are left out", GraspkitWarning,
                       stacklevel=user_stacklevel())
-    pca = HandPCA(bm)
     base_cfg = GraspPoseConfig(steps=cfg.steps, free_joints=tuple(cfg.free_joints), restart_sunk=cfg.restart_sunk,
                                stage2_collision=cfg.stage2_collision, stage2_ground=cfg.stage2_ground,
                                ground_rest=cfg.ground_rest, polish=tuple(cfg.polish),
@@ -292,96 +346,81 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
     opt = GraspPoseOpt(bm, prior, base_cfg)
     ch = None if single_state is None else single_state.get("hand_contact_prior")
     opt_h = GraspPoseOpt(bm, prior, base_cfg, hand_contact_prior=None if ch is None else ch.float()[opt.hand_ids])
+    return _EvalModels(wg, single, grabnet, HandPCA(bm), ids, opt, opt_h, ch is not None)
+
+
+def _draw(m: _EvalModels, pls: list[Placement], n: int, g: torch.Generator) -> dict[str, Any]:
+    """n draws per placement from each sampler, in this order from `g`: WholeGrasp's markers (N,143,3) and contacts
+    (N,143), (N,2048), WholeGrasp-single's markers (N or 0,143,3), GrabNet-SMPLX's parameters (N, n_params) or
+    None; N = len(pls) * n."""
+    s = [m.wg.sample(p.points, p.normals, p.height, n, g, centre=torch.zeros(3)) for p in pls]
+    mk, mc, oc = (torch.cat([getattr(x, k) for x in s]) for k in ("markers", "marker_contact", "object_contact"))
+    mk1 = mk[:0] if m.single is None else torch.cat(
+        [m.single.sample(p.points, p.normals, p.height, n, g, centre=torch.zeros(3)).markers for p in pls])
+    x = None if m.grabnet is None else torch.cat([m.grabnet.sample(p.points, p.normals, p.height, n, g) for p in pls])
+    return {"markers": mk, "marker_contact": mc, "object_contact": oc, "single": mk1, "grabnet": x}
+
+
+def _object_rows(bm: BodyModel, m: _EvalModels, cfg: EvalConfig, pls: list[Placement], gts: list[Placement],
+                 draws: dict[str, Any], sdf: Any, add: Callable[..., None]) -> None:
+    """Every row of one object: the draws and the ground-truth markers optimised in one batch, the bodies measured,
+    each row's metric rows given to add(key, rows, markers=None, per=1)."""
     n = cfg.samples
-    acc: dict[str, dict[str, list]] = {}
-    per_object: dict[str, dict[str, dict[str, float]]] = {}
+    mk, mk1 = draws["markers"], draws["single"]
+    # one batch per object: WholeGrasp samples | WholeGrasp-single samples | ground-truth markers. The samples
+    # are independent (Adam is per parameter), so Alg. 1's stages 1-2 run once for all of them, and each stage-3
+    # variant once for the marker sets it applies to (2,700 steps per object instead of 6,100)
+    nw = len(pls) * n
+    n1 = len(mk1)                                              # 0 without WholeGrasp-single
+    places = [p for p in pls for _ in range(n)] * (2 if n1 else 1) + gts
+    B = len(places)
+    iw, i1, ig = torch.arange(nw), torch.arange(nw, nw + n1), torch.arange(nw + n1, B)
+    obj = _object_batch(places, 1, sdf)
+    markers = torch.cat([mk, mk1, torch.stack([p.markers for p in gts])])
+    # stage 2 twice from one stage 1: without E_colli (the rows without it) and with (GraspPoseConfig's
+    # stage2_collision: the rows with E_colli in stage 3 have it in stage 2 too)
+    opt = m.opt
+    s1 = opt.fit(markers, obj, progress=False, stages=(1,))
+    bases = {c: opt.with_config(collision=c).fit(markers, obj, progress=False, init=s1.state, stages=(2,))
+             for c in ((False, True) if opt.cfg.stage2_collision else (False,))}
 
-    def add(key: str, rows: list[dict[str, float]], markers: Tensor | None = None, per: int = 1) -> None:
-        acc.setdefault(key, {"rows": [], "apd": []})
-        acc[key]["rows"] += rows
-        summary = summarise(rows, markers, per)
-        if "apd" in summary:
-            acc[key]["apd"].append(summary["apd"])
-        per_object.setdefault(name, {})[key] = summary
+    def stage3(o: GraspPoseOpt, idx: Tensor, variant: str, cm: Tensor | None = None,
+               co: Tensor | None = None) -> GraspPoseResult:
+        """Stage 3 of one variant for the bodies idx of the batch, from the shared stages 1-2."""
+        base = bases[VARIANTS[variant]["collision"] and opt.cfg.stage2_collision]
+        return o.with_config(**VARIANTS[variant]).fit(
+            markers[idx], _object_subset(obj, idx), cm, co, progress=False,
+            init={k: v[idx] for k, v in base.state.items()}, stages=(3,))
 
-    for oi, name in enumerate(tqdm(cfg.objects, desc="SAGA eval", disable=hidden(progress))):
-        pls = load_placements(root, name, max(cfg.placements, cfg.gt_grasps))
-        gts, pls = pls[:cfg.gt_grasps], pls[:cfg.placements]
-        sdf = collision_sdf_grid(name)
-        # seeded by the object's place in the default list, so a run on some objects draws what the full run draws
-        g = torch.Generator().manual_seed(cfg.seed * 1000 + _object_index(name, oi))
-        s = [wg.sample(p.points, p.normals, p.height, n, g, centre=torch.zeros(3)) for p in pls]
-        mk, mc, oc = (torch.cat([getattr(x, k) for x in s]) for k in ("markers", "marker_contact", "object_contact"))
-        mk1 = mk[:0] if single is None else torch.cat(
-            [single.sample(p.points, p.normals, p.height, n, g, centre=torch.zeros(3)).markers for p in pls])
-        x = None if grabnet is None else torch.cat([grabnet.sample(p.points, p.normals, p.height, n, g) for p in pls])
-        if grabnet_only:
-            add("GrabNet-SMPLX", *_grabnet_rows(bm, grabnet, x, pca, pls, n, ids, cfg.refine), n)
-            continue
-        # one batch per object: WholeGrasp samples | WholeGrasp-single samples | ground-truth markers. The samples
-        # are independent (Adam is per parameter), so Alg. 1's stages 1-2 run once for all of them, and each stage-3
-        # variant once for the marker sets it applies to (2,700 steps per object instead of 6,100)
-        nw = len(pls) * n
-        n1 = len(mk1)                                              # 0 without WholeGrasp-single
-        places = [p for p in pls for _ in range(n)] * (2 if n1 else 1) + gts
-        B = len(places)
-        iw, i1, ig = torch.arange(nw), torch.arange(nw, nw + n1), torch.arange(nw + n1, B)
-        obj = _object_batch(places, 1, sdf)
-        markers = torch.cat([mk, mk1, torch.stack([p.markers for p in gts])])
-        # stage 2 twice from one stage 1: without E_colli (the rows without it) and with (GraspPoseConfig's
-        # stage2_collision: the rows with E_colli in stage 3 have it in stage 2 too)
-        s1 = opt.fit(markers, obj, progress=False, stages=(1,))
-        bases = {c: opt.with_config(collision=c).fit(markers, obj, progress=False, init=s1.state, stages=(2,))
-                 for c in ((False, True) if opt.cfg.stage2_collision else (False,))}
-
-        def stage3(o: GraspPoseOpt, idx: Tensor, variant: str, cm: Tensor | None = None,
-                   co: Tensor | None = None) -> GraspPoseResult:
-            """Stage 3 of one variant for the bodies idx of the batch, from the shared stages 1-2."""
-            base = bases[VARIANTS[variant]["collision"] and opt.cfg.stage2_collision]
-            return o.with_config(**VARIANTS[variant]).fit(
-                markers[idx], _object_subset(obj, idx), cm, co, progress=False,
-                init={k: v[idx] for k, v in base.state.items()}, stages=(3,))
-
-        wg_gt = torch.cat([iw, ig])
-        cm = torch.cat([mc, torch.stack([p.marker_contact for p in gts])])
-        co = torch.cat([oc, torch.stack([p.object_contact for p in gts])])
-        res = {"fit_g": stage3(opt, torch.arange(B), "fit_g"), "fit_g_colli": stage3(opt, wg_gt, "fit_g_colli"),
-               "full": stage3(opt, wg_gt, "full", cm, co)}
-        rows = {v: body_rows(bm, r.vertices, [places[i] for i in (range(B) if v == "fit_g" else wg_gt)], 1,
-                           cfg.refine)
-                for v, r in res.items()}
-        for v, key in (("fit_g", "WholeGrasp w/o opt."), ("fit_g_colli", "samples + E_colli"),
-                       ("full", "WholeGrasp w/ opt. (Ours)")):
-            add(key, rows[v][:nw], res[v].markers[:nw], n)
-        # WholeGrasp-single: E_fit + E_g, and the heuristic optimisation (S.3/S.4)
-        if n1:
-            add("WholeGrasp-single w/o opt.", rows["fit_g"][nw:nw + n1], res["fit_g"].markers[nw:nw + n1], n)
-        if n1 and ch is not None:
-            r = stage3(opt_h, i1, "heuristic")
-            add("WholeGrasp-single w/ heuristic opt.", body_rows(bm, r.vertices, places[nw:nw + n1], 1, cfg.refine),
-                r.markers, n)
-        if x is not None:                                  # GrabNet-SMPLX: parameters sampled directly
-            add("GrabNet-SMPLX", *_grabnet_rows(bm, grabnet, x, pca, pls, n, ids, cfg.refine), n)
-        # ground truth: meshes, and its markers fitted with the three stage-3 variants (ground-truth contacts)
-        fp = torch.stack([p.body["fullpose"] for p in gts])
-        with torch.no_grad():
-            vg = bm.forward_rotmats(_absolute_rotmats(fp), betas=torch.stack([p.body["betas"] for p in gts]),
-                                    transl=torch.stack([p.body["transl"] for p in gts])).vertices
-        add("GT mesh", body_rows(bm, vg, gts, 1, cfg.refine))
-        add("GT + E_fit + E_g", rows["fit_g"][nw + n1:])
-        add("GT + E_colli", rows["fit_g_colli"][nw:])
-        add("GT + E_cont", rows["full"][nw:])
-        if out is not None:                                # partial results survive an interrupted run
-            write_json(Path(out).with_suffix(".partial.json"),
-                        {"config": asdict(cfg), "seconds": time.perf_counter() - t0, "per_object": per_object})
-    result = {"config": asdict(cfg), "seconds": time.perf_counter() - t0,
-              "rows": {k: {**summarise(a["rows"]), **({"apd": float(np.mean(a["apd"]))} if a["apd"] else {})}
-                       for k, a in acc.items()},
-              "per_object": per_object}
-    if out is not None:
-        write_json(out, result)
-        Path(out).with_suffix(".partial.json").unlink(missing_ok=True)    # only an interrupted run leaves one
-    return result
+    wg_gt = torch.cat([iw, ig])
+    cm = torch.cat([draws["marker_contact"], torch.stack([p.marker_contact for p in gts])])
+    co = torch.cat([draws["object_contact"], torch.stack([p.object_contact for p in gts])])
+    res = {"fit_g": stage3(opt, torch.arange(B), "fit_g"), "fit_g_colli": stage3(opt, wg_gt, "fit_g_colli"),
+           "full": stage3(opt, wg_gt, "full", cm, co)}
+    rows = {v: body_rows(bm, r.vertices, [places[i] for i in (range(B) if v == "fit_g" else wg_gt)], 1,
+                       cfg.refine)
+            for v, r in res.items()}
+    for v, key in (("fit_g", "WholeGrasp w/o opt."), ("fit_g_colli", "samples + E_colli"),
+                   ("full", "WholeGrasp w/ opt. (Ours)")):
+        add(key, rows[v][:nw], res[v].markers[:nw], n)
+    # WholeGrasp-single: E_fit + E_g, and the heuristic optimisation (S.3/S.4)
+    if n1:
+        add("WholeGrasp-single w/o opt.", rows["fit_g"][nw:nw + n1], res["fit_g"].markers[nw:nw + n1], n)
+    if n1 and m.heuristic:
+        r = stage3(m.opt_h, i1, "heuristic")
+        add("WholeGrasp-single w/ heuristic opt.", body_rows(bm, r.vertices, places[nw:nw + n1], 1, cfg.refine),
+            r.markers, n)
+    if draws["grabnet"] is not None:                      # GrabNet-SMPLX: parameters sampled directly
+        add("GrabNet-SMPLX", *_grabnet_rows(bm, m.grabnet, draws["grabnet"], m.pca, pls, n, m.ids, cfg.refine), n)
+    # ground truth: meshes, and its markers fitted with the three stage-3 variants (ground-truth contacts)
+    fp = torch.stack([p.body["fullpose"] for p in gts])
+    with torch.no_grad():
+        vg = bm.forward_rotmats(_absolute_rotmats(fp), betas=torch.stack([p.body["betas"] for p in gts]),
+                                transl=torch.stack([p.body["transl"] for p in gts])).vertices
+    add("GT mesh", body_rows(bm, vg, gts, 1, cfg.refine))
+    add("GT + E_fit + E_g", rows["fit_g"][nw + n1:])
+    add("GT + E_colli", rows["fit_g_colli"][nw:])
+    add("GT + E_cont", rows["full"][nw:])
 
 
 def _grabnet_rows(bm, grabnet, x: Tensor, pca, pls: list[Placement], n: int, ids: Tensor,
