@@ -336,8 +336,6 @@ def _command_named(argv: list[str] | None) -> str | None:
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The argument parser of the `graspkit` command for the command line `argv` (None: sys.argv[1:]; the
     subcommands of data, train and eval are only added when argv names that command)."""
-    from graspkit.paths import procedural_model_path
-
     named = _command_named(argv)
 
     p = argparse.ArgumentParser(prog="graspkit", description="graspkit: whole-body motion synthesis towards "
@@ -347,6 +345,45 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                    help="no progress bars or progress lines (before the command: graspkit --quiet train ...; the "
                    "library's switch is the environment's TQDM_DISABLE=1)")
     sub = p.add_subparsers(dest="command", required=True)
+
+    _add_body_commands(sub)
+    _add_demo_command(sub)
+    _add_method_commands(sub)
+    _add_wandr_command(sub)
+    if named == "data":
+        from graspkit.data.cli import add_data_commands
+        add_data_commands(sub)
+    else:
+        sub.add_parser("data", help=DATA_HELP)
+
+    # `graspkit train <model>`: each model family adds its own subcommands to this parser
+    train = sub.add_parser("train", help="train a model of the workbook: wholegrasp, wholegrasp_single, "
+                           "grabnet_smplx, pose_prior, motionfill, motionfill_baseline, gnet, mnet, wandr")
+    train = train.add_subparsers(dest="train_command", required=True)
+    if named == "train":
+        from graspkit.eval_goal import add_goal_train_commands
+        add_goal_train_commands(train)
+
+    # `graspkit eval <model>`: each model family adds its own evaluation subcommands to this parser;
+    # `graspkit eval --all`: every method on the same objects and goals (graspkit.benchmark)
+    ev = _add_eval_parser(sub)
+    evaluate = ev.add_subparsers(dest="eval_command", required=False)
+    if named in ("train", "eval"):
+        from graspkit.eval_wandr import add_wandr_commands
+        add_wandr_commands(train, evaluate)
+    if named == "train":
+        from graspkit.eval_saga import add_saga_train_commands
+        add_saga_train_commands(train)
+        from graspkit.eval_motionfill import add_motionfill_train_commands
+        add_motionfill_train_commands(train)
+    return p
+
+
+
+
+def _add_body_commands(sub: argparse._SubParsersAction) -> None:
+    """`graspkit body build` and `graspkit body info` on the subcommands `sub`."""
+    from graspkit.paths import procedural_model_path
 
     body = sub.add_parser("body", help="the body model").add_subparsers(dest="body_command", required=True)
     b = body.add_parser("build", help="build the procedural SMPL-X-format humanoid")
@@ -358,6 +395,9 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     i.add_argument("--model", type=Path, default=None, help="default: $GRASPKIT_MODEL, else the procedural humanoid")
     i.set_defaults(func=_cmd_body_info)
 
+
+def _add_demo_command(sub: argparse._SubParsersAction) -> None:
+    """`graspkit demo` (the main job) on the subcommands `sub`."""
     d = sub.add_parser("demo", help="run the main job and write its figures to --out")
     d.add_argument("--out", type=Path, default=Path("outputs/demo"))
     d.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz (default: the procedural humanoid)")
@@ -366,6 +406,10 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     d.add_argument("--threads", type=int, default=2, help="torch threads (default 2; another count can move the "
                    "optimised and rolled-out figures in their last digits, or more)")
     d.set_defaults(func=_cmd_demo, out_is_file=False)
+
+
+def _add_method_commands(sub: argparse._SubParsersAction) -> None:
+    """`graspkit saga` and `graspkit goal` (one method end to end for one object) on the subcommands `sub`."""
     for method, cmd, what in (("saga", _cmd_saga, "SAGA end to end for one object: grasp, then the approach "
                                "motion into it"),
                               ("goal", _cmd_goal, "GOAL end to end for one object: GNet's grasp, then MNet's "
@@ -398,7 +442,12 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                                  "that is not 5 mm closer than at its closest in this many frames before starts the "
                                  "refinement (default 10; 0: off, GOAL's rollout; docs/goal.md)")
         sg.set_defaults(func=cmd, out_is_file=False)
+
+
+def _add_wandr_command(sub: argparse._SubParsersAction) -> None:
+    """`graspkit wandr` (WANDR from a held-out start to one goal) on the subcommands `sub`."""
     from graspkit.paths import DATA_STUBS
+
     wa = sub.add_parser("wandr", help="WANDR from its held-out start pose to one goal in a given time")
     wa.add_argument("--goal", type=float, nargs=3, required=True, metavar=("X", "Y", "Z"),
                     help="the goal (m) in the start's frame: pelvis above the origin, facing +x, floor z = 0")
@@ -414,22 +463,11 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     wa.add_argument("--threads", type=int, default=1, help="torch threads (default 1; another count can move the "
                     "rollout in its last digits)")
     wa.set_defaults(func=_cmd_wandr, out_is_file=False)
-    if named == "data":
-        from graspkit.data.cli import add_data_commands
-        add_data_commands(sub)
-    else:
-        sub.add_parser("data", help=DATA_HELP)
 
-    # `graspkit train <model>`: each model family adds its own subcommands to this parser
-    train = sub.add_parser("train", help="train a model of the workbook: wholegrasp, wholegrasp_single, "
-                           "grabnet_smplx, pose_prior, motionfill, motionfill_baseline, gnet, mnet, wandr")
-    train = train.add_subparsers(dest="train_command", required=True)
-    if named == "train":
-        from graspkit.eval_goal import add_goal_train_commands
-        add_goal_train_commands(train)
 
-    # `graspkit eval <model>`: each model family adds its own evaluation subcommands to this parser;
-    # `graspkit eval --all`: every method on the same objects and goals (graspkit.benchmark)
+def _add_eval_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """`graspkit eval` with its --all options (the cross-method benchmark) on the subcommands `sub`; returns its
+    parser (the methods add their `eval` subcommands to it)."""
     ev = sub.add_parser("eval", help="evaluate WANDR's goal grid (eval wandr), or every method with --all")
     ev.add_argument("--all", action="store_true", help="the cross-method benchmark (table, CSV and figure in --out)")
     ev.add_argument("--out", type=Path, default=Path("outputs/benchmark"), help="folder for --all's report")
@@ -445,16 +483,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
                     help="with --all: keep --out's benchmark.csv and replace only the rows the --methods make (a "
                          "row whole: run together the methods that fill one row, e.g. saga_motion,motion)")
     ev.set_defaults(func=_cmd_eval_all, out_is_file=False)       # --all's --out is a folder, whatever its name
-    evaluate = ev.add_subparsers(dest="eval_command", required=False)
-    if named in ("train", "eval"):
-        from graspkit.eval_wandr import add_wandr_commands
-        add_wandr_commands(train, evaluate)
-    if named == "train":
-        from graspkit.eval_saga import add_saga_train_commands
-        add_saga_train_commands(train)
-        from graspkit.eval_motionfill import add_motionfill_train_commands
-        add_motionfill_train_commands(train)
-    return p
+    return ev
 
 
 FILE_SUFFIXES = (".npz", ".pt", ".json", ".csv")      # an --out with one of these names a file, otherwise a folder
