@@ -212,7 +212,7 @@ print(f"success rate on this slice: {100 * np.mean(dtg <= M.WANDR_SUCCESS_RADIUS
 #
 # Two kinds of clips, as WANDR's premise asks (`graspkit data make --kind {locomotion,reach}`):
 # **AMASS-style** locomotion without goals (speeds 0.5–1.6 m/s, curves, turns in place, side steps, starts, stops,
-# idling; 4–10 s) and **CIRCLE-style** reaching (a step or two at most, then a right-hand reach; goal, goal frame and
+# idling; 4–10 s) and **CIRCLE-style** reaching (a few short steps at most, then a right-hand reach; goal, goal frame and
 # hand stored). Below, as WANDR's Fig. S.4: the training goals in cylindrical coordinates around the start pose
 # (distance, angle from the facing direction, height) — CIRCLE-style goals and AMASS-style *hindsight* goals
 # (the wrist at a random future frame up to 8 s ahead, WANDR §3.2, drawn as the training windows draw them:
