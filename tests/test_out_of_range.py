@@ -47,6 +47,23 @@ def test_generate_warns_for_goals_out_of_range_and_names_the_worst_sequence(wand
     assert high.startswith("the goal is 2.50 m high")
 
 
+def test_generate_measures_the_goals_distance_from_the_pelvis(wandr):
+    """The speed note measured from the pose's translation, which the held-out starts' rest pelvis sits ~0.35 m off:
+    a goal 1.3 m from the pelvis in 1 s was called 1.7 m/s, one 1.6 m away passed (an independent check). Now, on
+    every side of the pelvis (posed by forward kinematics), 1.42 m/s is quiet and 1.58 m/s is named."""
+    from graspkit import intention as I
+
+    model, start = wandr
+    pelvis = I.body_joints(start.p[None], start.rest[None])[0, I.PELVIS]
+    assert float((pelvis[:2] - start.p[:2]).norm()) > 0.2                  # the case that told them apart
+    for angle in np.deg2rad([0.0, 90.0, 180.0, 270.0]):
+        way = torch.tensor([np.cos(angle), np.sin(angle), 0.0], dtype=torch.float32)
+        goal = lambda d: [*(pelvis[:2] + d * way[:2]).tolist(), 1.0]           # noqa: E731 - 1 m up
+        assert _notes(model, start, [goal(1.42)], 30) == []
+        (note,) = _notes(model, start, [goal(1.58)], 30)
+        assert note.startswith("the goal is 1.6 m away: 1.6 m/s on average"), note
+
+
 def test_betas_beyond_the_checked_range_are_warned_about():
     """All ten betas at -5 make a 0.94 m, 2 L body with joints outside it: taken silently before."""
     from graspkit.checks import check_betas
