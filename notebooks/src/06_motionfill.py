@@ -138,29 +138,47 @@ _ = axes[0].set_ylim(0, 1.5)
 # %% [markdown]
 # ## The palm turns to the object, and an animation
 # Eq. 11 weighs the palm term with α_t = 1 − (t/T)², on palm vertices within 1 cm of the object. Here: the mean angle
-# between the right palm's normals and the direction to the nearest object point, per frame, on the fitted bodies.
+# between the right palm's normals and the direction to the nearest object point, per frame, **before** (bodies fitted
+# to the sampled markers alone: Alg. 2's stage 1, E_fit, run here in a few seconds) and **after** GraspMotion-Opt
+# (the shipped fit above, with the palm, contact and feet terms of stage 2). On this clip the two curves stay within a
+# few degrees of each other: MotionFill's sampled markers already turn the hand towards the mug, and the palm term
+# only acts on palm vertices within 1 cm of the object, i.e. on the last frames, where contact (E^o_cont) decides
+# which part of the hand touches (exercise 6 asks what the term does where it acts).
 
 # %%
+from graspkit.models.pose_prior import load_pose_prior
+from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, load_smooth_ae
+
+stage1 = GraspMotionOpt(bm, load_pose_prior(), load_smooth_ae(), GraspMotionConfig(steps=(100, 0), polish=(0, 1e-3)))
+before = stage1.vertices(stage1.fit(torch.as_tensor(ex["markers_sample"])[None],
+                                    torch.as_tensor(ex["betas"])[None], progress=False), 0)
 rot = axis_angle_to_matrix(torch.as_tensor(ex["poses"]).view(-1, 55, 3))
 with torch.no_grad():
     verts = bm.forward_rotmats(rot, betas=torch.as_tensor(ex["betas"])[None].expand(len(rot), -1),
                                transl=torch.as_tensor(ex["transl"])).vertices.float()
 palm = torch.as_tensor(palm_vertices(bm)["right"])
-n = vertex_normals(verts, bm.faces)[:, palm]
-pv = verts[:, palm]
 pts = torch.as_tensor(scene["points"]).float()
-d = torch.cdist(pv, pts[None].expand(len(pv), -1, -1))
-near = pts[d.argmin(-1)]
-ang = torch.rad2deg(torch.acos(torch.nn.functional.cosine_similarity(n, near - pv, dim=-1).clamp(-1, 1))).mean(1)
-fig, ax = plt.subplots(figsize=(6, 2.8))
-ax.plot(ang.numpy(), label="palm normal vs direction to object")
-ax2 = ax.twinx()
-ax2.plot(d.min(-1).values.min(-1).values.numpy() * 100, "g--", label="palm to object (cm)")
-ax.set_xlabel("frame")
-ax.set_ylabel("angle (deg)")
-ax2.set_ylabel("distance (cm)", color="g")
-_ = ax.legend(ax.get_lines() + ax2.get_lines(), [ln.get_label() for ln in ax.get_lines() + ax2.get_lines()],
-              fontsize=8, loc="upper center")
+
+
+def palm_to_object(v: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame of bodies v (T, V, 3): the palm normals' mean angle to the nearest object point (deg) and the
+    palm's closest distance to the object (cm)."""
+    n, pv = vertex_normals(v, bm.faces)[:, palm], v[:, palm]
+    d = torch.cdist(pv, pts[None].expand(len(pv), -1, -1))
+    cos = torch.nn.functional.cosine_similarity(n, pts[d.argmin(-1)] - pv, dim=-1).clamp(-1, 1)
+    return torch.rad2deg(torch.acos(cos)).mean(1).numpy(), d.min(-1).values.min(-1).values.numpy() * 100
+
+
+fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 2.8), sharex=True)
+for v, label, style in ((before, "before (stage 1: E_fit)", "--"), (verts, "after GraspMotion-Opt", "-")):
+    ang, dist = palm_to_object(v)
+    ax.plot(ang, style, label=label)
+    ax2.plot(dist, style, label=label)
+ax.set_ylabel("palm normal vs direction\nto the object (deg)")
+ax2.set_ylabel("palm to object (cm)")
+for a in (ax, ax2):
+    a.set_xlabel("frame")
+_ = ax.legend(fontsize=8)
 
 # %%
 # NBVAL_IGNORE_OUTPUT
@@ -271,3 +289,7 @@ viz.show_animation(anim)
 # 5. Run `graspkit.eval_motionfill.graspmotion_eval` on one test clip with `weights=GraspMotionWeights(heel=0,
 #    foot_acc=0)` (S.2 alone) and with the defaults (about 25 s each). Compare the skating and the heel speed per
 #    frame: where does the metric drop, and what does a foot do that the metric cannot see?
+# 6. The palm term above: run `graspmotion_eval` on the mug clip with `weights=GraspMotionWeights(palm=0)` and with
+#    `palm=100`, and plot `palm_to_object` for both fits' last 15 frames (the bodies: `stage1.vertices(ev["result"],
+#    0)`; any GraspMotionOpt on `bm` poses a result). Where does the angle change, and what happens to the contact
+#    (the rows' `contact_mm`)?
