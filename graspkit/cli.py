@@ -472,7 +472,7 @@ def _add_eval_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser
     ev.add_argument("--all", action="store_true", help="the cross-method benchmark (table, CSV and figure in --out)")
     ev.add_argument("--out", type=Path, default=Path("outputs/benchmark"), help="folder for --all's report")
     ev.add_argument("--quick", action="store_true",
-                    help="with --all: a few samples per method (about 6 CPU minutes; 10.5 min on a busy 2-core machine)")
+                    help="with --all: a few samples per method (about 6 CPU minutes; 10.5 on a busy 2-core machine)")
     ev.add_argument("--data", type=Path, action="append", default=None,
                     help="with --all: a folder of grasp_*/approach_*.npz files (repeatable; default: made "
                          "sets or stubs)")
