@@ -149,6 +149,26 @@ def test_nearest_neighbours_both_paths_match_a_full_distance_matrix(monkeypatch,
     np.testing.assert_allclose(d2.numpy(), full32.min(-1) ** 2, rtol=1e-5, atol=1e-9)
 
 
+def test_nearest_neighbours_of_a_large_call_take_the_tree_not_the_distance_matrix(monkeypatch):
+    """At the default threshold a call of 12,000 x 12,000 points (above KD_PAIRS) makes no distance matrix; its
+    answers on 300 of the queries are numpy's full-matrix nearest."""
+    from graspkit.objects import distance
+
+    assert 12_000 ** 2 >= distance.KD_PAIRS
+    rng = np.random.default_rng(4)
+    q, t = rng.uniform(size=(12_000, 3)), rng.uniform(size=(12_000, 3))
+
+    def no_cdist(*a, **k):
+        raise AssertionError("a distance matrix was built")
+
+    monkeypatch.setattr(torch, "cdist", no_cdist)
+    d, i = nearest_neighbours(torch.tensor(q), torch.tensor(t))
+    some = rng.choice(len(q), 300, replace=False)
+    full = np.linalg.norm(q[some, None] - t[None], axis=-1)
+    np.testing.assert_array_equal(i.numpy()[some], full.argmin(-1))
+    np.testing.assert_allclose(d.numpy()[some], full.min(-1), atol=1e-12)
+
+
 def test_nearest_neighbours_and_bps_far_from_the_origin_match_kdtree():
     """Basis points 1 km from the origin (world coordinates), each with two candidate points 1 mm away that differ
     by 0.2 µm: the nearer one is found, as by a k-d tree (cdist's |a|² + |b|² - 2ab rounds at ~1e-9 m² there)."""

@@ -723,8 +723,10 @@ class GrabNetSMPLX(nn.Module):
             raise ValueError(f"body_space: expected 'prior' or 'rot6d', got {body_space!r}")
         self.prior: PosePrior | None = None
         if body_space == "prior":          # frozen: its weights travel in this model's state dict
+            # load_pose_prior's undecorated body: building the prior draws from the global generator, as it did
+            # when the documented GrabNet-SMPLX runs were made, so the layers after it get the same initial weights
             self.prior = prior if prior is not None else (
-                PosePrior(PosePriorConfig(**prior_config)) if prior_config else load_pose_prior())
+                PosePrior(PosePriorConfig(**prior_config)) if prior_config else load_pose_prior.__wrapped__())
             self.prior.eval().requires_grad_(False)
         self.hparams = dict(hidden=hidden, latent=latent, nsample=nsample, object_feature=object_feature,
                             kl_final=kl_final, body_space=body_space,

@@ -140,10 +140,12 @@ _ = axes[0].set_ylim(0, 1.5)
 # Eq. 11 weighs the palm term with α_t = 1 − (t/T)², on palm vertices within 1 cm of the object. Here: the mean angle
 # between the right palm's normals and the direction to the nearest object point, per frame, **before** (bodies fitted
 # to the sampled markers alone: Alg. 2's stage 1, E_fit, run here in a few seconds) and **after** GraspMotion-Opt
-# (the shipped fit above, with the palm, contact and feet terms of stage 2). On this clip the two curves stay within a
-# few degrees of each other: MotionFill's sampled markers already turn the hand towards the mug, and the palm term
-# only acts on palm vertices within 1 cm of the object, i.e. on the last frames, where contact (E^o_cont) decides
-# which part of the hand touches (exercise 6 asks what the term does where it acts).
+# (the shipped fit above, with the palm, contact and feet terms of stage 2). On this clip the two curves part by a few
+# degrees (under 10°), and not through the palm term: it acts only on palm vertices within 1 cm of the object, with
+# a weight α_t that falls to 0 at the grasp frame, and no palm vertex of the fitted bodies comes that close (the
+# solid curve on the right): the hand meets the mug with its fingers, which E^o_cont pulls in. MotionFill's sampled
+# markers already turn the hand towards the mug; the differences are stage 2's other terms at work (exercise 6
+# changes the palm term's weight).
 
 # %%
 from graspkit.models.pose_prior import load_pose_prior
