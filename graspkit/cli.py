@@ -379,8 +379,6 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     return p
 
 
-
-
 def _add_body_commands(sub: argparse._SubParsersAction) -> None:
     """`graspkit body build` and `graspkit body info` on the subcommands `sub`."""
     from graspkit.paths import procedural_model_path

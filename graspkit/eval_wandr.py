@@ -716,7 +716,8 @@ def run_train_wandr(variant: str = "wandr", folder: str | None = None, out: str 
                        f"--lr {lr:g} --max-steps {max_steps} --ramp-epochs {ramp_epochs} --stride-scale {stride_scale} "
                        f"--seed {seed} --threads {threads}" + "".join(c for c, _ in flags),
             "load_avg_end": float(__import__("os").getloadavg()[0]), "starts": starts_to_meta(starts),
-            **({"init": str(init), "init_command": init_model.meta.get("command", "")} if init_model else {}),
+            **({"init": str(init), "init_command": init_model.meta.get("command", "")}
+               if init_model is not None else {}),
             **({"val": val["scores"], "selected_epoch": val["best"]} if val else {})}
     earlier = [] if init_model is None else (init_model.meta.get("stages") or [
         _stage_record(init_model.meta, init_model.history, init_model.cfg.max_steps)])
