@@ -30,17 +30,7 @@ def _cmd_body_build(args: argparse.Namespace) -> int:
 
 def _cmd_body_info(args: argparse.Namespace) -> int:
     """Print what a body-model file holds."""
-    from graspkit.body import BodyModel
-    from graspkit.body.model import ModelFileError
-    from graspkit.paths import default_model_path
-
-    try:
-        bm = BodyModel.from_file(args.model if args.model is not None else default_model_path())
-    except ModelFileError as e:
-        raise ValueError(f"{_model_source(args.model)}: {e}") from None
-    except OSError as e:                                 # a name past 255 bytes, say
-        raise ValueError(f"{_model_source(args.model)}: {args.model or os.environ.get('GRASPKIT_MODEL')}: "
-                         f"{e.strerror or e}") from None
+    bm = _body_model(args.model, build=False)
     out = bm()
     v = out.vertices[0]
     print(bm.extra_repr())
@@ -145,23 +135,28 @@ def _free_joints(names: list[str]) -> tuple[str, ...]:
 
 def _model_source(path: Path | None) -> str:
     """Where a body model path came from, for an error: --model, or the GRASPKIT_MODEL variable."""
-    import os
-
     return "--model" if path is not None or not os.environ.get("GRASPKIT_MODEL") else "GRASPKIT_MODEL"
 
 
-def _body_model(path: Path | None):
-    """The body model of --model (None: $GRASPKIT_MODEL or the shipped humanoid, built if missing); a bad file names
-    where its path came from."""
+def _body_model(path: Path | None, build: bool = True):
+    """The body model of --model (None: $GRASPKIT_MODEL or the shipped humanoid, built if missing when `build`); a
+    bad file names where its path came from."""
+    from graspkit.body import BodyModel
     from graspkit.body.model import ModelFileError
     from graspkit.demo import load_or_build_body
+    from graspkit.paths import default_model_path
 
     try:
-        return load_or_build_body(path)
+        return load_or_build_body(path) if build else BodyModel.from_file(path or default_model_path())
     except ModelFileError as e:
         raise ValueError(f"{_model_source(path)}: {e}") from None
-    except OSError as e:                                 # a name past 255 bytes, say
-        raise ValueError(f"{_model_source(path)}: {path or os.environ.get('GRASPKIT_MODEL')}: {e.strerror or e}") from None
+    except OSError as e:
+        raise _os_error(_model_source(path), path or os.environ.get("GRASPKIT_MODEL"), e) from None
+
+
+def _os_error(flag: str, path: object, e: OSError) -> ValueError:
+    """A ValueError naming `flag` and `path` for an OSError of the file system (a name past 255 bytes, say)."""
+    return ValueError(f"{flag}: {path}: {e.strerror or e}")
 
 
 def _cmd_saga(args: argparse.Namespace) -> int:
@@ -495,7 +490,7 @@ def check_out(path: Path, is_file: bool | None = None, flag: str = "--out") -> N
     try:
         _check_out(Path(path), is_file, flag)
     except OSError as e:
-        raise ValueError(f"{flag}: {path}: {e.strerror or e}") from None
+        raise _os_error(flag, path, e) from None
 
 
 def _check_out(path: Path, is_file: bool | None, flag: str) -> None:
@@ -571,8 +566,8 @@ def check_folders(paths: Path | list[Path] | None, flag: str = "--data") -> None
     for d in paths if isinstance(paths, list) else [] if paths is None else [paths]:
         try:
             found = Path(d).is_dir()
-        except OSError as e:                             # a name past 255 bytes, say
-            raise ValueError(f"{flag}: {d}: {e.strerror or e}") from None
+        except OSError as e:
+            raise _os_error(flag, d, e) from None
         if not found:
             what = "is a file, expected a folder" if Path(d).exists() else "no such folder"
             raise FileNotFoundError(f"{flag}: {d}: {what} (make the data with `graspkit data make`, docs/data.md)")
@@ -586,8 +581,8 @@ def check_file(path: Path, flag: str, what: str = "a checkpoint file", see: str 
     path = Path(path)
     try:
         found = path.is_file()
-    except OSError as e:                                 # a name past 255 bytes, say
-        raise ValueError(f"{flag}: {path}: {e.strerror or e}") from None
+    except OSError as e:
+        raise _os_error(flag, path, e) from None
     if not found:
         problem = f"is a folder, expected {what}" if path.is_dir() else "is missing"
         raise FileNotFoundError(f"{flag}: {path} {problem}" + (f" (see {see})" if see else "") + stub_hint(path))

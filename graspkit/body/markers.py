@@ -29,6 +29,7 @@ import numpy as np
 import torch
 
 from graspkit.body.skeleton import FINGERS, JOINT_INDEX, SMPLX_LANDMARK_VERTEX_IDS
+from graspkit.checks import check_int
 from graspkit.rotations import axis_angle_to_matrix
 
 if TYPE_CHECKING:
@@ -261,10 +262,10 @@ def farthest_point_sampling(points: np.ndarray, n: int, start: int = 0) -> np.nd
         points = points.astype(np.float64)
     if not np.isfinite(points).all():
         raise ValueError("points: contain NaN or Inf")
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= len(points):
-        raise ValueError(f"n: expected a whole number of samples in 1..{len(points)}, got {n!r}")
-    if isinstance(start, bool) or not isinstance(start, (int, np.integer)) or not 0 <= start < len(points):
-        raise ValueError(f"start: expected a point index in 0..{len(points) - 1}, got {start!r}")
+    if check_int(n, "n", least=1) > len(points):
+        raise ValueError(f"n: expected at most {len(points)} samples, got {n}")
+    if check_int(start, "start") >= len(points):
+        raise ValueError(f"start: expected a point index in 0..{len(points) - 1}, got {start}")
     chosen = np.empty(n, np.int64)
     chosen[0] = start
     dist = np.linalg.norm(points - points[start], axis=1)

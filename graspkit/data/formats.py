@@ -49,7 +49,6 @@ def amass_split_keys(poses: np.ndarray, fps: float, num_betas: int = NUM_BETAS) 
             "pose_hand": p[:, 75:], "num_betas": np.array(num_betas), "mocap_time_length": np.array(T / fps)}
 
 
-
 CLIP_KINDS = ("locomotion", "reach", "reach_far", "reach_chain", "reach_near", "grasp", "approach")
 
 
@@ -59,6 +58,7 @@ def clip_files(root: str | os.PathLike, kind: str) -> list[Path]:
     reach_far_* beside reach_*): every reader of a folder of clips, and every cache key of one, takes these."""
     longer = [k for k in CLIP_KINDS if k != kind and k.startswith(f"{kind}_")]
     return sorted(f for f in Path(root).glob(f"{kind}_*.npz") if not f.name.startswith(tuple(f"{k}_" for k in longer)))
+
 
 def save_motion(path: str | os.PathLike, motion: Motion, amass_keys: bool = False) -> Path:
     """Write a Motion as an AMASS-style .npz (plus goal keys for reaching clips), atomically; returns the path.

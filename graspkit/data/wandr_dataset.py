@@ -106,8 +106,8 @@ class ClipSet:
 
 
 def list_clips(folder: str | Path, kinds: Sequence[str] = KINDS, limit: int | None = None) -> list[Path]:
-    """The clip files `<folder>/<sub>/<sub>_<digits>.npz` (sorted; what `graspkit data make --kind <sub>` writes, so a
-    reach clip written into locomotion/ is not taken for locomotion) of the sub-folders `kinds` (of locomotion, reach
+    """The clip files `<folder>/<sub>/<sub>_*.npz` (`formats.clip_files`, sorted: never another kind's, so a reach
+    clip written into locomotion/ is not taken for locomotion) of the sub-folders `kinds` (of locomotion, reach
     and the opt-in reach_far, reach_chain and reach_near; a missing one is skipped), at most `limit` per sub-folder."""
     folder = Path(folder)
     out: list[Path] = []
@@ -117,7 +117,7 @@ def list_clips(folder: str | Path, kinds: Sequence[str] = KINDS, limit: int | No
         files = clip_files(folder / kind, kind)
         out += files[:limit] if limit is not None else files
     if not out:
-        raise FileNotFoundError(f"folder: no clips under {folder}/{{{','.join(kinds)}}}/<kind>_<digits>.npz "
+        raise FileNotFoundError(f"folder: no clips under {folder}/{{{','.join(kinds)}}}/<kind>_*.npz "
                                 "(make them with `graspkit data make --kind locomotion` and `--kind reach`)")
     return out
 

@@ -15,12 +15,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import math
-import numbers
-
 import torch
 from torch import Tensor, nn
 
+from graspkit.checks import check_int, check_positive
 from graspkit.objects.distance import centred_cdist
 
 
@@ -33,11 +31,6 @@ def _check_points(xyz: Tensor, name: str = "xyz") -> None:
         raise ValueError(f"{name}: contains NaN or Inf")
 
 
-def _is_count(n: object) -> bool:
-    """Whether n is a whole number (an int, not a bool)."""
-    return isinstance(n, numbers.Integral) and not isinstance(n, bool)
-
-
 def farthest_point_sample(xyz: Tensor, n: int, generator: torch.Generator | None = None) -> Tensor:
     """Indices (B, n) of points greedily farthest from those already chosen, xyz (B, N, 3).
 
@@ -45,8 +38,8 @@ def farthest_point_sample(xyz: Tensor, n: int, generator: torch.Generator | None
     """
     _check_points(xyz)
     B, N, _ = xyz.shape
-    if not _is_count(n) or not 1 <= n <= N:
-        raise ValueError(f"n: expected a whole number of samples in 1..{N} (xyz has {N} points), got {n!r}")
+    if check_int(n, "n", least=1) > N:
+        raise ValueError(f"n: expected at most {N} samples (xyz has {N} points), got {n}")
     idx = torch.empty(B, n, dtype=torch.long, device=xyz.device)
     if generator is None:
         far = torch.zeros(B, dtype=torch.long, device=xyz.device)
@@ -72,10 +65,8 @@ def ball_query(xyz: Tensor, centres: Tensor, radius: float, k: int) -> Tensor:
     """
     _check_points(xyz)
     _check_points(centres, "centres")
-    if not isinstance(radius, numbers.Real) or not math.isfinite(radius) or radius <= 0:
-        raise ValueError(f"radius: expected a positive number of metres, got {radius!r}")
-    if not _is_count(k) or k < 1:
-        raise ValueError(f"k: expected a whole number >= 1, got {k!r}")
+    check_positive(radius, "radius")
+    check_int(k, "k", least=1)
     N = xyz.shape[1]
     with torch.no_grad():
         d2 = centred_cdist(centres, xyz).pow(2)                               # (B, S, N)
