@@ -426,8 +426,9 @@ def _add_method_commands(sub: argparse._SubParsersAction) -> None:
                                  "pose prior ('arms', the default: collars, shoulders, elbows, wrists; 'none': Alg. 1 "
                                  "and 2; docs/saga.md)")
             sg.add_argument("--hold-start", action=argparse.BooleanOptionalAction, default=True,
-                            help="GraspMotion-Opt holds frame 0 at the start body (the default; --no-hold-start: "
-                                 "Alg. 2, whose planted feet drag it along the first steps; docs/saga_motion.md)")
+                            help="GraspMotion-Opt holds frame 0 at the start body, with a heavier planted heel (the "
+                                 "default; --no-hold-start: Alg. 2, whose planted feet drag it along the first steps; "
+                                 "docs/saga_motion.md)")
         if method == "goal":
             sg.add_argument("--max-frames", type=int, default=150, help="MNet's rollout stops here if not at the grasp")
             sg.add_argument("--stall", type=int, default=None, metavar="FRAMES",

@@ -111,9 +111,9 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
     Alg. 1's and Alg. 2's prior latent alone; docs/saga.md, docs/saga_motion.md).
     polish_steps: the polish steps of GraspPose-Opt and of GraspMotion-Opt (None: their configs' 100 each; a lesson
     with fewer steps throughout passes fewer).
-    hold_start: GraspMotion-Opt fits frame 0 to the start body and holds it there (graspkit's; False: Alg. 2, where
-    S.2's planted feet drag frame 0 some 8-22 cm along the sample's first steps; docs/saga_motion.md, "The start
-    frame").
+    hold_start: GraspMotion-Opt fits frame 0 to the start body and holds it there, with the planted heel weighed by
+    `GraspMotionWeights.heel_held` (graspkit's; False: Alg. 2, where S.2's planted feet drag frame 0 some 8-22 cm
+    along the sample's first steps; docs/saga_motion.md, "The start frame").
     """
     from graspkit.body import BodyModel
     from graspkit.data.grasp_io import object_collision_grid

@@ -122,6 +122,8 @@ def test_planted_heel_term_is_analytic_and_off_when_a_heel_is_lifted(bm):
     on_floor = heel_z.min().reshape(1) - 0.01              # heels 1 cm (and a few mm) above the floor
     e = opt.energy(p, target, torch.zeros(F, 10), 2, None, None, None, on_floor)["heel"].item()
     assert e == pytest.approx(w.heel * (F - 1) * (0.02 - w.skate_sigma), rel=1e-4)
+    held = opt.energy(p, target, torch.zeros(F, 10), 2, None, None, None, on_floor, held=True)["heel"].item()
+    assert held == pytest.approx(w.heel_held * (F - 1) * (0.02 - w.skate_sigma), rel=1e-4)   # frame 0 held
     lifted = heel_z.max().reshape(1) - w.heel_height - 0.01    # both heels higher than heel_height: off
     assert opt.energy(p, target, torch.zeros(F, 10), 2, None, None, None, lifted)["heel"].item() == 0.0
     # a body standing still costs nothing
@@ -345,6 +347,26 @@ def test_a_given_start_holds_frame_0_where_planted_feet_would_drag_it(bm, clip):
     assert rest(held) < rest(free) + 0.01, (rest(held), rest(free))
     with pytest.raises(ValueError, match="start"):
         opt.fit(markers[None], betas[None, :10], progress=False, start=start)
+
+
+def test_a_held_start_fits_with_heel_held_and_a_free_one_with_heel(bm, clip):
+    """fit(start=...) weighs the planted heel by weights.heel_held, fit without a start by weights.heel: each result
+    is bit for bit the one whose other weight is set equal, and differs when the weight it uses changes."""
+    markers, _, betas, _ = clip
+    feet = torch.ones(1, len(markers), 4)
+    start = markers[0] - torch.tensor([0.03, 0.0, 0.0])
+
+    def fit(heel: float, heel_held: float, held: bool) -> torch.Tensor:
+        cfg = GraspMotionConfig(steps=(20, 30), polish=(0, 1e-3), terms=("skate", "heel"),
+                                weights=GraspMotionWeights(heel=heel, heel_held=heel_held))
+        res = GraspMotionOpt(bm, load_pose_prior(), None, cfg).fit(
+            markers[None], betas[None, :10], feet, progress=False, start=start[None] if held else None)
+        return res.markers
+
+    both = fit(1e4, 3e4, True)
+    assert torch.equal(both, fit(3e4, 3e4, True)) and not torch.equal(both, fit(1e4, 1e4, True))
+    free = fit(1e4, 3e4, False)
+    assert torch.equal(free, fit(1e4, 1e4, False)) and not torch.equal(free, fit(3e4, 3e4, False))
 
 
 def test_errors_name_the_argument(bm):

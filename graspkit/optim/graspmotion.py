@@ -80,8 +80,13 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   grasp's. With the arms free: 3.1 cm, 12 of 12 clips end in contact, last-frame volume 1.92 -> 1.20 cm3 (docs).
 - The start frame (graspkit's, since 2026-12-03; `fit(start=...)`, passed by `saga.synthesize`): stage 1 fits frame 0
   to the start body's markers and stage 2 leaves it there. Without it S.2's planted feet drag frame 0 along the
-  sample's first steps, 8-22 cm off the start body in the calls measured; held, it is 2-3 mm from it, at the price
-  of the sample's first shuffling steps counted as skating (docs/saga_motion.md, "The start frame").
+  sample's first steps, 8-22 cm off the start body in the calls measured; held, it is 2-3 mm from it. Held, the fit
+  must follow the sample's first steps, which slide feet its contact head calls planted, and at a_heel = 1e4 both
+  heels then crept at 0.08-0.14 m/s (SAGA's metric counts it: 0.18 on a mug); so a held start weighs the planted heel
+  by `heel_held` = 3e4 (since 2026-12-07). `synthesize` on the 11 training objects, seeds 0-2 (33 calls): skating
+  0.007 (4 calls above 0, at most 0.083) -> 0.000, at the price of jerkier heels (heel acceleration p99 26.6 -> 30.8
+  m/s^2, mean over calls) and a little more end penetration (0.36 -> 0.48 cm^3, most of it two pitcher grasps);
+  docs/saga_motion.md, "The start frame".
 - Initialisation: the prior's mean pose, rigidly aligned per frame (Kabsch on the body and face markers).
 - E^o_colli and E_g are evaluated on the frames where a hand vertex is within 2 cm of the object's bounding box
   (chosen without gradient each step; elsewhere both are 0 by definition: no vertex can be inside or within 1 cm),
@@ -259,6 +264,7 @@ class GraspMotionWeights:
     skate: float = 300.0           # a_skat
     skate_sigma: float = 0.05 / 30  # m per frame (0.05 m/s: below SAGA's 75 mm/s skating threshold)
     heel: float = 1e4              # graspkit's planted heel: the slower heel marker's speed above skate_sigma
+    heel_held: float = 3e4         # a_heel when fit holds frame 0 at a start body (fit(start=...), saga.synthesize)
     heel_height: float = 0.06      # m above the floor: with both heels this low, one of them should stand still
     foot_acc: float = 1e5          # graspkit's: squared foot-vertex acceleration (m/frame^2), mean over vertices
     floor: float = 1000.0          # graspkit's: each frame's lowest sole vertex below the floor (m), when fit gets it
@@ -390,8 +396,9 @@ class GraspMotionOpt:
     # ------------------------------------------------------------------ the energy
     def energy(self, p: dict[str, Tensor], target: Tensor, betas: Tensor, stage: int, foot_contact: Tensor | None,
                obj: GraspObject | None, object_contact: Tensor | None, floor: Tensor | None = None,
-               marker_contact: Tensor | None = None) -> dict[str, Tensor]:
-        """Each term per sequence (B,) for frame parameters (B*(T+1), ...) and target markers (B, T+1, M, 3)."""
+               marker_contact: Tensor | None = None, held: bool = False) -> dict[str, Tensor]:
+        """Each term per sequence (B,) for frame parameters (B*(T+1), ...) and target markers (B, T+1, M, 3);
+        `held`: frame 0 is held at a start body, so the planted heel takes weights.heel_held."""
         cfg, w = self.cfg, self.cfg.weights
         B, F = target.shape[:2]
         rot = self.rotmats(p)
@@ -456,13 +463,14 @@ class GraspMotionOpt:
             e["foot_acc"] = w.foot_acc * (feet[:, 2:] - 2 * feet[:, 1:-1] + feet[:, :-2]).pow(2).sum(-1).mean(-1).sum(1)
         if "floor" in terms and w.floor > 0 and floor is not None:    # only a floor given: the heel markers' is not it
             e["floor"] = w.floor * torch.relu(floor[:, None] - feet[..., 2].amin(-1)).sum(1)    # each frame's lowest
-        if "heel" in terms and w.heel > 0:
+        a_heel = w.heel_held if held else w.heel
+        if "heel" in terms and a_heel > 0:
             if floor is None:                   # the lowest heel marker of the target sequence
                 floor = target[:, :, self.heels, 2].amin((1, 2))
             h = m[:, :, self.heels]                                                 # (B, F, 2, 3)
             speed = (h[:, 1:] - h[:, :-1]).norm(dim=-1)                             # (B, T, 2)
             low = ((h[:, :-1, :, 2] - floor[:, None, None]) < w.heel_height).all(-1).detach()
-            e["heel"] = w.heel * (low * torch.relu(speed.min(-1).values - w.skate_sigma)).sum(1)
+            e["heel"] = a_heel * (low * torch.relu(speed.min(-1).values - w.skate_sigma)).sum(1)
         return e
 
     def cloud_penetration(self, q: Tensor, pts: Tensor, nrm: Tensor, lo: Tensor, hi: Tensor) -> Tensor:
@@ -554,6 +562,7 @@ class GraspMotionOpt:
         if start is not None:
             target = torch.cat([start.detach().float()[:, None], target[:, 1:]], 1)
         mc = None if marker_contact is None else marker_contact.detach().float()
+        held = start is not None
         bet = betas.float().repeat_interleave(F, 0)
         p0 = self.init_params(target.flatten(0, 1), bet)
         first = {k: v.view(B, F, -1)[:, :1].clone().requires_grad_(True) for k, v in p0.items()}
@@ -584,13 +593,13 @@ class GraspMotionOpt:
                 if stage == 2 and i in (150, self.cfg.steps[1]):      # the paper's decay, then the polish
                     for g in opt.param_groups:
                         g["lr"] = lr_polish if i >= self.cfg.steps[1] else 0.005
-                e = self.energy(params(), target, bet, stage, foot_contact, obj, object_contact, floor, mc)
+                e = self.energy(params(), target, bet, stage, foot_contact, obj, object_contact, floor, mc, held)
                 energy_step(opt, e, log, i, step, stage, self.cfg.log_every)
                 step += 1
                 bar.update(1)
             with torch.no_grad():
                 energies[f"stage{stage}"] = {k: t.detach() for k, t in self.energy(
-                    params(), target, bet, 2, foot_contact, obj, object_contact, floor, mc).items()}
+                    params(), target, bet, 2, foot_contact, obj, object_contact, floor, mc, held).items()}
         bar.close()
         with torch.no_grad():
             p = params()

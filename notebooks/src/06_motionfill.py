@@ -239,7 +239,8 @@ print("| mean | " + " | ".join(f"{np.mean([r[k] for r in ev['graspmotion']['rows
 # GraspPose-Opt fits it, a standing start is placed 0.4 m behind it facing the object, MotionFill-VAE infills the two
 # seconds between them and GraspMotion-Opt fits the bodies, all moved back into the world. GraspMotion-Opt holds the
 # first frame at the start body (graspkit's: left free as in Alg. 2, S.2's planted feet drag it 8–22 cm along the
-# sample's first steps; held, those shuffling steps count as skating instead; `docs/saga_motion.md`, "The start frame"). With the paper's step counts
+# sample's first steps; held, the fit follows those steps, and the planted-heel term weighs three times as much so
+# that their planted feet do not slide; `docs/saga_motion.md`, "The start frame"). With the paper's step counts
 # it takes about 100 s on one core (`graspkit saga --object mug` writes GIF, npz and GLB); here, to keep the lesson
 # short, with about a quarter of the steps (and of the polish), which leaves more skating after the fit than the full
 # schedule does (`docs/saga_motion.md`: 0.000 on its twelve test clips). The mug is a test object, so the models have
