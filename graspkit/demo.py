@@ -201,7 +201,7 @@ def saga_motion_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int] = (10
                       ) -> tuple[list[Path], Panel]:
     """SAGA end to end (`graspkit.saga.synthesize`) for the clip's object where the clip puts it: a WholeGrasp-VAE
     grasp fitted by GraspPose-Opt (Alg. 1), then 2 s of MotionFill-VAE motion from a standing start into that grasp,
-    fitted by GraspMotion-Opt (Alg. 2); in the world."""
+    fitted by GraspMotion-Opt (Alg. 2 with frame 0 held at the start, synthesize's default); in the world."""
     from graspkit.objects.placement import ObjectPose
     from graspkit.saga import synthesize
 

@@ -84,9 +84,9 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   must follow the sample's first steps, which slide feet its contact head calls planted, and at a_heel = 1e4 both
   heels then crept at 0.08-0.14 m/s (SAGA's metric counts it: 0.18 on a mug); so a held start weighs the planted heel
   by `heel_held` = 3e4 (since 2026-12-07). `synthesize` on the 11 training objects, seeds 0-2 (33 calls): skating
-  0.007 (4 calls above 0, at most 0.083) -> 0.000, at the price of jerkier heels (heel acceleration p99 26.6 -> 30.8
-  m/s^2, mean over calls) and a little more end penetration (0.36 -> 0.48 cm^3, most of it two pitcher grasps);
-  docs/saga_motion.md, "The start frame".
+  0.053 (15 calls above 0, every seed-1 call 0.10-0.18) -> 0.000, at the price of jerkier heels (heel acceleration
+  p99 23.6 -> 30.8 m/s^2, mean over calls) and a little more end penetration (0.36 -> 0.48 cm^3, most of it two
+  pitcher grasps); docs/saga_motion.md, "The start frame".
 - Initialisation: the prior's mean pose, rigidly aligned per frame (Kabsch on the body and face markers).
 - E^o_colli and E_g are evaluated on the frames where a hand vertex is within 2 cm of the object's bounding box
   (chosen without gradient each step; elsewhere both are 0 by definition: no vertex can be inside or within 1 cm),
@@ -264,7 +264,8 @@ class GraspMotionWeights:
     skate: float = 300.0           # a_skat
     skate_sigma: float = 0.05 / 30  # m per frame (0.05 m/s: below SAGA's 75 mm/s skating threshold)
     heel: float = 1e4              # graspkit's planted heel: the slower heel marker's speed above skate_sigma
-    heel_held: float = 3e4         # a_heel when fit holds frame 0 at a start body (fit(start=...), saga.synthesize)
+    heel_held: float = 3e4         # a_heel when fit holds frame 0 at a start body (fit(start=...), saga.synthesize);
+                                   # heel=0 leaves it on: set both to 0 to drop the planted heel there
     heel_height: float = 0.06      # m above the floor: with both heels this low, one of them should stand still
     foot_acc: float = 1e5          # graspkit's: squared foot-vertex acceleration (m/frame^2), mean over vertices
     floor: float = 1000.0          # graspkit's: each frame's lowest sole vertex below the floor (m), when fit gets it
