@@ -638,8 +638,7 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
     WholeGrasp-VAE's). `sdf`: E^o_colli's hand-in-object depth from each object's collision grid (GraspPose-Opt's;
     False: from the point cloud's normals). `hold_start`: frame 0 fitted to the clip's first frame and held there
     (`GraspMotionOpt.fit(start=...)`, as `saga.synthesize`, with the planted heel at `weights.heel_held`; False:
-    Alg. 2). `start_cm`: the fitted frame 0's markers
-    from the clip's first frame (mean, cm)."""
+    Alg. 2). `start_cm`: the fitted frame 0's markers from the clip's first frame (mean, cm)."""
     from graspkit.body import BodyModel
     from graspkit.data.grasp_io import collision_sdf_grid
     from graspkit.metrics import grasp_metrics, ground_penetration, non_collision_score

@@ -80,10 +80,10 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   grasp's. With the arms free: 3.1 cm, 12 of 12 clips end in contact, last-frame volume 1.92 -> 1.20 cm3 (docs).
 - The start frame (graspkit's, since 2026-12-03; `fit(start=...)`, passed by `saga.synthesize`): stage 1 fits frame 0
   to the start body's markers and stage 2 leaves it there. Without it S.2's planted feet drag frame 0 along the
-  sample's first steps, 8-22 cm off the start body in the calls measured; held, it is 2-3 mm from it. Held, the fit
-  must follow the sample's first steps, which slide feet its contact head calls planted, and at a_heel = 1e4 both
-  heels then crept at 0.08-0.14 m/s (SAGA's metric counts it: 0.18 on a mug); so a held start weighs the planted heel
-  by `heel_held` = 3e4 (since 2026-12-07). `synthesize` on the 11 training objects, seeds 0-2 (33 calls): skating
+  sample's first steps, 8-22 cm off the start body in the calls measured; held, it is 2-3 mm from it. The fit then
+  follows the sample's first steps, which slide feet its contact head calls planted; at a_heel = 1e4 the heel that
+  should stand crept at 0.08-0.14 m/s while the other moved too (SAGA's metric counts it: 0.18 on a mug), so a held
+  start weighs the planted heel by `heel_held` = 3e4 (since 2026-12-07). `synthesize` on the 11 training objects, seeds 0-2 (33 calls): skating
   0.053 (15 calls above 0, every seed-1 call 0.10-0.18) -> 0.000, at the price of jerkier heels (heel acceleration
   p99 23.6 -> 30.8 m/s^2, mean over calls) and a little more end penetration (0.36 -> 0.48 cm^3, most of it two
   pitcher grasps); docs/saga_motion.md, "The start frame".
