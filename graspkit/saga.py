@@ -103,7 +103,8 @@ def synthesize(name: str | Path | Any, bm: BodyModel | None = None, object_pose:
     (it runs on torch's current threads; another count rounds the optimisers' sums differently; the command uses 1).
 
     object_pose: where the object is (default: drawn by `within_reach_pose(seed)` in front of the origin);
-    start: a Start (x, y, heading: a standing body there) or a one-frame Motion (any body) or None: a standing body
+    start: a Start (x, y, heading: a standing body there) or a one-frame Motion (any body: its pose, in the grasp's
+    shape, where it stands, `reshaped_in_place`; SagaResult.start is that body) or None: a standing body
     `start_distance` m (at most 3) from the grasp's pelvis, facing the object (see module doc). MotionFill fills 2 s:
     a start more than 1.5 m from the grasp's pelvis gets a warning (it makes a run, docs/saga_motion.md).
     free_joints: the body joints freed on top of the pose prior in GraspPose-Opt and GraspMotion-Opt
@@ -211,8 +212,9 @@ def _grasp_stage(s: Any, obj: GraspObject, centre: np.ndarray, bm: BodyModel, pr
 
 def _start_body(start: Start | Motion | None, grasp_body: Motion, centre: np.ndarray, start_distance: float,
                 bm: BodyModel, seed: int) -> Motion:
-    """The start body (one frame, world) in the grasp body's shape, from synthesize's `start` (module doc); a
-    warning when a given start stands farther than WALK_START_DISTANCE from the grasp's pelvis."""
+    """The start body (one frame, world) in the grasp body's shape, from synthesize's `start` (module doc; a given
+    body is reshaped where it stands, `reshaped_in_place`); a warning when a given start stands farther than
+    WALK_START_DISTANCE from the grasp's pelvis."""
     pelvis = grasp_body.joint_positions(bm)[0, 0]
     betas = grasp_body.betas
     if start is None or isinstance(start, Start):
@@ -227,7 +229,7 @@ def _start_body(start: Start | Motion | None, grasp_body: Motion, centre: np.nda
             else:
                 st = default_start(pelvis, centre, betas, start_distance, bm, seed)
     else:                                                  # a Motion (checked by _check_args)
-        st = start.slice(0, 1)
+        st = reshaped_in_place(start.slice(0, 1), betas, bm)
     st = Motion(st.poses, st.trans, betas, 30.0)         # the grasp's shape: beta is fixed in GraspMotion-Opt
     if start is not None:                                  # start_distance was checked by _check_args
         away = float(np.linalg.norm(st.joint_positions(bm)[0, 0, :2] - pelvis[:2]))
@@ -235,6 +237,17 @@ def _start_body(start: Start | Motion | None, grasp_body: Motion, centre: np.nda
             warnings.warn(f"start: its pelvis is {away:.2f} m from the grasp's; {_RUN_NOTE}", GraspkitWarning,
                           stacklevel=user_stacklevel())
     return st
+
+
+def reshaped_in_place(body: Motion, betas: np.ndarray, bm: BodyModel) -> Motion:
+    """A one-frame body in another shape `betas`, standing where it stood: the same pose, its pelvis joint at the
+    same x, y and its lowest vertex at the same height (a body on the floor stays on it). Keeping the translation
+    instead would float or sink it by the change in leg length (-7 to +14 cm on GOAL's twelve test starts)."""
+    new = Motion(body.poses[:1], body.trans[:1], betas, 30.0)
+    shift = np.zeros(3)
+    shift[:2] = body.joint_positions(bm)[0, 0, :2] - new.joint_positions(bm)[0, 0, :2]
+    shift[2] = float(body.vertices(bm, 0, 1)[0, :, 2].min() - new.vertices(bm, 0, 1)[0, :, 2].min())
+    return Motion(body.poses[:1], body.trans[:1] + shift, betas, 30.0)
 
 
 def _motion_stage(ck: Path, bm: BodyModel, prior: Any, obj: GraspObject, R_o: np.ndarray, centre: np.ndarray,

@@ -14,6 +14,7 @@ from graspkit.body.markers import goal_vertices
 from graspkit.data import load_motion
 from graspkit.data.grab import GraspSequence, load_grasp_sequence, save_grasp_sequence
 from graspkit.data.grasp import object_points
+from graspkit.data.motion import Motion
 from graspkit.eval_goal import _body, approach_clips, gnet_samples
 from graspkit.models.mnet import ApproachClip
 from graspkit.paths import DATA_STUBS
@@ -111,7 +112,12 @@ def test_saga_sliding_starts_from_the_sequence_and_counts_goals_sliding_frames()
     bm, _, _ = _body()
     m = r.motion
     assert m.num_frames == 61 and out["per_clip"][0]["frames"] == 61
-    assert np.allclose(r.start.poses[0], seq.poses[0]) and np.allclose(r.start.trans[0], seq.trans[0])
+    given = Motion(np.asarray(seq.poses[:1], np.float64), np.asarray(seq.trans[:1], np.float64),
+                   np.asarray(seq.betas[:10], np.float64), 30.0)
+    assert np.allclose(r.start.poses[0], seq.poses[0])        # the sequence's first body in the grasp's shape, where
+    np.testing.assert_allclose(r.start.joint_positions(bm)[0, 0, :2], given.joint_positions(bm)[0, 0, :2], atol=1e-5)
+    assert float(r.start.vertices(bm)[0, :, 2].min()) == pytest.approx(float(given.vertices(bm)[0, :, 2].min()),
+                                                                       abs=1e-5)   # it stands (saga.reshaped_in_place)
     pelvis = m.joint_positions(bm)[:, 0]                                      # begins near that body, ends elsewhere
     assert np.linalg.norm(pelvis[0] - r.start.joint_positions(bm)[0, 0]) < 0.15
     v = m.vertices(bm).double().numpy()                                       # GOAL §4.2 by hand, numpy

@@ -231,3 +231,44 @@ def test_end_figures_and_skating_are_of_the_returned_motion(bm, monkeypatch):
     want = saga_sparse_markers(bm).select(v).numpy()
     np.testing.assert_allclose(fitted, want, atol=1e-3)
     assert r.metrics["skating_opt"] == pytest.approx(real_sk(want[None], np.zeros(1), emf.heel_columns()), abs=0.02)
+
+
+def _standing(bm, betas: np.ndarray) -> Motion:
+    """A standing body (the planner's first frame) of shape `betas` at (0.5, -0.2), facing +y, on the floor."""
+    from graspkit.data.reaching import plan_reach
+
+    return plan_reach(Start(0.5, -0.2, np.pi / 2), np.array([0.5, 0.6, 0.9]), 60, betas=betas, seed=0,
+                      bm=bm).slice(0, 1)
+
+
+def test_a_given_body_is_reshaped_where_it_stands(bm):
+    """saga.reshaped_in_place: the given pose in another shape keeps its pelvis joint's x, y and stands on the floor
+    (lowest vertex at z = 0, as the given body's); keeping the translation instead floats a shorter body and sinks a
+    taller one by centimetres (the truth: the given body's own joints and vertices)."""
+    from graspkit.saga import reshaped_in_place
+
+    given = _standing(bm, np.r_[1.5, -1.0, np.zeros(8)])
+    assert abs(float(given.vertices(bm)[0, :, 2].min())) < 2e-3                  # the planner's body stands on z = 0
+    for b0 in (-2.0, 2.0):
+        betas = np.r_[b0, 0.8, np.zeros(8)]
+        kept = Motion(given.poses, given.trans, betas, 30.0)
+        assert abs(float(kept.vertices(bm)[0, :, 2].min())) > 0.01                # the case is not trivial
+        new = reshaped_in_place(given, betas, bm)
+        np.testing.assert_array_equal(new.poses, given.poses)
+        np.testing.assert_allclose(new.betas, betas, atol=1e-6)
+        np.testing.assert_allclose(new.joint_positions(bm)[0, 0, :2], given.joint_positions(bm)[0, 0, :2], atol=1e-5)
+        assert float(new.vertices(bm)[0, :, 2].min()) == pytest.approx(float(given.vertices(bm)[0, :, 2].min()),
+                                                                       abs=1e-5)
+
+
+def test_a_given_start_body_stands_where_it_was_given(bm):
+    """synthesize(start=Motion) with a body of another shape than the grasp's: SagaResult.start is that pose in the
+    grasp's shape with its pelvis at the given x, y and its feet on the floor (before 2026-12-07 it kept the given
+    translation and stood centimetres above or below the floor, and the held frame 0 with it)."""
+    given = _standing(bm, np.r_[2.0, -1.5, np.zeros(8)])
+    r = synthesize("camera", bm, object_pose=ObjectPose.from_yaw(np.pi / 2, np.array([0.5, 0.6, 0.85])), seed=3,
+                   start=given, grasp_steps=(2, 2, 2), motion_steps=(2, 2), polish_steps=(0, 0), progress=False)
+    np.testing.assert_array_equal(r.start.betas, r.grasp.params["betas"][0].detach().double().numpy())
+    np.testing.assert_array_equal(r.start.poses, given.poses)
+    np.testing.assert_allclose(r.start.joint_positions(bm)[0, 0, :2], given.joint_positions(bm)[0, 0, :2], atol=1e-5)
+    assert abs(float(r.start.vertices(bm)[0, :, 2].min())) < 2e-3
