@@ -309,16 +309,23 @@ def goal_motions(seqs: list, checkpoints: Path, seed: int = 0, max_frames: int =
     return out
 
 
-def wandr_motions(checkpoint: Path, goals: torch.Tensor, t_goal: int, seed: int = 0, lift: bool = False) -> list:
+def wandr_motions(checkpoint: Path, goals: torch.Tensor, t_goal: int, seed: int = 0, lift: bool = False,
+                  bm: BodyModel | None = None) -> list:
     """WANDR from its first held-out start pose (canonical) to each goal (G,3) at frame t_goal, one batch; Motions
-    (lift: `rollout`'s guard against sinking into the floor, not in the paper)."""
+    (lift: `rollout`'s guard against sinking into the floor, not in the paper). bm: another body model to move on (the
+    start, made on graspkit's body, is stood on it: `StartPose.on_body`; None: graspkit's)."""
     import graspkit.intention as I
+    from graspkit.body import shared_body
     from graspkit.data.motion import Motion
     from graspkit.eval_wandr import starts_from_meta
     from graspkit.models.wandr import generate, load_wandr
+    from graspkit.paths import procedural_model_path
 
     model = load_wandr(checkpoint)
-    start = starts_from_meta(model.meta)[0].canonical()
+    start = starts_from_meta(model.meta)[0]
+    if bm is not None:
+        start = start.on_body(shared_body(procedural_model_path(), flat_hand_mean=True), bm)
+    start = start.canonical()
     out = generate(model, start, goals, t_goal, n=1, generator=torch.Generator().manual_seed(seed), lift=lift)
     motions = []
     for b, goal in enumerate(goals):

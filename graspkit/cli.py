@@ -256,8 +256,8 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RangeWarning)           # printed above, from the goal as given
-        motion = wandr_motions(args.checkpoint, goal[None], frames, seed=args.seed, lift=args.lift)[0]
-    bm = _body_model(args.model)
+        bm = _body_model(args.model)                          # the start is stood on it (StartPose.on_body)
+        motion = wandr_motions(args.checkpoint, goal[None], frames, seed=args.seed, lift=args.lift, bm=bm)[0]
     sv, sf = sphere(goal.numpy(), 0.05)
     args.out.mkdir(parents=True, exist_ok=True)
     paths, _ = _write_clip(bm, motion, args.out, f"wandr_s{args.seed}",
@@ -452,8 +452,9 @@ def _add_wandr_command(sub: argparse._SubParsersAction) -> None:
                          "(graspkit's, on by default; --no-lift: WANDR's own rollout, which sinks; docs/wandr.md)")
     wa.add_argument("--checkpoint", type=Path, default=DATA_STUBS / "checkpoints" / "wandr.pt")
     wa.add_argument("--out", type=Path, default=Path("outputs/wandr"))
-    wa.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz for the pictures (default: the "
-                    "procedural humanoid)")
+    wa.add_argument("--model", type=Path, default=None, help="an SMPL-X .npz to move and draw (default: the "
+                    "procedural humanoid, which WANDR was trained on; another body starts from the same pose, standing "
+                    "where it stood)")
     wa.add_argument("--threads", type=int, default=1, help="torch threads (default 1; another count can move the "
                     "rollout in its last digits)")
     wa.set_defaults(func=_cmd_wandr, out_is_file=False)

@@ -152,12 +152,23 @@ def _test_clip():
     return seqs[0], object_mesh_at(seqs[0], 0)
 
 
+def _on(bm: BodyModel, motion, made_on: Path | None = None):
+    """A motion made on the body model file `made_on` (default: graspkit's procedural body, that of the shipped clips)
+    drawn on bm, standing where it stood (`graspkit.data.motion.restand`; unchanged on the same body): a body of
+    other legs would float or sink by the difference."""
+    from graspkit.body import shared_body
+    from graspkit.data.motion import restand
+    from graspkit.paths import procedural_model_path
+
+    return restand(motion, shared_body(made_on or procedural_model_path(), flat_hand_mean=True), bm)
+
+
 def planner_stage(bm: BodyModel, out_dir: Path) -> tuple[list[Path], Panel]:
     """The synthetic ground truth: the procedural approach-and-grasp clip."""
     from graspkit.benchmark import sequence_motion
 
     seq, obj = _test_clip()
-    return _write_clip(bm, sequence_motion(seq), out_dir, "planner_approach", {seq.object_name: obj},
+    return _write_clip(bm, _on(bm, sequence_motion(seq)), out_dir, "planner_approach", {seq.object_name: obj},
                        f"procedural planner: {seq.object_name}")
 
 
@@ -218,8 +229,9 @@ def goal_stage(bm: BodyModel, out_dir: Path) -> tuple[list[Path], Panel]:
     from graspkit.benchmark import goal_motions
 
     seq, obj = _test_clip()
-    return _write_clip(bm, goal_motions([seq], CHECKPOINTS)[0], out_dir, "goal_approach", {seq.object_name: obj},
-                       "GOAL: GNet + MNet")
+    motion = goal_motions([seq], CHECKPOINTS)[0]                # on eval_goal's body: default_model_path()
+    return _write_clip(bm, _on(bm, motion, default_model_path()), out_dir, "goal_approach",
+                       {seq.object_name: obj}, "GOAL: GNet + MNet")
 
 
 def wandr_stage(bm: BodyModel, out_dir: Path, seconds: float = 4.0) -> tuple[list[Path], Panel]:
@@ -232,7 +244,7 @@ def wandr_stage(bm: BodyModel, out_dir: Path, seconds: float = 4.0) -> tuple[lis
     from graspkit.viz.scene import sphere
 
     goal = goal_from_cylinder(45.0, 2.0, 1.0)
-    motion = wandr_motions(CHECKPOINTS / "wandr.pt", goal[None], int(round(seconds * 30.0)), lift=True)[0]
+    motion = wandr_motions(CHECKPOINTS / "wandr.pt", goal[None], int(round(seconds * 30.0)), lift=True, bm=bm)[0]
     sv, sf = sphere(goal.numpy(), 0.05)
     return _write_clip(bm, motion, out_dir, "wandr_reach", {"goal": trimesh.Trimesh(sv, sf, process=False)},
                        f"WANDR (+ lift): reach the goal in {seconds:g} s", goals=goal[None].numpy())

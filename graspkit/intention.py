@@ -287,6 +287,22 @@ class StartPose:
         pelvis = self.p[:2] + self.rest[0, :2].to(self.p.dtype)
         return bool(pelvis.abs().max() <= tol) and abs(float(heading_of_pose(self.p))) <= tol
 
+    def on_body(self, bm_from: BodyModel, bm_to: BodyModel) -> "StartPose":
+        """The same start on another body model bm_to (it was made on bm_from): its rest joints from bm_to, both
+        frames moved so that the first keeps its pelvis x, y and its lowest vertex's height (`restand`); a start made
+        on graspkit's body and drawn on another would float or sink by the difference in their legs. The same body
+        (template, shape space and joint regressor equal) gives the start back as it is."""
+        from graspkit.data.motion import Motion, restand
+
+        if all(a.shape == b.shape and torch.equal(a, b) for a, b in
+               ((bm_from.v_template, bm_to.v_template), (bm_from.shape_basis, bm_to.shape_basis),
+                (bm_from.J_regressor, bm_to.J_regressor))):
+            return self                                    # the same body: nothing to move
+        trans, aa = pose_to_axis_angle(torch.stack([self.p_prev, self.p]), self.full_pose)
+        m = restand(Motion(aa.double().numpy(), trans.double().numpy(), self.betas.double().numpy(), FPS), bm_from,
+                    bm_to)
+        return StartPose.from_motion(m, 1, bm_to, self.source)
+
     @staticmethod
     def from_motion(motion: Motion, frame: int, bm: BodyModel, source: str = "") -> "StartPose":
         """The start at `frame` (>= 1) of a Motion, on body model bm (rest joints from the motion's betas)."""

@@ -241,13 +241,13 @@ def _start_body(start: Start | Motion | None, grasp_body: Motion, centre: np.nda
 
 def reshaped_in_place(body: Motion, betas: np.ndarray, bm: BodyModel) -> Motion:
     """A one-frame body in another shape `betas`, standing where it stood: the same pose, its pelvis joint at the
-    same x, y and its lowest vertex at the same height (a body on the floor stays on it). Keeping the translation
-    instead would float or sink it by the change in leg length (-7 to +14 cm on GOAL's twelve test starts)."""
-    new = Motion(body.poses[:1], body.trans[:1], betas, 30.0)
-    shift = np.zeros(3)
-    shift[:2] = body.joint_positions(bm)[0, 0, :2] - new.joint_positions(bm)[0, 0, :2]
-    shift[2] = float(body.vertices(bm, 0, 1)[0, :, 2].min() - new.vertices(bm, 0, 1)[0, :, 2].min())
-    return Motion(body.poses[:1], body.trans[:1] + shift, betas, 30.0)
+    same x, y and its lowest vertex at the same height (a body on the floor stays on it; `graspkit.data.motion.restand`).
+    Keeping the translation instead would float or sink it by the change in leg length (-7 to +14 cm on GOAL's twelve
+    test starts)."""
+    from graspkit.data.motion import restand
+
+    st = restand(body.slice(0, 1), bm, bm, betas)
+    return Motion(st.poses, st.trans, betas, 30.0)
 
 
 def _motion_stage(ck: Path, bm: BodyModel, prior: Any, obj: GraspObject, R_o: np.ndarray, centre: np.ndarray,

@@ -136,6 +136,29 @@ def test_a_clip_stopped_part_way_leaves_no_earlier_runs_files_beside_its_own(tmp
     assert (tmp_path / "wandr_s0.gif").is_symlink() and not list(store.iterdir())        # file is kept, the link too
 
 
+def test_demo_stages_stand_on_the_floor_of_another_model(tmp_path):
+    """`graspkit demo --model F` with F 8 % larger than graspkit's body: the planner clip (made on graspkit's body)
+    and WANDR's motion (its start rebuilt on F) begin with F's lowest vertex on the floor, the same poses as on the
+    shipped body. Until 2026-12-07 both kept the shipped body's translations and sank 7.3-7.5 cm."""
+    from conftest import PROCEDURAL_MODEL, npz_copy
+
+    from graspkit.body import BodyModel
+    from graspkit.data import load_motion
+    from graspkit.demo import run_demo
+
+    with np.load(PROCEDURAL_MODEL, allow_pickle=False) as z:
+        big = npz_copy(PROCEDURAL_MODEL, tmp_path / "big.npz", v_template=z["v_template"] * 1.08,
+                       shapedirs=z["shapedirs"] * 1.08)
+    bm = BodyModel.from_file(big)
+    for model, out in ((None, tmp_path / "shipped"), (big, tmp_path / "big")):
+        run_demo(out, model_path=model, stages=("planner", "wandr"))
+    for name in ("planner_approach", "wandr_reach"):
+        a, b = load_motion(tmp_path / "shipped" / f"{name}.npz"), load_motion(tmp_path / "big" / f"{name}.npz")
+        np.testing.assert_allclose(b.poses[0, :22], a.poses[0, :22], atol=1e-5)
+        assert abs(float(b.vertices(bm, 0, 1)[0, :, 2].min())) < 0.002, name
+        assert abs(float(a.vertices(bm, 0, 1)[0, :, 2].min())) > 0.03, name     # kept, F's body would not stand
+
+
 def test_demo_refuses_unknown_stages(tmp_path, capsys):
     from graspkit.cli import main
 
@@ -257,6 +280,43 @@ def test_wandr_notes_say_when_a_goal_leaves_the_trained_range():
     assert any("below the floor" in n for n in wandr_range_notes((1.0, 0.0, -0.5), 4.0))
     assert any("4.50 m high" in n for n in wandr_range_notes((0.3, 0.0, 4.5), 4.0))    # above every training goal
     assert wandr_range_notes((0.3, 0.0, 1.9), 4.0) == []                        # the highest training goals
+
+
+def test_wandr_command_moves_the_body_of_its_model_file(tmp_path, capsys):
+    """`graspkit wandr --model F` with F 8 % larger than graspkit's body (the body WANDR was trained on): the motion
+    starts standing on the floor of F's body and the wrist distance it prints is F's, both read back through the smplx
+    package on F. Until 2026-12-07 the rollout ran on graspkit's body and was drawn on F's, 7.5 cm under the floor."""
+    import re
+
+    import smplx
+    import torch
+
+    from graspkit.cli import main
+    from conftest import PROCEDURAL_MODEL, npz_copy
+
+    folder = tmp_path / "models" / "smplx"
+    folder.mkdir(parents=True)
+    with np.load(PROCEDURAL_MODEL, allow_pickle=False) as z:
+        tall = npz_copy(PROCEDURAL_MODEL, folder / "SMPLX_NEUTRAL.npz", v_template=z["v_template"] * 1.08,
+                        shapedirs=z["shapedirs"] * 1.08)
+    goal = np.array([1.5, 0.5, 1.0])
+    assert main(["wandr", "--goal", *map(str, goal), "--seconds", "2", "--model", str(tall),
+                 "--out", str(tmp_path / "w")]) == 0
+    text = capsys.readouterr().out
+    with np.load(tmp_path / "w" / "wandr_s0.npz", allow_pickle=False) as z:
+        poses, trans, betas = (torch.as_tensor(z[k], dtype=torch.float64) for k in ("poses", "trans", "betas"))
+    T = len(poses)
+    ref = smplx.create(str(folder.parent), model_type="smplx", gender="neutral", ext="npz", use_pca=False,
+                       flat_hand_mean=True, num_betas=10, batch_size=T, dtype=torch.float64)
+    body = ref(betas=betas[None].expand(T, -1), global_orient=poses[:, :3], body_pose=poses[:, 3:66],
+               jaw_pose=poses[:, 66:69], leye_pose=poses[:, 69:72], reye_pose=poses[:, 72:75],
+               left_hand_pose=poses[:, 75:120], right_hand_pose=poses[:, 120:165], transl=trans,
+               expression=torch.zeros(T, 10, dtype=torch.float64))
+    assert abs(float(body.vertices[0, :, 2].min())) < 0.002                  # frame 0 stands on F's floor
+    assert float(body.vertices[:, :, 2].amin(1).min()) > -0.01                 # and no frame sinks (the lift)
+    closest = float(re.search(r"goal ([\d.]+) cm at", text).group(1))
+    assert closest == pytest.approx(100 * np.linalg.norm(body.joints[:, 21].numpy() - goal, axis=1).min(), abs=0.06)
+    assert closest < 10                                                      # F's wrist reaches the goal
 
 
 def test_wandr_command_reports_what_smplx_measures_on_its_file(tmp_path, capsys):

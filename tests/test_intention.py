@@ -270,6 +270,42 @@ def test_from_motion_rest_joints_give_the_motions_joints(bm):
     np.testing.assert_allclose(J, m.joint_positions(bm)[5, :22], atol=1e-4)
 
 
+def test_a_start_on_another_body_stands_where_it_stood(bm, tmp_path):
+    """StartPose.on_body: a start made on graspkit's body moved onto one 8 % larger keeps its pose, the larger body's
+    rest joints, its first frame's pelvis x, y and lowest vertex (on the floor), and its delta p_prev -> p; on the same
+    body it is the start itself. The truth: the locomotion clip's own frames on the small body, and the larger body's
+    vertices of the start rebuilt as a Motion. (A `restand` of the whole clip keeps every frame's shift the same.)"""
+    from conftest import PROCEDURAL_MODEL, npz_copy
+
+    from graspkit.body import BodyModel
+    from graspkit.data.motion import Motion, restand
+
+    m, s = _start(bm, 5)
+    with np.load(PROCEDURAL_MODEL, allow_pickle=False) as z:
+        big = BodyModel.from_file(npz_copy(PROCEDURAL_MODEL, tmp_path / "big.npz", v_template=z["v_template"] * 1.08,
+                                           shapedirs=z["shapedirs"] * 1.08))
+    assert s.on_body(bm, BodyModel.from_file(PROCEDURAL_MODEL)) is s
+    o = s.on_body(bm, big)
+    k = big.num_betas
+    coeffs = torch.zeros(1, k + big.num_expression)
+    coeffs[0, :k] = s.betas[:k]
+    torch.testing.assert_close(o.rest, big.shaped(coeffs)[1][0, :22].float())
+    torch.testing.assert_close(I.pose_to_delta(o.p_prev, o.p), I.pose_to_delta(s.p_prev, s.p), atol=1e-5, rtol=0)
+    trans, aa = I.pose_to_axis_angle(torch.stack([o.p_prev, o.p]), o.full_pose)
+    mine = Motion(aa.double().numpy(), trans.double().numpy(), s.betas.double().numpy(), 30.0)
+    first = m.slice(4, 5)                                                      # p_prev: frame 4 of the clip
+    assert float(mine.vertices(big)[0, :, 2].min()) == pytest.approx(float(first.vertices(bm)[0, :, 2].min()), abs=1e-4)
+    np.testing.assert_allclose(mine.joint_positions(big)[0, 0, :2], first.joint_positions(bm)[0, 0, :2], atol=1e-4)
+    kept = Motion(first.poses, first.trans, first.betas, 30.0)
+    assert abs(float(kept.vertices(big)[0, :, 2].min()) - float(first.vertices(bm)[0, :, 2].min())) > 0.03
+    whole = restand(m, bm, big)
+    np.testing.assert_allclose(whole.trans - m.trans, np.broadcast_to(whole.trans[0] - m.trans[0], m.trans.shape),
+                               atol=1e-6)                                      # float32 translations
+    assert float(whole.vertices(big, 0, 1)[0, :, 2].min()) == pytest.approx(float(m.vertices(bm, 0, 1)[0, :, 2].min()),
+                                                                            abs=1e-5)
+    np.testing.assert_array_equal(restand(m, bm, BodyModel.from_file(PROCEDURAL_MODEL)).trans, m.trans)
+
+
 def test_canonical_puts_the_pelvis_joint_over_the_origin_facing_plus_x(bm):
     _, s = _start(bm, 5)
     c = s.canonical()

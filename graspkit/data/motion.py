@@ -157,6 +157,18 @@ class Motion:
             start = stop - overlap
 
 
+def restand(motion: Motion, bm_from: BodyModel, bm_to: BodyModel, betas: np.ndarray | None = None) -> Motion:
+    """The motion's poses on another body: model bm_to (it was made on bm_from) and `betas` (default: its own), every
+    frame moved by one shift that keeps frame 0's pelvis joint x, y and its lowest vertex's height (a body standing on
+    the floor stays on it). Keeping the translation instead floats or sinks a body of other legs by the difference."""
+    first = motion.slice(0, 1)
+    new = Motion(first.poses, first.trans, first.betas if betas is None else np.asarray(betas, np.float64), motion.fps)
+    shift = np.zeros(3)
+    shift[:2] = first.joint_positions(bm_from)[0, 0, :2] - new.joint_positions(bm_to)[0, 0, :2]
+    shift[2] = float(first.vertices(bm_from)[0, :, 2].min() - new.vertices(bm_to)[0, :, 2].min())
+    return replace(motion, trans=motion.trans + shift, betas=new.betas)
+
+
 def heading_of(global_orient: np.ndarray) -> np.ndarray:
     """Facing direction (radians from world +x) of root orientations (T,3): the canonical +z axis projected on the ground."""
     R = axis_angle_to_matrix(torch.as_tensor(np.asarray(global_orient, np.float64))).numpy()
