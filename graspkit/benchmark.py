@@ -323,8 +323,13 @@ def wandr_motions(checkpoint: Path, goals: torch.Tensor, t_goal: int, seed: int 
 
     model = load_wandr(checkpoint)
     start = starts_from_meta(model.meta)[0]
-    if bm is not None:
-        start = start.on_body(shared_body(procedural_model_path(), flat_hand_mean=True), bm)
+    if bm is not None and not start.made_on(bm):
+        ours = shared_body(procedural_model_path(), flat_hand_mean=True)
+        if not start.made_on(ours):
+            raise ValueError(f"checkpoint: {checkpoint}'s held-out starts were made on neither the body model given "
+                             "nor graspkit's (their rest joints are another body's): generate on the body it was "
+                             "trained on")
+        start = start.on_body(ours, bm)
     start = start.canonical()
     out = generate(model, start, goals, t_goal, n=1, generator=torch.Generator().manual_seed(seed), lift=lift)
     motions = []

@@ -816,6 +816,10 @@ def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = F
     bm = BodyModel.from_file(default_model_path())
     model = load_wandr(checkpoint)
     starts = starts_from_meta(model.meta)
+    if not all(s.made_on(bm) for s in starts):       # the rollout moves the starts' body, the figures would be bm's
+        raise ValueError(f"checkpoint: {checkpoint}'s held-out starts were made on another body model than "
+                         f"{default_model_path()} (their rest joints differ; GRASPKIT_MODEL names the body evaluated): "
+                         "evaluate with the body it was trained on")
     t0 = time.perf_counter()
     row = model.meta.get("row", "WANDR")
     if floor is not None:

@@ -287,6 +287,15 @@ class StartPose:
         pelvis = self.p[:2] + self.rest[0, :2].to(self.p.dtype)
         return bool(pelvis.abs().max() <= tol) and abs(float(heading_of_pose(self.p))) <= tol
 
+    def made_on(self, bm: BodyModel, tol: float = 1e-4) -> bool:
+        """Whether the start's rest joints are bm's for its betas (within tol m): the body it was made on."""
+        coeffs = torch.zeros(1, bm.num_betas + bm.num_expression, dtype=bm.dtype)
+        k = min(bm.num_betas, len(self.betas))
+        coeffs[0, :k] = self.betas[:k].to(bm.dtype)
+        with torch.no_grad():
+            rest = bm.shaped(coeffs)[1][0, :NUM_BODY].float()
+        return bool((rest - self.rest.float()).abs().max() <= tol)
+
     def on_body(self, bm_from: BodyModel, bm_to: BodyModel) -> "StartPose":
         """The same start on another body model bm_to (it was made on bm_from): its rest joints from bm_to, both
         frames moved so that the first keeps its pelvis x, y and its lowest vertex's height (`restand`); a start made

@@ -313,6 +313,29 @@ def test_goal_reacher_moves_any_start_to_where_its_sliders_measure_from(bm):
         E.GoalReacher(model, start.p)
 
 
+def test_an_evaluation_on_another_body_than_its_starts_is_refused(tmp_path, monkeypatch):
+    """run_eval_wandr with GRASPKIT_MODEL naming a body 8 % larger than graspkit's: the checkpoint's held-out starts
+    carry graspkit's rest joints, so the rollout would move graspkit's body while FS, SR and DTG were read on the other;
+    it is refused before any rollout, naming the checkpoint. On graspkit's body every start is its own."""
+    from conftest import PROCEDURAL_MODEL, npz_copy
+
+    from graspkit.body import BodyModel
+    from graspkit.eval_wandr import run_eval_wandr, starts_from_meta
+    from graspkit.models.wandr import load_wandr
+    from graspkit.paths import DATA_STUBS
+
+    ck = DATA_STUBS / "checkpoints" / "wandr.pt"
+    starts = starts_from_meta(load_wandr(ck).meta)
+    assert all(s.made_on(BodyModel.from_file(PROCEDURAL_MODEL)) for s in starts)
+    with np.load(PROCEDURAL_MODEL, allow_pickle=False) as z:
+        big = npz_copy(PROCEDURAL_MODEL, tmp_path / "big.npz", v_template=z["v_template"] * 1.08,
+                       shapedirs=z["shapedirs"] * 1.08)
+    assert not any(s.made_on(BodyModel.from_file(big)) for s in starts)
+    monkeypatch.setenv("GRASPKIT_MODEL", str(big))
+    with pytest.raises(ValueError, match=r"checkpoint: .*wandr.pt's held-out starts were made on another body model"):
+        run_eval_wandr(str(ck), n=1, threads=1)
+
+
 def test_train_command_parses_the_schedule_flags():
     import argparse
 
