@@ -19,7 +19,8 @@ import torch
 
 from graspkit.body import BodyModel
 from graspkit.checks import count_type
-from graspkit.eval_wandr import PAPER, breakdown, evaluate_grid, grid_goals, starts_from_meta, summary
+from graspkit.eval_wandr import (PAPER, breakdown, evaluate_grid, grid_goals, starts_body_problem, starts_from_meta,
+                                 summary)
 from graspkit.models.wandr import load_wandr
 from graspkit.paths import DATA_STUBS, default_model_path
 
@@ -35,6 +36,8 @@ def main() -> None:
     bm = BodyModel.from_file(default_model_path())
     model = load_wandr(args.checkpoint)
     starts = starts_from_meta(model.meta)
+    if starts_body_problem(starts, bm, args.checkpoint):           # the rollout would move another body than bm
+        raise SystemExit(starts_body_problem(starts, bm, args.checkpoint))
     goals, cells = grid_goals()
     total = len(starts) * len(goals) * args.n
 

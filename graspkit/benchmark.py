@@ -328,7 +328,7 @@ def wandr_motions(checkpoint: Path, goals: torch.Tensor, t_goal: int, seed: int 
         if not start.made_on(ours):
             raise ValueError(f"checkpoint: {checkpoint}'s held-out starts were made on neither the body model given "
                              "nor graspkit's (their rest joints are another body's): generate on the body it was "
-                             "trained on")
+                             "trained on (--model, or GRASPKIT_MODEL, naming that file)")
         start = start.on_body(ours, bm)
     start = start.canonical()
     out = generate(model, start, goals, t_goal, n=1, generator=torch.Generator().manual_seed(seed), lift=lift)
@@ -357,7 +357,7 @@ def common_motion_rows(bm: BodyModel, folders: list[Path], checkpoints: Path, k:
          "2 s windows ending at the grasp of the first test-object approach clips"),
         ("GOAL (GNet + MNet)", ("gnet.pt", "mnet.pt"), seqs, lambda: goal_motions(seqs, checkpoints),
          "GNet + MNet rollouts from the same clips' first frames"),
-        ("WANDR", ("wandr.pt",), True, lambda: wandr_motions(checkpoints / "wandr.pt", goals, 120),
+        ("WANDR", ("wandr.pt",), True, lambda: wandr_motions(checkpoints / "wandr.pt", goals, 120, bm=bm),
          "4 s towards goals 2 m away, 0.9 m high, no object"))
     suffix = f" · {k} common motion{'s' * (k != 1)}"          # COMMON for k = 4
     rows = []
@@ -430,8 +430,18 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
     rows_of = {"saga": saga_rows, "saga_motion": saga_motion_rows, "goal": goal_rows, "wandr": wandr_rows}
     reused = {m: reused_rows(ck / shipped[m], rows_of[m], m) for m in methods      # read (and a damaged one named)
               if reuse and m in shipped and (ck / shipped[m]).is_file()}           # before any work
-    out.mkdir(parents=True, exist_ok=True)                # after the checks: a refused run leaves no folder
     bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    if "wandr" in methods and "wandr" not in reused and (ck / "wandr.pt").is_file():   # before hours of other methods
+        from graspkit.eval_wandr import starts_body_problem, starts_from_meta
+        from graspkit.models.wandr import load_wandr
+
+        try:
+            problem = starts_body_problem(starts_from_meta(load_wandr(ck / "wandr.pt").meta), bm, ck / "wandr.pt")
+        except (OSError, ValueError):      # a damaged checkpoint: the method's own run says so in its row
+            problem = None
+        if problem:
+            raise ValueError(problem)
+    out.mkdir(parents=True, exist_ok=True)                # after the checks: a refused run leaves no folder
     rows: list[Row] = []
     steps = tqdm(list(methods), desc="eval --all", unit="method", disable=hidden())
     for m in steps:

@@ -609,6 +609,18 @@ def starts_to_meta(starts: Sequence[I.StartPose]) -> dict[str, Any]:
         "source": [s.source for s in starts]}
 
 
+def starts_body_problem(starts: Sequence[I.StartPose], bm: BodyModel, checkpoint: Any) -> str | None:
+    """None when every held-out start was made on bm (`StartPose.made_on`); else why the grid cannot be run on bm: the
+    rollout would move the starts' body while FS, SR and DTG were read on bm."""
+    if all(s.made_on(bm) for s in starts):
+        return None
+    from graspkit.paths import default_model_path
+
+    return (f"checkpoint: {checkpoint}'s held-out starts were made on another body model than {default_model_path()} "
+            "(their rest joints differ; GRASPKIT_MODEL names the body evaluated): evaluate with the body it was "
+            "trained on")
+
+
 def starts_from_meta(meta: dict[str, Any]) -> list[I.StartPose]:
     """The held-out start poses stored in a checkpoint's meta."""
     s = meta.get("starts")
@@ -816,10 +828,9 @@ def run_eval_wandr(checkpoint: str, n: int = 5, seed: int = 0, planner: bool = F
     bm = BodyModel.from_file(default_model_path())
     model = load_wandr(checkpoint)
     starts = starts_from_meta(model.meta)
-    if not all(s.made_on(bm) for s in starts):       # the rollout moves the starts' body, the figures would be bm's
-        raise ValueError(f"checkpoint: {checkpoint}'s held-out starts were made on another body model than "
-                         f"{default_model_path()} (their rest joints differ; GRASPKIT_MODEL names the body evaluated): "
-                         "evaluate with the body it was trained on")
+    problem = starts_body_problem(starts, bm, checkpoint)
+    if problem:
+        raise ValueError(problem)
     t0 = time.perf_counter()
     row = model.meta.get("row", "WANDR")
     if floor is not None:

@@ -370,7 +370,7 @@ def test_common_wandr_motions_go_to_k_different_directions(tmp_path, monkeypatch
     (tmp_path / "wandr.pt").write_bytes(b"")                   # present; the motions are stubbed
     seen = []
 
-    def fake(ck, goals, t_goal, seed=0, lift=False):
+    def fake(ck, goals, t_goal, seed=0, lift=False, bm=None):
         seen.append(goals.clone())
         m = load_motion(DATA_STUBS / "motion" / "reach" / "reach_000002.npz").slice(0, 6)
         return [m] * len(goals)
@@ -480,7 +480,7 @@ def test_common_wandr_motions_run_four_seconds_and_slide_in_percent(tmp_path, mo
 
     (tmp_path / "wandr.pt").write_bytes(b"")
     seen = []
-    monkeypatch.setattr(B, "wandr_motions", lambda ck, goals, t_goal, seed=0, lift=False:
+    monkeypatch.setattr(B, "wandr_motions", lambda ck, goals, t_goal, seed=0, lift=False, bm=None:
                         seen.append(t_goal) or _sliding_motions(len(goals)))
     bm = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
     rows = B.common_motion_rows(bm, [DATA_STUBS / "approach"], tmp_path, k=2)

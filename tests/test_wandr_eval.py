@@ -316,7 +316,8 @@ def test_goal_reacher_moves_any_start_to_where_its_sliders_measure_from(bm):
 def test_an_evaluation_on_another_body_than_its_starts_is_refused(tmp_path, monkeypatch):
     """run_eval_wandr with GRASPKIT_MODEL naming a body 8 % larger than graspkit's: the checkpoint's held-out starts
     carry graspkit's rest joints, so the rollout would move graspkit's body while FS, SR and DTG were read on the other;
-    it is refused before any rollout, naming the checkpoint. On graspkit's body every start is its own."""
+    it is refused before any rollout, naming the checkpoint, and `eval --all` refuses before any method runs. On
+    graspkit's body every start is its own."""
     from conftest import PROCEDURAL_MODEL, npz_copy
 
     from graspkit.body import BodyModel
@@ -334,6 +335,10 @@ def test_an_evaluation_on_another_body_than_its_starts_is_refused(tmp_path, monk
     monkeypatch.setenv("GRASPKIT_MODEL", str(big))
     with pytest.raises(ValueError, match=r"checkpoint: .*wandr.pt's held-out starts were made on another body model"):
         run_eval_wandr(str(ck), n=1, threads=1)
+    from graspkit.benchmark import run_all                     # eval --all says so before the other methods' hours
+    with pytest.raises(ValueError, match=r"held-out starts were made on another body model"):
+        run_all(tmp_path / "report", data=[DATA_STUBS / "grasps"], methods=("gt", "wandr"), quick=True)
+    assert not (tmp_path / "report").exists()
 
 
 def test_train_command_parses_the_schedule_flags():
