@@ -36,8 +36,9 @@ def main() -> None:
     bm = BodyModel.from_file(default_model_path())
     model = load_wandr(args.checkpoint)
     starts = starts_from_meta(model.meta)
-    if starts_body_problem(starts, bm, args.checkpoint):           # the rollout would move another body than bm
-        raise SystemExit(starts_body_problem(starts, bm, args.checkpoint))
+    problem = starts_body_problem(starts, bm, args.checkpoint)     # the rollout would move another body than bm
+    if problem:
+        raise SystemExit(problem)
     goals, cells = grid_goals()
     total = len(starts) * len(goals) * args.n
 

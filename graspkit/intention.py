@@ -289,12 +289,9 @@ class StartPose:
 
     def made_on(self, bm: BodyModel, tol: float = 1e-4) -> bool:
         """Whether the start's rest joints are bm's for its betas (within tol m): the body it was made on."""
-        coeffs = torch.zeros(1, bm.num_betas + bm.num_expression, dtype=bm.dtype)
-        k = min(bm.num_betas, len(self.betas))
-        coeffs[0, :k] = self.betas[:k].to(bm.dtype)
-        with torch.no_grad():
-            rest = bm.shaped(coeffs)[1][0, :NUM_BODY].float()
-        return bool((rest - self.rest.float()).abs().max() <= tol)
+        from graspkit.data.wandr_dataset import rest_joints
+
+        return bool((rest_joints(bm, self.betas[None])[0] - self.rest.float()).abs().max() <= tol)
 
     def on_body(self, bm_from: BodyModel, bm_to: BodyModel) -> "StartPose":
         """The same start on another body model bm_to (it was made on bm_from): its rest joints from bm_to, both
