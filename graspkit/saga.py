@@ -246,8 +246,7 @@ def reshaped_in_place(body: Motion, betas: np.ndarray, bm: BodyModel) -> Motion:
     test starts)."""
     from graspkit.data.motion import restand
 
-    st = restand(body.slice(0, 1), bm, bm, betas)
-    return Motion(st.poses, st.trans, betas, 30.0)
+    return restand(body.slice(0, 1), bm, bm, betas)
 
 
 def _motion_stage(ck: Path, bm: BodyModel, prior: Any, obj: GraspObject, R_o: np.ndarray, centre: np.ndarray,
