@@ -232,10 +232,11 @@ def run_saga_motion(approach: Path, out: Path, quick: bool, checkpoints: Path) -
     from graspkit.eval_motionfill import approach_motions, evaluate, load_motionfill
     from graspkit.paths import default_model_path, write_json
 
-    motions, names = approach_motions(approach)
+    bm = BodyModel.from_file(default_model_path())
+    motions, names = approach_motions(approach, bm=bm)
     if not motions:
         raise FileNotFoundError(f"data: no approach clips (approach_*.npz) in {approach}")
-    arr = make_windows(motions, BodyModel.from_file(default_model_path()), stride=30, align_end=True, progress=False)
+    arr = make_windows(motions, bm, stride=30, align_end=True, progress=False)
     test = np.unique(arr["clip"][[split_of(names[c]) == "test" for c in arr["clip"]]])
     if not len(test):
         raise FileNotFoundError(f"data: no test-object approach clips in {approach}")
@@ -441,6 +442,12 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
             problem = None
         if problem:
             raise ValueError(problem)
+    if any(m != "wandr" and m not in reused for m in methods):      # the others pose the data's grasps on bm
+        from graspkit.data.formats import clip_files
+        from graspkit.data.grab import check_made_on
+
+        for folder, kind in ((grasps, "grasp"), (approach, "approach")):
+            check_made_on(bm, clip_files(folder, kind), f"data: {folder}", kind)
     out.mkdir(parents=True, exist_ok=True)                # after the checks: a refused run leaves no folder
     rows: list[Row] = []
     steps = tqdm(list(methods), desc="eval --all", unit="method", disable=hidden())

@@ -116,15 +116,16 @@ def teacher_forced_v2v(mnet: MNet, windows: MNetWindows, bm: BodyModel, index: T
 
 def _files(folder, kind: str, split: str | None) -> list:
     """GRAB-style files `<folder>/<kind>_*.npz` (`formats.clip_files`) whose object is in `split` ('train', 'val',
-    'test' or None: all)."""
+    'test' or None: all); a ValueError when they were made on another body than graspkit's (`grab.check_made_on`)."""
     from graspkit.data.formats import clip_files
-    from graspkit.data.grab import load_grasp_sequence
+    from graspkit.data.grab import check_made_on, load_grasp_sequence
     from graspkit.data.grasp import file_split
 
     paths = clip_files(folder, kind)
     if not paths:
         raise FileNotFoundError(f"folder: no {kind}_*.npz files in {folder} (make them with "
                                 f"`graspkit data make --kind {kind}`)")
+    check_made_on(_body()[0], paths, f"folder: {folder}", kind)
     seqs = [(p, load_grasp_sequence(p)) for p in paths]
     return [s for p, s in seqs if split is None or file_split(s.object_name, p) == split]
 

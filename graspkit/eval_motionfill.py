@@ -49,13 +49,17 @@ STAGES = {"local": ("locomotion", ("local",), "truth"), "traj": ("approach", ("t
 DEFAULT_CLIPS = {"locomotion": 160, "reach": 600, "approach": 144}
 
 
-def approach_motions(root: str | Path, n: int | None = None) -> tuple[list, list[str]]:
+def approach_motions(root: str | Path, n: int | None = None, bm: BodyModel | None = None) -> tuple[list, list[str]]:
     """The first n approach-and-grasp clips in root (graspkit data make --kind approach: `clip_files`) as Motions
-    cut at the goal frame (the grasp is frame T of the window), and their object names; accepted grasps only."""
+    cut at the goal frame (the grasp is frame T of the window), and their object names; accepted grasps only. With
+    the body model `bm` they will be posed on, clips made on another body are refused (`grab.check_made_on`)."""
+    from graspkit.data.grab import check_made_on
     from graspkit.data.grasp import file_split
     from graspkit.data.motion import Motion
 
     files = clip_files(root, "approach")[:n]
+    if bm is not None:
+        check_made_on(bm, files, f"data: {root}", "approach")
     motions, names = [], []
     for f in files:
         a = _approach_arrays(f, WINDOW_KEYS)
@@ -150,7 +154,7 @@ def windows(kind: str, n: int, bm: BodyModel | None = None, data: Path | None = 
         return cached
     names = None
     if kind == "approach":
-        motions, names = approach_motions(root, n)
+        motions, names = approach_motions(root, n, bm)
     else:
         motions = [load_motion(f) for f in files]
     if kind == "reach":

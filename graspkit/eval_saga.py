@@ -254,6 +254,8 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
     from tqdm.auto import tqdm
 
     from graspkit.body import BodyModel
+    from graspkit.data.grab import check_made_on
+    from graspkit.data.grasp_datasets import grasp_files
     from graspkit.data.grasp_io import collision_sdf_grid
     from graspkit.paths import default_model_path
     from graspkit.progress import hidden
@@ -262,6 +264,7 @@ def evaluate(root: str | Path, cfg: EvalConfig | None = None, progress: bool = T
     torch.set_num_threads(cfg.threads)
     t0 = time.perf_counter()
     bm = BodyModel.from_file(default_model_path())
+    check_made_on(bm, grasp_files(root, "grasp", split="test"), f"root: {root}", "grasp")   # the GT rows pose them on bm
     m = _eval_models(bm, cfg, Path(checkpoints), grabnet_only)
     acc: dict[str, dict[str, list]] = {}
     per_object: dict[str, dict[str, dict[str, float]]] = {}

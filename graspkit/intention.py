@@ -297,12 +297,13 @@ class StartPose:
         """The same start on another body model bm_to (it was made on bm_from): its rest joints from bm_to, both
         frames moved so that the first keeps its pelvis x, y and its lowest vertex's height (`restand`); a start made
         on graspkit's body and drawn on another would float or sink by the difference in their legs. The same body
-        (template, shape space and joint regressor equal) gives the start back as it is."""
+        (every array of the model equal: template, bases, regressor, skinning weights, pose correctives) gives the start
+        back as it is."""
         from graspkit.data.motion import Motion, restand
 
-        if all(a.shape == b.shape and torch.equal(a, b) for a, b in
-               ((bm_from.v_template, bm_to.v_template), (bm_from.shape_basis, bm_to.shape_basis),
-                (bm_from.J_regressor, bm_to.J_regressor))):
+        a, b = bm_from.state_dict(), bm_to.state_dict()
+        if a.keys() == b.keys() and all(a[k].dtype == b[k].dtype and a[k].shape == b[k].shape and torch.equal(a[k], b[k])
+                                        for k in a):
             return self                                    # the same body: nothing to move
         trans, aa = pose_to_axis_angle(torch.stack([self.p_prev, self.p]), self.full_pose)
         m = restand(Motion(aa.double().numpy(), trans.double().numpy(), self.betas.double().numpy(), FPS), bm_from,

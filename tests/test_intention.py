@@ -306,6 +306,33 @@ def test_a_start_on_another_body_stands_where_it_stood(bm, tmp_path):
     np.testing.assert_array_equal(restand(m, bm, BodyModel.from_file(PROCEDURAL_MODEL)).trans, m.trans)
 
 
+
+def test_a_body_of_other_skinning_weights_is_not_the_same_body(bm, tmp_path):
+    """StartPose.on_body gives the start back as it is only on the same body: a body with graspkit's template, shape
+    space and joint regressor but other skinning weights (every vertex on the pelvis) has the same rest joints (made_on
+    holds) yet stands the posed start at another height, so the start is restood on it (its lowest vertex where it was
+    on graspkit's body). Until 2026-12-07 template, shapes and regressor alone were compared and such a body got the
+    start unmoved."""
+    from conftest import PROCEDURAL_MODEL, npz_copy
+
+    from graspkit.body import BodyModel
+    from graspkit.data.motion import Motion
+
+    m, s = _start(bm, 5)
+    with np.load(PROCEDURAL_MODEL, allow_pickle=False) as z:
+        w = np.zeros_like(z["weights"])
+        w[:, 0] = 1.0
+        flat = BodyModel.from_file(npz_copy(PROCEDURAL_MODEL, tmp_path / "flat.npz", weights=w))
+    assert s.made_on(flat)
+    first = m.slice(4, 5)                                                      # p_prev: frame 4 of the clip
+    low = float(first.vertices(bm)[0, :, 2].min())
+    assert abs(float(first.vertices(flat)[0, :, 2].min()) - low) > 1e-3       # kept as it is, it would not stand
+    o = s.on_body(bm, flat)
+    trans, aa = I.pose_to_axis_angle(torch.stack([o.p_prev, o.p]), o.full_pose)
+    mine = Motion(aa.double().numpy(), trans.double().numpy(), s.betas.double().numpy(), 30.0)
+    assert float(mine.vertices(flat)[0, :, 2].min()) == pytest.approx(low, abs=1e-4)
+    assert s.on_body(bm, BodyModel.from_file(PROCEDURAL_MODEL)) is s
+
 def test_canonical_puts_the_pelvis_joint_over_the_origin_facing_plus_x(bm):
     _, s = _start(bm, 5)
     c = s.canonical()

@@ -28,16 +28,21 @@ from __future__ import annotations
 
 import os
 import warnings
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from graspkit.checks import GraspkitWarning, user_stacklevel
 from graspkit.data.formats import (SequenceFileError, _numbers, _scalar, check_source_rate, npz_load_error, resample,
                                    write_npz_atomic)
-from graspkit.data.motion import check_fps
+from graspkit.data.motion import Motion, check_fps
 from graspkit.paths import check_suffix
+
+if TYPE_CHECKING:
+    from graspkit.body import BodyModel
 
 BODY_PARTS = (("global_orient", 0, 1), ("body_pose", 1, 22), ("jaw_pose", 22, 23), ("leye_pose", 23, 24),
               ("reye_pose", 24, 25), ("left_hand_pose", 25, 40), ("right_hand_pose", 40, 55))
@@ -89,6 +94,49 @@ class GraspSequence:
 
 FRAME_EXTRAS = {"grasp.goal_frame", "grasp.frame"}   # extras that are frame numbers (rescaled when resampled)
 DEFAULT_MODEL_NAME = "graspkit procedural SMPLX_NEUTRAL.npz"   # body.model of files made with the shipped body
+MADE_ON_TOL = 1e-3      # m: a file made on the body lies ~1e-6 m from it; another body's legs or arms, centimetres
+
+
+def grasp_frame(extras: Mapping[str, np.ndarray]) -> int:
+    """The frame of a file's grasp from its extras (or read_arrays' dictionary): an approach clip's goal frame, a grasp
+    file's grasp frame, else 0."""
+    return int(extras.get("grasp.goal_frame", extras.get("grasp.frame", np.array(0))))
+
+
+def body_offset(bm: BodyModel, path: str | os.PathLike) -> float | None:
+    """How far (m, the largest distance) bm's vertices for a grasp file's parameters at its grasp frame lie from GOAL's
+    400 vertices stored with them (`goal.vertex_ids`, `goal.vertices`: `graspkit data make`'s labels); None when the
+    file stores none (one's own GRAB files). ~1e-6 m when the file was made on bm."""
+    import torch
+
+    a = read_arrays(path)
+    keys = ("body.params.fullpose", "body.params.transl", "body.betas", "goal.vertex_ids", "goal.vertices")
+    if not all(k in a for k in keys):
+        return None
+    ids = np.asarray(a["goal.vertex_ids"]).reshape(-1).astype(np.int64)
+    stored = np.asarray(a["goal.vertices"], np.float64).reshape(-1, 3)
+    if not len(ids) or len(ids) != len(stored) or ids.min() < 0 or ids.max() >= bm.num_vertices:
+        return float("inf")                                             # another mesh layout altogether
+    f = grasp_frame(a)
+    poses = np.asarray(a["body.params.fullpose"], np.float64).reshape(-1, 55, 3)
+    if not 0 <= f < len(poses):
+        raise SequenceFileError(f"{path}: grasp frame {f} outside its {len(poses)} frames")
+    m = Motion(poses[f:f + 1], np.asarray(a["body.params.transl"], np.float64).reshape(-1, 3)[f:f + 1],
+               np.asarray(a["body.betas"], np.float64).reshape(-1), 30.0)
+    v = m.vertices(bm)[0, torch.as_tensor(ids)].double()
+    return float((v - torch.as_tensor(stored)).norm(dim=-1).max())
+
+
+def check_made_on(bm: BodyModel, paths: Sequence[str | os.PathLike], where: str, kind: str) -> None:
+    """ValueError naming `where` when the first of `paths` was made on another body model than bm (`body_offset` above
+    MADE_ON_TOL): its poses on bm would sink, float or miss the object by the difference of the bodies, and every figure
+    measured on them with it. Files without GOAL's labels pass; so does an empty list."""
+    off = body_offset(bm, paths[0]) if len(paths) else None
+    if off is not None and off > MADE_ON_TOL:
+        raise ValueError(f"{where}: its {kind} files were made on another body model than {bm.source or 'the one given'} "
+                         f"({Path(paths[0]).name}'s stored GOAL vertices lie up to {1000 * off:.0f} mm from that "
+                         "body's for the same parameters; GRASPKIT_MODEL names the body): use the body that made them, "
+                         f"or make data on this one (`graspkit data make --kind {kind} --out DIR`)")
 
 
 def to_arrays(seq: GraspSequence, model: str = DEFAULT_MODEL_NAME) -> dict[str, np.ndarray]:

@@ -867,9 +867,11 @@ class GrabNetTrainingSet(torch.utils.data.Dataset):
 
     def __init__(self, root: str | Path, split: str, bm: BodyModel, model: GrabNetSMPLX,
                  augment_yaw: bool = False) -> None:
+        from graspkit.data.grab import check_made_on
         from graspkit.data.grasp_datasets import GNetDataset, WholeGraspDataset
 
         wg, gn = WholeGraspDataset(root, split=split), GNetDataset(root, split=split)
+        check_made_on(bm, gn.files, f"root: {root}", "grasp")        # the parameters are posed on bm
         pca = HandPCA(bm)
         d = gn.data
         self.data = {"params": model.params_of(d["fullpose"], d["transl"], d["betas"], d["object_transl"], pca),
