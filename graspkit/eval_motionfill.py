@@ -32,7 +32,7 @@ import torch
 
 from graspkit.checks import positive_float
 from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_out, expand_user_paths, refuse_folder_out, reports_errors
-from graspkit.data.formats import clip_files
+from graspkit.data.formats import check_folders_body, clip_files
 from graspkit.data.motionfill_dataset import (MotionFillDataset, MotionFillStats, load_windows, make_windows,
                                               save_windows, split_clips)
 from graspkit.models.motionfill import MotionFillConfig, MotionFillVAE
@@ -149,6 +149,7 @@ def windows(kind: str, n: int, bm: BodyModel | None = None, data: Path | None = 
 
         bm = BodyModel.from_file(default_model_path())
     out, root, files = windows_source(kind, n, data, bm.digest())
+    check_folders_body([(root, kind)], bm.source)                           # the windows pose the clips on bm
     cached = read_cache(out, load_windows)
     if cached is not None:
         return cached

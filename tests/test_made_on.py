@@ -90,3 +90,35 @@ def test_readers_refuse_grasps_made_on_another_body(big, tmp_path, monkeypatch):
     with pytest.raises(ValueError, match=r"data: .*grasps: its grasp files were made on another body model"):
         run_all(tmp_path / "report", data=folders, methods=("gt",), quick=True)
     assert not list(tmp_path.iterdir())
+
+
+def test_clip_readers_refuse_clips_recorded_as_made_on_another_body(big, tmp_path):
+    """Motion clips (AMASS's layout) carry nothing of the body that made them: `graspkit data make`'s record
+    (graspkit_make_<kind>.json, the body's digest) is the witness. WANDR's clip sets and MotionFill's windows read a
+    folder recorded as made on graspkit's body when posing it on that body, and refuse it, naming the folder and
+    both digests, on another; a folder without the record (the stubs) is read on any body."""
+    import shutil
+
+    from graspkit.body import BodyModel
+    from graspkit.data.cli import claim_folder
+    from graspkit.data.wandr_dataset import cached_clips
+    from graspkit.eval_motionfill import windows
+
+    shipped, other = BodyModel.from_file(PROCEDURAL_MODEL), BodyModel.from_file(big)
+    stubs = sorted((DATA_STUBS / "motion" / "locomotion").glob("locomotion_*.npz"))[:2]
+    for name in ("plain", "motion"):
+        folder = tmp_path / name / "locomotion"
+        folder.mkdir(parents=True)
+        if name == "motion":                                   # as `data make` records it, before its first file
+            claim_folder(folder, "locomotion", {"seed": 0, "model": str(PROCEDURAL_MODEL)})
+        for p in stubs:
+            shutil.copy(p, folder / p.name)
+    assert len(cached_clips(tmp_path / "plain", other, cache=tmp_path / "c", kinds=("locomotion",)).names) == 2
+    assert len(cached_clips(tmp_path / "motion", shipped, cache=tmp_path / "c", kinds=("locomotion",)).names) == 2
+    want = rf"folder: {folder}'s locomotion clips were made on another body model than {big} \(its " \
+           rf"graspkit_make_locomotion.json records body {shipped.digest()}, this one is {other.digest()}"
+    with pytest.raises(ValueError, match=want):
+        cached_clips(tmp_path / "motion", other, cache=tmp_path / "c", kinds=("locomotion",))
+    with pytest.raises(ValueError, match=want):
+        windows("locomotion", 2, other, data=folder, progress=False)
+    assert windows("locomotion", 2, shipped, data=folder, progress=False)["local"].shape[0] > 0
