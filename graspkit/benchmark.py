@@ -88,14 +88,17 @@ class Row:
 
 # ----------------------------------------------------------------------------------------------- ours, measured here
 
-def split_sequences(folders: list[Path], kind: str, split: str) -> list:
-    """GRAB-style sequences of `kind` whose object is in `split`, from every folder that has such files."""
+def split_sequences(folders: list[Path], kind: str, split: str, bm: BodyModel | None = None) -> list:
+    """GRAB-style sequences of `kind` whose object is in `split`, from every folder that has such files; with the body
+    model `bm` they will be posed on, files made on another body are refused (`grab.check_made_on`)."""
     from graspkit.data.formats import clip_files
-    from graspkit.data.grab import load_grasp_sequence
+    from graspkit.data.grab import check_made_on, load_grasp_sequence
     from graspkit.data.grasp import file_split
 
     out = []
     for f in folders:
+        if bm is not None:
+            check_made_on(bm, clip_files(f, kind), f"data: {f}", kind)
         for p in clip_files(f, kind):
             s = load_grasp_sequence(p)
             if file_split(s.object_name, p) == split and bool(s.extras.get("grasp.accepted", True)):
@@ -123,7 +126,7 @@ def ground_truth_grasps(bm: BodyModel, folders: list[Path], split: str = "test",
     """Grasp quality of the synthetic ground truth: the last frame of every accepted `split` grasp file (<= n)."""
     from graspkit.metrics import grasp_metrics, grasp_quality_table
 
-    seqs = split_sequences(folders, "grasp", split)[:n]
+    seqs = split_sequences(folders, "grasp", split, bm)[:n]
     if not seqs:
         return Row("grasp", "ground truth (synthetic)", "graspkit", note=f"no accepted {split} grasps in {folders}")
     rows = [grasp_metrics(sequence_motion(s).vertices(bm, s.num_frames - 1)[0].double(), bm.faces,
@@ -141,7 +144,7 @@ def planner_motion(bm: BodyModel, folders: list[Path], split: str = "test", n: i
     """Motion quality of the procedural planner's approach-and-grasp clips (`split` objects, <= n clips)."""
     from graspkit.metrics import motion_quality
 
-    seqs = split_sequences(folders, "approach", split)[:n]
+    seqs = split_sequences(folders, "approach", split, bm)[:n]
     if not seqs:
         return Row("motion", "procedural planner (approach clips)", "graspkit", note=f"no {split} approach clips")
     q = motion_quality(bm, [sequence_motion(s) for s in seqs])
@@ -349,7 +352,7 @@ def common_motion_rows(bm: BodyModel, folders: list[Path], checkpoints: Path, k:
     from graspkit.eval_wandr import goal_from_cylinder
     from graspkit.metrics import motion_quality
 
-    seqs = split_sequences(folders, "approach", "test")[:k]
+    seqs = split_sequences(folders, "approach", "test", bm)[:k]
     files = _approach_files(folders, k)
     goals = torch.stack([goal_from_cylinder(a, 2.0, 0.9) for a in np.linspace(0.0, 360.0, k, endpoint=False)])
     methods = (  # name, weights, what it needs, its motions, what they are
@@ -446,8 +449,9 @@ def run_all(out_dir: str | Path, data: list[Path] | None = None, quick: bool = F
         from graspkit.data.formats import clip_files
         from graspkit.data.grab import check_made_on
 
-        for folder, kind in ((grasps, "grasp"), (approach, "approach")):
-            check_made_on(bm, clip_files(folder, kind), f"data: {folder}", kind)
+        for folder in folders:                                       # gt and motion read every one of them
+            for kind in ("grasp", "approach"):
+                check_made_on(bm, clip_files(folder, kind), f"data: {folder}", kind)
     out.mkdir(parents=True, exist_ok=True)                # after the checks: a refused run leaves no folder
     rows: list[Row] = []
     steps = tqdm(list(methods), desc="eval --all", unit="method", disable=hidden())

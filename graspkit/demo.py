@@ -14,6 +14,7 @@ A method whose shipped checkpoint is missing is skipped with a message naming th
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 from functools import lru_cache
@@ -226,9 +227,12 @@ def saga_motion_stage(bm: BodyModel, out_dir: Path, steps: tuple[int, int] = (10
 
 def goal_stage(bm: BodyModel, out_dir: Path) -> tuple[list[Path], Panel]:
     """GOAL from the clip's start: GNet's grasp (refined), then MNet's approach to it (§3.4)."""
-    from graspkit.benchmark import goal_motions
+    from graspkit.benchmark import goal_motions, sequence_motion
+    from graspkit.body import shared_body
 
     seq, obj = _test_clip()
+    start = _on(shared_body(default_model_path(), flat_hand_mean=True), sequence_motion(seq))   # the clip's start on
+    seq = dataclasses.replace(seq, trans=start.trans.astype(np.float32))       # that body, standing where it stood
     motion = goal_motions([seq], CHECKPOINTS)[0]                # on eval_goal's body: default_model_path()
     return _write_clip(bm, _on(bm, motion, default_model_path()), out_dir, "goal_approach",
                        {seq.object_name: obj}, "GOAL: GNet + MNet")

@@ -32,7 +32,7 @@ import torch
 
 from graspkit.checks import positive_float
 from graspkit.cli import TIME_LIMIT_HELP, check_counts, check_out, expand_user_paths, refuse_folder_out, reports_errors
-from graspkit.data.formats import check_folders_body, clip_files
+from graspkit.data.formats import clip_files
 from graspkit.data.motionfill_dataset import (MotionFillDataset, MotionFillStats, load_windows, make_windows,
                                               save_windows, split_clips)
 from graspkit.models.motionfill import MotionFillConfig, MotionFillVAE
@@ -149,7 +149,6 @@ def windows(kind: str, n: int, bm: BodyModel | None = None, data: Path | None = 
 
         bm = BodyModel.from_file(default_model_path())
     out, root, files = windows_source(kind, n, data, bm.digest())
-    check_folders_body([(root, kind)], bm.source)                           # the windows pose the clips on bm
     cached = read_cache(out, load_windows)
     if cached is not None:
         return cached
@@ -595,6 +594,7 @@ def approach_scene(path: str | Path, bm: BodyModel) -> dict[str, Any]:
     import zlib
 
     from graspkit.data.formats import open_npz
+    from graspkit.data.grab import check_made_on
     from graspkit.data.motion import Motion, canonicalize
     from graspkit.objects.catalogue import make_object
     from graspkit.rotations import axis_angle_to_matrix
@@ -616,6 +616,7 @@ def approach_scene(path: str | Path, bm: BodyModel) -> dict[str, Any]:
             name = str(a["obj_name"])
         except (ValueError, OSError, EOFError, zipfile.BadZipFile, zlib.error) as e:   # a damaged member, bad shapes
             raise ValueError(f"path: {path}: could not read the approach clip ({e})") from None
+    check_made_on(bm, [path], f"path: {path}", "approach")                  # its body is posed on bm
     arr = make_windows([m], bm, align_end=True, progress=False)
     joints = m.joint_positions(bm)
     n = len(joints)

@@ -251,6 +251,25 @@ def test_digest_names_the_model_arrays_and_dtype():
     assert BodyModel(arrays, dtype=torch.float64).digest() != a.digest()
 
 
+def test_digest_is_the_same_whatever_the_thread_count():
+    """The shipped body's digest (the key of window and clip caches and the body in `data make`'s folder records) in
+    processes of one and of two BLAS / OpenMP threads. Until 2026-12-07 J_template was a threaded BLAS product whose
+    last bits depended on the thread count: the same file had two digests, and a folder made in one environment was
+    "another body model" in the other."""
+    import os
+    import subprocess
+    import sys
+
+    from graspkit.paths import procedural_model_path
+
+    code = ("import torch; from graspkit.body import BodyModel; "
+            f"print(torch.get_num_threads(), BodyModel.from_file({str(procedural_model_path())!r}).digest())")
+    out = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                          env={**os.environ, "OMP_NUM_THREADS": n, "OPENBLAS_NUM_THREADS": n, "MKL_NUM_THREADS": n}
+                          ).stdout.split() for n in ("1", "2")]
+    assert [o[0] for o in out] == ["1", "2"] and out[0][1] == out[1][1]
+
+
 def test_a_400_component_file_matches_smplx_with_16_betas_and_short_betas_pad_at_the_end(tmp_path):
     """In an SMPL-X 2020 file (300 shape + 100 expression components) the expression basis starts at component 300
     whatever num_betas (smplx reads it so); betas shorter than num_betas are the leading components (zero-padded at

@@ -159,6 +159,27 @@ def test_demo_stages_stand_on_the_floor_of_another_model(tmp_path):
         assert abs(float(a.vertices(bm, 0, 1)[0, :, 2].min())) > 0.03, name     # kept, F's body would not stand
 
 
+def test_demo_goal_stage_stands_on_the_floor_of_the_graspkit_model_body(tmp_path, monkeypatch):
+    """Under GRASPKIT_MODEL naming a body 8 % larger, the demo's GOAL stage runs MNet on that body (eval_goal's) from
+    the shipped clip's start restood on it: frame 0's lowest vertex on the floor, no frame under it. Until 2026-12-07
+    the start kept the translation of graspkit's body and the whole approach sank 7.3 cm."""
+    from conftest import PROCEDURAL_MODEL, npz_copy
+
+    from graspkit.body import BodyModel
+    from graspkit.checks import GraspkitWarning
+    from graspkit.data import load_motion
+    from graspkit.demo import run_demo
+
+    with np.load(PROCEDURAL_MODEL, allow_pickle=False) as z:
+        big = npz_copy(PROCEDURAL_MODEL, tmp_path / "big.npz", v_template=z["v_template"] * 1.08,
+                       shapedirs=z["shapedirs"] * 1.08)
+    monkeypatch.setenv("GRASPKIT_MODEL", str(big))
+    with pytest.warns(GraspkitWarning, match="another body's proportions"):     # MNet's range check (docs/goal.md)
+        run_demo(tmp_path / "out", stages=("goal",))
+    low = load_motion(tmp_path / "out" / "goal_approach.npz").vertices(BodyModel.from_file(big))[:, :, 2].amin(1)
+    assert abs(float(low[0])) < 0.002 and float(low.min()) > -0.01
+
+
 def test_demo_refuses_unknown_stages(tmp_path, capsys):
     from graspkit.cli import main
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from scipy.spatial.transform import Rotation
 
 from conftest import PROCEDURAL_MODEL, npz_copy
 from graspkit.paths import DATA_STUBS
@@ -24,34 +25,56 @@ def big(tmp_path_factory):
 
 
 def _smplx_offset(model, path) -> float:
-    """The largest distance between the smplx package's vertices for a file's grasp frame and its goal.vertices."""
+    """body_offset's figure with the smplx package's vertices and scipy's rigid fit: the largest distance between GOAL's
+    stored vertices and the file's grasp-frame vertices rigidly aligned to them, at the best of 11 points on each
+    segment to a neighbouring frame."""
     import smplx
 
     with np.load(path, allow_pickle=False) as z:
         a = {k: z[k] for k in z.files}
     f = int(a.get("grasp.goal_frame", a.get("grasp.frame", 0)))
-    p = torch.as_tensor(a["body.params.fullpose"][f:f + 1], dtype=torch.float64)
+    lo, hi = max(f - 1, 0), min(f + 2, len(a["body.params.fullpose"]))
+    n = hi - lo
+    p = torch.as_tensor(a["body.params.fullpose"][lo:hi], dtype=torch.float64)
     ref = smplx.create(str(model.parent.parent), model_type="smplx", gender="neutral", ext="npz", use_pca=False,
-                       flat_hand_mean=True, num_betas=10, batch_size=1, dtype=torch.float64)
-    v = ref(betas=torch.as_tensor(a["body.betas"][None], dtype=torch.float64), global_orient=p[:, :3],
+                       flat_hand_mean=True, num_betas=10, batch_size=n, dtype=torch.float64)
+    v = ref(betas=torch.as_tensor(a["body.betas"][None], dtype=torch.float64).expand(n, -1), global_orient=p[:, :3],
             body_pose=p[:, 3:66], jaw_pose=p[:, 66:69], leye_pose=p[:, 69:72], reye_pose=p[:, 72:75],
-            left_hand_pose=p[:, 75:120], right_hand_pose=p[:, 120:165], expression=torch.zeros(1, 10).double(),
-            transl=torch.as_tensor(a["body.params.transl"][f:f + 1], dtype=torch.float64)).vertices[0]
-    return float(np.linalg.norm(v[a["goal.vertex_ids"]].numpy() - a["goal.vertices"], axis=1).max())
+            left_hand_pose=p[:, 75:120], right_hand_pose=p[:, 120:165], expression=torch.zeros(n, 10).double(),
+            transl=torch.as_tensor(a["body.params.transl"][lo:hi], dtype=torch.float64)).vertices
+    v = v[:, a["goal.vertex_ids"]].numpy()
+    pairs = [(k, k + 1) for k in range(n - 1)] or [(0, 0)]             # a one-frame grasp file: that frame
+    target = a["goal.vertices"].astype(np.float64)
+    best = np.inf
+    for i, j in pairs:
+        for w in np.linspace(0, 1, 11):
+            x = (1 - w) * v[i] + w * v[j]
+            rot, _ = Rotation.align_vectors(target - target.mean(0), x - x.mean(0))     # scipy's rigid fit
+            best = min(best, float(np.linalg.norm(rot.apply(x - x.mean(0)) + target.mean(0) - target, axis=1).max()))
+    return best
 
 
 def test_body_offset_is_what_smplx_measures(big, tmp_path):
     """On graspkit's body (which made the stubs) a grasp or approach file's stored GOAL vertices are its vertices to
-    a micrometre; on a body 8 % larger they lie 8-9 cm off, as the smplx package poses that body. A file without GOAL's
-    labels gives None, one of another mesh layout infinity."""
+    a micrometre, also with the whole clip moved and turned; on a body 8 % larger they lie 5-9 cm off, as the smplx
+    package poses that body. A file without GOAL's labels gives None, one of another mesh layout infinity."""
     from graspkit.body import BodyModel
     from graspkit.data.grab import MADE_ON_TOL, body_offset
+    from graspkit.saga import rigid_params
 
     shipped, other = BodyModel.from_file(PROCEDURAL_MODEL), BodyModel.from_file(big)
     for path in (GRASP, APPROACH):
         assert body_offset(shipped, path) < 1e-5 and _smplx_offset(PROCEDURAL_MODEL, path) < 1e-5
         off = body_offset(other, path)
         assert off == pytest.approx(_smplx_offset(big, path), abs=1e-5) and off > 50 * MADE_ON_TOL
+    with np.load(APPROACH, allow_pickle=False) as z:                          # the clip turned 30 deg and moved
+        poses, transl = rigid_params(z["body.params.fullpose"].reshape(-1, 55, 3).astype(np.float64),
+                                     z["body.params.transl"].astype(np.float64), z["body.betas"],
+                                     Rotation.from_euler("z", 30, degrees=True).as_matrix(), np.array([0.5, -1.0, 0.0]),
+                                     shipped)
+    moved = npz_copy(APPROACH, tmp_path / "moved.npz", **{"body.params.fullpose": poses.reshape(-1, 165),
+                                                           "body.params.transl": transl})
+    assert body_offset(shipped, moved) < 1e-5 and _smplx_offset(PROCEDURAL_MODEL, moved) < 1e-5
     assert body_offset(shipped, npz_copy(GRASP, tmp_path / "own.npz", **{"goal.vertices": None})) is None
     with np.load(GRASP, allow_pickle=False) as z:
         ids = z["goal.vertex_ids"].copy()
@@ -62,9 +85,8 @@ def test_body_offset_is_what_smplx_measures(big, tmp_path):
 def test_readers_refuse_grasps_made_on_another_body(big, tmp_path, monkeypatch):
     """With GRASPKIT_MODEL naming another body than the one that made the data, GOAL's readers (training and
     evaluation), SAGA's evaluation and its GrabNet-SMPLX baseline's training, MotionFill's approach windows and
-    `eval --all` refuse, naming the folder, before
-    anything is written: until 2026-12-07 they posed graspkit's grasps on that body (6-8 cm under the floor, the hand
-    9 cm from where it held the object) and measured them there."""
+    `eval --all` refuse, naming the folder, before anything is written: until 2026-12-07 they posed graspkit's grasps
+    on that body (6-8 cm under the floor, the hand 9 cm from where it held the object) and measured them there."""
     from graspkit.benchmark import run_all
     from graspkit.body import BodyModel
     from graspkit.eval_goal import evaluate as eval_goal, gnet_data
@@ -92,33 +114,58 @@ def test_readers_refuse_grasps_made_on_another_body(big, tmp_path, monkeypatch):
     assert not list(tmp_path.iterdir())
 
 
-def test_clip_readers_refuse_clips_recorded_as_made_on_another_body(big, tmp_path):
-    """Motion clips (AMASS's layout) carry nothing of the body that made them: `graspkit data make`'s record
-    (graspkit_make_<kind>.json, the body's digest) is the witness. WANDR's clip sets and MotionFill's windows read a
-    folder recorded as made on graspkit's body when posing it on that body, and refuse it, naming the folder and
-    both digests, on another; a folder without the record (the stubs) is read on any body."""
-    import shutil
+def _relabelled(src, dst, bm):
+    """The grasp / approach files of folder src copied to dst with GOAL's stored vertices recomputed on bm: files as
+    if made on bm (their poses unchanged)."""
+    from graspkit.data.grab import grasp_frame
+    from graspkit.data.motion import Motion
 
+    dst.mkdir(parents=True)
+    for p in sorted(src.glob("*.npz")):
+        with np.load(p, allow_pickle=False) as z:
+            a = {k: z[k] for k in z.files}
+        f = grasp_frame(a)
+        m = Motion(a["body.params.fullpose"][f:f + 1].reshape(1, 55, 3), a["body.params.transl"][f:f + 1],
+                   a["body.betas"], 30.0)
+        npz_copy(p, dst / p.name, **{"goal.vertices": m.vertices(bm)[0, a["goal.vertex_ids"]].numpy()})
+    return dst
+
+
+def test_every_folder_and_every_reader_of_the_benchmark_is_checked(big, tmp_path):
+    """`eval --all` checks every --data folder (its ground-truth and motion rows read them all; until 2026-12-07 only
+    the first grasp and approach folders were), and the rows' own readers (the ground truth's grasps, the planner's
+    clips) and GraspMotion-Opt's approach scenes refuse another body's files when called alone (lesson 10 calls the
+    first two): the ground truth of graspkit's stubs measured on a body 5 % larger had contact 0.75 and 3.6 cm³."""
+    from graspkit.benchmark import ground_truth_grasps, planner_motion, run_all
     from graspkit.body import BodyModel
-    from graspkit.data.cli import claim_folder
-    from graspkit.data.wandr_dataset import cached_clips
-    from graspkit.eval_motionfill import windows
+    from graspkit.eval_motionfill import approach_scene
 
     shipped, other = BodyModel.from_file(PROCEDURAL_MODEL), BodyModel.from_file(big)
-    stubs = sorted((DATA_STUBS / "motion" / "locomotion").glob("locomotion_*.npz"))[:2]
-    for name in ("plain", "motion"):
-        folder = tmp_path / name / "locomotion"
-        folder.mkdir(parents=True)
-        if name == "motion":                                   # as `data make` records it, before its first file
-            claim_folder(folder, "locomotion", {"seed": 0, "model": str(PROCEDURAL_MODEL)})
-        for p in stubs:
-            shutil.copy(p, folder / p.name)
-    assert len(cached_clips(tmp_path / "plain", other, cache=tmp_path / "c", kinds=("locomotion",)).names) == 2
-    assert len(cached_clips(tmp_path / "motion", shipped, cache=tmp_path / "c", kinds=("locomotion",)).names) == 2
-    want = rf"folder: {folder}'s locomotion clips were made on another body model than {big} \(its " \
-           rf"graspkit_make_locomotion.json records body {shipped.digest()}, this one is {other.digest()}"
-    with pytest.raises(ValueError, match=want):
-        cached_clips(tmp_path / "motion", other, cache=tmp_path / "c", kinds=("locomotion",))
-    with pytest.raises(ValueError, match=want):
-        windows("locomotion", 2, other, data=folder, progress=False)
-    assert windows("locomotion", 2, shipped, data=folder, progress=False)["local"].shape[0] > 0
+    theirs = _relabelled(DATA_STUBS / "grasps", tmp_path / "theirs", other)
+    with pytest.raises(ValueError, match=rf"data: {theirs}: its grasp files were made on another body model"):
+        run_all(tmp_path / "report", data=[DATA_STUBS / "grasps", DATA_STUBS / "approach", theirs], methods=("gt",),
+                quick=True)
+    assert not (tmp_path / "report").exists()
+    assert ground_truth_grasps(other, [theirs], n=2).values["contact_ratio"] > 0      # on the body that made them
+    with pytest.raises(ValueError, match=r"data: .*grasps: its grasp files were made on another body model"):
+        ground_truth_grasps(other, [DATA_STUBS / "grasps"], n=2)
+    with pytest.raises(ValueError, match=r"data: .*approach: its approach files were made on another body model"):
+        planner_motion(other, [DATA_STUBS / "approach"], n=1)
+    clip = DATA_STUBS / "approach" / "approach_000000.npz"
+    assert approach_scene(clip, shipped)["markers"].shape == (61, 79, 3)
+    with pytest.raises(ValueError, match=r"path: .*approach_000000.npz: its approach files were made on another"):
+        approach_scene(clip, other)
+
+
+@pytest.mark.parametrize("fps", [15.0, 20.0, 60.0])
+def test_a_clip_resampled_on_its_own_body_is_still_its_own(fps, tmp_path):
+    """An approach clip read at another frame rate (slerp, its goal frame rescaled and rounded) and saved again holds
+    the labelled instant between two frames: body_offset interpolates there and finds the body that made it (a
+    micrometre; at the rounded frame alone 1.3-4.6 mm, refused by the 1 mm rule), and the readers take it."""
+    from graspkit.body import BodyModel
+    from graspkit.data.grab import MADE_ON_TOL, body_offset, load_grasp_sequence, save_grasp_sequence
+    from graspkit.eval_goal import _files
+
+    path = save_grasp_sequence(tmp_path / "approach_000000.npz", load_grasp_sequence(APPROACH, fps=fps))
+    assert body_offset(BodyModel.from_file(PROCEDURAL_MODEL), path) < MADE_ON_TOL / 10
+    assert len(_files(tmp_path, "approach", None)) == 1

@@ -229,7 +229,8 @@ class BodyModel(nn.Module):
         self.register_buffer("_v_template_cm", t(v_template.T.reshape(1, 3 * V)))
         S = basis.shape[2]                                                   # 0 with no betas and no expression
         self.register_buffer("shape_basis", t(basis.transpose(2, 1, 0).reshape(S, 3 * V)))    # (S+E, 3V)
-        self.register_buffer("J_template", t(J_reg @ v_template))                          # (55, 3)
+        # einsum's own loop, not a threaded BLAS product: the same bits whatever the thread count (digest() hashes them)
+        self.register_buffer("J_template", t(np.einsum("jv,vc->jc", J_reg, v_template)))    # (55, 3)
         self.register_buffer("J_basis", t(np.einsum("jv,vkc->cjk", J_reg, basis).reshape(S, 3 * NUM_JOINTS)))
         self.register_buffer("J_regressor", t(J_reg))
         posedirs = np.asarray(arrays["posedirs"], np.float64).transpose(2, 1, 0).reshape(NUM_POSE_BASIS, 3 * V)

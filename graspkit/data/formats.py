@@ -60,36 +60,6 @@ def clip_files(root: str | os.PathLike, kind: str) -> list[Path]:
     return sorted(f for f in Path(root).glob(f"{kind}_*.npz") if not f.name.startswith(tuple(f"{k}_" for k in longer)))
 
 
-def check_folders_body(folders: Iterable[tuple[str | os.PathLike, str]], source: str) -> None:
-    """ValueError naming the folder when `graspkit data make` recorded (<folder>/graspkit_make_<kind>.json, for each
-    (folder, kind)) that its clips were made on another body model than the file `source` (their digests,
-    BodyModel.digest of the file as from_file loads it). A clip file has no body-specific content (AMASS's layout), so
-    the record is the one witness: a folder without it (one's own clips, the stubs), a damaged one (`data make` names
-    it) or a `source` that is no file passes."""
-    import json
-
-    made = {}
-    for folder, kind in folders:
-        record = Path(folder) / f"graspkit_make_{kind}.json"
-        try:
-            body = json.loads(record.read_text()).get("body") if record.is_file() else None
-        except (OSError, UnicodeDecodeError, ValueError, AttributeError):
-            body = None
-        if isinstance(body, str):
-            made[Path(folder)] = (kind, body)
-    if not made or not Path(source).is_file():
-        return
-    from graspkit.body import BodyModel
-
-    now = BodyModel.from_file(source).digest()
-    for folder, (kind, body) in made.items():
-        if body != now:
-            raise ValueError(f"folder: {folder}'s {kind} clips were made on another body model than {source} (its "
-                             f"graspkit_make_{kind}.json records body {body}, this one is {now}; GRASPKIT_MODEL names "
-                             "the body): use the body that made them, or make clips on this one (`graspkit data make "
-                             f"--kind {kind} --out DIR`)")
-
-
 def save_motion(path: str | os.PathLike, motion: Motion, amass_keys: bool = False) -> Path:
     """Write a Motion as an AMASS-style .npz (plus goal keys for reaching clips), atomically; returns the path.
     amass_keys: also write AMASS's per-part keys (`amass_split_keys`; the exports for other tools do)."""

@@ -105,9 +105,14 @@ def grasp_frame(extras: Mapping[str, np.ndarray]) -> int:
 
 def body_offset(bm: BodyModel, path: str | os.PathLike) -> float | None:
     """How far (m, the largest distance) bm's vertices for a grasp file's parameters at its grasp frame lie from GOAL's
-    400 vertices stored with them (`goal.vertex_ids`, `goal.vertices`: `graspkit data make`'s labels); None when the
-    file stores none (one's own GRAB files). ~1e-6 m when the file was made on bm."""
+    400 vertices stored with them (`goal.vertex_ids`, `goal.vertices`: `graspkit data make`'s labels), once rigidly
+    aligned to them (Kabsch: a clip moved or turned as a whole is the same body); None when the file stores none
+    (one's own GRAB files). ~1e-6 m when the file was made on bm. The closest of the vertices interpolated between
+    the grasp frame and its neighbours counts: a clip resampled to another frame rate (its goal frame rounded) holds
+    the labelled instant between two frames."""
     import torch
+
+    from graspkit.optim.grasppose import kabsch
 
     a = read_arrays(path)
     keys = ("body.params.fullpose", "body.params.transl", "body.betas", "goal.vertex_ids", "goal.vertices")
@@ -121,10 +126,15 @@ def body_offset(bm: BodyModel, path: str | os.PathLike) -> float | None:
     poses = np.asarray(a["body.params.fullpose"], np.float64).reshape(-1, 55, 3)
     if not 0 <= f < len(poses):
         raise SequenceFileError(f"{path}: grasp frame {f} outside its {len(poses)} frames")
-    m = Motion(poses[f:f + 1], np.asarray(a["body.params.transl"], np.float64).reshape(-1, 3)[f:f + 1],
+    lo, hi = max(f - 1, 0), min(f + 2, len(poses))
+    m = Motion(poses[lo:hi], np.asarray(a["body.params.transl"], np.float64).reshape(-1, 3)[lo:hi],
                np.asarray(a["body.betas"], np.float64).reshape(-1), 30.0)
-    v = m.vertices(bm)[0, torch.as_tensor(ids)].double()
-    return float((v - torch.as_tensor(stored)).norm(dim=-1).max())
+    v = m.vertices(bm)[:, torch.as_tensor(ids)].double()                          # (frames, n, 3)
+    w = torch.linspace(0, 1, 11, dtype=torch.float64)[:, None, None, None]
+    between = ((1 - w) * v[:-1] + w * v[1:] if len(v) > 1 else v[None]).flatten(0, 1)    # (11 (frames - 1), n, 3)
+    target = torch.as_tensor(stored).expand_as(between)
+    R, c = kabsch(between, target)
+    return float((between @ R.transpose(1, 2) + c[:, None] - target).norm(dim=-1).amax(-1).min())
 
 
 def check_made_on(bm: BodyModel, paths: Sequence[str | os.PathLike], where: str, kind: str) -> None:
@@ -133,10 +143,11 @@ def check_made_on(bm: BodyModel, paths: Sequence[str | os.PathLike], where: str,
     measured on them with it. Files without GOAL's labels pass; so does an empty list."""
     off = body_offset(bm, paths[0]) if len(paths) else None
     if off is not None and off > MADE_ON_TOL:
-        raise ValueError(f"{where}: its {kind} files were made on another body model than {bm.source or 'the one given'} "
-                         f"({Path(paths[0]).name}'s stored GOAL vertices lie up to {1000 * off:.0f} mm from that "
-                         "body's for the same parameters; GRASPKIT_MODEL names the body): use the body that made them, "
-                         f"or make data on this one (`graspkit data make --kind {kind} --out DIR`)")
+        raise ValueError(f"{where}: its {kind} files were made on another body model than "
+                         f"{bm.source or 'the one given'} ({Path(paths[0]).name}'s stored GOAL vertices lie up to "
+                         f"{1000 * off:.0f} mm from that body's for the same parameters, rigidly aligned; GRASPKIT_MODEL "
+                         "names the body): use the body that made them, or make data on this one "
+                         f"(`graspkit data make --kind {kind} --out DIR`)")
 
 
 def to_arrays(seq: GraspSequence, model: str = DEFAULT_MODEL_NAME) -> dict[str, np.ndarray]:

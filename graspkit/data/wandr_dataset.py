@@ -37,7 +37,7 @@ from torch.utils.data import Dataset
 from graspkit import intention as I
 from graspkit.body.skeleton import JOINT_INDEX
 from graspkit.checks import check_int
-from graspkit.data.formats import check_folders_body, clip_files, load_motion, member_crcs, npz_arrays, open_npz
+from graspkit.data.formats import clip_files, load_motion, member_crcs, npz_arrays, open_npz
 from graspkit.data.motion import Motion
 from graspkit.paths import read_cache
 
@@ -417,7 +417,6 @@ def cached_clips(folder: str | Path, bm: BodyModel, limit: int | None = None, ca
     npz's zip directory, no decompression: a clip remade in place at the same size is new data), the body model
     (`bm.digest()`) and CLIPSET_VERSION (so new or changed clips, another body or another clip code rebuild it)."""
     files = list_clips(folder, kinds=kinds, limit=limit)
-    check_folders_body([(Path(folder, k), k) for k in kinds], bm.source)     # their poses are posed on bm
     listing = "\n".join(f"{f.parent.name}/{f.name}:{f.stat().st_size}:{member_crcs(f)}" for f in files)
     key = hashlib.blake2b(f"{listing}\nbody={bm.digest()};version={CLIPSET_VERSION}".encode(),
                           digest_size=6).hexdigest()
