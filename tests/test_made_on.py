@@ -25,9 +25,9 @@ def big(tmp_path_factory):
 
 
 def _smplx_offset(model, path) -> float:
-    """body_offset's figure with the smplx package's vertices and scipy's rigid fit: the largest distance between GOAL's
-    stored vertices and the file's grasp-frame vertices rigidly aligned to them, at the best of 11 points on each
-    segment to a neighbouring frame."""
+    """body_offset's figure with the smplx package's vertices and scipy's rotation fit: the largest distance between
+    GOAL's stored vertices and the file's grasp-frame vertices turned about z and moved along the floor onto them, at
+    the best of 11 points on each segment to a neighbouring frame."""
     import smplx
 
     with np.load(path, allow_pickle=False) as z:
@@ -49,15 +49,19 @@ def _smplx_offset(model, path) -> float:
     for i, j in pairs:
         for w in np.linspace(0, 1, 11):
             x = (1 - w) * v[i] + w * v[j]
-            rot, _ = Rotation.align_vectors(target - target.mean(0), x - x.mean(0))     # scipy's rigid fit
-            best = min(best, float(np.linalg.norm(rot.apply(x - x.mean(0)) + target.mean(0) - target, axis=1).max()))
+            flat = lambda p: np.c_[p[:, :2] - p[:, :2].mean(0), np.zeros(len(p))]  # noqa: E731  (on the floor)
+            rot, _ = Rotation.align_vectors(flat(target), flat(x))                      # scipy's fit: a turn about z
+            moved = rot.apply(flat(x)) + np.r_[target[:, :2].mean(0), 0.0]
+            moved[:, 2] = x[:, 2]
+            best = min(best, float(np.linalg.norm(moved - target, axis=1).max()))
     return best
 
 
 def test_body_offset_is_what_smplx_measures(big, tmp_path):
     """On graspkit's body (which made the stubs) a grasp or approach file's stored GOAL vertices are its vertices to
-    a micrometre, also with the whole clip moved and turned; on a body 8 % larger they lie 5-9 cm off, as the smplx
-    package poses that body. A file without GOAL's labels gives None, one of another mesh layout infinity."""
+    a micrometre, also with the whole clip turned and moved along the floor, not raised; on a body 8 % larger they lie
+    5-9 cm off, as the smplx package poses that body. A file without GOAL's labels gives None, one of another mesh
+    layout infinity."""
     from graspkit.body import BodyModel
     from graspkit.data.grab import MADE_ON_TOL, body_offset
     from graspkit.saga import rigid_params
@@ -75,6 +79,9 @@ def test_body_offset_is_what_smplx_measures(big, tmp_path):
     moved = npz_copy(APPROACH, tmp_path / "moved.npz", **{"body.params.fullpose": poses.reshape(-1, 165),
                                                            "body.params.transl": transl})
     assert body_offset(shipped, moved) < 1e-5 and _smplx_offset(PROCEDURAL_MODEL, moved) < 1e-5
+    raised = npz_copy(APPROACH, tmp_path / "raised.npz", **{"body.params.fullpose": poses.reshape(-1, 165),
+                                                             "body.params.transl": transl + [0.0, 0.0, 0.02]})
+    assert body_offset(shipped, raised) == pytest.approx(0.02, abs=1e-5) == _smplx_offset(PROCEDURAL_MODEL, raised)
     assert body_offset(shipped, npz_copy(GRASP, tmp_path / "own.npz", **{"goal.vertices": None})) is None
     with np.load(GRASP, allow_pickle=False) as z:
         ids = z["goal.vertex_ids"].copy()

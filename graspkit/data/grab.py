@@ -105,14 +105,13 @@ def grasp_frame(extras: Mapping[str, np.ndarray]) -> int:
 
 def body_offset(bm: BodyModel, path: str | os.PathLike) -> float | None:
     """How far (m, the largest distance) bm's vertices for a grasp file's parameters at its grasp frame lie from GOAL's
-    400 vertices stored with them (`goal.vertex_ids`, `goal.vertices`: `graspkit data make`'s labels), once rigidly
-    aligned to them (Kabsch: a clip moved or turned as a whole is the same body); None when the file stores none
-    (one's own GRAB files). ~1e-6 m when the file was made on bm. The closest of the vertices interpolated between
-    the grasp frame and its neighbours counts: a clip resampled to another frame rate (its goal frame rounded) holds
-    the labelled instant between two frames."""
+    400 vertices stored with them (`goal.vertex_ids`, `goal.vertices`: `graspkit data make`'s labels), once turned
+    about the vertical and moved along the floor onto them (a clip moved on the floor as a whole is the same body;
+    one raised or sunk is not: its body would float or sink); None when the file stores none (one's own GRAB files).
+    ~1e-6 m when the file was made on bm. The closest of the vertices interpolated between the grasp frame and its
+    neighbours counts: a clip resampled to another frame rate (its goal frame rounded) holds the labelled instant
+    between two frames."""
     import torch
-
-    from graspkit.optim.grasppose import kabsch
 
     a = read_arrays(path)
     keys = ("body.params.fullpose", "body.params.transl", "body.betas", "goal.vertex_ids", "goal.vertices")
@@ -132,9 +131,13 @@ def body_offset(bm: BodyModel, path: str | os.PathLike) -> float | None:
     v = m.vertices(bm)[:, torch.as_tensor(ids)].double()                          # (frames, n, 3)
     w = torch.linspace(0, 1, 11, dtype=torch.float64)[:, None, None, None]
     between = ((1 - w) * v[:-1] + w * v[1:] if len(v) > 1 else v[None]).flatten(0, 1)    # (11 (frames - 1), n, 3)
-    target = torch.as_tensor(stored).expand_as(between)
-    R, c = kabsch(between, target)
-    return float((between @ R.transpose(1, 2) + c[:, None] - target).norm(dim=-1).amax(-1).min())
+    target = torch.as_tensor(stored)
+    a, b = between[..., :2] - between[..., :2].mean(-2, keepdim=True), target[:, :2] - target[:, :2].mean(0)
+    yaw = torch.atan2((a[..., 0] * b[:, 1] - a[..., 1] * b[:, 0]).sum(-1), (a * b).sum((-1, -2)))   # 2-D Kabsch
+    c, s = torch.cos(yaw)[:, None], torch.sin(yaw)[:, None]
+    xy = torch.stack([c * a[..., 0] - s * a[..., 1], s * a[..., 0] + c * a[..., 1]], -1) + target[:, :2].mean(0)
+    moved = torch.cat([xy, between[..., 2:]], -1)
+    return float((moved - target).norm(dim=-1).amax(-1).min())
 
 
 def check_made_on(bm: BodyModel, paths: Sequence[str | os.PathLike], where: str, kind: str) -> None:
@@ -145,8 +148,8 @@ def check_made_on(bm: BodyModel, paths: Sequence[str | os.PathLike], where: str,
     if off is not None and off > MADE_ON_TOL:
         raise ValueError(f"{where}: its {kind} files were made on another body model than "
                          f"{bm.source or 'the one given'} ({Path(paths[0]).name}'s stored GOAL vertices lie up to "
-                         f"{1000 * off:.0f} mm from that body's for the same parameters, rigidly aligned; GRASPKIT_MODEL "
-                         "names the body): use the body that made them, or make data on this one "
+                         f"{1000 * off:.0f} mm from that body's for the same parameters, moved on the floor onto them; "
+                         "GRASPKIT_MODEL names the body): use the body that made them, or make data on this one "
                          f"(`graspkit data make --kind {kind} --out DIR`)")
 
 
