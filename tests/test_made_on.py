@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from scipy.spatial.transform import Rotation
 
 from conftest import PROCEDURAL_MODEL, npz_copy
 from graspkit.paths import DATA_STUBS
@@ -25,9 +24,9 @@ def big(tmp_path_factory):
 
 
 def _smplx_offset(model, path) -> float:
-    """body_offset's figure with the smplx package's vertices and scipy's rotation fit: the largest distance between
-    GOAL's stored vertices and the file's grasp-frame vertices turned about z and moved along the floor onto them, at
-    the best of 11 points on each segment to a neighbouring frame."""
+    """body_offset's figure with the smplx package's vertices: the largest distance between GOAL's stored vertices and
+    the file's grasp-frame vertices taken back by the object's move since the labels, at the best of 11 points on each
+    segment to a neighbouring frame."""
     import smplx
 
     with np.load(path, allow_pickle=False) as z:
@@ -42,46 +41,38 @@ def _smplx_offset(model, path) -> float:
             body_pose=p[:, 3:66], jaw_pose=p[:, 66:69], leye_pose=p[:, 69:72], reye_pose=p[:, 72:75],
             left_hand_pose=p[:, 75:120], right_hand_pose=p[:, 120:165], expression=torch.zeros(n, 10).double(),
             transl=torch.as_tensor(a["body.params.transl"][lo:hi], dtype=torch.float64)).vertices
-    v = v[:, a["goal.vertex_ids"]].numpy()
+    v = v[:, a["goal.vertex_ids"]].numpy() - (a["object.params.transl"][lo:hi] - a["goal.object_transl"])[:, None]
     pairs = [(k, k + 1) for k in range(n - 1)] or [(0, 0)]             # a one-frame grasp file: that frame
-    target = a["goal.vertices"].astype(np.float64)
-    best = np.inf
-    for i, j in pairs:
-        for w in np.linspace(0, 1, 11):
-            x = (1 - w) * v[i] + w * v[j]
-            flat = lambda p: np.c_[p[:, :2] - p[:, :2].mean(0), np.zeros(len(p))]  # noqa: E731  (on the floor)
-            rot, _ = Rotation.align_vectors(flat(target), flat(x))                      # scipy's fit: a turn about z
-            moved = rot.apply(flat(x)) + np.r_[target[:, :2].mean(0), 0.0]
-            moved[:, 2] = x[:, 2]
-            best = min(best, float(np.linalg.norm(moved - target, axis=1).max()))
-    return best
+    return min(float(np.linalg.norm((1 - w) * v[i] + w * v[j] - a["goal.vertices"], axis=1).max())
+               for i, j in pairs for w in np.linspace(0, 1, 11))
 
 
 def test_body_offset_is_what_smplx_measures(big, tmp_path):
     """On graspkit's body (which made the stubs) a grasp or approach file's stored GOAL vertices are its vertices to
-    a micrometre, also with the whole clip turned and moved along the floor, not raised; on a body 8 % larger they lie
-    5-9 cm off, as the smplx package poses that body. A file without GOAL's labels gives None, one of another mesh
-    layout infinity."""
+    a micrometre, also with the whole clip (body and object) moved; with the body alone moved, by the move; on a body
+    8 % larger they lie 8-9 cm off, as the smplx package poses that body. A file without GOAL's labels gives None, one
+    of another mesh layout infinity."""
     from graspkit.body import BodyModel
     from graspkit.data.grab import MADE_ON_TOL, body_offset
-    from graspkit.saga import rigid_params
 
     shipped, other = BodyModel.from_file(PROCEDURAL_MODEL), BodyModel.from_file(big)
     for path in (GRASP, APPROACH):
         assert body_offset(shipped, path) < 1e-5 and _smplx_offset(PROCEDURAL_MODEL, path) < 1e-5
         off = body_offset(other, path)
         assert off == pytest.approx(_smplx_offset(big, path), abs=1e-5) and off > 50 * MADE_ON_TOL
-    with np.load(APPROACH, allow_pickle=False) as z:                          # the clip turned 30 deg and moved
-        poses, transl = rigid_params(z["body.params.fullpose"].reshape(-1, 55, 3).astype(np.float64),
-                                     z["body.params.transl"].astype(np.float64), z["body.betas"],
-                                     Rotation.from_euler("z", 30, degrees=True).as_matrix(), np.array([0.5, -1.0, 0.0]),
-                                     shipped)
-    moved = npz_copy(APPROACH, tmp_path / "moved.npz", **{"body.params.fullpose": poses.reshape(-1, 165),
-                                                           "body.params.transl": transl})
+    with np.load(APPROACH, allow_pickle=False) as z:
+        transl, obj = z["body.params.transl"], z["object.params.transl"]
+    d = np.array([0.5, -1.0, 0.02])
+    moved = npz_copy(APPROACH, tmp_path / "moved.npz", **{"body.params.transl": transl + d,     # body and object
+                                                           "object.params.transl": obj + d})
     assert body_offset(shipped, moved) < 1e-5 and _smplx_offset(PROCEDURAL_MODEL, moved) < 1e-5
-    raised = npz_copy(APPROACH, tmp_path / "raised.npz", **{"body.params.fullpose": poses.reshape(-1, 165),
-                                                             "body.params.transl": transl + [0.0, 0.0, 0.02]})
-    assert body_offset(shipped, raised) == pytest.approx(0.02, abs=1e-5) == _smplx_offset(PROCEDURAL_MODEL, raised)
+    apart = npz_copy(APPROACH, tmp_path / "apart.npz", **{"body.params.transl": transl + d})    # the body alone
+    assert body_offset(shipped, apart) == pytest.approx(np.linalg.norm(d), abs=1e-5)
+    assert _smplx_offset(PROCEDURAL_MODEL, apart) == pytest.approx(np.linalg.norm(d), abs=1e-5)
+    with np.load(PROCEDURAL_MODEL, allow_pickle=False) as z:            # the template 5 cm aside (re-centred)
+        side = BodyModel.from_file(npz_copy(PROCEDURAL_MODEL, tmp_path / "side.npz",
+                                            v_template=z["v_template"] + 0.05 * np.eye(3)[0]))
+    assert body_offset(side, APPROACH) == pytest.approx(0.05, abs=1e-4)
     assert body_offset(shipped, npz_copy(GRASP, tmp_path / "own.npz", **{"goal.vertices": None})) is None
     with np.load(GRASP, allow_pickle=False) as z:
         ids = z["goal.vertex_ids"].copy()

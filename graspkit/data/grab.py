@@ -105,12 +105,12 @@ def grasp_frame(extras: Mapping[str, np.ndarray]) -> int:
 
 def body_offset(bm: BodyModel, path: str | os.PathLike) -> float | None:
     """How far (m, the largest distance) bm's vertices for a grasp file's parameters at its grasp frame lie from GOAL's
-    400 vertices stored with them (`goal.vertex_ids`, `goal.vertices`: `graspkit data make`'s labels), once turned
-    about the vertical and moved along the floor onto them (a clip moved on the floor as a whole is the same body;
-    one raised or sunk is not: its body would float or sink); None when the file stores none (one's own GRAB files).
-    ~1e-6 m when the file was made on bm. The closest of the vertices interpolated between the grasp frame and its
-    neighbours counts: a clip resampled to another frame rate (its goal frame rounded) holds the labelled instant
-    between two frames."""
+    400 vertices stored with them (`goal.vertex_ids`, `goal.vertices`: `graspkit data make`'s labels); None when the
+    file stores none (one's own GRAB files). ~1e-6 m when the file was made on bm. A clip moved as a whole, body and
+    object, is the same body: the vertices are taken back by the object's move since the labels (its translation at
+    the grasp frame minus `goal.object_transl`); a body moved away from its object, or another body's, is not. The
+    closest of the vertices interpolated between the grasp frame and its neighbours counts: a clip resampled to another
+    frame rate (its goal frame rounded) holds the labelled instant between two frames."""
     import torch
 
     a = read_arrays(path)
@@ -129,15 +129,12 @@ def body_offset(bm: BodyModel, path: str | os.PathLike) -> float | None:
     m = Motion(poses[lo:hi], np.asarray(a["body.params.transl"], np.float64).reshape(-1, 3)[lo:hi],
                np.asarray(a["body.betas"], np.float64).reshape(-1), 30.0)
     v = m.vertices(bm)[:, torch.as_tensor(ids)].double()                          # (frames, n, 3)
+    if "object.params.transl" in a and "goal.object_transl" in a:              # the clip's move since its labels
+        obj = torch.as_tensor(np.asarray(a["object.params.transl"], np.float64).reshape(-1, 3)[lo:hi])
+        v = v - (obj - torch.as_tensor(np.asarray(a["goal.object_transl"], np.float64).reshape(3)))[:, None]
     w = torch.linspace(0, 1, 11, dtype=torch.float64)[:, None, None, None]
-    between = ((1 - w) * v[:-1] + w * v[1:] if len(v) > 1 else v[None]).flatten(0, 1)    # (11 (frames - 1), n, 3)
-    target = torch.as_tensor(stored)
-    a, b = between[..., :2] - between[..., :2].mean(-2, keepdim=True), target[:, :2] - target[:, :2].mean(0)
-    yaw = torch.atan2((a[..., 0] * b[:, 1] - a[..., 1] * b[:, 0]).sum(-1), (a * b).sum((-1, -2)))   # 2-D Kabsch
-    c, s = torch.cos(yaw)[:, None], torch.sin(yaw)[:, None]
-    xy = torch.stack([c * a[..., 0] - s * a[..., 1], s * a[..., 0] + c * a[..., 1]], -1) + target[:, :2].mean(0)
-    moved = torch.cat([xy, between[..., 2:]], -1)
-    return float((moved - target).norm(dim=-1).amax(-1).min())
+    between = (1 - w) * v[:-1] + w * v[1:] if len(v) > 1 else v[None]             # (11, frames - 1, n, 3)
+    return float((between - torch.as_tensor(stored)).norm(dim=-1).amax(-1).min())
 
 
 def check_made_on(bm: BodyModel, paths: Sequence[str | os.PathLike], where: str, kind: str) -> None:
@@ -148,8 +145,8 @@ def check_made_on(bm: BodyModel, paths: Sequence[str | os.PathLike], where: str,
     if off is not None and off > MADE_ON_TOL:
         raise ValueError(f"{where}: its {kind} files were made on another body model than "
                          f"{bm.source or 'the one given'} ({Path(paths[0]).name}'s stored GOAL vertices lie up to "
-                         f"{1000 * off:.0f} mm from that body's for the same parameters, moved on the floor onto them; "
-                         "GRASPKIT_MODEL names the body): use the body that made them, or make data on this one "
+                         f"{1000 * off:.0f} mm from that body's for the same parameters; GRASPKIT_MODEL names the "
+                         "body; a body moved apart from its object since it was labelled reads the same): use the body that made them, or make data on this one "
                          f"(`graspkit data make --kind {kind} --out DIR`)")
 
 
