@@ -116,7 +116,7 @@ def teacher_forced_v2v(mnet: MNet, windows: MNetWindows, bm: BodyModel, index: T
 
 def _files(folder, kind: str, split: str | None) -> list:
     """GRAB-style files `<folder>/<kind>_*.npz` (`formats.clip_files`) whose object is in `split` ('train', 'val',
-    'test' or None: all); a ValueError when they were made on another body than graspkit's (`grab.check_made_on`)."""
+    'test' or None: all); a ValueError when they were made on another body than `_body()`'s (`grab.check_made_on`)."""
     from graspkit.data.formats import clip_files
     from graspkit.data.grab import check_made_on, load_grasp_sequence
     from graspkit.data.grasp import file_split

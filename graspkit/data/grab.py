@@ -146,8 +146,8 @@ def check_made_on(bm: BodyModel, paths: Sequence[str | os.PathLike], where: str,
         raise ValueError(f"{where}: its {kind} files were made on another body model than "
                          f"{bm.source or 'the one given'} ({Path(paths[0]).name}'s stored GOAL vertices lie up to "
                          f"{1000 * off:.0f} mm from that body's for the same parameters; GRASPKIT_MODEL names the "
-                         "body; a body moved apart from its object since it was labelled reads the same): use the body that made them, or make data on this one "
-                         f"(`graspkit data make --kind {kind} --out DIR`)")
+                         "body; a body moved apart from its object since it was labelled reads the same): use the "
+                         f"body that made them, or make data on this one (`graspkit data make --kind {kind} --out DIR`)")
 
 
 def to_arrays(seq: GraspSequence, model: str = DEFAULT_MODEL_NAME) -> dict[str, np.ndarray]:
