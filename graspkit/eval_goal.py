@@ -188,7 +188,9 @@ def _start_xy(seq) -> np.ndarray:
 
 def grasp_frames(seqs: list) -> list[int]:
     """The frame of each sequence's grasp: an approach clip's goal frame, a grasp file's grasp frame (else 0)."""
-    return [int(s.extras.get("grasp.goal_frame", s.extras.get("grasp.frame", np.array(0)))) for s in seqs]
+    from graspkit.data.grab import grasp_frame
+
+    return [grasp_frame(s.extras) for s in seqs]
 
 
 def gnet_samples(seqs: list, accepted_only: bool = True) -> dict[str, Tensor]:

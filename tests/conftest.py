@@ -40,6 +40,23 @@ def npz_copy(src: Path, dst: Path, **replace) -> Path:
     return dst
 
 
+def relabelled(src: Path, dst: Path, bm) -> Path:
+    """The grasp / approach files of folder src copied to dst with GOAL's stored vertices (`goal.vertices`, at the grasp
+    frame) recomputed on body model bm: files as if made on bm, their poses unchanged."""
+    from graspkit.data.grab import grasp_frame
+    from graspkit.data.motion import Motion
+
+    dst.mkdir(parents=True)
+    for p in sorted(Path(src).glob("*.npz")):
+        with np.load(p, allow_pickle=False) as z:
+            a = {k: z[k] for k in z.files}
+        f = grasp_frame(a)
+        m = Motion(a["body.params.fullpose"][f:f + 1].reshape(1, 55, 3), a["body.params.transl"][f:f + 1],
+                   a["body.betas"], 30.0)
+        npz_copy(p, dst / p.name, **{"goal.vertices": m.vertices(bm)[0, a["goal.vertex_ids"]].numpy()})
+    return dst
+
+
 @pytest.fixture(scope="session")
 def random_model_dir(tmp_path_factory) -> Path:
     """A folder `<tmp>/smplx/SMPLX_NEUTRAL.npz` holding a random dense model (non-zero pose correctives)."""

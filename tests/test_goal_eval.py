@@ -707,12 +707,11 @@ def test_a_training_run_is_keyed_by_the_body_it_is_trained_on(tmp_path, monkeypa
     with BodyModel.from_file of the file), and a taller body gives another key. The spy stops before any training.
     The taller body trains on the stub grasps relabelled as its own (GOAL's stored vertices recomputed on it: grasps
     of another body are refused, tests/test_made_on.py)."""
-    from conftest import npz_copy
+    from conftest import relabelled
 
     import graspkit.models.wholegrasp as W
     import graspkit.train as T
     from graspkit.body import BodyModel
-    from graspkit.data.grab import grasp_frame
     from graspkit.eval_goal import run_train_gnet, run_train_mnet
     from graspkit.paths import default_model_path
 
@@ -736,16 +735,8 @@ def test_a_training_run_is_keyed_by_the_body_it_is_trained_on(tmp_path, monkeypa
         arrays = {k: z[k] for k in z.files}
     tall = tmp_path / "tall.npz"
     np.savez(tall, **{**arrays, "v_template": arrays["v_template"] * 1.2})
-    grasps = {None: DATA_STUBS / "grasps", tall: tmp_path / "tall_grasps"}
-    (tmp_path / "tall_grasps").mkdir()
-    tall_bm = BodyModel.from_file(tall)
-    for p in sorted((DATA_STUBS / "grasps").glob("grasp_*.npz")):
-        with np.load(p, allow_pickle=False) as z:
-            a = {k: z[k] for k in z.files}
-        f = grasp_frame(a)
-        m = Motion(a["body.params.fullpose"][f:f + 1].reshape(1, 55, 3), a["body.params.transl"][f:f + 1],
-                   a["body.betas"], 30.0)
-        npz_copy(p, grasps[tall] / p.name, **{"goal.vertices": m.vertices(tall_bm)[0, a["goal.vertex_ids"]].numpy()})
+    grasps = {None: DATA_STUBS / "grasps",
+              tall: relabelled(DATA_STUBS / "grasps", tmp_path / "tall_grasps", BodyModel.from_file(tall))}
     run = {"gnet": lambda g: run_train_gnet([g], tmp_path / "o.pt", epochs=1, threads=1, progress=False),
            "mnet": lambda g: run_train_mnet([approach], tmp_path / "o.pt", epochs=1, threads=1, progress=False),
            "grabnet_smplx": lambda g: W.train_grabnet_smplx(g, tmp_path / "o.pt", epochs=1, progress=False)}[trainer]

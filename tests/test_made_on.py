@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import PROCEDURAL_MODEL, npz_copy
+from conftest import PROCEDURAL_MODEL, npz_copy, relabelled
 from graspkit.paths import DATA_STUBS
 
 GRASP = DATA_STUBS / "grasps" / "grasp_000000.npz"
@@ -112,23 +112,6 @@ def test_readers_refuse_grasps_made_on_another_body(big, tmp_path, monkeypatch):
     assert not list(tmp_path.iterdir())
 
 
-def _relabelled(src, dst, bm):
-    """The grasp / approach files of folder src copied to dst with GOAL's stored vertices recomputed on bm: files as
-    if made on bm (their poses unchanged)."""
-    from graspkit.data.grab import grasp_frame
-    from graspkit.data.motion import Motion
-
-    dst.mkdir(parents=True)
-    for p in sorted(src.glob("*.npz")):
-        with np.load(p, allow_pickle=False) as z:
-            a = {k: z[k] for k in z.files}
-        f = grasp_frame(a)
-        m = Motion(a["body.params.fullpose"][f:f + 1].reshape(1, 55, 3), a["body.params.transl"][f:f + 1],
-                   a["body.betas"], 30.0)
-        npz_copy(p, dst / p.name, **{"goal.vertices": m.vertices(bm)[0, a["goal.vertex_ids"]].numpy()})
-    return dst
-
-
 def test_every_folder_and_every_reader_of_the_benchmark_is_checked(big, tmp_path):
     """`eval --all` checks every --data folder (its ground-truth and motion rows read them all; until 2026-12-07 only
     the first grasp and approach folders were), and the rows' own readers (the ground truth's grasps, the planner's
@@ -139,7 +122,7 @@ def test_every_folder_and_every_reader_of_the_benchmark_is_checked(big, tmp_path
     from graspkit.eval_motionfill import approach_scene
 
     shipped, other = BodyModel.from_file(PROCEDURAL_MODEL), BodyModel.from_file(big)
-    theirs = _relabelled(DATA_STUBS / "grasps", tmp_path / "theirs", other)
+    theirs = relabelled(DATA_STUBS / "grasps", tmp_path / "theirs", other)
     with pytest.raises(ValueError, match=rf"data: {theirs}: its grasp files were made on another body model"):
         run_all(tmp_path / "report", data=[DATA_STUBS / "grasps", DATA_STUBS / "approach", theirs], methods=("gt",),
                 quick=True)
