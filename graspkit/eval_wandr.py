@@ -614,9 +614,7 @@ def starts_body_problem(starts: Sequence[I.StartPose], bm: BodyModel, checkpoint
     rollout would move the starts' body while FS, SR and DTG were read on bm."""
     if all(s.made_on(bm) for s in starts):
         return None
-    from graspkit.paths import default_model_path
-
-    return (f"checkpoint: {checkpoint}'s held-out starts were made on another body model than {default_model_path()} "
+    return (f"checkpoint: {checkpoint}'s held-out starts were made on another body model than {bm.source} "
             "(their rest joints differ; GRASPKIT_MODEL names the body evaluated): evaluate with the body it was "
             "trained on")
 

@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+import torch
 
 from graspkit.checks import GraspkitWarning, user_stacklevel
 from graspkit.data.formats import (SequenceFileError, _numbers, _scalar, check_source_rate, npz_load_error, resample,
@@ -111,8 +112,6 @@ def body_offset(bm: BodyModel, path: str | os.PathLike) -> float | None:
     the grasp frame minus `goal.object_transl`); a body moved away from its object, or another body's, is not. The
     closest of the vertices interpolated between the grasp frame and its neighbours counts: a clip resampled to another
     frame rate (its goal frame rounded) holds the labelled instant between two frames."""
-    import torch
-
     a = read_arrays(path)
     keys = ("body.params.fullpose", "body.params.transl", "body.betas", "goal.vertex_ids", "goal.vertices")
     if not all(k in a for k in keys):
