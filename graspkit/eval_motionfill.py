@@ -140,7 +140,8 @@ def windows_source(kind: str, n: int, data: Path | None = None, body: str | None
 def windows(kind: str, n: int, bm: BodyModel | None = None, data: Path | None = None,
             progress: bool = True) -> dict[str, np.ndarray]:
     """Cached windows of the first `n` clips of a procedural set: 'locomotion' (every 30 frames) or 'reach' (one window
-    per clip, ending at its goal frame: the wrist on the target, as an approach clip ends at the grasp)."""
+    per clip, ending at its goal frame: the wrist on the target, as an approach clip ends at the grasp). Clips made on
+    another body than bm (None: graspkit's default) are refused (`made_on.check_clips_made_on`, `grab.check_made_on`)."""
     from graspkit.data import load_motion
 
     if bm is None:
@@ -156,6 +157,9 @@ def windows(kind: str, n: int, bm: BodyModel | None = None, data: Path | None = 
     if kind == "approach":
         motions, names = approach_motions(root, n, bm)
     else:
+        from graspkit.data.made_on import check_clips_made_on
+
+        check_clips_made_on(bm, files, f"data: {root}", kind)           # their poses are posed on bm
         motions = [load_motion(f) for f in files]
     if kind == "reach":
         motions = [m.slice(0, m.goal_frame + 1) for m in motions]

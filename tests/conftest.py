@@ -57,6 +57,16 @@ def relabelled(src: Path, dst: Path, bm) -> Path:
     return dst
 
 
+@pytest.fixture(scope="module")
+def big(tmp_path_factory) -> Path:
+    """graspkit's body 8 % larger, as <tmp>/models/smplx/SMPLX_NEUTRAL.npz (smplx.create's layout)."""
+    folder = tmp_path_factory.mktemp("big") / "models" / "smplx"
+    folder.mkdir(parents=True)
+    with np.load(PROCEDURAL_MODEL, allow_pickle=False) as z:
+        return npz_copy(PROCEDURAL_MODEL, folder / "SMPLX_NEUTRAL.npz", v_template=z["v_template"] * 1.08,
+                        shapedirs=z["shapedirs"] * 1.08)
+
+
 @pytest.fixture(scope="session")
 def random_model_dir(tmp_path_factory) -> Path:
     """A folder `<tmp>/smplx/SMPLX_NEUTRAL.npz` holding a random dense model (non-zero pose correctives)."""

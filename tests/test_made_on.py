@@ -13,16 +13,6 @@ GRASP = DATA_STUBS / "grasps" / "grasp_000000.npz"
 APPROACH = DATA_STUBS / "approach" / "approach_000000.npz"
 
 
-@pytest.fixture(scope="module")
-def big(tmp_path_factory):
-    """graspkit's body 8 % larger, as <tmp>/models/smplx/SMPLX_NEUTRAL.npz (smplx.create's layout)."""
-    folder = tmp_path_factory.mktemp("big") / "models" / "smplx"
-    folder.mkdir(parents=True)
-    with np.load(PROCEDURAL_MODEL, allow_pickle=False) as z:
-        return npz_copy(PROCEDURAL_MODEL, folder / "SMPLX_NEUTRAL.npz", v_template=z["v_template"] * 1.08,
-                        shapedirs=z["shapedirs"] * 1.08)
-
-
 def _smplx_offset(model, path) -> float:
     """body_offset's figure with the smplx package's vertices: the largest distance between GOAL's stored vertices and
     the file's grasp-frame vertices taken back by the object's move since the labels, at the best of 11 points on each

@@ -172,7 +172,8 @@ def test_graspmotion_eval_measures_the_last_frame_against_the_clips_posed_mesh()
 
 def test_window_cache_is_keyed_by_the_body_and_the_window_version(tmp_path, monkeypatch):
     """`windows` reads back its own set, and builds another (never reads across) for another body model or another
-    WINDOWS_VERSION: a body 5 cm taller in its template gives windows of its own, as make_windows makes them."""
+    WINDOWS_VERSION: a body whose template is moved 1 cm along x gives windows of its own, as make_windows makes
+    them (moved further, or up, the clips' goals or floor would no longer hold on it: `made_on`, refused)."""
     from graspkit import eval_motionfill as E
     from graspkit.body.model import load_model_arrays
     from graspkit.data import load_motion
@@ -182,7 +183,7 @@ def test_window_cache_is_keyed_by_the_body_and_the_window_version(tmp_path, monk
     data = DATA_STUBS / "motion" / "reach"
     bm = BodyModel.from_file(default_model_path())
     arrays = dict(load_model_arrays(default_model_path()))
-    arrays["v_template"] = arrays["v_template"] + np.array([0.0, 0.0, 0.05], arrays["v_template"].dtype)
+    arrays["v_template"] = arrays["v_template"] + np.array([0.01, 0.0, 0.0], arrays["v_template"].dtype)
     tall = BodyModel(arrays)
     a = E.windows("reach", 2, bm, data=data, progress=False)
     for k, v in E.windows("reach", 2, bm, data=data, progress=False).items():

@@ -226,8 +226,8 @@ def test_errors_name_the_argument(clips):
 
 def test_cached_clips_are_keyed_by_the_clips_and_the_body(bm, tmp_path):
     """The ClipSet cache reads back what it wrote for the same files and body, and is rebuilt (a second file) for
-    another body model or another CLIPSET_VERSION, never read across them: a body 5 cm taller in its template has
-    rest joints 5 cm higher."""
+    another body model or another CLIPSET_VERSION, never read across them: a body whose template is moved 1 cm along
+    x has its rest joints there (moved further, or up, the clips' goals or floor would not hold on it: refused)."""
     from graspkit.body import BodyModel
     from graspkit.body.model import load_model_arrays
     from graspkit.data import wandr_dataset
@@ -237,9 +237,9 @@ def test_cached_clips_are_keyed_by_the_clips_and_the_body(bm, tmp_path):
     torch.testing.assert_close(again.rest, a.rest)
     assert len(list(tmp_path.glob("clips_*.npz"))) == 1
     arrays = dict(load_model_arrays(PROCEDURAL_MODEL))
-    arrays["v_template"] = arrays["v_template"] + np.array([0.0, 0.0, 0.05], arrays["v_template"].dtype)
+    arrays["v_template"] = arrays["v_template"] + np.array([0.01, 0.0, 0.0], arrays["v_template"].dtype)
     b = W.cached_clips(STUBS, BodyModel(arrays), limit=1, cache=tmp_path)
-    torch.testing.assert_close(b.rest[..., 2] - a.rest[..., 2], torch.full_like(a.rest[..., 2], 0.05))
+    torch.testing.assert_close(b.rest[..., 0] - a.rest[..., 0], torch.full_like(a.rest[..., 0], 0.01))
     assert len(list(tmp_path.glob("clips_*.npz"))) == 2
     mp = pytest.MonkeyPatch()
     mp.setattr(wandr_dataset, "CLIPSET_VERSION", wandr_dataset.CLIPSET_VERSION + 1)

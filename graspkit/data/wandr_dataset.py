@@ -415,7 +415,8 @@ def cached_clips(folder: str | Path, bm: BodyModel, limit: int | None = None, ca
     """All clips under `folder` (<kind>/*.npz for the sub-folders `kinds`, at most `limit` per kind) as a ClipSet, read
     from / written to a cache file named after the folder's file list with each file's member CRC-32s (read from the
     npz's zip directory, no decompression: a clip remade in place at the same size is new data), the body model
-    (`bm.digest()`) and CLIPSET_VERSION (so new or changed clips, another body or another clip code rebuild it)."""
+    (`bm.digest()`) and CLIPSET_VERSION (so new or changed clips, another body or another clip code rebuild it).
+    Clips made on another body than bm are refused (`made_on.check_clips_made_on`, the first of each kind)."""
     files = list_clips(folder, kinds=kinds, limit=limit)
     listing = "\n".join(f"{f.parent.name}/{f.name}:{f.stat().st_size}:{member_crcs(f)}" for f in files)
     key = hashlib.blake2b(f"{listing}\nbody={bm.digest()};version={CLIPSET_VERSION}".encode(),
@@ -425,8 +426,12 @@ def cached_clips(folder: str | Path, bm: BodyModel, limit: int | None = None, ca
         cache = cache_dir() / "wandr"
     path = Path(cache) / f"clips_{len(files)}_{key}.npz"
     clips = read_cache(path, load_clipset)
-    if clips is not None:
+    if clips is not None:                   # (written for this body: its clips passed the check below then)
         return clips
+    from graspkit.data.made_on import check_clips_made_on
+
+    for kind in kinds:                      # their labels on bm: clips of another body are refused, not learnt
+        check_clips_made_on(bm, clip_files(Path(folder) / kind, kind), f"folder: {Path(folder) / kind}", kind)
     clips = load_clips(files, bm)
     save_clipset(path, clips)
     return clips
