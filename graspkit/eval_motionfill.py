@@ -150,16 +150,22 @@ def windows(kind: str, n: int, bm: BodyModel | None = None, data: Path | None = 
 
         bm = BodyModel.from_file(default_model_path())
     out, root, files = windows_source(kind, n, data, bm.digest())
+    # their poses are posed on bm; checked before the cache too (one written before the check answers any body)
+    if kind == "approach":
+        from graspkit.data.grab import check_made_on
+
+        check_made_on(bm, files, f"data: {root}", kind)
+    else:
+        from graspkit.data.made_on import check_clips_made_on
+
+        check_clips_made_on(bm, files, f"data: {root}", kind)
     cached = read_cache(out, load_windows)
     if cached is not None:
         return cached
     names = None
     if kind == "approach":
-        motions, names = approach_motions(root, n, bm)
+        motions, names = approach_motions(root, n)                         # (checked above)
     else:
-        from graspkit.data.made_on import check_clips_made_on
-
-        check_clips_made_on(bm, files, f"data: {root}", kind)           # their poses are posed on bm
         motions = [load_motion(f) for f in files]
     if kind == "reach":
         motions = [m.slice(0, m.goal_frame + 1) for m in motions]

@@ -86,24 +86,49 @@ def test_readers_refuse_clips_made_on_another_body(big, tmp_path, monkeypatch):
     are under the floor; on the body that made them they are read; a cache written for one body does not answer for
     the other."""
     from graspkit.body import BodyModel
-    from graspkit.data.wandr_dataset import cached_clips
+    from graspkit.data.wandr_dataset import cached_clips, list_clips, load_clips
     from graspkit.eval_motionfill import windows
 
     monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
     folder = _motion_folder(tmp_path / "motion")
     shipped, other = BodyModel.from_file(PROCEDURAL_MODEL), BodyModel.from_file(big)
     assert len(cached_clips(folder, shipped).names) == 6                       # read, and cached for that body
-    with pytest.raises(ValueError, match=rf"folder: {folder / 'locomotion'}: its locomotion clips were made on another "
-                                         r"body model than .*SMPLX_NEUTRAL.npz: posed on it, locomotion_000000.npz's "
-                                         r"lowest vertex .* lies [6-8]\.\d cm under the floor"):
+    with pytest.raises(ValueError, match=rf"folder: {folder / 'locomotion'}: its locomotion clips do not sit on "
+                                         r".*SMPLX_NEUTRAL.npz as on the body that made them: posed on it, "
+                                         r"locomotion_000000.npz's lowest vertex .* lies [6-8]\.\d cm under the "
+                                         r"floor .*made on another body model"):
         cached_clips(folder, other)
-    with pytest.raises(ValueError, match=rf"folder: {folder / 'reach'}: its reach clips .* under the floor .* and "
+    with pytest.raises(ValueError, match=rf"folder: {folder / 'reach'}: its reach clips .* under the floor .* and its "
                                          r"wrist comes no closer than \d\.\d cm to the stored goal"):
         cached_clips(folder, other, kinds=("reach",))
+    with pytest.raises(ValueError, match=rf"paths: {folder / 'reach'}: its reach clips do not sit on"):
+        load_clips(list_clips(folder, kinds=("reach",)), other)               # the public loader too
     for kind in ("locomotion", "reach"):
         assert set(windows(kind, 2, bm=shipped, data=folder / kind, progress=False)["clip"].tolist()) == {0, 1}
-        with pytest.raises(ValueError, match=rf"data: {folder / kind}: its {kind} clips were made on another body"):
+        with pytest.raises(ValueError, match=rf"data: {folder / kind}: its {kind} clips do not sit on"):
             windows(kind, 2, bm=other, data=folder / kind, progress=False)
+
+
+def test_a_cache_written_before_the_check_answers_no_other_body(big, tmp_path, monkeypatch):
+    """Clip sets and windows cached for another body before the check existed (a graspkit of before 2026-12-07) are
+    not served: the check runs before the cache is read (an independent review found them served)."""
+    from graspkit.body import BodyModel
+    from graspkit.data import made_on
+    from graspkit.data.wandr_dataset import cached_clips
+    from graspkit.eval_motionfill import windows
+
+    monkeypatch.setenv("GRASPKIT_CACHE", str(tmp_path / "cache"))
+    folder = _motion_folder(tmp_path / "motion", n=2)
+    other = BodyModel.from_file(big)
+    with monkeypatch.context() as m:                                   # the code of before: no check
+        m.setattr(made_on, "clip_body_problem", lambda *a: None)
+        assert len(cached_clips(folder, other).names) == 4
+        assert len(windows("reach", 2, bm=other, data=folder / "reach", progress=False)["clip"]) == 2
+    assert len(list((tmp_path / "cache").rglob("*.npz"))) == 2                       # both cached for that body
+    with pytest.raises(ValueError, match=r"its locomotion clips do not sit on"):
+        cached_clips(folder, other)
+    with pytest.raises(ValueError, match=r"its reach clips do not sit on"):
+        windows("reach", 2, bm=other, data=folder / "reach", progress=False)
 
 
 def _turned(m, angle: float, shift: np.ndarray):

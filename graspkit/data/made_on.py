@@ -61,26 +61,32 @@ def clip_offsets(bm: BodyModel, m: Motion) -> dict[str, float]:
 
 
 def clip_body_problem(bm: BodyModel, path: str | os.PathLike, kind: str) -> str | None:
-    """What is wrong with posing clip file `path` on bm (a sentence), or None when its labels hold on bm (or it has
-    none)."""
+    """What is wrong with posing clip file `path` (of folder kind `kind`: locomotion, reach, ...) on bm (a sentence),
+    or None when its labels hold on bm (or it has none)."""
     from graspkit.data.formats import load_motion
 
     off = clip_offsets(bm, load_motion(path))
     said = []
     if abs(off.get("floor", 0.0)) > FLOOR_TOL:
         cm = 100 * off["floor"]
-        said.append(f"its lowest vertex at the frames labelled in contact lies {abs(cm):.1f} cm "
+        said.append(f"lowest vertex at the frames labelled in contact lies {abs(cm):.1f} cm "
                     f"{'under' if cm < 0 else 'above'} the floor (on the body that made it: within "
                     f"{100 * FLOOR_TOL:g} cm)")
     if off.get("goal", 0.0) > GOAL_TOL:
-        said.append(f"its wrist comes no closer than {100 * off['goal']:.1f} cm to the stored goal at the goal frame "
-                    f"(on the body that made it: within {100 * GOAL_TOL:g} cm)")
+        said.append(f"wrist comes no closer than {100 * off['goal']:.1f} cm to the stored goal at the goal frame "
+                    "(graspkit's reaching clips end within 1 cm of it on the body that made them; one planned "
+                    "towards a goal out of that body's reach, as `plan_reach` keeps it, never gets there)")
     if not said:
         return None
-    return (f"its {kind} clips were made on another body model than {bm.source or 'the one given'}: posed on it, "
-            f"{Path(path).name}'s " + " and ".join(s.removeprefix("its ") for s in said)
-            + "; GRASPKIT_MODEL names the body (a clip raised or sunk since it was made reads the same): use the body "
-            f"that made them, or make clips on this one (`graspkit data make --kind {kind} --out DIR`)")
+    from graspkit.data.cli import KINDS                      # `graspkit data make`'s clip kinds
+
+    known = kind in KINDS
+    return (f"its {kind + ' ' if known else ''}clips do not sit on {bm.source or 'the body model given'} as on the "
+            f"body that made them: posed on it, {Path(path).name}'s " + " and its ".join(said)
+            + ". Most likely they were made on another body model (GRASPKIT_MODEL names the body; a clip raised or "
+            "sunk since it was made reads the same): use the body that made them, or make clips on this one "
+            f"(`graspkit data make --kind {kind if known else 'locomotion'} --out DIR`"
+            + ("" if known else ", `--kind reach`") + ")")
 
 
 def check_clips_made_on(bm: BodyModel, paths: Sequence[str | os.PathLike], where: str, kind: str) -> None:

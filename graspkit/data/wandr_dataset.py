@@ -189,9 +189,16 @@ def clips_from_motions(motions: Sequence[Motion], names: Sequence[str], bm: Body
 
 
 def load_clips(paths: Sequence[str | Path], bm: BodyModel,
-               max_foot_height: float | None = MAX_FOOT_HEIGHT) -> ClipSet:
-    """Load clip files (AMASS / CIRCLE-style .npz, resampled to 30 fps) into a ClipSet named '<kind folder>/<file>'."""
+               max_foot_height: float | None = MAX_FOOT_HEIGHT, check: bool = True) -> ClipSet:
+    """Load clip files (AMASS / CIRCLE-style .npz, resampled to 30 fps) into a ClipSet named '<kind folder>/<file>'.
+    check: refuse clips made on another body than bm (`made_on.check_clips_made_on`, the first file of each folder)."""
     paths = [Path(p) for p in paths]
+    if check:
+        from graspkit.data.made_on import check_clips_made_on
+
+        for folder in dict.fromkeys(p.parent for p in paths):
+            check_clips_made_on(bm, [next(p for p in paths if p.parent == folder)], f"paths: {folder}",
+                                folder.name)
     motions = [load_motion(p) for p in paths]
     names = [f"{p.parent.name}/{p.name}" for p in paths]
     return clips_from_motions(motions, names, bm, max_foot_height)
@@ -425,13 +432,14 @@ def cached_clips(folder: str | Path, bm: BodyModel, limit: int | None = None, ca
         from graspkit.paths import cache_dir
         cache = cache_dir() / "wandr"
     path = Path(cache) / f"clips_{len(files)}_{key}.npz"
-    clips = read_cache(path, load_clipset)
-    if clips is not None:                   # (written for this body: its clips passed the check below then)
-        return clips
     from graspkit.data.made_on import check_clips_made_on
 
-    for kind in kinds:                      # their labels on bm: clips of another body are refused, not learnt
-        check_clips_made_on(bm, clip_files(Path(folder) / kind, kind), f"folder: {Path(folder) / kind}", kind)
-    clips = load_clips(files, bm)
+    for kind in kinds:                      # their labels on bm: clips of another body are refused, not learnt (before
+        sub = Path(folder) / kind           # the cache too: one written before this check answers for any body)
+        check_clips_made_on(bm, clip_files(sub, kind), f"folder: {sub}", kind)
+    clips = read_cache(path, load_clipset)
+    if clips is not None:
+        return clips
+    clips = load_clips(files, bm, check=False)
     save_clipset(path, clips)
     return clips
