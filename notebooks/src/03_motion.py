@@ -301,6 +301,26 @@ with tempfile.TemporaryDirectory() as d:
 print("round trip exact:", np.array_equal(back.poses, clips[5].poses), "| goal frame", back.goal_frame, "| hand", back.hand)
 
 # %% [markdown]
+# The file names no body model: `poses`, `trans` and `betas` mean something only on the body that made them. Its labels
+# remember what that body did — a foot on the floor at every frame labelled in contact, the wrist on the goal at the
+# goal frame — so `graspkit.data.made_on.clip_offsets` can tell. Posed on a body only 2 % larger, the same parameters
+# put the feet under the floor and the wrist off the goal; WANDR's and MotionFill's readers refuse such a folder
+# (`check_clips_made_on`) rather than learn from it.
+
+# %%
+from graspkit.body.model import load_model_arrays
+from graspkit.data.made_on import clip_offsets
+
+arrays = dict(load_model_arrays(default_model_path()))
+arrays["v_template"], arrays["shapedirs"] = arrays["v_template"] * 1.02, arrays["shapedirs"] * 1.02
+bigger = BodyModel(arrays)
+for name, body in (("the body that made it", bm), ("a body 2 % larger", bigger)):
+    off = clip_offsets(body, back)
+    print(f"{name:22s} lowest vertex at the contact frames {100 * off['floor']:+.2f} cm | "
+          f"wrist to goal {100 * off['goal']:.2f} cm")
+assert abs(clip_offsets(bm, back)["floor"]) < 0.01 < abs(clip_offsets(bigger, back)["floor"])
+
+# %% [markdown]
 # ## Exercise
 # 1. Make the person walk backwards (`integrate_controls` with a negative forward speed): which parts of the footstep
 #    and foot-phase rules still make sense? Look at the heel-strike angle (`Step.strike`) of backward steps.
