@@ -304,8 +304,8 @@ print("round trip exact:", np.array_equal(back.poses, clips[5].poses), "| goal f
 # The file names no body model: `poses`, `trans` and `betas` mean something only on the body that made them. Its labels
 # remember what that body did — a foot on the floor at every frame labelled in contact, the wrist on the goal at the
 # goal frame — so `graspkit.data.made_on.clip_offsets` can tell. Posed on a body only 2 % larger, the same parameters
-# put the feet under the floor and the wrist off the goal; WANDR's and MotionFill's readers refuse such a folder
-# (`check_clips_made_on`) rather than learn from it.
+# put the feet about 2 cm under the floor; WANDR's and MotionFill's readers refuse such a folder rather than learn from
+# it (`check_clips_made_on`: the feet more than 1 cm off the floor, or the wrist more than 2 cm off its goal).
 
 # %%
 from graspkit.body.model import load_model_arrays
