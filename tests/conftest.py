@@ -57,6 +57,23 @@ def relabelled(src: Path, dst: Path, bm) -> Path:
     return dst
 
 
+def smplx_posed(model: Path, fullpose: np.ndarray, trans: np.ndarray, betas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The smplx package's vertices (n, V, 3) and joints (n, J, 3), float64, of the model file `model` (smplx.create's
+    layout: <root>/smplx/SMPLX_NEUTRAL.npz) for full poses (n, 165) or (n, 55, 3) (axis-angle, the hand mean not
+    added), translations (n, 3) and betas (10,)."""
+    import smplx
+
+    n = len(fullpose)
+    p = torch.as_tensor(np.asarray(fullpose).reshape(n, 165), dtype=torch.float64)
+    ref = smplx.create(str(Path(model).parent.parent), model_type="smplx", gender="neutral", ext="npz", use_pca=False,
+                       flat_hand_mean=True, num_betas=10, batch_size=n, dtype=torch.float64)
+    out = ref(betas=torch.as_tensor(np.asarray(betas)[None, :10], dtype=torch.float64).expand(n, -1),
+              global_orient=p[:, :3], body_pose=p[:, 3:66], jaw_pose=p[:, 66:69], leye_pose=p[:, 69:72],
+              reye_pose=p[:, 72:75], left_hand_pose=p[:, 75:120], right_hand_pose=p[:, 120:165],
+              expression=torch.zeros(n, 10, dtype=torch.float64), transl=torch.as_tensor(trans, dtype=torch.float64))
+    return out.vertices.detach().numpy(), out.joints.detach().numpy()
+
+
 @pytest.fixture(scope="module")
 def big(tmp_path_factory) -> Path:
     """graspkit's body 8 % larger, as <tmp>/models/smplx/SMPLX_NEUTRAL.npz (smplx.create's layout)."""

@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
-from conftest import PROCEDURAL_MODEL, npz_copy, relabelled
+from conftest import PROCEDURAL_MODEL, npz_copy, relabelled, smplx_posed
 from graspkit.paths import DATA_STUBS
 
 GRASP = DATA_STUBS / "grasps" / "grasp_000000.npz"
@@ -17,21 +16,13 @@ def _smplx_offset(model, path) -> float:
     """body_offset's figure with the smplx package's vertices: the largest distance between GOAL's stored vertices and
     the file's grasp-frame vertices taken back by the object's move since the labels, at the best of 11 points on each
     segment to a neighbouring frame."""
-    import smplx
-
     with np.load(path, allow_pickle=False) as z:
         a = {k: z[k] for k in z.files}
     f = int(a.get("grasp.goal_frame", a.get("grasp.frame", 0)))
     lo, hi = max(f - 1, 0), min(f + 2, len(a["body.params.fullpose"]))
     n = hi - lo
-    p = torch.as_tensor(a["body.params.fullpose"][lo:hi], dtype=torch.float64)
-    ref = smplx.create(str(model.parent.parent), model_type="smplx", gender="neutral", ext="npz", use_pca=False,
-                       flat_hand_mean=True, num_betas=10, batch_size=n, dtype=torch.float64)
-    v = ref(betas=torch.as_tensor(a["body.betas"][None], dtype=torch.float64).expand(n, -1), global_orient=p[:, :3],
-            body_pose=p[:, 3:66], jaw_pose=p[:, 66:69], leye_pose=p[:, 69:72], reye_pose=p[:, 72:75],
-            left_hand_pose=p[:, 75:120], right_hand_pose=p[:, 120:165], expression=torch.zeros(n, 10).double(),
-            transl=torch.as_tensor(a["body.params.transl"][lo:hi], dtype=torch.float64)).vertices
-    v = v[:, a["goal.vertex_ids"]].numpy() - (a["object.params.transl"][lo:hi] - a["goal.object_transl"])[:, None]
+    v, _ = smplx_posed(model, a["body.params.fullpose"][lo:hi], a["body.params.transl"][lo:hi], a["body.betas"])
+    v = v[:, a["goal.vertex_ids"]] - (a["object.params.transl"][lo:hi] - a["goal.object_transl"])[:, None]
     pairs = [(k, k + 1) for k in range(n - 1)] or [(0, 0)]             # a one-frame grasp file: that frame
     return min(float(np.linalg.norm((1 - w) * v[i] + w * v[j] - a["goal.vertices"], axis=1).max())
                for i, j in pairs for w in np.linspace(0, 1, 11))

@@ -7,9 +7,8 @@ import shutil
 
 import numpy as np
 import pytest
-import torch
 
-from conftest import PROCEDURAL_MODEL
+from conftest import PROCEDURAL_MODEL, smplx_posed
 from graspkit.paths import DATA_STUBS
 
 LOCO = DATA_STUBS / "motion" / "locomotion" / "locomotion_000004.npz"
@@ -17,33 +16,17 @@ REACH = DATA_STUBS / "motion" / "reach" / "reach_000006.npz"
 RIGHT_WRIST = 21                       # SMPL-X's joint order: pelvis, 21 body joints (..., 20 left, 21 right wrist), ...
 
 
-def _smplx(model, poses: np.ndarray, trans: np.ndarray, betas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The smplx package's vertices (n, V, 3) and joints (n, J, 3) of `model` for poses (n, 55, 3) (the hand mean not
-    added), trans (n, 3), betas (10,)."""
-    import smplx
-
-    n = len(poses)
-    p = torch.as_tensor(poses.reshape(n, 165), dtype=torch.float64)
-    ref = smplx.create(str(model.parent.parent), model_type="smplx", gender="neutral", ext="npz", use_pca=False,
-                       flat_hand_mean=True, num_betas=10, batch_size=n, dtype=torch.float64)
-    out = ref(betas=torch.as_tensor(betas[None, :10], dtype=torch.float64).expand(n, -1), global_orient=p[:, :3],
-              body_pose=p[:, 3:66], jaw_pose=p[:, 66:69], leye_pose=p[:, 69:72], reye_pose=p[:, 72:75],
-              left_hand_pose=p[:, 75:120], right_hand_pose=p[:, 120:165], expression=torch.zeros(n, 10).double(),
-              transl=torch.as_tensor(trans, dtype=torch.float64))
-    return out.vertices.detach().numpy(), out.joints.detach().numpy()
-
-
 def _smplx_offsets(model, m) -> dict[str, float]:
     """clip_offsets' figures by the smplx package: the median over the contact frames of the lowest vertex's height;
     for a reaching clip with its goal above the floor (no FLOOR_WRIST rule), the closest the right wrist comes to it at
     11 points on each segment from the goal frame to a neighbouring frame."""
     frames = np.flatnonzero(m.contacts.any(1))
-    v, _ = _smplx(model, m.poses[frames], m.trans[frames], m.betas)
+    v, _ = smplx_posed(model, m.poses[frames], m.trans[frames], m.betas)
     out = {"floor": float(np.median(v[..., 2].min(-1)))}
     if m.goal is not None:
         assert m.hand == "right" and m.goal[2] > 0.3                     # a goal well above the floor
         lo, hi = m.goal_frame - 1, m.goal_frame + 2
-        _, j = _smplx(model, m.poses[lo:hi], m.trans[lo:hi], m.betas)
+        _, j = smplx_posed(model, m.poses[lo:hi], m.trans[lo:hi], m.betas)
         w = j[:, RIGHT_WRIST]
         out["goal"] = min(float(np.linalg.norm((1 - t) * w[k] + t * w[k + 1] - m.goal))
                           for k in range(len(w) - 1) for t in np.linspace(0, 1, 11))
@@ -138,7 +121,7 @@ def _turned(m, angle: float, shift: np.ndarray):
 
     from scipy.spatial.transform import Rotation
 
-    _, j = _smplx(PROCEDURAL_MODEL, np.zeros((1, 55, 3)), np.zeros((1, 3)), m.betas)
+    _, j = smplx_posed(PROCEDURAL_MODEL, np.zeros((1, 55, 3)), np.zeros((1, 3)), m.betas)
     pelvis = j[0, 0]
     turn = Rotation.from_rotvec([0.0, 0.0, angle])
     poses = m.poses.copy()

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from graspkit.data.motion import Motion
 
 # The body that made graspkit's clips keeps its lowest vertex within 0.25 cm of the floor at every frame labelled in
-# contact (the median within 0.04 cm: the 20 shipped clips); one 2 % larger puts the median 1.7-2.0 cm under it.
+# contact (the median within 0.05 cm: the 20 shipped clips); one 2 % larger puts the median 1.7-2.0 cm under it.
 FLOOR_TOL = 0.01           # m, on the median over the contact frames
 # The planner ends within 1 cm of its target or stores the wrist as the goal (`reaching._goal_as_reached`).
 GOAL_TOL = 0.02            # m

@@ -188,17 +188,25 @@ def clips_from_motions(motions: Sequence[Motion], names: Sequence[str], bm: Body
                    [names[k] for k in keep])
 
 
+def check_folders_made_on(bm: BodyModel, paths: Sequence[Path], arg: str) -> None:
+    """Refuse clip files made on another body than bm: the first of each folder among `paths`
+    (`made_on.check_clips_made_on`, its error naming `arg` and the folder, the folder's name as the kind)."""
+    from graspkit.data.made_on import check_clips_made_on
+
+    first: dict[Path, Path] = {}
+    for p in paths:
+        first.setdefault(p.parent, p)
+    for folder, p in first.items():
+        check_clips_made_on(bm, [p], f"{arg}: {folder}", folder.name)
+
+
 def load_clips(paths: Sequence[str | Path], bm: BodyModel,
                max_foot_height: float | None = MAX_FOOT_HEIGHT, check: bool = True) -> ClipSet:
     """Load clip files (AMASS / CIRCLE-style .npz, resampled to 30 fps) into a ClipSet named '<kind folder>/<file>'.
     check: refuse clips made on another body than bm (`made_on.check_clips_made_on`, the first file of each folder)."""
     paths = [Path(p) for p in paths]
     if check:
-        from graspkit.data.made_on import check_clips_made_on
-
-        for folder in dict.fromkeys(p.parent for p in paths):
-            check_clips_made_on(bm, [next(p for p in paths if p.parent == folder)], f"paths: {folder}",
-                                folder.name)
+        check_folders_made_on(bm, paths, "paths")
     motions = [load_motion(p) for p in paths]
     names = [f"{p.parent.name}/{p.name}" for p in paths]
     return clips_from_motions(motions, names, bm, max_foot_height)
@@ -432,11 +440,9 @@ def cached_clips(folder: str | Path, bm: BodyModel, limit: int | None = None, ca
         from graspkit.paths import cache_dir
         cache = cache_dir() / "wandr"
     path = Path(cache) / f"clips_{len(files)}_{key}.npz"
-    from graspkit.data.made_on import check_clips_made_on
-
-    for kind in kinds:                      # their labels on bm: clips of another body are refused, not learnt (before
-        sub = Path(folder) / kind           # the cache too: one written before this check answers for any body)
-        check_clips_made_on(bm, clip_files(sub, kind), f"folder: {sub}", kind)
+    # their labels on bm: clips of another body are refused, not learnt (before the cache too: one written before
+    # this check answers for any body)
+    check_folders_made_on(bm, files, "folder")
     clips = read_cache(path, load_clipset)
     if clips is not None:
         return clips

@@ -314,11 +314,11 @@ from graspkit.data.made_on import clip_offsets
 arrays = dict(load_model_arrays(default_model_path()))
 arrays["v_template"], arrays["shapedirs"] = arrays["v_template"] * 1.02, arrays["shapedirs"] * 1.02
 bigger = BodyModel(arrays)
-for name, body in (("the body that made it", bm), ("a body 2 % larger", bigger)):
-    off = clip_offsets(body, back)
+offs = {name: clip_offsets(body, back) for name, body in (("the body that made it", bm), ("a body 2 % larger", bigger))}
+for name, off in offs.items():
     print(f"{name:22s} lowest vertex at the contact frames {100 * off['floor']:+.2f} cm | "
           f"wrist to goal {100 * off['goal']:.2f} cm")
-assert abs(clip_offsets(bm, back)["floor"]) < 0.01 < abs(clip_offsets(bigger, back)["floor"])
+assert abs(offs["the body that made it"]["floor"]) < 0.01 < abs(offs["a body 2 % larger"]["floor"])
 
 # %% [markdown]
 # ## Exercise
