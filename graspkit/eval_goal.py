@@ -370,9 +370,10 @@ def run_train_mnet(folders: Sequence[str | Path], out: str | Path, variant: str 
     t0 = time.perf_counter()
     train = mnet_windows(folders, "train", cfg, stride, goal_repeat)
     val = mnet_windows(folders, "val", cfg, max(stride, 4))
+    # held: MNet.forward holds the features training held still (2026-12-07); a run file from before is not resumed
     run = run_path(f"mnet_{variant}", seed, run_dir, cfg=asdict(cfg), epochs=epochs, stride=stride,
                     data=[str(f) for f in folders], n=len(train), goal_repeat=goal_repeat, vel_noise=vel_noise,
-                    files=files_key(folders), body=_body()[0].digest())
+                    files=files_key(folders), body=_body()[0].digest(), held="floored")
     net, hist = train_mnet(train, val, cfg, train_cfg=TrainConfig(epochs=epochs, batch_size=128, lr=1e-3, seed=seed,
                                                                    num_threads=threads),
                            checkpoint=run, time_limit_s=time_limit_s, progress=progress, vel_noise=vel_noise)
@@ -652,13 +653,11 @@ def evaluate(folders: Sequence[str | Path] | None = None, stubs: str | Path | No
              max_frames: int = 300, progress: bool = True) -> dict:
     """GOAL Tab. 1, Tab. 2 and foot sliding on the test objects with the shipped checkpoints (MNet's rollouts up to
     `max_frames` each); written as JSON. `progress`: a bar over the four phases (minutes each at the defaults)."""
-    import time
     from pathlib import Path
 
     from tqdm.auto import tqdm
 
     from graspkit.models.gnet import load_gnet
-    from graspkit.models.mnet import MNetConfig, load_mnet
     from graspkit.paths import DATA_STUBS, write_json
     from graspkit.progress import hidden
 
@@ -666,32 +665,17 @@ def evaluate(folders: Sequence[str | Path] | None = None, stubs: str | Path | No
     stubs = Path(stubs or DATA_STUBS / "checkpoints")
     with tqdm(total=4, desc="GOAL eval", unit="phase", disable=hidden(progress)) as bar:
         bar.set_postfix_str("Tab. 1: GNet samples, refined")
-        bm, gv, body = _body()
         res: dict = {"paper": {"tab1": PAPER_TAB1, "tab2": PAPER_TAB2, "sliding": PAPER_SLIDING},
                      "config": {"n_grasps": n_grasps, "n_rollouts": n_rollouts, "window_stride": window_stride,
                                 "seed": seed, "max_frames": max_frames, "threads": torch.get_num_threads()}}
         res.update(tab1_results(folders, stubs, n_grasps, seed))
         bar.update()
         bar.set_postfix_str("Tab. 2: MNet, teacher-forced")
-        gnet = load_gnet(stubs / "gnet.pt")
-        # Tab. 2: teacher-forced 10-frame horizon on the test clips' windows
-        t1 = time.perf_counter()
-        windows = mnet_windows(folders, "test", MNetConfig(), stride=window_stride)
-        idx = torch.arange(len(windows))
-        res["tab2"] = {}
-        for variant, name in (("mnet", "MNet"), ("no_iaa", "MNet-w/o-IAA"), ("pose", "MNet-Pose"),
-                              ("1frame", "1 output frame")):
-            path = stubs / ("mnet.pt" if variant == "mnet" else f"mnet_{variant}.pt")
-            if not path.is_file():
-                continue
-            e = teacher_forced_v2v(load_mnet(path), windows, bm, idx)
-            res["tab2"][name] = {"body": e.body, "hand": e.hand, "feet": e.feet}
-        res["tab2_windows"] = len(idx)
-        res["tab2_seconds"] = time.perf_counter() - t1
+        res.update(tab2_results(folders, stubs, window_stride))
         bar.update()
         bar.set_postfix_str("rollouts: MNet from the clips' starts")
         seqs = rollout_sequences(folders, n_rollouts)
-        res.update(rollout_results(seqs, stubs, gnet, seed, max_frames))
+        res.update(rollout_results(seqs, stubs, load_gnet(stubs / "gnet.pt"), seed, max_frames))
         out = Path(out or stubs / "goal_eval.json")
         write_json(out, res)                   # GOAL's tables first: SAGA's row takes minutes
         bar.update()
@@ -723,6 +707,28 @@ def rollout_results(seqs: list, stubs: str | Path, gnet: GNet, seed: int = 0, ma
             "sliding": {"GOAL (GNet + MNet, ours)": full["sliding"], "MNet to the true goal": to_gt["sliding"],
                         "synthetic GT (approach frames)": clip_sliding(clips)},
             "rollout_seconds": time.perf_counter() - t0}
+
+
+def tab2_results(folders: Sequence[str | Path], stubs: str | Path, window_stride: int = 5) -> dict:
+    """Tab. 2: the teacher-forced 10-frame errors of MNet and of each ablation found in `stubs` (mnet.pt,
+    mnet_<variant>.pt) on every `window_stride`-th window of the test clips. {'tab2', 'tab2_windows', 'tab2_seconds'}."""
+    import time
+    from pathlib import Path
+
+    from graspkit.models.mnet import MNetConfig, load_mnet
+
+    t0 = time.perf_counter()
+    bm, _, _ = _body()
+    windows = mnet_windows(folders, "test", MNetConfig(), stride=window_stride)
+    idx = torch.arange(len(windows))
+    tab2 = {}
+    for variant, name in (("mnet", "MNet"), ("no_iaa", "MNet-w/o-IAA"), ("pose", "MNet-Pose"),
+                          ("1frame", "1 output frame")):
+        path = Path(stubs) / ("mnet.pt" if variant == "mnet" else f"mnet_{variant}.pt")
+        if path.is_file():
+            e = teacher_forced_v2v(load_mnet(path), windows, bm, idx)
+            tab2[name] = {"body": e.body, "hand": e.hand, "feet": e.feet}
+    return {"tab2": tab2, "tab2_windows": len(idx), "tab2_seconds": time.perf_counter() - t0}
 
 
 def tab1_results(folders: Sequence[str | Path], stubs: str | Path, n_grasps: int = 60, seed: int = 0,
@@ -828,6 +834,8 @@ def main(argv: list[str] | None = None) -> int:
                       help="add only SAGA's foot-sliding row to an existing JSON (the same rollout sequences)")
     only.add_argument("--rollouts-only", action="store_true",
                       help="recompute only the MNet rollouts and GOAL's sliding rows in an existing JSON (SAGA's kept)")
+    only.add_argument("--tab2-only", action="store_true",
+                      help="recompute only Tab. 2 (MNet and the ablations in --checkpoints) in an existing JSON")
     a = p.parse_args(argv)
     refuse_folder_out(argv)
     expand_user_paths(a)
@@ -838,12 +846,13 @@ def main(argv: list[str] | None = None) -> int:
     if a.out is not None:
         check_out(a.out, is_file=True)                # before any work
     torch.set_num_threads(a.threads)
-    if a.tab1_only or a.saga_only or a.rollouts_only:          # update one part of an existing evaluation
+    if a.tab1_only or a.saga_only or a.rollouts_only or a.tab2_only:     # update one part of an existing evaluation
         from graspkit.paths import DATA_STUBS, write_json
 
         stubs = Path(a.checkpoints or DATA_STUBS / "checkpoints")
         out = Path(a.out or stubs / "goal_eval.json")
-        flag = "--tab1-only" if a.tab1_only else "--saga-only" if a.saga_only else "--rollouts-only"
+        flag = ("--tab1-only" if a.tab1_only else "--saga-only" if a.saga_only else
+                "--tab2-only" if a.tab2_only else "--rollouts-only")
         if not out.is_file():
             raise FileNotFoundError(f"--out: no evaluation at {out} to update (run without {flag})")
         try:                                            # read now: the update is written after minutes of work
@@ -866,6 +875,9 @@ def main(argv: list[str] | None = None) -> int:
                 new["tab1_seconds_rows"] = new.pop("tab1_seconds")
             r.update(new)
             shown = {k: r[k] for k in ("tab1", "tab1_paired")}
+        elif a.tab2_only:
+            r.update(tab2_results(folders, stubs, a.window_stride))
+            shown = {"tab2": r["tab2"]}
         elif a.rollouts_only:
             from graspkit.models.gnet import load_gnet
 

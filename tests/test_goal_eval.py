@@ -700,6 +700,36 @@ def test_tab2_rows_come_from_their_own_checkpoints(tmp_path, monkeypatch):
     assert got == {"MNet": 1.0, "MNet-w/o-IAA": 2.0, "MNet-Pose": 3.0, "1 output frame": 4.0}
 
 
+def test_tab2_only_recomputes_table_2_from_the_checkpoints_and_keeps_the_rest(tmp_path, monkeypatch, capsys):
+    """`python -m graspkit.eval_goal --tab2-only`: Tab. 2 measured again from the MNet checkpoints in --checkpoints
+    (stand-ins tag each row with its file; a variant without a file has no row), every other part of the JSON kept and
+    the update logged."""
+    import json
+
+    import graspkit.eval_goal as eg
+    import graspkit.models.mnet as mnet_mod
+    from graspkit.eval_goal import V2V
+
+    files = {"mnet.pt": 1.0, "mnet_pose.pt": 3.0}
+    for f in files:
+        (tmp_path / f).write_bytes(b"")
+    monkeypatch.setattr(mnet_mod, "load_mnet", lambda p: Path(p).name)
+    monkeypatch.setattr(eg, "mnet_windows", lambda folders, split, cfg, stride: list(range(7 * stride)))
+    monkeypatch.setattr(eg, "teacher_forced_v2v", lambda net, w, bm, idx: V2V(files[net], 10 * files[net], 0.0))
+    out = tmp_path / "goal_eval.json"
+    kept = {"tab1": {"GNet": {"volume": 2.0}}, "sliding": {"GOAL (GNet + MNet, ours)": 0.05},
+            "rollouts": {"clips": 12}, "tab2": {"MNet-w/o-IAA": {"body": 9.0}}}
+    out.write_text(json.dumps(kept))
+    assert eg.main(["--tab2-only", "--data", str(tmp_path), "--checkpoints", str(tmp_path), "--out", str(out),
+                    "--window-stride", "2", "--threads", "1"]) == 0
+    r = json.loads(out.read_text())
+    assert r["tab2"] == {"MNet": {"body": 1.0, "hand": 10.0, "feet": 0.0}, "MNet-Pose": {"body": 3.0, "hand": 30.0,
+                                                                                       "feet": 0.0}}
+    assert r["tab2_windows"] == 14 and all(r[k] == v for k, v in kept.items() if k != "tab2")
+    assert r["updates"][-1]["flag"] == "--tab2-only"
+    assert json.loads(capsys.readouterr().out)["tab2"] == r["tab2"]
+
+
 @pytest.mark.parametrize("trainer", ["gnet", "mnet", "grabnet_smplx"])
 def test_a_training_run_is_keyed_by_the_body_it_is_trained_on(tmp_path, monkeypatch, trainer):
     """GNet's, MNet's and the GrabNet-SMPLX baseline's labels are computed on the body GRASPKIT_MODEL names, so a run

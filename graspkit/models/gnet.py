@@ -151,11 +151,14 @@ class Standardiser(nn.Module):
         """Undo: (B,D) -> (B,D)."""
         return y * self.std + self.mean
 
+    def floored(self, min_std: float = MIN_STD) -> Tensor:
+        """(D,) bool: the features whose std sits at the floor (the training data hardly moved them)."""
+        return self.std <= min_std * (1 + 1e-3)         # fp32 statistics land a little above the floor
+
     def untrained(self, x: Tensor, sigma: float = 5.0, min_std: float = MIN_STD) -> Tensor:
         """(D,) bool: features of x (B,D) more than `sigma` stds from the mean where the std sits at the floor (the
         training data hardly moved them, and the network has only seen them still)."""
-        floored = self.std <= min_std * (1 + 1e-3)     # fp32 statistics land a little above the floor
-        return ((((x - self.mean) / self.std).abs() > sigma) & floored).any(0)
+        return ((((x - self.mean) / self.std).abs() > sigma) & self.floored(min_std)).any(0)
 
 
 # ------------------------------------------------------------------------------------------- GNet

@@ -29,7 +29,6 @@ as a per-frame code times one shared linear decoder), so that it trains on two C
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -39,8 +38,7 @@ import torch
 from scipy.spatial import cKDTree
 from torch import Tensor, nn
 
-from graspkit.body.skeleton import JOINT_NAMES
-from graspkit.checks import GraspkitWarning, check_int, user_stacklevel
+from graspkit.checks import check_int
 from graspkit.models.blocks import ResBlock, in_eval_mode
 from graspkit.models.gnet import NUM_JOINTS, POSE_DIM, Standardiser
 from graspkit.objects.bps import bps_encode
@@ -252,11 +250,16 @@ class MNet(nn.Module):
             if not isinstance(x, torch.Tensor) or x.dim() != 2 or x.shape[1] != want:
                 got = tuple(x.shape) if isinstance(x, torch.Tensor) else ("missing" if x is None else type(x).__name__)
                 raise ValueError(f"feats[{k!r}]: expected shape (B, {want}) (mnet.features), got {got}")
-        h = torch.cat([self.proj[k](self.norms[k](feats[k])) for k in self.proj], 1)
+        # Inputs and outputs the training clips held still (std at the floor: the jaw, eyes, left fingers, a knee's
+        # off-axis 6D entries, ...) are held at their training values: the network never learned what a change there
+        # means, and a jaw turned 3 degrees (50 floored stds) or its own drift there (30 stds after a few steps)
+        # otherwise steers the whole body (docs/goal.md "Features the training clips held still").
+        h = torch.cat([self.proj[k](self.norms[k](feats[k]).masked_fill(self.norms[k].floored(), 0.0))
+                       for k in self.proj], 1)
         h = self.trunk(h)
         B = h.shape[0]
         codes = self.codes(h).reshape(B, self.cfg.n_future, self.cfg.code)
-        y = (self.decoder(codes) + self.frame_bias).reshape(B, -1)
+        y = (self.decoder(codes) + self.frame_bias).reshape(B, -1).masked_fill(self.norm_out.floored(), 0.0)
         return self.unpack(self.norm_out.inverse(y))
 
     def config_dict(self) -> dict:
@@ -324,22 +327,6 @@ def mnet_step(mnet: MNet, s: MNetState, basis: Tensor) -> tuple[Tensor, Tensor, 
     Ri, oi = _invert(R, o)
     r_w, t_w = transform_params(r_c, t_c, s.root, Ri, oi)
     return r_w, t_w, out
-
-
-def _warn_untrained_start(mnet: MNet, s: MNetState, basis: Tensor, sigma: float = 5.0) -> None:
-    """Warn when the start's pose features lie `sigma` stds out where the training clips never moved them (the
-    shipped MNet then goes astray: a jaw turned 3 degrees, 50 stds out, makes the rollout miss, docs/goal.md)."""
-    feats, _, _ = mnet_inputs(s, basis, mnet.cfg.attention, mnet.cfg.n_hand)
-    far = torch.nonzero(mnet.norms["pose"].untrained(feats["pose"], sigma)).flatten().tolist()
-    per = NUM_JOINTS * 6 + 3                       # one past frame: 55 joints' 6D, the translation; then betas
-    names = sorted({"betas" if i >= mnet.cfg.n_past * per else "translation" if i % per >= NUM_JOINTS * 6
-                    else JOINT_NAMES[(i % per) // 6] for i in far})
-    if names:
-        warnings.warn(f"start: the pose features of {', '.join(names)} lie more than {sigma:g} training stds from "
-                      "where the training clips held them (they never moved there, std at the 1e-3 floor); MNet can "
-                      "then go astray (docs/goal.md). The planner's start for graspkit's body does not warn; another "
-                      "body's proportions, or a start posed by hand, can",
-                      GraspkitWarning, stacklevel=user_stacklevel())
 
 
 @torch.no_grad()
@@ -459,8 +446,6 @@ def rollout(mnet: MNet, body: SparseBody, start: tuple[Tensor, Tensor], goal: tu
         s = MNetState(torch.stack([rs[i] for i in idx])[None], torch.stack([ts[i] for i in idx])[None], betas,
                       vs[-1][None], vs[max(len(vs) - 2, 0)][None], goal_hand, centre,
                       hand_object_offsets(vs[-1][None], obj), root)
-        if len(rs) == 1:
-            _warn_untrained_start(mnet, s, basis)
         r_w, t_w, out = mnet_step(mnet, s, basis)                                    # (1,F,55,6), (1,F,3) world
         stalled = (stall is not None and dist[-1] < STALL_RADIUS and len(dist) > stall
                    and dist[-1] > min(dist[-stall - 1:-1]) - STALL_GAIN)

@@ -261,7 +261,7 @@ plt.show()
 # Be warned: the shipped MNet is small (0.6 M parameters) and was trained for 12 epochs (150 s on one CPU thread,
 # `docs/goal.md`). It turns towards the mug and walks up to it, then slows with the hand about 12–14 cm from the
 # goal hand, just outside the 10 cm at which the Eq. 12–13 refinement takes over, and left alone it stays there
-# (in 4 s it ends 13.0 cm off; given 300 frames, as in the evaluation of section 6, about half of the test
+# (in 4 s it ends 12.2 cm off; given 300 frames, as in the evaluation of section 6, about half of the test
 # rollouts never get within 10 cm). GOAL's far larger MNet, trained on GRAB, is not reported to stall.
 #
 # So graspkit adds two steps GOAL does not have (`docs/goal.md`, "The rollout and its refinement"; `None` gives the
@@ -271,7 +271,8 @@ plt.show()
 # - `stall=STALL_FRAMES` (10 frames): at each MNet step, a hand within 25 cm of the goal hand that is not 5 mm closer
 #   than at its closest in the 10 frames before (one creeping in at under 5 mm a frame) starts the Eq. 12–13
 #   refinement where it is. Here it fires at frame 61 (the flat stretch of
-#   the blue curve) and the hand arrives at frame 136 on the machine this lesson was built on (135 on another); on the evaluation's
+#   the blue curve) and the hand arrives at frame 137 on the machine this lesson was built on (136 and 135 before MNet held
+#   the features its training clips held still, `docs/goal.md`); on the evaluation's
 #   rollouts it takes the goal grasps reached from 7 to 11 of 12.
 #
 # The arrival frame is the one figure here that depends on the last bits of the arithmetic: a rollout feeds every
