@@ -709,6 +709,10 @@ def rollout_results(seqs: list, stubs: str | Path, gnet: GNet, seed: int = 0, ma
             "rollout_seconds": time.perf_counter() - t0}
 
 
+TAB2_ROWS = {"mnet.pt": "MNet", "mnet_no_iaa.pt": "MNet-w/o-IAA", "mnet_pose.pt": "MNet-Pose",
+             "mnet_1frame.pt": "1 output frame"}   # GOAL Tab. 2's rows and the checkpoint each is measured with
+
+
 def tab2_results(folders: Sequence[str | Path], stubs: str | Path, window_stride: int = 5) -> dict:
     """Tab. 2: the teacher-forced 10-frame errors of MNet and of each ablation found in `stubs` (mnet.pt,
     mnet_<variant>.pt) on every `window_stride`-th window of the test clips. {'tab2', 'tab2_windows', 'tab2_seconds'}."""
@@ -722,11 +726,9 @@ def tab2_results(folders: Sequence[str | Path], stubs: str | Path, window_stride
     windows = mnet_windows(folders, "test", MNetConfig(), stride=window_stride)
     idx = torch.arange(len(windows))
     tab2 = {}
-    for variant, name in (("mnet", "MNet"), ("no_iaa", "MNet-w/o-IAA"), ("pose", "MNet-Pose"),
-                          ("1frame", "1 output frame")):
-        path = Path(stubs) / ("mnet.pt" if variant == "mnet" else f"mnet_{variant}.pt")
-        if path.is_file():
-            e = teacher_forced_v2v(load_mnet(path), windows, bm, idx)
+    for file, name in TAB2_ROWS.items():
+        if (Path(stubs) / file).is_file():
+            e = teacher_forced_v2v(load_mnet(Path(stubs) / file), windows, bm, idx)
             tab2[name] = {"body": e.body, "hand": e.hand, "feet": e.feet}
     return {"tab2": tab2, "tab2_windows": len(idx), "tab2_seconds": time.perf_counter() - t0}
 
@@ -835,7 +837,8 @@ def main(argv: list[str] | None = None) -> int:
     only.add_argument("--rollouts-only", action="store_true",
                       help="recompute only the MNet rollouts and GOAL's sliding rows in an existing JSON (SAGA's kept)")
     only.add_argument("--tab2-only", action="store_true",
-                      help="recompute only Tab. 2 (MNet and the ablations in --checkpoints) in an existing JSON")
+                      help="recompute only Tab. 2's rows of the MNet checkpoints in --checkpoints (mnet.pt, "
+                           "mnet_<variant>.pt) in an existing JSON; the other rows are kept")
     a = p.parse_args(argv)
     refuse_folder_out(argv)
     expand_user_paths(a)
@@ -859,7 +862,7 @@ def main(argv: list[str] | None = None) -> int:
             r = json.loads(out.read_text())
         except ValueError as e:
             raise ValueError(f"--out: {out} is not a JSON file to update ({e})") from None
-        merged = ("sliding", "tab1", "tab1_paired", "rollouts", "saga")      # the parts an update reads or replaces
+        merged = ("sliding", "tab1", "tab1_paired", "tab2", "rollouts", "saga")   # the parts an update reads or replaces
         bad = ("it is no JSON object" if not isinstance(r, dict) else
                "it has no 'sliding' rows" if a.saga_only and "sliding" not in r else
                next((f"its '{k}' is no object" for k in merged if k in r and not isinstance(r[k], dict)),
@@ -876,7 +879,11 @@ def main(argv: list[str] | None = None) -> int:
             r.update(new)
             shown = {k: r[k] for k in ("tab1", "tab1_paired")}
         elif a.tab2_only:
-            r.update(tab2_results(folders, stubs, a.window_stride))
+            if not any((stubs / f).is_file() for f in TAB2_ROWS):
+                raise FileNotFoundError(f"--checkpoints: none of {list(TAB2_ROWS)} in {stubs} to measure Tab. 2 with")
+            new = tab2_results(folders, stubs, a.window_stride)
+            new["tab2"] = {**r.get("tab2", {}), **new["tab2"]}      # a variant without its checkpoint keeps its row
+            r.update(new)
             shown = {"tab2": r["tab2"]}
         elif a.rollouts_only:
             from graspkit.models.gnet import load_gnet
@@ -891,6 +898,7 @@ def main(argv: list[str] | None = None) -> int:
             shown = {"sliding": r["sliding"], "saga_end_contact": r["saga"]["end_contact"]}
         r.setdefault("updates", []).append({"flag": flag, "n_grasps": a.n_grasps, "n_rollouts": a.n_rollouts,
                                             "seed": a.seed, "max_frames": a.max_frames,
+                                            "window_stride": a.window_stride,
                                             "threads": torch.get_num_threads()})     # what changed the file since
         write_json(out, r)
         print(json.dumps(shown, indent=1))

@@ -701,9 +701,10 @@ def test_tab2_rows_come_from_their_own_checkpoints(tmp_path, monkeypatch):
 
 
 def test_tab2_only_recomputes_table_2_from_the_checkpoints_and_keeps_the_rest(tmp_path, monkeypatch, capsys):
-    """`python -m graspkit.eval_goal --tab2-only`: Tab. 2 measured again from the MNet checkpoints in --checkpoints
-    (stand-ins tag each row with its file; a variant without a file has no row), every other part of the JSON kept and
-    the update logged."""
+    """`python -m graspkit.eval_goal --tab2-only`: Tab. 2's rows measured again from the MNet checkpoints in
+    --checkpoints (stand-ins tag each row with its file), the row of a variant without a file and every other part of
+    the JSON kept, the update logged with its window stride; a folder with no MNet checkpoint is refused, the JSON
+    untouched (it had written an empty table, and dropped the rows of the ablations, which are not shipped)."""
     import json
 
     import graspkit.eval_goal as eg
@@ -723,11 +724,16 @@ def test_tab2_only_recomputes_table_2_from_the_checkpoints_and_keeps_the_rest(tm
     assert eg.main(["--tab2-only", "--data", str(tmp_path), "--checkpoints", str(tmp_path), "--out", str(out),
                     "--window-stride", "2", "--threads", "1"]) == 0
     r = json.loads(out.read_text())
-    assert r["tab2"] == {"MNet": {"body": 1.0, "hand": 10.0, "feet": 0.0}, "MNet-Pose": {"body": 3.0, "hand": 30.0,
-                                                                                       "feet": 0.0}}
+    assert r["tab2"] == {"MNet-w/o-IAA": {"body": 9.0}, "MNet": {"body": 1.0, "hand": 10.0, "feet": 0.0},
+                         "MNet-Pose": {"body": 3.0, "hand": 30.0, "feet": 0.0}}
     assert r["tab2_windows"] == 14 and all(r[k] == v for k, v in kept.items() if k != "tab2")
-    assert r["updates"][-1]["flag"] == "--tab2-only"
+    assert r["updates"][-1]["flag"] == "--tab2-only" and r["updates"][-1]["window_stride"] == 2
     assert json.loads(capsys.readouterr().out)["tab2"] == r["tab2"]
+    before = out.read_text()
+    (tmp_path / "none").mkdir()
+    assert eg.main(["--tab2-only", "--data", str(tmp_path), "--checkpoints", str(tmp_path / "none"), "--out",
+                    str(out)]) == 2
+    assert "--checkpoints: none of ['mnet.pt'" in capsys.readouterr().err and out.read_text() == before
 
 
 @pytest.mark.parametrize("trainer", ["gnet", "mnet", "grabnet_smplx"])

@@ -579,9 +579,11 @@ def test_features_the_training_clips_held_still_are_held(setup):
     """The shipped MNet's statistics put 354 of its pose inputs (jaw, eyes, left fingers, ...: joints the synthetic
     clips never move) and 852 of its outputs at the 1e-3 std floor. A jaw turned 0.05 rad (50 floored stds) made a
     rollout miss the goal the unturned start reached (an independent check), and MNet's own changes there drifted
-    up to 30 stds within a rollout: MNet.forward holds such inputs and outputs at their training values. Any value
+    up to 32 stds within a rollout: MNet.forward holds such inputs and outputs at their training values. Any value
     there leaves the output as it was, the held outputs are the training mean change, and a start with its jaw turned
-    moves the rest of the body as the unturned start does (with every input read: 0.2 in rot6d, 3.7 cm in 30 frames)."""
+    moves the rest of the body as the unturned start does (with every input read: 0.2 in rot6d, 3.7 cm in 30 frames).
+    Frame t's translation x, y (another body's rest pelvis offset) is held with the past frames' moved alike: an
+    offset of all five frames leaves the output as it was (held alone, a larger body walked backwards)."""
     from graspkit.data.reaching import Start, plan_reach
     from graspkit.models.gnet import Standardiser
     from graspkit.models.mnet import load_mnet
@@ -593,11 +595,21 @@ def test_features_the_training_clips_held_still_are_held(setup):
     net = load_mnet(Path(__file__).resolve().parents[1] / "data_stubs" / "checkpoints" / "mnet.pt")
     g = torch.Generator().manual_seed(0)
     feats = {k: n.mean + n.std * torch.randn(4, n.mean.numel(), generator=g) for k, n in net.norms.items()}
-    moved = {k: x + 100.0 * net.norms[k].floored() for k, x in feats.items()}
+    per, n_past = M.POSE_DIM, net.cfg.n_past
+    xy, shift = torch.zeros_like(feats["pose"][0], dtype=torch.bool), torch.zeros_like(feats["pose"][0])
+    for f in range(n_past):                                        # every frame's translation x, y
+        xy[f * per + 330:f * per + 332] = True
+        shift[f * per + 330:f * per + 332] = torch.tensor([0.03, -0.05])
+    assert net.norms["pose"].floored()[xy].tolist() == [False] * (2 * n_past - 2) + [True, True]   # frame t's only
+    moved = {k: x + 100.0 * (net.norms[k].floored() & ~xy if k == "pose" else net.norms[k].floored())
+             for k, x in feats.items()}
+    offset = {**feats, "pose": feats["pose"] + shift}
     assert int(net.norms["pose"].floored().sum()) == 354
     with torch.no_grad():
         out, out_moved = net.pack_targets(net(feats)), net.pack_targets(net(moved))
+        out_offset = net.pack_targets(net(offset))
     assert torch.equal(out, out_moved)
+    torch.testing.assert_close(out_offset, out, atol=1e-6, rtol=0)   # another body's rest pelvis offset, all frames
     held = net.norm_out.floored()
     torch.testing.assert_close(out[:, held], net.norm_out.mean[held].expand(4, -1), atol=1e-7, rtol=0)
 

@@ -250,10 +250,12 @@ class MNet(nn.Module):
             if not isinstance(x, torch.Tensor) or x.dim() != 2 or x.shape[1] != want:
                 got = tuple(x.shape) if isinstance(x, torch.Tensor) else ("missing" if x is None else type(x).__name__)
                 raise ValueError(f"feats[{k!r}]: expected shape (B, {want}) (mnet.features), got {got}")
-        # Inputs and outputs the training clips held still (std at the floor: the jaw, eyes, left fingers, a knee's
-        # off-axis 6D entries, ...) are held at their training values: the network never learned what a change there
-        # means, and a jaw turned 3 degrees (50 floored stds) or its own drift there (30 stds after a few steps)
-        # otherwise steers the whole body (docs/goal.md "Features the training clips held still").
+        # Inputs and outputs the training clips held still (std at the floor: the jaw, eyes, left collar, some 6D
+        # entries of the left fingers, toes and knees, ...) are held at their training values: the network never
+        # learned what a change there means, and a jaw turned 3 degrees (50 floored stds) or its own drift there (up
+        # to 32 stds in a rollout) otherwise steers the whole body (docs/goal.md "Features the training clips held
+        # still"). The current frame's translation x, y moves the past frames' with it (see `_shift_translation`).
+        feats = {**feats, "pose": self._shift_translation(feats["pose"])}
         h = torch.cat([self.proj[k](self.norms[k](feats[k]).masked_fill(self.norms[k].floored(), 0.0))
                        for k in self.proj], 1)
         h = self.trunk(h)
@@ -261,6 +263,19 @@ class MNet(nn.Module):
         codes = self.codes(h).reshape(B, self.cfg.n_future, self.cfg.code)
         y = (self.decoder(codes) + self.frame_bias).reshape(B, -1).masked_fill(self.norm_out.floored(), 0.0)
         return self.unpack(self.norm_out.inverse(y))
+
+    def _shift_translation(self, pose: Tensor) -> Tensor:
+        """Pose features (B, ·) with every past frame's translation x, y moved by what puts the current frame's at its
+        training value, where that one is held (std at the floor). Frame t's x, y in its own canonical frame is the
+        body's rest pelvis offset (−J_0 turned), the same for all the training bodies; holding it alone would read
+        another body's offset as a jump between the past frames and this one (a body 15 % larger walked backwards)."""
+        n, k = self.norms["pose"], self.cfg.n_past
+        cur = [(k - 1) * POSE_DIM + NUM_JOINTS * 6 + i for i in (0, 1)]
+        shift = torch.where(n.floored()[cur], n.mean[cur] - pose[:, cur], torch.zeros_like(pose[:, cur]))   # (B,2)
+        cols = [f * POSE_DIM + NUM_JOINTS * 6 + i for f in range(k) for i in (0, 1)]
+        out = pose.clone()
+        out[:, cols] = out[:, cols] + shift.repeat(1, k)
+        return out
 
     def config_dict(self) -> dict:
         """The config as plain values (for checkpoints)."""

@@ -271,7 +271,7 @@ plt.show()
 # - `stall=STALL_FRAMES` (10 frames): at each MNet step, a hand within 25 cm of the goal hand that is not 5 mm closer
 #   than at its closest in the 10 frames before (one creeping in at under 5 mm a frame) starts the Eq. 12–13
 #   refinement where it is. Here it fires at frame 61 (the flat stretch of
-#   the blue curve) and the hand arrives at frame 137 on the machine this lesson was built on (136 and 135 before MNet held
+#   the blue curve) and the hand arrives at frame 129 on the machine this lesson was built on (136 and 135 before MNet held
 #   the features its training clips held still, `docs/goal.md`); on the evaluation's
 #   rollouts it takes the goal grasps reached from 7 to 11 of 12.
 #
