@@ -271,7 +271,7 @@ class MNet(nn.Module):
         another body's offset as a jump between the past frames and this one (a body 15 % larger walked backwards)."""
         n, k = self.norms["pose"], self.cfg.n_past
         cur = [(k - 1) * POSE_DIM + NUM_JOINTS * 6 + i for i in (0, 1)]
-        shift = torch.where(n.floored()[cur], n.mean[cur] - pose[:, cur], torch.zeros_like(pose[:, cur]))   # (B,2)
+        shift = (n.mean[cur] - pose[:, cur]) * n.floored()[cur]          # (B,2); 0 where frame t's x, y is not held
         cols = [f * POSE_DIM + NUM_JOINTS * 6 + i for f in range(k) for i in (0, 1)]
         out = pose.clone()
         out[:, cols] = out[:, cols] + shift.repeat(1, k)
