@@ -1,0 +1,82 @@
+"""tools/goal_tab2_seeds.py: GOAL Tab. 2 over training seeds (mean ± sd, MNet's paired differences)."""
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+ROWS = ("MNet", "MNet-w/o-IAA", "MNet-Pose", "1 output frame")
+
+
+@pytest.fixture(scope="module")
+def tool():
+    spec = importlib.util.spec_from_file_location("goal_tab2_seeds", ROOT / "tools" / "goal_tab2_seeds.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_summary_is_the_seeds_mean_sd_and_paired_differences(tool):
+    """Mean and sample sd (numpy, ddof=1) per row and part; MNet − ablation per seed, and the seeds where MNet is
+    lower, counted."""
+    rng = np.random.default_rng(3)
+    per_seed = {s: {r: {p: float(rng.uniform(10, 30)) for p in ("body", "hand", "feet")} for r in ROWS}
+                for s in (0, 1, 2, 5)}
+    got = tool.summarise(per_seed)
+    for r in ROWS:
+        for p in ("body", "hand", "feet"):
+            v = np.array([per_seed[s][r][p] for s in per_seed])
+            assert got["rows"][r][p]["mean"] == pytest.approx(v.mean())
+            assert got["rows"][r][p]["sd"] == pytest.approx(v.std(ddof=1))
+            if r != "MNet":
+                d = np.array([per_seed[s]["MNet"][p] for s in per_seed]) - v
+                assert got["mnet_minus"][r][p]["mean"] == pytest.approx(d.mean())
+                assert got["mnet_minus"][r][p]["sd"] == pytest.approx(d.std(ddof=1))
+                assert got["mnet_minus"][r][p]["below"] == int((d < 0).sum())
+    assert "MNet" not in got["mnet_minus"]
+    line = next(x for x in tool.table(got).splitlines() if x.startswith("| MNet-Pose |"))
+    assert f"{got['rows']['MNet-Pose']['hand']['mean']:.2f} ± {got['rows']['MNet-Pose']['hand']['sd']:.2f}" in line
+
+
+def test_the_tool_trains_what_is_missing_and_writes_every_seed(tool, tmp_path, monkeypatch, capsys):
+    """One job in-process: a checkpoint already in <out>/seed<S> is measured, not trained again; the JSON holds each
+    seed's rows as tab2_results gave them (stand-ins: the error is seed + variant number) and the summary."""
+    import graspkit.eval_goal as eg
+
+    trained = []
+
+    def fake_train(folders, path, variant, epochs, time_limit, seed, threads, run_dir, progress):
+        assert time_limit is None and threads == 1 and epochs == 3
+        trained.append((seed, variant))
+        Path(path).write_text(variant)
+        return {"seconds": 1.0}
+
+    def fake_tab2(folders, stubs, stride):
+        files = {f: n for n, f in enumerate(eg.TAB2_ROWS)}
+        seed = int(Path(stubs).name.removeprefix("seed"))
+        rows = {eg.TAB2_ROWS[f]: {p: seed + files[f] for p in ("body", "hand", "feet")}
+                for f in files if (Path(stubs) / f).is_file()}
+        return {"tab2": rows, "tab2_windows": 7, "tab2_seconds": 0.1}
+
+    monkeypatch.setattr(eg, "run_train_mnet", fake_train)
+    monkeypatch.setattr(eg, "tab2_results", fake_tab2)
+    (tmp_path / "out" / "seed1").mkdir(parents=True)
+    (tmp_path / "out" / "seed1" / "mnet_pose.pt").write_text("old")
+    out = tmp_path / "t2.json"
+    assert tool.main(["--out", str(tmp_path / "out"), "--data", str(tmp_path), "--seeds", "0", "1", "--epochs", "3",
+                      "--jobs", "1", "--json", str(out)]) == 0
+    assert sorted(trained) == sorted({(s, v) for s in (0, 1) for v in tool.ORDER} - {(1, "pose")})
+    r = json.loads(out.read_text())
+    assert r["per_seed"]["1"]["MNet-Pose"]["body"] == 3 and r["per_seed"]["0"]["1 output frame"]["hand"] == 3
+    assert r["rows"]["MNet-w/o-IAA"]["feet"]["mean"] == pytest.approx(1.5)
+    assert r["mnet_minus"]["MNet-Pose"]["body"]["below"] == 2 and r["windows"] == 7
+    assert "| MNet |" in capsys.readouterr().out
+
+
+def test_the_tool_refuses_repeated_seeds(tool, tmp_path, capsys):
+    """--seeds 0 0 would measure one training twice and call it a spread."""
+    with pytest.raises(SystemExit) as e:
+        tool.main(["--out", str(tmp_path), "--seeds", "0", "0"])
+    assert e.value.code == 2 and "--seeds: expected distinct seeds" in capsys.readouterr().err
