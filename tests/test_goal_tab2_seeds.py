@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import stats
 
 ROOT = Path(__file__).resolve().parents[1]
 ROWS = ("MNet", "MNet-w/o-IAA", "MNet-Pose", "1 output frame")
@@ -19,8 +20,8 @@ def tool():
 
 
 def test_summary_is_the_seeds_mean_sd_and_paired_differences(tool):
-    """Mean and sample sd (numpy, ddof=1) per row and part; MNet − ablation per seed, and the seeds where MNet is
-    lower, counted."""
+    """Mean and sample sd (numpy, ddof=1) per row and part; MNet − ablation per seed, the seeds where MNet is
+    lower counted, and the paired t-test's two-sided p (the statistic by hand); two seeds give no p."""
     rng = np.random.default_rng(3)
     per_seed = {s: {r: {p: float(rng.uniform(10, 30)) for p in ("body", "hand", "feet")} for r in ROWS}
                 for s in (0, 1, 2, 5)}
@@ -35,35 +36,45 @@ def test_summary_is_the_seeds_mean_sd_and_paired_differences(tool):
                 assert got["mnet_minus"][r][p]["mean"] == pytest.approx(d.mean())
                 assert got["mnet_minus"][r][p]["sd"] == pytest.approx(d.std(ddof=1))
                 assert got["mnet_minus"][r][p]["below"] == int((d < 0).sum())
+                t = d.mean() / (d.std(ddof=1) / np.sqrt(len(d)))        # the paired t statistic, by hand
+                assert got["mnet_minus"][r][p]["p"] == pytest.approx(2 * stats.t.sf(abs(t), len(d) - 1))
     assert "MNet" not in got["mnet_minus"]
+    two = tool.summarise({s: per_seed[s] for s in (0, 1)})
+    assert two["mnet_minus"]["MNet-Pose"]["body"]["p"] is None and "below) |" in tool.table(two)
     line = next(x for x in tool.table(got).splitlines() if x.startswith("| MNet-Pose |"))
     assert f"{got['rows']['MNet-Pose']['hand']['mean']:.2f} ± {got['rows']['MNet-Pose']['hand']['sd']:.2f}" in line
 
 
 def test_the_tool_trains_what_is_missing_and_writes_every_seed(tool, tmp_path, monkeypatch, capsys):
-    """One job in-process: a checkpoint already in <out>/seed<S> is measured, not trained again; the JSON holds each
-    seed's rows as tab2_results gave them (stand-ins: the error is seed + variant number) and the summary."""
+    """One job in-process: a checkpoint already in <out>/seed<S> is measured, not trained again (one of other epochs
+    is refused); the JSON holds each
+    seed's rows as tab2_results gave them (stand-ins: the error is seed + variant number, a numpy float as the
+    evaluator's; the first real run failed writing one) and the summary."""
     import graspkit.eval_goal as eg
+    from graspkit.train import save_checkpoint
 
-    trained = []
+    trained, measured = [], []
 
     def fake_train(folders, path, variant, epochs, time_limit, seed, threads, run_dir, progress):
         assert time_limit is None and threads == 1 and epochs == 3
         trained.append((seed, variant))
-        Path(path).write_text(variant)
-        return {"seconds": 1.0}
+        info = {"variant": variant, "epochs": epochs, "seconds": 10.0 * seed + len(variant)}
+        save_checkpoint(path, {"extra": info})
+        return info
 
     def fake_tab2(folders, stubs, stride):
+        measured.append(Path(stubs).name)
         files = {f: n for n, f in enumerate(eg.TAB2_ROWS)}
         seed = int(Path(stubs).name.removeprefix("seed"))
-        rows = {eg.TAB2_ROWS[f]: {p: seed + files[f] for p in ("body", "hand", "feet")}
+        rows = {eg.TAB2_ROWS[f]: {p: np.float64(seed + files[f]) for p in ("body", "hand", "feet")}
                 for f in files if (Path(stubs) / f).is_file()}
         return {"tab2": rows, "tab2_windows": 7, "tab2_seconds": 0.1}
 
     monkeypatch.setattr(eg, "run_train_mnet", fake_train)
     monkeypatch.setattr(eg, "tab2_results", fake_tab2)
     (tmp_path / "out" / "seed1").mkdir(parents=True)
-    (tmp_path / "out" / "seed1" / "mnet_pose.pt").write_text("old")
+    save_checkpoint(tmp_path / "out" / "seed1" / "mnet_pose.pt", {"extra": {"variant": "pose", "epochs": 3,
+                                                                           "seconds": 99.0}})
     out = tmp_path / "t2.json"
     assert tool.main(["--out", str(tmp_path / "out"), "--data", str(tmp_path), "--seeds", "0", "1", "--epochs", "3",
                       "--jobs", "1", "--json", str(out)]) == 0
@@ -72,7 +83,20 @@ def test_the_tool_trains_what_is_missing_and_writes_every_seed(tool, tmp_path, m
     assert r["per_seed"]["1"]["MNet-Pose"]["body"] == 3 and r["per_seed"]["0"]["1 output frame"]["hand"] == 3
     assert r["rows"]["MNet-w/o-IAA"]["feet"]["mean"] == pytest.approx(1.5)
     assert r["mnet_minus"]["MNet-Pose"]["body"]["below"] == 2 and r["windows"] == 7
+    assert r["train_seconds"]["seed1/pose"] == 99.0 and r["train_seconds"]["seed1/no_iaa"] == 16.0
     assert "| MNet |" in capsys.readouterr().out
+    assert sorted(measured) == ["seed0", "seed1"]
+    # run again: the measurements kept in <out>/seed<S>/tab2.json are read, nothing trained or measured
+    assert tool.main(["--out", str(tmp_path / "out"), "--data", str(tmp_path), "--seeds", "0", "1", "--epochs", "3",
+                      "--jobs", "1", "--json", str(out)]) == 0
+    assert len(trained) == 7 and len(measured) == 2 and json.loads(out.read_text())["per_seed"] == r["per_seed"]
+    # a checkpoint of another command (other epochs) is refused before any work, the JSON kept
+    before = out.read_text()
+    with pytest.raises(SystemExit) as e:
+        tool.main(["--out", str(tmp_path / "out"), "--data", str(tmp_path), "--seeds", "0", "1", "--epochs", "4",
+                   "--jobs", "1", "--json", str(out)])
+    assert e.value.code == 2 and "trained 3 epochs, expected 'mnet' for --epochs 4" in capsys.readouterr().err
+    assert out.read_text() == before and len(trained) == 7
 
 
 def test_the_tool_refuses_repeated_seeds(tool, tmp_path, capsys):

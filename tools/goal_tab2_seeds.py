@@ -51,13 +51,26 @@ def _train(folders: list[str], out: str, seed: int, variant: str, epochs: int) -
 
 
 def _measure(folders: list[str], out: str, seed: int, stride: int) -> tuple[int, dict]:
-    """Tab. 2 of one seed's checkpoints on one thread (a worker process): (seed, tab2_results' dict)."""
+    """Tab. 2 of one seed's checkpoints on one thread (a worker process): (seed, tab2_results' dict), kept in
+    <out>/seed<S>/tab2.json with a key of the checkpoints, data and stride, and read from there while they hold."""
     import torch
 
-    from graspkit.eval_goal import tab2_results
+    from graspkit.eval_goal import TAB2_ROWS, tab2_results
+    from graspkit.paths import write_atomic
+    from graspkit.train import file_key, files_key
 
+    folder = Path(out) / f"seed{seed}"
+    key = {"checkpoints": {f: file_key(folder / f) for f in TAB2_ROWS}, "data": files_key(folders), "stride": stride}
+    cache = folder / "tab2.json"
+    if cache.is_file():
+        kept = json.loads(cache.read_text())
+        if kept.get("key") == key:
+            return seed, kept["result"]
     torch.set_num_threads(1)
-    return seed, tab2_results([Path(f) for f in folders], Path(out) / f"seed{seed}", stride)
+    res = tab2_results([Path(f) for f in folders], folder, stride)
+    res["tab2"] = {r: {p: float(x) for p, x in row.items()} for r, row in res["tab2"].items()}
+    write_atomic(cache, json.dumps({"key": key, "result": res}, indent=1) + "\n")
+    return seed, res
 
 
 def _map(fn, calls: list[tuple], jobs: int, done=None) -> list:
@@ -79,7 +92,10 @@ def _map(fn, calls: list[tuple], jobs: int, done=None) -> list:
 
 def summarise(per_seed: dict[int, dict]) -> dict:
     """{row: {part: {'mean', 'sd', 'seeds'}}} and MNet's paired differences {ablation: {part: {'mean', 'sd',
-    'below'}}} ('below': seeds on which MNet's error is the lower) from {seed: {row: {part: mm}}}."""
+    'below', 'p'}}} ('below': seeds on which MNet's error is the lower; 'p': the paired t-test's two-sided p over the
+    seeds, scipy) from {seed: {row: {part: mm}}}."""
+    from scipy.stats import ttest_rel
+
     seeds = sorted(per_seed)
     rows = {r for s in seeds for r in per_seed[s]}
     rows = [r for r in ("MNet", "MNet-w/o-IAA", "MNet-Pose", "1 output frame") if r in rows]
@@ -96,22 +112,32 @@ def summarise(per_seed: dict[int, dict]) -> dict:
             continue
         paired[r] = {}
         for part in ("body", "hand", "feet"):
-            d = [per_seed[s]["MNet"][part] - per_seed[s][r][part] for s in both]
+            m, o = [per_seed[s]["MNet"][part] for s in both], [per_seed[s][r][part] for s in both]
+            d = [x - y for x, y in zip(m, o)]
+            p = float(ttest_rel(m, o).pvalue) if len(d) > 2 else None
             paired[r][part] = {"mean": statistics.fmean(d), "sd": statistics.stdev(d) if len(d) > 1 else 0.0,
-                               "below": sum(x < 0 for x in d), "seeds": len(d)}
+                               "below": int(sum(x < 0 for x in d)), "seeds": len(d), "p": p}
     return {"rows": stats, "mnet_minus": paired}
 
 
 def table(summary: dict) -> str:
-    """The summary as a markdown table (mean ± sd over the seeds, then MNet − row paired)."""
+    """The summary as a markdown table (mean ± sd over the seeds, then MNet − row paired, the paired t-test's p)."""
     lines = ["| row | body | hand | feet | MNet − row: body | hand | feet |", "|---|---|---|---|---|---|---|"]
     for r, st in summary["rows"].items():
         cells = [f"{st[p]['mean']:.2f} ± {st[p]['sd']:.2f}" for p in ("body", "hand", "feet")]
         d = summary["mnet_minus"].get(r)
-        cells += ([f"{d[p]['mean']:+.2f} ± {d[p]['sd']:.2f} ({d[p]['below']}/{d[p]['seeds']} below)"
-                   for p in ("body", "hand", "feet")] if d else ["—"] * 3)
+        cells += ([f"{d[p]['mean']:+.2f} ± {d[p]['sd']:.2f} ({d[p]['below']}/{d[p]['seeds']} below"
+                   + (f", p {d[p]['p']:.2g})" if d[p]["p"] is not None else ")") for p in ("body", "hand", "feet")]
+                  if d else ["—"] * 3)
         lines.append(f"| {r} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def trained_with(path: Path) -> dict:
+    """What a checkpoint of run_train_mnet says of its training: {'variant', 'epochs', 'seconds', ...}."""
+    from graspkit.train import load_checkpoint
+
+    return load_checkpoint(path).get("extra", {})
 
 
 def _made(folder: str) -> dict:
@@ -145,21 +171,29 @@ def main(argv: list[str] | None = None) -> int:
     os.environ["OMP_NUM_THREADS"] = "1"                 # the workers' BLAS, before they start
     t0 = time.perf_counter()
     todo = [(s, v) for v in ORDER for s in a.seeds if not checkpoint(a.out, s, v).is_file()]
-    seconds: dict[str, float] = {}
+    for s, v in [(s, v) for v in ORDER for s in a.seeds if (s, v) not in todo]:   # found: trained as asked?
+        got = trained_with(checkpoint(a.out, s, v))
+        if got.get("epochs") != a.epochs or got.get("variant") != v:
+            p.error(f"--out: {checkpoint(a.out, s, v)} holds {got.get('variant')!r} trained {got.get('epochs')} "
+                    f"epochs, expected {v!r} for --epochs {a.epochs} (remove it to train it again)")
+    done: list = []
 
     def trained(r: tuple[int, str, float]) -> None:
-        seconds[f"seed{r[0]}/{r[1]}"] = r[2]
-        print(f"trained {r[1]} seed {r[0]} in {r[2]:.0f} s ({len(seconds)} of {len(todo)})", flush=True)
+        done.append(r)
+        print(f"trained {r[1]} seed {r[0]} in {r[2]:.0f} s ({len(done)} of {len(todo)})", flush=True)
 
     _map(_train, [(folders, str(a.out), s, v, a.epochs) for s, v in todo], a.jobs, trained)
     measured = dict(_map(_measure, [(folders, str(a.out), s, a.window_stride) for s in a.seeds], a.jobs))
-    per_seed = {s: measured[s]["tab2"] for s in a.seeds}
+    per_seed = {s: {r: {p: float(x) for p, x in row.items()} for r, row in measured[s]["tab2"].items()}
+                for s in a.seeds}                      # numpy floats from the evaluator, plain floats in the JSON
     summary = summarise(per_seed)
     print(table(summary))
     if a.json:
         res = {"per_seed": {str(s): per_seed[s] for s in a.seeds}, **summary,
                "windows": measured[a.seeds[0]]["tab2_windows"], "window_stride": a.window_stride,
-               "epochs": a.epochs, "seeds": a.seeds, "train_seconds": seconds,
+               "epochs": a.epochs, "seeds": a.seeds,
+               "train_seconds": {f"seed{s}/{v}": trained_with(checkpoint(a.out, s, v))["seconds"]
+                                 for s in a.seeds for v in ORDER},
                "seconds": time.perf_counter() - t0, "data": [_made(f) for f in folders],
                "protocol": "teacher-forced: from the true past 5 frames the next 10 (1 for the 1-frame model, "
                            "rolled out) predicted; V2V mm over the test clips' windows",
