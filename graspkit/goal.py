@@ -29,6 +29,12 @@ from graspkit.paths import require_checkpoints
 from graspkit.saga import CHECKPOINTS
 
 
+# Rest heights, relative to graspkit's procedural body (the one body GNet and MNet were trained on), at which
+# `synthesize` was measured to walk to a box's grasp from 1 m within 300 frames (docs/goal.md, "Other bodies"):
+# 0.8 times arrives at frame 154, 1.5 times at 118, 0.7 times not at all.
+MEASURED_HEIGHTS = (0.8, 1.5)
+
+
 @dataclass
 class GoalResult:
     """The goal grasp and the approach motion (world, absolute hand poses), the object mesh there and the figures."""
@@ -50,6 +56,31 @@ def default_start(centre: np.ndarray, distance: float, yaw_offset: float = 0.0) 
     return Start(x, y, float(np.arctan2(centre[1] - y, centre[0] - x)))
 
 
+def height_ratio(bm: Any, betas: torch.Tensor) -> float:
+    """Rest height of body model `bm` shaped by `betas` (k,) over that of graspkit's procedural body (zero betas):
+    the vertical (y) extents of the shaped rest vertices."""
+    from graspkit.body import shared_body
+    from graspkit.data.wandr_dataset import shaped_rest
+    from graspkit.paths import procedural_model_path
+
+    def height(model: Any, b: torch.Tensor) -> float:
+        v = shaped_rest(model, b[None])[0][0]
+        return float(v[:, 1].max() - v[:, 1].min())
+
+    return height(bm, betas) / height(shared_body(procedural_model_path(), flat_hand_mean=True), torch.zeros(1))
+
+
+def warn_height(bm: Any, betas: torch.Tensor) -> None:
+    """A warning when the body is outside MEASURED_HEIGHTS times the training body's height."""
+    import warnings
+
+    r, (lo, hi) = height_ratio(bm, betas), MEASURED_HEIGHTS
+    if not lo <= r <= hi:
+        warnings.warn(f"model: a body {r:.2f} times the height of graspkit's procedural body, the one GNet and MNet "
+                      f"were trained on; synthesize was measured to arrive for {lo}-{hi} times (a body 0.7 times as "
+                      "tall did not arrive within 300 frames; docs/goal.md)", stacklevel=3)
+
+
 def check_checkpoints(checkpoints: str | Path | None = None) -> Path:
     """The folder `checkpoints` once GNet's and MNet's files are in it (else FileNotFoundError naming the first
     missing; None: the shipped ones)."""
@@ -65,7 +96,8 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
     refined GNet grasp and MNet's approach into it from a standing start, seeded (the same seed and torch thread
     count give the same numbers; another thread count can move the result, the command uses 1). `penetration`: the
     refinement adds graspkit's E_pen on the object's collision grid (False: GOAL's Eq. 4-8 alone; docs/goal.md);
-    `model`: an SMPL-X .npz for the body (default: graspkit's procedural one, which the networks were trained on);
+    `model`: an SMPL-X .npz for the body (default: graspkit's procedural one, which the networks were trained on; a
+    warning when its height is outside MEASURED_HEIGHTS times that one's);
     `stall`: MNet's stall window in frames (`mnet.rollout`; None: GOAL's rollout, which may stop with the hand
     10-25 cm short); `progress`: a bar over the stages (half a minute in all on two cores)."""
     from tqdm.auto import tqdm
@@ -108,6 +140,7 @@ def synthesize(name: str | Path | Any, object_pose: ObjectPose | None = None, st
         st = start if start is not None else default_start(centre, start_distance)
         first = plan_reach(st, centre, 60, seed=seed, bm=bm).slice(0, 1)
         betas = torch.as_tensor(first.betas[:10]).float()
+        warn_height(bm, betas)
         s = (axis_angle_to_rot6d(torch.as_tensor(first.poses[0], dtype=torch.float64)).float(),
              torch.as_tensor(first.trans[0]).float())
         g = torch.Generator().manual_seed(seed)

@@ -195,3 +195,29 @@ def test_the_grasp_is_refined_on_the_body_given(tmp_path):
     low = float(r.grasp.vertices(bm)[0, :, 2].min())
     assert low == pytest.approx(0.0, abs=0.01)
     assert r.metrics["grasp_contact"] == 1.0
+
+
+def test_a_body_outside_the_measured_heights_is_warned_of(tmp_path):
+    """`height_ratio` of graspkit's body with its rest template scaled by k is k (heights scale with the template;
+    the joints follow through the regressor), and `synthesize` warns, naming `model` and the measured range, for a
+    body 0.7 times as tall (measured: it did not arrive within 300 frames; 0.8 times arrived at frame 154), not for
+    graspkit's own body."""
+    import warnings
+
+    from conftest import PROCEDURAL_MODEL, npz_copy
+
+    from graspkit.body import BodyModel
+    from graspkit.goal import height_ratio
+
+    with np.load(PROCEDURAL_MODEL, allow_pickle=False) as z:
+        small = npz_copy(PROCEDURAL_MODEL, tmp_path / "SMPLX_SMALL.npz", v_template=z["v_template"] * 0.7)
+    bm = BodyModel.from_file(small, flat_hand_mean=True)
+    assert height_ratio(bm, torch.zeros(10)) == pytest.approx(0.7, rel=1e-6)
+    assert height_ratio(BodyModel.from_file(PROCEDURAL_MODEL), torch.zeros(10)) == pytest.approx(1.0)
+    mesh = trimesh.creation.box((0.08, 0.12, 0.18))
+    pose = ObjectPose.from_yaw(0.0, np.array([0.0, 0.0, 1.0]))
+    with pytest.warns(UserWarning, match=r"model: a body 0.70 times the height .* measured to arrive for 0.8-1.5"):
+        synthesize(mesh, object_pose=pose, seed=0, max_frames=2, penetration=False, model=str(small), progress=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        synthesize(mesh, object_pose=pose, seed=0, max_frames=2, penetration=False, progress=False)
