@@ -11,7 +11,8 @@ extra such as normalisation statistics), so it loads with `torch.load(path, weig
 stopped at any point resumes from the last finished epoch with the same numbers as an uninterrupted run: the
 data order of each epoch comes from `seed + epoch`, and the RNG state is saved. A `time_limit_s` is the exception:
 it is wall time, so where it stops depends on the machine, and a resumed run gets the whole limit again (a finished
-time-limited command run a second time trains further).
+time-limited command run a second time trains further). The state also records `code_version()`, a hash of
+graspkit's sources: a run resumed by other code warns (the run key names the settings, not the code).
 
 DDP: when `torch.distributed` is initialised (`init_distributed()` under `torchrun --nproc_per_node=2 ...`), `fit`
 wraps the model in DistributedDataParallel, shards every epoch with a DistributedSampler, sums the logged terms over
@@ -23,6 +24,7 @@ identical weights. GNet's and MNet's steps do; WholeGrasp, the pose prior, Motio
 """
 from __future__ import annotations
 
+import functools
 import math
 import os
 import sys
@@ -177,6 +179,23 @@ def _foreign_archive(path: Path) -> str | None:
     if names and all(n.endswith(".npy") for n in names):
         return "; this is a NumPy .npz archive, not a torch file"
     return "; this zip archive has no data.pkl entry"
+
+
+def code_version(root: str | Path | None = None) -> str:
+    """A short content hash of the Python sources under `root` (default: graspkit's own; relative names and bytes),
+    kept in every training state so that a run resumed by other code says so."""
+    return _code_version(Path(root or Path(__file__).resolve().parent).resolve())
+
+
+@functools.lru_cache(maxsize=4)
+def _code_version(root: Path) -> str:
+    """code_version of one folder (read once per process: the sources do not change under a running program)."""
+    import hashlib
+
+    h = hashlib.blake2b(digest_size=6)
+    for f in sorted(root.rglob("*.py")):
+        h.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()
 
 
 def load_checkpoint(path: str | Path) -> dict[str, Any]:
@@ -432,7 +451,8 @@ def fit(model: torch.nn.Module, step: StepFn, dataset: Dataset, cfg: TrainConfig
         if checkpoint is not None and world[1] == 0:
             save_checkpoint(checkpoint, {"model": model.state_dict(), "optimizer": opt.state_dict(),
                                          "scheduler": sched.state_dict(), "epoch": epoch + 1, "history": history,
-                                         "rng": torch.get_rng_state(), "config": asdict(cfg), "extra": extra or {}})
+                                         "rng": torch.get_rng_state(), "config": asdict(cfg), "extra": extra or {},
+                                         "code": code_version()})
             write_history_csv(Path(checkpoint).with_suffix(".csv"), history)
         stop = (time_limit_s is not None and time.perf_counter() - t0 > time_limit_s) or epoch + 1 == stop_at
         if world[0]:
@@ -493,6 +513,15 @@ def _resume(checkpoint: str | Path, model: torch.nn.Module, opt: torch.optim.Opt
         differ = ", ".join(f"{k} {saved.get(k)!r} there, {now[k]!r} here" for k in now if saved.get(k) != now[k])
         raise ValueError(f"checkpoint {checkpoint}: a run with other settings ({differ}); delete it (graspkit's "
                          "run file) or pass another path to train anew")
+    code, now = state.get("code"), code_version()
+    if code != now:                  # the same settings, other code: the user decides whether the change matters
+        import warnings
+
+        written = f"other graspkit sources ({code}, now {now})" if code else "graspkit of before 2026-12-07, " \
+            "which did not record its sources"
+        warnings.warn(f"checkpoint {checkpoint}: a training state written by {written}; resuming it continues that "
+                      "run with this code (delete it, graspkit's run file, or pass another path to train anew)",
+                      stacklevel=3)
     model.load_state_dict(state["model"])
     opt.load_state_dict(state["optimizer"])
     sched.load_state_dict(state["scheduler"])

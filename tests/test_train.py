@@ -1,6 +1,7 @@
 """The shared training loop (resume = uninterrupted, atomic weights-only checkpoints) and the VAE blocks."""
 import math
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -499,3 +500,38 @@ def test_resblock_applies_leaky_relu_after_adding_the_skip(norm):
             blk.n2.bias.fill_(-5.0)
     y = blk(torch.ones(3, 4))
     torch.testing.assert_close(y, torch.full((3, 4), -0.8), atol=1e-4, rtol=0)
+
+
+def test_a_training_state_records_its_code_and_a_resume_by_other_code_warns(tmp_path, monkeypatch):
+    """The state holds code_version(), a hash of the sources: equal for a copy of graspkit's tree, other once one
+    byte of one file changes. Resuming with the same code is silent; with other code, or a state from before the code
+    was recorded, it warns naming the file (the run key names settings, not code: MNet's held features of 2026-12-07
+    needed a hand-made key entry so that an older run file was not resumed)."""
+    import shutil
+    import warnings
+
+    import graspkit
+    import graspkit.train as tr
+
+    same, other = tmp_path / "same", tmp_path / "other"          # two copies: a folder is hashed once per process
+    for tree in (same, other):
+        shutil.copytree(Path(graspkit.__file__).parent, tree, ignore=shutil.ignore_patterns("__pycache__"))
+    with open(other / "models" / "mnet.py", "a") as f:
+        f.write("#")
+    assert tr.code_version(same) == tr.code_version() != tr.code_version(other)
+
+    cfg = TrainConfig(epochs=3, batch_size=16, lr=1e-2, seed=0)
+    ck = tmp_path / "r.pt"
+    fit(torch.nn.Linear(4, 1), _step, _problem(), cfg, checkpoint=ck, progress=False, stop_at=1)
+    assert load_checkpoint(ck)["code"] == tr.code_version()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fit(torch.nn.Linear(4, 1), _step, _problem(), cfg, checkpoint=ck, progress=False, stop_at=2)
+    monkeypatch.setattr(tr, "code_version", lambda root=None: "0123456789ab")
+    with pytest.warns(UserWarning, match=rf"checkpoint {ck}: a training state written by other graspkit sources"):
+        fit(torch.nn.Linear(4, 1), _step, _problem(), cfg, checkpoint=ck, progress=False)
+    state = load_checkpoint(ck)
+    assert state["epoch"] == 3 and state["code"] == "0123456789ab"
+    save_checkpoint(ck, {k: v for k, v in state.items() if k != "code"} | {"epoch": 2})     # a state of before
+    with pytest.warns(UserWarning, match="did not record its sources"):
+        fit(torch.nn.Linear(4, 1), _step, _problem(), cfg, checkpoint=ck, progress=False)
