@@ -4,8 +4,8 @@ difference to each ablation (the same seed: the same data order and initialisati
 say whether MNet is below an ablation when they are a fraction of a millimetre apart; the seeds' spread can.
 
     graspkit data make --kind approach --n 272 --seed 0
-    python tools/goal_tab2_seeds.py --out /tmp/tab2_seeds --seeds 0 1 2 --jobs 2 \
-        --json data_stubs/checkpoints/goal_tab2_seeds.json
+    python tools/goal_tab2_seeds.py --out /tmp/tab2_seeds --seeds 0 1 2 3 4 --jobs 2 \
+        --json data_stubs/checkpoints/goal_tab2_seeds.json       # 29 min on two cores (the shipped JSON)
 
 Checkpoints go to <out>/seed<S>/mnet[_<variant>].pt (one already there is measured, not trained again) and resumable
 runs to <out>/runs; each training runs on one thread, `--jobs` of them at a time. docs/goal.md ("Tab. 2 over seeds")
