@@ -378,7 +378,7 @@ def run_train_mnet(folders: Sequence[str | Path], out: str | Path, variant: str 
                                                                    num_threads=threads),
                            checkpoint=run, time_limit_s=time_limit_s, progress=progress, vel_noise=vel_noise)
     info = {"variant": variant, "train_windows": len(train), "epochs": len(hist), "goal_repeat": goal_repeat,
-            "vel_noise": vel_noise,
+            "vel_noise": vel_noise, "seed": seed, "files": files_key(folders),
             "seconds": time.perf_counter() - t0, "history": hist}
     save_weights(out, net, "mnet", extra=info)
     return info

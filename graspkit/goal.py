@@ -31,8 +31,9 @@ from graspkit.saga import CHECKPOINTS
 
 # Rest heights, relative to graspkit's procedural body (the one body GNet and MNet were trained on), at which
 # `synthesize` was measured to walk to a box's grasp from 1 m within 300 frames (docs/goal.md, "Other bodies"):
-# 0.8 times arrives at frame 154, 1.5 times at 118, 0.7 times not at all.
+# 0.8 times arrives at frame 154 (past the default max_frames, 150), 1.5 times at 118, 0.7 times not at all.
 MEASURED_HEIGHTS = (0.8, 1.5)
+PROCEDURAL_HEIGHT = 1.6996      # m: the rest height of graspkit's procedural body (zero betas; a test measures it)
 
 
 @dataclass
@@ -57,28 +58,27 @@ def default_start(centre: np.ndarray, distance: float, yaw_offset: float = 0.0) 
 
 
 def height_ratio(bm: Any, betas: torch.Tensor) -> float:
-    """Rest height of body model `bm` shaped by `betas` (k,) over that of graspkit's procedural body (zero betas):
-    the vertical (y) extents of the shaped rest vertices."""
-    from graspkit.body import shared_body
+    """Rest height of body model `bm` shaped by `betas` (k,) (the vertical, y, extent of its shaped rest vertices) over
+    PROCEDURAL_HEIGHT, that of graspkit's procedural body (a constant: a plain `pip install` may not have built it)."""
     from graspkit.data.wandr_dataset import shaped_rest
-    from graspkit.paths import procedural_model_path
 
-    def height(model: Any, b: torch.Tensor) -> float:
-        v = shaped_rest(model, b[None])[0][0]
-        return float(v[:, 1].max() - v[:, 1].min())
-
-    return height(bm, betas) / height(shared_body(procedural_model_path(), flat_hand_mean=True), torch.zeros(1))
+    v = shaped_rest(bm, betas[None])[0][0]
+    return float(v[:, 1].max() - v[:, 1].min()) / PROCEDURAL_HEIGHT
 
 
 def warn_height(bm: Any, betas: torch.Tensor) -> None:
     """A warning when the body is outside MEASURED_HEIGHTS times the training body's height."""
     import warnings
 
+    from graspkit.checks import GraspkitWarning, user_stacklevel
+
     r, (lo, hi) = height_ratio(bm, betas), MEASURED_HEIGHTS
     if not lo <= r <= hi:
         warnings.warn(f"model: a body {r:.2f} times the height of graspkit's procedural body, the one GNet and MNet "
-                      f"were trained on; synthesize was measured to arrive for {lo}-{hi} times (a body 0.7 times as "
-                      "tall did not arrive within 300 frames; docs/goal.md)", stacklevel=3)
+                      f"were trained on; synthesize was measured to arrive within 300 frames (max_frames) for "
+                      f"{lo}-{hi} times, bodies under 0.88 times after more than the default 150, and a body 0.7 "
+                      "times as tall not at all (docs/goal.md, 'Other bodies')", GraspkitWarning,
+                      stacklevel=user_stacklevel())
 
 
 def check_checkpoints(checkpoints: str | Path | None = None) -> Path:

@@ -517,11 +517,13 @@ def _resume(checkpoint: str | Path, model: torch.nn.Module, opt: torch.optim.Opt
     if code != now:                  # the same settings, other code: the user decides whether the change matters
         import warnings
 
+        from graspkit.checks import GraspkitWarning, user_stacklevel
+
         written = f"other graspkit sources ({code}, now {now})" if code else "graspkit of before 2026-12-07, " \
             "which did not record its sources"
         warnings.warn(f"checkpoint {checkpoint}: a training state written by {written}; resuming it continues that "
                       "run with this code (delete it, graspkit's run file, or pass another path to train anew)",
-                      stacklevel=3)
+                      GraspkitWarning, stacklevel=user_stacklevel())
     model.load_state_dict(state["model"])
     opt.load_state_dict(state["optimizer"])
     sched.load_state_dict(state["scheduler"])

@@ -95,8 +95,21 @@ def test_the_tool_trains_what_is_missing_and_writes_every_seed(tool, tmp_path, m
     with pytest.raises(SystemExit) as e:
         tool.main(["--out", str(tmp_path / "out"), "--data", str(tmp_path), "--seeds", "0", "1", "--epochs", "4",
                    "--jobs", "1", "--json", str(out)])
-    assert e.value.code == 2 and "trained 3 epochs, expected 'mnet' for --epochs 4" in capsys.readouterr().err
+    assert e.value.code == 2 and "trained with other epochs (3, expected 4)" in capsys.readouterr().err
     assert out.read_text() == before and len(trained) == 7
+    # one of another seed or other data copied in is refused (seed and files recorded since 2026-12-07), and a file
+    # that is not a checkpoint named
+    for extra, said in (({"seed": 0}, "seed (0, expected 1)"), ({"seed": 1, "files": "x"}, "files ('x', expected")):
+        save_checkpoint(tmp_path / "out" / "seed1" / "mnet_pose.pt",
+                        {"extra": {"variant": "pose", "epochs": 3, "seconds": 9.0, **extra}})
+        with pytest.raises(SystemExit):
+            tool.main(["--out", str(tmp_path / "out"), "--data", str(tmp_path), "--seeds", "0", "1", "--epochs", "3",
+                       "--jobs", "1"])
+        assert said in capsys.readouterr().err
+    (tmp_path / "out" / "seed1" / "mnet_pose.pt").write_text("not torch")
+    with pytest.raises(SystemExit):
+        tool.main(["--out", str(tmp_path / "out"), "--data", str(tmp_path), "--seeds", "1", "--epochs", "3"])
+    assert "--out: checkpoint " in capsys.readouterr().err and len(trained) == 7
 
 
 def test_the_tool_refuses_repeated_seeds(tool, tmp_path, capsys):

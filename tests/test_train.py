@@ -512,6 +512,7 @@ def test_a_training_state_records_its_code_and_a_resume_by_other_code_warns(tmp_
 
     import graspkit
     import graspkit.train as tr
+    from graspkit.checks import GraspkitWarning
 
     same, other = tmp_path / "same", tmp_path / "other"          # two copies: a folder is hashed once per process
     for tree in (same, other):
@@ -528,10 +529,12 @@ def test_a_training_state_records_its_code_and_a_resume_by_other_code_warns(tmp_
         warnings.simplefilter("error")
         fit(torch.nn.Linear(4, 1), _step, _problem(), cfg, checkpoint=ck, progress=False, stop_at=2)
     monkeypatch.setattr(tr, "code_version", lambda root=None: "0123456789ab")
-    with pytest.warns(UserWarning, match=rf"checkpoint {ck}: a training state written by other graspkit sources"):
+    with pytest.warns(GraspkitWarning, match=rf"checkpoint {ck}: a training state written by other graspkit sources") \
+            as rec:
         fit(torch.nn.Linear(4, 1), _step, _problem(), cfg, checkpoint=ck, progress=False)
+    assert [w.filename for w in rec] == [__file__]          # the caller's line (a `graspkit train` note in the CLI)
     state = load_checkpoint(ck)
     assert state["epoch"] == 3 and state["code"] == "0123456789ab"
     save_checkpoint(ck, {k: v for k, v in state.items() if k != "code"} | {"epoch": 2})     # a state of before
-    with pytest.warns(UserWarning, match="did not record its sources"):
+    with pytest.warns(GraspkitWarning, match="did not record its sources"):
         fit(torch.nn.Linear(4, 1), _step, _problem(), cfg, checkpoint=ck, progress=False)

@@ -52,15 +52,17 @@ def _train(folders: list[str], out: str, seed: int, variant: str, epochs: int) -
 
 def _measure(folders: list[str], out: str, seed: int, stride: int) -> tuple[int, dict]:
     """Tab. 2 of one seed's checkpoints on one thread (a worker process): (seed, tab2_results' dict), kept in
-    <out>/seed<S>/tab2.json with a key of the checkpoints, data and stride, and read from there while they hold."""
+    <out>/seed<S>/tab2.json with a key of the checkpoints, data, stride and graspkit's sources, and read from there
+    while they hold."""
     import torch
 
     from graspkit.eval_goal import TAB2_ROWS, tab2_results
     from graspkit.paths import write_atomic
-    from graspkit.train import file_key, files_key
+    from graspkit.train import code_version, file_key, files_key
 
     folder = Path(out) / f"seed{seed}"
-    key = {"checkpoints": {f: file_key(folder / f) for f in TAB2_ROWS}, "data": files_key(folders), "stride": stride}
+    key = {"checkpoints": {f: file_key(folder / f) for f in TAB2_ROWS}, "data": files_key(folders), "stride": stride,
+           "code": code_version()}                    # the evaluator's code too
     cache = folder / "tab2.json"
     if cache.is_file():
         kept = json.loads(cache.read_text())
@@ -152,6 +154,7 @@ def _made(folder: str) -> dict:
 def main(argv: list[str] | None = None) -> int:
     from graspkit.eval_goal import default_data_folders
     from graspkit.paths import write_atomic
+    from graspkit.train import files_key
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, required=True, help="folder for the seeds' checkpoints and runs")
@@ -171,11 +174,19 @@ def main(argv: list[str] | None = None) -> int:
     os.environ["OMP_NUM_THREADS"] = "1"                 # the workers' BLAS, before they start
     t0 = time.perf_counter()
     todo = [(s, v) for v in ORDER for s in a.seeds if not checkpoint(a.out, s, v).is_file()]
+    data = files_key(folders)
     for s, v in [(s, v) for v in ORDER for s in a.seeds if (s, v) not in todo]:   # found: trained as asked?
-        got = trained_with(checkpoint(a.out, s, v))
-        if got.get("epochs") != a.epochs or got.get("variant") != v:
-            p.error(f"--out: {checkpoint(a.out, s, v)} holds {got.get('variant')!r} trained {got.get('epochs')} "
-                    f"epochs, expected {v!r} for --epochs {a.epochs} (remove it to train it again)")
+        try:
+            got = trained_with(checkpoint(a.out, s, v))
+        except ValueError as e:
+            p.error(f"--out: {e}")
+        asked = {"variant": v, "epochs": a.epochs, "seed": s, "files": data}
+        legacy = ("seed", "files")                   # recorded since 2026-12-07: older checkpoints pass on these
+        off = [k for k in asked if (k in got or k not in legacy) and got.get(k) != asked[k]]
+        if off:
+            p.error(f"--out: {checkpoint(a.out, s, v)} was trained with other "
+                    + ", ".join(f"{k} ({got.get(k)!r}, expected {asked[k]!r})" for k in off)
+                    + " (remove it to train it again)")
     done: list = []
 
     def trained(r: tuple[int, str, float]) -> None:
