@@ -117,3 +117,51 @@ def test_the_tool_refuses_repeated_seeds(tool, tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         tool.main(["--out", str(tmp_path), "--seeds", "0", "0"])
     assert e.value.code == 2 and "--seeds: expected distinct seeds" in capsys.readouterr().err
+
+
+def _alive(pid: int) -> bool:
+    """A process that runs (not gone, not a zombie waiting to be reaped)."""
+    try:
+        return " Z " not in Path(f"/proc/{pid}/stat").read_text().split(")", 1)[1][:4]
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_the_workers_stop_with_a_terminated_parent(tmp_path):
+    """A SIGTERM to the tool while two spawned workers run (each napping 60 s here) ends the parent with 143 and
+    terminates both workers: with concurrent.futures' pool they ran on, and two such trainings ran beside the next run
+    for ten minutes."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    (tmp_path / "napper.py").write_text("import os, time\n\ndef nap(path):\n"
+                                        "    open(path, 'w').write(str(os.getpid()))\n    time.sleep(60)\n")
+    (tmp_path / "run.py").write_text("import sys\nimport goal_tab2_seeds as t\nimport napper\n"
+                                     "if __name__ == '__main__':\n"
+                                     "    t._map(napper.nap, [(sys.argv[1] + '/a',), (sys.argv[1] + '/b',)], 2)\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT / "tools"), str(tmp_path), str(ROOT)])}
+    proc = subprocess.Popen([sys.executable, str(tmp_path / "run.py"), str(tmp_path)], env=env,
+                            start_new_session=True)
+    try:
+        t0 = time.monotonic()
+        while not all((tmp_path / n).is_file() and (tmp_path / n).read_text() for n in "ab"):
+            assert time.monotonic() - t0 < 60 and proc.poll() is None, "the workers did not start"
+            time.sleep(0.1)
+        pids = [int((tmp_path / n).read_text()) for n in "ab"]
+        assert all(_alive(p) for p in pids)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) == 128 + signal.SIGTERM
+    finally:                         # whatever failed, nothing of it left running (its own session: its group)
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.wait()
+    t0 = time.monotonic()
+    while any(_alive(p) for p in pids) and time.monotonic() - t0 < 15:
+        time.sleep(0.1)
+    assert not any(_alive(p) for p in pids)

@@ -16,10 +16,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import statistics
 import sys
+import threading
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -75,9 +76,16 @@ def _measure(folders: list[str], out: str, seed: int, stride: int) -> tuple[int,
     return seed, res
 
 
+def _call(job: tuple) -> tuple:
+    """(i, fn(*args)) for job (i, fn, args): a pool task that keeps its place."""
+    i, fn, args = job
+    return i, fn(*args)
+
+
 def _map(fn, calls: list[tuple], jobs: int, done=None) -> list:
     """[fn(*c) for c in calls], in `jobs` spawned processes when jobs > 1 (results in the calls' order); done(result)
-    is called as each finishes."""
+    is called as each finishes. The workers are terminated when the parent stops early (an error, Ctrl-C, or a
+    SIGTERM, which exits with 143 meanwhile): a pool left running had trained on beside the next run."""
     done = done or (lambda r: None)
     if jobs == 1 or len(calls) < 2:
         out = []
@@ -85,11 +93,18 @@ def _map(fn, calls: list[tuple], jobs: int, done=None) -> list:
             out.append(fn(*c))
             done(out[-1])
         return out
-    with ProcessPoolExecutor(jobs, mp_context=get_context("spawn")) as pool:
-        futures = [pool.submit(fn, *c) for c in calls]
-        for f in as_completed(futures):
-            done(f.result())
-        return [f.result() for f in futures]
+    results: dict[int, object] = {}
+    main = threading.current_thread() is threading.main_thread()
+    before = signal.signal(signal.SIGTERM, lambda signum, frame: sys.exit(128 + signum)) if main else None
+    try:
+        with get_context("spawn").Pool(jobs) as pool:          # __exit__ terminates the workers
+            for i, r in pool.imap_unordered(_call, [(i, fn, c) for i, c in enumerate(calls)]):
+                results[i] = r
+                done(r)
+    finally:
+        if main:
+            signal.signal(signal.SIGTERM, before)
+    return [results[i] for i in range(len(calls))]
 
 
 def summarise(per_seed: dict[int, dict]) -> dict:
