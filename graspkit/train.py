@@ -513,13 +513,13 @@ def _resume(checkpoint: str | Path, model: torch.nn.Module, opt: torch.optim.Opt
         differ = ", ".join(f"{k} {saved.get(k)!r} there, {now[k]!r} here" for k in now if saved.get(k) != now[k])
         raise ValueError(f"checkpoint {checkpoint}: a run with other settings ({differ}); delete it (graspkit's "
                          "run file) or pass another path to train anew")
-    code, now = state.get("code"), code_version()
-    if code != now:                  # the same settings, other code: the user decides whether the change matters
+    code, code_now = state.get("code"), code_version()
+    if code != code_now:                  # the same settings, other code: the user decides whether the change matters
         import warnings
 
         from graspkit.checks import GraspkitWarning, user_stacklevel
 
-        written = f"other graspkit sources ({code}, now {now})" if code else "graspkit of before 2026-12-07, " \
+        written = f"other graspkit sources ({code}, now {code_now})" if code else "graspkit of before 2026-12-07, " \
             "which did not record its sources"
         warnings.warn(f"checkpoint {checkpoint}: a training state written by {written}; resuming it continues that "
                       "run with this code (delete it, graspkit's run file, or pass another path to train anew)",
