@@ -71,7 +71,7 @@ def _measure(folders: list[str], out: str, seed: int, stride: int) -> tuple[int,
             return seed, kept["result"]
     torch.set_num_threads(1)
     res = tab2_results([Path(f) for f in folders], folder, stride)
-    res["tab2"] = {r: {p: float(x) for p, x in row.items()} for r, row in res["tab2"].items()}
+    res["tab2"] = {r: {p: float(x) for p, x in row.items()} for r, row in res["tab2"].items()}   # plain floats: JSON
     write_atomic(cache, json.dumps({"key": key, "result": res}, indent=1) + "\n")
     return seed, res
 
@@ -113,9 +113,10 @@ def summarise(per_seed: dict[int, dict]) -> dict:
     seeds, scipy) from {seed: {row: {part: mm}}}."""
     from scipy.stats import ttest_rel
 
+    from graspkit.eval_goal import TAB2_ROWS
+
     seeds = sorted(per_seed)
-    rows = {r for s in seeds for r in per_seed[s]}
-    rows = [r for r in ("MNet", "MNet-w/o-IAA", "MNet-Pose", "1 output frame") if r in rows]
+    rows = [r for r in TAB2_ROWS.values() if any(r in per_seed[s] for s in seeds)]     # MNet first, as in Tab. 2
     stats, paired = {}, {}
     for r in rows:
         stats[r] = {}
@@ -163,7 +164,8 @@ def _made(folder: str) -> dict:
     if not made:
         return {"folder": Path(folder).name}
     m = json.loads(made[0].read_text())
-    return {k: m[k] for k in ("kind", "seed", "chunk", "body") if k in m} | {"files": len(list(Path(folder).glob("*.npz")))}
+    files = len(list(Path(folder).glob("*.npz")))
+    return {k: m[k] for k in ("kind", "seed", "chunk", "body") if k in m} | {"files": files}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -210,8 +212,7 @@ def main(argv: list[str] | None = None) -> int:
 
     _map(_train, [(folders, str(a.out), s, v, a.epochs) for s, v in todo], a.jobs, trained)
     measured = dict(_map(_measure, [(folders, str(a.out), s, a.window_stride) for s in a.seeds], a.jobs))
-    per_seed = {s: {r: {p: float(x) for p, x in row.items()} for r, row in measured[s]["tab2"].items()}
-                for s in a.seeds}                      # numpy floats from the evaluator, plain floats in the JSON
+    per_seed = {s: measured[s]["tab2"] for s in a.seeds}
     summary = summarise(per_seed)
     print(table(summary))
     if a.json:

@@ -365,7 +365,8 @@ print(f"rollouts ({r['clips']} test clips): reached the true goal {100 * r['to_t
 # partly as GOAL's: the refinement brings the contact ratio to 1 and the feet onto the floor, and MNet beats its
 # ablations on parameters only and with one output frame (all four trained 12 epochs), and the one without attention
 # on body and feet but not hand error in this run, but over five training seeds (the lines under Tab. 2) the
-# attention's gain is not there at all: MNet without it is as good on this data; over all test grasps the refinement also lowers the mean penetration. They
+# attention's gain is not there at all: MNet without it is as good on this data; over all test grasps the refinement
+# also lowers the mean penetration. They
 # also differ: it lowers it for only about half of the grasps (GNet's latent is collapsed, so a sample is its mean
 # grasp, whose predicted offsets are ~1.5 cm off, and meeting them pulls some hands into the object as it pulls
 # others out; even the ground truth's own offsets leave ~2 cm³), GOAL's refinement stays about twenty times above the
