@@ -166,6 +166,51 @@ def test_fit_with_the_floor_keeps_the_body_on_it_where_the_markers_sink(bm, clip
     assert err["floor"] < err["smooth"] + 0.025, err
 
 
+def test_stand_term_is_the_height_of_the_lowest_foot_part_in_contact_and_off_without_one(bm):
+    """graspkit's stand term: on each frame where a foot part is in contact (T_c of S.2), w_stand times how far the
+    lowest vertex of the parts in contact stands above the floor plus stand_height, read here off the full mesh of
+    the same parameters (a body rising 1 cm a frame, only the left heel in contact); 0 with no part in contact
+    (one_foot_down off), absent without a floor or without contacts."""
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("stand",), one_foot_down=False))
+    F, w = 4, opt.cfg.weights
+    p = _sliding(opt, F, torch.arange(F, dtype=torch.float32)[:, None] * torch.tensor([0.0, 0.0, 0.01]))
+    with torch.no_grad():
+        v = bm.forward_rotmats(opt.rotmats(p), betas=torch.zeros(F, 10), transl=p["transl"]).vertices
+    heel = v[:, foot_vertices(bm)["left_heel"], 2].amin(1)                          # (F,) the left heel's lowest
+    floor = heel[0] - 0.002                                    # frame 0 stands within stand_height, the others above
+    contact = torch.zeros(1, F, 4)
+    contact[:, :, 0] = 0.9                                     # FOOT_PARTS[0]: the left heel
+    args = (torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, contact, None, None)
+    e = opt.energy(p, *args, floor.reshape(1))["stand"].item()
+    assert e == pytest.approx(w.stand * float(torch.relu(heel - floor - w.stand_height).sum()), rel=1e-4) and e > 0
+    # the right foot's parts are not down, so its soles (the same height here) do not count even where lower
+    contact[:, 1:, 0] = 0.4                                    # no part down on frames 1-3
+    assert opt.energy(p, *args, floor.reshape(1))["stand"].item() == 0.0
+    assert "stand" not in opt.energy(p, *args, None)
+    assert "stand" not in opt.energy(p, *args[:3], None, None, None, floor.reshape(1))
+
+
+def test_fit_with_feet_in_contact_puts_them_on_the_floor_where_the_markers_float(bm, clip):
+    """Markers of a walking clip lifted 3 cm above the floor z = 0, every foot part in contact: fitted with the
+    floor term alone (it only pushes up) the body floats with them; with the stand term each frame's lowest vertex
+    ends within stand_height (plus 2 mm) of the floor, the markers fitted within the 3 cm they rose (plus 5 mm)."""
+    markers, _, betas, _ = clip
+    lifted = (markers + torch.tensor([0.0, 0.0, 0.03]))[None]
+    F = lifted.shape[1]
+    low, err = {}, {}
+    for terms in (("smooth", "floor"), ("smooth", "floor", "stand")):
+        opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(steps=(60, 120), polish=(40, 1e-3),
+                                                                            terms=terms))
+        res = opt.fit(lifted, betas[None, :10], foot_contact=torch.ones(1, F, 4), progress=False,
+                      floor=torch.zeros(1))
+        low[terms[-1]] = opt.vertices(res)[..., 2].amin(-1)                     # (F,) each frame's lowest vertex
+        err[terms[-1]] = float((res.markers[0] - lifted[0]).norm(dim=-1).mean())
+    w = GraspMotionWeights()
+    assert float(low["floor"].min()) > 0.015, low["floor"]
+    assert float(low["stand"].max()) < w.stand_height + 0.002 and float(low["stand"].min()) > -0.002, low["stand"]
+    assert err["stand"] < err["floor"] + 0.035, err
+
+
 def test_foot_acceleration_term_is_zero_at_constant_velocity_and_analytic_at_constant_acceleration(bm):
     """The foot term graspkit adds beside S.2: sum over frames of the mean squared second difference of the foot
     vertices; a body at constant velocity gives 0, one at constant acceleration a (m/frame^2) gives w a^2 (F - 2)."""

@@ -243,7 +243,7 @@ def _boxed_hinge(q: Tensor, inside: Tensor, cloud: Tensor, normals: Tensor, sigm
 
 
 # ------------------------------------------------------------------------------------------------ the optimiser
-TERMS = ("colli", "contact", "palm", "smooth", "skate", "heel", "floor")     # stage 2's terms, all on by default
+TERMS = ("colli", "contact", "palm", "smooth", "skate", "heel", "floor", "stand")   # stage 2's terms, all on by default
 
 
 @dataclass
@@ -269,13 +269,15 @@ class GraspMotionWeights:
     heel_height: float = 0.06      # m above the floor: with both heels this low, one of them should stand still
     foot_acc: float = 1e5          # graspkit's: squared foot-vertex acceleration (m/frame^2), mean over vertices
     floor: float = 1000.0          # graspkit's: each frame's lowest sole vertex below the floor (m), when fit gets it
+    stand: float = 1000.0          # graspkit's: the lowest vertex of the foot parts in contact (T_c) above the floor
+    stand_height: float = 0.005    # m above the floor a foot part in contact may stand at no cost
     free_joints: float = 5e-4      # on the 6D offsets of GraspMotionConfig.free_joints (graspkit's; = alpha_theta)
     limits: float = 0.5            # per degree a free joint turns past the human range (metrics.joint_limit_excess)
 
     def __post_init__(self) -> None:
         for name, value in vars(self).items():        # a negative weight rewards what its term removes
             check_weight(value, name)
-        for name in ("palm_sigma", "skate_sigma", "heel_height"):        # the hinge floors sigma_b, sigma_o may be 0
+        for name in ("palm_sigma", "skate_sigma", "heel_height", "stand_height"):        # the hinge floors sigma_b, sigma_o may be 0
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name}: expected a threshold > 0, got {getattr(self, name)!r}")
 
@@ -454,16 +456,16 @@ class GraspMotionOpt:
                 e["smooth"] = e["smooth"] + w.smooth_latent * (S[:, 1:] - S[:, :-1]).pow(2).sum((1, 2))
         if "skate" in terms and foot_contact is not None:
             speed = (feet[:, 1:] - feet[:, :-1]).norm(dim=-1)                     # (B, T, n_foot)
-            c = foot_contact[:, :-1]
-            on = c > 0.5
-            if cfg.one_foot_down:              # the most probable part is down on every frame (first of ties)
-                on = on | torch.nn.functional.one_hot(c.argmax(-1), 4).bool()
-            on = on[:, :, self.foot_part].to(speed.dtype)
+            on = self.parts_down(foot_contact)[:, :-1].to(speed.dtype)
             e["skate"] = w.skate * (on * torch.relu(speed - w.skate_sigma)).sum((1, 2))
         if "skate" in terms and w.foot_acc > 0:
             e["foot_acc"] = w.foot_acc * (feet[:, 2:] - 2 * feet[:, 1:-1] + feet[:, :-2]).pow(2).sum(-1).mean(-1).sum(1)
         if "floor" in terms and w.floor > 0 and floor is not None:    # only a floor given: the heel markers' is not it
             e["floor"] = w.floor * torch.relu(floor[:, None] - feet[..., 2].amin(-1)).sum(1)    # each frame's lowest
+        if "stand" in terms and w.stand > 0 and floor is not None and foot_contact is not None:
+            down = self.parts_down(foot_contact)                                  # (B, F, n_foot)
+            z = (feet[..., 2] + (~down).to(feet.dtype)).amin(-1)  # parts not down lifted 1 m: out of the min
+            e["stand"] = w.stand * (down.any(-1) * torch.relu(z - floor[:, None] - w.stand_height)).sum(1)
         a_heel = w.heel_held if held else w.heel
         if "heel" in terms and a_heel > 0:
             if floor is None:                   # the lowest heel marker of the target sequence
@@ -473,6 +475,14 @@ class GraspMotionOpt:
             low = ((h[:, :-1, :, 2] - floor[:, None, None]) < w.heel_height).all(-1).detach()
             e["heel"] = a_heel * (low * torch.relu(speed.min(-1).values - w.skate_sigma)).sum(1)
         return e
+
+    def parts_down(self, foot_contact: Tensor) -> Tensor:
+        """T_c of S.2 per sole vertex: (B, F, 4) foot-contact probabilities -> (B, F, n_foot) bool, a part down where
+        its probability is above 0.5 (and, with `one_foot_down`, each frame's most probable part, first of ties)."""
+        on = foot_contact > 0.5
+        if self.cfg.one_foot_down:
+            on = on | torch.nn.functional.one_hot(foot_contact.argmax(-1), 4).bool()
+        return on[:, :, self.foot_part]
 
     def cloud_penetration(self, q: Tensor, pts: Tensor, nrm: Tensor, lo: Tensor, hi: Tensor) -> Tensor:
         """E^o_colli's hinge (S(q, O) below -sigma_b)_+ per query (B, N) against a point cloud with normals (B, P, 3),
