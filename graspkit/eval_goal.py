@@ -620,9 +620,11 @@ def saga_sliding(seqs: list, seed: int = 0, progress: bool = False, **saga_kwarg
         n_s, n = sliding(v)
         slide, pairs = slide + n_s, pairs + n
         per.append({"object": sq.object_name, "frames": m.num_frames, "sliding": n_s / max(n, 1),
-                    "end_contact": r.metrics["end_contact"], "end_volume_cm3": r.metrics["end_volume_cm3"]})
-    return {"sliding": slide / max(pairs, 1), "per_clip": per, "results": results,
-            "end_contact": float(np.mean([p["end_contact"] for p in per])) if per else float("nan")}
+                    "end_contact": r.metrics["end_contact"], "end_volume_cm3": r.metrics["end_volume_cm3"],
+                    "floating": r.metrics["floating_share"]})
+    mean = lambda k: float(np.mean([p[k] for p in per])) if per else float("nan")  # noqa: E731
+    return {"sliding": slide / max(pairs, 1), "per_clip": per, "results": results, "end_contact": mean("end_contact"),
+            "floating": mean("floating")}
 
 
 def rollout_sequences(folders: Sequence[str | Path], n_rollouts: int) -> list:
@@ -798,7 +800,8 @@ def add_saga_rows(res: dict, seqs: list, seed: int = 0) -> dict:
     t = time.perf_counter()
     saga = saga_sliding(seqs, seed)
     res["sliding"]["SAGA (WholeGrasp + MotionFill, ours)"] = saga["sliding"]
-    res["saga"] = {"per_clip": saga["per_clip"], "end_contact": saga["end_contact"], "seconds": time.perf_counter() - t}
+    res["saga"] = {"per_clip": saga["per_clip"], "end_contact": saga["end_contact"], "floating": saga["floating"],
+                   "seconds": time.perf_counter() - t}
     return res
 
 
@@ -895,7 +898,8 @@ def main(argv: list[str] | None = None) -> int:
             shown = {"sliding": r["sliding"], **{k: r["rollouts"][k] for k in ("to_true_goal", "goal_pipeline")}}
         else:
             r = add_saga_rows(r, rollout_sequences(folders, a.n_rollouts), a.seed)
-            shown = {"sliding": r["sliding"], "saga_end_contact": r["saga"]["end_contact"]}
+            shown = {"sliding": r["sliding"], "saga_end_contact": r["saga"]["end_contact"],
+                     "saga_floating": r["saga"]["floating"]}
         r.setdefault("updates", []).append({"flag": flag, "n_grasps": a.n_grasps, "n_rollouts": a.n_rollouts,
                                             "seed": a.seed, "max_frames": a.max_frames,
                                             "window_stride": a.window_stride,

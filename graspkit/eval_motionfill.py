@@ -657,7 +657,7 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
     Alg. 2). `start_cm`: the fitted frame 0's markers from the clip's first frame (mean, cm)."""
     from graspkit.body import BodyModel
     from graspkit.data.grasp_io import collision_sdf_grid
-    from graspkit.metrics import grasp_metrics, ground_penetration, non_collision_score
+    from graspkit.metrics import floating_share, grasp_metrics, ground_penetration, non_collision_score
     from graspkit.models.pose_prior import load_pose_prior
     from graspkit.optim.graspmotion import GraspMotionConfig, GraspMotionOpt, load_smooth_ae
     from graspkit.optim.grasppose import GraspObject
@@ -701,6 +701,8 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
                      "noncollision_opt": float(non_collision_score(v, s["floor"]).mean()),
                      "noncollision_gt": float(non_collision_score(s["motion"].vertices(bm)).mean()),
                      "below_floor_mean_cm": 100 * float(dip.mean()), "below_floor_max_cm": 100 * float(dip.max()),
+                     "floating_opt": floating_share(v, s["floor"]),
+                     "floating_gt": floating_share(s["motion"].vertices(bm)),
                      **{f"{k}_{tag}": x for tag, seq in (("gt", s["markers"]), ("opt", res.markers[i].numpy()))
                         for k, x in heel_jerkiness(seq, heels).items()}})
     return {"rows": rows, "result": res, "markers": markers, "contacts": contacts, "scenes": scenes}
@@ -855,7 +857,7 @@ def main(argv: list[str] | None = None) -> int:
                                        "seed": args.seed,
                                        "seconds": round(secs, 1), "threads": args.threads})
     keys = ("skating_gt", "skating_sample", "skating_opt", "contact_mm", "volume_cm3", "depth_cm", "heel_acc_p99_gt",
-            "heel_acc_p99_opt", "noncollision_opt", "below_floor_mean_cm", "below_floor_max_cm")
+            "heel_acc_p99_opt", "noncollision_opt", "below_floor_mean_cm", "below_floor_max_cm", "floating_opt")
     for r in ev["rows"]:
         print(f"{r['object']:12s} " + " ".join(f"{k} {r[k]:.3f}" for k in keys))
     print("mean         " + " ".join(f"{k} {np.mean([r[k] for r in ev['rows']]):.3f}" for k in keys)

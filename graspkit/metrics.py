@@ -168,10 +168,20 @@ def ground_penetration(vertices: Any) -> np.ndarray:
 
 def floor_figures(vertices: Any) -> dict[str, float]:
     """A motion's body against the floor z = 0, vertices (T,V,3): the deepest any vertex goes below it over the clip
-    and the lowest vertex's height at the last frame, in cm (the one-call pipelines report them)."""
+    and the lowest vertex's height at the last frame, in cm, and the share of frames in the air (`floating_share`;
+    the one-call pipelines report them)."""
     v = _shaped(vertices, "vertices", "T,V,3")
     return {"floor_deepest_cm": 100 * float(ground_penetration(v).max()),
-            "end_floor_cm": 100 * float(v[-1, :, 2].min())}
+            "end_floor_cm": 100 * float(v[-1, :, 2].min()), "floating_share": floating_share(v)}
+
+
+def floating_share(vertices: Any, floor: float = 0.0, height: float = 0.01) -> float:
+    """The share of frames whose lowest vertex stands more than `height` m above the floor z = `floor`, vertices
+    (T,V,3): a body in the air (graspkit's; walking and reaching keep a foot down on every frame, and 1 cm is above
+    the soles' rest unevenness)."""
+    v = _shaped(vertices, "vertices", "T,V,3")
+    lowest = v[..., 2].amin(-1) - _number(floor, "floor", positive=False)
+    return float((lowest > _number(height, "height")).double().mean())
 
 
 def non_collision_score(vertices: Any, floor: float = 0.0) -> np.ndarray:

@@ -284,6 +284,20 @@ def test_floor_figures_of_a_body_that_sinks_then_rises():
     f = M.floor_figures(v)
     assert f["floor_deepest_cm"] == pytest.approx(2.5) and f["end_floor_cm"] == pytest.approx(-0.4)
     assert M.floor_figures(v[:1])["floor_deepest_cm"] == 0.0                   # never below: 0
+    assert f["floating_share"] == 0.0                                      # +1 cm is not more than 1 cm above
+
+
+def test_floating_share_counts_the_frames_whose_lowest_vertex_is_above_the_floor_plus_height():
+    """Four frames of a two-vertex body, lowest at 0, 1.5, 0.9 and 3 cm: two of four more than 1 cm above z = 0;
+    with the floor at 1 cm one (3 cm); with height 0.5 cm three."""
+    v = np.zeros((4, 2, 3))
+    v[:, 0, 2], v[:, 1, 2] = [0.0, 0.015, 0.009, 0.03], 1.0
+    assert M.floating_share(v) == pytest.approx(0.5)
+    assert M.floating_share(v, floor=0.01) == pytest.approx(0.25)
+    assert M.floating_share(v, height=0.005) == pytest.approx(0.75)
+    assert M.floor_figures(v)["floating_share"] == pytest.approx(0.5)
+    with pytest.raises(ValueError, match="height"):
+        M.floating_share(v, height=-0.01)
 
 
 def test_joint_turn_speed_is_the_angular_speed_of_a_joint_turning_about_any_axis():

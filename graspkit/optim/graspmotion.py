@@ -70,6 +70,13 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   0.4-2.7 cm (it loses to the marker fit and the hand's contact), and on markers sunk 2 cm into the floor a_floor =
   3000 threw the body 2 cm above it, where the fit's small gradients then barely move it (1000: every frame between
   0.1 mm under and 4.7 mm above; tests/test_graspmotion.py). A sum over all sole vertices overshot the same way.
+- A stand term (graspkit's, since 2026-12-07), the floor term's other side: a_stand sum_t 1(a part in T_c)
+  (min_{v in the soles of the parts in T_c} v_z,t - floor - h)_+, a_stand = 1000 per metre, h = 5 mm, with T_c as
+  S.2's (MotionFill's foot contacts > 0.5, and each frame's most probable part with `one_foot_down`), in stage 2
+  and only when `fit` is given the floor and the contacts. The floor term only pushes up, so a body MotionFill
+  puts above the floor stayed there: on GOAL's twelve test sequences (`eval_goal.saga_sliding`, frame 0 free) 70
+  of 732 frames stood more than 1 cm above it (at most 3.4 cm), every one with a foot part predicted in contact;
+  with the term 0 (at most 1.0 cm), GOAL's sliding 9.7 -> 8.9 % (docs/saga_motion.md, "The stand term").
 - Free arm joints (`GraspMotionConfig.free_joints`, graspkit's, since 2026-12-02; () is Alg. 2's prior latent
   alone): per frame, the collar, shoulder, elbow and wrist joints get a free rotation on top of the prior's decoded
   pose (6D offsets from the identity, weight 5e-4 as alpha_theta, and 0.5 per degree past the human range:
