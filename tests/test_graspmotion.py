@@ -166,26 +166,28 @@ def test_fit_with_the_floor_keeps_the_body_on_it_where_the_markers_sink(bm, clip
     assert err["floor"] < err["smooth"] + 0.025, err
 
 
-def test_stand_term_is_the_height_of_the_lowest_foot_part_in_contact_and_off_without_one(bm):
+def test_stand_term_is_the_lowest_sole_vertex_above_the_floor_on_frames_with_a_foot_part_in_contact(bm):
     """graspkit's stand term: on each frame where a foot part is in contact (T_c of S.2), w_stand times how far the
-    lowest vertex of the parts in contact stands above the floor plus stand_height, read here off the full mesh of
-    the same parameters (a body rising 1 cm a frame, only the left heel in contact); 0 with no part in contact
-    (one_foot_down off), absent without a floor or without contacts."""
+    lowest sole vertex (the floor term's) stands above the floor plus stand_height, read here off the full mesh of the
+    same parameters (a body rising 1 cm a frame); the same whichever part is in contact; 0 on frames with none
+    (one_foot_down off); absent without a floor or without contacts."""
     opt = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("stand",), one_foot_down=False))
     F, w = 4, opt.cfg.weights
     p = _sliding(opt, F, torch.arange(F, dtype=torch.float32)[:, None] * torch.tensor([0.0, 0.0, 0.01]))
     with torch.no_grad():
         v = bm.forward_rotmats(opt.rotmats(p), betas=torch.zeros(F, 10), transl=p["transl"]).vertices
-    heel = v[:, foot_vertices(bm)["left_heel"], 2].amin(1)                          # (F,) the left heel's lowest
-    floor = heel[0] - 0.002                                    # frame 0 stands within stand_height, the others above
-    contact = torch.zeros(1, F, 4)
-    contact[:, :, 0] = 0.9                                     # FOOT_PARTS[0]: the left heel
-    args = (torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, contact, None, None)
-    e = opt.energy(p, *args, floor.reshape(1))["stand"].item()
-    assert e == pytest.approx(w.stand * float(torch.relu(heel - floor - w.stand_height).sum()), rel=1e-4) and e > 0
-    # the right foot's parts are not down, so its soles (the same height here) do not count even where lower
-    contact[:, 1:, 0] = 0.4                                    # no part down on frames 1-3
-    assert opt.energy(p, *args, floor.reshape(1))["stand"].item() == 0.0
+    sole = v[:, np.concatenate(list(foot_vertices(bm).values())), 2].amin(1)         # (F,) the lowest sole vertex
+    floor = sole[0] - 0.002                                    # frame 0 stands within stand_height, the others above
+    expected = w.stand * float(torch.relu(sole - floor - w.stand_height).sum())
+    for part in range(4):                                      # FOOT_PARTS: left heel, left toe, right heel, right toe
+        contact = torch.zeros(1, F, 4)
+        contact[:, :, part] = 0.9
+        args = (torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, contact, None, None)
+        e = opt.energy(p, *args, floor.reshape(1))["stand"].item()
+        assert e == pytest.approx(expected, rel=1e-4) and e > 0
+    contact[:, 2:, part] = 0.4                                 # no part down on frames 2-3: only frame 1 counts
+    assert opt.energy(p, *args, floor.reshape(1))["stand"].item() == pytest.approx(
+        w.stand * float(torch.relu(sole[1] - floor - w.stand_height)), rel=1e-4)
     assert "stand" not in opt.energy(p, *args, None)
     assert "stand" not in opt.energy(p, *args[:3], None, None, None, floor.reshape(1))
 

@@ -71,9 +71,11 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   3000 threw the body 2 cm above it, where the fit's small gradients then barely move it (1000: every frame between
   0.1 mm under and 4.7 mm above; tests/test_graspmotion.py). A sum over all sole vertices overshot the same way.
 - A stand term (graspkit's, since 2026-12-07), the floor term's other side: a_stand sum_t 1(a part in T_c)
-  (min_{v in the soles of the parts in T_c} v_z,t - floor - h)_+, a_stand = 1000 per metre, h = 5 mm, with T_c as
-  S.2's (MotionFill's foot contacts > 0.5, and each frame's most probable part with `one_foot_down`), in stage 2
-  and only when `fit` is given the floor and the contacts. The floor term only pushes up, so a body MotionFill
+  (min_{v in soles} v_z,t - floor - h)_+, a_stand = 1000 per metre, h = 5 mm, with T_c as S.2's (MotionFill's foot
+  contacts > 0.5, and each frame's most probable part with `one_foot_down`), in stage 2 and only when `fit` is
+  given the floor and the contacts. It acts on the floor term's vertex, so the two hold it between the floor and
+  h above (on the lowest vertex of the parts in contact instead, the two fought where a part not in contact dipped
+  under the floor: a mug clip's deepest vertex 0.18 -> 1.18 cm). The floor term only pushes up, so a body MotionFill
   puts above the floor stayed there: on GOAL's twelve test sequences (`eval_goal.saga_sliding`, frame 0 free) 70
   of 732 frames stood more than 1 cm above it (at most 3.4 cm), every one with a foot part predicted in contact;
   with the term 0 (at most 1.0 cm), GOAL's sliding 9.7 -> 8.9 % (docs/saga_motion.md, "The stand term").
@@ -276,7 +278,8 @@ class GraspMotionWeights:
     heel_height: float = 0.06      # m above the floor: with both heels this low, one of them should stand still
     foot_acc: float = 1e5          # graspkit's: squared foot-vertex acceleration (m/frame^2), mean over vertices
     floor: float = 1000.0          # graspkit's: each frame's lowest sole vertex below the floor (m), when fit gets it
-    stand: float = 1000.0          # graspkit's: the lowest vertex of the foot parts in contact (T_c) above the floor
+    stand: float = 1000.0          # graspkit's: each frame's lowest sole vertex above the floor while a foot part is
+                                   # in contact (T_c), when fit gets the floor and the contacts
     stand_height: float = 0.005    # m above the floor a foot part in contact may stand at no cost
     free_joints: float = 5e-4      # on the 6D offsets of GraspMotionConfig.free_joints (graspkit's; = alpha_theta)
     limits: float = 0.5            # per degree a free joint turns past the human range (metrics.joint_limit_excess)
@@ -470,9 +473,10 @@ class GraspMotionOpt:
         if "floor" in terms and w.floor > 0 and floor is not None:    # only a floor given: the heel markers' is not it
             e["floor"] = w.floor * torch.relu(floor[:, None] - feet[..., 2].amin(-1)).sum(1)    # each frame's lowest
         if "stand" in terms and w.stand > 0 and floor is not None and foot_contact is not None:
-            down = self.parts_down(foot_contact)                                  # (B, F, n_foot)
-            z = (feet[..., 2] + (~down).to(feet.dtype)).amin(-1)  # parts not down lifted 1 m: out of the min
-            e["stand"] = w.stand * (down.any(-1) * torch.relu(z - floor[:, None] - w.stand_height)).sum(1)
+            # the floor term's vertex: a part's own lowest vertex would fight it where another part dips under
+            down = self.parts_down(foot_contact).any(-1)                          # (B, F) a part in T_c
+            low = feet[..., 2].amin(-1) - floor[:, None] - w.stand_height
+            e["stand"] = w.stand * (down * torch.relu(low)).sum(1)
         a_heel = w.heel_held if held else w.heel
         if "heel" in terms and a_heel > 0:
             if floor is None:                   # the lowest heel marker of the target sequence
