@@ -235,7 +235,7 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
     from graspkit.benchmark import wandr_motions
     from graspkit.demo import _write_clip
     from graspkit.eval_wandr import FOOT_ON_FLOOR, SUNK_DEPTH
-    from graspkit.metrics import floor_figures, foot_skating_wandr
+    from graspkit.metrics import floating_share, floor_figures, foot_skating_wandr
     from graspkit.viz.scene import sphere
 
     if not all(math.isfinite(v) for v in args.goal):
@@ -275,7 +275,7 @@ def _cmd_wandr(args: argparse.Namespace) -> int:
           f"{100 * foot_skating_wandr(v).mean():.1f} % of the frame pairs; the body {floor['floor_deepest_cm']:.1f} cm "
           f"below the floor at the deepest, {100 * sunk:.0f} % of the frames more than 1 cm below it"
           + ("" if args.lift or sunk == 0 else " (without --no-lift the feet are held at the floor)"))
-    floating = float((v[:, :, 2].amin(1) > FOOT_ON_FLOOR).double().mean())
+    floating = floating_share(v, height=FOOT_ON_FLOOR)
     print(f"no part of the body within {100 * FOOT_ON_FLOOR:.0f} cm of the floor (floating) in {100 * floating:.0f} % of "
           "the frames")
     for path in paths:

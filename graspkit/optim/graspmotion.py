@@ -72,13 +72,15 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   0.1 mm under and 4.7 mm above; tests/test_graspmotion.py). A sum over all sole vertices overshot the same way.
 - A stand term (graspkit's, since 2026-12-07), the floor term's other side: a_stand sum_t 1(a part in T_c)
   (min_{v in soles} v_z,t - floor - h)_+, a_stand = 1000 per metre, h = 5 mm, with T_c as S.2's (MotionFill's foot
-  contacts > 0.5, and each frame's most probable part with `one_foot_down`), in stage 2 and only when `fit` is
-  given the floor and the contacts. It acts on the floor term's vertex, so the two hold it between the floor and
-  h above (on the lowest vertex of the parts in contact instead, the two fought where a part not in contact dipped
-  under the floor: a mug clip's deepest vertex 0.18 -> 1.18 cm). The floor term only pushes up, so a body MotionFill
-  puts above the floor stayed there: on GOAL's twelve test sequences (`eval_goal.saga_sliding`, frame 0 free) 70
-  of 732 frames stood more than 1 cm above it (at most 3.4 cm), every one with a foot part predicted in contact;
-  with the term 0 (at most 1.0 cm), GOAL's sliding 9.7 -> 8.9 % (docs/saga_motion.md, "The stand term").
+  contacts > 0.5, and each frame's most probable part with `one_foot_down`, the default: then every frame), in stage
+  2 and only when `fit` is given the floor and the contacts. It acts on the floor term's vertex, so the two hold it
+  between the floor and h above (on the lowest vertex of the parts in contact instead, the two fought where a part
+  not in contact dipped under the floor: a mug clip's deepest vertex 0.17 -> 1.18 cm). The floor term only pushes
+  up, so a body MotionFill puts above the floor stayed there: on GOAL's twelve test sequences
+  (`eval_goal.saga_sliding`, frame 0 free) 70 of 732 frames stood more than 1 cm above it (at most 3.4 cm), every
+  one with a foot part predicted in contact; with the term 2, GOAL's sliding 9.7 -> 9.2 %, end contact 11 -> 9 of
+  12 (two ends 2.7 and 3.9 mm off); on the twelve clips of `graspmotion_eval` 14.5 % of the frames -> 0, end
+  contact 12 of 12 both (docs/saga_motion.md, "The stand term").
 - Free arm joints (`GraspMotionConfig.free_joints`, graspkit's, since 2026-12-02; () is Alg. 2's prior latent
   alone): per frame, the collar, shoulder, elbow and wrist joints get a free rotation on top of the prior's decoded
   pose (6D offsets from the identity, weight 5e-4 as alpha_theta, and 0.5 per degree past the human range:
@@ -280,14 +282,14 @@ class GraspMotionWeights:
     floor: float = 1000.0          # graspkit's: each frame's lowest sole vertex below the floor (m), when fit gets it
     stand: float = 1000.0          # graspkit's: each frame's lowest sole vertex above the floor while a foot part is
                                    # in contact (T_c), when fit gets the floor and the contacts
-    stand_height: float = 0.005    # m above the floor a foot part in contact may stand at no cost
+    stand_height: float = 0.005    # m above the floor the lowest sole vertex may stand at no cost
     free_joints: float = 5e-4      # on the 6D offsets of GraspMotionConfig.free_joints (graspkit's; = alpha_theta)
     limits: float = 0.5            # per degree a free joint turns past the human range (metrics.joint_limit_excess)
 
     def __post_init__(self) -> None:
         for name, value in vars(self).items():        # a negative weight rewards what its term removes
             check_weight(value, name)
-        for name in ("palm_sigma", "skate_sigma", "heel_height", "stand_height"):        # the hinge floors sigma_b, sigma_o may be 0
+        for name in ("palm_sigma", "skate_sigma", "heel_height", "stand_height"):   # sigma_b, sigma_o may be 0
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name}: expected a threshold > 0, got {getattr(self, name)!r}")
 
@@ -474,7 +476,7 @@ class GraspMotionOpt:
             e["floor"] = w.floor * torch.relu(floor[:, None] - feet[..., 2].amin(-1)).sum(1)    # each frame's lowest
         if "stand" in terms and w.stand > 0 and floor is not None and foot_contact is not None:
             # the floor term's vertex: a part's own lowest vertex would fight it where another part dips under
-            down = self.parts_down(foot_contact).any(-1)                          # (B, F) a part in T_c
+            down = self.parts_down(foot_contact).any(-1)      # (B, F) a part in T_c (every frame with one_foot_down)
             low = feet[..., 2].amin(-1) - floor[:, None] - w.stand_height
             e["stand"] = w.stand * (down * torch.relu(low)).sum(1)
         a_heel = w.heel_held if held else w.heel

@@ -93,9 +93,11 @@ print(f"sample spread at mid-motion: {float(s['traj'][:, 30, :2].std(0).norm()):
 # millimetres on their own, and 2.5 mm between two frames is already SAGA's skating speed (75 mm/s). graspkit adds two
 # foot terms beside S.2's skating hinge: a planted heel (while both heels are within 6 cm of the floor, the slower
 # heel marker is held below 0.05 m/s) and the feet's squared acceleration (S.2's hinge is linear in the speed, so
-# without it a foot may stand still and then jump 10 cm in one frame at no extra cost), and a floor term (each frame's
+# without it a foot may stand still and then jump 10 cm in one frame at no extra cost), a floor term (each frame's
 # lowest sole vertex held at or above the floor: Eq. 10 has none, and MotionFill's markers put the feet up to 3 cm
-# under it; `docs/saga_motion.md`). And the arm joints are free on top of the pose prior's decoded pose, as in
+# under it) and its other side, a stand term (on the frames MotionFill predicts a foot part in contact, the lowest
+# vertex of those parts held within 5 mm of the floor: the markers also float a body up to 3.4 cm above it;
+# `docs/saga_motion.md`). And the arm joints are free on top of the pose prior's decoded pose, as in
 # GraspPose-Opt (lesson 05): through the latent alone the bodies stayed 6.3 cm from the sampled markers on the twelve
 # test clips and two hands ended off their object; with the arms free 3.1 cm and all twelve in contact. On the last
 # five frames E^o_cont pulls both ways, as Eq. 6 does in GraspPose-Opt: the object points with the highest Ĉ_O to
@@ -109,7 +111,7 @@ ex = np.load(DATA_STUBS / "checkpoints" / "motionfill_examples.npz", allow_pickl
 info = json.loads((DATA_STUBS / "checkpoints" / "motionfill_examples.json").read_text())
 log = info["log"]
 fig, ax = plt.subplots(figsize=(7, 3))
-for k in ("fit", "contact", "skate", "heel", "foot_acc", "floor", "smooth", "palm", "colli"):
+for k in ("fit", "contact", "skate", "heel", "foot_acc", "floor", "stand", "smooth", "palm", "colli"):
     st = [r["step"] for r in log if k in r]
     if st:
         ax.semilogy(st, [max(r[k], 1e-4) for r in log if k in r], label=k)
@@ -220,12 +222,14 @@ print(table(ev["rows"]))
 # of their objects through both sums of Eq. 7 — hand vertices inside the object, read from its 2 mm collision grid,
 # and object points inside the hand — with which the mean penetration fell from about 6.8 to 2.1 cm³ (a mug's handle
 # through the hand: 18.3 → 0.04 cm³; `docs/saga_motion.md`; with the changes since, 1.25 in the table below).
-# graspkit's floor term keeps every fitted mesh out of the ground (non-collision 1.000, 0.998 without it; the last
-# column: how deep the lowest vertex goes, cm).
+# graspkit's floor term keeps every fitted mesh out of the ground (non-collision 1.000, 0.998 without it; the
+# column `below_floor_max_cm`: how deep the lowest vertex goes, cm), and its stand term keeps it from floating while
+# MotionFill says a foot is down (the last column: the share of frames whose lowest vertex stands more than 1 cm
+# above the floor, `graspkit.metrics.floating_share`).
 
 # %%
 keys = ["skating_gt", "skating_sample", "skating_opt", "contact_mm", "volume_cm3", "noncollision_opt", "noncollision_gt",
-        "heel_acc_p99_opt", "heel_acc_p99_gt", "below_floor_max_cm"]
+        "heel_acc_p99_opt", "heel_acc_p99_gt", "below_floor_max_cm", "floating_opt"]
 print("| object | " + " | ".join(keys) + " |")
 for r in ev["graspmotion"]["rows"]:
     print(f"| {r['object']} {r['clip'][-7:-4]} | " + " | ".join(f"{r[k]:.3f}" for k in keys) + " |")
@@ -247,7 +251,7 @@ print("| mean | " + " | ".join(f"{np.mean([r[k] for r in ev['graspmotion']['rows
 # not seen it; its 2 mm collision grid ships with graspkit (any other object's is built once into the cache, ~20 s).
 # The grasp itself is GraspPose-Opt's and touches the object; the motion's last frame is GraspMotion-Opt's fit to
 # MotionFill's last markers, and it does not always keep the touch: on the twelve test clips of `docs/saga_motion.md`
-# all 12 end in contact since the arm joints are free (10 before), and through the whole pipeline 11 of the 12
+# all 12 end in contact since the arm joints are free (10 before), and through the whole pipeline 9 of the 12
 # sequences of GOAL's evaluation do (`docs/goal.md`), and a change in the last bits of the arithmetic (another CPU, another rounding) can turn a
 # touching last frame into one a few millimetres short. So the cell prints how far the last frame's body is from the
 # object and checks only that it is close (within 2 cm).
