@@ -599,6 +599,7 @@ def saga_sliding(seqs: list, seed: int = 0, progress: bool = False, **saga_kwarg
     here: the shipped row is Alg. 2's fit, measured before `synthesize` held frame 0 at the start body)."""
     from graspkit.body import BodyModel
     from graspkit.data.motion import Motion
+    from graspkit.metrics import floating_share
     from graspkit.objects.placement import ObjectPose
     from graspkit.paths import default_model_path
     from graspkit.rotations import axis_angle_to_rot6d
@@ -621,7 +622,7 @@ def saga_sliding(seqs: list, seed: int = 0, progress: bool = False, **saga_kwarg
         slide, pairs = slide + n_s, pairs + n
         per.append({"object": sq.object_name, "frames": m.num_frames, "sliding": n_s / max(n, 1),
                     "end_contact": r.metrics["end_contact"], "end_volume_cm3": r.metrics["end_volume_cm3"],
-                    "floating": r.metrics["floating_share"]})
+                    "floating": floating_share(v)})
     mean = lambda k: float(np.mean([p[k] for p in per])) if per else float("nan")  # noqa: E731
     return {"sliding": slide / max(pairs, 1), "per_clip": per, "results": results, "end_contact": mean("end_contact"),
             "floating": mean("floating")}

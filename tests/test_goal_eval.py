@@ -650,6 +650,10 @@ def test_saga_sliding_measures_algorithm_2s_fit_with_one_seed_per_sequence(monke
     for c, sq in zip(calls, seqs):
         np.testing.assert_allclose(c["start"].poses[0], sq.poses[0], atol=1e-6)
     assert out["per_clip"][0]["frames"] == 3
+    for row, sq in zip(out["per_clip"], seqs):          # frames whose lowest vertex is more than 1 cm up
+        low = Fake(sq).motion.vertices(_body()[0])[..., 2].amin(-1).numpy()
+        assert row["floating"] == pytest.approx(float(np.mean(low > 0.01)))
+    assert out["floating"] == pytest.approx(np.mean([row["floating"] for row in out["per_clip"]]))
     saga_sliding(seqs[:1], hold_start=True)
     assert calls[-1]["hold_start"] is True
 
