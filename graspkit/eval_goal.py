@@ -593,8 +593,9 @@ def clip_sliding(clips: list, until_goal: bool = True) -> float:
 def saga_sliding(seqs: list, seed: int = 0, progress: bool = False, **saga_kwargs: Any) -> dict:
     """SAGA's motions (graspkit.saga.synthesize: WholeGrasp + GraspPose-Opt, MotionFill + GraspMotion-Opt) for GRAB-style
     approach sequences: each sequence's object where it stands and its first frame as the start body (in the grasp's
-    shape, standing where it stood: `saga.reshaped_in_place`); GOAL's foot sliding over the 61 frames, and the end
-    grasp's contact. Returns the pooled sliding, per-sequence figures and the
+    shape, standing where it stood: `saga.reshaped_in_place`); GOAL's foot sliding over the 61 frames, the end
+    grasp's contact and the share of frames standing more than 1 cm above the floor (`metrics.floating_share`).
+    Returns the pooled sliding, per-sequence figures (their mean contact and floating share too) and the
     SagaResults ('results'); saga_kwargs go to synthesize (e.g. fewer optimiser steps; hold_start defaults to False
     here: the shipped row is Alg. 2's fit, measured before `synthesize` held frame 0 at the start body)."""
     from graspkit.body import BodyModel

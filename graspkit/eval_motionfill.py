@@ -649,7 +649,8 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
     """One MotionFill-VAE sample per approach clip, then GraspMotion-Opt (batched): skating (SAGA) of the ground truth,
     the sample and the fitted bodies; the last frame's contact, penetration volume and depth of the fitted bodies;
     SAGA's non-collision score (§4.2) of the fitted and the ground-truth meshes over the window, and how far the fitted
-    mesh's lowest vertex goes below the floor (cm: the mean over frames and the deepest). Returns rows and the
+    mesh's lowest vertex goes below the floor (cm: the mean over frames and the deepest) and the share of frames it
+    stands more than 1 cm above it (`floating_opt`, `floating_gt`: `metrics.floating_share`). Returns rows and the
     arrays for plots. E^o_cont gets the data's contact maps at the grasp frame (C_O and C_M, standing in for
     WholeGrasp-VAE's). `sdf`: E^o_colli's hand-in-object depth from each object's collision grid (GraspPose-Opt's;
     False: from the point cloud's normals). `hold_start`: frame 0 fitted to the clip's first frame and held there

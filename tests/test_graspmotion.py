@@ -190,6 +190,9 @@ def test_stand_term_is_the_lowest_sole_vertex_above_the_floor_on_frames_with_a_f
         w.stand * float(torch.relu(sole[1] - floor - w.stand_height)), rel=1e-4)
     assert "stand" not in opt.energy(p, *args, None)
     assert "stand" not in opt.energy(p, *args[:3], None, None, None, floor.reshape(1))
+    # one_foot_down (the default): each frame's most probable part is down, so every frame counts
+    always = GraspMotionOpt(bm, load_pose_prior(), None, GraspMotionConfig(terms=("stand",)))
+    assert always.energy(p, *args, floor.reshape(1))["stand"].item() == pytest.approx(expected, rel=1e-4)
 
 
 def test_fit_with_feet_in_contact_puts_them_on_the_floor_where_the_markers_float(bm, clip):

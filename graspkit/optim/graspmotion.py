@@ -538,8 +538,8 @@ class GraspMotionOpt:
             object_contact: Tensor | None = None, progress: bool = True, floor: Tensor | None = None,
             marker_contact: Tensor | None = None, start: Tensor | None = None) -> GraspMotionResult:
         """Alg. 2 on a batch: markers (B, T+1, 79, 3), betas (B, 10), foot contacts (B, T+1, 4) probabilities, the
-        object in the markers' frame, its contact map (B, P), the floor's height (B,) for the floor term and the
-        planted-heel term (default: no floor term, and each target's lowest heel marker for the heel), the grasp's
+        object in the markers' frame, its contact map (B, P), the floor's height (B,) for the floor and stand terms
+        and the planted-heel term (default: neither, and each target's lowest heel marker for the heel), the grasp's
         143-marker contacts C^_M (B, 143) for E^o_cont's marker side (default: left out), and the start body's
         markers (B, 79, 3): stage 1 fits frame 0 to them and stage 2 holds frame 0 there (graspkit's; default: Alg. 2,
         frame 0 fits the sample's first frame like any other) -> GraspMotionResult."""
