@@ -689,7 +689,7 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
     rows = []
     for i, s in enumerate(scenes):
         floor = np.array(s["floor"])
-        v = opt.vertices(res, i)
+        v, v_gt = opt.vertices(res, i), s["motion"].vertices(bm)
         fit = grasp_metrics(v[-1], bm.faces, s["mesh"])
         dip = ground_penetration(v - torch.tensor([0.0, 0.0, s["floor"]]))    # (T+1,) under the scene's floor
         rows.append({"object": s["name"], "clip": s["file"],
@@ -700,10 +700,10 @@ def graspmotion_eval(model: MotionFillVAE, files: list[Path], seed: int = 0, ste
                      "start_cm": 100 * float((res.markers[i, 0] - torch.as_tensor(s["markers"][0])).norm(dim=-1).mean()),
                      "contact_mm": fit["min_distance"] * 1000, "volume_cm3": fit["volume_cm3"], "depth_cm": fit["depth_cm"],
                      "noncollision_opt": float(non_collision_score(v, s["floor"]).mean()),
-                     "noncollision_gt": float(non_collision_score(s["motion"].vertices(bm)).mean()),
+                     "noncollision_gt": float(non_collision_score(v_gt).mean()),
                      "below_floor_mean_cm": 100 * float(dip.mean()), "below_floor_max_cm": 100 * float(dip.max()),
                      "floating_opt": floating_share(v, s["floor"]),
-                     "floating_gt": floating_share(s["motion"].vertices(bm)),
+                     "floating_gt": floating_share(v_gt),
                      **{f"{k}_{tag}": x for tag, seq in (("gt", s["markers"]), ("opt", res.markers[i].numpy()))
                         for k, x in heel_jerkiness(seq, heels).items()}})
     return {"rows": rows, "result": res, "markers": markers, "contacts": contacts, "scenes": scenes}

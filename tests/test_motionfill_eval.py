@@ -164,6 +164,7 @@ def test_graspmotion_eval_measures_the_last_frame_against_the_clips_posed_mesh()
     dip = np.maximum(s["floor"] - low, 0.0)
     assert row["below_floor_max_cm"] == pytest.approx(100 * dip.max(), abs=1e-3)
     assert row["below_floor_mean_cm"] == pytest.approx(100 * dip.mean(), abs=1e-3)
+    assert row["floating_opt"] == pytest.approx(float(np.mean(low - s["floor"] > 0.01)))     # more than 1 cm up
     # start_cm: the fitted frame 0's markers, read off its full mesh, from the clip's first frame
     frame0 = GraspMotionOpt(bm, load_pose_prior()).vertices(ev["result"], 0)[0]
     first = saga_sparse_markers(bm).select(frame0).double().numpy()
