@@ -634,8 +634,8 @@ def test_saga_sliding_measures_algorithm_2s_fit_with_one_seed_per_sequence(monke
 
     class Fake:
         def __init__(self, sq):
-            self.motion = Motion(np.asarray(sq.poses[:3], np.float64), np.asarray(sq.trans[:3], np.float64),
-                                 np.asarray(sq.betas[:10], np.float64), 30.0)
+            trans = np.asarray(sq.trans[:3], np.float64) + [[0, 0, 0], [0, 0, 0.05], [0, 0, 0]]   # frame 1 in the air
+            self.motion = Motion(np.asarray(sq.poses[:3], np.float64), trans, np.asarray(sq.betas[:10], np.float64), 30.0)
             self.metrics = {"end_contact": 1.0, "end_volume_cm3": 0.0}
 
     seqs = [_sequence(0, "mug"), _sequence(1, "camera")]
@@ -652,7 +652,7 @@ def test_saga_sliding_measures_algorithm_2s_fit_with_one_seed_per_sequence(monke
     assert out["per_clip"][0]["frames"] == 3
     for row, sq in zip(out["per_clip"], seqs):          # frames whose lowest vertex is more than 1 cm up
         low = Fake(sq).motion.vertices(_body()[0])[..., 2].amin(-1).numpy()
-        assert row["floating"] == pytest.approx(float(np.mean(low > 0.01)))
+        assert row["floating"] == pytest.approx(float(np.mean(low > 0.01))) and row["floating"] > 0
     assert out["floating"] == pytest.approx(np.mean([row["floating"] for row in out["per_clip"]]))
     saga_sliding(seqs[:1], hold_start=True)
     assert calls[-1]["hold_start"] is True

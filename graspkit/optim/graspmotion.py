@@ -472,13 +472,13 @@ class GraspMotionOpt:
             e["skate"] = w.skate * (on * torch.relu(speed - w.skate_sigma)).sum((1, 2))
         if "skate" in terms and w.foot_acc > 0:
             e["foot_acc"] = w.foot_acc * (feet[:, 2:] - 2 * feet[:, 1:-1] + feet[:, :-2]).pow(2).sum(-1).mean(-1).sum(1)
+        lowest = feet[..., 2].amin(-1)                  # (B, F) each frame's lowest sole vertex: the floor and stand terms'
         if "floor" in terms and w.floor > 0 and floor is not None:    # only a floor given: the heel markers' is not it
-            e["floor"] = w.floor * torch.relu(floor[:, None] - feet[..., 2].amin(-1)).sum(1)    # each frame's lowest
+            e["floor"] = w.floor * torch.relu(floor[:, None] - lowest).sum(1)
         if "stand" in terms and w.stand > 0 and floor is not None and foot_contact is not None:
             # the floor term's vertex: a part's own lowest vertex would fight it where another part dips under
             down = self.parts_down(foot_contact).any(-1)      # (B, F) a part in T_c (every frame with one_foot_down)
-            low = feet[..., 2].amin(-1) - floor[:, None] - w.stand_height
-            e["stand"] = w.stand * (down * torch.relu(low)).sum(1)
+            e["stand"] = w.stand * (down * torch.relu(lowest - floor[:, None] - w.stand_height)).sum(1)
         a_heel = w.heel_held if held else w.heel
         if "heel" in terms and a_heel > 0:
             if floor is None:                   # the lowest heel marker of the target sequence
