@@ -60,27 +60,32 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   + heel 3e3 and acc 1e4 0.044 / 43; 1e5: 0.065 / 19; heel 1e4 and acc 1e5 (shipped) 0.005 / 23 / 7.21; heel 3e4
   0.000 / 27 / 7.14. Ground truth: 0.021 / 11.
 - A floor term (graspkit's, since 2026-12-01; Eq. 10 has no ground term, SAGA only measures the non-collision score):
-  a_floor sum_t (floor - min_{v in soles} v_z,t)_+, a_floor = 1000 per metre, on each frame's lowest sole vertex
-  (`foot_vertices`), in stage 2 and only when `fit` is given the floor (the heel markers' default is not the ground).
+  a_floor sum_t (floor - min_{v in soles} v_z,t)_+, a_floor = 3000 per metre (1000 until 2026-12-07, below), on each
+  frame's lowest sole vertex (`foot_vertices`), in stage 2 and only when `fit` is given the floor (the heel markers'
+  default is not the ground).
   MotionFill's markers and the grasp body they end at put the feet up to 3.3 cm under the floor. Measured with
-  `saga.synthesize` (default steps, one thread) on a capsule, a box and a torus no model saw, seeds 0 and 1: the
-  deepest vertex over the clip 1.2, 0.8 / 3.3, 2.4 / 1.0, 1.5 cm without the term and at most 0.12 mm with it;
+  `saga.synthesize` (default steps, one thread, a_floor = 1000) on a capsule, a box and a torus no model saw, seeds
+  0 and 1: the deepest vertex over the clip 1.2, 0.8 / 3.3, 2.4 / 1.0, 1.5 cm without the term, at most 0.12 mm with it;
   last-frame contact, volume and skating as before (the box's seed 0 even ends in contact, which it missed). The
   weight matters because Adam divides each step by the root of its running squared gradient: a_floor = 100 left
-  0.4-2.7 cm (it loses to the marker fit and the hand's contact), and on markers sunk 2 cm into the floor a_floor =
-  3000 threw the body 2 cm above it, where the fit's small gradients then barely move it (1000: every frame between
-  0.1 mm under and 4.7 mm above; tests/test_graspmotion.py). A sum over all sole vertices overshot the same way.
-- A stand term (graspkit's, since 2026-12-07), the floor term's other side: a_stand sum_t 1(a part in T_c)
-  (min_{v in soles} v_z,t - floor - h)_+, a_stand = 1000 per metre, h = 5 mm, with T_c as S.2's (MotionFill's foot
-  contacts > 0.5, and each frame's most probable part with `one_foot_down`, the default: then every frame), in stage
-  2 and only when `fit` is given the floor and the contacts. It acts on the floor term's vertex, so the two hold it
-  between the floor and h above (on the lowest vertex of the parts in contact instead, the two fought where a part
-  not in contact dipped under the floor: a mug clip's deepest vertex 0.17 -> 1.18 cm). The floor term only pushes
-  up, so a body MotionFill puts above the floor stayed there: on GOAL's twelve test sequences
-  (`eval_goal.saga_sliding`, frame 0 free) 70 of 732 frames stood more than 1 cm above it (at most 3.4 cm), every
-  one with a foot part predicted in contact; with the term 2, GOAL's sliding 9.7 -> 9.2 %, end contact 11 -> 9 of
-  12 (two ends 2.7 and 3.9 mm off); on the twelve clips of `graspmotion_eval` 14.5 % of the frames -> 0, end
-  contact 12 of 12 both (docs/saga_motion.md, "The stand term").
+  0.4-2.7 cm (it loses to the marker fit and the hand's contact), and on markers sunk 2 cm into the floor, fitted
+  without foot contacts (so without the stand term below), a_floor = 3000 throws the body up to 2.6 cm above it,
+  where the fit's small gradients then barely move it (1000: 0.9 cm; tests/test_graspmotion.py). With the contacts
+  the stand term holds it down, and 1000 lost to S.2's skating term, whose gradient sums over every sole vertex in
+  contact: a mug clip's first twelve frames sank 0.78 cm under the floor with both terms at 1000, 0.08 cm at 3000
+  (docs/saga_motion.md, "The stand term"). A sum over all sole vertices overshot the same way.
+- A stand term (graspkit's, since 2026-12-07), the floor term's other side: a_stand sum_t 1(a part in T_c) (min_{v in
+  soles} v_z,t - floor - h)_+, a_stand = a_floor = 3000 per metre (both 1000 on its first day), h = 5 mm, with T_c as
+  S.2's (MotionFill's foot contacts > 0.5, and each frame's most probable part with `one_foot_down`, the default: then
+  every frame), in stage 2 and only when `fit` is given the floor and the contacts. It acts on the floor term's
+  vertex, so the two hold it between the floor and h above (on the lowest vertex of the parts in contact instead, the
+  two fought where a part not in contact dipped under the floor: a mug clip's deepest vertex 0.17 -> 1.18 cm). The
+  floor term only pushes up, so a body MotionFill puts above the floor stayed there: on GOAL's twelve test sequences
+  (`eval_goal.saga_sliding`, frame 0 free) 70 of 732 frames stood more than 1 cm above it (at most 3.4 cm), every one
+  with a foot part predicted in contact; with both terms at 1000, 2 of them (GOAL's sliding 9.7 -> 9.2 %, end contact
+  11 -> 9 of 12), at 3000 none (9.4 %, end contact 11 of 12, end volume 0.19 -> 0.22 cm3); on the twelve clips of
+  `graspmotion_eval` 14.5 % of the frames -> 0, end contact 12 of 12 throughout, the deepest vertex under the floor
+  0.17 cm without the term, 0.78 with both at 1000, 0.08 at 3000 (docs/saga_motion.md, "The stand term").
 - Free arm joints (`GraspMotionConfig.free_joints`, graspkit's, since 2026-12-02; () is Alg. 2's prior latent
   alone): per frame, the collar, shoulder, elbow and wrist joints get a free rotation on top of the prior's decoded
   pose (6D offsets from the identity, weight 5e-4 as alpha_theta, and 0.5 per degree past the human range:
@@ -279,8 +284,8 @@ class GraspMotionWeights:
                                    # heel=0 leaves it on: set both to 0 to drop the planted heel there
     heel_height: float = 0.06      # m above the floor: with both heels this low, one of them should stand still
     foot_acc: float = 1e5          # graspkit's: squared foot-vertex acceleration (m/frame^2), mean over vertices
-    floor: float = 1000.0          # graspkit's: each frame's lowest sole vertex below the floor (m), when fit gets it
-    stand: float = 1000.0          # graspkit's: each frame's lowest sole vertex above the floor while a foot part is
+    floor: float = 3000.0          # graspkit's: each frame's lowest sole vertex below the floor (m), when fit gets it
+    stand: float = 3000.0          # graspkit's: each frame's lowest sole vertex above the floor while a foot part is
                                    # in contact (T_c), when fit gets the floor and the contacts
     stand_height: float = 0.005    # m above the floor the lowest sole vertex may stand at no cost
     free_joints: float = 5e-4      # on the 6D offsets of GraspMotionConfig.free_joints (graspkit's; = alpha_theta)

@@ -82,11 +82,11 @@ graspkit's choices where the paper is silent (all in `GraspPoseWeights` / `Grasp
   sets the median on the floor) sinks each foot's lowest vertices about 1 cm under it; with h0 a foot flat as at
   rest reads 0 with its lowest vertex on the floor (docs/saga.md).
 - A floor term (`GraspPoseWeights.floor`, graspkit's, since 2026-12-02; 0 turns it off): with E^g_cont, in the same
-  stages, a_floor (-min_{v in V^f_B} h(v))_+ with a_floor = 1000 per metre, GraspMotion-Opt's term and weight
-  (graspkit.optim.graspmotion). Why: a foot turned from its rest shape (the sampled markers turn it) has its toes
-  under the floor and its heels above, and E^g_cont's L1 balances the two ends, so grasp bodies stood up to 2.5 cm
-  into the floor with their toes. It is one-sided: a foot may lift (Adam carries a correction a few mm on), not sink
-  (docs/saga.md, "The floor").
+  stages, a_floor (-min_{v in V^f_B} h(v))_+ with a_floor = 1000 per metre, GraspMotion-Opt's term (and its weight
+  until 2026-12-07; graspkit.optim.graspmotion). Why: a foot turned from its rest shape (the sampled markers turn
+  it) has its toes under the floor and its heels above, and E^g_cont's L1 balances the two ends, so grasp bodies
+  stood up to 2.5 cm into the floor with their toes. It is one-sided: a foot may lift (Adam carries a correction a
+  few mm on), not sink (docs/saga.md, "The floor").
 Frames: everything in the object frame of WholeGrasp-VAE (object centre at 0, z up, floor at z = -t_O).
 """
 from __future__ import annotations

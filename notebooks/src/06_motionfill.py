@@ -220,7 +220,7 @@ print(table(ev["rows"]))
 # without jumping (99th percentile of the heel markers' acceleration, m/s²; the clips' own beside it). The end grasps keep out
 # of their objects through both sums of Eq. 7 — hand vertices inside the object, read from its 2 mm collision grid,
 # and object points inside the hand — with which the mean penetration fell from about 6.8 to 2.1 cm³ (a mug's handle
-# through the hand: 18.3 → 0.04 cm³; `docs/saga_motion.md`; with the changes since, 0.13 in the table below).
+# through the hand: 18.3 → 0.04 cm³; `docs/saga_motion.md`; with the changes since, 0.16 in the table below).
 # graspkit's floor term keeps every fitted mesh out of the ground (non-collision 1.000, 0.998 without it; the
 # column `below_floor_max_cm`: how deep the lowest vertex goes, cm), and its stand term keeps it from floating while
 # MotionFill says a foot is down (the last column: the share of frames whose lowest vertex stands more than 1 cm
