@@ -70,10 +70,10 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   weight matters because Adam divides each step by the root of its running squared gradient: a_floor = 100 left
   0.4-2.7 cm (it loses to the marker fit and the hand's contact), and on markers sunk 2 cm into the floor, fitted
   without foot contacts (so without the stand term below), a_floor = 3000 throws the body up to 2.6 cm above it,
-  where the fit's small gradients then barely move it (1000: 0.9 cm; tests/test_graspmotion.py). With the contacts
-  the stand term holds it down, and 1000 lost to S.2's skating term, whose gradient sums over every sole vertex in
-  contact: a mug clip's first twelve frames sank 0.78 cm under the floor with both terms at 1000, 0.08 cm at 3000
-  (docs/saga_motion.md, "The stand term"). A sum over all sole vertices overshot the same way.
+  where the fit's small gradients then barely move it (1000: 0.9 cm; tests/test_graspmotion.py); a sum over all
+  sole vertices overshot the same way. With the contacts the stand term holds it down, and 1000 lost to S.2's
+  skating term, whose gradient sums over every sole vertex in contact: a mug clip's first twelve frames sank 0.78 cm
+  under the floor with both terms at 1000, 0.08 cm at 3000 (found to hold; docs/saga_motion.md, "The stand term").
 - A stand term (graspkit's, since 2026-12-07), the floor term's other side: a_stand sum_t 1(a part in T_c) (min_{v in
   soles} v_z,t - floor - h)_+, a_stand = a_floor = 3000 per metre (both 1000 on its first day), h = 5 mm, with T_c as
   S.2's (MotionFill's foot contacts > 0.5, and each frame's most probable part with `one_foot_down`, the default: then
@@ -83,7 +83,7 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   floor term only pushes up, so a body MotionFill puts above the floor stayed there: on GOAL's twelve test sequences
   (`eval_goal.saga_sliding`, frame 0 free) 70 of 732 frames stood more than 1 cm above it (at most 3.4 cm), every one
   with a foot part predicted in contact; with both terms at 1000, 2 of them (GOAL's sliding 9.7 -> 9.2 %, end contact
-  11 -> 9 of 12), at 3000 none (9.4 %, end contact 11 of 12, end volume 0.19 -> 0.22 cm3); on the twelve clips of
+  11 -> 9 of 12), at 3000 none (9.4 %, end contact 11 of 12, end volume 0.37 -> 0.22 cm3); on the twelve clips of
   `graspmotion_eval` 14.5 % of the frames -> 0, end contact 12 of 12 throughout, the deepest vertex under the floor
   0.17 cm without the term, 0.78 with both at 1000, 0.08 at 3000 (docs/saga_motion.md, "The stand term").
 - Free arm joints (`GraspMotionConfig.free_joints`, graspkit's, since 2026-12-02; () is Alg. 2's prior latent

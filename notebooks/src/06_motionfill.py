@@ -250,7 +250,7 @@ print("| mean | " + " | ".join(f"{np.mean([r[k] for r in ev['graspmotion']['rows
 # not seen it; its 2 mm collision grid ships with graspkit (any other object's is built once into the cache, ~20 s).
 # The grasp itself is GraspPose-Opt's and touches the object; the motion's last frame is GraspMotion-Opt's fit to
 # MotionFill's last markers, and it does not always keep the touch: on the twelve test clips of `docs/saga_motion.md`
-# all 12 end in contact since the arm joints are free (10 before), and through the whole pipeline 9 of the 12
+# all 12 end in contact since the arm joints are free (10 before), and through the whole pipeline 11 of the 12
 # sequences of GOAL's evaluation do (`docs/goal.md`), and a change in the last bits of the arithmetic (another CPU, another rounding) can turn a
 # touching last frame into one a few millimetres short. So the cell prints how far the last frame's body is from the
 # object and checks only that it is close (within 2 cm).
