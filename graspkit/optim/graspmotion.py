@@ -471,19 +471,19 @@ class GraspMotionOpt:
             if self.ae is not None:
                 S = self.ae.encode((m[:, 1:] - m[:, :-1]).flatten(2))
                 e["smooth"] = e["smooth"] + w.smooth_latent * (S[:, 1:] - S[:, :-1]).pow(2).sum((1, 2))
-        if "skate" in terms and foot_contact is not None:
+        down = None if foot_contact is None else self.parts_down(foot_contact)   # (B, F, n_foot) T_c: skate, stand
+        if "skate" in terms and down is not None:
             speed = (feet[:, 1:] - feet[:, :-1]).norm(dim=-1)                     # (B, T, n_foot)
-            on = self.parts_down(foot_contact)[:, :-1].to(speed.dtype)
-            e["skate"] = w.skate * (on * torch.relu(speed - w.skate_sigma)).sum((1, 2))
+            e["skate"] = w.skate * (down[:, :-1].to(speed.dtype) * torch.relu(speed - w.skate_sigma)).sum((1, 2))
         if "skate" in terms and w.foot_acc > 0:
             e["foot_acc"] = w.foot_acc * (feet[:, 2:] - 2 * feet[:, 1:-1] + feet[:, :-2]).pow(2).sum(-1).mean(-1).sum(1)
-        lowest = feet[..., 2].amin(-1)                  # (B, F) each frame's lowest sole vertex: the floor and stand terms'
+        lowest = feet[..., 2].amin(-1)                  # (B, F) each frame's lowest sole vertex (floor and stand)
         if "floor" in terms and w.floor > 0 and floor is not None:    # only a floor given: the heel markers' is not it
             e["floor"] = w.floor * torch.relu(floor[:, None] - lowest).sum(1)
-        if "stand" in terms and w.stand > 0 and floor is not None and foot_contact is not None:
-            # the floor term's vertex: a part's own lowest vertex would fight it where another part dips under
-            down = self.parts_down(foot_contact).any(-1)      # (B, F) a part in T_c (every frame with one_foot_down)
-            e["stand"] = w.stand * (down * torch.relu(lowest - floor[:, None] - w.stand_height)).sum(1)
+        if "stand" in terms and w.stand > 0 and floor is not None and down is not None:
+            # the floor term's vertex: a part's own lowest vertex would fight it where another part dips under;
+            # a frame counts when a part is in T_c (every frame with one_foot_down)
+            e["stand"] = w.stand * (down.any(-1) * torch.relu(lowest - floor[:, None] - w.stand_height)).sum(1)
         a_heel = w.heel_held if held else w.heel
         if "heel" in terms and a_heel > 0:
             if floor is None:                   # the lowest heel marker of the target sequence

@@ -87,23 +87,23 @@ print(f"sample spread at mid-motion: {float(s['traj'][:, 30, :2].std(0).norm()):
 # %% [markdown]
 # ## GraspMotion-Opt: from markers to bodies
 # The shipped example ran Alg. 2 (100 steps of marker fitting, then 300 steps of every term, then graspkit's 100-step
-# polish at a tenth of the learning rate) on one sample for this mug clip (`python -m graspkit.eval_motionfill
-# example`, batched with a binoculars clip: about a minute on one core, so it is loaded here). Why the polish: Adam's step is
+# polish at a tenth of the learning rate) on one sample for this mug clip (`python -m graspkit.eval_motionfill example`,
+# batched with a binoculars clip: about a minute on one core, so it is loaded here). Why the polish: Adam's step is
 # about its learning rate whatever the gradient, so at the paper's last rate every frame's parameters jitter by
 # millimetres on their own, and 2.5 mm between two frames is already SAGA's skating speed (75 mm/s). graspkit adds two
-# foot terms beside S.2's skating hinge: a planted heel (while both heels are within 6 cm of the floor, the slower
-# heel marker is held below 0.05 m/s) and the feet's squared acceleration (S.2's hinge is linear in the speed, so
-# without it a foot may stand still and then jump 10 cm in one frame at no extra cost), a floor term (each frame's
-# lowest sole vertex held at or above the floor: Eq. 10 has none, and MotionFill's markers put the feet up to 3 cm
-# under it) and its other side, a stand term (while MotionFill predicts a foot part in contact, the same lowest sole
-# vertex held within 5 mm of the floor: the markers also float a body up to 3.4 cm above it; `docs/saga_motion.md`). And the arm joints are free on top of the pose prior's decoded pose, as in
-# GraspPose-Opt (lesson 05): through the latent alone the bodies stayed 6.3 cm from the sampled markers on the twelve
-# test clips and two hands ended off their object; with the arms free 3.1 cm and all twelve in contact. On the last
-# five frames E^o_cont pulls both ways, as Eq. 6 does in GraspPose-Opt: the object points with the highest Ĉ_O to
-# the hand, and the 143 markers with their grasp contacts Ĉ_M to the object (in `synthesize`, three more of the
-# twelve SAGA motions of lesson 07 end on their object with the marker side). Below:
-# the energies along the run, then the heels' speed of the sampled markers and of the fitted bodies on the frames
-# MotionFill predicts in contact (skating: both heels low and faster than 75 mm/s).
+# foot terms beside S.2's skating hinge: a planted heel (while both heels are within 6 cm of the floor, the slower heel
+# marker is held below 0.05 m/s) and the feet's squared acceleration (S.2's hinge is linear in the speed, so without it
+# a foot may stand still and then jump 10 cm in one frame at no extra cost), a floor term (each frame's lowest sole
+# vertex held at or above the floor: Eq. 10 has none, and MotionFill's markers put the feet up to 3 cm under it) and its
+# other side, a stand term (while MotionFill predicts a foot part in contact, the same lowest sole vertex held within 5
+# mm of the floor: the markers also float a body up to 3.4 cm above it; `docs/saga_motion.md`). And the arm joints are
+# free on top of the pose prior's decoded pose, as in GraspPose-Opt (lesson 05): through the latent alone the bodies
+# stayed 6.3 cm from the sampled markers on the twelve test clips and two hands ended off their object; with the arms
+# free 3.1 cm and all twelve in contact. On the last five frames E^o_cont pulls both ways, as Eq. 6 does in
+# GraspPose-Opt: the object points with the highest Ĉ_O to the hand, and the 143 markers with their grasp contacts Ĉ_M
+# to the object (in `synthesize`, three more of the twelve SAGA motions of lesson 07 end on their object with the marker
+# side). Below: the energies along the run, then the heels' speed of the sampled markers and of the fitted bodies on the
+# frames MotionFill predicts in contact (skating: both heels low and faster than 75 mm/s).
 
 # %%
 ex = np.load(DATA_STUBS / "checkpoints" / "motionfill_examples.npz", allow_pickle=False)
@@ -213,18 +213,18 @@ print(f"{ev['test_windows']} test windows")
 print(table(ev["rows"]))
 
 # %% [markdown]
-# After GraspMotion-Opt, on two clips of each test object: SAGA's skating of the sampled and of the fitted markers,
-# the end grasp, and the **non-collision score** (§4.2: the share of mesh vertices above the ground; the paper reports
+# After GraspMotion-Opt, on two clips of each test object: SAGA's skating of the sampled and of the fitted markers, the
+# end grasp, and the **non-collision score** (§4.2: the share of mesh vertices above the ground; the paper reports
 # 0.9743 for its motions and 0.9771 for GRAB). The optimisation brings the skating down to the ground truth's level
-# (graspkit's target, set in its issue; SAGA sets none: no more than 2 points above it); the two `heel_acc_p99` columns show that the heels get there
-# without jumping (99th percentile of the heel markers' acceleration, m/s²; the clips' own beside it). The end grasps keep out
-# of their objects through both sums of Eq. 7 — hand vertices inside the object, read from its 2 mm collision grid,
-# and object points inside the hand — with which the mean penetration fell from about 6.8 to 2.1 cm³ (a mug's handle
-# through the hand: 18.3 → 0.04 cm³; `docs/saga_motion.md`; with the changes since, 0.16 in the table below).
-# graspkit's floor term keeps every fitted mesh out of the ground (non-collision 1.000, 0.998 without it; the
-# column `below_floor_max_cm`: how deep the lowest vertex goes, cm), and its stand term keeps it from floating while
-# MotionFill says a foot is down (the last column: the share of frames whose lowest vertex stands more than 1 cm
-# above the floor, `graspkit.metrics.floating_share`).
+# (graspkit's target, set in its issue; SAGA sets none: no more than 2 points above it); the two `heel_acc_p99` columns
+# show that the heels get there without jumping (99th percentile of the heel markers' acceleration, m/s²; the clips' own
+# beside it). The end grasps keep out of their objects through both sums of Eq. 7 — hand vertices inside the object,
+# read from its 2 mm collision grid, and object points inside the hand — with which the mean penetration fell from about
+# 6.8 to 2.1 cm³ (a mug's handle through the hand: 18.3 → 0.04 cm³; `docs/saga_motion.md`; with the changes since, 0.16
+# in the table below). graspkit's floor term keeps every fitted mesh out of the ground (non-collision 1.000, 0.998
+# without it; the column `below_floor_max_cm`: how deep the lowest vertex goes, cm), and its stand term keeps it from
+# floating while MotionFill says a foot is down (the last column: the share of frames whose lowest vertex stands more
+# than 1 cm above the floor, `graspkit.metrics.floating_share`).
 
 # %%
 keys = ["skating_gt", "skating_sample", "skating_opt", "contact_mm", "volume_cm3", "noncollision_opt", "noncollision_gt",
