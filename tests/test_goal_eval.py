@@ -774,7 +774,7 @@ def test_a_training_run_is_keyed_by_the_body_it_is_trained_on(tmp_path, monkeypa
     with np.load(default_model_path(), allow_pickle=False) as z:
         arrays = {k: z[k] for k in z.files}
     tall = tmp_path / "tall.npz"
-    np.savez(tall, **{**arrays, "v_template": arrays["v_template"] * 1.2})
+    np.savez_compressed(tall, **{**arrays, "v_template": arrays["v_template"] * 1.2})
     grasps = {None: DATA_STUBS / "grasps",
               tall: relabelled(DATA_STUBS / "grasps", tmp_path / "tall_grasps", BodyModel.from_file(tall))}
     run = {"gnet": lambda g: run_train_gnet([g], tmp_path / "o.pt", epochs=1, threads=1, progress=False),

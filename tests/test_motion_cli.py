@@ -74,16 +74,16 @@ def test_a_folder_refuses_another_body_behind_the_same_name(tmp_path, monkeypatc
     with np.load(default_model_path(), allow_pickle=False) as z:
         arrays = {k: z[k] for k in z.files}
     tall = tmp_path / "tall.npz"
-    np.savez(tall, **{**arrays, "v_template": arrays["v_template"] * 1.2})
+    np.savez_compressed(tall, **{**arrays, "v_template": arrays["v_template"] * 1.2})
     make_dataset("reach", 1, 7, tmp_path / "a", workers=1, progress=False)
     monkeypatch.setenv("GRASPKIT_MODEL", str(tall))
     with pytest.raises(ValueError, match=r"--out: .*\(body: '[0-9a-f]+' there, '[0-9a-f]+' now\)"):
         make_dataset("reach", 2, 7, tmp_path / "a", workers=1, progress=False)
     monkeypatch.delenv("GRASPKIT_MODEL")
     own = tmp_path / "own.npz"
-    np.savez(own, **arrays)
+    np.savez_compressed(own, **arrays)
     make_dataset("reach", 1, 7, tmp_path / "b", workers=1, progress=False, model=str(own))
-    np.savez(own, **{**arrays, "v_template": arrays["v_template"] * 1.2})          # changed in place
+    np.savez_compressed(own, **{**arrays, "v_template": arrays["v_template"] * 1.2})          # changed in place
     with pytest.raises(ValueError, match=r"--out: .*\(body: "):
         make_dataset("reach", 2, 7, tmp_path / "b", workers=1, progress=False, model=str(own))
     record = tmp_path / "a" / "graspkit_make_reach.json"

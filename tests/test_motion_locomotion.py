@@ -523,7 +523,7 @@ def shifted_model(tmp_path_factory):
     a["v_template"] = a["v_template"] + np.array([0.02, 0.03, 0.05], a["v_template"].dtype)
     root = tmp_path_factory.mktemp("shifted_model")
     (root / "smplx").mkdir()
-    np.savez(root / "smplx" / "SMPLX_NEUTRAL.npz", **a)
+    np.savez_compressed(root / "smplx" / "SMPLX_NEUTRAL.npz", **a)
     return BodyModel.from_file(root / "smplx" / "SMPLX_NEUTRAL.npz")
 
 
