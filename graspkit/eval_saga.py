@@ -124,7 +124,7 @@ def load_placements(root: str | Path, name: str, n: int, split: str = "test") ->
     """The first n accepted grasps of object `name` (of `split`) in `root` as placements; each file read is checked
     (a ValueError naming it), NoGraspsError when there is none."""
     from graspkit.data.grab import read_arrays
-    from graspkit.data.grasp_datasets import check_arrays, grasp_files
+    from graspkit.data.grasp_datasets import check_arrays, grasp_files, moved_since_labels
     from graspkit.rotations import axis_angle_to_matrix
 
     out = []
@@ -133,12 +133,12 @@ def load_placements(root: str | Path, name: str, n: int, split: str = "test") ->
         check_arrays(a, ("obj_name",), p)
         if str(a["obj_name"]) != name:
             continue
-        check_arrays(a, PLACEMENT_KEYS, p)
+        check_arrays(a, PLACEMENT_KEYS + (("goal.object_transl",) if "goal.object_transl" in a else ()), p)
         R = axis_angle_to_matrix(torch.as_tensor(a["object.params.global_orient"][0], dtype=torch.float64)).float()
         t = torch.as_tensor(a["object.params.transl"][0]).float()
         out.append(Placement(
             name, torch.as_tensor(a["object.points"]).float() @ R.T, torch.as_tensor(a["object.normals"]).float() @ R.T,
-            float(a["object.height"]), R, torch.as_tensor(a["saga.markers"]).float() - t,
+            float(a["object.height"]), R, torch.as_tensor(a["saga.markers"] + moved_since_labels(a)).float() - t,
             torch.as_tensor(a["contact.markers"][0]).float(), torch.as_tensor(a["contact.object"][0]).float(),
             {"fullpose": torch.as_tensor(a["body.params.fullpose"][0]).float().view(55, 3),
              "transl": torch.as_tensor(a["body.params.transl"][0]).float() - t,

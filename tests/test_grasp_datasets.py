@@ -112,3 +112,50 @@ def test_a_window_longer_than_the_clip_repeats_its_first_frame_in_front():
         assert int(it["goal_frame"]) == g + pad
         for key, arr in (("transl", transl), ("foot_contacts", feet)):             # padded the same way
             np.testing.assert_array_equal(it[key].numpy(), np.concatenate([np.repeat(arr[:1], pad, 0), arr]))
+
+
+def test_a_scene_moved_along_the_floor_keeps_its_labels_on_its_body(tmp_path):
+    """Grasp and approach files moved as a whole, body and object, by (0.5, -1, 0) m (which `body_offset` takes as
+    the same body's): the world-frame labels follow the move (`moved_since_labels`), so SAGA's object-centred markers
+    (dataset and evaluation) and an approach clip's hand-to-goal offsets are the unmoved files', the hand-to-goal
+    offset is zero at the goal frame, and GNet's 400 vertices are the `smplx` package's for the moved parameters
+    (all were off by the move)."""
+    from graspkit.body import BodyModel
+    from graspkit.data.grasp_datasets import WholeGraspDataset
+    from graspkit.eval_saga import load_placements
+    from graspkit.paths import default_model_path
+
+    d = np.array([0.5, -1.0, 0.0], np.float32)
+    for kind, folder in (("grasp", "grasps"), ("approach", "approach")):
+        (tmp_path / folder).mkdir()
+        for p in sorted((STUBS / folder).glob(f"{kind}_*.npz")):
+            with np.load(p, allow_pickle=False) as z:
+                moved = {k: z[k] + d for k in ("body.params.transl", "object.params.transl")}
+            npz_copy(p, tmp_path / folder / p.name, **moved)
+    old, new = WholeGraspDataset(STUBS / "grasps", split=None), WholeGraspDataset(tmp_path / "grasps", split=None)
+    np.testing.assert_allclose(new.data["markers"].numpy(), old.data["markers"].numpy(), atol=1e-5)
+    name = old.object_names[0]
+    for a, b in zip(load_placements(STUBS / "grasps", name, 3, split=_split_of(name)),
+                    load_placements(tmp_path / "grasps", name, 3, split=_split_of(name))):
+        np.testing.assert_allclose(b.markers.numpy(), a.markers.numpy(), atol=1e-5)
+    bm = BodyModel.from_file(default_model_path())
+    old, new = (ApproachDataset(f, split=None, bm=bm) for f in (STUBS / "approach", tmp_path / "approach"))
+    for a, b in zip(old, new):
+        np.testing.assert_allclose(b["hand_to_goal"].numpy(), a["hand_to_goal"].numpy(), atol=1e-5)
+        assert float(b["hand_to_goal"][int(b["goal_frame"])].abs().max()) < 1e-5
+    ds = GNetDataset(tmp_path / "grasps", split=None)
+    model = smplx.create(str(STUBS / "body_models"), model_type="smplx", gender="neutral", ext="npz", use_pca=False,
+                         flat_hand_mean=True, num_betas=10, dtype=torch.float64)
+    it = ds[0]
+    p = it["fullpose"].double()
+    with torch.no_grad():
+        v = model(betas=it["betas"].double()[None], global_orient=p[None, 0], body_pose=p[None, 1:22].reshape(1, -1),
+                  jaw_pose=p[None, 22], leye_pose=p[None, 23], reye_pose=p[None, 24],
+                  left_hand_pose=p[None, 25:40].reshape(1, -1), right_hand_pose=p[None, 40:55].reshape(1, -1),
+                  transl=it["transl"].double()[None], expression=torch.zeros(1, 10, dtype=torch.float64)).vertices[0]
+    np.testing.assert_allclose(v[ds.vertex_ids].numpy(), it["verts"].numpy(), atol=1e-4)
+
+
+def _split_of(name: str) -> str:
+    """The split an object's grasps belong to (SPLITS)."""
+    return next(s for s, names in SPLITS.items() if name in names)

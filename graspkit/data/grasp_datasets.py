@@ -51,6 +51,21 @@ def grasp_files(root: str | os.PathLike, kind: str = "grasp", split: str | None 
     return out
 
 
+def moved_since_labels(a: dict[str, np.ndarray]) -> np.ndarray:
+    """How far (m, (3,)) a file's scene was moved as a whole since `graspkit data make` labelled it: the object's
+    translation at the grasp frame minus `goal.object_transl` (zeros without that key). The world-frame labels
+    (`saga.markers`, `goal.vertices`) are where the body was then; adding this puts them where it is now, so a clip
+    moved along the floor, body and object (which `grab.body_offset` takes as the same body's), keeps its markers,
+    GOAL vertices and hand-to-goal offsets on its body (they were off by the move)."""
+    from graspkit.data.grab import grasp_frame
+
+    if "goal.object_transl" not in a or "object.params.transl" not in a:
+        return np.zeros(3)
+    obj = np.asarray(a["object.params.transl"], np.float64).reshape(-1, 3)
+    f = min(max(grasp_frame(a), 0), len(obj) - 1)
+    return obj[f] - np.asarray(a["goal.object_transl"], np.float64).reshape(3)
+
+
 def _rot(aa: np.ndarray) -> np.ndarray:
     """Rotation matrix (3,3) of an axis-angle vector (3,)."""
     return axis_angle_to_matrix(torch.as_tensor(np.asarray(aa, np.float64))).numpy()
@@ -64,6 +79,7 @@ SHAPES: dict[str, tuple[int | str | None, ...]] = {
     "contact.object": ("T", None), "contact.feet": ("T", 4), "grasp.goal_frame": (),
     "goal.vertices": (400, 3), "goal.offsets": (400, 3), "goal.hand_offsets": (99, 3), "goal.head_direction": (3,),
     "goal.bps_object": (1024,), "goal.bps_hand": (1024,), "goal.right_hand": (99,), "goal.vertex_ids": (400,),
+    "goal.object_transl": (3,),
     "body.params.body_pose": ("T", 63), "contact.body": ("T", None), "obj_name": ()}
 STRING_KEYS = {"obj_name"}
 
@@ -122,7 +138,7 @@ class _Files(Dataset):
         self.split = split
         self.arrays = [read_arrays(p) for p in self.files]
         for p, a in zip(self.files, self.arrays):
-            check_arrays(a, self.keys, p)
+            check_arrays(a, self.keys + (("goal.object_transl",) if "goal.object_transl" in a else ()), p)
         self.object_names = [str(a["obj_name"]) for a in self.arrays]
         names = list_objects()
         for p, n in zip(self.files, self.object_names):
@@ -150,7 +166,7 @@ class WholeGraspDataset(_Files):
         for a in self.arrays:
             t = a["object.params.transl"][0].astype(np.float64)
             R = _rot(a["object.params.global_orient"][0])
-            m.append(a["saga.markers"] - t)
+            m.append(a["saga.markers"] + moved_since_labels(a) - t)
             cm.append(a["contact.markers"][0])
             op.append(a["object.points"] @ R.T)
             on.append(a["object.normals"] @ R.T)
@@ -188,6 +204,8 @@ class GNetDataset(_Files):
                 "object_height": ("object.height", ())}
         self.data = {k: torch.as_tensor(np.stack([np.asarray(a[src], np.float32).reshape(shape) for a in self.arrays]))
                      for k, (src, shape) in keys.items()}
+        moved = np.stack([moved_since_labels(a) for a in self.arrays])
+        self.data["verts"] += torch.as_tensor(moved, dtype=torch.float32)[:, None]
         self.data["fullpose_6d"] = axis_angle_to_rot6d(self.data["fullpose"])
         for key in ("goal.vertex_ids", "goal.right_hand"):      # one GOAL layout for the whole set
             for p, a in zip(self.files[1:], self.arrays[1:]):
@@ -260,7 +278,7 @@ class ApproachDataset(_Files):
             item["verts"] = v[:, :len(vid)].float()
             item["markers"] = v[:, len(vid):].float()
             rh = torch.as_tensor(a["goal.right_hand"])
-            goal_hand = torch.as_tensor(a["goal.vertices"])[rh]
+            goal_hand = torch.as_tensor(a["goal.vertices"] + moved_since_labels(a), dtype=torch.float32)[rh]
             item["hand_to_goal"] = goal_hand[None] - item["verts"][:, rh]
         return item
 
