@@ -21,6 +21,20 @@ def _copy(dst: Path, name: str, kind: str = "grasp", **replace) -> Path:
     return npz_copy(STUBS / ("grasps" if kind == "grasp" else "approach") / name, dst / name, **replace)
 
 
+def _smplx_vertices(item: dict) -> np.ndarray:
+    """The `smplx` package's vertices (10475, 3), float64, of a GNetDataset item's fullpose, transl and betas on the
+    shipped procedural model (flat hand mean: the hand poses are absolute)."""
+    model = smplx.create(str(STUBS / "body_models"), model_type="smplx", gender="neutral", ext="npz", use_pca=False,
+                         flat_hand_mean=True, num_betas=10, dtype=torch.float64)
+    p = item["fullpose"].double()
+    with torch.no_grad():
+        return model(betas=item["betas"].double()[None], global_orient=p[None, 0],
+                     body_pose=p[None, 1:22].reshape(1, -1), jaw_pose=p[None, 22], leye_pose=p[None, 23],
+                     reye_pose=p[None, 24], left_hand_pose=p[None, 25:40].reshape(1, -1),
+                     right_hand_pose=p[None, 40:55].reshape(1, -1), transl=item["transl"].double()[None],
+                     expression=torch.zeros(1, 10, dtype=torch.float64)).vertices[0].numpy()
+
+
 def test_grasp_files_by_split_and_acceptance(tmp_path):
     """grasp_files: mug grasps are SPLITS' test split and pitcher grasps its train split; a rejected grasp
     (grasp.accepted False) is left out unless accepted_only=False, a file without the flag counts as accepted; an
@@ -64,17 +78,9 @@ def test_gnet_items_rebuild_their_vertices_with_smplx():
     (procedural model, flat hand mean) they give the item's 400 verts, and hand_offsets are the right-hand rows of
     offsets."""
     ds = GNetDataset(STUBS / "grasps", split=None)
-    model = smplx.create(str(STUBS / "body_models"), model_type="smplx", gender="neutral", ext="npz", use_pca=False,
-                         flat_hand_mean=True, num_betas=10, dtype=torch.float64)
     for i in (0, len(ds) - 1):
         it = ds[i]
-        p = it["fullpose"].double()
-        with torch.no_grad():
-            v = model(betas=it["betas"].double()[None], global_orient=p[None, 0], body_pose=p[None, 1:22].reshape(1, -1),
-                      jaw_pose=p[None, 22], leye_pose=p[None, 23], reye_pose=p[None, 24],
-                      left_hand_pose=p[None, 25:40].reshape(1, -1), right_hand_pose=p[None, 40:55].reshape(1, -1),
-                      transl=it["transl"].double()[None], expression=torch.zeros(1, 10, dtype=torch.float64)).vertices[0]
-        np.testing.assert_allclose(v[ds.vertex_ids].numpy(), it["verts"].numpy(), atol=1e-4)
+        np.testing.assert_allclose(_smplx_vertices(it)[ds.vertex_ids], it["verts"].numpy(), atol=1e-4)
         np.testing.assert_allclose(it["hand_offsets"].numpy(), it["offsets"][ds.right_hand].numpy(), atol=0)
 
 
@@ -144,16 +150,7 @@ def test_a_scene_moved_along_the_floor_keeps_its_labels_on_its_body(tmp_path):
         np.testing.assert_allclose(b["hand_to_goal"].numpy(), a["hand_to_goal"].numpy(), atol=1e-5)
         assert float(b["hand_to_goal"][int(b["goal_frame"])].abs().max()) < 1e-5
     ds = GNetDataset(tmp_path / "grasps", split=None)
-    model = smplx.create(str(STUBS / "body_models"), model_type="smplx", gender="neutral", ext="npz", use_pca=False,
-                         flat_hand_mean=True, num_betas=10, dtype=torch.float64)
-    it = ds[0]
-    p = it["fullpose"].double()
-    with torch.no_grad():
-        v = model(betas=it["betas"].double()[None], global_orient=p[None, 0], body_pose=p[None, 1:22].reshape(1, -1),
-                  jaw_pose=p[None, 22], leye_pose=p[None, 23], reye_pose=p[None, 24],
-                  left_hand_pose=p[None, 25:40].reshape(1, -1), right_hand_pose=p[None, 40:55].reshape(1, -1),
-                  transl=it["transl"].double()[None], expression=torch.zeros(1, 10, dtype=torch.float64)).vertices[0]
-    np.testing.assert_allclose(v[ds.vertex_ids].numpy(), it["verts"].numpy(), atol=1e-4)
+    np.testing.assert_allclose(_smplx_vertices(ds[0])[ds.vertex_ids], ds[0]["verts"].numpy(), atol=1e-4)
 
 
 def _split_of(name: str) -> str:
