@@ -890,3 +890,71 @@ def test_fit_names_contact_maps_outside_0_1_and_too_many_betas(bm):
         opt.fit(m, torch.zeros(1, 300))
     with pytest.raises(ValueError, match=r"^markers: expected at least one sequence \(B >= 1\)"):    # a reshape error
         opt.fit(torch.zeros(0, 5, 79, 3), torch.zeros(0, 10))
+
+
+def test_touch_term_is_the_closest_hand_vertex_past_the_gap_on_the_last_frames(bm):
+    """graspkit's touch term (stage 2's polish) with the object's grid: a box under the right hand, its top face 8 mm
+    below the lowest hand vertex, gives w_touch (min over the hand vertices of the analytic box SDF - touch_gap) on
+    each of the last contact_frames frames (F = 7 still frames: 5 of them); absent outside the polish; 0 with the top face 0.5 mm below (within the gap) or
+    cutting into the hand; without a grid it reads the nearest object point (SAGA's S(x, Y), of every 4th point), at
+    most the points' spacing (3 mm here) farther than the face."""
+    cfg = GraspMotionConfig(terms=("touch",))
+    opt = GraspMotionOpt(bm, load_pose_prior(), None, cfg)
+    F, w = 7, opt.cfg.weights
+    p = _still(opt, F)
+    with torch.no_grad():
+        hands = opt.body(p, torch.zeros(F, 10))[0][0, opt.sl_h].double().numpy()
+    ext = np.array([0.3, 0.3, 0.3])
+    box = trimesh.creation.box(extents=ext)
+    grid = SDFGrid.from_mesh(box, resolution=24)
+    pts, fid = trimesh.sample.sample_surface_even(box, 20000, seed=0)
+    args = (torch.zeros(1, F, 79, 3), torch.zeros(F, 10), 2, None)
+    for below, want_on in ((0.008, True), (0.0005, False), (-0.01, False)):
+        origin = np.array([*hands[:, :2].mean(0), hands[:, 2].min() - below - ext[2] / 2])
+        q = np.abs(hands - origin) - ext / 2
+        sdf = np.linalg.norm(np.maximum(q, 0), axis=1) + np.minimum(q.max(1), 0)
+        want = 5 * w.touch * max(sdf.min() - w.touch_gap, 0.0)
+        assert (want > 0) == want_on
+        for g in (grid, None):
+            obj = GraspObject(torch.as_tensor(pts + origin).float()[None],
+                              torch.as_tensor(box.face_normals[fid]).float()[None], 0.0, g, torch.eye(3)[None],
+                              torch.as_tensor(origin).float()[None])
+            with torch.no_grad():
+                e = opt.energy(p, *args, obj, None, polish=True)["touch"].item()
+                assert "touch" not in opt.energy(p, *args, obj, None)          # only in stage 2's polish
+            if g is not None:
+                assert e == pytest.approx(want, rel=0.02, abs=1e-3), below
+            else:                     # the nearest of every 4th point: farther than the face by up to its spacing
+                assert want - 1e-3 <= e <= want + 5 * w.touch * 0.003, (below, e, want)
+
+
+def test_touch_brings_the_hand_onto_an_object_the_markers_miss(bm, clip):
+    """A walking clip's markers and a ball 8 mm past the right hand's closest vertex at the last frame (its grid
+    from trimesh's icosphere): fitted with the touch term (100 polish steps at lr 1e-3) the hand ends within 2 mm of the ball (the exact signed
+    distance, `objects.sdf.signed_distance`) and not more than 2 mm into it (-1.0 mm measured: the collision hinge lets it 1 mm
+    in); without it over 6 mm off (18.9 mm measured: the fit stands the hand a little farther off than the clip)."""
+    from graspkit.objects.sdf import signed_distance
+
+    markers, _, betas, m = clip
+    flat = BodyModel.from_file(default_model_path(), flat_hand_mean=True)
+    hand = torch.as_tensor(m.vertices(flat)[-1][_right_hand_ids(bm)]).double()           # (H, 3)
+    centre = hand.mean(0)
+    out = torch.nn.functional.normalize(centre - torch.as_tensor(m.joint_positions(flat)[-1, 0]).double(), dim=0)
+    r = 0.05
+    ball = trimesh.creation.icosphere(subdivisions=4, radius=r)
+    s = r + 0.05                                     # the centre along `out`, moved until the gap is 8 mm
+    for _ in range(20):
+        s += 0.008 - (float((hand - (centre + s * out)).norm(dim=-1).min()) - r)
+    c = centre + s * out
+    mesh = trimesh.Trimesh(ball.vertices + c.numpy(), ball.faces)
+    pts, fid = trimesh.sample.sample_surface_even(ball, 2048, seed=0)
+    obj = GraspObject(torch.as_tensor(pts + c.numpy()).float()[None], torch.as_tensor(ball.face_normals[fid]).float()[None],
+                      0.0, SDFGrid.from_mesh(ball, resolution=32), torch.eye(3)[None], c.float()[None])
+    end = {}
+    for terms in (("colli",), ("colli", "touch")):
+        cfg = GraspMotionConfig(steps=(40, 60), polish=(100, 1e-3), terms=terms)
+        opt = GraspMotionOpt(bm, load_pose_prior(), None, cfg)
+        res = opt.fit(markers[None], betas[None, :10], obj=obj, progress=False)
+        v = opt.vertices(res)[-1].double()[_right_hand_ids(bm)]
+        end[terms[-1]] = float(signed_distance(v, mesh).min())
+    assert end["colli"] > 0.006 and -0.002 < end["touch"] < 0.002, end

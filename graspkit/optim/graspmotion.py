@@ -86,6 +86,13 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   11 -> 9 of 12), at 3000 none (9.4 %, end contact 11 of 12, end volume 0.37 -> 0.22 cm3); on the twelve clips of
   `graspmotion_eval` 14.5 % of the frames -> 0, end contact 12 of 12 throughout, the deepest vertex under the floor
   0.17 cm without the term, 0.78 with both at 1000, 0.08 at 3000 (docs/saga_motion.md, "The stand term").
+- A touch term (graspkit's, since 2026-12-08), in stage 2's polish only (`GraspMotionConfig.polish`; none with the
+  paper's schedule): a_touch sum over the last contact_frames frames of (min over the hand vertices of the object's
+  signed distance - 1 mm)_+, a_touch = 1000 per metre. Eq. 6 pulls on squared distances, 2 alpha d per point (0.24 at
+  8 mm), which fade as the hand nears the object: on GOAL's twelve sequences a hand that touched at frame 50 drifted
+  7.5 mm off by the last, and the row ended 11 of 12 in contact. With the term, 12 of 12 at the same sliding and end
+  volume; on the whole of stage 2 it pulled hands in early (the twelve clips' end volume 0.16 -> 0.45 cm3); in the
+  polish it leaves them as they were (docs/saga_motion.md, "The touch term").
 - Free arm joints (`GraspMotionConfig.free_joints`, graspkit's, since 2026-12-02; () is Alg. 2's prior latent
   alone): per frame, the collar, shoulder, elbow and wrist joints get a free rotation on top of the prior's decoded
   pose (6D offsets from the identity, weight 5e-4 as alpha_theta, and 0.5 per degree past the human range:
@@ -136,6 +143,7 @@ from tqdm.auto import tqdm
 from graspkit.body.markers import foot_vertices, palm_vertices, saga_markers, saga_sparse_markers, vertex_normals
 from graspkit.checks import check_bool, check_int, check_probabilities, check_steps, check_weight
 from graspkit.models.gnet import SparseBody
+from graspkit.objects.sdf import signed_distance_to_points
 from graspkit.optim.grasppose import (ARM_JOINTS, GraspObject, _nearest, body_joint_ids, free_joint_excess,
                                      hand_vertex_ids, kabsch, with_free_joints)
 from graspkit.optim.step import energy_step, with_autograd
@@ -259,7 +267,7 @@ def _boxed_hinge(q: Tensor, inside: Tensor, cloud: Tensor, normals: Tensor, sigm
 
 
 # ------------------------------------------------------------------------------------------------ the optimiser
-TERMS = ("colli", "contact", "palm", "smooth", "skate", "heel", "floor", "stand")   # stage 2's terms, all on by default
+TERMS = ("colli", "contact", "touch", "palm", "smooth", "skate", "heel", "floor", "stand")   # stage 2's, all on by default
 
 
 @dataclass
@@ -274,6 +282,8 @@ class GraspMotionWeights:
     contact: float = 15.0          # alpha^o_cont
     contact_marker: float = 15.0   # alpha^m_cont: Eq. 6's marker side, when fit gets C^_M (as GraspPose-Opt)
     palm: float = 10.0             # E_g's weight
+    touch: float = 1000.0          # graspkit's: per metre the hand's closest vertex stands off the object past
+    touch_gap: float = 0.001       # touch_gap (m) on each of the last contact_frames frames, in stage 2's polish
     palm_sigma: float = 0.01       # m (Eq. 11)
     smooth_latent: float = 1.0     # a^B_s
     smooth_hand: float = 10.0      # a^h_s (on the mean over hand vertices)
@@ -294,7 +304,7 @@ class GraspMotionWeights:
     def __post_init__(self) -> None:
         for name, value in vars(self).items():        # a negative weight rewards what its term removes
             check_weight(value, name)
-        for name in ("palm_sigma", "skate_sigma", "heel_height", "stand_height"):   # sigma_b, sigma_o may be 0
+        for name in ("palm_sigma", "skate_sigma", "heel_height", "stand_height", "touch_gap"):   # sigma_b, sigma_o may be 0
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name}: expected a threshold > 0, got {getattr(self, name)!r}")
 
@@ -416,9 +426,10 @@ class GraspMotionOpt:
     # ------------------------------------------------------------------ the energy
     def energy(self, p: dict[str, Tensor], target: Tensor, betas: Tensor, stage: int, foot_contact: Tensor | None,
                obj: GraspObject | None, object_contact: Tensor | None, floor: Tensor | None = None,
-               marker_contact: Tensor | None = None, held: bool = False) -> dict[str, Tensor]:
+               marker_contact: Tensor | None = None, held: bool = False, polish: bool = False) -> dict[str, Tensor]:
         """Each term per sequence (B,) for frame parameters (B*(T+1), ...) and target markers (B, T+1, M, 3);
-        `held`: frame 0 is held at a start body, so the planted heel takes weights.heel_held."""
+        `held`: frame 0 is held at a start body, so the planted heel takes weights.heel_held; `polish`: stage 2's
+        polish steps, which add the touch term."""
         cfg, w = self.cfg, self.cfg.weights
         B, F = target.shape[:2]
         rot = self.rotmats(p)
@@ -492,6 +503,18 @@ class GraspMotionOpt:
             speed = (h[:, 1:] - h[:, :-1]).norm(dim=-1)                             # (B, T, 2)
             low = ((h[:, :-1, :, 2] - floor[:, None, None]) < w.heel_height).all(-1).detach()
             e["heel"] = a_heel * (low * torch.relu(speed.min(-1).values - w.skate_sigma)).sum(1)
+        k_c = min(cfg.contact_frames, F)
+        if "touch" in terms and polish and w.touch > 0 and obj is not None and k_c:
+            # graspkit's (docs/saga_motion.md, "The touch term"): Eq. 6 pulls on squared distances, which fade as the
+            # hand nears the object; this pulls the closest hand vertex linearly to within touch_gap of the surface
+            # and no further (the collision hinges push back past sigma_b)
+            last = hands[:, F - k_c:].reshape(B, -1, 3)
+            if obj.sdf is not None:
+                d = obj.signed_distance(last)
+            else:
+                cloud, normals, _ = obj.batch(B)
+                d = signed_distance_to_points(last, cloud[:, ::cfg.point_stride], normals[:, ::cfg.point_stride])
+            e["touch"] = w.touch * torch.relu(d.view(B, k_c, -1).amin(-1) - w.touch_gap).sum(1)
         return e
 
     def parts_down(self, foot_contact: Tensor) -> Tensor:
@@ -622,13 +645,15 @@ class GraspMotionOpt:
                 if stage == 2 and i in (150, self.cfg.steps[1]):      # the paper's decay, then the polish
                     for g in opt.param_groups:
                         g["lr"] = lr_polish if i >= self.cfg.steps[1] else 0.005
-                e = self.energy(params(), target, bet, stage, foot_contact, obj, object_contact, floor, mc, held)
+                e = self.energy(params(), target, bet, stage, foot_contact, obj, object_contact, floor, mc, held,
+                                stage == 2 and i >= self.cfg.steps[1])
                 energy_step(opt, e, log, i, step, stage, self.cfg.log_every)
                 step += 1
                 bar.update(1)
             with torch.no_grad():
                 energies[f"stage{stage}"] = {k: t.detach() for k, t in self.energy(
-                    params(), target, bet, 2, foot_contact, obj, object_contact, floor, mc, held).items()}
+                    params(), target, bet, 2, foot_contact, obj, object_contact, floor, mc, held,
+                    stage == 2 and n_polish > 0).items()}
         bar.close()
         with torch.no_grad():
             p = params()
