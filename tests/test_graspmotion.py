@@ -895,8 +895,8 @@ def test_fit_names_contact_maps_outside_0_1_and_too_many_betas(bm):
 def test_touch_term_is_the_closest_hand_vertex_past_the_gap_on_the_last_frames(bm):
     """graspkit's touch term (stage 2's polish) with the object's grid: a box under the right hand, its top face 8 mm
     below the lowest hand vertex, gives w_touch (min over the hand vertices of the analytic box SDF - touch_gap) on
-    each of the last contact_frames frames (F = 7 still frames: 5 of them); absent outside the polish; 0 with the top face 0.5 mm below (within the gap) or
-    cutting into the hand; without a grid it reads the nearest object point (SAGA's S(x, Y), of every 4th point), at
+    each of the last contact_frames frames (F = 7 still frames: 5 of them); absent outside the polish; 0 with the top
+    face 0.5 mm below (within the gap) or cutting into the hand; without a grid it reads the nearest object point (SAGA's S(x, Y), of every 4th point), at
     most the points' spacing (3 mm here) farther than the face."""
     cfg = GraspMotionConfig(terms=("touch",))
     opt = GraspMotionOpt(bm, load_pose_prior(), None, cfg)
@@ -930,9 +930,10 @@ def test_touch_term_is_the_closest_hand_vertex_past_the_gap_on_the_last_frames(b
 
 def test_touch_brings_the_hand_onto_an_object_the_markers_miss(bm, clip):
     """A walking clip's markers and a ball 8 mm past the right hand's closest vertex at the last frame (its grid
-    from trimesh's icosphere): fitted with the touch term (100 polish steps at lr 1e-3) the hand ends within 2 mm of the ball (the exact signed
-    distance, `objects.sdf.signed_distance`) and not more than 2 mm into it (-1.0 mm measured: the collision hinge lets it 1 mm
-    in); without it over 6 mm off (18.9 mm measured: the fit stands the hand a little farther off than the clip)."""
+    from trimesh's icosphere): fitted with the touch term (100 polish steps at lr 1e-3) the hand ends within 2 mm of
+    the ball (the exact signed distance, `objects.sdf.signed_distance`) and not more than 2 mm into it (-1.0 mm
+    measured: the collision hinge lets it 1 mm in); without it over 6 mm off (18.9 mm measured: the fit stands the
+    hand a little farther off than the clip)."""
     from graspkit.objects.sdf import signed_distance
 
     markers, _, betas, m = clip
@@ -948,8 +949,9 @@ def test_touch_brings_the_hand_onto_an_object_the_markers_miss(bm, clip):
     c = centre + s * out
     mesh = trimesh.Trimesh(ball.vertices + c.numpy(), ball.faces)
     pts, fid = trimesh.sample.sample_surface_even(ball, 2048, seed=0)
-    obj = GraspObject(torch.as_tensor(pts + c.numpy()).float()[None], torch.as_tensor(ball.face_normals[fid]).float()[None],
-                      0.0, SDFGrid.from_mesh(ball, resolution=32), torch.eye(3)[None], c.float()[None])
+    obj = GraspObject(torch.as_tensor(pts + c.numpy()).float()[None],
+                      torch.as_tensor(ball.face_normals[fid]).float()[None], 0.0, SDFGrid.from_mesh(ball, resolution=32),
+                      torch.eye(3)[None], c.float()[None])
     end = {}
     for terms in (("colli",), ("colli", "touch")):
         cfg = GraspMotionConfig(steps=(40, 60), polish=(100, 1e-3), terms=terms)

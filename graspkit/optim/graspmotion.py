@@ -267,7 +267,8 @@ def _boxed_hinge(q: Tensor, inside: Tensor, cloud: Tensor, normals: Tensor, sigm
 
 
 # ------------------------------------------------------------------------------------------------ the optimiser
-TERMS = ("colli", "contact", "touch", "palm", "smooth", "skate", "heel", "floor", "stand")   # stage 2's, all on by default
+# stage 2's terms, all on by default (touch in the polish only)
+TERMS = ("colli", "contact", "touch", "palm", "smooth", "skate", "heel", "floor", "stand")
 
 
 @dataclass
@@ -304,7 +305,7 @@ class GraspMotionWeights:
     def __post_init__(self) -> None:
         for name, value in vars(self).items():        # a negative weight rewards what its term removes
             check_weight(value, name)
-        for name in ("palm_sigma", "skate_sigma", "heel_height", "stand_height", "touch_gap"):   # sigma_b, sigma_o may be 0
+        for name in ("palm_sigma", "skate_sigma", "heel_height", "stand_height", "touch_gap"):  # sigma_b, sigma_o: 0 ok
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name}: expected a threshold > 0, got {getattr(self, name)!r}")
 
@@ -445,6 +446,7 @@ class GraspMotionOpt:
         if stage < 2:
             return e
         terms = cfg.terms
+        k_c = min(cfg.contact_frames, F)                           # the last k_c frames: contact and touch (0: none)
         if obj is not None:
             pts, nrm, _ = obj.batch(B)
             with torch.no_grad():               # frames with a hand vertex within 2 cm of the object's box
@@ -462,7 +464,6 @@ class GraspMotionOpt:
                     K = len(near)
                     inner = self.object_in_hand(hf.reshape(B * K, -1, 3), pts.repeat_interleave(K, 0))
                     e["colli"] = e["colli"] + w.colli_object * inner.view(B, -1).sum(-1)
-            k_c = min(cfg.contact_frames, hands.shape[1])              # the last k_c frames (0: none)
             if "contact" in terms and object_contact is not None and k_c:
                 last = hands[:, hands.shape[1] - k_c:]
                 idx = object_contact.topk(min(256, object_contact.shape[1]), -1).indices
@@ -503,7 +504,6 @@ class GraspMotionOpt:
             speed = (h[:, 1:] - h[:, :-1]).norm(dim=-1)                             # (B, T, 2)
             low = ((h[:, :-1, :, 2] - floor[:, None, None]) < w.heel_height).all(-1).detach()
             e["heel"] = a_heel * (low * torch.relu(speed.min(-1).values - w.skate_sigma)).sum(1)
-        k_c = min(cfg.contact_frames, F)
         if "touch" in terms and polish and w.touch > 0 and obj is not None and k_c:
             # graspkit's (docs/saga_motion.md, "The touch term"): Eq. 6 pulls on squared distances, which fade as the
             # hand nears the object; this pulls the closest hand vertex linearly to within touch_gap of the surface
