@@ -90,7 +90,7 @@ graspkit's choices (the paper leaves them out; all in `GraspMotionWeights`):
   paper's schedule): a_touch sum over the last contact_frames frames of (min over the hand vertices of the object's
   signed distance - 1 mm)_+, a_touch = 1000 per metre. Eq. 6 pulls on squared distances, 2 alpha d per point (0.24 at
   8 mm), which fade as the hand nears the object: on GOAL's twelve sequences a hand that touched at frame 50 drifted
-  7.5 mm off by the last, and the row ended 11 of 12 in contact. With the term, 12 of 12 at the same sliding and end
+  7.8 mm off by the last, and the row ended 11 of 12 in contact. With the term, 12 of 12 at the same sliding and end
   volume; on the whole of stage 2 it pulled hands in early (the twelve clips' end volume 0.16 -> 0.45 cm3); in the
   polish it leaves them as they were (docs/saga_motion.md, "The touch term").
 - Free arm joints (`GraspMotionConfig.free_joints`, graspkit's, since 2026-12-02; () is Alg. 2's prior latent

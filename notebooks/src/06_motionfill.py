@@ -104,7 +104,7 @@ print(f"sample spread at mid-motion: {float(s['traj'][:, 30, :2].std(0).norm()):
 # to the object (in `synthesize`, three more of the twelve SAGA motions of lesson 07 end on their object with the marker
 # side). Eq. 6's pull is on squared distances and fades as the hand nears the object, so in the polish graspkit adds a
 # touch term: the hand's closest vertex pulled linearly to within 1 mm of the object on those frames (a hand of lesson
-# 07 that touched its pan at frame 50 had drifted 7.5 mm off by the last). Below: the energies along the run, then the
+# 07 that touched its pan at frame 50 had drifted 7.8 mm off by the last). Below: the energies along the run, then the
 # heels' speed of the sampled markers and of the fitted bodies on the frames MotionFill predicts in contact (skating:
 # both heels low and faster than 75 mm/s).
 
